@@ -1,0 +1,1 @@
+"""Comparisons, validation reports, benchmarks and the ``prioik`` command line."""

@@ -1,0 +1,103 @@
+"""The ``prioik`` command line: one sub-command per module (each has ``add_parser``)."""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+import numpy as np
+
+#: modules that contribute a sub-command through ``add_parser(subparsers)``
+SUBCOMMAND_MODULES = [
+    "benchmarks.compare",
+]
+
+
+def _cmd_list(args: argparse.Namespace) -> int:
+    import formulations
+    import qpsolvers
+    print(f"{'formulation':<22} {'available':<10} {'ineq.':<6} {'exact':<6} description")
+    for f in formulations.available():
+        if f.available:
+            c = f.capabilities
+            print(f"{f.name:<22} {'yes':<10} {'yes' if c.inequalities else 'no':<6} "
+                  f"{'yes' if c.exact else 'no':<6} {f.description}")
+            if f.backends:
+                print(f"{'':<22} back-ends: {', '.join(f.backends)}")
+        else:
+            print(f"{f.name:<22} {'no':<10} {'':<6} {'':<6} {f.reason}")
+    print(f"\nQP back-ends qpsolvers sees here: {', '.join(qpsolvers.available_solvers)}")
+    return 0
+
+
+def _parse_value(text: str):
+    low = text.lower()
+    if low in ("true", "false"):
+        return low == "true"
+    if low in ("none", "null"):
+        return None
+    for conv in (int, float):
+        try:
+            return conv(text)
+        except ValueError:
+            pass
+    return text
+
+
+def _cmd_solve(args: argparse.Namespace) -> int:
+    import formulations
+    from hierarchy import load_stack
+    stack = load_stack(args.file)
+    options = {}
+    for item in args.option:
+        if "=" not in item:
+            raise ValueError(f"--option takes key=value, got {item!r}")
+        k, v = item.split("=", 1)
+        options[k] = _parse_value(v)
+    sol = formulations.solve(stack, args.formulation, **options)
+    np.set_printoptions(precision=6, suppress=False, linewidth=100)
+    print(f"formulation: {sol.formulation}  status: {sol.status}  "
+          f"time: {sol.time_s * 1e6:.1f} µs")
+    print(f"x = {sol.x}")
+    for i, (level, r) in enumerate(zip(stack.levels, sol.residuals)):
+        print(f"level {i} ({', '.join(level.names)}): residual {r:.3e}")
+    if sol.status == "failed":
+        print(f"failed: {sol.info.get('message', '')}")
+        return 1
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="prioik",
+        description="Task-priority inverse kinematics: one task-stack spec, every formulation.")
+    sub = parser.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("list", help="list formulations, their availability and QP back-ends")
+    p.set_defaults(func=_cmd_list)
+    p = sub.add_parser("solve", help="solve a task-stack JSON file and print x and residuals")
+    p.add_argument("file", help="task-stack JSON file (docs/task-stack-format.md)")
+    p.add_argument("--formulation", "-f", default="extended_jacobian",
+                   help="formulation name (see `prioik list`)")
+    p.add_argument("--option", "-o", action="append", default=[], metavar="KEY=VALUE",
+                   help="formulation option, repeatable (e.g. -o damping=0.01)")
+    p.set_defaults(func=_cmd_solve)
+    for name in SUBCOMMAND_MODULES:
+        importlib.import_module(name).add_parser(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``prioik`` console script."""
+    from formulations import FormulationError
+    from hierarchy import TaskStackError
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except (TaskStackError, FormulationError, ValueError, OSError) as exc:
+        print(f"prioik {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

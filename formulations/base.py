@@ -1,0 +1,81 @@
+"""Records shared by every formulation: what it supports, what it returns."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+#: Values of :attr:`Solution.status`.
+STATUSES = ("optimal", "approximate", "failed")
+
+
+class FormulationError(ValueError):
+    """A formulation cannot be used as asked: unknown name, not installed here,
+    an unknown option, or a required option (e.g. ``mass_matrix``) missing."""
+
+
+@dataclass(frozen=True)
+class Capabilities:
+    """What a formulation can take.
+
+    Attributes:
+        equalities: Equality tasks ``A x ≈ b``.
+        inequalities: Inequality tasks ``lower ≤ A x ≤ upper``.
+        weights: Several weighted tasks in one level.
+        needs_mass_matrix: Requires the option ``mass_matrix=M``.
+        exact: Returns the lexicographic optimum of equality stacks (up to the
+            solver's tolerance); ``False`` for methods with algorithmic error or
+            soft-priority approximations.
+    """
+
+    equalities: bool = True
+    inequalities: bool = False
+    weights: bool = True
+    needs_mass_matrix: bool = False
+    exact: bool = True
+
+
+@dataclass
+class Outcome:
+    """What a plugin's ``solve`` returns; the registry turns it into a :class:`Solution`.
+
+    Attributes:
+        x: The solution (``n``).
+        status: One of :data:`STATUSES`.
+        info: Formulation-specific data (ranks, iterations, torques, messages).
+    """
+
+    x: np.ndarray
+    status: str = "optimal"
+    info: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class Solution:
+    """The answer of a formulation to a task stack.
+
+    Attributes:
+        x: The solution, shape ``(n,)`` (NaN-free unless ``status == "failed"``).
+        formulation: Name of the formulation that produced it.
+        options: Options it was called with.
+        status: ``"optimal"``, ``"approximate"`` (a soft or regularised answer) or
+            ``"failed"`` (see ``info["message"]``).
+        residuals: Per level, ``‖A_i x − b_i‖`` plus inequality violation (weighted).
+        time_s: Wall time of the formulation's solve alone (``perf_counter``).
+        info: Formulation-specific data.
+    """
+
+    x: np.ndarray
+    formulation: str
+    options: dict[str, Any]
+    status: str
+    residuals: np.ndarray
+    time_s: float
+    info: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        """``True`` unless the status is ``"failed"``."""
+        return self.status != "failed"

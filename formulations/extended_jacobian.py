@@ -1,0 +1,229 @@
+"""The extended-Jacobian framework of Jeong & Chang (2009), eq. 15-18 and eq. 27.
+
+Each level ``i > 1`` contributes the rows ``Z_i J_iᵀ J_i θ̈ = Z_i J_iᵀ h_i`` (eq. 14),
+the stationarity condition of its least-squares error restricted to the null space
+of the levels above; stacked under ``J_1`` they form the extended Jacobian ``J_E``
+(eq. 15), ``h_E`` (eq. 16), and ``θ̈ = J_E⁺ h_E`` (eq. 18). Theorem 1 shows that the
+system equals the full-row-rank system of the *feasible* rows (eq. 25-26).
+
+Two paths compute the same answer:
+
+* ``nullspace="svd"`` — as the paper: each ``Z_i`` from an SVD of the augmented
+  Jacobian ``J_{i-1}^A`` (eq. 7, 13), ``J_E`` built literally, solved with an SVD
+  pseudo-inverse keeping ``ρ(J_k^A)`` singular values (the rank Theorem 1 gives).
+  When ``J_1`` is rank-deficient its block is ``J_1ᵀ J_1`` (eq. 14 with ``Z_1 = I``),
+  so that an inconsistent first level is solved in the least-squares sense
+  instead of being mixed with lower levels.
+* ``nullspace="qr"`` (default) — every ``Z_i`` from one nested orthogonal
+  factorization, without SVD: level by level, a Householder QR with column pivoting
+  of ``(A_i Z_i)ᵀ`` splits the free directions into the level's feasible ones (its
+  rank ``r_i``) and the new null space ``Z_{i+1}``; its reflectors are applied to the
+  rows of the lower levels only (``O(m n r_i)``, total independent of the number of
+  levels). In the rotated coordinates the extended system is block lower-triangular
+  and is solved by forward substitution (triangular solves; a small QR where a level
+  conflicts), the feasible rows of eq. 26.
+
+``damping=λ > 0`` is eq. 27: the lower blocks become ``Z_i (J_iᵀ J_i + λ I)`` and the
+(generally over-determined) system is solved in the least-squares sense (SVD
+pseudo-inverse on the ``svd`` path, complete orthogonal decomposition ``dgelsy`` on
+the ``qr`` path). As the paper notes, this bounds θ̈ near algorithmic singularities
+at the cost of task accuracy; it also lets lower levels trade accuracy with one
+another (every damped block has full rank).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.linalg import lapack
+
+from hierarchy import DEFAULT_RCOND, TaskStack, null_space_basis
+
+from .base import Capabilities, Outcome
+
+NAME = "extended_jacobian"
+DESCRIPTION = "Jeong & Chang extended Jacobian (eq. 15-18), damped form eq. 27"
+CAPABILITIES = Capabilities(equalities=True, inequalities=False, weights=True,
+                            needs_mass_matrix=False, exact=True)
+OPTIONS = {
+    "nullspace": ("qr", "'qr': nested pivoted QR, no SVD; 'svd': SVD of J_{i-1}^A as the paper"),
+    "damping": (0.0, "λ ≥ 0 of eq. 27 (0: exact eq. 18)"),
+    "rcond": (DEFAULT_RCOND, "relative rank threshold: σ counts if σ > rcond·‖A_i‖_F"),
+}
+
+_dgeqp3 = lapack.dgeqp3
+_dgeqrf = lapack.dgeqrf
+_dormqr = lapack.dormqr
+_dtrtrs = lapack.dtrtrs
+
+
+def solve(stack: TaskStack, *, nullspace: str = "qr", damping: float = 0.0,
+          rcond: float = DEFAULT_RCOND) -> Outcome:
+    """Solve the extended system (eq. 17) for ``x``; see the module docstring."""
+    if nullspace not in ("qr", "svd"):
+        raise ValueError(f"nullspace must be 'qr' or 'svd', got {nullspace!r}")
+    damping = float(damping)
+    if not np.isfinite(damping) or damping < 0:
+        raise ValueError(f"damping must be a finite λ ≥ 0, got {damping}")
+    if damping > 0:
+        return _solve_damped(stack, damping, rcond, nullspace)
+    if nullspace == "svd":
+        return _solve_svd(stack, rcond)
+    return _solve_qr(stack, rcond)
+
+
+# --------------------------------------------------------------------------- qr
+def _lstsq_full_column_rank(K: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """min ‖K z − p‖ for ``K`` (m × r, m > r) of full column rank, by Householder QR."""
+    m, r = K.shape
+    qr, tau, _, _ = _dgeqrf(K)
+    qtp, _, _ = _dormqr("L", "T", qr, tau, p.reshape(m, 1), max(1, m))
+    z, _ = _dtrtrs(qr[:r, :r], qtp[:r])
+    return z.ravel()
+
+
+def _solve_qr(stack: TaskStack, rcond: float) -> Outcome:
+    n = stack.n
+    mats = [(level.A, level.b) for level in stack.levels]
+    B = np.vstack([A for A, _ in mats])          # working copy of all rows
+    c = np.concatenate([b for _, b in mats])
+    y = np.zeros(n)                               # solution in rotated coordinates
+    reflectors = []                               # (col, qr[:, :r], tau[:r]) per level
+    ranks = []
+    col = 0
+    start = 0
+    for A, _ in mats:
+        m = A.shape[0]
+        stop = start + m
+        d = n - col
+        if d == 0 or m == 0:
+            ranks.append(0)
+            start = stop
+            continue
+        M_T = np.array(B[start:stop, col:].T, order="F")      # (A_i Z_i)ᵀ, d × m
+        qr, jpvt, tau, _, _ = _dgeqp3(M_T, overwrite_a=1)
+        diag = np.abs(np.diagonal(qr)[: min(d, m)])
+        tol = rcond * float(np.linalg.norm(A))
+        r = int(np.count_nonzero(diag > tol)) if tol > 0 else 0
+        ranks.append(r)
+        if r == 0:
+            start = stop
+            continue
+        # In rotated coordinates level i reads  B_i[:, :col] y_prev + Pᵀ-permuted Rᵀ y_new.
+        rhs = c[start:stop] - B[start:stop, :col] @ y[:col]
+        perm = jpvt - 1
+        Rt = qr[:r, :].T                                        # m × r, rows in pivot order
+        p = rhs[perm]
+        if r == m:
+            z, _ = _dtrtrs(qr[:r, :r], p, trans=1)
+        else:
+            z = _lstsq_full_column_rank(np.triu(Rt.T).T.copy(), p)
+        y[col:col + r] = z
+        if stop < B.shape[0] and r < d:
+            rest = B[stop:, col:]
+            B[stop:, col:], _, _ = _dormqr("R", "N", qr[:, :r], tau[:r], rest,
+                                           max(1, rest.shape[0]))
+        reflectors.append((col, qr[:, :r], tau[:r]))
+        col += r
+        start = stop
+    x = y
+    for col_i, v, t in reversed(reflectors):
+        seg = x[col_i:].reshape(-1, 1)
+        out, _, _ = _dormqr("L", "N", v, t, seg, 1)
+        x[col_i:] = out.ravel()
+    return Outcome(x, "optimal", {"rank_profile": ranks, "nullspace": "qr"})
+
+
+# -------------------------------------------------------------------------- svd
+def _extended_blocks(stack: TaskStack, rcond: float, damping: float, zs):
+    """``J_E`` and ``h_E`` of eq. 15-16 (eq. 27 when ``damping > 0``)."""
+    rows, rhs = [], []
+    for i, ((A, b), Z) in enumerate(zip(stack.equality_matrices(), zs)):
+        n = A.shape[1]
+        if i == 0 and Z.shape[1] == n:
+            full_row_rank = np.linalg.matrix_rank(A, tol=rcond * float(np.linalg.norm(A))) \
+                == A.shape[0]
+            if full_row_rank or A.shape[0] == 0:
+                rows.append(A)
+                rhs.append(b)
+                continue
+        if Z.shape[1] == 0:
+            continue
+        G = A.T @ A
+        if damping > 0:
+            G = G + damping * np.eye(n)
+        rows.append(Z.T @ G)
+        rhs.append(Z.T @ (A.T @ b))
+    return np.vstack(rows), np.concatenate(rhs)
+
+
+def _augmented_null_spaces(stack: TaskStack, rcond: float) -> tuple[list[np.ndarray], int]:
+    """``Z_i`` (columns) from the SVD of each augmented Jacobian ``J_{i-1}^A`` (eq. 7, 13).
+
+    The threshold of each SVD is ``rcond`` times the largest level norm so far, so a
+    level's rank is judged on the scale of the tasks it stacks.
+    """
+    n = stack.n
+    zs = [np.eye(n)]
+    scale = 0.0
+    blocks = []
+    for level in stack.levels[:-1]:
+        blocks.append(level.A)
+        scale = max(scale, float(np.linalg.norm(level.A)))
+        zs.append(null_space_basis(np.vstack(blocks), rcond, scale=scale))
+    blocks.append(stack.levels[-1].A)
+    scale = max(scale, float(np.linalg.norm(stack.levels[-1].A)))
+    rank = n - null_space_basis(np.vstack(blocks), rcond, scale=scale).shape[1]
+    return zs, rank
+
+
+def _solve_svd(stack: TaskStack, rcond: float) -> Outcome:
+    zs, rank = _augmented_null_spaces(stack, rcond)
+    JE, hE = _extended_blocks(stack, rcond, 0.0, zs)
+    u, s, vt = np.linalg.svd(JE, full_matrices=False)
+    r = min(rank, int(np.count_nonzero(s > 0)))
+    x = vt[:r].T @ ((u[:, :r].T @ hE) / s[:r])
+    return Outcome(x, "optimal", {"rank": rank, "nullspace": "svd",
+                                  "extended_rows": int(JE.shape[0])})
+
+
+# ----------------------------------------------------------------------- damped
+def _qr_null_spaces(stack: TaskStack, rcond: float) -> list[np.ndarray]:
+    """Explicit ``Z_i`` (columns) from the nested pivoted QR (no SVD)."""
+    n = stack.n
+    Z = np.eye(n)
+    zs = [Z]
+    for level in stack.levels[:-1]:
+        A = level.A
+        d = Z.shape[1]
+        if d and A.shape[0]:
+            M_T = np.array((A @ Z).T, order="F")
+            qr, _, tau, _, _ = _dgeqp3(M_T, overwrite_a=1)
+            k = min(M_T.shape)
+            tol = rcond * float(np.linalg.norm(A))
+            r = int(np.count_nonzero(np.abs(np.diagonal(qr)[:k]) > tol)) if tol > 0 else 0
+            if r:
+                # columns r.. of the full Q span null(A_i Z_i) in the local coordinates
+                Q, _, _ = _dormqr("L", "N", qr[:, :r], tau[:r], np.eye(d, order="F"), d)
+                Z = Z @ Q[:, r:]
+        zs.append(Z)
+    return zs
+
+
+def _solve_damped(stack: TaskStack, damping: float, rcond: float, nullspace: str) -> Outcome:
+    if nullspace == "svd":
+        zs, _ = _augmented_null_spaces(stack, rcond)
+    else:
+        zs = _qr_null_spaces(stack, rcond)
+    JE, hE = _extended_blocks(stack, rcond, damping, zs)
+    if nullspace == "svd":
+        x = np.linalg.pinv(JE) @ hE
+    else:
+        m, n = JE.shape
+        jpvt = np.zeros(n, dtype=np.int32)
+        bb = np.zeros(max(m, n))
+        bb[:m] = hE
+        lwork = max(1, max(m, n) * 8 + 64)
+        _, xb, _, _, _ = lapack.dgelsy(JE, bb.reshape(-1, 1), jpvt, 1e-12, lwork)
+        x = xb[:n].ravel()
+    return Outcome(x, "approximate", {"damping": damping, "nullspace": nullspace,
+                                      "extended_rows": int(JE.shape[0])})

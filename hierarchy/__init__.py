@@ -1,0 +1,23 @@
+"""The task-stack spec: tasks, levels, stacks, validation and lexicographic analysis.
+
+Pure numpy: this package knows nothing of robots or solvers.
+"""
+
+from .analysis import (FeasibleSplit, LevelCheck, LexicographicReport, algorithmic_error,
+                       algorithmic_error_norms, check_lexicographic, conflicting_levels,
+                       feasible_split, lexicographic_residuals, nested_null_spaces,
+                       rank_profile, singularity_distance)
+from .errors import TaskStackError, UnsupportedTaskError
+from .io import load_stack, save_stack, stack_from_dict, stack_to_dict
+from .linalg import DEFAULT_RCOND, matrix_rank, null_space_basis, range_basis
+from .stack import TaskStack
+from .task import Level, Task
+
+__all__ = [
+    "DEFAULT_RCOND", "FeasibleSplit", "Level", "LevelCheck", "LexicographicReport", "Task",
+    "TaskStack", "TaskStackError", "UnsupportedTaskError", "algorithmic_error",
+    "algorithmic_error_norms", "check_lexicographic", "conflicting_levels",
+    "feasible_split", "lexicographic_residuals", "matrix_rank", "nested_null_spaces",
+    "null_space_basis", "range_basis", "rank_profile", "singularity_distance",
+    "load_stack", "save_stack", "stack_from_dict", "stack_to_dict",
+]

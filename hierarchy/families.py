@@ -1,0 +1,108 @@
+"""Seeded random task-stack families shared by the tests, the validation report and
+the benchmarks (one place, so every consumer draws the same problems).
+
+Every generator takes a ``numpy.random.Generator`` and returns a :class:`TaskStack`;
+:data:`FAMILIES` maps a family name to ``f(rng, n, k)``.
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+
+from .stack import TaskStack
+from .task import Task
+
+
+def _split(rng: np.random.Generator, total: int, k: int, low: int = 1) -> list[int]:
+    """``k`` positive row counts summing to about ``total``."""
+    total = max(total, k * low)
+    cuts = np.sort(rng.choice(np.arange(1, total), size=k - 1, replace=False)) if k > 1 else []
+    sizes = np.diff(np.concatenate([[0], cuts, [total]])).astype(int)
+    return [max(low, int(s)) for s in sizes]
+
+
+def compatible(rng: np.random.Generator, n: int, k: int, fill: float = 0.8) -> TaskStack:
+    """Full-rank levels with ``Σ m_i ≈ fill · n ≤ n``: every task can be met exactly."""
+    k = max(1, min(k, n))
+    ms = _split(rng, max(k, int(fill * n)), k)
+    while sum(ms) > n:
+        ms[int(np.argmax(ms))] -= 1
+    return TaskStack([Task(f"task{i}", rng.standard_normal((m, n)), rng.standard_normal(m))
+                      for i, m in enumerate(ms)])
+
+
+def conflicting(rng: np.random.Generator, n: int, k: int) -> TaskStack:
+    """Levels that share directions with higher ones (``Σ m_i > n`` for deep stacks).
+
+    From the second level on, about a third of each level's rows are combinations
+    of rows of higher levels (with targets that disagree), the rest random.
+    """
+    k = max(1, k)
+    ms = _split(rng, max(k, int(1.3 * n)), k)
+    tasks: list[Task] = []
+    rows_above: list[np.ndarray] = []
+    for i, m in enumerate(ms):
+        A = rng.standard_normal((m, n))
+        if rows_above:
+            above = np.vstack(rows_above)
+            shared = max(1, m // 3)
+            A[:shared] = rng.standard_normal((shared, above.shape[0])) @ above
+        rows_above.append(A)
+        tasks.append(Task(f"task{i}", A, rng.standard_normal(m)))
+    return TaskStack(tasks)
+
+
+def rank_deficient(rng: np.random.Generator, n: int, k: int) -> TaskStack:
+    """Levels whose own rows are dependent and whose targets are inconsistent
+    (no exact solution even on their own), the first level included."""
+    k = max(1, k)
+    ms = _split(rng, max(2 * k, int(0.9 * n)), k, low=2)
+    tasks = []
+    for i, m in enumerate(ms):
+        rank = max(1, m // 2)
+        A = rng.standard_normal((m, rank)) @ rng.standard_normal((rank, n))
+        tasks.append(Task(f"task{i}", A, rng.standard_normal(m)))
+    return TaskStack(tasks)
+
+
+def near_singular(sigma: float, n: int = 6, rng: np.random.Generator | None = None
+                  ) -> TaskStack:
+    """Two levels where the second task's row tends to the row space of the first.
+
+    Level 1: ``x_0 = 0, x_1 = 0``; level 2: ``cos(σ) x_0 + sin(σ) x_2 = 1`` plus a
+    free row. The smallest singular value of ``A_2 Z_2`` is ``sin σ ≈ σ``, and the
+    exact lexicographic optimum has ``x_2 = 1/sin σ``.
+    """
+    rng = np.random.default_rng(0) if rng is None else rng
+    A1 = np.zeros((2, n))
+    A1[0, 0] = A1[1, 1] = 1.0
+    A2 = np.zeros((2, n))
+    A2[0, 0], A2[0, 2] = np.cos(sigma), np.sin(sigma)
+    A2[1, 3:] = rng.standard_normal(n - 3)
+    return TaskStack([Task("high", A1, np.zeros(2)), Task("low", A2, np.array([1.0, 0.5]))])
+
+
+def weighted(rng: np.random.Generator, n: int, k: int) -> TaskStack:
+    """Like :func:`conflicting`, with two weighted tasks sharing each level."""
+    base = conflicting(rng, n, k)
+    levels = []
+    for i, level in enumerate(base.levels):
+        t = level[0]
+        if t.m >= 2:
+            h = t.m // 2
+            levels.append([t.rows(list(range(h))).with_weight(float(rng.uniform(0.5, 4.0))),
+                           t.rows(list(range(h, t.m))).with_weight(float(rng.uniform(0.5, 4.0)))])
+        else:
+            levels.append([t])
+    return TaskStack(levels)
+
+
+#: family name -> generator ``f(rng, n, k)``
+FAMILIES: dict[str, Callable[[np.random.Generator, int, int], TaskStack]] = {
+    "compatible": compatible,
+    "conflicting": conflicting,
+    "rank_deficient": rank_deficient,
+    "weighted": weighted,
+}

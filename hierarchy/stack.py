@@ -1,0 +1,139 @@
+"""The task stack: levels of tasks, highest priority first, validated once."""
+
+from __future__ import annotations
+
+from typing import Iterator, Sequence
+
+import numpy as np
+
+from .errors import TaskStackError
+from .task import Level, Task
+
+
+class TaskStack:
+    """A prioritized stack of tasks over ``n`` unknowns.
+
+    Args:
+        levels: Highest priority first; each level is a :class:`Task` or a sequence
+            of tasks (``[[t1], [t2, t3]]``, ``[t1, t2 + t3]``).
+
+    Raises:
+        TaskStackError: naming the task and level at fault, for differing column
+            counts, a ``b`` of the wrong length, NaN anywhere, inf in ``A`` or ``b``,
+            ``lower > upper``, a task with neither ``b`` nor bounds, an empty stack or
+            level, or duplicate task names.
+
+    A stack is immutable; ``stack / task`` returns a new stack with one more level.
+    The compact form ``t1 / (t2 + t3) / t4`` builds the same stacks.
+    """
+
+    __slots__ = ("_levels", "_n")
+
+    def __init__(self, levels: Sequence) -> None:
+        if isinstance(levels, (Task, Level)):
+            levels = [levels]
+        if isinstance(levels, TaskStack):
+            levels = levels.levels
+        try:
+            raw = list(levels)
+        except TypeError:
+            raise TaskStackError(f"a stack is a sequence of levels, got "
+                                 f"{type(levels).__name__}") from None
+        if not raw:
+            raise TaskStackError("the stack is empty: give at least one level")
+        parsed: list[Level] = []
+        seen: dict[str, int] = {}
+        n = None
+        for i, item in enumerate(raw):
+            try:
+                level = Level.of(item)
+            except TaskStackError as exc:
+                raise TaskStackError(str(exc), level=i) from None
+            if len(level) == 0:
+                raise TaskStackError("the level is empty: give at least one task", level=i)
+            for task in level:
+                task.validate(level=i, n=n)
+                if n is None:
+                    n = task.n
+                if task.name in seen:
+                    raise TaskStackError(f"duplicate task name (also at level "
+                                         f"{seen[task.name]})", task=task.name, level=i)
+                seen[task.name] = i
+            parsed.append(level)
+        self._levels = tuple(parsed)
+        self._n = int(n)
+
+    # ------------------------------------------------------------------ access
+    @property
+    def n(self) -> int:
+        """Number of unknowns (columns of every task)."""
+        return self._n
+
+    @property
+    def levels(self) -> tuple[Level, ...]:
+        """The levels, highest priority first."""
+        return self._levels
+
+    @property
+    def tasks(self) -> tuple[Task, ...]:
+        """Every task, level by level."""
+        return tuple(t for level in self._levels for t in level)
+
+    @property
+    def is_equality(self) -> bool:
+        """``True`` when every task is an equality task."""
+        return all(level.is_equality for level in self._levels)
+
+    def __len__(self) -> int:
+        return len(self._levels)
+
+    def __iter__(self) -> Iterator[Level]:
+        return iter(self._levels)
+
+    def __getitem__(self, i: int) -> Level:
+        return self._levels[i]
+
+    def task(self, name: str) -> Task:
+        """The task called ``name``."""
+        for t in self.tasks:
+            if t.name == name:
+                return t
+        raise KeyError(name)
+
+    def level_of(self, name: str) -> int:
+        """Level index of the task called ``name``."""
+        for i, level in enumerate(self._levels):
+            if name in level.names:
+                return i
+        raise KeyError(name)
+
+    # ------------------------------------------------------------- composition
+    def __truediv__(self, other) -> "TaskStack":
+        if isinstance(other, TaskStack):
+            return TaskStack(self._levels + other.levels)
+        return TaskStack(self._levels + (Level.of(other),))
+
+    def __rtruediv__(self, other) -> "TaskStack":
+        return TaskStack((Level.of(other),) + self._levels)
+
+    def equality_matrices(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Per level, the weighted equality rows ``(A_i, b_i)``."""
+        return [(level.A, level.b) for level in self._levels]
+
+    # ------------------------------------------------------------------ display
+    def summary(self) -> str:
+        """A table: level, task, rows, kind, rank of the task, rank gained (eq. 12)."""
+        from .analysis import rank_profile
+        from .linalg import matrix_rank
+        profile = rank_profile(self)
+        lines = [f"TaskStack: {len(self)} levels, n = {self.n}",
+                 f"{'level':>5}  {'task':<24} {'rows':>4}  {'kind':<10} {'rank':>4}  {'r_i':>4}"]
+        for i, level in enumerate(self._levels):
+            for j, t in enumerate(level):
+                r_i = str(profile[i]) if j == 0 else ""
+                lines.append(f"{i:>5}  {t.name:<24} {t.m:>4}  {t.kind:<10} "
+                             f"{matrix_rank(t.A):>4}  {r_i:>4}")
+        return "\n".join(lines)
+
+    def __repr__(self) -> str:
+        return self.summary()

@@ -1,0 +1,1 @@
+"""Robot models and task builders (pinocchio): robot state -> hierarchy tasks."""
