@@ -29,6 +29,14 @@ from .base import STATUSES, Capabilities, FormulationError, Outcome, Solution
 PLUGINS: dict[str, tuple[str, str]] = {
     "reference": ("formulations.reference", ""),
     "extended_jacobian": ("formulations.extended_jacobian", ""),
+    "nullspace": ("formulations.nullspace", ""),
+    "chiaverini": ("formulations.chiaverini", ""),
+    "unifying": ("formulations.unifying", ""),
+    "operational_space": ("formulations.operational_space", ""),
+    "cascaded_qp": ("formulations.cascaded_qp", "qpsolvers[open_source_solvers]"),
+    "cvxpy": ("formulations.cvxpy_", "cvxpy"),
+    "placo": ("formulations.placo_", "placo==0.10.2 pin==3.8.0"),
+    "daqp_hierarchical": ("formulations.daqp_hierarchical", "daqp"),
 }
 
 _loaded: dict[str, ModuleType] = {}
@@ -67,7 +75,9 @@ def _load(name: str) -> ModuleType | None:
     try:
         mod = importlib.import_module(module_name)
     except ImportError as exc:
-        hint = f"; install it with `pip install {package}`" if package else ""
+        missing = getattr(exc, "name", None) or ""
+        own = missing == module_name or missing.startswith("formulations")
+        hint = f"; install it with `pip install {package}`" if package and not own else ""
         _failed[name] = f"{type(exc).__name__}: {exc}{hint}"
         return None
     _loaded[name] = mod
