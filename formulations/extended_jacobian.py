@@ -23,6 +23,16 @@ Two paths compute the same answer:
   and is solved by forward substitution (triangular solves; a small QR where a level
   conflicts), the feasible rows of eq. 26.
 
+``level_damping=λ_max`` with ``singular_threshold=ε`` (``qr`` path) is a selective
+alternative to eq. 27: a level is damped only when the smallest singular value of
+its projected rows ``A_i Z_i`` (estimated by the smallest ``|R_jj|`` of the pivoted QR)
+falls below ``ε‖A_i‖_F``, with the variable damping ``μ² = λ_max (1 − (σ/ε‖A_i‖_F)²)``
+of the singular-robust inverse (Nakamura 1986, Chiaverini 1997). The damped level
+still owns its ``r_i`` directions, so every higher level stays exact and no lower
+level can use them; θ̈ stays bounded (the level's step is at most
+``‖p‖ / (2√μ²)``). The status is ``"approximate"`` when some level was damped, and
+``info["damped_levels"]`` lists them.
+
 ``damping=λ > 0`` is eq. 27: the lower blocks become ``Z_i (J_iᵀ J_i + λ I)`` and the
 (generally over-determined) system is solved in the least-squares sense (SVD
 pseudo-inverse on the ``svd`` path, complete orthogonal decomposition ``dgelsy`` on
@@ -38,7 +48,7 @@ from scipy.linalg import lapack
 
 from hierarchy import DEFAULT_RCOND, TaskStack, null_space_basis
 
-from .base import Capabilities, Outcome
+from .base import Capabilities, FormulationError, Outcome
 
 NAME = "extended_jacobian"
 DESCRIPTION = "Jeong & Chang extended Jacobian (eq. 15-18), damped form eq. 27"
@@ -48,6 +58,8 @@ OPTIONS = {
     "nullspace": ("qr", "'qr': nested pivoted QR, no SVD; 'svd': SVD of J_{i-1}^A as the paper"),
     "damping": (0.0, "λ ≥ 0 of eq. 27 (0: exact eq. 18)"),
     "rcond": (DEFAULT_RCOND, "relative rank threshold: σ counts if σ > rcond·‖A_i‖_F"),
+    "level_damping": (0.0, "λ_max of the selective damping (qr path; 0: off)"),
+    "singular_threshold": (0.0, "ε: damp a level whose projected σ_min < ε·‖A_i‖_F"),
 }
 
 _dgeqp3 = lapack.dgeqp3
@@ -57,18 +69,26 @@ _dtrtrs = lapack.dtrtrs
 
 
 def solve(stack: TaskStack, *, nullspace: str = "qr", damping: float = 0.0,
-          rcond: float = DEFAULT_RCOND) -> Outcome:
+          rcond: float = DEFAULT_RCOND, level_damping: float = 0.0,
+          singular_threshold: float = 0.0) -> Outcome:
     """Solve the extended system (eq. 17) for ``x``; see the module docstring."""
     if nullspace not in ("qr", "svd"):
-        raise ValueError(f"nullspace must be 'qr' or 'svd', got {nullspace!r}")
+        raise FormulationError(f"nullspace must be 'qr' or 'svd', got {nullspace!r}")
+    for key, val in (("damping", damping), ("level_damping", level_damping),
+                     ("singular_threshold", singular_threshold), ("rcond", rcond)):
+        if not np.isfinite(float(val)) or float(val) < 0:
+            raise FormulationError(f"{key} must be a finite number ≥ 0, got {val}")
     damping = float(damping)
-    if not np.isfinite(damping) or damping < 0:
-        raise ValueError(f"damping must be a finite λ ≥ 0, got {damping}")
+    selective = float(level_damping) > 0 and float(singular_threshold) > 0
+    if selective and (damping > 0 or nullspace != "qr"):
+        raise FormulationError("level_damping works on the qr path without eq. 27 "
+                               "damping; use one or the other")
     if damping > 0:
         return _solve_damped(stack, damping, rcond, nullspace)
     if nullspace == "svd":
         return _solve_svd(stack, rcond)
-    return _solve_qr(stack, rcond)
+    return _solve_qr(stack, rcond, float(level_damping) if selective else 0.0,
+                     float(singular_threshold))
 
 
 # --------------------------------------------------------------------------- qr
@@ -81,7 +101,19 @@ def _lstsq_full_column_rank(K: np.ndarray, p: np.ndarray) -> np.ndarray:
     return z.ravel()
 
 
-def _solve_qr(stack: TaskStack, rcond: float) -> Outcome:
+def _damped_lstsq(K: np.ndarray, p: np.ndarray, mu2: float) -> np.ndarray:
+    """min ‖K z − p‖² + μ² ‖z‖² through the QR of ``[K; μ I]``."""
+    m, r = K.shape
+    aug = np.zeros((m + r, r), order="F")
+    aug[:m] = K
+    aug[m:] = np.sqrt(mu2) * np.eye(r)
+    rhs = np.zeros(m + r)
+    rhs[:m] = p
+    return _lstsq_full_column_rank(aug, rhs)
+
+
+def _solve_qr(stack: TaskStack, rcond: float, level_damping: float = 0.0,
+              singular_threshold: float = 0.0) -> Outcome:
     n = stack.n
     mats = [(level.A, level.b) for level in stack.levels]
     B = np.vstack([A for A, _ in mats])          # working copy of all rows
@@ -89,9 +121,10 @@ def _solve_qr(stack: TaskStack, rcond: float) -> Outcome:
     y = np.zeros(n)                               # solution in rotated coordinates
     reflectors = []                               # (col, qr[:, :r], tau[:r]) per level
     ranks = []
+    damped = []
     col = 0
     start = 0
-    for A, _ in mats:
+    for index, (A, _) in enumerate(mats):
         m = A.shape[0]
         stop = start + m
         d = n - col
@@ -111,12 +144,20 @@ def _solve_qr(stack: TaskStack, rcond: float) -> Outcome:
         # In rotated coordinates level i reads  B_i[:, :col] y_prev + Pᵀ-permuted Rᵀ y_new.
         rhs = c[start:stop] - B[start:stop, :col] @ y[:col]
         perm = jpvt - 1
-        Rt = qr[:r, :].T                                        # m × r, rows in pivot order
         p = rhs[perm]
-        if r == m:
+        mu2 = 0.0
+        if level_damping > 0:
+            sigma = float(diag[r - 1])                           # RRQR estimate of σ_min
+            eps_abs = singular_threshold * float(np.linalg.norm(A))
+            if sigma < eps_abs:
+                mu2 = level_damping * (1.0 - (sigma / eps_abs) ** 2)
+                damped.append(index)
+        if mu2 > 0:
+            z = _damped_lstsq(np.triu(qr[:r, :]).T.copy(), p, mu2)
+        elif r == m:
             z, _ = _dtrtrs(qr[:r, :r], p, trans=1)
         else:
-            z = _lstsq_full_column_rank(np.triu(Rt.T).T.copy(), p)
+            z = _lstsq_full_column_rank(np.triu(qr[:r, :]).T.copy(), p)
         y[col:col + r] = z
         if stop < B.shape[0] and r < d:
             rest = B[stop:, col:]
@@ -130,15 +171,26 @@ def _solve_qr(stack: TaskStack, rcond: float) -> Outcome:
         seg = x[col_i:].reshape(-1, 1)
         out, _, _ = _dormqr("L", "N", v, t, seg, 1)
         x[col_i:] = out.ravel()
-    return Outcome(x, "optimal", {"rank_profile": ranks, "nullspace": "qr"})
+    info = {"rank_profile": ranks, "nullspace": "qr"}
+    if level_damping > 0:
+        info["damped_levels"] = damped
+    return Outcome(x, "approximate" if damped else "optimal", info)
 
 
 # -------------------------------------------------------------------------- svd
-def _extended_blocks(stack: TaskStack, rcond: float, damping: float, zs):
-    """``J_E`` and ``h_E`` of eq. 15-16 (eq. 27 when ``damping > 0``)."""
+def _extended_blocks(stack: TaskStack, rcond: float, damping: float, zs,
+                     equilibrate: bool = False):
+    """``J_E`` and ``h_E`` of eq. 15-16 (eq. 27 when ``damping > 0``).
+
+    With ``equilibrate`` each block ``Z_iᵀJ_iᵀJ_i`` is scaled to unit Frobenius norm,
+    which leaves the solutions of the (consistent) undamped system unchanged and keeps
+    the squared scale of ``J_iᵀJ_i`` from hiding a level's singular values.
+    """
     rows, rhs = [], []
     for i, ((A, b), Z) in enumerate(zip(stack.equality_matrices(), zs)):
         n = A.shape[1]
+        if damping == 0 and i + 1 < len(zs) and zs[i + 1].shape[1] == Z.shape[1]:
+            continue  # r_i = 0: Z_i J_iᵀ J_i = 0 up to rounding, no equation (Theorem 1)
         if i == 0 and Z.shape[1] == n:
             full_row_rank = np.linalg.matrix_rank(A, tol=rcond * float(np.linalg.norm(A))) \
                 == A.shape[0]
@@ -151,34 +203,39 @@ def _extended_blocks(stack: TaskStack, rcond: float, damping: float, zs):
         G = A.T @ A
         if damping > 0:
             G = G + damping * np.eye(n)
-        rows.append(Z.T @ G)
-        rhs.append(Z.T @ (A.T @ b))
+        block, target = Z.T @ G, Z.T @ (A.T @ b)
+        if equilibrate:  # a consistent system keeps its solutions under row scaling
+            norm = float(np.linalg.norm(block))
+            if norm > 0:
+                block, target = block / norm, target / norm
+        rows.append(block)
+        rhs.append(target)
     return np.vstack(rows), np.concatenate(rhs)
 
 
 def _augmented_null_spaces(stack: TaskStack, rcond: float) -> tuple[list[np.ndarray], int]:
-    """``Z_i`` (columns) from the SVD of each augmented Jacobian ``J_{i-1}^A`` (eq. 7, 13).
+    """``Z_1 … Z_{k+1}`` (columns) from the SVD of each augmented Jacobian (eq. 7, 13),
+    and the rank ``ρ(J_k^A)``.
 
-    The threshold of each SVD is ``rcond`` times the largest level norm so far, so a
-    level's rank is judged on the scale of the tasks it stacks.
+    Each level's block is first scaled to unit Frobenius norm (row equilibration: the
+    null space is unchanged), so one threshold ``rcond`` judges every level on its own
+    scale, as the nested rule of ``hierarchy.linalg`` does.
     """
     n = stack.n
     zs = [np.eye(n)]
-    scale = 0.0
     blocks = []
-    for level in stack.levels[:-1]:
-        blocks.append(level.A)
-        scale = max(scale, float(np.linalg.norm(level.A)))
-        zs.append(null_space_basis(np.vstack(blocks), rcond, scale=scale))
-    blocks.append(stack.levels[-1].A)
-    scale = max(scale, float(np.linalg.norm(stack.levels[-1].A)))
-    rank = n - null_space_basis(np.vstack(blocks), rcond, scale=scale).shape[1]
-    return zs, rank
+    for level in stack.levels:
+        A = level.A
+        norm = float(np.linalg.norm(A))
+        blocks.append(A / norm if norm > 0 else A)
+        Z = null_space_basis(np.vstack(blocks), rcond, scale=1.0)
+        zs.append(Z)
+    return zs, n - zs[-1].shape[1]
 
 
 def _solve_svd(stack: TaskStack, rcond: float) -> Outcome:
     zs, rank = _augmented_null_spaces(stack, rcond)
-    JE, hE = _extended_blocks(stack, rcond, 0.0, zs)
+    JE, hE = _extended_blocks(stack, rcond, 0.0, zs, equilibrate=True)
     u, s, vt = np.linalg.svd(JE, full_matrices=False)
     r = min(rank, int(np.count_nonzero(s > 0)))
     x = vt[:r].T @ ((u[:, :r].T @ hE) / s[:r])

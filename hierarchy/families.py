@@ -99,10 +99,36 @@ def weighted(rng: np.random.Generator, n: int, k: int) -> TaskStack:
     return TaskStack(levels)
 
 
+def degenerate(rng: np.random.Generator, n: int, k: int) -> TaskStack:
+    """Levels of mixed, often degenerate kinds: random, all-zero rows (unreachable
+    targets), copies of higher rows with other targets, dependent rows, and rows
+    scaled by 1e-6 or 1e4 (the rank rule is relative to each level's own scale)."""
+    kinds = ("random", "zero", "repeat", "dependent", "tiny", "huge")
+    tasks: list[Task] = []
+    above: list[np.ndarray] = []
+    for i in range(max(1, k)):
+        kind = kinds[int(rng.integers(len(kinds)))] if i else kinds[int(rng.integers(2, 6)) % 6]
+        m = int(rng.integers(1, max(2, n // 2) + 1))
+        if kind == "zero":
+            A = np.zeros((m, n))
+        elif kind == "repeat" and above:
+            rows = np.vstack(above)
+            A = rows[rng.integers(rows.shape[0], size=m)] * rng.uniform(0.5, 2.0, (m, 1))
+        elif kind == "dependent" and m > 1:
+            A = rng.standard_normal((m, 1)) @ rng.standard_normal((1, n))
+        else:
+            A = rng.standard_normal((m, n))
+            A *= {"tiny": 1e-6, "huge": 1e4}.get(kind, 1.0)
+        above.append(A)
+        tasks.append(Task(f"{kind}{i}", A, rng.standard_normal(m)))
+    return TaskStack(tasks)
+
+
 #: family name -> generator ``f(rng, n, k)``
 FAMILIES: dict[str, Callable[[np.random.Generator, int, int], TaskStack]] = {
     "compatible": compatible,
     "conflicting": conflicting,
     "rank_deficient": rank_deficient,
     "weighted": weighted,
+    "degenerate": degenerate,
 }

@@ -54,3 +54,49 @@ def test_damped_is_bounded_near_singularity_and_tends_to_reference(nullspace):
             for l in (1e-2, 1e-4, 1e-6, 1e-8)]
     assert all(b < a for a, b in zip(errs, errs[1:]))
     assert errs[-1] < 1e-6
+
+
+from hypothesis import given, settings, strategies as st  # noqa: E402
+
+
+@settings(max_examples=150, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(2, 60), k=st.integers(1, 8),
+       family=st.sampled_from(sorted(FAMILIES)), nullspace=st.sampled_from(PATHS))
+def test_property_equals_reference_on_any_family(seed, n, k, family, nullspace):
+    """Any family, n 2..60, 1..8 levels (degenerate ones included): right shape, finite,
+    equal to the reference (relative 1e-8) and lexicographic."""
+    rng = np.random.default_rng(seed)
+    stack = FAMILIES[family](rng, n, k)
+    ref = formulations.solve(stack, "reference").x
+    sol = formulations.solve(stack, "extended_jacobian", nullspace=nullspace)
+    assert sol.x.shape == (stack.n,) and np.isfinite(sol.x).all()
+    assert np.linalg.norm(sol.x - ref) <= 1e-8 * max(1.0, np.linalg.norm(ref))
+    assert check_lexicographic(stack, sol.x, tol=1e-8).ok
+
+
+@pytest.mark.parametrize("sigma", [1e-2, 1e-4, 1e-8, 0.0])
+def test_selective_damping_keeps_higher_level_exact_and_bounds_x(sigma):
+    stack = near_singular(sigma)
+    sol = formulations.solve(stack, "extended_jacobian", level_damping=1e-2,
+                             singular_threshold=0.05)
+    assert sol.residuals[0] <= 1e-12          # the higher level is untouched
+    assert np.linalg.norm(sol.x) <= 5.0       # the exact optimum is 1/sin σ here
+    assert sol.status == ("approximate" if sigma > 0 else "optimal")
+
+
+def test_selective_damping_is_inactive_far_from_singularities():
+    rng = np.random.default_rng(7)
+    stack = compatible(rng, 20, 4)
+    ref = formulations.solve(stack, "reference").x
+    sol = formulations.solve(stack, "extended_jacobian", level_damping=1e-2,
+                             singular_threshold=1e-3)
+    assert sol.status == "optimal" and sol.info["damped_levels"] == []
+    np.testing.assert_allclose(sol.x, ref, atol=1e-10 * np.linalg.norm(ref))
+
+
+def test_bad_options_are_named():
+    stack = near_singular(0.1)
+    with pytest.raises(formulations.FormulationError, match="nullspace must be"):
+        formulations.solve(stack, "extended_jacobian", nullspace="lu")
+    with pytest.raises(formulations.FormulationError, match="damping must be"):
+        formulations.solve(stack, "extended_jacobian", damping=-1.0)

@@ -1,0 +1,76 @@
+"""The reference: independent checks of minimum norm, optimality and the metric."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+import formulations
+from hierarchy import Task, TaskStack, check_lexicographic, nested_null_spaces
+from hierarchy.families import FAMILIES, compatible
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_compatible_equals_min_norm_of_stacked_system(seed):
+    rng = np.random.default_rng(seed)
+    s = compatible(rng, 20, 4)
+    A = np.vstack([lv.A for lv in s])
+    b = np.concatenate([lv.b for lv in s])
+    expected = np.linalg.lstsq(A, b, rcond=None)[0]   # min-norm exact solution
+    np.testing.assert_allclose(formulations.solve(s, "reference").x, expected,
+                               rtol=0, atol=1e-10 * np.linalg.norm(expected))
+
+
+@pytest.mark.parametrize("family", sorted(FAMILIES))
+@pytest.mark.parametrize("seed", range(5))
+def test_solution_is_lexicographic_and_orthogonal_to_remaining_null_space(family, seed):
+    rng = np.random.default_rng(seed)
+    s = FAMILIES[family](rng, 15, 3)
+    x = formulations.solve(s, "reference").x
+    assert check_lexicographic(s, x, tol=1e-10).ok
+    Z = nested_null_spaces(s)[-1]
+    assert np.linalg.norm(Z.T @ x) <= 1e-10 * max(1.0, np.linalg.norm(x))
+
+
+def test_strict_priority_matches_the_limit_of_heavy_weights():
+    """Two conflicting levels: the lexicographic optimum is the limit of a weighted
+    least-squares problem as the weight ratio grows (an independent route)."""
+    rng = np.random.default_rng(3)
+    A1, b1 = rng.standard_normal((3, 5)), rng.standard_normal(3)
+    A2 = np.vstack([A1[0] + A1[1], rng.standard_normal((2, 5))])
+    b2 = rng.standard_normal(3)
+    x = formulations.solve(TaskStack([Task("a", A1, b1), Task("b", A2, b2)]), "reference").x
+    w = 1e6
+    A = np.vstack([w * A1, A2, 1e-7 * np.eye(5)])
+    y = np.linalg.lstsq(A, np.concatenate([w * b1, b2, np.zeros(5)]), rcond=None)[0]
+    np.testing.assert_allclose(x, y, atol=1e-5)
+
+
+def test_metric_minimises_weighted_norm_on_the_optimal_set():
+    rng = np.random.default_rng(4)
+    s = compatible(rng, 8, 2)
+    L = rng.standard_normal((8, 8))
+    W = L @ L.T + 8 * np.eye(8)
+    x = formulations.solve(s, "reference", metric=W).x
+    assert check_lexicographic(s, x).ok
+    # closed form: argmin xᵀWx s.t. A x = b  ->  x = W⁻¹Aᵀ(AW⁻¹Aᵀ)⁻¹b
+    A = np.vstack([lv.A for lv in s])
+    b = np.concatenate([lv.b for lv in s])
+    Wi = np.linalg.inv(W)
+    np.testing.assert_allclose(x, Wi @ A.T @ np.linalg.solve(A @ Wi @ A.T, b), rtol=1e-9)
+
+
+def test_metric_that_is_not_positive_definite_fails_cleanly():
+    s = TaskStack([Task("a", np.eye(3)[[0]], [1.0])])
+    sol = formulations.solve(s, "reference", metric=-np.eye(3))
+    assert sol.status == "failed" and "positive definite" in sol.info["message"]
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(2, 12), k=st.integers(1, 4))
+def test_first_level_is_solved_alone_in_least_squares(seed, n, k):
+    rng = np.random.default_rng(seed)
+    s = FAMILIES["rank_deficient"](rng, n, k)
+    x = formulations.solve(s, "reference").x
+    A1, b1 = s[0].A, s[0].b
+    best = np.linalg.norm(A1 @ np.linalg.lstsq(A1, b1, rcond=None)[0] - b1)
+    assert np.linalg.norm(A1 @ x - b1) <= best + 1e-9 * max(1.0, np.linalg.norm(b1))

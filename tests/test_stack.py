@@ -1,0 +1,158 @@
+"""Task / TaskStack: composition and validation (one test per error)."""
+
+import numpy as np
+import pytest
+
+from hierarchy import Level, Task, TaskStack, TaskStackError
+
+A = np.arange(6.0).reshape(2, 3) + 1.0
+
+
+def eq(name, A=A, b=(1.0, 2.0), **kw):
+    return Task(name, A, np.asarray(b), **kw)
+
+
+def test_compact_forms_build_the_explicit_stack():
+    t1, t2, t3, t4 = eq("t1"), eq("t2"), eq("t3"), eq("t4")
+    s = t1 / (t2 + t3) / t4
+    assert isinstance(t2 + t3, Level)
+    assert [lv.names for lv in s.levels] == [("t1",), ("t2", "t3"), ("t4",)]
+    explicit = TaskStack([[t1], [t2, t3], t4])
+    assert [lv.names for lv in explicit] == [lv.names for lv in s]
+    assert len(t1 / t2 / t3) == 3 and (t1 / t2 / t3).n == 3
+    assert [lv.names for lv in (t1 / t2) / (t3 / t4)] == [("t1",), ("t2",), ("t3",), ("t4",)]
+
+
+def test_rows_selects_rows_and_keeps_bounds():
+    t = Task("ineq", A, lower=[0.0, -1.0], upper=[1.0, np.inf], weight=[2.0, 3.0])
+    r = t.rows([1])
+    assert r.name == "ineq[1]"
+    np.testing.assert_array_equal(r.A, A[[1]])
+    np.testing.assert_array_equal(r.lower, [-1.0])
+    np.testing.assert_array_equal(r.upper, [np.inf])
+    np.testing.assert_array_equal(r.weight, [3.0])
+    with pytest.raises(TaskStackError, match="'ineq'.*out of range"):
+        t.rows([5])
+
+
+def test_level_rows_are_weighted_by_sqrt_weight():
+    s = TaskStack([[eq("a", weight=4.0), eq("b", b=(3.0, 4.0))]])
+    np.testing.assert_allclose(s[0].A[:2], 2.0 * A)
+    np.testing.assert_allclose(s[0].b, [2.0, 4.0, 3.0, 4.0])
+
+
+def test_arrays_are_copied_and_read_only():
+    M = A.copy()
+    b = np.array([1.0, 2.0])
+    t = Task("t", M, b)
+    M[0, 0] = 99.0
+    b[0] = 99.0
+    assert t.A[0, 0] == 1.0 and t.b[0] == 1.0
+    with pytest.raises(ValueError):
+        t.A[0, 0] = 5.0
+
+
+def test_summary_names_levels_tasks_and_ranks():
+    text = repr(eq("reach") / Task("lim", A, lower=[0, 0]))
+    assert "reach" in text and "lim" in text and "inequality" in text and "r_i" in text
+
+
+# ------------------------------------------------------------------- validation
+def _raises(levels, *, task, level, match):
+    with pytest.raises(TaskStackError, match=match) as info:
+        TaskStack(levels)
+    assert info.value.task == task and info.value.level == level
+    msg = str(info.value)
+    if task is not None:
+        assert repr(task) in msg
+    if level is not None:
+        assert f"level {level}" in msg
+    return info.value
+
+
+def test_error_columns_differ():
+    err = _raises([eq("a"), Task("b", np.ones((2, 4)), [0, 0])], task="b", level=1,
+                  match="4 columns but the stack has 3")
+    assert err.detail["columns"] == 4
+
+
+def test_error_b_wrong_length():
+    _raises([eq("a"), Task("short", A, [1.0, 2.0, 3.0])], task="short", level=1,
+            match=r"b has shape \(3,\) but A has 2 rows")
+
+
+def test_error_nan_in_A():
+    bad = A.copy()
+    bad[1, 2] = np.nan
+    _raises([Task("nanA", bad, [0, 0])], task="nanA", level=0, match="A holds NaN at")
+
+
+def test_error_nan_in_b():
+    _raises([eq("ok"), Task("nanb", A, [0, np.nan])], task="nanb", level=1, match="b holds NaN")
+
+
+def test_error_nan_in_bounds():
+    _raises([Task("nanlo", A, lower=[np.nan, 0])], task="nanlo", level=0,
+            match="lower holds NaN")
+
+
+def test_error_inf_in_A():
+    bad = A.copy()
+    bad[0, 0] = np.inf
+    _raises([Task("infA", bad, [0, 0])], task="infA", level=0, match="A holds inf")
+
+
+def test_error_inf_in_b():
+    _raises([Task("infb", A, [np.inf, 0])], task="infb", level=0, match="b holds inf")
+
+
+def test_infinite_bounds_mean_unbounded():
+    s = TaskStack([Task("box", A, lower=[-np.inf, 0], upper=[1, np.inf])])
+    assert not s.is_equality
+
+
+def test_error_wrong_sided_infinite_bound():
+    _raises([Task("lo", A, lower=[np.inf, 0])], task="lo", level=0, match=r"lower holds \+inf")
+
+
+def test_error_lower_above_upper():
+    err = _raises([eq("a"), Task("box", A, lower=[0, 2], upper=[1, 1])], task="box",
+                  level=1, match=r"lower > upper at rows \[1\] \(row 1: 2.0 > 1.0\)")
+    assert err.detail["rows"] == [1]
+
+
+def test_error_neither_b_nor_bounds():
+    _raises([eq("a"), Task("empty_task", A)], task="empty_task", level=1,
+            match="neither b .* nor lower/upper")
+
+
+def test_error_empty_stack():
+    with pytest.raises(TaskStackError, match="the stack is empty"):
+        TaskStack([])
+
+
+def test_error_empty_level():
+    _raises([eq("a"), []], task=None, level=1, match="the level is empty")
+
+
+def test_error_duplicate_names():
+    _raises([eq("same"), eq("other"), eq("same")], task="same", level=2,
+            match="duplicate task name .also at level 0")
+
+
+def test_error_b_and_bounds_together():
+    with pytest.raises(TaskStackError, match="'both'.*not both"):
+        Task("both", A, [0, 0], lower=[0, 0])
+
+
+def test_error_not_numbers():
+    with pytest.raises(TaskStackError, match="'words': A cannot be read as float64"):
+        Task("words", [["a", "b"]], [0])
+
+
+def test_error_bad_weight():
+    _raises([eq("w", weight=-1.0)], task="w", level=0, match="weight must be finite and > 0")
+
+
+def test_error_not_a_task_in_level():
+    _raises([eq("a"), [np.eye(3)]], task=None, level=1, match="a level holds Task objects")
