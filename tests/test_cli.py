@@ -1,0 +1,59 @@
+"""The ``prioik`` command line: list, solve, compare and clean errors (exit 2)."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from benchmarks.cli import main
+from benchmarks.compare import examples_dir
+
+
+def test_list_shows_formulations_and_backends(capsys):
+    assert main(["list"]) == 0
+    out = capsys.readouterr().out
+    assert "extended_jacobian" in out and "reference" in out
+    assert "QP back-ends qpsolvers sees here:" in out
+
+
+def test_solve_prints_x_and_residuals(capsys):
+    path = examples_dir() / "small_4x3.json"
+    assert main(["solve", str(path), "-f", "extended_jacobian", "-o", "nullspace=svd"]) == 0
+    out = capsys.readouterr().out
+    assert "status: optimal" in out and "x = [" in out
+    assert "level 2 (posture): residual" in out
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["solve", "missing.json"], "cannot read"),
+    (["solve", "{small}", "-f", "magic"], "unknown formulation 'magic'"),
+    (["solve", "{small}", "-o", "dampnig=1"], "has no option dampnig"),
+    (["solve", "{small}", "-o", "novalue"], "--option takes key=value"),
+])
+def test_bad_input_prints_one_line_and_exits_2(argv, message, capsys):
+    argv = [a.replace("{small}", str(examples_dir() / "small_4x3.json")) for a in argv]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and len(err.splitlines()) == 1
+
+
+def test_invalid_stack_file_names_the_task(tmp_path, capsys):
+    bad = tmp_path / "nan.json"
+    bad.write_text(json.dumps({"levels": [{"name": "arm", "A": [[1.0, 2.0]], "b": [float("nan")]}]}))
+    assert main(["solve", str(bad)]) == 2
+    assert "task 'arm': b holds NaN" in capsys.readouterr().err
+
+
+def test_compare_prints_a_table(capsys):
+    assert main(["compare", str(examples_dir() / "small_4x3.json"), "--repeats", "2",
+                 "--formulations", "reference,extended_jacobian"]) == 0
+    out = capsys.readouterr().out
+    assert "dist. to ref" in out and "extended_jacobian" in out
+
+
+def test_console_script_runs():
+    exe = [sys.executable, "-m", "benchmarks.cli", "list"]
+    res = subprocess.run(exe, capture_output=True, text=True, timeout=120)
+    assert res.returncode == 0 and "reference" in res.stdout

@@ -1,0 +1,114 @@
+"""The registry: names, availability, option checks, failures as statuses."""
+
+import types
+
+import numpy as np
+import pytest
+
+import formulations
+from formulations import Capabilities, FormulationError, Outcome, registry
+from hierarchy import Task, TaskStack, UnsupportedTaskError
+from hierarchy.families import compatible
+
+
+@pytest.fixture
+def stack():
+    return compatible(np.random.default_rng(0), 6, 2)
+
+
+def test_available_lists_every_registered_plugin_with_a_reason_when_not():
+    infos = {f.name: f for f in formulations.available()}
+    assert set(infos) == set(registry.PLUGINS)
+    for f in infos.values():
+        assert f.available or f.reason
+        if f.available:
+            assert f.description and isinstance(f.capabilities, Capabilities)
+    assert infos["reference"].available and infos["extended_jacobian"].available
+
+
+def test_unknown_formulation_lists_known_ones(stack):
+    with pytest.raises(FormulationError, match="unknown formulation 'magic'; known: reference"):
+        formulations.solve(stack, "magic")
+
+
+def test_failed_import_is_recorded_and_repeated(monkeypatch, stack):
+    monkeypatch.setitem(registry.PLUGINS, "ghost", ("formulations._no_such_module", "ghostpkg"))
+    monkeypatch.delitem(registry._failed, "ghost", raising=False)
+    info = {f.name: f for f in formulations.available()}["ghost"]
+    assert not info.available and "_no_such_module" in info.reason
+    with pytest.raises(FormulationError, match="'ghost' is not available here: .*_no_such_module"):
+        formulations.solve(stack, "ghost")
+
+
+def test_unknown_option_is_named_with_the_accepted_ones(stack):
+    with pytest.raises(FormulationError, match="has no option dampnig; its options: .*damping"):
+        formulations.solve(stack, "extended_jacobian", dampnig=0.1)
+
+
+def test_inequality_task_in_closed_form_method_names_the_task():
+    s = TaskStack([Task("eq", np.eye(3)[[0]], [1.0]),
+                   Task("joint_limits", np.eye(3), lower=[-1, -1, -1], upper=[1, 1, 1])])
+    with pytest.raises(UnsupportedTaskError, match="level 1, task 'joint_limits'") as info:
+        formulations.solve(s, "extended_jacobian")
+    assert info.value.formulation == "extended_jacobian"
+
+
+def _fake(monkeypatch, name, solve, caps=Capabilities()):
+    mod = types.ModuleType(name)
+    mod.NAME, mod.DESCRIPTION, mod.CAPABILITIES = name, "test double", caps
+    mod.OPTIONS = {"mass_matrix": (None, "M"), "bias": (None, "C+G")}
+    mod.solve = solve
+    monkeypatch.setitem(registry.PLUGINS, name, (f"tests.{name}", ""))
+    monkeypatch.setitem(registry._loaded, name, mod)
+    return mod
+
+
+def test_linalg_failure_becomes_failed_status(monkeypatch, stack):
+    def boom(stack, **_):
+        raise np.linalg.LinAlgError("Singular matrix")
+    _fake(monkeypatch, "boom", boom)
+    sol = formulations.solve(stack, "boom")
+    assert sol.status == "failed" and not sol.ok
+    assert "LinAlgError: Singular matrix" in sol.info["message"]
+    assert np.isnan(sol.x).all() and np.isnan(sol.residuals).all()
+
+
+def test_non_finite_answer_is_reported_failed(monkeypatch, stack):
+    _fake(monkeypatch, "nanny", lambda stack, **_: Outcome(np.full(stack.n, np.nan)))
+    sol = formulations.solve(stack, "nanny")
+    assert sol.status == "failed" and "non-finite" in sol.info["message"]
+
+
+def test_mass_matrix_is_required_validated_and_never_mutated(monkeypatch, stack):
+    seen = {}
+
+    def record(stack, mass_matrix=None, bias=None):
+        seen["M"] = mass_matrix
+        return Outcome(np.zeros(stack.n))
+    _fake(monkeypatch, "dyn", record, Capabilities(needs_mass_matrix=True))
+    with pytest.raises(FormulationError, match="needs mass_matrix=M .the 6x6"):
+        formulations.solve(stack, "dyn")
+    with pytest.raises(FormulationError, match="mass_matrix must be 6x6 .* shape \\(5, 5\\)"):
+        formulations.solve(stack, "dyn", mass_matrix=np.eye(5))
+    with pytest.raises(FormulationError, match="must be symmetric"):
+        formulations.solve(stack, "dyn", mass_matrix=np.triu(np.ones((6, 6))))
+    with pytest.raises(FormulationError, match="bias must be a finite vector of length 6"):
+        formulations.solve(stack, "dyn", mass_matrix=np.eye(6), bias=[np.nan] * 6)
+    M = np.eye(6)
+    formulations.solve(stack, "dyn", mass_matrix=M)
+    assert seen["M"] is not M and not seen["M"].flags.writeable
+
+
+@pytest.mark.parametrize("name", ["reference", "extended_jacobian"])
+def test_solve_does_not_mutate_inputs_and_reports_time(name, stack):
+    before = [(t.A.copy(), t.b.copy()) for t in stack.tasks]
+    sol = formulations.solve(stack, name)
+    assert sol.time_s > 0 and sol.formulation == name and sol.residuals.shape == (2,)
+    for (A, b), t in zip(before, stack.tasks):
+        np.testing.assert_array_equal(A, t.A)
+        np.testing.assert_array_equal(b, t.b)
+
+
+def test_solve_accepts_a_plain_list_of_levels():
+    sol = formulations.solve([Task("a", np.eye(2), [1.0, 2.0])], "reference")
+    np.testing.assert_allclose(sol.x, [1.0, 2.0])
