@@ -13,7 +13,11 @@ Two paths compute the same answer:
   pseudo-inverse keeping ``ρ(J_k^A)`` singular values (the rank Theorem 1 gives).
   When ``J_1`` is rank-deficient its block is ``J_1ᵀ J_1`` (eq. 14 with ``Z_1 = I``),
   so that an inconsistent first level is solved in the least-squares sense
-  instead of being mixed with lower levels.
+  instead of being mixed with lower levels. Because the blocks hold ``J_iᵀ J_i``
+  this path squares the conditioning: its error relative to the exact optimum is
+  about ``ε κ(J_E)`` (measured ≤ 200 ε κ over 1500 random stacks;
+  ``info["condition_number"]`` reports ``κ(J_E)``), while the ``qr`` path works on
+  ``A_i`` itself.
 * ``nullspace="qr"`` (default) — every ``Z_i`` from one nested orthogonal
   factorization, without SVD: level by level, a Householder QR with column pivoting
   of ``(A_i Z_i)ᵀ`` splits the free directions into the level's feasible ones (its
@@ -239,8 +243,10 @@ def _solve_svd(stack: TaskStack, rcond: float) -> Outcome:
     u, s, vt = np.linalg.svd(JE, full_matrices=False)
     r = min(rank, int(np.count_nonzero(s > 0)))
     x = vt[:r].T @ ((u[:, :r].T @ hE) / s[:r])
+    cond = float(s[0] / s[r - 1]) if r else 1.0
     return Outcome(x, "optimal", {"rank": rank, "nullspace": "svd",
-                                  "extended_rows": int(JE.shape[0])})
+                                  "extended_rows": int(JE.shape[0]),
+                                  "condition_number": cond})
 
 
 # ----------------------------------------------------------------------- damped

@@ -64,14 +64,21 @@ from hypothesis import given, settings, strategies as st  # noqa: E402
        family=st.sampled_from(sorted(FAMILIES)), nullspace=st.sampled_from(PATHS))
 def test_property_equals_reference_on_any_family(seed, n, k, family, nullspace):
     """Any family, n 2..60, 1..8 levels (degenerate ones included): right shape, finite,
-    equal to the reference (relative 1e-8) and lexicographic."""
+    equal to the reference and lexicographic.
+
+    Tolerance: relative 1e-8 for the qr path. The svd path builds the paper's
+    ``Z_i J_iᵀ J_i`` rows, which square the conditioning; it is held to
+    ``max(1e-8, 1e3 ε κ(J_E))`` (measured worst: 190 ε κ over 1500 draws)."""
     rng = np.random.default_rng(seed)
     stack = FAMILIES[family](rng, n, k)
     ref = formulations.solve(stack, "reference").x
     sol = formulations.solve(stack, "extended_jacobian", nullspace=nullspace)
     assert sol.x.shape == (stack.n,) and np.isfinite(sol.x).all()
-    assert np.linalg.norm(sol.x - ref) <= 1e-8 * max(1.0, np.linalg.norm(ref))
-    assert check_lexicographic(stack, sol.x, tol=1e-8).ok
+    tol = 1e-8
+    if nullspace == "svd":
+        tol = max(tol, 1e3 * np.finfo(float).eps * sol.info["condition_number"])
+    assert np.linalg.norm(sol.x - ref) <= tol * max(1.0, np.linalg.norm(ref))
+    assert check_lexicographic(stack, sol.x, tol=max(1e-8, tol)).ok
 
 
 @pytest.mark.parametrize("sigma", [1e-2, 1e-4, 1e-8, 0.0])
