@@ -6,7 +6,8 @@
 """
 
 from .base import STATUSES, Capabilities, FormulationError, Outcome, Solution
-from .registry import PLUGINS, FormulationInfo, available, get, names, solve
+from .registry import (PLUGINS, BatchSolution, FormulationInfo, available, get, names, solve,
+                       solve_batch)
 
-__all__ = ["STATUSES", "Capabilities", "FormulationError", "FormulationInfo", "Outcome",
-           "PLUGINS", "Solution", "available", "get", "names", "solve"]
+__all__ = ["BatchSolution", "STATUSES", "Capabilities", "FormulationError", "FormulationInfo", "Outcome",
+           "PLUGINS", "Solution", "available", "get", "names", "solve", "solve_batch"]

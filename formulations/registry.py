@@ -5,7 +5,9 @@ A plugin is a module that defines
 * ``NAME`` (str), ``DESCRIPTION`` (one line), ``CAPABILITIES`` (:class:`Capabilities`),
 * ``OPTIONS``: ``{option: (default, description)}``, the only options it accepts,
 * ``solve(stack, **options) -> Outcome``,
-* optionally ``backends() -> list[str]``, the back-ends it can use here.
+* optionally ``backends() -> list[str]``, the back-ends it can use here,
+* optionally ``solve_batch(stacks, **options) -> (X, statuses)`` for many stacks of one
+  shape (stacked linear algebra); :func:`solve_batch` loops over ``solve`` otherwise.
 
 An optional dependency that fails to import makes the plugin unavailable; the
 reason is recorded and repeated when that formulation is asked for.
@@ -217,3 +219,78 @@ def solve(stack, formulation: str = "extended_jacobian", **options: Any) -> Solu
     residuals = (lexicographic_residuals(stack, x) if np.isfinite(x).all()
                  else np.full(len(stack), np.nan))
     return Solution(x, formulation, dict(options), status, residuals, elapsed, info)
+
+
+@dataclass
+class BatchSolution:
+    """The answers of one formulation to many stacks of the same shape.
+
+    Attributes:
+        X: Solutions, one row per stack (``B × n``).
+        statuses: One status per stack.
+        formulation: Name of the formulation.
+        options: Options it was called with.
+        time_s: Wall time of the whole batch (solve alone).
+        batched: Whether the plugin's own batched kernel ran (else a loop of ``solve``).
+    """
+
+    X: np.ndarray
+    statuses: list[str]
+    formulation: str
+    options: dict[str, Any]
+    time_s: float
+    batched: bool
+
+    @property
+    def time_per_stack_s(self) -> float:
+        """``time_s`` divided by the number of stacks."""
+        return self.time_s / max(1, len(self.statuses))
+
+
+def stack_shape(stack: TaskStack) -> tuple:
+    """What must agree for stacks to share a batch: ``n`` and each task's rows and kind."""
+    return (stack.n,) + tuple(tuple((t.m, t.is_equality) for t in level) for level in stack)
+
+
+def solve_batch(stacks, formulation: str = "extended_jacobian", **options: Any) -> BatchSolution:
+    """Solve many stacks of the same shape (sampled states, retargeting frames, sweeps).
+
+    Uses the plugin's ``solve_batch`` (stacked numpy linear algebra) when it has one,
+    otherwise loops over its ``solve``.
+
+    Raises:
+        TaskStackError: the stacks do not share one shape (names the first that differs).
+        FormulationError, UnsupportedTaskError: as :func:`solve`.
+    """
+    from hierarchy import TaskStackError
+    stacks = [s if isinstance(s, TaskStack) else TaskStack(s) for s in stacks]
+    if not stacks:
+        raise TaskStackError("solve_batch needs at least one stack")
+    mod = get(formulation)
+    shape = stack_shape(stacks[0])
+    for i, s in enumerate(stacks[1:], 1):
+        if stack_shape(s) != shape:
+            raise TaskStackError(f"stack {i} of the batch differs in shape from stack 0 "
+                                 f"(n, rows and kinds of every task must agree)")
+    check_support(formulation, mod.CAPABILITIES, stacks[0])
+    opts = _check_options(formulation, mod, stacks[0], options)
+    batched = hasattr(mod, "solve_batch")
+    t0 = time.perf_counter()
+    if batched:
+        X, statuses = mod.solve_batch(stacks, **opts)
+        X = np.asarray(X, dtype=np.float64)
+        statuses = list(statuses)
+    else:
+        X = np.empty((len(stacks), shape[0]))
+        statuses = []
+        for i, s in enumerate(stacks):
+            try:
+                out = mod.solve(s, **opts)
+                X[i], st = out.x, out.status
+            except (np.linalg.LinAlgError, ArithmeticError):
+                X[i], st = np.nan, "failed"
+            statuses.append(st)
+    elapsed = time.perf_counter() - t0
+    bad = ~np.isfinite(X).all(axis=1)
+    statuses = ["failed" if b else st for b, st in zip(bad, statuses)]
+    return BatchSolution(X, statuses, formulation, dict(options), elapsed, batched)

@@ -112,3 +112,24 @@ def test_solve_does_not_mutate_inputs_and_reports_time(name, stack):
 def test_solve_accepts_a_plain_list_of_levels():
     sol = formulations.solve([Task("a", np.eye(2), [1.0, 2.0])], "reference")
     np.testing.assert_allclose(sol.x, [1.0, 2.0])
+
+
+def test_solve_batch_loops_and_matches_single_solves():
+    rng = np.random.default_rng(5)
+    stacks = [compatible(np.random.default_rng(s), 10, 3) for s in range(4)]
+    # the families draw row counts at random: keep those with the first one's shape
+    shape = registry.stack_shape(stacks[0])
+    stacks = [s for s in stacks if registry.stack_shape(s) == shape] or stacks[:1]
+    batch = formulations.solve_batch(stacks, "reference")
+    for x, s in zip(batch.X, stacks):
+        np.testing.assert_allclose(x, formulations.solve(s, "reference").x, atol=1e-12)
+    assert batch.statuses == ["optimal"] * len(stacks) and batch.time_per_stack_s > 0
+    del rng
+
+
+def test_solve_batch_rejects_mixed_shapes():
+    from hierarchy import TaskStackError
+    a = TaskStack([Task("a", np.eye(3)[[0]], [1.0])])
+    b = TaskStack([Task("a", np.eye(3)[[0, 1]], [1.0, 2.0])])
+    with pytest.raises(TaskStackError, match="stack 1 of the batch differs"):
+        formulations.solve_batch([a, b], "reference")
