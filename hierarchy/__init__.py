@@ -10,11 +10,11 @@ from .analysis import (FeasibleSplit, LevelCheck, LexicographicReport, algorithm
 from .errors import TaskStackError, UnsupportedTaskError
 from .io import load_stack, save_stack, stack_from_dict, stack_to_dict
 from .linalg import DEFAULT_RCOND, matrix_rank, null_space_basis, range_basis
-from .stack import TaskStack
+from .stack import PackedRows, TaskStack
 from .task import Level, Task
 
 __all__ = [
-    "DEFAULT_RCOND", "FeasibleSplit", "Level", "LevelCheck", "LexicographicReport", "Task",
+    "DEFAULT_RCOND", "FeasibleSplit", "PackedRows", "Level", "LevelCheck", "LexicographicReport", "Task",
     "TaskStack", "TaskStackError", "UnsupportedTaskError", "algorithmic_error",
     "algorithmic_error_norms", "check_lexicographic", "conflicting_levels",
     "feasible_split", "lexicographic_residuals", "matrix_rank", "nested_null_spaces",

@@ -2,12 +2,42 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Iterator, Sequence
 
 import numpy as np
 
 from .errors import TaskStackError
 from .task import Level, Task
+
+
+@dataclass(frozen=True)
+class PackedRows:
+    """The weighted equality rows of all levels stacked, for compiled kernels.
+
+    Attributes:
+        A: ``Σ m_i × n`` rows, level after level (``level.A`` of each level).
+        b: ``Σ m_i`` targets.
+        starts: ``k + 1`` row offsets (level ``i`` is ``A[starts[i]:starts[i+1]]``).
+        scales: ``‖A_i‖_F`` per level (the scale of the rank rule).
+    """
+
+    A: np.ndarray
+    b: np.ndarray
+    starts: np.ndarray
+    scales: np.ndarray
+
+    @classmethod
+    def of(cls, stack: "TaskStack") -> "PackedRows":
+        mats = [(level.A, level.b) for level in stack.levels]
+        A = np.vstack([a for a, _ in mats])
+        b = np.concatenate([v for _, v in mats])
+        starts = np.zeros(len(mats) + 1, dtype=np.int64)
+        np.cumsum([a.shape[0] for a, _ in mats], out=starts[1:])
+        scales = np.array([float(np.linalg.norm(a)) for a, _ in mats])
+        for arr in (A, b, starts, scales):
+            arr.setflags(write=False)
+        return cls(A, b, starts, scales)
 
 
 class TaskStack:
@@ -27,7 +57,7 @@ class TaskStack:
     The compact form ``t1 / (t2 + t3) / t4`` builds the same stacks.
     """
 
-    __slots__ = ("_levels", "_n")
+    __slots__ = ("_levels", "_n", "_packed")
 
     def __init__(self, levels: Sequence) -> None:
         if isinstance(levels, (Task, Level)):
@@ -62,6 +92,7 @@ class TaskStack:
             parsed.append(level)
         self._levels = tuple(parsed)
         self._n = int(n)
+        self._packed = None
 
     # ------------------------------------------------------------------ access
     @property
@@ -115,6 +146,12 @@ class TaskStack:
 
     def __rtruediv__(self, other) -> "TaskStack":
         return TaskStack((Level.of(other),) + self._levels)
+
+    def packed(self) -> "PackedRows":
+        """Every level's weighted equality rows in one array (computed once, read-only)."""
+        if self._packed is None:
+            self._packed = PackedRows.of(self)
+        return self._packed
 
     def equality_matrices(self) -> list[tuple[np.ndarray, np.ndarray]]:
         """Per level, the weighted equality rows ``(A_i, b_i)``."""

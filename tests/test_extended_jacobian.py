@@ -7,16 +7,19 @@ import formulations
 from hierarchy import check_lexicographic
 from hierarchy.families import FAMILIES, compatible, near_singular
 
-PATHS = ["qr", "svd"]
+#: the three ways to compute eq. 18: compiled nested QR, LAPACK nested QR, the paper's SVD
+PATHS = {"qr-numba": {"nullspace": "qr", "kernel": "numba"},
+         "qr-lapack": {"nullspace": "qr", "kernel": "lapack"},
+         "svd": {"nullspace": "svd"}}
 
 
-@pytest.mark.parametrize("nullspace", PATHS)
+@pytest.mark.parametrize("path", sorted(PATHS))
 @pytest.mark.parametrize("seed", range(20))
-def test_compatible_equals_reference_and_meets_every_task(nullspace, seed):
+def test_compatible_equals_reference_and_meets_every_task(path, seed):
     rng = np.random.default_rng(seed)
     stack = compatible(rng, int(rng.integers(4, 40)), int(rng.integers(1, 6)))
     ref = formulations.solve(stack, "reference").x
-    sol = formulations.solve(stack, "extended_jacobian", nullspace=nullspace)
+    sol = formulations.solve(stack, "extended_jacobian", **PATHS[path])
     assert sol.status == "optimal"
     # relative 1e-9 to the reference, and every task met to 1e-9 of its scale
     assert np.linalg.norm(sol.x - ref) <= 1e-9 * max(1.0, np.linalg.norm(ref))
@@ -24,21 +27,22 @@ def test_compatible_equals_reference_and_meets_every_task(nullspace, seed):
         assert r <= 1e-9 * max(1.0, np.linalg.norm(level.b))
 
 
-@pytest.mark.parametrize("nullspace", PATHS)
+@pytest.mark.parametrize("path", sorted(PATHS))
 @pytest.mark.parametrize("family", ["conflicting", "rank_deficient", "weighted"])
 @pytest.mark.parametrize("seed", range(12))
-def test_conflicting_equals_reference_and_is_lexicographic(nullspace, family, seed):
+def test_conflicting_equals_reference_and_is_lexicographic(path, family, seed):
     rng = np.random.default_rng(1000 + seed)
     stack = FAMILIES[family](rng, int(rng.integers(3, 40)), int(rng.integers(2, 7)))
     ref = formulations.solve(stack, "reference").x
-    sol = formulations.solve(stack, "extended_jacobian", nullspace=nullspace)
+    sol = formulations.solve(stack, "extended_jacobian", **PATHS[path])
     assert np.linalg.norm(sol.x - ref) <= 1e-8 * max(1.0, np.linalg.norm(ref))
     report = check_lexicographic(stack, sol.x, tol=1e-8)
     assert report.ok, str(report)
 
 
-@pytest.mark.parametrize("nullspace", PATHS)
-def test_damped_is_bounded_near_singularity_and_tends_to_reference(nullspace):
+@pytest.mark.parametrize("path", sorted(PATHS))
+def test_damped_is_bounded_near_singularity_and_tends_to_reference(path):
+    nullspace = PATHS[path]["nullspace"]
     lam = 1e-2
     norms = []
     for sigma in np.logspace(-1, -7, 7):
@@ -61,8 +65,8 @@ from hypothesis import given, settings, strategies as st  # noqa: E402
 
 @settings(max_examples=150, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(2, 60), k=st.integers(1, 8),
-       family=st.sampled_from(sorted(FAMILIES)), nullspace=st.sampled_from(PATHS))
-def test_property_equals_reference_on_any_family(seed, n, k, family, nullspace):
+       family=st.sampled_from(sorted(FAMILIES)), path=st.sampled_from(sorted(PATHS)))
+def test_property_equals_reference_on_any_family(seed, n, k, family, path):
     """Any family, n 2..60, 1..8 levels (degenerate ones included): right shape, finite,
     equal to the reference and lexicographic.
 
@@ -72,20 +76,21 @@ def test_property_equals_reference_on_any_family(seed, n, k, family, nullspace):
     rng = np.random.default_rng(seed)
     stack = FAMILIES[family](rng, n, k)
     ref = formulations.solve(stack, "reference").x
-    sol = formulations.solve(stack, "extended_jacobian", nullspace=nullspace)
+    sol = formulations.solve(stack, "extended_jacobian", **PATHS[path])
     assert sol.x.shape == (stack.n,) and np.isfinite(sol.x).all()
     tol = 1e-8
-    if nullspace == "svd":
+    if path == "svd":
         tol = max(tol, 1e3 * np.finfo(float).eps * sol.info["condition_number"])
     assert np.linalg.norm(sol.x - ref) <= tol * max(1.0, np.linalg.norm(ref))
     assert check_lexicographic(stack, sol.x, tol=max(1e-8, tol)).ok
 
 
+@pytest.mark.parametrize("kernel", ["numba", "lapack"])
 @pytest.mark.parametrize("sigma", [1e-2, 1e-4, 1e-8, 0.0])
-def test_selective_damping_keeps_higher_level_exact_and_bounds_x(sigma):
+def test_selective_damping_keeps_higher_level_exact_and_bounds_x(sigma, kernel):
     stack = near_singular(sigma)
     sol = formulations.solve(stack, "extended_jacobian", level_damping=1e-2,
-                             singular_threshold=0.05)
+                             singular_threshold=0.05, kernel=kernel)
     assert sol.residuals[0] <= 1e-12          # the higher level is untouched
     assert np.linalg.norm(sol.x) <= 5.0       # the exact optimum is 1/sin σ here
     assert sol.status == ("approximate" if sigma > 0 else "optimal")
@@ -107,3 +112,14 @@ def test_bad_options_are_named():
         formulations.solve(stack, "extended_jacobian", nullspace="lu")
     with pytest.raises(formulations.FormulationError, match="damping must be"):
         formulations.solve(stack, "extended_jacobian", damping=-1.0)
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_compiled_and_lapack_kernels_agree_on_ranks_and_x(seed):
+    rng = np.random.default_rng(5000 + seed)
+    family = sorted(FAMILIES)[seed % len(FAMILIES)]
+    stack = FAMILIES[family](rng, int(rng.integers(2, 50)), int(rng.integers(1, 8)))
+    a = formulations.solve(stack, "extended_jacobian", kernel="numba")
+    b = formulations.solve(stack, "extended_jacobian", kernel="lapack")
+    assert a.info["rank_profile"] == b.info["rank_profile"]
+    assert np.linalg.norm(a.x - b.x) <= 1e-9 * max(1.0, np.linalg.norm(b.x))

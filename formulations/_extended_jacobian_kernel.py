@@ -1,0 +1,219 @@
+"""Compiled kernel of the extended-Jacobian ``qr`` path (numba).
+
+The same algorithm as ``extended_jacobian._solve_qr`` (the readable LAPACK version),
+written as one loop nest so that a whole G1-size stack costs one call instead of
+several LAPACK calls per level, each with Python overhead.
+
+Level by level, an LQ factorization with row pivoting of the level's rows restricted
+to the still-free coordinates (``A_i Z_i`` in rotated coordinates) finds the level's
+rank ``r_i`` (pivot norm ``> rcond‖A_i‖_F``) and a Householder reflector per feasible
+direction. Each reflector is applied, from the right, to the rows of the levels below
+only, so the free coordinates of the next level are the trailing columns (``Z_{i+1}``
+implicitly). The level's feasible rows are then lower-trapezoidal ``L`` (eq. 26) and
+its unknowns follow by forward substitution, or by a small least-squares solve when
+the level conflicts (``r_i < m_i``), optionally damped (selective damping). Finally
+``x = H_1 H_2 … H_R y``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+
+@njit(cache=True, fastmath=False)
+def _small_lstsq(L, rhs, m, r, mu2, out, col):
+    """min ‖L[:m, :r] z − rhs‖² + mu2 ‖z‖², by Householder QR of [L; √mu2 I]."""
+    rows = m + r if mu2 > 0.0 else m
+    T = np.zeros((rows, r))
+    t = np.zeros(rows)
+    for i in range(m):
+        for j in range(r):
+            T[i, j] = L[i, j]
+        t[i] = rhs[i]
+    if mu2 > 0.0:
+        s = np.sqrt(mu2)
+        for j in range(r):
+            T[m + j, j] = s
+    for j in range(r):
+        norm = 0.0
+        for i in range(j, rows):
+            norm += T[i, j] * T[i, j]
+        norm = np.sqrt(norm)
+        if norm == 0.0:
+            continue
+        alpha = -norm if T[j, j] >= 0.0 else norm
+        v0 = T[j, j] - alpha
+        # v = [v0, T[j+1:, j]], H = I - 2 v vᵀ / vᵀv
+        vtv = v0 * v0
+        for i in range(j + 1, rows):
+            vtv += T[i, j] * T[i, j]
+        if vtv == 0.0:
+            continue
+        for k in range(j + 1, r):
+            dot = v0 * T[j, k]
+            for i in range(j + 1, rows):
+                dot += T[i, j] * T[i, k]
+            f = 2.0 * dot / vtv
+            T[j, k] -= f * v0
+            for i in range(j + 1, rows):
+                T[i, k] -= f * T[i, j]
+        dot = v0 * t[j]
+        for i in range(j + 1, rows):
+            dot += T[i, j] * t[i]
+        f = 2.0 * dot / vtv
+        t[j] -= f * v0
+        for i in range(j + 1, rows):
+            t[i] -= f * T[i, j]
+        T[j, j] = alpha
+    for j in range(r - 1, -1, -1):
+        acc = t[j]
+        for k in range(j + 1, r):
+            acc -= T[j, k] * out[col + k]
+        out[col + j] = acc / T[j, j]
+
+
+@njit(cache=True, fastmath=False)
+def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
+                 x, ranks, damped):
+    """Solve one stack in place.
+
+    Args:
+        B: ``M × n`` working copy of every level's weighted rows (overwritten).
+        c: ``M`` targets (overwritten).
+        starts: ``k + 1`` row offsets of the levels.
+        scales: ``‖A_i‖_F`` per level.
+        rcond: Relative rank threshold.
+        level_damping, singular_threshold: Selective damping (0: off).
+        x: Output, ``n``.
+        ranks: Output, ``k`` ranks ``r_i``.
+        damped: Output, ``k`` flags (1 where the level was damped).
+    """
+    M, n = B.shape
+    k = starts.shape[0] - 1
+    V = np.zeros((n, n))          # reflector j stored in V[j, pos_j:]
+    beta = np.zeros(n)
+    pos = np.zeros(n, dtype=np.int64)
+    nref = 0
+    y = np.zeros(n)
+    col = 0
+    norms = np.zeros(M)
+    L = np.zeros((M, n))
+    rhs = np.zeros(M)
+    for lev in range(k):
+        s0 = starts[lev]
+        s1 = starts[lev + 1]
+        m = s1 - s0
+        ranks[lev] = 0
+        damped[lev] = 0
+        if m == 0 or col >= n:
+            continue
+        tol = rcond * scales[lev]
+        # right-hand side in rotated coordinates: c_i - B_i[:, :col] y[:col]
+        for i in range(m):
+            acc = c[s0 + i]
+            for j in range(col):
+                acc -= B[s0 + i, j] * y[j]
+            rhs[i] = acc
+        for i in range(m):
+            acc = 0.0
+            for j in range(col, n):
+                acc += B[s0 + i, j] * B[s0 + i, j]
+            norms[i] = acc
+        r = 0
+        d = n - col
+        while r < m and r < d:
+            # pivot: the remaining row of largest norm on the free columns
+            p = r
+            best = norms[r]
+            for i in range(r + 1, m):
+                if norms[i] > best:
+                    best = norms[i]
+                    p = i
+            # recompute exactly (downdating loses accuracy)
+            exact = 0.0
+            for j in range(col + r, n):
+                exact += B[s0 + p, j] * B[s0 + p, j]
+            if not (np.sqrt(exact) > tol) or tol <= 0.0:
+                break
+            if p != r:
+                for j in range(n):
+                    tmp = B[s0 + r, j]
+                    B[s0 + r, j] = B[s0 + p, j]
+                    B[s0 + p, j] = tmp
+                tmp = rhs[r]
+                rhs[r] = rhs[p]
+                rhs[p] = tmp
+                tmp = norms[r]
+                norms[r] = norms[p]
+                norms[p] = tmp
+            q = col + r
+            norm = np.sqrt(exact)
+            alpha = -norm if B[s0 + r, q] >= 0.0 else norm
+            # v = row[q:] - alpha e_1 ; H = I - beta v vᵀ
+            V[nref, q] = B[s0 + r, q] - alpha
+            vtv = V[nref, q] * V[nref, q]
+            for j in range(q + 1, n):
+                V[nref, j] = B[s0 + r, j]
+                vtv += V[nref, j] * V[nref, j]
+            bt = 2.0 / vtv if vtv > 0.0 else 0.0
+            beta[nref] = bt
+            pos[nref] = q
+            B[s0 + r, q] = alpha
+            for j in range(q + 1, n):
+                B[s0 + r, j] = 0.0
+            # apply to the level's other rows and to every lower level's rows
+            for i in range(s0 + r + 1, M):
+                dot = 0.0
+                for j in range(q, n):
+                    dot += B[i, j] * V[nref, j]
+                if dot != 0.0:
+                    f = bt * dot
+                    for j in range(q, n):
+                        B[i, j] -= f * V[nref, j]
+            for i in range(r + 1, m):
+                norms[i] -= B[s0 + i, q] * B[s0 + i, q]
+            nref += 1
+            r += 1
+        ranks[lev] = r
+        if r == 0:
+            continue
+        # L = B_i[:, col:col+r] (lower trapezoidal, rows in pivot order)
+        mu2 = 0.0
+        if level_damping > 0.0 and singular_threshold > 0.0:
+            sig = abs(B[s0 + r - 1, col + r - 1])   # RRQR estimate of σ_min
+            eps_abs = singular_threshold * scales[lev]
+            if sig < eps_abs:
+                mu2 = level_damping * (1.0 - (sig / eps_abs) ** 2)
+                damped[lev] = 1
+        if r == m and mu2 == 0.0:
+            for i in range(r):
+                acc = rhs[i]
+                for j in range(i):
+                    acc -= B[s0 + i, col + j] * y[col + j]
+                y[col + i] = acc / B[s0 + i, col + i]
+        else:
+            for i in range(m):
+                for j in range(r):
+                    L[i, j] = B[s0 + i, col + j] if j <= i else 0.0
+            _small_lstsq(L, rhs, m, r, mu2, y, col)
+        col += r
+    for j in range(n):
+        x[j] = y[j]
+    for t in range(nref - 1, -1, -1):
+        q = pos[t]
+        dot = 0.0
+        for j in range(q, n):
+            dot += V[t, j] * x[j]
+        f = beta[t] * dot
+        for j in range(q, n):
+            x[j] -= f * V[t, j]
+
+
+@njit(cache=True, parallel=True)
+def solve_batch_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
+                       X, ranks, damped):
+    """:func:`solve_kernel` over a batch (``B``: ``N × M × n``), in parallel."""
+    for b in prange(B.shape[0]):
+        solve_kernel(B[b], c[b], starts, scales[b], rcond, level_damping,
+                     singular_threshold, X[b], ranks[b], damped[b])
