@@ -1,0 +1,228 @@
+"""The paper's fencing scenario (Jeong & Chang 2009, Sec. III) on the Unitree G1.
+
+The G1 (29 joints, floating base, ``n_v = 35``) holds a sword in its left hand — a
+point 0.5 m along the x axis of ``left_rubber_hand`` — and, priorities highest
+first:
+
+0. ``support_foot`` — right foot contact: 6 rows, the foot's pose held
+   (``ẍ* = 0``, ``K_p = 100``, ``K_d = 20`` to cancel integration drift);
+1. ``joint_limits`` — activation rows (equality formulations) or bounds on ``q̈``
+   (QP formulations), see :mod:`robots.tasks`;
+2. ``com`` — the centre of mass, horizontally, over the middle of the feet
+   (the midpoint of the support foot and the stepping foot's reference);
+3. ``left_foot`` — the left foot steps 0.2 m forward with a 4 cm clearance
+   (minimum-jerk, ``0.2 → 1.2 s``), orientation held (6 rows);
+4. ``sword_tip`` — the tip to the target (minimum-jerk, ``0.5 → 2.5 s``, then hold);
+5. ``posture`` — the actuated joints to the standing posture with low gains
+   (``K_p = 4``, ``K_d = 4``). The paper has no such level; it damps the motion left
+   in the null space of the five tasks above, which would otherwise drift at
+   constant velocity under minimum-norm solutions. It never competes with a
+   higher level in an exact hierarchy.
+
+Variants: ``compatible`` — target ``(0.55, 0.25, 0.85)`` m (world; the left shoulder is
+near ``(0, 0.1, 1.02)``), reachable; ``incompatible`` — target ``(1.6, 0.2, 1.0)`` m,
+about 1.6 m from the shoulder while the arm plus sword are ~0.93 m long, i.e. far
+(≥ 0.3 m) beyond what the higher levels allow. Tracking gains of levels 2-4 are
+``K_p = 25``, ``K_d = 10``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+
+from hierarchy import TaskStack
+
+from .models import RobotModel, g1
+from .references import Reference, Waypoints, minimum_jerk
+from .simulate import StepTasks
+from .tasks import (JointLimitActivation, KinematicState, com_position, contact,
+                    frame_pose, frame_position, joint_limit_bounds, joint_limit_rows,
+                    joint_limit_violation, posture)
+
+__all__ = ["VARIANTS", "TARGETS", "FencingScenario", "LEVEL_NAMES"]
+
+VARIANTS = ("compatible", "incompatible")
+#: sword-tip targets (world, m)
+TARGETS = {"compatible": (0.55, 0.25, 0.85), "incompatible": (1.6, 0.2, 1.0)}
+#: task names, highest priority first
+LEVEL_NAMES = ("support_foot", "joint_limits", "com", "left_foot", "sword_tip", "posture")
+SWORD_LENGTH = 0.5
+
+
+@dataclass
+class FencingScenario:
+    """The fencing scenario: robot, references and gains; builds each step's stack.
+
+    Attributes:
+        variant: ``"compatible"`` or ``"incompatible"``.
+        robot: The G1 with the ``sword_tip`` frame (built if omitted).
+        gains: Task name → ``(K_p, K_d)``.
+        step_length: Forward step of the left foot (m).
+        step_height: Clearance of the stepping foot (m).
+        step_window: Start and end of the step (s).
+        tip_window: Start and end of the sword move (s); held afterwards.
+        limits: Parameters of the activation-row form of the joint limits.
+        bound_horizon: Horizon ``T`` of the inequality form (s).
+        with_posture: Include the lowest ``posture`` level.
+    """
+
+    variant: str = "compatible"
+    robot: RobotModel | None = None
+    gains: dict[str, tuple[float, float]] = field(default_factory=lambda: {
+        "support_foot": (100.0, 20.0), "com": (25.0, 10.0), "left_foot": (25.0, 10.0),
+        "sword_tip": (25.0, 10.0), "posture": (4.0, 4.0)})
+    step_length: float = 0.2
+    step_height: float = 0.04
+    step_window: tuple[float, float] = (0.2, 1.2)
+    tip_window: tuple[float, float] = (0.5, 2.5)
+    limits: JointLimitActivation = JointLimitActivation()
+    bound_horizon: float = 0.1
+    with_posture: bool = True
+
+    def __post_init__(self) -> None:
+        if self.variant not in VARIANTS:
+            raise ValueError(f"unknown fencing variant {self.variant!r}; "
+                             f"known: {', '.join(VARIANTS)}")
+        if self.robot is None:
+            self.robot = g1().with_point_frame("sword_tip", "left_hand",
+                                               (SWORD_LENGTH, 0.0, 0.0))
+        r = self.robot
+        data = r.data()
+        pin.framesForwardKinematics(r.model, data, r.q0)
+        self.right_foot0 = data.oMf[r.frame_id("right_foot")].copy()
+        self.left_foot0 = data.oMf[r.frame_id("left_foot")].copy()
+        self.tip0 = data.oMf[r.frame_id("sword_tip")].translation.copy()
+        com0 = np.array(pin.centerOfMass(r.model, data, r.q0))[:2]
+        self.com_offset0 = com0 - 0.5 * (self.left_foot0.translation[:2]
+                                         + self.right_foot0.translation[:2])
+        self.target = np.array(TARGETS[self.variant], dtype=float)
+        p0 = self.left_foot0.translation
+        s0, s1 = self.step_window
+        mid = 0.5 * (s0 + s1)
+        self._lift = Waypoints((s0, mid, s1), (p0[2], p0[2] + self.step_height, p0[2]))
+
+    # ----------------------------------------------------------------- references
+    def left_foot_ref(self, t: float) -> Reference:
+        """Reference of the stepping foot's origin (x: one minimum-jerk move;
+        z: up and down through two)."""
+        p0 = self.left_foot0.translation
+        s0, s1 = self.step_window
+        fwd = minimum_jerk(p0[0], p0[0] + self.step_length, s0, s1 - s0, t)
+        lift = self._lift(t)
+        return Reference(np.array([fwd.x, p0[1], lift.x]),
+                         np.array([fwd.xd, 0.0, lift.xd]), np.array([fwd.xdd, 0.0, lift.xdd]))
+
+    def com_ref(self, t: float) -> Reference:
+        """Horizontal centre of mass over the middle of the feet (xy).
+
+        The standing posture's centre of mass is not exactly there, so its initial
+        offset is removed by a minimum-jerk move over the first ``step_window[0]``
+        seconds (no step in the reference at ``t = 0``)."""
+        foot = self.left_foot_ref(t)
+        right = self.right_foot0.translation
+        blend = minimum_jerk(self.com_offset0, np.zeros(2), 0.0, self.step_window[0], t)
+        return Reference(0.5 * (foot.x[:2] + right[:2]) + blend.x,
+                         0.5 * foot.xd[:2] + blend.xd, 0.5 * foot.xdd[:2] + blend.xdd)
+
+    def tip_ref(self, t: float) -> Reference:
+        """Minimum-jerk from the initial tip to the target, then hold."""
+        a, b = self.tip_window
+        return minimum_jerk(self.tip0, self.target, a, b - a, t)
+
+    # --------------------------------------------------------------------- stacks
+    def terms(self, state: KinematicState, t: float) -> dict:
+        """The task terms (name → :class:`~robots.tasks.TaskTerm`) at ``(state, t)``."""
+        r = self.robot
+        out = {
+            "support_foot": contact(state, "right_foot", self.right_foot0,
+                                    name="support_foot"),
+            "com": com_position(state, self.com_ref(t), axes=(0, 1), name="com"),
+            "left_foot": frame_pose(state, "left_foot", self.left_foot_ref(t),
+                                    np.array(self.left_foot0.rotation), name="left_foot"),
+            "sword_tip": frame_position(state, "sword_tip", self.tip_ref(t),
+                                        name="sword_tip"),
+        }
+        if self.with_posture:
+            out["posture"] = posture(state, r.q0, name="posture")
+        return out
+
+    def errors(self, state: KinematicState, t: float, terms: dict) -> dict[str, float]:
+        """Recorded errors: tip to the final target and to its reference, CoM,
+        feet (m) and the largest joint-limit violation (rad)."""
+        tip = state.placement("sword_tip").translation
+        sup = state.placement("right_foot")
+        return {
+            "tip_error_m": float(np.linalg.norm(self.target - tip)),
+            "tip_tracking_error_m": float(np.linalg.norm(terms["sword_tip"].error)),
+            "com_error_m": float(np.linalg.norm(terms["com"].error)),
+            "support_foot_error_m": float(np.linalg.norm(sup.translation
+                                                         - self.right_foot0.translation)),
+            "support_foot_rotation_error_rad": float(np.linalg.norm(
+                terms["support_foot"].error[3:])),
+            "left_foot_error_m": float(np.linalg.norm(terms["left_foot"].error[:3])),
+            "joint_limit_violation_rad": joint_limit_violation(self.robot, state.q),
+        }
+
+    def acceleration_stack(self, state: KinematicState, t: float, limits: str = "activation",
+                           dt: float = 0.002) -> StepTasks:
+        """The acceleration-level stack (eq. 2-4) and the errors to record.
+
+        Args:
+            limits: ``"activation"`` (equality rows; level omitted when no joint is
+                near a limit) or ``"bounds"`` (inequality on ``q̈``).
+            dt: Control step, for the velocity part of the bounds.
+        """
+        terms = self.terms(state, t)
+        g = self.gains
+        levels = [terms["support_foot"].acceleration(*g["support_foot"])]
+        if limits == "activation":
+            jl = joint_limit_rows(state, self.limits)
+            if jl is not None:
+                levels.append(jl)
+        elif limits == "bounds":
+            levels.append(joint_limit_bounds(state, self.bound_horizon, dt))
+        else:
+            raise ValueError(f"limits must be 'activation' or 'bounds', got {limits!r}")
+        for name in ("com", "left_foot", "sword_tip", "posture"):
+            if name in terms:
+                levels.append(terms[name].acceleration(*g[name]))
+        return StepTasks(TaskStack(levels), self.errors(state, t, terms))
+
+    def velocity_stack(self, state: KinematicState, t: float, gain: float = 10.0,
+                       limits: str = "none", dt: float = 0.002) -> StepTasks:
+        """The velocity-level stack ``J q̇ = ẋ* + K e`` of the same tasks.
+
+        Args:
+            gain: ``K`` of every task.
+            limits: ``"bounds"`` for position/velocity bounds on ``q̇``
+                (``q + q̇ dt`` within limits, ``|q̇| ≤ q̇_max``), ``"none"`` to omit.
+            dt: Step used by the bounds.
+        """
+        terms = self.terms(state, t)
+        levels = [terms["support_foot"].velocity(gain)]
+        if limits == "bounds":
+            levels.append(_velocity_bounds(state, dt))
+        elif limits != "none":
+            raise ValueError(f"limits must be 'bounds' or 'none', got {limits!r}")
+        for name in ("com", "left_foot", "sword_tip", "posture"):
+            if name in terms:
+                levels.append(terms[name].velocity(gain))
+        return StepTasks(TaskStack(levels), self.errors(state, t, terms))
+
+
+def _velocity_bounds(state: KinematicState, dt: float):
+    from hierarchy import Task
+    from .tasks import _actuated_positions
+    r = state.robot
+    lo, hi, vmax = r.joint_limits()
+    qa = _actuated_positions(state)
+    k = lo.size
+    A = np.zeros((k, r.nv))
+    A[np.arange(k), r.n_base + np.arange(k)] = 1.0
+    lower = np.maximum((lo - qa) / dt, -vmax)
+    upper = np.minimum((hi - qa) / dt, vmax)
+    lower = np.minimum(lower, upper)
+    return Task("joint_limits", A, lower=lower, upper=upper)

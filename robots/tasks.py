@@ -1,0 +1,358 @@
+"""Task builders: robot state → ``hierarchy`` tasks at acceleration or velocity level.
+
+Every builder returns a :class:`TaskTerm` holding, for one task ``x = f(q)``:
+its Jacobian ``J`` (``ẋ = J q̇``), the drift ``J̇ q̇``, the error ``e = x* − x``, the
+rate error ``ė = ẋ* − ẋ`` and the feed-forward ``ẍ*``. From these
+
+* :meth:`TaskTerm.acceleration` gives the paper's task ``J θ̈ = h`` with
+  ``h = ẍ* + K_d (ẋ* − ẋ) + K_p (x* − x) − J̇ θ̇`` (eq. 2-4);
+* :meth:`TaskTerm.velocity` gives ``J q̇ = ẋ* + K e`` for velocity-level tools.
+
+Kinematic quantities come from pinocchio, once per state, in
+:class:`KinematicState`: frame Jacobians in ``LOCAL_WORLD_ALIGNED`` (linear rows are
+the world velocity of the frame origin, angular rows the world angular velocity),
+``J̇ q̇`` as the frame's classical acceleration at ``q̈ = 0``, and the centre of mass
+with its Jacobian and its drift (``pin.centerOfMass`` at ``q̈ = 0``).
+
+Joint limits come in two forms (see :func:`joint_limit_rows` and
+:func:`joint_limit_bounds`): activation rows for the equality formulations and bounds
+on ``q̈`` for the QP formulations.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from hierarchy import Task
+
+from .models import RobotModel
+from .references import Reference
+
+__all__ = ["KinematicState", "TaskTerm", "frame_position", "frame_orientation",
+           "frame_pose", "com_position", "contact", "posture", "joint_limit_rows",
+           "joint_limit_bounds", "JointLimitActivation"]
+
+_LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+
+
+class KinematicState:
+    """Pinocchio kinematics of one state ``(q, v)``, computed once.
+
+    Args:
+        robot: The robot.
+        q: Configuration (``n_q``); copied.
+        v: Velocity (``n_v``); copied.
+        data: A ``pin.Data`` to reuse (a fresh one if omitted).
+
+    After construction ``data`` holds the joint Jacobians, frame placements, the
+    velocities and the accelerations at ``q̈ = 0`` (the drift terms), the centre of
+    mass ``com``, its velocity ``vcom``, drift ``acom_drift`` and Jacobian ``Jcom``.
+    """
+
+    def __init__(self, robot: RobotModel, q, v, data: pin.Data | None = None) -> None:
+        self.robot = robot
+        self.model = robot.model
+        self.q = np.array(q, dtype=float, copy=True)
+        self.v = np.array(v, dtype=float, copy=True)
+        if self.q.shape != (robot.nq,) or self.v.shape != (robot.nv,):
+            raise ValueError(f"q must have {robot.nq} and v {robot.nv} entries, got "
+                             f"{self.q.shape} and {self.v.shape}")
+        self.data = data if data is not None else robot.model.createData()
+        m, d = self.model, self.data
+        zero = np.zeros(robot.nv)
+        self.Jcom = np.array(pin.jacobianCenterOfMass(m, d, self.q, False))
+        pin.centerOfMass(m, d, self.q, self.v, zero, False)
+        self.com = np.array(d.com[0])
+        self.vcom = np.array(d.vcom[0])
+        self.acom_drift = np.array(d.acom[0])
+        pin.computeJointJacobians(m, d, self.q)
+        pin.updateFramePlacements(m, d)
+        self._cache: dict = {}
+
+    @property
+    def n(self) -> int:
+        """Number of task columns (``n_v``)."""
+        return self.robot.nv
+
+    def placement(self, frame: str) -> pin.SE3:
+        """World placement of a frame (or role)."""
+        return self.data.oMf[self.robot.frame_id(frame)]
+
+    def frame_jacobian(self, frame: str) -> np.ndarray:
+        """``6 × n_v`` Jacobian of the frame (LOCAL_WORLD_ALIGNED; linear then angular)."""
+        key = ("J", frame)
+        if key not in self._cache:
+            self._cache[key] = np.array(pin.getFrameJacobian(
+                self.model, self.data, self.robot.frame_id(frame), _LWA))
+        return self._cache[key]
+
+    def frame_velocity(self, frame: str) -> np.ndarray:
+        """World-aligned velocity ``J q̇`` of the frame origin (6)."""
+        return self.frame_jacobian(frame) @ self.v
+
+    def frame_drift(self, frame: str) -> np.ndarray:
+        """``J̇ q̇`` (6): classical acceleration of the frame origin at ``q̈ = 0``."""
+        key = ("dJv", frame)
+        if key not in self._cache:
+            acc = pin.getFrameClassicalAcceleration(self.model, self.data,
+                                                    self.robot.frame_id(frame), _LWA)
+            self._cache[key] = np.array(acc.vector)
+        return self._cache[key]
+
+
+@dataclass
+class TaskTerm:
+    """One task's kinematics at one state; see the module docstring.
+
+    Attributes:
+        name: Task name (unique in a stack).
+        J: Task Jacobian (``m × n``).
+        drift: ``J̇ q̇`` (``m``).
+        error: ``e = x* − x`` (``m``).
+        rate_error: ``ė = ẋ* − ẋ`` (``m``).
+        feedforward: ``ẍ*`` (``m``).
+        velocity_ref: ``ẋ*`` (``m``).
+    """
+
+    name: str
+    J: np.ndarray
+    drift: np.ndarray
+    error: np.ndarray
+    rate_error: np.ndarray
+    feedforward: np.ndarray
+    velocity_ref: np.ndarray
+
+    def acceleration(self, kp: float, kd: float, weight=1.0) -> Task:
+        """``J θ̈ = ẍ* + K_d ė + K_p e − J̇ θ̇`` (eq. 2-4)."""
+        h = self.feedforward + kd * self.rate_error + kp * self.error - self.drift
+        return Task(self.name, self.J, h, weight=weight)
+
+    def velocity(self, k: float, weight=1.0) -> Task:
+        """``J q̇ = ẋ* + K e`` (velocity-level closed-loop inverse kinematics)."""
+        return Task(self.name, self.J, self.velocity_ref + k * self.error, weight=weight)
+
+    def select(self, rows) -> "TaskTerm":
+        """The term restricted to some rows (e.g. the horizontal axes)."""
+        idx = list(rows)
+        return TaskTerm(self.name, self.J[idx], self.drift[idx], self.error[idx],
+                        self.rate_error[idx], self.feedforward[idx], self.velocity_ref[idx])
+
+
+def _ref3(ref: Reference | None, fallback: np.ndarray) -> Reference:
+    if ref is None:
+        return Reference(fallback.copy(), np.zeros(3), np.zeros(3))
+    return ref
+
+
+def frame_position(state: KinematicState, frame: str, ref: Reference,
+                   name: str | None = None) -> TaskTerm:
+    """Position of a frame origin (a point fixed on a body: add it with
+    :meth:`RobotModel.with_point_frame`), world coordinates (3 rows)."""
+    J = state.frame_jacobian(frame)[:3]
+    p = state.placement(frame).translation
+    return TaskTerm(name or f"{frame}_position", J, state.frame_drift(frame)[:3],
+                    np.asarray(ref.x) - p, np.asarray(ref.xd) - J @ state.v,
+                    np.asarray(ref.xdd, dtype=float), np.asarray(ref.xd, dtype=float))
+
+
+def frame_orientation(state: KinematicState, frame: str, rotation: np.ndarray,
+                      name: str | None = None, angular_velocity=None,
+                      angular_acceleration=None) -> TaskTerm:
+    """Orientation of a frame (3 rows): error ``log(R* Rᵀ)`` in world coordinates.
+
+    Args:
+        rotation: Target rotation ``R*`` (3×3).
+        angular_velocity: ``ω*`` (world), zero if omitted.
+        angular_acceleration: ``ω̇*`` (world), zero if omitted.
+    """
+    J = state.frame_jacobian(frame)[3:]
+    R = state.placement(frame).rotation
+    err = pin.log3(np.asarray(rotation) @ R.T)
+    w_ref = np.zeros(3) if angular_velocity is None else np.asarray(angular_velocity, float)
+    dw_ref = np.zeros(3) if angular_acceleration is None else np.asarray(angular_acceleration,
+                                                                          float)
+    return TaskTerm(name or f"{frame}_orientation", J, state.frame_drift(frame)[3:], err,
+                    w_ref - J @ state.v, dw_ref, w_ref)
+
+
+def frame_pose(state: KinematicState, frame: str, ref: Reference, rotation: np.ndarray,
+               name: str | None = None) -> TaskTerm:
+    """Position (rows 0-2, following ``ref``) and orientation (rows 3-5, fixed
+    ``rotation``) of a frame: 6 rows."""
+    p = frame_position(state, frame, ref)
+    o = frame_orientation(state, frame, rotation)
+    return TaskTerm(name or f"{frame}_pose", np.vstack([p.J, o.J]),
+                    np.concatenate([p.drift, o.drift]), np.concatenate([p.error, o.error]),
+                    np.concatenate([p.rate_error, o.rate_error]),
+                    np.concatenate([p.feedforward, o.feedforward]),
+                    np.concatenate([p.velocity_ref, o.velocity_ref]))
+
+
+def contact(state: KinematicState, frame: str, placement: pin.SE3,
+            name: str | None = None) -> TaskTerm:
+    """A support contact: the frame held at ``placement`` (6 rows, zero reference
+    velocity and acceleration; with gains this is ``ẍ = −K_d ẋ + K_p e``)."""
+    ref = Reference(np.array(placement.translation), np.zeros(3), np.zeros(3))
+    return frame_pose(state, frame, ref, np.array(placement.rotation),
+                      name=name or f"{frame}_contact")
+
+
+def com_position(state: KinematicState, ref: Reference, axes=(0, 1),
+                 name: str = "com") -> TaskTerm:
+    """Centre of mass (eq. 32-33) on the selected world axes (default horizontal)."""
+    idx = list(axes)
+    ref_x = np.asarray(ref.x, float)
+    full = TaskTerm(name, state.Jcom, state.acom_drift,
+                    _pad(ref_x, idx) - state.com,
+                    _pad(np.asarray(ref.xd, float), idx) - state.Jcom @ state.v,
+                    _pad(np.asarray(ref.xdd, float), idx), _pad(np.asarray(ref.xd, float), idx))
+    return full.select(idx)
+
+
+def _pad(values: np.ndarray, idx) -> np.ndarray:
+    """A 3-vector from values given on the axes ``idx`` (or already 3 long)."""
+    if values.shape == (3,):
+        return values
+    out = np.zeros(3)
+    out[idx] = values
+    return out
+
+
+def posture(state: KinematicState, q_ref, name: str = "posture") -> TaskTerm:
+    """Actuated joints to ``q_ref`` (rows ``n_base:`` of the velocity)."""
+    robot = state.robot
+    nb = robot.n_base
+    k = robot.nv - nb
+    J = np.zeros((k, robot.nv))
+    J[:, nb:] = np.eye(k)
+    err = pin.difference(robot.model, state.q, np.asarray(q_ref, float))[nb:]
+    return TaskTerm(name, J, np.zeros(k), err, -state.v[nb:], np.zeros(k), np.zeros(k))
+
+
+# ------------------------------------------------------------------ joint limits
+@dataclass(frozen=True)
+class JointLimitActivation:
+    """Parameters of the equality (activation-row) form of joint limits.
+
+    A joint's row is active while it is within ``margin`` of a limit. With
+    ``s ∈ (0, 1]`` the depth into the margin (0 at the margin's edge, 1 at the limit)
+    and ``y = s·margin`` the same depth in radians, the row is
+    ``q̈_j = ± s (K_p y + K_d ẏ)`` pointing away from the limit. The blend ``s``
+    makes the target continuous: a row enters asking ``q̈_j = 0`` and grows
+    stiffer the deeper the joint goes; with the defaults (margin 0.1 rad,
+    ``K_p = 2500``, ``K_d = 100``) a joint entering at up to ~5 rad/s stops inside the
+    margin (a 1-D check is in ``tests/test_tasks.py``). The row *set* still switches
+    discretely (an exact hierarchy enforces any present row fully), which is what
+    makes ``q̈`` jump at activation; the rows never ask more than the pushing
+    target, so ``q`` and ``q̇`` stay continuous.
+
+    Attributes:
+        margin: Width of the activation zone inside each limit (rad); it is capped
+            at a quarter of the joint's range.
+        kp: Stiffness of the push-back.
+        kd: Damping of the push-back.
+    """
+
+    margin: float = 0.1
+    kp: float = 2500.0
+    kd: float = 100.0
+
+
+def joint_limit_rows(state: KinematicState, params: JointLimitActivation = JointLimitActivation(),
+                     name: str = "joint_limits") -> Task | None:
+    """Equality form of joint limits: one row ``q̈_j = target`` per joint inside its
+    margin (see :class:`JointLimitActivation`), or ``None`` when no joint is.
+
+    The task's rows are unit rows on the actuated joints' columns.
+    """
+    robot = state.robot
+    nb = robot.n_base
+    lo, hi, _ = robot.joint_limits()
+    qa = _actuated_positions(state)
+    va = state.v[nb:]
+    width = np.minimum(params.margin, 0.25 * (hi - lo))
+    rows, targets = [], []
+    for j in range(lo.size):
+        if not np.isfinite(lo[j]) or not np.isfinite(hi[j]):
+            continue
+        y_lo = lo[j] + width[j] - qa[j]          # depth into the lower margin
+        y_hi = qa[j] - (hi[j] - width[j])        # depth into the upper margin
+        if y_lo > 0:
+            s = min(y_lo / width[j], 1.0)
+            # ẏ_lo = −v: push towards +q
+            targets.append(s * (params.kp * y_lo - params.kd * va[j]))
+        elif y_hi > 0:
+            s = min(y_hi / width[j], 1.0)
+            targets.append(-s * (params.kp * y_hi + params.kd * va[j]))
+        else:
+            continue
+        rows.append(nb + j)
+    if not rows:
+        return None
+    A = np.zeros((len(rows), robot.nv))
+    A[np.arange(len(rows)), rows] = 1.0
+    return Task(name, A, np.array(targets))
+
+
+def joint_limit_bounds(state: KinematicState, horizon: float, dt: float,
+                       name: str = "joint_limits") -> Task:
+    """Inequality form of joint limits for the QP formulations: bounds on ``q̈``.
+
+    For each actuated joint, ``q + q̇ T + ½ q̈ T² ∈ [q_min, q_max]`` over the horizon
+    ``T`` and ``|q̇ + q̈ dt| ≤ q̇_max`` over the next step. Where the two ranges do not
+    intersect (a joint moving too fast towards a limit to stop within the horizon),
+    both bounds become the velocity bound nearest to the position range (the
+    hardest admissible braking), so the task stays feasible.
+    """
+    robot = state.robot
+    nb = robot.n_base
+    lo, hi, vmax = robot.joint_limits()
+    qa = _actuated_positions(state)
+    va = state.v[nb:]
+    T = float(horizon)
+    with np.errstate(invalid="ignore"):
+        p_lo = 2.0 * (lo - qa - va * T) / T ** 2
+        p_hi = 2.0 * (hi - qa - va * T) / T ** 2
+        v_lo = (-vmax - va) / dt
+        v_hi = (vmax - va) / dt
+    lower = np.maximum(np.nan_to_num(p_lo, nan=-np.inf), np.nan_to_num(v_lo, nan=-np.inf))
+    upper = np.minimum(np.nan_to_num(p_hi, nan=np.inf), np.nan_to_num(v_hi, nan=np.inf))
+    bad = lower > upper
+    if bad.any():
+        mid = np.where(p_lo[bad] > v_hi[bad], v_hi[bad], v_lo[bad])
+        lower[bad] = upper[bad] = mid
+    k = lo.size
+    A = np.zeros((k, robot.nv))
+    A[np.arange(k), nb + np.arange(k)] = 1.0
+    return Task(name, A, lower=lower, upper=upper)
+
+
+def _actuated_positions(state: KinematicState) -> np.ndarray:
+    """Positions of the actuated one-dof joints, ordered like their velocity rows."""
+    robot = state.robot
+    m = robot.model
+    nb = robot.n_base
+    out = np.zeros(robot.nv - nb)
+    for j in range(1, m.njoints):
+        jm = m.joints[j]
+        if jm.nv == 1 and jm.nq == 1 and jm.idx_v >= nb:
+            out[jm.idx_v - nb] = state.q[jm.idx_q]
+    return out
+
+
+def joint_limit_violation(robot: RobotModel, q) -> float:
+    """Largest amount by which an actuated joint of ``q`` is past a limit (rad, ≥ 0)."""
+    lo, hi, _ = robot.joint_limits()
+    st = np.zeros(robot.nv - robot.n_base)
+    m = robot.model
+    for j in range(1, m.njoints):
+        jm = m.joints[j]
+        if jm.nv == 1 and jm.nq == 1 and jm.idx_v >= robot.n_base:
+            st[jm.idx_v - robot.n_base] = q[jm.idx_q]
+    with np.errstate(invalid="ignore"):
+        over = np.maximum(np.nan_to_num(lo - st, nan=0.0, neginf=0.0),
+                          np.nan_to_num(st - hi, nan=0.0, neginf=0.0))
+    return float(max(0.0, over.max(initial=0.0)))
