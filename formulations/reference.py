@@ -62,3 +62,90 @@ def solve(stack: TaskStack, *, rcond: float = DEFAULT_RCOND, metric=None) -> Out
         z = np.linalg.solve(L.T, np.linalg.solve(L, -(Z.T @ (W @ x))))
         x = x + Z @ z
     return Outcome(x, "optimal", {"rank_profile": ranks, "null_space_dim": int(Z.shape[1])})
+
+
+def solve_batch(stacks, *, rcond: float = DEFAULT_RCOND, metric=None
+                ) -> tuple[np.ndarray, list[str]]:
+    """:func:`solve` for ``B`` stacks of one shape, with stacked linear algebra.
+
+    The same nested-SVD recursion as :func:`solve`, run on ``(G, m_i, d)`` arrays by
+    ``np.linalg.svd``. Stacks whose null spaces have the same dimension ``d`` form a
+    group; each level's rank ``r`` (``σ > rcond · ‖A_i‖_F``, per stack) enters the
+    update ``y = V_r Σ_r⁻¹ U_rᵀ c`` through a mask over the singular values, and the
+    group is then split by ``d − r`` (stacks that lose the same number of directions
+    keep sharing arrays). With ``metric=W`` the final tie-break solves
+    ``(ZᵀWZ) z = −ZᵀW x`` per group by a batched Cholesky factorization.
+
+    Args:
+        stacks: Equality :class:`TaskStack` objects of one shape (checked by
+            :func:`formulations.solve_batch`).
+        rcond: Relative rank threshold (as :func:`solve`).
+        metric: SPD ``n × n`` ``W`` shared by every stack, or ``None``.
+
+    Returns:
+        ``(X, statuses)``: ``X`` is ``B × n`` (row ``b`` is :func:`solve` of stack
+        ``b``); a status is ``"optimal"``, or ``"failed"`` (row of NaN) where
+        ``ZᵀWZ`` is not positive definite.
+    """
+    stacks = list(stacks)
+    B, n = len(stacks), stacks[0].n
+    X = np.zeros((B, n))
+    statuses = ["optimal"] * B
+    # groups: null-space dimension d -> (stack indices, Z of shape (G, n, d))
+    groups: dict[int, tuple[np.ndarray, np.ndarray]] = {
+        n: (np.arange(B), np.broadcast_to(np.eye(n), (B, n, n)))}
+    for li in range(len(stacks[0].levels)):
+        A_all = np.stack([s.levels[li].A for s in stacks])       # (B, m, n)
+        b_all = np.stack([s.levels[li].b for s in stacks])       # (B, m)
+        tol_all = rcond * np.linalg.norm(A_all, axis=(1, 2))     # (B,)
+        new_groups: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {}
+        for d, (idx, Z) in groups.items():
+            if d == 0:
+                new_groups.setdefault(0, []).append((idx, Z))
+                continue
+            A, b, tol = A_all[idx], b_all[idx], tol_all[idx]
+            M = A @ Z                                             # (G, m, d)
+            u, s, vt = np.linalg.svd(M, full_matrices=True)      # s: (G, p), p = min(m, d)
+            p = s.shape[1]
+            keep = (s > tol[:, None]) & (tol[:, None] > 0)        # σ_j counts, per stack
+            r = keep.sum(axis=1)                                  # rank per stack
+            c = b - np.einsum("gmn,gn->gm", A, X[idx])            # c = b − A x
+            w = np.einsum("gmp,gm->gp", u[:, :, :p], c)           # U_pᵀ c
+            w = np.where(keep, w / np.where(keep, s, 1.0), 0.0)   # Σ_r⁻¹ U_rᵀ c, masked
+            y = np.einsum("gpd,gp->gd", vt[:, :p, :], w)          # V_r (…)
+            X[idx] += np.einsum("gnd,gd->gn", Z, y)
+            for rank in np.unique(r):
+                sel = np.flatnonzero(r == rank)
+                Znew = Z[sel] @ np.swapaxes(vt[sel, rank:, :], 1, 2)   # Z · null(M)
+                new_groups.setdefault(d - int(rank), []).append((idx[sel], Znew))
+        groups = {d: (np.concatenate([i for i, _ in parts]),
+                      np.concatenate([z for _, z in parts]))
+                  for d, parts in new_groups.items()}
+    if metric is not None:
+        W = np.asarray(metric, dtype=np.float64)
+        for d, (idx, Z) in groups.items():
+            if d == 0:
+                continue
+            G = np.swapaxes(Z, 1, 2) @ W @ Z                       # (G, d, d)
+            rhs = -np.einsum("gnd,gn->gd", Z, X[idx] @ W)          # −Zᵀ W x
+            try:
+                L = np.linalg.cholesky(G)
+                ok = np.ones(len(idx), dtype=bool)
+            except np.linalg.LinAlgError:    # some stack's ZᵀWZ is not SPD: find which
+                L = np.zeros_like(G)
+                ok = np.zeros(len(idx), dtype=bool)
+                for j in range(len(idx)):
+                    try:
+                        L[j] = np.linalg.cholesky(G[j])
+                        ok[j] = True
+                    except np.linalg.LinAlgError:
+                        pass
+            if ok.any():
+                Lk = L[ok]
+                v = np.linalg.solve(Lk, rhs[ok][..., None])
+                z = np.linalg.solve(np.swapaxes(Lk, 1, 2), v)[..., 0]
+                X[idx[ok]] += np.einsum("gnd,gd->gn", Z[ok], z)
+            for gi in idx[~ok]:
+                X[gi] = np.nan
+                statuses[gi] = "failed"
+    return X, statuses

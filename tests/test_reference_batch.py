@@ -1,0 +1,109 @@
+"""reference.solve_batch (stacked SVDs) against a loop of formulations.solve."""
+
+import numpy as np
+import pytest
+
+import formulations
+from hierarchy import Task, TaskStack, rank_profile
+from hierarchy.families import FAMILIES
+
+
+def _rotate_and_reduce(base: TaskStack, rng: np.random.Generator, B: int,
+                       reduce: float) -> list[TaskStack]:
+    """``B`` stacks of ``base``'s shape: each level's rows turned by a random orthogonal
+    ``Q`` (ranks and conflicts kept) and, with probability ``reduce``, cut to a lower
+    rank (down to an all-zero level), with fresh targets. Shapes stay uniform; ranks
+    differ from stack to stack."""
+    out = []
+    n = base.n
+    for _ in range(B):
+        Q, _ = np.linalg.qr(rng.standard_normal((n, n)))
+        levels = []
+        for level in base.levels:
+            tasks = []
+            for t in level:
+                A = t.A @ Q
+                if rng.random() < reduce:
+                    u, s, vt = np.linalg.svd(A, full_matrices=False)
+                    r = int(rng.integers(0, max(1, int(np.count_nonzero(s > 1e-9 * s[0])))))
+                    A = (u[:, :r] * s[:r]) @ vt[:r]
+                tasks.append(Task(t.name, A, rng.standard_normal(t.m), weight=t.weight))
+            levels.append(tasks)
+        out.append(TaskStack(levels))
+    return out
+
+
+def _loop(stacks, **options):
+    return np.array([formulations.solve(s, "reference", **options).x for s in stacks])
+
+
+@pytest.mark.parametrize("family", sorted(FAMILIES))
+@pytest.mark.parametrize("seed", range(3))
+def test_batch_equals_loop_with_per_stack_ranks(family, seed):
+    rng = np.random.default_rng(500 + seed)
+    n, k = int(rng.integers(3, 30)), int(rng.integers(1, 7))
+    base = FAMILIES[family](rng, n, k)
+    stacks = _rotate_and_reduce(base, rng, 24, reduce=0.3)
+    batch = formulations.solve_batch(stacks, "reference")
+    assert batch.batched
+    assert batch.statuses == ["optimal"] * len(stacks)
+    X = _loop(stacks)
+    scale = np.maximum(1.0, np.linalg.norm(X, axis=1))
+    # relative 1e-9 per stack: the same SVDs, in another order of summation
+    assert np.all(np.linalg.norm(batch.X - X, axis=1) <= 1e-9 * scale)
+
+
+def test_batch_really_mixes_rank_profiles():
+    """The mixed batch of the test above holds stacks of different rank profiles,
+    including all-zero levels, so the masks and group splits are exercised."""
+    rng = np.random.default_rng(7)
+    base = FAMILIES["conflicting"](rng, 20, 5)
+    stacks = _rotate_and_reduce(base, rng, 40, reduce=0.4)
+    profiles = {tuple(rank_profile(s)) for s in stacks}
+    assert len(profiles) >= 5
+    assert any(0 in p for p in profiles)
+    batch = formulations.solve_batch(stacks, "reference")
+    X = _loop(stacks)
+    assert np.abs(batch.X - X).max() <= 1e-9 * max(1.0, np.abs(X).max())
+
+
+@pytest.mark.parametrize("family", ["compatible", "conflicting", "rank_deficient"])
+def test_batch_with_metric_equals_loop(family):
+    rng = np.random.default_rng(11)
+    n = 15
+    base = FAMILIES[family](rng, n, 3)
+    stacks = _rotate_and_reduce(base, rng, 12, reduce=0.3)
+    R = rng.standard_normal((n, n))
+    W = R @ R.T + n * np.eye(n)
+    batch = formulations.solve_batch(stacks, "reference", metric=W)
+    X = _loop(stacks, metric=W)
+    assert batch.statuses == ["optimal"] * len(stacks)
+    assert np.all(np.linalg.norm(batch.X - X, axis=1)
+                  <= 1e-9 * np.maximum(1.0, np.linalg.norm(X, axis=1)))
+
+
+def test_metric_singular_on_null_space_fails_only_that_stack():
+    """W = diag(0, 1, 1, 1): stacks whose remaining null space is span(e_0) fail (a
+    failed status and a NaN row, as the loop raises inside and reports failed); the
+    others are solved."""
+    n = 4
+    W = np.diag([0.0, 1.0, 1.0, 1.0])
+    fixes_rest = TaskStack([Task("rest", np.eye(n)[1:], np.ones(3))])
+    fixes_first = TaskStack([Task("rest", np.eye(n)[[0, 2, 3]], np.ones(3))])
+    batch = formulations.solve_batch([fixes_rest, fixes_first], "reference", metric=W)
+    assert batch.statuses == ["failed", "optimal"]
+    assert np.isnan(batch.X[0]).all()
+    assert formulations.solve(fixes_rest, "reference", metric=W).status == "failed"
+    expected = formulations.solve(fixes_first, "reference", metric=W).x
+    assert np.allclose(batch.X[1], expected, atol=1e-12)
+    assert np.allclose(batch.X[1], [1.0, 0.0, 1.0, 1.0], atol=1e-12)
+
+
+def test_batch_does_not_touch_the_stacks():
+    rng = np.random.default_rng(3)
+    stacks = _rotate_and_reduce(FAMILIES["conflicting"](rng, 10, 3), rng, 5, reduce=0.3)
+    before = [[lvl.A.copy() for lvl in s.levels] for s in stacks]
+    formulations.solve_batch(stacks, "reference")
+    for s, mats in zip(stacks, before):
+        for lvl, A in zip(s.levels, mats):
+            assert np.array_equal(lvl.A, A)
