@@ -20,8 +20,12 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+#: LLVM may reassociate and contract (vectorised reductions, FMA) but not assume
+#: finite values: inputs are validated finite and a non-finite result must show.
+_FAST = {"reassoc", "contract", "nsz", "arcp"}
 
-@njit(cache=True, fastmath=False)
+
+@njit(cache=True, fastmath=_FAST)
 def _small_lstsq(L, rhs, m, r, mu2, out, col):
     """min ‖L[:m, :r] z − rhs‖² + mu2 ‖z‖², by Householder QR of [L; √mu2 I]."""
     rows = m + r if mu2 > 0.0 else m
@@ -73,7 +77,7 @@ def _small_lstsq(L, rhs, m, r, mu2, out, col):
         out[col + j] = acc / T[j, j]
 
 
-@njit(cache=True, fastmath=False)
+@njit(cache=True, fastmath=_FAST)
 def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
                  x, ranks, damped):
     """Solve one stack in place.

@@ -330,3 +330,34 @@ def _solve_damped(stack: TaskStack, damping: float, rcond: float, nullspace: str
         x = xb[:n].ravel()
     return Outcome(x, "approximate", {"damping": damping, "nullspace": nullspace,
                                       "extended_rows": int(JE.shape[0])})
+
+
+def solve_batch(stacks: list[TaskStack], *, nullspace: str = "qr", damping: float = 0.0,
+                rcond: float = DEFAULT_RCOND, level_damping: float = 0.0,
+                singular_threshold: float = 0.0, kernel: str = "auto"
+                ) -> tuple[np.ndarray, list[str]]:
+    """Many stacks of one shape at once (compiled kernel, stacks in parallel).
+
+    Falls back to a loop of :func:`solve` for the ``svd`` path, eq. 27 damping or
+    when numba is missing. Returns the solutions (``B × n``) and their statuses.
+    """
+    kernel = _resolve_kernel(kernel)
+    if kernel != "numba" or nullspace != "qr" or damping > 0:
+        outs = [solve(s, nullspace=nullspace, damping=damping, rcond=rcond,
+                      level_damping=level_damping, singular_threshold=singular_threshold,
+                      kernel=kernel) for s in stacks]
+        return np.array([o.x for o in outs]), [o.status for o in outs]
+    selective = float(level_damping) > 0 and float(singular_threshold) > 0
+    packs = [s.packed() for s in stacks]
+    B = np.stack([p.A for p in packs])
+    c = np.stack([p.b for p in packs])
+    scales = np.stack([p.scales for p in packs])
+    N, k, n = len(stacks), len(stacks[0]), stacks[0].n
+    X = np.empty((N, n))
+    ranks = np.zeros((N, k), dtype=np.int64)
+    damped = np.zeros((N, k), dtype=np.int64)
+    _kernel.solve_batch_kernel(B, c, packs[0].starts, scales, float(rcond),
+                               float(level_damping) if selective else 0.0,
+                               float(singular_threshold), X, ranks, damped)
+    statuses = ["approximate" if d.any() else "optimal" for d in damped]
+    return X, statuses

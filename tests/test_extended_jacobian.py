@@ -123,3 +123,24 @@ def test_compiled_and_lapack_kernels_agree_on_ranks_and_x(seed):
     b = formulations.solve(stack, "extended_jacobian", kernel="lapack")
     assert a.info["rank_profile"] == b.info["rank_profile"]
     assert np.linalg.norm(a.x - b.x) <= 1e-9 * max(1.0, np.linalg.norm(b.x))
+
+
+@pytest.mark.parametrize("family", ["compatible", "conflicting", "rank_deficient"])
+def test_solve_batch_uses_the_compiled_kernel_and_matches_solve(family):
+    rng = np.random.default_rng(77)
+    base = FAMILIES[family](rng, 20, 4)
+    # same shape, other numbers: redraw every task's entries, keep the structure
+    stacks = [base]
+    for _ in range(15):
+        levels = []
+        for level in base.levels:
+            t = level[0]
+            A = rng.standard_normal(t.A.shape) if family != "rank_deficient" else \
+                rng.standard_normal((t.m, 1)) @ rng.standard_normal((1, t.n))
+            levels.append([type(t)(t.name, A, rng.standard_normal(t.m))])
+        stacks.append(type(base)(levels))
+    batch = formulations.solve_batch(stacks, "extended_jacobian")
+    assert batch.batched and batch.X.shape == (16, 20)
+    for x, s in zip(batch.X, stacks):
+        ref = formulations.solve(s, "reference").x
+        assert np.linalg.norm(x - ref) <= 1e-8 * max(1.0, np.linalg.norm(ref))
