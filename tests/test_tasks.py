@@ -1,0 +1,237 @@
+"""robots.tasks and robots.references: finite-difference checks of every Jacobian and
+J̇q̇ term, the task equations (eq. 2-4 and the velocity form) and both joint-limit forms.
+
+Derivatives are checked by central differences along ``q(s) = q ⊕ s v`` (constant
+velocity in pinocchio's convention, ``q̈ = 0``) with ``h = 1e-6``: ``ẋ = J v`` against
+``(x(h) − x(−h)) / 2h`` and ``J̇ v`` against ``(J(h) v − J(−h) v) / 2h``, to
+``1e-6 · (1 + |value|)`` (the truncation error is ``O(h²)``, the round-off ``O(ε/h)``).
+"""
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from robots import (JointLimitActivation, KinematicState, Reference, Waypoints, com_position,
+                    contact, frame_orientation, frame_pose, frame_position, g1,
+                    joint_limit_bounds, joint_limit_rows, joint_limit_violation,
+                    minimum_jerk, posture, sample_humanoid, spatial_chain)
+
+H = 1e-6
+TOL = 1e-6
+
+
+@pytest.fixture(scope="module")
+def robots_under_test():
+    sword = g1().with_point_frame("sword_tip", "left_hand", (0.5, 0.0, 0.0))
+    return {"g1": (sword, ["sword_tip", "left_foot", "right_foot", "torso"]),
+            "sample_humanoid": (sample_humanoid(), ["left_hand", "right_foot"]),
+            "chain7": (spatial_chain(7), ["tip"])}
+
+
+def _random_state(robot, seed):
+    rng = np.random.default_rng(seed)
+    q = robot.q0.copy()
+    nb = robot.n_base
+    if nb:
+        q[7:] += rng.uniform(-0.2, 0.2, robot.nq - 7)
+    else:
+        q += rng.uniform(-0.2, 0.2, robot.nq)
+    v = rng.normal(size=robot.nv)
+    return q, v
+
+
+def _states(robot, q, v):
+    plus = KinematicState(robot, pin.integrate(robot.model, q, v * H), v)
+    minus = KinematicState(robot, pin.integrate(robot.model, q, -v * H), v)
+    return KinematicState(robot, q, v), plus, minus
+
+
+def _close(a, b):
+    return np.abs(np.asarray(a) - np.asarray(b)).max() <= TOL * (1 + np.abs(b).max())
+
+
+@pytest.mark.parametrize("name", ["g1", "sample_humanoid", "chain7"])
+@pytest.mark.parametrize("seed", range(3))
+def test_frame_jacobians_and_drift_match_finite_differences(robots_under_test, name, seed):
+    robot, frames = robots_under_test[name]
+    q, v = _random_state(robot, seed)
+    s0, sp, sm = _states(robot, q, v)
+    for f in frames:
+        J = s0.frame_jacobian(f)
+        # linear rows: velocity of the frame origin in world coordinates
+        dp = (sp.placement(f).translation - sm.placement(f).translation) / (2 * H)
+        assert _close(J[:3] @ v, dp), f
+        # angular rows: world angular velocity, from log(R(h) R(−h)ᵀ) / 2h
+        dR = pin.log3(sp.placement(f).rotation @ sm.placement(f).rotation.T) / (2 * H)
+        assert _close(J[3:] @ v, dR), f
+        # drift J̇ q̇ = d/dt (J q̇) at q̈ = 0
+        dJv = (sp.frame_jacobian(f) @ v - sm.frame_jacobian(f) @ v) / (2 * H)
+        assert _close(s0.frame_drift(f), dJv), f
+        assert np.abs(s0.frame_drift(f)).max() > 1e-3  # the check is not vacuous
+
+
+@pytest.mark.parametrize("name", ["g1", "sample_humanoid", "chain7"])
+def test_com_jacobian_and_drift_match_finite_differences(robots_under_test, name):
+    robot, _ = robots_under_test[name]
+    q, v = _random_state(robot, 11)
+    s0, sp, sm = _states(robot, q, v)
+    assert _close(s0.Jcom @ v, (sp.com - sm.com) / (2 * H))
+    assert _close(s0.vcom, s0.Jcom @ v)
+    assert _close(s0.acom_drift, (sp.Jcom @ v - sm.Jcom @ v) / (2 * H))
+
+
+def test_task_terms_give_the_acceleration_and_velocity_equations(robots_under_test):
+    robot, _ = robots_under_test["g1"]
+    q, v = _random_state(robot, 5)
+    s = KinematicState(robot, q, v)
+    ref = Reference(np.array([0.4, 0.2, 0.8]), np.array([0.1, 0.0, -0.2]),
+                    np.array([1.0, 2.0, 3.0]))
+    term = frame_position(s, "sword_tip", ref)
+    p = s.placement("sword_tip").translation
+    J = s.frame_jacobian("sword_tip")[:3]
+    kp, kd = 25.0, 10.0
+    task = term.acceleration(kp, kd)
+    h = ref.xdd + kd * (ref.xd - J @ v) + kp * (ref.x - p) - s.frame_drift("sword_tip")[:3]
+    assert np.allclose(task.A, J, rtol=0, atol=1e-15)
+    assert np.allclose(task.b, h, rtol=1e-13, atol=1e-13)
+    vel = term.velocity(3.0)
+    assert np.allclose(vel.b, ref.xd + 3.0 * (ref.x - p), rtol=1e-13, atol=1e-13)
+    # with q̈ solving J q̈ = h the task-space acceleration is the commanded one
+    a = np.linalg.lstsq(J, task.b, rcond=None)[0]
+    xdd = J @ a + s.frame_drift("sword_tip")[:3]
+    assert np.allclose(xdd, ref.xdd + kd * term.rate_error + kp * term.error, atol=1e-9)
+
+
+def test_orientation_pose_and_contact_errors(robots_under_test):
+    robot, _ = robots_under_test["g1"]
+    q, v = _random_state(robot, 6)
+    s = KinematicState(robot, q, v)
+    M = s.placement("left_foot")
+    o = frame_orientation(s, "left_foot", M.rotation)
+    assert np.abs(o.error).max() < 1e-12
+    rot = pin.exp3(np.array([0.0, 0.0, 0.1])) @ M.rotation
+    o2 = frame_orientation(s, "left_foot", rot)
+    assert o2.error == pytest.approx([0, 0, 0.1], abs=1e-12)
+    c = contact(s, "left_foot", M)
+    assert c.J.shape == (6, 35) and np.abs(c.error).max() < 1e-12
+    assert np.allclose(c.rate_error, -s.frame_velocity("left_foot"), atol=1e-14)
+    ref = Reference(M.translation + [0.1, 0, 0], np.zeros(3), np.zeros(3))
+    pose = frame_pose(s, "left_foot", ref, M.rotation)
+    assert pose.error == pytest.approx([0.1, 0, 0, 0, 0, 0], abs=1e-12)
+
+
+def test_com_task_selects_horizontal_axes(robots_under_test):
+    robot, _ = robots_under_test["g1"]
+    q, v = _random_state(robot, 7)
+    s = KinematicState(robot, q, v)
+    term = com_position(s, Reference(np.zeros(2), np.zeros(2), np.zeros(2)))
+    assert term.J.shape == (2, 35)
+    assert np.allclose(term.error, -s.com[:2]) and np.allclose(term.drift, s.acom_drift[:2])
+
+
+def test_posture_rows_are_the_actuated_joints(robots_under_test):
+    robot, _ = robots_under_test["g1"]
+    q, v = _random_state(robot, 8)
+    s = KinematicState(robot, q, v)
+    term = posture(s, robot.q0)
+    assert term.J.shape == (29, 35) and np.all(term.J[:, :6] == 0)
+    assert np.allclose(term.error, robot.q0[7:] - q[7:], atol=1e-12)
+    assert np.allclose(term.rate_error, -v[6:])
+
+
+def test_state_copies_its_inputs(robots_under_test):
+    robot, _ = robots_under_test["chain7"]
+    q, v = _random_state(robot, 1)
+    q_in, v_in = q.copy(), v.copy()
+    s = KinematicState(robot, q, v)
+    q[:] = 0
+    assert np.array_equal(s.q, q_in) and np.array_equal(v, v_in)
+    with pytest.raises(ValueError, match="entries"):
+        KinematicState(robot, q[:3], v)
+
+
+# ----------------------------------------------------------------- joint limits
+def test_activation_rows_only_near_limits_and_push_away():
+    robot = spatial_chain(4)
+    q = np.zeros(4)
+    v = np.zeros(4)
+    assert joint_limit_rows(KinematicState(robot, q, v)) is None
+    q = np.array([-2.45, 0.0, 2.47, 0.0])      # limits ±2.5, margin 0.1
+    v = np.array([-1.0, 0.0, 1.0, 0.0])
+    task = joint_limit_rows(KinematicState(robot, q, v))
+    assert task.m == 2 and np.array_equal(np.flatnonzero(task.A.any(0)), [0, 2])
+    assert task.b[0] > 0 and task.b[1] < 0
+    p = JointLimitActivation()
+    y, s = 0.05, 0.5                            # joint 0: depth 0.05 of 0.1
+    assert task.b[0] == pytest.approx(s * (p.kp * y + p.kd * 1.0))
+
+
+@pytest.mark.parametrize("v0", [0.5, 1.0, 3.0, 5.0])
+def test_activation_target_stops_a_joint_inside_its_margin(v0):
+    """1-D check of the blend: a joint entering the margin at v0 stops before the limit."""
+    robot = spatial_chain(1)
+    q, v, dt = np.array([2.39]), np.array([v0]), 1e-4
+    qmax = q[0]
+    for _ in range(20000):
+        task = joint_limit_rows(KinematicState(robot, q, v))
+        a = 0.0 if task is None else task.b[0]
+        v = v + a * dt
+        q = q + v * dt
+        qmax = max(qmax, q[0])
+    assert qmax < 2.5 and v[0] <= 0
+
+
+def test_bounds_keep_the_horizon_prediction_and_speed_within_limits():
+    robot = spatial_chain(5)
+    rng = np.random.default_rng(3)
+    lo, hi, vmax = robot.joint_limits()
+    T, dt = 0.1, 0.002
+    for _ in range(50):
+        q = rng.uniform(-2.4, 2.4, 5)
+        v = rng.uniform(-3, 3, 5)
+        task = joint_limit_bounds(KinematicState(robot, q, v), T, dt)
+        assert task.m == 5 and not task.is_equality
+        for a in (task.lower, task.upper):
+            pred = q + v * T + 0.5 * a * T ** 2
+            ok = (pred >= lo - 1e-9) & (pred <= hi + 1e-9)
+            speed_ok = np.abs(v + a * dt) <= vmax + 1e-9
+            # where both can hold they do; where they cannot, the speed limit wins
+            assert np.all(speed_ok)
+            feasible = (2 * (lo - q - v * T) / T ** 2 <= (vmax - v) / dt) & \
+                (2 * (hi - q - v * T) / T ** 2 >= (-vmax - v) / dt)
+            assert np.all(ok[feasible])
+        assert np.all(task.lower <= task.upper)
+
+
+def test_joint_limit_violation():
+    robot = spatial_chain(3)
+    assert joint_limit_violation(robot, np.array([0.0, 2.5, -2.5])) == 0.0
+    assert joint_limit_violation(robot, np.array([0.0, 2.6, -2.7])) == pytest.approx(0.2)
+
+
+# ------------------------------------------------------------------- references
+def test_minimum_jerk_endpoints_and_derivatives():
+    x0, x1 = np.array([0.0, 1.0]), np.array([2.0, -1.0])
+    start = minimum_jerk(x0, x1, 1.0, 2.0, 0.5)
+    end = minimum_jerk(x0, x1, 1.0, 2.0, 3.5)
+    assert np.array_equal(start.x, x0) and np.array_equal(end.x, x1)
+    for r in (start, end, minimum_jerk(x0, x1, 1.0, 2.0, 1.0)):
+        assert np.abs(r.xd).max() == 0 and np.abs(r.xdd).max() < 1e-12
+    mid = minimum_jerk(x0, x1, 1.0, 2.0, 2.0)
+    assert mid.x == pytest.approx(0.5 * (x0 + x1))
+    h = 1e-5
+    for t in (1.3, 2.0, 2.7):
+        r = minimum_jerk(x0, x1, 1.0, 2.0, t)
+        rp, rm = minimum_jerk(x0, x1, 1.0, 2.0, t + h), minimum_jerk(x0, x1, 1.0, 2.0, t - h)
+        assert r.xd == pytest.approx((rp.x - rm.x) / (2 * h), abs=1e-8)
+        assert r.xdd == pytest.approx((rp.xd - rm.xd) / (2 * h), abs=1e-7)
+    with pytest.raises(ValueError, match="duration"):
+        minimum_jerk(x0, x1, 0.0, 0.0, 0.0)
+
+
+def test_waypoints_pass_through_points_and_hold():
+    w = Waypoints((0.0, 1.0, 2.0), (0.0, 0.5, 0.0))
+    assert w(-1.0).x == 0.0 and w(1.0).x == pytest.approx(0.5) and w(5.0).x == 0.0
+    assert 0 < w(0.5).x < 0.5 and w(0.5).xd > 0 and w(1.5).xd < 0
+    with pytest.raises(ValueError, match="increase"):
+        Waypoints((0.0, 0.0), (1.0, 2.0))
