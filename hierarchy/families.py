@@ -124,6 +124,52 @@ def degenerate(rng: np.random.Generator, n: int, k: int) -> TaskStack:
     return TaskStack(tasks)
 
 
+def coupled(rng: np.random.Generator, n: int, k: int) -> TaskStack:
+    """Compatible full-rank levels (``Σ m_i ≤ 0.8 n``) whose rows lean on the rows above.
+
+    Each row of level ``i > 1`` is a random row plus twice a random unit combination
+    of the higher levels' (normalised) rows, so every task can be met exactly but the
+    levels are far from orthogonal: methods that solve each task on its own and then
+    project (Chiaverini, the unifying framework) show algorithmic error (eq. 29).
+    """
+    base = compatible(rng, n, k)
+    tasks: list[Task] = []
+    above: list[np.ndarray] = []
+    for i, level in enumerate(base.levels):
+        A = np.array(level.A)
+        if above:
+            U = np.vstack(above)
+            U = U / np.linalg.norm(U, axis=1, keepdims=True)
+            G = rng.standard_normal((A.shape[0], U.shape[0]))
+            G /= np.linalg.norm(G, axis=1, keepdims=True)
+            A = A + 2.0 * np.sqrt(n) * (G @ U) / np.sqrt(max(1, U.shape[0]))
+        above.append(A)
+        tasks.append(Task(f"task{i}", A, rng.standard_normal(A.shape[0])))
+    return TaskStack(tasks)
+
+
+def decoupled(rng: np.random.Generator, n: int, k: int) -> TaskStack:
+    """Compatible full-rank levels acting on disjoint sets of columns.
+
+    The levels' row spaces are mutually orthogonal (also under any diagonal metric),
+    so solving each task on its own and projecting it is already optimal: the
+    algorithmic error of every method is zero. ``k ≤ n``.
+    """
+    k = max(1, min(k, n))
+    blocks = _split(rng, n, k)
+    while sum(blocks) > n:
+        blocks[int(np.argmax(blocks))] -= 1
+    cols = rng.permutation(n)
+    tasks, start = [], 0
+    for i, d in enumerate(blocks):
+        m = max(1, int(0.8 * d))
+        A = np.zeros((m, n))
+        A[:, cols[start:start + d]] = rng.standard_normal((m, d))
+        start += d
+        tasks.append(Task(f"task{i}", A, rng.standard_normal(m)))
+    return TaskStack(tasks)
+
+
 #: family name -> generator ``f(rng, n, k)``
 FAMILIES: dict[str, Callable[[np.random.Generator, int, int], TaskStack]] = {
     "compatible": compatible,
@@ -131,4 +177,6 @@ FAMILIES: dict[str, Callable[[np.random.Generator, int, int], TaskStack]] = {
     "rank_deficient": rank_deficient,
     "weighted": weighted,
     "degenerate": degenerate,
+    "coupled": coupled,
+    "decoupled": decoupled,
 }

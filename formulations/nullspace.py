@@ -1,0 +1,116 @@
+"""Recursive null-space projection, resolved-acceleration form.
+
+The classical task-priority scheme of Nakamura, Hanafusa & Yoshikawa (1987) and
+Siciliano & Slotine (1991), written for accelerations (``J_i θ̈ = h_i``, eq. 3 of
+Jeong & Chang 2009). With ``θ̈_0 = 0`` and ``N_0 = I``, for each level ``i = 1..k``::
+
+    Ĵ_i   = J_i N_{i-1}                              (the projected Jacobian)
+    θ̈_i  = θ̈_{i-1} + Ĵ_i^# (h_i − J_i θ̈_{i-1})
+    N_i   = N_{i-1} − Ĵ_i⁺ Ĵ_i
+
+``Ĵ_i^#`` is the plain Moore-Penrose pseudo-inverse ``Ĵ_i⁺`` when ``damping = 0``,
+computed by SVD with the shared rank rule (a singular value counts when
+``σ > rcond·‖J_i‖_F``); with that rule the result equals ``reference`` on compatible
+*and* conflicting stacks (an exactly conflicting direction has ``σ = 0`` and is
+dropped). Near an algorithmic singularity — a row of ``J_i`` tending to the row
+space of the levels above, so that the smallest kept ``σ`` of ``Ĵ_i`` tends to 0 —
+``Ĵ_i⁺`` divides by ``σ`` and ``θ̈`` grows like ``1/σ`` (as does the exact optimum).
+
+``damping = λ > 0`` switches ``Ĵ_i^#`` to the damped least-squares /
+singularity-robust inverse (Nakamura & Hanafusa 1986, Wampler 1986)::
+
+    Ĵ_i^# = Ĵ_iᵀ (Ĵ_i Ĵ_iᵀ + λ I)⁻¹ ,   i.e. σ ↦ σ / (σ² + λ) ≤ 1 / (2√λ)
+
+— ``λ`` multiplies ``I`` (it is *not* squared), the convention of the paper's
+eq. 27 (``J_iᵀ J_i + λ I``) used by ``extended_jacobian``. The projectors ``N_i``
+stay the exact ones (undamped ``Ĵ_i⁺ Ĵ_i``), so higher levels are never disturbed
+by lower ones; the damped levels lose accuracy instead (status ``"approximate"``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hierarchy import DEFAULT_RCOND, TaskStack
+
+from .base import Capabilities, FormulationError, Outcome
+
+NAME = "nullspace"
+DESCRIPTION = "recursive null-space projection (Nakamura 1987), damped LS inverse option"
+CAPABILITIES = Capabilities(equalities=True, inequalities=False, weights=True,
+                            needs_mass_matrix=False, exact=True)
+OPTIONS = {
+    "damping": (0.0, "λ ≥ 0: Ĵ^# = Ĵᵀ(ĴĴᵀ + λI)⁻¹ (λ multiplies I, as eq. 27); 0: pseudo-inverse"),
+    "rcond": (DEFAULT_RCOND, "relative rank threshold: σ counts if σ > rcond·‖J_i‖_F"),
+}
+
+
+def check_nonnegative(**values: float) -> None:
+    """Raise :class:`FormulationError` for an option that is not a finite number ≥ 0."""
+    for key, val in values.items():
+        try:
+            v = float(val)
+        except (TypeError, ValueError):
+            raise FormulationError(f"{key} must be a number ≥ 0, got {val!r}") from None
+        if not np.isfinite(v) or v < 0:
+            raise FormulationError(f"{key} must be a finite number ≥ 0, got {val}")
+
+
+def truncated_svd(M: np.ndarray, tol: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(U_r, s_r, V_r)`` of ``M`` keeping the singular values ``σ > tol``.
+
+    ``U_r`` is ``m × r``, ``V_r`` is ``n × r``. An empty ``M`` (or ``tol ≤ 0`` with a
+    zero scale) gives ``r = 0``.
+    """
+    m, n = M.shape
+    if M.size == 0:
+        return np.zeros((m, 0)), np.zeros(0), np.zeros((n, 0))
+    u, s, vt = np.linalg.svd(M, full_matrices=False)
+    r = int(np.count_nonzero(s > tol)) if tol > 0 else 0
+    return u[:, :r], s[:r], vt[:r].T
+
+
+def generalized_inverse(M: np.ndarray, tol: float, damping: float = 0.0
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``M^#`` and the orthonormal bases of ``M``'s kept row and column spaces.
+
+    ``M^# = V diag(σ/(σ² + λ)) Uᵀ`` over the singular values ``σ > tol``; with
+    ``damping = λ = 0`` that is the truncated pseudo-inverse ``M⁺``.
+
+    Returns:
+        ``(M^#, V_r, U_r)``; ``V_r V_rᵀ = M⁺ M`` is the projector onto the kept row space.
+    """
+    U, s, V = truncated_svd(M, tol)
+    gain = s / (s * s + damping) if damping > 0 else 1.0 / s
+    return (V * gain) @ U.T, V, U
+
+
+def solve(stack: TaskStack, *, damping: float = 0.0, rcond: float = DEFAULT_RCOND) -> Outcome:
+    """Recursive null-space projection; see the module docstring.
+
+    Returns:
+        ``Outcome`` with ``info["rank_profile"]`` (kept rank of each ``Ĵ_i``) and
+        ``info["min_singular_values"]`` (smallest kept ``σ`` of each ``Ĵ_i``, ``0`` when
+        none: the distance to an algorithmic singularity).
+    """
+    check_nonnegative(damping=damping, rcond=rcond)
+    damping = float(damping)
+    n = stack.n
+    x = np.zeros(n)
+    N = np.eye(n)
+    ranks, sigmas = [], []
+    for level in stack.levels:
+        A, b = level.A, level.b
+        J_hat = A @ N
+        tol = float(rcond) * float(np.linalg.norm(A))
+        U, s, V = truncated_svd(J_hat, tol)
+        ranks.append(int(s.size))
+        sigmas.append(float(s.min()) if s.size else 0.0)
+        if s.size == 0:
+            continue
+        gain = s / (s * s + damping) if damping > 0 else 1.0 / s
+        x = x + V @ (gain * (U.T @ (b - A @ x)))
+        N = N - V @ V.T          # N_i = N_{i-1} − Ĵ_i⁺ Ĵ_i
+    status = "approximate" if damping > 0 else "optimal"
+    return Outcome(x, status, {"rank_profile": ranks, "min_singular_values": sigmas,
+                               "damping": damping})

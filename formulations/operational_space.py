@@ -1,0 +1,132 @@
+"""Prioritized operational-space control (Khatib 1987; Sentis & Khatib 2005; Khatib,
+Sentis & Park 2008), in joint accelerations and torques.
+
+With ``M`` the joint-space inertia, a task Jacobian ``J`` has the operational-space
+inertia ``Λ = (J M⁻¹ Jᵀ)⁺`` and the *dynamically consistent* generalized inverse
+``J̄ = M⁻¹ Jᵀ Λ``; ``N = I − J̄ J`` is the dynamically consistent null-space
+projector (``M N`` is symmetric: torques in ``range(Nᵀ)`` produce no acceleration
+of the task). Levels are prioritized through the projected Jacobians::
+
+    J_{i|prev} = J_i N_{i-1} ,   Λ_{i|prev} = (J_{i|prev} M⁻¹ J_{i|prev}ᵀ)⁺ ,
+    J̄_{i|prev} = M⁻¹ J_{i|prev}ᵀ Λ_{i|prev} ,
+    F_i = Λ_{i|prev} (h_i − J_i θ̈_{i-1})                   (task force)
+    θ̈_i = θ̈_{i-1} + J̄_{i|prev} (h_i − J_i θ̈_{i-1}) ,   N_i = N_{i-1} − J̄_{i|prev} J_{i|prev}
+
+with ``θ̈_0 = 0``, ``N_0 = I`` (Jeong & Chang 2009 compare with it in §III; ``h_i``
+is eq. 4, so ``J̇θ̇`` is already in it). The torque is ``τ = M θ̈ + C + G``, equal to
+the operational-space form ``Σ_i J_{i|prev}ᵀ F_i + C + G``; splitting the bias
+over the levels gives the classical ``Λ ẍ* + μ + p`` form
+``Σ_i J_{i|prev}ᵀ (F_i + J̄_{i|prev}ᵀ (C + G)) + N_kᵀ (C + G)``
+(see :func:`task_space_torque`).
+
+On an equality stack the result is the lexicographic optimum whose remaining
+freedom is fixed by the smallest kinetic metric ``θ̈ᵀ M θ̈`` — ``reference`` with
+``metric=M`` — because ``J_i J̄_{i|prev}`` is the orthogonal projector onto
+``range(J_{i|prev})``. Like ``nullspace``, it divides by the singular values of the
+projected Jacobians, so near an algorithmic singularity ``θ̈`` grows like ``1/σ``.
+
+Numerics: ``M = L Lᵀ`` (Cholesky); with ``B = J_{i|prev} L⁻ᵀ`` one has
+``Λ = (B Bᵀ)⁺`` and ``J̄ = L⁻ᵀ B⁺``, so no inverse of ``M`` and no squared condition
+number: ``B⁺`` comes from an SVD keeping ``σ > rcond·‖J_i L⁻ᵀ‖_F``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg import solve_triangular
+
+from hierarchy import DEFAULT_RCOND, TaskStack
+
+from .base import Capabilities, FormulationError, Outcome
+from .nullspace import check_nonnegative, truncated_svd
+
+NAME = "operational_space"
+DESCRIPTION = "prioritized operational-space control (Khatib, Sentis), mass_matrix=M"
+CAPABILITIES = Capabilities(equalities=True, inequalities=False, weights=True,
+                            needs_mass_matrix=True, exact=True)
+OPTIONS = {
+    "mass_matrix": (None, "SPD n×n joint-space inertia M (required)"),
+    "bias": (None, "C + G (n): with it, info['tau'] = M θ̈ + C + G"),
+    "rcond": (DEFAULT_RCOND, "relative rank threshold: σ counts if σ > rcond·‖J_i L⁻ᵀ‖_F"),
+}
+
+
+@dataclass
+class PrioritizedLevel:
+    """The operational-space quantities of one level.
+
+    Attributes:
+        J_projected: ``J_{i|prev} = J_i N_{i-1}`` (``m_i × n``).
+        Lambda: ``Λ_{i|prev}`` (``m_i × m_i``), the operational-space inertia.
+        J_bar: ``J̄_{i|prev}`` (``n × m_i``), the dynamically consistent inverse.
+        force: ``F_i = Λ_{i|prev} (h_i − J_i θ̈_{i-1})``.
+        rank: Kept rank of ``J_{i|prev}``.
+    """
+
+    J_projected: np.ndarray
+    Lambda: np.ndarray
+    J_bar: np.ndarray
+    force: np.ndarray
+    rank: int
+
+
+def _cholesky_lower(M: np.ndarray) -> np.ndarray:
+    try:
+        return np.linalg.cholesky(M)
+    except np.linalg.LinAlgError:
+        w = np.linalg.eigvalsh(M)
+        raise FormulationError(f"mass_matrix must be positive definite "
+                               f"(smallest eigenvalue {w.min():.3e})") from None
+
+
+def task_space_torque(levels: list[PrioritizedLevel], null_projector: np.ndarray,
+                      bias: np.ndarray) -> np.ndarray:
+    """``Σ_i J_{i|prev}ᵀ (F_i + μ_i + p_i) + N_kᵀ (C + G)`` with ``μ_i + p_i = J̄_{i|prev}ᵀ (C + G)``.
+
+    The operational-space (``Λ ẍ* + μ + p``) form of the torque; it equals
+    ``M θ̈ + C + G`` because ``Σ_i J̄_{i|prev} J_{i|prev} + N_k = I``.
+    """
+    tau = null_projector.T @ bias
+    for lv in levels:
+        tau = tau + lv.J_projected.T @ (lv.force + lv.J_bar.T @ bias)
+    return tau
+
+
+def solve(stack: TaskStack, *, mass_matrix=None, bias=None,
+          rcond: float = DEFAULT_RCOND) -> Outcome:
+    """Prioritized operational-space control; see the module docstring.
+
+    Returns:
+        ``Outcome`` with ``info["levels"]`` (one :class:`PrioritizedLevel` each),
+        ``info["null_projector"]`` (``N_k``) and, when ``bias`` is given,
+        ``info["tau"] = M θ̈ + C + G``.
+    """
+    if mass_matrix is None:
+        raise FormulationError("formulation 'operational_space' needs mass_matrix=M")
+    check_nonnegative(rcond=rcond)
+    M = np.asarray(mass_matrix, dtype=np.float64)
+    L = _cholesky_lower(M)
+    n = stack.n
+    x = np.zeros(n)
+    N = np.eye(n)
+    levels = []
+    for level in stack.levels:
+        A, b = level.A, level.b
+        Jp = A @ N                                                   # J_{i|prev}
+        B = solve_triangular(L, Jp.T, lower=True).T                  # J_{i|prev} L⁻ᵀ
+        scale = float(np.linalg.norm(solve_triangular(L, A.T, lower=True)))
+        U, s, V = truncated_svd(B, float(rcond) * scale)
+        B_pinv = (V / s) @ U.T if s.size else np.zeros((n, A.shape[0]))
+        J_bar = solve_triangular(L, B_pinv, lower=True, trans="T")   # L⁻ᵀ B⁺
+        Lam = (U / (s * s)) @ U.T if s.size else np.zeros((A.shape[0], A.shape[0]))
+        err = b - A @ x
+        levels.append(PrioritizedLevel(Jp, Lam, J_bar, Lam @ err, int(s.size)))
+        x = x + J_bar @ err
+        N = N - J_bar @ Jp
+    info = {"levels": levels, "null_projector": N,
+            "rank_profile": [lv.rank for lv in levels]}
+    if bias is not None:
+        info["tau"] = M @ x + np.asarray(bias, dtype=np.float64)
+    return Outcome(x, "optimal", info)

@@ -1,0 +1,126 @@
+"""The unifying framework of Peters, Mistry, Udwadia, Nakanishi & Schaal (2008),
+as reformulated in the appendix of Jeong & Chang (2009), eq. 36-40.
+
+With the joint-space dynamics ``τ = M θ̈ + C + G`` (eq. 36), the framework computes
+one torque per level, lowest priority first (eq. 37)::
+
+    τ = Σ_i τ_i + C + G ,
+    τ_i = (J_i M⁻¹)⁺ (h_i − J_i M⁻¹ τ_i_post) ,   τ_i_post = Σ_{j>i} τ_j
+
+so the highest level, computed last, corrects whatever the lower ones did to it.
+(Eq. 37 as printed also carries ``−(C+G)`` inside the bracket; with the bias
+compensated outside, ``M θ̈ = Σ_i τ_i`` and the acceleration the other levels
+produce is ``M⁻¹ τ_i_post``, which is how eq. 38-40 use it, so that is what is
+implemented.) Using ``(J M⁻¹)⁺ = M J^{M²+}`` with the ``M²``-weighted pseudo-inverse
+
+    J^{M²+} = M⁻² Jᵀ (J M⁻² Jᵀ)⁺        (check: M J^{M²+} = M⁻¹Jᵀ(JM⁻¹(JM⁻¹)ᵀ)⁺ = (JM⁻¹)⁺)
+
+the recursion unrolls into eq. 40::
+
+    τ = M Σ_i θ̈_i + C + G ,   θ̈_i = N_i J_i^{M²+} h_i ,
+    N_1 = I ,  N_i = N_{i-1} (I − J_{i-1}^{M²+} J_{i-1})
+
+``solve`` evaluates eq. 40 forwards (top level first); :func:`torque_recursion` is
+eq. 37 literally (bottom level first), and the tests check that both agree. Like
+Chiaverini's method, each level uses its own inverse ``J_i^{M²+}`` rather than that
+of a projected Jacobian, so there is no algorithmic singularity but there is
+algorithmic error (eq. 34) on coupled lower levels; the top level is met exactly.
+
+Every ``M⁻¹`` is applied through the Cholesky factor of ``M``; the pseudo-inverse of
+``B_i = J_i M⁻¹`` uses an SVD with the shared rank rule relative to ``‖B_i‖_F``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.linalg import cho_factor, cho_solve
+
+from hierarchy import DEFAULT_RCOND, TaskStack
+
+from .base import Capabilities, FormulationError, Outcome
+from .nullspace import check_nonnegative, generalized_inverse
+
+NAME = "unifying"
+DESCRIPTION = "unifying framework (Peters et al. 2008), paper's eq. 36-40 with mass_matrix=M"
+CAPABILITIES = Capabilities(equalities=True, inequalities=False, weights=True,
+                            needs_mass_matrix=True, exact=False)
+OPTIONS = {
+    "mass_matrix": (None, "SPD n×n joint-space inertia M (required)"),
+    "bias": (None, "C + G (n): with it, info['tau'] = M θ̈ + C + G (eq. 40)"),
+    "rcond": (DEFAULT_RCOND, "relative rank threshold: σ counts if σ > rcond·‖J_i M⁻¹‖_F"),
+}
+
+
+def cholesky(mass_matrix: np.ndarray) -> tuple[np.ndarray, bool]:
+    """Cholesky factor of ``M`` for :func:`scipy.linalg.cho_solve`.
+
+    Raises:
+        FormulationError: ``M`` is not positive definite.
+    """
+    try:
+        return cho_factor(np.asarray(mass_matrix, dtype=np.float64), lower=True)
+    except np.linalg.LinAlgError:
+        w = np.linalg.eigvalsh(mass_matrix)
+        raise FormulationError(f"mass_matrix must be positive definite "
+                               f"(smallest eigenvalue {w.min():.3e})") from None
+
+
+def weighted_pinv(J: np.ndarray, factor, rcond: float = DEFAULT_RCOND) -> np.ndarray:
+    """``J^{M²+} = M⁻² Jᵀ (J M⁻² Jᵀ)⁺ = M⁻¹ (J M⁻¹)⁺`` (``factor``: Cholesky of ``M``)."""
+    B = cho_solve(factor, J.T).T                         # J M⁻¹ (M symmetric)
+    B_pinv, _, _ = generalized_inverse(B, float(rcond) * float(np.linalg.norm(B)))
+    return cho_solve(factor, B_pinv)
+
+
+def torque_recursion(stack: TaskStack, mass_matrix: np.ndarray, bias=None,
+                     rcond: float = DEFAULT_RCOND) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Eq. 37 literally: ``τ_i = (J_i M⁻¹)⁺ (h_i − J_i M⁻¹ τ_i_post)``, lowest level first.
+
+    Args:
+        stack: Equality task stack (``J_i = A_i``, ``h_i = b_i``).
+        mass_matrix: SPD ``M``.
+        bias: ``C + G`` (default zero).
+        rcond: Relative rank threshold for ``(J_i M⁻¹)⁺``.
+
+    Returns:
+        ``(τ, [τ_1, …, τ_k])`` with ``τ = Σ τ_i + C + G``.
+    """
+    factor = cholesky(mass_matrix)
+    n = stack.n
+    taus: list[np.ndarray] = [np.zeros(n)] * len(stack)
+    tau_post = np.zeros(n)
+    for i in range(len(stack) - 1, -1, -1):
+        A, b = stack.levels[i].A, stack.levels[i].b
+        B = cho_solve(factor, A.T).T                     # J_i M⁻¹
+        B_pinv, _, _ = generalized_inverse(B, float(rcond) * float(np.linalg.norm(B)))
+        taus[i] = B_pinv @ (b - B @ tau_post)
+        tau_post = tau_post + taus[i]
+    bias_vec = np.zeros(n) if bias is None else np.asarray(bias, dtype=np.float64)
+    return tau_post + bias_vec, taus
+
+
+def solve(stack: TaskStack, *, mass_matrix=None, bias=None,
+          rcond: float = DEFAULT_RCOND) -> Outcome:
+    """Eq. 40: ``θ̈ = Σ_i N_i J_i^{M²+} h_i``; see the module docstring.
+
+    Returns:
+        ``Outcome`` (status ``"approximate"``: the method has algorithmic error) with
+        ``info["tau"] = M θ̈ + C + G`` when ``bias`` is given.
+    """
+    if mass_matrix is None:
+        raise FormulationError("formulation 'unifying' needs mass_matrix=M")
+    check_nonnegative(rcond=rcond)
+    M = np.asarray(mass_matrix, dtype=np.float64)
+    factor = cholesky(M)
+    n = stack.n
+    x = np.zeros(n)
+    N = np.eye(n)
+    for level in stack.levels:
+        A, b = level.A, level.b
+        K = weighted_pinv(A, factor, rcond)              # J_i^{M²+}
+        x = x + N @ (K @ b)                              # θ̈_i = N_i J_i^{M²+} h_i
+        N = N - (N @ K) @ A                              # N_{i+1} = N_i (I − J_i^{M²+} J_i)
+    info = {}
+    if bias is not None:
+        info["tau"] = M @ x + np.asarray(bias, dtype=np.float64)
+    return Outcome(x, "approximate", info)
