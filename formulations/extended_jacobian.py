@@ -47,6 +47,8 @@ another (every damped block has full rank).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy.linalg import lapack
 
@@ -101,7 +103,7 @@ def solve(stack: TaskStack, *, nullspace: str = "qr", damping: float = 0.0,
         raise FormulationError(f"nullspace must be 'qr' or 'svd', got {nullspace!r}")
     for key, val in (("damping", damping), ("level_damping", level_damping),
                      ("singular_threshold", singular_threshold), ("rcond", rcond)):
-        if not np.isfinite(float(val)) or float(val) < 0:
+        if not (0.0 <= val < math.inf):   # also False for NaN
             raise FormulationError(f"{key} must be a finite number ≥ 0, got {val}")
     damping = float(damping)
     selective = float(level_damping) > 0 and float(singular_threshold) > 0
@@ -128,11 +130,13 @@ def _solve_qr_compiled(stack: TaskStack, rcond: float, level_damping: float,
     damped = np.zeros(k, dtype=np.int64)
     _kernel.solve_kernel(B, c, packed.starts, packed.scales, rcond, level_damping,
                          singular_threshold, x, ranks, damped)
-    info = {"rank_profile": ranks.tolist(), "nullspace": "qr", "kernel": "numba"}
-    flagged = np.flatnonzero(damped).tolist()
+    info = {"rank_profile": ranks, "nullspace": "qr", "kernel": "numba"}
     if level_damping > 0:
+        flagged = np.flatnonzero(damped).tolist()
         info["damped_levels"] = flagged
-    return Outcome(x, "approximate" if flagged else "optimal", info)
+        if flagged:
+            return Outcome(x, "approximate", info)
+    return Outcome(x, "optimal", info)
 
 
 # --------------------------------------------------------------------------- qr
@@ -215,7 +219,7 @@ def _solve_qr(stack: TaskStack, rcond: float, level_damping: float = 0.0,
         seg = x[col_i:].reshape(-1, 1)
         out, _, _ = _dormqr("L", "N", v, t, seg, 1)
         x[col_i:] = out.ravel()
-    info = {"rank_profile": ranks, "nullspace": "qr", "kernel": "lapack"}
+    info = {"rank_profile": np.array(ranks), "nullspace": "qr", "kernel": "lapack"}
     if level_damping > 0:
         info["damped_levels"] = damped
     return Outcome(x, "approximate" if damped else "optimal", info)
