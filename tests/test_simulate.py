@@ -1,0 +1,115 @@
+"""robots.simulate: the loop integrates, records, times and stops cleanly."""
+
+from types import SimpleNamespace
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import formulations
+from hierarchy import Task, TaskStack, algorithmic_error_norms
+from robots import (Reference, StepTasks, equality_view, frame_position, posture, simulate,
+                    spatial_chain)
+
+TARGET = np.array([1.2, 0.6, 0.4])
+
+
+@pytest.fixture(scope="module")
+def chain():
+    return spatial_chain(6)
+
+
+def _build(robot):
+    def build(state, t):
+        tip = frame_position(state, "tip", Reference(TARGET, np.zeros(3), np.zeros(3)),
+                             name="tip")
+        stack = TaskStack([tip.acceleration(25.0, 10.0),
+                           posture(state, robot.q0).acceleration(1.0, 2.0)])
+        return StepTasks(stack, {"tip_error": float(np.linalg.norm(tip.error))})
+    return build
+
+
+def test_tip_converges_and_everything_is_recorded(chain):
+    res = simulate(chain, _build(chain),
+                   lambda s, **kw: formulations.solve(s, "extended_jacobian"),
+                   duration=2.0, dt=0.002)
+    assert not res.failed and res.steps == 1000 and res.message == ""
+    assert res.q.shape == (1000, 6) and res.v.shape == res.a.shape == res.tau.shape
+    assert res.errors["tip_error"][0] > 0.5 and res.errors["tip_error"][-1] < 1e-3
+    assert np.all(res.kinematics_time_s > 0) and np.all(res.solve_time_s > 0)
+    assert np.all(res.torque_time_s >= 0)
+    assert np.allclose(res.step_time_s, res.kinematics_time_s + res.solve_time_s
+                       + res.torque_time_s)
+    # an exact solution of a compatible-then-conflicting stack: no algorithmic error
+    assert np.nanmax(res.algorithmic_error) < 1e-8
+    # semi-implicit Euler: v_{k+1} = v_k + a_k dt, q_{k+1} = q_k + v_{k+1} dt
+    k = 500
+    assert np.allclose(res.v[k + 1], res.v[k] + res.a[k] * 0.002, atol=1e-12)
+    assert np.allclose(res.q[k + 1], res.q[k] + res.v[k + 1] * 0.002, atol=1e-12)
+    # RNEA torques: τ = M(q) q̈ + b(q, q̇)
+    d = chain.model.createData()
+    M = pin.crba(chain.model, d, res.q[k])
+    M = np.triu(M) + np.triu(M, 1).T
+    b = pin.nonLinearEffects(chain.model, d, res.q[k], res.v[k])
+    assert np.allclose(res.tau[k], M @ res.a[k] + b, atol=1e-9)
+
+
+def test_torque_law_of_the_formulation_is_used(chain):
+    seen = {}
+
+    def solve(stack, **kw):
+        seen.update(kw)
+        return SimpleNamespace(x=np.zeros(stack.n), status="optimal",
+                               info={"tau": np.full(stack.n, 7.0)})
+
+    res = simulate(chain, _build(chain), solve, duration=0.01, dt=0.002,
+                   needs_dynamics=True, torque_from_solution=True)
+    assert set(seen) == {"mass_matrix", "bias"} and seen["mass_matrix"].shape == (6, 6)
+    assert np.allclose(seen["mass_matrix"], seen["mass_matrix"].T)
+    assert np.all(res.tau == 7.0)
+
+
+def test_failed_or_nonfinite_solution_stops_cleanly(chain):
+    calls = []
+
+    def solve(stack, **kw):
+        calls.append(1)
+        x = np.zeros(stack.n) if len(calls) < 4 else np.full(stack.n, np.nan)
+        return SimpleNamespace(x=x, status="optimal", info={})
+
+    res = simulate(chain, _build(chain), solve, duration=1.0, dt=0.01)
+    assert res.failed and res.steps == 3 and "t = 0.030" in res.message
+    res = simulate(chain, _build(chain),
+                   lambda s, **kw: SimpleNamespace(x=np.zeros(s.n), status="failed",
+                                                   info={"message": "boom"}),
+                   duration=1.0, dt=0.01)
+    assert res.failed and res.steps == 0 and "boom" in res.message
+
+
+def test_inputs_are_not_mutated(chain):
+    q0 = chain.q0.copy()
+    v0 = np.full(6, 0.1)
+    v_in = v0.copy()
+    simulate(chain, _build(chain), lambda s, **kw: formulations.solve(s, "extended_jacobian"),
+             duration=0.02, dt=0.002, v0=v0)
+    assert np.array_equal(chain.q0, q0) and np.array_equal(v0, v_in)
+    with pytest.raises(ValueError, match="dt"):
+        simulate(chain, _build(chain), None, duration=1.0, dt=0.0)
+
+
+def test_equality_view_keeps_active_bounds():
+    A = np.eye(3)
+    stack = TaskStack([Task("eq", [[1.0, 1.0, 0.0]], [1.0]),
+                       Task("box", A, lower=[0.0, 0.0, -1.0], upper=[0.5, 2.0, 1.0]),
+                       Task("low", [[0.0, 0.0, 1.0]], [3.0])])
+    x = np.array([0.5, 0.5, 1.0])          # row 0 at its upper bound, row 2 at its upper
+    eq = equality_view(stack, x)
+    assert [lv.names for lv in eq.levels] == [("eq",), ("box",), ("low",)]
+    box = eq.levels[1][0]
+    assert np.array_equal(box.A, A[[0, 2]]) and np.array_equal(box.b, [0.5, 1.0])
+    # x is the lexicographic optimum of that view: no algorithmic error
+    assert max(algorithmic_error_norms(eq, x)) < 1e-12
+    inner = np.array([0.25, 0.75, 0.0])
+    eq2 = equality_view(stack, inner)
+    assert [lv.names for lv in eq2.levels] == [("eq",), ("low",)]
+    assert equality_view(eq2, inner) is eq2
