@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import itertools
+import math
 from dataclasses import dataclass
 from typing import Iterator, Sequence
 
@@ -32,9 +34,9 @@ class PackedRows:
         mats = [(level.A, level.b) for level in stack.levels]
         A = np.vstack([a for a, _ in mats])
         b = np.concatenate([v for _, v in mats])
-        starts = np.zeros(len(mats) + 1, dtype=np.int64)
-        np.cumsum([a.shape[0] for a, _ in mats], out=starts[1:])
-        scales = np.array([float(np.linalg.norm(a)) for a, _ in mats])
+        starts = np.array([0, *itertools.accumulate(a.shape[0] for a, _ in mats)],
+                          dtype=np.int64)
+        scales = np.array([math.sqrt(float(np.dot(a.ravel(), a.ravel()))) for a, _ in mats])
         for arr in (A, b, starts, scales):
             arr.setflags(write=False)
         return cls(A, b, starts, scales)

@@ -44,7 +44,7 @@ class Task:
     so that errors can name the level as well as the task.
     """
 
-    __slots__ = ("name", "A", "b", "lower", "upper", "weight")
+    __slots__ = ("name", "A", "b", "lower", "upper", "weight", "_unit_weight")
 
     def __init__(self, name: str, A, b=None, *, lower=None, upper=None,
                  weight=1.0) -> None:
@@ -73,11 +73,18 @@ class Task:
                                  "(inequality), not both", task=name)
         self.lower = vec(lower, "lower")
         self.upper = vec(upper, "upper")
-        w = _as_float_array(weight, name, "weight")
-        if w.ndim == 0 and m is not None:
-            w = np.full(m, float(w))
+        unit = isinstance(weight, (int, float)) and weight == 1.0
+        if unit and m is not None:
+            w = np.ones(m)
             w.setflags(write=False)
+        else:
+            w = _as_float_array(weight, name, "weight")
+            if w.ndim == 0 and m is not None:
+                w = np.full(m, float(w))
+                w.setflags(write=False)
+            unit = False
         self.weight = w
+        self._unit_weight = unit
 
     # ------------------------------------------------------------------ checks
     def validate(self, level: int | None = None, n: int | None = None) -> None:
@@ -87,6 +94,17 @@ class Task:
             level: Level index used in the message.
             n: Expected number of columns, if known.
         """
+        # fast path (one vectorised check per array); the detailed diagnosis below
+        # runs only when something is off, or for inequality tasks
+        A, b = self.A, self.b
+        if (b is not None and self._unit_weight and A.ndim == 2 and A.shape[0]
+                and A.shape[1] and (n is None or A.shape[1] == n)
+                and b.shape == (A.shape[0],) and np.isfinite(A).all()
+                and np.isfinite(b).all()):
+            return
+        self._diagnose(level, n)
+
+    def _diagnose(self, level: int | None, n: int | None) -> None:
         name = self.name
 
         def fail(msg, **detail):
@@ -264,6 +282,9 @@ class Level(tuple):
         cache = self.__dict__ if hasattr(self, "__dict__") else None
         if cache is not None and key in cache:
             return cache[key]
+        if len(self) == 1 and self[0].is_equality and self[0]._unit_weight:
+            self.__dict__["_A"], self.__dict__["_b"] = self[0].A, self[0].b  # read-only
+            return self.__dict__[key]
         eq = [t for t in self if t.is_equality]
         n = self[0].n
         if eq:
