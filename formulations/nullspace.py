@@ -22,9 +22,11 @@ singularity-robust inverse (Nakamura & Hanafusa 1986, Wampler 1986)::
     Ĵ_i^# = Ĵ_iᵀ (Ĵ_i Ĵ_iᵀ + λ I)⁻¹ ,   i.e. σ ↦ σ / (σ² + λ) ≤ 1 / (2√λ)
 
 — ``λ`` multiplies ``I`` (it is *not* squared), the convention of the paper's
-eq. 27 (``J_iᵀ J_i + λ I``) used by ``extended_jacobian``. The projectors ``N_i``
-stay the exact ones (undamped ``Ĵ_i⁺ Ĵ_i``), so higher levels are never disturbed
-by lower ones; the damped levels lose accuracy instead (status ``"approximate"``).
+eq. 27 (``J_iᵀ J_i + λ I``) used by ``extended_jacobian``. Every level is damped, the
+first included (so a kinematic singularity of ``J_1`` is damped too; eq. 27 instead
+leaves ``J_1``'s rows undamped). The projectors ``N_i`` stay the exact ones
+(undamped ``Ĵ_i⁺ Ĵ_i``), so a lower level never disturbs a higher one; the damped
+levels lose accuracy instead (status ``"approximate"``).
 """
 
 from __future__ import annotations

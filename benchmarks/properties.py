@@ -1,0 +1,437 @@
+"""The paper's comparative claims, measured: algorithmic singularity and algorithmic error.
+
+``prioik properties --out docs/properties.md`` (or ``python -m benchmarks.properties``)
+writes ``docs/properties.md``:
+
+1. **Approaching an algorithmic singularity** — ``hierarchy.families.near_singular(σ)``:
+   level 1 fixes ``x_0 = x_1 = 0``, level 2 asks ``cos σ x_0 + sin σ x_2 = 1`` (plus a
+   free row). The exact lexicographic optimum has ``x_2 = 1/sin σ``. The table gives
+   ``‖θ̈‖`` of every formulation against ``σ``, the fitted slope of ``log‖θ̈‖`` against
+   ``log σ`` over ``σ = 1e-1 … 1e-7``, and the lower task's residual.
+2. **Algorithmic error** (eq. 29) of every formulation on seeded ``coupled``,
+   ``decoupled`` and ``conflicting`` stacks (``hierarchy.analysis.algorithmic_error``).
+
+Everything is computed when the script runs (deterministic seeds); nothing is typed in.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as _dt
+import platform
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+import formulations
+from hierarchy import (DEFAULT_RCOND, TaskStack, algorithmic_error_norms,
+                       check_lexicographic, rank_profile)
+from hierarchy.families import FAMILIES, near_singular
+
+#: σ values of the near-singular sweep (0: exactly conflicting)
+SIGMAS = (1e-1, 1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-10, 0.0)
+#: σ range of the fitted slope
+SLOPE_RANGE = (1e-7, 1e-1)
+#: damping used by the damped variants
+LAMBDA = 1e-2
+#: condition number of the fixed SPD mass matrices
+MASS_CONDITION = 10.0
+
+
+@dataclass(frozen=True)
+class Variant:
+    """One formulation with fixed options; ``mass`` says which mass matrix it gets.
+
+    Attributes:
+        label: Column label.
+        name: Registry name.
+        options: Options other than the mass matrix.
+        mass: ``None`` (no mass matrix), ``"identity"`` or ``"spd"`` (fixed seeded SPD).
+    """
+
+    label: str
+    name: str
+    options: tuple[tuple[str, object], ...] = ()
+    mass: str | None = None
+
+
+VARIANTS: tuple[Variant, ...] = (
+    Variant("reference", "reference"),
+    Variant("ext_jac qr", "extended_jacobian", (("nullspace", "qr"),)),
+    Variant("ext_jac svd", "extended_jacobian", (("nullspace", "svd"),)),
+    Variant(f"ext_jac qr λ={LAMBDA:g}", "extended_jacobian",
+            (("nullspace", "qr"), ("damping", LAMBDA))),
+    Variant(f"ext_jac svd λ={LAMBDA:g}", "extended_jacobian",
+            (("nullspace", "svd"), ("damping", LAMBDA))),
+    Variant("nullspace", "nullspace"),
+    Variant(f"nullspace λ={LAMBDA:g}", "nullspace", (("damping", LAMBDA),)),
+    Variant("chiaverini", "chiaverini"),
+    Variant("unifying M=I", "unifying", (), "identity"),
+    Variant("unifying M", "unifying", (), "spd"),
+    Variant("op_space M", "operational_space", (), "spd"),
+)
+
+
+def random_mass_matrix(rng: np.random.Generator, n: int,
+                       condition: float = MASS_CONDITION) -> np.ndarray:
+    """Seeded SPD matrix with eigenvalues geometrically spread over ``[1, condition]``."""
+    Q, _ = np.linalg.qr(rng.standard_normal((n, n)))
+    return (Q * np.geomspace(1.0, condition, n)) @ Q.T
+
+
+def solve_variant(stack: TaskStack, variant: Variant, mass: np.ndarray):
+    """Solve ``stack`` with ``variant``; ``mass`` is the SPD matrix for ``"spd"``."""
+    options = dict(variant.options)
+    if variant.mass == "identity":
+        options["mass_matrix"] = np.eye(stack.n)
+    elif variant.mass == "spd":
+        options["mass_matrix"] = mass
+    return formulations.solve(stack, variant.name, **options)
+
+
+def _available(variants) -> list[Variant]:
+    ok = {f.name for f in formulations.available() if f.available}
+    return [v for v in variants if v.name in ok]
+
+
+# ------------------------------------------------------------ near singularity
+@dataclass
+class SingularitySweep:
+    """``‖θ̈‖`` and the lower level's residual for each variant and ``σ``."""
+
+    sigmas: tuple[float, ...]
+    variants: list[Variant]
+    norms: np.ndarray          # len(sigmas) × len(variants)
+    residuals: np.ndarray      # lower level's residual ‖A_2 θ̈ − b_2‖
+    slopes: np.ndarray         # fitted d log‖θ̈‖ / d log σ over SLOPE_RANGE
+
+
+def singularity_sweep(sigmas=SIGMAS, variants=VARIANTS) -> SingularitySweep:
+    """Solve ``near_singular(σ)`` with every variant (one fixed SPD ``M``, seed 0)."""
+    variants = _available(variants)
+    mass = random_mass_matrix(np.random.default_rng(0), near_singular(0.1).n)
+    norms = np.full((len(sigmas), len(variants)), np.nan)
+    residuals = np.full_like(norms, np.nan)
+    for i, s in enumerate(sigmas):
+        stack = near_singular(s)
+        for j, v in enumerate(variants):
+            sol = solve_variant(stack, v, mass)
+            if sol.ok:
+                norms[i, j] = np.linalg.norm(sol.x)
+                residuals[i, j] = sol.residuals[1]
+    sig = np.array(sigmas)
+    fit = (sig >= SLOPE_RANGE[0]) & (sig <= SLOPE_RANGE[1])
+    slopes = np.array([np.polyfit(np.log(sig[fit]), np.log(norms[fit, j]), 1)[0]
+                       for j in range(len(variants))])
+    return SingularitySweep(tuple(sigmas), variants, norms, residuals, slopes)
+
+
+# ---------------------------------------------------------- algorithmic error
+@dataclass
+class ErrorSummary:
+    """Relative algorithmic error of one variant over the stacks of one family.
+
+    Attributes:
+        top_max: Max over stacks of ``‖e_1‖ / ‖h_1‖`` (the top level).
+        lower_median: Median over stacks of ``max_{i≥2} ‖e_i‖ / ‖h_i‖``.
+        lower_min: Smallest such value.
+        lower_max: Largest such value.
+        lexicographic: Fraction of stacks passing ``check_lexicographic`` (tol 1e-8).
+        stacks: Number of stacks.
+        trivial: Fraction of stacks whose lower levels have no feasible direction
+            left (``r_i = 0`` for ``i ≥ 2``, eq. 12): every method is optimal there.
+    """
+
+    top_max: float
+    lower_median: float
+    lower_min: float
+    lower_max: float
+    lexicographic: float
+    stacks: int
+    trivial: float
+
+
+ERROR_FAMILIES = ("coupled", "decoupled", "conflicting")
+
+
+def error_table(n_stacks: int = 50, families=ERROR_FAMILIES, variants=VARIANTS,
+                seed: int = 12345) -> dict[str, dict[str, ErrorSummary]]:
+    """``{family: {variant label: ErrorSummary}}`` over seeded stacks, n 6..30, 2..5 levels.
+
+    Each stack gets its own seeded SPD ``M`` (condition ``MASS_CONDITION``).
+    """
+    variants = _available(variants)
+    out: dict[str, dict[str, ErrorSummary]] = {}
+    for fam_index, family in enumerate(families):
+        rows: dict[str, list[tuple[float, float, bool]]] = {v.label: [] for v in variants}
+        trivial = 0
+        for s in range(n_stacks):
+            rng = np.random.default_rng([seed, fam_index, s])
+            n = int(rng.integers(6, 31))
+            stack = FAMILIES[family](rng, n, int(rng.integers(2, 6)))
+            mass = random_mass_matrix(rng, n)
+            trivial += int(sum(rank_profile(stack)[1:]) == 0)
+            scale = np.array([max(np.linalg.norm(level.b), 1e-300) for level in stack.levels])
+            for v in variants:
+                sol = solve_variant(stack, v, mass)
+                if not sol.ok:
+                    rows[v.label].append((np.nan, np.nan, False))
+                    continue
+                rel = algorithmic_error_norms(stack, sol.x) / scale
+                lower = float(rel[1:].max()) if len(rel) > 1 else 0.0
+                lex = check_lexicographic(stack, sol.x, tol=1e-8).ok
+                rows[v.label].append((float(rel[0]), lower, lex))
+        out[family] = {}
+        for label, vals in rows.items():
+            arr = np.array([(a, b) for a, b, _ in vals])
+            out[family][label] = ErrorSummary(
+                float(np.nanmax(arr[:, 0])), float(np.nanmedian(arr[:, 1])),
+                float(np.nanmin(arr[:, 1])), float(np.nanmax(arr[:, 1])),
+                float(np.mean([c for _, _, c in vals])), len(vals), trivial / n_stacks)
+    return out
+
+
+# ------------------------------------------------------------------ report
+def _fmt(v: float) -> str:
+    if not np.isfinite(v):
+        return "failed"
+    return "0" if v == 0 else f"{v:.3g}" if 1e-3 <= abs(v) < 1e4 else f"{v:.2e}"
+
+
+def _sigma(s: float) -> str:
+    return "0" if s == 0 else f"{s:.0e}"
+
+
+def _find(sweep: SingularitySweep, label: str) -> int | None:
+    labels = [v.label for v in sweep.variants]
+    return labels.index(label) if label in labels else None
+
+
+def render(sweep: SingularitySweep, errors: dict[str, dict[str, ErrorSummary]],
+           n_stacks: int) -> str:
+    """The Markdown of ``docs/properties.md``."""
+    labels = [v.label for v in sweep.variants]
+    sig = np.array(sweep.sigmas)
+    lines = [
+        "# Measured properties: algorithmic singularity and algorithmic error",
+        "",
+        "Generated by `prioik properties --out docs/properties.md` "
+        "(`benchmarks/properties.py`); do not edit by hand. "
+        f"Generated {_dt.datetime.now(_dt.timezone.utc):%Y-%m-%d %H:%M} UTC, "
+        f"numpy {np.__version__}, Python {platform.python_version()}.",
+        "",
+        "Formulations (columns): `reference` (exact nested-SVD lexicographic least squares), "
+        "`extended_jacobian` (the paper's eq. 18 on the `qr` and `svd` paths, and eq. 27 with "
+        f"`damping=λ={LAMBDA:g}`), `nullspace` (recursive null-space projection, plain "
+        f"pseudo-inverse and damped least-squares inverse with λ={LAMBDA:g}), `chiaverini` "
+        "(Chiaverini 1997), `unifying` (the paper's appendix eq. 36-40) with `M = I` and with "
+        f"a fixed seeded SPD `M` (condition {MASS_CONDITION:g}), `operational_space` "
+        "(Khatib/Sentis) with the same `M`. λ multiplies `I` everywhere "
+        "(`Jᵀ(JJᵀ + λI)⁻¹`, eq. 27's `JᵀJ + λI`).",
+        "",
+        "## 1. Approaching an algorithmic singularity",
+        "",
+        "Stack `hierarchy.families.near_singular(σ)` (n = 6): level 1 `x_0 = 0, x_1 = 0`; "
+        "level 2 `cos σ · x_0 + sin σ · x_2 = 1` plus a free row on `x_3..x_5`. As σ → 0 the "
+        "lower row tends to the row space of level 1; the smallest singular value of the "
+        "projected Jacobian `J_2 N_1` is `sin σ`. The exact lexicographic optimum has "
+        "`x_2 = 1/sin σ`: the *problem* is ill-conditioned, not only some methods. At σ = 0 the "
+        "row is exactly conflicting (eq. 35) and is split off (eq. 20).",
+        "",
+        "### ‖θ̈‖ against σ",
+        "",
+        "| σ | " + " | ".join(labels) + " |",
+        "|---|" + "---:|" * len(labels),
+    ]
+    for i, s in enumerate(sweep.sigmas):
+        lines.append(f"| {_sigma(s)} | " + " | ".join(_fmt(v) for v in sweep.norms[i]) + " |")
+    lines.append(f"| **slope** (log‖θ̈‖ vs log σ, σ = {SLOPE_RANGE[0]:.0e} … "
+                 f"{SLOPE_RANGE[1]:.0e}) | " + " | ".join(f"**{v:+.3f}**" for v in sweep.slopes)
+                 + " |")
+    lines += [
+        "",
+        "### Lower task's residual ‖J_2 θ̈ − h_2‖ against σ",
+        "",
+        "| σ | " + " | ".join(labels) + " |",
+        "|---|" + "---:|" * len(labels),
+    ]
+    for i, s in enumerate(sweep.sigmas):
+        lines.append(f"| {_sigma(s)} | " + " | ".join(_fmt(v) for v in sweep.residuals[i])
+                     + " |")
+    lines += ["", "### What the tables show", ""]
+    lines += _singularity_findings(sweep)
+    lines += [
+        "",
+        "## 2. Algorithmic error (eq. 29)",
+        "",
+        "`e_i = h_i_feasible − J_i_feasible θ̈`, with the feasible rows of eq. 19-21 taken "
+        "basis-free as `range(J_i Z_i)` (`hierarchy.analysis.algorithmic_error`). Reported "
+        "relative to the level's target, `‖e_i‖ / ‖h_i‖`, over "
+        f"{n_stacks} seeded stacks per family (n 6..30, 2..5 levels; each stack its own SPD "
+        f"`M`, condition {MASS_CONDITION:g}). `coupled`: compatible full-rank levels whose rows "
+        "lean on the rows above; `decoupled`: levels on disjoint columns (mutually orthogonal "
+        "rows); `conflicting`: about a third of each lower level's rows are combinations of "
+        "higher rows, with disagreeing targets. \"lex. opt.\" is the fraction of stacks "
+        "passing `check_lexicographic` (tol 1e-8).",
+        "",
+    ]
+    for family, table in errors.items():
+        lines += [f"### `{family}`", "",
+                  "| formulation | top level max | lower levels: median | min | max "
+                  "| lex. opt. |",
+                  "|---|---:|---:|---:|---:|---:|"]
+        for label, e in table.items():
+            lines.append(f"| {label} | {_fmt(e.top_max)} | {_fmt(e.lower_median)} | "
+                         f"{_fmt(e.lower_min)} | {_fmt(e.lower_max)} | "
+                         f"{e.lexicographic:.0%} |")
+        lines.append("")
+    lines += ["### What the tables show", ""]
+    lines += _error_findings(errors)
+    lines.append("")
+    return "\n".join(lines)
+
+
+def _singularity_findings(sweep: SingularitySweep) -> list[str]:
+    sig = np.array(sweep.sigmas)
+    out = []
+    ref = _find(sweep, "reference")
+    exact = [lab for lab in ("ext_jac qr", "ext_jac svd", "nullspace", "op_space M")
+             if _find(sweep, lab) is not None]
+    if ref is not None:
+        track = [lab for lab in exact if np.allclose(sweep.norms[:, _find(sweep, lab)],
+                                                     sweep.norms[:, ref], rtol=1e-6)]
+        out.append(f"* The exact optimum grows like 1/σ: `reference` has slope "
+                   f"{sweep.slopes[ref]:+.3f}. Every exact formulation follows it: "
+                   + ", ".join(f"`{lab}` (slope {sweep.slopes[_find(sweep, lab)]:+.3f})"
+                               for lab in exact)
+                   + (f"; {', '.join(f'`{t}`' for t in track)} equal `reference`'s norms to "
+                      f"1e-6 at every σ" if track else "") + ".")
+        if "ext_jac qr" in track and "ext_jac svd" in track:
+            out.append("  In particular the undamped extended Jacobian (eq. 18) tracks the exact "
+                       "optimum just as the recursive null-space projection does: near (but "
+                       "not at) an algorithmic singularity it is no more bounded than "
+                       "`nullspace`, because a bounded answer would not be the optimum.")
+        zero = int(np.flatnonzero(sig == 0)[0]) if (sig == 0).any() else None
+        if zero is not None:
+            finite = bool(np.isfinite(sweep.norms[zero]).all())
+            A2 = near_singular(0.0)[1].A
+            threshold = DEFAULT_RCOND * float(np.linalg.norm(A2))
+            out.append(f"* At σ = 0 (exactly conflicting, Theorem 1's case) every formulation "
+                       f"is {'finite' if finite else 'NOT finite'}: the largest ‖θ̈‖ is "
+                       f"{_fmt(np.nanmax(sweep.norms[zero]))}, and the exact ones equal "
+                       f"`reference`. The rank rule drops the conflicting direction instead of "
+                       f"dividing by it. The same happens once sin σ falls below the rank "
+                       f"threshold `rcond·‖J_2‖_F` = {threshold:.2g} (rows σ = "
+                       + ", ".join(_sigma(v) for v in sig if 0 < v < threshold)
+                       + "): ‖θ̈‖ falls back to O(1) and the lower row counts as conflicting.")
+    osc = _find(sweep, "op_space M")
+    fit = (sig >= SLOPE_RANGE[0]) & (sig <= SLOPE_RANGE[1])
+    if osc is not None and ref is not None:
+        others = [_find(sweep, lab) for lab in exact if lab != "op_space M"] + [ref]
+        out.append(f"* Accuracy near the singularity differs among the exact formulations "
+                   f"(second table): over σ = {SLOPE_RANGE[0]:.0e} … {SLOPE_RANGE[1]:.0e} the "
+                   f"lower task's residual stays ≤ "
+                   f"{_fmt(np.nanmax(sweep.residuals[np.ix_(fit, others)]))} for "
+                   + ", ".join(f"`{sweep.variants[j].label}`" for j in others)
+                   + f", but reaches {_fmt(np.nanmax(sweep.residuals[fit, osc]))} for "
+                   f"`op_space M`: its explicit dynamically consistent projector "
+                   f"`N = I − J̄J` leaves O(ε) components that the 1/σ² of "
+                   f"`Λ = (J N M⁻¹ Nᵀ Jᵀ)⁺` amplifies (residual ≈ ε/σ²), where the "
+                   f"other exact methods stay at ≈ ε/σ or below.")
+    damped = [lab for lab in sweep.variants if "λ=" in lab.label]
+    if damped:
+        parts = []
+        for v in damped:
+            j = _find(sweep, v.label)
+            parts.append(f"`{v.label}` max {_fmt(np.nanmax(sweep.norms[:, j]))}")
+        out.append(f"* The damped variants stay bounded (λ = {LAMBDA:g}, bound 1/(2√λ) + O(1) "
+                   f"= {1 / (2 * np.sqrt(LAMBDA)) + 1:.1f}): " + ", ".join(parts)
+                   + ". They pay with the lower task's residual (second table), which is "
+                   "O(1) near the singularity instead of 0. (Here the two damped methods "
+                   "coincide: with two levels and `h_1 = 0`, eq. 27 and the damped "
+                   "null-space recursion give the same `σ/(σ² + λ)`.)")
+    for lab in ("chiaverini", "unifying M=I", "unifying M"):
+        j = _find(sweep, lab)
+        if j is not None:
+            out.append(f"* `{lab}` is bounded for every σ (max ‖θ̈‖ "
+                       f"{_fmt(np.nanmax(sweep.norms[:, j]))}, slope {sweep.slopes[j]:+.3f}): "
+                       f"it never inverts a projected Jacobian. Its lower-task residual is "
+                       f"O(1) even at σ = 1e-1, where the exact methods meet the task: that "
+                       f"is the algorithmic error of section 2.")
+    return out
+
+
+def _error_findings(errors: dict[str, dict[str, ErrorSummary]]) -> list[str]:
+    out = []
+    exact = ["reference", "ext_jac qr", "ext_jac svd", "nullspace", "op_space M"]
+    approx = ["chiaverini", "unifying M=I", "unifying M"]
+    for family, table in errors.items():
+        ex = [table[lab] for lab in exact if lab in table]
+        ap = {lab: table[lab] for lab in approx if lab in table}
+        if ex:
+            worst = max(max(e.top_max, e.lower_max) for e in ex)
+            lex = min(e.lexicographic for e in ex)
+            out.append(f"* `{family}`: the exact formulations ({', '.join(f'`{lab}`' for lab in exact if lab in table)}) "
+                       f"have no algorithmic error (largest relative ‖e_i‖ {_fmt(worst)}, "
+                       f"lexicographic on {lex:.0%} of the stacks).")
+        for lab, e in ap.items():
+            out.append(f"  `{lab}`: top level {_fmt(e.top_max)}; lower levels median "
+                       f"{_fmt(e.lower_median)} (min {_fmt(e.lower_min)}, max "
+                       f"{_fmt(e.lower_max)}); lexicographic on {e.lexicographic:.0%}.")
+        any_e = next(iter(table.values()))
+        if any_e.trivial > 0:
+            out.append(f"  ({any_e.trivial:.0%} of these stacks leave no feasible direction "
+                       f"to the lower levels (r_i = 0 for i ≥ 2, eq. 12); every method is "
+                       f"trivially optimal there, hence the minima of 0.)")
+        if family == "decoupled" and "unifying M" in table:
+            out.append("  Decoupled means orthogonal rows; the unifying framework needs "
+                       "`J_i M⁻² J_jᵀ = 0`, which a full SPD `M` breaks (with `M = I`, or a "
+                       "diagonal `M` on these disjoint-column stacks, its error is 0 — "
+                       "`tests/test_unifying.py`).")
+    out.append("* The damped variants (λ = "
+               f"{LAMBDA:g}) trade exactness for boundedness: their error is the damping's, "
+               "not an algorithmic error in the paper's sense, and it vanishes as λ → 0 "
+               "(`tests/test_nullspace.py`, `tests/test_extended_jacobian.py`). Neither keeps "
+               "the top level exact: eq. 27 does not damp `J_1`'s rows but solves the whole "
+               "(over-determined) system in least squares, and the damped least-squares "
+               "inverse of `nullspace` damps every level, the first included. Top-level "
+               "relative error "
+               + ", ".join(f"`{lab}` {_fmt(max(errors[f][lab].top_max for f in errors))}"
+                           for lab in next(iter(errors.values())) if "λ=" in lab)
+               + " (worst over the families).")
+    return out
+
+
+def write_report(out: Path, n_stacks: int = 50) -> str:
+    """Measure everything and write the Markdown report to ``out``; returns the text."""
+    text = render(singularity_sweep(), error_table(n_stacks), n_stacks)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(text, encoding="utf-8")
+    return text
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("properties",
+                       help="measure algorithmic singularity and algorithmic error "
+                            "(writes docs/properties.md)",
+                       description=__doc__.split("\n\n")[0])
+    p.add_argument("--out", type=Path, default=Path("docs/properties.md"),
+                   help="Markdown file to write (default: docs/properties.md)")
+    p.add_argument("--stacks", type=int, default=50,
+                   help="seeded stacks per family for the algorithmic-error table")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.stacks < 1:
+        raise ValueError(f"--stacks must be ≥ 1, got {args.stacks}")
+    write_report(args.out, args.stacks)
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    import sys
+    from benchmarks.cli import main
+    sys.exit(main(["properties", *sys.argv[1:]]))
