@@ -36,3 +36,25 @@ def test_cli_writes_the_report(tmp_path, capsys):
     assert "| **slope**" in text and "### `coupled`" in text and "### `conflicting`" in text
     assert "wrote" in capsys.readouterr().out
     assert main(["properties", "--out", str(out), "--stacks", "0"]) == 2
+
+
+def test_exactly_conflicting_limit_every_formulation_finite_exact_ones_equal_reference():
+    """σ = 0 (Theorem 1's case): all variants finite; the exact ones equal reference
+    (operational_space: reference with metric=M); the damped ones (λ = 1e-2) within
+    5 % of it (measured 2.2 % = λ/(σ² + λ) for the free row, σ² = 0.44)."""
+    import formulations
+    from benchmarks.properties import VARIANTS, random_mass_matrix, solve_variant
+    from hierarchy.families import near_singular
+    stack = near_singular(0.0)
+    mass = random_mass_matrix(np.random.default_rng(0), stack.n)
+    ref = formulations.solve(stack, "reference").x
+    ref_m = formulations.solve(stack, "reference", metric=mass).x
+    for v in VARIANTS:
+        sol = solve_variant(stack, v, mass)
+        assert sol.ok and np.isfinite(sol.x).all() and np.linalg.norm(sol.x) < 2.0, v.label
+        if v.label in ("ext_jac qr", "ext_jac svd", "nullspace"):
+            np.testing.assert_allclose(sol.x, ref, atol=1e-12)
+        elif v.label == "op_space M":
+            np.testing.assert_allclose(sol.x, ref_m, atol=1e-12)
+        elif "λ=" in v.label:
+            assert np.linalg.norm(sol.x - ref) <= 0.05 * np.linalg.norm(ref), v.label
