@@ -372,7 +372,8 @@ def _error_findings(errors: dict[str, dict[str, ErrorSummary]]) -> list[str]:
         if ex:
             worst = max(max(e.top_max, e.lower_max) for e in ex)
             lex = min(e.lexicographic for e in ex)
-            out.append(f"* `{family}`: the exact formulations ({', '.join(f'`{lab}`' for lab in exact if lab in table)}) "
+            names = ", ".join(f"`{lab}`" for lab in exact if lab in table)
+            out.append(f"* `{family}`: the exact formulations ({names}) "
                        f"have no algorithmic error (largest relative ‖e_i‖ {_fmt(worst)}, "
                        f"lexicographic on {lex:.0%} of the stacks).")
         for lab, e in ap.items():

@@ -83,7 +83,7 @@ def _cholesky_lower(M: np.ndarray) -> np.ndarray:
 
 def task_space_torque(levels: list[PrioritizedLevel], null_projector: np.ndarray,
                       bias: np.ndarray) -> np.ndarray:
-    """``Σ_i J_{i|prev}ᵀ (F_i + μ_i + p_i) + N_kᵀ (C + G)`` with ``μ_i + p_i = J̄_{i|prev}ᵀ (C + G)``.
+    """``Σ_i J_{i|prev}ᵀ (F_i + μ_i + p_i) + N_kᵀ (C + G)``, ``μ_i + p_i = J̄_{i|prev}ᵀ (C + G)``.
 
     The operational-space (``Λ ẍ* + μ + p``) form of the torque; it equals
     ``M θ̈ + C + G`` because ``Σ_i J̄_{i|prev} J_{i|prev} + N_k = I``.

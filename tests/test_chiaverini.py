@@ -6,7 +6,7 @@ import pytest
 import formulations
 from hierarchy import (Task, TaskStack, UnsupportedTaskError, algorithmic_error_norms,
                        check_lexicographic, rank_profile)
-from hierarchy.families import FAMILIES, coupled, decoupled, near_singular
+from hierarchy.families import FAMILIES, near_singular
 
 
 def relative_algorithmic_error(stack, x):
