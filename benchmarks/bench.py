@@ -1,0 +1,928 @@
+"""``prioik bench``: time every formulation and back-end on G1 fencing and random stacks.
+
+In one process, per case (a set of stacks) and per formulation variant (one row per
+back-end of formulations that have ``backends()``): a few warm-up solves, then
+``--repeats`` (default 200) timed solves cycling over the case's stacks. The time of a
+solve is :attr:`formulations.Solution.time_s` — ``time.perf_counter`` around the
+plugin's ``solve`` alone (the registry's option checks and residual evaluation are
+outside it). Each row reports the median, p10 and p90 of those times, the success
+rate and the distance to ``reference``:
+
+* **success**: status not ``"failed"`` and, at every level, the residual
+  ``‖A_i x − b_i‖`` within ``1e-6 · max(1, ‖b_i‖)`` of ``reference``'s (the same
+  lexicographic optimum values, level by level);
+* **distance**: ``‖x − x_ref‖ / max(1, ‖x_ref‖)`` (median and max over the solves),
+  with ``x_ref`` from ``reference`` — with ``metric=M`` for formulations that take a
+  mass matrix (their remaining freedom is fixed by ``θ̈ᵀ M θ̈``).
+
+A row whose estimated time exceeds the per-case cap (``--cap`` seconds of timed
+solves) gets fewer repeats (status ``reduced``, the count is in the row); one whose
+single solve exceeds ``cap / min_repeats`` is not timed (status ``skipped``).
+
+Then, from the same run, the ratios the benchmark issue names (see :func:`ratios`),
+the batch experiment (:func:`measure_batch`), the whole G1 IK step against PlaCo
+(:func:`measure_ik_step`) and the paper's per-control-step comparison
+(:func:`measure_control_step`). Outputs in ``--out``: ``results.csv``, ``results.md``,
+``summary.json``, ``time_vs_n.png``, ``time_vs_k.png``; ``--doc FILE`` also writes the
+documentation page.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import os
+import platform
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+import formulations
+from formulations.registry import check_support
+from hierarchy import TaskStack, UnsupportedTaskError
+
+from .stacks import (Case, FencingSamples, g1_fencing_cases, random_case,
+                     same_shape_batch)
+
+#: ``n`` and ``k`` of the random cases (default and ``--quick``)
+SIZES = (12, 35, 100, 300)
+LEVELS = (2, 4, 8, 16)
+QUICK_SIZES = (12, 100)
+QUICK_LEVELS = (2, 16)
+
+#: extra rows beside each formulation's defaults: (formulation, label suffix, options)
+EXTRA_VARIANTS = (
+    ("extended_jacobian", "svd", {"nullspace": "svd"}),
+    ("extended_jacobian", "lapack", {"kernel": "lapack"}),
+)
+#: residual tolerance of the success test (relative to max(1, ‖b_i‖))
+SUCCESS_TOL = 1e-6
+
+CSV_COLUMNS = ("suite", "case", "n", "k", "rows", "label", "formulation", "backend",
+               "options", "repeats", "median_us", "p10_us", "p90_us", "success_rate",
+               "dist_median", "dist_max", "status", "note")
+
+
+@dataclass(frozen=True)
+class Variant:
+    """A formulation with fixed options, one row of every table.
+
+    Attributes:
+        label: Row name, e.g. ``"nullspace"``, ``"cascaded_qp[daqp]"``.
+        formulation: Registry name.
+        options: Options passed to every solve.
+        backend: The back-end, for formulations that have several.
+        needs_mass_matrix: Gets ``mass_matrix=M`` of the case.
+        capabilities: The formulation's :class:`~formulations.Capabilities`.
+    """
+
+    label: str
+    formulation: str
+    options: dict = field(default_factory=dict, hash=False)
+    backend: str = ""
+    needs_mass_matrix: bool = False
+    capabilities: Any = field(default=None, hash=False)
+
+
+@dataclass
+class Row:
+    """One variant timed on one case (one CSV line; times in µs)."""
+
+    suite: str
+    case: str
+    n: int
+    k: int
+    rows: int
+    label: str
+    formulation: str
+    backend: str
+    options: str
+    repeats: int = 0
+    median_us: float = math.nan
+    p10_us: float = math.nan
+    p90_us: float = math.nan
+    success_rate: float = math.nan
+    dist_median: float = math.nan
+    dist_max: float = math.nan
+    status: str = "ok"
+    note: str = ""
+
+
+@dataclass
+class Settings:
+    """What a run measures (``--quick`` shrinks it)."""
+
+    sizes: tuple[int, ...] = SIZES
+    levels: tuple[int, ...] = LEVELS
+    repeats: int = 200
+    min_repeats: int = 20
+    warmup: int = 3
+    cap_s: float = 1.5
+    samples: int = 8
+    g1_samples: int = 24
+    family: str = "conflicting"
+    batch_size: int = 1000
+    batch_rounds: int = 5
+    control_duration_s: float = 1.0
+    ik_steps: int = 300
+    only: tuple[str, ...] = ()
+    g1: bool = True
+    quick: bool = False
+
+
+def quick_settings() -> Settings:
+    """The ``--quick`` run (under a minute): fewer cases, repeats and samples."""
+    return Settings(sizes=QUICK_SIZES, levels=QUICK_LEVELS, repeats=30, min_repeats=5,
+                    warmup=1, cap_s=0.15, samples=4, g1_samples=6, batch_size=1000,
+                    batch_rounds=2, control_duration_s=0.1, ik_steps=50, quick=True)
+
+
+# --------------------------------------------------------------------- progress
+class Progress:
+    """A progress bar on stderr (one line, redrawn; plain lines when not a terminal)."""
+
+    def __init__(self, total: int, stream=None) -> None:
+        self.total = max(1, total)
+        self.done = 0
+        self.stream = stream or sys.stderr
+        self.tty = hasattr(self.stream, "isatty") and self.stream.isatty()
+        self.t0 = time.perf_counter()
+
+    def step(self, what: str, advance: int = 1) -> None:
+        self.done = min(self.total, self.done + advance)
+        frac = self.done / self.total
+        bar = "#" * int(30 * frac) + "." * (30 - int(30 * frac))
+        line = (f"[{bar}] {self.done}/{self.total} {time.perf_counter() - self.t0:6.1f}s "
+                f"{what}")
+        if self.tty:
+            self.stream.write("\r" + line[:120].ljust(120))
+        else:
+            self.stream.write(line + "\n")
+        self.stream.flush()
+
+    def message(self, text: str) -> None:
+        self.stream.write(("\n" if self.tty else "") + text + "\n")
+        self.stream.flush()
+
+    def close(self) -> None:
+        if self.tty:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+# --------------------------------------------------------------------- variants
+def variants(only: tuple[str, ...] = ()) -> tuple[list[Variant], list[str]]:
+    """Every available formulation with its default options, one variant per back-end
+    (``solver=``) for those that have several, and :data:`EXTRA_VARIANTS`.
+
+    Returns:
+        The variants and, for each unavailable formulation, why not.
+    """
+    out, unavailable = [], []
+    for info in formulations.available():
+        if only and info.name not in only:
+            continue
+        if not info.available:
+            unavailable.append(f"{info.name}: {info.reason}")
+            continue
+        needs_m = bool(info.capabilities and info.capabilities.needs_mass_matrix)
+        if info.backends and "solver" in info.options:
+            for b in info.backends:
+                out.append(Variant(f"{info.name}[{b}]", info.name, {"solver": b}, b, needs_m,
+                                   info.capabilities))
+        else:
+            out.append(Variant(info.name, info.name, {}, "", needs_m, info.capabilities))
+        for name, suffix, opts in EXTRA_VARIANTS:
+            if name == info.name and set(opts) <= set(info.options):
+                out.append(Variant(f"{name}[{suffix}]", name, dict(opts), "", needs_m,
+                                   info.capabilities))
+    return out, unavailable
+
+
+# ----------------------------------------------------------------------- timing
+@dataclass
+class _Reference:
+    x: list[np.ndarray]
+    residuals: list[np.ndarray]
+    x_metric: list[np.ndarray | None]
+
+
+def _references(case: Case, with_metric: bool) -> _Reference:
+    xs, res, xm = [], [], []
+    for stack, M in zip(case.stacks, case.mass_matrices):
+        sol = formulations.solve(stack, "reference")
+        xs.append(sol.x)
+        res.append(sol.residuals)
+        xm.append(formulations.solve(stack, "reference", metric=M).x if with_metric else None)
+    return _Reference(xs, res, xm)
+
+
+def _percentile(values: np.ndarray, q: float) -> float:
+    return float(np.percentile(values, q)) if values.size else math.nan
+
+
+def _scales(stack: TaskStack) -> np.ndarray:
+    return np.array([max(1.0, float(np.linalg.norm(level.b))) for level in stack.levels])
+
+
+def time_case(case: Case, variant: Variant, ref: _Reference, settings: Settings) -> Row:
+    """Time ``variant`` on ``case``: warm-up, then up to ``settings.repeats`` timed
+    solves (fewer when they would exceed ``settings.cap_s``), cycling over the stacks."""
+    row = Row(case.suite, case.name, case.n, case.k, case.rows, variant.label,
+              variant.formulation, variant.backend,
+              " ".join(f"{k}={v}" for k, v in variant.options.items()))
+    try:
+        check_support(variant.formulation, variant.capabilities, case.stacks[0])
+    except UnsupportedTaskError as exc:
+        row.status, row.note = "unsupported", str(exc)
+        return row
+    S = len(case.stacks)
+    scales = [_scales(s) for s in case.stacks]
+
+    def run(i: int):
+        opts = dict(variant.options)
+        if variant.needs_mass_matrix:
+            opts["mass_matrix"] = case.mass_matrices[i]
+        return formulations.solve(case.stacks[i], variant.formulation, **opts)
+
+    first = run(0)                     # untimed for the decision: imports, JIT, caches
+    if first.time_s > settings.cap_s:
+        row.status = "skipped"
+        row.note = f"one solve took {first.time_s * 1e3:.0f} ms > cap {settings.cap_s:g} s"
+        return row
+    warm: list[float] = []
+    for i in range(1, max(2, settings.warmup + 1)):
+        warm.append(run(i % S).time_s)
+        if sum(warm) > settings.cap_s:
+            break
+    budget_one = settings.cap_s / settings.min_repeats
+    if min(warm) > budget_one:
+        row.status = "skipped"
+        row.note = (f"one solve takes {min(warm) * 1e3:.0f} ms > cap/min_repeats = "
+                    f"{budget_one * 1e3:.0f} ms")
+        return row
+    estimate = float(np.median(warm))
+    repeats = settings.repeats
+    if estimate * repeats > settings.cap_s:
+        repeats = max(settings.min_repeats, int(settings.cap_s / max(estimate, 1e-9)))
+        if repeats < settings.repeats:
+            row.status = "reduced"
+            row.note = (f"{repeats} repeats instead of {settings.repeats} "
+                        f"(≈{estimate * 1e3:.1f} ms per solve, cap {settings.cap_s:g} s)")
+    times = np.empty(repeats)
+    ok = np.zeros(repeats, dtype=bool)
+    dist = np.full(repeats, np.nan)
+    spent, done = 0.0, 0
+    for r in range(repeats):
+        if spent > 2 * settings.cap_s:        # a few solves far slower than the estimate
+            row.status = "reduced"
+            row.note = (f"stopped after {r} of {repeats} repeats: {spent:.1f} s > twice "
+                        f"the cap {settings.cap_s:g} s (some solves are much slower)")
+            break
+        i = r % S
+        sol = run(i)
+        times[r] = sol.time_s
+        spent += sol.time_s
+        done = r + 1
+        xr = ref.x_metric[i] if variant.needs_mass_matrix else ref.x[i]
+        if sol.ok:
+            dist[r] = float(np.linalg.norm(sol.x - xr) / max(1.0, np.linalg.norm(xr)))
+            ok[r] = bool(np.all(np.abs(sol.residuals - ref.residuals[i])
+                                <= SUCCESS_TOL * scales[i]))
+    times, ok, dist = times[:done], ok[:done], dist[:done]
+    row.repeats = done
+    row.median_us = float(np.median(times)) * 1e6
+    row.p10_us = _percentile(times, 10) * 1e6
+    row.p90_us = _percentile(times, 90) * 1e6
+    row.success_rate = float(ok.mean())
+    finite = dist[np.isfinite(dist)]
+    row.dist_median = float(np.median(finite)) if finite.size else math.nan
+    row.dist_max = float(finite.max()) if finite.size else math.nan
+    return row
+
+
+def prewarm(vars_: list[Variant]) -> None:
+    """Solve one tiny stack with every variant (imports, JIT compilation, caches), so
+    that no case pays for them."""
+    case = random_case(6, 2, samples=1)
+    for v in vars_:
+        opts = dict(v.options)
+        if v.needs_mass_matrix:
+            opts["mass_matrix"] = case.mass_matrices[0]
+        try:
+            formulations.solve(case.stacks[0], v.formulation, **opts)
+        except UnsupportedTaskError:
+            pass
+
+
+# ------------------------------------------------------------------ experiments
+def measure_batch(runs: list[FencingSamples], settings: Settings,
+                  progress: Progress | None = None) -> dict[str, Any]:
+    """``solve_batch`` of ``batch_size`` G1 stacks of one shape against single solves.
+
+    Per-stack times (µs): each available formulation's ``solve_batch`` (median over
+    ``batch_rounds`` calls, and whether its own batched kernel ran), a loop of
+    ``formulations.solve`` over the same stacks (wall time per stack, what a user
+    writes today), and the median single solve (``Solution.time_s``) of
+    ``daqp_hierarchical`` and ``extended_jacobian`` on the first 200 stacks.
+    """
+    per_run = -(-settings.batch_size // max(1, len(runs)))
+    stacks_all = [s for run in runs for s in run.stacks_at(per_run)]
+    batch, note = same_shape_batch(stacks_all, settings.batch_size)
+    out: dict[str, Any] = {"size": len(batch), "note": note, "n": batch[0].n,
+                           "rows": sum(lvl.m for lvl in batch[0].levels),
+                           "k": len(batch[0]), "batch_us": {}, "batched": {},
+                           "loop_us": {}, "single_us": {}}
+    names = [f.name for f in formulations.available() if f.available
+             and not (f.capabilities and f.capabilities.needs_mass_matrix)]
+    for name in ("extended_jacobian", "reference", "nullspace"):
+        if name not in names:
+            continue
+        times = []
+        res = None
+        for _ in range(max(1, settings.batch_rounds)):
+            res = formulations.solve_batch(batch, name)
+            times.append(res.time_per_stack_s)
+        out["batch_us"][name] = float(np.median(times)) * 1e6
+        out["batched"][name] = bool(res.batched)
+        if progress:
+            progress.step(f"batch: solve_batch {name}")
+    for name in ("extended_jacobian",):
+        if name in names:
+            t0 = time.perf_counter()
+            for s in batch:
+                formulations.solve(s, name)
+            out["loop_us"][name] = (time.perf_counter() - t0) / len(batch) * 1e6
+    for name in ("daqp_hierarchical", "extended_jacobian"):
+        if name in names:
+            sub = batch[:200]
+            for s in sub[:5]:
+                formulations.solve(s, name)
+            out["single_us"][name] = float(np.median(
+                [formulations.solve(s, name).time_s for s in sub])) * 1e6
+    if progress:
+        progress.step("batch: loops and single solves")
+    return out
+
+
+def measure_control_step(settings: Settings, progress: Progress | None = None
+                         ) -> tuple[list[dict[str, Any]], str]:
+    """The paper's per-control-step comparison (kinematics + solve + torque) on G1.
+
+    :func:`robots.simulate.simulate` runs the compatible fencing scenario for
+    ``control_duration_s`` at ``dt = 2 ms`` with each formulation's plugin ``solve``
+    called directly; ``unifying`` and ``operational_space`` get ``M(q)`` and the bias
+    and return the torque themselves (the kinematics phase then includes
+    ``crba`` and ``nonLinearEffects``); the others get the torque by RNEA.
+    Returns per formulation the median of each phase (µs), or a reason it cannot run.
+    """
+    try:
+        from robots.fencing import FencingScenario
+        from robots.simulate import simulate
+    except ImportError as exc:
+        return [], f"robots cannot be imported ({type(exc).__name__}: {exc})"
+    avail = {f.name: f for f in formulations.available() if f.available}
+    plan = [("extended_jacobian", "extended Jacobian (this paper)", "1.4"),
+            ("nullspace", "resolved acceleration (null-space projection)", "2.7"),
+            ("unifying", "unifying framework", "3.2"),
+            ("operational_space", "operational space", "4.8"),
+            ("reference", "reference (nested SVD, ground truth)", ""),
+            ("daqp_hierarchical", "DAQP hierarchical QP", "")]
+    rows = []
+    scenario = FencingScenario("compatible")
+    for name, what, paper in plan:
+        if name not in avail:
+            continue
+        mod = formulations.get(name)
+        dyn = bool(avail[name].capabilities.needs_mass_matrix)
+        sim = simulate(scenario.robot, lambda state, t: scenario.acceleration_stack(state, t),
+                       lambda stack, **kw: mod.solve(stack, **kw),
+                       duration=settings.control_duration_s, dt=0.002, needs_dynamics=dyn,
+                       torque_from_solution=dyn, algorithmic_error=False)
+        if sim.steps == 0:
+            rows.append({"formulation": name, "what": what, "paper_ms": paper,
+                         "steps": 0, "note": sim.message})
+            continue
+        rows.append({"formulation": name, "what": what, "paper_ms": paper,
+                     "steps": sim.steps,
+                     "kinematics_us": float(np.median(sim.kinematics_time_s)) * 1e6,
+                     "solve_us": float(np.median(sim.solve_time_s)) * 1e6,
+                     "torque_us": float(np.median(sim.torque_time_s)) * 1e6,
+                     "total_us": float(np.median(sim.step_time_s)) * 1e6,
+                     "note": sim.message if sim.failed else ""})
+        if progress:
+            progress.step(f"control step: {name}")
+    return rows, ""
+
+
+def measure_ik_step(settings: Settings, progress: Progress | None = None
+                    ) -> tuple[dict[str, Any], str]:
+    """The whole G1 IK step (kinematics + solve) of ``extended_jacobian`` against
+    PlaCo's ``KinematicsSolver`` (see :mod:`benchmarks.placo_step`)."""
+    try:
+        from .placo_step import ik_step_times
+    except ImportError as exc:
+        return {}, f"PlaCo step unavailable ({type(exc).__name__}: {exc})"
+    try:
+        out = ik_step_times(settings.ik_steps)
+    except (ImportError, FileNotFoundError, RuntimeError) as exc:
+        return {}, f"PlaCo step failed ({type(exc).__name__}: {exc})"
+    if progress:
+        progress.step("IK step: PlaCo vs extended_jacobian")
+    return out, ""
+
+
+# ----------------------------------------------------------------------- ratios
+def _median(rows: list[Row], case: str, label: str) -> float:
+    for r in rows:
+        if r.case == case and r.label == label and r.status in ("ok", "reduced"):
+            return r.median_us
+    return math.nan
+
+
+@dataclass
+class Ratio:
+    """One target of the benchmark issue, measured in this run."""
+
+    name: str
+    value: float
+    target: float
+    detail: str
+
+    @property
+    def met(self) -> str:
+        if not math.isfinite(self.value):
+            return "n/a"
+        return "yes" if self.value <= self.target else "no"
+
+
+def ratios(rows: list[Row], batch: dict[str, Any], ik: dict[str, Any]) -> list[Ratio]:
+    """The ratios the issue's targets name, from this run's medians."""
+    out = []
+    ej = "extended_jacobian"
+    for case in sorted({r.case for r in rows if r.suite == "g1"}):
+        e = _median(rows, case, ej)
+        out.append(Ratio(f"{ej} / nullspace (λ=0), {case}", e / _median(rows, case, "nullspace"),
+                         0.5, f"{e:.1f} / {_median(rows, case, 'nullspace'):.1f} µs"))
+        qp = [(r.median_us, r.label) for r in rows if r.case == case
+              and r.formulation == "cascaded_qp" and r.status in ("ok", "reduced")]
+        best = min(qp) if qp else (math.nan, "cascaded_qp")
+        out.append(Ratio(f"{ej} / fastest cascaded_qp ({best[1]}), {case}", e / best[0], 0.2,
+                         f"{e:.1f} / {best[0]:.1f} µs"))
+        d = _median(rows, case, "daqp_hierarchical")
+        out.append(Ratio(f"{ej} / daqp_hierarchical, {case}", e / d, 1.0,
+                         f"{e:.1f} / {d:.1f} µs"))
+    for label, target in ((ej, 2.0), ("nullspace", math.inf)):
+        a = _median(rows, "random n=100 k=16", label)
+        b = _median(rows, "random n=100 k=2", label)
+        out.append(Ratio(f"{label} k=16 / k=2 at n=100", a / b, target,
+                         f"{a:.1f} / {b:.1f} µs"))
+    bt = batch.get("batch_us", {}).get(ej, math.nan)
+    d1 = batch.get("single_us", {}).get("daqp_hierarchical", math.nan)
+    lp = batch.get("loop_us", {}).get(ej, math.nan)
+    size = batch.get("size", 0)
+    out.append(Ratio(f"solve_batch({ej}) of {size} G1 stacks per stack / one "
+                     f"daqp_hierarchical solve", bt / d1, 0.5, f"{bt:.1f} / {d1:.1f} µs"))
+    out.append(Ratio(f"solve_batch({ej}) per stack / loop of {ej} through solve",
+                     bt / lp, 0.5, f"{bt:.1f} / {lp:.1f} µs"))
+    if ik:
+        a, b = ik.get("prioik_step_us", math.nan), ik.get("placo_step_us", math.nan)
+        out.append(Ratio(f"G1 IK step (kinematics + solve): {ej} / PlaCo KinematicsSolver",
+                         a / b, 1.0, f"{a:.1f} / {b:.1f} µs"))
+    else:
+        out.append(Ratio(f"G1 IK step (kinematics + solve): {ej} / PlaCo KinematicsSolver",
+                         math.nan, 1.0, "not measured"))
+    return out
+
+
+# ---------------------------------------------------------------------- outputs
+def write_csv(rows: list[Row], path: Path) -> None:
+    """All rows, one per (case, variant), columns :data:`CSV_COLUMNS`."""
+    with open(path, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=CSV_COLUMNS)
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: v for k, v in asdict(r).items()})
+
+
+def _fmt_us(v: float) -> str:
+    if not math.isfinite(v):
+        return "–"
+    if v >= 1e5:
+        return f"{v / 1e3:.0f} ms"
+    if v >= 1e4:
+        return f"{v / 1e3:.1f} ms"
+    return f"{v:.1f}"
+
+
+def _fmt_dist(v: float) -> str:
+    return "–" if not math.isfinite(v) else f"{v:.1e}"
+
+
+def detail_table(rows: list[Row]) -> str:
+    """Markdown: every row of one case in full."""
+    lines = ["| formulation | median µs | p10 µs | p90 µs | success | dist. median | "
+             "dist. max | repeats | status |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|---|"]
+    for r in sorted(rows, key=lambda r: (math.isnan(r.median_us), r.median_us)):
+        if r.status in ("skipped", "unsupported"):
+            lines.append(f"| {r.label} | – | – | – | – | – | – | 0 | {r.status}: "
+                         f"{r.note} |")
+            continue
+        status = r.status if r.status == "ok" else f"{r.status}: {r.note}"
+        lines.append(f"| {r.label} | {_fmt_us(r.median_us)} | {_fmt_us(r.p10_us)} | "
+                     f"{_fmt_us(r.p90_us)} | {r.success_rate:.0%} | "
+                     f"{_fmt_dist(r.dist_median)} | {_fmt_dist(r.dist_max)} | "
+                     f"{r.repeats} | {status} |")
+    return "\n".join(lines)
+
+
+def pivot_table(rows: list[Row], k: int) -> str:
+    """Markdown: median µs of every variant (rows) over ``n`` (columns) at ``k`` levels;
+    ``†`` marks reduced repeats, ``*`` a success rate below 100 %."""
+    sub = [r for r in rows if r.suite == "random" and r.k == k]
+    ns = sorted({r.n for r in sub})
+    labels = sorted({r.label for r in sub},
+                    key=lambda l: min((r.median_us for r in sub if r.label == l
+                                       and math.isfinite(r.median_us)), default=math.inf))
+    lines = ["| formulation | " + " | ".join(f"n={n}" for n in ns) + " |",
+             "|---|" + "---:|" * len(ns)]
+    for label in labels:
+        cells = []
+        for n in ns:
+            r = next((r for r in sub if r.label == label and r.n == n), None)
+            if r is None:
+                cells.append("")
+            elif r.status in ("skipped", "unsupported"):
+                cells.append(r.status)
+            else:
+                mark = ("†" if r.status == "reduced" else "") + \
+                    ("*" if r.success_rate < 1.0 else "")
+                cells.append(f"{_fmt_us(r.median_us)}{mark}")
+        lines.append(f"| {label} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def plot(rows: list[Row], out: Path) -> list[str]:
+    """Log-log plots of the median time against ``n`` (one panel per ``k``) and
+    against ``k`` (one panel per ``n``); returns the file names written."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    sub = [r for r in rows if r.suite == "random" and math.isfinite(r.median_us)]
+    if not sub:
+        return []
+    labels = sorted({r.label for r in sub})
+    cmap = plt.get_cmap("tab20")
+    style = {l: (cmap(i % 20), "-" if i < 10 else "--") for i, l in enumerate(labels)}
+    written = []
+    for axis, other, fname in (("n", "k", "time_vs_n.png"), ("k", "n", "time_vs_k.png")):
+        panels = sorted({getattr(r, other) for r in sub})
+        fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels) + 2.5, 4.2),
+                                 squeeze=False, sharey=True)
+        for ax, p in zip(axes[0], panels):
+            for l in labels:
+                pts = sorted((getattr(r, axis), r.median_us) for r in sub
+                             if r.label == l and getattr(r, other) == p)
+                if len(pts) >= 1:
+                    xs, ys = zip(*pts)
+                    ax.plot(xs, ys, marker="o", ms=3, color=style[l][0], ls=style[l][1],
+                            label=l)
+            ax.set_xscale("log")
+            ax.set_yscale("log")
+            ax.set_title(f"{other} = {p}")
+            ax.set_xlabel(axis)
+            ax.grid(True, which="both", alpha=0.3)
+        axes[0][0].set_ylabel("median solve time (µs)")
+        handles, names = axes[0][0].get_legend_handles_labels()
+        fig.legend(handles, names, loc="center right", fontsize=7)
+        fig.tight_layout(rect=(0, 0, 1 - 2.3 / (4.2 * len(panels) + 2.5), 1))
+        fig.savefig(out / fname, dpi=110)
+        plt.close(fig)
+        written.append(fname)
+    return written
+
+
+def machine() -> dict[str, str]:
+    """CPU model, cores, OS and library versions."""
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as fh:
+            for line in fh:
+                if line.lower().startswith("model name"):
+                    cpu = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    from importlib import metadata
+    versions = {}
+    for dist in ("numpy", "scipy", "numba", "pin", "placo", "qpsolvers", "daqp", "cvxpy",
+                 "clarabel", "osqp", "proxsuite", "quadprog", "scs", "highspy",
+                 "matplotlib"):
+        try:
+            versions[dist] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            pass
+    try:
+        blas = np.show_config(mode="dicts")["Build Dependencies"]["blas"]
+        blas_name = f"{blas.get('name', '?')} {blas.get('version', '')}".strip()
+    except Exception:  # noqa: BLE001 - older numpy: no dict mode
+        blas_name = "unknown"
+    return {"cpu": cpu, "cores": str(os.cpu_count()), "python": platform.python_version(),
+            "os": f"{platform.system()} {platform.release()}", "blas": blas_name,
+            "versions": ", ".join(f"{k} {v}" for k, v in versions.items())}
+
+
+def markdown_report(rows: list[Row], rats: list[Ratio], batch: dict, ik: dict,
+                    control: list[dict], notes: list[str], settings: Settings,
+                    plots: list[str], plot_prefix: str = "") -> str:
+    """The results as markdown (tables, ratios, batch, IK step, control step, notes)."""
+    md = []
+    md.append("## Targets (ratios of medians measured side by side in this run)\n")
+    md.append("| ratio | measured | target | met | medians |")
+    md.append("|---|---:|---:|---|---|")
+    for r in rats:
+        tgt = "report" if math.isinf(r.target) else f"≤ {r.target:g}"
+        val = f"{r.value:.2f}" if math.isfinite(r.value) else "n/a"
+        met = "–" if math.isinf(r.target) else r.met
+        md.append(f"| {r.name} | {val} | {tgt} | {met} | {r.detail} |")
+    g1 = sorted({r.case for r in rows if r.suite == "g1"})
+    for case in g1:
+        sub = [r for r in rows if r.case == case]
+        md.append(f"\n## {case}: n = {sub[0].n}, {sub[0].k} levels (most common), "
+                  f"{sub[0].rows} rows (median)\n")
+        md.append(detail_table(sub))
+    if batch:
+        md.append(f"\n## solve_batch: {batch['size']} G1 stacks of one shape "
+                  f"(n = {batch['n']}, {batch['k']} levels, {batch['rows']} rows)\n")
+        md.append(f"{batch['note']}. Per-stack times in µs.\n")
+        md.append("| what | µs per stack |")
+        md.append("|---|---:|")
+        for name, v in batch["batch_us"].items():
+            kind = "own batched kernel" if batch["batched"][name] else "loop inside solve_batch"
+            md.append(f"| `solve_batch(..., \"{name}\")` ({kind}) | {_fmt_us(v)} |")
+        for name, v in batch["loop_us"].items():
+            md.append(f"| loop of `formulations.solve(s, \"{name}\")` (wall) | {_fmt_us(v)} |")
+        for name, v in batch["single_us"].items():
+            md.append(f"| one `{name}` solve (median `time_s`, 200 stacks) | {_fmt_us(v)} |")
+    if ik:
+        md.append("\n## Whole G1 IK step (kinematics + solve)\n")
+        md.append(ik.get("description", ""))
+        md.append("\n| step | median µs | p10 µs | p90 µs |")
+        md.append("|---|---:|---:|---:|")
+        for key, what in (("prioik", "prioik: kinematics + velocity stack + extended_jacobian"),
+                          ("placo", "PlaCo: update_kinematics + KinematicsSolver.solve")):
+            md.append(f"| {what} | {_fmt_us(ik[key + '_step_us'])} | "
+                      f"{_fmt_us(ik[key + '_p10_us'])} | {_fmt_us(ik[key + '_p90_us'])} |")
+    if control:
+        md.append("\n## Per control step on G1 (the paper's comparison re-measured)\n")
+        md.append(f"Compatible fencing scenario, {control[0]['steps']} steps of 2 ms; median "
+                  "per phase. Paper: 28 DOF, 4 tasks, 2.4 GHz Pentium (2009).\n")
+        md.append("| formulation | kinematics µs | solve µs | torque µs | total µs | paper ms |")
+        md.append("|---|---:|---:|---:|---:|---:|")
+        for c in control:
+            if not c.get("steps"):
+                md.append(f"| {c['what']} | – | – | – | – | {c['paper_ms']} |")
+                continue
+            md.append(f"| {c['what']} (`{c['formulation']}`) | {_fmt_us(c['kinematics_us'])} | "
+                      f"{_fmt_us(c['solve_us'])} | {_fmt_us(c['torque_us'])} | "
+                      f"{_fmt_us(c['total_us'])} | {c['paper_ms'] or '–'} |")
+    ks = sorted({r.k for r in rows if r.suite == "random"})
+    if ks:
+        md.append("\n## Random stacks: median solve time (µs)\n")
+        md.append(f"Family `{settings.family}`, {settings.samples} stacks per case. "
+                  "`†`: reduced repeats (time cap), `*`: success rate below 100 % "
+                  "(see results.csv for p10/p90, success and distance).\n")
+        for k in ks:
+            md.append(f"\n### k = {k} levels\n")
+            md.append(pivot_table(rows, k))
+    for p in plots:
+        md.append(f"\n![{p}]({plot_prefix}{p})")
+    if notes:
+        md.append("\n## Notes\n")
+        md.extend(f"- {n}" for n in notes)
+    return "\n".join(md) + "\n"
+
+
+def doc_page(report: str, info: dict[str, str], settings: Settings, command: str,
+             elapsed_s: float) -> str:
+    """``docs/benchmarks.md``: how it was measured, the machine, then the report."""
+    mode = "quick" if settings.quick else "default"
+    return f"""# Benchmarks
+
+Generated by `{command}` ({mode} run, {elapsed_s / 60:.1f} min); do not edit by hand.
+
+**Machine**: {info['cpu']}, {info['cores']} cores, {info['os']}, Python {info['python']},
+BLAS {info['blas']}. **Libraries**: {info['versions']}.
+The machine was shared with other processes while measuring: compare ratios measured
+side by side in one run, not absolute times across runs.
+
+**Method.** For each case (a set of stacks) and each formulation variant (one row per
+QP back-end), after {settings.warmup} warm-up solves, up to {settings.repeats} timed
+solves cycle over the case's stacks; the time of a solve is `Solution.time_s`
+(`time.perf_counter` around the plugin's `solve`, without the registry's option checks
+and residual evaluation). Rows give the median, p10 and p90; **success** is the share of
+solves whose status is not `failed` and whose residual at every level is within
+{SUCCESS_TOL:g}·max(1, ‖b_i‖) of `reference`'s; **distance** is
+‖x − x_ref‖ / max(1, ‖x_ref‖) to `reference` (to `reference` with `metric=M` for
+formulations that take a mass matrix). Formulations that need a mass matrix get the
+robot's M(q) on G1 stacks and a fixed SPD M (eigenvalues 0.1–10, seeded rotation) on
+random stacks. A variant whose timed solves would exceed {settings.cap_s:g} s per case
+gets fewer repeats (at least {settings.min_repeats}; marked `reduced`/`†`), and one
+whose single solve exceeds {settings.cap_s / settings.min_repeats * 1e3:.0f} ms is
+`skipped` — this happens at n = 300 and k = 16 for the SVD- and QP-based methods.
+
+G1 stacks: the fencing scenario (`robots.fencing`, both variants, acceleration level,
+joint limits as activation rows so every equality formulation can take them) at
+{settings.g1_samples} states evenly spread over a {3.0:g} s run solved by `reference`.
+
+{report}"""
+
+
+# ------------------------------------------------------------------------- main
+def run_benchmark(settings: Settings, out: Path, doc: Path | None = None,
+                  command: str = "prioik bench") -> dict[str, Any]:
+    """Run everything, write the outputs; returns the summary (also ``summary.json``)."""
+    t_start = time.perf_counter()
+    out.mkdir(parents=True, exist_ok=True)
+    vars_, unavailable = variants(settings.only)
+    notes = [f"not available here: {u}" for u in unavailable]
+
+    cases: list[Case] = []
+    if settings.g1:
+        g1_cases, runs, reason = g1_fencing_cases(settings.g1_samples)
+    else:
+        g1_cases, runs, reason = [], [], "--no-g1"
+    if reason:
+        notes.append(f"G1 part skipped: {reason}")
+        print(f"prioik bench: G1 part skipped: {reason}", file=sys.stderr)
+    cases.extend(g1_cases)
+    for n in settings.sizes:
+        for k in settings.levels:
+            cases.append(random_case(n, k, settings.samples, settings.family))
+
+    total = len(cases) * len(vars_) + (4 if runs else 0) + (6 if runs else 0) + 1
+    progress = Progress(total)
+    prewarm(vars_)
+    rows: list[Row] = []
+    too_slow: dict[str, list[tuple[int, int, str]]] = {}
+    for case in cases:
+        with_metric = any(v.needs_mass_matrix for v in vars_)
+        ref = _references(case, with_metric)
+        for v in vars_:
+            progress.step(f"{case.name}: {v.label}")
+            smaller = [c for (n, k, c) in too_slow.get(v.label, [])
+                       if case.suite == "random" and n <= case.n and k <= case.k]
+            if smaller:
+                rows.append(Row(case.suite, case.name, case.n, case.k, case.rows, v.label,
+                                v.formulation, v.backend,
+                                " ".join(f"{a}={b}" for a, b in v.options.items()),
+                                status="skipped",
+                                note=f"not tried: over the cap already at {smaller[0]}"))
+                continue
+            row = time_case(case, v, ref, settings)
+            if row.status == "skipped" and case.suite == "random":
+                too_slow.setdefault(v.label, []).append((case.n, case.k, case.name))
+            rows.append(row)
+    reduced = [r for r in rows if r.status == "reduced"]
+    skipped = [r for r in rows if r.status == "skipped"]
+    if reduced:
+        notes.append(f"{len(reduced)} rows have fewer than {settings.repeats} repeats "
+                     f"(time cap {settings.cap_s:g} s per case): "
+                     + ", ".join(sorted({f'{r.label} @ {r.case}' for r in reduced})[:40]))
+    if skipped:
+        notes.append(f"{len(skipped)} rows skipped (one solve over "
+                     f"{settings.cap_s / settings.min_repeats * 1e3:.0f} ms): "
+                     + ", ".join(sorted({f'{r.label} @ {r.case}' for r in skipped})))
+
+    batch: dict[str, Any] = {}
+    control: list[dict] = []
+    ik: dict[str, Any] = {}
+    if runs:
+        batch = measure_batch(runs, settings, progress)
+        control, why = measure_control_step(settings, progress)
+        if why:
+            notes.append(f"control-step comparison skipped: {why}")
+        ik, why = measure_ik_step(settings, progress)
+        if why:
+            notes.append(f"IK-step comparison skipped: {why}")
+    else:
+        notes.append("batch, IK-step and control-step experiments need the G1 stacks")
+    progress.step("writing outputs")
+    progress.close()
+
+    rats = ratios(rows, batch, ik)
+    write_csv(rows, out / "results.csv")
+    plots = plot(rows, out)
+    report = markdown_report(rows, rats, batch, ik, control, notes, settings, plots)
+    (out / "results.md").write_text(report)
+    info = machine()
+    elapsed = time.perf_counter() - t_start
+    summary = {"machine": info, "elapsed_s": elapsed, "settings": asdict(settings),
+               "ratios": [{"name": r.name, "value": r.value, "target": r.target,
+                           "met": r.met, "detail": r.detail} for r in rats],
+               "batch": batch, "ik_step": ik, "control_step": control, "notes": notes}
+    (out / "summary.json").write_text(json.dumps(summary, indent=1, default=str))
+    if doc is not None:
+        doc.parent.mkdir(parents=True, exist_ok=True)
+        prefix = os.path.relpath(out.resolve(), doc.parent.resolve()) + "/"
+        report_doc = markdown_report(rows, rats, batch, ik, control, notes, settings,
+                                     plots, prefix)
+        doc.write_text(doc_page(report_doc, info, settings, command, elapsed))
+    return summary
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("bench", help="time every formulation and back-end (G1 and random "
+                                     "stacks); CSV, markdown and plots",
+                       description=__doc__.split("\n\n")[0])
+    p.add_argument("--out", type=Path, default=Path("bench-results"),
+                   help="output directory (default: bench-results)")
+    p.add_argument("--doc", type=Path, default=None,
+                   help="also write the documentation page here (e.g. docs/benchmarks.md)")
+    p.add_argument("--quick", action="store_true", help="a smaller run (under a minute)")
+    p.add_argument("--repeats", type=int, default=None, help="timed solves per case")
+    p.add_argument("--cap", type=float, default=None,
+                   help="seconds of timed solves per (case, formulation) before repeats "
+                        "are reduced")
+    p.add_argument("--family", default=None, help="random stack family (hierarchy.families)")
+    p.add_argument("--formulations", default="", help="comma-separated names (default: all)")
+    p.add_argument("--sizes", default=None, help="comma-separated n of the random cases "
+                                                 f"(default: {','.join(map(str, SIZES))})")
+    p.add_argument("--levels", default=None, help="comma-separated k of the random cases "
+                                                  f"(default: {','.join(map(str, LEVELS))})")
+    p.add_argument("--samples", type=int, default=None,
+                   help="stacks per random case (default: 8)")
+    p.add_argument("--no-g1", action="store_true",
+                   help="random stacks only (no G1 cases, batch, IK-step or control-step runs)")
+    p.set_defaults(func=run)
+
+
+def _command(args: argparse.Namespace) -> str:
+    """The command line that reproduces this run (printed in the doc page)."""
+    parts = ["prioik bench"]
+    if args.quick:
+        parts.append("--quick")
+    parts.append(f"--out {args.out}")
+    if args.doc:
+        parts.append(f"--doc {args.doc}")
+    for flag, value in (("--repeats", args.repeats), ("--cap", args.cap),
+                        ("--family", args.family), ("--formulations", args.formulations),
+                        ("--sizes", args.sizes), ("--levels", args.levels),
+                        ("--samples", args.samples)):
+        if value not in (None, ""):
+            parts.append(f"{flag} {value}")
+    if args.no_g1:
+        parts.append("--no-g1")
+    return " ".join(parts)
+
+
+def _int_list(text: str, what: str) -> tuple[int, ...]:
+    try:
+        values = tuple(int(v) for v in text.split(",") if v.strip())
+    except ValueError:
+        raise ValueError(f"{what} takes comma-separated integers, got {text!r}") from None
+    if not values or min(values) < 1:
+        raise ValueError(f"{what} takes positive integers, got {text!r}")
+    return values
+
+
+def run(args: argparse.Namespace) -> int:
+    settings = quick_settings() if args.quick else Settings()
+    if args.repeats is not None:
+        if args.repeats < 1:
+            raise ValueError(f"--repeats must be ≥ 1, got {args.repeats}")
+        settings.repeats = args.repeats
+        settings.min_repeats = min(settings.min_repeats, args.repeats)
+    if args.cap is not None:
+        if not args.cap > 0:
+            raise ValueError(f"--cap must be > 0, got {args.cap}")
+        settings.cap_s = args.cap
+    if args.family:
+        settings.family = args.family
+    settings.only = tuple(s for s in args.formulations.split(",") if s)
+    if args.sizes:
+        settings.sizes = _int_list(args.sizes, "--sizes")
+    if args.levels:
+        settings.levels = _int_list(args.levels, "--levels")
+    if args.samples is not None:
+        if args.samples < 1:
+            raise ValueError(f"--samples must be ≥ 1, got {args.samples}")
+        settings.samples = args.samples
+    settings.g1 = not args.no_g1
+    command = _command(args)
+    summary = run_benchmark(settings, args.out, args.doc, command)
+    print(f"wrote {args.out}/results.csv, results.md, summary.json and plots "
+          f"in {summary['elapsed_s']:.0f} s")
+    for r in summary["ratios"]:
+        v = r["value"]
+        print(f"  {r['name']}: {v:.2f} (target ≤ {r['target']:g}, met: {r['met']})"
+              if math.isfinite(v) else f"  {r['name']}: n/a")
+    return 0

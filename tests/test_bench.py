@@ -1,0 +1,182 @@
+"""The benchmark harness on tiny configurations: files, columns, consistent numbers.
+
+No timing assertions: only that what is written is complete and self-consistent.
+"""
+
+import csv
+import json
+import math
+
+import numpy as np
+import pytest
+
+from benchmarks import bench
+from benchmarks.bench import CSV_COLUMNS, Row, Settings, ratios, run_benchmark
+from benchmarks.cli import main
+from benchmarks.stacks import random_case, random_mass_matrix
+
+TINY = dict(sizes=(6, 9), levels=(2, 3), repeats=6, min_repeats=2, warmup=1, cap_s=2.0,
+            samples=2, g1=False,
+            only=("reference", "extended_jacobian", "nullspace", "operational_space",
+                  "cascaded_qp"))
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("bench")
+    doc = out / "doc" / "benchmarks.md"
+    summary = run_benchmark(Settings(**TINY), out, doc, command="prioik bench (test)")
+    with open(out / "results.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    return out, doc, summary, rows
+
+
+def test_writes_csv_markdown_plots_summary_and_doc(tiny_run):
+    out, doc, summary, rows = tiny_run
+    for name in ("results.csv", "results.md", "summary.json", "time_vs_n.png",
+                 "time_vs_k.png"):
+        assert (out / name).stat().st_size > 0, name
+    assert (out / "time_vs_n.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert json.loads((out / "summary.json").read_text())["ratios"]
+    text = doc.read_text()
+    assert "prioik bench (test)" in text and "**Machine**" in text
+    assert "](../time_vs_n.png)" in text           # plot paths relative to the page
+    assert "G1 part skipped: --no-g1" in text
+
+
+def test_one_row_per_case_and_variant_with_the_csv_columns(tiny_run):
+    _, _, _, rows = tiny_run
+    assert tuple(rows[0].keys()) == CSV_COLUMNS
+    cases = {r["case"] for r in rows}
+    assert cases == {f"random n={n} k={k}" for n in (6, 9) for k in (2, 3)}
+    labels = {r["label"] for r in rows}
+    # one row per back-end of cascaded_qp, plus the extra extended_jacobian paths
+    import formulations
+    qp = formulations.get("cascaded_qp").backends()
+    assert {f"cascaded_qp[{b}]" for b in qp} <= labels
+    assert {"reference", "extended_jacobian", "extended_jacobian[svd]", "nullspace",
+            "operational_space"} <= labels
+    assert len(rows) == len(cases) * len(labels)
+
+
+def test_numbers_are_consistent(tiny_run):
+    _, _, _, rows = tiny_run
+    timed = [r for r in rows if r["status"] in ("ok", "reduced")]
+    assert len(timed) >= 0.8 * len(rows)
+    for r in timed:
+        p10, med, p90 = float(r["p10_us"]), float(r["median_us"]), float(r["p90_us"])
+        assert 0 < p10 <= med <= p90, r
+        assert 0.0 <= float(r["success_rate"]) <= 1.0
+        assert 1 <= int(r["repeats"]) <= TINY["repeats"]
+        if r["status"] == "ok":
+            assert int(r["repeats"]) == TINY["repeats"]
+        dmed, dmax = float(r["dist_median"]), float(r["dist_max"])
+        assert math.isnan(dmed) or 0.0 <= dmed <= dmax
+    for r in rows:
+        if r["status"] not in ("ok", "reduced"):
+            assert r["note"], r               # a skipped row says why
+
+
+def test_exact_formulations_succeed_and_match_reference(tiny_run):
+    """reference is its own reference; extended_jacobian and nullspace are exact on
+    these stacks; operational_space is measured against reference with metric=M."""
+    _, _, _, rows = tiny_run
+    for r in rows:
+        if r["label"] in ("reference", "extended_jacobian", "extended_jacobian[svd]",
+                          "nullspace", "operational_space") and r["status"] == "ok":
+            assert float(r["success_rate"]) == 1.0, r
+            assert float(r["dist_max"]) <= 1e-8, r
+        if r["label"] == "reference":
+            assert float(r["dist_max"]) == 0.0
+
+
+def test_markdown_tables_have_every_row(tiny_run):
+    out, _, _, rows = tiny_run
+    md = (out / "results.md").read_text()
+    for k in (2, 3):
+        assert f"### k = {k} levels" in md
+    assert "| formulation | n=6 | n=9 |" in md
+    for label in {r["label"] for r in rows}:
+        assert f"| {label} |" in md
+
+
+def _row(case, label, median, suite="g1", formulation=None, k=5, n=35):
+    return Row(suite, case, n, k, 46, label, formulation or label.split("[")[0], "", "",
+               repeats=200, median_us=median, p10_us=median, p90_us=median,
+               success_rate=1.0)
+
+
+def test_ratios_are_the_quotients_of_the_medians():
+    rows = [_row("g1 compatible", "extended_jacobian", 20.0),
+            _row("g1 compatible", "nullspace", 100.0),
+            _row("g1 compatible", "cascaded_qp[daqp]", 400.0),
+            _row("g1 compatible", "cascaded_qp[osqp]", 900.0),
+            _row("g1 compatible", "daqp_hierarchical", 25.0),
+            _row("random n=100 k=2", "extended_jacobian", 50.0, "random", k=2, n=100),
+            _row("random n=100 k=16", "extended_jacobian", 80.0, "random", k=16, n=100),
+            _row("random n=100 k=2", "nullspace", 100.0, "random", k=2, n=100),
+            _row("random n=100 k=16", "nullspace", 700.0, "random", k=16, n=100)]
+    batch = {"size": 1000, "batch_us": {"extended_jacobian": 5.0},
+             "single_us": {"daqp_hierarchical": 20.0}, "loop_us": {"extended_jacobian": 40.0}}
+    ik = {"prioik_step_us": 150.0, "placo_step_us": 100.0}
+    got = {r.name: r for r in ratios(rows, batch, ik)}
+    assert got["extended_jacobian / nullspace (λ=0), g1 compatible"].value == pytest.approx(0.2)
+    fastest = got["extended_jacobian / fastest cascaded_qp (cascaded_qp[daqp]), g1 compatible"]
+    assert fastest.value == pytest.approx(0.05) and fastest.met == "yes"
+    daqp = got["extended_jacobian / daqp_hierarchical, g1 compatible"]
+    assert daqp.value == pytest.approx(0.8) and daqp.met == "yes"
+    assert got["extended_jacobian k=16 / k=2 at n=100"].value == pytest.approx(1.6)
+    assert got["nullspace k=16 / k=2 at n=100"].value == pytest.approx(7.0)
+    names = list(got)
+    assert got[names[-3]].value == pytest.approx(0.25)      # batch / one daqp solve
+    assert got[names[-2]].value == pytest.approx(0.125)     # batch / loop
+    ik_ratio = got[names[-1]]
+    assert ik_ratio.value == pytest.approx(1.5) and ik_ratio.met == "no"
+
+
+def test_missing_measurements_give_nan_not_a_number():
+    got = ratios([_row("g1 compatible", "extended_jacobian", 20.0)], {}, {})
+    for r in got:
+        assert math.isnan(r.value) and r.met == "n/a"
+
+
+def test_skipped_and_unsupported_rows_are_recorded_not_timed():
+    """A per-case cap below one solve records the variant as skipped with a reason."""
+    case = random_case(12, 2, samples=2)
+    variants, _ = bench.variants(("reference",))
+    settings = Settings(cap_s=1e-9, min_repeats=2)
+    ref = bench._references(case, False)
+    row = bench.time_case(case, variants[0], ref, settings)
+    assert row.status == "skipped" and row.repeats == 0 and "ms" in row.note
+    assert math.isnan(row.median_us)
+
+
+def test_random_cases_are_seeded_and_mass_matrices_spd():
+    a, b = random_case(20, 4, samples=3), random_case(20, 4, samples=3)
+    for s, t in zip(a.stacks, b.stacks):
+        for la, lb in zip(s.levels, t.levels):
+            assert np.array_equal(la.A, lb.A) and np.array_equal(la.b, lb.b)
+    assert all(len(s) == 4 and s.n == 20 for s in a.stacks)
+    M = random_mass_matrix(20)
+    assert np.array_equal(M, M.T)
+    w = np.linalg.eigvalsh(M)
+    assert w.min() == pytest.approx(0.1, rel=1e-8) and w.max() == pytest.approx(10.0, rel=1e-8)
+
+
+def test_cli_runs_a_tiny_benchmark(tmp_path, capsys):
+    code = main(["bench", "--out", str(tmp_path), "--no-g1", "--sizes", "5",
+                 "--levels", "2", "--samples", "1", "--repeats", "3",
+                 "--formulations", "reference,extended_jacobian"])
+    assert code == 0
+    with open(tmp_path / "results.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert {r["label"] for r in rows} == {"reference", "extended_jacobian",
+                                         "extended_jacobian[svd]",
+                                         "extended_jacobian[lapack]"}
+    assert all(r["repeats"] == "3" for r in rows)
+    assert "wrote" in capsys.readouterr().out
+
+
+def test_cli_rejects_bad_lists(tmp_path, capsys):
+    assert main(["bench", "--out", str(tmp_path), "--no-g1", "--sizes", "a,b"]) == 2
+    assert "--sizes" in capsys.readouterr().err
