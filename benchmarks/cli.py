@@ -10,6 +10,7 @@ import numpy as np
 
 #: modules that contribute a sub-command through ``add_parser(subparsers)``
 SUBCOMMAND_MODULES = [
+    "benchmarks.fencing",
     "benchmarks.compare",
     "benchmarks.bench",
     "benchmarks.properties",

@@ -17,7 +17,8 @@ first:
    (``K_p = 4``, ``K_d = 4``). The paper has no such level; it damps the motion left
    in the null space of the five tasks above, which would otherwise drift at
    constant velocity under minimum-norm solutions. It never competes with a
-   higher level in an exact hierarchy.
+   higher level in an exact hierarchy, and the recorded algorithmic error (eq. 29)
+   covers levels 0-4 only.
 
 Variants: ``compatible`` — target ``(0.55, 0.25, 0.85)`` m (world; the left shoulder is
 near ``(0, 0.1, 1.02)``), reachable; ``incompatible`` — target ``(1.6, 0.2, 1.0)`` m,
@@ -186,10 +187,12 @@ class FencingScenario:
             levels.append(joint_limit_bounds(state, self.bound_horizon, dt))
         else:
             raise ValueError(f"limits must be 'activation' or 'bounds', got {limits!r}")
-        for name in ("com", "left_foot", "sword_tip", "posture"):
-            if name in terms:
-                levels.append(terms[name].acceleration(*g[name]))
-        return StepTasks(TaskStack(levels), self.errors(state, t, terms))
+        for name in ("com", "left_foot", "sword_tip"):
+            levels.append(terms[name].acceleration(*g[name]))
+        n_tasks = len(levels)
+        if "posture" in terms:
+            levels.append(terms["posture"].acceleration(*g["posture"]))
+        return StepTasks(TaskStack(levels), self.errors(state, t, terms), n_tasks)
 
     def velocity_stack(self, state: KinematicState, t: float, gain: float = 10.0,
                        limits: str = "none", dt: float = 0.002) -> StepTasks:

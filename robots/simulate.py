@@ -13,9 +13,10 @@
 4. semi-implicit Euler: ``q̇ ← q̇ + q̈ dt``, ``q ← q ⊕ q̇ dt`` (``pin.integrate``).
 
 It records ``q, q̇, q̈, τ``, every task's error (from ``build``), the algorithmic
-error of eq. 29 (:func:`hierarchy.algorithmic_error_norms`) of the equality view of
-the stack (:func:`equality_view`), and the wall time of the three phases. A failed
-solution or a non-finite value stops the run cleanly with ``failed = True``.
+error of eq. 29 (:func:`hierarchy.algorithmic_error_norms`, the norm over the
+levels) of the equality view of the stack (:func:`equality_view`), and the wall time of the three phases. A failed
+solution, a non-finite value or ``‖q̈‖`` above ``divergence_limit`` stops the run
+cleanly with ``failed = True``.
 
 The floating base is integrated like the joints (no contact forces are modelled);
 ``τ`` of the base rows is then the wrench the contacts would have to supply.
@@ -45,10 +46,14 @@ class StepTasks:
     Attributes:
         stack: The task stack to solve (columns: ``n_v`` accelerations).
         errors: Task errors to record (name → value, e.g. a norm in metres).
+        algorithmic_levels: Number of leading levels over which the algorithmic error
+            is recorded (``None``: every level), e.g. to leave out a regularising
+            lowest level that is not one of the scenario's tasks.
     """
 
     stack: TaskStack
     errors: dict[str, float] = field(default_factory=dict)
+    algorithmic_levels: int | None = None
 
 
 @dataclass
@@ -121,7 +126,9 @@ def equality_view(stack: TaskStack, x: np.ndarray, tol: float = 1e-7) -> TaskSta
     return TaskStack(levels) if levels else None
 
 
-def _algorithmic_error(stack: TaskStack, x: np.ndarray) -> float:
+def _algorithmic_error(stack: TaskStack, x: np.ndarray, levels: int | None = None) -> float:
+    if levels is not None:
+        stack = TaskStack(stack.levels[:levels])
     eq = equality_view(stack, x)
     if eq is None:
         return 0.0
@@ -136,6 +143,7 @@ BuildFn = Callable[[KinematicState, float], StepTasks]
 def simulate(robot: RobotModel, build: BuildFn, solve: SolveFn, *, duration: float,
              dt: float, q0=None, v0=None, needs_dynamics: bool = False,
              torque_from_solution: bool = False, algorithmic_error: bool = True,
+             divergence_limit: float = 1e6,
              progress: Callable[[float], None] | None = None) -> SimulationResult:
     """Run a fixed-step simulation; see the module docstring.
 
@@ -152,7 +160,9 @@ def simulate(robot: RobotModel, build: BuildFn, solve: SolveFn, *, duration: flo
         needs_dynamics: Pass ``M(q)`` and ``b(q, q̇)`` to ``solve``.
         torque_from_solution: Take ``τ`` from ``info["tau"]`` instead of RNEA.
         algorithmic_error: Record eq. 29 (costs an SVD per level per step).
-        progress: Called with the simulated time every 100 steps.
+        divergence_limit: Stop (``failed``) when ``‖q̈‖`` exceeds this: the run has
+            diverged and would only overflow to NaN a few steps later.
+        progress: Called with the simulated time every 250 steps.
 
     Returns:
         A :class:`SimulationResult`.
@@ -187,6 +197,11 @@ def simulate(robot: RobotModel, build: BuildFn, solve: SolveFn, *, duration: flo
             message = (f"t = {t:.3f} s: solution {sol.status}"
                        f"{': ' + str(sol.info.get('message', '')) if sol.info else ''}")
             break
+        if np.linalg.norm(x) > divergence_limit:
+            failed = True
+            message = (f"t = {t:.3f} s: diverged (‖q̈‖ = {np.linalg.norm(x):.3g} > "
+                       f"{divergence_limit:g})")
+            break
         if torque_from_solution:
             if "tau" not in sol.info:
                 raise ValueError("torque_from_solution=True but the solution has no "
@@ -209,13 +224,14 @@ def simulate(robot: RobotModel, build: BuildFn, solve: SolveFn, *, duration: flo
         for name in errors:
             if len(errors[name]) < len(T):
                 errors[name].append(np.nan)
-        ALG.append(_algorithmic_error(step.stack, x) if algorithmic_error else np.nan)
+        ALG.append(_algorithmic_error(step.stack, x, step.algorithmic_levels)
+                   if algorithmic_error else np.nan)
         v = v + x * dt
         q = pin.integrate(model, q, v * dt)
         if not (np.isfinite(q).all() and np.isfinite(v).all()):
             failed, message = True, f"t = {t:.3f} s: state became non-finite"
             break
-        if progress is not None and (k + 1) % 100 == 0:
+        if progress is not None and (k + 1) % 250 == 0:
             progress(t + dt)
     nq, nv = robot.nq, robot.nv
 

@@ -1,0 +1,678 @@
+"""``prioik fencing``: the paper's fencing scenario on the G1 with every formulation.
+
+Runs :class:`robots.fencing.FencingScenario` (variants ``compatible`` and
+``incompatible``) with each selected formulation through :func:`robots.simulate`,
+prints one table per variant and writes into ``--out``:
+
+* ``summary.json`` — ``{variant: {run: {final_tip_error_m, max_algorithmic_error,
+  max_com_error_m, max_support_foot_error_m, max_joint_limit_violation_rad,
+  max_qdd_norm, median_step_time_s, median_solve_time_s, failed}}}``;
+* ``<variant>_<run>.csv`` — the trajectory of each run (time, recorded errors,
+  algorithmic error, ``‖q̈‖``, phase times, ``q``, ``q̇``, ``q̈``, ``τ``);
+* ``<variant>_tip_error.png`` (the paper's Fig. 2 / Fig. 4), ``<variant>_algorithmic_error.png``
+  (Fig. 3), ``<variant>_qdd.png`` (acceleration spikes) and ``step_time.png``
+  (Sec. III-B.3);
+* ``crosscheck.json`` — ``extended_jacobian``'s ``q̈`` against ``cascaded_qp`` on the
+  same stacks along its own trajectory;
+
+and, with ``--doc PATH``, regenerates the reproduction page (``docs/reproduction.md``)
+with the measured numbers, copying the plots it shows to ``img/`` beside it.
+
+Stacks: formulations that take inequality tasks (QP formulations) get joint limits as
+bounds on ``q̈`` (:func:`robots.tasks.joint_limit_bounds`); the others get the
+activation rows (:func:`robots.tasks.joint_limit_rows`). Torque-level formulations
+(``CAPABILITIES.needs_mass_matrix``) get ``M`` and ``b`` and their own torques;
+the others' torques come from RNEA.
+
+Runs and their options per variant are in :data:`RUNS`, the one table of
+per-scenario settings; see its comments for why each option is there.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+#: the keys of one run in summary.json, in order
+SUMMARY_KEYS = ("final_tip_error_m", "max_algorithmic_error", "max_com_error_m",
+                "max_support_foot_error_m", "max_joint_limit_violation_rad", "max_qdd_norm",
+                "median_step_time_s", "median_solve_time_s", "failed")
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One row of the comparison.
+
+    Attributes:
+        label: Row name (``formulation`` or ``formulation:variant``).
+        formulation: Registry name; ``"placo_kinematics_solver"`` is PlaCo's own
+            ``KinematicsSolver`` (``benchmarks/placo_baseline.py``).
+        options: Scenario variant → options passed to ``formulations.solve``.
+        note: Why these options (printed in the reproduction page).
+        default: Part of the default selection.
+    """
+
+    label: str
+    formulation: str
+    options: dict[str, dict[str, Any]] = field(default_factory=dict)
+    note: str = ""
+    default: bool = True
+
+
+#: The per-scenario option table (one row per run).
+RUNS: tuple[RunSpec, ...] = (
+    RunSpec("extended_jacobian", "extended_jacobian",
+            {"compatible": {},
+             "incompatible": {"level_damping": 0.1, "singular_threshold": 0.05}},
+            "exact eq. 18 when compatible; when not, selective damping: a level whose "
+            "projected σ_min < 0.05·‖A_i‖_F is damped with μ² ≤ 0.1, higher levels stay "
+            "exact"),
+    RunSpec("extended_jacobian:sharp", "extended_jacobian",
+            {"compatible": {"level_damping": 0.3, "singular_threshold": 0.03},
+             "incompatible": {"level_damping": 0.3, "singular_threshold": 0.03}},
+            "selective damping with a lower threshold ε = 0.03 (μ² ≤ 0.3): the left foot "
+            "(projected σ_min ≈ 0.041·‖A‖_F when standing) is never damped, at the price "
+            "of sharper q̈ peaks before the tip level is damped"),
+    RunSpec("extended_jacobian:eq27", "extended_jacobian",
+            {"compatible": {"damping": 1e-3}, "incompatible": {"damping": 1e-3}},
+            "the paper's eq. 27 damping λ = 1e-3 on every lower level"),
+    RunSpec("nullspace", "nullspace", {},
+            "resolved acceleration, recursive null-space projection, λ = 0 (the paper's "
+            "'resolved acceleration method')"),
+    RunSpec("nullspace:damped", "nullspace",
+            {"compatible": {"damping": 1e-3}, "incompatible": {"damping": 1e-3}},
+            "the same with the SR (damped least-squares) inverse, λ = 1e-3"),
+    RunSpec("chiaverini", "chiaverini", {}, "Chiaverini's singularity-robust priority"),
+    RunSpec("unifying", "unifying", {}, "unifying framework, torques from eq. 40"),
+    RunSpec("operational_space", "operational_space", {},
+            "prioritized operational-space control, its own torques"),
+    RunSpec("cascaded_qp", "cascaded_qp", {"compatible": {"solver": "daqp"},
+                                           "incompatible": {"solver": "daqp"}},
+            "one QP per level (DAQP back-end), joint limits as bounds on q̈"),
+    RunSpec("cvxpy", "cvxpy", {}, "the cascaded QP modelled in cvxpy (slow; a check)",
+            default=False),
+    RunSpec("daqp_hierarchical", "daqp_hierarchical", {},
+            "DAQP's hierarchical solve, joint limits as bounds"),
+    RunSpec("placo", "placo", {}, "PlaCo's algebraic QP through the registry"),
+    RunSpec("reference", "reference", {}, "the test oracle (nested SVD)", default=False),
+    RunSpec("placo_kinematics_solver", "placo_kinematics_solver", {},
+            "PlaCo's own KinematicsSolver at velocity level (hard contact, soft "
+            "weighted tasks, its joint and velocity limits): what users run today"),
+)
+
+
+def _runs_by_label() -> dict[str, RunSpec]:
+    return {r.label: r for r in RUNS}
+
+
+# ------------------------------------------------------------------- one run
+def _formulation_solver(spec: RunSpec, variant: str):
+    """``(solve, needs_dynamics, torque_from_solution, limits)`` for a registry run."""
+    import formulations
+    mod = formulations.get(spec.formulation)
+    caps = mod.CAPABILITIES
+    opts = dict(spec.options.get(variant, {}))
+    limits = "bounds" if caps.inequalities else "activation"
+
+    def solve(stack, **kw):
+        return formulations.solve(stack, spec.formulation, **opts, **kw)
+
+    return solve, caps.needs_mass_matrix, caps.needs_mass_matrix, limits
+
+
+def run_one(spec: RunSpec, variant: str, duration: float, dt: float,
+            progress=None):
+    """Simulate one run; returns a :class:`robots.SimulationResult`.
+
+    Raises:
+        UnsupportedTaskError: the formulation cannot take the scenario's stack.
+        FormulationError: it is not available here.
+    """
+    from robots import simulate
+    from robots.fencing import FencingScenario
+    scenario = FencingScenario(variant)
+    if spec.formulation == "placo_kinematics_solver":
+        from benchmarks.placo_baseline import run_placo
+        return run_placo(scenario, duration=duration, dt=dt, progress=progress)
+    solve, dyn, own_tau, limits = _formulation_solver(spec, variant)
+
+    def build(state, t):
+        return scenario.acceleration_stack(state, t, limits=limits, dt=dt)
+
+    return simulate(scenario.robot, build, solve, duration=duration, dt=dt,
+                    needs_dynamics=dyn, torque_from_solution=own_tau, progress=progress)
+
+
+def _finite(x: float) -> float | None:
+    x = float(x)
+    return x if np.isfinite(x) else None
+
+
+def summarize(res) -> dict[str, Any]:
+    """The summary.json entry of one run (non-finite values become ``null``)."""
+    def mx(a):
+        a = np.asarray(a, dtype=float)
+        return _finite(np.nanmax(a)) if a.size and not np.isnan(a).all() else None
+
+    tip = res.errors.get("tip_error_m", np.array([]))
+    return {
+        "final_tip_error_m": _finite(tip[-1]) if tip.size else None,
+        "max_algorithmic_error": mx(res.algorithmic_error),
+        "max_com_error_m": mx(res.errors.get("com_error_m", [])),
+        "max_support_foot_error_m": mx(res.errors.get("support_foot_error_m", [])),
+        "max_joint_limit_violation_rad": mx(res.errors.get("joint_limit_violation_rad", [])),
+        "max_qdd_norm": mx(np.linalg.norm(res.a, axis=1)) if res.steps else None,
+        "median_step_time_s": _finite(np.median(res.step_time_s)) if res.steps else None,
+        "median_solve_time_s": _finite(np.median(res.solve_time_s)) if res.steps else None,
+        "failed": bool(res.failed),
+    }
+
+
+def write_csv(path: Path, res) -> None:
+    """Trajectory of one run as CSV (header line, one row per step)."""
+    cols = ["t"] + list(res.errors) + ["algorithmic_error", "qdd_norm", "kinematics_time_s",
+                                       "solve_time_s", "torque_time_s"]
+    nq, nv = res.q.shape[1], res.v.shape[1]
+    cols += [f"q{i}" for i in range(nq)] + [f"v{i}" for i in range(nv)]
+    cols += [f"qdd{i}" for i in range(nv)] + [f"tau{i}" for i in range(nv)]
+    table = np.column_stack([res.t] + [res.errors[k] for k in res.errors]
+                            + [res.algorithmic_error, np.linalg.norm(res.a, axis=1),
+                               res.kinematics_time_s, res.solve_time_s, res.torque_time_s,
+                               res.q, res.v, res.a, res.tau]) if res.steps else \
+        np.zeros((0, len(cols)))
+    np.savetxt(path, table, delimiter=",", header=",".join(cols), comments="", fmt="%.9g")
+
+
+# ------------------------------------------------------------- cross-check
+def crosscheck(variant: str, res, dt: float, every: int = 25,
+               run_options: dict | None = None) -> dict[str, Any] | None:
+    """``extended_jacobian`` against ``cascaded_qp`` on the same stacks.
+
+    Along the recorded trajectory of an ``extended_jacobian`` run, every ``every``
+    steps the activation-form stack is rebuilt and solved by both (the first with the
+    run's options). Where no level was damped, the whole ``q̈`` is compared
+    (``‖Δq̈‖ / max(1, ‖q̈‖)``); where the selective damping acted, the task
+    accelerations of the levels above the first damped one are compared
+    (``‖A_top Δq̈‖ / max(1, ‖A_top q̈‖)``), the part the damping must leave exact.
+    ``None`` when ``cascaded_qp`` is not available.
+    """
+    import formulations
+    from hierarchy import TaskStack
+    from robots import KinematicState
+    from robots.fencing import FencingScenario
+    try:
+        formulations.get("cascaded_qp")
+    except formulations.FormulationError:
+        return None
+    scenario = FencingScenario(variant)
+    exact, above, first_damped = [], [], []
+    for k in range(0, res.steps, every):
+        state = KinematicState(scenario.robot, res.q[k], res.v[k])
+        stack = scenario.acceleration_stack(state, float(res.t[k]), "activation", dt).stack
+        a = formulations.solve(stack, "extended_jacobian", **(run_options or {}))
+        b = formulations.solve(stack, "cascaded_qp", solver="daqp")
+        if not (a.ok and b.ok):
+            continue
+        damped = a.info.get("damped_levels") or []
+        if not damped:
+            exact.append(float(np.linalg.norm(a.x - b.x) / max(1.0, np.linalg.norm(b.x))))
+            continue
+        first = min(damped)
+        first_damped.append(stack.levels[first].names[0])
+        if first == 0:
+            continue
+        top = TaskStack(stack.levels[:first])
+        A = np.vstack([lv.A for lv in top.levels])
+        above.append(float(np.linalg.norm(A @ (a.x - b.x))
+                           / max(1.0, np.linalg.norm(A @ b.x))))
+    names = sorted(set(first_damped))
+    return {"steps_compared": len(exact) + len(first_damped),
+            "steps_with_damping": len(first_damped),
+            "first_damped_levels": {n: first_damped.count(n) for n in names},
+            "max_rel_diff_qdd_undamped_steps": max(exact) if exact else None,
+            "max_rel_diff_levels_above_damping": max(above) if above else None}
+
+
+# ------------------------------------------------------------------- plots
+def plot_variant(out: Path, variant: str, results: dict) -> list[Path]:
+    """Tip error, algorithmic error and ‖q̈‖ over time, one curve per run."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    files = []
+    series = [("tip_error", "sword-tip error to the target (m)",
+               lambda r: r.errors.get("tip_error_m")),
+              ("algorithmic_error", "algorithmic error ‖e_algorithm‖ (eq. 29)",
+               lambda r: r.algorithmic_error),
+              ("qdd", "‖q̈‖ (rad/s², m/s²)", lambda r: np.linalg.norm(r.a, axis=1))]
+    for key, ylabel, get in series:
+        fig, ax = plt.subplots(figsize=(7.5, 4.2))
+        for label, res in results.items():
+            y = get(res)
+            if y is None or res.steps == 0:
+                continue
+            y = np.abs(np.asarray(y, dtype=float))
+            y = np.where(y > 0, y, np.nan)
+            ax.semilogy(res.t, y, label=label + (" (failed)" if res.failed else ""), lw=1.2)
+        ax.set_xlabel("time (s)")
+        ax.set_ylabel(ylabel)
+        ax.set_title(f"fencing, {variant} tasks")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=7, ncol=2)
+        fig.tight_layout()
+        path = out / f"{variant}_{key}.png"
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        files.append(path)
+    return files
+
+
+def plot_step_times(out: Path, summary: dict) -> Path:
+    """Median step time per run and variant (kinematics + solve + torque)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    labels = sorted({k for v in summary.values() for k in v})
+    fig, ax = plt.subplots(figsize=(7.5, 4.2))
+    width = 0.8 / max(1, len(summary))
+    for i, (variant, runs) in enumerate(summary.items()):
+        vals = [1e3 * (runs.get(lb, {}).get("median_step_time_s") or 0.0) for lb in labels]
+        ax.bar(np.arange(len(labels)) + i * width, vals, width, label=variant)
+    ax.set_xticks(np.arange(len(labels)) + 0.4 - width / 2, labels, rotation=35, ha="right",
+                  fontsize=7)
+    ax.set_ylabel("median step time (ms)")
+    ax.set_title("compute time per control step (kinematics + solve + torque)")
+    ax.legend()
+    fig.tight_layout()
+    path = out / "step_time.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+# ------------------------------------------------------------------- table
+def format_table(variant: str, runs: dict[str, dict], phases: dict[str, tuple]) -> str:
+    """One row per run: the summary numbers and the median phase times."""
+    head = (f"{'run':<26} {'tip final':>10} {'alg err':>9} {'CoM max':>9} {'foot max':>9} "
+            f"{'JL viol':>9} {'max|q̈|':>9} {'kin ms':>7} {'solve ms':>8} {'tau ms':>7} "
+            f"{'step ms':>8}  status")
+    lines = [f"fencing — {variant} tasks", head, "-" * len(head)]
+
+    def f(x, width=9):
+        return f"{x:>{width}.2e}" if x is not None else f"{'—':>{width}}"
+
+    for label, s in runs.items():
+        kin, sol, tau = phases.get(label, (np.nan, np.nan, np.nan))
+        step = s["median_step_time_s"]
+        lines.append(
+            f"{label:<26} {f(s['final_tip_error_m'], 10)} "
+            f"{f(s['max_algorithmic_error'])} {f(s['max_com_error_m'])} "
+            f"{f(s['max_support_foot_error_m'])} {f(s['max_joint_limit_violation_rad'])} "
+            f"{f(s['max_qdd_norm'])} {1e3 * kin:>7.3f} {1e3 * sol:>8.3f} {1e3 * tau:>7.3f} "
+            f"{(1e3 * step if step is not None else float('nan')):>8.3f}  "
+            f"{'FAILED' if s['failed'] else 'ok'}")
+    return "\n".join(lines)
+
+
+# ------------------------------------------------------------------ command
+def select_runs(text: str | None) -> tuple[list[RunSpec], list[str]]:
+    """Runs to do and skip messages: every default run whose formulation is available,
+    or the comma-separated labels of ``--formulations``."""
+    import formulations
+    table = _runs_by_label()
+    if text:
+        labels = [s.strip() for s in text.split(",") if s.strip()]
+        unknown = [lb for lb in labels if lb not in table]
+        if unknown:
+            raise ValueError(f"unknown run(s) {', '.join(unknown)}; known: "
+                             f"{', '.join(table)}")
+        specs = [table[lb] for lb in labels]
+    else:
+        specs = [r for r in RUNS if r.default]
+    chosen, skipped = [], []
+    for spec in specs:
+        if spec.formulation == "placo_kinematics_solver":
+            try:
+                import placo  # noqa: F401
+            except ImportError as exc:
+                skipped.append(f"{spec.label}: placo is not installed ({exc})")
+                continue
+            chosen.append(spec)
+            continue
+        try:
+            formulations.get(spec.formulation)
+        except formulations.FormulationError as exc:
+            skipped.append(f"{spec.label}: {exc}")
+            continue
+        chosen.append(spec)
+    return chosen, skipped
+
+
+def run_command(args: argparse.Namespace) -> int:
+    """``prioik fencing``: see the module docstring."""
+    from hierarchy import UnsupportedTaskError
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    variants = ["compatible", "incompatible"] if args.variant == "both" else [args.variant]
+    specs, skipped = select_runs(args.formulations)
+    for msg in skipped:
+        print(f"skipping {msg}", file=sys.stderr)
+    summary: dict[str, dict] = {}
+    phases: dict[str, dict] = {}
+    checks: dict[str, Any] = {}
+    pngs: dict[str, list[Path]] = {}
+    skipped_runs: list[str] = list(skipped)
+    wall0 = time.perf_counter()
+    for variant in variants:
+        results = {}
+        summary[variant] = {}
+        phases[variant] = {}
+        for spec in specs:
+            t0 = time.perf_counter()
+
+            def progress(t, _label=spec.label, _variant=variant):
+                print(f"  [{_variant}] {_label}: t = {t:.1f} / {args.duration:.1f} s",
+                      file=sys.stderr, flush=True)
+
+            try:
+                res = run_one(spec, variant, args.duration, args.dt,
+                              progress=progress if args.progress else None)
+            except UnsupportedTaskError as exc:
+                msg = f"{spec.label} ({variant}): cannot take the stack: {exc}"
+                print(f"skipping {msg}", file=sys.stderr)
+                skipped_runs.append(msg)
+                continue
+            results[spec.label] = res
+            summary[variant][spec.label] = summarize(res)
+            phases[variant][spec.label] = tuple(
+                float(np.median(x)) if res.steps else float("nan")
+                for x in (res.kinematics_time_s, res.solve_time_s, res.torque_time_s))
+            write_csv(out / f"{variant}_{spec.label.replace(':', '_')}.csv", res)
+            print(f"[{variant}] {spec.label}: {res.steps} steps in "
+                  f"{time.perf_counter() - t0:.1f} s"
+                  f"{' — FAILED: ' + res.message if res.failed else ''}",
+                  file=sys.stderr, flush=True)
+            if spec.label == "extended_jacobian" and not args.no_crosscheck:
+                c = crosscheck(variant, res, args.dt,
+                               run_options=spec.options.get(variant, {}))
+                if c is not None:
+                    checks[variant] = c
+        pngs[variant] = plot_variant(out, variant, results) if results else []
+        print(format_table(variant, summary[variant], phases[variant]))
+        print()
+    pngs["step_time"] = [plot_step_times(out, summary)]
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    meta = {"duration_s": args.duration, "dt_s": args.dt, "variants": variants,
+            "runs": {s.label: {"formulation": s.formulation, "options": s.options,
+                               "note": s.note} for s in specs},
+            "skipped": skipped_runs, "crosscheck": checks, "phases": phases,
+            "wall_time_s": time.perf_counter() - wall0}
+    (out / "crosscheck.json").write_text(json.dumps(checks, indent=2) + "\n")
+    (out / "run_info.json").write_text(json.dumps(meta, indent=2, default=str) + "\n")
+    if checks:
+        for variant, c in checks.items():
+            print(f"cross-check [{variant}] extended_jacobian vs cascaded_qp: {c}")
+    print(f"wrote {out / 'summary.json'} and {sum(len(v) for v in pngs.values())} plots "
+          f"in {time.perf_counter() - wall0:.0f} s", file=sys.stderr)
+    if args.doc:
+        path = write_reproduction(Path(args.doc), summary, meta, pngs)
+        print(f"wrote {path}", file=sys.stderr)
+    return 0
+
+
+def add_parser(subparsers) -> None:
+    """Register ``prioik fencing``."""
+    p = subparsers.add_parser(
+        "fencing", help="the paper's fencing scenario on the G1, every formulation",
+        description="Simulate the fencing scenario (Jeong & Chang 2009, Sec. III) on the "
+                    "Unitree G1 with each formulation; print tables, write summary.json, "
+                    "CSV trajectories and plots.")
+    p.add_argument("--variant", choices=["compatible", "incompatible", "both"],
+                   default="both")
+    p.add_argument("--formulations", default=None, metavar="A,B,...",
+                   help="runs to do (labels of benchmarks.fencing.RUNS; default: every "
+                        "default run whose formulation is available)")
+    p.add_argument("--duration", type=float, default=3.0, help="simulated seconds")
+    p.add_argument("--dt", type=float, default=0.002, help="control step (s)")
+    p.add_argument("--out", default="results", help="output folder")
+    p.add_argument("--doc", default=None, metavar="PATH",
+                   help="also (re)generate the reproduction page here "
+                        "(e.g. docs/reproduction.md; plots copied to img/ beside it)")
+    p.add_argument("--no-crosscheck", action="store_true",
+                   help="skip the extended_jacobian vs cascaded_qp q̈ comparison")
+    p.add_argument("--quiet", dest="progress", action="store_false",
+                   help="no per-second progress on stderr")
+    p.set_defaults(func=run_command)
+
+
+# ------------------------------------------------------------ reproduction page
+PAPER_STEP_TIMES_MS = {"extended_jacobian": 1.4, "nullspace": 2.7, "unifying": 3.2,
+                       "operational_space": 4.8}
+PAPER_NAMES = {"extended_jacobian": "proposed framework (extended Jacobian)",
+               "nullspace": "resolved acceleration method",
+               "nullspace:damped": "resolved acceleration with SR inverse",
+               "unifying": "unifying framework",
+               "operational_space": "operational space formulation"}
+
+
+def _fmt(x, spec=".2e"):
+    return "—" if x is None else format(x, spec)
+
+
+def _mm(x):
+    return "—" if x is None else f"{1e3 * x:.3g} mm"
+
+
+def write_reproduction(path: Path, summary: dict, meta: dict, pngs: dict) -> Path:
+    """Write the reproduction page from measured numbers; copy its plots to ``img/``.
+
+    Every number and every verdict on the page comes from ``summary`` / ``meta``;
+    the fixed text describes the setting and how it differs from the paper's.
+    """
+    path = Path(path)
+    img = path.parent / "img"
+    img.mkdir(parents=True, exist_ok=True)
+    shown = {}
+    for files in pngs.values():
+        for f in files:
+            target = img / f"fencing_{Path(f).name}"
+            shutil.copyfile(f, target)
+            shown[Path(f).stem] = f"img/{target.name}"
+    L: list[str] = []
+    add = L.append
+    comp = summary.get("compatible", {})
+    inc = summary.get("incompatible", {})
+    add("# Reproduction: the fencing experiment of Jeong & Chang (2009), Sec. III")
+    add("")
+    add("<!-- generated by `prioik fencing --doc docs/reproduction.md`; do not edit -->")
+    add("")
+    add(f"Generated by `prioik fencing --variant {'both' if len(summary) == 2 else next(iter(summary))}"
+        f" --duration {meta['duration_s']:g} --dt {meta['dt_s']:g} --doc {path.as_posix()}` "
+        f"(wall time {meta['wall_time_s']:.0f} s on this machine). Every number below is "
+        "measured by that command; timings are noisy on a shared machine.")
+    add("")
+    add("## The setting, and how it differs from the paper's")
+    add("")
+    add("| | paper | here |")
+    add("|---|---|---|")
+    add("| robot | 28-DOF humanoid (SimStudio) | Unitree G1, 29 joints + floating base "
+        "(`n_v = 35`), `g1_29dof_rev_1_0.urdf` |")
+    add("| simulation | full dynamics with contacts | kinematic: the chosen `q̈` is integrated "
+        "(semi-implicit Euler, fixed `dt`); torques by RNEA or the formulation's own law "
+        "are recorded, not fed back; no contact forces |")
+    add("| tasks (priority) | joint limit, self-balance (CoG at the centre of the feet), "
+        "left foot steps one pace, sword tip to the target | support (right) foot contact; "
+        "joint limits; CoM (horizontal) over the middle of the feet; left foot steps "
+        "0.2 m; sword tip (0.5 m along the left hand) to the target; plus a low-gain "
+        "posture level at the bottom (see `docs/robots.md`) |")
+    add("| references | not stated | minimum-jerk to the target then hold, `K_p = 25`, "
+        "`K_d = 10` (contact `K_p = 100`, `K_d = 20`) |")
+    add("| joint limits | top task | activation rows with a continuous target for the "
+        "equality formulations, bounds on `q̈` for the QP formulations |")
+    add("")
+    add("Runs and their options (`benchmarks/fencing.py`, `RUNS`):")
+    add("")
+    add("| run | formulation | options (compatible / incompatible) | why |")
+    add("|---|---|---|---|")
+    for label, r in meta["runs"].items():
+        o = r["options"]
+        add(f"| `{label}` | `{r['formulation']}` | `{o.get('compatible', {})}` / "
+            f"`{o.get('incompatible', {})}` | {r['note']} |")
+    if meta.get("skipped"):
+        add("")
+        add("Not run here: " + "; ".join(meta["skipped"]) + ".")
+    add("")
+    for variant, runs in summary.items():
+        add(f"## Measured: {variant} tasks")
+        add("")
+        add("| run | final tip error | max algorithmic error | max CoM error | "
+            "max support-foot error | max joint-limit violation | max ‖q̈‖ | "
+            "median step | median solve | status |")
+        add("|---|---|---|---|---|---|---|---|---|---|")
+        for label, s in runs.items():
+            add(f"| `{label}` | {_mm(s['final_tip_error_m'])} | "
+                f"{_fmt(s['max_algorithmic_error'])} | {_mm(s['max_com_error_m'])} | "
+                f"{_mm(s['max_support_foot_error_m'])} | "
+                f"{_fmt(s['max_joint_limit_violation_rad'])} rad | "
+                f"{_fmt(s['max_qdd_norm'], '.3g')} | "
+                f"{_fmt(None if s['median_step_time_s'] is None else 1e3 * s['median_step_time_s'], '.3f')} ms | "
+                f"{_fmt(None if s['median_solve_time_s'] is None else 1e3 * s['median_solve_time_s'], '.3f')} ms | "
+                f"{'failed' if s['failed'] else 'ran to the end'} |")
+        add("")
+        for key, caption in (("tip_error", "sword-tip error (paper Fig. 2 / Fig. 4)"),
+                             ("algorithmic_error", "algorithmic error, eq. 29 (paper Fig. 3)"),
+                             ("qdd", "‖q̈‖: spikes of algorithmic singularities")):
+            stem = f"{variant}_{key}"
+            if stem in shown:
+                add(f"![{variant}: {caption}]({shown[stem]})")
+                add("")
+    # --------------------------------------------------------------- claims
+    add("## The paper's claims beside the measurements")
+    add("")
+
+    def tip(runs, label):
+        return runs.get(label, {}).get("final_tip_error_m")
+
+    def ok(runs, label):
+        return label in runs and not runs[label]["failed"]
+
+    add("**1. Compatible tasks: the proposed framework, the resolved acceleration method "
+        "and the operational space formulation execute the sub-task (sword tip) "
+        "accurately; the unifying framework does not (algorithmic error).**")
+    add("")
+    for label in ("extended_jacobian", "nullspace", "operational_space", "cascaded_qp",
+                  "daqp_hierarchical", "unifying", "chiaverini", "placo_kinematics_solver"):
+        if label not in comp:
+            continue
+        e = tip(comp, label)
+        verdict = ("within 1 mm of the target" if e is not None and e < 1e-3
+                   else "not within 1 mm of the target")
+        extra = "" if ok(comp, label) else f" — the run failed ({_mm(e)} when it stopped)"
+        add(f"- `{label}`: final tip error {_mm(e)}, {verdict}{extra}.")
+    add("")
+    add("**2. Algorithmic error (eq. 29): zero for the proposed framework, not for the "
+        "unifying framework.**")
+    add("")
+    for label in ("extended_jacobian", "nullspace", "operational_space", "unifying",
+                  "chiaverini"):
+        if label in comp:
+            a = comp[label]["max_algorithmic_error"]
+            add(f"- `{label}`: largest ‖e_algorithm‖ over the compatible run "
+                f"{_fmt(a)}{'' if ok(comp, label) else ' (run failed)'}.")
+    add("")
+    add("**3. Incompatible tasks: the proposed framework performs the tasks by priority "
+        "without algorithmic singularity; the resolved acceleration method is unstable "
+        "without the SR inverse and tracks well with it; the unifying framework "
+        "converges to a non-optimal position.**")
+    add("")
+    for label in inc:
+        s = inc[label]
+        add(f"- `{label}`: {'ran to the end' if not s['failed'] else 'FAILED'}; final tip "
+            f"error {_mm(s['final_tip_error_m'])}; support foot within "
+            f"{_mm(s['max_support_foot_error_m'])}, CoM within {_mm(s['max_com_error_m'])}, "
+            f"joint limits within {_fmt(s['max_joint_limit_violation_rad'])} rad, "
+            f"max ‖q̈‖ {_fmt(s['max_qdd_norm'], '.3g')}.")
+    cc = meta.get("crosscheck", {})
+    if cc:
+        add("")
+        add("Cross-check of `extended_jacobian` against `cascaded_qp` on the same stacks "
+            "along the extended-Jacobian trajectory (every 25th step):")
+        add("")
+        for variant, c in cc.items():
+            add(f"- {variant}: {c['steps_compared']} steps compared, "
+                f"{c['steps_with_damping']} with a damped level "
+                f"(first damped level: {c['first_damped_levels'] or 'none'}); "
+                f"largest relative ‖Δq̈‖ where nothing was damped: "
+                f"{_fmt(c['max_rel_diff_qdd_undamped_steps'])}; largest relative "
+                f"difference of the task accelerations above the first damped level: "
+                f"{_fmt(c['max_rel_diff_levels_above_damping'])}.")
+    add("")
+    add("**4. Computation per control step: proposed 1.4 ms < resolved acceleration "
+        "2.7 ms < unifying 3.2 ms < operational space 4.8 ms (2.4 GHz Pentium).**")
+    add("")
+    phases = meta.get("phases", {})
+    add("| run | variant | kinematics | solve | torque | total (median) |")
+    add("|---|---|---|---|---|---|")
+    for variant, runs in phases.items():
+        for label, (k, s_, t) in runs.items():
+            add(f"| `{label}` | {variant} | {1e3 * k:.3f} ms | {1e3 * s_:.3f} ms | "
+                f"{1e3 * t:.3f} ms | {1e3 * (k + s_ + t):.3f} ms |")
+    add("")
+    order_src = comp or inc
+    timed = [(lb, order_src[lb]["median_step_time_s"]) for lb in PAPER_STEP_TIMES_MS
+             if lb in order_src and order_src[lb]["median_step_time_s"] is not None]
+    if timed:
+        measured = [lb for lb, _ in sorted(timed, key=lambda p: p[1])]
+        paper = [lb for lb in sorted(PAPER_STEP_TIMES_MS, key=PAPER_STEP_TIMES_MS.get)
+                 if lb in measured]
+        same = measured == paper
+        add(f"Measured order (fastest first): {' < '.join(f'`{m}`' for m in measured)}; "
+            f"the paper's order over the same methods: {' < '.join(f'`{p}`' for p in paper)}"
+            f" — {'the same' if same else 'different'}. The kinematics phase (pinocchio "
+            "Jacobians, drifts, and building the stack in Python) is shared by all and "
+            "is of the same size as the solves; the torque-level formulations also "
+            "need `M(q)` (CRBA) and the bias, counted in their kinematics phase.")
+        add("")
+    if "step_time" in shown:
+        add(f"![median step time per run]({shown['step_time']})")
+        add("")
+    add("## Differences, and why")
+    add("")
+    add("- The simulation is kinematic (integrated `q̈`), not a dynamic simulation with "
+        "contacts: a formulation's `q̈` is applied exactly, so differences between runs "
+        "are those of the formulations, not of a contact model. Torques are recorded "
+        "(RNEA, or the formulation's own law) but not fed back.")
+    add("- The floating base is free, held only by the support-foot task; the torque on "
+        "the base rows is the wrench the contact would have to supply.")
+    add("- The paper's joint-limit task is a black box; here it is either activation rows "
+        "(`robots.tasks.joint_limit_rows`) or bounds on `q̈` "
+        "(`robots.tasks.joint_limit_bounds`). Rows switching on change the level's rank, "
+        "which is exactly what produces the algorithmic singularity of the tip level in "
+        "the incompatible run.")
+    add("- The paper's exact method survives the incompatible run; the exact "
+        "lexicographic `q̈` here does not (see the `extended_jacobian` row of the "
+        "compatible-options run in the prototype notes of issue 5): as the arm stretches "
+        "against its limits the tip level's projected Jacobian loses rank smoothly "
+        "(σ → 0, not a rank drop), and `1/σ` growth makes `q̈` diverge. The "
+        "`extended_jacobian` row of the incompatible table uses the selective damping "
+        "(`level_damping`, `singular_threshold`), which keeps every level above the "
+        "damped one exact (cross-check above) and bounds `q̈`; its cost is the accuracy "
+        "of the damped levels, and, with ε = 0.05, of the left foot level, whose "
+        "projected σ_min is already ≈ 0.041·‖A‖_F when standing (`:sharp`, ε = 0.03, "
+        "keeps the foot exact with larger `q̈` peaks).")
+    add("- A low-gain posture level is added at the bottom of the stack so that the "
+        "null-space motion left by the five tasks is damped; the algorithmic error is "
+        "reported over the five tasks only.")
+    add("- PlaCo's `KinematicsSolver` is velocity (displacement) level with two priority "
+        "levels (hard/soft); its `q̈` is a finite difference of its velocities, so its "
+        "max ‖q̈‖ mostly reflects the velocity jump of its first steps.")
+    path.write_text("\n".join(L) + "\n")
+    return path

@@ -1,0 +1,154 @@
+"""robots.fencing (the scenario), benchmarks.fencing (the command) and the PlaCo baseline,
+on short durations."""
+
+import json
+
+import numpy as np
+import pytest
+
+import formulations
+from benchmarks import fencing as cmd
+from benchmarks.cli import main
+from robots import KinematicState, simulate
+from robots.fencing import LEVEL_NAMES, TARGETS, FencingScenario
+
+
+@pytest.fixture(scope="module")
+def scenarios():
+    return {v: FencingScenario(v) for v in ("compatible", "incompatible")}
+
+
+def test_stack_levels_follow_the_paper_priorities(scenarios):
+    sc = scenarios["compatible"]
+    state = KinematicState(sc.robot, sc.robot.q0, np.zeros(35))
+    step = sc.acceleration_stack(state, 0.0, "bounds")
+    names = [lv.names[0] for lv in step.stack.levels]
+    assert names == list(LEVEL_NAMES)
+    assert step.stack.n == 35 and not step.stack.levels[1].is_equality
+    assert step.algorithmic_levels == 5                # posture left out of eq. 29
+    assert [lv.m for lv in step.stack.levels] == [6, 29, 2, 6, 3, 29]
+    # standing posture: no joint in its margin, so no activation rows
+    step = sc.acceleration_stack(state, 0.0, "activation")
+    assert [lv.names[0] for lv in step.stack.levels] == \
+        ["support_foot", "com", "left_foot", "sword_tip", "posture"]
+    assert step.algorithmic_levels == 4 and step.stack.is_equality
+    q = sc.robot.q0.copy()
+    q[7 + 3] = -0.05                                   # left knee near its -0.087 limit
+    step = sc.acceleration_stack(KinematicState(sc.robot, q, np.zeros(35)), 0.0)
+    assert step.stack.levels[1].names == ("joint_limits",) and step.stack.levels[1].m == 1
+    with pytest.raises(ValueError, match="limits"):
+        sc.acceleration_stack(state, 0.0, "soft")
+    with pytest.raises(ValueError, match="unknown fencing variant"):
+        FencingScenario("easy")
+
+
+def test_velocity_stack_uses_the_same_terms(scenarios):
+    sc = scenarios["compatible"]
+    rng = np.random.default_rng(0)
+    v = rng.normal(scale=0.1, size=35)
+    state = KinematicState(sc.robot, sc.robot.q0, v)
+    terms = sc.terms(state, 1.0)
+    step = sc.velocity_stack(state, 1.0, gain=5.0, limits="bounds")
+    tip = step.stack.task("sword_tip")
+    assert np.allclose(tip.A, terms["sword_tip"].J)
+    assert np.allclose(tip.b, terms["sword_tip"].velocity_ref + 5.0 * terms["sword_tip"].error)
+    jl = step.stack.task("joint_limits")
+    assert np.all(jl.lower <= 0) and np.all(jl.upper >= 0)   # standing: q̇ = 0 admissible
+
+
+def test_references_are_smooth_and_reach_their_targets(scenarios):
+    sc = scenarios["incompatible"]
+    data = sc.robot.data()
+    import pinocchio as pin
+    com0 = pin.centerOfMass(sc.robot.model, data, sc.robot.q0)[:2]
+    assert np.allclose(sc.com_ref(0.0).x, com0, atol=1e-12)
+    end = sc.left_foot_ref(5.0)
+    assert end.x == pytest.approx(sc.left_foot0.translation + [0.2, 0, 0], abs=1e-12)
+    mid = sc.left_foot_ref(0.7)
+    assert mid.x[2] == pytest.approx(sc.left_foot0.translation[2] + 0.04, abs=1e-12)
+    mid_feet = 0.5 * (end.x[:2] + sc.right_foot0.translation[:2])
+    assert np.allclose(sc.com_ref(5.0).x, mid_feet, atol=1e-12)
+    assert np.allclose(sc.tip_ref(2.5).x, TARGETS["incompatible"]) and \
+        np.allclose(sc.tip_ref(0.5).x, sc.tip0)
+    # no step anywhere: references 0.1 ms apart differ by < 0.2 mm (speed < 2 m/s),
+    # and the velocities are continuous too (< 0.1 mm/s apart)
+    ts = np.arange(0, 3, 1e-4)
+    for ref in (sc.tip_ref, sc.com_ref, sc.left_foot_ref):
+        xs = np.array([ref(t).x for t in ts])
+        vs = np.array([ref(t).xd for t in ts])
+        assert np.abs(np.diff(xs, axis=0)).max() < 2e-4
+        assert np.abs(np.diff(vs, axis=0)).max() < 1e-3
+
+
+def test_short_compatible_run_keeps_higher_levels_exact(scenarios):
+    sc = scenarios["compatible"]
+    res = simulate(sc.robot, lambda s, t: sc.acceleration_stack(s, t, "activation"),
+                   lambda st, **kw: formulations.solve(st, "extended_jacobian"),
+                   duration=0.2, dt=0.002)
+    assert not res.failed and res.steps == 100
+    assert res.errors["support_foot_error_m"].max() < 1e-5
+    assert res.errors["com_error_m"].max() < 1e-3
+    assert np.nanmax(res.algorithmic_error) < 1e-8
+    assert res.errors["joint_limit_violation_rad"].max() == 0.0
+    # eq. 18 equals the cascaded QP on the scenario's stacks along the run
+    check = cmd.crosscheck("compatible", res, 0.002, every=20)
+    assert check["steps_with_damping"] == 0 and check["steps_compared"] == 5
+    assert check["max_rel_diff_qdd_undamped_steps"] < 1e-6
+
+
+def test_fencing_command_writes_summary_csv_plots_and_doc(tmp_path, capsys):
+    out = tmp_path / "results"
+    doc = tmp_path / "docs" / "reproduction.md"
+    rc = main(["fencing", "--variant", "both", "--formulations",
+               "extended_jacobian,nullspace", "--duration", "0.1", "--out", str(out),
+               "--doc", str(doc), "--quiet"])
+    assert rc == 0
+    printed = capsys.readouterr().out
+    assert "fencing — compatible tasks" in printed and "fencing — incompatible tasks" in printed
+    summary = json.loads((out / "summary.json").read_text())
+    assert list(summary) == ["compatible", "incompatible"]
+    for variant in summary:
+        assert list(summary[variant]) == ["extended_jacobian", "nullspace"]
+        for run in summary[variant].values():
+            assert tuple(run) == cmd.SUMMARY_KEYS
+            assert run["failed"] is False and run["median_step_time_s"] > 0
+            assert run["max_support_foot_error_m"] < 1e-4
+        csv = out / f"{variant}_extended_jacobian.csv"
+        header = csv.read_text().splitlines()[0].split(",")
+        assert header[0] == "t" and "tip_error_m" in header and "qdd34" in header
+        assert np.loadtxt(csv, delimiter=",", skiprows=1).shape == (50, len(header))
+        for key in ("tip_error", "algorithmic_error", "qdd"):
+            assert (out / f"{variant}_{key}.png").stat().st_size > 1000
+    text = doc.read_text()
+    assert "| `extended_jacobian` |" in text
+    for line in text.splitlines():
+        if line.startswith("!["):
+            assert (doc.parent / line.rsplit("](", 1)[1].rstrip(")")).is_file()
+
+
+def test_fencing_command_rejects_unknown_runs_and_skips_unavailable(tmp_path, monkeypatch,
+                                                                     capsys):
+    rc = main(["fencing", "--formulations", "no_such_method", "--out", str(tmp_path)])
+    assert rc == 2 and "unknown run(s) no_such_method" in capsys.readouterr().err
+    real_get = formulations.get
+
+    def get(name):
+        if name == "nullspace":
+            raise formulations.FormulationError("formulation 'nullspace' is not available")
+        return real_get(name)
+
+    monkeypatch.setattr(formulations, "get", get)
+    chosen, skipped = cmd.select_runs("extended_jacobian,nullspace")
+    assert [c.label for c in chosen] == ["extended_jacobian"]
+    assert skipped and "nullspace" in skipped[0] and "not available" in skipped[0]
+
+
+def test_placo_baseline_runs_the_same_scenario(scenarios):
+    pytest.importorskip("placo")
+    from benchmarks.placo_baseline import run_placo
+    res = run_placo(scenarios["compatible"], duration=0.1, dt=0.002)
+    assert not res.failed and res.steps == 50
+    assert res.errors["support_foot_error_m"].max() < 1e-4       # a hard task in PlaCo
+    assert res.errors["joint_limit_violation_rad"].max() < 1e-9
+    assert np.isnan(res.algorithmic_error).all()
+    assert np.all(res.solve_time_s > 0)
