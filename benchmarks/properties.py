@@ -73,6 +73,14 @@ VARIANTS: tuple[Variant, ...] = (
 )
 
 
+#: variants added to the rotated-coordinates table only: the textbook step of the
+#: projector recursions, without the extra ``N_{i-1}`` (see ``formulations/nullspace.py``)
+ROUNDOFF_VARIANTS: tuple[Variant, ...] = (
+    Variant("nullspace, no reproject", "nullspace", (("reproject", False),)),
+    Variant("op_space M, no reproject", "operational_space", (("reproject", False),), "spd"),
+)
+
+
 def random_mass_matrix(rng: np.random.Generator, n: int,
                        condition: float = MASS_CONDITION) -> np.ndarray:
     """Seeded SPD matrix with eigenvalues geometrically spread over ``[1, condition]``."""
@@ -105,6 +113,7 @@ class SingularitySweep:
     norms: np.ndarray          # len(sigmas) × len(variants)
     residuals: np.ndarray      # lower level's residual ‖A_2 θ̈ − b_2‖
     slopes: np.ndarray         # fitted d log‖θ̈‖ / d log σ over SLOPE_RANGE
+    rotated_variants: list[Variant]   # variants + ROUNDOFF_VARIANTS
     rotated_top: np.ndarray    # level 1's residual on the column-rotated stack
     rotated_lower: np.ndarray  # level 2's residual on the column-rotated stack
 
@@ -122,8 +131,9 @@ def singularity_sweep(sigmas=SIGMAS, variants=VARIANTS) -> SingularitySweep:
     Q, _ = np.linalg.qr(np.random.default_rng(1).standard_normal((mass.shape[0],) * 2))
     norms = np.full((len(sigmas), len(variants)), np.nan)
     residuals = np.full_like(norms, np.nan)
-    rot_top = np.full_like(norms, np.nan)
-    rot_lower = np.full_like(norms, np.nan)
+    rot_variants = variants + _available(ROUNDOFF_VARIANTS)
+    rot_top = np.full((len(sigmas), len(rot_variants)), np.nan)
+    rot_lower = np.full_like(rot_top, np.nan)
     for i, s in enumerate(sigmas):
         stack = near_singular(s)
         rotated = rotate_columns(stack, Q)
@@ -132,6 +142,7 @@ def singularity_sweep(sigmas=SIGMAS, variants=VARIANTS) -> SingularitySweep:
             if sol.ok:
                 norms[i, j] = np.linalg.norm(sol.x)
                 residuals[i, j] = sol.residuals[1]
+        for j, v in enumerate(rot_variants):
             sol = solve_variant(rotated, v, Q.T @ mass @ Q)
             if sol.ok:
                 rot_top[i, j], rot_lower[i, j] = sol.residuals[0], sol.residuals[1]
@@ -139,8 +150,8 @@ def singularity_sweep(sigmas=SIGMAS, variants=VARIANTS) -> SingularitySweep:
     fit = (sig >= SLOPE_RANGE[0]) & (sig <= SLOPE_RANGE[1])
     slopes = np.array([np.polyfit(np.log(sig[fit]), np.log(norms[fit, j]), 1)[0]
                        for j in range(len(variants))])
-    return SingularitySweep(tuple(sigmas), variants, norms, residuals, slopes, rot_top,
-                            rot_lower)
+    return SingularitySweep(tuple(sigmas), variants, norms, residuals, slopes, rot_variants,
+                            rot_top, rot_lower)
 
 
 # ---------------------------------------------------------- algorithmic error
@@ -282,10 +293,11 @@ def render(sweep: SingularitySweep, errors: dict[str, dict[str, ErrorSummary]],
         "`near_singular(σ)` above is axis-aligned (level 1 fixes coordinates), which spares "
         "the projector-based recursions any cancellation. Here the columns are rotated by a "
         "fixed random orthogonal `Q` (`A_i → A_i Q`, `M → Qᵀ M Q`): the same problem, the same "
-        "optimum norms, generic round-off.",
+        "optimum norms, generic round-off. The last columns are the textbook steps of the "
+        "projector recursions (`reproject=False`: without the extra `N_{i-1}`).",
         "",
-        "| σ | " + " | ".join(labels) + " |",
-        "|---|" + "---:|" * len(labels),
+        "| σ | " + " | ".join(v.label for v in sweep.rotated_variants) + " |",
+        "|---|" + "---:|" * len(sweep.rotated_variants),
     ]
     for i, s in enumerate(sweep.sigmas):
         lines.append(f"| {_sigma(s)} | " + " | ".join(
@@ -359,28 +371,28 @@ def _singularity_findings(sweep: SingularitySweep) -> list[str]:
                        + "): ‖θ̈‖ falls back to O(1) and the lower row counts as conflicting.")
     threshold = DEFAULT_RCOND * float(np.linalg.norm(near_singular(0.0)[1].A))
     rows = sig > threshold                     # rows where the exact optimum is 1/sin σ
+    rot_labels = [v.label for v in sweep.rotated_variants]
     if ref is not None and rows.any():
         worst = np.nanmax(np.maximum(sweep.rotated_top, sweep.rotated_lower)[rows], axis=0)
-        s_at = sig[rows].min()
-        exact_all = ["reference"] + exact
-        good = [lab for lab in exact_all if worst[_find(sweep, lab)] <= 1e-6]
-        bad = [lab for lab in exact_all if worst[_find(sweep, lab)] > 1e-6]
-        out.append(f"* Accuracy near the singularity differs among the exact formulations "
-                   f"(third table, σ = {_sigma(s_at)} … {_sigma(sig[rows].max())}, largest "
-                   f"residual of either level): "
-                   + ", ".join(f"`{lab}` {_fmt(worst[_find(sweep, lab)])}" for lab in good)
-                   + (" stay at round-off times ‖θ̈‖ (≈ ε/σ); " if good else "; ")
-                   + ", ".join(f"`{lab}` {_fmt(worst[_find(sweep, lab)])}" for lab in bad)
-                   + (" lose accuracy like ε/σ²." if bad else ".")
-                   + " The projector recursions (`nullspace`, `op_space`) form "
-                   "`N = I − Ĵ⁺Ĵ` (or `I − J̄J`) explicitly: its O(ε) leak into the higher "
-                   "levels' directions is multiplied by the 1/σ of the next inverse, and "
-                   "the step is 1/σ large; the `svd` path of `extended_jacobian` builds "
-                   "`Z_i J_iᵀ J_i`, which squares the conditioning. The basis methods "
-                   "(`reference`, the `qr` path) step only inside an orthonormal null-space "
-                   "basis. The axis-aligned stack of the second table hides this for "
-                   "`nullspace`, whose projectors are exact there (not for `op_space`: its "
-                   "`M` is not diagonal).")
+        candidates = ["reference"] + exact + [v.label for v in ROUNDOFF_VARIANTS]
+        candidates = [lab for lab in candidates if lab in rot_labels]
+        good = [lab for lab in candidates if worst[rot_labels.index(lab)] <= 1e-6]
+        bad = [lab for lab in candidates if worst[rot_labels.index(lab)] > 1e-6]
+        show = lambda lab: f"`{lab}` {_fmt(worst[rot_labels.index(lab)])}"  # noqa: E731
+        out.append(f"* Accuracy near the singularity (third table, σ = "
+                   f"{_sigma(sig[rows].min())} … {_sigma(sig[rows].max())}, largest residual "
+                   f"of either level, where ‖θ̈‖ reaches {_fmt(np.nanmax(sweep.norms[rows, ref]))}): "
+                   + ", ".join(show(lab) for lab in good)
+                   + (" stay at round-off times ‖θ̈‖ (≈ ε/σ)" if good else "")
+                   + ("; " + ", ".join(show(lab) for lab in bad)
+                      + " lose accuracy like ε/σ²." if bad else ".")
+                   + " The `svd` path of `extended_jacobian` builds `Z_i J_iᵀ J_i`, which "
+                   "squares the conditioning. The textbook projector steps "
+                   "`Ĵ_i^#(h_i − J_i θ̈)` leak O(ε/σ) out of `range(N_{i-1})` and the 1/σ step "
+                   "multiplies the leak; applying `N_{i-1}` once more (the default "
+                   "`reproject=True` of `nullspace` and `operational_space`, an exact no-op) "
+                   "removes it. The axis-aligned stack of the second table hides the "
+                   "difference for `nullspace` (its projectors are exact there).")
     damped = [lab for lab in sweep.variants if "λ=" in lab.label]
     if damped:
         parts = []

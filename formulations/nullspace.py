@@ -27,6 +27,15 @@ first included (so a kinematic singularity of ``J_1`` is damped too; eq. 27 inst
 leaves ``J_1``'s rows undamped). The projectors ``N_i`` stay the exact ones
 (undamped ``Ĵ_i⁺ Ĵ_i``), so a lower level never disturbs a higher one; the damped
 levels lose accuracy instead (status ``"approximate"``).
+
+Round-off: ``N_{i-1} Ĵ_i^# = Ĵ_i^#`` in exact arithmetic, but the computed columns of
+``Ĵ_i^#`` leak ``O(ε/σ)`` out of ``range(N_{i-1})`` (they come from an SVD of rows
+known to ``O(ε)``), and that leak is multiplied by the ``1/σ`` step: the higher
+levels' residuals then grow like ``ε/σ²`` near an algorithmic singularity. With
+``reproject=True`` (default) each step is multiplied by ``N_{i-1}`` once more
+(``x_i = x_{i-1} + N_{i-1} Ĵ_i^# (h_i − J_i x_{i-1})``, ``O(n² m_i)``), which keeps
+them at ``ε/σ`` like ``reference``; ``reproject=False`` is the textbook step
+(``docs/properties.md`` measures both).
 """
 
 from __future__ import annotations
@@ -44,6 +53,7 @@ CAPABILITIES = Capabilities(equalities=True, inequalities=False, weights=True,
 OPTIONS = {
     "damping": (0.0, "λ ≥ 0: Ĵ^# = Ĵᵀ(ĴĴᵀ + λI)⁻¹ (λ multiplies I, as eq. 27); 0: pseudo-inverse"),
     "rcond": (DEFAULT_RCOND, "relative rank threshold: σ counts if σ > rcond·‖J_i‖_F"),
+    "reproject": (True, "apply N_{i-1} to each step (exact no-op; keeps round-off ≈ ε/σ)"),
 }
 
 
@@ -87,7 +97,8 @@ def generalized_inverse(M: np.ndarray, tol: float, damping: float = 0.0
     return (V * gain) @ U.T, V, U
 
 
-def solve(stack: TaskStack, *, damping: float = 0.0, rcond: float = DEFAULT_RCOND) -> Outcome:
+def solve(stack: TaskStack, *, damping: float = 0.0, rcond: float = DEFAULT_RCOND,
+          reproject: bool = True) -> Outcome:
     """Recursive null-space projection; see the module docstring.
 
     Returns:
@@ -111,7 +122,8 @@ def solve(stack: TaskStack, *, damping: float = 0.0, rcond: float = DEFAULT_RCON
         if s.size == 0:
             continue
         gain = s / (s * s + damping) if damping > 0 else 1.0 / s
-        x = x + V @ (gain * (U.T @ (b - A @ x)))
+        step = V @ (gain * (U.T @ (b - A @ x)))
+        x = x + (N @ step if reproject else step)        # N_{i-1} Ĵ_i^# = Ĵ_i^#
         N = N - V @ V.T          # N_i = N_{i-1} − Ĵ_i⁺ Ĵ_i
     status = "approximate" if damping > 0 else "optimal"
     return Outcome(x, status, {"rank_profile": ranks, "min_singular_values": sigmas,

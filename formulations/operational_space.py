@@ -27,7 +27,11 @@ projected Jacobians, so near an algorithmic singularity ``θ̈`` grows like ``1/
 
 Numerics: ``M = L Lᵀ`` (Cholesky); with ``B = J_{i|prev} L⁻ᵀ`` one has
 ``Λ = (B Bᵀ)⁺`` and ``J̄ = L⁻ᵀ B⁺``, so no inverse of ``M`` and no squared condition
-number: ``B⁺`` comes from an SVD keeping ``σ > rcond·‖J_i L⁻ᵀ‖_F``.
+number: ``B⁺`` comes from an SVD keeping ``σ > rcond·‖J_i L⁻ᵀ‖_F``. As in
+``nullspace``, ``reproject=True`` (default) applies ``N_{i-1}`` once more to each step
+(``N_{i-1} J̄_{i|prev} = J̄_{i|prev}`` exactly, but not in round-off): without it the
+higher levels' residuals grow like ``ε/σ²`` near an algorithmic singularity instead of
+``ε/σ`` (measured in ``docs/properties.md``).
 """
 
 from __future__ import annotations
@@ -50,6 +54,7 @@ OPTIONS = {
     "mass_matrix": (None, "SPD n×n joint-space inertia M (required)"),
     "bias": (None, "C + G (n): with it, info['tau'] = M θ̈ + C + G"),
     "rcond": (DEFAULT_RCOND, "relative rank threshold: σ counts if σ > rcond·‖J_i L⁻ᵀ‖_F"),
+    "reproject": (True, "apply N_{i-1} to each step (exact no-op; keeps round-off ≈ ε/σ)"),
 }
 
 
@@ -95,7 +100,7 @@ def task_space_torque(levels: list[PrioritizedLevel], null_projector: np.ndarray
 
 
 def solve(stack: TaskStack, *, mass_matrix=None, bias=None,
-          rcond: float = DEFAULT_RCOND) -> Outcome:
+          rcond: float = DEFAULT_RCOND, reproject: bool = True) -> Outcome:
     """Prioritized operational-space control; see the module docstring.
 
     Returns:
@@ -123,7 +128,8 @@ def solve(stack: TaskStack, *, mass_matrix=None, bias=None,
         Lam = (U / (s * s)) @ U.T if s.size else np.zeros((A.shape[0], A.shape[0]))
         err = b - A @ x
         levels.append(PrioritizedLevel(Jp, Lam, J_bar, Lam @ err, int(s.size)))
-        x = x + J_bar @ err
+        step = J_bar @ err
+        x = x + (N @ step if reproject else step)   # N_{i-1} J̄_{i|prev} = J̄_{i|prev}
         N = N - J_bar @ Jp
     info = {"levels": levels, "null_projector": N,
             "rank_profile": [lv.rank for lv in levels]}
