@@ -82,14 +82,14 @@ RUNS: tuple[RunSpec, ...] = (
             "(projected σ_min ≈ 0.041·‖A‖_F when standing) is never damped, at the price "
             "of sharper q̈ peaks before the tip level is damped"),
     RunSpec("extended_jacobian:eq27", "extended_jacobian",
-            {"compatible": {"damping": 1e-3}, "incompatible": {"damping": 1e-3}},
-            "the paper's eq. 27 damping λ = 1e-3 on every lower level"),
+            {"compatible": {"damping": 1e-2}, "incompatible": {"damping": 1e-2}},
+            "the paper's eq. 27 damping λ = 1e-2 on every lower level"),
     RunSpec("nullspace", "nullspace", {},
             "resolved acceleration, recursive null-space projection, λ = 0 (the paper's "
             "'resolved acceleration method')"),
     RunSpec("nullspace:damped", "nullspace",
-            {"compatible": {"damping": 1e-3}, "incompatible": {"damping": 1e-3}},
-            "the same with the SR (damped least-squares) inverse, λ = 1e-3"),
+            {"compatible": {"damping": 1e-2}, "incompatible": {"damping": 1e-2}},
+            "the same with the SR (damped least-squares) inverse, λ = 1e-2"),
     RunSpec("chiaverini", "chiaverini", {}, "Chiaverini's singularity-robust priority"),
     RunSpec("unifying", "unifying", {}, "unifying framework, torques from eq. 40"),
     RunSpec("operational_space", "operational_space", {},

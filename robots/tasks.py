@@ -301,11 +301,20 @@ def joint_limit_bounds(state: KinematicState, horizon: float, dt: float,
                        name: str = "joint_limits") -> Task:
     """Inequality form of joint limits for the QP formulations: bounds on ``q̈``.
 
-    For each actuated joint, ``q + q̇ T + ½ q̈ T² ∈ [q_min, q_max]`` over the horizon
-    ``T`` and ``|q̇ + q̈ dt| ≤ q̇_max`` over the next step. Where the two ranges do not
-    intersect (a joint moving too fast towards a limit to stop within the horizon),
-    both bounds become the velocity bound nearest to the position range (the
-    hardest admissible braking), so the task stays feasible.
+    For each actuated joint, with ``d`` the distance left to the limit the joint
+    moves towards:
+
+    * horizon: ``q + q̇ T + ½ q̈ T² ∈ [q_min, q_max]`` over the horizon ``T``;
+    * next step: ``q + (q̇ + q̈ dt) dt ∈ [q_min, q_max]``;
+    * braking: a joint moving towards a limit decelerates at least ``q̇² / 2d``, so
+      that the peak of its constant-acceleration path, ``q − q̇²/2q̈``, stays inside
+      (the horizon bound alone lets that peak overshoot when it falls before ``T``);
+    * speed: ``|q̇ + q̈ dt| ≤ q̇_max`` over the next step.
+
+    Where the ranges do not intersect (a joint moving too fast towards a limit to
+    stop in time), both bounds become the position bound of the limit it moves
+    towards, clipped to the speed range (the hardest admissible braking), so the
+    task stays feasible.
     """
     robot = state.robot
     nb = robot.n_base
@@ -313,16 +322,24 @@ def joint_limit_bounds(state: KinematicState, horizon: float, dt: float,
     qa = _actuated_positions(state)
     va = state.v[nb:]
     T = float(horizon)
-    with np.errstate(invalid="ignore"):
-        p_lo = 2.0 * (lo - qa - va * T) / T ** 2
-        p_hi = 2.0 * (hi - qa - va * T) / T ** 2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        p_lo = np.maximum(2.0 * (lo - qa - va * T) / T ** 2, (lo - qa - va * dt) / dt ** 2)
+        p_hi = np.minimum(2.0 * (hi - qa - va * T) / T ** 2, (hi - qa - va * dt) / dt ** 2)
+        d_hi = np.maximum(hi - qa, 1e-9)
+        d_lo = np.maximum(qa - lo, 1e-9)
+        brake_hi = np.where(va > 0, -va ** 2 / (2.0 * d_hi), np.inf)
+        brake_lo = np.where(va < 0, va ** 2 / (2.0 * d_lo), -np.inf)
+        p_hi = np.minimum(np.nan_to_num(p_hi, nan=np.inf), brake_hi)
+        p_lo = np.maximum(np.nan_to_num(p_lo, nan=-np.inf), brake_lo)
         v_lo = (-vmax - va) / dt
         v_hi = (vmax - va) / dt
-    lower = np.maximum(np.nan_to_num(p_lo, nan=-np.inf), np.nan_to_num(v_lo, nan=-np.inf))
-    upper = np.minimum(np.nan_to_num(p_hi, nan=np.inf), np.nan_to_num(v_hi, nan=np.inf))
+    lower = np.maximum(p_lo, np.nan_to_num(v_lo, nan=-np.inf))
+    upper = np.minimum(p_hi, np.nan_to_num(v_hi, nan=np.inf))
     bad = lower > upper
     if bad.any():
-        mid = np.where(p_lo[bad] > v_hi[bad], v_hi[bad], v_lo[bad])
+        mid = np.where(va[bad] > 0, np.clip(p_hi[bad], v_lo[bad], v_hi[bad]),
+                       np.clip(p_lo[bad], v_lo[bad], v_hi[bad]))
+        mid = np.where(np.isfinite(mid), mid, 0.0)
         lower[bad] = upper[bad] = mid
     k = lo.size
     A = np.zeros((k, robot.nv))
