@@ -16,7 +16,7 @@ from benchmarks.cli import main
 from benchmarks.stacks import random_case, random_mass_matrix
 
 TINY = dict(sizes=(6, 9), levels=(2, 3), repeats=6, min_repeats=2, warmup=1, cap_s=2.0,
-            samples=2, g1=False,
+            samples=2, g1=False, blas_threads=1,
             only=("reference", "extended_jacobian", "nullspace", "operational_space",
                   "cascaded_qp"))
 
@@ -180,3 +180,35 @@ def test_cli_runs_a_tiny_benchmark(tmp_path, capsys):
 def test_cli_rejects_bad_lists(tmp_path, capsys):
     assert main(["bench", "--out", str(tmp_path), "--no-g1", "--sizes", "a,b"]) == 2
     assert "--sizes" in capsys.readouterr().err
+
+
+def test_blas_threads_are_set_and_restored():
+    import ctypes
+    previous = bench.set_blas_threads(1)
+    try:
+        assert previous, "no OpenBLAS found in this process"
+        for path in previous:
+            lib = ctypes.CDLL(path)
+            getter = next(getattr(lib, n.replace("_set_", "_get_"))
+                          for n in bench._BLAS_SETTERS if hasattr(lib, n))
+            assert getter() == 1
+    finally:
+        bench.restore_blas_threads(previous)
+    for path, count in previous.items():
+        lib = ctypes.CDLL(path)
+        getter = next(getattr(lib, n.replace("_set_", "_get_"))
+                      for n in bench._BLAS_SETTERS if hasattr(lib, n))
+        assert getter() == count
+
+
+def test_g1_fencing_samples_give_robot_stacks_and_mass_matrices():
+    pytest.importorskip("pinocchio")
+    from benchmarks.stacks import g1_fencing_samples
+    samples = g1_fencing_samples("compatible", 3, dt=0.01, duration=0.1)
+    assert len(samples.stacks) == 3 and samples.times[0] == 0.0
+    for stack, M in zip(samples.stacks, samples.mass_matrices):
+        assert stack.n == 35 and stack.is_equality
+        assert stack.levels[0].names == ("support_foot",)
+        assert np.array_equal(M, M.T) and np.linalg.eigvalsh(M).min() > 0
+    more = samples.stacks_at(5)
+    assert len(more) == 5 and all(s.n == 35 for s in more)
