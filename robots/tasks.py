@@ -306,9 +306,10 @@ def joint_limit_bounds(state: KinematicState, horizon: float, dt: float,
 
     * horizon: ``q + q̇ T + ½ q̈ T² ∈ [q_min, q_max]`` over the horizon ``T``;
     * next step: ``q + (q̇ + q̈ dt) dt ∈ [q_min, q_max]``;
-    * braking: a joint moving towards a limit decelerates at least ``q̇² / 2d``, so
-      that the peak of its constant-acceleration path, ``q − q̇²/2q̈``, stays inside
-      (the horizon bound alone lets that peak overshoot when it falls before ``T``);
+    * braking: when the horizon bound would make the constant-acceleration path
+      peak before ``T`` (it then overshoots the limit in between), the joint must
+      instead decelerate by at least ``q̇² / 2d``, so that the peak
+      ``q − q̇²/2q̈`` stays inside; far from a limit this never binds;
     * speed: ``|q̇ + q̈ dt| ≤ q̇_max`` over the next step.
 
     Where the ranges do not intersect (a joint moving too fast towards a limit to
@@ -323,14 +324,20 @@ def joint_limit_bounds(state: KinematicState, horizon: float, dt: float,
     va = state.v[nb:]
     T = float(horizon)
     with np.errstate(invalid="ignore", divide="ignore"):
-        p_lo = np.maximum(2.0 * (lo - qa - va * T) / T ** 2, (lo - qa - va * dt) / dt ** 2)
-        p_hi = np.minimum(2.0 * (hi - qa - va * T) / T ** 2, (hi - qa - va * dt) / dt ** 2)
+        h_lo = 2.0 * (lo - qa - va * T) / T ** 2          # horizon bounds
+        h_hi = 2.0 * (hi - qa - va * T) / T ** 2
         d_hi = np.maximum(hi - qa, 1e-9)
         d_lo = np.maximum(qa - lo, 1e-9)
-        brake_hi = np.where(va > 0, -va ** 2 / (2.0 * d_hi), np.inf)
-        brake_lo = np.where(va < 0, va ** 2 / (2.0 * d_lo), -np.inf)
-        p_hi = np.minimum(np.nan_to_num(p_hi, nan=np.inf), brake_hi)
-        p_lo = np.maximum(np.nan_to_num(p_lo, nan=-np.inf), brake_lo)
+        # the constant-acceleration path peaks before T (and would overshoot) when
+        # the horizon bound decelerates faster than -v/T: then brake by v²/2d
+        brake_hi = np.where((va > 0) & (h_hi < -va / T), -va ** 2 / (2.0 * d_hi), np.inf)
+        brake_lo = np.where((va < 0) & (h_lo > -va / T), va ** 2 / (2.0 * d_lo), -np.inf)
+        p_hi = np.minimum.reduce([np.nan_to_num(h_hi, nan=np.inf), brake_hi,
+                                  (hi - qa - va * dt) / dt ** 2])
+        p_lo = np.maximum.reduce([np.nan_to_num(h_lo, nan=-np.inf), brake_lo,
+                                  (lo - qa - va * dt) / dt ** 2])
+        p_hi = np.nan_to_num(p_hi, nan=np.inf)
+        p_lo = np.nan_to_num(p_lo, nan=-np.inf)
         v_lo = (-vmax - va) / dt
         v_hi = (vmax - va) / dt
     lower = np.maximum(p_lo, np.nan_to_num(v_lo, nan=-np.inf))
