@@ -47,7 +47,7 @@ import formulations
 from formulations.registry import check_support
 from hierarchy import TaskStack, UnsupportedTaskError
 
-from .stacks import (Case, FencingSamples, g1_fencing_cases, random_case,
+from .stacks import (G1_DURATION_S, Case, FencingSamples, g1_fencing_cases, random_case,
                      same_shape_batch)
 
 #: ``n`` and ``k`` of the random cases (default and ``--quick``)
@@ -477,7 +477,9 @@ def measure_control_step(settings: Settings, progress: Progress | None = None,
                      "solve_us": float(np.median(sim.solve_time_s)) * 1e6,
                      "torque_us": float(np.median(sim.torque_time_s)) * 1e6,
                      "total_us": float(np.median(sim.step_time_s)) * 1e6,
-                     "note": sim.message if sim.failed else ""})
+                     "note": sim.message if sim.failed else (
+                         f"shortened to {sim.steps} steps (time cap)"
+                         if duration < settings.control_duration_s - 1e-9 else "")})
         if progress:
             progress.step(f"control step: {name}")
     return rows, ""
@@ -642,25 +644,45 @@ def plot(rows: list[Row], out: Path) -> list[str]:
     if not sub:
         return []
     labels = sorted({r.label for r in sub})
-    cmap = plt.get_cmap("tab20")
-    style = {l: (cmap(i % 20), "-" if i < 10 else "--") for i, l in enumerate(labels)}
+    from matplotlib.ticker import NullFormatter
+    cmap = plt.get_cmap("tab10")
+    families = sorted({l.split("[")[0] for l in labels})
+
+    def style(label: str) -> dict:
+        fam = label.split("[")[0]
+        if label == "extended_jacobian":
+            return {"color": "black", "lw": 2.6, "ls": "-", "marker": "o", "zorder": 5}
+        if fam in ("cascaded_qp", "cvxpy"):
+            backs = sorted(l for l in labels if l.startswith(fam + "["))
+            i = backs.index(label) if label in backs else 0
+            return {"color": cmap(i % 10), "lw": 1.0, "marker": "x",
+                    "ls": "--" if fam == "cascaded_qp" else ":"}
+        if "[" in label:            # extra paths of one formulation: same colour, own marker
+            extra = sorted(l for l in labels if l.startswith(fam + "["))
+            return {"color": cmap(families.index(fam) % 10), "lw": 1.4, "ls": "-.",
+                    "marker": "s^vD"[extra.index(label) % 4]}
+        return {"color": cmap(families.index(fam) % 10), "lw": 1.6, "marker": "o", "ls": "-"}
+
     written = []
     for axis, other, fname in (("n", "k", "time_vs_n.png"), ("k", "n", "time_vs_k.png")):
         panels = sorted({getattr(r, other) for r in sub})
-        fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels) + 2.5, 4.2),
+        ticks = sorted({getattr(r, axis) for r in sub})
+        fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels) + 2.5, 4.6),
                                  squeeze=False, sharey=True)
         for ax, p in zip(axes[0], panels):
             for l in labels:
                 pts = sorted((getattr(r, axis), r.median_us) for r in sub
                              if r.label == l and getattr(r, other) == p)
-                if len(pts) >= 1:
+                if pts:
                     xs, ys = zip(*pts)
-                    ax.plot(xs, ys, marker="o", ms=3, color=style[l][0], ls=style[l][1],
-                            label=l)
+                    ax.plot(xs, ys, ms=3, label=l, **style(l))
             ax.set_xscale("log")
             ax.set_yscale("log")
+            ax.set_xticks(ticks)
+            ax.set_xticklabels([str(t) for t in ticks])
+            ax.xaxis.set_minor_formatter(NullFormatter())
             ax.set_title(f"{other} = {p}")
-            ax.set_xlabel(axis)
+            ax.set_xlabel(axis + (" (unknowns)" if axis == "n" else " (levels)"))
             ax.grid(True, which="both", alpha=0.3)
         axes[0][0].set_ylabel("median solve time (µs)")
         handles, names = axes[0][0].get_legend_handles_labels()
@@ -752,16 +774,20 @@ def markdown_report(rows: list[Row], rats: list[Ratio], batch: dict, ik: dict,
                   "(or the formulation's own τ). Paper: 28 DOF, 4 tasks, 2.4 GHz Pentium "
                   "(2009).\n")
         md.append("| formulation | steps | kinematics µs | solve µs | torque µs | total µs | "
-                  "paper ms |")
-        md.append("|---|---:|---:|---:|---:|---:|---:|")
+                  "paper ms | run |")
+        md.append("|---|---:|---:|---:|---:|---:|---:|---|")
         for c in control:
+            note = c.get("note", "")
+            run_note = (note if note.startswith("shortened") else f"stopped: {note}") \
+                if note else "completed"
             if not c.get("steps"):
-                md.append(f"| {c['what']} | 0 | – | – | – | – | {c['paper_ms'] or '–'} |")
+                md.append(f"| {c['what']} | 0 | – | – | – | – | {c['paper_ms'] or '–'} | "
+                          f"{run_note} |")
                 continue
             md.append(f"| {c['what']} (`{c['formulation']}`) | {c['steps']} | "
                       f"{_fmt_us(c['kinematics_us'])} | {_fmt_us(c['solve_us'])} | "
                       f"{_fmt_us(c['torque_us'])} | {_fmt_us(c['total_us'])} | "
-                      f"{c['paper_ms'] or '–'} |")
+                      f"{c['paper_ms'] or '–'} | {run_note} |")
     ks = sorted({r.k for r in rows if r.suite == "random"})
     if ks:
         md.append("\n## Random stacks: median solve time (µs)\n")
@@ -783,12 +809,18 @@ def doc_page(report: str, info: dict[str, str], settings: Settings, command: str
              elapsed_s: float) -> str:
     """``docs/benchmarks.md``: how it was measured, the machine, then the report."""
     mode = "quick" if settings.quick else "default"
+    threads = (f"OpenBLAS was limited to {settings.blas_threads} thread(s) while measuring "
+               "(`--blas-threads`), as in a control loop that solves one problem at a time; "
+               "with BLAS's default threads on this shared 2-core machine, solves at "
+               "n ≥ 100 were up to 100× slower and erratic."
+               if settings.blas_threads > 0 else "BLAS ran with its default thread count.")
     return f"""# Benchmarks
 
 Generated by `{command}` ({mode} run, {elapsed_s / 60:.1f} min); do not edit by hand.
 
 **Machine**: {info['cpu']}, {info['cores']} cores, {info['os']}, Python {info['python']},
 BLAS {info['blas']}. **Libraries**: {info['versions']}.
+{threads}
 The machine was shared with other processes while measuring: compare ratios measured
 side by side in one run, not absolute times across runs.
 
@@ -809,7 +841,10 @@ whose single solve exceeds {settings.cap_s / settings.min_repeats * 1e3:.0f} ms 
 
 G1 stacks: the fencing scenario (`robots.fencing`, both variants, acceleration level,
 joint limits as activation rows so every equality formulation can take them) at
-{settings.g1_samples} states evenly spread over a {3.0:g} s run solved by `reference`.
+{settings.g1_samples} states evenly spread over a {G1_DURATION_S:g} s run (5 ms steps) driven
+by `reference` (compatible) or by the selectively damped `extended_jacobian` of
+`prioik fencing` (incompatible: exact methods blow up at its algorithmic singularity);
+every formulation is then timed with its default options (λ = 0) on those stacks.
 
 {report}"""
 
