@@ -14,6 +14,7 @@ SUBCOMMAND_MODULES = [
     "benchmarks.compare",
     "benchmarks.bench",
     "benchmarks.properties",
+    "benchmarks.validation",
 ]
 
 

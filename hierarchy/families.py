@@ -180,3 +180,70 @@ FAMILIES: dict[str, Callable[[np.random.Generator, int, int], TaskStack]] = {
     "coupled": coupled,
     "decoupled": decoupled,
 }
+
+
+# ------------------------------------------------------------ inequality stacks
+def with_inequalities(rng: np.random.Generator, n: int, k: int) -> TaskStack:
+    """Joint-limit-like stacks: inequality levels above equality levels.
+
+    Level 1 is a box ``−u ≤ x ≤ u`` (task ``box``, ``u ∈ [0.3, 1.2]``); level 2 (when
+    ``k ≥ 3``) general rows ``lower ≤ A x ≤ upper`` around a point inside the box,
+    some rows one-sided (``∓inf``), so levels 1-2 are jointly feasible. The remaining
+    levels are equality tasks whose targets (scale 2) usually push ``x`` onto the
+    box; from four levels on, one of them also holds a weighted inequality task
+    sharing the level with an equality task. ``k`` is at least 2.
+    """
+    k = max(2, k)
+    u = rng.uniform(0.3, 1.2, n)
+    levels: list[list[Task]] = [[Task("box", np.eye(n), lower=-u, upper=u)]]
+    n_eq = k - 1
+    if k >= 3:
+        m = max(1, n // 3)
+        A = rng.standard_normal((m, n))
+        x0 = rng.uniform(-0.5, 0.5, n) * u
+        centre = A @ x0
+        lower = centre - rng.uniform(0.05, 0.5, m)
+        upper = centre + rng.uniform(0.05, 0.5, m)
+        side = rng.integers(0, 3, m)              # 0: two-sided, 1: lower only, 2: upper only
+        lower[side == 2] = -np.inf
+        upper[side == 1] = np.inf
+        levels.append([Task("band", A, lower=lower, upper=upper)])
+        n_eq = k - 2
+    ms = _split(rng, max(n_eq, int(0.9 * n)), n_eq)
+    mixed = int(rng.integers(n_eq)) if k >= 4 else -1
+    for i, m in enumerate(ms):
+        level = [Task(f"task{i}", rng.standard_normal((m, n)), 2.0 * rng.standard_normal(m),
+                      weight=float(rng.uniform(0.5, 2.0)))]
+        if i == mixed:
+            a = rng.standard_normal((2, n))
+            level.append(Task(f"limit{i}", a, lower=np.array([-0.5, -np.inf]),
+                              upper=np.array([0.5, 0.2]), weight=float(rng.uniform(0.5, 2.0))))
+        levels.append(level)
+    return TaskStack(levels)
+
+
+def infeasible_inequality(rng: np.random.Generator, n: int, k: int) -> TaskStack:
+    """A first level of hard inequalities that cannot all hold, then equality levels.
+
+    Level 1 holds ``box`` (``|x| ≤ 1``) and ``keepout``: rows ``c x ≥ 1`` and
+    ``c x ≤ −1`` for one random unit direction ``c`` (contradictory). The
+    lexicographic least-violation answer has ``c x = 0`` (each row violated by 1);
+    the lower levels are equality tasks. ``k`` is at least 2.
+    """
+    k = max(2, k)
+    c = rng.standard_normal(n)
+    c /= np.linalg.norm(c)
+    first = [Task("box", np.eye(n), lower=-np.ones(n), upper=np.ones(n)),
+             Task("keepout", np.vstack([c, c]), lower=np.array([1.0, -np.inf]),
+                  upper=np.array([np.inf, -1.0]))]
+    ms = _split(rng, max(k - 1, int(0.7 * n)), k - 1)
+    return TaskStack([first] + [[Task(f"task{i}", rng.standard_normal((m, n)),
+                                      rng.standard_normal(m))] for i, m in enumerate(ms)])
+
+
+#: stacks with inequality tasks (kept apart from :data:`FAMILIES`, whose consumers
+#: expect equality stacks): family name -> generator ``f(rng, n, k)``
+INEQUALITY_FAMILIES: dict[str, Callable[[np.random.Generator, int, int], TaskStack]] = {
+    "with_inequalities": with_inequalities,
+    "infeasible_inequality": infeasible_inequality,
+}

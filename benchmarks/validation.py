@@ -1,0 +1,326 @@
+"""Validation report: every formulation × back-end on N seeded random stacks per family.
+
+``prioik validate --n-stacks 200 --out docs/validation.md`` (or
+``python -m benchmarks.validation …``) draws, for each family — ``compatible``,
+``conflicting``, ``rank_deficient`` (equality stacks, :data:`hierarchy.families.FAMILIES`)
+and ``with_inequalities``, ``infeasible_inequality``
+(:data:`hierarchy.families.INEQUALITY_FAMILIES`) — ``N`` stacks with seeded sizes,
+solves each with every available formulation and every QP back-end of
+``cascaded_qp``, and writes a markdown table per family:
+
+* distance ``‖x − x_ref‖ / max(1, ‖x_ref‖)`` (max and median) to ``reference`` on
+  equality stacks, to the ``cvxpy``/Clarabel cascade on inequality stacks;
+* the lexicographic check pass rate: :func:`hierarchy.check_lexicographic` with
+  ``tol = 1e-6`` on equality stacks; on inequality stacks, every level's residual
+  (:func:`hierarchy.lexicographic_residuals`, equality residual plus inequality
+  violation) within ``1e-6 · max(1, r_ref)`` of the reference answer's;
+* the largest inequality violation beyond the reference answer's own (0 when a
+  formulation keeps every bound the reference keeps);
+* statuses (optimal / approximate / failed), errors (exceptions), median time.
+
+Formulations that cannot take a family (closed-form methods on inequality
+stacks) are skipped and listed; formulations that need a mass matrix get
+``mass_matrix = I`` (their metric tie-break is then the minimum norm of
+``reference``). Progress goes to stderr.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import platform
+import statistics
+import sys
+import time
+from dataclasses import dataclass, field
+from importlib import metadata
+from pathlib import Path
+
+import numpy as np
+
+import formulations
+from formulations.registry import check_support
+from hierarchy import (TaskStack, UnsupportedTaskError, check_lexicographic,
+                       lexicographic_residuals)
+from hierarchy.families import FAMILIES, INEQUALITY_FAMILIES
+
+EQUALITY_FAMILY_NAMES = ("compatible", "conflicting", "rank_deficient")
+INEQUALITY_FAMILY_NAMES = ("with_inequalities", "infeasible_inequality")
+LEX_TOL = 1e-6
+
+#: seed offset per family, so that families draw independent streams
+_SEED_OFFSET = {name: 10_000 * (i + 1) for i, name in
+                enumerate(EQUALITY_FAMILY_NAMES + INEQUALITY_FAMILY_NAMES)}
+
+
+@dataclass
+class Variant:
+    """One formulation with one back-end (or none)."""
+
+    label: str
+    formulation: str
+    options: dict = field(default_factory=dict)
+    needs_mass_matrix: bool = False
+
+
+@dataclass
+class Tally:
+    """Accumulated results of one variant on one family."""
+
+    distances: list = field(default_factory=list)
+    lex_pass: int = 0
+    lex_total: int = 0
+    violation: float = 0.0
+    statuses: dict = field(default_factory=dict)
+    errors: int = 0
+    first_error: str = ""
+    first_failure: str = ""
+    times: list = field(default_factory=list)
+
+
+def variants(include_cvxpy_backends: bool = False) -> tuple[list[Variant], list[str]]:
+    """Every available formulation × back-end, and the notes on what was left out."""
+    out, notes = [], []
+    for info in formulations.available():
+        if not info.available:
+            notes.append(f"`{info.name}`: not available here ({info.reason})")
+            continue
+        mm = bool(info.capabilities and info.capabilities.needs_mass_matrix)
+        if mm:
+            notes.append(f"`{info.name}`: needs a mass matrix; run with `mass_matrix = I`")
+        if info.name == "cascaded_qp":
+            for be in info.backends:
+                out.append(Variant(f"cascaded_qp/{be}", info.name, {"solver": be}))
+        elif info.name == "cvxpy" and include_cvxpy_backends:
+            for be in info.backends:
+                out.append(Variant(f"cvxpy/{be}", info.name, {"solver": be}))
+        elif info.name == "cvxpy":
+            out.append(Variant("cvxpy/CLARABEL", info.name, {"solver": "CLARABEL"}))
+        else:
+            out.append(Variant(info.name, info.name, {}, mm))
+    return out, notes
+
+
+def draw(family: str, index: int, n_range: tuple[int, int], k_range: tuple[int, int]
+         ) -> TaskStack:
+    """Stack ``index`` of ``family``: sizes and data from one seeded generator."""
+    rng = np.random.default_rng(_SEED_OFFSET.get(family, 0) + index)
+    n = int(rng.integers(n_range[0], n_range[1] + 1))
+    k = int(rng.integers(k_range[0], k_range[1] + 1))
+    gen = FAMILIES.get(family) or INEQUALITY_FAMILIES[family]
+    return gen(rng, n, k)
+
+
+def _violation(stack: TaskStack, x: np.ndarray) -> np.ndarray:
+    """Per inequality task, ``‖viol_t(x)‖`` (unweighted)."""
+    out = []
+    for t in stack.tasks:
+        if t.is_equality:
+            continue
+        lo, up = t.bounds()
+        Ax = t.A @ x
+        out.append(float(np.linalg.norm(np.maximum(lo - Ax, 0) + np.maximum(Ax - up, 0))))
+    return np.array(out)
+
+
+def run_family(family: str, n_stacks: int, vs: list[Variant], n_range, k_range,
+               progress=None) -> tuple[dict[str, Tally], list[str]]:
+    """Solve ``n_stacks`` stacks of ``family`` with every variant."""
+    tallies = {v.label: Tally() for v in vs}
+    skipped: dict[str, str] = {}
+    for i in range(n_stacks):
+        stack = draw(family, i, n_range, k_range)
+        if stack.is_equality:
+            ref = formulations.solve(stack, "reference")
+        else:
+            ref = formulations.solve(stack, "cvxpy", solver="CLARABEL")
+        if not ref.ok:
+            tallies.setdefault("(reference failed)", Tally()).errors += 1
+            continue
+        ref_res = ref.residuals
+        ref_viol = _violation(stack, ref.x)
+        for v in vs:
+            info = formulations.get(v.formulation)
+            try:
+                check_support(v.formulation, info.CAPABILITIES, stack)
+            except UnsupportedTaskError as exc:
+                skipped[v.label] = str(exc).split(":")[0]
+                continue
+            opts = dict(v.options)
+            if v.needs_mass_matrix:
+                opts["mass_matrix"] = np.eye(stack.n)
+            tally = tallies[v.label]
+            try:
+                sol = formulations.solve(stack, v.formulation, **opts)
+            except Exception as exc:  # a report row, not a test: count and show it
+                tally.errors += 1
+                tally.first_error = tally.first_error or f"{type(exc).__name__}: {exc}"
+                continue
+            tally.times.append(sol.time_s)
+            tally.statuses[sol.status] = tally.statuses.get(sol.status, 0) + 1
+            if not sol.ok:
+                tally.first_failure = tally.first_failure or str(sol.info.get("message", ""))
+                continue
+            x = sol.x
+            tally.distances.append(float(np.linalg.norm(x - ref.x)
+                                         / max(1.0, np.linalg.norm(ref.x))))
+            tally.lex_total += 1
+            if stack.is_equality:
+                tally.lex_pass += bool(check_lexicographic(stack, x, tol=LEX_TOL).ok)
+            else:
+                res = lexicographic_residuals(stack, x)
+                tally.lex_pass += bool(np.all(np.abs(res - ref_res)
+                                              <= LEX_TOL * np.maximum(1.0, ref_res)))
+                viol = _violation(stack, x)
+                tally.violation = max(tally.violation,
+                                      float(np.max(viol - ref_viol, initial=0.0)))
+        if progress is not None:
+            progress(family, i + 1, n_stacks)
+    tallies = {k: t for k, t in tallies.items() if t.times or t.errors}
+    notes = [f"`{k}` skipped: {why}" for k, why in sorted(skipped.items())
+             if k not in tallies]
+    return tallies, notes
+
+
+def _fmt(v: float) -> str:
+    return "–" if not np.isfinite(v) else f"{v:.1e}"
+
+
+def table(family: str, tallies: dict[str, Tally], equality: bool) -> str:
+    """The markdown table of one family."""
+    ref = "`reference`" if equality else "`cvxpy`/Clarabel"
+    head = ("| formulation / back-end | max dist. | median dist. | lex. check | "
+            + ("" if equality else "max extra violation | ")
+            + "optimal / approx. / failed | errors | median time |")
+    sep = "|" + "---|" * (head.count("|") - 1)
+    rows = [f"Distance to {ref}; lexicographic check at tol {LEX_TOL:g}.", "", head, sep]
+    for label, t in tallies.items():
+        d = np.array(t.distances) if t.distances else np.array([np.nan])
+        lex = f"{t.lex_pass}/{t.lex_total}" if t.lex_total else "–"
+        st = "/".join(str(t.statuses.get(s, 0)) for s in ("optimal", "approximate", "failed"))
+        tm = f"{statistics.median(t.times) * 1e6:.0f} µs" if t.times else "–"
+        viol = "" if equality else f"{_fmt(t.violation)} | "
+        rows.append(f"| {label} | {_fmt(float(np.max(d)))} | {_fmt(float(np.median(d)))} | "
+                    f"{lex} | {viol}{st} | {t.errors} | {tm} |")
+    fails = [(k, t.first_failure) for k, t in tallies.items() if t.first_failure]
+    errs = [(k, t.first_error) for k, t in tallies.items() if t.first_error]
+    if fails or errs:
+        rows.append("")
+        for k, msg in fails:
+            rows.append(f"- `{k}` first failure: {msg[:300]}")
+        for k, msg in errs:
+            rows.append(f"- `{k}` first error: {msg[:300]}")
+    return "\n".join(rows)
+
+
+def _versions() -> str:
+    out = []
+    for pkg in ("numpy", "qpsolvers", "clarabel", "osqp", "proxsuite", "quadprog", "daqp",
+                "highspy", "scs", "cvxpy", "placo"):
+        try:
+            out.append(f"{pkg} {metadata.version(pkg)}")
+        except metadata.PackageNotFoundError:
+            pass
+    return ", ".join(out)
+
+
+def report(n_stacks: int, families: list[str], n_range, k_range, include_cvxpy_backends=False,
+           only: list[str] | None = None, stream=None) -> str:
+    """Run everything and return the markdown report."""
+    stream = sys.stderr if stream is None else stream
+    vs, notes = variants(include_cvxpy_backends)
+    if only:
+        vs = [v for v in vs if v.formulation in only or v.label in only]
+    t0 = time.perf_counter()
+    last = [0.0]
+
+    def progress(family, i, total):
+        now = time.perf_counter()
+        if i == total or now - last[0] > 2.0:
+            last[0] = now
+            print(f"validate: {family} {i}/{total} ({now - t0:.0f} s)", file=stream, flush=True)
+
+    sections = []
+    for family in families:
+        tallies, skip_notes = run_family(family, n_stacks, vs, n_range, k_range, progress)
+        equality = family in FAMILIES
+        doc = (FAMILIES.get(family) or INEQUALITY_FAMILIES[family]).__doc__ or ""
+        sections.append(f"## {family}\n\n{doc.strip().splitlines()[0]}\n\n"
+                        + table(family, tallies, equality)
+                        + ("\n\n" + "\n".join(f"- {s}" for s in skip_notes) if skip_notes else ""))
+    elapsed = time.perf_counter() - t0
+    cmd = (f"prioik validate --n-stacks {n_stacks} --n-min {n_range[0]} --n-max {n_range[1]} "
+           f"--k-min {k_range[0]} --k-max {k_range[1]}")
+    header = [
+        "# Validation report",
+        "",
+        f"Generated by `benchmarks/validation.py` (`{cmd}`) on "
+        f"{datetime.date.today().isoformat()}, {platform.machine()}, Python "
+        f"{platform.python_version()}; {elapsed:.0f} s in total. Do not edit by hand: re-run "
+        f"the command.",
+        "",
+        f"{n_stacks} seeded stacks per family, `n` in [{n_range[0]}, {n_range[1]}] unknowns, "
+        f"`k` in [{k_range[0]}, {k_range[1]}] levels (drawn per stack). Every formulation is "
+        "called with its default options (`cascaded_qp` once per back-end). Distances are "
+        "relative: `‖x − x_ref‖ / max(1, ‖x_ref‖)`. Times are wall-clock per solve on a "
+        "shared 2-core machine (noisy; see `prioik bench` for timing).",
+        "",
+        f"Versions: {_versions()}.",
+        "",
+    ]
+    if notes:
+        header += ["Notes:", ""] + [f"- {s}" for s in notes] + [""]
+    return "\n".join(header) + "\n" + "\n\n".join(sections) + "\n"
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("validate", help="validation report: every formulation × back-end on "
+                                        "N random stacks per family",
+                       description=__doc__.split("\n\n")[0])
+    _arguments(p)
+    p.set_defaults(func=run)
+
+
+def _arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--n-stacks", type=int, default=200, help="stacks per family (default 200)")
+    p.add_argument("--out", type=Path, default=Path("docs/validation.md"),
+                   help="markdown file to write (default docs/validation.md)")
+    p.add_argument("--families", default=",".join(EQUALITY_FAMILY_NAMES + INEQUALITY_FAMILY_NAMES),
+                   help="comma-separated family names")
+    p.add_argument("--formulations", default="", help="comma-separated names (default: all)")
+    p.add_argument("--n-min", type=int, default=4)
+    p.add_argument("--n-max", type=int, default=20)
+    p.add_argument("--k-min", type=int, default=2)
+    p.add_argument("--k-max", type=int, default=5)
+    p.add_argument("--cvxpy-backends", action="store_true",
+                   help="run cvxpy with every solver it has (default: Clarabel only)")
+
+
+def run(args: argparse.Namespace) -> int:
+    families = [f for f in args.families.split(",") if f]
+    unknown = [f for f in families if f not in FAMILIES and f not in INEQUALITY_FAMILIES]
+    if unknown:
+        raise ValueError(f"unknown families {unknown}; known: "
+                         f"{', '.join(list(FAMILIES) + list(INEQUALITY_FAMILIES))}")
+    if args.n_stacks < 1 or args.n_min < 2 or args.n_max < args.n_min or args.k_min < 1 \
+            or args.k_max < args.k_min:
+        raise ValueError("need n-stacks ≥ 1, 2 ≤ n-min ≤ n-max, 1 ≤ k-min ≤ k-max")
+    only = [s for s in args.formulations.split(",") if s] or None
+    text = report(args.n_stacks, families, (args.n_min, args.n_max), (args.k_min, args.k_max),
+                  args.cvxpy_backends, only)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(text, encoding="utf-8")
+    print(f"validate: wrote {args.out}", file=sys.stderr)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m benchmarks.validation``."""
+    p = argparse.ArgumentParser(prog="python -m benchmarks.validation",
+                                description=__doc__.split("\n\n")[0])
+    _arguments(p)
+    return run(p.parse_args(argv))
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,617 @@
+"""Cascaded QP: one quadratic program per level (Kanoun, Lamiraux & Wieber 2011).
+
+Level ``j`` (highest first) solves, over ``x`` and its slacks,
+
+    min  Σ_t ‖√w_t (A_t x − b_t)‖²  +  Σ_t ‖√w_t v_t‖²
+    s.t. lower_t ≤ A_t x − v_t ≤ upper_t            (the level's inequality tasks)
+         every higher level's optimum kept fixed
+
+The equality tasks enter through residual variables ``r = √W (A x − b)``
+(``min ‖r‖²`` subject to ``√W A x − r = √W b``), which keeps the QP at the conditioning
+of ``A`` instead of ``AᵀA`` and never leaves a level unconstrained. With ``A = J_i``
+and ``b = h_i`` the level is the paper's task ``J_i θ̈ = h_i`` (eq. 3) solved in the
+least-squares sense inside the optimal set of the levels above, i.e. the
+lexicographic optimum the extended Jacobian (eq. 18) reaches on equality stacks.
+
+*Fixing a level's optimum.* The weighted least-squares objective is strictly
+convex in ``A x`` and in the slacks, so every optimal point of level ``h`` shares
+``A_h x`` (equality rows) and the slacks ``v_h``. The later levels therefore keep
+
+* the equality rows on their achieved values, ``A_h x = A_h x_h*``, in one of
+  three ways (option ``fixing``):
+
+  - ``"basis"`` (default): an orthonormal basis ``R`` of the row space of all
+    higher equality rows, built by nested SVDs with the rank rule of
+    :mod:`hierarchy.linalg` (the null spaces ``Z_i`` of eq. 13), and the
+    constraint ``Rᵀ x = Rᵀ x*``: no redundant rows even when a level is
+    rank-deficient or repeats directions of the levels above;
+  - ``"rows"``: the literal rows ``A_h x = A_h x*``; redundant whenever a level is
+    rank-deficient or conflicts, which some back-ends cannot take (measured in
+    ``docs/qp-formulations.md``);
+  - ``"nullspace"``: ``x = x* + Z y`` with ``Z`` the same nested null-space basis,
+    so the QP is over ``y`` and holds no equality constraint from above;
+
+* the inequality rows relaxed by their optimal slacks:
+  ``lower_h + v_h ≤ A_h x ≤ upper_h + v_h`` with ``v_h = A_h x* − clip(A_h x*, lower_h,
+  upper_h)`` computed from the level's answer, so each QP is feasible at the
+  previous answer by construction.
+
+A final regularisation level minimises ``‖x‖²`` (``xᵀWx`` with ``metric=W``) over the
+lexicographic optimal set, which makes the answer unique and comparable with
+``reference``.
+
+*Failures and diagnostics.* A back-end that raises, or reports no solution, ends
+the cascade with ``status="failed"``, ``info["message"]``, ``info["failed_level"]``
+and ``info["failed_tasks"]`` (and ``info["fixed_tasks"]``: the higher-priority
+tasks whose optima were constraints of that QP). An inequality level that cannot
+be met gives its least-violation answer (slacks); it is listed in
+``info["infeasible_levels"]`` with the violated tasks and their violation, and
+``on_infeasible="fail"`` turns it into a failure naming them.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import qpsolvers
+import scipy.sparse as spa
+
+from hierarchy import DEFAULT_RCOND, TaskStack
+
+from .base import Capabilities, FormulationError, Outcome
+
+NAME = "cascaded_qp"
+DESCRIPTION = "one QP per level through qpsolvers (Kanoun et al. 2011), any back-end"
+CAPABILITIES = Capabilities(equalities=True, inequalities=True, weights=True,
+                            needs_mass_matrix=False, exact=True)
+
+#: Default back-end: the most accurate solver measured on the validation families
+#: (docs/qp-formulations.md, "Choosing the default back-end").
+DEFAULT_SOLVER = "clarabel"
+
+#: Default accuracy per back-end, passed through :func:`backend_settings`.
+DEFAULT_TOLERANCES: dict[str, float | None] = {
+    "clarabel": 1e-10,
+    "daqp": 1e-10,
+    "highs": 1e-10,
+    "osqp": 1e-9,
+    "proxqp": 1e-10,
+    "quadprog": None,      # dual active set, no tolerance setting
+    "scs": 1e-9,
+}
+
+#: Regularisation ``ε`` added to the ``x`` block of each level's Hessian (relative to
+#: ``‖A_level‖_F²``) for back-ends that need a positive-definite ``P``.
+NEEDS_DEFINITE_P = {"quadprog": 1e-12, "daqp": 1e-10}
+
+OPTIONS = {
+    "solver": (DEFAULT_SOLVER, "qpsolvers back-end (see backends())"),
+    "tolerance": (None, "back-end accuracy (None: DEFAULT_TOLERANCES[solver])"),
+    "backend_options": (None, "dict of extra keyword arguments for the back-end (override)"),
+    "fixing": ("basis", "how higher equality optima are kept: 'basis', 'rows' or 'nullspace'"),
+    "metric": (None, "SPD n×n W: the final level minimises xᵀWx instead of xᵀx"),
+    "rcond": (DEFAULT_RCOND, "relative rank threshold of the nested null spaces"),
+    "regularization": (None, "ε·‖A‖_F² on each level's x block (None: 1e-12 for quadprog, "
+                             "else 0)"),
+    "fix_active": (True, "fix strongly active inequalities (positive multiplier) as "
+                         "equalities for the lower levels (exact; avoids degenerate faces)"),
+    "margin": (1e-9, "fixed higher inequality rows are relaxed by margin·max(1, ‖x*‖) "
+                     "(unit rows) so degenerate active sets stay solvable"),
+    "on_infeasible": ("relax", "'relax': least-violation answer; 'fail': failed status"),
+    "infeasibility_tol": (1e-7, "an inequality task counts as violated above this "
+                                "(relative to max(1, ‖A_t‖_F‖x‖))"),
+}
+
+FIXINGS = ("basis", "rows", "nullspace")
+
+
+def backends() -> list[str]:
+    """The qpsolvers back-ends available here."""
+    return sorted(qpsolvers.available_solvers)
+
+
+def backend_settings(solver: str, tolerance: float | None) -> dict[str, Any]:
+    """Keyword arguments that set ``solver``'s accuracy to ``tolerance``.
+
+    Args:
+        solver: qpsolvers back-end name.
+        tolerance: Absolute and relative accuracy asked for (``None``: the
+            back-end's own defaults).
+
+    Returns:
+        The back-end's option names with values (empty for quadprog, which has no
+        tolerance, and for back-ends not listed here).
+    """
+    if tolerance is None:
+        return {}
+    t = float(tolerance)
+    if solver == "clarabel":
+        return {"tol_gap_abs": t, "tol_gap_rel": t, "tol_feas": t, "tol_ktratio": max(t, 1e-12),
+                "max_iter": 500}
+    if solver == "osqp":
+        return {"eps_abs": t, "eps_rel": t, "polishing": True, "max_iter": 200_000}
+    if solver == "scs":
+        return {"eps_abs": t, "eps_rel": t, "max_iters": 200_000}
+    if solver == "proxqp":
+        return {"eps_abs": t, "eps_rel": t, "max_iter": 10_000}
+    if solver == "highs":
+        return {"primal_feasibility_tolerance": t, "dual_feasibility_tolerance": t}
+    if solver == "daqp":
+        return {"primal_tol": t, "dual_tol": min(t, 1e-12)}
+    return {}
+
+
+def resolve_solver(solver: str) -> str:
+    """Check that ``solver`` is a qpsolvers back-end available here.
+
+    Raises:
+        FormulationError: naming the back-end and listing the available ones.
+    """
+    available = backends()
+    if not isinstance(solver, str) or solver not in available:
+        raise FormulationError(f"QP back-end {solver!r} is not available here; "
+                               f"available: {', '.join(available)}")
+    return solver
+
+
+# ----------------------------------------------------------------- the levels
+@dataclass
+class LevelRows:
+    """The rows of one level in QP form.
+
+    Attributes:
+        A_eq: Weighted equality rows ``√W A`` (``m_e × n``).
+        b_eq: ``√W b``.
+        A_in: Inequality rows with at least one finite bound.
+        lower: Their lower bounds (``-inf`` allowed).
+        upper: Their upper bounds (``+inf`` allowed).
+        w_in: Weight of each inequality row.
+        task_of_row: Task name of each inequality row.
+    """
+
+    A_eq: np.ndarray
+    b_eq: np.ndarray
+    A_in: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    w_in: np.ndarray
+    task_of_row: list[str] = field(default_factory=list)
+
+
+def level_rows(level) -> LevelRows:
+    """Split a :class:`~hierarchy.Level` into weighted equality and inequality rows."""
+    n = level[0].n
+    A_in, lo, up, w, names = [], [], [], [], []
+    for t in level:
+        if t.is_equality:
+            continue
+        tl, tu = t.bounds()
+        keep = np.isfinite(tl) | np.isfinite(tu)
+        A_in.append(t.A[keep])
+        lo.append(tl[keep])
+        up.append(tu[keep])
+        w.append(np.broadcast_to(t.weight, (t.m,))[keep])
+        names += [t.name] * int(keep.sum())
+    if A_in:
+        return LevelRows(level.A, level.b, np.vstack(A_in), np.concatenate(lo),
+                         np.concatenate(up), np.concatenate(w), names)
+    return LevelRows(level.A, level.b, np.zeros((0, n)), np.zeros(0), np.zeros(0),
+                     np.zeros(0), names)
+
+
+def slacks(A: np.ndarray, lower: np.ndarray, upper: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Signed violation ``v = A x − clip(A x, lower, upper)`` of inequality rows."""
+    Ax = A @ x
+    return Ax - np.clip(Ax, lower, upper)
+
+
+def split_null_space(A: np.ndarray, Z: np.ndarray, rcond: float
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """Split ``range(Z)`` into the directions ``A`` sees and its null space (eq. 13).
+
+    Returns:
+        ``(Z V_r, Z V_0)``: orthonormal ``n × r`` and ``n × (d − r)`` bases, ``r`` the
+        rank of ``A Z`` with threshold ``rcond · ‖A‖_F``.
+    """
+    if A.shape[0] == 0 or Z.shape[1] == 0:
+        return Z[:, :0], Z
+    _, s, vt = np.linalg.svd(A @ Z, full_matrices=True)
+    tol = rcond * float(np.linalg.norm(A))
+    r = int(np.count_nonzero(s > tol)) if tol > 0 else 0
+    return Z @ vt[:r].T, Z @ vt[r:].T
+
+
+@dataclass
+class Fixed:
+    """What the levels solved so far impose on the next ones.
+
+    Attributes:
+        x: The latest level's answer ``x*``.
+        Z: Orthonormal basis of the null space of every higher equality row.
+        R: Orthonormal basis of their row space (``[R Z]`` is orthogonal).
+        eq_rows: The literal higher equality rows (``fixing="rows"``).
+        A_in, lower, upper: Higher inequality rows with bounds relaxed by slacks.
+        tasks: Names of the tasks fixed so far.
+    """
+
+    x: np.ndarray
+    Z: np.ndarray
+    R: np.ndarray
+    eq_rows: list[np.ndarray]
+    A_in: list[np.ndarray]
+    lower: list[np.ndarray]
+    upper: list[np.ndarray]
+    tasks: list[str]
+
+    @classmethod
+    def start(cls, n: int) -> "Fixed":
+        return cls(np.zeros(n), np.eye(n), np.zeros((n, 0)), [], [], [], [], [])
+
+    def add(self, rows: LevelRows, names, x: np.ndarray, rcond: float,
+            active: np.ndarray | None = None) -> np.ndarray:
+        """Fix a solved level at ``x``; returns the slacks of its inequality rows.
+
+        ``active`` holds unit rows of inequality constraints that are strongly active
+        at ``x`` (positive multiplier): every optimum of the level satisfies them with
+        equality (complementary slackness), so they join the equality fixing.
+        """
+        self.x = x
+        v = slacks(rows.A_in, rows.lower, rows.upper, x)
+        extra = [] if active is None else [active]
+        if rows.A_in.shape[0]:
+            # a violated row keeps A x = bound + v at every optimum (v is unique)
+            viol = np.abs(v) > ACTIVE_TOL * np.maximum(1.0, np.abs(rows.A_in @ x))
+            if viol.any():
+                extra.append(rows.A_in[viol] / np.linalg.norm(rows.A_in[viol], axis=1)[:, None])
+        eq = rows.A_eq
+        if extra:
+            blocks = [eq / max(float(np.linalg.norm(eq)) / np.sqrt(eq.shape[0]), 1e-300)] \
+                if eq.shape[0] else []
+            eq = np.vstack(blocks + extra)
+        if eq.shape[0]:
+            Rn, self.Z = split_null_space(eq, self.Z, rcond)
+            self.R = np.hstack([self.R, Rn])
+            self.eq_rows.append(eq)
+        if rows.A_in.shape[0]:
+            self.A_in.append(rows.A_in)
+            self.lower.append(rows.lower + v)
+            self.upper.append(rows.upper + v)
+        # An inequality row inside the fixed row space has a constant value on the
+        # optimal set (the value it has at x), so it is implied: drop it.
+        for i in range(len(self.A_in)):
+            A = self.A_in[i]
+            keep = np.linalg.norm(A @ self.Z, axis=1) > 1e-8 * np.linalg.norm(A, axis=1)
+            if not keep.all():
+                self.A_in[i], self.lower[i], self.upper[i] = \
+                    A[keep], self.lower[i][keep], self.upper[i][keep]
+        self.tasks += list(names)
+        return v
+
+
+@dataclass
+class LevelQP:
+    """One QP ``min ½ zᵀPz + qᵀz, G z ≤ h, E z = e`` over ``z = (y, r, v)``,
+    ``x = x0 + Z y``."""
+
+    P: np.ndarray
+    q: np.ndarray
+    G: np.ndarray | None
+    h: np.ndarray | None
+    E: np.ndarray | None
+    e: np.ndarray | None
+    x0: np.ndarray
+    Z: np.ndarray
+    G_x: np.ndarray | None = None
+
+
+def _two_sided(M: np.ndarray, lower: np.ndarray, upper: np.ndarray, offset: np.ndarray,
+               X: np.ndarray, G_x: list[np.ndarray]) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """Rows of ``lower ≤ M z + offset ≤ upper`` as ``G z ≤ h`` (finite sides only);
+    appends the matching rows of ``X`` (the same constraints in ``x`` space) to ``G_x``."""
+    G, h = [], []
+    up = np.isfinite(upper)
+    lo = np.isfinite(lower)
+    if up.any():
+        G.append(M[up])
+        h.append(upper[up] - offset[up])
+        G_x.append(X[up])
+    if lo.any():
+        G.append(-M[lo])
+        h.append(offset[lo] - lower[lo])
+        G_x.append(X[lo])
+    return G, h
+
+
+def _unit_rows(A: np.ndarray, lower: np.ndarray, upper: np.ndarray):
+    """``lower ≤ A x ≤ upper`` with every row scaled to unit norm (same set)."""
+    s = np.linalg.norm(A, axis=1)
+    s[s == 0] = 1.0
+    return A / s[:, None], lower / s, upper / s
+
+
+def scaled_level(rows: LevelRows) -> LevelRows:
+    """The level divided by its RMS row norm: same minimiser, better-scaled QP."""
+    m = rows.A_eq.shape[0] + rows.A_in.shape[0]
+    s = np.sqrt((float(np.sum(rows.A_eq ** 2)) + float(np.sum(rows.A_in ** 2))) / max(m, 1))
+    if not np.isfinite(s) or s == 0:
+        return rows
+    return LevelRows(rows.A_eq / s, rows.b_eq / s, rows.A_in / s, rows.lower / s,
+                     rows.upper / s, rows.w_in, rows.task_of_row)
+
+
+def build_level_qp(rows: LevelRows | None, fixed: Fixed, fixing: str, eps: float,
+                   metric: np.ndarray | None = None, margin: float = 0.0) -> LevelQP:
+    """The QP of one level (``rows``) or, with ``rows=None``, of the final level.
+
+    The level's rows are divided by their RMS row norm (which leaves the minimiser
+    unchanged) and the fixed higher inequality rows are scaled to unit norm, so that
+    tasks of very different scales give back-ends a well-scaled problem.
+    """
+    n = fixed.x.shape[0]
+    if rows is not None:
+        rows = scaled_level(rows)
+    if fixing == "nullspace":
+        Z, x0 = fixed.Z, fixed.x
+    else:
+        Z, x0 = np.eye(n), np.zeros(n)
+    ny = Z.shape[1]
+    if rows is None:
+        W = np.eye(n) if metric is None else metric
+        me = mi = 0
+        P = Z.T @ W @ Z
+        P = 0.5 * (P + P.T)
+        q = Z.T @ (W @ x0)
+    else:
+        me, mi = rows.A_eq.shape[0], rows.A_in.shape[0]
+        P = np.zeros((ny + me + mi, ny + me + mi))
+        P[:ny, :ny] = eps * np.eye(ny)
+        P[ny:ny + me, ny:ny + me] = 2.0 * np.eye(me)
+        P[ny + me:, ny + me:] = 2.0 * np.diag(rows.w_in)
+        q = np.zeros(ny + me + mi)
+    nz = ny + me + mi
+    E, e, G, h, G_x = [], [], [], [], []
+    if rows is not None and me:
+        # √W A (x0 + Z y) − r = √W b
+        blk = np.zeros((me, nz))
+        blk[:, :ny] = rows.A_eq @ Z
+        blk[:, ny:ny + me] = -np.eye(me)
+        E.append(blk)
+        e.append(rows.b_eq - rows.A_eq @ x0)
+    if rows is not None and mi:
+        blk = np.zeros((mi, nz))
+        blk[:, :ny] = rows.A_in @ Z
+        blk[:, ny + me:] = -np.eye(mi)
+        A_unit = rows.A_in / np.maximum(np.linalg.norm(rows.A_in, axis=1), 1e-300)[:, None]
+        g, hh = _two_sided(blk, rows.lower, rows.upper, rows.A_in @ x0, A_unit, G_x)
+        G += g
+        h += hh
+    if fixing == "basis" and fixed.R.shape[1]:
+        blk = np.zeros((fixed.R.shape[1], nz))
+        blk[:, :ny] = fixed.R.T
+        E.append(blk)
+        e.append(fixed.R.T @ fixed.x)
+    elif fixing == "rows":
+        for A_h in fixed.eq_rows:
+            A_h = A_h / max(float(np.linalg.norm(A_h)) / np.sqrt(A_h.shape[0]), 1e-300)
+            blk = np.zeros((A_h.shape[0], nz))
+            blk[:, :ny] = A_h
+            E.append(blk)
+            e.append(A_h @ fixed.x)
+    delta = margin * max(1.0, float(np.linalg.norm(fixed.x)))
+    for A_h, lo, up in zip(fixed.A_in, fixed.lower, fixed.upper):
+        A_h, lo, up = _unit_rows(A_h, lo, up)
+        lo, up = lo - delta, up + delta
+        blk = np.zeros((A_h.shape[0], nz))
+        blk[:, :ny] = A_h @ Z
+        g, hh = _two_sided(blk, lo, up, A_h @ x0, A_h, G_x)
+        G += g
+        h += hh
+    return LevelQP(P, q, np.vstack(G) if G else None, np.concatenate(h) if h else None,
+                   np.vstack(E) if E else None, np.concatenate(e) if e else None, x0, Z,
+                   np.vstack(G_x) if G_x else None)
+
+
+_CAUGHT = (qpsolvers.QPError, ValueError, RuntimeError, ArithmeticError,
+           np.linalg.LinAlgError, MemoryError)
+
+
+def solve_level_qp(qp: LevelQP, solver: str, settings: dict[str, Any]
+                   ) -> tuple[np.ndarray | None, str, dict[str, Any]]:
+    """Solve one level's QP with a qpsolvers back-end.
+
+    Returns:
+        ``(x, message, extras)``: ``x`` is ``None`` when the back-end failed, with
+        ``message`` saying how; ``extras`` holds primal residual and warnings.
+    """
+    if qp.G is None and qp.E is None:
+        # Only the final level of fixing="nullspace" without inequalities: an
+        # unconstrained strictly convex QP (some back-ends refuse those).
+        y = np.linalg.solve(qp.P, -qp.q)
+        return qp.x0 + qp.Z @ y, "", {"closed_form": True}
+    if solver == "daqp":
+        return _solve_daqp(qp, settings)
+    sparse = solver not in qpsolvers.dense_solvers
+    conv = (lambda M: None if M is None else spa.csc_matrix(M)) if sparse else (lambda M: M)
+    problem = qpsolvers.Problem(conv(qp.P), qp.q, conv(qp.G), qp.h, conv(qp.E), qp.e)
+    extras: dict[str, Any] = {}
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            sol = qpsolvers.solve_problem(problem, solver=solver, **settings)
+        except _CAUGHT as exc:
+            return None, f"{solver} raised {type(exc).__name__}: {exc}", extras
+    if caught:
+        extras["warnings"] = sorted({str(w.message) for w in caught})
+    status = sol.extras.get("status") if isinstance(sol.extras, dict) else None
+    if not sol.found or sol.x is None:
+        why = f" (status {status})" if status is not None else ""
+        warn = f"; {extras['warnings'][0]}" if extras.get("warnings") else ""
+        return None, f"{solver} found no solution{why}{warn}", extras
+    z = np.asarray(sol.x, dtype=np.float64).reshape(-1)
+    if not np.isfinite(z).all():
+        return None, f"{solver} returned non-finite values", extras
+    ny = qp.Z.shape[1]
+    try:
+        extras["primal_residual"] = float(sol.primal_residual())
+    except (ValueError, TypeError, AttributeError):  # pragma: no cover - defensive
+        pass
+    if qp.G is not None and sol.z is not None and np.shape(sol.z) == (qp.G.shape[0],):
+        extras["_active"] = strongly_active(qp, z, np.asarray(sol.z, dtype=np.float64))
+    return qp.x0 + qp.Z @ z[:ny], "", extras
+
+
+def _solve_daqp(qp: LevelQP, settings: dict[str, Any]
+                ) -> tuple[np.ndarray | None, str, dict[str, Any]]:
+    """The DAQP back-end, called as ``daqp.solve`` on the problem qpsolvers would build.
+
+    qpsolvers 4.13 hands DAQP its equality rows with ``blower = −1e30`` (not ``b``);
+    when DAQP moves such a row to its lower side the level fails (measured: 8 % of
+    the inequality levels of the validation families, and a 3-variable example in
+    tests/test_cascaded_qp.py). Passing ``blower = bupper = b`` fixes it.
+    """
+    import daqp
+    from ctypes import c_int
+
+    n_z = qp.P.shape[0]
+    G = qp.G if qp.G is not None else np.zeros((0, n_z))
+    h = qp.h if qp.h is not None else np.zeros(0)
+    E = qp.E if qp.E is not None else np.zeros((0, n_z))
+    e = qp.e if qp.e is not None else np.zeros(0)
+    A = np.ascontiguousarray(np.vstack([G, E]))
+    bu = np.ascontiguousarray(np.concatenate([h, e]))
+    bl = np.ascontiguousarray(np.concatenate([np.full(h.shape, -1e30), e]))
+    sense = np.concatenate([np.zeros(h.shape[0]), np.full(e.shape[0], 5)]).astype(c_int)
+    try:
+        z, _, flag, info = daqp.solve(np.ascontiguousarray(qp.P), np.ascontiguousarray(qp.q),
+                                      A, bu, bl, sense, **settings)
+    except TypeError as exc:
+        raise FormulationError(f"daqp.solve rejected the settings: {exc}") from None
+    extras: dict[str, Any] = {"exitflag": int(flag)}
+    if flag <= 0 or not np.isfinite(z).all():
+        return None, f"daqp found no solution (exit flag {flag})", extras
+    ny = qp.Z.shape[1]
+    if qp.G is not None:
+        extras["_active"] = strongly_active(qp, z, np.asarray(info["lam"][:h.shape[0]]))
+    return qp.x0 + qp.Z @ z[:ny], "", extras
+
+
+#: A constraint ``g z ≤ h`` counts as strongly active when its multiplier exceeds
+#: ``MULTIPLIER_TOL · max(1, ‖λ‖_∞)`` and its slack ``h − g z`` is below
+#: ``ACTIVE_TOL · max(1, |h|)``.
+MULTIPLIER_TOL = 1e-7
+ACTIVE_TOL = 1e-7
+
+
+def strongly_active(qp: LevelQP, z: np.ndarray, lam: np.ndarray) -> np.ndarray:
+    """Unit ``x``-space rows of the inequality constraints strongly active at ``z``."""
+    slack = qp.h - qp.G @ z
+    lam_tol = MULTIPLIER_TOL * max(1.0, float(np.max(np.abs(lam), initial=0.0)))
+    act = (lam > lam_tol) & (slack <= ACTIVE_TOL * np.maximum(1.0, np.abs(qp.h)))
+    return qp.G_x[act]
+
+
+def check_options(solver: str, fixing: str, on_infeasible: str, tolerance,
+                  backend_options) -> dict[str, Any]:
+    """Validate the options shared with :mod:`formulations.cvxpy_`; returns settings."""
+    if fixing not in FIXINGS:
+        raise FormulationError(f"fixing must be one of {', '.join(FIXINGS)}, got {fixing!r}")
+    if on_infeasible not in ("relax", "fail"):
+        raise FormulationError(f"on_infeasible must be 'relax' or 'fail', got {on_infeasible!r}")
+    if tolerance is not None and not (np.isfinite(float(tolerance)) and float(tolerance) > 0):
+        raise FormulationError(f"tolerance must be a finite number > 0, got {tolerance}")
+    if backend_options is not None and not isinstance(backend_options, dict):
+        raise FormulationError(f"backend_options must be a dict, got "
+                               f"{type(backend_options).__name__}")
+    return dict(backend_options or {})
+
+
+def violated_tasks(level, x: np.ndarray, tol: float) -> dict[str, float]:
+    """Inequality tasks of ``level`` violated at ``x`` beyond ``tol`` (relative)."""
+    out = {}
+    for t in level:
+        if t.is_equality:
+            continue
+        lo, up = t.bounds()
+        v = slacks(t.A, lo, up, x)
+        viol = float(np.sqrt(np.sum(np.broadcast_to(t.weight, (t.m,)) * v * v)))
+        if viol > tol * max(1.0, float(np.linalg.norm(t.A)) * float(np.linalg.norm(x))):
+            out[t.name] = viol
+    return out
+
+
+def run_cascade(stack: TaskStack, solve_qp, *, fixing: str, metric, rcond: float,
+                eps: float, on_infeasible: str, infeasibility_tol: float,
+                backend: str, margin: float = 0.0, fix_active: bool = True) -> Outcome:
+    """The cascade shared by the back-ends: ``solve_qp(LevelQP) -> (x, msg, extras)``."""
+    n = stack.n
+    fixed = Fixed.start(n)
+    info: dict[str, Any] = {"backend": backend, "fixing": fixing, "levels": [],
+                            "infeasible_levels": []}
+
+    def fail(level_index, tasks, message, partial):
+        info.update(message=message, failed_level=level_index, failed_tasks=list(tasks),
+                    fixed_tasks=list(fixed.tasks), x_partial=partial)
+        return Outcome(np.full(n, np.nan), "failed", info)
+
+    for j, level in enumerate(stack.levels):
+        rows = level_rows(level)
+        if rows.A_eq.shape[0] == 0 and rows.A_in.shape[0] == 0:
+            info["levels"].append({"level": j, "skipped": "no finite bound"})
+            fixed.tasks += list(level.names)
+            continue
+        scale = float(rows.A_eq.shape[0] + rows.A_in.shape[0])   # ‖A‖_F² after scaling
+        qp = build_level_qp(rows, fixed, fixing, eps * max(scale, 1e-300), margin=margin)
+        x, message, extras = solve_qp(qp)
+        if x is None:
+            return fail(j, level.names, f"level {j} ({', '.join(level.names)}): {message}",
+                        fixed.x.copy() if j else None)
+        active = extras.pop("_active", None) if fix_active else None
+        if active is not None:
+            extras["strongly_active"] = int(active.shape[0])
+        fixed.add(rows, level.names, x, rcond, active)
+        rec = {"level": j, "tasks": list(level.names), **extras}
+        bad = violated_tasks(level, x, infeasibility_tol)
+        if bad:
+            rec["violated"] = bad
+            info["infeasible_levels"].append({"level": j, "tasks": sorted(bad),
+                                              "violation": bad})
+            if on_infeasible == "fail":
+                info["levels"].append(rec)
+                names = ", ".join(f"{k} (violation {v:.3g})" for k, v in bad.items())
+                return fail(j, sorted(bad), f"level {j}: inequality tasks {names} cannot "
+                            f"hold together with the levels above", x)
+        info["levels"].append(rec)
+    qp = build_level_qp(None, fixed, fixing, 0.0, metric, margin=margin)
+    x, message, extras = solve_qp(qp)
+    extras.pop("_active", None)
+    if x is None:
+        return fail(len(stack), [], f"final regularisation level: {message}", fixed.x.copy())
+    info["levels"].append({"level": "regularisation", **extras})
+    return Outcome(x, "optimal", info)
+
+
+def solve(stack: TaskStack, *, solver: str = DEFAULT_SOLVER, tolerance: float | None = None,
+          backend_options: dict | None = None, fixing: str = "basis", metric=None,
+          rcond: float = DEFAULT_RCOND, regularization: float | None = None,
+          on_infeasible: str = "relax", infeasibility_tol: float = 1e-7,
+          margin: float = 1e-9, fix_active: bool = True) -> Outcome:
+    """Solve the stack by one QP per level plus a regularisation level.
+
+    See the module docstring; every option is listed in :data:`OPTIONS`.
+    """
+    solver = resolve_solver(solver)
+    extra = check_options(solver, fixing, on_infeasible, tolerance, backend_options)
+    tol = DEFAULT_TOLERANCES.get(solver) if tolerance is None else float(tolerance)
+    settings = {**backend_settings(solver, tol), **extra}
+    eps = NEEDS_DEFINITE_P.get(solver, 0.0) if regularization is None else float(regularization)
+    if not np.isfinite(eps) or eps < 0:
+        raise FormulationError(f"regularization must be a finite number ≥ 0, got {regularization}")
+    out = run_cascade(stack, lambda qp: solve_level_qp(qp, solver, settings), fixing=fixing,
+                      metric=metric, rcond=rcond, eps=eps, on_infeasible=on_infeasible,
+                      infeasibility_tol=float(infeasibility_tol), backend=solver,
+                      margin=float(margin), fix_active=bool(fix_active))
+    out.info["settings"] = settings
+    return out

@@ -1,0 +1,204 @@
+"""The cascade of :mod:`formulations.cascaded_qp`, modelled in cvxpy.
+
+An independent reference for stacks with inequality tasks: the same levels
+(weighted least squares of the equality tasks plus weighted squared slacks of the
+inequality tasks, every higher optimum fixed, a final minimum-norm level) written
+as cvxpy expressions — ``sum_squares(√W (A x − b)) + sum_squares(√w ∘ v)`` with
+``lower ≤ A x − v ≤ upper`` — canonicalised by cvxpy and solved by any cvxpy
+solver that takes QPs (``solver=``, default Clarabel). Only the bookkeeping of
+what a solved level fixes (the orthonormal row-space basis of the higher equality
+rows, relaxed inequality bounds, strongly active rows read from cvxpy's dual
+values) is shared with :mod:`formulations.cascaded_qp`; the modelling, the
+canonicalisation and the solver interfaces are cvxpy's.
+
+``fixing="basis"`` keeps the higher equality rows as ``Rᵀ x = Rᵀ x*`` with ``R`` an
+orthonormal basis of their row space; ``fixing="rows"`` keeps the literal rows
+``A_h x = A_h x*`` (redundant on rank-deficient or conflicting levels).
+
+A solver status of ``optimal_inaccurate`` at some level gives
+``status="approximate"`` (the levels are listed in ``info["inaccurate_levels"]``);
+any other non-optimal status gives ``status="failed"`` with ``info["message"]``,
+``info["failed_level"]`` and ``info["failed_tasks"]``.
+"""
+
+from __future__ import annotations
+
+import warnings
+from typing import Any
+
+import cvxpy as cp
+import numpy as np
+
+from hierarchy import DEFAULT_RCOND, TaskStack
+
+from .base import Capabilities, FormulationError, Outcome
+from .cascaded_qp import (ACTIVE_TOL, MULTIPLIER_TOL, Fixed, _unit_rows, level_rows,
+                          scaled_level, violated_tasks)
+
+NAME = "cvxpy"
+DESCRIPTION = "the cascaded QP modelled in cvxpy (independent reference for inequalities)"
+CAPABILITIES = Capabilities(equalities=True, inequalities=True, weights=True,
+                            needs_mass_matrix=False, exact=True)
+
+#: cvxpy solvers that take QPs, in order of preference.
+QP_SOLVERS = ("CLARABEL", "OSQP", "SCS", "PROXQP", "DAQP", "HIGHS", "ECOS", "PIQP",
+              "CVXOPT", "MOSEK", "GUROBI")
+DEFAULT_SOLVER = "CLARABEL"
+
+#: Accuracy asked of each solver by default (keyword names are the solver's own).
+DEFAULT_SETTINGS: dict[str, dict[str, Any]] = {
+    "CLARABEL": {"tol_gap_abs": 1e-10, "tol_gap_rel": 1e-10, "tol_feas": 1e-10,
+                 "tol_ktratio": 1e-10, "max_iter": 500},
+    "OSQP": {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iter": 200_000},
+    "SCS": {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iters": 200_000},
+}
+
+OPTIONS = {
+    "solver": (DEFAULT_SOLVER, "cvxpy solver name (see backends())"),
+    "backend_options": (None, "dict of keyword arguments for the solver (override defaults)"),
+    "fixing": ("basis", "'basis' (orthonormal row-space basis) or 'rows' (literal rows)"),
+    "metric": (None, "SPD n×n W: the final level minimises xᵀWx instead of xᵀx"),
+    "rcond": (DEFAULT_RCOND, "relative rank threshold of the nested null spaces"),
+    "margin": (1e-9, "fixed higher inequality rows relaxed by margin·max(1, ‖x*‖) (unit rows)"),
+    "on_infeasible": ("relax", "'relax': least-violation answer; 'fail': failed status"),
+    "infeasibility_tol": (1e-7, "an inequality task counts as violated above this "
+                                "(relative to max(1, ‖A_t‖_F‖x‖))"),
+}
+
+
+def backends() -> list[str]:
+    """cvxpy solvers installed here that take QPs."""
+    installed = set(cp.installed_solvers())
+    return [s for s in QP_SOLVERS if s in installed]
+
+
+def _bounds(expr, lower: np.ndarray, upper: np.ndarray, rows: np.ndarray,
+            cons: list, tracked: list) -> None:
+    """Add ``lower ≤ expr ≤ upper`` (finite sides); remember each side's x-space rows."""
+    up, lo = np.isfinite(upper), np.isfinite(lower)
+    if up.any():
+        c = expr[np.flatnonzero(up)] <= upper[up]
+        cons.append(c)
+        tracked.append((c, rows[up]))
+    if lo.any():
+        c = expr[np.flatnonzero(lo)] >= lower[lo]
+        cons.append(c)
+        tracked.append((c, rows[lo]))
+
+
+def _solve(problem: cp.Problem, solver: str, settings: dict) -> tuple[str, str]:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            problem.solve(solver=solver, **settings)
+        except (cp.error.SolverError, ValueError, ArithmeticError, RuntimeError) as exc:
+            return "error", f"{solver} raised {type(exc).__name__}: {exc}"
+    return problem.status, ""
+
+
+def solve(stack: TaskStack, *, solver: str = DEFAULT_SOLVER, backend_options: dict | None = None,
+          fixing: str = "basis", metric=None, rcond: float = DEFAULT_RCOND,
+          margin: float = 1e-9, on_infeasible: str = "relax",
+          infeasibility_tol: float = 1e-7) -> Outcome:
+    """Solve the stack level by level with cvxpy; see the module docstring."""
+    available = backends()
+    if not isinstance(solver, str) or solver.upper() not in available:
+        raise FormulationError(f"cvxpy solver {solver!r} is not available here; "
+                               f"available: {', '.join(available)}")
+    solver = solver.upper()
+    if fixing not in ("basis", "rows"):
+        raise FormulationError(f"fixing must be 'basis' or 'rows', got {fixing!r}")
+    if on_infeasible not in ("relax", "fail"):
+        raise FormulationError(f"on_infeasible must be 'relax' or 'fail', got {on_infeasible!r}")
+    if backend_options is not None and not isinstance(backend_options, dict):
+        raise FormulationError("backend_options must be a dict")
+    settings = {**DEFAULT_SETTINGS.get(solver, {}), **(backend_options or {})}
+    n = stack.n
+    fixed = Fixed.start(n)
+    info: dict[str, Any] = {"backend": solver, "fixing": fixing, "levels": [],
+                            "infeasible_levels": [], "inaccurate_levels": [],
+                            "settings": settings}
+
+    def fail(j, tasks, message, partial):
+        info.update(message=message, failed_level=j, failed_tasks=list(tasks),
+                    fixed_tasks=list(fixed.tasks), x_partial=partial)
+        return Outcome(np.full(n, np.nan), "failed", info)
+
+    def fixed_constraints(x: cp.Variable, tracked: list) -> list:
+        cons = []
+        if fixing == "basis" and fixed.R.shape[1]:
+            cons.append(fixed.R.T @ x == fixed.R.T @ fixed.x)
+        elif fixing == "rows":
+            for A_h in fixed.eq_rows:
+                cons.append(A_h @ x == A_h @ fixed.x)
+        delta = margin * max(1.0, float(np.linalg.norm(fixed.x)))
+        for A_h, lo, up in zip(fixed.A_in, fixed.lower, fixed.upper):
+            A_u, lo, up = _unit_rows(A_h, lo, up)
+            if A_u.shape[0]:
+                _bounds(A_u @ x, lo - delta, up + delta, A_u, cons, tracked)
+        return cons
+
+    for j, level in enumerate(stack.levels):
+        rows = level_rows(level)
+        if rows.A_eq.shape[0] == 0 and rows.A_in.shape[0] == 0:
+            fixed.tasks += list(level.names)
+            continue
+        srows = scaled_level(rows)
+        x = cp.Variable(n)
+        tracked: list = []
+        cons = fixed_constraints(x, tracked)
+        obj = 0
+        if srows.A_eq.shape[0]:
+            obj = obj + cp.sum_squares(srows.A_eq @ x - srows.b_eq)
+        if srows.A_in.shape[0]:
+            v = cp.Variable(srows.A_in.shape[0])
+            obj = obj + cp.sum_squares(cp.multiply(np.sqrt(srows.w_in), v))
+            norms = np.linalg.norm(srows.A_in, axis=1)
+            _bounds(srows.A_in @ x - v, srows.lower, srows.upper,
+                    srows.A_in / norms[:, None], cons, tracked)
+        problem = cp.Problem(cp.Minimize(obj), cons)
+        status, message = _solve(problem, solver, settings)
+        if status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE) or x.value is None:
+            return fail(j, level.names, f"level {j} ({', '.join(level.names)}): "
+                        f"{message or f'{solver} status {status}'}", fixed.x.copy() if j else None)
+        if status == cp.OPTIMAL_INACCURATE:
+            info["inaccurate_levels"].append(j)
+        xv = np.asarray(x.value, dtype=np.float64)
+        active = []
+        lam_max = max([float(np.max(np.abs(c.dual_value), initial=0.0)) for c, _ in tracked
+                       if c.dual_value is not None], default=0.0)
+        for c, xrows in tracked:
+            if c.dual_value is None:
+                continue
+            lam = np.atleast_1d(np.asarray(c.dual_value, dtype=np.float64))
+            slack = np.abs(np.atleast_1d(c.args[1].value - c.args[0].value))
+            act = (lam > MULTIPLIER_TOL * max(1.0, lam_max)) & \
+                (slack <= ACTIVE_TOL * max(1.0, float(np.linalg.norm(xv))))
+            if act.any():
+                active.append(xrows[act])
+        fixed.add(rows, level.names, xv, rcond, np.vstack(active) if active else None)
+        rec: dict[str, Any] = {"level": j, "tasks": list(level.names), "status": status}
+        bad = violated_tasks(level, xv, float(infeasibility_tol))
+        if bad:
+            rec["violated"] = bad
+            info["infeasible_levels"].append({"level": j, "tasks": sorted(bad),
+                                              "violation": bad})
+            if on_infeasible == "fail":
+                info["levels"].append(rec)
+                names = ", ".join(f"{k} (violation {v:.3g})" for k, v in bad.items())
+                return fail(j, sorted(bad), f"level {j}: inequality tasks {names} cannot "
+                            f"hold together with the levels above", xv)
+        info["levels"].append(rec)
+    x = cp.Variable(n)
+    W = np.eye(n) if metric is None else np.asarray(metric)
+    obj = cp.sum_squares(x) if metric is None else cp.quad_form(x, cp.psd_wrap(0.5 * (W + W.T)))
+    problem = cp.Problem(cp.Minimize(obj), fixed_constraints(x, []))
+    status, message = _solve(problem, solver, settings)
+    if status not in (cp.OPTIMAL, cp.OPTIMAL_INACCURATE) or x.value is None:
+        return fail(len(stack), [], f"final regularisation level: "
+                    f"{message or f'{solver} status {status}'}", fixed.x.copy())
+    if status == cp.OPTIMAL_INACCURATE:
+        info["inaccurate_levels"].append(len(stack))
+    info["levels"].append({"level": "regularisation", "status": status})
+    return Outcome(np.asarray(x.value, dtype=np.float64),
+                   "approximate" if info["inaccurate_levels"] else "optimal", info)

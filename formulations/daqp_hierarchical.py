@@ -1,0 +1,191 @@
+"""DAQP's native hierarchical solve: one ``daqp.solve`` call for the whole stack.
+
+DAQP (Arnström, Bemporad & Axehill 2022) takes the rows of every level stacked,
+``blower ≤ A x ≤ bupper``, and ``break_points`` (the end row of each level). With
+no cost (``H = f = None``) it minimises, level by level, the squared violation of
+the level's rows (soft constraints with slacks, ``rho_soft``) inside the optimal
+set of the levels above, and returns the minimum-norm point of the last set —
+the lexicographic optimum the paper's eq. 18 gives on equality stacks. An
+equality task is the row pair ``b ≤ A x ≤ b`` (weighted by ``√w``); an inequality
+task keeps its bounds (``∓inf`` sent as ``∓1e30``).
+
+*Where it is exact and where not (measured, docs/qp-formulations.md).* DAQP's
+hierarchical loop counts one degree of freedom per active soft row. That count
+is right when every level adds as much rank as it has rows; it is wrong when
+
+* a level's own rows are dependent (rank-deficient level): the first activation
+  is singular (exit flag −6, "overdetermined initial"). Fixed here by
+  ``compress_levels=True`` (default): each equality level is replaced by its
+  ``r`` SVD rows ``Σ_r V_rᵀ x = U_rᵀ b``, which has the same least-squares optimum
+  — after that DAQP is exact on rank-deficient stacks;
+* a level shares directions with higher levels (a *conflicting* level, eq. 35,
+  including over-determined stacks ``Σ m_i > n``): DAQP runs out of counted
+  freedom early and stops optimising the lower levels; the answer can be far from
+  the optimum (relative error up to O(1) measured). No setting changes this.
+
+``status`` is therefore ``"optimal"`` when DAQP exits with flag 1 or 2 and no
+level conflicts with the levels above (checked on the equality rows with the
+library's rank rule, :func:`hierarchy.conflicting_levels`; ``check=False`` skips
+the check and reports ``"optimal"`` on exit flags 1/2), ``"approximate"`` when
+some level conflicts (``info["conflicting_levels"]``; the levels above the first
+one are exact), and ``"failed"`` on a negative exit flag (``info["message"]``,
+``info["failed_level"]``/``info["failed_tasks"]`` when the flag points at a level).
+Stacks with inequality tasks are ``"approximate"`` when an inequality task is
+active below the first level is not decidable beforehand; they are reported
+``"optimal"`` under the same equality-rank rule and measured against the
+cascaded QP in ``docs/validation.md``.
+
+``primal_tol`` defaults to 1e-10 (DAQP's default 1e-6 gives ~1e-6 relative errors
+on compatible stacks; 1e-10 gives ~1e-10).
+"""
+
+from __future__ import annotations
+
+from ctypes import c_int
+from typing import Any
+
+import daqp
+import numpy as np
+
+from hierarchy import DEFAULT_RCOND, TaskStack
+
+from .base import Capabilities, FormulationError, Outcome
+
+NAME = "daqp_hierarchical"
+DESCRIPTION = "DAQP's hierarchical QP: the whole stack in one daqp.solve call (break_points)"
+CAPABILITIES = Capabilities(equalities=True, inequalities=True, weights=True,
+                            needs_mass_matrix=False, exact=False)
+OPTIONS = {
+    "primal_tol": (1e-10, "DAQP primal feasibility tolerance (DAQP's default: 1e-6)"),
+    "dual_tol": (1e-12, "DAQP dual feasibility tolerance"),
+    "compress_levels": (True, "replace each equality level by its SVD rows (full row rank)"),
+    "check": (True, "decide optimal/approximate from the conflicting-level test (eq. 35)"),
+    "rcond": (DEFAULT_RCOND, "relative rank threshold of the level compression and check"),
+    "settings": (None, "dict of extra daqp.solve settings (e.g. iter_limit, rho_soft)"),
+}
+
+#: DAQP exit flags (DAQP's constants.h).
+EXIT_FLAGS = {1: "optimal", 2: "soft optimal", -1: "infeasible", -2: "cycling",
+              -3: "unbounded", -4: "iteration limit", -5: "non-convex",
+              -6: "overdetermined initial active set"}
+
+_INF = 1e30
+
+
+def build(stack: TaskStack, compress: bool, rcond: float):
+    """Stacked ``A``, ``bupper``, ``blower``, ``break_points`` and each row's task name."""
+    rows, up, lo, bps, names = [], [], [], [], []
+    total = 0
+    for level in stack.levels:
+        A, b = level.A, level.b
+        if A.shape[0]:
+            if compress:
+                u, s, vt = np.linalg.svd(A, full_matrices=False)
+                tol = rcond * float(np.linalg.norm(A))
+                r = int(np.count_nonzero(s > tol)) if tol > 0 else 0
+                A, b = s[:r, None] * vt[:r], u[:, :r].T @ b
+                eq_names = [",".join(t.name for t in level if t.is_equality)] * r
+            else:
+                eq_names = [t.name for t in level if t.is_equality for _ in range(t.m)]
+            rows.append(A)
+            up.append(b)
+            lo.append(b)
+            names += eq_names
+        for t in level:
+            if t.is_equality:
+                continue
+            tl, tu = t.bounds()
+            sw = np.sqrt(np.broadcast_to(t.weight, (t.m,)))
+            rows.append(sw[:, None] * t.A)
+            up.append(np.where(np.isfinite(tu), sw * tu, _INF))
+            lo.append(np.where(np.isfinite(tl), sw * tl, -_INF))
+            names += [t.name] * t.m
+        total = sum(r.shape[0] for r in rows)
+        bps.append(total)
+    A = np.ascontiguousarray(np.vstack(rows), dtype=np.float64)
+    return (A, np.ascontiguousarray(np.concatenate(up)), np.ascontiguousarray(np.concatenate(lo)),
+            np.array(bps, dtype=np.intc), names)
+
+
+def solve(stack: TaskStack, *, primal_tol: float = 1e-10, dual_tol: float = 1e-12,
+          compress_levels: bool = True, check: bool = True, rcond: float = DEFAULT_RCOND,
+          settings: dict | None = None) -> Outcome:
+    """One hierarchical ``daqp.solve`` call; see the module docstring."""
+    if settings is not None and not isinstance(settings, dict):
+        raise FormulationError("settings must be a dict of daqp.solve keyword arguments")
+    for key, val in (("primal_tol", primal_tol), ("dual_tol", dual_tol)):
+        if not np.isfinite(float(val)) or float(val) <= 0:
+            raise FormulationError(f"{key} must be a finite number > 0, got {val}")
+    A, bu, bl, bps, names = build(stack, bool(compress_levels), float(rcond))
+    sense = np.zeros(len(bu), dtype=c_int)
+    kwargs = {"primal_tol": float(primal_tol), "dual_tol": float(dual_tol), **(settings or {})}
+    try:
+        x, _, flag, dinfo = daqp.solve(None, None, A, bu.copy(), bl.copy(), sense,
+                                       break_points=bps, **kwargs)
+    except TypeError as exc:
+        raise FormulationError(f"daqp.solve rejected the settings: {exc}") from None
+    info: dict[str, Any] = {"exitflag": int(flag), "exit": EXIT_FLAGS.get(int(flag), "unknown"),
+                            "iterations": int(dinfo.get("iterations", 0)),
+                            "daqp_solve_time_s": float(dinfo.get("solve_time", 0.0)),
+                            "break_points": bps.tolist(), "settings": kwargs}
+    if flag < 0:
+        msg = f"DAQP exit flag {flag} ({info['exit']})"
+        if flag == -6:
+            msg += ("; the first activation of a level was singular: a level's rows are "
+                    "dependent (try compress_levels=True) or repeat higher rows")
+        info.update(message=msg, failed_level=None, failed_tasks=[])
+        if flag == -1:
+            ineq = [(j, [t.name for t in lvl if not t.is_equality])
+                    for j, lvl in enumerate(stack.levels)]
+            ineq = [(j, n) for j, n in ineq if n]
+            if ineq:
+                info.update(failed_level=ineq[0][0], failed_tasks=ineq[0][1],
+                            message=msg + f"; hard inequality tasks involved: "
+                            f"{', '.join(n for _, ns in ineq for n in ns)}")
+        return Outcome(np.full(stack.n, np.nan), "failed", info)
+    x = np.asarray(x, dtype=np.float64).copy()
+    status = "optimal"
+    if check:
+        conflicts = dependent_active_levels(A, bu, bl, bps, x, float(rcond))
+        info["conflicting_levels"] = conflicts
+        if conflicts:
+            status = "approximate"
+            info["message"] = (f"the active rows of levels {conflicts} depend on those of the "
+                               f"levels above (a conflicting level, eq. 35): DAQP's count of "
+                               f"free directions is then wrong; levels 0..{conflicts[0] - 1} "
+                               f"are exact")
+    return Outcome(x, status, info)
+
+
+#: A row counts as active when ``|A x − bound| ≤ ACTIVE_TOL · max(1, |bound|)`` or violated.
+ACTIVE_TOL = 1e-7
+
+
+def dependent_active_levels(A: np.ndarray, bu: np.ndarray, bl: np.ndarray, bps: np.ndarray,
+                            x: np.ndarray, rcond: float) -> list[int]:
+    """Levels whose active rows at ``x`` do not add their own count to the rank.
+
+    DAQP's hierarchical loop removes one degree of freedom per active soft row; the
+    count is right exactly when, level by level, the active rows (equalities,
+    inequalities at a bound or violated) are independent of each other and of the
+    active rows above. Returns the levels where that fails (empty: DAQP's answer is
+    the lexicographic optimum up to its tolerances).
+    """
+    Ax = A @ x
+    tol_u = ACTIVE_TOL * np.maximum(1.0, np.abs(bu))
+    tol_l = ACTIVE_TOL * np.maximum(1.0, np.abs(bl))
+    active = (bu == bl) | (Ax >= bu - tol_u) | (Ax <= bl + tol_l)
+    unit = A / np.maximum(np.linalg.norm(A, axis=1), 1e-300)[:, None]
+    out, rank, start = [], 0, 0
+    rows = np.zeros((0, A.shape[1]))
+    for j, stop in enumerate(bps):
+        new = unit[start:stop][active[start:stop]]
+        if new.shape[0]:
+            rows = np.vstack([rows, new])
+            s = np.linalg.svd(rows, compute_uv=False)
+            r = int(np.count_nonzero(s > rcond * max(float(s[0]), 1e-300) * np.sqrt(rows.shape[0])))
+            if r - rank < new.shape[0]:
+                out.append(j)
+            rank = r
+        start = stop
+    return out

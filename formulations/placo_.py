@@ -1,0 +1,169 @@
+"""PlaCo's generic QP builder (``placo.Problem``): first level hard, the rest soft.
+
+One QP (PlaCo eliminates the hard equalities by QR and calls eiquadprog):
+
+    min  Σ_{j≥2} ρ^{j−2} ‖A_j x − b_j‖²  +  ε ‖x‖²
+    s.t. A_1 x = b_1                         (the first level, hard)
+         lower_t ≤ A_t x ≤ upper_t           (every inequality task, hard)
+
+with ``A_j``, ``b_j`` the level's weighted equality rows (``√w`` per task, as in
+:class:`~hierarchy.Level`), ``ρ = weight_ratio`` the geometric ratio between soft
+levels and ``ε = regularization`` PlaCo's own Tikhonov term. By default
+``ρ = SOFT_SPAN^(1/(k−2))`` with ``SOFT_SPAN = 1e-4``: the soft weights run from 1
+down to ``1e-4 = 10⁴ ε``; a smaller ratio pushes the lowest levels under the
+regularisation and a larger one lets lower levels pull higher ones (measured in
+``docs/qp-formulations.md``). ``ε = 1e-8`` (PlaCo's default) was the most accurate
+tie-break measured here: smaller values leave the minimum-norm direction to the
+QP solver's tolerance (error 1e-4 at ``ε = 1e-12``), larger ones bias the answer
+by ``O(ε)``.
+
+*Exactness.* With two levels whose first level is an equality level, this is the
+lexicographic optimum of the paper's eq. 18 up to ``ε`` (the tie-break is
+``min ‖x‖`` within ``O(ε)``): ``status="optimal"``. Deeper stacks are a weighted
+compromise between the soft levels (a lower level can pull a higher soft level
+off its optimum by ``O(ρ)``): ``status="approximate"``; so is any stack with an
+inequality task below the first level (PlaCo keeps it hard, which can override a
+higher soft level).
+
+*First level.* PlaCo's QR elimination refuses hard equalities that are not of
+full row rank. A rank-deficient (or inconsistent) first level is therefore
+replaced by its feasible rows ``U_rᵀ A_1 x = U_rᵀ b_1`` (``U_r`` the left singular
+vectors of its ``r`` non-zero singular values): the same optimal set as the
+least-squares first level, in full row rank (``info["first_level_rank"]``).
+
+*Failures.* PlaCo raises on infeasible hard inequalities; the Solution is then
+``failed`` and names, in ``info["failed_level"]`` and ``info["failed_tasks"]``,
+the first level whose hard inequalities cannot hold together with those above
+(found by re-solving the hard constraints alone, level by level).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import placo
+
+from hierarchy import DEFAULT_RCOND, TaskStack
+
+from .base import Capabilities, FormulationError, Outcome
+
+NAME = "placo"
+DESCRIPTION = "PlaCo placo.Problem: first level hard, lower levels soft (geometric weights)"
+CAPABILITIES = Capabilities(equalities=True, inequalities=True, weights=True,
+                            needs_mass_matrix=False, exact=False)
+#: Smallest soft weight of the default geometric ratio: 10⁴× PlaCo's default
+#: regularisation (1e-8), so the lowest level still dominates the Tikhonov term.
+SOFT_SPAN = 1e-4
+
+OPTIONS = {
+    "weight_ratio": (None, "ρ: soft level j (j ≥ 2) has weight ρ^(j−2); None: "
+                           "ρ = SOFT_SPAN^(1/(k−2)) (weights from 1 down to SOFT_SPAN)"),
+    "regularization": (1e-8, "ε: PlaCo's ‖x‖² regularisation weight (PlaCo's default; measured best)"),
+    "rcond": (DEFAULT_RCOND, "relative rank threshold used to reduce the first level"),
+}
+
+
+def _expression(variable, A: np.ndarray):
+    return variable.expr().left_multiply(np.ascontiguousarray(A, dtype=np.float64))
+
+
+def _add_inequalities(problem, variable, level) -> int:
+    count = 0
+    for t in level:
+        if t.is_equality:
+            continue
+        lo, up = t.bounds()
+        for side, keep in (("lower", np.isfinite(lo)), ("upper", np.isfinite(up))):
+            if not keep.any():
+                continue
+            e = _expression(variable, t.A[keep])
+            if side == "lower":
+                problem.add_constraint(e >= np.ascontiguousarray(lo[keep]))
+            else:
+                problem.add_constraint(e <= np.ascontiguousarray(up[keep]))
+            count += 1
+    return count
+
+
+def _first_level_rows(level, rcond: float) -> tuple[np.ndarray, np.ndarray, int]:
+    """Full-row-rank rows with the same least-squares optimal set as the level."""
+    A, b = level.A, level.b
+    if A.shape[0] == 0:
+        return A, b, 0
+    u, s, vt = np.linalg.svd(A, full_matrices=False)
+    tol = rcond * float(np.linalg.norm(A))
+    r = int(np.count_nonzero(s > tol)) if tol > 0 else 0
+    if r == A.shape[0]:
+        return A, b, r
+    # U_rᵀ A = Σ_r V_rᵀ, U_rᵀ b
+    return s[:r, None] * vt[:r], u[:, :r].T @ b, r
+
+
+def _hard_infeasible_level(stack: TaskStack, regularization: float) -> int | None:
+    """Index of the first level whose hard inequalities make the hard set infeasible."""
+    problem = placo.Problem()
+    problem.regularization = max(regularization, 1e-12)
+    x = problem.add_variable(stack.n)
+    for j, level in enumerate(stack.levels):
+        if _add_inequalities(problem, x, level) == 0:
+            continue
+        try:
+            problem.solve()
+        except RuntimeError:
+            return j
+    return None
+
+
+def default_weight_ratio(levels: int) -> float:
+    """``ρ = SOFT_SPAN^(1/(k−2))``: the soft weights of ``k`` levels span ``[SOFT_SPAN, 1]``."""
+    return SOFT_SPAN ** (1.0 / (levels - 2)) if levels > 2 else 1.0
+
+
+def solve(stack: TaskStack, *, weight_ratio: float | None = None, regularization: float = 1e-8,
+          rcond: float = DEFAULT_RCOND) -> Outcome:
+    """Build and solve the single PlaCo QP; see the module docstring."""
+    if weight_ratio is None:
+        weight_ratio = default_weight_ratio(len(stack))
+    for key, val in (("weight_ratio", weight_ratio), ("regularization", regularization)):
+        if not np.isfinite(float(val)) or float(val) <= 0:
+            raise FormulationError(f"{key} must be a finite number > 0, got {val}")
+    if float(weight_ratio) > 1:
+        raise FormulationError(f"weight_ratio must be ≤ 1 (a lower level weighs less), "
+                               f"got {weight_ratio}")
+    n = stack.n
+    problem = placo.Problem()
+    problem.regularization = float(regularization)
+    x = problem.add_variable(n)
+    info: dict[str, Any] = {"weight_ratio": float(weight_ratio),
+                            "regularization": float(regularization), "soft_weights": []}
+    first = stack.levels[0]
+    A1, b1, r1 = _first_level_rows(first, rcond)
+    info["first_level_rank"] = r1
+    if r1:
+        problem.add_constraint(_expression(x, A1) == np.ascontiguousarray(b1))
+    _add_inequalities(problem, x, first)
+    low_inequality = False
+    for j, level in enumerate(stack.levels[1:], start=1):
+        w = float(weight_ratio) ** (j - 1)
+        if level.A.shape[0]:
+            c = problem.add_constraint(_expression(x, level.A) == np.ascontiguousarray(level.b))
+            c.configure("soft", w)
+        info["soft_weights"].append(w)
+        low_inequality |= _add_inequalities(problem, x, level) > 0
+    try:
+        problem.solve()
+    except RuntimeError as exc:
+        j = _hard_infeasible_level(stack, float(regularization))
+        if j is None:
+            info.update(message=f"PlaCo failed: {exc}", failed_level=None, failed_tasks=[])
+        else:
+            names = [t.name for lvl in stack.levels[:j + 1] for t in lvl if not t.is_equality]
+            info.update(message=f"PlaCo failed: {exc}; the hard inequalities of levels 0..{j} "
+                                f"({', '.join(names)}) cannot hold together",
+                        failed_level=j, failed_tasks=[t.name for t in stack.levels[j]
+                                                      if not t.is_equality])
+        return Outcome(np.full(n, np.nan), "failed", info)
+    exact = len(stack) <= 2 and first.is_equality and not low_inequality
+    return Outcome(np.array(x.value, dtype=np.float64), "optimal" if exact else "approximate",
+                   info)
