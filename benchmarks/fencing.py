@@ -290,13 +290,16 @@ def plot_variant(out: Path, variant: str, results: dict) -> list[Path]:
               ("qdd", "‖q̈‖ (rad/s², m/s²)", lambda r: np.linalg.norm(r.a, axis=1))]
     for key, ylabel, get in series:
         fig, ax = plt.subplots(figsize=(7.5, 4.2))
-        for label, res in results.items():
+        colors = plt.get_cmap("tab20").colors
+        for i, (label, res) in enumerate(results.items()):
             y = get(res)
             if y is None or res.steps == 0:
                 continue
-            y = np.abs(np.asarray(y, dtype=float))
-            y = np.where(y > 0, y, np.nan)
-            ax.semilogy(res.t, y, label=label + (" (failed)" if res.failed else ""), lw=1.2)
+            # values below 1e-16 (round-off of an exact answer) are drawn at 1e-16
+            y = np.maximum(np.abs(np.asarray(y, dtype=float)), 1e-16)
+            ax.semilogy(res.t, y, label=label + (" (failed)" if res.failed else ""), lw=1.2,
+                        color=colors[(2 * i) % 20 + (i // 10) % 2],
+                        ls=("-", "--", ":")[(i // 7) % 3])
         ax.set_xlabel("time (s)")
         ax.set_ylabel(ylabel)
         ax.set_title(f"fencing, {variant} tasks")

@@ -75,17 +75,40 @@ class RobotModel:
 
     def frame_id(self, frame: str) -> int:
         """Frame index of a frame name or role; :class:`KeyError` naming it if absent."""
+        cache = self.__dict__.setdefault("_frame_ids", {})
+        if frame in cache:
+            return cache[frame]
         name = self.frames.get(frame, frame)
         if not self.model.existFrame(name):
             raise KeyError(f"model {self.name!r} has no frame {name!r}")
-        return int(self.model.getFrameId(name))
+        cache[frame] = int(self.model.getFrameId(name))
+        return cache[frame]
 
     def joint_limits(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Position lower/upper limits and velocity limits of the actuated joints.
 
         Returns arrays over the velocity rows ``n_base:`` (one per actuated joint of
-        one degree of freedom); unlimited joints get ``∓inf``.
+        one degree of freedom); unlimited joints get ``∓inf``. Computed once per
+        :class:`RobotModel` (copies are returned).
         """
+        if "_limits" not in self.__dict__:
+            self.__dict__["_limits"] = self._compute_joint_limits()
+        return tuple(a.copy() for a in self.__dict__["_limits"])
+
+    def actuated_q_index(self) -> np.ndarray:
+        """Index in ``q`` of each actuated one-dof joint, ordered like ``v[n_base:]``
+        (``-1`` for a velocity row without a single configuration entry)."""
+        if "_q_index" not in self.__dict__:
+            idx = np.full(self.nv - self.n_base, -1, dtype=int)
+            m = self.model
+            for j in range(1, m.njoints):
+                jm = m.joints[j]
+                if jm.nv == 1 and jm.nq == 1 and jm.idx_v >= self.n_base:
+                    idx[jm.idx_v - self.n_base] = jm.idx_q
+            self.__dict__["_q_index"] = idx
+        return self.__dict__["_q_index"].copy()
+
+    def _compute_joint_limits(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         m = self.model
         lo = np.full(self.nv - self.n_base, -np.inf)
         hi = np.full(self.nv - self.n_base, np.inf)

@@ -273,28 +273,24 @@ def joint_limit_rows(state: KinematicState, params: JointLimitActivation = Joint
     lo, hi, _ = robot.joint_limits()
     qa = _actuated_positions(state)
     va = state.v[nb:]
-    width = np.minimum(params.margin, 0.25 * (hi - lo))
-    rows, targets = [], []
-    for j in range(lo.size):
-        if not np.isfinite(lo[j]) or not np.isfinite(hi[j]):
-            continue
-        y_lo = lo[j] + width[j] - qa[j]          # depth into the lower margin
-        y_hi = qa[j] - (hi[j] - width[j])        # depth into the upper margin
-        if y_lo > 0:
-            s = min(y_lo / width[j], 1.0)
-            # ẏ_lo = −v: push towards +q
-            targets.append(s * (params.kp * y_lo - params.kd * va[j]))
-        elif y_hi > 0:
-            s = min(y_hi / width[j], 1.0)
-            targets.append(-s * (params.kp * y_hi + params.kd * va[j]))
-        else:
-            continue
-        rows.append(nb + j)
-    if not rows:
+    finite = np.isfinite(lo) & np.isfinite(hi)
+    with np.errstate(invalid="ignore"):
+        width = np.where(finite, np.minimum(params.margin, 0.25 * (hi - lo)), 1.0)
+        y_lo = np.where(finite, lo + width - qa, -1.0)     # depth into the lower margin
+        y_hi = np.where(finite, qa - (hi - width), -1.0)   # depth into the upper margin
+    in_lo = y_lo > 0
+    in_hi = (y_hi > 0) & ~in_lo
+    s_lo = np.minimum(y_lo / width, 1.0)
+    s_hi = np.minimum(y_hi / width, 1.0)
+    # lower margin: ẏ = −q̇, push towards +q; upper margin: ẏ = q̇, push towards −q
+    target = np.where(in_lo, s_lo * (params.kp * y_lo - params.kd * va),
+                      -s_hi * (params.kp * y_hi + params.kd * va))
+    rows = np.flatnonzero(in_lo | in_hi)
+    if rows.size == 0:
         return None
-    A = np.zeros((len(rows), robot.nv))
-    A[np.arange(len(rows)), rows] = 1.0
-    return Task(name, A, np.array(targets))
+    A = np.zeros((rows.size, robot.nv))
+    A[np.arange(rows.size), nb + rows] = 1.0
+    return Task(name, A, target[rows])
 
 
 def joint_limit_bounds(state: KinematicState, horizon: float, dt: float,
@@ -355,27 +351,18 @@ def joint_limit_bounds(state: KinematicState, horizon: float, dt: float,
 
 
 def _actuated_positions(state: KinematicState) -> np.ndarray:
-    """Positions of the actuated one-dof joints, ordered like their velocity rows."""
-    robot = state.robot
-    m = robot.model
-    nb = robot.n_base
-    out = np.zeros(robot.nv - nb)
-    for j in range(1, m.njoints):
-        jm = m.joints[j]
-        if jm.nv == 1 and jm.nq == 1 and jm.idx_v >= nb:
-            out[jm.idx_v - nb] = state.q[jm.idx_q]
-    return out
+    """Positions of the actuated one-dof joints, ordered like their velocity rows
+    (0 for a row without a single configuration entry)."""
+    idx = state.robot.actuated_q_index()
+    return np.where(idx >= 0, state.q[np.maximum(idx, 0)], 0.0)
 
 
 def joint_limit_violation(robot: RobotModel, q) -> float:
     """Largest amount by which an actuated joint of ``q`` is past a limit (rad, ≥ 0)."""
     lo, hi, _ = robot.joint_limits()
-    st = np.zeros(robot.nv - robot.n_base)
-    m = robot.model
-    for j in range(1, m.njoints):
-        jm = m.joints[j]
-        if jm.nv == 1 and jm.nq == 1 and jm.idx_v >= robot.n_base:
-            st[jm.idx_v - robot.n_base] = q[jm.idx_q]
+    idx = robot.actuated_q_index()
+    q = np.asarray(q, dtype=float)
+    st = np.where(idx >= 0, q[np.maximum(idx, 0)], 0.0)
     with np.errstate(invalid="ignore"):
         over = np.maximum(np.nan_to_num(lo - st, nan=0.0, neginf=0.0),
                           np.nan_to_num(st - hi, nan=0.0, neginf=0.0))
