@@ -463,10 +463,16 @@ def measure_control_step(settings: Settings, progress: Progress | None = None,
             per_step = est * 1e-6 + 2e-3            # solve + kinematics and torque
             steps = int(min(duration / 0.002, max(20, 4 * settings.cap_s / per_step)))
             duration = steps * 0.002
-        sim = simulate(scenario.robot, lambda state, t: scenario.acceleration_stack(state, t),
-                       lambda stack, **kw: mod.solve(stack, **kw),
-                       duration=duration, dt=0.002, needs_dynamics=dyn,
-                       torque_from_solution=dyn, algorithmic_error=False)
+        try:
+            sim = simulate(scenario.robot,
+                           lambda state, t: scenario.acceleration_stack(state, t),
+                           lambda stack, **kw: mod.solve(stack, **kw),
+                           duration=duration, dt=0.002, needs_dynamics=dyn,
+                           torque_from_solution=dyn, algorithmic_error=False)
+        except Exception as exc:  # noqa: BLE001 - recorded in the table, the run goes on
+            rows.append({"formulation": name, "what": what, "paper_ms": paper, "steps": 0,
+                         "note": f"{type(exc).__name__}: {exc}"[:300]})
+            continue
         if sim.steps == 0:
             rows.append({"formulation": name, "what": what, "paper_ms": paper,
                          "steps": 0, "note": sim.message})
@@ -595,7 +601,7 @@ def detail_table(rows: list[Row]) -> str:
              "dist. max | repeats | status |",
              "|---|---:|---:|---:|---:|---:|---:|---:|---|"]
     for r in sorted(rows, key=lambda r: (math.isnan(r.median_us), r.median_us)):
-        if r.status in ("skipped", "unsupported"):
+        if r.status in ("skipped", "unsupported", "error"):
             lines.append(f"| {r.label} | – | – | – | – | – | – | 0 | {r.status}: "
                          f"{r.note} |")
             continue
@@ -623,7 +629,7 @@ def pivot_table(rows: list[Row], k: int) -> str:
             r = next((r for r in sub if r.label == label and r.n == n), None)
             if r is None:
                 cells.append("")
-            elif r.status in ("skipped", "unsupported"):
+            elif r.status in ("skipped", "unsupported", "error"):
                 cells.append(r.status)
             else:
                 mark = ("†" if r.status == "reduced" else "") + \
@@ -805,10 +811,28 @@ def markdown_report(rows: list[Row], rats: list[Ratio], batch: dict, ik: dict,
     return "\n".join(md) + "\n"
 
 
+def _count_by_n(rows: list[Row]) -> dict[str, int]:
+    """Rows per G1 / random ``n``, in that order."""
+    out: dict[str, int] = {}
+    for r in sorted(rows, key=lambda r: (r.suite != "g1", r.n)):
+        key = "G1" if r.suite == "g1" else f"n={r.n}"
+        out[key] = out.get(key, 0) + 1
+    return out
+
+
 def doc_page(report: str, info: dict[str, str], settings: Settings, command: str,
-             elapsed_s: float) -> str:
+             elapsed_s: float, rows: list[Row] | None = None) -> str:
     """``docs/benchmarks.md``: how it was measured, the machine, then the report."""
     mode = "quick" if settings.quick else "default"
+    rows = rows or []
+    status = {st: [r for r in rows if r.status == st]
+              for st in ("ok", "reduced", "skipped", "unsupported", "error")}
+    words = {"ok": "with every repeat", "reduced": "reduced", "skipped": "skipped",
+             "unsupported": "unsupported", "error": "with an error"}
+    counts = ", ".join(f"{len(v)} rows {words[k]}" + (
+        " (" + ", ".join(f"{n}: {c}" for n, c in _count_by_n(v).items()) + ")"
+        if k in ("reduced", "skipped") and v else "")
+        for k, v in status.items() if v) or "no rows"
     threads = (f"OpenBLAS was limited to {settings.blas_threads} thread(s) while measuring "
                "(`--blas-threads`), as in a control loop that solves one problem at a time; "
                "with BLAS's default threads on this shared 2-core machine, solves at "
@@ -825,7 +849,7 @@ The machine was shared with other processes while measuring: compare ratios meas
 side by side in one run, not absolute times across runs.
 
 **Method.** For each case (a set of stacks) and each formulation variant (one row per
-QP back-end), after {settings.warmup} warm-up solves, up to {settings.repeats} timed
+QP back-end), after {settings.warmup + 1} warm-up solves, up to {settings.repeats} timed
 solves cycle over the case's stacks; the time of a solve is `Solution.time_s`
 (`time.perf_counter` around the plugin's `solve`, without the registry's option checks
 and residual evaluation). Rows give the median, p10 and p90; **success** is the share of
@@ -834,10 +858,13 @@ solves whose status is not `failed` and whose residual at every level is within
 ‖x − x_ref‖ / max(1, ‖x_ref‖) to `reference` (to `reference` with `metric=M` for
 formulations that take a mass matrix). Formulations that need a mass matrix get the
 robot's M(q) on G1 stacks and a fixed SPD M (eigenvalues 0.1–10, seeded rotation) on
-random stacks. A variant whose timed solves would exceed {settings.cap_s:g} s per case
-gets fewer repeats (at least {settings.min_repeats}; marked `reduced`/`†`), and one
-whose single solve exceeds {settings.cap_s / settings.min_repeats * 1e3:.0f} ms is
-`skipped` — this happens at n = 300 and k = 16 for the SVD- and QP-based methods.
+random stacks. Time budget: a variant whose timed solves would exceed {settings.cap_s:g} s
+per case gets fewer repeats (at least {settings.min_repeats}, and the loop stops at
+twice the cap; marked `reduced`/`†`); it is `skipped` when one solve takes more than
+{2 * settings.cap_s / settings.min_repeats * 1e3:.0f} ms after warm-up (or the first
+more than {settings.cap_s:g} s), when it was skipped on a smaller random case, or when
+its p90 on a smaller case (≥ 5 ms) scaled by (n ratio)³ exceeds {4 * settings.cap_s:g} s.
+In this run: {counts}. The reason for each is in the `note` column of `results.csv`.
 
 G1 stacks: the fencing scenario (`robots.fencing`, both variants, acceleration level,
 joint limits as activation rows so every equality formulation can take them) at
@@ -922,7 +949,13 @@ def _run_benchmark(settings: Settings, out: Path, doc: Path | None, command: str
                                      f"= {4 * settings.cap_s:g} s (p90 at {c} × (n ratio)³)"))
                 too_slow.setdefault(v.label, []).append((case.n, case.k, case.name))
                 continue
-            row = time_case(case, v, ref, settings)
+            try:
+                row = time_case(case, v, ref, settings)
+            except Exception as exc:  # noqa: BLE001 - one plugin's bug must not end the run
+                row = Row(case.suite, case.name, case.n, case.k, case.rows, v.label,
+                          v.formulation, v.backend,
+                          " ".join(f"{a}={b}" for a, b in v.options.items()),
+                          status="error", note=f"{type(exc).__name__}: {exc}"[:300])
             if case.suite == "random":
                 if row.status == "skipped":
                     too_slow.setdefault(v.label, []).append((case.n, case.k, case.name))
@@ -986,7 +1019,7 @@ def _run_benchmark(settings: Settings, out: Path, doc: Path | None, command: str
         prefix = os.path.relpath(out.resolve(), doc.parent.resolve()) + "/"
         report_doc = markdown_report(rows, rats, batch, ik, control, notes, settings,
                                      plots, prefix)
-        doc.write_text(doc_page(report_doc, info, settings, command, elapsed))
+        doc.write_text(doc_page(report_doc, info, settings, command, elapsed, rows))
     return summary
 
 

@@ -212,3 +212,23 @@ def test_g1_fencing_samples_give_robot_stacks_and_mass_matrices():
         assert np.array_equal(M, M.T) and np.linalg.eigvalsh(M).min() > 0
     more = samples.stacks_at(5)
     assert len(more) == 5 and all(s.n == 35 for s in more)
+
+
+def test_a_plugin_error_is_recorded_and_the_run_goes_on(tmp_path, monkeypatch):
+    real = bench.time_case
+
+    def broken(case, variant, ref, settings):
+        if variant.label == "extended_jacobian[svd]":
+            raise RuntimeError("boom in a plugin")
+        return real(case, variant, ref, settings)
+
+    monkeypatch.setattr(bench, "time_case", broken)
+    settings = Settings(sizes=(5,), levels=(2,), repeats=3, min_repeats=2, warmup=1,
+                        samples=1, g1=False, only=("reference", "extended_jacobian"))
+    run_benchmark(settings, tmp_path)
+    with open(tmp_path / "results.csv") as fh:
+        rows = {r["label"]: r for r in csv.DictReader(fh)}
+    assert rows["extended_jacobian[svd]"]["status"] == "error"
+    assert "boom in a plugin" in rows["extended_jacobian[svd]"]["note"]
+    assert rows["extended_jacobian"]["status"] == "ok"
+    assert "| extended_jacobian[svd] | error" in (tmp_path / "results.md").read_text()
