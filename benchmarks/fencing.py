@@ -59,6 +59,9 @@ class RunSpec:
         note: Why these options (printed in the reproduction page).
         default: Part of the default selection.
         variants: The scenario variants it is run in.
+        level: ``"acceleration"`` (the paper's stacks) or ``"velocity"`` (the same
+            tasks as ``J q̇ = ẋ* + K e``, ``K = VELOCITY_GAIN``, joint limits as
+            bounds on ``q̇``; QP formulations only).
     """
 
     label: str
@@ -67,6 +70,11 @@ class RunSpec:
     note: str = ""
     default: bool = True
     variants: tuple[str, ...] = ("compatible", "incompatible")
+    level: str = "acceleration"
+
+
+#: ``K`` (1/s) of the velocity-level runs
+VELOCITY_GAIN = 20.0
 
 
 #: The per-scenario option table (one row per run).
@@ -102,6 +110,11 @@ RUNS: tuple[RunSpec, ...] = (
     RunSpec("cascaded_qp", "cascaded_qp", {"compatible": {"solver": "daqp"},
                                            "incompatible": {"solver": "daqp"}},
             "one QP per level (DAQP back-end), joint limits as bounds on q̈"),
+    RunSpec("cascaded_qp:velocity", "cascaded_qp", {"compatible": {"solver": "daqp"},
+                                                    "incompatible": {"solver": "daqp"}},
+            "the same tasks at velocity level (J q̇ = ẋ* + 20 e, limits as bounds on q̇), "
+            "exact hierarchy: the like-for-like counterpart of PlaCo's KinematicsSolver",
+            level="velocity"),
     RunSpec("cvxpy", "cvxpy", {}, "the cascaded QP modelled in cvxpy (slow; a check)",
             default=False),
     RunSpec("daqp_hierarchical", "daqp_hierarchical", {},
@@ -148,6 +161,19 @@ def run_one(spec: RunSpec, variant: str, duration: float, dt: float,
         from benchmarks.placo_baseline import run_placo
         return run_placo(scenario, duration=duration, dt=dt, progress=progress)
     solve, dyn, own_tau, limits = _formulation_solver(spec, variant)
+    if spec.level == "velocity":
+        if limits != "bounds" or dyn:
+            from hierarchy import UnsupportedTaskError
+            raise UnsupportedTaskError("velocity-level runs need a formulation that takes "
+                                       "inequality tasks (joint limits as bounds on q̇)",
+                                       formulation=spec.formulation, task="joint_limits")
+
+        def build_velocity(state, t):
+            return scenario.velocity_stack(state, t, gain=VELOCITY_GAIN, limits="bounds",
+                                           dt=dt)
+
+        return simulate(scenario.robot, build_velocity, solve, duration=duration, dt=dt,
+                        level="velocity", progress=progress)
 
     def build(state, t):
         return scenario.acceleration_stack(state, t, limits=limits, dt=dt)

@@ -199,7 +199,7 @@ class FencingScenario:
         """The velocity-level stack ``J q̇ = ẋ* + K e`` of the same tasks.
 
         Args:
-            gain: ``K`` of every task.
+            gain: ``K`` of every task but the posture (which keeps its ``K_p``).
             limits: ``"bounds"`` for position/velocity bounds on ``q̇``
                 (``q + q̇ dt`` within limits, ``|q̇| ≤ q̇_max``), ``"none"`` to omit.
             dt: Step used by the bounds.
@@ -210,10 +210,12 @@ class FencingScenario:
             levels.append(_velocity_bounds(state, dt))
         elif limits != "none":
             raise ValueError(f"limits must be 'bounds' or 'none', got {limits!r}")
-        for name in ("com", "left_foot", "sword_tip", "posture"):
-            if name in terms:
-                levels.append(terms[name].velocity(gain))
-        return StepTasks(TaskStack(levels), self.errors(state, t, terms))
+        for name in ("com", "left_foot", "sword_tip"):
+            levels.append(terms[name].velocity(gain))
+        n_tasks = len(levels)
+        if "posture" in terms:
+            levels.append(terms["posture"].velocity(self.gains["posture"][0]))
+        return StepTasks(TaskStack(levels), self.errors(state, t, terms), n_tasks)
 
 
 def _velocity_bounds(state: KinematicState, dt: float):

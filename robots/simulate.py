@@ -143,7 +143,7 @@ BuildFn = Callable[[KinematicState, float], StepTasks]
 def simulate(robot: RobotModel, build: BuildFn, solve: SolveFn, *, duration: float,
              dt: float, q0=None, v0=None, needs_dynamics: bool = False,
              torque_from_solution: bool = False, algorithmic_error: bool = True,
-             divergence_limit: float = 1e6,
+             divergence_limit: float = 1e6, level: str = "acceleration",
              progress: Callable[[float], None] | None = None) -> SimulationResult:
     """Run a fixed-step simulation; see the module docstring.
 
@@ -162,6 +162,9 @@ def simulate(robot: RobotModel, build: BuildFn, solve: SolveFn, *, duration: flo
         algorithmic_error: Record eq. 29 (costs an SVD per level per step).
         divergence_limit: Stop (``failed``) when ``‖q̈‖`` exceeds this: the run has
             diverged and would only overflow to NaN a few steps later.
+        level: ``"acceleration"`` (``x`` is ``q̈``, the default) or ``"velocity"``
+            (``x`` is the next velocity: ``q̇ ← x``, ``q ← q ⊕ x dt``, and the recorded
+            ``q̈ = (x − q̇)/dt``, used for RNEA), for velocity-level stacks.
         progress: Called with the simulated time every 250 steps.
 
     Returns:
@@ -169,6 +172,8 @@ def simulate(robot: RobotModel, build: BuildFn, solve: SolveFn, *, duration: flo
     """
     if not (dt > 0 and duration > 0):
         raise ValueError(f"dt and duration must be > 0, got dt={dt}, duration={duration}")
+    if level not in ("acceleration", "velocity"):
+        raise ValueError(f"level must be 'acceleration' or 'velocity', got {level!r}")
     model = robot.model
     data = model.createData()
     dyn = model.createData()
@@ -192,6 +197,9 @@ def simulate(robot: RobotModel, build: BuildFn, solve: SolveFn, *, duration: flo
         sol = solve(step.stack, **kw)
         t2 = time.perf_counter()
         x = np.asarray(sol.x, dtype=float)
+        x_solved = x
+        if level == "velocity" and np.isfinite(x).all():
+            x = (x_solved - v) / dt                    # recorded q̈
         if sol.status == "failed" or not np.isfinite(x).all():
             failed = True
             message = (f"t = {t:.3f} s: solution {sol.status}"
@@ -224,9 +232,9 @@ def simulate(robot: RobotModel, build: BuildFn, solve: SolveFn, *, duration: flo
         for name in errors:
             if len(errors[name]) < len(T):
                 errors[name].append(np.nan)
-        ALG.append(_algorithmic_error(step.stack, x, step.algorithmic_levels)
+        ALG.append(_algorithmic_error(step.stack, x_solved, step.algorithmic_levels)
                    if algorithmic_error else np.nan)
-        v = v + x * dt
+        v = v + x * dt if level == "acceleration" else x_solved.copy()
         q = pin.integrate(model, q, v * dt)
         if not (np.isfinite(q).all() and np.isfinite(v).all()):
             failed, message = True, f"t = {t:.3f} s: state became non-finite"

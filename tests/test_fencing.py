@@ -152,3 +152,15 @@ def test_placo_baseline_runs_the_same_scenario(scenarios):
     assert res.errors["joint_limit_violation_rad"].max() < 1e-9
     assert np.isnan(res.algorithmic_error).all()
     assert np.all(res.solve_time_s > 0)
+
+
+def test_velocity_level_qp_run(scenarios):
+    spec = cmd._runs_by_label()["cascaded_qp:velocity"]
+    res = cmd.run_one(spec, "compatible", 0.05, 0.002)
+    assert not res.failed and res.steps == 25
+    assert res.errors["support_foot_error_m"].max() < 1e-5
+    assert np.nanmax(res.algorithmic_error) < 1e-6
+    unsupported = cmd.RunSpec("nullspace:velocity", "nullspace", level="velocity")
+    from hierarchy import UnsupportedTaskError
+    with pytest.raises(UnsupportedTaskError, match="inequality"):
+        cmd.run_one(unsupported, "compatible", 0.01, 0.002)

@@ -113,3 +113,22 @@ def test_equality_view_keeps_active_bounds():
     eq2 = equality_view(stack, inner)
     assert [lv.names for lv in eq2.levels] == [("eq",), ("low",)]
     assert equality_view(eq2, inner) is eq2
+
+
+def test_velocity_level_integrates_the_solved_velocity(chain):
+    def build(state, t):
+        tip = frame_position(state, "tip", Reference(TARGET, np.zeros(3), np.zeros(3)),
+                             name="tip")
+        stack = TaskStack([tip.velocity(5.0), posture(state, chain.q0).velocity(1.0)])
+        return StepTasks(stack, {"tip_error": float(np.linalg.norm(tip.error))})
+
+    res = simulate(chain, build, lambda s, **kw: formulations.solve(s, "extended_jacobian"),
+                   duration=1.0, dt=0.002, level="velocity")
+    assert not res.failed and res.steps == 500
+    # the tip error decays like exp(-5 t) (up to the Euler step): e(1) ≈ e(0)·e^-5
+    assert res.errors["tip_error"][-1] < 1.2 * np.exp(-5.0 * 0.998) * res.errors["tip_error"][0]
+    k = 200
+    assert np.allclose(res.a[k], (res.v[k + 1] - res.v[k]) / 0.002, atol=1e-9)
+    assert np.allclose(res.q[k + 1], res.q[k] + res.v[k + 1] * 0.002, atol=1e-12)
+    with pytest.raises(ValueError, match="level"):
+        simulate(chain, build, None, duration=0.1, dt=0.01, level="jerk")
