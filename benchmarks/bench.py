@@ -969,7 +969,8 @@ def _run_benchmark(settings: Settings, out: Path, doc: Path | None, command: str
     if reduced:
         notes.append(f"{len(reduced)} rows have fewer than {settings.repeats} repeats "
                      f"(time cap {settings.cap_s:g} s per case): "
-                     + ", ".join(sorted({f'{r.label} @ {r.case}' for r in reduced})[:40]))
+                     + ", ".join(sorted({f'{r.label} @ {r.case}' for r in reduced})[:40])
+                     + (", …" if len(reduced) > 40 else ""))
     if skipped:
         notes.append(f"{len(skipped)} rows skipped (over the time cap; the reason is in "
                      f"the note column of results.csv): "
