@@ -60,6 +60,8 @@ QUICK_LEVELS = (2, 16)
 EXTRA_VARIANTS = (
     ("extended_jacobian", "svd", {"nullspace": "svd"}),
     ("extended_jacobian", "lapack", {"kernel": "lapack"}),
+    # DAQP's C call alone: no SVD compression of the levels, no conflicting-level check
+    ("daqp_hierarchical", "raw", {"compress_levels": False, "check": False}),
 )
 #: residual tolerance of the success test (relative to max(1, ‖b_i‖))
 SUCCESS_TOL = 1e-6
@@ -412,13 +414,16 @@ def measure_batch(runs: list[FencingSamples], settings: Settings,
             for s in batch:
                 formulations.solve(s, name)
             out["loop_us"][name] = (time.perf_counter() - t0) / len(batch) * 1e6
-    for name in ("daqp_hierarchical", "extended_jacobian"):
+    for label, name, opts in (("daqp_hierarchical", "daqp_hierarchical", {}),
+                              ("daqp_hierarchical[raw]", "daqp_hierarchical",
+                               {"compress_levels": False, "check": False}),
+                              ("extended_jacobian", "extended_jacobian", {})):
         if name in names:
             sub = batch[:200]
             for s in sub[:5]:
-                formulations.solve(s, name)
-            out["single_us"][name] = float(np.median(
-                [formulations.solve(s, name).time_s for s in sub])) * 1e6
+                formulations.solve(s, name, **opts)
+            out["single_us"][label] = float(np.median(
+                [formulations.solve(s, name, **opts).time_s for s in sub])) * 1e6
     if progress:
         progress.step("batch: loops and single solves")
     return out
@@ -545,20 +550,21 @@ def ratios(rows: list[Row], batch: dict[str, Any], ik: dict[str, Any]) -> list[R
         best = min(qp) if qp else (math.nan, "cascaded_qp")
         out.append(Ratio(f"{ej} / fastest cascaded_qp ({best[1]}), {case}", e / best[0], 0.2,
                          f"{e:.1f} / {best[0]:.1f} µs"))
-        d = _median(rows, case, "daqp_hierarchical")
-        out.append(Ratio(f"{ej} / daqp_hierarchical, {case}", e / d, 1.0,
-                         f"{e:.1f} / {d:.1f} µs"))
+        for label in ("daqp_hierarchical", "daqp_hierarchical[raw]"):
+            d = _median(rows, case, label)
+            out.append(Ratio(f"{ej} / {label}, {case}", e / d, 1.0, f"{e:.1f} / {d:.1f} µs"))
     for label, target in ((ej, 2.0), ("nullspace", math.inf)):
         a = _median(rows, "random n=100 k=16", label)
         b = _median(rows, "random n=100 k=2", label)
         out.append(Ratio(f"{label} k=16 / k=2 at n=100", a / b, target,
                          f"{a:.1f} / {b:.1f} µs"))
     bt = batch.get("batch_us", {}).get(ej, math.nan)
-    d1 = batch.get("single_us", {}).get("daqp_hierarchical", math.nan)
     lp = batch.get("loop_us", {}).get(ej, math.nan)
     size = batch.get("size", 0)
-    out.append(Ratio(f"solve_batch({ej}) of {size} G1 stacks per stack / one "
-                     f"daqp_hierarchical solve", bt / d1, 0.5, f"{bt:.1f} / {d1:.1f} µs"))
+    for label in ("daqp_hierarchical", "daqp_hierarchical[raw]"):
+        d1 = batch.get("single_us", {}).get(label, math.nan)
+        out.append(Ratio(f"solve_batch({ej}) of {size} G1 stacks per stack / one "
+                         f"{label} solve", bt / d1, 0.5, f"{bt:.1f} / {d1:.1f} µs"))
     out.append(Ratio(f"solve_batch({ej}) per stack / loop of {ej} through solve",
                      bt / lp, 0.5, f"{bt:.1f} / {lp:.1f} µs"))
     if ik:
@@ -865,6 +871,12 @@ twice the cap; marked `reduced`/`†`); it is `skipped` when one solve takes mor
 more than {settings.cap_s:g} s), when it was skipped on a smaller random case, or when
 its p90 on a smaller case (≥ 5 ms) scaled by (n ratio)³ exceeds {4 * settings.cap_s:g} s.
 In this run: {counts}. The reason for each is in the `note` column of `results.csv`.
+
+Extra rows beside each formulation's defaults: `extended_jacobian[svd]` (the paper's
+SVD path), `extended_jacobian[lapack]` (the readable LAPACK nested-QR path; the default
+row is the compiled kernel), `daqp_hierarchical[raw]` (`compress_levels=False,
+check=False`: DAQP's C call alone, without the plugin's SVD compression of the levels and
+its conflicting-level check — faster, but not exact on conflicting levels).
 
 G1 stacks: the fencing scenario (`robots.fencing`, both variants, acceleration level,
 joint limits as activation rows so every equality formulation can take them) at

@@ -112,12 +112,14 @@ def test_ratios_are_the_quotients_of_the_medians():
             _row("g1 compatible", "cascaded_qp[daqp]", 400.0),
             _row("g1 compatible", "cascaded_qp[osqp]", 900.0),
             _row("g1 compatible", "daqp_hierarchical", 25.0),
+            _row("g1 compatible", "daqp_hierarchical[raw]", 16.0, formulation="daqp_hierarchical"),
             _row("random n=100 k=2", "extended_jacobian", 50.0, "random", k=2, n=100),
             _row("random n=100 k=16", "extended_jacobian", 80.0, "random", k=16, n=100),
             _row("random n=100 k=2", "nullspace", 100.0, "random", k=2, n=100),
             _row("random n=100 k=16", "nullspace", 700.0, "random", k=16, n=100)]
     batch = {"size": 1000, "batch_us": {"extended_jacobian": 5.0},
-             "single_us": {"daqp_hierarchical": 20.0}, "loop_us": {"extended_jacobian": 40.0}}
+             "single_us": {"daqp_hierarchical": 20.0, "daqp_hierarchical[raw]": 10.0},
+             "loop_us": {"extended_jacobian": 40.0}}
     ik = {"prioik_step_us": 150.0, "placo_step_us": 100.0}
     got = {r.name: r for r in ratios(rows, batch, ik)}
     assert got["extended_jacobian / nullspace (λ=0), g1 compatible"].value == pytest.approx(0.2)
@@ -125,10 +127,13 @@ def test_ratios_are_the_quotients_of_the_medians():
     assert fastest.value == pytest.approx(0.05) and fastest.met == "yes"
     daqp = got["extended_jacobian / daqp_hierarchical, g1 compatible"]
     assert daqp.value == pytest.approx(0.8) and daqp.met == "yes"
+    raw = got["extended_jacobian / daqp_hierarchical[raw], g1 compatible"]
+    assert raw.value == pytest.approx(1.25) and raw.met == "no"
     assert got["extended_jacobian k=16 / k=2 at n=100"].value == pytest.approx(1.6)
     assert got["nullspace k=16 / k=2 at n=100"].value == pytest.approx(7.0)
     names = list(got)
-    assert got[names[-3]].value == pytest.approx(0.25)      # batch / one daqp solve
+    assert got[names[-4]].value == pytest.approx(0.25)      # batch / one daqp solve
+    assert got[names[-3]].value == pytest.approx(0.5)       # batch / one raw daqp call
     assert got[names[-2]].value == pytest.approx(0.125)     # batch / loop
     ik_ratio = got[names[-1]]
     assert ik_ratio.value == pytest.approx(1.5) and ik_ratio.met == "no"
