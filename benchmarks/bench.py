@@ -709,14 +709,23 @@ def plot(rows: list[Row], out: Path) -> list[str]:
 def machine() -> dict[str, str]:
     """CPU model, cores, OS and library versions."""
     cpu = platform.processor() or platform.machine()
+    fields: dict[str, str] = {}
     try:
         with open("/proc/cpuinfo") as fh:
             for line in fh:
-                if line.lower().startswith("model name"):
-                    cpu = line.split(":", 1)[1].strip()
-                    break
+                key, _, value = line.partition(":")
+                key = key.strip().lower()
+                if key in ("model name", "cpu mhz", "cache size") and key not in fields:
+                    fields[key] = value.strip()
     except OSError:
         pass
+    if "model name" in fields:
+        cpu = fields["model name"]
+        extra = [f"{float(fields['cpu mhz']):.0f} MHz" if "cpu mhz" in fields else "",
+                 f"cache {fields['cache size']}" if "cache size" in fields else ""]
+        extra = [e for e in extra if e]
+        if extra:
+            cpu += f" ({', '.join(extra)})"
     from importlib import metadata
     versions = {}
     for dist in ("numpy", "scipy", "numba", "pin", "placo", "qpsolvers", "daqp", "cvxpy",
@@ -786,20 +795,27 @@ def markdown_report(rows: list[Row], rats: list[Ratio], batch: dict, ik: dict,
                   "(or the formulation's own τ). Paper: 28 DOF, 4 tasks, 2.4 GHz Pentium "
                   "(2009).\n")
         md.append("| formulation | steps | kinematics µs | solve µs | torque µs | total µs | "
-                  "paper ms | run |")
-        md.append("|---|---:|---:|---:|---:|---:|---:|---|")
+                  "total / extended Jacobian | paper ms | paper / extended Jacobian | run |")
+        md.append("|---|---:|---:|---:|---:|---:|---:|---:|---:|---|")
+        base = next((c.get("total_us", math.nan) for c in control
+                     if c["formulation"] == "extended_jacobian"), math.nan)
+        base_paper = next((float(c["paper_ms"]) for c in control
+                           if c["formulation"] == "extended_jacobian" and c["paper_ms"]), 0.0)
         for c in control:
             note = c.get("note", "")
             run_note = (note if note.startswith("shortened") else f"stopped: {note}") \
                 if note else "completed"
+            paper = (f"{float(c['paper_ms']) / base_paper:.2f}"
+                     if c["paper_ms"] and base_paper else "–")
             if not c.get("steps"):
-                md.append(f"| {c['what']} | 0 | – | – | – | – | {c['paper_ms'] or '–'} | "
-                          f"{run_note} |")
+                md.append(f"| {c['what']} | 0 | – | – | – | – | – | {c['paper_ms'] or '–'} | "
+                          f"{paper} | {run_note} |")
                 continue
+            rel = c["total_us"] / base if math.isfinite(base) else math.nan
             md.append(f"| {c['what']} (`{c['formulation']}`) | {c['steps']} | "
                       f"{_fmt_us(c['kinematics_us'])} | {_fmt_us(c['solve_us'])} | "
                       f"{_fmt_us(c['torque_us'])} | {_fmt_us(c['total_us'])} | "
-                      f"{c['paper_ms'] or '–'} | {run_note} |")
+                      f"{rel:.2f} | {c['paper_ms'] or '–'} | {paper} | {run_note} |")
     ks = sorted({r.k for r in rows if r.suite == "random"})
     if ks:
         md.append("\n## Random stacks: median solve time (µs)\n")

@@ -237,3 +237,19 @@ def test_a_plugin_error_is_recorded_and_the_run_goes_on(tmp_path, monkeypatch):
     assert "boom in a plugin" in rows["extended_jacobian[svd]"]["note"]
     assert rows["extended_jacobian"]["status"] == "ok"
     assert "| extended_jacobian[svd] | error" in (tmp_path / "results.md").read_text()
+
+
+def test_control_step_table_normalises_to_the_extended_jacobian():
+    control = [
+        {"formulation": "extended_jacobian", "what": "EJ", "paper_ms": "1.4", "steps": 5,
+         "kinematics_us": 1.0, "solve_us": 2.0, "torque_us": 3.0, "total_us": 6.0,
+         "note": ""},
+        {"formulation": "nullspace", "what": "NS", "paper_ms": "2.7", "steps": 5,
+         "kinematics_us": 1.0, "solve_us": 5.0, "torque_us": 3.0, "total_us": 9.0,
+         "note": "shortened to 5 steps (time cap)"},
+        {"formulation": "reference", "what": "R", "paper_ms": "", "steps": 0,
+         "note": "t = 0.1 s: diverged"}]
+    md = bench.markdown_report([], [], {}, {}, control, [], Settings(), [])
+    assert "| NS (`nullspace`) | 5 | 1.0 | 5.0 | 3.0 | 9.0 | 1.50 | 2.7 | 1.93 | " \
+           "shortened to 5 steps (time cap) |" in md
+    assert "| R | 0 |" in md and "stopped: t = 0.1 s: diverged" in md
