@@ -78,7 +78,26 @@ class Tally:
     times: list = field(default_factory=list)
 
 
-def variants(include_cvxpy_backends: bool = False) -> tuple[list[Variant], list[str]]:
+#: Non-default settings measured alongside the defaults (``--no-ablations`` drops them):
+#: how higher optima are fixed in the cascade, and DAQP without level compression.
+ABLATIONS = [
+    Variant("cascaded_qp/clarabel fixing=rows", "cascaded_qp",
+            {"solver": "clarabel", "fixing": "rows"}),
+    Variant("cascaded_qp/clarabel fixing=nullspace", "cascaded_qp",
+            {"solver": "clarabel", "fixing": "nullspace"}),
+    Variant("cascaded_qp/quadprog fixing=rows", "cascaded_qp",
+            {"solver": "quadprog", "fixing": "rows"}),
+    Variant("cascaded_qp/proxqp fixing=nullspace", "cascaded_qp",
+            {"solver": "proxqp", "fixing": "nullspace"}),
+    Variant("cascaded_qp/quadprog fix_active=False", "cascaded_qp",
+            {"solver": "quadprog", "fix_active": False}),
+    Variant("daqp_hierarchical compress_levels=False", "daqp_hierarchical",
+            {"compress_levels": False}),
+]
+
+
+def variants(include_cvxpy_backends: bool = False, ablations: bool = True
+             ) -> tuple[list[Variant], list[str]]:
     """Every available formulation × back-end, and the notes on what was left out."""
     out, notes = [], []
     for info in formulations.available():
@@ -98,7 +117,16 @@ def variants(include_cvxpy_backends: bool = False) -> tuple[list[Variant], list[
             out.append(Variant("cvxpy/CLARABEL", info.name, {"solver": "CLARABEL"}))
         else:
             out.append(Variant(info.name, info.name, {}, mm))
+    if ablations:
+        names = {v.formulation for v in out}
+        out += [v for v in ABLATIONS if v.formulation in names
+                and v.options.get("solver") in (None, *_backends(v.formulation))]
     return out, notes
+
+
+def _backends(name: str) -> tuple[str, ...]:
+    mod = formulations.get(name)
+    return tuple(mod.backends()) if hasattr(mod, "backends") else ()
 
 
 def draw(family: str, index: int, n_range: tuple[int, int], k_range: tuple[int, int]
@@ -225,10 +253,10 @@ def _versions() -> str:
 
 
 def report(n_stacks: int, families: list[str], n_range, k_range, include_cvxpy_backends=False,
-           only: list[str] | None = None, stream=None) -> str:
+           only: list[str] | None = None, stream=None, ablations: bool = True) -> str:
     """Run everything and return the markdown report."""
     stream = sys.stderr if stream is None else stream
-    vs, notes = variants(include_cvxpy_backends)
+    vs, notes = variants(include_cvxpy_backends, ablations)
     if only:
         vs = [v for v in vs if v.formulation in only or v.label in only]
     t0 = time.perf_counter()
@@ -261,7 +289,8 @@ def report(n_stacks: int, families: list[str], n_range, k_range, include_cvxpy_b
         "",
         f"{n_stacks} seeded stacks per family, `n` in [{n_range[0]}, {n_range[1]}] unknowns, "
         f"`k` in [{k_range[0]}, {k_range[1]}] levels (drawn per stack). Every formulation is "
-        "called with its default options (`cascaded_qp` once per back-end). Distances are "
+        "called with its default options (`cascaded_qp` once per back-end); rows whose label "
+        "ends with a setting (e.g. `fixing=rows`) are ablations of one option. Distances are "
         "relative: `‖x − x_ref‖ / max(1, ‖x_ref‖)`. Times are wall-clock per solve on a "
         "shared 2-core machine (noisy; see `prioik bench` for timing).",
         "",
@@ -294,6 +323,8 @@ def _arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--k-max", type=int, default=5)
     p.add_argument("--cvxpy-backends", action="store_true",
                    help="run cvxpy with every solver it has (default: Clarabel only)")
+    p.add_argument("--no-ablations", action="store_true",
+                   help="only default settings (drop the rows marked with a setting)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -307,7 +338,7 @@ def run(args: argparse.Namespace) -> int:
         raise ValueError("need n-stacks ≥ 1, 2 ≤ n-min ≤ n-max, 1 ≤ k-min ≤ k-max")
     only = [s for s in args.formulations.split(",") if s] or None
     text = report(args.n_stacks, families, (args.n_min, args.n_max), (args.k_min, args.k_max),
-                  args.cvxpy_backends, only)
+                  args.cvxpy_backends, only, ablations=not args.no_ablations)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(text, encoding="utf-8")
     print(f"validate: wrote {args.out}", file=sys.stderr)

@@ -98,7 +98,7 @@ OPTIONS = {
                              "else 0)"),
     "fix_active": (True, "fix strongly active inequalities (positive multiplier) as "
                          "equalities for the lower levels (exact; avoids degenerate faces)"),
-    "margin": (1e-9, "fixed higher inequality rows are relaxed by margin·max(1, ‖x*‖) "
+    "margin": (0.0, "fixed higher inequality rows are relaxed by margin·max(1, ‖x*‖) "
                      "(unit rows) so degenerate active sets stay solvable"),
     "on_infeasible": ("relax", "'relax': least-violation answer; 'fail': failed status"),
     "infeasibility_tol": (1e-7, "an inequality task counts as violated above this "
@@ -138,7 +138,8 @@ def backend_settings(solver: str, tolerance: float | None) -> dict[str, Any]:
     if solver == "proxqp":
         return {"eps_abs": t, "eps_rel": t, "max_iter": 10_000}
     if solver == "highs":
-        return {"primal_feasibility_tolerance": t, "dual_feasibility_tolerance": t}
+        return {"primal_feasibility_tolerance": t, "dual_feasibility_tolerance": t,
+                "qp_iteration_limit": 10_000}
     if solver == "daqp":
         return {"primal_tol": t, "dual_tol": min(t, 1e-12)}
     return {}
@@ -597,7 +598,7 @@ def solve(stack: TaskStack, *, solver: str = DEFAULT_SOLVER, tolerance: float | 
           backend_options: dict | None = None, fixing: str = "basis", metric=None,
           rcond: float = DEFAULT_RCOND, regularization: float | None = None,
           on_infeasible: str = "relax", infeasibility_tol: float = 1e-7,
-          margin: float = 1e-9, fix_active: bool = True) -> Outcome:
+          margin: float = 0.0, fix_active: bool = True) -> Outcome:
     """Solve the stack by one QP per level plus a regularisation level.
 
     See the module docstring; every option is listed in :data:`OPTIONS`.

@@ -59,7 +59,7 @@ OPTIONS = {
     "fixing": ("basis", "'basis' (orthonormal row-space basis) or 'rows' (literal rows)"),
     "metric": (None, "SPD n×n W: the final level minimises xᵀWx instead of xᵀx"),
     "rcond": (DEFAULT_RCOND, "relative rank threshold of the nested null spaces"),
-    "margin": (1e-9, "fixed higher inequality rows relaxed by margin·max(1, ‖x*‖) (unit rows)"),
+    "margin": (0.0, "fixed higher inequality rows relaxed by margin·max(1, ‖x*‖) (unit rows)"),
     "on_infeasible": ("relax", "'relax': least-violation answer; 'fail': failed status"),
     "infeasibility_tol": (1e-7, "an inequality task counts as violated above this "
                                 "(relative to max(1, ‖A_t‖_F‖x‖))"),
@@ -98,7 +98,7 @@ def _solve(problem: cp.Problem, solver: str, settings: dict) -> tuple[str, str]:
 
 def solve(stack: TaskStack, *, solver: str = DEFAULT_SOLVER, backend_options: dict | None = None,
           fixing: str = "basis", metric=None, rcond: float = DEFAULT_RCOND,
-          margin: float = 1e-9, on_infeasible: str = "relax",
+          margin: float = 0.0, on_infeasible: str = "relax",
           infeasibility_tol: float = 1e-7) -> Outcome:
     """Solve the stack level by level with cvxpy; see the module docstring."""
     available = backends()
