@@ -34,11 +34,27 @@ convex in ``A x`` and in the slacks, so every optimal point of level ``h`` share
 * the inequality rows relaxed by their optimal slacks:
   ``lower_h + v_h ≤ A_h x ≤ upper_h + v_h`` with ``v_h = A_h x* − clip(A_h x*, lower_h,
   upper_h)`` computed from the level's answer, so each QP is feasible at the
-  previous answer by construction.
+  previous answer by construction (``margin`` widens them, default 0);
+* strongly active inequality rows (positive multiplier, zero slack) and rows the
+  level had to violate as equalities (``fix_active=True``): every optimum of the
+  level satisfies them with equality (complementary slackness), and keeping them
+  as inequalities leaves the lower levels a degenerate sliver of a face that
+  active-set back-ends fail on. Inequality rows that fall inside the fixed row
+  space are implied and dropped.
 
-A final regularisation level minimises ``‖x‖²`` (``xᵀWx`` with ``metric=W``) over the
-lexicographic optimal set, which makes the answer unique and comparable with
-``reference``.
+Each level's rows are divided by their RMS row norm (same minimiser) and fixed
+inequality rows are scaled to unit norm, so tasks of very different scales stay
+solvable. A final regularisation level minimises ``‖x‖²`` (``xᵀWx`` with
+``metric=W``) over the lexicographic optimal set, which makes the answer unique and
+comparable with ``reference``.
+
+*Back-ends.* ``solver=`` is any back-end of ``qpsolvers.available_solvers``
+(default Clarabel, the most accurate measured); :func:`backend_settings` maps
+``tolerance`` onto each back-end's own option names (defaults in
+:data:`DEFAULT_TOLERANCES`), and quadprog and DAQP get a small Hessian
+regularisation of the ``x`` block (:data:`NEEDS_DEFINITE_P`). DAQP is called as
+``daqp.solve`` on the same dense problem, because qpsolvers 4.13 gives it
+``blower = −1e30`` on equality rows. Measurements: ``docs/qp-formulations.md``.
 
 *Failures and diagnostics.* A back-end that raises, or reports no solution, ends
 the cascade with ``status="failed"``, ``info["message"]``, ``info["failed_level"]``
@@ -521,8 +537,13 @@ def check_options(solver: str, fixing: str, on_infeasible: str, tolerance,
         raise FormulationError(f"fixing must be one of {', '.join(FIXINGS)}, got {fixing!r}")
     if on_infeasible not in ("relax", "fail"):
         raise FormulationError(f"on_infeasible must be 'relax' or 'fail', got {on_infeasible!r}")
-    if tolerance is not None and not (np.isfinite(float(tolerance)) and float(tolerance) > 0):
-        raise FormulationError(f"tolerance must be a finite number > 0, got {tolerance}")
+    if tolerance is not None:
+        try:
+            ok = np.isfinite(float(tolerance)) and float(tolerance) > 0
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            raise FormulationError(f"tolerance must be a finite number > 0, got {tolerance!r}")
     if backend_options is not None and not isinstance(backend_options, dict):
         raise FormulationError(f"backend_options must be a dict, got "
                                f"{type(backend_options).__name__}")
@@ -609,7 +630,8 @@ def solve(stack: TaskStack, *, solver: str = DEFAULT_SOLVER, tolerance: float | 
     settings = {**backend_settings(solver, tol), **extra}
     eps = NEEDS_DEFINITE_P.get(solver, 0.0) if regularization is None else float(regularization)
     if not np.isfinite(eps) or eps < 0:
-        raise FormulationError(f"regularization must be a finite number ≥ 0, got {regularization}")
+        raise FormulationError(f"regularization must be a finite number ≥ 0, "
+                               f"got {regularization}")
     out = run_cascade(stack, lambda qp: solve_level_qp(qp, solver, settings), fixing=fixing,
                       metric=metric, rcond=rcond, eps=eps, on_infeasible=on_infeasible,
                       infeasibility_tol=float(infeasibility_tol), backend=solver,

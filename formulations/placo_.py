@@ -59,7 +59,8 @@ SOFT_SPAN = 1e-4
 OPTIONS = {
     "weight_ratio": (None, "ρ: soft level j (j ≥ 2) has weight ρ^(j−2); None: "
                            "ρ = SOFT_SPAN^(1/(k−2)) (weights from 1 down to SOFT_SPAN)"),
-    "regularization": (1e-8, "ε: PlaCo's ‖x‖² regularisation weight (PlaCo's default; measured best)"),
+    "regularization": (1e-8, "ε: PlaCo's ‖x‖² regularisation weight (PlaCo's default, "
+                             "measured best)"),
     "rcond": (DEFAULT_RCOND, "relative rank threshold used to reduce the first level"),
 }
 
