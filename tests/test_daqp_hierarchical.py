@@ -20,8 +20,9 @@ def test_exact_on_non_conflicting_stacks(family, seed):
     stack = FAMILIES[family](rng, int(rng.integers(4, 16)), int(rng.integers(2, 5)))
     ref = formulations.solve(stack, "reference").x
     sol = formulations.solve(stack, "daqp_hierarchical")
-    if any(conflicting_levels(stack)):       # rank-deficient levels may also conflict
-        assert sol.status == "approximate" and sol.info["conflicting_levels"]
+    if any(conflicting_levels(stack)) and sol.status == "approximate":
+        # rank-deficient levels may also conflict: then DAQP is not certified
+        assert sol.info["conflicting_levels"] and not sol.info["verified"]
         return
     assert sol.status == "optimal", sol.info
     assert _dist(sol.x, ref) <= 1e-8          # measured ≤ 1.3e-10 with primal_tol 1e-10
@@ -46,6 +47,8 @@ def test_conflicting_stacks_are_flagged_approximate():
             assert _dist(sol.x, ref) <= 1e-8
         else:
             assert sol.status == "approximate" and sol.info["conflicting_levels"]
+            assert sol.info["verified"] is False and "lexicographic check" in sol.info["message"]
+            assert _dist(sol.x, ref) > 1e-3          # and it is indeed off
             flagged += 1
     assert flagged >= 1
 
