@@ -85,3 +85,17 @@ def test_bad_settings():
         formulations.solve(stack, "daqp_hierarchical", primal_tol=0.0)
     with pytest.raises(FormulationError):
         formulations.solve(stack, "daqp_hierarchical", settings=[1])
+
+
+def test_optimal_status_is_truthful_on_badly_scaled_stacks():
+    # tasks scaled by 1e-6 and 1e4 (‖x‖ up to 1e6): "optimal" answers are checked
+    checked = 0
+    for seed in range(12):
+        rng = np.random.default_rng(777 + seed)
+        stack = FAMILIES["degenerate"](rng, int(rng.integers(3, 20)), int(rng.integers(2, 6)))
+        sol = formulations.solve(stack, "daqp_hierarchical")
+        if sol.status == "optimal":
+            ref = formulations.solve(stack, "reference").x
+            assert _dist(sol.x, ref) <= 1e-6
+            checked += 1
+    assert checked >= 4

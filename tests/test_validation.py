@@ -21,7 +21,7 @@ def test_validate_writes_a_table_for_every_family(tmp_path, capsys):
     ineq = text.split("## with_inequalities")[1]
     assert "| extended_jacobian |" not in ineq and "`extended_jacobian` skipped" in ineq
     # the reference agrees with itself, and progress went to stderr
-    assert "| reference | 0.0e+00 | 0.0e+00 | 2/2 |" in text
+    assert "| reference | 0.0e+00 | 0.0e+00 | 0.0e+00 | 2/2 |" in text
     assert "validate: compatible 2/2" in capsys.readouterr().err
 
 
