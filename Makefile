@@ -21,7 +21,7 @@ test: $(STAMP)
 	$(PY) -m pytest -q -p no:cacheprovider
 
 demo: $(STAMP)
-	$(VENV)/bin/prioik compare
+	$(VENV)/bin/prioik fencing --variant both --out $(OUT)
 
 clean:
 	rm -rf $(VENV) $(OUT) *.egg-info
