@@ -550,6 +550,29 @@ def check_options(solver: str, fixing: str, on_infeasible: str, tolerance,
     return dict(backend_options or {})
 
 
+def record_level(info: dict, rec: dict, level, x: np.ndarray, tol: float,
+                 on_infeasible: str, fail) -> Outcome | None:
+    """Append level ``rec["level"]``'s record to ``info`` and diagnose its inequalities.
+
+    Inequality tasks of the level that ``x`` violates beyond ``tol`` are named in
+    ``rec["violated"]`` and ``info["infeasible_levels"]``; with ``on_infeasible="fail"``
+    the failed :class:`Outcome` from ``fail(level, tasks, message, x)`` is returned
+    (``None`` otherwise), shared by every cascade.
+    """
+    j = rec["level"]
+    bad = violated_tasks(level, x, tol)
+    if bad:
+        rec["violated"] = bad
+        info["infeasible_levels"].append({"level": j, "tasks": sorted(bad),
+                                          "violation": bad})
+    info["levels"].append(rec)
+    if bad and on_infeasible == "fail":
+        names = ", ".join(f"{k} (violation {v:.3g})" for k, v in bad.items())
+        return fail(j, sorted(bad), f"level {j}: inequality tasks {names} cannot "
+                    f"hold together with the levels above", x)
+    return None
+
+
 def violated_tasks(level, x: np.ndarray, tol: float) -> dict[str, float]:
     """Inequality tasks of ``level`` violated at ``x`` beyond ``tol`` (relative)."""
     out = {}
@@ -594,18 +617,10 @@ def run_cascade(stack: TaskStack, solve_qp, *, fixing: str, metric, rcond: float
         if active is not None:
             extras["strongly_active"] = int(active.shape[0])
         fixed.add(rows, level.names, x, rcond, active)
-        rec = {"level": j, "tasks": list(level.names), **extras}
-        bad = violated_tasks(level, x, infeasibility_tol)
-        if bad:
-            rec["violated"] = bad
-            info["infeasible_levels"].append({"level": j, "tasks": sorted(bad),
-                                              "violation": bad})
-            if on_infeasible == "fail":
-                info["levels"].append(rec)
-                names = ", ".join(f"{k} (violation {v:.3g})" for k, v in bad.items())
-                return fail(j, sorted(bad), f"level {j}: inequality tasks {names} cannot "
-                            f"hold together with the levels above", x)
-        info["levels"].append(rec)
+        failed = record_level(info, {"level": j, "tasks": list(level.names), **extras},
+                              level, x, infeasibility_tol, on_infeasible, fail)
+        if failed is not None:
+            return failed
     qp = build_level_qp(None, fixed, fixing, 0.0, metric, margin=margin)
     x, message, extras = solve_qp(qp)
     extras.pop("_active", None)

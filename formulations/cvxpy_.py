@@ -33,7 +33,7 @@ from hierarchy import DEFAULT_RCOND, TaskStack
 
 from .base import Capabilities, FormulationError, Outcome
 from .cascaded_qp import (ACTIVE_TOL, MULTIPLIER_TOL, Fixed, _unit_rows, level_rows,
-                          scaled_level, violated_tasks)
+                          record_level, scaled_level)
 
 NAME = "cvxpy"
 DESCRIPTION = "the cascaded QP modelled in cvxpy (independent reference for inequalities)"
@@ -178,17 +178,10 @@ def solve(stack: TaskStack, *, solver: str = DEFAULT_SOLVER, backend_options: di
                 active.append(xrows[act])
         fixed.add(rows, level.names, xv, rcond, np.vstack(active) if active else None)
         rec: dict[str, Any] = {"level": j, "tasks": list(level.names), "status": status}
-        bad = violated_tasks(level, xv, float(infeasibility_tol))
-        if bad:
-            rec["violated"] = bad
-            info["infeasible_levels"].append({"level": j, "tasks": sorted(bad),
-                                              "violation": bad})
-            if on_infeasible == "fail":
-                info["levels"].append(rec)
-                names = ", ".join(f"{k} (violation {v:.3g})" for k, v in bad.items())
-                return fail(j, sorted(bad), f"level {j}: inequality tasks {names} cannot "
-                            f"hold together with the levels above", xv)
-        info["levels"].append(rec)
+        failed = record_level(info, rec, level, xv, float(infeasibility_tol), on_infeasible,
+                              fail)
+        if failed is not None:
+            return failed
     x = cp.Variable(n)
     W = np.eye(n) if metric is None else np.asarray(metric)
     obj = cp.sum_squares(x) if metric is None else cp.quad_form(x, cp.psd_wrap(0.5 * (W + W.T)))
