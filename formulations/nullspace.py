@@ -128,3 +128,40 @@ def solve(stack: TaskStack, *, damping: float = 0.0, rcond: float = DEFAULT_RCON
     status = "approximate" if damping > 0 else "optimal"
     return Outcome(x, status, {"rank_profile": ranks, "min_singular_values": sigmas,
                                "damping": damping})
+
+
+def solve_batch(stacks: list[TaskStack], *, damping: float = 0.0,
+                rcond: float = DEFAULT_RCOND, reproject: bool = True
+                ) -> tuple[np.ndarray, list[str]]:
+    """:func:`solve` for many stacks of one shape with stacked numpy linear algebra.
+
+    One batched SVD per level (``np.linalg.svd`` on a ``B × m × n`` array); each
+    stack's rank rule is applied with a mask on its singular values instead of
+    truncating, so stacks of different ranks share the arrays.
+    """
+    check_nonnegative(damping=damping, rcond=rcond)
+    damping = float(damping)
+    count, n = len(stacks), stacks[0].n
+    X = np.zeros((count, n))
+    N = np.broadcast_to(np.eye(n), (count, n, n)).copy()
+    for li in range(len(stacks[0])):
+        A = np.stack([s.levels[li].A for s in stacks])              # B × m × n
+        if A.shape[1] == 0:
+            continue
+        b = np.stack([s.levels[li].b for s in stacks])              # B × m
+        J_hat = A @ N
+        U, sv, Vt = np.linalg.svd(J_hat, full_matrices=False)
+        tol = float(rcond) * np.linalg.norm(A, axis=(1, 2))
+        keep = (sv > tol[:, None]) & (tol[:, None] > 0)
+        safe = np.where(keep, sv, 1.0)
+        gain = np.where(keep, safe / (safe * safe + damping) if damping > 0 else 1.0 / safe,
+                        0.0)
+        residual = b - np.einsum("bmn,bn->bm", A, X)
+        step = np.einsum("brn,br->bn", Vt, gain * np.einsum("bmr,bm->br", U, residual))
+        if reproject:
+            step = np.einsum("bij,bj->bi", N, step)
+        X += step
+        Vk = Vt * keep[:, :, None]
+        N -= np.einsum("brn,brp->bnp", Vk, Vk)                     # N_i = N_{i-1} − Ĵ⁺Ĵ
+    status = "approximate" if damping > 0 else "optimal"
+    return X, [status] * count

@@ -170,6 +170,33 @@ def decoupled(rng: np.random.Generator, n: int, k: int) -> TaskStack:
     return TaskStack(tasks)
 
 
+def same_shape_batch(base: TaskStack, rng: np.random.Generator, count: int,
+                     reduce: float = 0.0) -> list[TaskStack]:
+    """``count`` stacks of ``base``'s shape, for batch solvers.
+
+    Each level's rows are turned by one random orthogonal ``Q`` (ranks and conflicts
+    kept) and, with probability ``reduce``, cut to a lower rank (down to an all-zero
+    level); targets are fresh. Shapes stay uniform, ranks differ between stacks.
+    """
+    out = []
+    n = base.n
+    for _ in range(count):
+        Q, _ = np.linalg.qr(rng.standard_normal((n, n)))
+        levels = []
+        for level in base.levels:
+            tasks = []
+            for t in level:
+                A = t.A @ Q
+                if rng.random() < reduce:
+                    u, s, vt = np.linalg.svd(A, full_matrices=False)
+                    r = int(rng.integers(0, max(1, int(np.count_nonzero(s > 1e-9 * s[0])))))
+                    A = (u[:, :r] * s[:r]) @ vt[:r]
+                tasks.append(Task(t.name, A, rng.standard_normal(t.m), weight=t.weight))
+            levels.append(tasks)
+        out.append(TaskStack(levels))
+    return out
+
+
 #: family name -> generator ``f(rng, n, k)``
 FAMILIES: dict[str, Callable[[np.random.Generator, int, int], TaskStack]] = {
     "compatible": compatible,

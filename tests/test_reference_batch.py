@@ -5,32 +5,7 @@ import pytest
 
 import formulations
 from hierarchy import Task, TaskStack, rank_profile
-from hierarchy.families import FAMILIES
-
-
-def _rotate_and_reduce(base: TaskStack, rng: np.random.Generator, B: int,
-                       reduce: float) -> list[TaskStack]:
-    """``B`` stacks of ``base``'s shape: each level's rows turned by a random orthogonal
-    ``Q`` (ranks and conflicts kept) and, with probability ``reduce``, cut to a lower
-    rank (down to an all-zero level), with fresh targets. Shapes stay uniform; ranks
-    differ from stack to stack."""
-    out = []
-    n = base.n
-    for _ in range(B):
-        Q, _ = np.linalg.qr(rng.standard_normal((n, n)))
-        levels = []
-        for level in base.levels:
-            tasks = []
-            for t in level:
-                A = t.A @ Q
-                if rng.random() < reduce:
-                    u, s, vt = np.linalg.svd(A, full_matrices=False)
-                    r = int(rng.integers(0, max(1, int(np.count_nonzero(s > 1e-9 * s[0])))))
-                    A = (u[:, :r] * s[:r]) @ vt[:r]
-                tasks.append(Task(t.name, A, rng.standard_normal(t.m), weight=t.weight))
-            levels.append(tasks)
-        out.append(TaskStack(levels))
-    return out
+from hierarchy.families import FAMILIES, same_shape_batch
 
 
 def _loop(stacks, **options):
@@ -43,7 +18,7 @@ def test_batch_equals_loop_with_per_stack_ranks(family, seed):
     rng = np.random.default_rng(500 + seed)
     n, k = int(rng.integers(3, 30)), int(rng.integers(1, 7))
     base = FAMILIES[family](rng, n, k)
-    stacks = _rotate_and_reduce(base, rng, 24, reduce=0.3)
+    stacks = same_shape_batch(base, rng, 24, reduce=0.3)
     batch = formulations.solve_batch(stacks, "reference")
     assert batch.batched
     assert batch.statuses == ["optimal"] * len(stacks)
@@ -58,7 +33,7 @@ def test_batch_really_mixes_rank_profiles():
     including all-zero levels, so the masks and group splits are exercised."""
     rng = np.random.default_rng(7)
     base = FAMILIES["conflicting"](rng, 20, 5)
-    stacks = _rotate_and_reduce(base, rng, 40, reduce=0.4)
+    stacks = same_shape_batch(base, rng, 40, reduce=0.4)
     profiles = {tuple(rank_profile(s)) for s in stacks}
     assert len(profiles) >= 5
     assert any(0 in p for p in profiles)
@@ -72,7 +47,7 @@ def test_batch_with_metric_equals_loop(family):
     rng = np.random.default_rng(11)
     n = 15
     base = FAMILIES[family](rng, n, 3)
-    stacks = _rotate_and_reduce(base, rng, 12, reduce=0.3)
+    stacks = same_shape_batch(base, rng, 12, reduce=0.3)
     R = rng.standard_normal((n, n))
     W = R @ R.T + n * np.eye(n)
     batch = formulations.solve_batch(stacks, "reference", metric=W)
@@ -101,7 +76,7 @@ def test_metric_singular_on_null_space_fails_only_that_stack():
 
 def test_batch_does_not_touch_the_stacks():
     rng = np.random.default_rng(3)
-    stacks = _rotate_and_reduce(FAMILIES["conflicting"](rng, 10, 3), rng, 5, reduce=0.3)
+    stacks = same_shape_batch(FAMILIES["conflicting"](rng, 10, 3), rng, 5, reduce=0.3)
     before = [[lvl.A.copy() for lvl in s.levels] for s in stacks]
     formulations.solve_batch(stacks, "reference")
     for s, mats in zip(stacks, before):
