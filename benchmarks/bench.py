@@ -39,13 +39,13 @@ import sys
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
 import formulations
 from formulations.registry import check_support
-from hierarchy import TaskStack, UnsupportedTaskError
+from hierarchy import TaskStack, UnsupportedTaskError, relative_distance
 
 from .stacks import (G1_DURATION_S, Case, FencingSamples, g1_fencing_cases, random_case,
                      same_shape_batch)
@@ -347,7 +347,7 @@ def time_case(case: Case, variant: Variant, ref: _Reference, settings: Settings)
         done = r + 1
         xr = ref.x_metric[i] if variant.needs_mass_matrix else ref.x[i]
         if sol.ok:
-            dist[r] = float(np.linalg.norm(sol.x - xr) / max(1.0, np.linalg.norm(xr)))
+            dist[r] = relative_distance(sol.x, xr)
             ok[r] = bool(np.all(np.abs(sol.residuals - ref.residuals[i])
                                 <= SUCCESS_TOL * scales[i]))
     times, ok, dist = times[:done], ok[:done], dist[:done]

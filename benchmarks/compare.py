@@ -16,7 +16,8 @@ import numpy as np
 
 import formulations
 from formulations.registry import check_support
-from hierarchy import TaskStack, UnsupportedTaskError, check_lexicographic, load_stack
+from hierarchy import (TaskStack, UnsupportedTaskError, check_lexicographic, load_stack,
+                       relative_distance)
 
 
 @dataclass
@@ -54,7 +55,7 @@ def compare_stack(stack: TaskStack, repeats: int = 20,
         for _ in range(repeats):
             sol = formulations.solve(stack, info.name)
             times.append(sol.time_s)
-        dist = float(np.linalg.norm(sol.x - ref) / max(1.0, np.linalg.norm(ref))) \
+        dist = relative_distance(sol.x, ref) \
             if ref is not None and sol.ok else float("nan")
         lex = "-"
         if stack.is_equality and sol.ok:

@@ -27,7 +27,7 @@ import numpy as np
 import formulations
 from hierarchy import (DEFAULT_RCOND, Task, TaskStack, algorithmic_error_norms,
                        check_lexicographic, rank_profile)
-from hierarchy.families import FAMILIES, near_singular
+from hierarchy.families import FAMILIES, near_singular, random_spd
 
 #: σ values of the near-singular sweep (0: exactly conflicting)
 SIGMAS = (1e-1, 1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-10, 0.0)
@@ -84,8 +84,7 @@ ROUNDOFF_VARIANTS: tuple[Variant, ...] = (
 def random_mass_matrix(rng: np.random.Generator, n: int,
                        condition: float = MASS_CONDITION) -> np.ndarray:
     """Seeded SPD matrix with eigenvalues geometrically spread over ``[1, condition]``."""
-    Q, _ = np.linalg.qr(rng.standard_normal((n, n)))
-    return (Q * np.geomspace(1.0, condition, n)) @ Q.T
+    return random_spd(rng, n, condition)
 
 
 def solve_variant(stack: TaskStack, variant: Variant, mass: np.ndarray):
@@ -239,7 +238,6 @@ def render(sweep: SingularitySweep, errors: dict[str, dict[str, ErrorSummary]],
            n_stacks: int) -> str:
     """The Markdown of ``docs/properties.md``."""
     labels = [v.label for v in sweep.variants]
-    sig = np.array(sweep.sigmas)
     lines = [
         "# Measured properties: algorithmic singularity and algorithmic error",
         "",

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hierarchy import TaskStack
-from hierarchy.families import FAMILIES
+from hierarchy.families import FAMILIES, random_spd
 
 __all__ = ["Case", "random_mass_matrix", "random_case", "FencingSamples",
            "g1_fencing_samples", "g1_fencing_cases", "G1_DURATION_S"]
@@ -65,10 +65,7 @@ class Case:
 def random_mass_matrix(n: int, seed: int = 0) -> np.ndarray:
     """A fixed SPD ``n × n`` matrix ``Q diag(λ) Qᵀ`` with ``λ`` log-spaced in ``[0.1, 10]``
     (condition number 100) and ``Q`` a seeded random rotation."""
-    rng = np.random.default_rng(10_000 + seed)
-    Q, _ = np.linalg.qr(rng.standard_normal((n, n)))
-    M = (Q * np.logspace(-1, 1, n)) @ Q.T
-    M = 0.5 * (M + M.T)
+    M = 0.1 * random_spd(np.random.default_rng(10_000 + seed), n, 100.0)
     M.setflags(write=False)
     return M
 

@@ -42,7 +42,7 @@ import numpy as np
 import formulations
 from formulations.registry import check_support
 from hierarchy import (TaskStack, UnsupportedTaskError, check_lexicographic,
-                       lexicographic_residuals)
+                       lexicographic_residuals, relative_distance)
 from hierarchy.families import FAMILIES, INEQUALITY_FAMILIES
 
 EQUALITY_FAMILY_NAMES = ("compatible", "conflicting", "rank_deficient")
@@ -192,7 +192,7 @@ def run_family(family: str, n_stacks: int, vs: list[Variant], n_range, k_range,
                 tally.first_failure = tally.first_failure or str(sol.info.get("message", ""))
                 continue
             x = sol.x
-            dist = float(np.linalg.norm(x - ref.x) / max(1.0, np.linalg.norm(ref.x)))
+            dist = relative_distance(x, ref.x)
             tally.distances.append(dist)
             if sol.status == "optimal":
                 tally.optimal_distances.append(dist)

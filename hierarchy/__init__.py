@@ -5,7 +5,7 @@ Pure numpy: this package knows nothing of robots or solvers.
 
 from .analysis import (FeasibleSplit, LevelCheck, LexicographicReport, algorithmic_error,
                        algorithmic_error_norms, check_lexicographic, conflicting_levels,
-                       feasible_split, lexicographic_residuals, nested_null_spaces,
+                       feasible_split, lexicographic_residuals, nested_null_spaces, relative_distance,
                        rank_profile, singularity_distance)
 from .errors import TaskStackError, UnsupportedTaskError
 from .io import load_stack, save_stack, stack_from_dict, stack_to_dict
@@ -18,6 +18,7 @@ __all__ = [
     "TaskStack", "TaskStackError", "UnsupportedTaskError", "algorithmic_error",
     "algorithmic_error_norms", "check_lexicographic", "conflicting_levels",
     "feasible_split", "lexicographic_residuals", "matrix_rank", "nested_null_spaces",
-    "null_space_basis", "range_basis", "rank_profile", "singularity_distance",
+    "null_space_basis", "range_basis", "rank_profile", "relative_distance",
+    "singularity_distance",
     "load_stack", "save_stack", "stack_from_dict", "stack_to_dict",
 ]

@@ -134,6 +134,12 @@ def algorithmic_error_norms(stack: TaskStack, x: np.ndarray,
     return np.array([float(np.linalg.norm(e)) for e in algorithmic_error(stack, x, rcond)])
 
 
+def relative_distance(x: np.ndarray, ref: np.ndarray) -> float:
+    """``‖x − ref‖ / max(1, ‖ref‖)``: the distance to a reference answer that every test
+    and report uses (relative for large answers, absolute for small ones)."""
+    return float(np.linalg.norm(np.asarray(x) - ref) / max(1.0, float(np.linalg.norm(ref))))
+
+
 def lexicographic_residuals(stack: TaskStack, x: np.ndarray) -> np.ndarray:
     """Per level, the norm of the weighted equality residual and inequality violation.
 

@@ -197,6 +197,15 @@ def same_shape_batch(base: TaskStack, rng: np.random.Generator, count: int,
     return out
 
 
+def random_spd(rng: np.random.Generator, n: int, condition: float = 10.0) -> np.ndarray:
+    """Seeded SPD ``n × n`` matrix ``Q diag(λ) Qᵀ`` (a stand-in mass matrix): ``λ``
+    spread geometrically over ``[1, condition]``, ``Q`` a random rotation, exactly
+    symmetric."""
+    Q, _ = np.linalg.qr(rng.standard_normal((n, n)))
+    M = (Q * np.geomspace(1.0, condition, n)) @ Q.T
+    return 0.5 * (M + M.T)
+
+
 #: family name -> generator ``f(rng, n, k)``
 FAMILIES: dict[str, Callable[[np.random.Generator, int, int], TaskStack]] = {
     "compatible": compatible,

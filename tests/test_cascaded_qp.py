@@ -13,6 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import formulations
+from hierarchy import relative_distance
 from formulations import FormulationError, cascaded_qp
 from hierarchy import Task, TaskStack, check_lexicographic, lexicographic_residuals
 from hierarchy.families import FAMILIES, infeasible_inequality, with_inequalities
@@ -31,9 +32,6 @@ BOUND_TOL = {"highs": 1e-6}
 INEQUALITY_OPTIONS: dict = {}
 
 
-def _dist(x, ref):
-    return np.linalg.norm(x - ref) / max(1.0, np.linalg.norm(ref))
-
 
 @pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("family", ["compatible", "conflicting"])
@@ -44,7 +42,7 @@ def test_equality_stacks_agree_with_reference(backend, family, seed):
     ref = formulations.solve(stack, "reference").x
     sol = formulations.solve(stack, "cascaded_qp", solver=backend)
     assert sol.status == "optimal", sol.info.get("message")
-    assert _dist(sol.x, ref) <= EQUALITY_TOL[backend]
+    assert relative_distance(sol.x, ref) <= EQUALITY_TOL[backend]
     assert sol.info["backend"] == backend
 
 
@@ -58,7 +56,7 @@ def test_fixings_on_rank_deficient_and_conflicting_levels(fixing, family):
         ref = formulations.solve(stack, "reference").x
         sol = formulations.solve(stack, "cascaded_qp", fixing=fixing)
         assert sol.ok, sol.info.get("message")
-        assert _dist(sol.x, ref) <= 1e-7
+        assert relative_distance(sol.x, ref) <= 1e-7
         assert check_lexicographic(stack, sol.x, tol=1e-7).ok
 
 
@@ -69,8 +67,8 @@ def test_metric_is_the_final_tie_break():
     W = B @ B.T + 8 * np.eye(8)
     ref = formulations.solve(stack, "reference", metric=W).x
     sol = formulations.solve(stack, "cascaded_qp", metric=W)
-    assert _dist(sol.x, ref) <= 1e-8
-    assert _dist(formulations.solve(stack, "cascaded_qp").x, ref) > 1e-3   # W matters
+    assert relative_distance(sol.x, ref) <= 1e-8
+    assert relative_distance(formulations.solve(stack, "cascaded_qp").x, ref) > 1e-3   # W matters
 
 
 @pytest.fixture(scope="module")
@@ -90,7 +88,7 @@ def test_inequality_stacks_agree_with_cvxpy_and_keep_bounds(backend, inequality_
         sol = formulations.solve(stack, "cascaded_qp", solver=backend,
                                  **INEQUALITY_OPTIONS.get(backend, {}))
         assert sol.status == "optimal", sol.info.get("message")
-        assert _dist(sol.x, ref.x) <= INEQUALITY_TOL[backend]
+        assert relative_distance(sol.x, ref.x) <= INEQUALITY_TOL[backend]
         # the box and the band (levels 1-2, feasible together) hold within tolerance
         tol = BOUND_TOL.get(backend, 1e-7)
         for level in stack.levels[:2]:
@@ -187,6 +185,6 @@ def test_default_backend_matches_reference_on_random_stacks(seed, n, k):
     ref = formulations.solve(stack, "reference").x
     sol = formulations.solve(stack, "cascaded_qp")
     assert sol.status == "optimal"
-    assert _dist(sol.x, ref) <= 1e-8
+    assert relative_distance(sol.x, ref) <= 1e-8
     np.testing.assert_allclose(sol.residuals, lexicographic_residuals(stack, ref),
                                rtol=1e-6, atol=1e-8)

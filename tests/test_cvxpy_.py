@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 import formulations
+from hierarchy import relative_distance
 from formulations import FormulationError, cvxpy_
 from hierarchy import check_lexicographic
 from hierarchy.families import FAMILIES, infeasible_inequality, with_inequalities
@@ -11,9 +12,6 @@ from hierarchy.families import FAMILIES, infeasible_inequality, with_inequalitie
 #: relative distance to reference per cvxpy solver (Clarabel measured ≤ 1e-10)
 TOL = {"CLARABEL": 1e-8, "OSQP": 1e-5, "SCS": 1e-5}
 
-
-def _dist(x, ref):
-    return np.linalg.norm(x - ref) / max(1.0, np.linalg.norm(ref))
 
 
 @pytest.mark.parametrize("fixing", ["basis", "rows"])
@@ -25,7 +23,7 @@ def test_equality_stacks_agree_with_reference(fixing, family):
         ref = formulations.solve(stack, "reference").x
         sol = formulations.solve(stack, "cvxpy", fixing=fixing)
         assert sol.status == "optimal", sol.info.get("message")
-        assert _dist(sol.x, ref) <= TOL["CLARABEL"]
+        assert relative_distance(sol.x, ref) <= TOL["CLARABEL"]
         assert check_lexicographic(stack, sol.x, tol=1e-7).ok
 
 
@@ -35,7 +33,7 @@ def test_other_cvxpy_solvers_on_a_compatible_stack(solver):
     ref = formulations.solve(stack, "reference").x
     sol = formulations.solve(stack, "cvxpy", solver=solver)
     assert sol.ok, sol.info.get("message")
-    assert _dist(sol.x, ref) <= TOL[solver]
+    assert relative_distance(sol.x, ref) <= TOL[solver]
 
 
 def test_inequality_stacks_agree_with_cascaded_qp():
@@ -45,7 +43,7 @@ def test_inequality_stacks_agree_with_cascaded_qp():
         a = formulations.solve(stack, "cvxpy")
         b = formulations.solve(stack, "cascaded_qp")
         assert a.status == b.status == "optimal"
-        assert _dist(a.x, b.x) <= 1e-7
+        assert relative_distance(a.x, b.x) <= 1e-7
         np.testing.assert_allclose(a.residuals, b.residuals, rtol=1e-6, atol=1e-8)
 
 

@@ -4,13 +4,11 @@ import numpy as np
 import pytest
 
 import formulations
+from hierarchy import relative_distance
 from formulations import FormulationError
 from hierarchy import Task, TaskStack, check_lexicographic, conflicting_levels
 from hierarchy.families import FAMILIES
 
-
-def _dist(x, ref):
-    return np.linalg.norm(x - ref) / max(1.0, np.linalg.norm(ref))
 
 
 @pytest.mark.parametrize("family", ["compatible", "rank_deficient"])
@@ -25,7 +23,7 @@ def test_exact_on_non_conflicting_stacks(family, seed):
         assert sol.info["conflicting_levels"] and not sol.info["verified"]
         return
     assert sol.status == "optimal", sol.info
-    assert _dist(sol.x, ref) <= 1e-8          # measured ≤ 1.3e-10 with primal_tol 1e-10
+    assert relative_distance(sol.x, ref) <= 1e-8          # measured ≤ 1.3e-10 with primal_tol 1e-10
     assert check_lexicographic(stack, sol.x, tol=1e-8).ok
 
 
@@ -44,11 +42,11 @@ def test_conflicting_stacks_are_flagged_approximate():
         ref = formulations.solve(stack, "reference").x
         sol = formulations.solve(stack, "daqp_hierarchical")
         if sol.status == "optimal":
-            assert _dist(sol.x, ref) <= 1e-8
+            assert relative_distance(sol.x, ref) <= 1e-8
         else:
             assert sol.status == "approximate" and sol.info["conflicting_levels"]
             assert sol.info["verified"] is False and "lexicographic check" in sol.info["message"]
-            assert _dist(sol.x, ref) > 1e-3          # and it is indeed off
+            assert relative_distance(sol.x, ref) > 1e-3          # and it is indeed off
             flagged += 1
     assert flagged >= 1
 
@@ -59,8 +57,8 @@ def test_default_primal_tol_is_the_accurate_setting():
         rng = np.random.default_rng(seed)
         stack = FAMILIES["compatible"](rng, int(rng.integers(4, 16)), 3)
         ref = formulations.solve(stack, "reference").x
-        tight.append(_dist(formulations.solve(stack, "daqp_hierarchical").x, ref))
-        loose.append(_dist(formulations.solve(stack, "daqp_hierarchical", primal_tol=1e-6).x,
+        tight.append(relative_distance(formulations.solve(stack, "daqp_hierarchical").x, ref))
+        loose.append(relative_distance(formulations.solve(stack, "daqp_hierarchical", primal_tol=1e-6).x,
                            ref))
     # DAQP's default 1e-6 leaves ~1e-7..1e-6; 1e-10 leaves ~1e-10
     assert max(tight) <= 1e-8 < max(loose)
@@ -96,6 +94,6 @@ def test_optimal_status_is_truthful_on_badly_scaled_stacks():
         sol = formulations.solve(stack, "daqp_hierarchical")
         if sol.status == "optimal":
             ref = formulations.solve(stack, "reference").x
-            assert _dist(sol.x, ref) <= 1e-6
+            assert relative_distance(sol.x, ref) <= 1e-6
             checked += 1
     assert checked >= 4

@@ -6,13 +6,7 @@ import pytest
 import formulations
 from formulations.operational_space import task_space_torque
 from hierarchy import Task, TaskStack, UnsupportedTaskError, check_lexicographic
-from hierarchy.families import FAMILIES, compatible, near_singular
-
-
-def random_spd(rng, n, cond=10.0):
-    """Seeded SPD matrix with eigenvalues spread geometrically over [1, cond]."""
-    Q, _ = np.linalg.qr(rng.standard_normal((n, n)))
-    return (Q * np.geomspace(1.0, cond, n)) @ Q.T
+from hierarchy.families import FAMILIES, compatible, near_singular, random_spd
 
 
 @pytest.mark.parametrize("seed", range(15))

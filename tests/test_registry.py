@@ -115,7 +115,6 @@ def test_solve_accepts_a_plain_list_of_levels():
 
 
 def test_solve_batch_loops_and_matches_single_solves():
-    rng = np.random.default_rng(5)
     stacks = [compatible(np.random.default_rng(s), 10, 3) for s in range(4)]
     # the families draw row counts at random: keep those with the first one's shape
     shape = registry.stack_shape(stacks[0])
@@ -124,7 +123,6 @@ def test_solve_batch_loops_and_matches_single_solves():
     for x, s in zip(batch.X, stacks):
         np.testing.assert_allclose(x, formulations.solve(s, "reference").x, atol=1e-12)
     assert batch.statuses == ["optimal"] * len(stacks) and batch.time_per_stack_s > 0
-    del rng
 
 
 def test_solve_batch_rejects_mixed_shapes():

@@ -8,13 +8,7 @@ import formulations
 from formulations.unifying import torque_recursion, weighted_pinv
 from hierarchy import (Task, TaskStack, UnsupportedTaskError, algorithmic_error_norms,
                        check_lexicographic, rank_profile)
-from hierarchy.families import FAMILIES, near_singular
-
-
-def random_spd(rng, n, cond=10.0):
-    """Seeded SPD matrix with eigenvalues spread geometrically over [1, cond]."""
-    Q, _ = np.linalg.qr(rng.standard_normal((n, n)))
-    return (Q * np.geomspace(1.0, cond, n)) @ Q.T
+from hierarchy.families import FAMILIES, near_singular, random_spd
 
 
 def draw(family, seed):

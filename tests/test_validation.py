@@ -1,7 +1,6 @@
 """benchmarks/validation.py on a tiny N (the committed report uses N ≥ 200)."""
 
 import numpy as np
-import pytest
 
 from benchmarks import cli, validation
 
