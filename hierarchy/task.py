@@ -279,9 +279,8 @@ class Level(tuple):
         return self._cached("_b")
 
     def _cached(self, key):
-        cache = self.__dict__ if hasattr(self, "__dict__") else None
-        if cache is not None and key in cache:
-            return cache[key]
+        if key in self.__dict__:
+            return self.__dict__[key]
         if len(self) == 1 and self[0].is_equality and self[0]._unit_weight:
             self.__dict__["_A"], self.__dict__["_b"] = self[0].A, self[0].b  # read-only
             return self.__dict__[key]
