@@ -30,11 +30,10 @@ __all__ = ["Case", "random_mass_matrix", "random_case", "FencingSamples",
 G1_DURATION_S = 3.0
 #: what drives the sampled run of each variant: ``reference`` where the tasks are
 #: compatible; where they are not, the exact methods' accelerations blow up at the
-#: algorithmic singularity (t ≈ 1.8 s), so the run uses the selectively damped
-#: extended Jacobian of ``prioik fencing``
+#: algorithmic singularity (t ≈ 1.8 s), so the run uses the extended Jacobian with the
+#: sword-tip step bound of ``prioik fencing``
 G1_DRIVERS = {"compatible": ("reference", {}),
-              "incompatible": ("extended_jacobian",
-                               {"level_damping": 0.1, "singular_threshold": 0.05})}
+              "incompatible": ("extended_jacobian", {"step_bound": {"sword_tip": 10.0}})}
 
 
 @dataclass

@@ -11,8 +11,8 @@ direction. Each reflector is applied, from the right, to the rows of the levels 
 only, so the free coordinates of the next level are the trailing columns (``Z_{i+1}``
 implicitly). The level's feasible rows are then lower-trapezoidal ``L`` (eq. 26) and
 its unknowns follow by forward substitution, or by a small least-squares solve when
-the level conflicts (``r_i < m_i``), optionally damped (selective damping). Finally
-``x = H_1 H_2 … H_R y``.
+the level conflicts (``r_i < m_i``), optionally damped (selective damping, and the
+trust-region ``step_bound`` of :func:`_bounded_step`). Finally ``x = H_1 H_2 … H_R y``.
 """
 
 from __future__ import annotations
@@ -78,8 +78,52 @@ def _small_lstsq(L, rhs, m, r, mu2, out, col):
 
 
 @njit(cache=True, fastmath=_FAST)
+def _bounded_step(L, rhs, m, r, mu2_min, step_bound, out, col):
+    """Trust-region least squares of one level: ``min ‖L z − rhs‖ s.t. ‖z‖ ≤ Δ``.
+
+    ``L[:m, :r]`` has full column rank. Finds the smallest ``μ² ≥ mu2_min`` whose damped
+    step ``(LᵀL + μ² I)⁻¹ Lᵀ rhs`` has ``‖z‖ ≤ Δ`` (Newton on ``1/‖z‖ − 1/Δ`` in the SVD
+    basis), writes ``z`` into ``out[col:col + r]`` and returns ``μ²``.
+    """
+    u, s, vt = np.linalg.svd(np.ascontiguousarray(L[:m, :r]), full_matrices=False)
+    c = np.zeros(r)
+    for j in range(r):
+        acc = 0.0
+        for i in range(m):
+            acc += u[i, j] * rhs[i]
+        c[j] = s[j] * acc
+    mu2 = mu2_min
+    w = np.zeros(r)
+    norm = 0.0
+    for j in range(r):
+        w[j] = c[j] / (s[j] * s[j] + mu2)
+        norm += w[j] * w[j]
+    norm = np.sqrt(norm)
+    if norm > step_bound:
+        for _ in range(100):
+            dn = 0.0
+            for j in range(r):
+                dn += w[j] * w[j] / (s[j] * s[j] + mu2)
+            dn = -dn / norm
+            mu2 = max(mu2 + (1.0 / norm - 1.0 / step_bound) * norm * norm / dn, mu2_min)
+            norm = 0.0
+            for j in range(r):
+                w[j] = c[j] / (s[j] * s[j] + mu2)
+                norm += w[j] * w[j]
+            norm = np.sqrt(norm)
+            if abs(norm - step_bound) <= 1e-12 * step_bound:
+                break
+    for i in range(r):
+        acc = 0.0
+        for j in range(r):
+            acc += vt[j, i] * w[j]
+        out[col + i] = acc
+    return mu2
+
+
+@njit(cache=True, fastmath=_FAST)
 def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
-                 x, ranks, damped):
+                 step_bound, x, ranks, level_mu2):
     """Solve one stack in place.
 
     Args:
@@ -89,9 +133,10 @@ def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
         scales: ``‖A_i‖_F`` per level.
         rcond: Relative rank threshold.
         level_damping, singular_threshold: Selective damping (0: off).
+        step_bound: ``k`` bounds ``Δ_i`` on the levels' steps (0: unbounded).
         x: Output, ``n``.
         ranks: Output, ``k`` ranks ``r_i``.
-        damped: Output, ``k`` flags (1 where the level was damped).
+        level_mu2: Output, ``k`` damping values ``μ_i²`` (0 where the level is exact).
     """
     M, n = B.shape
     k = starts.shape[0] - 1
@@ -109,7 +154,7 @@ def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
         s1 = starts[lev + 1]
         m = s1 - s0
         ranks[lev] = 0
-        damped[lev] = 0
+        level_mu2[lev] = 0.0
         if m == 0 or col >= n:
             continue
         tol = rcond * scales[lev]
@@ -189,7 +234,6 @@ def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
             eps_abs = singular_threshold * scales[lev]
             if sig < eps_abs:
                 mu2 = level_damping * (1.0 - (sig / eps_abs) ** 2)
-                damped[lev] = 1
         if r == m and mu2 == 0.0:
             for i in range(r):
                 acc = rhs[i]
@@ -201,6 +245,16 @@ def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
                 for j in range(r):
                     L[i, j] = B[s0 + i, col + j] if j <= i else 0.0
             _small_lstsq(L, rhs, m, r, mu2, y, col)
+        if step_bound[lev] > 0.0:
+            znorm = 0.0
+            for j in range(r):
+                znorm += y[col + j] * y[col + j]
+            if np.sqrt(znorm) > step_bound[lev]:
+                for i in range(m):
+                    for j in range(r):
+                        L[i, j] = B[s0 + i, col + j] if j <= i else 0.0
+                mu2 = _bounded_step(L, rhs, m, r, mu2, step_bound[lev], y, col)
+        level_mu2[lev] = mu2
         col += r
     for j in range(n):
         x[j] = y[j]
@@ -216,8 +270,8 @@ def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
 
 @njit(cache=True, parallel=True)
 def solve_batch_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
-                       X, ranks, damped):
+                       step_bound, X, ranks, level_mu2):
     """:func:`solve_kernel` over a batch (``B``: ``N × M × n``), in parallel."""
     for b in prange(B.shape[0]):
         solve_kernel(B[b], c[b], starts, scales[b], rcond, level_damping,
-                     singular_threshold, X[b], ranks[b], damped[b])
+                     singular_threshold, step_bound[b], X[b], ranks[b], level_mu2[b])

@@ -42,6 +42,13 @@ convex in ``A x`` and in the slacks, so every optimal point of level ``h`` share
   active-set back-ends fail on. Inequality rows that fall inside the fixed row
   space are implied and dropped.
 
+*Damped levels.* ``level_damping=(μ_1², …, μ_k²)`` adds ``μ_i² ‖x‖²`` to level ``i``'s
+objective: with the higher levels' row space fixed, ``‖x‖²`` differs from the squared
+step in the level's free directions by a constant, so the level becomes the damped
+least-squares problem ``min ‖A_i x − b_i‖² + μ_i² ‖Z_iᵀ x‖²`` inside the optimal set of
+the levels above — the hierarchy the extended Jacobian solves with selective damping
+or ``step_bound`` (whose ``info["level_damping"]`` gives these ``μ_i²``).
+
 Each level's rows are divided by their RMS row norm (same minimiser) and fixed
 inequality rows are scaled to unit norm, so tasks of very different scales stay
 solvable. A final regularisation level minimises ``‖x‖²`` (``xᵀWx`` with
@@ -117,6 +124,8 @@ OPTIONS = {
     "margin": (0.0, "fixed higher inequality rows are relaxed by margin·max(1, ‖x*‖) "
                      "(unit rows) so degenerate active sets stay solvable"),
     "on_infeasible": ("relax", "'relax': least-violation answer; 'fail': failed status"),
+    "level_damping": (None, "k values μ_i² ≥ 0: level i minimises ‖A_i x − b_i‖² + μ_i²‖x‖² "
+                            "(damped least squares within the optimal set above)"),
     "infeasibility_tol": (1e-7, "an inequality task counts as violated above this "
                                 "(relative to max(1, ‖A_t‖_F‖x‖))"),
 }
@@ -349,26 +358,36 @@ def _unit_rows(A: np.ndarray, lower: np.ndarray, upper: np.ndarray):
     return A / s[:, None], lower / s, upper / s
 
 
-def scaled_level(rows: LevelRows) -> LevelRows:
-    """The level divided by its RMS row norm: same minimiser, better-scaled QP."""
+def level_scale(rows: LevelRows) -> float:
+    """The level's RMS row norm (1 when it is zero or not finite)."""
     m = rows.A_eq.shape[0] + rows.A_in.shape[0]
     s = np.sqrt((float(np.sum(rows.A_eq ** 2)) + float(np.sum(rows.A_in ** 2))) / max(m, 1))
-    if not np.isfinite(s) or s == 0:
+    return s if np.isfinite(s) and s > 0 else 1.0
+
+
+def scaled_level(rows: LevelRows) -> LevelRows:
+    """The level divided by its RMS row norm: same minimiser, better-scaled QP."""
+    s = level_scale(rows)
+    if s == 1.0:
         return rows
     return LevelRows(rows.A_eq / s, rows.b_eq / s, rows.A_in / s, rows.lower / s,
                      rows.upper / s, rows.w_in, rows.task_of_row)
 
 
 def build_level_qp(rows: LevelRows | None, fixed: Fixed, fixing: str, eps: float,
-                   metric: np.ndarray | None = None, margin: float = 0.0) -> LevelQP:
+                   metric: np.ndarray | None = None, margin: float = 0.0,
+                   damping: float = 0.0) -> LevelQP:
     """The QP of one level (``rows``) or, with ``rows=None``, of the final level.
 
     The level's rows are divided by their RMS row norm (which leaves the minimiser
     unchanged) and the fixed higher inequality rows are scaled to unit norm, so that
-    tasks of very different scales give back-ends a well-scaled problem.
+    tasks of very different scales give back-ends a well-scaled problem. ``damping``
+    is the level's ``μ²`` (the term ``μ² ‖x‖²``, in the level's own units).
     """
     n = fixed.x.shape[0]
+    damp = 0.0
     if rows is not None:
+        damp = 2.0 * damping / level_scale(rows) ** 2   # ½ yᵀPy with the rows scaled by s
         rows = scaled_level(rows)
     if fixing == "nullspace":
         Z, x0 = fixed.Z, fixed.x
@@ -384,10 +403,11 @@ def build_level_qp(rows: LevelRows | None, fixed: Fixed, fixing: str, eps: float
     else:
         me, mi = rows.A_eq.shape[0], rows.A_in.shape[0]
         P = np.zeros((ny + me + mi, ny + me + mi))
-        P[:ny, :ny] = eps * np.eye(ny)
+        P[:ny, :ny] = (eps + damp) * np.eye(ny)          # ZᵀZ = I
         P[ny:ny + me, ny:ny + me] = 2.0 * np.eye(me)
         P[ny + me:, ny + me:] = 2.0 * np.diag(rows.w_in)
         q = np.zeros(ny + me + mi)
+        q[:ny] = damp * (Z.T @ x0)                        # μ²‖x0 + Z y‖² up to a constant
     nz = ny + me + mi
     E, e, G, h, G_x = [], [], [], [], []
     if rows is not None and me:
@@ -589,7 +609,8 @@ def violated_tasks(level, x: np.ndarray, tol: float) -> dict[str, float]:
 
 def run_cascade(stack: TaskStack, solve_qp, *, fixing: str, metric, rcond: float,
                 eps: float, on_infeasible: str, infeasibility_tol: float,
-                backend: str, margin: float = 0.0, fix_active: bool = True) -> Outcome:
+                backend: str, margin: float = 0.0, fix_active: bool = True,
+                level_damping: np.ndarray | None = None) -> Outcome:
     """The cascade shared by the back-ends: ``solve_qp(LevelQP) -> (x, msg, extras)``."""
     n = stack.n
     fixed = Fixed.start(n)
@@ -608,7 +629,8 @@ def run_cascade(stack: TaskStack, solve_qp, *, fixing: str, metric, rcond: float
             fixed.tasks += list(level.names)
             continue
         scale = float(rows.A_eq.shape[0] + rows.A_in.shape[0])   # ‖A‖_F² after scaling
-        qp = build_level_qp(rows, fixed, fixing, eps * max(scale, 1e-300), margin=margin)
+        qp = build_level_qp(rows, fixed, fixing, eps * max(scale, 1e-300), margin=margin,
+                            damping=0.0 if level_damping is None else float(level_damping[j]))
         x, message, extras = solve_qp(qp)
         if x is None:
             return fail(j, level.names, f"level {j} ({', '.join(level.names)}): {message}",
@@ -634,11 +656,17 @@ def solve(stack: TaskStack, *, solver: str = DEFAULT_SOLVER, tolerance: float | 
           backend_options: dict | None = None, fixing: str = "basis", metric=None,
           rcond: float = DEFAULT_RCOND, regularization: float | None = None,
           on_infeasible: str = "relax", infeasibility_tol: float = 1e-7,
-          margin: float = 0.0, fix_active: bool = True) -> Outcome:
+          margin: float = 0.0, fix_active: bool = True, level_damping=None) -> Outcome:
     """Solve the stack by one QP per level plus a regularisation level.
 
     See the module docstring; every option is listed in :data:`OPTIONS`.
     """
+    if level_damping is not None:
+        level_damping = np.array(level_damping, dtype=np.float64).ravel()
+        if level_damping.shape != (len(stack),) or not np.all(np.isfinite(level_damping)) \
+                or np.any(level_damping < 0):
+            raise FormulationError(f"level_damping must hold {len(stack)} finite values "
+                                   f"≥ 0 (one μ² per level), got {level_damping.tolist()}")
     solver = resolve_solver(solver)
     extra = check_options(solver, fixing, on_infeasible, tolerance, backend_options)
     tol = DEFAULT_TOLERANCES.get(solver) if tolerance is None else float(tolerance)
@@ -650,6 +678,7 @@ def solve(stack: TaskStack, *, solver: str = DEFAULT_SOLVER, tolerance: float | 
     out = run_cascade(stack, lambda qp: solve_level_qp(qp, solver, settings), fixing=fixing,
                       metric=metric, rcond=rcond, eps=eps, on_infeasible=on_infeasible,
                       infeasibility_tol=float(infeasibility_tol), backend=solver,
-                      margin=float(margin), fix_active=bool(fix_active))
+                      margin=float(margin), fix_active=bool(fix_active),
+                      level_damping=level_damping)
     out.info["settings"] = settings
     return out

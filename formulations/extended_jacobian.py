@@ -37,6 +37,20 @@ level can use them; θ̈ stays bounded (the level's step is at most
 ``‖p‖ / (2√μ²)``). The status is ``"approximate"`` when some level was damped, and
 ``info["damped_levels"]`` lists them.
 
+``step_bound=Δ`` (``qr`` path) bounds every level's own step: the level's part of θ̈,
+``z_i`` (``‖x_i − x_{i−1}‖``, the coordinates it adds in its feasible directions),
+solves the trust-region least-squares problem ``min ‖A_i Z_i z − p_i‖ s.t. ‖z‖ ≤ Δ``
+(Moré 1983). Where the exact step is shorter than ``Δ`` nothing changes; where it is
+longer — near an algorithmic or kinematic singularity, or when a far target pulls a
+level — the level is solved by damped least squares ``(LᵀL + μ_i² I) z = Lᵀp`` with the
+``μ_i`` that makes ``‖z‖ = Δ`` (Newton on ``1/‖z(μ²)‖ − 1/Δ`` from the SVD of the level's
+small ``m_i × r_i`` block). It damps only the level and only the steps that need it:
+every higher level stays exact, the damped level still owns its ``r_i`` directions,
+and ``‖θ̈‖ ≤ √k Δ`` by construction (the steps are orthogonal). It composes with the
+selective damping (``μ_i² ≥`` the selective value). ``info["level_damping"]`` holds
+every level's ``μ_i²`` (0 where exact), so a cascade of QPs with the same Tikhonov
+terms (``cascaded_qp``'s ``level_damping``) reproduces the whole θ̈.
+
 ``damping=λ > 0`` is eq. 27: the lower blocks become ``Z_i (J_iᵀ J_i + λ I)`` and the
 (generally over-determined) system is solved in the least-squares sense (SVD
 pseudo-inverse on the ``svd`` path, complete orthogonal decomposition ``dgelsy`` on
@@ -75,6 +89,9 @@ OPTIONS = {
     "kernel": ("auto", "qr path: 'numba' (compiled), 'lapack' (readable scipy.linalg.lapack), "
                        "'auto' (numba when importable and n ≤ 80, else lapack)"),
     "singular_threshold": (0.0, "ε: damp a level whose projected σ_min < ε·‖A_i‖_F"),
+    "step_bound": (0.0, "Δ > 0: every level's step ‖x_i − x_{i−1}‖ ≤ Δ by trust-region "
+                        "damping (qr path; 0: off); or k values (one per level, 0: "
+                        "unbounded), or {task name: Δ} for the levels holding those tasks"),
 }
 
 _dgeqp3 = lapack.dgeqp3
@@ -103,7 +120,8 @@ def _resolve_kernel(kernel: str, n: int = 0) -> str:
 
 def solve(stack: TaskStack, *, nullspace: str = "qr", damping: float = 0.0,
           rcond: float = DEFAULT_RCOND, level_damping: float = 0.0,
-          singular_threshold: float = 0.0, kernel: str = "auto") -> Outcome:
+          singular_threshold: float = 0.0, kernel: str = "auto",
+          step_bound=0.0) -> Outcome:
     """Solve the extended system (eq. 17) for ``x``; see the module docstring."""
     kernel = _resolve_kernel(kernel, stack.n)
     if nullspace not in ("qr", "svd"):
@@ -114,36 +132,77 @@ def solve(stack: TaskStack, *, nullspace: str = "qr", damping: float = 0.0,
             raise FormulationError(f"{key} must be a finite number ≥ 0, got {val}")
     damping = float(damping)
     selective = float(level_damping) > 0 and float(singular_threshold) > 0
-    if selective and (damping > 0 or nullspace != "qr"):
-        raise FormulationError("level_damping works on the qr path without eq. 27 "
-                               "damping; use one or the other")
+    bound = level_step_bounds(stack, step_bound)
+    if (selective or bound.any()) and (damping > 0 or nullspace != "qr"):
+        raise FormulationError("level_damping and step_bound work on the qr path without "
+                               "eq. 27 damping; use one or the other")
     if damping > 0:
         return _solve_damped(stack, damping, rcond, nullspace)
     if nullspace == "svd":
         return _solve_svd(stack, rcond)
     lam = float(level_damping) if selective else 0.0
     if kernel == "numba":
-        return _solve_qr_compiled(stack, rcond, lam, float(singular_threshold))
-    return _solve_qr(stack, rcond, lam, float(singular_threshold))
+        return _solve_qr_compiled(stack, rcond, lam, float(singular_threshold), bound)
+    return _solve_qr(stack, rcond, lam, float(singular_threshold), bound)
+
+
+def level_step_bounds(stack: TaskStack, step_bound) -> np.ndarray:
+    """The per-level bounds ``Δ_i`` (0: unbounded) of the ``step_bound`` option.
+
+    Args:
+        stack: The stack.
+        step_bound: One ``Δ ≥ 0`` for every level, ``k`` values, or a mapping task
+            name → ``Δ`` (a level gets the smallest bound of its tasks).
+
+    Raises:
+        FormulationError: a value is negative or not finite, the sequence has the
+            wrong length, or a task name is not in the stack.
+    """
+    k = len(stack)
+    if isinstance(step_bound, dict):
+        out = np.zeros(k)
+        for name, val in step_bound.items():
+            try:
+                i = stack.level_of(name)
+            except KeyError:
+                raise FormulationError(f"step_bound names task {name!r}, which is not in "
+                                       f"the stack (tasks: {', '.join(t.name for t in stack.tasks)})"
+                                       ) from None
+            out[i] = float(val) if out[i] == 0 else min(out[i], float(val))
+    else:
+        try:
+            out = np.broadcast_to(np.asarray(step_bound, dtype=np.float64), (k,)).copy()
+        except ValueError:
+            raise FormulationError(f"step_bound must be one number, {k} numbers (one per "
+                                   f"level) or a task-name mapping, got {step_bound!r}"
+                                   ) from None
+    if not np.all(np.isfinite(out)) or np.any(out < 0):
+        raise FormulationError(f"step_bound must be finite and ≥ 0, got {out.tolist()}")
+    return out
+
+
+def _damping_info(info: dict, mu2: np.ndarray, selective: bool, bound: bool) -> str:
+    """Record the per-level damping in ``info``; the status it implies."""
+    flagged = np.flatnonzero(mu2 > 0).tolist()
+    if selective or bound:
+        info["damped_levels"] = flagged
+        info["level_damping"] = mu2
+    return "approximate" if flagged else "optimal"
 
 
 def _solve_qr_compiled(stack: TaskStack, rcond: float, level_damping: float,
-                       singular_threshold: float) -> Outcome:
+                       singular_threshold: float, step_bound: np.ndarray) -> Outcome:
     packed = stack.packed()
     B, c = packed.A.copy(), packed.b.copy()
     k = len(stack)
     x = np.empty(stack.n)
     ranks = np.zeros(k, dtype=np.int64)
-    damped = np.zeros(k, dtype=np.int64)
+    mu2 = np.zeros(k)
     _kernel.solve_kernel(B, c, packed.starts, packed.scales, rcond, level_damping,
-                         singular_threshold, x, ranks, damped)
+                         singular_threshold, step_bound, x, ranks, mu2)
     info = {"rank_profile": ranks, "nullspace": "qr", "kernel": "numba"}
-    if level_damping > 0:
-        flagged = np.flatnonzero(damped).tolist()
-        info["damped_levels"] = flagged
-        if flagged:
-            return Outcome(x, "approximate", info)
-    return Outcome(x, "optimal", info)
+    status = _damping_info(info, mu2, level_damping > 0, bool(step_bound.any()))
+    return Outcome(x, status, info)
 
 
 # --------------------------------------------------------------------------- qr
@@ -167,8 +226,35 @@ def _damped_lstsq(K: np.ndarray, p: np.ndarray, mu2: float) -> np.ndarray:
     return _lstsq_full_column_rank(aug, rhs)
 
 
+def _trust_region_step(K: np.ndarray, p: np.ndarray, mu2_min: float, step_bound: float
+                       ) -> tuple[np.ndarray, float]:
+    """``z`` of ``min ‖K z − p‖ s.t. ‖z‖ ≤ Δ`` with damping at least ``mu2_min``.
+
+    ``K`` (``m × r``) has full column rank. Returns ``(z, μ²)``: ``z`` solves
+    ``(KᵀK + μ² I) z = Kᵀp`` with the smallest ``μ² ≥ mu2_min`` for which ``‖z‖ ≤ Δ``
+    (``μ² = mu2_min`` when that step is short enough; otherwise ``‖z‖ = Δ`` to 1e-12).
+    """
+    u, s, vt = np.linalg.svd(K, full_matrices=False)
+    c = s * (u.T @ p)                                    # s_j (u_jᵀ p)
+    s2 = s * s
+    mu2 = mu2_min
+    w = c / (s2 + mu2)
+    norm = float(np.linalg.norm(w))
+    if step_bound > 0 and norm > step_bound:
+        for _ in range(100):   # Newton on 1/‖z(μ²)‖ − 1/Δ: concave, monotone from below
+            dnorm = -float(np.sum(w * w / (s2 + mu2))) / norm     # d‖z‖/dμ²
+            step = (1.0 / norm - 1.0 / step_bound) * norm * norm / dnorm
+            mu2 = max(mu2 + step, mu2_min)
+            w = c / (s2 + mu2)
+            norm = float(np.linalg.norm(w))
+            if abs(norm - step_bound) <= 1e-12 * step_bound:
+                break
+    return vt.T @ w, mu2
+
+
 def _solve_qr(stack: TaskStack, rcond: float, level_damping: float = 0.0,
-              singular_threshold: float = 0.0) -> Outcome:
+              singular_threshold: float = 0.0, step_bound: np.ndarray | None = None
+              ) -> Outcome:
     n = stack.n
     mats = [(level.A, level.b) for level in stack.levels]
     B = np.vstack([A for A, _ in mats])          # working copy of all rows
@@ -176,7 +262,8 @@ def _solve_qr(stack: TaskStack, rcond: float, level_damping: float = 0.0,
     y = np.zeros(n)                               # solution in rotated coordinates
     reflectors = []                               # (col, qr[:, :r], tau[:r]) per level
     ranks = []
-    damped = []
+    level_mu2 = np.zeros(len(mats))
+    bounds = np.zeros(len(mats)) if step_bound is None else step_bound
     col = 0
     start = 0
     for index, (A, _) in enumerate(mats):
@@ -206,13 +293,15 @@ def _solve_qr(stack: TaskStack, rcond: float, level_damping: float = 0.0,
             eps_abs = singular_threshold * float(np.linalg.norm(A))
             if sigma < eps_abs:
                 mu2 = level_damping * (1.0 - (sigma / eps_abs) ** 2)
-                damped.append(index)
         if mu2 > 0:
             z = _damped_lstsq(np.triu(qr[:r, :]).T.copy(), p, mu2)
         elif r == m:
             z, _ = _dtrtrs(qr[:r, :r], p, trans=1)
         else:
             z = _lstsq_full_column_rank(np.triu(qr[:r, :]).T.copy(), p)
+        if bounds[index] > 0 and float(np.linalg.norm(z)) > bounds[index]:
+            z, mu2 = _trust_region_step(np.triu(qr[:r, :]).T, p, mu2, bounds[index])
+        level_mu2[index] = mu2
         y[col:col + r] = z
         if stop < B.shape[0] and r < d:
             rest = B[stop:, col:]
@@ -227,9 +316,8 @@ def _solve_qr(stack: TaskStack, rcond: float, level_damping: float = 0.0,
         out, _, _ = _dormqr("L", "N", v, t, seg, 1)
         x[col_i:] = out.ravel()
     info = {"rank_profile": np.array(ranks), "nullspace": "qr", "kernel": "lapack"}
-    if level_damping > 0:
-        info["damped_levels"] = damped
-    return Outcome(x, "approximate" if damped else "optimal", info)
+    status = _damping_info(info, level_mu2, level_damping > 0, bool(bounds.any()))
+    return Outcome(x, status, info)
 
 
 # -------------------------------------------------------------------------- svd
@@ -345,8 +433,8 @@ def _solve_damped(stack: TaskStack, damping: float, rcond: float, nullspace: str
 
 def solve_batch(stacks: list[TaskStack], *, nullspace: str = "qr", damping: float = 0.0,
                 rcond: float = DEFAULT_RCOND, level_damping: float = 0.0,
-                singular_threshold: float = 0.0, kernel: str = "auto"
-                ) -> tuple[np.ndarray, list[str]]:
+                singular_threshold: float = 0.0, kernel: str = "auto",
+                step_bound=0.0) -> tuple[np.ndarray, list[str]]:
     """Many stacks of one shape at once (compiled kernel, stacks in parallel).
 
     Falls back to a loop of :func:`solve` for the ``svd`` path, eq. 27 damping or
@@ -356,7 +444,7 @@ def solve_batch(stacks: list[TaskStack], *, nullspace: str = "qr", damping: floa
     if kernel != "numba" or nullspace != "qr" or damping > 0:
         outs = [solve(s, nullspace=nullspace, damping=damping, rcond=rcond,
                       level_damping=level_damping, singular_threshold=singular_threshold,
-                      kernel=kernel) for s in stacks]
+                      kernel=kernel, step_bound=step_bound) for s in stacks]
         return np.array([o.x for o in outs]), [o.status for o in outs]
     selective = float(level_damping) > 0 and float(singular_threshold) > 0
     packs = [s.packed() for s in stacks]
@@ -366,9 +454,10 @@ def solve_batch(stacks: list[TaskStack], *, nullspace: str = "qr", damping: floa
     N, k, n = len(stacks), len(stacks[0]), stacks[0].n
     X = np.empty((N, n))
     ranks = np.zeros((N, k), dtype=np.int64)
-    damped = np.zeros((N, k), dtype=np.int64)
+    mu2 = np.zeros((N, k))
+    bounds = np.stack([level_step_bounds(s, step_bound) for s in stacks])
     _kernel.solve_batch_kernel(B, c, packs[0].starts, scales, float(rcond),
                                float(level_damping) if selective else 0.0,
-                               float(singular_threshold), X, ranks, damped)
-    statuses = ["approximate" if d.any() else "optimal" for d in damped]
+                               float(singular_threshold), bounds, X, ranks, mu2)
+    statuses = ["approximate" if (d > 0).any() else "optimal" for d in mu2]
     return X, statuses

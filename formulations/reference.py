@@ -10,6 +10,11 @@ with ``Z_1 = I`` and every pseudo-inverse and null space from an SVD in float64
 sense, so rank-deficient and infeasible levels are handled. Because every ``y_i``
 lies in the row space of ``M_i``, the result is the minimum-norm point of the
 lexicographic optimal set; ``metric=W`` instead minimises ``xᵀ W x`` over that set.
+
+``level_damping=(μ_1², …, μ_k²)`` solves each level by damped least squares instead,
+``y_i = argmin ‖M_i y − c_i‖² + μ_i² ‖y‖²`` (``σ ↦ σ / (σ² + μ_i²)`` on the kept
+singular values): the damped hierarchy that ``extended_jacobian`` (selective damping,
+``step_bound``) and ``cascaded_qp`` (``level_damping``) also solve, here as its oracle.
 """
 
 from __future__ import annotations
@@ -18,7 +23,7 @@ import numpy as np
 
 from hierarchy import DEFAULT_RCOND, TaskStack
 
-from .base import Capabilities, Outcome
+from .base import Capabilities, FormulationError, Outcome
 
 NAME = "reference"
 DESCRIPTION = "exact lexicographic least squares, nested SVD null spaces (ground truth)"
@@ -27,16 +32,36 @@ CAPABILITIES = Capabilities(equalities=True, inequalities=False, weights=True,
 OPTIONS = {
     "rcond": (DEFAULT_RCOND, "relative rank threshold: σ counts if σ > rcond·‖A_i‖_F"),
     "metric": (None, "SPD n×n W: the final tie-break minimises xᵀWx instead of xᵀx"),
+    "level_damping": (None, "k values μ_i² ≥ 0: level i by damped least squares "
+                            "(σ ↦ σ/(σ² + μ_i²))"),
 }
 
 
-def solve(stack: TaskStack, *, rcond: float = DEFAULT_RCOND, metric=None) -> Outcome:
+def level_damping_values(stack: TaskStack, level_damping) -> np.ndarray:
+    """``level_damping`` as ``k`` finite values ``≥ 0`` (zeros for ``None``).
+
+    Raises:
+        FormulationError: wrong length, a negative or non-finite value.
+    """
+    k = len(stack)
+    if level_damping is None:
+        return np.zeros(k)
+    mu2 = np.array(level_damping, dtype=np.float64).ravel()
+    if mu2.shape != (k,) or not np.all(np.isfinite(mu2)) or np.any(mu2 < 0):
+        raise FormulationError(f"level_damping must hold {k} finite values ≥ 0 (one μ² "
+                               f"per level), got {mu2.tolist()}")
+    return mu2
+
+
+def solve(stack: TaskStack, *, rcond: float = DEFAULT_RCOND, metric=None,
+          level_damping=None) -> Outcome:
     """Lexicographic minimum-norm (or minimum ``xᵀWx``) solution of an equality stack."""
+    mu2 = level_damping_values(stack, level_damping)
     n = stack.n
     x = np.zeros(n)
     Z = np.eye(n)
     ranks = []
-    for level in stack.levels:
+    for i, level in enumerate(stack.levels):
         A, b = level.A, level.b
         if Z.shape[1] == 0:
             ranks.append(0)
@@ -47,7 +72,7 @@ def solve(stack: TaskStack, *, rcond: float = DEFAULT_RCOND, metric=None) -> Out
         r = int(np.count_nonzero(s > tol)) if tol > 0 else 0
         if r:
             c = b - A @ x
-            y = vt[:r].T @ ((u[:, :r].T @ c) / s[:r])
+            y = vt[:r].T @ ((u[:, :r].T @ c) * s[:r] / (s[:r] ** 2 + mu2[i]))
             x = x + Z @ y
         Z = Z @ vt[r:].T
         ranks.append(r)
@@ -61,10 +86,11 @@ def solve(stack: TaskStack, *, rcond: float = DEFAULT_RCOND, metric=None) -> Out
                                         "remaining null space") from None
         z = np.linalg.solve(L.T, np.linalg.solve(L, -(Z.T @ (W @ x))))
         x = x + Z @ z
-    return Outcome(x, "optimal", {"rank_profile": ranks, "null_space_dim": int(Z.shape[1])})
+    return Outcome(x, "approximate" if mu2.any() else "optimal",
+                   {"rank_profile": ranks, "null_space_dim": int(Z.shape[1])})
 
 
-def solve_batch(stacks, *, rcond: float = DEFAULT_RCOND, metric=None
+def solve_batch(stacks, *, rcond: float = DEFAULT_RCOND, metric=None, level_damping=None
                 ) -> tuple[np.ndarray, list[str]]:
     """:func:`solve` for ``B`` stacks of one shape, with stacked linear algebra.
 
@@ -81,6 +107,7 @@ def solve_batch(stacks, *, rcond: float = DEFAULT_RCOND, metric=None
             :func:`formulations.solve_batch`).
         rcond: Relative rank threshold (as :func:`solve`).
         metric: SPD ``n × n`` ``W`` shared by every stack, or ``None``.
+        level_damping: ``k`` values ``μ_i²`` shared by every stack, or ``None``.
 
     Returns:
         ``(X, statuses)``: ``X`` is ``B × n`` (row ``b`` is :func:`solve` of stack
@@ -89,8 +116,9 @@ def solve_batch(stacks, *, rcond: float = DEFAULT_RCOND, metric=None
     """
     stacks = list(stacks)
     B, n = len(stacks), stacks[0].n
+    mu2 = level_damping_values(stacks[0], level_damping)
     X = np.zeros((B, n))
-    statuses = ["optimal"] * B
+    statuses = ["approximate" if mu2.any() else "optimal"] * B
     # groups: null-space dimension d -> (stack indices, Z of shape (G, n, d))
     groups: dict[int, tuple[np.ndarray, np.ndarray]] = {
         n: (np.arange(B), np.broadcast_to(np.eye(n), (B, n, n)))}
@@ -111,7 +139,8 @@ def solve_batch(stacks, *, rcond: float = DEFAULT_RCOND, metric=None
             r = keep.sum(axis=1)                                  # rank per stack
             c = b - np.einsum("gmn,gn->gm", A, X[idx])            # c = b − A x
             w = np.einsum("gmp,gm->gp", u[:, :, :p], c)           # U_pᵀ c
-            w = np.where(keep, w / np.where(keep, s, 1.0), 0.0)   # Σ_r⁻¹ U_rᵀ c, masked
+            w = np.where(keep, w * s / np.where(keep, s * s + mu2[li], 1.0), 0.0)
+            #   Σ_r⁻¹ U_rᵀ c (σ/(σ² + μ²) when damped), masked
             y = np.einsum("gpd,gp->gd", vt[:, :p, :], w)          # V_r (…)
             X[idx] += np.einsum("gnd,gd->gn", Z, y)
             for rank in np.unique(r):

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 import formulations
-from hierarchy import check_lexicographic
-from hierarchy.families import FAMILIES, compatible, near_singular
+from hierarchy import TaskStack, check_lexicographic, relative_distance
+from hierarchy.families import FAMILIES, compatible, near_singular, same_shape_batch
 
 #: the three ways to compute eq. 18: compiled nested QR, LAPACK nested QR, the paper's SVD
 PATHS = {"qr-numba": {"nullspace": "qr", "kernel": "numba"},
@@ -144,3 +144,92 @@ def test_solve_batch_uses_the_compiled_kernel_and_matches_solve(family):
     for x, s in zip(batch.X, stacks):
         ref = formulations.solve(s, "reference").x
         assert np.linalg.norm(x - ref) <= 1e-8 * max(1.0, np.linalg.norm(ref))
+
+
+#: the two regularisations of the qr path that damp single levels
+LEVEL_DAMPINGS = {"step_bound": lambda exact: {"step_bound": 0.3 * np.linalg.norm(exact)},
+                  "selective": lambda exact: {"level_damping": 0.5, "singular_threshold": 0.3}}
+
+
+@pytest.mark.parametrize("kernel", ["numba", "lapack"])
+@pytest.mark.parametrize("how", sorted(LEVEL_DAMPINGS))
+@pytest.mark.parametrize("family", ["conflicting", "rank_deficient", "coupled", "compatible"])
+@pytest.mark.parametrize("seed", range(3))
+def test_level_damping_solves_the_damped_hierarchy_exactly(kernel, how, family, seed):
+    """Damped levels: θ̈ equals the nested-SVD oracle given the same μ_i² (1e-9 relative)."""
+    rng = np.random.default_rng(100 + seed)
+    stack = FAMILIES[family](rng, int(rng.integers(8, 40)), int(rng.integers(2, 6)))
+    exact = formulations.solve(stack, "reference").x
+    sol = formulations.solve(stack, "extended_jacobian", kernel=kernel,
+                             **LEVEL_DAMPINGS[how](exact))
+    mu2 = sol.info["level_damping"]
+    assert mu2.shape == (len(stack),) and np.all(mu2 >= 0)
+    assert sol.info["damped_levels"] == np.flatnonzero(mu2).tolist()
+    assert sol.status == ("approximate" if mu2.any() else "optimal")
+    oracle = formulations.solve(stack, "reference", level_damping=mu2).x
+    assert relative_distance(sol.x, oracle) <= 1e-9
+
+
+@pytest.mark.parametrize("kernel", ["numba", "lapack"])
+@pytest.mark.parametrize("seed", range(6))
+def test_step_bound_is_the_trust_region_step_of_every_level(kernel, seed):
+    """Each level's step ‖x_i − x_{i−1}‖ is ≤ Δ, and = Δ (1e-9) exactly where it was damped;
+    with the oracle test above (damped least squares with that μ_i² > 0) this is the
+    trust-region solution ``min ‖A_i Z_i z − p‖ s.t. ‖z‖ ≤ Δ`` (Moré 1983)."""
+    rng = np.random.default_rng(200 + seed)
+    stack = FAMILIES["conflicting"](rng, int(rng.integers(8, 40)), int(rng.integers(2, 6)))
+    bound = 0.3 * np.linalg.norm(formulations.solve(stack, "reference").x)
+    mu2 = formulations.solve(stack, "extended_jacobian", step_bound=bound,
+                             kernel=kernel).info["level_damping"]
+    assert mu2.any()          # the bound is active somewhere in this family
+    prev = np.zeros(stack.n)
+    for i in range(len(stack)):
+        xi = formulations.solve(TaskStack(stack.levels[:i + 1]), "extended_jacobian",
+                                step_bound=bound, kernel=kernel).x
+        step = np.linalg.norm(xi - prev)
+        assert step <= bound * (1 + 1e-9)
+        if mu2[i] > 0:
+            assert abs(step - bound) <= 1e-9 * bound
+        prev = xi
+
+
+@pytest.mark.parametrize("kernel", ["numba", "lapack"])
+@pytest.mark.parametrize("sigma", [1e-2, 1e-4, 1e-8])
+def test_step_bound_keeps_higher_level_exact_and_bounds_x(sigma, kernel):
+    stack = near_singular(sigma)
+    sol = formulations.solve(stack, "extended_jacobian", step_bound=2.0, kernel=kernel)
+    assert sol.residuals[0] <= 1e-12
+    assert np.linalg.norm(sol.x) <= 2.0 * (1 + 1e-9)  # exact optimum: 1/sin σ
+    assert sol.status == "approximate" and sol.info["damped_levels"] == [1]
+
+
+def test_step_bound_by_task_name_per_level_or_one_value_agree():
+    stack = near_singular(1e-3)
+    one = formulations.solve(stack, "extended_jacobian", step_bound=2.0)
+    per_level = formulations.solve(stack, "extended_jacobian", step_bound=[0.0, 2.0])
+    by_name = formulations.solve(stack, "extended_jacobian", step_bound={"low": 2.0})
+    np.testing.assert_array_equal(one.x, per_level.x)
+    np.testing.assert_array_equal(one.x, by_name.x)
+    free = formulations.solve(stack, "extended_jacobian", step_bound={"high": 2.0})
+    exact = formulations.solve(stack, "extended_jacobian")
+    assert free.status == "optimal" and free.info["damped_levels"] == []
+    np.testing.assert_array_equal(free.x, exact.x)
+
+
+@pytest.mark.parametrize("bad, words", [({"sword": 1.0}, "'sword'"), ([1.0, 2.0, 3.0], "3"),
+                                        (-1.0, "≥ 0"), ({"low": float("nan")}, "finite")])
+def test_bad_step_bound_is_named(bad, words):
+    with pytest.raises(formulations.FormulationError, match="step_bound") as err:
+        formulations.solve(near_singular(0.1), "extended_jacobian", step_bound=bad)
+    assert words in str(err.value)
+
+
+def test_step_bound_batch_matches_solve():
+    rng = np.random.default_rng(9)
+    stacks = same_shape_batch(FAMILIES["conflicting"](rng, 20, 4), rng, 6, reduce=0.3)
+    opts = {"step_bound": 0.5}
+    batch = formulations.solve_batch(stacks, "extended_jacobian", **opts)
+    for s, x, status in zip(stacks, batch.X, batch.statuses):
+        one = formulations.solve(s, "extended_jacobian", **opts)
+        assert relative_distance(x, one.x) <= 1e-12 and status == one.status
+    assert "approximate" in batch.statuses          # the bound acted somewhere

@@ -96,6 +96,21 @@ def test_short_compatible_run_keeps_higher_levels_exact(scenarios):
     assert check["max_rel_diff_qdd_undamped_steps"] < 1e-6
 
 
+def test_step_bound_run_equals_the_cascade_with_the_same_damping(scenarios):
+    """A bound small enough to act at every step: the tip level is damped, the levels
+    above stay exact, and the whole q̈ equals cascaded_qp given the same μ²."""
+    sc = scenarios["compatible"]
+    opts = {"step_bound": {"sword_tip": 0.05, "left_foot": 0.05}}
+    res = simulate(sc.robot, lambda s, t: sc.acceleration_stack(s, t, "activation"),
+                   lambda st, **kw: formulations.solve(st, "extended_jacobian", **opts),
+                   duration=0.1, dt=0.002)
+    assert not res.failed
+    assert res.errors["support_foot_error_m"].max() < 1e-5
+    check = cmd.crosscheck("compatible", res, 0.002, every=10, run_options=opts)
+    assert check["steps_with_damping"] >= 3
+    assert check["max_rel_diff_qdd_damped_steps"] < 1e-6
+
+
 def test_fencing_command_writes_summary_csv_plots_and_doc(tmp_path, capsys):
     out = tmp_path / "results"
     doc = tmp_path / "docs" / "reproduction.md"

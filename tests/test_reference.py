@@ -6,7 +6,7 @@ from hypothesis import given, settings, strategies as st
 
 import formulations
 from hierarchy import Task, TaskStack, check_lexicographic, nested_null_spaces
-from hierarchy.families import FAMILIES, compatible
+from hierarchy.families import FAMILIES, compatible, near_singular
 
 
 @pytest.mark.parametrize("seed", range(10))
@@ -74,3 +74,18 @@ def test_first_level_is_solved_alone_in_least_squares(seed, n, k):
     A1, b1 = s[0].A, s[0].b
     best = np.linalg.norm(A1 @ np.linalg.lstsq(A1, b1, rcond=None)[0] - b1)
     assert np.linalg.norm(A1 @ x - b1) <= best + 1e-9 * max(1.0, np.linalg.norm(b1))
+
+
+def test_level_damping_is_damped_least_squares_per_level():
+    """Two levels, the second damped: y = (MᵀM + μ²I)⁻¹Mᵀc on the free directions."""
+    stack = near_singular(1e-2)
+    mu2 = 0.3
+    sol = formulations.solve(stack, "reference", level_damping=[0.0, mu2])
+    # level 1 fixes x0 = x1 = 0; level 2 over (x2, …, x5): damped least squares
+    M = stack.levels[1].A[:, 2:]
+    c = stack.levels[1].b
+    y = np.linalg.solve(M.T @ M + mu2 * np.eye(M.shape[1]), M.T @ c)
+    np.testing.assert_allclose(sol.x, np.concatenate([[0.0, 0.0], y]), atol=1e-12)
+    assert sol.status == "approximate"
+    with pytest.raises(formulations.FormulationError, match="one μ² per level"):
+        formulations.solve(stack, "reference", level_damping=[0.1, -1.0])
