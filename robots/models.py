@@ -156,6 +156,24 @@ class RobotModel:
         return RobotModel(self.name, model, self.q0.copy(), frames, self.source,
                           self.floating_base)
 
+    def with_armature(self, armature: float) -> "RobotModel":
+        """A copy of this robot with rotor inertia ``armature`` (kg·m²) on every actuated
+        joint: pinocchio adds ``model.armature`` to the diagonal of ``M(q)`` (CRBA,
+        ABA, RNEA); kinematics are unchanged.
+
+        Raises:
+            ValueError: ``armature`` is negative or not finite.
+        """
+        a = float(armature)
+        if not (0.0 <= a < np.inf):
+            raise ValueError(f"armature must be a finite number ≥ 0, got {armature!r}")
+        model = self.model.copy()
+        arm = np.array(model.armature, dtype=float)
+        arm[self.n_base:] = a
+        model.armature = arm
+        return RobotModel(self.name, model, self.q0.copy(), dict(self.frames), self.source,
+                          self.floating_base)
+
 
 # ------------------------------------------------------------------ locating files
 def example_robot_data_dir() -> Path:

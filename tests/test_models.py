@@ -110,3 +110,18 @@ def test_missing_file_gives_a_clear_error(monkeypatch):
     monkeypatch.setattr(models, "G1_URDF", "g1_description/urdf/no_such_robot.urdf")
     with pytest.raises(ModelNotFoundError, match="no_such_robot.urdf"):
         g1()
+
+
+def test_with_armature_adds_rotor_inertia_to_the_actuated_diagonal_only():
+    robot = sample_humanoid()
+    heavy = robot.with_armature(0.1)
+    M0 = pin.crba(robot.model, robot.data(), robot.q0)
+    M1 = pin.crba(heavy.model, heavy.data(), heavy.q0)
+    nb = robot.n_base
+    expected = np.zeros(robot.nv)
+    expected[nb:] = 0.1
+    np.testing.assert_allclose(np.diag(M1 - M0), expected, atol=1e-12)
+    np.testing.assert_allclose(np.triu(M1 - M0, 1), 0.0, atol=1e-12)
+    assert np.all(np.asarray(robot.model.armature) == 0.0)    # the original is untouched
+    with pytest.raises(ValueError, match="armature"):
+        robot.with_armature(-1.0)
