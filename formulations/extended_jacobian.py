@@ -455,7 +455,10 @@ def solve_batch(stacks: list[TaskStack], *, nullspace: str = "qr", damping: floa
     X = np.empty((N, n))
     ranks = np.zeros((N, k), dtype=np.int64)
     mu2 = np.zeros((N, k))
-    bounds = np.stack([level_step_bounds(s, step_bound) for s in stacks])
+    if isinstance(step_bound, dict):   # task names may sit on different levels per stack
+        bounds = np.stack([level_step_bounds(s, step_bound) for s in stacks])
+    else:
+        bounds = np.broadcast_to(level_step_bounds(stacks[0], step_bound), (N, k)).copy()
     _kernel.solve_batch_kernel(B, c, packs[0].starts, scales, float(rcond),
                                float(level_damping) if selective else 0.0,
                                float(singular_threshold), bounds, X, ranks, mu2)
