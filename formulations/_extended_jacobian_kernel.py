@@ -27,54 +27,60 @@ _FAST = {"reassoc", "contract", "nsz", "arcp"}
 
 @njit(cache=True, fastmath=_FAST)
 def _small_lstsq(L, rhs, m, r, mu2, out, col):
-    """min ‖L[:m, :r] z − rhs‖² + mu2 ‖z‖², by Householder QR of [L; √mu2 I]."""
+    """min ‖L[:m, :r] z − rhs‖² + mu2 ‖z‖², by Householder QR of [L; √mu2 I].
+
+    The matrix is held transposed (``Tt[j]`` is column ``j``) so that every inner
+    loop runs over contiguous memory.
+    """
     rows = m + r if mu2 > 0.0 else m
-    T = np.zeros((rows, r))
+    Tt = np.zeros((r, rows))
     t = np.zeros(rows)
     for i in range(m):
         for j in range(r):
-            T[i, j] = L[i, j]
+            Tt[j, i] = L[i, j]
         t[i] = rhs[i]
     if mu2 > 0.0:
         s = np.sqrt(mu2)
         for j in range(r):
-            T[m + j, j] = s
+            Tt[j, m + j] = s
     for j in range(r):
+        cj = Tt[j]
         norm = 0.0
         for i in range(j, rows):
-            norm += T[i, j] * T[i, j]
+            norm += cj[i] * cj[i]
         norm = np.sqrt(norm)
         if norm == 0.0:
             continue
-        alpha = -norm if T[j, j] >= 0.0 else norm
-        v0 = T[j, j] - alpha
-        # v = [v0, T[j+1:, j]], H = I - 2 v vᵀ / vᵀv
+        alpha = -norm if cj[j] >= 0.0 else norm
+        v0 = cj[j] - alpha
+        # v = [v0, cj[j+1:]], H = I - 2 v vᵀ / vᵀv
         vtv = v0 * v0
         for i in range(j + 1, rows):
-            vtv += T[i, j] * T[i, j]
+            vtv += cj[i] * cj[i]
         if vtv == 0.0:
             continue
         for k in range(j + 1, r):
-            dot = v0 * T[j, k]
+            ck = Tt[k]
+            dot = v0 * ck[j]
             for i in range(j + 1, rows):
-                dot += T[i, j] * T[i, k]
+                dot += cj[i] * ck[i]
             f = 2.0 * dot / vtv
-            T[j, k] -= f * v0
+            ck[j] -= f * v0
             for i in range(j + 1, rows):
-                T[i, k] -= f * T[i, j]
+                ck[i] -= f * cj[i]
         dot = v0 * t[j]
         for i in range(j + 1, rows):
-            dot += T[i, j] * t[i]
+            dot += cj[i] * t[i]
         f = 2.0 * dot / vtv
         t[j] -= f * v0
         for i in range(j + 1, rows):
-            t[i] -= f * T[i, j]
-        T[j, j] = alpha
+            t[i] -= f * cj[i]
+        cj[j] = alpha
     for j in range(r - 1, -1, -1):
         acc = t[j]
         for k in range(j + 1, r):
-            acc -= T[j, k] * out[col + k]
-        out[col + j] = acc / T[j, j]
+            acc -= Tt[k, j] * out[col + k]
+        out[col + j] = acc / Tt[j, j]
 
 
 @njit(cache=True, fastmath=_FAST)
