@@ -274,6 +274,18 @@ def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
             x[j] -= f * V[t, j]
 
 
+@njit(cache=True, fastmath=_FAST)
+def level_scales(A, starts, scales):
+    """``scales[i] = ‖A_i‖_F`` of every level (rows ``starts[i]:starts[i+1]``)."""
+    M, n = A.shape
+    for lev in range(starts.shape[0] - 1):
+        acc = 0.0
+        for i in range(starts[lev], starts[lev + 1]):
+            for j in range(n):
+                acc += A[i, j] * A[i, j]
+        scales[lev] = np.sqrt(acc)
+
+
 @njit(cache=True, parallel=True)
 def solve_batch_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
                        step_bound, X, ranks, level_mu2):

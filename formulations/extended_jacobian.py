@@ -66,7 +66,7 @@ import math
 import numpy as np
 from scipy.linalg import lapack
 
-from hierarchy import DEFAULT_RCOND, TaskStack, null_space_basis
+from hierarchy import DEFAULT_RCOND, StackBuffer, TaskStack, null_space_basis
 
 from .base import Capabilities, FormulationError, Outcome
 
@@ -203,6 +203,85 @@ def _solve_qr_compiled(stack: TaskStack, rcond: float, level_damping: float,
     info = {"rank_profile": ranks, "nullspace": "qr", "kernel": "numba"}
     status = _damping_info(info, mu2, level_damping > 0, bool(step_bound.any()))
     return Outcome(x, status, info)
+
+
+class BufferSolver:
+    """The compiled ``qr`` path on a :class:`~hierarchy.StackBuffer`, for control loops.
+
+    :func:`solve` takes a :class:`~hierarchy.TaskStack` (validated, packed and copied
+    per call); a loop that refills the same layout at every step can instead fill a
+    buffer and call :meth:`solve`, which checks the values (finite), copies the rows
+    into a preallocated workspace and runs the same kernel (eq. 15-18 by nested
+    pivoted QR): no ``Task`` objects, no packing, no allocation but the answer.
+    The answer equals ``solve(buffer.to_stack(), ...)`` bit for bit (same kernel,
+    same inputs; asserted in ``tests/test_extended_jacobian.py``).
+
+    Args:
+        buffer: The layout (and the default rows) to solve.
+        rcond, level_damping, singular_threshold, step_bound: As for :func:`solve`
+            (``step_bound``: one value or one per level).
+
+    Raises:
+        FormulationError: numba is missing, or an option is out of range.
+    """
+
+    def __init__(self, buffer: StackBuffer, *, rcond: float = DEFAULT_RCOND,
+                 level_damping: float = 0.0, singular_threshold: float = 0.0,
+                 step_bound=0.0) -> None:
+        if _kernel is None:
+            raise FormulationError(f"BufferSolver needs the compiled kernel: {_kernel_error}; "
+                                   f"install it with `pip install numba`")
+        for key, val in (("level_damping", level_damping), ("rcond", rcond),
+                         ("singular_threshold", singular_threshold)):
+            if not (0.0 <= val < math.inf):
+                raise FormulationError(f"{key} must be a finite number ≥ 0, got {val}")
+        k = len(buffer)
+        try:
+            bound = np.broadcast_to(np.asarray(step_bound, dtype=np.float64), (k,)).copy()
+        except ValueError:
+            raise FormulationError(f"step_bound must be one number or {k} (one per level), "
+                                   f"got {step_bound!r}") from None
+        if not np.all(np.isfinite(bound)) or np.any(bound < 0):
+            raise FormulationError(f"step_bound must be finite and ≥ 0, got {bound.tolist()}")
+        self.buffer = buffer
+        self.rcond = float(rcond)
+        selective = float(level_damping) > 0 and float(singular_threshold) > 0
+        self.level_damping = float(level_damping) if selective else 0.0
+        self.singular_threshold = float(singular_threshold)
+        self.step_bound = bound
+        self._B = np.empty_like(buffer.A)
+        self._c = np.empty_like(buffer.b)
+        self._scales = np.zeros(k)
+        self._x = np.empty(buffer.n)
+        self._ranks = np.zeros(k, dtype=np.int64)
+        self._mu2 = np.zeros(k)
+        self._flagged = selective or bool(bound.any())
+
+    def solve(self, buffer: StackBuffer | None = None) -> Outcome:
+        """Solve the buffer's current rows (``buffer``: another of the same layout).
+
+        Raises:
+            TaskStackError: a value is not finite (naming the task and level).
+            FormulationError: ``buffer`` has another layout.
+        """
+        buf = self.buffer if buffer is None else buffer
+        if buf is not self.buffer and (buf.A.shape != self.buffer.A.shape
+                                       or not np.array_equal(buf.starts, self.buffer.starts)):
+            raise FormulationError(f"buffer layout differs from the solver's: rows "
+                                   f"{buf.starts.tolist()} × {buf.n} vs "
+                                   f"{self.buffer.starts.tolist()} × {self.buffer.n}")
+        buf.check()
+        np.copyto(self._B, buf.A)
+        np.copyto(self._c, buf.b)
+        _kernel.level_scales(self._B, buf.starts, self._scales)
+        _kernel.solve_kernel(self._B, self._c, buf.starts, self._scales, self.rcond,
+                             self.level_damping, self.singular_threshold, self.step_bound,
+                             self._x, self._ranks, self._mu2)
+        info = {"rank_profile": self._ranks.copy(), "nullspace": "qr", "kernel": "numba"}
+        status = "optimal"
+        if self._flagged:
+            status = _damping_info(info, self._mu2.copy(), self.level_damping > 0, True)
+        return Outcome(self._x.copy(), status, info)
 
 
 # --------------------------------------------------------------------------- qr

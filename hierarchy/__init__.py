@@ -7,6 +7,7 @@ from .analysis import (FeasibleSplit, LevelCheck, LexicographicReport, algorithm
                        algorithmic_error_norms, check_lexicographic, conflicting_levels,
                        feasible_split, lexicographic_residuals, nested_null_spaces, relative_distance,
                        rank_profile, singularity_distance)
+from .buffer import StackBuffer
 from .errors import TaskStackError, UnsupportedTaskError
 from .io import load_stack, save_stack, stack_from_dict, stack_to_dict
 from .linalg import DEFAULT_RCOND, matrix_rank, null_space_basis, range_basis
@@ -15,7 +16,7 @@ from .task import Level, Task
 
 __all__ = [
     "DEFAULT_RCOND", "FeasibleSplit", "PackedRows", "Level", "LevelCheck", "LexicographicReport", "Task",
-    "TaskStack", "TaskStackError", "UnsupportedTaskError", "algorithmic_error",
+    "StackBuffer", "TaskStack", "TaskStackError", "UnsupportedTaskError", "algorithmic_error",
     "algorithmic_error_norms", "check_lexicographic", "conflicting_levels",
     "feasible_split", "lexicographic_residuals", "matrix_rank", "nested_null_spaces",
     "null_space_basis", "range_basis", "rank_profile", "relative_distance",

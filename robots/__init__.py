@@ -7,6 +7,7 @@ Data flows one way: ``hierarchy`` ← ``robots``; this package never imports
 from .models import (LOADERS, ModelNotFoundError, RobotModel, example_robot_data_dir, g1,
                      load, sample_humanoid, spatial_chain, talos)
 from .references import Reference, Waypoints, minimum_jerk
+from .rows import TaskRows
 from .simulate import SimulationResult, StepTasks, equality_view, simulate
 from .tasks import (JointLimitActivation, KinematicState, TaskTerm, com_position, contact,
                     frame_orientation, frame_pose, frame_position, joint_limit_bounds,
@@ -15,7 +16,7 @@ from .tasks import (JointLimitActivation, KinematicState, TaskTerm, com_position
 __all__ = [
     "LOADERS", "ModelNotFoundError", "RobotModel", "example_robot_data_dir", "g1", "load",
     "sample_humanoid", "spatial_chain", "talos", "Reference", "Waypoints", "minimum_jerk",
-    "SimulationResult", "StepTasks", "equality_view", "simulate", "JointLimitActivation",
+    "TaskRows", "SimulationResult", "StepTasks", "equality_view", "simulate", "JointLimitActivation",
     "KinematicState", "TaskTerm", "com_position", "contact", "frame_orientation",
     "frame_pose", "frame_position", "joint_limit_bounds", "joint_limit_rows",
     "joint_limit_violation", "posture",

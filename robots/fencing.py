@@ -38,6 +38,7 @@ from hierarchy import TaskStack
 
 from .models import RobotModel, g1
 from .references import Reference, Waypoints, minimum_jerk
+from .rows import TaskRows
 from .simulate import StepTasks
 from .tasks import (JointLimitActivation, KinematicState, com_position, contact,
                     frame_pose, frame_position, joint_limit_bounds, joint_limit_rows,
@@ -216,6 +217,35 @@ class FencingScenario:
         if "posture" in terms:
             levels.append(terms["posture"].velocity(self.gains["posture"][0]))
         return StepTasks(TaskStack(levels), self.errors(state, t, terms), n_tasks)
+
+    # ------------------------------------------------------- preallocated rows
+    def velocity_rows(self, gain: float = 10.0) -> TaskRows:
+        """Preallocated rows of :meth:`velocity_stack` (``limits="none"``): the same
+        levels and gains, for :meth:`write_velocity_rows` in a control loop."""
+        nb, nv = self.robot.n_base, self.robot.nv
+        layout = [[("support_foot", 6)], [("com", 2)], [("left_foot", 6)], [("sword_tip", 3)]]
+        gains = {name: gain for (name, _), in layout}
+        if self.with_posture:
+            layout.append([("posture", nv - nb)])
+            gains["posture"] = self.gains["posture"][0]
+        return TaskRows(self.robot, layout, gains)
+
+    def write_velocity_rows(self, rows: TaskRows, state: KinematicState, t: float):
+        """Fill ``rows`` (from :meth:`velocity_rows`) at ``(state, t)``; returns its
+        buffer, equal to ``velocity_stack(state, t).stack`` to rounding."""
+        sup = self.right_foot0
+        rows.frame_pose(state, "support_foot", "right_foot", sup.translation,
+                        sup.rotation)
+        com = self.com_ref(t)
+        rows.com(state, "com", com.x, com.xd, com.xdd)
+        foot = self.left_foot_ref(t)
+        rows.frame_pose(state, "left_foot", "left_foot", foot.x, self.left_foot0.rotation,
+                        foot.xd, foot.xdd)
+        tip = self.tip_ref(t)
+        rows.frame_position(state, "sword_tip", "sword_tip", tip.x, tip.xd, tip.xdd)
+        if self.with_posture:
+            rows.posture(state, "posture", self.robot.q0)
+        return rows.velocity_targets()
 
 
 def _velocity_bounds(state: KinematicState, dt: float):
