@@ -25,6 +25,15 @@ from numba import njit, prange
 _FAST = {"reassoc", "contract", "nsz", "arcp"}
 
 
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _dot(a, b):
+    """``a · b`` of two 1-D views of equal length."""
+    acc = 0.0
+    for j in range(a.shape[0]):
+        acc += a[j] * b[j]
+    return acc
+
+
 @njit(cache=True, fastmath=_FAST)
 def _small_lstsq(L, rhs, m, r, mu2, out, col):
     """min ‖L[:m, :r] z − rhs‖² + mu2 ‖z‖², by Householder QR of [L; √mu2 I].
@@ -165,16 +174,12 @@ def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
             continue
         tol = rcond * scales[lev]
         # right-hand side in rotated coordinates: c_i - B_i[:, :col] y[:col]
+        # (1-D views throughout: they let LLVM vectorise the loops; measured 2x on G1)
+        yc = y[:col]
         for i in range(m):
-            acc = c[s0 + i]
-            for j in range(col):
-                acc -= B[s0 + i, j] * y[j]
-            rhs[i] = acc
-        for i in range(m):
-            acc = 0.0
-            for j in range(col, n):
-                acc += B[s0 + i, j] * B[s0 + i, j]
-            norms[i] = acc
+            rhs[i] = c[s0 + i] - _dot(B[s0 + i, :col], yc)
+            free = B[s0 + i, col:]
+            norms[i] = _dot(free, free)
         r = 0
         d = n - col
         while r < m and r < d:
@@ -186,9 +191,8 @@ def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
                     best = norms[i]
                     p = i
             # recompute exactly (downdating loses accuracy)
-            exact = 0.0
-            for j in range(col + r, n):
-                exact += B[s0 + p, j] * B[s0 + p, j]
+            tail = B[s0 + p, col + r:]
+            exact = _dot(tail, tail)
             if not (np.sqrt(exact) > tol) or tol <= 0.0:
                 break
             if p != r:
@@ -218,14 +222,15 @@ def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
             for j in range(q + 1, n):
                 B[s0 + r, j] = 0.0
             # apply to the level's other rows and to every lower level's rows
+            vq = V[nref, q:]
+            w = n - q
             for i in range(s0 + r + 1, M):
-                dot = 0.0
-                for j in range(q, n):
-                    dot += B[i, j] * V[nref, j]
+                row = B[i, q:]
+                dot = _dot(row, vq)
                 if dot != 0.0:
                     f = bt * dot
-                    for j in range(q, n):
-                        B[i, j] -= f * V[nref, j]
+                    for j in range(w):
+                        row[j] -= f * vq[j]
             for i in range(r + 1, m):
                 norms[i] -= B[s0 + i, q] * B[s0 + i, q]
             nref += 1
@@ -266,12 +271,11 @@ def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
         x[j] = y[j]
     for t in range(nref - 1, -1, -1):
         q = pos[t]
-        dot = 0.0
-        for j in range(q, n):
-            dot += V[t, j] * x[j]
-        f = beta[t] * dot
-        for j in range(q, n):
-            x[j] -= f * V[t, j]
+        vq = V[t, q:]
+        xq = x[q:]
+        f = beta[t] * _dot(vq, xq)
+        for j in range(n - q):
+            xq[j] -= f * vq[j]
 
 
 @njit(cache=True, fastmath=_FAST)

@@ -87,7 +87,7 @@ OPTIONS = {
     "rcond": (DEFAULT_RCOND, "relative rank threshold: σ counts if σ > rcond·‖A_i‖_F"),
     "level_damping": (0.0, "λ_max of the selective damping (qr path; 0: off)"),
     "kernel": ("auto", "qr path: 'numba' (compiled), 'lapack' (readable scipy.linalg.lapack), "
-                       "'auto' (numba when importable and n ≤ 80, else lapack)"),
+                       "'auto' (numba when importable and n ≤ 160, else lapack)"),
     "singular_threshold": (0.0, "ε: damp a level whose projected σ_min < ε·‖A_i‖_F"),
     "step_bound": (0.0, "Δ > 0: every level's step ‖x_i − x_{i−1}‖ ≤ Δ by trust-region "
                         "damping (qr path; 0: off); or k values (one per level, 0: "
@@ -100,11 +100,12 @@ _dormqr = lapack.dormqr
 _dtrtrs = lapack.dtrtrs
 
 
-#: ``kernel="auto"`` uses the compiled kernel up to this many unknowns. Its scalar loops
-#: win where call overhead dominates; LAPACK's blocked Householder code wins on larger
-#: problems (measured, conflicting 4-level stacks, median µs numba/lapack: n=35 49/231,
-#: n=70 293/339, n=100 795/493, n=300 20763/5214).
-AUTO_NUMBA_MAX_N = 80
+#: ``kernel="auto"`` uses the compiled kernel up to this many unknowns. Its loops win
+#: where call overhead dominates; LAPACK's blocked Householder code wins on larger
+#: problems. Measured median µs numba/lapack (one thread, k = 2/16 levels): compatible
+#: n=100 76/122 and 72/304, n=150 200/263 and 191/469, n=200 719/512 and 686/727;
+#: conflicting n=150 396/507 and 363/697, n=200 2924/1679 and 1004/1532.
+AUTO_NUMBA_MAX_N = 160
 
 
 def _resolve_kernel(kernel: str, n: int = 0) -> str:
