@@ -233,3 +233,55 @@ def test_step_bound_batch_matches_solve():
         one = formulations.solve(s, "extended_jacobian", **opts)
         assert relative_distance(x, one.x) <= 1e-12 and status == one.status
     assert "approximate" in batch.statuses          # the bound acted somewhere
+
+
+# --------------------------------------------------------------- BufferSolver
+def _buffer_of(stack):
+    from hierarchy import StackBuffer
+    buf = StackBuffer(stack.n, [[(t.name, t.m) for t in level] for level in stack.levels])
+    for t in stack.tasks:
+        A, b = buf.rows(t.name)
+        A[:], b[:] = t.A, t.b
+    return buf
+
+
+@pytest.mark.parametrize("family", ["compatible", "conflicting", "rank_deficient",
+                                    "degenerate"])
+@pytest.mark.parametrize("options", [{}, {"level_damping": 0.1, "singular_threshold": 0.05},
+                                     {"step_bound": 0.5}])
+def test_buffer_solver_equals_solve_bit_for_bit(family, options):
+    from formulations.extended_jacobian import BufferSolver
+    for seed in range(4):
+        stack = FAMILIES[family](np.random.default_rng(900 + seed), 14, 4)
+        buf = _buffer_of(stack)
+        A0, b0 = buf.A.copy(), buf.b.copy()
+        out = BufferSolver(buf, **options).solve()
+        ref = formulations.solve(stack, "extended_jacobian", kernel="numba", **options)
+        assert np.array_equal(out.x, ref.x)
+        assert out.status == ref.status
+        assert np.array_equal(out.info["rank_profile"], ref.info["rank_profile"])
+        assert np.array_equal(buf.A, A0) and np.array_equal(buf.b, b0)   # not mutated
+
+
+def test_buffer_solver_refills_and_refuses_other_layouts_and_nan():
+    from hierarchy import StackBuffer, TaskStackError
+    from formulations.base import FormulationError
+    from formulations.extended_jacobian import BufferSolver
+    rng = np.random.default_rng(5)
+    s1 = compatible(rng, 10, 3)
+    buf = _buffer_of(s1)
+    solver = BufferSolver(buf)
+    x1 = solver.solve().x
+    other = _buffer_of(s1)                      # same layout, new values
+    other.A[:] = rng.standard_normal(other.A.shape)
+    other.b[:] = rng.standard_normal(other.b.shape)
+    assert relative_distance(solver.solve(other).x,
+                             formulations.solve(other.to_stack(), "reference").x) <= 1e-9
+    assert np.array_equal(solver.solve().x, x1)       # the solver's own buffer again
+    with pytest.raises(FormulationError, match="layout differs"):
+        solver.solve(StackBuffer(10, [[("t", 2)]]))
+    buf.rows(s1.tasks[-1].name)[1][0] = np.nan
+    with pytest.raises(TaskStackError, match=s1.tasks[-1].name):
+        solver.solve()
+    with pytest.raises(FormulationError, match="step_bound"):
+        BufferSolver(buf, step_bound=[1.0, 2.0])
