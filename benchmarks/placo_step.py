@@ -7,13 +7,24 @@ left foot, sword tip and posture soft; joint and velocity limits); its step is
 ``update_kinematics`` plus the target updates (kinematics) and
 ``KinematicsSolver.solve(True)`` (solve), as that function times them.
 
-prioik's step is timed at the same states (PlaCo's trajectory): kinematics
-(:class:`robots.tasks.KinematicState`: pinocchio Jacobians, frame placements,
-centre of mass), building the velocity-level stack of the same five tasks in the
-scenario's priority order (support foot, com, left foot, sword tip, posture;
-``J q̇ = ẋ* + K e``, ``K = 10``) — :meth:`robots.fencing.FencingScenario.terms` then
-:meth:`robots.tasks.TaskTerm.velocity` — and ``extended_jacobian``'s plugin
-``solve`` (called directly, without the registry's checks).
+prioik's step is timed at the same states (PlaCo's trajectory), two ways, one after
+the other at every state:
+
+* **TaskStack path** — :class:`robots.tasks.KinematicState` (pinocchio Jacobians,
+  frame placements, centre of mass), building the velocity-level stack of the same
+  five tasks in the scenario's priority order (support foot, com, left foot, sword
+  tip, posture; ``J q̇ = ẋ* + K e``, ``K = 10``) —
+  :meth:`robots.fencing.FencingScenario.terms`, :meth:`robots.tasks.TaskTerm.velocity`
+  and :class:`hierarchy.TaskStack` — and ``extended_jacobian``'s plugin ``solve``
+  (called directly, without the registry's checks);
+* **preallocated path** — ``KinematicState(..., drift=False)``,
+  :meth:`robots.fencing.FencingScenario.write_velocity_rows` into a
+  :class:`robots.TaskRows` buffer, and
+  :class:`formulations.extended_jacobian.BufferSolver` (same kernel, no ``Task``
+  objects). Both paths' answers are compared at every state (``max_path_distance``).
+
+Both paths and PlaCo compute the same minimum-jerk references in Python
+(:meth:`~robots.fencing.FencingScenario.com_ref`, ``left_foot_ref``, ``tip_ref``).
 """
 
 from __future__ import annotations
@@ -34,14 +45,16 @@ DT = 0.002
 
 def ik_step_times(steps: int = 300, formulation: str = "extended_jacobian"
                   ) -> dict[str, Any]:
-    """Median, p10 and p90 (µs) of PlaCo's step and of prioik's step (with its three
-    phases) over ``steps`` control steps of the compatible fencing scenario.
+    """Median, p10 and p90 (µs) of PlaCo's step and of prioik's two step paths (with
+    their phases) over ``steps`` control steps of the compatible fencing scenario.
 
     Raises:
         ImportError: placo, pinocchio or :mod:`robots` is missing.
-        RuntimeError: PlaCo's run failed.
+        RuntimeError: PlaCo's run failed, or a prioik path failed.
     """
     import formulations
+    from formulations.extended_jacobian import BufferSolver
+    from hierarchy import relative_distance
     from robots.fencing import FencingScenario
     from robots.tasks import KinematicState
 
@@ -56,7 +69,11 @@ def ik_step_times(steps: int = 300, formulation: str = "extended_jacobian"
 
     mod = formulations.get(formulation)
     data = robot.model.createData()
-    kin, build, solve = [], [], []
+    data_fast = robot.model.createData()
+    rows = scenario.velocity_rows(GAIN)
+    solver = BufferSolver(rows.buffer)
+    kin, build, solve, fkin, fbuild, fsolve = [], [], [], [], [], []
+    distance = 0.0
     for i in range(placo_run.steps):
         q, v, t = placo_run.q[i], placo_run.v[i], float(placo_run.t[i])
         t0 = time.perf_counter()
@@ -67,13 +84,22 @@ def ik_step_times(steps: int = 300, formulation: str = "extended_jacobian"
         t2 = time.perf_counter()
         out = mod.solve(stack)
         t3 = time.perf_counter()
-        if out.status == "failed":
+        fstate = KinematicState(robot, q, v, data_fast, drift=False)
+        t4 = time.perf_counter()
+        scenario.write_velocity_rows(rows, fstate, t)
+        t5 = time.perf_counter()
+        fast = solver.solve()
+        t6 = time.perf_counter()
+        if out.status == "failed" or fast.status == "failed":
             raise RuntimeError(f"{formulation} failed at t = {t:.3f} s")
-        kin.append(t1 - t0)
-        build.append(t2 - t1)
-        solve.append(t3 - t2)
-    kin, build, solve = (np.array(a) for a in (kin, build, solve))
+        distance = max(distance, relative_distance(fast.x, out.x))
+        for lst, val in ((kin, t1 - t0), (build, t2 - t1), (solve, t3 - t2),
+                         (fkin, t4 - t3), (fbuild, t5 - t4), (fsolve, t6 - t5)):
+            lst.append(val)
+    kin, build, solve, fkin, fbuild, fsolve = (np.array(a) for a in
+                                               (kin, build, solve, fkin, fbuild, fsolve))
     ours = kin + build + solve
+    fast_step = fkin + fbuild + fsolve
 
     def us(a, q):
         return float(np.percentile(a, q)) * 1e6
@@ -89,16 +115,28 @@ def ik_step_times(steps: int = 300, formulation: str = "extended_jacobian"
         "prioik_p90_us": us(ours, 90),
         "prioik_kinematics_us": us(kin, 50), "prioik_build_us": us(build, 50),
         "prioik_solve_us": us(solve, 50),
+        "prioik_buffer_step_us": us(fast_step, 50), "prioik_buffer_p10_us": us(fast_step, 10),
+        "prioik_buffer_p90_us": us(fast_step, 90),
+        "prioik_buffer_kinematics_us": us(fkin, 50), "prioik_buffer_build_us": us(fbuild, 50),
+        "prioik_buffer_solve_us": us(fsolve, 50),
+        "max_path_distance": distance,
         "description": (f"{int(placo_run.steps)} control steps (2 ms) of the compatible "
                         "fencing scenario, at PlaCo's own states. PlaCo: "
                         "`update_kinematics` + target updates, then "
                         "`KinematicsSolver.solve(True)` (support foot and CoM hard; left "
-                        "foot, sword tip, posture soft; joint and velocity limits). prioik: "
-                        "`KinematicState` (pinocchio), the velocity stack of the same five "
-                        f"tasks as five strict levels, then `{formulation}`. Phase medians "
-                        f"(µs): PlaCo kinematics "
+                        "foot, sword tip, posture soft; joint and velocity limits). prioik, "
+                        "the velocity stack of the same five tasks as five strict levels "
+                        f"solved by `{formulation}`, two ways at every state: the TaskStack "
+                        "path (`KinematicState`, task terms, `Task`/`TaskStack`, plugin "
+                        "`solve`) and the preallocated path (`KinematicState(drift=False)`, "
+                        "`FencingScenario.write_velocity_rows` into a `TaskRows` buffer, "
+                        "`BufferSolver.solve`); their answers differ by at most "
+                        f"{distance:.1e} (relative). All three compute the same Python "
+                        "references. Phase medians (µs): PlaCo kinematics "
                         f"{us(placo_run.kinematics_time_s, 50):.1f}, solve "
-                        f"{us(placo_run.solve_time_s, 50):.1f}; prioik kinematics "
+                        f"{us(placo_run.solve_time_s, 50):.1f}; TaskStack path kinematics "
                         f"{us(kin, 50):.1f}, stack building {us(build, 50):.1f}, solve "
-                        f"{us(solve, 50):.1f}."),
+                        f"{us(solve, 50):.1f}; preallocated path kinematics "
+                        f"{us(fkin, 50):.1f}, rows {us(fbuild, 50):.1f}, solve "
+                        f"{us(fsolve, 50):.1f}."),
     }
