@@ -895,7 +895,7 @@ In this run: {counts}. The reason for each is in the `note` column of `results.c
 
 Extra rows beside each formulation's defaults: `extended_jacobian[svd]` (the paper's
 SVD path), `extended_jacobian[lapack]` (the readable LAPACK nested-QR path; the default
-row is the compiled kernel), `daqp_hierarchical[raw]` (`compress_levels=False,
+row is `kernel="auto"`: the compiled kernel up to n = 160, LAPACK above), `daqp_hierarchical[raw]` (`compress_levels=False,
 check=False`: DAQP's C call alone, without the plugin's SVD compression of the levels and
 its conflicting-level check — faster, but not exact on conflicting levels).
 
