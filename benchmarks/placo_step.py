@@ -13,7 +13,7 @@ the other at every state:
 * **TaskStack path** — :class:`robots.tasks.KinematicState` (pinocchio Jacobians,
   frame placements, centre of mass), building the velocity-level stack of the same
   five tasks in the scenario's priority order (support foot, com, left foot, sword
-  tip, posture; ``J q̇ = ẋ* + K e``, ``K = 10``) —
+  tip, posture; ``J q̇ = ẋ* + K e``, ``K = 10``, the posture its ``K_p = 4``) —
   :meth:`robots.fencing.FencingScenario.terms`, :meth:`robots.tasks.TaskTerm.velocity`
   and :class:`hierarchy.TaskStack` — and ``extended_jacobian``'s plugin ``solve``
   (called directly, without the registry's checks);
@@ -71,6 +71,8 @@ def ik_step_times(steps: int = 300, formulation: str = "extended_jacobian"
     data = robot.model.createData()
     data_fast = robot.model.createData()
     rows = scenario.velocity_rows(GAIN)
+    # the posture keeps its own K_p, as in FencingScenario.velocity_stack / velocity_rows
+    gains = {"posture": scenario.gains["posture"][0]}
     solver = BufferSolver(rows.buffer)
     kin, build, solve, fkin, fbuild, fsolve = [], [], [], [], [], []
     distance = 0.0
@@ -80,7 +82,8 @@ def ik_step_times(steps: int = 300, formulation: str = "extended_jacobian"
         state = KinematicState(robot, q, v, data)
         t1 = time.perf_counter()
         terms = scenario.terms(state, t)
-        stack = TaskStack([terms[name].velocity(GAIN) for name in ORDER if name in terms])
+        stack = TaskStack([terms[name].velocity(gains.get(name, GAIN))
+                           for name in ORDER if name in terms])
         t2 = time.perf_counter()
         out = mod.solve(stack)
         t3 = time.perf_counter()
