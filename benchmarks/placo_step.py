@@ -71,8 +71,7 @@ def ik_step_times(steps: int = 300, formulation: str = "extended_jacobian"
     data = robot.model.createData()
     data_fast = robot.model.createData()
     rows = scenario.velocity_rows(GAIN)
-    # the posture keeps its own K_p, as in FencingScenario.velocity_stack / velocity_rows
-    gains = {"posture": scenario.gains["posture"][0]}
+    gains = scenario.velocity_gains(GAIN)
     solver = BufferSolver(rows.buffer)
     kin, build, solve, fkin, fbuild, fsolve = [], [], [], [], [], []
     distance = 0.0
@@ -82,8 +81,7 @@ def ik_step_times(steps: int = 300, formulation: str = "extended_jacobian"
         state = KinematicState(robot, q, v, data)
         t1 = time.perf_counter()
         terms = scenario.terms(state, t)
-        stack = TaskStack([terms[name].velocity(gains.get(name, GAIN))
-                           for name in ORDER if name in terms])
+        stack = TaskStack([terms[name].velocity(gains[name]) for name in ORDER if name in terms])
         t2 = time.perf_counter()
         out = mod.solve(stack)
         t3 = time.perf_counter()

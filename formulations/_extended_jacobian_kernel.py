@@ -279,15 +279,25 @@ def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
 
 
 @njit(cache=True, fastmath=_FAST)
-def level_scales(A, starts, scales):
-    """``scales[i] = ‖A_i‖_F`` of every level (rows ``starts[i]:starts[i+1]``)."""
+def level_scales(A, b, starts, scales):
+    """``scales[i] = ‖A_i‖_F`` of every level (rows ``starts[i]:starts[i+1]``).
+
+    Returns ``False`` when a scale or ``‖b‖`` is not finite — a NaN or inf in the
+    rows (or an overflow of the squares): the caller then looks for the entry at
+    fault. The same pass serves as the finite check of the hot path.
+    """
     M, n = A.shape
+    finite = True
     for lev in range(starts.shape[0] - 1):
         acc = 0.0
         for i in range(starts[lev], starts[lev + 1]):
-            for j in range(n):
-                acc += A[i, j] * A[i, j]
+            acc += _dot(A[i], A[i])
         scales[lev] = np.sqrt(acc)
+        if not np.isfinite(scales[lev]):
+            finite = False
+    if not np.isfinite(_dot(b, b)):
+        finite = False
+    return finite
 
 
 @njit(cache=True, parallel=True)

@@ -127,10 +127,8 @@ def solve(stack: TaskStack, *, nullspace: str = "qr", damping: float = 0.0,
     kernel = _resolve_kernel(kernel, stack.n)
     if nullspace not in ("qr", "svd"):
         raise FormulationError(f"nullspace must be 'qr' or 'svd', got {nullspace!r}")
-    for key, val in (("damping", damping), ("level_damping", level_damping),
-                     ("singular_threshold", singular_threshold), ("rcond", rcond)):
-        if not (0.0 <= val < math.inf):   # also False for NaN
-            raise FormulationError(f"{key} must be a finite number ≥ 0, got {val}")
+    _check_nonnegative(damping=damping, level_damping=level_damping,
+                       singular_threshold=singular_threshold, rcond=rcond)
     damping = float(damping)
     selective = float(level_damping) > 0 and float(singular_threshold) > 0
     bound = level_step_bounds(stack, step_bound)
@@ -147,11 +145,18 @@ def solve(stack: TaskStack, *, nullspace: str = "qr", damping: float = 0.0,
     return _solve_qr(stack, rcond, lam, float(singular_threshold), bound)
 
 
-def level_step_bounds(stack: TaskStack, step_bound) -> np.ndarray:
+def _check_nonnegative(**values: float) -> None:
+    """Raise :class:`FormulationError` naming the first option not finite and ≥ 0."""
+    for key, val in values.items():
+        if not (0.0 <= val < math.inf):   # also False for NaN
+            raise FormulationError(f"{key} must be a finite number ≥ 0, got {val}")
+
+
+def level_step_bounds(stack: TaskStack | StackBuffer, step_bound) -> np.ndarray:
     """The per-level bounds ``Δ_i`` (0: unbounded) of the ``step_bound`` option.
 
     Args:
-        stack: The stack.
+        stack: The stack (or buffer layout).
         step_bound: One ``Δ ≥ 0`` for every level, ``k`` values, or a mapping task
             name → ``Δ`` (a level gets the smallest bound of its tasks).
 
@@ -166,9 +171,10 @@ def level_step_bounds(stack: TaskStack, step_bound) -> np.ndarray:
             try:
                 i = stack.level_of(name)
             except KeyError:
+                names = [n for level in stack.levels for n in level.names] \
+                    if isinstance(stack, TaskStack) else [n for lv in stack.names for n in lv]
                 raise FormulationError(f"step_bound names task {name!r}, which is not in "
-                                       f"the stack (tasks: {', '.join(t.name for t in stack.tasks)})"
-                                       ) from None
+                                       f"the stack (tasks: {', '.join(names)})") from None
             out[i] = float(val) if out[i] == 0 else min(out[i], float(val))
     else:
         try:
@@ -194,16 +200,22 @@ def _damping_info(info: dict, mu2: np.ndarray, selective: bool, bound: bool) -> 
 def _solve_qr_compiled(stack: TaskStack, rcond: float, level_damping: float,
                        singular_threshold: float, step_bound: np.ndarray) -> Outcome:
     packed = stack.packed()
-    B, c = packed.A.copy(), packed.b.copy()
     k = len(stack)
-    x = np.empty(stack.n)
-    ranks = np.zeros(k, dtype=np.int64)
-    mu2 = np.zeros(k)
-    _kernel.solve_kernel(B, c, packed.starts, packed.scales, rcond, level_damping,
-                         singular_threshold, step_bound, x, ranks, mu2)
-    info = {"rank_profile": ranks, "nullspace": "qr", "kernel": "numba"}
-    status = _damping_info(info, mu2, level_damping > 0, bool(step_bound.any()))
-    return Outcome(x, status, info)
+    return _kernel_outcome(packed.A.copy(), packed.b.copy(), packed.starts, packed.scales,
+                           rcond, level_damping, singular_threshold, step_bound,
+                           np.empty(stack.n), np.zeros(k, dtype=np.int64), np.zeros(k))
+
+
+def _kernel_outcome(B, c, starts, scales, rcond: float, level_damping: float,
+                    singular_threshold: float, step_bound: np.ndarray, x, ranks,
+                    mu2) -> Outcome:
+    """Run the compiled kernel on working copies ``B``, ``c`` (overwritten) and wrap
+    ``x``, the ranks and the per-level damping (copied out) in an :class:`Outcome`."""
+    _kernel.solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
+                         step_bound, x, ranks, mu2)
+    info = {"rank_profile": ranks.copy(), "nullspace": "qr", "kernel": "numba"}
+    status = _damping_info(info, mu2.copy(), level_damping > 0, bool(step_bound.any()))
+    return Outcome(x.copy(), status, info)
 
 
 class BufferSolver:
@@ -211,8 +223,9 @@ class BufferSolver:
 
     :func:`solve` takes a :class:`~hierarchy.TaskStack` (validated, packed and copied
     per call); a loop that refills the same layout at every step can instead fill a
-    buffer and call :meth:`solve`, which checks the values (finite), copies the rows
-    into a preallocated workspace and runs the same kernel (eq. 15-18 by nested
+    buffer and call :meth:`solve`, which copies the rows into a preallocated
+    workspace, checks them (finite, in the same pass that takes the level scales)
+    and runs the same kernel (eq. 15-18 by nested
     pivoted QR): no ``Task`` objects, no packing, no allocation but the answer.
     The answer equals ``solve(buffer.to_stack(), ...)`` bit for bit (same kernel,
     same inputs; asserted in ``tests/test_extended_jacobian.py``).
@@ -220,7 +233,7 @@ class BufferSolver:
     Args:
         buffer: The layout (and the default rows) to solve.
         rcond, level_damping, singular_threshold, step_bound: As for :func:`solve`
-            (``step_bound``: one value or one per level).
+            (``step_bound``: one value, one per level, or a task-name mapping).
 
     Raises:
         FormulationError: numba is missing, or an option is out of range.
@@ -232,31 +245,21 @@ class BufferSolver:
         if _kernel is None:
             raise FormulationError(f"BufferSolver needs the compiled kernel: {_kernel_error}; "
                                    f"install it with `pip install numba`")
-        for key, val in (("level_damping", level_damping), ("rcond", rcond),
-                         ("singular_threshold", singular_threshold)):
-            if not (0.0 <= val < math.inf):
-                raise FormulationError(f"{key} must be a finite number ≥ 0, got {val}")
+        _check_nonnegative(level_damping=level_damping, rcond=rcond,
+                           singular_threshold=singular_threshold)
         k = len(buffer)
-        try:
-            bound = np.broadcast_to(np.asarray(step_bound, dtype=np.float64), (k,)).copy()
-        except ValueError:
-            raise FormulationError(f"step_bound must be one number or {k} (one per level), "
-                                   f"got {step_bound!r}") from None
-        if not np.all(np.isfinite(bound)) or np.any(bound < 0):
-            raise FormulationError(f"step_bound must be finite and ≥ 0, got {bound.tolist()}")
         self.buffer = buffer
         self.rcond = float(rcond)
         selective = float(level_damping) > 0 and float(singular_threshold) > 0
         self.level_damping = float(level_damping) if selective else 0.0
         self.singular_threshold = float(singular_threshold)
-        self.step_bound = bound
+        self.step_bound = level_step_bounds(buffer, step_bound)
         self._B = np.empty_like(buffer.A)
         self._c = np.empty_like(buffer.b)
         self._scales = np.zeros(k)
         self._x = np.empty(buffer.n)
         self._ranks = np.zeros(k, dtype=np.int64)
         self._mu2 = np.zeros(k)
-        self._flagged = selective or bool(bound.any())
 
     def solve(self, buffer: StackBuffer | None = None) -> Outcome:
         """Solve the buffer's current rows (``buffer``: another of the same layout).
@@ -271,18 +274,13 @@ class BufferSolver:
             raise FormulationError(f"buffer layout differs from the solver's: rows "
                                    f"{buf.starts.tolist()} × {buf.n} vs "
                                    f"{self.buffer.starts.tolist()} × {self.buffer.n}")
-        buf.check()
         np.copyto(self._B, buf.A)
         np.copyto(self._c, buf.b)
-        _kernel.level_scales(self._B, buf.starts, self._scales)
-        _kernel.solve_kernel(self._B, self._c, buf.starts, self._scales, self.rcond,
-                             self.level_damping, self.singular_threshold, self.step_bound,
-                             self._x, self._ranks, self._mu2)
-        info = {"rank_profile": self._ranks.copy(), "nullspace": "qr", "kernel": "numba"}
-        status = "optimal"
-        if self._flagged:
-            status = _damping_info(info, self._mu2.copy(), self.level_damping > 0, True)
-        return Outcome(self._x.copy(), status, info)
+        if not _kernel.level_scales(self._B, self._c, buf.starts, self._scales):
+            buf.check()     # names the task, level and row of a NaN or inf
+        return _kernel_outcome(self._B, self._c, buf.starts, self._scales, self.rcond,
+                               self.level_damping, self.singular_threshold, self.step_bound,
+                               self._x, self._ranks, self._mu2)
 
 
 # --------------------------------------------------------------------------- qr

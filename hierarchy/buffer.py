@@ -98,19 +98,27 @@ class StackBuffer:
         """Total number of rows."""
         return int(self.starts[-1])
 
-    def rows(self, name: str) -> tuple[np.ndarray, np.ndarray]:
-        """Writable views ``(A_t, b_t)`` of one task's rows."""
+    def task_slice(self, name: str) -> slice:
+        """Row range of a task in :attr:`A` and :attr:`b`.
+
+        Raises:
+            TaskStackError: no such task (listing the buffer's tasks).
+        """
         try:
-            sl = self._slices[name]
+            return self._slices[name]
         except KeyError:
             raise TaskStackError(f"no task {name!r} in the buffer (tasks: "
                                  f"{', '.join(self._slices)})") from None
+
+    def rows(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """Writable views ``(A_t, b_t)`` of one task's rows."""
+        sl = self.task_slice(name)
         return self.A[sl], self.b[sl]
 
-    def task_slice(self, name: str) -> slice:
-        """Row range of a task in :attr:`A` and :attr:`b`."""
-        self.rows(name)          # the error for an unknown name
-        return self._slices[name]
+    def level_of(self, name: str) -> int:
+        """Level index of a task (:class:`KeyError` if absent, as
+        :meth:`TaskStack.level_of`)."""
+        return self._level_of[name]
 
     def check(self) -> None:
         """The boundary check: every value finite.

@@ -206,29 +206,36 @@ class FencingScenario:
             dt: Step used by the bounds.
         """
         terms = self.terms(state, t)
-        levels = [terms["support_foot"].velocity(gain)]
+        k = self.velocity_gains(gain)
+        levels = [terms["support_foot"].velocity(k["support_foot"])]
         if limits == "bounds":
             levels.append(_velocity_bounds(state, dt))
         elif limits != "none":
             raise ValueError(f"limits must be 'bounds' or 'none', got {limits!r}")
         for name in ("com", "left_foot", "sword_tip"):
-            levels.append(terms[name].velocity(gain))
+            levels.append(terms[name].velocity(k[name]))
         n_tasks = len(levels)
         if "posture" in terms:
-            levels.append(terms["posture"].velocity(self.gains["posture"][0]))
+            levels.append(terms["posture"].velocity(k["posture"]))
         return StepTasks(TaskStack(levels), self.errors(state, t, terms), n_tasks)
+
+    def velocity_gains(self, gain: float = 10.0) -> dict[str, float]:
+        """``K`` per task at velocity level: ``gain`` for every task but the posture,
+        which keeps its ``K_p`` (used by :meth:`velocity_stack` and
+        :meth:`velocity_rows`)."""
+        out = {name: gain for name in ("support_foot", "com", "left_foot", "sword_tip")}
+        if self.with_posture:
+            out["posture"] = self.gains["posture"][0]
+        return out
 
     # ------------------------------------------------------- preallocated rows
     def velocity_rows(self, gain: float = 10.0) -> TaskRows:
         """Preallocated rows of :meth:`velocity_stack` (``limits="none"``): the same
         levels and gains, for :meth:`write_velocity_rows` in a control loop."""
-        nb, nv = self.robot.n_base, self.robot.nv
         layout = [[("support_foot", 6)], [("com", 2)], [("left_foot", 6)], [("sword_tip", 3)]]
-        gains = {name: gain for (name, _), in layout}
         if self.with_posture:
-            layout.append([("posture", nv - nb)])
-            gains["posture"] = self.gains["posture"][0]
-        return TaskRows(self.robot, layout, gains)
+            layout.append([("posture", self.robot.nv - self.robot.n_base)])
+        return TaskRows(self.robot, layout, self.velocity_gains(gain))
 
     def write_velocity_rows(self, rows: TaskRows, state: KinematicState, t: float):
         """Fill ``rows`` (from :meth:`velocity_rows`) at ``(state, t)``; returns its

@@ -59,8 +59,6 @@ class TaskRows:
         self.drift = np.zeros(m)
         self.kp = np.zeros(m)
         self.kd = np.zeros(m)
-        self._slices = {name: self.buffer.task_slice(name)
-                        for level in self.buffer.names for name in level}
         self._posture_written: set[str] = set()
         for name, gain in (gains or {}).items():
             kp, kd = (gain, 0.0) if np.isscalar(gain) else gain
@@ -74,9 +72,7 @@ class TaskRows:
 
     # ------------------------------------------------------------------ writers
     def _check_rows(self, name: str, m: int) -> slice:
-        sl = self._slices.get(name)
-        if sl is None:
-            self.buffer.task_slice(name)    # raises, naming the known tasks
+        sl = self.buffer.task_slice(name)   # raises for an unknown name, listing the tasks
         if sl.stop - sl.start != m:
             raise ValueError(f"task {name!r} has {sl.stop - sl.start} rows in the layout, "
                              f"the builder writes {m}")
