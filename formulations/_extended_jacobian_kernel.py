@@ -12,7 +12,10 @@ only, so the free coordinates of the next level are the trailing columns (``Z_{i
 implicitly). The level's feasible rows are then lower-trapezoidal ``L`` (eq. 26) and
 its unknowns follow by forward substitution, or by a small least-squares solve when
 the level conflicts (``r_i < m_i``), optionally damped (selective damping, and the
-trust-region ``step_bound`` of :func:`_bounded_step`). Finally ``x = H_1 H_2 … H_R y``.
+trust-region ``step_bound`` of :func:`_bounded_step`). A level with ``m_i`` rows on
+``d ≤ m_i`` free coordinates (undamped, unbounded) is first tried with one column-pivoted
+QR (:func:`_full_column_rank_lstsq`): with full column rank it is solved by that one
+factorization and leaves no null space. Finally ``x = H_1 H_2 … H_R y``.
 """
 
 from __future__ import annotations
@@ -90,6 +93,81 @@ def _small_lstsq(L, rhs, m, r, mu2, out, col):
         for k in range(j + 1, r):
             acc -= Tt[k, j] * out[col + k]
         out[col + j] = acc / Tt[j, j]
+
+
+@njit(cache=True, fastmath=_FAST)
+def _full_column_rank_lstsq(B, s0, m, col, rhs, tol, out):
+    """One level with ``m ≥ d`` rows on its ``d = n − col`` free coordinates.
+
+    Householder QR with column pivoting of ``A_i Z_i = B[s0:s0+m, col:]`` (held
+    transposed, so that the inner loops run over contiguous memory), with the rank
+    test of the row-pivoted path (pivot norm ``> tol``). When all ``d`` pivots pass,
+    the level has full column rank: its least-squares solution ``R⁻¹ Qᵀ rhs`` (one
+    factorization instead of an LQ and then a least-squares QR) is written into
+    ``out[col:]`` and ``True`` returned; the level leaves no null space. Otherwise
+    nothing is written and ``False`` returned (``B`` is never modified).
+    """
+    n = B.shape[1]
+    d = n - col
+    Tt = np.empty((d, m))
+    for i in range(m):
+        row = B[s0 + i]
+        for j in range(d):
+            Tt[j, i] = row[col + j]
+    t = rhs[:m].copy()
+    norms = np.empty(d)
+    perm = np.empty(d, dtype=np.int64)
+    for j in range(d):
+        norms[j] = _dot(Tt[j], Tt[j])
+        perm[j] = j
+    for j in range(d):
+        p = j
+        best = norms[j]
+        for k in range(j + 1, d):
+            if norms[k] > best:
+                best = norms[k]
+                p = k
+        if p != j:
+            for i in range(m):
+                tmp = Tt[j, i]
+                Tt[j, i] = Tt[p, i]
+                Tt[p, i] = tmp
+            tmp = norms[j]
+            norms[j] = norms[p]
+            norms[p] = tmp
+            itmp = perm[j]
+            perm[j] = perm[p]
+            perm[p] = itmp
+        cj = Tt[j, j:]
+        exact = _dot(cj, cj)
+        if not (np.sqrt(exact) > tol) or tol <= 0.0:
+            return False
+        norm = np.sqrt(exact)
+        c0 = cj[0]
+        alpha = -norm if c0 >= 0.0 else norm
+        cj[0] = c0 - alpha                  # cj is now v; H = I − 2 v vᵀ / vᵀv
+        vtv = 2.0 * (exact - alpha * c0)    # ‖v‖² = ‖c‖² − 2αc₀ + α², α² = ‖c‖²
+        w = m - j
+        for k in range(j + 1, d):
+            ck = Tt[k, j:]
+            f = 2.0 * _dot(ck, cj) / vtv
+            for i in range(w):
+                ck[i] -= f * cj[i]
+            norms[k] -= ck[0] * ck[0]
+        tj = t[j:]
+        f = 2.0 * _dot(tj, cj) / vtv
+        for i in range(w):
+            tj[i] -= f * cj[i]
+        cj[0] = alpha
+    z = np.empty(d)
+    for j in range(d - 1, -1, -1):
+        acc = t[j]
+        for k in range(j + 1, d):
+            acc -= Tt[k, j] * z[k]
+        z[j] = acc / Tt[j, j]
+    for j in range(d):
+        out[col + perm[j]] = z[j]
+    return True
 
 
 @njit(cache=True, fastmath=_FAST)
@@ -180,8 +258,14 @@ def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
             rhs[i] = c[s0 + i] - _dot(B[s0 + i, :col], yc)
             free = B[s0 + i, col:]
             norms[i] = _dot(free, free)
-        r = 0
         d = n - col
+        if (m >= d and step_bound[lev] <= 0.0
+                and not (level_damping > 0.0 and singular_threshold > 0.0)
+                and _full_column_rank_lstsq(B, s0, m, col, rhs, tol, y)):
+            ranks[lev] = d
+            col = n
+            continue
+        r = 0
         while r < m and r < d:
             # pivot: the remaining row of largest norm on the free columns
             p = r

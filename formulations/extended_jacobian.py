@@ -25,7 +25,13 @@ Two paths compute the same answer:
   rows of the lower levels only (``O(m n r_i)``, total independent of the number of
   levels). In the rotated coordinates the extended system is block lower-triangular
   and is solved by forward substitution (triangular solves; a small QR where a level
-  conflicts), the feasible rows of eq. 26.
+  conflicts), the feasible rows of eq. 26. A level with at least as many rows as
+  free directions (``m_i ≥ n − Σ_{j<i} r_j``; e.g. a posture level at the bottom),
+  undamped and unbounded, is first tried with one QR with column pivoting of
+  ``A_i Z_i`` itself (same rank threshold): when it has full column rank its
+  least-squares solution follows from that single factorization (instead of the
+  row-pivoted one and then a least-squares QR) and it leaves no null space; when it
+  is rank-deficient the row-pivoted path runs as above.
 
 ``level_damping=λ_max`` with ``singular_threshold=ε`` (``qr`` path) is a selective
 alternative to eq. 27: a level is damped only when the smallest singular value of
@@ -284,6 +290,21 @@ class BufferSolver:
 
 
 # --------------------------------------------------------------------------- qr
+def _full_column_rank_lstsq(K: np.ndarray, p: np.ndarray, tol: float) -> np.ndarray | None:
+    """``argmin ‖K z − p‖`` for ``K`` (``m × d``, ``m ≥ d``) of full column rank, by one
+    QR with column pivoting (``dgeqp3``, then ``Qᵀp`` and a triangular solve); ``None``
+    when a pivot is ``≤ tol`` (rank-deficient: the caller takes the row-pivoted path)."""
+    d = K.shape[1]
+    qr, jpvt, tau, _, _ = _dgeqp3(np.array(K, order="F"), overwrite_a=1)
+    if tol <= 0 or not np.all(np.abs(np.diagonal(qr)[:d]) > tol):
+        return None
+    qtp, _, _ = _dormqr("L", "T", qr, tau, p.reshape(-1, 1).copy(), 1)
+    w, _ = _dtrtrs(qr[:d, :d], qtp[:d, 0])
+    z = np.empty(d)
+    z[jpvt - 1] = w
+    return z
+
+
 def _lstsq_full_column_rank(K: np.ndarray, p: np.ndarray) -> np.ndarray:
     """min ‖K z − p‖ for ``K`` (m × r, m > r) of full column rank, by Householder QR."""
     m, r = K.shape
@@ -352,6 +373,16 @@ def _solve_qr(stack: TaskStack, rcond: float, level_damping: float = 0.0,
             ranks.append(0)
             start = stop
             continue
+        rhs = c[start:stop] - B[start:stop, :col] @ y[:col]
+        if m >= d and bounds[index] <= 0 and level_damping <= 0:
+            z = _full_column_rank_lstsq(B[start:stop, col:], rhs,
+                                        rcond * float(np.linalg.norm(A)))
+            if z is not None:                 # full column rank: no null space left
+                ranks.append(d)
+                y[col:] = z
+                col = n
+                start = stop
+                continue
         M_T = np.array(B[start:stop, col:].T, order="F")      # (A_i Z_i)ᵀ, d × m
         qr, jpvt, tau, _, _ = _dgeqp3(M_T, overwrite_a=1)
         diag = np.abs(np.diagonal(qr)[: min(d, m)])
@@ -362,7 +393,6 @@ def _solve_qr(stack: TaskStack, rcond: float, level_damping: float = 0.0,
             start = stop
             continue
         # In rotated coordinates level i reads  B_i[:, :col] y_prev + Pᵀ-permuted Rᵀ y_new.
-        rhs = c[start:stop] - B[start:stop, :col] @ y[:col]
         perm = jpvt - 1
         p = rhs[perm]
         mu2 = 0.0

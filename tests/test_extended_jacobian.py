@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import formulations
-from hierarchy import TaskStack, check_lexicographic, relative_distance
+from hierarchy import Task, TaskStack, check_lexicographic, relative_distance
 from hierarchy.families import FAMILIES, compatible, near_singular, same_shape_batch
 
 #: the three ways to compute eq. 18: compiled nested QR, LAPACK nested QR, the paper's SVD
@@ -123,6 +123,30 @@ def test_compiled_and_lapack_kernels_agree_on_ranks_and_x(seed):
     b = formulations.solve(stack, "extended_jacobian", kernel="lapack")
     np.testing.assert_array_equal(a.info["rank_profile"], b.info["rank_profile"])
     assert np.linalg.norm(a.x - b.x) <= 1e-9 * max(1.0, np.linalg.norm(b.x))
+
+
+@pytest.mark.parametrize("path", ["qr-numba", "qr-lapack"])
+@pytest.mark.parametrize("rank", [None, 2])
+@pytest.mark.parametrize("seed", range(6))
+def test_tall_level_on_few_free_directions_is_its_least_squares_optimum(path, rank, seed):
+    """A level with more rows than free directions (the column-pivoted QR shortcut):
+    full column rank — or, with ``rank=2``, rank-deficient (the row-pivoted path) —
+    both equal the reference and are lexicographic, with the rank profile expected."""
+    rng = np.random.default_rng(9000 + seed)
+    n = int(rng.integers(6, 30))
+    top = int(rng.integers(1, n - 3))
+    tall = rng.standard_normal((n + int(rng.integers(0, 10)), n))
+    if rank is not None:
+        tall = rng.standard_normal((tall.shape[0], rank)) @ rng.standard_normal((rank, n))
+    stack = TaskStack([Task("top", rng.standard_normal((top, n)), rng.standard_normal(top)),
+                       Task("tall", tall, rng.standard_normal(tall.shape[0]))])
+    sol = formulations.solve(stack, "extended_jacobian", **PATHS[path])
+    ref = formulations.solve(stack, "reference").x
+    expected = [top, n - top if rank is None else min(rank, n - top)]
+    np.testing.assert_array_equal(sol.info["rank_profile"], expected)
+    assert np.linalg.norm(sol.x - ref) <= 1e-9 * max(1.0, np.linalg.norm(ref))
+    report = check_lexicographic(stack, sol.x, tol=1e-9)
+    assert report.ok, str(report)
 
 
 @pytest.mark.parametrize("family", ["compatible", "conflicting", "rank_deficient"])
