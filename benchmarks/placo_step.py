@@ -7,8 +7,8 @@ left foot, sword tip and posture soft; joint and velocity limits); its step is
 ``update_kinematics`` plus the target updates (kinematics) and
 ``KinematicsSolver.solve(True)`` (solve), as that function times them.
 
-prioik's step is timed at the same states (PlaCo's trajectory), two ways, one after
-the other at every state:
+prioik's step is timed at the same states (PlaCo's trajectory), two ways, each in its
+own loop over the states (as PlaCo's step runs in its own):
 
 * **TaskStack path** — :class:`robots.tasks.KinematicState` (pinocchio Jacobians,
   frame placements, centre of mass), building the velocity-level stack of the same
@@ -22,6 +22,9 @@ the other at every state:
   :class:`robots.TaskRows` buffer, and
   :class:`formulations.extended_jacobian.BufferSolver` (same kernel, no ``Task``
   objects). Both paths' answers are compared at every state (``max_path_distance``).
+
+The references alone are timed in a third loop (``references_us``), so that a
+reader can subtract them from every step.
 
 Both paths and PlaCo compute the same minimum-jerk references in Python
 (:meth:`~robots.fencing.FencingScenario.com_ref`, ``left_foot_ref``, ``tip_ref``).
@@ -68,15 +71,14 @@ def ik_step_times(steps: int = 300, formulation: str = "extended_jacobian"
     placo_step = placo_run.kinematics_time_s + placo_run.solve_time_s
 
     mod = formulations.get(formulation)
+    states = [(placo_run.q[i], placo_run.v[i], float(placo_run.t[i]))
+              for i in range(placo_run.steps)]
+    # each path in its own loop over the same states, as a control loop runs one path
+    # (interleaving them let each evict the other's working set from the caches)
     data = robot.model.createData()
-    data_fast = robot.model.createData()
-    rows = scenario.velocity_rows(GAIN)
     gains = scenario.velocity_gains(GAIN)
-    solver = BufferSolver(rows.buffer)
-    kin, build, solve, fkin, fbuild, fsolve = [], [], [], [], [], []
-    distance = 0.0
-    for i in range(placo_run.steps):
-        q, v, t = placo_run.q[i], placo_run.v[i], float(placo_run.t[i])
+    kin, build, solve, xs = [], [], [], []
+    for q, v, t in states:
         t0 = time.perf_counter()
         state = KinematicState(robot, q, v, data)
         t1 = time.perf_counter()
@@ -85,20 +87,38 @@ def ik_step_times(steps: int = 300, formulation: str = "extended_jacobian"
         t2 = time.perf_counter()
         out = mod.solve(stack)
         t3 = time.perf_counter()
+        if out.status == "failed":
+            raise RuntimeError(f"{formulation} failed at t = {t:.3f} s (TaskStack path)")
+        xs.append(out.x)
+        kin.append(t1 - t0)
+        build.append(t2 - t1)
+        solve.append(t3 - t2)
+    data_fast = robot.model.createData()
+    rows = scenario.velocity_rows(GAIN)
+    solver = BufferSolver(rows.buffer)
+    fkin, fbuild, fsolve, fxs = [], [], [], []
+    for q, v, t in states:
+        t3 = time.perf_counter()
         fstate = KinematicState(robot, q, v, data_fast, drift=False)
         t4 = time.perf_counter()
         scenario.write_velocity_rows(rows, fstate, t)
         t5 = time.perf_counter()
         fast = solver.solve()
         t6 = time.perf_counter()
-        if out.status == "failed" or fast.status == "failed":
-            raise RuntimeError(f"{formulation} failed at t = {t:.3f} s")
-        distance = max(distance, relative_distance(fast.x, out.x))
-        for lst, val in ((kin, t1 - t0), (build, t2 - t1), (solve, t3 - t2),
-                         (fkin, t4 - t3), (fbuild, t5 - t4), (fsolve, t6 - t5)):
-            lst.append(val)
-    kin, build, solve, fkin, fbuild, fsolve = (np.array(a) for a in
-                                               (kin, build, solve, fkin, fbuild, fsolve))
+        if fast.status == "failed":
+            raise RuntimeError(f"{formulation} failed at t = {t:.3f} s (preallocated path)")
+        fxs.append(fast.x)
+        fkin.append(t4 - t3)
+        fbuild.append(t5 - t4)
+        fsolve.append(t6 - t5)
+    refs = []          # the references alone, as all three steps compute them
+    for _, _, t in states:
+        t0 = time.perf_counter()
+        scenario.com_ref(t), scenario.left_foot_ref(t), scenario.tip_ref(t)
+        refs.append(time.perf_counter() - t0)
+    distance = max(relative_distance(a, b) for a, b in zip(fxs, xs))
+    kin, build, solve, fkin, fbuild, fsolve, refs = (
+        np.array(a) for a in (kin, build, solve, fkin, fbuild, fsolve, refs))
     ours = kin + build + solve
     fast_step = fkin + fbuild + fsolve
 
@@ -120,6 +140,7 @@ def ik_step_times(steps: int = 300, formulation: str = "extended_jacobian"
         "prioik_buffer_p90_us": us(fast_step, 90),
         "prioik_buffer_kinematics_us": us(fkin, 50), "prioik_buffer_build_us": us(fbuild, 50),
         "prioik_buffer_solve_us": us(fsolve, 50),
+        "references_us": us(refs, 50),
         "max_path_distance": distance,
         "description": (f"{int(placo_run.steps)} control steps (2 ms) of the compatible "
                         "fencing scenario, at PlaCo's own states. PlaCo: "
@@ -139,5 +160,6 @@ def ik_step_times(steps: int = 300, formulation: str = "extended_jacobian"
                         f"{us(kin, 50):.1f}, stack building {us(build, 50):.1f}, solve "
                         f"{us(solve, 50):.1f}; preallocated path kinematics "
                         f"{us(fkin, 50):.1f}, rows {us(fbuild, 50):.1f}, solve "
-                        f"{us(fsolve, 50):.1f}."),
+                        f"{us(fsolve, 50):.1f}; the references alone (in every "
+                        f"kinematics or rows phase) {us(refs, 50):.1f}."),
     }

@@ -37,7 +37,7 @@ import pinocchio as pin
 from hierarchy import TaskStack
 
 from .models import RobotModel, g1
-from .references import Reference, Waypoints, minimum_jerk
+from .references import Reference, Waypoints, minimum_jerk, minimum_jerk_profile
 from .rows import TaskRows
 from .simulate import StepTasks
 from .tasks import (JointLimitActivation, KinematicState, com_position, contact,
@@ -110,12 +110,19 @@ class FencingScenario:
     def left_foot_ref(self, t: float) -> Reference:
         """Reference of the stepping foot's origin (x: one minimum-jerk move;
         z: up and down through two)."""
+        x, xd, xdd = self._foot_xy(t)
+        lift = self._lift(t)
+        return Reference(np.array([x[0], x[1], lift.x]), np.array([xd[0], 0.0, lift.xd]),
+                         np.array([xdd[0], 0.0, lift.xdd]))
+
+    def _foot_xy(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The stepping foot's horizontal reference (x moves, y holds)."""
         p0 = self.left_foot0.translation
         s0, s1 = self.step_window
-        fwd = minimum_jerk(p0[0], p0[0] + self.step_length, s0, s1 - s0, t)
-        lift = self._lift(t)
-        return Reference(np.array([fwd.x, p0[1], lift.x]),
-                         np.array([fwd.xd, 0.0, lift.xd]), np.array([fwd.xdd, 0.0, lift.xdd]))
+        p, dp, ddp = minimum_jerk_profile(s0, s1 - s0, t)
+        L = self.step_length
+        return (np.array([p0[0] + p * L, p0[1]]), np.array([dp * L, 0.0]),
+                np.array([ddp * L, 0.0]))
 
     def com_ref(self, t: float) -> Reference:
         """Horizontal centre of mass over the middle of the feet (xy).
@@ -123,11 +130,12 @@ class FencingScenario:
         The standing posture's centre of mass is not exactly there, so its initial
         offset is removed by a minimum-jerk move over the first ``step_window[0]``
         seconds (no step in the reference at ``t = 0``)."""
-        foot = self.left_foot_ref(t)
+        x, xd, xdd = self._foot_xy(t)
         right = self.right_foot0.translation
-        blend = minimum_jerk(self.com_offset0, np.zeros(2), 0.0, self.step_window[0], t)
-        return Reference(0.5 * (foot.x[:2] + right[:2]) + blend.x,
-                         0.5 * foot.xd[:2] + blend.xd, 0.5 * foot.xdd[:2] + blend.xdd)
+        p, dp, ddp = minimum_jerk_profile(0.0, self.step_window[0], t)
+        off = self.com_offset0
+        return Reference(0.5 * (x + right[:2]) + (1.0 - p) * off, 0.5 * xd - dp * off,
+                         0.5 * xdd - ddp * off)
 
     def tip_ref(self, t: float) -> Reference:
         """Minimum-jerk from the initial tip to the target, then hold."""

@@ -13,7 +13,7 @@ from typing import Sequence
 
 import numpy as np
 
-__all__ = ["Reference", "minimum_jerk", "Waypoints"]
+__all__ = ["Reference", "minimum_jerk", "minimum_jerk_profile", "Waypoints"]
 
 
 @dataclass(frozen=True)
@@ -23,6 +23,24 @@ class Reference:
     x: np.ndarray
     xd: np.ndarray
     xdd: np.ndarray
+
+
+def minimum_jerk_profile(t0: float, duration: float, t: float) -> tuple[float, float, float]:
+    """The time scaling of a minimum-jerk move and its derivatives at ``t``:
+    ``p = 10 s³ − 15 s⁴ + 6 s⁵``, ``ṗ``, ``p̈`` with ``s = (t − t0)/T`` clipped to
+    ``[0, 1]`` (floats; the move is ``x0 + p (x1 − x0)``).
+
+    Raises:
+        ValueError: ``duration`` is not > 0.
+    """
+    if not duration > 0:
+        raise ValueError(f"duration must be > 0, got {duration}")
+    s = min(max((t - t0) / duration, 0.0), 1.0)
+    s2 = s * s
+    p = s2 * s * (10.0 - 15.0 * s + 6.0 * s2)
+    dp = s2 * (30.0 - 60.0 * s + 30.0 * s2) / duration
+    ddp = s * (60.0 - 180.0 * s + 120.0 * s2) / (duration * duration)
+    return p, dp, ddp
 
 
 def minimum_jerk(x0, x1, t0: float, duration: float, t: float) -> Reference:
@@ -39,12 +57,7 @@ def minimum_jerk(x0, x1, t0: float, duration: float, t: float) -> Reference:
     x1 = np.asarray(x1, dtype=float)
     if x0.shape != x1.shape:
         raise ValueError(f"x0 and x1 differ in shape: {x0.shape} vs {x1.shape}")
-    if not duration > 0:
-        raise ValueError(f"duration must be > 0, got {duration}")
-    s = min(max((t - t0) / duration, 0.0), 1.0)
-    p = 10 * s ** 3 - 15 * s ** 4 + 6 * s ** 5
-    dp = (30 * s ** 2 - 60 * s ** 3 + 30 * s ** 4) / duration
-    ddp = (60 * s - 180 * s ** 2 + 120 * s ** 3) / duration ** 2
+    p, dp, ddp = minimum_jerk_profile(t0, duration, t)
     d = x1 - x0
     return Reference(x0 + p * d, dp * d, ddp * d)
 
@@ -66,14 +79,25 @@ class Waypoints:
             raise ValueError("Waypoints needs as many times as points (≥ 1)")
         if np.any(np.diff(np.asarray(self.times, float)) <= 0):
             raise ValueError(f"waypoint times must increase, got {list(self.times)}")
+        pts = [np.asarray(p, float) for p in self.points]
+        if any(p.shape != pts[0].shape for p in pts):
+            raise ValueError(f"waypoints differ in shape: {[p.shape for p in pts]}")
+        # converted once (a frozen dataclass: set through object.__setattr__)
+        object.__setattr__(self, "_times", tuple(float(t) for t in self.times))
+        object.__setattr__(self, "_points", tuple(pts))
 
     def __call__(self, t: float) -> Reference:
-        times = list(self.times)
-        pts = [np.asarray(p, float) for p in self.points]
+        times, pts = self._times, self._points
         if t <= times[0] or len(times) == 1:
             hold = pts[0] if t <= times[0] else pts[-1]
             return Reference(hold.copy(), np.zeros_like(hold), np.zeros_like(hold))
-        for i in range(len(times) - 1):
-            if t < times[i + 1]:
-                return minimum_jerk(pts[i], pts[i + 1], times[i], times[i + 1] - times[i], t)
-        return minimum_jerk(pts[-2], pts[-1], times[-2], times[-1] - times[-2], times[-1])
+        i = len(times) - 2
+        for j in range(len(times) - 1):
+            if t < times[j + 1]:
+                i = j
+                break
+        else:
+            t = times[-1]
+        p, dp, ddp = minimum_jerk_profile(times[i], times[i + 1] - times[i], t)
+        d = pts[i + 1] - pts[i]
+        return Reference(pts[i] + p * d, dp * d, ddp * d)

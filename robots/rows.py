@@ -5,12 +5,16 @@ then a :class:`~hierarchy.Task`) per task and step: clear, and ~100 µs of Pytho
 per G1 step. :class:`TaskRows` computes the same quantities — Jacobian rows ``J``,
 error ``e = x* − x``, reference velocity ``ẋ*``, feed-forward ``ẍ*`` and drift
 ``J̇ q̇`` — straight into per-row arrays beside a buffer whose layout is fixed once,
-then forms every target in one vectorised line:
+then forms every target in one line:
 
 * velocity level: ``b = ẋ* + K e`` (:meth:`TaskRows.velocity_targets`);
 * acceleration level (eq. 2-4): ``b = ẍ* + K_d (ẋ* − J q̇) + K_p e − J̇ q̇``
   (:meth:`TaskRows.acceleration_targets`).
 
+Each writer is one compiled call (:mod:`robots._rows_kernel`) on views of the
+state's ``pin.Data`` — the joint Jacobians ``data.J`` (a frame's LOCAL_WORLD_ALIGNED
+Jacobian is formed from them), ``data.oMf``, ``data.Jcom``, ``data.com[0]`` — taken
+once per ``Data``, so that a G1 step of five tasks costs a few µs instead of ~20.
 Each writer matches the builder of the same name in :mod:`robots.tasks` to rounding
 (``tests/test_rows.py`` compares both on G1 states). Kinematics come from a
 :class:`~robots.tasks.KinematicState` (``drift=False`` suffices at velocity level).
@@ -25,6 +29,7 @@ import pinocchio as pin
 
 from hierarchy import StackBuffer
 
+from . import _rows_kernel as _k
 from .models import RobotModel
 from .tasks import KinematicState
 
@@ -59,7 +64,12 @@ class TaskRows:
         self.drift = np.zeros(m)
         self.kp = np.zeros(m)
         self.kd = np.zeros(m)
-        self._posture_written: set[str] = set()
+        self._plans: dict = {}            # (writer, task, frame) -> constants of one writer
+        self._views = None                # _DataViews of the last state's pin.Data
+        self._without_drift: set[str] = set()
+        q_index = robot.actuated_q_index()
+        #: q entries of the actuated joints when q_ref ⊖ q is q_ref − q for all of them
+        self._posture_q = q_index if np.all(q_index >= 0) else None
         for name, gain in (gains or {}).items():
             kp, kd = (gain, 0.0) if np.isscalar(gain) else gain
             self.set_gains(name, kp, kd)
@@ -71,26 +81,21 @@ class TaskRows:
         self.kd[sl] = kd
 
     # ------------------------------------------------------------------ writers
-    def _check_rows(self, name: str, m: int) -> slice:
-        sl = self.buffer.task_slice(name)   # raises for an unknown name, listing the tasks
-        if sl.stop - sl.start != m:
-            raise ValueError(f"task {name!r} has {sl.stop - sl.start} rows in the layout, "
-                             f"the builder writes {m}")
-        return sl
-
     def frame_position(self, state: KinematicState, name: str, frame: str, x,
                        xd=None, xdd=None) -> None:
         """A frame origin's world position (3 rows), as
         :func:`robots.tasks.frame_position`."""
-        sl = self._check_rows(name, 3)
-        fid = self.robot.frame_id(frame)
-        m, d = state.model, state.data
-        self.buffer.A[sl] = pin.getFrameJacobian(m, d, fid, _LWA)[:3]
-        self.error[sl] = x
-        self.error[sl] -= d.oMf[fid].translation
-        self._refs(sl, xd, xdd)
-        if state.has_drift:
-            self.drift[sl] = pin.getFrameClassicalAcceleration(m, d, fid, _LWA).linear
+        s, fid, cols = self._frame_plan("position", name, frame, 3)
+        views = self._data_views(state)
+        p, R = views.frame(fid)
+        _k.frame_rows(self.buffer.A, self.error, self.velocity_ref, self.feedforward, s, 3,
+                      views.J, cols, p, R, _vector(x, 3, name, "x"), _EYE3,
+                      _vector(xd, 3, name, "xd"), _vector(xdd, 3, name, "xdd"))
+        if self._note_drift(state, name):
+            self.drift[s:s + 3] = pin.getFrameClassicalAcceleration(
+                state.model, state.data, fid, _LWA).linear
+        else:
+            self.drift[s:s + 3] = 0.0
 
     def frame_pose(self, state: KinematicState, name: str, frame: str, x,
                    rotation: np.ndarray, xd=None, xdd=None) -> None:
@@ -98,65 +103,122 @@ class TaskRows:
         ``rotation``, error ``log(R* Rᵀ)``) of a frame, as
         :func:`robots.tasks.frame_pose` (and :func:`robots.tasks.contact` with
         ``xd = xdd = 0``)."""
-        sl = self._check_rows(name, 6)
-        fid = self.robot.frame_id(frame)
-        m, d = state.model, state.data
-        self.buffer.A[sl] = pin.getFrameJacobian(m, d, fid, _LWA)
-        placement = d.oMf[fid]
-        s = sl.start
-        self.error[s:s + 3] = x
-        self.error[s:s + 3] -= placement.translation
-        self.error[s + 3:s + 6] = pin.log3(rotation @ placement.rotation.T)
-        self._refs(slice(s, s + 3), xd, xdd)
-        self.velocity_ref[s + 3:s + 6] = 0.0
-        self.feedforward[s + 3:s + 6] = 0.0
-        if state.has_drift:
-            self.drift[sl] = pin.getFrameClassicalAcceleration(m, d, fid, _LWA).vector
+        s, fid, cols = self._frame_plan("pose", name, frame, 6)
+        views = self._data_views(state)
+        p, R = views.frame(fid)
+        rot = np.asarray(rotation, dtype=np.float64)
+        if rot.shape != (3, 3):
+            raise ValueError(f"task {name!r}: rotation must be 3 × 3, got {rot.shape}")
+        _k.frame_rows(self.buffer.A, self.error, self.velocity_ref, self.feedforward, s, 6,
+                      views.J, cols, p, R, _vector(x, 3, name, "x"), rot,
+                      _vector(xd, 3, name, "xd"), _vector(xdd, 3, name, "xdd"))
+        if self._note_drift(state, name):
+            self.drift[s:s + 6] = pin.getFrameClassicalAcceleration(
+                state.model, state.data, fid, _LWA).vector
+        else:
+            self.drift[s:s + 6] = 0.0
 
     def com(self, state: KinematicState, name: str, x, xd=None, xdd=None,
             axes: Sequence[int] = (0, 1)) -> None:
         """The centre of mass on ``axes`` (``x``, ``xd``, ``xdd`` given on those axes),
         as :func:`robots.tasks.com_position`."""
-        idx = list(axes)
-        sl = self._check_rows(name, len(idx))
-        self.buffer.A[sl] = state.Jcom[idx]
-        self.error[sl] = x
-        self.error[sl] -= state.com[idx]
-        self._refs(sl, xd, xdd)
-        if state.has_drift:
-            self.drift[sl] = state.acom_drift[idx]
+        key = ("com", name, tuple(axes))
+        plan = self._plans.get(key)
+        if plan is None:
+            idx = np.array(axes, dtype=np.int64)
+            if idx.ndim != 1 or not np.all((idx >= 0) & (idx < 3)):
+                raise ValueError(f"task {name!r}: com axes must be among 0, 1, 2, got "
+                                 f"{list(axes)}")
+            plan = self._plans[key] = (self._check_rows(name, idx.size), idx)
+        s, idx = plan
+        views = self._data_views(state)
+        m = idx.size
+        _k.com_rows(self.buffer.A, self.error, self.velocity_ref, self.feedforward, s,
+                    views.Jcom, views.com, idx, _vector(x, m, name, "x"),
+                    _vector(xd, m, name, "xd"), _vector(xdd, m, name, "xdd"))
+        if self._note_drift(state, name):
+            self.drift[s:s + m] = state.acom_drift[idx]
+        else:
+            self.drift[s:s + m] = 0.0
 
     def posture(self, state: KinematicState, name: str, q_ref) -> None:
         """The actuated joints to ``q_ref``, as :func:`robots.tasks.posture` (the
         constant unit rows are written on the first call only)."""
         robot = self.robot
         nb = robot.n_base
-        sl = self._check_rows(name, robot.nv - nb)
-        if name not in self._posture_written:
-            A = self.buffer.A[sl]
+        key = ("posture", name)
+        s = self._plans.get(key)
+        if s is None:
+            s = self._check_rows(name, robot.nv - nb)
+            A = self.buffer.A[s:s + robot.nv - nb]
             A[:] = 0.0
             A[:, nb:] = np.eye(robot.nv - nb)
-            self._posture_written.add(name)
-        self.error[sl] = pin.difference(robot.model, state.q, q_ref)[nb:]
-        self.velocity_ref[sl] = 0.0
-        self.feedforward[sl] = 0.0
-        self.drift[sl] = 0.0
+            self._plans[key] = s
+        q_ref = _vector(q_ref, robot.nq, name, "q_ref")
+        if self._posture_q is not None:
+            _k.posture_error(self.error, self.velocity_ref, self.feedforward, self.drift,
+                             s, state.q, q_ref, self._posture_q)
+        else:
+            sl = slice(s, s + robot.nv - nb)
+            self.error[sl] = pin.difference(robot.model, state.q, q_ref)[nb:]
+            self.velocity_ref[sl] = 0.0
+            self.feedforward[sl] = 0.0
+            self.drift[sl] = 0.0
+        self._without_drift.discard(name)      # a posture has no drift
 
-    def _refs(self, sl: slice, xd, xdd) -> None:
-        self.velocity_ref[sl] = 0.0 if xd is None else xd
-        self.feedforward[sl] = 0.0 if xdd is None else xdd
+    # ------------------------------------------------------------------ helpers
+    def _check_rows(self, name: str, m: int) -> int:
+        sl = self.buffer.task_slice(name)   # raises for an unknown name, listing the tasks
+        if sl.stop - sl.start != m:
+            raise ValueError(f"task {name!r} has {sl.stop - sl.start} rows in the layout, "
+                             f"the builder writes {m}")
+        return sl.start
+
+    def _frame_plan(self, kind: str, name: str, frame: str, m: int):
+        key = (kind, name, frame)
+        plan = self._plans.get(key)
+        if plan is None:
+            start = self._check_rows(name, m)
+            fid = self.robot.frame_id(frame)
+            model = self.robot.model
+            joint = model.frames[fid].parentJoint
+            cols = [c for j in model.supports[joint] if j > 0
+                    for c in range(model.joints[j].idx_v,
+                                   model.joints[j].idx_v + model.joints[j].nv)]
+            plan = self._plans[key] = (start, fid, np.array(sorted(cols), dtype=np.int64))
+        return plan
+
+    def _data_views(self, state: KinematicState) -> "_DataViews":
+        views = self._views
+        if views is None or views.data is not state.data:
+            views = self._views = _DataViews(state.data)
+        return views
+
+    def _note_drift(self, state: KinematicState, name: str) -> bool:
+        if state.has_drift:
+            self._without_drift.discard(name)
+            return True
+        self._without_drift.add(name)
+        return False
 
     # ------------------------------------------------------------------ targets
     def velocity_targets(self) -> StackBuffer:
         """``b = ẋ* + K e`` into the buffer; returns it."""
-        b = self.buffer.b
-        np.multiply(self.kp, self.error, out=b)
-        b += self.velocity_ref
+        _k.velocity_targets(self.buffer.b, self.kp, self.error, self.velocity_ref)
         return self.buffer
 
     def acceleration_targets(self, v: np.ndarray) -> StackBuffer:
         """``b = ẍ* + K_d (ẋ* − J q̇) + K_p e − J̇ q̇`` (eq. 2-4) into the buffer;
-        returns it. The drifts must have been written (``drift=True`` state)."""
+        returns it.
+
+        Raises:
+            ValueError: a task was last written from a ``drift=False`` state (its
+                ``J̇ q̇`` is unknown), naming it.
+        """
+        if self._without_drift:
+            raise ValueError(f"tasks {sorted(self._without_drift)} were written from a "
+                             "KinematicState(drift=False): acceleration targets need "
+                             "J̇q̇ (build the state with drift=True)")
         buf = self.buffer
         rate = self.velocity_ref - buf.A @ v
         np.multiply(self.kd, rate, out=buf.b)
@@ -164,3 +226,37 @@ class TaskRows:
         buf.b += self.feedforward
         buf.b -= self.drift
         return buf
+
+
+class _DataViews:
+    """Views into one ``pin.Data`` (its storage is fixed at creation, so views taken
+    once follow every later kinematics call on it): ``J`` (``6 × n_v`` world-frame
+    joint Jacobians), ``Jcom``, ``com``, and per frame the placement's translation
+    and rotation. Holds ``data`` so that the views never outlive it."""
+
+    def __init__(self, data: pin.Data) -> None:
+        self.data = data
+        self.J = data.J
+        self.Jcom = data.Jcom
+        self.com = data.com[0]
+        self._frames: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+    def frame(self, fid: int) -> tuple[np.ndarray, np.ndarray]:
+        views = self._frames.get(fid)
+        if views is None:
+            placement = self.data.oMf[fid]
+            views = self._frames[fid] = (placement.translation, placement.rotation)
+        return views
+
+
+_EYE3 = np.eye(3)
+
+
+def _vector(value, m: int, task: str, what: str) -> np.ndarray:
+    """``value`` as a float64 vector of ``m`` entries (zeros for ``None``)."""
+    if value is None:
+        return np.zeros(m)
+    out = np.asarray(value, dtype=np.float64)
+    if out.shape != (m,):
+        raise ValueError(f"task {task!r}: {what} must have {m} entries, got shape {out.shape}")
+    return out

@@ -53,6 +53,8 @@ class KinematicState:
     After construction ``data`` holds the joint Jacobians, frame placements, the
     velocities and the accelerations at ``q̈ = 0`` (the drift terms), the centre of
     mass ``com``, its velocity ``vcom``, drift ``acom_drift`` and Jacobian ``Jcom``.
+    ``com``, ``Jcom`` and ``vcom`` are copied out of ``data`` when first read, like
+    the frame quantities: a state is valid until its ``data`` is reused for another.
     """
 
     def __init__(self, robot: RobotModel, q, v, data: pin.Data | None = None,
@@ -71,19 +73,38 @@ class KinematicState:
         # centre of mass are then read from it (was three passes: 9.5 -> 4.6 µs on G1)
         if self.has_drift:
             pin.forwardKinematics(m, d, self.q, self.v, np.zeros(robot.nv))
+            pin.computeJointJacobians(m, d)
         else:
-            pin.forwardKinematics(m, d, self.q)
-        pin.computeJointJacobians(m, d)
+            pin.computeJointJacobians(m, d, self.q)     # placements and Jacobians
         pin.updateFramePlacements(m, d)
-        self.Jcom = np.array(pin.jacobianCenterOfMass(m, d, False)).reshape(3, robot.nv)
-        self.com = np.array(d.com[0])
-        self.vcom = self.Jcom @ self.v
+        pin.jacobianCenterOfMass(m, d, False)           # data.Jcom and data.com[0]
         if self.has_drift:
             pin.centerOfMass(m, d, pin.KinematicLevel.ACCELERATION, False)
             self.acom_drift = np.array(d.acom[0])
         else:
             self.acom_drift = None
         self._cache: dict = {}
+
+    @property
+    def Jcom(self) -> np.ndarray:
+        """``3 × n_v`` Jacobian of the centre of mass."""
+        if "Jcom" not in self._cache:
+            self._cache["Jcom"] = np.array(self.data.Jcom)
+        return self._cache["Jcom"]
+
+    @property
+    def com(self) -> np.ndarray:
+        """Centre of mass (world, 3)."""
+        if "com" not in self._cache:
+            self._cache["com"] = np.array(self.data.com[0])
+        return self._cache["com"]
+
+    @property
+    def vcom(self) -> np.ndarray:
+        """Centre-of-mass velocity ``J_com q̇`` (3)."""
+        if "vcom" not in self._cache:
+            self._cache["vcom"] = self.Jcom @ self.v
+        return self._cache["vcom"]
 
     @property
     def n(self) -> int:

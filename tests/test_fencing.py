@@ -179,3 +179,18 @@ def test_velocity_level_qp_run(scenarios):
     from hierarchy import UnsupportedTaskError
     with pytest.raises(UnsupportedTaskError, match="inequality"):
         cmd.run_one(unsupported, "compatible", 0.01, 0.002)
+
+
+@pytest.mark.parametrize("t", [0.05, 0.15, 0.3, 0.55, 0.72, 0.95, 1.1, 1.6, 2.2])
+def test_reference_velocities_and_accelerations_are_the_derivatives(scenarios, t):
+    """ẋ* and ẍ* of every reference equal central differences of x* and ẋ*
+    (h = 1e-6 s: truncation ~h² ẍ, rounding ~1e-16/h; tolerance 1e-6 relative).
+    Times avoid the waypoints (0.2, 0.5, 0.7, 1.2, 2.5 s), where the jerk jumps and a
+    central difference of ẋ* is only O(h) accurate."""
+    sc = scenarios["compatible"]
+    h = 1e-6
+    for ref in (sc.com_ref, sc.left_foot_ref, sc.tip_ref):
+        now, up, down = ref(t), ref(t + h), ref(t - h)
+        scale = 1.0 + np.abs(now.xd).max() + np.abs(now.xdd).max()
+        assert np.allclose((up.x - down.x) / (2 * h), now.xd, rtol=0, atol=1e-6 * scale)
+        assert np.allclose((up.xd - down.xd) / (2 * h), now.xdd, rtol=0, atol=1e-6 * scale)

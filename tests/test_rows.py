@@ -5,9 +5,13 @@ velocity rows equal the scenario's velocity stack."""
 import numpy as np
 import pinocchio as pin
 import pytest
+from hypothesis import assume, given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
 
 from robots import KinematicState, Reference, TaskRows, com_position, frame_pose, \
     frame_position, g1, posture
+from robots import _rows_kernel as _k
 from robots.fencing import FencingScenario
 
 #: the two paths do the same arithmetic in another order: rows agree to rounding
@@ -92,3 +96,92 @@ def test_wrong_row_count_and_unknown_task_are_named(robot):
     from hierarchy import TaskStackError
     with pytest.raises(TaskStackError, match="no task 'com'"):
         rows.com(state, "com", np.zeros(2))
+
+
+def test_writers_follow_a_reused_data_across_states(robot):
+    """The writers read views of the state's ``pin.Data`` taken once: refilled by
+    later states on the same ``Data``, they still equal the builders."""
+    data = robot.model.createData()
+    rows = TaskRows(robot, [[("tip", 3), ("com", 2)], [("pose", 6)]])
+    target = np.array([0.3, 0.2, 0.9])
+    rot = pin.exp3(np.array([0.1, -0.2, 0.3]))
+    for seed in range(3):
+        rng = np.random.default_rng(seed)
+        q = robot.q0.copy()
+        q[7:] += rng.uniform(-0.3, 0.3, robot.nq - 7)
+        state = KinematicState(robot, q, np.zeros(robot.nv), data, drift=False)
+        rows.frame_position(state, "tip", "sword_tip", target)
+        rows.com(state, "com", target[:2])
+        rows.frame_pose(state, "pose", "left_foot", target, rot)
+        buf = rows.velocity_targets()
+        fresh = KinematicState(robot, q, np.zeros(robot.nv))
+        ref = Reference(target, np.zeros(3), np.zeros(3))
+        for name, term in {"tip": frame_position(fresh, "sword_tip", ref, name="tip"),
+                           "com": com_position(fresh, Reference(target[:2], np.zeros(2),
+                                                                np.zeros(2)), name="com"),
+                           "pose": frame_pose(fresh, "left_foot", ref, rot, name="pose")
+                           }.items():
+            A, b = buf.rows(name)
+            assert _close(A, term.J) and _close(b, term.velocity(0.0).b), name
+            assert _close(rows.error[rows.buffer.task_slice(name)], term.error), name
+
+
+def test_acceleration_targets_refuse_rows_written_without_drift(robot):
+    rows = TaskRows(robot, [[("tip", 3)], [("com", 2)]])
+    slow, fast = _state(robot, 0, drift=True), _state(robot, 0, drift=False)
+    rows.frame_position(slow, "tip", "sword_tip", np.zeros(3))
+    rows.com(fast, "com", np.zeros(2))
+    with pytest.raises(ValueError, match=r"\['com'\].*drift=False"):
+        rows.acceleration_targets(slow.v)
+    rows.com(slow, "com", np.zeros(2))
+    assert np.all(np.isfinite(rows.acceleration_targets(slow.v).b))
+
+
+def test_targets_of_the_wrong_size_name_the_task(robot):
+    state = _state(robot, 0)
+    rows = TaskRows(robot, [[("tip", 3), ("com", 2), ("pose", 6)]])
+    with pytest.raises(ValueError, match="task 'tip': x must have 3 entries"):
+        rows.frame_position(state, "tip", "sword_tip", np.zeros(2))
+    with pytest.raises(ValueError, match="task 'com': xd must have 2 entries"):
+        rows.com(state, "com", np.zeros(2), np.zeros(3))
+    with pytest.raises(ValueError, match="task 'pose': rotation must be 3 × 3"):
+        rows.frame_pose(state, "pose", "left_foot", np.zeros(3), np.eye(2))
+    with pytest.raises(ValueError, match="com axes must be among 0, 1, 2"):
+        TaskRows(robot, [[("c", 1)]]).com(state, "c", np.zeros(1), axes=(3,))
+
+
+def test_posture_of_joints_without_a_single_coordinate_uses_the_lie_difference():
+    """A spherical joint (``n_q = 4``, ``n_v = 3``): the posture error is
+    ``q_ref ⊖ q`` (pinocchio's ``difference``), as the builder."""
+    from robots import RobotModel, posture as posture_term
+    model = pin.Model()
+    j1 = model.addJoint(0, pin.JointModelSpherical(), pin.SE3.Identity(), "ball")
+    model.appendBodyToJoint(j1, pin.Inertia.Random(), pin.SE3.Identity())
+    j2 = model.addJoint(j1, pin.JointModelRY(), pin.SE3(np.eye(3), np.array([0.3, 0, 0])),
+                        "elbow")
+    model.appendBodyToJoint(j2, pin.Inertia.Random(), pin.SE3.Identity())
+    robot = RobotModel("ball", model, pin.neutral(model), floating_base=False)
+    q = pin.integrate(model, robot.q0, np.array([0.3, -0.2, 0.5, 0.4]))
+    state = KinematicState(robot, q, np.zeros(4))
+    rows = TaskRows(robot, [[("posture", 4)]], {"posture": 2.0})
+    rows.posture(state, "posture", robot.q0)
+    term = posture_term(state, robot.q0, name="posture")
+    A, b = rows.velocity_targets().rows("posture")
+    assert _close(A, term.J) and _close(b, term.velocity(2.0).b)
+    assert not np.allclose(rows.error, robot.q0[[0, 1, 2, 4]] - q[[0, 1, 2, 4]])
+
+
+@settings(max_examples=300, deadline=None)
+@given(axis=arrays(np.float64, 3, elements=st.floats(-1, 1)),
+       angle=st.one_of(st.floats(0.0, 1e-3), st.floats(0.0, np.pi),
+                       st.floats(np.pi - 1e-2, np.pi - 1e-7)))
+def test_log3_is_pinocchios_rotation_log(axis, angle):
+    """The rotation vector θu back to 1e-12 for θ up to π − 1e-7 (pinocchio's own
+    log3 is off by up to ~2e-12 near π, hence the looser comparison with it)."""
+    assume(np.linalg.norm(axis) > 1e-3)
+    w = angle * axis / np.linalg.norm(axis)
+    R = pin.exp3(w)
+    out = np.zeros(3)
+    _k.log3(R, out, 0)
+    assert np.allclose(out, w, rtol=0, atol=1e-12)
+    assert np.allclose(out, pin.log3(R), rtol=0, atol=1e-10)
