@@ -384,6 +384,20 @@ def level_scales(A, b, starts, scales):
     return finite
 
 
+@njit(cache=True, fastmath=_FAST)
+def solve_buffer(A, b, B, c, starts, scales, rcond, level_damping, singular_threshold,
+                 step_bound, x, ranks, level_mu2):
+    """Copy ``A``, ``b`` into the workspace ``B``, ``c``, take the level scales and, if
+    every value is finite, run :func:`solve_kernel`; returns whether it ran."""
+    B[:, :] = A
+    c[:] = b
+    if not level_scales(B, c, starts, scales):
+        return False
+    solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
+                 step_bound, x, ranks, level_mu2)
+    return True
+
+
 @njit(cache=True, parallel=True)
 def solve_batch_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
                        step_bound, X, ranks, level_mu2):

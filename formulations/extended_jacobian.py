@@ -196,6 +196,8 @@ def level_step_bounds(stack: TaskStack | StackBuffer, step_bound) -> np.ndarray:
 
 def _damping_info(info: dict, mu2: np.ndarray, selective: bool, bound: bool) -> str:
     """Record the per-level damping in ``info``; the status it implies."""
+    if not (selective or bound):
+        return "optimal"            # the kernels damp no level without either option
     flagged = np.flatnonzero(mu2 > 0).tolist()
     if selective or bound:
         info["damped_levels"] = flagged
@@ -219,8 +221,13 @@ def _kernel_outcome(B, c, starts, scales, rcond: float, level_damping: float,
     ``x``, the ranks and the per-level damping (copied out) in an :class:`Outcome`."""
     _kernel.solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
                          step_bound, x, ranks, mu2)
+    return _wrap_outcome(x, ranks, mu2, level_damping > 0, bool(step_bound.any()))
+
+
+def _wrap_outcome(x, ranks, mu2, selective: bool, bounded: bool) -> Outcome:
+    """The kernel's outputs (copied out of the workspace) as an :class:`Outcome`."""
     info = {"rank_profile": ranks.copy(), "nullspace": "qr", "kernel": "numba"}
-    status = _damping_info(info, mu2.copy(), level_damping > 0, bool(step_bound.any()))
+    status = _damping_info(info, mu2.copy(), selective, bounded)
     return Outcome(x.copy(), status, info)
 
 
@@ -259,13 +266,24 @@ class BufferSolver:
         selective = float(level_damping) > 0 and float(singular_threshold) > 0
         self.level_damping = float(level_damping) if selective else 0.0
         self.singular_threshold = float(singular_threshold)
-        self.step_bound = level_step_bounds(buffer, step_bound)
+        self.step_bound = step_bound
         self._B = np.empty_like(buffer.A)
         self._c = np.empty_like(buffer.b)
         self._scales = np.zeros(k)
         self._x = np.empty(buffer.n)
         self._ranks = np.zeros(k, dtype=np.int64)
         self._mu2 = np.zeros(k)
+
+    @property
+    def step_bound(self) -> np.ndarray:
+        """Per-level ``Δ_i`` (0: unbounded); set like the constructor's argument."""
+        return self._step_bound
+
+    @step_bound.setter
+    def step_bound(self, value) -> None:
+        self._step_bound = level_step_bounds(self.buffer, value)
+        self._step_bound.flags.writeable = False     # changed only through the setter
+        self._bounded = bool(self._step_bound.any())
 
     def solve(self, buffer: StackBuffer | None = None) -> Outcome:
         """Solve the buffer's current rows (``buffer``: another of the same layout).
@@ -280,13 +298,15 @@ class BufferSolver:
             raise FormulationError(f"buffer layout differs from the solver's: rows "
                                    f"{buf.starts.tolist()} × {buf.n} vs "
                                    f"{self.buffer.starts.tolist()} × {self.buffer.n}")
-        np.copyto(self._B, buf.A)
-        np.copyto(self._c, buf.b)
-        if not _kernel.level_scales(self._B, self._c, buf.starts, self._scales):
+        # one compiled call: copy into the workspace, level scales (and finite check),
+        # kernel
+        if not _kernel.solve_buffer(buf.A, buf.b, self._B, self._c, buf.starts,
+                                    self._scales, self.rcond, self.level_damping,
+                                    self.singular_threshold, self._step_bound, self._x,
+                                    self._ranks, self._mu2):
             buf.check()     # names the task, level and row of a NaN or inf
-        return _kernel_outcome(self._B, self._c, buf.starts, self._scales, self.rcond,
-                               self.level_damping, self.singular_threshold, self.step_bound,
-                               self._x, self._ranks, self._mu2)
+        return _wrap_outcome(self._x, self._ranks, self._mu2, self.level_damping > 0,
+                             self._bounded)
 
 
 # --------------------------------------------------------------------------- qr

@@ -54,15 +54,19 @@ def log3(R, out, o):
             out[o + i] = sign * theta * u[i] / norm
 
 
+#: rows of the per-row array ``Q`` (``6 × M``) of :class:`robots.rows.TaskRows`
+ERROR, VELOCITY_REF, FEEDFORWARD, DRIFT, KP, KD = range(6)
+
+
 @njit(cache=True)
-def frame_rows(A, error, vref, ff, s, nrows, J, cols, p, R, x, Rstar, xd, xdd):
+def frame_rows(A, Q, s, nrows, J, cols, p, R, x, Rstar, xd, xdd, zero_drift):
     """One frame's rows at ``s``: position (3 rows) or pose (``nrows = 6``).
 
     ``A[s:s+3] = J_lin + J_ang × p`` on the columns ``cols`` of the frame's
     supporting joints (zero elsewhere): the LOCAL_WORLD_ALIGNED Jacobian of the point
     ``p`` from the world-frame joint Jacobians ``J`` (``v_p = v_O + ω × p``);
     ``A[s+3:s+6] = J_ang``. Error ``x − p`` (and ``log(R* Rᵀ)``), ``ẋ* = xd``,
-    ``ẍ* = xdd`` (zero on the orientation rows).
+    ``ẍ* = xdd`` (zero on the orientation rows), drift zeroed if ``zero_drift``.
     """
     for i in range(nrows):
         row = A[s + i]
@@ -80,48 +84,53 @@ def frame_rows(A, error, vref, ff, s, nrows, J, cols, p, R, x, Rstar, xd, xdd):
             A[s + 4, c] = wy
             A[s + 5, c] = wz
     for i in range(3):
-        error[s + i] = x[i] - p[i]
-        vref[s + i] = xd[i]
-        ff[s + i] = xdd[i]
+        Q[ERROR, s + i] = x[i] - p[i]
+        Q[VELOCITY_REF, s + i] = xd[i]
+        Q[FEEDFORWARD, s + i] = xdd[i]
     if nrows == 6:
         E = np.empty((3, 3))
         for i in range(3):
             for j in range(3):
                 E[i, j] = Rstar[i, 0] * R[j, 0] + Rstar[i, 1] * R[j, 1] + Rstar[i, 2] * R[j, 2]
-        log3(E, error, s + 3)
+        log3(E, Q[ERROR], s + 3)
         for i in range(3, 6):
-            vref[s + i] = 0.0
-            ff[s + i] = 0.0
+            Q[VELOCITY_REF, s + i] = 0.0
+            Q[FEEDFORWARD, s + i] = 0.0
+    if zero_drift:
+        for i in range(nrows):
+            Q[DRIFT, s + i] = 0.0
 
 
 @njit(cache=True)
-def com_rows(A, error, vref, ff, s, Jcom, com, axes, x, xd, xdd):
+def com_rows(A, Q, s, Jcom, com, axes, x, xd, xdd, zero_drift):
     """Centre-of-mass rows at ``s`` on ``axes``: ``A = J_com[axes]``, error
-    ``x − c[axes]``, ``ẋ* = xd``, ``ẍ* = xdd``."""
+    ``x − c[axes]``, ``ẋ* = xd``, ``ẍ* = xdd``, drift zeroed if ``zero_drift``."""
     for i in range(axes.shape[0]):
         a = axes[i]
         row = A[s + i]
         for j in range(row.shape[0]):
             row[j] = Jcom[a, j]
-        error[s + i] = x[i] - com[a]
-        vref[s + i] = xd[i]
-        ff[s + i] = xdd[i]
+        Q[ERROR, s + i] = x[i] - com[a]
+        Q[VELOCITY_REF, s + i] = xd[i]
+        Q[FEEDFORWARD, s + i] = xdd[i]
+        if zero_drift:
+            Q[DRIFT, s + i] = 0.0
 
 
 @njit(cache=True)
-def posture_error(error, vref, ff, drift, s, q, q_ref, iq):
+def posture_error(Q, s, q, q_ref, iq):
     """Posture rows' targets at ``s`` for joints whose configuration is their
     coordinate (``n_q = n_v``, where ``q_ref ⊖ q = q_ref − q``): error
     ``q_ref[iq] − q[iq]``, zero ``ẋ*``, ``ẍ*`` and drift."""
     for i in range(iq.shape[0]):
-        error[s + i] = q_ref[iq[i]] - q[iq[i]]
-        vref[s + i] = 0.0
-        ff[s + i] = 0.0
-        drift[s + i] = 0.0
+        Q[ERROR, s + i] = q_ref[iq[i]] - q[iq[i]]
+        Q[VELOCITY_REF, s + i] = 0.0
+        Q[FEEDFORWARD, s + i] = 0.0
+        Q[DRIFT, s + i] = 0.0
 
 
 @njit(cache=True)
-def velocity_targets(b, kp, error, vref):
+def velocity_targets(b, Q):
     """``b = ẋ* + K e`` (per row)."""
     for i in range(b.shape[0]):
-        b[i] = vref[i] + kp[i] * error[i]
+        b[i] = Q[VELOCITY_REF, i] + Q[KP, i] * Q[ERROR, i]

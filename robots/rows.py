@@ -49,21 +49,16 @@ class TaskRows:
 
     Attributes:
         buffer: The rows ``A`` and targets ``b`` (what a solver reads).
-        error, velocity_ref, feedforward, drift: Per-row ``e``, ``ẋ*``, ``ẍ*``, ``J̇q̇``.
-        kp, kd: Per-row gains.
+        error, velocity_ref, feedforward, drift: Per-row ``e``, ``ẋ*``, ``ẍ*``, ``J̇q̇``
+            (writable views of one ``6 × M`` array; change them in place).
+        kp, kd: Per-row gains (views, likewise).
     """
 
     def __init__(self, robot: RobotModel, levels: Sequence[Sequence[tuple[str, int]]],
                  gains: dict | None = None) -> None:
         self.robot = robot
         self.buffer = StackBuffer(robot.nv, levels)
-        m = self.buffer.m
-        self.error = np.zeros(m)
-        self.velocity_ref = np.zeros(m)
-        self.feedforward = np.zeros(m)
-        self.drift = np.zeros(m)
-        self.kp = np.zeros(m)
-        self.kd = np.zeros(m)
+        self._Q = np.zeros((6, self.buffer.m))   # rows: _rows_kernel.ERROR ... KD
         self._plans: dict = {}            # (writer, task, frame) -> constants of one writer
         self._views = None                # _DataViews of the last state's pin.Data
         self._without_drift: set[str] = set()
@@ -73,6 +68,36 @@ class TaskRows:
         for name, gain in (gains or {}).items():
             kp, kd = (gain, 0.0) if np.isscalar(gain) else gain
             self.set_gains(name, kp, kd)
+
+    @property
+    def error(self) -> np.ndarray:
+        """Per-row error ``e = x* − x`` (a view)."""
+        return self._Q[_k.ERROR]
+
+    @property
+    def velocity_ref(self) -> np.ndarray:
+        """Per-row reference velocity ``ẋ*`` (a view)."""
+        return self._Q[_k.VELOCITY_REF]
+
+    @property
+    def feedforward(self) -> np.ndarray:
+        """Per-row feed-forward ``ẍ*`` (a view)."""
+        return self._Q[_k.FEEDFORWARD]
+
+    @property
+    def drift(self) -> np.ndarray:
+        """Per-row drift ``J̇ q̇`` (a view)."""
+        return self._Q[_k.DRIFT]
+
+    @property
+    def kp(self) -> np.ndarray:
+        """Per-row ``K_p`` (``K`` at velocity level; a view)."""
+        return self._Q[_k.KP]
+
+    @property
+    def kd(self) -> np.ndarray:
+        """Per-row ``K_d`` (a view)."""
+        return self._Q[_k.KD]
 
     def set_gains(self, name: str, kp: float, kd: float = 0.0) -> None:
         """Gains of one task's rows (``kp`` is ``K`` at velocity level)."""
@@ -88,14 +113,13 @@ class TaskRows:
         s, fid, cols = self._frame_plan("position", name, frame, 3)
         views = self._data_views(state)
         p, R = views.frame(fid)
-        _k.frame_rows(self.buffer.A, self.error, self.velocity_ref, self.feedforward, s, 3,
-                      views.J, cols, p, R, _vector(x, 3, name, "x"), _EYE3,
-                      _vector(xd, 3, name, "xd"), _vector(xdd, 3, name, "xdd"))
-        if self._note_drift(state, name):
+        drift = self._note_drift(state, name)
+        _k.frame_rows(self.buffer.A, self._Q, s, 3, views.J, cols, p, R,
+                      _vec(x, 3, name, "x"), _EYE3, _vec(xd, 3, name, "xd"),
+                      _vec(xdd, 3, name, "xdd"), not drift)
+        if drift:
             self.drift[s:s + 3] = pin.getFrameClassicalAcceleration(
                 state.model, state.data, fid, _LWA).linear
-        else:
-            self.drift[s:s + 3] = 0.0
 
     def frame_pose(self, state: KinematicState, name: str, frame: str, x,
                    rotation: np.ndarray, xd=None, xdd=None) -> None:
@@ -106,17 +130,18 @@ class TaskRows:
         s, fid, cols = self._frame_plan("pose", name, frame, 6)
         views = self._data_views(state)
         p, R = views.frame(fid)
-        rot = np.asarray(rotation, dtype=np.float64)
+        rot = rotation
+        if type(rot) is not np.ndarray or rot.dtype != _F64:
+            rot = np.asarray(rotation, dtype=np.float64)
         if rot.shape != (3, 3):
             raise ValueError(f"task {name!r}: rotation must be 3 × 3, got {rot.shape}")
-        _k.frame_rows(self.buffer.A, self.error, self.velocity_ref, self.feedforward, s, 6,
-                      views.J, cols, p, R, _vector(x, 3, name, "x"), rot,
-                      _vector(xd, 3, name, "xd"), _vector(xdd, 3, name, "xdd"))
-        if self._note_drift(state, name):
+        drift = self._note_drift(state, name)
+        _k.frame_rows(self.buffer.A, self._Q, s, 6, views.J, cols, p, R,
+                      _vec(x, 3, name, "x"), rot, _vec(xd, 3, name, "xd"),
+                      _vec(xdd, 3, name, "xdd"), not drift)
+        if drift:
             self.drift[s:s + 6] = pin.getFrameClassicalAcceleration(
                 state.model, state.data, fid, _LWA).vector
-        else:
-            self.drift[s:s + 6] = 0.0
 
     def com(self, state: KinematicState, name: str, x, xd=None, xdd=None,
             axes: Sequence[int] = (0, 1)) -> None:
@@ -133,13 +158,12 @@ class TaskRows:
         s, idx = plan
         views = self._data_views(state)
         m = idx.size
-        _k.com_rows(self.buffer.A, self.error, self.velocity_ref, self.feedforward, s,
-                    views.Jcom, views.com, idx, _vector(x, m, name, "x"),
-                    _vector(xd, m, name, "xd"), _vector(xdd, m, name, "xdd"))
-        if self._note_drift(state, name):
+        drift = self._note_drift(state, name)
+        _k.com_rows(self.buffer.A, self._Q, s, views.Jcom, views.com, idx,
+                    _vec(x, m, name, "x"), _vec(xd, m, name, "xd"), _vec(xdd, m, name, "xdd"),
+                    not drift)
+        if drift:
             self.drift[s:s + m] = state.acom_drift[idx]
-        else:
-            self.drift[s:s + m] = 0.0
 
     def posture(self, state: KinematicState, name: str, q_ref) -> None:
         """The actuated joints to ``q_ref``, as :func:`robots.tasks.posture` (the
@@ -154,10 +178,9 @@ class TaskRows:
             A[:] = 0.0
             A[:, nb:] = np.eye(robot.nv - nb)
             self._plans[key] = s
-        q_ref = _vector(q_ref, robot.nq, name, "q_ref")
+        q_ref = _vec(q_ref, robot.nq, name, "q_ref")
         if self._posture_q is not None:
-            _k.posture_error(self.error, self.velocity_ref, self.feedforward, self.drift,
-                             s, state.q, q_ref, self._posture_q)
+            _k.posture_error(self._Q, s, state.q, q_ref, self._posture_q)
         else:
             sl = slice(s, s + robot.nv - nb)
             self.error[sl] = pin.difference(robot.model, state.q, q_ref)[nb:]
@@ -204,7 +227,7 @@ class TaskRows:
     # ------------------------------------------------------------------ targets
     def velocity_targets(self) -> StackBuffer:
         """``b = ẋ* + K e`` into the buffer; returns it."""
-        _k.velocity_targets(self.buffer.b, self.kp, self.error, self.velocity_ref)
+        _k.velocity_targets(self.buffer.b, self._Q)
         return self.buffer
 
     def acceleration_targets(self, v: np.ndarray) -> StackBuffer:
@@ -250,6 +273,21 @@ class _DataViews:
 
 
 _EYE3 = np.eye(3)
+_F64 = np.dtype(np.float64)
+_ZEROS: dict[int, np.ndarray] = {}        # m -> zeros(m), never written
+
+
+def _vec(value, m: int, task: str, what: str) -> np.ndarray:
+    """:func:`_vector` with the checks of the common case (a float64 ndarray of ``m``
+    entries, or ``None``) done first: the control-loop path."""
+    if value is None:
+        zeros = _ZEROS.get(m)
+        if zeros is None:
+            zeros = _ZEROS[m] = np.zeros(m)
+        return zeros
+    if type(value) is np.ndarray and value.dtype == _F64 and value.shape == (m,):
+        return value
+    return _vector(value, m, task, what)
 
 
 def _vector(value, m: int, task: str, what: str) -> np.ndarray:

@@ -309,3 +309,23 @@ def test_buffer_solver_refills_and_refuses_other_layouts_and_nan():
         solver.solve()
     with pytest.raises(FormulationError, match="step_bound"):
         BufferSolver(buf, step_bound=[1.0, 2.0])
+
+
+def test_buffer_solver_step_bound_can_be_changed_between_solves():
+    from formulations.base import FormulationError
+    from formulations.extended_jacobian import BufferSolver
+    stack = near_singular(1e-4)
+    buf = _buffer_of(stack)
+    solver = BufferSolver(buf)
+    free = solver.solve()
+    solver.step_bound = 2.0
+    bounded = solver.solve()
+    ref = formulations.solve(stack, "extended_jacobian", kernel="numba", step_bound=2.0)
+    assert np.array_equal(bounded.x, ref.x) and bounded.status == ref.status
+    assert not np.array_equal(bounded.x, free.x) and "level_damping" in bounded.info
+    with pytest.raises(ValueError):
+        solver.step_bound[0] = 1.0                  # read-only: set the attribute instead
+    with pytest.raises(FormulationError, match="step_bound"):
+        solver.step_bound = -1.0
+    solver.step_bound = 0.0
+    assert np.array_equal(solver.solve().x, free.x)
