@@ -576,6 +576,13 @@ def ratios(rows: list[Row], batch: dict[str, Any], ik: dict[str, Any]) -> list[R
             out.append(Ratio(name, a / b, target, f"{a:.1f} / {b:.1f} µs"))
         else:
             out.append(Ratio(name, math.nan, target, "not measured"))
+    if ik and "references_us" in ik:
+        # the minimum-jerk references are the same Python in all three steps
+        r = ik["references_us"]
+        a, b = ik["prioik_buffer_step_us"] - r, ik["placo_step_us"] - r
+        out.append(Ratio(f"G1 IK step without the shared references ({r:.1f} µs), "
+                         f"preallocated path / PlaCo", a / b, math.inf,
+                         f"{a:.1f} / {b:.1f} µs"))
     return out
 
 

@@ -139,6 +139,10 @@ def test_ratios_are_the_quotients_of_the_medians():
     assert "preallocated" in fast.name and "TaskStack" in stack_path.name
     assert fast.value == pytest.approx(0.8) and fast.met == "yes"
     assert stack_path.value == pytest.approx(1.5) and math.isinf(stack_path.target)
+    # with the shared references timed, the step without them is reported too
+    own = ratios(rows, batch, {**ik, "references_us": 20.0})[-1]
+    assert "without the shared references" in own.name
+    assert own.value == pytest.approx(60.0 / 80.0) and math.isinf(own.target)
 
 
 def test_missing_measurements_give_nan_not_a_number():
