@@ -77,48 +77,28 @@ def ik_step_times(steps: int = 300, formulation: str = "extended_jacobian"
     # (interleaving them let each evict the other's working set from the caches)
     data = robot.model.createData()
     gains = scenario.velocity_gains(GAIN)
-    kin, build, solve, xs = [], [], [], []
-    for q, v, t in states:
-        t0 = time.perf_counter()
-        state = KinematicState(robot, q, v, data)
-        t1 = time.perf_counter()
+
+    def stack_of(state, t):
         terms = scenario.terms(state, t)
-        stack = TaskStack([terms[name].velocity(gains[name]) for name in ORDER if name in terms])
-        t2 = time.perf_counter()
-        out = mod.solve(stack)
-        t3 = time.perf_counter()
-        if out.status == "failed":
-            raise RuntimeError(f"{formulation} failed at t = {t:.3f} s (TaskStack path)")
-        xs.append(out.x)
-        kin.append(t1 - t0)
-        build.append(t2 - t1)
-        solve.append(t3 - t2)
+        return TaskStack([terms[name].velocity(gains[name]) for name in ORDER if name in terms])
+
+    (kin, build, solve), xs = _time_path(
+        states, "TaskStack path", formulation,
+        lambda q, v: KinematicState(robot, q, v, data), stack_of, mod.solve)
     data_fast = robot.model.createData()
     rows = scenario.velocity_rows(GAIN)
     solver = BufferSolver(rows.buffer)
-    fkin, fbuild, fsolve, fxs = [], [], [], []
-    for q, v, t in states:
-        t3 = time.perf_counter()
-        fstate = KinematicState(robot, q, v, data_fast, drift=False)
-        t4 = time.perf_counter()
-        scenario.write_velocity_rows(rows, fstate, t)
-        t5 = time.perf_counter()
-        fast = solver.solve()
-        t6 = time.perf_counter()
-        if fast.status == "failed":
-            raise RuntimeError(f"{formulation} failed at t = {t:.3f} s (preallocated path)")
-        fxs.append(fast.x)
-        fkin.append(t4 - t3)
-        fbuild.append(t5 - t4)
-        fsolve.append(t6 - t5)
+    (fkin, fbuild, fsolve), fxs = _time_path(
+        states, "preallocated path", formulation,
+        lambda q, v: KinematicState(robot, q, v, data_fast, drift=False),
+        lambda state, t: scenario.write_velocity_rows(rows, state, t), solver.solve)
     refs = []          # the references alone, as all three steps compute them
     for _, _, t in states:
         t0 = time.perf_counter()
         scenario.com_ref(t), scenario.left_foot_ref(t), scenario.tip_ref(t)
         refs.append(time.perf_counter() - t0)
     distance = max(relative_distance(a, b) for a, b in zip(fxs, xs))
-    kin, build, solve, fkin, fbuild, fsolve, refs = (
-        np.array(a) for a in (kin, build, solve, fkin, fbuild, fsolve, refs))
+    refs = np.array(refs)
     ours = kin + build + solve
     fast_step = fkin + fbuild + fsolve
 
@@ -164,3 +144,29 @@ def ik_step_times(steps: int = 300, formulation: str = "extended_jacobian"
                         f"{us(fsolve, 50):.1f}; the references alone (in every "
                         f"kinematics or rows phase) {us(refs, 50):.1f}."),
     }
+
+
+def _time_path(states, label: str, formulation: str, kinematics, build, solve
+               ) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Time one path over ``states`` (``(q, v, t)``): ``kinematics(q, v)``,
+    ``build(state, t)``, ``solve(problem)``; returns the ``3 × N`` phase times (s)
+    and the answers.
+
+    Raises:
+        RuntimeError: a solve failed (naming the path and the time).
+    """
+    times = np.empty((3, len(states)))
+    xs = []
+    for i, (q, v, t) in enumerate(states):
+        t0 = time.perf_counter()
+        state = kinematics(q, v)
+        t1 = time.perf_counter()
+        problem = build(state, t)
+        t2 = time.perf_counter()
+        out = solve(problem)
+        t3 = time.perf_counter()
+        if out.status == "failed":
+            raise RuntimeError(f"{formulation} failed at t = {t:.3f} s ({label})")
+        xs.append(out.x)
+        times[:, i] = (t1 - t0, t2 - t1, t3 - t2)
+    return times, xs

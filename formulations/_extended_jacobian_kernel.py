@@ -37,6 +37,26 @@ def _dot(a, b):
     return acc
 
 
+@njit(cache=True, inline="always")
+def _swap(a, i, j):
+    """Exchange ``a[i]`` and ``a[j]``."""
+    tmp = a[i]
+    a[i] = a[j]
+    a[j] = tmp
+
+
+@njit(cache=True, inline="always")
+def _argmax_from(values, start, stop):
+    """Index of the largest of ``values[start:stop]`` (the first on ties)."""
+    p = start
+    best = values[start]
+    for i in range(start + 1, stop):
+        if values[i] > best:
+            best = values[i]
+            p = i
+    return p
+
+
 @njit(cache=True, fastmath=_FAST)
 def _small_lstsq(L, rhs, m, r, mu2, out, col):
     """min ‖L[:m, :r] z − rhs‖² + mu2 ‖z‖², by Householder QR of [L; √mu2 I].
@@ -121,23 +141,14 @@ def _full_column_rank_lstsq(B, s0, m, col, rhs, tol, out):
         norms[j] = _dot(Tt[j], Tt[j])
         perm[j] = j
     for j in range(d):
-        p = j
-        best = norms[j]
-        for k in range(j + 1, d):
-            if norms[k] > best:
-                best = norms[k]
-                p = k
+        p = _argmax_from(norms, j, d)
         if p != j:
             for i in range(m):
                 tmp = Tt[j, i]
                 Tt[j, i] = Tt[p, i]
                 Tt[p, i] = tmp
-            tmp = norms[j]
-            norms[j] = norms[p]
-            norms[p] = tmp
-            itmp = perm[j]
-            perm[j] = perm[p]
-            perm[p] = itmp
+            _swap(norms, j, p)
+            _swap(perm, j, p)
         cj = Tt[j, j:]
         exact = _dot(cj, cj)
         if not (np.sqrt(exact) > tol) or tol <= 0.0:
@@ -268,12 +279,7 @@ def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
         r = 0
         while r < m and r < d:
             # pivot: the remaining row of largest norm on the free columns
-            p = r
-            best = norms[r]
-            for i in range(r + 1, m):
-                if norms[i] > best:
-                    best = norms[i]
-                    p = i
+            p = _argmax_from(norms, r, m)
             # recompute exactly (downdating loses accuracy)
             tail = B[s0 + p, col + r:]
             exact = _dot(tail, tail)
@@ -284,12 +290,8 @@ def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
                     tmp = B[s0 + r, j]
                     B[s0 + r, j] = B[s0 + p, j]
                     B[s0 + p, j] = tmp
-                tmp = rhs[r]
-                rhs[r] = rhs[p]
-                rhs[p] = tmp
-                tmp = norms[r]
-                norms[r] = norms[p]
-                norms[p] = tmp
+                _swap(rhs, r, p)
+                _swap(norms, r, p)
             q = col + r
             norm = np.sqrt(exact)
             alpha = -norm if B[s0 + r, q] >= 0.0 else norm

@@ -69,35 +69,16 @@ class TaskRows:
             kp, kd = (gain, 0.0) if np.isscalar(gain) else gain
             self.set_gains(name, kp, kd)
 
-    @property
-    def error(self) -> np.ndarray:
-        """Per-row error ``e = x* − x`` (a view)."""
-        return self._Q[_k.ERROR]
-
-    @property
-    def velocity_ref(self) -> np.ndarray:
-        """Per-row reference velocity ``ẋ*`` (a view)."""
-        return self._Q[_k.VELOCITY_REF]
-
-    @property
-    def feedforward(self) -> np.ndarray:
-        """Per-row feed-forward ``ẍ*`` (a view)."""
-        return self._Q[_k.FEEDFORWARD]
-
-    @property
-    def drift(self) -> np.ndarray:
-        """Per-row drift ``J̇ q̇`` (a view)."""
-        return self._Q[_k.DRIFT]
-
-    @property
-    def kp(self) -> np.ndarray:
-        """Per-row ``K_p`` (``K`` at velocity level; a view)."""
-        return self._Q[_k.KP]
-
-    @property
-    def kd(self) -> np.ndarray:
-        """Per-row ``K_d`` (a view)."""
-        return self._Q[_k.KD]
+    error = property(lambda self: self._Q[_k.ERROR],
+                     doc="Per-row error ``e = x* − x`` (a view).")
+    velocity_ref = property(lambda self: self._Q[_k.VELOCITY_REF],
+                            doc="Per-row reference velocity ``ẋ*`` (a view).")
+    feedforward = property(lambda self: self._Q[_k.FEEDFORWARD],
+                           doc="Per-row feed-forward ``ẍ*`` (a view).")
+    drift = property(lambda self: self._Q[_k.DRIFT], doc="Per-row drift ``J̇ q̇`` (a view).")
+    kp = property(lambda self: self._Q[_k.KP],
+                  doc="Per-row ``K_p`` (``K`` at velocity level; a view).")
+    kd = property(lambda self: self._Q[_k.KD], doc="Per-row ``K_d`` (a view).")
 
     def set_gains(self, name: str, kp: float, kd: float = 0.0) -> None:
         """Gains of one task's rows (``kp`` is ``K`` at velocity level)."""
@@ -110,16 +91,7 @@ class TaskRows:
                        xd=None, xdd=None) -> None:
         """A frame origin's world position (3 rows), as
         :func:`robots.tasks.frame_position`."""
-        s, fid, cols = self._frame_plan("position", name, frame, 3)
-        views = self._data_views(state)
-        p, R = views.frame(fid)
-        drift = self._note_drift(state, name)
-        _k.frame_rows(self.buffer.A, self._Q, s, 3, views.J, cols, p, R,
-                      _vec(x, 3, name, "x"), _EYE3, _vec(xd, 3, name, "xd"),
-                      _vec(xdd, 3, name, "xdd"), not drift)
-        if drift:
-            self.drift[s:s + 3] = pin.getFrameClassicalAcceleration(
-                state.model, state.data, fid, _LWA).linear
+        self._frame(state, name, frame, 3, x, _EYE3, xd, xdd)
 
     def frame_pose(self, state: KinematicState, name: str, frame: str, x,
                    rotation: np.ndarray, xd=None, xdd=None) -> None:
@@ -127,21 +99,26 @@ class TaskRows:
         ``rotation``, error ``log(R* Rᵀ)``) of a frame, as
         :func:`robots.tasks.frame_pose` (and :func:`robots.tasks.contact` with
         ``xd = xdd = 0``)."""
-        s, fid, cols = self._frame_plan("pose", name, frame, 6)
-        views = self._data_views(state)
-        p, R = views.frame(fid)
         rot = rotation
         if type(rot) is not np.ndarray or rot.dtype != _F64:
             rot = np.asarray(rotation, dtype=np.float64)
         if rot.shape != (3, 3):
             raise ValueError(f"task {name!r}: rotation must be 3 × 3, got {rot.shape}")
+        self._frame(state, name, frame, 6, x, rot, xd, xdd)
+
+    def _frame(self, state: KinematicState, name: str, frame: str, nrows: int, x,
+               rotation: np.ndarray, xd, xdd) -> None:
+        """The frame writers' common body: ``nrows`` 3 (position) or 6 (pose)."""
+        s, fid, cols = self._frame_plan(name, frame, nrows)
+        views = self._data_views(state)
+        p, R = views.frame(fid)
         drift = self._note_drift(state, name)
-        _k.frame_rows(self.buffer.A, self._Q, s, 6, views.J, cols, p, R,
-                      _vec(x, 3, name, "x"), rot, _vec(xd, 3, name, "xd"),
+        _k.frame_rows(self.buffer.A, self._Q, s, nrows, views.J, cols, p, R,
+                      _vec(x, 3, name, "x"), rotation, _vec(xd, 3, name, "xd"),
                       _vec(xdd, 3, name, "xdd"), not drift)
         if drift:
-            self.drift[s:s + 6] = pin.getFrameClassicalAcceleration(
-                state.model, state.data, fid, _LWA).vector
+            acc = pin.getFrameClassicalAcceleration(state.model, state.data, fid, _LWA)
+            self.drift[s:s + nrows] = acc.vector[:nrows]
 
     def com(self, state: KinematicState, name: str, x, xd=None, xdd=None,
             axes: Sequence[int] = (0, 1)) -> None:
@@ -197,8 +174,8 @@ class TaskRows:
                              f"the builder writes {m}")
         return sl.start
 
-    def _frame_plan(self, kind: str, name: str, frame: str, m: int):
-        key = (kind, name, frame)
+    def _frame_plan(self, name: str, frame: str, m: int):
+        key = (m, name, frame)
         plan = self._plans.get(key)
         if plan is None:
             start = self._check_rows(name, m)
