@@ -14,7 +14,7 @@ its unknowns follow by forward substitution, or by a small least-squares solve w
 the level conflicts (``r_i < m_i``), optionally damped (selective damping, and the
 trust-region ``step_bound`` of :func:`_bounded_step`). A level with ``m_i`` rows on
 ``d ≤ m_i`` free coordinates (undamped, unbounded) is first tried with one column-pivoted
-QR (:func:`_full_column_rank_lstsq`): with full column rank it is solved by that one
+QR (:func:`_pivoted_lstsq_if_full_rank`): with full column rank it is solved by that one
 factorization and leaves no null space. Finally ``x = H_1 H_2 … H_R y``.
 """
 
@@ -46,6 +46,15 @@ def _swap(a, i, j):
 
 
 @njit(cache=True, inline="always")
+def _swap_rows(M, i, j):
+    """Exchange rows ``i`` and ``j`` of ``M``."""
+    for k in range(M.shape[1]):
+        tmp = M[i, k]
+        M[i, k] = M[j, k]
+        M[j, k] = tmp
+
+
+@njit(cache=True, inline="always")
 def _argmax_from(values, start, stop):
     """Index of the largest of ``values[start:stop]`` (the first on ties)."""
     p = start
@@ -55,6 +64,43 @@ def _argmax_from(values, start, stop):
             best = values[i]
             p = i
     return p
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _reflect_column(Tt, j, ncols, rows, t, exact):
+    """One Householder step of a QR held transposed (``Tt[k]`` is column ``k``).
+
+    Reflects column ``j``'s tail ``Tt[j, j:rows]`` (squared norm ``exact > 0``) onto
+    ``α e₁`` and applies the reflector to the columns ``j+1 … ncols−1`` and to ``t``.
+    """
+    cj = Tt[j, j:rows]
+    norm = np.sqrt(exact)
+    c0 = cj[0]
+    alpha = -norm if c0 >= 0.0 else norm
+    cj[0] = c0 - alpha                  # cj is now v; H = I − 2 v vᵀ / vᵀv
+    vtv = 2.0 * (exact - alpha * c0)    # ‖v‖² = ‖c‖² − 2αc₀ + α², α² = ‖c‖²
+    w = rows - j
+    for k in range(j + 1, ncols):
+        ck = Tt[k, j:rows]
+        f = 2.0 * _dot(ck, cj) / vtv
+        for i in range(w):
+            ck[i] -= f * cj[i]
+    tj = t[j:rows]
+    f = 2.0 * _dot(tj, cj) / vtv
+    for i in range(w):
+        tj[i] -= f * cj[i]
+    cj[0] = alpha
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _back_substitute(Tt, t, r, out, col):
+    """``R z = t[:r]`` for the upper-triangular ``R`` held transposed
+    (``R[j, k] = Tt[k, j]``), into ``out[col:col + r]``."""
+    for j in range(r - 1, -1, -1):
+        acc = t[j]
+        for k in range(j + 1, r):
+            acc -= Tt[k, j] * out[col + k]
+        out[col + j] = acc / Tt[j, j]
 
 
 @njit(cache=True, fastmath=_FAST)
@@ -76,47 +122,15 @@ def _small_lstsq(L, rhs, m, r, mu2, out, col):
         for j in range(r):
             Tt[j, m + j] = s
     for j in range(r):
-        cj = Tt[j]
-        norm = 0.0
-        for i in range(j, rows):
-            norm += cj[i] * cj[i]
-        norm = np.sqrt(norm)
-        if norm == 0.0:
-            continue
-        alpha = -norm if cj[j] >= 0.0 else norm
-        v0 = cj[j] - alpha
-        # v = [v0, cj[j+1:]], H = I - 2 v vᵀ / vᵀv
-        vtv = v0 * v0
-        for i in range(j + 1, rows):
-            vtv += cj[i] * cj[i]
-        if vtv == 0.0:
-            continue
-        for k in range(j + 1, r):
-            ck = Tt[k]
-            dot = v0 * ck[j]
-            for i in range(j + 1, rows):
-                dot += cj[i] * ck[i]
-            f = 2.0 * dot / vtv
-            ck[j] -= f * v0
-            for i in range(j + 1, rows):
-                ck[i] -= f * cj[i]
-        dot = v0 * t[j]
-        for i in range(j + 1, rows):
-            dot += cj[i] * t[i]
-        f = 2.0 * dot / vtv
-        t[j] -= f * v0
-        for i in range(j + 1, rows):
-            t[i] -= f * cj[i]
-        cj[j] = alpha
-    for j in range(r - 1, -1, -1):
-        acc = t[j]
-        for k in range(j + 1, r):
-            acc -= Tt[k, j] * out[col + k]
-        out[col + j] = acc / Tt[j, j]
+        tail = Tt[j, j:rows]
+        exact = _dot(tail, tail)
+        if exact > 0.0:
+            _reflect_column(Tt, j, r, rows, t, exact)
+    _back_substitute(Tt, t, r, out, col)
 
 
 @njit(cache=True, fastmath=_FAST)
-def _full_column_rank_lstsq(B, s0, m, col, rhs, tol, out):
+def _pivoted_lstsq_if_full_rank(B, s0, m, col, rhs, tol, out):
     """One level with ``m ≥ d`` rows on its ``d = n − col`` free coordinates.
 
     Householder QR with column pivoting of ``A_i Z_i = B[s0:s0+m, col:]`` (held
@@ -143,39 +157,18 @@ def _full_column_rank_lstsq(B, s0, m, col, rhs, tol, out):
     for j in range(d):
         p = _argmax_from(norms, j, d)
         if p != j:
-            for i in range(m):
-                tmp = Tt[j, i]
-                Tt[j, i] = Tt[p, i]
-                Tt[p, i] = tmp
+            _swap_rows(Tt, j, p)
             _swap(norms, j, p)
             _swap(perm, j, p)
-        cj = Tt[j, j:]
-        exact = _dot(cj, cj)
+        tail = Tt[j, j:]
+        exact = _dot(tail, tail)      # exactly (downdated norms lose accuracy)
         if not (np.sqrt(exact) > tol) or tol <= 0.0:
             return False
-        norm = np.sqrt(exact)
-        c0 = cj[0]
-        alpha = -norm if c0 >= 0.0 else norm
-        cj[0] = c0 - alpha                  # cj is now v; H = I − 2 v vᵀ / vᵀv
-        vtv = 2.0 * (exact - alpha * c0)    # ‖v‖² = ‖c‖² − 2αc₀ + α², α² = ‖c‖²
-        w = m - j
+        _reflect_column(Tt, j, d, m, t, exact)
         for k in range(j + 1, d):
-            ck = Tt[k, j:]
-            f = 2.0 * _dot(ck, cj) / vtv
-            for i in range(w):
-                ck[i] -= f * cj[i]
-            norms[k] -= ck[0] * ck[0]
-        tj = t[j:]
-        f = 2.0 * _dot(tj, cj) / vtv
-        for i in range(w):
-            tj[i] -= f * cj[i]
-        cj[0] = alpha
+            norms[k] -= Tt[k, j] * Tt[k, j]
     z = np.empty(d)
-    for j in range(d - 1, -1, -1):
-        acc = t[j]
-        for k in range(j + 1, d):
-            acc -= Tt[k, j] * z[k]
-        z[j] = acc / Tt[j, j]
+    _back_substitute(Tt, t, d, z, 0)
     for j in range(d):
         out[col + perm[j]] = z[j]
     return True
@@ -272,7 +265,7 @@ def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
         d = n - col
         if (m >= d and step_bound[lev] <= 0.0
                 and not (level_damping > 0.0 and singular_threshold > 0.0)
-                and _full_column_rank_lstsq(B, s0, m, col, rhs, tol, y)):
+                and _pivoted_lstsq_if_full_rank(B, s0, m, col, rhs, tol, y)):
             ranks[lev] = d
             col = n
             continue
@@ -286,10 +279,7 @@ def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
             if not (np.sqrt(exact) > tol) or tol <= 0.0:
                 break
             if p != r:
-                for j in range(n):
-                    tmp = B[s0 + r, j]
-                    B[s0 + r, j] = B[s0 + p, j]
-                    B[s0 + p, j] = tmp
+                _swap_rows(B, s0 + r, s0 + p)
                 _swap(rhs, r, p)
                 _swap(norms, r, p)
             q = col + r

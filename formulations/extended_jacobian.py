@@ -199,9 +199,8 @@ def _damping_info(info: dict, mu2: np.ndarray, selective: bool, bound: bool) -> 
     if not (selective or bound):
         return "optimal"            # the kernels damp no level without either option
     flagged = np.flatnonzero(mu2 > 0).tolist()
-    if selective or bound:
-        info["damped_levels"] = flagged
-        info["level_damping"] = mu2
+    info["damped_levels"] = flagged
+    info["level_damping"] = mu2.copy()
     return "approximate" if flagged else "optimal"
 
 
@@ -209,25 +208,17 @@ def _solve_qr_compiled(stack: TaskStack, rcond: float, level_damping: float,
                        singular_threshold: float, step_bound: np.ndarray) -> Outcome:
     packed = stack.packed()
     k = len(stack)
-    return _kernel_outcome(packed.A.copy(), packed.b.copy(), packed.starts, packed.scales,
-                           rcond, level_damping, singular_threshold, step_bound,
-                           np.empty(stack.n), np.zeros(k, dtype=np.int64), np.zeros(k))
-
-
-def _kernel_outcome(B, c, starts, scales, rcond: float, level_damping: float,
-                    singular_threshold: float, step_bound: np.ndarray, x, ranks,
-                    mu2) -> Outcome:
-    """Run the compiled kernel on working copies ``B``, ``c`` (overwritten) and wrap
-    ``x``, the ranks and the per-level damping (copied out) in an :class:`Outcome`."""
-    _kernel.solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
-                         step_bound, x, ranks, mu2)
+    x, ranks, mu2 = np.empty(stack.n), np.zeros(k, dtype=np.int64), np.zeros(k)
+    _kernel.solve_kernel(packed.A.copy(), packed.b.copy(), packed.starts, packed.scales,
+                         rcond, level_damping, singular_threshold, step_bound, x, ranks, mu2)
     return _wrap_outcome(x, ranks, mu2, level_damping > 0, bool(step_bound.any()))
 
 
 def _wrap_outcome(x, ranks, mu2, selective: bool, bounded: bool) -> Outcome:
-    """The kernel's outputs (copied out of the workspace) as an :class:`Outcome`."""
+    """The compiled kernel's outputs (copied out of the workspace) as an
+    :class:`Outcome`."""
     info = {"rank_profile": ranks.copy(), "nullspace": "qr", "kernel": "numba"}
-    status = _damping_info(info, mu2.copy(), selective, bounded)
+    status = _damping_info(info, mu2, selective, bounded)
     return Outcome(x.copy(), status, info)
 
 
@@ -310,25 +301,30 @@ class BufferSolver:
 
 
 # --------------------------------------------------------------------------- qr
-def _full_column_rank_lstsq(K: np.ndarray, p: np.ndarray, tol: float) -> np.ndarray | None:
+def _pivoted_lstsq_if_full_rank(K: np.ndarray, p: np.ndarray, tol: float
+                                ) -> np.ndarray | None:
     """``argmin ‖K z − p‖`` for ``K`` (``m × d``, ``m ≥ d``) of full column rank, by one
-    QR with column pivoting (``dgeqp3``, then ``Qᵀp`` and a triangular solve); ``None``
-    when a pivot is ``≤ tol`` (rank-deficient: the caller takes the row-pivoted path)."""
+    QR with column pivoting (``dgeqp3``); ``None`` when a pivot is ``≤ tol``
+    (rank-deficient: the caller takes the row-pivoted path)."""
     d = K.shape[1]
     qr, jpvt, tau, _, _ = _dgeqp3(np.array(K, order="F"), overwrite_a=1)
     if tol <= 0 or not np.all(np.abs(np.diagonal(qr)[:d]) > tol):
         return None
-    qtp, _, _ = _dormqr("L", "T", qr, tau, p.reshape(-1, 1).copy(), 1)
-    w, _ = _dtrtrs(qr[:d, :d], qtp[:d, 0])
     z = np.empty(d)
-    z[jpvt - 1] = w
+    z[jpvt - 1] = _qr_least_squares(qr, tau, p)
     return z
 
 
 def _lstsq_full_column_rank(K: np.ndarray, p: np.ndarray) -> np.ndarray:
     """min ‖K z − p‖ for ``K`` (m × r, m > r) of full column rank, by Householder QR."""
-    m, r = K.shape
     qr, tau, _, _ = _dgeqrf(K)
+    return _qr_least_squares(qr, tau, p)
+
+
+def _qr_least_squares(qr: np.ndarray, tau: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """``R⁻¹ (Qᵀ p)[:r]`` from LAPACK's compact QR (``qr``, ``tau``) of an ``m × r``
+    matrix of full column rank."""
+    m, r = qr.shape
     qtp, _, _ = _dormqr("L", "T", qr, tau, p.reshape(m, 1), max(1, m))
     z, _ = _dtrtrs(qr[:r, :r], qtp[:r])
     return z.ravel()
@@ -395,8 +391,8 @@ def _solve_qr(stack: TaskStack, rcond: float, level_damping: float = 0.0,
             continue
         rhs = c[start:stop] - B[start:stop, :col] @ y[:col]
         if m >= d and bounds[index] <= 0 and level_damping <= 0:
-            z = _full_column_rank_lstsq(B[start:stop, col:], rhs,
-                                        rcond * float(np.linalg.norm(A)))
+            z = _pivoted_lstsq_if_full_rank(B[start:stop, col:], rhs,
+                                            rcond * float(np.linalg.norm(A)))
             if z is not None:                 # full column rank: no null space left
                 ranks.append(d)
                 y[col:] = z

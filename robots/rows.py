@@ -255,8 +255,8 @@ _ZEROS: dict[int, np.ndarray] = {}        # m -> zeros(m), never written
 
 
 def _vec(value, m: int, task: str, what: str) -> np.ndarray:
-    """:func:`_vector` with the checks of the common case (a float64 ndarray of ``m``
-    entries, or ``None``) done first: the control-loop path."""
+    """``value`` as a float64 vector of ``m`` entries (zeros for ``None``); the common
+    case (such an ndarray already) is checked first and passed through as is."""
     if value is None:
         zeros = _ZEROS.get(m)
         if zeros is None:
@@ -264,13 +264,6 @@ def _vec(value, m: int, task: str, what: str) -> np.ndarray:
         return zeros
     if type(value) is np.ndarray and value.dtype == _F64 and value.shape == (m,):
         return value
-    return _vector(value, m, task, what)
-
-
-def _vector(value, m: int, task: str, what: str) -> np.ndarray:
-    """``value`` as a float64 vector of ``m`` entries (zeros for ``None``)."""
-    if value is None:
-        return np.zeros(m)
     out = np.asarray(value, dtype=np.float64)
     if out.shape != (m,):
         raise ValueError(f"task {task!r}: {what} must have {m} entries, got shape {out.shape}")

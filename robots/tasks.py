@@ -74,15 +74,13 @@ class KinematicState:
         if self.has_drift:
             pin.forwardKinematics(m, d, self.q, self.v, np.zeros(robot.nv))
             pin.computeJointJacobians(m, d)
-        else:
-            pin.computeJointJacobians(m, d, self.q)     # placements and Jacobians
-        pin.updateFramePlacements(m, d)
-        pin.jacobianCenterOfMass(m, d, False)           # data.Jcom and data.com[0]
-        if self.has_drift:
             pin.centerOfMass(m, d, pin.KinematicLevel.ACCELERATION, False)
             self.acom_drift = np.array(d.acom[0])
         else:
+            pin.computeJointJacobians(m, d, self.q)     # placements and Jacobians
             self.acom_drift = None
+        pin.updateFramePlacements(m, d)
+        pin.jacobianCenterOfMass(m, d, False)           # data.Jcom and data.com[0]
         self._cache: dict = {}
 
     @property
