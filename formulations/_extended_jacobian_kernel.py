@@ -67,25 +67,25 @@ def _argmax_from(values, start, stop):
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
-def _reflect_column(Tt, j, ncols, rows, t, exact):
+def _reflect_column(Tt, j, t, exact):
     """One Householder step of a QR held transposed (``Tt[k]`` is column ``k``).
 
-    Reflects column ``j``'s tail ``Tt[j, j:rows]`` (squared norm ``exact > 0``) onto
-    ``α e₁`` and applies the reflector to the columns ``j+1 … ncols−1`` and to ``t``.
+    Reflects column ``j``'s tail ``Tt[j, j:]`` (squared norm ``exact > 0``) onto
+    ``α e₁`` and applies the reflector to the later columns and to ``t``.
     """
-    cj = Tt[j, j:rows]
+    cj = Tt[j, j:]
     norm = np.sqrt(exact)
     c0 = cj[0]
     alpha = -norm if c0 >= 0.0 else norm
     cj[0] = c0 - alpha                  # cj is now v; H = I − 2 v vᵀ / vᵀv
     vtv = 2.0 * (exact - alpha * c0)    # ‖v‖² = ‖c‖² − 2αc₀ + α², α² = ‖c‖²
-    w = rows - j
-    for k in range(j + 1, ncols):
-        ck = Tt[k, j:rows]
+    w = cj.shape[0]
+    for k in range(j + 1, Tt.shape[0]):
+        ck = Tt[k, j:]
         f = 2.0 * _dot(ck, cj) / vtv
         for i in range(w):
             ck[i] -= f * cj[i]
-    tj = t[j:rows]
+    tj = t[j:]
     f = 2.0 * _dot(tj, cj) / vtv
     for i in range(w):
         tj[i] -= f * cj[i]
@@ -122,10 +122,10 @@ def _small_lstsq(L, rhs, m, r, mu2, out, col):
         for j in range(r):
             Tt[j, m + j] = s
     for j in range(r):
-        tail = Tt[j, j:rows]
+        tail = Tt[j, j:]
         exact = _dot(tail, tail)
         if exact > 0.0:
-            _reflect_column(Tt, j, r, rows, t, exact)
+            _reflect_column(Tt, j, t, exact)
     _back_substitute(Tt, t, r, out, col)
 
 
@@ -164,9 +164,26 @@ def _pivoted_lstsq_if_full_rank(B, s0, m, col, rhs, tol, out):
         exact = _dot(tail, tail)      # exactly (downdated norms lose accuracy)
         if not (np.sqrt(exact) > tol) or tol <= 0.0:
             return False
-        _reflect_column(Tt, j, d, m, t, exact)
+        # the step of _reflect_column with the pivot norms downdated in the same pass
+        # (calling the shared step and downdating after measured ~0.5 µs slower on G1)
+        cj = Tt[j, j:]
+        norm = np.sqrt(exact)
+        c0 = cj[0]
+        alpha = -norm if c0 >= 0.0 else norm
+        cj[0] = c0 - alpha
+        vtv = 2.0 * (exact - alpha * c0)
+        w = m - j
         for k in range(j + 1, d):
-            norms[k] -= Tt[k, j] * Tt[k, j]
+            ck = Tt[k, j:]
+            f = 2.0 * _dot(ck, cj) / vtv
+            for i in range(w):
+                ck[i] -= f * cj[i]
+            norms[k] -= ck[0] * ck[0]
+        tj = t[j:]
+        f = 2.0 * _dot(tj, cj) / vtv
+        for i in range(w):
+            tj[i] -= f * cj[i]
+        cj[0] = alpha
     z = np.empty(d)
     _back_substitute(Tt, t, d, z, 0)
     for j in range(d):
