@@ -43,10 +43,11 @@ from typing import Any
 
 import numpy as np
 
-import formulations
-from formulations.registry import check_support
-from hierarchy import TaskStack, UnsupportedTaskError, relative_distance
+from prioik import formulations
+from prioik.formulations.registry import check_support
+from prioik.hierarchy import TaskStack, UnsupportedTaskError, relative_distance
 
+from .threads import blas_info, blas_threads
 from .stacks import (G1_DURATION_S, Case, FencingSamples, g1_fencing_cases, random_case,
                      same_shape_batch)
 
@@ -145,55 +146,6 @@ def quick_settings() -> Settings:
     return Settings(sizes=QUICK_SIZES, levels=QUICK_LEVELS, repeats=30, min_repeats=5,
                     warmup=1, cap_s=0.15, samples=4, g1_samples=6, batch_size=1000,
                     batch_rounds=2, control_duration_s=0.1, ik_steps=50, quick=True)
-
-
-# ------------------------------------------------------------------ BLAS threads
-_BLAS_SETTERS = ("scipy_openblas_set_num_threads64_", "scipy_openblas_set_num_threads",
-                 "openblas_set_num_threads64_", "openblas_set_num_threads")
-
-
-def set_blas_threads(threads: int) -> dict[str, int]:
-    """Set the thread count of every OpenBLAS loaded in this process (numpy's and
-    scipy's) through its C API; returns ``{library: previous count}`` for
-    :func:`restore_blas_threads` (empty when none is found, e.g. on macOS Accelerate).
-
-    A control loop solves one small problem at a time on one core; with multi-threaded
-    BLAS on a shared 2-core machine, n ≥ 100 solves were up to 100× slower and erratic.
-    """
-    import ctypes
-    previous: dict[str, int] = {}
-    try:
-        with open("/proc/self/maps") as fh:
-            paths = sorted({line.split()[-1] for line in fh if "openblas" in line.lower()
-                            and line.split()[-1].startswith("/")})
-    except OSError:
-        return previous
-    for path in paths:
-        try:
-            lib = ctypes.CDLL(path)
-        except OSError:
-            continue
-        for name in _BLAS_SETTERS:
-            if hasattr(lib, name):
-                getter = getattr(lib, name.replace("_set_", "_get_"), None)
-                before = int(getter()) if getter is not None else 0
-                getattr(lib, name)(int(threads))
-                previous[path] = before
-                break
-    return previous
-
-
-def restore_blas_threads(previous: dict[str, int]) -> None:
-    """Undo :func:`set_blas_threads`."""
-    import ctypes
-    for path, count in previous.items():
-        if count <= 0:
-            continue
-        lib = ctypes.CDLL(path)
-        for name in _BLAS_SETTERS:
-            if hasattr(lib, name):
-                getattr(lib, name)(int(count))
-                break
 
 
 # --------------------------------------------------------------------- progress
@@ -444,8 +396,8 @@ def measure_control_step(settings: Settings, progress: Progress | None = None,
     Returns per formulation the median of each phase (µs), or a reason it cannot run.
     """
     try:
-        from robots.fencing import FencingScenario
-        from robots.simulate import simulate
+        from prioik.robots.fencing import FencingScenario
+        from prioik.robots.simulate import simulate
     except ImportError as exc:
         return [], f"robots cannot be imported ({type(exc).__name__}: {exc})"
     avail = {f.name: f for f in formulations.available() if f.available}
@@ -920,11 +872,8 @@ every formulation is then timed with its default options (λ = 0) on those stack
 def run_benchmark(settings: Settings, out: Path, doc: Path | None = None,
                   command: str = "prioik bench") -> dict[str, Any]:
     """Run everything, write the outputs; returns the summary (also ``summary.json``)."""
-    previous = set_blas_threads(settings.blas_threads) if settings.blas_threads > 0 else {}
-    try:
-        return _run_benchmark(settings, out, doc, command, bool(previous))
-    finally:
-        restore_blas_threads(previous)
+    with blas_threads(settings.blas_threads):
+        return _run_benchmark(settings, out, doc, command, settings.blas_threads > 0 and bool(blas_info()))
 
 
 def _run_benchmark(settings: Settings, out: Path, doc: Path | None, command: str,

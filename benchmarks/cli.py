@@ -10,16 +10,16 @@ import numpy as np
 
 #: modules that contribute a sub-command through ``add_parser(subparsers)``
 SUBCOMMAND_MODULES = [
-    "benchmarks.fencing",
-    "benchmarks.compare",
-    "benchmarks.bench",
-    "benchmarks.properties",
-    "benchmarks.validation",
+    "prioik.benchmarks.fencing",
+    "prioik.benchmarks.compare",
+    "prioik.benchmarks.bench",
+    "prioik.benchmarks.properties",
+    "prioik.benchmarks.validation",
 ]
 
 
 def _cmd_list(args: argparse.Namespace) -> int:
-    import formulations
+    from prioik import formulations
     import qpsolvers
     print(f"{'formulation':<22} {'available':<10} {'ineq.':<6} {'exact':<6} description")
     for f in formulations.available():
@@ -50,8 +50,8 @@ def _parse_value(text: str):
 
 
 def _cmd_solve(args: argparse.Namespace) -> int:
-    import formulations
-    from hierarchy import load_stack
+    from prioik import formulations
+    from prioik.hierarchy import load_stack
     stack = load_stack(args.file)
     options = {}
     for item in args.option:
@@ -76,6 +76,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="prioik",
         description="Task-priority inverse kinematics: one task-stack spec, every formulation.")
+    from prioik import __version__
+    parser.add_argument("--version", action="version", version=f"prioik {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("list", help="list formulations, their availability and QP back-ends")
     p.set_defaults(func=_cmd_list)
@@ -93,11 +95,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``prioik`` console script."""
-    from formulations import FormulationError
-    from hierarchy import TaskStackError
+    from prioik.formulations import FormulationError
+    from prioik.hierarchy import TaskStackError
+    from .threads import blas_threads
     args = build_parser().parse_args(argv)
     try:
-        return int(args.func(args) or 0)
+        with blas_threads(getattr(args, "blas_threads", 1)):
+            return int(args.func(args) or 0)
     except (TaskStackError, FormulationError, ValueError, OSError) as exc:
         print(f"prioik {args.command}: error: {exc}", file=sys.stderr)
         return 2

@@ -14,9 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-import formulations
-from formulations.registry import check_support
-from hierarchy import (TaskStack, UnsupportedTaskError, check_lexicographic, load_stack,
+from prioik import formulations
+from prioik.formulations.registry import check_support
+from prioik.hierarchy import (TaskStack, UnsupportedTaskError, check_lexicographic, load_stack,
                        relative_distance)
 
 

@@ -155,7 +155,7 @@ def _runs_by_label() -> dict[str, RunSpec]:
 # ------------------------------------------------------------------- one run
 def _formulation_solver(spec: RunSpec, variant: str):
     """``(solve, needs_dynamics, torque_from_solution, limits)`` for a registry run."""
-    import formulations
+    from prioik import formulations
     mod = formulations.get(spec.formulation)
     caps = mod.CAPABILITIES
     opts = dict(spec.options.get(variant, {}))
@@ -175,18 +175,18 @@ def run_one(spec: RunSpec, variant: str, duration: float, dt: float,
         UnsupportedTaskError: the formulation cannot take the scenario's stack.
         FormulationError: it is not available here.
     """
-    from robots import simulate
-    from robots.fencing import FencingScenario
+    from prioik.robots import simulate
+    from prioik.robots.fencing import FencingScenario
     scenario = FencingScenario(variant)
     if spec.armature:
         scenario.robot = scenario.robot.with_armature(spec.armature)
     if spec.formulation == "placo_kinematics_solver":
-        from benchmarks.placo_baseline import run_placo
+        from prioik.benchmarks.placo_baseline import run_placo
         return run_placo(scenario, duration=duration, dt=dt, progress=progress)
     solve, dyn, own_tau, limits = _formulation_solver(spec, variant)
     if spec.level == "velocity":
         if limits != "bounds" or dyn:
-            from hierarchy import UnsupportedTaskError
+            from prioik.hierarchy import UnsupportedTaskError
             raise UnsupportedTaskError("velocity-level runs need a formulation that takes "
                                        "inequality tasks (joint limits as bounds on q̇)",
                                        formulation=spec.formulation, task="joint_limits")
@@ -258,9 +258,9 @@ def crosscheck(variant: str, res, dt: float, every: int = 25,
     give the same whole ``q̈`` (``‖Δq̈‖ / max(1, ‖q̈‖)``), damped or not. ``None`` when
     ``cascaded_qp`` is not available.
     """
-    import formulations
-    from robots import KinematicState
-    from robots.fencing import FencingScenario
+    from prioik import formulations
+    from prioik.robots import KinematicState
+    from prioik.robots.fencing import FencingScenario
     try:
         formulations.get("cascaded_qp")
     except formulations.FormulationError:
@@ -297,9 +297,9 @@ def unifying_diagnostic(dt: float = 0.002) -> dict[str, float] | None:
     ``None`` when ``unifying`` is not available."""
     import pinocchio as pin
 
-    import formulations
-    from robots import KinematicState
-    from robots.fencing import FencingScenario
+    from prioik import formulations
+    from prioik.robots import KinematicState
+    from prioik.robots.fencing import FencingScenario
     try:
         formulations.get("unifying")
     except formulations.FormulationError:
@@ -408,7 +408,7 @@ def format_table(variant: str, runs: dict[str, dict], phases: dict[str, tuple]) 
 def select_runs(text: str | None) -> tuple[list[RunSpec], list[str]]:
     """Runs to do and skip messages: every default run whose formulation is available,
     or the comma-separated labels of ``--formulations``."""
-    import formulations
+    from prioik import formulations
     table = _runs_by_label()
     if text:
         labels = [s.strip() for s in text.split(",") if s.strip()]
@@ -440,7 +440,7 @@ def select_runs(text: str | None) -> tuple[list[RunSpec], list[str]]:
 
 def run_command(args: argparse.Namespace) -> int:
     """``prioik fencing``: see the module docstring."""
-    from hierarchy import UnsupportedTaskError
+    from prioik.hierarchy import UnsupportedTaskError
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     variants = ["compatible", "incompatible"] if args.variant == "both" else [args.variant]

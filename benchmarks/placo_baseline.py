@@ -57,9 +57,9 @@ def run_placo(scenario, *, duration: float, dt: float, progress=None):
     """
     import placo
 
-    from robots import KinematicState, SimulationResult
-    from robots.fencing import SWORD_LENGTH
-    from robots.models import example_robot_data_dir
+    from prioik.robots import KinematicState, SimulationResult
+    from prioik.robots.fencing import SWORD_LENGTH
+    from prioik.robots.models import example_robot_data_dir
 
     robot = scenario.robot
     hand = robot.frames["left_hand"]

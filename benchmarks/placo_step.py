@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from hierarchy import TaskStack
+from prioik.hierarchy import TaskStack
 
 #: task order of the velocity stack (the scenario's priorities, joint limits omitted:
 #: PlaCo handles its limits as inequalities, and the equality formulation has none)
@@ -55,11 +55,11 @@ def ik_step_times(steps: int = 300, formulation: str = "extended_jacobian"
         ImportError: placo, pinocchio or :mod:`robots` is missing.
         RuntimeError: PlaCo's run failed, or a prioik path failed.
     """
-    import formulations
-    from formulations.extended_jacobian import BufferSolver
-    from hierarchy import relative_distance
-    from robots.fencing import FencingScenario
-    from robots.tasks import KinematicState
+    from prioik import formulations
+    from prioik.formulations.extended_jacobian import BufferSolver
+    from prioik.hierarchy import relative_distance
+    from prioik.robots.fencing import FencingScenario
+    from prioik.robots.tasks import KinematicState
 
     from .placo_baseline import run_placo
 

@@ -24,10 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
-import formulations
-from hierarchy import (DEFAULT_RCOND, Task, TaskStack, algorithmic_error_norms,
+from prioik import formulations
+from prioik.hierarchy import (DEFAULT_RCOND, Task, TaskStack, algorithmic_error_norms,
                        check_lexicographic, rank_profile)
-from hierarchy.families import FAMILIES, near_singular, random_spd
+from prioik.hierarchy.families import FAMILIES, near_singular, random_spd
 
 #: σ values of the near-singular sweep (0: exactly conflicting)
 SIGMAS = (1e-1, 1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-10, 0.0)
@@ -488,5 +488,5 @@ def run(args: argparse.Namespace) -> int:
 
 if __name__ == "__main__":  # pragma: no cover
     import sys
-    from benchmarks.cli import main
+    from prioik.benchmarks.cli import main
     sys.exit(main(["properties", *sys.argv[1:]]))

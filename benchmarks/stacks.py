@@ -19,8 +19,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hierarchy import TaskStack
-from hierarchy.families import FAMILIES, random_spd
+from prioik.hierarchy import TaskStack
+from prioik.hierarchy.families import FAMILIES, random_spd
 
 __all__ = ["Case", "random_mass_matrix", "random_case", "FencingSamples",
            "g1_fencing_samples", "g1_fencing_cases", "G1_DURATION_S"]
@@ -109,7 +109,7 @@ class FencingSamples:
     def stacks_at(self, count: int) -> list[TaskStack]:
         """Stacks at ``count`` states evenly spread over the whole run (at most one
         per simulated step)."""
-        from robots.tasks import KinematicState
+        from prioik.robots.tasks import KinematicState
         run, scenario = self.run, self.scenario
         pick = np.unique(np.linspace(0, run.steps - 1, count).round().astype(int))
         data = scenario.robot.model.createData()
@@ -135,10 +135,10 @@ def g1_fencing_samples(variant: str, samples: int, dt: float = 0.005,
         ImportError: :mod:`robots` (pinocchio, example-robot-data) is not installed.
         RuntimeError: the simulated run failed.
     """
-    import formulations
-    from robots.fencing import FencingScenario
-    from robots.simulate import simulate
-    from robots.tasks import KinematicState
+    from prioik import formulations
+    from prioik.robots.fencing import FencingScenario
+    from prioik.robots.simulate import simulate
+    from prioik.robots.tasks import KinematicState
 
     scenario = FencingScenario(variant)
     robot = scenario.robot
@@ -165,12 +165,12 @@ def g1_fencing_cases(samples: int, dt: float = 0.005
     """One :class:`Case` per fencing variant, or ``([], [], reason)`` when the robot
     part cannot run here."""
     try:
-        import robots.fencing  # noqa: F401
-        import robots.simulate  # noqa: F401
+        import prioik.robots.fencing  # noqa: F401
+        import prioik.robots.simulate  # noqa: F401
     except ImportError as exc:
         return [], [], f"robots cannot be imported here ({type(exc).__name__}: {exc})"
     try:
-        from robots.fencing import VARIANTS
+        from prioik.robots.fencing import VARIANTS
         runs = [g1_fencing_samples(v, samples, dt) for v in VARIANTS]
     except (ImportError, FileNotFoundError, RuntimeError) as exc:
         return [], [], f"the G1 fencing stacks cannot be built ({type(exc).__name__}: {exc})"
@@ -188,7 +188,7 @@ def g1_fencing_cases(samples: int, dt: float = 0.005
 
 def same_shape_batch(stacks: list[TaskStack], size: int) -> tuple[list[TaskStack], str]:
     """``size`` stacks of the most common shape among ``stacks`` (cycled when fewer)."""
-    from formulations.registry import stack_shape
+    from prioik.formulations.registry import stack_shape
     shapes = Counter(stack_shape(s) for s in stacks)
     shape, count = shapes.most_common(1)[0]
     same = [s for s in stacks if stack_shape(s) == shape]

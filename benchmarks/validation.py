@@ -39,11 +39,11 @@ from pathlib import Path
 
 import numpy as np
 
-import formulations
-from formulations.registry import check_support
-from hierarchy import (TaskStack, UnsupportedTaskError, check_lexicographic,
+from prioik import formulations
+from prioik.formulations.registry import check_support
+from prioik.hierarchy import (TaskStack, UnsupportedTaskError, check_lexicographic,
                        lexicographic_residuals, relative_distance)
-from hierarchy.families import FAMILIES, INEQUALITY_FAMILIES
+from prioik.hierarchy.families import FAMILIES, INEQUALITY_FAMILIES
 
 EQUALITY_FAMILY_NAMES = ("compatible", "conflicting", "rank_deficient")
 INEQUALITY_FAMILY_NAMES = ("with_inequalities", "infeasible_inequality")

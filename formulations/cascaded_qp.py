@@ -82,7 +82,7 @@ import numpy as np
 import qpsolvers
 import scipy.sparse as spa
 
-from hierarchy import DEFAULT_RCOND, TaskStack
+from prioik.hierarchy import DEFAULT_RCOND, TaskStack
 
 from .base import Capabilities, FormulationError, Outcome
 

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hierarchy import DEFAULT_RCOND, TaskStack, nested_null_spaces
+from prioik.hierarchy import DEFAULT_RCOND, TaskStack, nested_null_spaces
 
 from .base import Capabilities, Outcome
 from .nullspace import check_nonnegative, generalized_inverse

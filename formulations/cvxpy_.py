@@ -29,7 +29,7 @@ from typing import Any
 import cvxpy as cp
 import numpy as np
 
-from hierarchy import DEFAULT_RCOND, TaskStack
+from prioik.hierarchy import DEFAULT_RCOND, TaskStack
 
 from .base import Capabilities, FormulationError, Outcome
 from .cascaded_qp import (ACTIVE_TOL, MULTIPLIER_TOL, Fixed, _unit_rows, level_rows,

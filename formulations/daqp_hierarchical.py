@@ -52,7 +52,7 @@ from typing import Any
 import daqp
 import numpy as np
 
-from hierarchy import DEFAULT_RCOND, TaskStack, check_lexicographic, nested_null_spaces
+from prioik.hierarchy import DEFAULT_RCOND, TaskStack, check_lexicographic, nested_null_spaces
 
 from .base import Capabilities, FormulationError, Outcome
 

@@ -72,7 +72,7 @@ import math
 import numpy as np
 from scipy.linalg import lapack
 
-from hierarchy import DEFAULT_RCOND, StackBuffer, TaskStack, null_space_basis
+from prioik.hierarchy import DEFAULT_RCOND, StackBuffer, TaskStack, null_space_basis
 
 from .base import Capabilities, FormulationError, Outcome
 

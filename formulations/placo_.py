@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 import placo
 
-from hierarchy import DEFAULT_RCOND, TaskStack
+from prioik.hierarchy import DEFAULT_RCOND, TaskStack
 
 from .base import Capabilities, FormulationError, Outcome
 

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hierarchy import DEFAULT_RCOND, TaskStack
+from prioik.hierarchy import DEFAULT_RCOND, TaskStack
 
 from .base import Capabilities, FormulationError, Outcome
 

@@ -23,22 +23,22 @@ from typing import Any
 
 import numpy as np
 
-from hierarchy import TaskStack, UnsupportedTaskError, lexicographic_residuals
+from prioik.hierarchy import TaskStack, UnsupportedTaskError, lexicographic_residuals
 
 from .base import STATUSES, Capabilities, FormulationError, Outcome, Solution
 
 #: name -> (module, pip package(s) that provide its optional dependency)
 PLUGINS: dict[str, tuple[str, str]] = {
-    "reference": ("formulations.reference", ""),
-    "extended_jacobian": ("formulations.extended_jacobian", ""),
-    "nullspace": ("formulations.nullspace", ""),
-    "chiaverini": ("formulations.chiaverini", ""),
-    "unifying": ("formulations.unifying", ""),
-    "operational_space": ("formulations.operational_space", ""),
-    "cascaded_qp": ("formulations.cascaded_qp", "qpsolvers[open_source_solvers]"),
-    "cvxpy": ("formulations.cvxpy_", "cvxpy"),
-    "placo": ("formulations.placo_", "placo==0.10.2 pin==3.8.0"),
-    "daqp_hierarchical": ("formulations.daqp_hierarchical", "daqp"),
+    "reference": ("prioik.formulations.reference", ""),
+    "extended_jacobian": ("prioik.formulations.extended_jacobian", ""),
+    "nullspace": ("prioik.formulations.nullspace", ""),
+    "chiaverini": ("prioik.formulations.chiaverini", ""),
+    "unifying": ("prioik.formulations.unifying", ""),
+    "operational_space": ("prioik.formulations.operational_space", ""),
+    "cascaded_qp": ("prioik.formulations.cascaded_qp", "qpsolvers[open_source_solvers]"),
+    "cvxpy": ("prioik.formulations.cvxpy_", "cvxpy"),
+    "placo": ("prioik.formulations.placo_", "placo==0.10.2 pin==3.8.0"),
+    "daqp_hierarchical": ("prioik.formulations.daqp_hierarchical", "daqp"),
 }
 
 _loaded: dict[str, ModuleType] = {}
@@ -78,7 +78,7 @@ def _load(name: str) -> ModuleType | None:
         mod = importlib.import_module(module_name)
     except ImportError as exc:
         missing = getattr(exc, "name", None) or ""
-        own = missing == module_name or missing.startswith("formulations")
+        own = missing == module_name or missing.startswith("prioik.formulations")
         hint = f"; install it with `pip install {package}`" if package and not own else ""
         _failed[name] = f"{type(exc).__name__}: {exc}{hint}"
         return None
@@ -262,7 +262,7 @@ def solve_batch(stacks, formulation: str = "extended_jacobian", **options: Any) 
         TaskStackError: the stacks do not share one shape (names the first that differs).
         FormulationError, UnsupportedTaskError: as :func:`solve`.
     """
-    from hierarchy import TaskStackError
+    from prioik.hierarchy import TaskStackError
     stacks = [s if isinstance(s, TaskStack) else TaskStack(s) for s in stacks]
     if not stacks:
         raise TaskStackError("solve_batch needs at least one stack")

@@ -35,7 +35,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve
 
-from hierarchy import DEFAULT_RCOND, TaskStack
+from prioik.hierarchy import DEFAULT_RCOND, TaskStack
 
 from .base import Capabilities, FormulationError, Outcome
 from .nullspace import check_nonnegative, generalized_inverse

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
-from hierarchy import TaskStack
+from prioik.hierarchy import TaskStack
 
 from .models import RobotModel, g1
 from .references import Reference, Waypoints, minimum_jerk, minimum_jerk_profile
@@ -264,7 +264,7 @@ class FencingScenario:
 
 
 def _velocity_bounds(state: KinematicState, dt: float):
-    from hierarchy import Task
+    from prioik.hierarchy import Task
     from .tasks import _actuated_positions
     r = state.robot
     lo, hi, vmax = r.joint_limits()

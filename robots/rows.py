@@ -27,7 +27,7 @@ from typing import Sequence
 import numpy as np
 import pinocchio as pin
 
-from hierarchy import StackBuffer
+from prioik.hierarchy import StackBuffer
 
 from . import _rows_kernel as _k
 from .models import RobotModel

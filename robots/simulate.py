@@ -31,7 +31,7 @@ from typing import Any, Callable
 import numpy as np
 import pinocchio as pin
 
-from hierarchy import Task, TaskStack, algorithmic_error_norms
+from prioik.hierarchy import Task, TaskStack, algorithmic_error_norms
 
 from .models import RobotModel
 from .tasks import KinematicState

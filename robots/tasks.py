@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from hierarchy import Task
+from prioik.hierarchy import Task
 
 from .models import RobotModel
 from .references import Reference

@@ -1,4 +1,7 @@
-"""Test configuration: single-threaded BLAS (small matrices; see benchmarks/__init__)."""
+"""Test configuration: single-threaded BLAS (small matrices; see prioik.benchmarks.threads).
+
+Set here, for the test process only: importing prioik changes no environment variable.
+"""
 
 import os
 

@@ -4,11 +4,11 @@ the lexicographic check, which must be able to fail."""
 import numpy as np
 import pytest
 
-import formulations
-from hierarchy import (Task, TaskStack, check_lexicographic, conflicting_levels,
+from prioik import formulations
+from prioik.hierarchy import (Task, TaskStack, check_lexicographic, conflicting_levels,
                        lexicographic_residuals, nested_null_spaces, rank_profile,
                        singularity_distance)
-from hierarchy.families import FAMILIES, near_singular
+from prioik.hierarchy.families import FAMILIES, near_singular
 
 
 def _stack_with_shared_row():
@@ -85,7 +85,7 @@ def test_check_accepts_any_point_of_the_optimal_set_and_reports_levels():
 
 
 def test_check_rejects_inequality_stacks_by_name():
-    from hierarchy import UnsupportedTaskError
+    from prioik.hierarchy import UnsupportedTaskError
     s = TaskStack([Task("box", np.eye(2), lower=[0, 0])])
     with pytest.raises(UnsupportedTaskError, match="'box'"):
         check_lexicographic(s, np.zeros(2))

@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-import formulations
-from hierarchy import (Task, TaskStack, UnsupportedTaskError, algorithmic_error,
+from prioik import formulations
+from prioik.hierarchy import (Task, TaskStack, UnsupportedTaskError, algorithmic_error,
                        algorithmic_error_norms, feasible_split, matrix_rank, rank_profile)
-from hierarchy.families import FAMILIES, compatible, near_singular
+from prioik.hierarchy.families import FAMILIES, compatible, near_singular
 
 EQUALITY_FAMILIES = sorted(FAMILIES)
 

@@ -10,10 +10,10 @@ import math
 import numpy as np
 import pytest
 
-from benchmarks import bench
-from benchmarks.bench import CSV_COLUMNS, Row, Settings, ratios, run_benchmark
-from benchmarks.cli import main
-from benchmarks.stacks import random_case, random_mass_matrix
+from prioik.benchmarks import bench
+from prioik.benchmarks.bench import CSV_COLUMNS, Row, Settings, ratios, run_benchmark
+from prioik.benchmarks.cli import main
+from prioik.benchmarks.stacks import random_case, random_mass_matrix
 
 TINY = dict(sizes=(6, 9), levels=(2, 3), repeats=6, min_repeats=2, warmup=1, cap_s=2.0,
             samples=2, g1=False, blas_threads=1,
@@ -51,7 +51,7 @@ def test_one_row_per_case_and_variant_with_the_csv_columns(tiny_run):
     assert cases == {f"random n={n} k={k}" for n in (6, 9) for k in (2, 3)}
     labels = {r["label"] for r in rows}
     # one row per back-end of cascaded_qp, plus the extra extended_jacobian paths
-    import formulations
+    from prioik import formulations
     qp = formulations.get("cascaded_qp").backends()
     assert {f"cascaded_qp[{b}]" for b in qp} <= labels
     assert {"reference", "extended_jacobian", "extended_jacobian[svd]", "nullspace",
@@ -194,27 +194,18 @@ def test_cli_rejects_bad_lists(tmp_path, capsys):
 
 
 def test_blas_threads_are_set_and_restored():
-    import ctypes
-    previous = bench.set_blas_threads(1)
-    try:
-        assert previous, "no OpenBLAS found in this process"
-        for path in previous:
-            lib = ctypes.CDLL(path)
-            getter = next(getattr(lib, n.replace("_set_", "_get_"))
-                          for n in bench._BLAS_SETTERS if hasattr(lib, n))
-            assert getter() == 1
-    finally:
-        bench.restore_blas_threads(previous)
-    for path, count in previous.items():
-        lib = ctypes.CDLL(path)
-        getter = next(getattr(lib, n.replace("_set_", "_get_"))
-                      for n in bench._BLAS_SETTERS if hasattr(lib, n))
-        assert getter() == count
+    from prioik.benchmarks.threads import blas_info, blas_threads
+    before = [p["num_threads"] for p in blas_info()]
+    assert before, "no BLAS found in this process"
+    with blas_threads(1):
+        assert all(p["num_threads"] == 1 for p in blas_info())
+    assert [p["num_threads"] for p in blas_info()] == before
+
 
 
 def test_g1_fencing_samples_give_robot_stacks_and_mass_matrices():
     pytest.importorskip("pinocchio")
-    from benchmarks.stacks import g1_fencing_samples
+    from prioik.benchmarks.stacks import g1_fencing_samples
     samples = g1_fencing_samples("compatible", 3, dt=0.01, duration=0.1)
     assert len(samples.stacks) == 3 and samples.times[0] == 0.0
     for stack, M in zip(samples.stacks, samples.mass_matrices):

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from hierarchy import StackBuffer, TaskStackError
-from hierarchy.families import FAMILIES
+from prioik.hierarchy import StackBuffer, TaskStackError
+from prioik.hierarchy.families import FAMILIES
 
 LAYOUT = [[("a", 2)], [("b", 1), ("c", 3)], [("d", 4)]]
 

@@ -12,11 +12,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import formulations
-from hierarchy import relative_distance
-from formulations import FormulationError, cascaded_qp
-from hierarchy import Task, TaskStack, check_lexicographic, lexicographic_residuals
-from hierarchy.families import FAMILIES, infeasible_inequality, with_inequalities
+from prioik import formulations
+from prioik.hierarchy import relative_distance
+from prioik.formulations import FormulationError, cascaded_qp
+from prioik.hierarchy import Task, TaskStack, check_lexicographic, lexicographic_residuals
+from prioik.hierarchy.families import FAMILIES, infeasible_inequality, with_inequalities
 
 BACKENDS = cascaded_qp.backends()
 

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-import formulations
-from hierarchy import (Task, TaskStack, UnsupportedTaskError, algorithmic_error_norms,
+from prioik import formulations
+from prioik.hierarchy import (Task, TaskStack, UnsupportedTaskError, algorithmic_error_norms,
                        check_lexicographic, rank_profile)
-from hierarchy.families import FAMILIES, near_singular
+from prioik.hierarchy.families import FAMILIES, near_singular
 
 
 def relative_algorithmic_error(stack, x):

@@ -6,8 +6,8 @@ import sys
 
 import pytest
 
-from benchmarks.cli import main
-from benchmarks.compare import examples_dir
+from prioik.benchmarks.cli import main
+from prioik.benchmarks.compare import examples_dir
 
 
 def test_list_shows_formulations_and_backends(capsys):
@@ -53,6 +53,6 @@ def test_compare_prints_a_table(capsys):
 
 
 def test_console_script_runs():
-    exe = [sys.executable, "-m", "benchmarks.cli", "list"]
+    exe = [sys.executable, "-m", "prioik.benchmarks.cli", "list"]
     res = subprocess.run(exe, capture_output=True, text=True, timeout=120)
     assert res.returncode == 0 and "reference" in res.stdout

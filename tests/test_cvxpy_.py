@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-import formulations
-from hierarchy import relative_distance
-from formulations import FormulationError, cvxpy_
-from hierarchy import check_lexicographic
-from hierarchy.families import FAMILIES, infeasible_inequality, with_inequalities
+from prioik import formulations
+from prioik.hierarchy import relative_distance
+from prioik.formulations import FormulationError, cvxpy_
+from prioik.hierarchy import check_lexicographic
+from prioik.hierarchy.families import FAMILIES, infeasible_inequality, with_inequalities
 
 #: relative distance to reference per cvxpy solver (Clarabel measured ≤ 1e-10)
 TOL = {"CLARABEL": 1e-8, "OSQP": 1e-5, "SCS": 1e-5}

@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-import formulations
-from hierarchy import relative_distance
-from formulations import FormulationError
-from hierarchy import Task, TaskStack, check_lexicographic, conflicting_levels
-from hierarchy.families import FAMILIES
+from prioik import formulations
+from prioik.hierarchy import relative_distance
+from prioik.formulations import FormulationError
+from prioik.hierarchy import Task, TaskStack, check_lexicographic, conflicting_levels
+from prioik.hierarchy.families import FAMILIES
 
 
 

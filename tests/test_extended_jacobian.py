@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-import formulations
-from hierarchy import Task, TaskStack, check_lexicographic, relative_distance
-from hierarchy.families import FAMILIES, compatible, near_singular, same_shape_batch
+from prioik import formulations
+from prioik.hierarchy import Task, TaskStack, check_lexicographic, relative_distance
+from prioik.hierarchy.families import FAMILIES, compatible, near_singular, same_shape_batch
 
 #: the three ways to compute eq. 18: compiled nested QR, LAPACK nested QR, the paper's SVD
 PATHS = {"qr-numba": {"nullspace": "qr", "kernel": "numba"},
@@ -261,7 +261,7 @@ def test_step_bound_batch_matches_solve():
 
 # --------------------------------------------------------------- BufferSolver
 def _buffer_of(stack):
-    from hierarchy import StackBuffer
+    from prioik.hierarchy import StackBuffer
     buf = StackBuffer(stack.n, [[(t.name, t.m) for t in level] for level in stack.levels])
     for t in stack.tasks:
         A, b = buf.rows(t.name)
@@ -274,7 +274,7 @@ def _buffer_of(stack):
 @pytest.mark.parametrize("options", [{}, {"level_damping": 0.1, "singular_threshold": 0.05},
                                      {"step_bound": 0.5}])
 def test_buffer_solver_equals_solve_bit_for_bit(family, options):
-    from formulations.extended_jacobian import BufferSolver
+    from prioik.formulations.extended_jacobian import BufferSolver
     for seed in range(4):
         stack = FAMILIES[family](np.random.default_rng(900 + seed), 14, 4)
         buf = _buffer_of(stack)
@@ -288,9 +288,9 @@ def test_buffer_solver_equals_solve_bit_for_bit(family, options):
 
 
 def test_buffer_solver_refills_and_refuses_other_layouts_and_nan():
-    from hierarchy import StackBuffer, TaskStackError
-    from formulations.base import FormulationError
-    from formulations.extended_jacobian import BufferSolver
+    from prioik.hierarchy import StackBuffer, TaskStackError
+    from prioik.formulations.base import FormulationError
+    from prioik.formulations.extended_jacobian import BufferSolver
     rng = np.random.default_rng(5)
     s1 = compatible(rng, 10, 3)
     buf = _buffer_of(s1)
@@ -312,8 +312,8 @@ def test_buffer_solver_refills_and_refuses_other_layouts_and_nan():
 
 
 def test_buffer_solver_step_bound_can_be_changed_between_solves():
-    from formulations.base import FormulationError
-    from formulations.extended_jacobian import BufferSolver
+    from prioik.formulations.base import FormulationError
+    from prioik.formulations.extended_jacobian import BufferSolver
     stack = near_singular(1e-4)
     buf = _buffer_of(stack)
     solver = BufferSolver(buf)

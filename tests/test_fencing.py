@@ -6,11 +6,11 @@ import json
 import numpy as np
 import pytest
 
-import formulations
-from benchmarks import fencing as cmd
-from benchmarks.cli import main
-from robots import KinematicState, simulate
-from robots.fencing import LEVEL_NAMES, TARGETS, FencingScenario
+from prioik import formulations
+from prioik.benchmarks import fencing as cmd
+from prioik.benchmarks.cli import main
+from prioik.robots import KinematicState, simulate
+from prioik.robots.fencing import LEVEL_NAMES, TARGETS, FencingScenario
 
 
 @pytest.fixture(scope="module")
@@ -160,7 +160,7 @@ def test_fencing_command_rejects_unknown_runs_and_skips_unavailable(tmp_path, mo
 
 def test_placo_baseline_runs_the_same_scenario(scenarios):
     pytest.importorskip("placo")
-    from benchmarks.placo_baseline import run_placo
+    from prioik.benchmarks.placo_baseline import run_placo
     res = run_placo(scenarios["compatible"], duration=0.1, dt=0.002)
     assert not res.failed and res.steps == 50
     assert res.errors["support_foot_error_m"].max() < 1e-4       # a hard task in PlaCo
@@ -176,7 +176,7 @@ def test_velocity_level_qp_run(scenarios):
     assert res.errors["support_foot_error_m"].max() < 1e-5
     assert np.nanmax(res.algorithmic_error) < 1e-6
     unsupported = cmd.RunSpec("nullspace:velocity", "nullspace", level="velocity")
-    from hierarchy import UnsupportedTaskError
+    from prioik.hierarchy import UnsupportedTaskError
     with pytest.raises(UnsupportedTaskError, match="inequality"):
         cmd.run_one(unsupported, "compatible", 0.01, 0.002)
 

@@ -5,8 +5,8 @@ import json
 import numpy as np
 import pytest
 
-from benchmarks.compare import examples_dir
-from hierarchy import Task, TaskStack, TaskStackError, load_stack, save_stack, stack_from_dict
+from prioik.benchmarks.compare import examples_dir
+from prioik.hierarchy import Task, TaskStack, TaskStackError, load_stack, save_stack, stack_from_dict
 
 
 def test_round_trip_keeps_everything(tmp_path):

@@ -6,8 +6,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-import robots.models as models
-from robots import ModelNotFoundError, g1, load, sample_humanoid, spatial_chain, talos
+import prioik.robots.models as models
+from prioik.robots import ModelNotFoundError, g1, load, sample_humanoid, spatial_chain, talos
 
 
 @pytest.fixture(scope="module")

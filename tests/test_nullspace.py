@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-import formulations
-from hierarchy import Task, TaskStack, UnsupportedTaskError, check_lexicographic
-from hierarchy.families import FAMILIES, compatible, near_singular
+from prioik import formulations
+from prioik.hierarchy import Task, TaskStack, UnsupportedTaskError, check_lexicographic
+from prioik.hierarchy.families import FAMILIES, compatible, near_singular
 
 SIGMAS = np.logspace(-1, -7, 7)
 
@@ -143,7 +143,7 @@ def test_property_shape_finite_and_exact_on_any_family(seed, n, k, family, dampi
 @pytest.mark.parametrize("family", ["compatible", "conflicting", "rank_deficient", "degenerate"])
 def test_solve_batch_matches_the_loop(family, damping):
     """Stacked SVDs with per-stack rank masks = a loop of solve (relative 1e-9)."""
-    from hierarchy.families import same_shape_batch
+    from prioik.hierarchy.families import same_shape_batch
     rng = np.random.default_rng(31)
     stacks = same_shape_batch(FAMILIES[family](rng, 12, 4), rng, 20, reduce=0.3)
     batch = formulations.solve_batch(stacks, "nullspace", damping=damping)

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-import formulations
-from formulations.operational_space import task_space_torque
-from hierarchy import Task, TaskStack, UnsupportedTaskError, check_lexicographic
-from hierarchy.families import FAMILIES, compatible, near_singular, random_spd
+from prioik import formulations
+from prioik.formulations.operational_space import task_space_torque
+from prioik.hierarchy import Task, TaskStack, UnsupportedTaskError, check_lexicographic
+from prioik.hierarchy.families import FAMILIES, compatible, near_singular, random_spd
 
 
 @pytest.mark.parametrize("seed", range(15))

@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-import formulations
-from hierarchy import relative_distance
-from formulations import FormulationError, placo_
-from hierarchy import Task, TaskStack
-from hierarchy.families import FAMILIES, infeasible_inequality, with_inequalities
+from prioik import formulations
+from prioik.hierarchy import relative_distance
+from prioik.formulations import FormulationError, placo_
+from prioik.hierarchy import Task, TaskStack
+from prioik.hierarchy.families import FAMILIES, infeasible_inequality, with_inequalities
 
 
 

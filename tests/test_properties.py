@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from benchmarks.cli import main
-from benchmarks.properties import error_table, singularity_sweep
+from prioik.benchmarks.cli import main
+from prioik.benchmarks.properties import error_table, singularity_sweep
 
 
 def test_sweep_slopes_and_bounds():
@@ -49,9 +49,9 @@ def test_exactly_conflicting_limit_every_formulation_finite_exact_ones_equal_ref
     """σ = 0 (Theorem 1's case): all variants finite; the exact ones equal reference
     (operational_space: reference with metric=M); the damped ones (λ = 1e-2) within
     5 % of it (measured 2.2 % = λ/(σ² + λ) for the free row, σ² = 0.44)."""
-    import formulations
-    from benchmarks.properties import VARIANTS, random_mass_matrix, solve_variant
-    from hierarchy.families import near_singular
+    from prioik import formulations
+    from prioik.benchmarks.properties import VARIANTS, random_mass_matrix, solve_variant
+    from prioik.hierarchy.families import near_singular
     stack = near_singular(0.0)
     mass = random_mass_matrix(np.random.default_rng(0), stack.n)
     ref = formulations.solve(stack, "reference").x

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-import formulations
-from hierarchy import Task, TaskStack, check_lexicographic, nested_null_spaces
-from hierarchy.families import FAMILIES, compatible, near_singular
+from prioik import formulations
+from prioik.hierarchy import Task, TaskStack, check_lexicographic, nested_null_spaces
+from prioik.hierarchy.families import FAMILIES, compatible, near_singular
 
 
 @pytest.mark.parametrize("seed", range(10))

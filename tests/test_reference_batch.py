@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-import formulations
-from hierarchy import Task, TaskStack, rank_profile
-from hierarchy.families import FAMILIES, same_shape_batch
+from prioik import formulations
+from prioik.hierarchy import Task, TaskStack, rank_profile
+from prioik.hierarchy.families import FAMILIES, same_shape_batch
 
 
 def _loop(stacks, **options):

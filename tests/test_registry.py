@@ -5,10 +5,10 @@ import types
 import numpy as np
 import pytest
 
-import formulations
-from formulations import Capabilities, FormulationError, Outcome, registry
-from hierarchy import Task, TaskStack, UnsupportedTaskError
-from hierarchy.families import compatible
+from prioik import formulations
+from prioik.formulations import Capabilities, FormulationError, Outcome, registry
+from prioik.hierarchy import Task, TaskStack, UnsupportedTaskError
+from prioik.hierarchy.families import compatible
 
 
 @pytest.fixture
@@ -32,7 +32,7 @@ def test_unknown_formulation_lists_known_ones(stack):
 
 
 def test_failed_import_is_recorded_and_repeated(monkeypatch, stack):
-    monkeypatch.setitem(registry.PLUGINS, "ghost", ("formulations._no_such_module", "ghostpkg"))
+    monkeypatch.setitem(registry.PLUGINS, "ghost", ("prioik.formulations._no_such_module", "ghostpkg"))
     monkeypatch.delitem(registry._failed, "ghost", raising=False)
     info = {f.name: f for f in formulations.available()}["ghost"]
     assert not info.available and "_no_such_module" in info.reason
@@ -126,7 +126,7 @@ def test_solve_batch_loops_and_matches_single_solves():
 
 
 def test_solve_batch_rejects_mixed_shapes():
-    from hierarchy import TaskStackError
+    from prioik.hierarchy import TaskStackError
     a = TaskStack([Task("a", np.eye(3)[[0]], [1.0])])
     b = TaskStack([Task("a", np.eye(3)[[0, 1]], [1.0, 2.0])])
     with pytest.raises(TaskStackError, match="stack 1 of the batch differs"):

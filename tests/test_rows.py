@@ -9,10 +9,10 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from robots import KinematicState, Reference, TaskRows, com_position, frame_pose, \
+from prioik.robots import KinematicState, Reference, TaskRows, com_position, frame_pose, \
     frame_position, g1, posture
-from robots import _rows_kernel as _k
-from robots.fencing import FencingScenario
+from prioik.robots import _rows_kernel as _k
+from prioik.robots.fencing import FencingScenario
 
 #: the two paths do the same arithmetic in another order: rows agree to rounding
 TOL = 1e-12
@@ -93,7 +93,7 @@ def test_wrong_row_count_and_unknown_task_are_named(robot):
     rows = TaskRows(robot, [[("tip", 2)]])
     with pytest.raises(ValueError, match="'tip' has 2 rows in the layout, the builder writes 3"):
         rows.frame_position(state, "tip", "sword_tip", np.zeros(3))
-    from hierarchy import TaskStackError
+    from prioik.hierarchy import TaskStackError
     with pytest.raises(TaskStackError, match="no task 'com'"):
         rows.com(state, "com", np.zeros(2))
 
@@ -153,7 +153,7 @@ def test_targets_of_the_wrong_size_name_the_task(robot):
 def test_posture_of_joints_without_a_single_coordinate_uses_the_lie_difference():
     """A spherical joint (``n_q = 4``, ``n_v = 3``): the posture error is
     ``q_ref ⊖ q`` (pinocchio's ``difference``), as the builder."""
-    from robots import RobotModel, posture as posture_term
+    from prioik.robots import RobotModel, posture as posture_term
     model = pin.Model()
     j1 = model.addJoint(0, pin.JointModelSpherical(), pin.SE3.Identity(), "ball")
     model.appendBodyToJoint(j1, pin.Inertia.Random(), pin.SE3.Identity())

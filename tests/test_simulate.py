@@ -6,9 +6,9 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-import formulations
-from hierarchy import Task, TaskStack, algorithmic_error_norms
-from robots import (Reference, StepTasks, equality_view, frame_position, posture, simulate,
+from prioik import formulations
+from prioik.hierarchy import Task, TaskStack, algorithmic_error_norms
+from prioik.robots import (Reference, StepTasks, equality_view, frame_position, posture, simulate,
                     spatial_chain)
 
 TARGET = np.array([1.2, 0.6, 0.4])

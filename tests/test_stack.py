@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from hierarchy import Level, Task, TaskStack, TaskStackError
+from prioik.hierarchy import Level, Task, TaskStack, TaskStackError
 
 A = np.arange(6.0).reshape(2, 3) + 1.0
 

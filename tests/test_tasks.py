@@ -11,7 +11,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from robots import (JointLimitActivation, KinematicState, Reference, Waypoints, com_position,
+from prioik.robots import (JointLimitActivation, KinematicState, Reference, Waypoints, com_position,
                     contact, frame_orientation, frame_pose, frame_position, g1,
                     joint_limit_bounds, joint_limit_rows, joint_limit_violation,
                     minimum_jerk, posture, sample_humanoid, spatial_chain)

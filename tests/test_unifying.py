@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 from scipy.linalg import cho_factor
 
-import formulations
-from formulations.unifying import torque_recursion, weighted_pinv
-from hierarchy import (Task, TaskStack, UnsupportedTaskError, algorithmic_error_norms,
+from prioik import formulations
+from prioik.formulations.unifying import torque_recursion, weighted_pinv
+from prioik.hierarchy import (Task, TaskStack, UnsupportedTaskError, algorithmic_error_norms,
                        check_lexicographic, rank_profile)
-from hierarchy.families import FAMILIES, near_singular, random_spd
+from prioik.hierarchy.families import FAMILIES, near_singular, random_spd
 
 
 def draw(family, seed):

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from benchmarks import cli, validation
+from prioik.benchmarks import cli, validation
 
 
 def test_validate_writes_a_table_for_every_family(tmp_path, capsys):

@@ -1,0 +1,61 @@
+"""prioik: task-priority inverse kinematics for highly redundant robots.
+
+One task-stack spec, every major formulation behind it by name, a lexicographic
+certificate for any answer, and a prepared solve path for control loops::
+
+    import prioik
+    stack = prioik.Task("contact", J1, h1) / prioik.Task("tip", J2, h2)
+    sol = prioik.solve(stack, "extended_jacobian")
+    prioik.check_lexicographic(stack, sol.x).ok
+
+Sub-packages (data flows one way, top to bottom):
+
+* :mod:`prioik.hierarchy` — the pure-numpy spec: tasks, levels, stacks, layouts,
+  analysis and the lexicographic certificate;
+* :mod:`prioik.formulations` — the formulation plugins and their registry;
+* :mod:`prioik.robots` — robot models (pinocchio) and task writers (imported on first
+  use: it needs the ``robots`` extra);
+* :mod:`prioik.benchmarks` — comparisons, reports and the ``prioik`` command line.
+
+Importing prioik changes nothing in the process (no environment variable, no BLAS
+thread setting).
+"""
+
+from __future__ import annotations
+
+import importlib
+from importlib.metadata import PackageNotFoundError, version as _version
+
+from . import formulations, hierarchy
+from .formulations import (BatchSolution, Capabilities, FormulationError, Solution, available,
+                           solve, solve_batch)
+from .hierarchy import (Level, LexicographicReport, Task, TaskStack, TaskStackError,
+                        UnsupportedTaskError, check_lexicographic, load_stack, save_stack)
+
+try:
+    __version__ = _version("prioik")
+except PackageNotFoundError:  # pragma: no cover - a source tree that was never installed
+    __version__ = "0+unknown"
+
+_LAZY = ("robots", "benchmarks")
+
+
+def __getattr__(name: str):
+    # robots needs pinocchio and benchmarks the plotting/QP stack: import them on first use
+    if name in _LAZY:
+        module = importlib.import_module(f"{__name__}.{name}")
+        globals()[name] = module
+        return module
+    raise AttributeError(f"module 'prioik' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))
+
+
+__all__ = [
+    "BatchSolution", "Capabilities", "FormulationError", "Level", "LexicographicReport",
+    "Solution", "Task", "TaskStack", "TaskStackError", "UnsupportedTaskError", "__version__",
+    "available", "benchmarks", "check_lexicographic", "formulations", "hierarchy",
+    "load_stack", "robots", "save_stack", "solve", "solve_batch",
+]
