@@ -15,6 +15,7 @@ SUBCOMMAND_MODULES = [
     "prioik.benchmarks.bench",
     "prioik.benchmarks.properties",
     "prioik.benchmarks.validation",
+    "prioik.benchmarks.fuzz",
 ]
 
 
