@@ -74,6 +74,8 @@ be met gives its least-violation answer (slacks); it is listed in
 
 from __future__ import annotations
 
+import contextlib
+import io
 import warnings
 from dataclasses import dataclass, field
 from typing import Any
@@ -168,6 +170,19 @@ def backend_settings(solver: str, tolerance: float | None) -> dict[str, Any]:
     if solver == "daqp":
         return {"primal_tol": t, "dual_tol": min(t, 1e-12)}
     return {}
+
+
+def quiet_unless_verbose(settings: dict[str, Any]):
+    """A context that discards what a back-end prints unless ``settings["verbose"]``.
+
+    OSQP prints "Polishing not needed ..." through Python's ``sys.stdout`` at every
+    solve with ``polishing=True`` (which :func:`backend_settings` sets), even with
+    ``verbose=False``; a back-end's own log is asked for with
+    ``backend_options={"verbose": True}``.
+    """
+    if settings.get("verbose"):
+        return contextlib.nullcontext()
+    return contextlib.redirect_stdout(io.StringIO())
 
 
 def resolve_solver(solver: str) -> str:
@@ -477,7 +492,8 @@ def solve_level_qp(qp: LevelQP, solver: str, settings: dict[str, Any]
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
-            sol = qpsolvers.solve_problem(problem, solver=solver, **settings)
+            with quiet_unless_verbose(settings):
+                sol = qpsolvers.solve_problem(problem, solver=solver, **settings)
         except _CAUGHT as exc:
             return None, f"{solver} raised {type(exc).__name__}: {exc}", extras
     if caught:
