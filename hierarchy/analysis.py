@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import UnsupportedTaskError
+from .errors import TaskStackError, UnsupportedTaskError
 from .linalg import DEFAULT_RCOND, matrix_rank, range_basis
 from .stack import TaskStack
 
@@ -216,6 +216,18 @@ class LexicographicReport:
         return "\n".join(rows)
 
 
+def _candidate(x, n: int) -> np.ndarray:
+    """``x`` as a float64 vector of length ``n``; :class:`TaskStackError` otherwise."""
+    try:
+        arr = np.asarray(x, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise TaskStackError(f"x cannot be read as a vector of numbers ({exc})") from None
+    if arr.shape != (n,):
+        raise TaskStackError(f"x has shape {arr.shape}, the stack has n = {n} "
+                             f"(x must have shape ({n},))", shape=arr.shape)
+    return arr
+
+
 def check_lexicographic(stack: TaskStack, x: np.ndarray, tol: float = 1e-8,
                         rcond: float = DEFAULT_RCOND) -> LexicographicReport:
     """Whether ``x`` is a lexicographic optimum of an equality stack.
@@ -227,11 +239,10 @@ def check_lexicographic(stack: TaskStack, x: np.ndarray, tol: float = 1e-8,
 
     Raises:
         UnsupportedTaskError: for a stack with inequality tasks.
+        TaskStackError: ``x`` is not a vector of ``n`` numbers.
     """
     _require_equality(stack, "check_lexicographic")
-    x = np.asarray(x, dtype=np.float64)
-    if x.shape != (stack.n,):
-        raise ValueError(f"x has shape {x.shape}, the stack has n = {stack.n}")
+    x = _candidate(x, stack.n)
     Zs = nested_null_spaces(stack, rcond)
     xn = float(np.linalg.norm(x))
     checks = []

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from prioik import formulations
-from prioik.hierarchy import (Task, TaskStack, check_lexicographic, conflicting_levels,
+from prioik.hierarchy import (Task, TaskStack, TaskStackError, check_lexicographic, conflicting_levels,
                        lexicographic_residuals, nested_null_spaces, rank_profile,
                        singularity_distance)
 from prioik.hierarchy.families import FAMILIES, near_singular
@@ -89,3 +89,11 @@ def test_check_rejects_inequality_stacks_by_name():
     s = TaskStack([Task("box", np.eye(2), lower=[0, 0])])
     with pytest.raises(UnsupportedTaskError, match="'box'"):
         check_lexicographic(s, np.zeros(2))
+
+
+@pytest.mark.parametrize("x", [np.zeros(2), np.zeros((1, 4)), np.zeros(5), [[1.0], [2.0]],
+                               "abc", [1.0, "a", 2.0, 3.0]])
+def test_check_refuses_a_wrong_shape_x_with_a_task_stack_error(x):
+    stack = TaskStack([Task("a", np.eye(4), np.ones(4))])
+    with pytest.raises(TaskStackError, match="x "):      # was numpy's plain ValueError
+        check_lexicographic(stack, x)
