@@ -4,8 +4,9 @@ Data flows one way: ``hierarchy`` ← ``robots``; this package never imports
 ``formulations`` (:func:`simulate` takes any solver callable).
 """
 
-from .models import (LOADERS, ModelNotFoundError, RobotModel, example_robot_data_dir, g1,
-                     load, sample_humanoid, spatial_chain, talos)
+from .models import (LOADERS, ModelNotFoundError, RobotModel, StateError,
+                     check_configuration, check_velocity, example_robot_data_dir, g1, load,
+                     sample_humanoid, spatial_chain, talos)
 from .references import Reference, Waypoints, minimum_jerk
 from .rows import TaskRows
 from .simulate import SimulationResult, StepTasks, equality_view, simulate
@@ -14,7 +15,8 @@ from .tasks import (JointLimitActivation, KinematicState, TaskTerm, com_position
                     joint_limit_rows, joint_limit_violation, posture)
 
 __all__ = [
-    "LOADERS", "ModelNotFoundError", "RobotModel", "example_robot_data_dir", "g1", "load",
+    "LOADERS", "ModelNotFoundError", "RobotModel", "StateError", "check_configuration",
+    "check_velocity", "example_robot_data_dir", "g1", "load",
     "sample_humanoid", "spatial_chain", "talos", "Reference", "Waypoints", "minimum_jerk",
     "TaskRows", "SimulationResult", "StepTasks", "equality_view", "simulate", "JointLimitActivation",
     "KinematicState", "TaskTerm", "com_position", "contact", "frame_orientation",
