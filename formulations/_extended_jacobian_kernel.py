@@ -130,7 +130,7 @@ def _small_lstsq(L, rhs, m, r, mu2, out, col):
 
 
 @njit(cache=True, fastmath=_FAST)
-def _pivoted_lstsq_if_full_rank(B, s0, m, col, rhs, tol, out):
+def _pivoted_lstsq_if_full_rank(B, s0, m, col, rhs, tol, out, smallest):
     """One level with ``m ≥ d`` rows on its ``d = n − col`` free coordinates.
 
     Householder QR with column pivoting of ``A_i Z_i = B[s0:s0+m, col:]`` (held
@@ -140,9 +140,11 @@ def _pivoted_lstsq_if_full_rank(B, s0, m, col, rhs, tol, out):
     factorization instead of an LQ and then a least-squares QR) is written into
     ``out[col:]`` and ``True`` returned; the level leaves no null space. Otherwise
     nothing is written and ``False`` returned (``B`` is never modified).
+    ``smallest[0]`` receives the smallest pivot norm (the rank decision's margin).
     """
     n = B.shape[1]
     d = n - col
+    smallest[0] = np.inf
     Tt = np.empty((d, m))
     for i in range(m):
         row = B[s0 + i]
@@ -164,6 +166,7 @@ def _pivoted_lstsq_if_full_rank(B, s0, m, col, rhs, tol, out):
         exact = _dot(tail, tail)      # exactly (downdated norms lose accuracy)
         if not (np.sqrt(exact) > tol) or tol <= 0.0:
             return False
+        smallest[0] = min(smallest[0], np.sqrt(exact))
         # the step of _reflect_column with the pivot norms downdated in the same pass
         # (calling the shared step and downdating after measured ~0.5 µs slower on G1)
         cj = Tt[j, j:]
@@ -237,7 +240,7 @@ def _bounded_step(L, rhs, m, r, mu2_min, step_bound, out, col):
 
 @njit(cache=True, fastmath=_FAST)
 def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
-                 step_bound, x, ranks, level_mu2):
+                 step_bound, x, ranks, level_mu2, margins):
     """Solve one stack in place.
 
     Args:
@@ -251,8 +254,13 @@ def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
         x: Output, ``n``.
         ranks: Output, ``k`` ranks ``r_i``.
         level_mu2: Output, ``k`` damping values ``μ_i²`` (0 where the level is exact).
+        margins: Output, ``k`` margins of the rank decisions: the smallest of (kept
+            pivot norm / threshold) and (threshold / largest rejected pivot norm),
+            ``inf`` when the level decided nothing (``hierarchy.linalg``: a margin
+            ``≤ AMBIGUITY`` is an ambiguous decision).
     """
     M, n = B.shape
+    smallest = np.empty(1)
     k = starts.shape[0] - 1
     V = np.zeros((n, n))          # reflector j stored in V[j, pos_j:]
     beta = np.zeros(n)
@@ -269,6 +277,7 @@ def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
         m = s1 - s0
         ranks[lev] = 0
         level_mu2[lev] = 0.0
+        margins[lev] = np.inf
         if m == 0 or col >= n:
             continue
         tol = rcond * scales[lev]
@@ -282,11 +291,13 @@ def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
         d = n - col
         if (m >= d and step_bound[lev] <= 0.0
                 and not (level_damping > 0.0 and singular_threshold > 0.0)
-                and _pivoted_lstsq_if_full_rank(B, s0, m, col, rhs, tol, y)):
+                and _pivoted_lstsq_if_full_rank(B, s0, m, col, rhs, tol, y, smallest)):
             ranks[lev] = d
+            margins[lev] = smallest[0] / tol
             col = n
             continue
         r = 0
+        kept_min = np.inf
         while r < m and r < d:
             # pivot: the remaining row of largest norm on the free columns
             p = _argmax_from(norms, r, m)
@@ -294,7 +305,10 @@ def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
             tail = B[s0 + p, col + r:]
             exact = _dot(tail, tail)
             if not (np.sqrt(exact) > tol) or tol <= 0.0:
+                if tol > 0.0 and exact > 0.0:
+                    margins[lev] = min(kept_min / tol, tol / np.sqrt(exact))
                 break
+            kept_min = min(kept_min, np.sqrt(exact))
             if p != r:
                 _swap_rows(B, s0 + r, s0 + p)
                 _swap(rhs, r, p)
@@ -329,6 +343,8 @@ def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
             nref += 1
             r += 1
         ranks[lev] = r
+        if tol > 0.0:
+            margins[lev] = min(margins[lev], kept_min / tol)
         if r == 0:
             continue
         # L = B_i[:, col:col+r] (lower trapezoidal, rows in pivot order)
@@ -395,7 +411,7 @@ def level_scales(A, b, starts, scales):
 
 @njit(cache=True, fastmath=_FAST)
 def solve_buffer(A, b, B, c, starts, scales, rcond, level_damping, singular_threshold,
-                 step_bound, x, ranks, level_mu2):
+                 step_bound, x, ranks, level_mu2, margins):
     """Copy ``A``, ``b`` into the workspace ``B``, ``c``, take the level scales and, if
     every value is finite, run :func:`solve_kernel`; returns whether it ran."""
     B[:, :] = A
@@ -403,14 +419,15 @@ def solve_buffer(A, b, B, c, starts, scales, rcond, level_damping, singular_thre
     if not level_scales(B, c, starts, scales):
         return False
     solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
-                 step_bound, x, ranks, level_mu2)
+                 step_bound, x, ranks, level_mu2, margins)
     return True
 
 
 @njit(cache=True, parallel=True)
 def solve_batch_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
-                       step_bound, X, ranks, level_mu2):
+                       step_bound, X, ranks, level_mu2, margins):
     """:func:`solve_kernel` over a batch (``B``: ``N × M × n``), in parallel."""
     for b in prange(B.shape[0]):
         solve_kernel(B[b], c[b], starts, scales[b], rcond, level_damping,
-                     singular_threshold, step_bound[b], X[b], ranks[b], level_mu2[b])
+                     singular_threshold, step_bound[b], X[b], ranks[b], level_mu2[b],
+                     margins[b])

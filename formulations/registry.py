@@ -185,7 +185,9 @@ def solve(stack, formulation: str = "extended_jacobian", **options: Any) -> Solu
 
     Returns:
         A :class:`Solution`. A numerical failure inside the formulation gives
-        ``status == "failed"`` with ``info["message"]``, not an exception.
+        ``status == "failed"`` with ``info["message"]``, not an exception. An exact
+        formulation solves the stack with its levels of extreme scale equilibrated
+        (:meth:`~hierarchy.TaskStack.equilibrated`; ``info["equilibrated_levels"]``).
 
     Raises:
         FormulationError: unknown/unavailable formulation, unknown or missing option.
@@ -196,9 +198,10 @@ def solve(stack, formulation: str = "extended_jacobian", **options: Any) -> Solu
         stack = TaskStack(stack)
     check_support(formulation, mod.CAPABILITIES, stack)
     opts = _check_options(formulation, mod, stack, options)
+    work, scaled = stack.equilibrated() if mod.CAPABILITIES.exact else (stack, [])
     t0 = time.perf_counter()
     try:
-        out: Outcome = mod.solve(stack, **opts)
+        out: Outcome = mod.solve(work, **opts)
         elapsed = time.perf_counter() - t0
     except (np.linalg.LinAlgError, ArithmeticError) as exc:
         elapsed = time.perf_counter() - t0
@@ -206,6 +209,8 @@ def solve(stack, formulation: str = "extended_jacobian", **options: Any) -> Solu
                       {"message": f"{type(exc).__name__}: {exc}"})
     x = np.asarray(out.x, dtype=np.float64).reshape(-1)
     info = dict(out.info)
+    if scaled:
+        info["equilibrated_levels"] = scaled
     status = out.status
     if status not in STATUSES:
         raise RuntimeError(f"formulation {formulation!r} returned unknown status {status!r}")
@@ -274,6 +279,8 @@ def solve_batch(stacks, formulation: str = "extended_jacobian", **options: Any) 
                                  f"(n, rows and kinds of every task must agree)")
     check_support(formulation, mod.CAPABILITIES, stacks[0])
     opts = _check_options(formulation, mod, stacks[0], options)
+    if mod.CAPABILITIES.exact:          # as solve: levels of extreme scale rescaled
+        stacks = [s.equilibrated()[0] for s in stacks]
     batched = hasattr(mod, "solve_batch")
     t0 = time.perf_counter()
     if batched:

@@ -55,6 +55,8 @@ class FuzzCase:
         truth: The ground-truth ``x`` (equality stacks), else ``None``.
         min_gap: Smallest distance (in decades) of a projected ``σ / ‖A_i‖_F`` from
             the band ends (negative: inside the band).
+        min_sigma: Smallest kept ``σ / ‖A_i‖_F`` of any level (1 when none is kept):
+            how much a level amplifies rounding.
     """
 
     stack: TaskStack
@@ -64,6 +66,7 @@ class FuzzCase:
     well_conditioned: bool = False
     truth: np.ndarray | None = None
     min_gap: float = np.inf
+    min_sigma: float = 1.0
 
 
 def _log_uniform(rng: np.random.Generator, low: float, high: float) -> float:
@@ -132,31 +135,32 @@ def equality_case(rng: np.random.Generator, seed: int = -1, *, max_n: int = 60,
         features.append(feats)
     case = FuzzCase(TaskStack(levels), seed, "equality", features)
     if truth:
-        case.truth, case.min_gap = nested_truth(case.stack)
+        case.truth, case.min_gap, case.min_sigma = nested_truth(case.stack)
         case.well_conditioned = bool(case.min_gap > 0 and np.isfinite(case.truth).all())
     return case
 
 
-def nested_truth(stack: TaskStack, rcond: float = 1e-9) -> tuple[np.ndarray, float]:
+def nested_truth(stack: TaskStack, rcond: float = 1e-9
+                 ) -> tuple[np.ndarray, float, float]:
     """Minimum-norm lexicographic least squares by nested SVD on equilibrated levels.
 
     Returns:
-        ``(x, min_gap)``: the answer and the smallest distance, in decades, of any
-        projected ``σ / ‖A_i‖_F`` from the ambiguous band (negative inside it).
+        ``(x, min_gap, min_sigma)``: the answer, the smallest distance, in decades,
+        of any projected ``σ / ‖A_i‖_F`` from the ambiguous band (negative inside
+        it), and the smallest kept ``σ / ‖A_i‖_F``.
     """
     n = stack.n
     x = np.zeros(n)
     Z = np.eye(n)
     lo, hi = np.log10(AMBIGUOUS_BAND[0]), np.log10(AMBIGUOUS_BAND[1])
-    gap = np.inf
+    gap, sigma = np.inf, 1.0
     for level in stack.levels:
         A, b = level.A, level.b
         norm = float(np.linalg.norm(A))
         if norm == 0 or not np.isfinite(norm) or Z.shape[1] == 0:
             continue
         A, b = A / norm, b / norm
-        _, s, vt = np.linalg.svd(A @ Z, full_matrices=True)
-        u, s_thin, _ = np.linalg.svd(A @ Z, full_matrices=False)
+        u, s, vt = np.linalg.svd(A @ Z, full_matrices=True)
         with np.errstate(divide="ignore"):
             logs = np.log10(s)
         # an exact zero (log −inf) is far below the band
@@ -166,10 +170,11 @@ def nested_truth(stack: TaskStack, rcond: float = 1e-9) -> tuple[np.ndarray, flo
             gap = min(gap, float(dist.min()))
         r = int(np.count_nonzero(s > rcond))
         if r:
-            y = vt[:r].T @ ((u[:, :r].T @ (b - A @ x)) / s_thin[:r])
+            sigma = min(sigma, float(s[r - 1]))
+            y = vt[:r].T @ ((u[:, :r].T @ (b - A @ x)) / s[:r])
             x = x + Z @ y
         Z = Z @ vt[r:].T
-    return x, gap
+    return x, gap, sigma
 
 
 def inequality_case(rng: np.random.Generator, seed: int = -1, *, max_n: int = 30,

@@ -13,6 +13,16 @@ from .errors import TaskStackError
 from .task import Level, Task
 
 
+#: Level scales ``‖A_i‖_F`` outside this range are equilibrated
+#: (:meth:`TaskStack.equilibrated`): their squares would lose precision in float64.
+EQUILIBRATE_BELOW = 1e-100
+EQUILIBRATE_ABOVE = 1e100
+
+
+def _peak(level: Level) -> float:
+    return max(float(np.max(np.abs(t.A))) for t in level)
+
+
 @dataclass(frozen=True)
 class PackedRows:
     """The weighted equality rows of all levels stacked, for compiled kernels.
@@ -154,6 +164,36 @@ class TaskStack:
         if self._packed is None:
             self._packed = PackedRows.of(self)
         return self._packed
+
+    def equilibrated(self) -> tuple["TaskStack", list[int]]:
+        """The stack with every level of extreme scale rescaled, and those levels.
+
+        A level whose ``‖A_i‖_F`` lies outside ``[EQUILIBRATE_BELOW, EQUILIBRATE_ABOVE]``
+        has its tasks' ``A``, ``b`` and bounds multiplied by the power of two that
+        brings its largest entry to 1. The lexicographic optimal set (and every
+        minimum-norm tie-break) is unchanged: each level's objective is multiplied by
+        a constant. Without it, squares of entries below ~1e-154 underflow (a
+        ``1e-200·I`` level read as zero gave ``x = 0``, "optimal"). Returns ``self``
+        (and ``[]``) when no level needs it: a check of the packed scales.
+        """
+        scales = self.packed().scales.tolist()
+        if all(EQUILIBRATE_BELOW <= v <= EQUILIBRATE_ABOVE for v in scales):
+            return self, []             # the hot path: one pass over k floats
+        # a level of scale 0 is all zeros, or its squares underflowed, or it holds
+        # only inequality rows (not in the packed equality rows): look at its entries
+        levels = [i for i, v in enumerate(scales)
+                  if not EQUILIBRATE_BELOW <= v <= EQUILIBRATE_ABOVE
+                  and (v != 0 or _peak(self._levels[i]) > 0)]
+        levels = [i for i in levels
+                  if not EQUILIBRATE_BELOW <= _peak(self._levels[i]) <= EQUILIBRATE_ABOVE]
+        if not levels:
+            return self, []
+        out = list(self._levels)
+        for i in levels:
+            peak = _peak(self._levels[i])
+            factor = math.ldexp(1.0, -math.frexp(peak)[1])       # 2^-e: peak -> [0.5, 1)
+            out[i] = Level(t.scaled(factor) for t in self._levels[i])
+        return TaskStack(out), levels
 
     def equality_matrices(self) -> list[tuple[np.ndarray, np.ndarray]]:
         """Per level, the weighted equality rows ``(A_i, b_i)``."""

@@ -220,6 +220,16 @@ class Task:
                     pick(self.b), lower=pick(self.lower), upper=pick(self.upper),
                     weight=self.weight[idx] if self.weight.ndim == 1 else self.weight)
 
+    def scaled(self, factor: float) -> "Task":
+        """A copy with ``A``, ``b`` and the bounds multiplied by ``factor > 0`` (same
+        weight): the task's optimal set is unchanged."""
+        w = self.weight if not self._unit_weight else 1.0
+        if self.is_equality:
+            return Task(self.name, self.A * factor, self.b * factor, weight=w)
+        lo = None if self.lower is None else self.lower * factor
+        up = None if self.upper is None else self.upper * factor
+        return Task(self.name, self.A * factor, lower=lo, upper=up, weight=w)
+
     def with_weight(self, weight) -> "Task":
         """A copy of this task with another weight."""
         if self.is_equality:
