@@ -75,7 +75,8 @@ be met gives its least-violation answer (slacks); it is listed in
 from __future__ import annotations
 
 import contextlib
-import io
+import sys
+import threading
 import warnings
 from dataclasses import dataclass, field
 from typing import Any
@@ -172,17 +173,62 @@ def backend_settings(solver: str, tolerance: float | None) -> dict[str, Any]:
     return {}
 
 
+class _ThreadSilencer:
+    """A ``sys.stdout`` stand-in that drops the writes of the threads it silences and
+    passes every other thread's writes to the stream it replaced."""
+
+    def __init__(self, target) -> None:
+        self.target = target
+        self.silenced: dict[int, int] = {}          # thread id -> nesting depth
+
+    def write(self, text: str) -> int:
+        if threading.get_ident() in self.silenced:
+            return len(text)
+        return self.target.write(text)
+
+    def __getattr__(self, name: str):
+        return getattr(self.target, name)
+
+
+_silencer_lock = threading.Lock()
+_silencer: _ThreadSilencer | None = None
+
+
+@contextlib.contextmanager
+def _silence_this_thread():
+    global _silencer
+    tid = threading.get_ident()
+    with _silencer_lock:
+        if _silencer is None or sys.stdout is not _silencer:
+            _silencer = _ThreadSilencer(sys.stdout)
+            sys.stdout = _silencer
+        _silencer.silenced[tid] = _silencer.silenced.get(tid, 0) + 1
+        mine = _silencer
+    try:
+        yield
+    finally:
+        with _silencer_lock:
+            depth = mine.silenced.pop(tid) - 1
+            if depth:
+                mine.silenced[tid] = depth
+            if not mine.silenced and sys.stdout is mine:
+                sys.stdout = mine.target
+                _silencer = None
+
+
 def quiet_unless_verbose(settings: dict[str, Any]):
     """A context that discards what a back-end prints unless ``settings["verbose"]``.
 
     OSQP prints "Polishing not needed ..." through Python's ``sys.stdout`` at every
     solve with ``polishing=True`` (which :func:`backend_settings` sets), even with
     ``verbose=False``; a back-end's own log is asked for with
-    ``backend_options={"verbose": True}``.
+    ``backend_options={"verbose": True}``. Only the calling thread is silenced
+    (``contextlib.redirect_stdout`` swaps the stream of every thread, and concurrent
+    solves could leave it swapped).
     """
     if settings.get("verbose"):
         return contextlib.nullcontext()
-    return contextlib.redirect_stdout(io.StringIO())
+    return _silence_this_thread()
 
 
 def resolve_solver(solver: str) -> str:

@@ -235,3 +235,18 @@ def test_level_damping_of_wrong_length_is_named():
     stack = FAMILIES["conflicting"](np.random.default_rng(0), 10, 3)
     with pytest.raises(FormulationError, match="level_damping must hold 3"):
         formulations.solve(stack, "cascaded_qp", level_damping=[0.1, 0.2])
+
+
+@pytest.mark.skipif("osqp" not in BACKENDS, reason="OSQP not installed")
+def test_concurrent_quiet_solves_leave_stdout_alone(capfd):
+    import sys
+    from concurrent.futures import ThreadPoolExecutor
+    stack = with_inequalities(np.random.default_rng(1), 6, 4)
+    before = sys.stdout
+    with ThreadPoolExecutor(4) as pool:
+        sols = list(pool.map(lambda _: formulations.solve(stack, "cascaded_qp",
+                                                          solver="osqp"), range(16)))
+    assert sys.stdout is before            # redirect_stdout from threads left a StringIO
+    print("still printing")
+    assert capfd.readouterr().out == "still printing\n"
+    assert all(np.array_equal(s.x, sols[0].x) for s in sols)
