@@ -351,8 +351,10 @@ class Fixed:
         if rows.A_in.shape[0]:
             # a violated row keeps A x = bound + v at every optimum (v is unique)
             viol = np.abs(v) > ACTIVE_TOL * np.maximum(1.0, np.abs(rows.A_in @ x))
+            norms = np.linalg.norm(rows.A_in, axis=1)
+            viol &= norms > 0     # a violated zero row (0 ∉ [lower, upper]) fixes nothing
             if viol.any():
-                extra.append(rows.A_in[viol] / np.linalg.norm(rows.A_in[viol], axis=1)[:, None])
+                extra.append(rows.A_in[viol] / norms[viol, None])
         eq = rows.A_eq
         if extra:
             blocks = [eq / max(float(np.linalg.norm(eq)) / np.sqrt(eq.shape[0]), 1e-300)] \

@@ -15,8 +15,8 @@ levels (every level divided by its ``‖A_i‖_F``, which changes neither its op
 set nor the rank rule of :mod:`hierarchy.linalg`), written here independently of
 the formulations. It also returns the gap of every rank decision, from which
 :attr:`FuzzCase.well_conditioned` is decided: a stack is well-conditioned when no
-singular value of a projected level ``A_i Z_i`` lies in the ambiguous band
-``[1e-13, 1e-6]·‖A_i‖_F`` around the rank threshold (so every sound solver makes the
+singular value of a projected level ``A_i Z_i`` lies in the band
+``[1e-13, 1e-4]·‖A_i‖_F`` around the rank threshold (so every sound solver makes the
 same rank decisions) and the exact answer is finite in float64.
 """
 
@@ -30,10 +30,15 @@ from .stack import TaskStack
 from .task import Task
 
 __all__ = ["FuzzCase", "equality_case", "inequality_case", "nested_truth",
-           "AMBIGUOUS_BAND", "ROW_FEATURES"]
+           "rounding_error", "AMBIGUOUS_BAND", "CONDITIONED_ERROR", "ROW_FEATURES"]
 
-#: Singular values ``σ / ‖A_i‖_F`` in this band make a rank decision ambiguous.
+#: Singular values ``σ / ‖A_i‖_F`` in this band make a rank decision ambiguous (the
+#: solvers' threshold is 1e-9).
 AMBIGUOUS_BAND = (1e-13, 1e-6)
+
+#: A stack is well-conditioned only if rounding (ε) amplified by its levels' least-
+#: squares condition numbers stays below this relative error in ``x``.
+CONDITIONED_ERROR = 1e-8
 
 #: How a task's rows are drawn (uniformly among these).
 ROW_FEATURES = ("random", "rank_deficient", "duplicated", "zero_rows", "all_zero",
@@ -57,6 +62,8 @@ class FuzzCase:
             the band ends (negative: inside the band).
         min_sigma: Smallest kept ``σ / ‖A_i‖_F`` of any level (1 when none is kept):
             how much a level amplifies rounding.
+        rounding_error: The Wedin bound on the relative error rounding causes in ``x``
+            (see the module docstring).
     """
 
     stack: TaskStack
@@ -67,6 +74,7 @@ class FuzzCase:
     truth: np.ndarray | None = None
     min_gap: float = np.inf
     min_sigma: float = 1.0
+    rounding_error: float = 0.0
 
 
 def _log_uniform(rng: np.random.Generator, low: float, high: float) -> float:
@@ -136,7 +144,9 @@ def equality_case(rng: np.random.Generator, seed: int = -1, *, max_n: int = 60,
     case = FuzzCase(TaskStack(levels), seed, "equality", features)
     if truth:
         case.truth, case.min_gap, case.min_sigma = nested_truth(case.stack)
-        case.well_conditioned = bool(case.min_gap > 0 and np.isfinite(case.truth).all())
+        case.rounding_error = rounding_error(case.stack, case.truth)
+        case.well_conditioned = bool(case.min_gap > 0 and np.isfinite(case.truth).all()
+                                     and case.rounding_error <= CONDITIONED_ERROR)
     return case
 
 
@@ -175,6 +185,30 @@ def nested_truth(stack: TaskStack, rcond: float = 1e-9
             x = x + Z @ y
         Z = Z @ vt[r:].T
     return x, gap, sigma
+
+
+def rounding_error(stack: TaskStack, x: np.ndarray, rcond: float = 1e-9) -> float:
+    """``ε Σ_i (κ_i ‖x‖ + κ_i² ‖r_i‖) / max(1, ‖x‖)`` on equilibrated levels: how far
+    rounding may move the lexicographic optimum ``x`` (relative; Wedin's bound per
+    level, ``κ_i = 1/σ_min(A_i Z_i)``, ``r_i = A_i x − b_i``, ``‖A_i‖_F = 1``)."""
+    eps = np.finfo(float).eps
+    xn = float(np.linalg.norm(x))
+    if not np.isfinite(xn):
+        return np.inf
+    total = 0.0
+    Z = np.eye(stack.n)
+    for level in stack.levels:
+        norm = float(np.linalg.norm(level.A))
+        if norm == 0 or Z.shape[1] == 0:
+            continue
+        A, b = level.A / norm, level.b / norm
+        _, s, vt = np.linalg.svd(A @ Z, full_matrices=True)
+        r = int(np.count_nonzero(s > rcond))
+        if r:
+            kappa = 1.0 / float(s[r - 1])
+            total += kappa * xn + kappa ** 2 * float(np.linalg.norm(A @ x - b))
+        Z = Z @ vt[r:].T
+    return eps * total / max(1.0, xn)
 
 
 def inequality_case(rng: np.random.Generator, seed: int = -1, *, max_n: int = 30,
