@@ -425,15 +425,21 @@ def solve_data(A, b, w, B, c, starts, scales, rcond, level_damping, singular_thr
                step_bound, x, ranks, level_mu2, residuals):
     """The prepared solve of a stack's data: weigh the rows into the workspace ``B``,
     ``c``, take the level scales and, if every value is finite, run
-    :func:`solve_kernel` and the per-level residuals; returns whether it ran."""
+    :func:`solve_kernel` and the per-level residuals.
+
+    Returns 0 when an input is not finite (nothing solved), 1 when ``x`` and the
+    residuals are finite, 2 when they are not (the caller reports a failure)."""
     if not weigh_rows(A, b, w, B, c):
-        return False
+        return 0
     if not level_scales(B, c, starts, scales):
-        return False
+        return 0
     solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
                  step_bound, x, ranks, level_mu2)
     level_residuals(A, b, w, starts, x, residuals)
-    return True
+    acc = 0.0
+    for lev in range(residuals.shape[0]):
+        acc += residuals[lev]
+    return 1 if np.isfinite(acc) else 2
 
 
 @njit(cache=True, parallel=True)

@@ -211,6 +211,8 @@ class Prepared:
                                    "eq. 27 damping; use one or the other")
         self.compiled = (self.kernel == "numba" and self.nullspace == "qr"
                          and self.damping == 0)
+        self._selective = self.level_damping > 0
+        self._starts = layout.starts
         if self.compiled:
             m, n, k = layout.m, layout.n, layout.k
             self._B = np.empty((m, n))
@@ -230,17 +232,18 @@ class Prepared:
         """
         if not self.compiled:
             return self._solve_stack(data.as_stack())
-        if not _kernel.solve_data(data.A, data.b, data.sqrt_weight, self._B, self._c,
-                                  self.layout.starts, self._scales, self.rcond,
+        code = _kernel.solve_data(data.A, data.b, data.sqrt_weight, self._B, self._c,
+                                  self._starts, self._scales, self.rcond,
                                   self.level_damping, self.singular_threshold,
                                   self.step_bound, self._x, self._ranks, self._mu2,
-                                  self._residuals):
+                                  self._residuals)
+        if code == 0:
             data.check()     # names the task, level and row of a NaN, inf or bad √w
             raise TaskStackError("the rows' scale overflows float64 (‖A_i‖_F² is not "
                                  "finite): scale the tasks down")
         info = {"rank_profile": self._ranks.copy(), "nullspace": "qr", "kernel": "numba"}
-        status = _damping_info(info, self._mu2, self.level_damping > 0, self._bounded)
-        return Outcome(self._x.copy(), status, info, residuals=self._residuals.copy())
+        status = _damping_info(info, self._mu2, self._selective, self._bounded)
+        return Outcome(self._x.copy(), status, info, self._residuals.copy(), code == 1)
 
     def _solve_stack(self, stack: TaskStack) -> Outcome:
         if self.damping > 0:
