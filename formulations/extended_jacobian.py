@@ -215,13 +215,11 @@ class Prepared:
         self._starts = layout.starts
         if self.compiled:
             m, n, k = layout.m, layout.n, layout.k
-            self._B = np.empty((m, n))
-            self._c = np.empty(m)
-            self._scales = np.zeros(k)
-            self._x = np.empty(n)
+            self._work = np.empty(m * n + m + k)
+            self._params = np.concatenate([[self.rcond, self.level_damping,
+                                            self.singular_threshold], self.step_bound])
             self._ranks = np.zeros(k, dtype=np.int64)
-            self._mu2 = np.zeros(k)
-            self._residuals = np.zeros(k)
+            self._out_size = n + 2 * k
 
     def solve(self, data: StackData) -> Outcome:
         """Solve one stack of the layout (its data; the registry checked the layout).
@@ -232,18 +230,19 @@ class Prepared:
         """
         if not self.compiled:
             return self._solve_stack(data.as_stack())
-        code = _kernel.solve_data(data.A, data.b, data.sqrt_weight, self._B, self._c,
-                                  self._starts, self._scales, self.rcond,
-                                  self.level_damping, self.singular_threshold,
-                                  self.step_bound, self._x, self._ranks, self._mu2,
-                                  self._residuals)
+        out = np.empty(self._out_size)      # x, residuals, μ² of this answer (one array)
+        code = _kernel.solve_data(data.A, data.b, data.sqrt_weight, self._starts,
+                                  self._work, self._params, out, self._ranks)
         if code == 0:
             data.check()     # names the task, level and row of a NaN, inf or bad √w
             raise TaskStackError("the rows' scale overflows float64 (‖A_i‖_F² is not "
                                  "finite): scale the tasks down")
+        n, k = self.layout.n, self.layout.k
         info = {"rank_profile": self._ranks.copy(), "nullspace": "qr", "kernel": "numba"}
-        status = _damping_info(info, self._mu2, self._selective, self._bounded)
-        return Outcome(self._x.copy(), status, info, self._residuals.copy(), code == 1)
+        status = "optimal"
+        if self._selective or self._bounded:
+            status = _damping_info(info, out[n + k:], self._selective, self._bounded)
+        return Outcome(out[:n], status, info, out[n:n + k], code == 1)
 
     def _solve_stack(self, stack: TaskStack) -> Outcome:
         if self.damping > 0:
