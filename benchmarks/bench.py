@@ -2,10 +2,11 @@
 
 In one process, per case (a set of stacks) and per formulation variant (one row per
 back-end of formulations that have ``backends()``): a few warm-up solves, then
-``--repeats`` (default 200) timed solves cycling over the case's stacks. The time of a
-solve is :attr:`formulations.Solution.time_s` — ``time.perf_counter`` around the
-plugin's ``solve`` alone (the registry's option checks and residual evaluation are
-outside it). Each row reports the median, p10 and p90 of those times, the success
+``--repeats`` (default 200) timed solves cycling over the case's stacks, each through a
+solver prepared once per layout (:func:`prioik.prepare`, the path a control loop
+runs). The time of a solve is :attr:`formulations.Solution.time_s` —
+``time.perf_counter`` around the plugin's solve alone (option checks happen at prepare;
+the residual evaluation is outside it). Each row reports the median, p10 and p90 of those times, the success
 rate and the distance to ``reference``:
 
 * **success**: status not ``"failed"`` and, at every level, the residual
@@ -250,11 +251,17 @@ def time_case(case: Case, variant: Variant, ref: _Reference, settings: Settings)
     S = len(case.stacks)
     scales = [_scales(s) for s in case.stacks]
 
+    solvers = {}      # the path a control loop runs: one prepared solver per layout
+
     def run(i: int):
-        opts = dict(variant.options)
+        stack = case.stacks[i]
+        solver = solvers.get(stack.layout)
+        if solver is None:
+            solver = solvers[stack.layout] = formulations.prepare(
+                stack.layout, variant.formulation, **variant.options)
         if variant.needs_mass_matrix:
-            opts["mass_matrix"] = case.mass_matrices[i]
-        return formulations.solve(case.stacks[i], variant.formulation, **opts)
+            return solver.solve(stack, mass_matrix=case.mass_matrices[i])
+        return solver.solve(stack)
 
     first = run(0)                     # untimed for the decision: imports, JIT, caches
     if first.time_s > settings.cap_s:
