@@ -470,3 +470,11 @@ def test_bad_z_basis_is_named():
     assert "'task_range'" in str(err.value) and "'nullspace'" in str(err.value)
     with pytest.raises(formulations.FormulationError, match="z_basis"):
         extended_system(near_singular(0.1), z_basis="rows")
+
+
+def test_theory_page_states_the_kernel_crossover_the_code_uses():
+    """docs/theory.md names the n up to which kernel='auto' compiles: the code's."""
+    from pathlib import Path
+    from prioik.formulations.extended_jacobian import AUTO_NUMBA_MAX_N
+    text = (Path(__file__).parents[1] / "docs" / "theory.md").read_text(encoding="utf-8")
+    assert f"compiled kernel up to n = {AUTO_NUMBA_MAX_N}" in text.replace("\n  ", " ")
