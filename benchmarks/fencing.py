@@ -953,7 +953,7 @@ def write_reproduction(path: Path, summary: dict, meta: dict, pngs: dict) -> Pat
                          "level's scale, not zero: a level's step is "
                          "`|u_minᵀ(h_i − J_i θ̈_(i−1))|/σ`, and the divergence comes with "
                          "the joint-limit rows switching on with the targets above, not "
-                         "with σ → 0" if low["sigma_lowest"] > 1e-3 else
+                         "with σ → 0." if low["sigma_lowest"] > 1e-3 else
                          f" The projected σ falls to {low['sigma_lowest']:.2g} of its "
                          "level's scale before the run stops.")
         add(text)
