@@ -519,9 +519,10 @@ def ratios(rows: list[Row], batch: dict[str, Any], ik: dict[str, Any]) -> list[R
                          f"{label} solve", bt / d1, 0.5, f"{bt:.1f} / {d1:.1f} µs"))
     out.append(Ratio(f"solve_batch({ej}) per stack / loop of {ej} through solve",
                      bt / lp, 0.5, f"{bt:.1f} / {lp:.1f} µs"))
-    for key, what, target in (("prioik_buffer_step_us", "preallocated rows + BufferSolver",
-                               1.0),
-                              ("prioik_step_us", "TaskStack path", math.inf)):
+    for key, what, target in (("prioik_prepared_step_us", "rows written in place + prepared "
+                               "solver (public API)", 0.8),
+                              ("prioik_oneoff_step_us", "Task/TaskStack + one-off prioik.solve",
+                               math.inf)):
         name = f"G1 IK step (kinematics + solve), {what}: {ej} / PlaCo KinematicsSolver"
         if ik:
             a, b = ik.get(key, math.nan), ik.get("placo_step_us", math.nan)
@@ -531,9 +532,9 @@ def ratios(rows: list[Row], batch: dict[str, Any], ik: dict[str, Any]) -> list[R
     if ik and "references_us" in ik:
         # the minimum-jerk references are the same Python in all three steps
         r = ik["references_us"]
-        a, b = ik["prioik_buffer_step_us"] - r, ik["placo_step_us"] - r
+        a, b = ik["prioik_prepared_step_us"] - r, ik["placo_step_us"] - r
         out.append(Ratio(f"G1 IK step without the shared references ({r:.1f} µs), "
-                         f"preallocated path / PlaCo", a / b, math.inf,
+                         f"prepared path / PlaCo", a / b, math.inf,
                          f"{a:.1f} / {b:.1f} µs"))
     return out
 
@@ -743,10 +744,10 @@ def markdown_report(rows: list[Row], rats: list[Ratio], batch: dict, ik: dict,
         md.append(ik.get("description", ""))
         md.append("\n| step | median µs | p10 µs | p90 µs |")
         md.append("|---|---:|---:|---:|")
-        for key, what in (("prioik_buffer", "prioik, preallocated: kinematics + "
-                                            "`write_velocity_rows` + `BufferSolver`"),
-                          ("prioik", "prioik, TaskStack path: kinematics + velocity stack + "
-                                     "extended_jacobian"),
+        for key, what in (("prioik_prepared", "prioik, prepared: kinematics + "
+                                              "`write_velocity_rows` + `solver.solve(data)`"),
+                          ("prioik_oneoff", "prioik, one-off: kinematics + `Task`/`TaskStack` "
+                                            "+ `prioik.solve`"),
                           ("placo", "PlaCo: update_kinematics + KinematicsSolver.solve")):
             md.append(f"| {what} | {_fmt_us(ik[key + '_step_us'])} | "
                       f"{_fmt_us(ik[key + '_p10_us'])} | {_fmt_us(ik[key + '_p90_us'])} |")
