@@ -255,10 +255,11 @@ class Prepared:
         self._starts = layout.starts
         if self.compiled:
             m, n, k = layout.m, layout.n, layout.k
-            self._work = np.empty(m * n + m + k)
+            self._work = np.empty(_kernel.work_size(m, n, k))
             self._params = np.concatenate([[self.rcond, self.level_damping,
                                             self.singular_threshold], self.step_bound])
-            self._ranks = np.zeros(k, dtype=np.int64)
+            self._iwork = np.zeros(k + n, dtype=np.int64)      # ranks, then scratch
+            self._ranks = self._iwork[:k]
             self._out_size = n + 2 * k
 
     def solve(self, data: StackData) -> Outcome:
@@ -272,7 +273,7 @@ class Prepared:
             return self._solve_stack(data.as_stack())
         out = np.empty(self._out_size)      # x, residuals, μ² of this answer (one array)
         code = _kernel.solve_data(data.A, data.b, data.sqrt_weight, self._starts,
-                                  self._work, self._params, out, self._ranks)
+                                  self._work, self._params, out, self._iwork)
         if code == 0:
             data.check()     # names the task, level and row of a NaN, inf or bad √w
             raise TaskStackError("the rows' scale overflows float64 (‖A_i‖_F² is not "
