@@ -19,7 +19,7 @@ own loop over the states (as PlaCo's step runs in its own):
   (called directly, without the registry's checks);
 * **preallocated path** — ``KinematicState(..., drift=False)``,
   :meth:`robots.fencing.FencingScenario.write_velocity_rows` into a
-  :class:`robots.TaskRows` buffer, and
+  :class:`robots.TaskWriter`, and
   :class:`formulations.extended_jacobian.BufferSolver` (same kernel, no ``Task``
   objects). Both paths' answers are compared at every state (``max_path_distance``).
 
@@ -111,14 +111,14 @@ def ik_step_times(steps: int = 300, formulation: str = "extended_jacobian"
         "placo_p90_us": us(placo_step, 90),
         "placo_kinematics_us": us(placo_run.kinematics_time_s, 50),
         "placo_solve_us": us(placo_run.solve_time_s, 50),
-        "prioik_step_us": us(ours, 50), "prioik_p10_us": us(ours, 10),
-        "prioik_p90_us": us(ours, 90),
-        "prioik_kinematics_us": us(kin, 50), "prioik_build_us": us(build, 50),
-        "prioik_solve_us": us(solve, 50),
-        "prioik_buffer_step_us": us(fast_step, 50), "prioik_buffer_p10_us": us(fast_step, 10),
-        "prioik_buffer_p90_us": us(fast_step, 90),
-        "prioik_buffer_kinematics_us": us(fkin, 50), "prioik_buffer_build_us": us(fbuild, 50),
-        "prioik_buffer_solve_us": us(fsolve, 50),
+        "prioik_oneoff_step_us": us(ours, 50), "prioik_oneoff_p10_us": us(ours, 10),
+        "prioik_oneoff_p90_us": us(ours, 90),
+        "prioik_oneoff_kinematics_us": us(kin, 50), "prioik_oneoff_build_us": us(build, 50),
+        "prioik_oneoff_solve_us": us(solve, 50),
+        "prioik_prepared_step_us": us(fast_step, 50), "prioik_prepared_p10_us": us(fast_step, 10),
+        "prioik_prepared_p90_us": us(fast_step, 90),
+        "prioik_prepared_kinematics_us": us(fkin, 50), "prioik_prepared_build_us": us(fbuild, 50),
+        "prioik_prepared_solve_us": us(fsolve, 50),
         "references_us": us(refs, 50),
         "max_path_distance": distance,
         "description": (f"{int(placo_run.steps)} control steps (2 ms) of the compatible "
@@ -131,7 +131,7 @@ def ik_step_times(steps: int = 300, formulation: str = "extended_jacobian"
                         "states: the TaskStack "
                         "path (`KinematicState`, task terms, `Task`/`TaskStack`, plugin "
                         "`solve`) and the preallocated path (`KinematicState(drift=False)`, "
-                        "`FencingScenario.write_velocity_rows` into preallocated `TaskRows` data, "
+                        "`FencingScenario.write_velocity_rows` into a `TaskWriter`'s data, "
                         "a solver prepared once, `solver.solve(rows.data)`); their answers differ by at most "
                         f"{distance:.1e} (relative). All three compute the same Python "
                         "references. Phase medians (µs): PlaCo kinematics "
