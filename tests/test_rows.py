@@ -460,3 +460,29 @@ def test_log3_at_half_a_turn_is_either_of_the_two_rotation_vectors(axis):
     _k.log3(R, out, 0)
     assert min(np.abs(out - np.pi * u).max(), np.abs(out + np.pi * u).max()) <= 1e-12
     assert np.allclose(pin.exp3(out), R, atol=1e-12)
+
+
+def test_fencing_closed_loop_with_masked_activation_rows_follows_the_stack_path(robot):
+    """0.3 s of the compatible fencing run from a knee inside its limit margin: the
+    writer's fixed-size masked activation level under one prepared solver follows the
+    one-off path whose activation level comes and goes (same trajectory to 1e-6)."""
+    from prioik.robots import StepTasks, simulate
+    sc = FencingScenario("compatible", robot=robot)
+    q0 = robot.q0.copy()
+    q0[7 + 3] = -0.05                        # left knee near its -0.087 limit
+    w = sc.acceleration_rows("activation")
+    solver = formulations.prepare(w.layout, "extended_jacobian")
+    active = []
+
+    def build_rows(state, t):
+        data = sc.write_rows(w, state, t)
+        active.append(int(data.rows("joint_limits")[0].any(axis=1).sum()))
+        return StepTasks(data)
+
+    run = dict(duration=0.3, dt=0.002, q0=q0, algorithmic_error=False)
+    a = simulate(robot, build_rows, lambda d, **kw: solver.solve(d), **run)
+    b = simulate(robot, lambda s, t: sc.acceleration_stack(s, t, "activation"),
+                 lambda s, **kw: formulations.solve(s, "extended_jacobian"), **run)
+    assert not a.failed and not b.failed
+    assert max(active) >= 1                  # the masked level had active rows
+    assert np.abs(a.q - b.q).max() < 1e-6 and np.abs(a.v - b.v).max() < 1e-5
