@@ -126,6 +126,10 @@ class TaskWriter:
     prefix), then :meth:`targets`. A writer call with a ``KinematicState(drift=False)``
     is refused at acceleration level for tasks that have a drift (frames, CoM).
 
+    A writer writes into its one :class:`~prioik.hierarchy.StackData`: use it from one
+    thread at a time (one writer per thread; the builders of :mod:`robots.tasks` keep
+    one per thread).
+
     Attributes:
         robot: The robot.
         mode: ``"velocity"`` or ``"acceleration"``.

@@ -486,3 +486,34 @@ def test_fencing_closed_loop_with_masked_activation_rows_follows_the_stack_path(
     assert not a.failed and not b.failed
     assert max(active) >= 1                  # the masked level had active rows
     assert np.abs(a.q - b.q).max() < 1e-6 and np.abs(a.v - b.v).max() < 1e-5
+
+
+def test_builders_from_several_threads_give_each_its_own_rows(robot):
+    """The builders' writers are per thread: two threads building at once get the
+    same terms as one thread alone."""
+    import threading
+    states = [_state(robot, seed) for seed in range(6)]
+    ref = Reference(np.array([0.3, 0.2, 0.9]), np.zeros(3), np.zeros(3))
+    expected = [frame_position(s, "sword_tip", ref).acceleration(25.0, 10.0).b
+                for s in states]
+    wrong = []
+
+    def run(k):
+        for j in range(400):
+            i = (k + j) % len(states)
+            b = frame_position(states[i], "sword_tip", ref).acceleration(25.0, 10.0).b
+            if not np.array_equal(b, expected[i]):
+                wrong.append(i)
+
+    import sys
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)          # switch threads as often as possible
+    try:
+        threads = [threading.Thread(target=run, args=(k,)) for k in range(3)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+    finally:
+        sys.setswitchinterval(interval)
+    assert not wrong
