@@ -9,7 +9,8 @@ from .analysis import (FeasibleSplit, LevelCheck, LexicographicReport, algorithm
                        rank_profile, singularity_distance)
 from .buffer import StackBuffer
 from .errors import TaskStackError, UnsupportedTaskError
-from .io import load_stack, save_stack, stack_from_dict, stack_to_dict
+from .io import (PeerProblem, load_lexls, load_peer, load_peer_json, load_soth, load_stack,
+                 save_stack, stack_from_dict, stack_to_dict)
 from .linalg import DEFAULT_RCOND, matrix_rank, null_space_basis, range_basis
 from .stack import PackedRows, TaskStack
 from .task import Level, Task
@@ -21,5 +22,6 @@ __all__ = [
     "feasible_split", "lexicographic_residuals", "matrix_rank", "nested_null_spaces",
     "null_space_basis", "range_basis", "rank_profile", "relative_distance",
     "singularity_distance",
+    "PeerProblem", "load_lexls", "load_peer", "load_peer_json", "load_soth",
     "load_stack", "save_stack", "stack_from_dict", "stack_to_dict",
 ]
