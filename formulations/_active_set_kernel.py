@@ -33,9 +33,12 @@ from ._extended_jacobian_kernel import _dot, _small_lstsq, _swap
 #: the same fast-math set as the extended-Jacobian kernel (no finite-math assumption)
 _FAST = {"reassoc", "contract", "nsz", "arcp"}
 
-#: a non-working row blocks the step only if it moves by more than this fraction of
-#: ``‖a_j‖ ‖p‖`` (rows that the step leaves unchanged, to rounding, never block)
+#: a non-working row blocks the step only if it moves by more than ``max(this, rcond)``
+#: times ``‖a_j‖ ‖p‖``: a row that the step leaves unchanged to rounding, or that
+#: depends on the working hard rows by the rank rule (``rcond``), never blocks
 _BLOCK_EPS = 1e-13
+#: a step shorter than this fraction of ``‖y‖`` is rounding noise and taken as zero
+_ZERO_STEP = 1e-13
 #: a step of at most this length (of the full step) counts as degenerate
 _DEGENERATE = 1e-12
 
@@ -81,11 +84,14 @@ def _reflect_row(T, i, q, w, V, beta, nref, first, last):
 
 @njit(cache=True, fastmath=_FAST)
 def _eqp(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T, rhs, norms, V, beta,
-         vpos, Lw, p):
+         vpos, Lw, p, reach):
     """One equality-constrained least-squares step from ``y``.
 
     Finds the minimum-norm step ``p`` (free coordinates ``col:``) that keeps the
-    ``nh`` working hard rows ``rows[:nh]`` at their bounds ``tgt[:nh]`` and minimises
+    ``nh`` working hard rows ``rows[:nh]`` at their bounds ``tgt[:nh]`` (``reach``: moves
+    them onto their bounds; else ``C_H p = 0``: inside an active-set iteration they are
+    on their bounds already, and correcting rounding there would move the rows that
+    depend on them) and minimises
     ``Σ (B_j (y + p) − tgt_j)²`` over the ``nw`` working soft rows ``rows[nh:nh+nw]``.
 
     The hard rows are factorized first (row-pivoted LQ, pivot on the residual norm
@@ -105,7 +111,7 @@ def _eqp(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T, rhs, norms, V,
     for i in range(nr):
         j = rows[i]
         Bj = B[j]
-        rhs[i] = tgt[i] - _dot(Bj, y)
+        rhs[i] = tgt[i] - _dot(Bj, y) if (reach or i >= nh) else 0.0
         for c in range(d):
             T[i, c] = Bj[col + c]
     nref = 0
@@ -387,7 +393,7 @@ def solve_kernel(A, b, lower, upper, sw, row_eq, starts, rcond, primal_tol, dual
                     state[j] = 0
             nh, nw = _gather(state, hard_end, s0, s1, blo, bup, rows, tgt)
             hr, rs, nref = _eqp(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T,
-                                rhs, norms, V, beta, vpos, Lw, p)
+                                rhs, norms, V, beta, vpos, Lw, p, True)
             iters[lev] += 1
             for i in range(hr, nh):
                 state[rows[i]] = 0
@@ -426,19 +432,24 @@ def solve_kernel(A, b, lower, upper, sw, row_eq, starts, rcond, primal_tol, dual
             iters[lev] += 1
             nh, nw = _gather(state, hard_end, s0, s1, blo, bup, rows, tgt)
             hr, rs, nref = _eqp(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T,
-                                rhs, norms, V, beta, vpos, Lw, p)
+                                rhs, norms, V, beta, vpos, Lw, p, False)
             for i in range(hr, nh):
                 state[rows[i]] = 0          # dependent on the kept hard rows
             pn = np.sqrt(_dot(p[:d], p[:d]))
+            if pn <= _ZERO_STEP * np.sqrt(_dot(y, y)):
+                for c in range(d):      # rounding noise: no move (and nothing blocks)
+                    p[c] = 0.0
+                pn = 0.0
             alpha = 1.0
             blk = -1
+            block_eps = max(_BLOCK_EPS, rcond)
             bside = 0
             if pn > 0.0:
                 for j in range(s1):
                     if state[j] != 0 or eqr[j] or (j >= hard_end and j < s0):
                         continue
                     cp = _dot(B[j, col:], p[:d])
-                    thr = _BLOCK_EPS * rnorm[j] * pn
+                    thr = block_eps * rnorm[j] * pn
                     if cp < -thr and np.isfinite(blo[j]):
                         a = (blo[j] - _dot(B[j], y)) / cp
                         side = -1
