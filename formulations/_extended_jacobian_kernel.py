@@ -394,16 +394,45 @@ def level_scales(A, b, starts, scales):
 
 
 @njit(cache=True, fastmath=_FAST)
-def solve_buffer(A, b, B, c, starts, scales, rcond, level_damping, singular_threshold,
-                 step_bound, x, ranks, level_mu2):
-    """Copy ``A``, ``b`` into the workspace ``B``, ``c``, take the level scales and, if
-    every value is finite, run :func:`solve_kernel`; returns whether it ran."""
-    B[:, :] = A
-    c[:] = b
+def weigh_rows(A, b, w, B, c):
+    """``B = diag(w) A``, ``c = w ∘ b`` (the level's weighted rows, into the workspace);
+    returns ``False`` when a ``√w`` is not finite and > 0."""
+    M, n = A.shape
+    ok = True
+    for i in range(M):
+        wi = w[i]
+        if not (wi > 0.0 and wi < np.inf):
+            ok = False
+        for j in range(n):
+            B[i, j] = wi * A[i, j]
+        c[i] = wi * b[i]
+    return ok
+
+
+@njit(cache=True, fastmath=_FAST)
+def level_residuals(A, b, w, starts, x, out):
+    """``out[i] = ‖w ∘ (A_i x − b_i)‖`` per level (equality rows)."""
+    for lev in range(starts.shape[0] - 1):
+        acc = 0.0
+        for i in range(starts[lev], starts[lev + 1]):
+            r = w[i] * (_dot(A[i], x) - b[i])
+            acc += r * r
+        out[lev] = np.sqrt(acc)
+
+
+@njit(cache=True, fastmath=_FAST)
+def solve_data(A, b, w, B, c, starts, scales, rcond, level_damping, singular_threshold,
+               step_bound, x, ranks, level_mu2, residuals):
+    """The prepared solve of a stack's data: weigh the rows into the workspace ``B``,
+    ``c``, take the level scales and, if every value is finite, run
+    :func:`solve_kernel` and the per-level residuals; returns whether it ran."""
+    if not weigh_rows(A, b, w, B, c):
+        return False
     if not level_scales(B, c, starts, scales):
         return False
     solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
                  step_bound, x, ranks, level_mu2)
+    level_residuals(A, b, w, starts, x, residuals)
     return True
 
 
