@@ -306,22 +306,37 @@ def solve_kernel(A, b, lower, upper, sw, row_eq, starts, rcond, primal_tol, dual
             level): iterations, :data:`FLAG_ITERATION_CAP` when the cap was hit, rank
             fixed.
         w2: Output ``k``: each level's weighted squared violation at ``x``.
+
+    Returns:
+        ``False`` (nothing solved) when a value is not valid: a non-finite entry of
+        ``A``, of an equality target or of ``√w``, ``√w ≤ 0``, a NaN bound,
+        ``lower = +inf``, ``upper = −inf`` or ``lower > upper``; the caller names it.
     """
     M, n = A.shape
     k = starts.shape[0] - 1
     for j in range(M):
         s = sw[j]
+        if not (np.isfinite(s) and s > 0.0):
+            return False
         for c in range(n):
             B[j, c] = s * A[j, c]
         if row_eq[j]:
+            if not np.isfinite(b[j]):
+                return False
             blo[j] = s * b[j]
             bup[j] = blo[j]
             eqr[j] = True
         else:
-            blo[j] = s * lower[j]
-            bup[j] = s * upper[j]
-            eqr[j] = lower[j] == upper[j]
+            lo = lower[j]
+            up = upper[j]
+            if np.isnan(lo) or np.isnan(up) or lo == np.inf or up == -np.inf or lo > up:
+                return False
+            blo[j] = s * lo
+            bup[j] = s * up
+            eqr[j] = lo == up
         rnorm[j] = np.sqrt(_dot(B[j], B[j]))
+        if not np.isfinite(rnorm[j]):
+            return False
         state[j] = 0
     for j in range(M, M + n):
         blo[j] = 0.0
@@ -600,3 +615,4 @@ def solve_kernel(A, b, lower, upper, sw, row_eq, starts, rcond, primal_tol, dual
                 e = lo - ax if ax < lo else (ax - up if ax > up else 0.0)
             acc += e * e
         w2[lev] = acc
+    return True

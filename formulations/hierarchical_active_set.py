@@ -73,9 +73,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from prioik.hierarchy import DEFAULT_RCOND, TaskStack
+from prioik.hierarchy import StackData, StackLayout, TaskStack, TaskStackError
 
 from .base import Capabilities, FormulationError, Outcome
+from .options import Option, rcond_option, validate_options
 
 try:
     from . import _active_set_kernel as _kernel
@@ -90,110 +91,69 @@ DESCRIPTION = ("exact lexicographic optimum of equality and inequality stacks: c
 CAPABILITIES = Capabilities(equalities=True, inequalities=True, weights=True,
                             needs_mass_matrix=False, exact=True)
 OPTIONS = {
-    "rcond": (DEFAULT_RCOND, "relative rank threshold (rcond·‖A_i‖_F per level, "
-                             "rcond·‖a_j‖ per hard row)"),
-    "primal_tol": (1e-10, "relative tolerance on bounds: violated when outside by more "
-                          "than primal_tol·(‖a_j‖‖x‖ + |bound|)"),
-    "dual_tol": (1e-12, "relative tolerance on the sign of a hard row's multiplier"),
-    "max_iter": (500, "iteration cap of each level (status 'approximate' when hit)"),
-    "warm_start": (True, "prepared solver: start each level from the last solve's working "
-                         "set (False: every solve cold)"),
+    "rcond": rcond_option("‖A_i‖_F (soft and fixed rows), rcond·‖a_j‖ (hard rows)"),
+    "primal_tol": Option(1e-10, "float", "relative bound tolerance: a row is violated when "
+                         "outside by more than primal_tol·(‖a_j‖‖x‖ + |bound|)",
+                         minimum=0.0, maximum=1.0, exclusive_maximum=True),
+    "dual_tol": Option(1e-12, "float", "relative tolerance on the sign of a hard row's "
+                       "multiplier", minimum=0.0, maximum=1.0, exclusive_maximum=True),
+    "max_iter": Option(500, "int", "iteration cap of each level (status 'approximate' "
+                       "naming the level when hit)", minimum=1),
+    "warm_start": Option(True, "bool", "prepared solver: start each level from the last "
+                         "solve's working set (False: every solve cold)"),
 }
 
 
-def pack(stack: TaskStack) -> tuple[np.ndarray, ...]:
-    """The stack's rows as the arrays of the layout/data API.
-
-    Returns:
-        ``(A, b, lower, upper, sqrt_weight, row_is_equality, starts)``: ``M × n``
-        rows level after level; targets of equality rows (0 elsewhere); bounds of
-        inequality rows (``±inf`` unbounded; ``b`` on equality rows); ``√w`` per row;
-        the equality flags; ``k + 1`` row offsets of the levels.
-    """
-    A, b, lo, up, sw, eq, starts = [], [], [], [], [], [], [0]
-    for level in stack.levels:
-        for t in level:
-            m = t.m
-            A.append(t.A)
-            w = np.broadcast_to(t.weight, (m,))
-            sw.append(np.sqrt(w))
-            if t.is_equality:
-                b.append(t.b)
-                lo.append(t.b)
-                up.append(t.b)
-                eq.append(np.ones(m, dtype=bool))
-            else:
-                tl, tu = t.bounds()
-                b.append(np.zeros(m))
-                lo.append(tl)
-                up.append(tu)
-                eq.append(np.zeros(m, dtype=bool))
-        starts.append(starts[-1] + level.m)
-    return (np.ascontiguousarray(np.vstack(A), dtype=np.float64),
-            np.concatenate(b).astype(np.float64), np.concatenate(lo).astype(np.float64),
-            np.concatenate(up).astype(np.float64), np.concatenate(sw).astype(np.float64),
-            np.concatenate(eq), np.array(starts, dtype=np.int64))
-
-
-def _options(options: dict) -> dict:
-    """Defaults filled in and every value checked (FormulationError naming the option)."""
-    unknown = sorted(set(options) - set(OPTIONS))
-    if unknown:
-        raise FormulationError(f"formulation {NAME!r} has no option {', '.join(unknown)}; "
-                               f"its options: {', '.join(OPTIONS)}")
-    out = {key: options.get(key, default) for key, (default, _) in OPTIONS.items()}
-    for key in ("rcond", "primal_tol", "dual_tol"):
-        try:
-            val = float(out[key])
-        except (TypeError, ValueError):
-            raise FormulationError(f"{key} must be a number, got {out[key]!r}") from None
-        if not (0.0 <= val < 1.0):     # also False for NaN
-            raise FormulationError(f"{key} must be in [0, 1), got {out[key]!r}")
-        out[key] = val
-    it = out["max_iter"]
-    if isinstance(it, bool) or not isinstance(it, (int, np.integer)) or it < 1:
-        raise FormulationError(f"max_iter must be an integer ≥ 1, got {it!r}")
-    out["max_iter"] = int(it)
-    if not isinstance(out["warm_start"], (bool, np.bool_)):
-        raise FormulationError(f"warm_start must be True or False, got {out['warm_start']!r}")
-    out["warm_start"] = bool(out["warm_start"])
-    return out
+def solve(stack: TaskStack, **options) -> Outcome:
+    """The lexicographic optimum of ``stack`` (a cold solve): :class:`Prepared` for the
+    stack's layout, then its :meth:`Prepared.solve` (see the module docstring)."""
+    opts = validate_options(NAME, OPTIONS, options, stack.n)
+    return Prepared(stack.layout, opts).solve(stack.data)
 
 
 class Prepared:
-    """A solver for one stack shape that keeps its workspaces and last active set.
+    """The active-set solver prepared for one layout: workspaces allocated once, and the
+    working set of every level kept from one solve to the next.
+
+    A :meth:`solve` is one compiled call on the data's arrays (rows weighed by ``√w``
+    into the workspace, the boundary check in the same pass, the level-by-level active
+    set, the minimum-norm tie-break and the per-level residuals). With
+    ``warm_start=True`` (default) each level first tries last solve's working set
+    (see the module docstring); the answer is the same optimum either way.
+
+    Safe to use from one thread at a time (the registry's
+    :class:`~prioik.formulations.PreparedSolver` enforces it).
 
     Args:
-        layout: The shape to solve: a :class:`~prioik.hierarchy.TaskStack` (its
-            levels' row counts and kinds; the rows themselves come with each
-            :meth:`solve`).
-        options: The formulation's options (see :data:`OPTIONS`).
+        layout: The stack layout (equality and inequality tasks).
+        options: Every option of :data:`OPTIONS`, validated.
 
     Raises:
-        FormulationError: numba missing, or an option out of range.
+        FormulationError: numba is not importable here.
     """
 
-    def __init__(self, layout: TaskStack, options: dict | None = None) -> None:
+    def __init__(self, layout: StackLayout, options: dict) -> None:
         if _kernel is None:
-            raise FormulationError(f"{NAME} needs numba: {_kernel_error}")
-        self.options = _options(dict(options or {}))
-        A, _, _, _, _, eq, starts = pack(layout)
-        self.n = int(A.shape[1])
-        self.starts = starts
-        self.row_is_equality = eq
-        self.names = tuple(level.names for level in layout.levels)
-        M, n, k = A.shape[0], self.n, len(starts) - 1
-        rows = M + n
-        self._ws = dict(
-            B=np.zeros((rows, n)), blo=np.zeros(rows), bup=np.zeros(rows),
-            rnorm=np.zeros(rows), eqr=np.zeros(rows, dtype=np.bool_),
-            state=np.zeros(rows, dtype=np.int8), saved=np.zeros(rows, dtype=np.int8),
-            T=np.zeros((rows, n)), rhs=np.zeros(rows), norms=np.zeros(rows),
-            rows=np.zeros(rows, dtype=np.int64), tgt=np.zeros(rows),
-            V=np.zeros((n, n)), beta=np.zeros(n), vpos=np.zeros(n, dtype=np.int64),
-            Vf=np.zeros((n, n)), betaf=np.zeros(n), posf=np.zeros(n, dtype=np.int64),
-            y=np.zeros(n), p=np.zeros(n), g=np.zeros(n), nu=np.zeros(rows),
-            Lw=np.zeros((rows, n)))
+            raise FormulationError(f"{NAME} needs numba: {_kernel_error}; install it with "
+                                   f"`pip install numba`")
+        self.layout = layout
+        self.rcond = float(options["rcond"])
+        self.primal_tol = float(options["primal_tol"])
+        self.dual_tol = float(options["dual_tol"])
+        self.max_iter = int(options["max_iter"])
+        self.warm_start = bool(options["warm_start"])
+        m, n, k = layout.m, layout.n, layout.k
+        rows = m + n
+        self._ws = (np.zeros((rows, n)), np.zeros(rows), np.zeros(rows), np.zeros(rows),
+                    np.zeros(rows, dtype=np.bool_), np.zeros(rows, dtype=np.int8),
+                    np.zeros(rows, dtype=np.int8), np.zeros((rows, n)), np.zeros(rows),
+                    np.zeros(rows), np.zeros(rows, dtype=np.int64), np.zeros(rows),
+                    np.zeros((n, n)), np.zeros(n), np.zeros(n, dtype=np.int64),
+                    np.zeros((n, n)), np.zeros(n), np.zeros(n, dtype=np.int64),
+                    np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(rows),
+                    np.zeros((rows, n)))
+        #: per level (and the minimum-norm level last), the working set at its optimum:
+        #: ``-1``/``+1`` a row held at its lower/upper bound, ``0`` not held
         self.warm_state = np.zeros((k + 1, rows), dtype=np.int8)
         self.warm_valid = np.zeros(k + 1, dtype=np.bool_)
         self._x = np.zeros(n)
@@ -203,66 +163,50 @@ class Prepared:
         self._w2 = np.zeros(k)
 
     def reset(self) -> None:
-        """Forget the last active set (the next solve starts cold)."""
+        """Forget the kept working sets (the next solve starts cold)."""
         self.warm_valid[:] = False
 
-    def solve(self, data: TaskStack) -> Outcome:
-        """Solve one stack of this shape (warm-started from the last solve unless
-        ``warm_start=False``).
+    def solve(self, data: StackData) -> Outcome:
+        """Solve one stack of the layout (its data; the registry checked the layout).
 
         Raises:
-            FormulationError: the stack's shape differs from the prepared one.
+            TaskStackError: a value is not valid (naming the task, level and row).
         """
-        A, b, lo, up, sw, eq, starts = pack(data)
-        if (A.shape[1] != self.n or not np.array_equal(starts, self.starts)
-                or not np.array_equal(eq, self.row_is_equality)):
-            raise FormulationError(f"{NAME}: the stack's shape (n, rows per level, kinds) "
-                                   f"differs from the prepared one")
-        return self.solve_arrays(A, b, lo, up, sw)
-
-    def solve_arrays(self, A: np.ndarray, b: np.ndarray, lower: np.ndarray,
-                     upper: np.ndarray, sqrt_weight: np.ndarray) -> Outcome:
-        """Solve from the packed arrays of :func:`pack` (shape as prepared; not
-        validated here: the caller validated the stack)."""
-        o, ws = self.options, self._ws
-        _kernel.solve_kernel(A, b, lower, upper, sqrt_weight, self.row_is_equality,
-                             self.starts, o["rcond"], o["primal_tol"], o["dual_tol"],
-                             o["max_iter"], o["warm_start"], self.warm_state, self.warm_valid,
-                             ws["B"], ws["blo"], ws["bup"], ws["rnorm"], ws["eqr"],
-                             ws["state"], ws["saved"], ws["T"], ws["rhs"], ws["norms"],
-                             ws["rows"], ws["tgt"], ws["V"], ws["beta"], ws["vpos"],
-                             ws["Vf"], ws["betaf"], ws["posf"], ws["y"], ws["p"], ws["g"],
-                             ws["nu"], ws["Lw"], self._x, self._iters, self._flags,
-                             self._ranks, self._w2)
+        L = self.layout
+        ok = _kernel.solve_kernel(data.A, data.b, data.lower, data.upper, data.sqrt_weight,
+                                  L.row_is_equality, L.starts, self.rcond, self.primal_tol,
+                                  self.dual_tol, self.max_iter, self.warm_start,
+                                  self.warm_state, self.warm_valid, *self._ws, self._x,
+                                  self._iters, self._flags, self._ranks, self._w2)
+        if not ok:
+            self.warm_valid[:] = False
+            data.check()     # names the task, level and row at fault
+            raise TaskStackError("the rows' values overflow float64: scale the tasks down")
         return self._outcome()
 
     def _outcome(self) -> Outcome:
         x = self._x.copy()
-        k = len(self.starts) - 1
+        k = self.layout.k
         w2 = self._w2.copy()
+        residuals = np.sqrt(w2)
+        scale = self.primal_tol * max(1.0, float(np.linalg.norm(x)))
         info = {"iterations": self._iters.copy(), "rank_profile": self._ranks[:k].copy(),
                 "level_violation": w2,
-                "infeasible_levels": [i for i in range(k)
-                                      if w2[i] > 0.0 and np.sqrt(w2[i]) > self.options["primal_tol"]
-                                      * max(1.0, float(np.linalg.norm(x)))],
-                "warm_start": self.options["warm_start"]}
-        capped = np.flatnonzero(self._flags == _kernel.FLAG_ITERATION_CAP).tolist()
-        if not np.isfinite(x).all():
+                "infeasible_levels": [i for i in range(k) if residuals[i] > scale],
+                "warm_start": self.warm_start}
+        if not (np.isfinite(x).all() and np.isfinite(residuals).all()):
+            self.warm_valid[:] = False
             info["message"] = "the active-set iterations produced non-finite values"
-            return Outcome(x, "failed", info)
+            return Outcome(x, "failed", info, residuals=residuals)
+        capped = np.flatnonzero(self._flags == _kernel.FLAG_ITERATION_CAP).tolist()
         if capped:
             lv = capped[0]
-            what = (f"level {lv} ({', '.join(self.names[lv])})" if lv < k
+            what = (f"level {lv} ({', '.join(self.layout.names[lv])})" if lv < k
                     else "the minimum-norm tie-break")
             info.update(capped_levels=capped, failed_level=lv,
-                        message=f"iteration cap max_iter={self.options['max_iter']} hit at "
-                                f"{what}: its working set did not settle (degenerate or "
-                                f"cycling); levels above it are optimal, x is feasible for "
-                                f"them but not certified optimal at and below it")
-            return Outcome(x, "approximate", info)
-        return Outcome(x, "optimal", info)
-
-
-def solve(stack: TaskStack, **options) -> Outcome:
-    """The lexicographic optimum of ``stack`` (cold start); see the module docstring."""
-    return Prepared(stack, options).solve(stack)
+                        message=f"iteration cap max_iter={self.max_iter} hit at {what}: its "
+                                f"working set did not settle (degenerate or cycling); the "
+                                f"levels above are optimal and x keeps their optimum, but it "
+                                f"is not certified optimal from that level down")
+            return Outcome(x, "approximate", info, residuals=residuals)
+        return Outcome(x, "optimal", info, residuals=residuals)
