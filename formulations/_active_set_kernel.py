@@ -393,6 +393,11 @@ def solve_kernel(A, b, lower, upper, sw, row_eq, starts, rcond, primal_tol, dual
                                           _tol(primal_tol, rnorm[j], ynorm, blo[j]),
                                           _tol(primal_tol, rnorm[j], ynorm, bup[j]))
         # ---- warm start: jump to the step of last time's working set if it is feasible
+        have_step = False
+        nh = 0
+        nw = 0
+        hr = 0
+        rs = 0
         if use_warm and warm_valid[lev]:
             for j in range(s1):
                 saved[j] = state[j]
@@ -427,12 +432,17 @@ def solve_kernel(A, b, lower, upper, sw, row_eq, starts, rcond, primal_tol, dual
                     feasible = False
                     break
             if feasible:
+                # the point is the step's end for this working set: go straight to the
+                # optimality test unless rows had to leave or join it
+                have_step = hr == nh
                 for j in range(s0, s1):
                     if state[j] == 0:
                         r = _dot(B[j], y)
                         state[j] = _violated_side(r, blo[j], bup[j],
                                                   _tol(primal_tol, rnorm[j], ynorm, blo[j]),
                                                   _tol(primal_tol, rnorm[j], ynorm, bup[j]))
+                        if state[j] != 0:
+                            have_step = False
             else:
                 for c in range(d):
                     y[col + c] = g[c]
@@ -440,51 +450,55 @@ def solve_kernel(A, b, lower, upper, sw, row_eq, starts, rcond, primal_tol, dual
                     state[j] = saved[j]
         # ---- primal active-set iterations
         bland = False
+        settled = False
         while True:
-            if iters[lev] >= max_iter:
-                flags[lev] = FLAG_ITERATION_CAP
-                break
-            iters[lev] += 1
-            nh, nw = _gather(state, hard_end, s0, s1, blo, bup, rows, tgt)
-            hr, rs, nref = _eqp(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T,
-                                rhs, norms, V, beta, vpos, Lw, p, False)
-            for i in range(hr, nh):
-                state[rows[i]] = 0          # dependent on the kept hard rows
-            pn = np.sqrt(_dot(p[:d], p[:d]))
-            if pn <= _ZERO_STEP * np.sqrt(_dot(y, y)):
-                for c in range(d):      # rounding noise: no move (and nothing blocks)
-                    p[c] = 0.0
-                pn = 0.0
-            alpha = 1.0
-            blk = -1
-            block_eps = max(_BLOCK_EPS, rcond)
-            bside = 0
-            if pn > 0.0:
-                for j in range(s1):
-                    if state[j] != 0 or eqr[j] or (j >= hard_end and j < s0):
-                        continue
-                    cp = _dot(B[j, col:], p[:d])
-                    thr = block_eps * rnorm[j] * pn
-                    if cp < -thr and np.isfinite(blo[j]):
-                        a = (blo[j] - _dot(B[j], y)) / cp
-                        side = -1
-                    elif cp > thr and np.isfinite(bup[j]):
-                        a = (bup[j] - _dot(B[j], y)) / cp
-                        side = 1
-                    else:
-                        continue
-                    if a < 0.0:
-                        a = 0.0
-                    if a < alpha:
-                        alpha = a
-                        blk = j
-                        bside = side
-            for c in range(d):
-                y[col + c] += alpha * p[c]
-            if blk >= 0:
-                state[blk] = bside
-                bland = alpha <= _DEGENERATE
-                continue
+            if have_step:
+                have_step = False
+            else:
+                if iters[lev] >= max_iter:
+                    flags[lev] = FLAG_ITERATION_CAP
+                    break
+                iters[lev] += 1
+                nh, nw = _gather(state, hard_end, s0, s1, blo, bup, rows, tgt)
+                hr, rs, nref = _eqp(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T,
+                                    rhs, norms, V, beta, vpos, Lw, p, False)
+                for i in range(hr, nh):
+                    state[rows[i]] = 0          # dependent on the kept hard rows
+                pn = np.sqrt(_dot(p[:d], p[:d]))
+                if pn <= _ZERO_STEP * np.sqrt(_dot(y, y)):
+                    for c in range(d):      # rounding noise: no move (and nothing blocks)
+                        p[c] = 0.0
+                    pn = 0.0
+                alpha = 1.0
+                blk = -1
+                block_eps = max(_BLOCK_EPS, rcond)
+                bside = 0
+                if pn > 0.0:
+                    for j in range(s1):
+                        if state[j] != 0 or eqr[j] or (j >= hard_end and j < s0):
+                            continue
+                        cp = _dot(B[j, col:], p[:d])
+                        thr = block_eps * rnorm[j] * pn
+                        if cp < -thr and np.isfinite(blo[j]):
+                            a = (blo[j] - _dot(B[j], y)) / cp
+                            side = -1
+                        elif cp > thr and np.isfinite(bup[j]):
+                            a = (bup[j] - _dot(B[j], y)) / cp
+                            side = 1
+                        else:
+                            continue
+                        if a < 0.0:
+                            a = 0.0
+                        if a < alpha:
+                            alpha = a
+                            blk = j
+                            bside = side
+                for c in range(d):
+                    y[col + c] += alpha * p[c]
+                if blk >= 0:
+                    state[blk] = bside
+                    bland = alpha <= _DEGENERATE
+                    continue
             bland = False
             ynorm = np.sqrt(_dot(y, y))
             # soft rows on the wrong side of their bound: release or switch sides
@@ -504,6 +518,7 @@ def solve_kernel(A, b, lower, upper, sw, row_eq, starts, rcond, primal_tol, dual
             if changed:
                 continue
             if hr == 0:
+                settled = True
                 break
             gn = _hard_multipliers(B, y, col, rows, nh, hr, nw, tgt, T, V, beta, vpos, g, nu)
             tn = 0.0
@@ -523,6 +538,7 @@ def solve_kernel(A, b, lower, upper, sw, row_eq, starts, rcond, primal_tol, dual
                         worst = wrong
                         drop = j
             if drop < 0:
+                settled = True
                 break
             state[drop] = 0
         # ---- level done: remember its working set, fix its non-zero slacks
@@ -544,8 +560,39 @@ def solve_kernel(A, b, lower, upper, sw, row_eq, starts, rcond, primal_tol, dual
                 rows[nfix] = j
                 norms[nfix] = _dot(B[j, col:], B[j, col:])
                 nfix += 1
-                state[j] = 2
+                state[j] = 5            # being fixed: rotated until its pivot is taken
         rf = 0
+        if settled and hr == 0 and nfix == nw:
+            # the last step's factorization is that of exactly these rows (no hard row
+            # was held, every held row is fixed): its reflectors are the fixing ones
+            nfix = 0
+            for t in range(rs):
+                q = col + vpos[t]
+                vf = Vf[nf, q:]
+                vt = V[t, vpos[t]:d]
+                for c in range(n - q):
+                    vf[c] = vt[c]
+                bt = beta[t]
+                betaf[nf] = bt
+                posf[nf] = q
+                for i in range(M):
+                    if state[i] == 2 or state[i] == 5:
+                        continue
+                    other = B[i, q:]
+                    f = bt * _dot(other, vf)
+                    if f != 0.0:
+                        for c in range(n - q):
+                            other[c] -= f * vf[c]
+                yq = y[q:]
+                f = bt * _dot(yq, vf)
+                for c in range(n - q):
+                    yq[c] -= f * vf[c]
+                nf += 1
+            col += rs
+            rf = rs
+            for j in range(s0, s1):
+                if state[j] == 5:
+                    state[j] = 2
         while rf < nfix and col < n:
             piv = rf
             best = norms[rf]
@@ -575,7 +622,7 @@ def solve_kernel(A, b, lower, upper, sw, row_eq, starts, rcond, primal_tol, dual
             for c in range(1, n - col):
                 tail[c] = 0.0
             for i in range(M):
-                if i == jp:
+                if i == jp or state[i] == 2:   # fixed rows above are done with
                     continue
                 other = B[i, col:]
                 f = bt * _dot(other, vf)
@@ -588,10 +635,13 @@ def solve_kernel(A, b, lower, upper, sw, row_eq, starts, rcond, primal_tol, dual
                 yq[c] -= f * vf[c]
             for i in range(rf + 1, nfix):
                 norms[i] -= B[rows[i], col] * B[rows[i], col]
+            state[jp] = 2
             nf += 1
             col += 1
             rf += 1
         ranks[lev] = rf
+        for i in range(nfix):
+            state[rows[i]] = 2
     # x = H_1 … H_F y
     for c in range(n):
         x[c] = y[c]
@@ -616,3 +666,24 @@ def solve_kernel(A, b, lower, upper, sw, row_eq, starts, rcond, primal_tol, dual
             acc += e * e
         w2[lev] = acc
     return True
+
+
+@njit(cache=True)
+def solve_data(A, b, lower, upper, sw, row_eq, starts, params, use_warm, warm_state,
+               warm_valid, fmat, fsq, fvec, ivec, bvec, eqr, x, counts, w2):
+    """:func:`solve_kernel` with its workspaces packed into a few arrays (one compiled
+    call with few arguments: numba's dispatch costs per argument).
+
+    ``params`` = ``(rcond, primal_tol, dual_tol, max_iter)``; ``fmat`` ``3 × R × n``
+    (``B``, ``T``, ``Lw``), ``fsq`` ``2 × n × n`` (``V``, ``Vf``), ``fvec`` ``12 × R``,
+    ``ivec`` ``3 × R`` (int64), ``bvec`` ``2 × R`` (int8), ``eqr`` ``R`` (bool) with
+    ``R = M + n``; ``counts`` ``3 × (k + 1)`` (iterations, flags, ranks).
+    """
+    n = A.shape[1]
+    return solve_kernel(A, b, lower, upper, sw, row_eq, starts, params[0], params[1],
+                        params[2], int(params[3]), use_warm, warm_state, warm_valid,
+                        fmat[0], fvec[0], fvec[1], fvec[2], eqr, bvec[0], bvec[1], fmat[1],
+                        fvec[3], fvec[4], ivec[0], fvec[5], fsq[0], fvec[6, :n],
+                        ivec[1, :n], fsq[1], fvec[7, :n], ivec[2, :n], fvec[8, :n],
+                        fvec[9, :n], fvec[10, :n], fvec[11], fmat[2], x, counts[0],
+                        counts[1], counts[2], w2)

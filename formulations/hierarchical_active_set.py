@@ -71,6 +71,8 @@ row that becomes active; warm along a trajectory: usually none).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from prioik.hierarchy import StackData, StackLayout, TaskStack, TaskStackError
@@ -144,22 +146,19 @@ class Prepared:
         self.warm_start = bool(options["warm_start"])
         m, n, k = layout.m, layout.n, layout.k
         rows = m + n
-        self._ws = (np.zeros((rows, n)), np.zeros(rows), np.zeros(rows), np.zeros(rows),
-                    np.zeros(rows, dtype=np.bool_), np.zeros(rows, dtype=np.int8),
-                    np.zeros(rows, dtype=np.int8), np.zeros((rows, n)), np.zeros(rows),
-                    np.zeros(rows), np.zeros(rows, dtype=np.int64), np.zeros(rows),
-                    np.zeros((n, n)), np.zeros(n), np.zeros(n, dtype=np.int64),
-                    np.zeros((n, n)), np.zeros(n), np.zeros(n, dtype=np.int64),
-                    np.zeros(n), np.zeros(n), np.zeros(n), np.zeros(rows),
-                    np.zeros((rows, n)))
+        self._params = np.array([self.rcond, self.primal_tol, self.dual_tol, self.max_iter])
+        self._fmat = np.zeros((3, rows, n))
+        self._fsq = np.zeros((2, n, n))
+        self._fvec = np.zeros((12, rows))
+        self._ivec = np.zeros((3, rows), dtype=np.int64)
+        self._bvec = np.zeros((2, rows), dtype=np.int8)
+        self._eqr = np.zeros(rows, dtype=np.bool_)
         #: per level (and the minimum-norm level last), the working set at its optimum:
         #: ``-1``/``+1`` a row held at its lower/upper bound, ``0`` not held
         self.warm_state = np.zeros((k + 1, rows), dtype=np.int8)
         self.warm_valid = np.zeros(k + 1, dtype=np.bool_)
         self._x = np.zeros(n)
-        self._iters = np.zeros(k + 1, dtype=np.int64)
-        self._flags = np.zeros(k + 1, dtype=np.int64)
-        self._ranks = np.zeros(k + 1, dtype=np.int64)
+        self._counts = np.zeros((3, k + 1), dtype=np.int64)
         self._w2 = np.zeros(k)
 
     def reset(self) -> None:
@@ -173,11 +172,11 @@ class Prepared:
             TaskStackError: a value is not valid (naming the task, level and row).
         """
         L = self.layout
-        ok = _kernel.solve_kernel(data.A, data.b, data.lower, data.upper, data.sqrt_weight,
-                                  L.row_is_equality, L.starts, self.rcond, self.primal_tol,
-                                  self.dual_tol, self.max_iter, self.warm_start,
-                                  self.warm_state, self.warm_valid, *self._ws, self._x,
-                                  self._iters, self._flags, self._ranks, self._w2)
+        ok = _kernel.solve_data(data.A, data.b, data.lower, data.upper, data.sqrt_weight,
+                                L.row_is_equality, L.starts, self._params, self.warm_start,
+                                self.warm_state, self.warm_valid, self._fmat, self._fsq,
+                                self._fvec, self._ivec, self._bvec, self._eqr, self._x,
+                                self._counts, self._w2)
         if not ok:
             self.warm_valid[:] = False
             data.check()     # names the task, level and row at fault
@@ -189,17 +188,19 @@ class Prepared:
         k = self.layout.k
         w2 = self._w2.copy()
         residuals = np.sqrt(w2)
-        scale = self.primal_tol * max(1.0, float(np.linalg.norm(x)))
-        info = {"iterations": self._iters.copy(), "rank_profile": self._ranks[:k].copy(),
+        counts = self._counts
+        xn = math.sqrt(float(x @ x))
+        tol = self.primal_tol * max(1.0, xn)
+        info = {"iterations": counts[0].copy(), "rank_profile": counts[2, :k].copy(),
                 "level_violation": w2,
-                "infeasible_levels": [i for i in range(k) if residuals[i] > scale],
+                "infeasible_levels": [i for i, r in enumerate(residuals.tolist()) if r > tol],
                 "warm_start": self.warm_start}
-        if not (np.isfinite(x).all() and np.isfinite(residuals).all()):
+        if not (math.isfinite(xn) and math.isfinite(float(w2.sum()))):
             self.warm_valid[:] = False
             info["message"] = "the active-set iterations produced non-finite values"
             return Outcome(x, "failed", info, residuals=residuals)
-        capped = np.flatnonzero(self._flags == _kernel.FLAG_ITERATION_CAP).tolist()
-        if capped:
+        if counts[1].any():
+            capped = np.flatnonzero(counts[1] == _kernel.FLAG_ITERATION_CAP).tolist()
             lv = capped[0]
             what = (f"level {lv} ({', '.join(self.layout.names[lv])})" if lv < k
                     else "the minimum-norm tie-break")
