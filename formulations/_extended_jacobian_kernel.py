@@ -421,19 +421,43 @@ def level_residuals(A, b, w, starts, x, out):
 
 
 @njit(cache=True, fastmath=_FAST)
-def solve_data(A, b, w, B, c, starts, scales, rcond, level_damping, singular_threshold,
-               step_bound, x, ranks, level_mu2, residuals):
-    """The prepared solve of a stack's data: weigh the rows into the workspace ``B``,
-    ``c``, take the level scales and, if every value is finite, run
-    :func:`solve_kernel` and the per-level residuals; returns whether it ran."""
+def solve_data(A, b, w, starts, work, params, out, ranks):
+    """The prepared solve of a stack's data, in one call with few arguments (the call's
+    cost on small stacks is mostly numba unboxing its arguments).
+
+    Weighs the rows into the workspace, takes the level scales and, if every value is
+    finite, runs :func:`solve_kernel` and the per-level residuals.
+
+    Args:
+        A, b, w: The data's rows, targets and ``√w`` (``M × n``, ``M``, ``M``).
+        starts: ``k + 1`` row offsets.
+        work: Workspace of ``M n + M + k`` floats (weighted rows, targets, scales).
+        params: ``rcond, level_damping, singular_threshold`` then the ``k`` step bounds.
+        out: Output of ``n + 2 k`` floats: ``x``, the residuals, the damping ``μ_i²``.
+        ranks: Output, ``k`` ranks.
+
+    Returns 0 when an input is not finite (nothing solved), 1 when ``x`` and the
+    residuals are finite, 2 when they are not (the caller reports a failure).
+    """
+    M, n = A.shape
+    k = starts.shape[0] - 1
+    B = work[:M * n].reshape((M, n))
+    c = work[M * n:M * n + M]
+    scales = work[M * n + M:M * n + M + k]
+    x = out[:n]
+    residuals = out[n:n + k]
+    mu2 = out[n + k:n + 2 * k]
     if not weigh_rows(A, b, w, B, c):
-        return False
+        return 0
     if not level_scales(B, c, starts, scales):
-        return False
-    solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
-                 step_bound, x, ranks, level_mu2)
+        return 0
+    solve_kernel(B, c, starts, scales, params[0], params[1], params[2], params[3:], x,
+                 ranks, mu2)
     level_residuals(A, b, w, starts, x, residuals)
-    return True
+    acc = 0.0
+    for lev in range(k):
+        acc += residuals[lev]
+    return 1 if np.isfinite(acc) else 2
 
 
 @njit(cache=True, parallel=True)

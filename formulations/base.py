@@ -52,12 +52,16 @@ class Outcome:
         info: Formulation-specific data (ranks, iterations, torques, messages).
         residuals: Per-level residuals when the plugin computed them itself (a compiled
             kernel does, from the same rows); ``None``: the registry computes them.
+        checked: The plugin guarantees that ``x`` is a finite float64 vector of the
+            right length and ``residuals`` are given (the registry then skips its own
+            checks: the compiled paths verify both in the kernel).
     """
 
     x: np.ndarray
     status: str = "optimal"
     info: dict[str, Any] = field(default_factory=dict)
     residuals: np.ndarray | None = None
+    checked: bool = False
 
 
 @dataclass

@@ -55,16 +55,28 @@ def check_support(name: str, caps: Capabilities, stack: TaskStack) -> None:
                                            task=level[0].name, level=i)
 
 
+def _step_options(name: str, module: ModuleType, n: int, given: dict) -> dict:
+    from .options import validate_options
+    declared = {k: module.OPTIONS[k] for k in given if k in module.OPTIONS}
+    unknown = sorted(set(given) - set(declared))
+    if unknown:
+        raise FormulationError(f"formulation {name!r} has no option {', '.join(unknown)}; "
+                               f"its options: {', '.join(module.OPTIONS) or 'none'}")
+    return validate_options(name, declared, given, n)
+
+
 class _StackAdapter:
     """The default prepared solver: the module's ``solve`` on the data's stack."""
+
+    accepts_step_options = True
 
     def __init__(self, name: str, module: ModuleType, options: dict) -> None:
         self._name, self._module, self._options = name, module, options
 
-    def solve(self, data: StackData) -> Outcome:
+    def solve(self, data: StackData, options: dict | None = None) -> Outcome:
         stack = data.as_stack()
         check_support(self._name, self._module.CAPABILITIES, stack)
-        return self._module.solve(stack, **self._options)
+        return self._module.solve(stack, **(options or self._options))
 
 
 class PreparedSolver:
@@ -91,12 +103,15 @@ class PreparedSolver:
         self._module = module
         self._lock = threading.Lock()
         self._n = layout.n
+        self._needs_mass_matrix = module.CAPABILITIES.needs_mass_matrix
         prepared = getattr(module, "Prepared", None)
         self._impl = (prepared(layout, options) if prepared is not None
                       else _StackAdapter(formulation, module, options))
 
     def _data(self, stack_or_data) -> StackData:
-        if isinstance(stack_or_data, StackData):
+        if type(stack_or_data) is StackData:
+            data = stack_or_data
+        elif isinstance(stack_or_data, StackData):
             data = stack_or_data
         elif isinstance(stack_or_data, TaskStack):
             data = stack_or_data.data
@@ -108,12 +123,17 @@ class PreparedSolver:
                                    f"layout {data.layout.describe()}")
         return data
 
-    def solve(self, stack_or_data) -> Solution:
+    def solve(self, stack_or_data, **step_options: Any) -> Solution:
         """Solve one stack of the layout.
 
         Args:
             stack_or_data: A :class:`~prioik.hierarchy.TaskStack` or
                 :class:`~prioik.hierarchy.StackData` of :attr:`layout`.
+            **step_options: Options that change every step (e.g. ``mass_matrix`` and
+                ``bias`` of the dynamics formulations), validated on each call and
+                merged over the prepared ones; only for formulations without a
+                prepared solver of their own (the others fix their options at
+                :func:`prioik.prepare`).
 
         Returns:
             The :class:`~prioik.formulations.Solution` (a numerical failure inside the
@@ -125,13 +145,27 @@ class PreparedSolver:
             ConcurrentUseError: another thread is using this solver.
         """
         data = self._data(stack_or_data)
+        merged = None
+        if step_options:
+            if not getattr(self._impl, "accepts_step_options", False):
+                raise FormulationError(f"formulation {self.formulation!r} fixes its options "
+                                       f"when prepared; prepare another solver for "
+                                       f"{', '.join(step_options)}")
+            merged = dict(self.options)
+            merged.update(_step_options(self.formulation, self._module, self._n,
+                                        step_options))
+        if self._needs_mass_matrix and (merged or self.options).get("mass_matrix") is None:
+            raise FormulationError(f"formulation {self.formulation!r} needs mass_matrix=M "
+                                   f"(the {self._n}x{self._n} joint-space inertia matrix, "
+                                   f"SPD)")
         if not self._lock.acquire(blocking=False):
             raise ConcurrentUseError(f"this prepared {self.formulation!r} solver is busy in "
                                      f"another thread; prepare one solver per thread")
         try:
             t0 = time.perf_counter()
             try:
-                out = self._impl.solve(data)
+                out = self._impl.solve(data) if merged is None else \
+                    self._impl.solve(data, merged)
             except (np.linalg.LinAlgError, ArithmeticError) as exc:
                 out = Outcome(np.full(self._n, np.nan), "failed",
                               {"message": f"{type(exc).__name__}: {exc}"})
@@ -141,6 +175,10 @@ class PreparedSolver:
         return self._solution(out, data, elapsed)
 
     def _solution(self, out: Outcome, data: StackData, elapsed: float) -> Solution:
+        if out.checked:     # the plugin verified x and the residuals (compiled paths)
+            if out.status in STATUSES:
+                return Solution(out.x, self.formulation, self._given, out.status,
+                                out.residuals, elapsed, out.info)
         status = out.status
         if status not in STATUSES:
             raise FormulationError(f"formulation {self.formulation!r} returned unknown "

@@ -124,16 +124,6 @@ def get(name: str) -> ModuleType:
     return mod
 
 
-def _options(name: str, mod: ModuleType, n: int, options: dict) -> dict:
-    """Every option of the plugin, validated (unknown names and bad values raise
-    :class:`FormulationError` naming the option)."""
-    opts = validate_options(name, mod.OPTIONS, options, n)
-    if mod.CAPABILITIES.needs_mass_matrix and opts.get("mass_matrix") is None:
-        raise FormulationError(f"formulation {name!r} needs mass_matrix=M "
-                               f"(the {n}x{n} joint-space inertia matrix, SPD)")
-    return opts
-
-
 def prepare(stack_or_layout, formulation: str = "extended_jacobian",
             **options: Any) -> PreparedSolver:
     """A formulation prepared for one stack layout: options validated and workspaces
@@ -146,9 +136,11 @@ def prepare(stack_or_layout, formulation: str = "extended_jacobian",
         **options: The formulation's options (see its ``OPTIONS``).
 
     Raises:
-        FormulationError: unknown/unavailable formulation, unknown, invalid or missing
-            option.
+        FormulationError: unknown/unavailable formulation, unknown or invalid option.
         UnsupportedTaskError: the layout holds a task kind the formulation cannot take.
+
+    A formulation that needs ``mass_matrix`` may get it here or with every solve
+    (``solver.solve(stack, mass_matrix=M, bias=b)``: it changes with the state).
     """
     mod = get(formulation)
     if isinstance(stack_or_layout, StackLayout):
@@ -157,7 +149,7 @@ def prepare(stack_or_layout, formulation: str = "extended_jacobian",
         layout = stack_or_layout.layout
     else:
         layout = TaskStack(stack_or_layout).layout
-    opts = _options(formulation, mod, layout.n, options)
+    opts = validate_options(formulation, mod.OPTIONS, options, layout.n)
     return PreparedSolver(formulation, mod, layout, opts, options)
 
 
