@@ -8,7 +8,8 @@ from .analysis import (FeasibleSplit, LevelCheck, LexicographicReport, algorithm
                        feasible_split, lexicographic_residuals, nested_null_spaces, relative_distance,
                        rank_profile, singularity_distance)
 from .errors import TaskStackError, UnsupportedTaskError
-from .io import load_stack, save_stack, stack_from_dict, stack_to_dict
+from .io import (PeerProblem, load_lexls, load_peer, load_peer_json, load_soth, load_stack,
+                 save_stack, stack_from_dict, stack_to_dict)
 from .linalg import DEFAULT_RCOND, matrix_rank, null_space_basis, range_basis
 from .layout import StackData, StackLayout, level_residuals
 from .stack import TaskStack
@@ -21,5 +22,6 @@ __all__ = [
     "feasible_split", "lexicographic_residuals", "matrix_rank", "nested_null_spaces",
     "null_space_basis", "range_basis", "rank_profile", "relative_distance",
     "singularity_distance",
+    "PeerProblem", "load_lexls", "load_peer", "load_peer_json", "load_soth",
     "load_stack", "save_stack", "stack_from_dict", "stack_to_dict",
 ]
