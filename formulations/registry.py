@@ -39,6 +39,7 @@ PLUGINS: dict[str, tuple[str, str]] = {
     "cvxpy": ("prioik.formulations.cvxpy_", "cvxpy"),
     "placo": ("prioik.formulations.placo_", "placo==0.10.2 pin==3.8.0"),
     "daqp_hierarchical": ("prioik.formulations.daqp_hierarchical", "daqp"),
+    "sns": ("prioik.formulations.sns", ""),
 }
 
 _loaded: dict[str, ModuleType] = {}
