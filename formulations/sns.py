@@ -21,7 +21,7 @@ null-space projection (no bounds).
 
 **Algorithm** (per task ``k``, with ``x_{k-1}`` the answer of the higher tasks and
 ``P_{k-1}`` the orthogonal projector onto the null space of ``J_1 … J_{k-1}``;
-``x_0 = clip(0, lower, upper)``, ``P_0 = I``)::
+``x_0 = 0``, ``P_0 = I``)::
 
     W = I (free joints), x_N = 0 (values of the saturated joints), s* = best scale
     repeat
@@ -42,7 +42,8 @@ null-space projection (no bounds).
 Only the task's own target is scaled (the correction ``−J_k x_{k-1}`` is not, as in
 the T-RO algorithm). When no scale in ``[0, 1]`` is feasible for any saturation set,
 the task is dropped (``s = 0``, ``x = x_{k-1}``): the higher tasks' answer, which is
-within the bounds, is kept. Each level's answer is checked against the bounds before
+within the bounds, is kept (for the first task, whose ``x_0 = 0`` may be outside a box
+that excludes 0, ``x = clip(0, lower, upper)``). Each level's answer is checked against the bounds before
 it is accepted, so the returned ``x`` is always within them (to ``bound_tolerance``).
 
 Differences from the papers, on purpose: a task is a whole level of the stack (its
@@ -181,7 +182,7 @@ def solve(stack: TaskStack, *, rcond: float = DEFAULT_RCOND, bound_tolerance: fl
     tol = float(bound_tolerance) * np.maximum(1.0, np.maximum(
         np.nan_to_num(np.abs(lower), posinf=0.0), np.nan_to_num(np.abs(upper), posinf=0.0)))
     eye = np.eye(n)
-    x = np.clip(np.zeros(n), lower, upper)
+    x = np.zeros(n)              # may lie outside the box (braking bounds): see the drop case
     P = eye.copy()
     levels = stack.levels[1:] if bounds_level == 0 else stack.levels
     first = 1 if bounds_level == 0 else 0
@@ -245,9 +246,9 @@ def solve(stack: TaskStack, *, rcond: float = DEFAULT_RCOND, bound_tolerance: fl
                 if best[1] is not None and best[0] > 0.0:
                     s_level, x_new = best
                 else:
-                    s_level, x_new = 0.0, x
-        if not feasible(x_new):          # round-off or an unreachable saturation
-            s_level, x_new = 0.0, x
+                    s_level, x_new = 0.0, None
+        if x_new is None or not feasible(x_new):   # dropped (or round-off)
+            s_level, x_new = 0.0, (x if feasible(x) else np.clip(x, lower, upper))
         res = float(np.linalg.norm(J @ x_new - b))
         if res > res_free + 1e-9 * max(1.0, float(np.linalg.norm(b))):
             exact = False
