@@ -67,7 +67,7 @@ def panda() -> RobotModel:
                       str(path), floating_base=False)
 
 
-@dataclass
+@dataclass(repr=False)
 class ArmScenario(Scenario):
     """The arm-reach scenario; see the module docstring.
 
