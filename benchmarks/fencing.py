@@ -403,7 +403,7 @@ def format_table(variant: str, runs: dict[str, dict], phases: dict[str, tuple],
     head = (f"{'run':<26} {'tip final':>10} {'alg err':>9} {c3:>9} {c4:>9} "
             f"{'JL viol':>9} {'max|q̈|':>9} {'kin ms':>7} {'solve ms':>8} {'tau ms':>7} "
             f"{'step ms':>8}  status")
-    lines = [f"{scenario} — {variant}", head, "-" * len(head)]
+    lines = [f"{scenario} — {variant}{'' if arm else ' tasks'}", head, "-" * len(head)]
 
     def f(x, width=9):
         return f"{x:>{width}.2e}" if x is not None else f"{'—':>{width}}"
