@@ -50,21 +50,14 @@ TOOL = "panda_hand_tcp"
 
 
 def panda() -> RobotModel:
-    """The Panda with its fingers locked open (``n_q = n_v = 7``, fixed base)."""
+    """The Panda with its fingers locked (``n_q = n_v = 7``, fixed base), ``q0`` the
+    ready posture: :func:`robots.from_urdf` with ``locked_joints=PANDA_FINGERS``."""
+    from .models import PANDA_FINGERS, from_urdf
     path = example_robot_data_dir() / PANDA_URDF
-    if not path.is_file():
-        from .models import ModelNotFoundError
-        raise ModelNotFoundError(f"{PANDA_URDF} is not in example-robot-data at {path.parent}")
-    full = pin.buildModelFromUrdf(str(path))
-    q_full = pin.neutral(full)
-    q_full[:7] = PANDA_READY
-    fingers = [full.getJointId(j) for j in ("panda_finger_joint1", "panda_finger_joint2")]
-    for j in fingers:
-        q_full[full.joints[j].idx_q] = 0.04
-    model = pin.buildReducedModel(full, fingers, q_full)
-    return RobotModel("panda", model, np.array(PANDA_READY, dtype=float),
-                      {"tool": TOOL, "hand": "panda_hand", "base": "panda_link0"},
-                      str(path), floating_base=False)
+    names = [f"panda_joint{i}" for i in range(1, 8)]
+    return from_urdf(path, floating_base=False, locked_joints=PANDA_FINGERS,
+                     q0=dict(zip(names, PANDA_READY)), name="panda",
+                     frames={"tool": TOOL, "hand": "panda_hand", "base": "panda_link0"})
 
 
 @dataclass(repr=False)
