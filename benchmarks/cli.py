@@ -11,6 +11,8 @@ import numpy as np
 #: modules that contribute a sub-command through ``add_parser(subparsers)``
 SUBCOMMAND_MODULES = [
     "prioik.benchmarks.fencing",
+    "prioik.benchmarks.arm",
+    "prioik.benchmarks.results",
     "prioik.benchmarks.compare",
     "prioik.benchmarks.bench",
     "prioik.benchmarks.properties",

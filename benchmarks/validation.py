@@ -318,8 +318,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def _arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--n-stacks", type=int, default=200, help="stacks per family (default 200)")
-    p.add_argument("--out", type=Path, default=Path("docs/validation.md"),
-                   help="markdown file to write (default docs/validation.md)")
+    p.add_argument("--out", type=Path, default=Path("results/validation.md"),
+                   help="markdown file to write (default results/validation.md; the "
+                        "repository's page is regenerated with --out docs/validation.md)")
     p.add_argument("--families", default=",".join(EQUALITY_FAMILY_NAMES + INEQUALITY_FAMILY_NAMES),
                    help="comma-separated family names")
     p.add_argument("--formulations", default="", help="comma-separated names (default: all)")

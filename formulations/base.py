@@ -91,3 +91,24 @@ class Solution:
     def ok(self) -> bool:
         """``True`` unless the status is ``"failed"``."""
         return self.status != "failed"
+
+    def __repr__(self) -> str:
+        x = np.asarray(self.x)
+        head = np.array2string(x[:4], precision=4, separator=", ")[1:-1]
+        more = f", … ({x.size} values)" if x.size > 4 else ""
+        res = np.array2string(np.asarray(self.residuals), precision=2, separator=", ",
+                              threshold=8)
+        return (f"Solution({self.formulation!r}, {self.status}, x=[{head}{more}], "
+                f"residuals={res}, {1e6 * self.time_s:.1f} µs)")
+
+    def _repr_html_(self) -> str:
+        from html import escape
+        rows = [("formulation", self.formulation), ("status", self.status),
+                ("x", f"{np.asarray(self.x).size} values, ‖x‖ = "
+                      f"{float(np.linalg.norm(self.x)):.4g}"),
+                ("residuals", np.array2string(np.asarray(self.residuals), precision=3)),
+                ("time", f"{1e6 * self.time_s:.1f} µs"),
+                ("options", repr(self.options)), ("info", ", ".join(self.info) or "—")]
+        body = "".join(f"<tr><th style='text-align:left'>{escape(k)}</th>"
+                       f"<td>{escape(v)}</td></tr>" for k, v in rows)
+        return f"<table><caption>Solution</caption>{body}</table>"

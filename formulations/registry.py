@@ -43,6 +43,7 @@ PLUGINS: dict[str, tuple[str, str]] = {
     "placo": ("prioik.formulations.placo_", "placo==0.10.2 pin==3.8.0"),
     "daqp_hierarchical": ("prioik.formulations.daqp_hierarchical", "daqp"),
     "hierarchical_active_set": ("prioik.formulations.hierarchical_active_set", "numba"),
+    "sns": ("prioik.formulations.sns", ""),
 }
 
 _loaded: dict[str, ModuleType] = {}

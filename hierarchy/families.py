@@ -283,3 +283,28 @@ INEQUALITY_FAMILIES: dict[str, Callable[[np.random.Generator, int, int], TaskSta
     "with_inequalities": with_inequalities,
     "infeasible_inequality": infeasible_inequality,
 }
+
+
+def box_bounded(rng: np.random.Generator, n: int, k: int, target_scale: float = 1.0,
+                offset: bool = False) -> TaskStack:
+    """Hard box bounds on top of equality tasks: the stacks of joint-limited IK.
+
+    Level 1 is ``box`` (``l ≤ x ≤ u``; ``−u ≤ x ≤ u`` with ``u ∈ [0.2, 1.5]``, or with
+    ``offset`` a box that may exclude 0, as braking bounds at acceleration level do);
+    then ``k`` equality levels of 1-3 random rows whose targets have norms about
+    ``target_scale`` × U(0.2, 2) — small scales leave the bounds inactive, large ones
+    make the tasks infeasible within the box. Used by the SNS tests against the QP
+    cascade; not in :data:`INEQUALITY_FAMILIES` (the validation report's set).
+    """
+    k = max(1, k)
+    u = rng.uniform(0.2, 1.5, n)
+    lo = -u
+    if offset:
+        shift = rng.uniform(-1.0, 1.0, n) * u
+        lo, u = lo + shift, u + shift
+    levels = [Task("box", np.eye(n), lower=lo, upper=u)]
+    for i in range(k):
+        m = int(rng.integers(1, 4))
+        levels.append(Task(f"task{i}", rng.standard_normal((m, n)),
+                           target_scale * rng.uniform(0.2, 2.0) * rng.standard_normal(m)))
+    return TaskStack(levels)

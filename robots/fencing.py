@@ -39,6 +39,7 @@ from prioik.hierarchy import StackData, TaskStack
 from .models import RobotModel, g1
 from .references import Reference, Waypoints, minimum_jerk, minimum_jerk_profile
 from .rows import TaskWriter
+from .scenario import BaselineTask, Scenario
 from .simulate import StepTasks
 from .tasks import (JointLimitActivation, KinematicState, com_position, contact,
                     frame_pose, frame_position, joint_limit_bounds, joint_limit_rows,
@@ -54,9 +55,10 @@ LEVEL_NAMES = ("support_foot", "joint_limits", "com", "left_foot", "sword_tip", 
 SWORD_LENGTH = 0.5
 
 
-@dataclass
-class FencingScenario:
-    """The fencing scenario: robot, references and gains; builds each step's stack.
+@dataclass(repr=False)
+class FencingScenario(Scenario):
+    """The fencing scenario: robot, references and gains; builds each step's stack
+    (the :class:`~robots.scenario.Scenario` interface).
 
     Attributes:
         variant: ``"compatible"`` or ``"incompatible"``.
@@ -70,6 +72,11 @@ class FencingScenario:
         bound_horizon: Horizon ``T`` of the inequality form (s).
         with_posture: Include the lowest ``posture`` level.
     """
+
+    name = "fencing"
+    variants = VARIANTS
+    tip_frame = "sword_tip"
+    default_duration = 3.0
 
     variant: str = "compatible"
     robot: RobotModel | None = None
@@ -185,7 +192,9 @@ class FencingScenario:
 
         Args:
             limits: ``"activation"`` (equality rows; level omitted when no joint is
-                near a limit) or ``"bounds"`` (inequality on ``q̈``).
+                near a limit), ``"bounds"`` (inequality on ``q̈``, level 1) or
+                ``"hard_bounds"`` (the same bounds as level 0, above the support
+                foot: the form SNS takes).
             dt: Control step, for the velocity part of the bounds.
         """
         terms = self.terms(state, t)
@@ -197,8 +206,11 @@ class FencingScenario:
                 levels.append(jl)
         elif limits == "bounds":
             levels.append(joint_limit_bounds(state, self.bound_horizon, dt))
+        elif limits == "hard_bounds":
+            levels.insert(0, joint_limit_bounds(state, self.bound_horizon, dt))
         else:
-            raise ValueError(f"limits must be 'activation' or 'bounds', got {limits!r}")
+            raise ValueError(f"limits must be 'activation', 'bounds' or 'hard_bounds', "
+                             f"got {limits!r}")
         for name in ("com", "left_foot", "sword_tip"):
             levels.append(terms[name].acceleration(*g[name]))
         n_tasks = len(levels)
@@ -213,7 +225,8 @@ class FencingScenario:
         Args:
             gain: ``K`` of every task but the posture (which keeps its ``K_p``).
             limits: ``"bounds"`` for position/velocity bounds on ``q̇``
-                (``q + q̇ dt`` within limits, ``|q̇| ≤ q̇_max``), ``"none"`` to omit.
+                (``q + q̇ dt`` within limits, ``|q̇| ≤ q̇_max``) at level 1,
+                ``"hard_bounds"`` for the same at level 0, ``"none"`` to omit.
             dt: Step used by the bounds.
         """
         terms = self.terms(state, t)
@@ -221,8 +234,11 @@ class FencingScenario:
         levels = [terms["support_foot"].velocity(k["support_foot"])]
         if limits == "bounds":
             levels.append(joint_velocity_bounds(state, dt))
+        elif limits == "hard_bounds":
+            levels.insert(0, joint_velocity_bounds(state, dt))
         elif limits != "none":
-            raise ValueError(f"limits must be 'bounds' or 'none', got {limits!r}")
+            raise ValueError(f"limits must be 'bounds', 'hard_bounds' or 'none', "
+                             f"got {limits!r}")
         for name in ("com", "left_foot", "sword_tip"):
             levels.append(terms[name].velocity(k[name]))
         n_tasks = len(levels)
@@ -238,6 +254,50 @@ class FencingScenario:
         if self.with_posture:
             out["posture"] = self.gains["posture"][0]
         return out
+
+    # ------------------------------------------------------------ baselines
+    def baseline_tasks(self) -> list[BaselineTask]:
+        """Hard support foot and CoM, soft left foot and sword tip (weight 1), soft
+        posture (1e-4): the mapping of ``benchmarks/placo_baseline.py``."""
+        out = [BaselineTask("support_foot", "frame", self.robot.frames["right_foot"], 0,
+                            hard=True),
+               BaselineTask("com", "com_xy", None, 1, hard=True),
+               BaselineTask("left_foot", "frame", self.robot.frames["left_foot"], 2),
+               BaselineTask("sword_tip", "position", "sword_tip", 3)]
+        if self.with_posture:
+            out.append(BaselineTask("posture", "posture", None, 4, weight=1e-4))
+        return out
+
+    def baseline_target(self, name: str, t: float):
+        if name == "support_foot":
+            return np.array(self.right_foot0.homogeneous)
+        if name == "com":
+            return self.com_ref(t).x
+        if name == "left_foot":
+            T = np.array(self.left_foot0.homogeneous)
+            T[:3, 3] = self.left_foot_ref(t).x
+            return T
+        if name == "sword_tip":
+            return self.tip_ref(t).x
+        if name == "posture":
+            return self.robot.q0.copy()
+        raise KeyError(f"the fencing scenario has no baseline task {name!r}")
+
+    def markers(self, t: float) -> dict[str, np.ndarray]:
+        """The sword target and the tip's reference."""
+        return {"target": self.target.copy(), "reference": self.tip_ref(t).x}
+
+    def urdf_text(self) -> str:
+        """The G1 URDF with a ``sword_tip`` link fixed 0.5 m along the left hand's x."""
+        from pathlib import Path
+        text = Path(self.robot.source).read_text()
+        extra = (f'  <link name="sword_tip"/>\n'
+                 f'  <joint name="sword_tip_joint" type="fixed">\n'
+                 f'    <parent link="{self.robot.frames["left_hand"]}"/>\n'
+                 f'    <child link="sword_tip"/>\n'
+                 f'    <origin xyz="{SWORD_LENGTH} 0 0" rpy="0 0 0"/>\n  </joint>\n')
+        end = text.rindex("</robot>")
+        return text[:end] + extra + text[end:]
 
     # ------------------------------------------------------- preallocated rows
     def velocity_rows(self, gain: float = 10.0, limits: str = "none",
