@@ -85,6 +85,7 @@ import scipy.sparse as spa
 from prioik.hierarchy import DEFAULT_RCOND, TaskStack
 
 from .base import Capabilities, FormulationError, Outcome
+from .base import certify as certify_outcome
 
 NAME = "cascaded_qp"
 DESCRIPTION = "one QP per level through qpsolvers (Kanoun et al. 2011), any back-end"
@@ -128,6 +129,8 @@ OPTIONS = {
                             "(damped least squares within the optimal set above)"),
     "infeasibility_tol": (1e-7, "an inequality task counts as violated above this "
                                 "(relative to max(1, ‖A_t‖_F‖x‖))"),
+    "certify": (True, "'optimal' only when the answer passes check_lexicographic "
+                      "(DEFAULT_CERTIFICATE_TOL, minimum-norm tie-break), else 'approximate'"),
 }
 
 FIXINGS = ("basis", "rows", "nullspace")
@@ -208,14 +211,20 @@ class LevelRows:
 
 
 def level_rows(level) -> LevelRows:
-    """Split a :class:`~hierarchy.Level` into weighted equality and inequality rows."""
+    """Split a :class:`~hierarchy.Level` into weighted equality and inequality rows.
+
+    Inequality rows without a finite bound, and zero rows (whose violation no ``x``
+    changes), are left out.
+    """
     n = level[0].n
     A_in, lo, up, w, names = [], [], [], [], []
     for t in level:
         if t.is_equality:
             continue
         tl, tu = t.bounds()
-        keep = np.isfinite(tl) | np.isfinite(tu)
+        # a zero row has a fixed violation (0 ∉ [l, u] stays violated whatever x is):
+        # it stays in the level's ‖w_i‖² but not in the QP, where normalising it gave NaN
+        keep = (np.isfinite(tl) | np.isfinite(tu)) & np.any(t.A != 0.0, axis=1)
         A_in.append(t.A[keep])
         lo.append(tl[keep])
         up.append(tu[keep])
@@ -625,7 +634,8 @@ def run_cascade(stack: TaskStack, solve_qp, *, fixing: str, metric, rcond: float
     for j, level in enumerate(stack.levels):
         rows = level_rows(level)
         if rows.A_eq.shape[0] == 0 and rows.A_in.shape[0] == 0:
-            info["levels"].append({"level": j, "skipped": "no finite bound"})
+            info["levels"].append({"level": j, "skipped": "no row with a finite bound that "
+                                                          "x can change"})
             fixed.tasks += list(level.names)
             continue
         scale = float(rows.A_eq.shape[0] + rows.A_in.shape[0])   # ‖A‖_F² after scaling
@@ -656,7 +666,8 @@ def solve(stack: TaskStack, *, solver: str = DEFAULT_SOLVER, tolerance: float | 
           backend_options: dict | None = None, fixing: str = "basis", metric=None,
           rcond: float = DEFAULT_RCOND, regularization: float | None = None,
           on_infeasible: str = "relax", infeasibility_tol: float = 1e-7,
-          margin: float = 0.0, fix_active: bool = True, level_damping=None) -> Outcome:
+          margin: float = 0.0, fix_active: bool = True, level_damping=None,
+          certify: bool = True) -> Outcome:
     """Solve the stack by one QP per level plus a regularisation level.
 
     See the module docstring; every option is listed in :data:`OPTIONS`.
@@ -681,4 +692,6 @@ def solve(stack: TaskStack, *, solver: str = DEFAULT_SOLVER, tolerance: float | 
                       margin=float(margin), fix_active=bool(fix_active),
                       level_damping=level_damping)
     out.info["settings"] = settings
+    if certify and level_damping is None:
+        out = certify_outcome(stack, out, metric=metric)
     return out

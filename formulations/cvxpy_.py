@@ -32,6 +32,7 @@ import numpy as np
 from prioik.hierarchy import DEFAULT_RCOND, TaskStack
 
 from .base import Capabilities, FormulationError, Outcome
+from .base import certify as certify_outcome
 from .cascaded_qp import (ACTIVE_TOL, MULTIPLIER_TOL, Fixed, _unit_rows, level_rows,
                           record_level, scaled_level)
 
@@ -63,6 +64,8 @@ OPTIONS = {
     "on_infeasible": ("relax", "'relax': least-violation answer; 'fail': failed status"),
     "infeasibility_tol": (1e-7, "an inequality task counts as violated above this "
                                 "(relative to max(1, ‖A_t‖_F‖x‖))"),
+    "certify": (True, "'optimal' only when the answer passes check_lexicographic "
+                      "(DEFAULT_CERTIFICATE_TOL, minimum-norm tie-break), else 'approximate'"),
 }
 
 
@@ -99,7 +102,7 @@ def _solve(problem: cp.Problem, solver: str, settings: dict) -> tuple[str, str]:
 def solve(stack: TaskStack, *, solver: str = DEFAULT_SOLVER, backend_options: dict | None = None,
           fixing: str = "basis", metric=None, rcond: float = DEFAULT_RCOND,
           margin: float = 0.0, on_infeasible: str = "relax",
-          infeasibility_tol: float = 1e-7) -> Outcome:
+          infeasibility_tol: float = 1e-7, certify: bool = True) -> Outcome:
     """Solve the stack level by level with cvxpy; see the module docstring."""
     available = backends()
     if not isinstance(solver, str) or solver.upper() not in available:
@@ -193,5 +196,6 @@ def solve(stack: TaskStack, *, solver: str = DEFAULT_SOLVER, backend_options: di
     if status == cp.OPTIMAL_INACCURATE:
         info["inaccurate_levels"].append(len(stack))
     info["levels"].append({"level": "regularisation", "status": status})
-    return Outcome(np.asarray(x.value, dtype=np.float64),
-                   "approximate" if info["inaccurate_levels"] else "optimal", info)
+    out = Outcome(np.asarray(x.value, dtype=np.float64),
+                  "approximate" if info["inaccurate_levels"] else "optimal", info)
+    return certify_outcome(stack, out, metric=metric) if certify else out
