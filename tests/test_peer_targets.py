@@ -1,5 +1,5 @@
-"""The recorded per-level ‖w_i‖² targets of the peer cases (tests/data/peer/targets.json,
-written by tests/data/peer/compute_targets.py): trusted, complete, reproducible."""
+"""The recorded per-level ‖w_i‖² targets of the peer cases (tests/data/peer_targets.json,
+written by tests/data/compute_peer_targets.py): trusted, complete, reproducible."""
 
 import json
 import re
@@ -13,13 +13,13 @@ from prioik import formulations
 from prioik.hierarchy import check_lexicographic, lexicographic_residuals, load_peer, load_soth
 
 PEER = Path(__file__).parent / "data" / "peer"
-TARGETS = json.loads((PEER / "targets.json").read_text())
+TARGETS = json.loads((PEER.parent / "peer_targets.json").read_text())
 
 
 def _problems():
     out = {}
     for path in sorted(PEER.iterdir()):
-        if path.suffix in (".dat", ".txt", ".json") and path.name != "targets.json":
+        if path.suffix in (".dat", ".txt", ".json"):
             probs = load_soth(path, problems=[0, 1]) if path.name == "soth_new.txt" \
                 else load_peer(path)
             out.update({p.name: p for p in probs})

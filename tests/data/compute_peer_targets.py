@@ -1,6 +1,6 @@
-"""Compute which peer cases have trusted per-level ‖w_i‖² targets; writes targets.json.
+"""Compute which peer cases have trusted per-level ‖w_i‖² targets; writes peer_targets.json.
 
-Run from the repository root: ``.venv/bin/python tests/data/peer/compute_targets.py``.
+Run from the repository root: ``.venv/bin/python tests/data/compute_peer_targets.py``.
 
 A case's targets are trusted when
 
@@ -27,7 +27,8 @@ import numpy as np
 from prioik import formulations
 from prioik.hierarchy import check_lexicographic, lexicographic_residuals, load_peer, load_soth
 
-HERE = Path(__file__).parent
+HERE = Path(__file__).parent / "peer"
+OUT = Path(__file__).parent / "peer_targets.json"
 AGREE = 1e-9
 SOLVERS = (("cascaded_qp", {"solver": "quadprog"}), ("cascaded_qp", {"solver": "proxqp"}),
            ("cascaded_qp", {"solver": "clarabel", "tolerance": 1e-12}),
@@ -37,7 +38,7 @@ SOLVERS = (("cascaded_qp", {"solver": "quadprog"}), ("cascaded_qp", {"solver": "
 def problems():
     out = []
     for path in sorted(HERE.iterdir()):
-        if path.suffix not in (".dat", ".txt", ".json") or path.name == "targets.json":
+        if path.suffix not in (".dat", ".txt", ".json"):
             continue
         out += load_soth(path, problems=[0, 1]) if path.name == "soth_new.txt" else load_peer(path)
     return out
@@ -83,7 +84,7 @@ def record(p) -> dict:
 
 def main() -> None:
     out = {p.name: record(p) for p in problems()}
-    (HERE / "targets.json").write_text(json.dumps(out, indent=1) + "\n")
+    OUT.write_text(json.dumps(out, indent=1) + "\n")
     for name, rec in out.items():
         print(f"{name:22s} {rec['trust']!s:9s} {rec.get('solvers', rec.get('reason', ''))}")
 
