@@ -296,6 +296,12 @@ def report(n_stacks: int, families: list[str], n_range, k_range, include_cvxpy_b
     elapsed = time.perf_counter() - t0
     cmd = (f"prioik validate --n-stacks {n_stacks} --n-min {n_range[0]} --n-max {n_range[1]} "
            f"--k-min {k_range[0]} --k-max {k_range[1]}")
+    if list(families) != list(EQUALITY_FAMILY_NAMES + INEQUALITY_FAMILY_NAMES):
+        cmd += f" --families {','.join(families)}"
+    if not ablations:
+        cmd += " --no-ablations"
+    if only:
+        cmd += f" --formulations {','.join(only)}"
     header = [
         "# Validation report",
         "",
