@@ -33,8 +33,7 @@ from .references import Reference, minimum_jerk
 from .scenario import BaselineTask, Scenario
 from .simulate import StepTasks
 from .tasks import (JointLimitActivation, KinematicState, frame_orientation, frame_position,
-                    joint_limit_bounds, joint_limit_rows, joint_limit_violation, posture,
-                    _actuated_positions)
+                    joint_limit_bounds, joint_limit_rows, joint_limit_violation, posture)
 
 __all__ = ["ArmScenario", "TARGETS", "PANDA_URDF", "panda", "ACCELERATION_LIMITS"]
 
@@ -163,7 +162,8 @@ class ArmScenario(Scenario):
         acceleration limit enters only through the braking term; 0 is inside the box
         whenever ``q`` is within its limits."""
         lo, hi, vmax = self.robot.joint_limits()
-        q = _actuated_positions(state)
+        idx = self.robot.actuated_q_index()          # a fixed-base arm: every joint
+        q = np.where(idx >= 0, state.q[np.maximum(idx, 0)], 0.0)
         d_lo, d_hi = np.maximum(q - lo, 0.0), np.maximum(hi - q, 0.0)
         lower = np.maximum.reduce([(lo - q) / dt, -vmax, -np.sqrt(2 * self.amax * d_lo)])
         upper = np.minimum.reduce([(hi - q) / dt, vmax, np.sqrt(2 * self.amax * d_hi)])
