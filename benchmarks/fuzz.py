@@ -16,16 +16,18 @@ and runs every fuzzed path on each. A path fails a case when:
   :func:`hierarchy.check_lexicographic`;
 * ``uncertified`` — the status is ``optimal`` on any equality stack but
   :func:`~hierarchy.check_lexicographic` rejects ``x``;
-* ``mismatch`` — ``solve_batch`` (on the stack and two same-shape variants) or the
-  preallocated solver disagree with ``solve``: their statuses differ, or on a
+* ``mismatch`` — ``solve_batch`` (on the stack and two same-shape variants) or one
+  prepared solver (:func:`prioik.prepare`) reused over those stacks disagree with
+  one-off ``solve`` calls: their statuses differ, or on a
   well-conditioned stack their answers differ by more than
   ``MATCH_TOL / min_sigma`` (at most :data:`WRONG_TOL`; ``min_sigma`` is the smallest
   kept ``σ / ‖A_i‖_F``, by which a level amplifies rounding), or on
   another stack two answers both called ``optimal`` differ by more than
   :data:`WRONG_TOL` (rounding amplified by an ill-conditioned level may separate
   them by more than ``MATCH_TOL``, not by more than an ``optimal`` answer may err);
-* ``threads`` — the same solves run concurrently from several threads (one shared
-  solver object where the path has one) differ from the serial answers.
+* ``threads`` — the same solve run from several threads differs from the serial
+  answer: on one shared prepared solver (which may refuse a concurrent call with
+  ``ConcurrentUseError``, never answer wrongly) and on one prepared solver per thread.
 
 Every failing case is saved as ``DIR/<kind>-<seed>-<index>.json``
 (:func:`hierarchy.save_stack` format, so ``prioik solve`` reloads it) with the
@@ -47,7 +49,8 @@ import numpy as np
 
 from prioik import formulations
 from prioik.formulations import FormulationError
-from prioik.hierarchy import (StackBuffer, TaskStack, TaskStackError, check_lexicographic,
+from prioik.formulations import ConcurrentUseError
+from prioik.hierarchy import (TaskStack, TaskStackError, check_lexicographic,
                               relative_distance, save_stack)
 from prioik.hierarchy.families import same_shape_batch
 from prioik.hierarchy.fuzz import FuzzCase, equality_case, inequality_case
@@ -71,13 +74,12 @@ class Path_:
     formulation: str
     options: dict
     kinds: tuple[str, ...] = ("equality",)
-    buffer: bool = False          # compare with BufferSolver (extended_jacobian qr numba)
 
 
 #: The paths ``prioik fuzz`` runs by default.
 PATHS: dict[str, Path_] = {p.name: p for p in (
     Path_("reference", "reference", {}),
-    Path_("ej_qr_numba", "extended_jacobian", {"kernel": "numba"}, buffer=True),
+    Path_("ej_qr_numba", "extended_jacobian", {"kernel": "numba"}),
     Path_("ej_qr_lapack", "extended_jacobian", {"kernel": "lapack"}),
     Path_("ej_svd", "extended_jacobian", {"nullspace": "svd"}),
     Path_("nullspace", "nullspace", {}),
@@ -153,16 +155,6 @@ def draw(kind: str, seed: int, index: int, sizes: dict | None = None) -> FuzzCas
     return _case(kind, seed, index, sizes)
 
 
-def _buffer_of(stack: TaskStack) -> StackBuffer:
-    """The stack's weighted equality rows in a :class:`StackBuffer` (one task a level)."""
-    buf = StackBuffer(stack.n, [[(f"level{i}", level.m)] for i, level in enumerate(stack)])
-    for i, level in enumerate(stack):
-        A, b = buf.rows(f"level{i}")
-        A[:] = level.A
-        b[:] = level.b
-    return buf
-
-
 def _solve(path: Path_, stack: TaskStack):
     return formulations.solve(stack, path.formulation, **path.options)
 
@@ -220,8 +212,8 @@ class _Runner:
                               f"{cert.first_failure.level}")
             if check_batch:
                 self._compare_batch(case_id, case, path, sol)
-            if path.buffer:
-                self._compare_buffer(case_id, case, path, sol)
+            if check_batch:
+                self._compare_prepared(case_id, case, path, sol)
             if check_threads:
                 self._compare_threads(case_id, case, path, sol)
 
@@ -265,38 +257,53 @@ class _Runner:
                           f"solve_batch row {j} vs solve: {why}")
                 return
 
-    def _compare_buffer(self, case_id, case, path, sol) -> None:
-        from prioik.formulations.extended_jacobian import BufferSolver
+    def _compare_prepared(self, case_id, case, path, sol) -> None:
+        """One prepared solver reused over same-layout stacks equals one-off solves."""
+        stack = case.stack
+        rng = np.random.default_rng(case.seed + 11)
+        variants = (same_shape_batch(stack, rng, 2, reduce=0.3)
+                    if case.kind == "equality" else []) + [stack]
         try:
-            out = BufferSolver(_buffer_of(case.stack)).solve()
+            solver = formulations.prepare(stack.layout, path.formulation, **path.options)
+            for j, s in enumerate(variants):
+                one = sol if s is stack else _solve(path, s)
+                got = solver.solve(s)
+                well = case.well_conditioned and s is stack
+                why = self._mismatch(got.x, one.x, got.status, one.status, well,
+                                     case.min_sigma)
+                if why:
+                    self.fail(case_id, case, "mismatch", path.name,
+                              f"prepared solve {j} (reused) vs solve: {why}")
+                    return
         except Exception as exc:  # noqa: BLE001
             self.fail(case_id, case, "crash" if not isinstance(exc, DOCUMENTED_ERRORS)
-                      else "mismatch", path.name, f"BufferSolver: {type(exc).__name__}: {exc}")
-            return
-        status = "failed" if not np.isfinite(out.x).all() else out.status
-        why = self._mismatch(out.x, sol.x, status, sol.status, case.well_conditioned,
-                             case.min_sigma)
-        if why:
-            self.fail(case_id, case, "mismatch", path.name, f"BufferSolver vs solve: {why}")
+                      else "mismatch", path.name,
+                      f"prepared solver: {type(exc).__name__}: {exc}")
 
     def _compare_threads(self, case_id, case, path, sol) -> None:
+        """4 threads: one shared prepared solver (answers or ConcurrentUseError, never a
+        wrong answer) and one solver per thread (the serial answers)."""
         reps = 4 * self.threads
-        if path.buffer:
-            from prioik.formulations.extended_jacobian import BufferSolver
-            solver = BufferSolver(_buffer_of(case.stack))
-            bufs = [_buffer_of(case.stack) for _ in range(reps)]
-            call: Callable[[int], np.ndarray] = lambda i: solver.solve(bufs[i]).x  # noqa: E731
-        else:
-            call = lambda i: _solve(path, case.stack).x  # noqa: E731
-        serial = call(0)
+        shared = formulations.prepare(case.stack.layout, path.formulation, **path.options)
+        serial = shared.solve(case.stack).x
+
+        def on_shared(_):
+            try:
+                return shared.solve(case.stack).x
+            except ConcurrentUseError:
+                return None
+
+        def own(_):
+            return formulations.prepare(case.stack.layout, path.formulation,
+                                        **path.options).solve(case.stack).x
         try:
             with ThreadPoolExecutor(self.threads) as pool:
-                xs = list(pool.map(call, range(reps)))
+                xs = list(pool.map(on_shared, range(reps))) + list(pool.map(own, range(reps)))
         except Exception as exc:  # noqa: BLE001
             self.fail(case_id, case, "threads", path.name, f"{type(exc).__name__}: {exc}")
             return
         for x in xs:
-            if not np.array_equal(x, serial, equal_nan=True):
+            if x is not None and not np.array_equal(x, serial, equal_nan=True):
                 self.fail(case_id, case, "threads", path.name,
                           "a concurrent solve differs from the serial one")
                 return

@@ -130,7 +130,7 @@ def _small_lstsq(L, rhs, m, r, mu2, out, col):
 
 
 @njit(cache=True, fastmath=_FAST)
-def _pivoted_lstsq_if_full_rank(B, s0, m, col, rhs, tol, out, smallest):
+def _pivoted_lstsq_if_full_rank(B, s0, m, col, rhs, tol, out, margin):
     """One level with ``m ≥ d`` rows on its ``d = n − col`` free coordinates.
 
     Householder QR with column pivoting of ``A_i Z_i = B[s0:s0+m, col:]`` (held
@@ -140,11 +140,11 @@ def _pivoted_lstsq_if_full_rank(B, s0, m, col, rhs, tol, out, smallest):
     factorization instead of an LQ and then a least-squares QR) is written into
     ``out[col:]`` and ``True`` returned; the level leaves no null space. Otherwise
     nothing is written and ``False`` returned (``B`` is never modified).
-    ``smallest[0]`` receives the smallest pivot norm (the rank decision's margin).
+    ``margin[0]`` receives the smallest pivot norm (the rank decision's margin).
     """
     n = B.shape[1]
     d = n - col
-    smallest[0] = np.inf
+    margin[0] = np.inf
     Tt = np.empty((d, m))
     for i in range(m):
         row = B[s0 + i]
@@ -166,7 +166,7 @@ def _pivoted_lstsq_if_full_rank(B, s0, m, col, rhs, tol, out, smallest):
         exact = _dot(tail, tail)      # exactly (downdated norms lose accuracy)
         if not (np.sqrt(exact) > tol) or tol <= 0.0:
             return False
-        smallest[0] = min(smallest[0], np.sqrt(exact))
+        margin[0] = min(margin[0], np.sqrt(exact))
         # the step of _reflect_column with the pivot norms downdated in the same pass
         # (calling the shared step and downdating after measured ~0.5 µs slower on G1)
         cj = Tt[j, j:]
@@ -260,17 +260,26 @@ def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
             ``≤ AMBIGUITY`` is an ambiguous decision).
     """
     M, n = B.shape
-    smallest = np.empty(1)
+    solve_kernel_ws(B, c, starts, scales, rcond, level_damping, singular_threshold,
+                    step_bound, x, ranks, level_mu2, margins, np.empty((n, n)), np.empty(n),
+                    np.empty(n, dtype=np.int64), np.empty(n), np.empty(M),
+                    np.empty((M, n)), np.empty(M))
+
+
+@njit(cache=True, fastmath=_FAST)
+def solve_kernel_ws(B, c, starts, scales, rcond, level_damping, singular_threshold,
+                    step_bound, x, ranks, level_mu2, margins, V, beta, pos, y, norms, L,
+                    rhs):
+    """:func:`solve_kernel` with its scratch arrays given (a prepared solver owns them:
+    no allocation per solve). ``V`` (``n × n``: reflector ``j`` in ``V[j, pos_j:]``),
+    ``beta``, ``pos`` (int), ``y`` (``n``), ``norms``, ``rhs`` (``M``), ``L``
+    (``M × n``); their contents on entry do not matter."""
+    M, n = B.shape
     k = starts.shape[0] - 1
-    V = np.zeros((n, n))          # reflector j stored in V[j, pos_j:]
-    beta = np.zeros(n)
-    pos = np.zeros(n, dtype=np.int64)
+    margin = np.empty(1)
     nref = 0
-    y = np.zeros(n)
+    y[:] = 0.0            # coordinates no level claims stay 0 (the minimum norm)
     col = 0
-    norms = np.zeros(M)
-    L = np.zeros((M, n))
-    rhs = np.zeros(M)
     for lev in range(k):
         s0 = starts[lev]
         s1 = starts[lev + 1]
@@ -291,9 +300,9 @@ def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
         d = n - col
         if (m >= d and step_bound[lev] <= 0.0
                 and not (level_damping > 0.0 and singular_threshold > 0.0)
-                and _pivoted_lstsq_if_full_rank(B, s0, m, col, rhs, tol, y, smallest)):
+                and _pivoted_lstsq_if_full_rank(B, s0, m, col, rhs, tol, y, margin)):
             ranks[lev] = d
-            margins[lev] = smallest[0] / tol
+            margins[lev] = margin[0] / tol
             col = n
             continue
         r = 0
@@ -304,6 +313,16 @@ def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
             # recompute exactly (downdating loses accuracy)
             tail = B[s0 + p, col + r:]
             exact = _dot(tail, tail)
+            if not (np.sqrt(exact) > tol) and tol > 0.0:
+                # the downdated norms may have lost the largest remaining row (their
+                # cancellation error is ~ε·‖row‖², above the rows a heavy first pivot
+                # leaves; fuzzing found ranks 1 for 3): recompute them before stopping
+                for i in range(r, m):
+                    rest = B[s0 + i, col + r:]
+                    norms[i] = _dot(rest, rest)
+                p = _argmax_from(norms, r, m)
+                tail = B[s0 + p, col + r:]
+                exact = _dot(tail, tail)
             if not (np.sqrt(exact) > tol) or tol <= 0.0:
                 if tol > 0.0 and exact > 0.0:
                     margins[lev] = min(kept_min / tol, tol / np.sqrt(exact))
@@ -392,8 +411,11 @@ def level_scales(A, b, starts, scales):
     """``scales[i] = ‖A_i‖_F`` of every level (rows ``starts[i]:starts[i+1]``).
 
     Returns ``False`` when a scale or ``‖b‖`` is not finite — a NaN or inf in the
-    rows (or an overflow of the squares): the caller then looks for the entry at
-    fault. The same pass serves as the finite check of the hot path.
+    rows (or an overflow of the squares) — or when a level's scale is outside
+    ``[1e-100, 1e100]`` with a non-zero entry (its squares lose precision or
+    underflow: the caller equilibrates it, ``TaskStack.equilibrated``): the caller
+    then looks for the entry at fault. The same pass serves as the finite check of
+    the hot path.
     """
     M, n = A.shape
     finite = True
@@ -402,25 +424,102 @@ def level_scales(A, b, starts, scales):
         for i in range(starts[lev], starts[lev + 1]):
             acc += _dot(A[i], A[i])
         scales[lev] = np.sqrt(acc)
-        if not np.isfinite(scales[lev]):
+        if not np.isfinite(scales[lev]) or scales[lev] > 1e100:
             finite = False
-    if not np.isfinite(_dot(b, b)):
-        finite = False
+        elif scales[lev] < 1e-100:
+            for i in range(starts[lev], starts[lev + 1]):   # a zero level is fine
+                for j in range(n):
+                    if A[i, j] != 0.0:
+                        finite = False
+    for i in range(b.shape[0]):      # entry by entry: b may be large (x is then large)
+        if not np.isfinite(b[i]):
+            finite = False
     return finite
 
 
 @njit(cache=True, fastmath=_FAST)
-def solve_buffer(A, b, B, c, starts, scales, rcond, level_damping, singular_threshold,
-                 step_bound, x, ranks, level_mu2, margins):
-    """Copy ``A``, ``b`` into the workspace ``B``, ``c``, take the level scales and, if
-    every value is finite, run :func:`solve_kernel`; returns whether it ran."""
-    B[:, :] = A
-    c[:] = b
+def weigh_rows(A, b, w, B, c):
+    """``B = diag(w) A``, ``c = w ∘ b`` (the level's weighted rows, into the workspace);
+    returns ``False`` when a ``√w`` is not finite and > 0."""
+    M, n = A.shape
+    ok = True
+    for i in range(M):
+        wi = w[i]
+        if not (wi > 0.0 and wi < np.inf):
+            ok = False
+        for j in range(n):
+            B[i, j] = wi * A[i, j]
+        c[i] = wi * b[i]
+    return ok
+
+
+@njit(cache=True, fastmath=_FAST)
+def level_residuals(A, b, w, starts, x, out):
+    """``out[i] = ‖w ∘ (A_i x − b_i)‖`` per level (equality rows)."""
+    for lev in range(starts.shape[0] - 1):
+        acc = 0.0
+        for i in range(starts[lev], starts[lev + 1]):
+            r = w[i] * (_dot(A[i], x) - b[i])
+            acc += r * r
+        out[lev] = np.sqrt(acc)
+
+
+def work_size(M: int, n: int, k: int) -> int:
+    """Floats of :func:`solve_data`'s workspace for ``M`` rows, ``n`` columns, ``k``
+    levels."""
+    return 2 * M * n + 3 * M + k + n * n + 2 * n
+
+
+@njit(cache=True, fastmath=_FAST)
+def solve_data(A, b, w, starts, work, params, out, ranks):
+    """The prepared solve of a stack's data, in one call with few arguments (the call's
+    cost on small stacks is mostly numba unboxing its arguments).
+
+    Weighs the rows into the workspace, takes the level scales and, if every value is
+    finite, runs :func:`solve_kernel` and the per-level residuals.
+
+    Args:
+        A, b, w: The data's rows, targets and ``√w`` (``M × n``, ``M``, ``M``).
+        starts: ``k + 1`` row offsets.
+        work: Workspace of :func:`work_size` floats (weighted rows, targets, scales and
+            the kernel's scratch).
+        params: ``rcond, level_damping, singular_threshold`` then the ``k`` step bounds.
+        out: Output of ``n + 3 k`` floats: ``x``, the residuals, the damping ``μ_i²``,
+            the rank decisions' margins (see :func:`solve_kernel`).
+        ranks: ``k + n`` ints: the ``k`` ranks (output), then the kernel's scratch.
+
+    Returns 0 when an input is not finite (nothing solved), 1 when ``x`` and the
+    residuals are finite, 2 when they are not (the caller reports a failure).
+    """
+    M, n = A.shape
+    k = starts.shape[0] - 1
+    B = work[:M * n].reshape((M, n))
+    c = work[M * n:M * n + M]
+    scales = work[M * n + M:M * n + M + k]
+    o = M * n + M + k                     # scratch of the kernel (see work_size)
+    V = work[o:o + n * n].reshape((n, n))
+    o += n * n
+    beta = work[o:o + n]
+    y = work[o + n:o + 2 * n]
+    norms = work[o + 2 * n:o + 2 * n + M]
+    rhs = work[o + 2 * n + M:o + 2 * n + 2 * M]
+    o += 2 * n + 2 * M
+    L = work[o:o + M * n].reshape((M, n))
+    x = out[:n]
+    residuals = out[n:n + k]
+    mu2 = out[n + k:n + 2 * k]
+    margins = out[n + 2 * k:n + 3 * k]
+    if not weigh_rows(A, b, w, B, c):
+        return 0
     if not level_scales(B, c, starts, scales):
-        return False
-    solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
-                 step_bound, x, ranks, level_mu2, margins)
-    return True
+        return 0
+    solve_kernel_ws(B, c, starts, scales, params[0], params[1], params[2], params[3:], x,
+                    ranks[:k], mu2, margins, V, beta, ranks[k:], y, norms, L, rhs)
+    level_residuals(A, b, w, starts, x, residuals)
+    acc = 0.0
+    for lev in range(k):
+        acc += residuals[lev]
+    return 1 if np.isfinite(acc) else 2
 
 
 @njit(cache=True, parallel=True)

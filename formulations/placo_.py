@@ -31,6 +31,12 @@ replaced by its feasible rows ``U_rᵀ A_1 x = U_rᵀ b_1`` (``U_r`` the left si
 vectors of its ``r`` non-zero singular values): the same optimal set as the
 least-squares first level, in full row rank (``info["first_level_rank"]``).
 
+*Status.* ``"optimal"`` needs both: a stack of the exact shape above, and an answer
+that passes the lexicographic certificate (:func:`formulations.base.certify`:
+:func:`hierarchy.check_lexicographic` with the minimum-norm tie-break at
+``DEFAULT_CERTIFICATE_TOL``; the ``O(ε)`` regularisation bias can fail it), otherwise
+``"approximate"`` with the level at fault in ``info["fault_level"]``.
+
 *Failures.* PlaCo raises on infeasible hard inequalities; the Solution is then
 ``failed`` and names, in ``info["failed_level"]`` and ``info["failed_tasks"]``,
 the first level whose hard inequalities cannot hold together with those above
@@ -46,7 +52,8 @@ import placo
 
 from prioik.hierarchy import DEFAULT_RCOND, TaskStack
 
-from .base import Capabilities, FormulationError, Outcome
+from .base import Capabilities, FormulationError, Outcome, certify
+from .options import Option, rcond_option
 
 NAME = "placo"
 DESCRIPTION = "PlaCo placo.Problem: first level hard, lower levels soft (geometric weights)"
@@ -57,11 +64,12 @@ CAPABILITIES = Capabilities(equalities=True, inequalities=True, weights=True,
 SOFT_SPAN = 1e-4
 
 OPTIONS = {
-    "weight_ratio": (None, "ρ: soft level j (j ≥ 2) has weight ρ^(j−2); None: "
-                           "ρ = SOFT_SPAN^(1/(k−2)) (weights from 1 down to SOFT_SPAN)"),
-    "regularization": (1e-8, "ε: PlaCo's ‖x‖² regularisation weight (PlaCo's default, "
-                             "measured best)"),
-    "rcond": (DEFAULT_RCOND, "relative rank threshold used to reduce the first level"),
+    "weight_ratio": Option(None, "float", "ρ: soft level j (j ≥ 2) has weight ρ^(j−2); None: "
+                           "ρ = SOFT_SPAN^(1/(k−2)) (weights from 1 down to SOFT_SPAN)",
+                           minimum=0.0, exclusive_minimum=True, optional=True),
+    "regularization": Option(1e-8, "float", "ε: PlaCo's ‖x‖² regularisation weight (PlaCo's "
+                             "default, measured best)", minimum=0.0),
+    "rcond": rcond_option(),
 }
 
 
@@ -121,8 +129,8 @@ def default_weight_ratio(levels: int) -> float:
     return SOFT_SPAN ** (1.0 / (levels - 2)) if levels > 2 else 1.0
 
 
-def solve(stack: TaskStack, *, weight_ratio: float | None = None, regularization: float = 1e-8,
-          rcond: float = DEFAULT_RCOND) -> Outcome:
+def solve(stack: TaskStack, *, weight_ratio: float | None, regularization: float, rcond:
+          float) -> Outcome:
     """Build and solve the single PlaCo QP; see the module docstring."""
     if weight_ratio is None:
         weight_ratio = default_weight_ratio(len(stack))
@@ -166,5 +174,6 @@ def solve(stack: TaskStack, *, weight_ratio: float | None = None, regularization
                                                       if not t.is_equality])
         return Outcome(np.full(n, np.nan), "failed", info)
     exact = len(stack) <= 2 and first.is_equality and not low_inequality
-    return Outcome(np.array(x.value, dtype=np.float64), "optimal" if exact else "approximate",
-                   info)
+    out = Outcome(np.array(x.value, dtype=np.float64), "optimal" if exact else "approximate",
+                  info)
+    return certify(stack, out)

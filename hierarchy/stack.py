@@ -2,18 +2,17 @@
 
 from __future__ import annotations
 
-import itertools
 import math
-from dataclasses import dataclass
 from typing import Iterator, Sequence
 
 import numpy as np
 
 from .errors import TaskStackError
+from .layout import StackData, StackLayout
 from .task import Level, Task
 
 
-#: Level scales ``‖A_i‖_F`` outside this range are equilibrated
+#: Levels whose largest entry lies outside this range are equilibrated
 #: (:meth:`TaskStack.equilibrated`): their squares would lose precision in float64.
 EQUILIBRATE_BELOW = 1e-100
 EQUILIBRATE_ABOVE = 1e100
@@ -21,35 +20,6 @@ EQUILIBRATE_ABOVE = 1e100
 
 def _peak(level: Level) -> float:
     return max(float(np.max(np.abs(t.A))) for t in level)
-
-
-@dataclass(frozen=True)
-class PackedRows:
-    """The weighted equality rows of all levels stacked, for compiled kernels.
-
-    Attributes:
-        A: ``Σ m_i × n`` rows, level after level (``level.A`` of each level).
-        b: ``Σ m_i`` targets.
-        starts: ``k + 1`` row offsets (level ``i`` is ``A[starts[i]:starts[i+1]]``).
-        scales: ``‖A_i‖_F`` per level (the scale of the rank rule).
-    """
-
-    A: np.ndarray
-    b: np.ndarray
-    starts: np.ndarray
-    scales: np.ndarray
-
-    @classmethod
-    def of(cls, stack: "TaskStack") -> "PackedRows":
-        mats = [(level.A, level.b) for level in stack.levels]
-        A = np.vstack([a for a, _ in mats])
-        b = np.concatenate([v for _, v in mats])
-        starts = np.array([0, *itertools.accumulate(a.shape[0] for a, _ in mats)],
-                          dtype=np.int64)
-        scales = np.array([math.sqrt(float(np.dot(a.ravel(), a.ravel()))) for a, _ in mats])
-        for arr in (A, b, starts, scales):
-            arr.setflags(write=False)
-        return cls(A, b, starts, scales)
 
 
 class TaskStack:
@@ -66,10 +36,12 @@ class TaskStack:
             level, or duplicate task names.
 
     A stack is immutable; ``stack / task`` returns a new stack with one more level.
-    The compact form ``t1 / (t2 + t3) / t4`` builds the same stacks.
+    The compact form ``t1 / (t2 + t3) / t4`` builds the same stacks. It is a
+    :class:`~prioik.hierarchy.StackLayout` (:attr:`layout`) with frozen
+    :class:`~prioik.hierarchy.StackData` (:attr:`data`), which is what every solver reads.
     """
 
-    __slots__ = ("_levels", "_n", "_packed")
+    __slots__ = ("_levels", "_n", "_layout", "_data")
 
     def __init__(self, levels: Sequence) -> None:
         if isinstance(levels, (Task, Level)):
@@ -104,7 +76,8 @@ class TaskStack:
             parsed.append(level)
         self._levels = tuple(parsed)
         self._n = int(n)
-        self._packed = None
+        self._layout = None
+        self._data = None
 
     # ------------------------------------------------------------------ access
     @property
@@ -159,39 +132,53 @@ class TaskStack:
     def __rtruediv__(self, other) -> "TaskStack":
         return TaskStack((Level.of(other),) + self._levels)
 
-    def packed(self) -> "PackedRows":
-        """Every level's weighted equality rows in one array (computed once, read-only)."""
-        if self._packed is None:
-            self._packed = PackedRows.of(self)
-        return self._packed
+    @property
+    def layout(self) -> StackLayout:
+        """The stack's shape: ``n`` and per level ``(task name, rows, kind)``."""
+        if self._layout is None:
+            self._layout = StackLayout(self._n, [[(t.name, t.m, t.kind) for t in level]
+                                                 for level in self._levels])
+        return self._layout
+
+    @property
+    def data(self) -> StackData:
+        """The stack's rows, targets, bounds and ``√w`` in one read-only
+        :class:`~prioik.hierarchy.StackData` (built once)."""
+        if self._data is None:
+            layout = self.layout
+            data = StackData(layout)
+            for t in self.tasks:
+                sl = layout.task_slice(t.name)
+                data.A[sl] = t.A
+                if t.is_equality:
+                    data.b[sl] = t.b
+                else:
+                    data.lower[sl], data.upper[sl] = t.bounds()
+                if not t._unit_weight:
+                    data.sqrt_weight[sl] = np.sqrt(t.weight)
+            data._source = self
+            self._data = data.freeze()
+        return self._data
 
     def equilibrated(self) -> tuple["TaskStack", list[int]]:
         """The stack with every level of extreme scale rescaled, and those levels.
 
-        A level whose ``‖A_i‖_F`` lies outside ``[EQUILIBRATE_BELOW, EQUILIBRATE_ABOVE]``
-        has its tasks' ``A``, ``b`` and bounds multiplied by the power of two that
-        brings its largest entry to 1. The lexicographic optimal set (and every
-        minimum-norm tie-break) is unchanged: each level's objective is multiplied by
-        a constant. Without it, squares of entries below ~1e-154 underflow (a
-        ``1e-200·I`` level read as zero gave ``x = 0``, "optimal"). Returns ``self``
-        (and ``[]``) when no level needs it: a check of the packed scales.
+        A level whose largest entry lies outside ``[EQUILIBRATE_BELOW,
+        EQUILIBRATE_ABOVE]`` has its tasks' ``A``, ``b`` and bounds multiplied by the
+        power of two that brings that entry into ``[0.5, 1)``. The lexicographic
+        optimal set (and every minimum-norm tie-break) is unchanged: each level's
+        objective is multiplied by a constant. Without it, squares of entries below
+        ~1e-154 underflow (a ``1e-200·I`` level read as zero gave ``x = 0``,
+        "optimal"). Returns ``self`` (and ``[]``) when no level needs it.
         """
-        scales = self.packed().scales.tolist()
-        if all(EQUILIBRATE_BELOW <= v <= EQUILIBRATE_ABOVE for v in scales):
-            return self, []             # the hot path: one pass over k floats
-        # a level of scale 0 is all zeros, or its squares underflowed, or it holds
-        # only inequality rows (not in the packed equality rows): look at its entries
-        levels = [i for i, v in enumerate(scales)
-                  if not EQUILIBRATE_BELOW <= v <= EQUILIBRATE_ABOVE
-                  and (v != 0 or _peak(self._levels[i]) > 0)]
-        levels = [i for i in levels
-                  if not EQUILIBRATE_BELOW <= _peak(self._levels[i]) <= EQUILIBRATE_ABOVE]
+        peaks = [_peak(level) for level in self._levels]
+        levels = [i for i, p in enumerate(peaks)
+                  if p > 0 and not EQUILIBRATE_BELOW <= p <= EQUILIBRATE_ABOVE]
         if not levels:
             return self, []
         out = list(self._levels)
         for i in levels:
-            peak = _peak(self._levels[i])
-            factor = math.ldexp(1.0, -math.frexp(peak)[1])       # 2^-e: peak -> [0.5, 1)
+            factor = math.ldexp(1.0, -math.frexp(peaks[i])[1])    # 2^-e: peak -> [0.5, 1)
             out[i] = Level(t.scaled(factor) for t in self._levels[i])
         return TaskStack(out), levels
 
@@ -215,4 +202,19 @@ class TaskStack:
         return "\n".join(lines)
 
     def __repr__(self) -> str:
-        return self.summary()
+        """One line: levels (``task[rows]``, ``≤`` marks inequality tasks) and ``n``;
+        :meth:`summary` gives the table with ranks."""
+        parts = []
+        for level in self._levels[:8]:
+            parts.append(" + ".join(f"{t.name}[{t.m}{'' if t.is_equality else '≤'}]"
+                                    for t in level[:4]) + (" + …" if len(level) > 4 else ""))
+        more = f" / … ({len(self) - 8} more)" if len(self) > 8 else ""
+        return f"TaskStack(n={self.n}, {len(self)} levels: {' / '.join(parts)}{more})"
+
+    def _repr_html_(self) -> str:
+        from html import escape
+        rows = "".join(f"<tr><td>{i}</td><td>{escape(t.name)}</td><td>{t.m}</td>"
+                       f"<td>{t.kind}</td></tr>"
+                       for i, level in enumerate(self._levels) for t in level)
+        return (f"<table><caption>TaskStack, n = {self.n}, {len(self)} levels</caption>"
+                f"<tr><th>level</th><th>task</th><th>rows</th><th>kind</th></tr>{rows}</table>")

@@ -84,13 +84,6 @@ def test_check_accepts_any_point_of_the_optimal_set_and_reports_levels():
     assert "FAIL" in str(report)
 
 
-def test_check_rejects_inequality_stacks_by_name():
-    from prioik.hierarchy import UnsupportedTaskError
-    s = TaskStack([Task("box", np.eye(2), lower=[0, 0])])
-    with pytest.raises(UnsupportedTaskError, match="'box'"):
-        check_lexicographic(s, np.zeros(2))
-
-
 @pytest.mark.parametrize("x", [np.zeros(2), np.zeros((1, 4)), np.zeros(5), [[1.0], [2.0]],
                                "abc", [1.0, "a", 2.0, 3.0]])
 def test_check_refuses_a_wrong_shape_x_with_a_task_stack_error(x):

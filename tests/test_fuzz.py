@@ -4,7 +4,7 @@
 Every property of ``prioik fuzz`` must hold on every stack: no exception but the
 library's own, no NaN unless ``failed``, ``optimal`` only when
 ``check_lexicographic`` passes (and, on well-conditioned stacks, within 1e-6 of the
-independent nested-SVD truth), ``solve`` = ``solve_batch`` = ``BufferSolver``, and
+independent nested-SVD truth), ``solve`` = ``solve_batch`` = a reused prepared solver, and
 threads sharing a solver give the serial answers. The bulk runs use the issue's
 families at smaller sizes (``n ≤ 12``, ``≤ 5`` levels of ``≤ 8`` rows a task) so that
 a few thousand stacks fit in the suite; ``prioik fuzz`` runs the full sizes.
