@@ -14,8 +14,8 @@ and runs every fuzzed path on each. A path fails a case when:
   :data:`WRONG_TOL` (relative, :func:`hierarchy.relative_distance`) from the
   independent ground truth :func:`hierarchy.fuzz.nested_truth`, or fails
   :func:`hierarchy.check_lexicographic`;
-* ``uncertified`` — the status is ``optimal`` on any equality stack but
-  :func:`~hierarchy.check_lexicographic` rejects ``x``;
+* ``uncertified`` — the status is ``optimal`` on any stack (equality or
+  inequality) but :func:`~hierarchy.check_lexicographic` rejects ``x``;
 * ``mismatch`` — ``solve_batch`` (on the stack and two same-shape variants) or one
   prepared solver (:func:`prioik.prepare`) reused over those stacks disagree with
   one-off ``solve`` calls: their statuses differ, or on a
@@ -207,6 +207,12 @@ class _Runner:
                                   f"optimal but {dist:.2e} from the truth, certificate "
                                   f"{'ok' if cert.ok else 'fails at level ' + str(cert.first_failure.level)}")
                 elif not cert.ok:
+                    self.fail(case_id, case, "uncertified", path.name,
+                              f"optimal but the certificate fails at level "
+                              f"{cert.first_failure.level}")
+            elif sol.status == "optimal":         # inequality stacks: the KKT certificate
+                cert = check_lexicographic(stack, sol.x)
+                if not cert.ok:
                     self.fail(case_id, case, "uncertified", path.name,
                               f"optimal but the certificate fails at level "
                               f"{cert.first_failure.level}")

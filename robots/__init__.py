@@ -10,7 +10,7 @@ from .models import (LOADERS, PANDA_FINGERS, ModelNotFoundError, RobotModel, Sta
                      spatial_chain, talos, ur5)
 from .references import Reference, Waypoints, minimum_jerk
 from .rows import MODES, TaskWriter
-from .simulate import SimulationResult, StepTasks, equality_view, simulate
+from .simulate import SimulationError, SimulationResult, StepTasks, equality_view, simulate
 from .tasks import (JointLimitActivation, KinematicState, TaskTerm, com_position, contact,
                     frame_orientation, frame_pose, frame_position, joint_limit_bounds,
                     joint_limit_rows, joint_limit_violation, joint_velocity_bounds,
@@ -21,7 +21,7 @@ __all__ = [
     "check_configuration", "check_velocity", "example_robot_data_dir",
     "from_urdf", "g1", "go2", "has_free_flyer", "load", "panda", "sample_humanoid", "solo12",
     "spatial_chain", "talos", "ur5", "Reference", "Waypoints", "minimum_jerk",
-    "MODES", "TaskWriter", "SimulationResult", "StepTasks", "equality_view", "simulate", "JointLimitActivation",
+    "MODES", "TaskWriter", "SimulationError", "SimulationResult", "StepTasks", "equality_view", "simulate", "JointLimitActivation",
     "KinematicState", "TaskTerm", "com_position", "contact", "frame_orientation",
     "frame_pose", "frame_position", "joint_limit_bounds", "joint_limit_rows",
     "joint_limit_violation", "joint_velocity_bounds", "point_position", "posture",

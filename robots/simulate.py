@@ -46,7 +46,8 @@ from .tasks import KinematicState
 #: solver callable and does not import formulations/).
 STATUSES = ("optimal", "approximate", "failed")
 
-__all__ = ["StepTasks", "SimulationResult", "simulate", "equality_view", "coordinate_names"]
+__all__ = ["StepTasks", "SimulationError", "SimulationResult", "simulate", "equality_view",
+           "coordinate_names"]
 
 
 @dataclass
@@ -283,6 +284,10 @@ def _algorithmic_error(stack: TaskStack | StackData, x: np.ndarray,
     return float(np.sqrt(np.sum(np.square(norms))))
 
 
+class SimulationError(ValueError):
+    """:func:`simulate` was called with a ``duration``, ``dt`` or ``level`` it cannot run."""
+
+
 def _check_times(duration: float, dt: float) -> None:
     """``duration`` and ``dt`` finite, > 0 and ``dt ≤ duration`` (at least one step)."""
     for name, value in (("duration", duration), ("dt", dt)):
@@ -291,9 +296,9 @@ def _check_times(duration: float, dt: float) -> None:
         except (TypeError, ValueError):
             ok = False
         if not ok:
-            raise ValueError(f"{name} must be a finite number > 0 (s), got {value!r}")
+            raise SimulationError(f"{name} must be a finite number > 0 (s), got {value!r}")
     if int(round(duration / dt)) < 1:
-        raise ValueError(f"dt = {dt} s is longer than duration = {duration} s: "
+        raise SimulationError(f"dt = {dt} s is longer than duration = {duration} s: "
                          f"the run would have no step")
 
 
@@ -369,12 +374,13 @@ def simulate(robot: RobotModel, build: BuildFn, solve: SolveFn, *, duration: flo
         A :class:`SimulationResult`.
 
     Raises:
-        ValueError: ``duration`` or ``dt`` not finite and > 0, ``dt > duration``, or
-            an unknown ``level``. Errors during the run end it as ``failed`` instead.
+        SimulationError: (a ``ValueError``) ``duration`` or ``dt`` not finite and > 0,
+            ``dt > duration``, or an unknown ``level``. Errors during the run end it as
+            ``failed`` instead.
     """
     _check_times(duration, dt)
     if level not in ("acceleration", "velocity"):
-        raise ValueError(f"level must be 'acceleration' or 'velocity', got {level!r}")
+        raise SimulationError(f"level must be 'acceleration' or 'velocity', got {level!r}")
     model = robot.model
     data = model.createData()
     dyn = model.createData()

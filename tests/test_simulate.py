@@ -8,7 +8,7 @@ import pytest
 
 from prioik import formulations
 from prioik.hierarchy import Task, TaskStack, algorithmic_error_norms
-from prioik.robots import (Reference, StepTasks, equality_view, frame_position, posture, simulate,
+from prioik.robots import (SimulationError, Reference, StepTasks, equality_view, frame_position, posture, simulate,
                     spatial_chain)
 
 TARGET = np.array([1.2, 0.6, 0.4])
@@ -202,5 +202,5 @@ def test_torque_from_solution_without_tau_fails_the_run(chain):
     (None, 0.01, "duration must be a finite number > 0"),
 ])
 def test_bad_duration_or_step_is_refused(chain, duration, dt, message):
-    with pytest.raises(ValueError, match=message):
+    with pytest.raises(SimulationError, match=message):
         simulate(chain, _build(chain), None, duration=duration, dt=dt)
