@@ -234,6 +234,28 @@ class PreparedSolver:
                 raise FormulationError(f"stack {i} of the batch: {exc}") from None
         batched = hasattr(self._impl, "solve_batch") or hasattr(self._module, "solve_batch")
         t0 = time.perf_counter()
+        try:
+            X, statuses = self._batched(datas)
+        except (np.linalg.LinAlgError, ArithmeticError):
+            # a stack the batched kernel cannot take (e.g. an SVD that does not
+            # converge): one by one, so that stack alone is "failed", as in solve
+            X, statuses = self._one_by_one(datas)
+        elapsed = time.perf_counter() - t0
+        X = np.asarray(X, dtype=np.float64)
+        bad = ~np.isfinite(X).all(axis=1)
+        statuses = ["failed" if b else st for b, st in zip(bad, statuses)]
+        return BatchSolution(X, statuses, self.formulation, dict(self._given), elapsed, batched)
+
+    def _one_by_one(self, datas: list[StackData]) -> tuple[np.ndarray, list[str]]:
+        X = np.empty((len(datas), self._n))
+        statuses = []
+        for i, d in enumerate(datas):
+            sol = self.solve(d)
+            X[i] = sol.x
+            statuses.append(sol.status)
+        return X, statuses
+
+    def _batched(self, datas: list[StackData]) -> tuple[np.ndarray, list[str]]:
         if hasattr(self._impl, "solve_batch"):
             X, statuses = self._impl.solve_batch(datas)
         elif hasattr(self._module, "solve_batch"):
@@ -244,17 +266,8 @@ class PreparedSolver:
                 stacks = [s.equilibrated()[0] for s in stacks]
             X, statuses = self._module.solve_batch(stacks, **self.options)
         else:
-            X = np.empty((len(datas), self._n))
-            statuses = []
-            for i, d in enumerate(datas):
-                sol = self.solve(d)
-                X[i] = sol.x
-                statuses.append(sol.status)
-        elapsed = time.perf_counter() - t0
-        X = np.asarray(X, dtype=np.float64)
-        bad = ~np.isfinite(X).all(axis=1)
-        statuses = ["failed" if b else st for b, st in zip(bad, statuses)]
-        return BatchSolution(X, statuses, self.formulation, dict(self._given), elapsed, batched)
+            X, statuses = self._one_by_one(datas)
+        return X, list(statuses)
 
     def __repr__(self) -> str:
         opts = ", ".join(f"{k}={v!r}" for k, v in self._given.items())
