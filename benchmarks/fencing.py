@@ -263,15 +263,27 @@ def _run(spec: RunSpec, scenario, variant: str, duration: float, dt: float, prog
                                        "inequality tasks (joint limits as bounds on q̇)",
                                        formulation=spec.formulation, task="joint_limits")
 
-        def build_velocity(state, t):
-            return scenario.velocity_stack(state, t, gain=VELOCITY_GAIN, limits=limits,
-                                           dt=dt)
+        if hasattr(scenario, "written_step") and limits == "bounds":
+            rows = scenario.velocity_rows(VELOCITY_GAIN, limits=limits, dt=dt)
+
+            def build_velocity(state, t):      # rows written in place: no per-step objects
+                return scenario.written_step(rows, state, t)
+        else:
+            def build_velocity(state, t):
+                return scenario.velocity_stack(state, t, gain=VELOCITY_GAIN, limits=limits,
+                                               dt=dt)
 
         return simulate(scenario.robot, build_velocity, solve, duration=duration, dt=dt,
                         level="velocity", progress=progress)
 
-    def build(state, t):
-        return scenario.acceleration_stack(state, t, limits=limits, dt=dt)
+    if hasattr(scenario, "written_step") and limits in ("activation", "bounds"):
+        rows = scenario.acceleration_rows(limits=limits, dt=dt)
+
+        def build(state, t):                   # rows written in place: no per-step objects
+            return scenario.written_step(rows, state, t)
+    else:
+        def build(state, t):
+            return scenario.acceleration_stack(state, t, limits=limits, dt=dt)
 
     return simulate(scenario.robot, build, solve, duration=duration, dt=dt,
                     needs_dynamics=dyn, torque_from_solution=own_tau, progress=progress)

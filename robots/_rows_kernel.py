@@ -259,3 +259,15 @@ def velocity_targets(b, Q):
     """``b = ẋ* + K e`` (per row)."""
     for i in range(b.shape[0]):
         b[i] = Q[VELOCITY_REF, i] + Q[KP, i] * Q[ERROR, i]
+
+
+@njit(cache=True)
+def acceleration_targets(A, b, Q, v):
+    """``b = ẍ* + K_d (ẋ* − J q̇) + K_p e − J̇ q̇`` (eq. 2-4, per row)."""
+    n = A.shape[1]
+    for i in range(b.shape[0]):
+        jv = 0.0
+        for j in range(n):
+            jv += A[i, j] * v[j]
+        b[i] = (Q[KD, i] * (Q[VELOCITY_REF, i] - jv) + Q[KP, i] * Q[ERROR, i]
+                + Q[FEEDFORWARD, i] - Q[DRIFT, i])
