@@ -1039,7 +1039,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "loop; 0: leave BLAS's default)")
     p.add_argument("--no-g1", action="store_true",
                    help="random stacks only (no G1 cases, batch, IK-step or control-step runs)")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, extras=("plots",))
 
 
 def _command(args: argparse.Namespace) -> str:

@@ -15,7 +15,9 @@ Sub-packages (data flows one way, top to bottom):
 * :mod:`prioik.formulations` — the formulation plugins and their registry;
 * :mod:`prioik.robots` — robot models (pinocchio) and task writers (imported on first
   use: it needs the ``robots`` extra);
-* :mod:`prioik.benchmarks` — comparisons, reports and the ``prioik`` command line.
+* :mod:`prioik.benchmarks` — comparisons, reports and the ``prioik`` command line;
+* :mod:`prioik.extras` — which ``pip install prioik[EXTRA]`` brings which part
+  (``pip install prioik`` is the core: numpy, scipy, numba, threadpoolctl).
 
 Importing prioik changes nothing in the process (no environment variable, no BLAS
 thread setting).
@@ -26,7 +28,8 @@ from __future__ import annotations
 import importlib
 from importlib.metadata import PackageNotFoundError, version as _version
 
-from . import formulations, hierarchy
+from . import extras, formulations, hierarchy
+from .extras import MissingExtraError
 from .formulations import (BatchSolution, Capabilities, FormulationError, Solution, available,
                            solve, solve_batch)
 from .hierarchy import (Level, LexicographicReport, Task, TaskStack, TaskStackError,
@@ -55,7 +58,7 @@ def __dir__() -> list[str]:
 
 __all__ = [
     "BatchSolution", "Capabilities", "FormulationError", "Level", "LexicographicReport",
-    "Solution", "Task", "TaskStack", "TaskStackError", "UnsupportedTaskError", "__version__",
-    "available", "benchmarks", "check_lexicographic", "formulations", "hierarchy",
+    "MissingExtraError", "Solution", "Task", "TaskStack", "TaskStackError", "UnsupportedTaskError", "__version__",
+    "available", "benchmarks", "check_lexicographic", "extras", "formulations", "hierarchy",
     "load_stack", "robots", "save_stack", "solve", "solve_batch",
 ]
