@@ -452,6 +452,11 @@ def measure_ik_step(settings: Settings, progress: Progress | None = None
                     ) -> tuple[dict[str, Any], str]:
     """The whole G1 IK step (kinematics + solve) of ``extended_jacobian`` against
     PlaCo's ``KinematicsSolver`` (see :mod:`benchmarks.placo_step`)."""
+    from prioik.extras import MissingExtraError, require
+    try:
+        require("robots", "placo", what="the PlaCo IK step")
+    except MissingExtraError as exc:
+        return {}, str(exc)
     try:
         from .placo_step import ik_step_times
     except ImportError as exc:
