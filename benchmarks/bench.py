@@ -2,10 +2,11 @@
 
 In one process, per case (a set of stacks) and per formulation variant (one row per
 back-end of formulations that have ``backends()``): a few warm-up solves, then
-``--repeats`` (default 200) timed solves cycling over the case's stacks. The time of a
-solve is :attr:`formulations.Solution.time_s` — ``time.perf_counter`` around the
-plugin's ``solve`` alone (the registry's option checks and residual evaluation are
-outside it). Each row reports the median, p10 and p90 of those times, the success
+``--repeats`` (default 200) timed solves cycling over the case's stacks, each through a
+solver prepared once per layout (:func:`prioik.prepare`, the path a control loop
+runs). The time of a solve is :attr:`formulations.Solution.time_s` —
+``time.perf_counter`` around the plugin's solve alone (option checks happen at prepare;
+the residual evaluation is outside it). Each row reports the median, p10 and p90 of those times, the success
 rate and the distance to ``reference``:
 
 * **success**: status not ``"failed"`` and, at every level, the residual
@@ -250,11 +251,17 @@ def time_case(case: Case, variant: Variant, ref: _Reference, settings: Settings)
     S = len(case.stacks)
     scales = [_scales(s) for s in case.stacks]
 
+    solvers = {}      # the path a control loop runs: one prepared solver per layout
+
     def run(i: int):
-        opts = dict(variant.options)
+        stack = case.stacks[i]
+        solver = solvers.get(stack.layout)
+        if solver is None:
+            solver = solvers[stack.layout] = formulations.prepare(
+                stack.layout, variant.formulation, **variant.options)
         if variant.needs_mass_matrix:
-            opts["mass_matrix"] = case.mass_matrices[i]
-        return formulations.solve(case.stacks[i], variant.formulation, **opts)
+            return solver.solve(stack, mass_matrix=case.mass_matrices[i])
+        return solver.solve(stack)
 
     first = run(0)                     # untimed for the decision: imports, JIT, caches
     if first.time_s > settings.cap_s:
@@ -465,6 +472,11 @@ def measure_ik_step(settings: Settings, progress: Progress | None = None
         out = ik_step_times(settings.ik_steps)
     except (ImportError, FileNotFoundError, RuntimeError) as exc:
         return {}, f"PlaCo step failed ({type(exc).__name__}: {exc})"
+    from .panda_step import panda_step_times
+    try:
+        out["panda"] = panda_step_times(settings.ik_steps)
+    except (ImportError, FileNotFoundError, RuntimeError) as exc:
+        out["panda_error"] = f"{type(exc).__name__}: {exc}"
     if progress:
         progress.step("IK step: PlaCo vs extended_jacobian")
     return out, ""
@@ -524,21 +536,29 @@ def ratios(rows: list[Row], batch: dict[str, Any], ik: dict[str, Any]) -> list[R
                          f"{label} solve", bt / d1, 0.5, f"{bt:.1f} / {d1:.1f} µs"))
     out.append(Ratio(f"solve_batch({ej}) per stack / loop of {ej} through solve",
                      bt / lp, 0.5, f"{bt:.1f} / {lp:.1f} µs"))
-    for key, what, target in (("prioik_buffer_step_us", "preallocated rows + BufferSolver",
-                               1.0),
-                              ("prioik_step_us", "TaskStack path", math.inf)):
+    for key, what, target in (("prioik_prepared_step_us", "rows written in place + prepared "
+                               "solver (public API)", 0.8),
+                              ("prioik_oneoff_step_us", "Task/TaskStack + one-off prioik.solve",
+                               math.inf)):
         name = f"G1 IK step (kinematics + solve), {what}: {ej} / PlaCo KinematicsSolver"
         if ik:
             a, b = ik.get(key, math.nan), ik.get("placo_step_us", math.nan)
             out.append(Ratio(name, a / b, target, f"{a:.1f} / {b:.1f} µs"))
         else:
             out.append(Ratio(name, math.nan, target, "not measured"))
+    panda = ik.get("panda", {}) if ik else {}
+    for key, what, target in (("prepared_step_us", "prepared path", 2.5),
+                              ("oneoff_step_us", "one-off prioik.solve", math.inf)):
+        name = f"Panda reach step (kinematics + rows + solve), {what}: {ej} / PlaCo"
+        a, b = panda.get(key, math.nan), panda.get("placo_step_us", math.nan)
+        out.append(Ratio(name, a / b, target, f"{a:.1f} / {b:.1f} µs" if panda
+                         else "not measured"))
     if ik and "references_us" in ik:
         # the minimum-jerk references are the same Python in all three steps
         r = ik["references_us"]
-        a, b = ik["prioik_buffer_step_us"] - r, ik["placo_step_us"] - r
+        a, b = ik["prioik_prepared_step_us"] - r, ik["placo_step_us"] - r
         out.append(Ratio(f"G1 IK step without the shared references ({r:.1f} µs), "
-                         f"preallocated path / PlaCo", a / b, math.inf,
+                         f"prepared path / PlaCo", a / b, math.inf,
                          f"{a:.1f} / {b:.1f} µs"))
     return out
 
@@ -748,13 +768,23 @@ def markdown_report(rows: list[Row], rats: list[Ratio], batch: dict, ik: dict,
         md.append(ik.get("description", ""))
         md.append("\n| step | median µs | p10 µs | p90 µs |")
         md.append("|---|---:|---:|---:|")
-        for key, what in (("prioik_buffer", "prioik, preallocated: kinematics + "
-                                            "`write_velocity_rows` + `BufferSolver`"),
-                          ("prioik", "prioik, TaskStack path: kinematics + velocity stack + "
-                                     "extended_jacobian"),
+        for key, what in (("prioik_prepared", "prioik, prepared: kinematics + "
+                                              "`write_velocity_rows` + `solver.solve(data)`"),
+                          ("prioik_oneoff", "prioik, one-off: kinematics + `Task`/`TaskStack` "
+                                            "+ `prioik.solve`"),
                           ("placo", "PlaCo: update_kinematics + KinematicsSolver.solve")):
             md.append(f"| {what} | {_fmt_us(ik[key + '_step_us'])} | "
                       f"{_fmt_us(ik[key + '_p10_us'])} | {_fmt_us(ik[key + '_p90_us'])} |")
+    if ik and ik.get("panda"):
+        panda = ik["panda"]
+        md.append("\n## Panda reach step (kinematics + rows + solve)\n")
+        md.append(panda.get("description", ""))
+        md.append("\n| step | median µs | p10 µs | p90 µs |")
+        md.append("|---|---:|---:|---:|")
+        for key, what in (("prepared", "prioik, prepared"), ("oneoff", "prioik, one-off"),
+                          ("placo", "PlaCo KinematicsSolver")):
+            md.append(f"| {what} | {_fmt_us(panda[key + '_step_us'])} | "
+                      f"{_fmt_us(panda[key + '_p10_us'])} | {_fmt_us(panda[key + '_p90_us'])} |")
     if control:
         md.append("\n## Per control step on G1 (the paper's comparison re-measured)\n")
         md.append("Compatible fencing scenario on the G1 (n = 35: 29 joints and the floating "

@@ -1,6 +1,8 @@
-"""Singularity-robust task priority (Chiaverini 1997).
+"""Singularity-robust task priority (Chiaverini 1997), in its k-level form.
 
-Each level is first solved *on its own* — ``J_i^# h_i``, ignoring the levels above —
+Chiaverini (1997) treats two tasks, ``θ̈ = J_1^# h_1 + (I − J_1⁺J_1) J_2^# h_2``; the
+sum over ``k`` levels with the augmented projectors below is the usual later
+generalisation, not his paper's. Each level is first solved *on its own* — ``J_i^# h_i``, ignoring the levels above —
 and that solution is then projected into the null space of the augmented Jacobian
 of the higher levels (``J_{i-1}^A``, eq. 7 of Jeong & Chang 2009)::
 
@@ -10,9 +12,11 @@ of the higher levels (``J_{i-1}^A``, eq. 7 of Jeong & Chang 2009)::
 Because only each task's own inverse ``J_i^#`` appears (never the projected
 ``J_i N^A_{i-1}``), no algorithmic singularity can occur: ``θ̈`` is bounded by
 ``Σ_i ‖J_i^#‖ ‖h_i‖`` whatever the coupling between levels. The price is the
-*algorithmic error* (eq. 29): a lower task is met exactly only when its rows are
-orthogonal to the higher levels' rows (decoupled tasks); otherwise
-``h_i_feasible − J_i_feasible θ̈ ≠ 0`` even when every task could be met.
+*algorithmic error* (eq. 29): ``h_i_feasible − J_i_feasible θ̈`` is in general
+non-zero even when every task could be met. Rows orthogonal to the higher levels'
+rows (decoupled tasks) are sufficient for it to vanish, not necessary: a level made
+of rows orthogonal to the levels above plus copies of higher rows (its conflicting
+part) has none either (tests).
 
 ``J_i^#`` is the pseudo-inverse (``damping = 0``, the default: the shared rank rule
 ``σ > rcond·‖J_i‖_F``) or the damped least-squares inverse
@@ -28,6 +32,7 @@ import numpy as np
 from prioik.hierarchy import DEFAULT_RCOND, TaskStack, nested_null_spaces
 
 from .base import Capabilities, Outcome
+from .options import Option, rcond_option
 from .nullspace import check_nonnegative, generalized_inverse
 
 NAME = "chiaverini"
@@ -35,12 +40,13 @@ DESCRIPTION = "singularity-robust task priority (Chiaverini 1997): Σ N^A_{i-1} 
 CAPABILITIES = Capabilities(equalities=True, inequalities=False, weights=True,
                             needs_mass_matrix=False, exact=False)
 OPTIONS = {
-    "damping": (0.0, "λ ≥ 0: J^# = Jᵀ(JJᵀ + λI)⁻¹ (λ multiplies I); 0: pseudo-inverse"),
-    "rcond": (DEFAULT_RCOND, "relative rank threshold: σ counts if σ > rcond·‖J_i‖_F"),
+    "damping": Option(0.0, "float", "λ: J^# = Jᵀ(JJᵀ + λI)⁻¹ (λ multiplies I); 0: pseudo-inverse",
+                      minimum=0.0),
+    "rcond": rcond_option("‖J_i‖_F"),
 }
 
 
-def solve(stack: TaskStack, *, damping: float = 0.0, rcond: float = DEFAULT_RCOND) -> Outcome:
+def solve(stack: TaskStack, *, damping: float, rcond: float) -> Outcome:
     """Chiaverini's singularity-robust task priority; see the module docstring.
 
     Returns:

@@ -20,7 +20,7 @@ from prioik import extras, formulations
 from prioik.benchmarks.cli import main
 from prioik.formulations.registry import PLUGINS
 from prioik.hierarchy import check_lexicographic
-from prioik.hierarchy.families import compatible, conflicting, random_spd
+from prioik.hierarchy.families import compatible, conflicting, random_spd, with_inequalities
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "docs" / "examples"
 CORE = [name for name, (_, extra) in PLUGINS.items() if not extra]
@@ -44,7 +44,7 @@ def test_this_environment_holds_the_core_and_no_extra():
 def test_the_core_formulations_are_available_and_the_optional_ones_are_not():
     infos = {f.name: f for f in formulations.available()}
     assert set(CORE) == {"reference", "extended_jacobian", "nullspace", "chiaverini",
-                         "unifying", "operational_space"}
+                         "unifying", "operational_space", "hierarchical_active_set"}
     for name in CORE:
         assert infos[name].available, infos[name].reason
     for name, extra in OPTIONAL.items():
@@ -86,6 +86,14 @@ def test_extended_jacobian_agrees_with_reference_on_conflicting_stacks(kernel):
     assert batch.batched and batch.statuses == ["optimal"] * len(stacks)
     for s, x in zip(stacks, batch.X):
         assert np.allclose(x, formulations.solve(s, "reference").x, rtol=0, atol=1e-8)
+
+
+def test_hierarchical_active_set_takes_inequality_stacks_in_the_core():
+    for seed in range(3):
+        stack = with_inequalities(np.random.default_rng(seed), 10, 3)
+        sol = formulations.solve(stack, "hierarchical_active_set")
+        assert sol.status == "optimal", sol.info
+        assert sol.residuals[0] <= 1e-8   # the first level (a feasible box) is met
 
 
 @pytest.mark.parametrize("name", sorted(OPTIONAL))
