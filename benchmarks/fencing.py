@@ -564,10 +564,9 @@ def select_runs(text: str | None, runs=None) -> tuple[list[RunSpec], list[str]]:
     chosen, skipped = [], []
     for spec in specs:
         if spec.formulation == "placo_kinematics_solver":
-            try:
-                import placo  # noqa: F401
-            except ImportError as exc:
-                skipped.append(f"{spec.label}: placo is not installed ({exc})")
+            from prioik.extras import install_hint, missing_distributions
+            if missing_distributions("placo"):
+                skipped.append(f"{spec.label}: placo is not installed; {install_hint('placo')}")
                 continue
             chosen.append(spec)
             continue
@@ -767,7 +766,7 @@ def add_parser(subparsers) -> None:
                    help="skip the extended_jacobian vs cascaded_qp q̈ comparison")
     p.add_argument("--quiet", dest="progress", action="store_false",
                    help="no progress bars on stderr")
-    p.set_defaults(func=run_command)
+    p.set_defaults(func=run_command, extras=("robots", "plots"))
 
 
 # ------------------------------------------------------------ reproduction page
