@@ -293,10 +293,10 @@ class Prepared:
         if self._selective or self._bounded:
             status = _damping_info(info, out[n + k:n + 2 * k], self._selective,
                                    self._bounded)
-        margins = out[n + 2 * k:]
-        if margins.min() <= AMBIGUITY:
+        if code & 4:          # a rank decision within AMBIGUITY of its threshold
+            margins = out[n + 2 * k:]
             status = _ambiguity_status(info, status, np.flatnonzero(margins <= AMBIGUITY))
-        return Outcome(out[:n], status, info, out[n:n + k], code == 1)
+        return Outcome(out[:n], status, info, out[n:n + k], (code & 3) == 1)
 
     def _solve_stack(self, stack: TaskStack) -> Outcome:
         if self.damping > 0:

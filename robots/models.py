@@ -235,6 +235,16 @@ class RobotModel:
             self.__dict__["_unit_parts"] = parts
         return self.__dict__["_unit_parts"]
 
+    def unit_norm_index(self) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`unit_norm_parts` as two ``int64`` arrays (starts, sizes), for the
+        compiled state check."""
+        if "_unit_index" not in self.__dict__:
+            parts = self.unit_norm_parts()
+            self.__dict__["_unit_index"] = (
+                np.array([p[0] for p in parts], dtype=np.int64),
+                np.array([p[1] for p in parts], dtype=np.int64))
+        return self.__dict__["_unit_index"]
+
     def _compute_joint_limits(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         m = self.model
         lo = np.full(self.nv - self.n_base, -np.inf)

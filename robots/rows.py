@@ -417,6 +417,7 @@ class TaskWriter:
     def com(self, state, name: str, x, xd=None, xdd=None) -> None:
         """The centre of mass: ``x*``, ``ẋ*``, ``ẍ*`` given on the task's axes."""
         task = self._task(name, "com")
+        state.ensure_com()
         views = self._data_views(state)
         m = task.rows
         drift = self._drift(state, task)
