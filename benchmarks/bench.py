@@ -2,10 +2,11 @@
 
 In one process, per case (a set of stacks) and per formulation variant (one row per
 back-end of formulations that have ``backends()``): a few warm-up solves, then
-``--repeats`` (default 200) timed solves cycling over the case's stacks. The time of a
-solve is :attr:`formulations.Solution.time_s` — ``time.perf_counter`` around the
-plugin's ``solve`` alone (the registry's option checks and residual evaluation are
-outside it). Each row reports the median, p10 and p90 of those times, the success
+``--repeats`` (default 200) timed solves cycling over the case's stacks, each through a
+solver prepared once per layout (:func:`prioik.prepare`, the path a control loop
+runs). The time of a solve is :attr:`formulations.Solution.time_s` —
+``time.perf_counter`` around the plugin's solve alone (option checks happen at prepare;
+the residual evaluation is outside it). Each row reports the median, p10 and p90 of those times, the success
 rate and the distance to ``reference``:
 
 * **success**: status not ``"failed"`` and, at every level, the residual
@@ -250,11 +251,17 @@ def time_case(case: Case, variant: Variant, ref: _Reference, settings: Settings)
     S = len(case.stacks)
     scales = [_scales(s) for s in case.stacks]
 
+    solvers = {}      # the path a control loop runs: one prepared solver per layout
+
     def run(i: int):
-        opts = dict(variant.options)
+        stack = case.stacks[i]
+        solver = solvers.get(stack.layout)
+        if solver is None:
+            solver = solvers[stack.layout] = formulations.prepare(
+                stack.layout, variant.formulation, **variant.options)
         if variant.needs_mass_matrix:
-            opts["mass_matrix"] = case.mass_matrices[i]
-        return formulations.solve(case.stacks[i], variant.formulation, **opts)
+            return solver.solve(stack, mass_matrix=case.mass_matrices[i])
+        return solver.solve(stack)
 
     first = run(0)                     # untimed for the decision: imports, JIT, caches
     if first.time_s > settings.cap_s:
@@ -519,9 +526,10 @@ def ratios(rows: list[Row], batch: dict[str, Any], ik: dict[str, Any]) -> list[R
                          f"{label} solve", bt / d1, 0.5, f"{bt:.1f} / {d1:.1f} µs"))
     out.append(Ratio(f"solve_batch({ej}) per stack / loop of {ej} through solve",
                      bt / lp, 0.5, f"{bt:.1f} / {lp:.1f} µs"))
-    for key, what, target in (("prioik_buffer_step_us", "preallocated rows + BufferSolver",
-                               1.0),
-                              ("prioik_step_us", "TaskStack path", math.inf)):
+    for key, what, target in (("prioik_prepared_step_us", "rows written in place + prepared "
+                               "solver (public API)", 0.8),
+                              ("prioik_oneoff_step_us", "Task/TaskStack + one-off prioik.solve",
+                               math.inf)):
         name = f"G1 IK step (kinematics + solve), {what}: {ej} / PlaCo KinematicsSolver"
         if ik:
             a, b = ik.get(key, math.nan), ik.get("placo_step_us", math.nan)
@@ -531,9 +539,9 @@ def ratios(rows: list[Row], batch: dict[str, Any], ik: dict[str, Any]) -> list[R
     if ik and "references_us" in ik:
         # the minimum-jerk references are the same Python in all three steps
         r = ik["references_us"]
-        a, b = ik["prioik_buffer_step_us"] - r, ik["placo_step_us"] - r
+        a, b = ik["prioik_prepared_step_us"] - r, ik["placo_step_us"] - r
         out.append(Ratio(f"G1 IK step without the shared references ({r:.1f} µs), "
-                         f"preallocated path / PlaCo", a / b, math.inf,
+                         f"prepared path / PlaCo", a / b, math.inf,
                          f"{a:.1f} / {b:.1f} µs"))
     return out
 
@@ -743,10 +751,10 @@ def markdown_report(rows: list[Row], rats: list[Ratio], batch: dict, ik: dict,
         md.append(ik.get("description", ""))
         md.append("\n| step | median µs | p10 µs | p90 µs |")
         md.append("|---|---:|---:|---:|")
-        for key, what in (("prioik_buffer", "prioik, preallocated: kinematics + "
-                                            "`write_velocity_rows` + `BufferSolver`"),
-                          ("prioik", "prioik, TaskStack path: kinematics + velocity stack + "
-                                     "extended_jacobian"),
+        for key, what in (("prioik_prepared", "prioik, prepared: kinematics + "
+                                              "`write_velocity_rows` + `solver.solve(data)`"),
+                          ("prioik_oneoff", "prioik, one-off: kinematics + `Task`/`TaskStack` "
+                                            "+ `prioik.solve`"),
                           ("placo", "PlaCo: update_kinematics + KinematicsSolver.solve")):
             md.append(f"| {what} | {_fmt_us(ik[key + '_step_us'])} | "
                       f"{_fmt_us(ik[key + '_p10_us'])} | {_fmt_us(ik[key + '_p90_us'])} |")

@@ -31,6 +31,9 @@ def _cmd_list(args: argparse.Namespace) -> int:
                   f"{'yes' if c.exact else 'no':<6} {f.description}")
             if f.backends:
                 print(f"{'':<22} back-ends: {', '.join(f.backends)}")
+            if args.options:
+                for key, opt in f.options.items():
+                    print(f"{'':<22} {key}: {opt.doc()}")
         else:
             print(f"{f.name:<22} {'no':<10} {'':<6} {'':<6} {f.reason}")
     print(f"\nQP back-ends qpsolvers sees here: {', '.join(qpsolvers.available_solvers)}")
@@ -82,6 +85,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"prioik {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("list", help="list formulations, their availability and QP back-ends")
+    p.add_argument("--options", action="store_true",
+                   help="also print every option: meaning, default and range")
     p.set_defaults(func=_cmd_list)
     p = sub.add_parser("solve", help="solve a task-stack JSON file and print x and residuals")
     p.add_argument("file", help="task-stack JSON file (docs/task-stack-format.md)")

@@ -184,8 +184,14 @@ def _formulation_solver(spec: RunSpec, variant: str):
     opts = dict(spec.options.get(variant, {}))
     limits = spec.limits or ("bounds" if caps.inequalities else "activation")
 
+    solvers = {}          # layout -> prepared solver (the joint-limit rows come and go)
+
     def solve(stack, **kw):
-        return formulations.solve(stack, spec.formulation, **opts, **kw)
+        solver = solvers.get(stack.layout)
+        if solver is None:
+            solver = solvers[stack.layout] = formulations.prepare(stack.layout,
+                                                                  spec.formulation, **opts)
+        return solver.solve(stack, **kw)
 
     return solve, caps.needs_mass_matrix, caps.needs_mass_matrix, limits
 

@@ -56,7 +56,6 @@ def ik_step_times(steps: int = 300, formulation: str = "extended_jacobian"
         RuntimeError: PlaCo's run failed, or a prioik path failed.
     """
     from prioik import formulations
-    from prioik.formulations.extended_jacobian import BufferSolver
     from prioik.hierarchy import relative_distance
     from prioik.robots.fencing import FencingScenario
     from prioik.robots.tasks import KinematicState
@@ -70,7 +69,6 @@ def ik_step_times(steps: int = 300, formulation: str = "extended_jacobian"
         raise RuntimeError(f"PlaCo's run failed: {placo_run.message}")
     placo_step = placo_run.kinematics_time_s + placo_run.solve_time_s
 
-    mod = formulations.get(formulation)
     states = [(placo_run.q[i], placo_run.v[i], float(placo_run.t[i]))
               for i in range(placo_run.steps)]
     # each path in its own loop over the same states, as a control loop runs one path
@@ -84,10 +82,11 @@ def ik_step_times(steps: int = 300, formulation: str = "extended_jacobian"
 
     (kin, build, solve), xs = _time_path(
         states, "TaskStack path", formulation,
-        lambda q, v: KinematicState(robot, q, v, data), stack_of, mod.solve)
+        lambda q, v: KinematicState(robot, q, v, data), stack_of,
+        lambda stack: formulations.solve(stack, formulation))
     data_fast = robot.model.createData()
     rows = scenario.velocity_rows(GAIN)
-    solver = BufferSolver(rows.buffer)
+    solver = formulations.prepare(rows.data.layout, formulation)
     (fkin, fbuild, fsolve), fxs = _time_path(
         states, "preallocated path", formulation,
         lambda q, v: KinematicState(robot, q, v, data_fast, drift=False),
@@ -112,14 +111,14 @@ def ik_step_times(steps: int = 300, formulation: str = "extended_jacobian"
         "placo_p90_us": us(placo_step, 90),
         "placo_kinematics_us": us(placo_run.kinematics_time_s, 50),
         "placo_solve_us": us(placo_run.solve_time_s, 50),
-        "prioik_step_us": us(ours, 50), "prioik_p10_us": us(ours, 10),
-        "prioik_p90_us": us(ours, 90),
-        "prioik_kinematics_us": us(kin, 50), "prioik_build_us": us(build, 50),
-        "prioik_solve_us": us(solve, 50),
-        "prioik_buffer_step_us": us(fast_step, 50), "prioik_buffer_p10_us": us(fast_step, 10),
-        "prioik_buffer_p90_us": us(fast_step, 90),
-        "prioik_buffer_kinematics_us": us(fkin, 50), "prioik_buffer_build_us": us(fbuild, 50),
-        "prioik_buffer_solve_us": us(fsolve, 50),
+        "prioik_oneoff_step_us": us(ours, 50), "prioik_oneoff_p10_us": us(ours, 10),
+        "prioik_oneoff_p90_us": us(ours, 90),
+        "prioik_oneoff_kinematics_us": us(kin, 50), "prioik_oneoff_build_us": us(build, 50),
+        "prioik_oneoff_solve_us": us(solve, 50),
+        "prioik_prepared_step_us": us(fast_step, 50), "prioik_prepared_p10_us": us(fast_step, 10),
+        "prioik_prepared_p90_us": us(fast_step, 90),
+        "prioik_prepared_kinematics_us": us(fkin, 50), "prioik_prepared_build_us": us(fbuild, 50),
+        "prioik_prepared_solve_us": us(fsolve, 50),
         "references_us": us(refs, 50),
         "max_path_distance": distance,
         "description": (f"{int(placo_run.steps)} control steps (2 ms) of the compatible "
@@ -132,8 +131,8 @@ def ik_step_times(steps: int = 300, formulation: str = "extended_jacobian"
                         "states: the TaskStack "
                         "path (`KinematicState`, task terms, `Task`/`TaskStack`, plugin "
                         "`solve`) and the preallocated path (`KinematicState(drift=False)`, "
-                        "`FencingScenario.write_velocity_rows` into a `TaskRows` buffer, "
-                        "`BufferSolver.solve`); their answers differ by at most "
+                        "`FencingScenario.write_velocity_rows` into preallocated `TaskRows` data, "
+                        "a solver prepared once, `solver.solve(rows.data)`); their answers differ by at most "
                         f"{distance:.1e} (relative). All three compute the same Python "
                         "references. Phase medians (µs): PlaCo kinematics "
                         f"{us(placo_run.kinematics_time_s, 50):.1f}, solve "

@@ -5,9 +5,12 @@
 >>> [f.name for f in formulations.available() if f.available]   # doctest: +SKIP
 """
 
-from .base import STATUSES, Capabilities, FormulationError, Outcome, Solution
-from .registry import (PLUGINS, BatchSolution, FormulationInfo, available, get, names, solve,
-                       solve_batch)
+from .base import STATUSES, Capabilities, ConcurrentUseError, FormulationError, Outcome, Solution
+from .options import Option
+from .prepared import PreparedSolver
+from .registry import (PLUGINS, BatchSolution, FormulationInfo, available, get, names, prepare,
+                       solve, solve_batch)
 
-__all__ = ["BatchSolution", "STATUSES", "Capabilities", "FormulationError", "FormulationInfo", "Outcome",
-           "PLUGINS", "Solution", "available", "get", "names", "solve", "solve_batch"]
+__all__ = ["BatchSolution", "STATUSES", "Capabilities", "ConcurrentUseError", "FormulationError",
+           "FormulationInfo", "Option", "Outcome", "PLUGINS", "PreparedSolver", "Solution",
+           "available", "get", "names", "prepare", "solve", "solve_batch"]

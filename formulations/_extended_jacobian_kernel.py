@@ -394,17 +394,70 @@ def level_scales(A, b, starts, scales):
 
 
 @njit(cache=True, fastmath=_FAST)
-def solve_buffer(A, b, B, c, starts, scales, rcond, level_damping, singular_threshold,
-                 step_bound, x, ranks, level_mu2):
-    """Copy ``A``, ``b`` into the workspace ``B``, ``c``, take the level scales and, if
-    every value is finite, run :func:`solve_kernel`; returns whether it ran."""
-    B[:, :] = A
-    c[:] = b
+def weigh_rows(A, b, w, B, c):
+    """``B = diag(w) A``, ``c = w ∘ b`` (the level's weighted rows, into the workspace);
+    returns ``False`` when a ``√w`` is not finite and > 0."""
+    M, n = A.shape
+    ok = True
+    for i in range(M):
+        wi = w[i]
+        if not (wi > 0.0 and wi < np.inf):
+            ok = False
+        for j in range(n):
+            B[i, j] = wi * A[i, j]
+        c[i] = wi * b[i]
+    return ok
+
+
+@njit(cache=True, fastmath=_FAST)
+def level_residuals(A, b, w, starts, x, out):
+    """``out[i] = ‖w ∘ (A_i x − b_i)‖`` per level (equality rows)."""
+    for lev in range(starts.shape[0] - 1):
+        acc = 0.0
+        for i in range(starts[lev], starts[lev + 1]):
+            r = w[i] * (_dot(A[i], x) - b[i])
+            acc += r * r
+        out[lev] = np.sqrt(acc)
+
+
+@njit(cache=True, fastmath=_FAST)
+def solve_data(A, b, w, starts, work, params, out, ranks):
+    """The prepared solve of a stack's data, in one call with few arguments (the call's
+    cost on small stacks is mostly numba unboxing its arguments).
+
+    Weighs the rows into the workspace, takes the level scales and, if every value is
+    finite, runs :func:`solve_kernel` and the per-level residuals.
+
+    Args:
+        A, b, w: The data's rows, targets and ``√w`` (``M × n``, ``M``, ``M``).
+        starts: ``k + 1`` row offsets.
+        work: Workspace of ``M n + M + k`` floats (weighted rows, targets, scales).
+        params: ``rcond, level_damping, singular_threshold`` then the ``k`` step bounds.
+        out: Output of ``n + 2 k`` floats: ``x``, the residuals, the damping ``μ_i²``.
+        ranks: Output, ``k`` ranks.
+
+    Returns 0 when an input is not finite (nothing solved), 1 when ``x`` and the
+    residuals are finite, 2 when they are not (the caller reports a failure).
+    """
+    M, n = A.shape
+    k = starts.shape[0] - 1
+    B = work[:M * n].reshape((M, n))
+    c = work[M * n:M * n + M]
+    scales = work[M * n + M:M * n + M + k]
+    x = out[:n]
+    residuals = out[n:n + k]
+    mu2 = out[n + k:n + 2 * k]
+    if not weigh_rows(A, b, w, B, c):
+        return 0
     if not level_scales(B, c, starts, scales):
-        return False
-    solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
-                 step_bound, x, ranks, level_mu2)
-    return True
+        return 0
+    solve_kernel(B, c, starts, scales, params[0], params[1], params[2], params[3:], x,
+                 ranks, mu2)
+    level_residuals(A, b, w, starts, x, residuals)
+    acc = 0.0
+    for lev in range(k):
+        acc += residuals[lev]
+    return 1 if np.isfinite(acc) else 2
 
 
 @njit(cache=True, parallel=True)

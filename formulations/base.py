@@ -16,6 +16,11 @@ class FormulationError(ValueError):
     an unknown option, or a required option (e.g. ``mass_matrix``) missing."""
 
 
+class ConcurrentUseError(RuntimeError):
+    """A prepared solver was called from a second thread while a solve was running
+    (a prepared solver owns its workspaces: use one per thread)."""
+
+
 @dataclass(frozen=True)
 class Capabilities:
     """What a formulation can take.
@@ -45,11 +50,18 @@ class Outcome:
         x: The solution (``n``).
         status: One of :data:`STATUSES`.
         info: Formulation-specific data (ranks, iterations, torques, messages).
+        residuals: Per-level residuals when the plugin computed them itself (a compiled
+            kernel does, from the same rows); ``None``: the registry computes them.
+        checked: The plugin guarantees that ``x`` is a finite float64 vector of the
+            right length and ``residuals`` are given (the registry then skips its own
+            checks: the compiled paths verify both in the kernel).
     """
 
     x: np.ndarray
     status: str = "optimal"
     info: dict[str, Any] = field(default_factory=dict)
+    residuals: np.ndarray | None = None
+    checked: bool = False
 
 
 @dataclass

@@ -85,6 +85,7 @@ import scipy.sparse as spa
 from prioik.hierarchy import DEFAULT_RCOND, TaskStack
 
 from .base import Capabilities, FormulationError, Outcome
+from .options import Option, dictionary, per_level_nonnegative, positive_semidefinite, rcond_option
 
 NAME = "cascaded_qp"
 DESCRIPTION = "one QP per level through qpsolvers (Kanoun et al. 2011), any back-end"
@@ -111,23 +112,32 @@ DEFAULT_TOLERANCES: dict[str, float | None] = {
 NEEDS_DEFINITE_P = {"quadprog": 1e-12, "daqp": 1e-10}
 
 OPTIONS = {
-    "solver": (DEFAULT_SOLVER, "qpsolvers back-end (see backends())"),
-    "tolerance": (None, "back-end accuracy (None: DEFAULT_TOLERANCES[solver])"),
-    "backend_options": (None, "dict of extra keyword arguments for the back-end (override)"),
-    "fixing": ("basis", "how higher equality optima are kept: 'basis', 'rows' or 'nullspace'"),
-    "metric": (None, "SPD n×n W: the final level minimises xᵀWx instead of xᵀx"),
-    "rcond": (DEFAULT_RCOND, "relative rank threshold of the nested null spaces"),
-    "regularization": (None, "ε·‖A‖_F² on each level's x block (None: 1e-12 for quadprog, "
-                             "else 0)"),
-    "fix_active": (True, "fix strongly active inequalities (positive multiplier) as "
-                         "equalities for the lower levels (exact; avoids degenerate faces)"),
-    "margin": (0.0, "fixed higher inequality rows are relaxed by margin·max(1, ‖x*‖) "
-                     "(unit rows) so degenerate active sets stay solvable"),
-    "on_infeasible": ("relax", "'relax': least-violation answer; 'fail': failed status"),
-    "level_damping": (None, "k values μ_i² ≥ 0: level i minimises ‖A_i x − b_i‖² + μ_i²‖x‖² "
-                            "(damped least squares within the optimal set above)"),
-    "infeasibility_tol": (1e-7, "an inequality task counts as violated above this "
-                                "(relative to max(1, ‖A_t‖_F‖x‖))"),
+    "solver": Option(DEFAULT_SOLVER, "str", "qpsolvers back-end (see backends())"),
+    "tolerance": Option(None, "float", "back-end accuracy (None: DEFAULT_TOLERANCES[solver])",
+                        minimum=0.0, exclusive_minimum=True, optional=True),
+    "backend_options": Option(None, "any", "dict of extra keyword arguments for the back-end "
+                              "(override)", optional=True, check=dictionary),
+    "fixing": Option("basis", "str", "how higher equality optima are kept: 'basis', 'rows' or "
+                     "'nullspace'", choices=("basis", "rows", "nullspace")),
+    "metric": Option(None, "matrix", "SPD n×n W: the final level minimises xᵀWx instead of "
+                     "xᵀx", optional=True, check=positive_semidefinite),
+    "rcond": rcond_option(),
+    "regularization": Option(None, "float", "ε·‖A‖_F² on each level's x block (None: 1e-12 "
+                             "for quadprog, else 0)", minimum=0.0, optional=True),
+    "fix_active": Option(True, "bool", "fix strongly active inequalities (positive "
+                         "multiplier) as equalities for the lower levels (exact; avoids "
+                         "degenerate faces)"),
+    "margin": Option(0.0, "float", "fixed higher inequality rows are relaxed by "
+                     "margin·max(1, ‖x*‖) (unit rows) so degenerate active sets stay "
+                     "solvable", minimum=0.0),
+    "on_infeasible": Option("relax", "str", "'relax': least-violation answer; 'fail': "
+                            "failed status", choices=("relax", "fail")),
+    "level_damping": Option(None, "any", "k values μ_i² ≥ 0: level i minimises "
+                            "‖A_i x − b_i‖² + μ_i²‖x‖² (damped least squares within the "
+                            "optimal set above)", optional=True, check=per_level_nonnegative),
+    "infeasibility_tol": Option(1e-7, "float", "an inequality task counts as violated above "
+                                "this (relative to max(1, ‖A_t‖_F‖x‖))", minimum=0.0,
+                                exclusive_minimum=True),
 }
 
 FIXINGS = ("basis", "rows", "nullspace")
@@ -652,11 +662,10 @@ def run_cascade(stack: TaskStack, solve_qp, *, fixing: str, metric, rcond: float
     return Outcome(x, "optimal", info)
 
 
-def solve(stack: TaskStack, *, solver: str = DEFAULT_SOLVER, tolerance: float | None = None,
-          backend_options: dict | None = None, fixing: str = "basis", metric=None,
-          rcond: float = DEFAULT_RCOND, regularization: float | None = None,
-          on_infeasible: str = "relax", infeasibility_tol: float = 1e-7,
-          margin: float = 0.0, fix_active: bool = True, level_damping=None) -> Outcome:
+def solve(stack: TaskStack, *, solver: str, tolerance: float | None, backend_options: dict
+          | None, fixing: str, metric, rcond: float, regularization: float | None,
+          on_infeasible: str, infeasibility_tol: float, margin: float, fix_active: bool,
+          level_damping) -> Outcome:
     """Solve the stack by one QP per level plus a regularisation level.
 
     See the module docstring; every option is listed in :data:`OPTIONS`.

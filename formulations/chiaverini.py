@@ -28,6 +28,7 @@ import numpy as np
 from prioik.hierarchy import DEFAULT_RCOND, TaskStack, nested_null_spaces
 
 from .base import Capabilities, Outcome
+from .options import Option, rcond_option
 from .nullspace import check_nonnegative, generalized_inverse
 
 NAME = "chiaverini"
@@ -35,12 +36,13 @@ DESCRIPTION = "singularity-robust task priority (Chiaverini 1997): Σ N^A_{i-1} 
 CAPABILITIES = Capabilities(equalities=True, inequalities=False, weights=True,
                             needs_mass_matrix=False, exact=False)
 OPTIONS = {
-    "damping": (0.0, "λ ≥ 0: J^# = Jᵀ(JJᵀ + λI)⁻¹ (λ multiplies I); 0: pseudo-inverse"),
-    "rcond": (DEFAULT_RCOND, "relative rank threshold: σ counts if σ > rcond·‖J_i‖_F"),
+    "damping": Option(0.0, "float", "λ: J^# = Jᵀ(JJᵀ + λI)⁻¹ (λ multiplies I); 0: pseudo-inverse",
+                      minimum=0.0),
+    "rcond": rcond_option("‖J_i‖_F"),
 }
 
 
-def solve(stack: TaskStack, *, damping: float = 0.0, rcond: float = DEFAULT_RCOND) -> Outcome:
+def solve(stack: TaskStack, *, damping: float, rcond: float) -> Outcome:
     """Chiaverini's singularity-robust task priority; see the module docstring.
 
     Returns:

@@ -32,6 +32,7 @@ import numpy as np
 from prioik.hierarchy import DEFAULT_RCOND, TaskStack
 
 from .base import Capabilities, FormulationError, Outcome
+from .options import Option, dictionary, positive_semidefinite, rcond_option
 from .cascaded_qp import (ACTIVE_TOL, MULTIPLIER_TOL, Fixed, _unit_rows, level_rows,
                           record_level, scaled_level)
 
@@ -54,15 +55,21 @@ DEFAULT_SETTINGS: dict[str, dict[str, Any]] = {
 }
 
 OPTIONS = {
-    "solver": (DEFAULT_SOLVER, "cvxpy solver name (see backends())"),
-    "backend_options": (None, "dict of keyword arguments for the solver (override defaults)"),
-    "fixing": ("basis", "'basis' (orthonormal row-space basis) or 'rows' (literal rows)"),
-    "metric": (None, "SPD n×n W: the final level minimises xᵀWx instead of xᵀx"),
-    "rcond": (DEFAULT_RCOND, "relative rank threshold of the nested null spaces"),
-    "margin": (0.0, "fixed higher inequality rows relaxed by margin·max(1, ‖x*‖) (unit rows)"),
-    "on_infeasible": ("relax", "'relax': least-violation answer; 'fail': failed status"),
-    "infeasibility_tol": (1e-7, "an inequality task counts as violated above this "
-                                "(relative to max(1, ‖A_t‖_F‖x‖))"),
+    "solver": Option(DEFAULT_SOLVER, "str", "cvxpy solver name (see backends())"),
+    "backend_options": Option(None, "any", "dict of keyword arguments for the solver "
+                              "(override defaults)", optional=True, check=dictionary),
+    "fixing": Option("basis", "str", "'basis' (orthonormal row-space basis) or 'rows' "
+                     "(literal rows)", choices=("basis", "rows")),
+    "metric": Option(None, "matrix", "SPD n×n W: the final level minimises xᵀWx instead of "
+                     "xᵀx", optional=True, check=positive_semidefinite),
+    "rcond": rcond_option(),
+    "margin": Option(0.0, "float", "fixed higher inequality rows relaxed by "
+                     "margin·max(1, ‖x*‖) (unit rows)", minimum=0.0),
+    "on_infeasible": Option("relax", "str", "'relax': least-violation answer; 'fail': "
+                            "failed status", choices=("relax", "fail")),
+    "infeasibility_tol": Option(1e-7, "float", "an inequality task counts as violated above "
+                                "this (relative to max(1, ‖A_t‖_F‖x‖))", minimum=0.0,
+                                exclusive_minimum=True),
 }
 
 
@@ -96,10 +103,9 @@ def _solve(problem: cp.Problem, solver: str, settings: dict) -> tuple[str, str]:
     return problem.status, ""
 
 
-def solve(stack: TaskStack, *, solver: str = DEFAULT_SOLVER, backend_options: dict | None = None,
-          fixing: str = "basis", metric=None, rcond: float = DEFAULT_RCOND,
-          margin: float = 0.0, on_infeasible: str = "relax",
-          infeasibility_tol: float = 1e-7) -> Outcome:
+def solve(stack: TaskStack, *, solver: str, backend_options: dict | None, fixing: str,
+          metric, rcond: float, margin: float, on_infeasible: str, infeasibility_tol:
+          float) -> Outcome:
     """Solve the stack level by level with cvxpy; see the module docstring."""
     available = backends()
     if not isinstance(solver, str) or solver.upper() not in available:

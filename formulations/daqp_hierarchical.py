@@ -55,18 +55,24 @@ import numpy as np
 from prioik.hierarchy import DEFAULT_RCOND, TaskStack, check_lexicographic, nested_null_spaces
 
 from .base import Capabilities, FormulationError, Outcome
+from .options import Option, dictionary, rcond_option
 
 NAME = "daqp_hierarchical"
 DESCRIPTION = "DAQP's hierarchical QP: the whole stack in one daqp.solve call (break_points)"
 CAPABILITIES = Capabilities(equalities=True, inequalities=True, weights=True,
                             needs_mass_matrix=False, exact=False)
 OPTIONS = {
-    "primal_tol": (1e-10, "DAQP primal feasibility tolerance (DAQP's default: 1e-6)"),
-    "dual_tol": (1e-12, "DAQP dual feasibility tolerance"),
-    "compress_levels": (True, "replace each equality level by its SVD rows (full row rank)"),
-    "check": (True, "decide optimal/approximate from the conflicting-level test (eq. 35)"),
-    "rcond": (DEFAULT_RCOND, "relative rank threshold of the level compression and check"),
-    "settings": (None, "dict of extra daqp.solve settings (e.g. iter_limit, rho_soft)"),
+    "primal_tol": Option(1e-10, "float", "DAQP primal feasibility tolerance (DAQP's default: "
+                         "1e-6)", minimum=0.0, exclusive_minimum=True),
+    "dual_tol": Option(1e-12, "float", "DAQP dual feasibility tolerance", minimum=0.0,
+                       exclusive_minimum=True),
+    "compress_levels": Option(True, "bool", "replace each equality level by its SVD rows "
+                              "(full row rank)"),
+    "check": Option(True, "bool", "decide optimal/approximate from the conflicting-level "
+                    "test (eq. 35)"),
+    "rcond": rcond_option(),
+    "settings": Option(None, "any", "dict of extra daqp.solve settings (e.g. iter_limit, "
+                       "rho_soft)", optional=True, check=dictionary),
 }
 
 #: DAQP exit flags (DAQP's constants.h).
@@ -129,9 +135,8 @@ def build(stack: TaskStack, compress: bool, rcond: float, scale: bool = True):
             np.array(bps, dtype=np.intc), names)
 
 
-def solve(stack: TaskStack, *, primal_tol: float = 1e-10, dual_tol: float = 1e-12,
-          compress_levels: bool = True, check: bool = True, rcond: float = DEFAULT_RCOND,
-          settings: dict | None = None) -> Outcome:
+def solve(stack: TaskStack, *, primal_tol: float, dual_tol: float, compress_levels: bool,
+          check: bool, rcond: float, settings: dict | None) -> Outcome:
     """One hierarchical ``daqp.solve`` call; see the module docstring."""
     if settings is not None and not isinstance(settings, dict):
         raise FormulationError("settings must be a dict of daqp.solve keyword arguments")

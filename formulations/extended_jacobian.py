@@ -72,9 +72,11 @@ import math
 import numpy as np
 from scipy.linalg import lapack
 
-from prioik.hierarchy import DEFAULT_RCOND, StackBuffer, TaskStack, null_space_basis
+from prioik.hierarchy import (StackData, StackLayout, TaskStack, TaskStackError,
+                              UnsupportedTaskError, null_space_basis)
 
 from .base import Capabilities, FormulationError, Outcome
+from .options import Option, rcond_option, validate_options
 
 try:  # the compiled kernel is optional: the lapack path is the readable reference
     from . import _extended_jacobian_kernel as _kernel
@@ -83,21 +85,55 @@ except ImportError as exc:  # pragma: no cover - numba is a declared dependency
     _kernel = None
     _kernel_error = f"{type(exc).__name__}: {exc}"
 
+def step_bound_value(value):
+    """The ``step_bound`` option's type check (its per-level values are checked against
+    the layout by :func:`level_step_bounds`)."""
+    if isinstance(value, dict):
+        for key, val in value.items():
+            if not isinstance(key, str):
+                raise ValueError(f"a step_bound mapping takes task names, got {key!r}")
+            _nonnegative_number(val)
+        return dict(value)
+    if isinstance(value, (str, bytes)):
+        raise ValueError(f"must be a number, one number per level or a task-name mapping, "
+                         f"got {value!r}")
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"must be a number, one number per level or a task-name mapping, "
+                         f"got {value!r}") from None
+    if arr.ndim > 1 or not np.all(np.isfinite(arr)) or np.any(arr < 0):
+        raise ValueError(f"must be finite and ≥ 0, got {value!r}")
+    return value
+
+
+def _nonnegative_number(val) -> float:
+    if isinstance(val, bool) or not isinstance(val, (int, float, np.integer, np.floating)) \
+            or not (0.0 <= float(val) < math.inf):
+        raise ValueError(f"step bounds must be finite numbers ≥ 0, got {val!r}")
+    return float(val)
+
+
 NAME = "extended_jacobian"
 DESCRIPTION = "Jeong & Chang extended Jacobian (eq. 15-18), damped form eq. 27"
 CAPABILITIES = Capabilities(equalities=True, inequalities=False, weights=True,
                             needs_mass_matrix=False, exact=True)
 OPTIONS = {
-    "nullspace": ("qr", "'qr': nested pivoted QR, no SVD; 'svd': SVD of J_{i-1}^A as the paper"),
-    "damping": (0.0, "λ ≥ 0 of eq. 27 (0: exact eq. 18)"),
-    "rcond": (DEFAULT_RCOND, "relative rank threshold: σ counts if σ > rcond·‖A_i‖_F"),
-    "level_damping": (0.0, "λ_max of the selective damping (qr path; 0: off)"),
-    "kernel": ("auto", "qr path: 'numba' (compiled), 'lapack' (readable scipy.linalg.lapack), "
-                       "'auto' (numba when importable and n ≤ 160, else lapack)"),
-    "singular_threshold": (0.0, "ε: damp a level whose projected σ_min < ε·‖A_i‖_F"),
-    "step_bound": (0.0, "Δ > 0: every level's step ‖x_i − x_{i−1}‖ ≤ Δ by trust-region "
-                        "damping (qr path; 0: off); or k values (one per level, 0: "
-                        "unbounded), or {task name: Δ} for the levels holding those tasks"),
+    "nullspace": Option("qr", "str", "'qr': nested pivoted QR, no SVD; 'svd': SVD of "
+                        "J_{i-1}^A as the paper", choices=("qr", "svd")),
+    "damping": Option(0.0, "float", "λ of eq. 27 (0: exact eq. 18)", minimum=0.0),
+    "rcond": rcond_option(),
+    "level_damping": Option(0.0, "float", "λ_max of the selective damping (qr path; 0: off)",
+                            minimum=0.0),
+    "kernel": Option("auto", "str", "qr path: 'numba' (compiled), 'lapack' (readable "
+                     "scipy.linalg.lapack), 'auto' (numba when importable and n ≤ 160, else "
+                     "lapack)", choices=("auto", "numba", "lapack")),
+    "singular_threshold": Option(0.0, "float", "ε: damp a level whose projected "
+                                 "σ_min < ε·‖A_i‖_F", minimum=0.0),
+    "step_bound": Option(0.0, "any", "Δ > 0: every level's step ‖x_i − x_{i−1}‖ ≤ Δ by "
+                         "trust-region damping (qr path; 0: off); or k values (one per "
+                         "level, 0: unbounded), or {task name: Δ} for the levels holding "
+                         "those tasks", check=step_bound_value),
 }
 
 _dgeqp3 = lapack.dgeqp3
@@ -115,8 +151,6 @@ AUTO_NUMBA_MAX_N = 160
 
 
 def _resolve_kernel(kernel: str, n: int = 0) -> str:
-    if kernel not in ("auto", "numba", "lapack"):
-        raise FormulationError(f"kernel must be 'auto', 'numba' or 'lapack', got {kernel!r}")
     if kernel == "lapack" or (kernel == "auto" and (_kernel is None or n > AUTO_NUMBA_MAX_N)):
         return "lapack"
     if _kernel is None:
@@ -125,44 +159,109 @@ def _resolve_kernel(kernel: str, n: int = 0) -> str:
     return "numba"
 
 
-def solve(stack: TaskStack, *, nullspace: str = "qr", damping: float = 0.0,
-          rcond: float = DEFAULT_RCOND, level_damping: float = 0.0,
-          singular_threshold: float = 0.0, kernel: str = "auto",
-          step_bound=0.0) -> Outcome:
-    """Solve the extended system (eq. 17) for ``x``; see the module docstring."""
-    kernel = _resolve_kernel(kernel, stack.n)
-    if nullspace not in ("qr", "svd"):
-        raise FormulationError(f"nullspace must be 'qr' or 'svd', got {nullspace!r}")
-    _check_nonnegative(damping=damping, level_damping=level_damping,
-                       singular_threshold=singular_threshold, rcond=rcond)
-    damping = float(damping)
-    selective = float(level_damping) > 0 and float(singular_threshold) > 0
-    bound = level_step_bounds(stack, step_bound)
-    if (selective or bound.any()) and (damping > 0 or nullspace != "qr"):
-        raise FormulationError("level_damping and step_bound work on the qr path without "
-                               "eq. 27 damping; use one or the other")
-    if damping > 0:
-        return _solve_damped(stack, damping, rcond, nullspace)
-    if nullspace == "svd":
-        return _solve_svd(stack, rcond)
-    lam = float(level_damping) if selective else 0.0
-    if kernel == "numba":
-        return _solve_qr_compiled(stack, rcond, lam, float(singular_threshold), bound)
-    return _solve_qr(stack, rcond, lam, float(singular_threshold), bound)
+def solve(stack: TaskStack, **options) -> Outcome:
+    """Solve the extended system (eq. 17) for ``x``: :class:`Prepared` for the stack's
+    layout, then its :meth:`Prepared.solve` (see the module docstring)."""
+    opts = validate_options(NAME, OPTIONS, options, stack.n)
+    return Prepared(stack.layout, opts).solve(stack.data)
 
 
-def _check_nonnegative(**values: float) -> None:
-    """Raise :class:`FormulationError` naming the first option not finite and ≥ 0."""
-    for key, val in values.items():
-        if not (0.0 <= val < math.inf):   # also False for NaN
-            raise FormulationError(f"{key} must be a finite number ≥ 0, got {val}")
+class Prepared:
+    """The extended Jacobian prepared for one layout: options checked, workspaces
+    allocated once.
+
+    On the default path (``nullspace="qr"``, no eq. 27 damping, compiled kernel) a
+    :meth:`solve` is one compiled call on the data's arrays: rows weighed by ``√w`` into
+    the workspace, level scales and the finite check in the same pass, the nested
+    pivoted QR of eq. 15-18 and the per-level residuals — no allocation but the answer.
+    The other paths (``svd``, eq. 27, the LAPACK kernel) solve the data's stack.
+
+    Safe to use from one thread at a time (the registry's
+    :class:`~prioik.formulations.PreparedSolver` enforces it).
+
+    Args:
+        layout: The stack layout (equality tasks only).
+        options: Every option of :data:`OPTIONS`, validated.
+
+    Raises:
+        UnsupportedTaskError: the layout holds an inequality task.
+        FormulationError: options that do not combine, or a ``step_bound`` naming a task
+            the layout does not have.
+    """
+
+    def __init__(self, layout: StackLayout, options: dict) -> None:
+        for i, level in enumerate(layout.levels):
+            for name, _, kind in level:
+                if kind != "equality":
+                    raise UnsupportedTaskError("inequality tasks are not supported",
+                                               formulation=NAME, task=name, level=i)
+        self.layout = layout
+        self.kernel = _resolve_kernel(options["kernel"], layout.n)
+        self.nullspace = options["nullspace"]
+        self.damping = float(options["damping"])
+        self.rcond = float(options["rcond"])
+        self.singular_threshold = float(options["singular_threshold"])
+        selective = float(options["level_damping"]) > 0 and self.singular_threshold > 0
+        self.level_damping = float(options["level_damping"]) if selective else 0.0
+        self.step_bound = level_step_bounds(layout, options["step_bound"])
+        self.step_bound.setflags(write=False)
+        self._bounded = bool(self.step_bound.any())
+        if (selective or self._bounded) and (self.damping > 0 or self.nullspace != "qr"):
+            raise FormulationError("level_damping and step_bound work on the qr path without "
+                                   "eq. 27 damping; use one or the other")
+        self.compiled = (self.kernel == "numba" and self.nullspace == "qr"
+                         and self.damping == 0)
+        self._selective = self.level_damping > 0
+        self._starts = layout.starts
+        if self.compiled:
+            m, n, k = layout.m, layout.n, layout.k
+            self._work = np.empty(m * n + m + k)
+            self._params = np.concatenate([[self.rcond, self.level_damping,
+                                            self.singular_threshold], self.step_bound])
+            self._ranks = np.zeros(k, dtype=np.int64)
+            self._out_size = n + 2 * k
+
+    def solve(self, data: StackData) -> Outcome:
+        """Solve one stack of the layout (its data; the registry checked the layout).
+
+        Raises:
+            TaskStackError: a value is not finite (naming the task, level and row), or
+                the rows' squares overflow.
+        """
+        if not self.compiled:
+            return self._solve_stack(data.as_stack())
+        out = np.empty(self._out_size)      # x, residuals, μ² of this answer (one array)
+        code = _kernel.solve_data(data.A, data.b, data.sqrt_weight, self._starts,
+                                  self._work, self._params, out, self._ranks)
+        if code == 0:
+            data.check()     # names the task, level and row of a NaN, inf or bad √w
+            raise TaskStackError("the rows' scale overflows float64 (‖A_i‖_F² is not "
+                                 "finite): scale the tasks down")
+        n, k = self.layout.n, self.layout.k
+        info = {"rank_profile": self._ranks.copy(), "nullspace": "qr", "kernel": "numba"}
+        status = "optimal"
+        if self._selective or self._bounded:
+            status = _damping_info(info, out[n + k:], self._selective, self._bounded)
+        return Outcome(out[:n], status, info, out[n:n + k], code == 1)
+
+    def _solve_stack(self, stack: TaskStack) -> Outcome:
+        if self.damping > 0:
+            return _solve_damped(stack, self.damping, self.rcond, self.nullspace)
+        if self.nullspace == "svd":
+            return _solve_svd(stack, self.rcond)
+        return _solve_qr(stack, self.rcond, self.level_damping, self.singular_threshold,
+                         self.step_bound)
+
+    def solve_batch(self, datas: list[StackData]) -> tuple[np.ndarray, list[str]]:
+        """Many stacks of the layout: ``(X, statuses)`` (compiled, in parallel)."""
+        return _solve_batch(self, datas)
 
 
-def level_step_bounds(stack: TaskStack | StackBuffer, step_bound) -> np.ndarray:
+def level_step_bounds(stack: TaskStack | StackLayout, step_bound) -> np.ndarray:
     """The per-level bounds ``Δ_i`` (0: unbounded) of the ``step_bound`` option.
 
     Args:
-        stack: The stack (or buffer layout).
+        stack: The stack or its layout.
         step_bound: One ``Δ ≥ 0`` for every level, ``k`` values, or a mapping task
             name → ``Δ`` (a level gets the smallest bound of its tasks).
 
@@ -170,17 +269,17 @@ def level_step_bounds(stack: TaskStack | StackBuffer, step_bound) -> np.ndarray:
         FormulationError: a value is negative or not finite, the sequence has the
             wrong length, or a task name is not in the stack.
     """
-    k = len(stack)
+    layout = stack.layout if isinstance(stack, TaskStack) else stack
+    k = len(layout)
     if isinstance(step_bound, dict):
         out = np.zeros(k)
         for name, val in step_bound.items():
             try:
-                i = stack.level_of(name)
+                i = layout.level_of(name)
             except KeyError:
-                names = [n for level in stack.levels for n in level.names] \
-                    if isinstance(stack, TaskStack) else [n for lv in stack.names for n in lv]
                 raise FormulationError(f"step_bound names task {name!r}, which is not in "
-                                       f"the stack (tasks: {', '.join(names)})") from None
+                                       f"the stack (tasks: {', '.join(layout.task_names())})"
+                                       ) from None
             out[i] = float(val) if out[i] == 0 else min(out[i], float(val))
     else:
         try:
@@ -202,102 +301,6 @@ def _damping_info(info: dict, mu2: np.ndarray, selective: bool, bound: bool) -> 
     info["damped_levels"] = flagged
     info["level_damping"] = mu2.copy()
     return "approximate" if flagged else "optimal"
-
-
-def _solve_qr_compiled(stack: TaskStack, rcond: float, level_damping: float,
-                       singular_threshold: float, step_bound: np.ndarray) -> Outcome:
-    packed = stack.packed()
-    k = len(stack)
-    x, ranks, mu2 = np.empty(stack.n), np.zeros(k, dtype=np.int64), np.zeros(k)
-    _kernel.solve_kernel(packed.A.copy(), packed.b.copy(), packed.starts, packed.scales,
-                         rcond, level_damping, singular_threshold, step_bound, x, ranks, mu2)
-    return _wrap_outcome(x, ranks, mu2, level_damping > 0, bool(step_bound.any()))
-
-
-def _wrap_outcome(x, ranks, mu2, selective: bool, bounded: bool) -> Outcome:
-    """The compiled kernel's outputs (copied out of the workspace) as an
-    :class:`Outcome`."""
-    info = {"rank_profile": ranks.copy(), "nullspace": "qr", "kernel": "numba"}
-    status = _damping_info(info, mu2, selective, bounded)
-    return Outcome(x.copy(), status, info)
-
-
-class BufferSolver:
-    """The compiled ``qr`` path on a :class:`~hierarchy.StackBuffer`, for control loops.
-
-    :func:`solve` takes a :class:`~hierarchy.TaskStack` (validated, packed and copied
-    per call); a loop that refills the same layout at every step can instead fill a
-    buffer and call :meth:`solve`, which copies the rows into a preallocated
-    workspace, checks them (finite, in the same pass that takes the level scales)
-    and runs the same kernel (eq. 15-18 by nested
-    pivoted QR): no ``Task`` objects, no packing, no allocation but the answer.
-    The answer equals ``solve(buffer.to_stack(), ...)`` bit for bit (same kernel,
-    same inputs; asserted in ``tests/test_extended_jacobian.py``).
-
-    Args:
-        buffer: The layout (and the default rows) to solve.
-        rcond, level_damping, singular_threshold, step_bound: As for :func:`solve`
-            (``step_bound``: one value, one per level, or a task-name mapping).
-
-    Raises:
-        FormulationError: numba is missing, or an option is out of range.
-    """
-
-    def __init__(self, buffer: StackBuffer, *, rcond: float = DEFAULT_RCOND,
-                 level_damping: float = 0.0, singular_threshold: float = 0.0,
-                 step_bound=0.0) -> None:
-        if _kernel is None:
-            raise FormulationError(f"BufferSolver needs the compiled kernel: {_kernel_error}; "
-                                   f"install it with `pip install numba`")
-        _check_nonnegative(level_damping=level_damping, rcond=rcond,
-                           singular_threshold=singular_threshold)
-        k = len(buffer)
-        self.buffer = buffer
-        self.rcond = float(rcond)
-        selective = float(level_damping) > 0 and float(singular_threshold) > 0
-        self.level_damping = float(level_damping) if selective else 0.0
-        self.singular_threshold = float(singular_threshold)
-        self.step_bound = step_bound
-        self._B = np.empty_like(buffer.A)
-        self._c = np.empty_like(buffer.b)
-        self._scales = np.zeros(k)
-        self._x = np.empty(buffer.n)
-        self._ranks = np.zeros(k, dtype=np.int64)
-        self._mu2 = np.zeros(k)
-
-    @property
-    def step_bound(self) -> np.ndarray:
-        """Per-level ``Δ_i`` (0: unbounded); set like the constructor's argument."""
-        return self._step_bound
-
-    @step_bound.setter
-    def step_bound(self, value) -> None:
-        self._step_bound = level_step_bounds(self.buffer, value)
-        self._step_bound.flags.writeable = False     # changed only through the setter
-        self._bounded = bool(self._step_bound.any())
-
-    def solve(self, buffer: StackBuffer | None = None) -> Outcome:
-        """Solve the buffer's current rows (``buffer``: another of the same layout).
-
-        Raises:
-            TaskStackError: a value is not finite (naming the task and level).
-            FormulationError: ``buffer`` has another layout.
-        """
-        buf = self.buffer if buffer is None else buffer
-        if buf is not self.buffer and (buf.A.shape != self.buffer.A.shape
-                                       or not np.array_equal(buf.starts, self.buffer.starts)):
-            raise FormulationError(f"buffer layout differs from the solver's: rows "
-                                   f"{buf.starts.tolist()} × {buf.n} vs "
-                                   f"{self.buffer.starts.tolist()} × {self.buffer.n}")
-        # one compiled call: copy into the workspace, level scales (and finite check),
-        # kernel
-        if not _kernel.solve_buffer(buf.A, buf.b, self._B, self._c, buf.starts,
-                                    self._scales, self.rcond, self.level_damping,
-                                    self.singular_threshold, self._step_bound, self._x,
-                                    self._ranks, self._mu2):
-            buf.check()     # names the task, level and row of a NaN or inf
-        return _wrap_outcome(self._x, self._ranks, self._mu2, self.level_damping > 0,
-                             self._bounded)
 
 
 # --------------------------------------------------------------------------- qr
@@ -555,36 +558,28 @@ def _solve_damped(stack: TaskStack, damping: float, rcond: float, nullspace: str
                                       "extended_rows": int(JE.shape[0])})
 
 
-def solve_batch(stacks: list[TaskStack], *, nullspace: str = "qr", damping: float = 0.0,
-                rcond: float = DEFAULT_RCOND, level_damping: float = 0.0,
-                singular_threshold: float = 0.0, kernel: str = "auto",
-                step_bound=0.0) -> tuple[np.ndarray, list[str]]:
-    """Many stacks of one shape at once (compiled kernel, stacks in parallel).
-
-    Falls back to a loop of :func:`solve` for the ``svd`` path, eq. 27 damping or
-    when numba is missing. Returns the solutions (``B × n``) and their statuses.
-    """
-    kernel = _resolve_kernel(kernel, stacks[0].n if stacks else 0)
-    if kernel != "numba" or nullspace != "qr" or damping > 0:
-        outs = [solve(s, nullspace=nullspace, damping=damping, rcond=rcond,
-                      level_damping=level_damping, singular_threshold=singular_threshold,
-                      kernel=kernel, step_bound=step_bound) for s in stacks]
+def _solve_batch(prepared: "Prepared", datas: list[StackData]) -> tuple[np.ndarray, list[str]]:
+    """Many stacks of one layout at once: the compiled kernel over the batch, stacks in
+    parallel (a loop of :meth:`Prepared.solve` off the compiled path)."""
+    if not prepared.compiled:
+        outs = [prepared.solve(d) for d in datas]
         return np.array([o.x for o in outs]), [o.status for o in outs]
-    selective = float(level_damping) > 0 and float(singular_threshold) > 0
-    packs = [s.packed() for s in stacks]
-    B = np.stack([p.A for p in packs])
-    c = np.stack([p.b for p in packs])
-    scales = np.stack([p.scales for p in packs])
-    N, k, n = len(stacks), len(stacks[0]), stacks[0].n
+    N, k, n = len(datas), prepared.layout.k, prepared.layout.n
+    starts = prepared.layout.starts
+    B = np.empty((N, prepared.layout.m, n))
+    c = np.empty((N, prepared.layout.m))
+    scales = np.zeros((N, k))
+    for i, d in enumerate(datas):
+        if not (_kernel.weigh_rows(d.A, d.b, d.sqrt_weight, B[i], c[i])
+                and _kernel.level_scales(B[i], c[i], starts, scales[i])):
+            d.check()
+            raise TaskStackError(f"stack {i} of the batch: the rows' scale overflows "
+                                 f"float64")
     X = np.empty((N, n))
     ranks = np.zeros((N, k), dtype=np.int64)
     mu2 = np.zeros((N, k))
-    if isinstance(step_bound, dict):   # task names may sit on different levels per stack
-        bounds = np.stack([level_step_bounds(s, step_bound) for s in stacks])
-    else:
-        bounds = np.broadcast_to(level_step_bounds(stacks[0], step_bound), (N, k)).copy()
-    _kernel.solve_batch_kernel(B, c, packs[0].starts, scales, float(rcond),
-                               float(level_damping) if selective else 0.0,
-                               float(singular_threshold), bounds, X, ranks, mu2)
+    bounds = np.broadcast_to(prepared.step_bound, (N, k)).copy()
+    _kernel.solve_batch_kernel(B, c, starts, scales, prepared.rcond, prepared.level_damping,
+                               prepared.singular_threshold, bounds, X, ranks, mu2)
     statuses = ["approximate" if (d > 0).any() else "optimal" for d in mu2]
     return X, statuses

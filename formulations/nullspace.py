@@ -45,15 +45,18 @@ import numpy as np
 from prioik.hierarchy import DEFAULT_RCOND, TaskStack
 
 from .base import Capabilities, FormulationError, Outcome
+from .options import Option, rcond_option
 
 NAME = "nullspace"
 DESCRIPTION = "recursive null-space projection (Nakamura 1987), damped LS inverse option"
 CAPABILITIES = Capabilities(equalities=True, inequalities=False, weights=True,
                             needs_mass_matrix=False, exact=True)
 OPTIONS = {
-    "damping": (0.0, "λ ≥ 0: Ĵ^# = Ĵᵀ(ĴĴᵀ + λI)⁻¹ (λ multiplies I, as eq. 27); 0: pseudo-inverse"),
-    "rcond": (DEFAULT_RCOND, "relative rank threshold: σ counts if σ > rcond·‖J_i‖_F"),
-    "reproject": (True, "apply N_{i-1} to each step (exact no-op; keeps round-off ≈ ε/σ)"),
+    "damping": Option(0.0, "float", "λ: Ĵ^# = Ĵᵀ(ĴĴᵀ + λI)⁻¹ (λ multiplies I, as eq. 27); "
+                      "0: pseudo-inverse", minimum=0.0),
+    "rcond": rcond_option("‖J_i‖_F"),
+    "reproject": Option(True, "bool", "apply N_{i-1} to each step (exact no-op; keeps "
+                        "round-off ≈ ε/σ)"),
 }
 
 
@@ -97,8 +100,7 @@ def generalized_inverse(M: np.ndarray, tol: float, damping: float = 0.0
     return (V * gain) @ U.T, V, U
 
 
-def solve(stack: TaskStack, *, damping: float = 0.0, rcond: float = DEFAULT_RCOND,
-          reproject: bool = True) -> Outcome:
+def solve(stack: TaskStack, *, damping: float, rcond: float, reproject: bool) -> Outcome:
     """Recursive null-space projection; see the module docstring.
 
     Returns:

@@ -44,6 +44,7 @@ from scipy.linalg import solve_triangular
 from prioik.hierarchy import DEFAULT_RCOND, TaskStack
 
 from .base import Capabilities, FormulationError, Outcome
+from .options import Option, rcond_option
 from .nullspace import check_nonnegative, truncated_svd
 
 NAME = "operational_space"
@@ -51,10 +52,13 @@ DESCRIPTION = "prioritized operational-space control (Khatib, Sentis), mass_matr
 CAPABILITIES = Capabilities(equalities=True, inequalities=False, weights=True,
                             needs_mass_matrix=True, exact=True)
 OPTIONS = {
-    "mass_matrix": (None, "SPD n×n joint-space inertia M (required)"),
-    "bias": (None, "C + G (n): with it, info['tau'] = M θ̈ + C + G"),
-    "rcond": (DEFAULT_RCOND, "relative rank threshold: σ counts if σ > rcond·‖J_i L⁻ᵀ‖_F"),
-    "reproject": (True, "apply N_{i-1} to each step (exact no-op; keeps round-off ≈ ε/σ)"),
+    "mass_matrix": Option(None, "matrix", "SPD n×n joint-space inertia M (required)",
+                          optional=True),
+    "bias": Option(None, "vector", "C + G (n): with it, info['tau'] = M θ̈ + C + G",
+                   optional=True),
+    "rcond": rcond_option("‖J_i L⁻ᵀ‖_F"),
+    "reproject": Option(True, "bool", "apply N_{i-1} to each step (exact no-op; keeps "
+                        "round-off ≈ ε/σ)"),
 }
 
 
@@ -99,8 +103,7 @@ def task_space_torque(levels: list[PrioritizedLevel], null_projector: np.ndarray
     return tau
 
 
-def solve(stack: TaskStack, *, mass_matrix=None, bias=None,
-          rcond: float = DEFAULT_RCOND, reproject: bool = True) -> Outcome:
+def solve(stack: TaskStack, *, mass_matrix, bias, rcond: float, reproject: bool) -> Outcome:
     """Prioritized operational-space control; see the module docstring.
 
     Returns:

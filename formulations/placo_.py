@@ -47,6 +47,7 @@ import placo
 from prioik.hierarchy import DEFAULT_RCOND, TaskStack
 
 from .base import Capabilities, FormulationError, Outcome
+from .options import Option, rcond_option
 
 NAME = "placo"
 DESCRIPTION = "PlaCo placo.Problem: first level hard, lower levels soft (geometric weights)"
@@ -57,11 +58,12 @@ CAPABILITIES = Capabilities(equalities=True, inequalities=True, weights=True,
 SOFT_SPAN = 1e-4
 
 OPTIONS = {
-    "weight_ratio": (None, "ρ: soft level j (j ≥ 2) has weight ρ^(j−2); None: "
-                           "ρ = SOFT_SPAN^(1/(k−2)) (weights from 1 down to SOFT_SPAN)"),
-    "regularization": (1e-8, "ε: PlaCo's ‖x‖² regularisation weight (PlaCo's default, "
-                             "measured best)"),
-    "rcond": (DEFAULT_RCOND, "relative rank threshold used to reduce the first level"),
+    "weight_ratio": Option(None, "float", "ρ: soft level j (j ≥ 2) has weight ρ^(j−2); None: "
+                           "ρ = SOFT_SPAN^(1/(k−2)) (weights from 1 down to SOFT_SPAN)",
+                           minimum=0.0, exclusive_minimum=True, optional=True),
+    "regularization": Option(1e-8, "float", "ε: PlaCo's ‖x‖² regularisation weight (PlaCo's "
+                             "default, measured best)", minimum=0.0),
+    "rcond": rcond_option(),
 }
 
 
@@ -121,8 +123,8 @@ def default_weight_ratio(levels: int) -> float:
     return SOFT_SPAN ** (1.0 / (levels - 2)) if levels > 2 else 1.0
 
 
-def solve(stack: TaskStack, *, weight_ratio: float | None = None, regularization: float = 1e-8,
-          rcond: float = DEFAULT_RCOND) -> Outcome:
+def solve(stack: TaskStack, *, weight_ratio: float | None, regularization: float, rcond:
+          float) -> Outcome:
     """Build and solve the single PlaCo QP; see the module docstring."""
     if weight_ratio is None:
         weight_ratio = default_weight_ratio(len(stack))

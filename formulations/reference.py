@@ -24,16 +24,19 @@ import numpy as np
 from prioik.hierarchy import DEFAULT_RCOND, TaskStack
 
 from .base import Capabilities, FormulationError, Outcome
+from .options import Option, per_level_nonnegative, positive_semidefinite, rcond_option
 
 NAME = "reference"
 DESCRIPTION = "exact lexicographic least squares, nested SVD null spaces (ground truth)"
 CAPABILITIES = Capabilities(equalities=True, inequalities=False, weights=True,
                             needs_mass_matrix=False, exact=True)
 OPTIONS = {
-    "rcond": (DEFAULT_RCOND, "relative rank threshold: σ counts if σ > rcond·‖A_i‖_F"),
-    "metric": (None, "SPD n×n W: the final tie-break minimises xᵀWx instead of xᵀx"),
-    "level_damping": (None, "k values μ_i² ≥ 0: level i by damped least squares "
-                            "(σ ↦ σ/(σ² + μ_i²))"),
+    "rcond": rcond_option(),
+    "metric": Option(None, "matrix", "SPD n×n W: the final tie-break minimises xᵀWx instead "
+                     "of xᵀx", optional=True, check=positive_semidefinite),
+    "level_damping": Option(None, "any", "k values μ_i² ≥ 0: level i by damped least squares "
+                            "(σ ↦ σ/(σ² + μ_i²))", optional=True,
+                            check=per_level_nonnegative),
 }
 
 
@@ -53,8 +56,7 @@ def level_damping_values(stack: TaskStack, level_damping) -> np.ndarray:
     return mu2
 
 
-def solve(stack: TaskStack, *, rcond: float = DEFAULT_RCOND, metric=None,
-          level_damping=None) -> Outcome:
+def solve(stack: TaskStack, *, rcond: float, metric, level_damping) -> Outcome:
     """Lexicographic minimum-norm (or minimum ``xᵀWx``) solution of an equality stack."""
     mu2 = level_damping_values(stack, level_damping)
     n = stack.n

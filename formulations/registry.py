@@ -3,8 +3,12 @@
 A plugin is a module that defines
 
 * ``NAME`` (str), ``DESCRIPTION`` (one line), ``CAPABILITIES`` (:class:`Capabilities`),
-* ``OPTIONS``: ``{option: (default, description)}``, the only options it accepts,
+* ``OPTIONS``: ``{option: Option(...)}`` (:mod:`.options`), the only options it accepts
+  (validated once by the registry: the plugin receives every option, clean),
 * ``solve(stack, **options) -> Outcome``,
+* optionally ``Prepared(layout, options)`` with ``solve(data) -> Outcome`` (and
+  ``solve_batch(datas)``): its own prepared solver (:func:`prepare`); otherwise a default
+  adapter calls ``solve`` on the data's stack,
 * optionally ``backends() -> list[str]``, the back-ends it can use here,
 * optionally ``solve_batch(stacks, **options) -> (X, statuses)`` for many stacks of one
   shape (stacked linear algebra); :func:`solve_batch` loops over ``solve`` otherwise.
@@ -16,16 +20,15 @@ reason is recorded and repeated when that formulation is asked for.
 from __future__ import annotations
 
 import importlib
-import time
 from dataclasses import dataclass, field
 from types import ModuleType
 from typing import Any
 
-import numpy as np
+from prioik.hierarchy import StackData, StackLayout, TaskStack
 
-from prioik.hierarchy import TaskStack, UnsupportedTaskError, lexicographic_residuals
-
-from .base import STATUSES, Capabilities, FormulationError, Outcome, Solution
+from .base import Capabilities, FormulationError, Solution
+from .options import Option, validate_options
+from .prepared import PreparedSolver, check_support  # noqa: F401  (re-exported)
 
 #: name -> (module, pip package(s) that provide its optional dependency)
 PLUGINS: dict[str, tuple[str, str]] = {
@@ -56,7 +59,7 @@ class FormulationInfo:
         reason: Why not, when not available.
         description: One line.
         capabilities: What it supports (``None`` when it could not be imported).
-        options: Accepted options with defaults and descriptions.
+        options: Accepted options (typed :class:`~prioik.formulations.options.Option`).
         backends: Back-ends it can use here (QP solvers), if it has any.
     """
 
@@ -65,7 +68,7 @@ class FormulationInfo:
     reason: str = ""
     description: str = ""
     capabilities: Capabilities | None = None
-    options: dict[str, tuple[Any, str]] = field(default_factory=dict)
+    options: dict[str, Option] = field(default_factory=dict)
     backends: tuple[str, ...] = ()
 
 
@@ -121,66 +124,41 @@ def get(name: str) -> ModuleType:
     return mod
 
 
-_MATRIX_OPTIONS = ("mass_matrix", "metric")
-_VECTOR_OPTIONS = ("bias",)
+def prepare(stack_or_layout, formulation: str = "extended_jacobian",
+            **options: Any) -> PreparedSolver:
+    """A formulation prepared for one stack layout: options validated and workspaces
+    allocated once, then ``solver.solve(stack_or_data)`` per step.
 
+    Args:
+        stack_or_layout: A :class:`~prioik.hierarchy.StackLayout`, or a stack (its layout
+            is used).
+        formulation: Registry name (see :func:`available`).
+        **options: The formulation's options (see its ``OPTIONS``).
 
-def _check_options(name: str, mod: ModuleType, stack: TaskStack, options: dict) -> dict:
-    unknown = sorted(set(options) - set(mod.OPTIONS))
-    if unknown:
-        raise FormulationError(f"formulation {name!r} has no option {', '.join(unknown)}; "
-                               f"its options: {', '.join(mod.OPTIONS) or 'none'}")
-    n = stack.n
-    out = {}
-    for key, value in options.items():
-        if key in _MATRIX_OPTIONS and value is not None:
-            arr = np.array(value, dtype=np.float64, copy=True)
-            if arr.shape != (n, n):
-                raise FormulationError(f"{key} must be {n}x{n} for this stack, got shape {arr.shape}")
-            if not np.isfinite(arr).all():
-                raise FormulationError(f"{key} holds NaN or inf")
-            if not np.allclose(arr, arr.T, rtol=1e-10, atol=1e-12 * max(1.0, np.abs(arr).max())):
-                raise FormulationError(f"{key} must be symmetric (max |M - Mᵀ| = "
-                                       f"{np.abs(arr - arr.T).max():.3e})")
-            arr.setflags(write=False)
-            value = arr
-        elif key in _VECTOR_OPTIONS and value is not None:
-            arr = np.array(value, dtype=np.float64, copy=True).reshape(-1)
-            if arr.shape != (n,) or not np.isfinite(arr).all():
-                raise FormulationError(f"{key} must be a finite vector of length {n}, "
-                                       f"got shape {np.shape(value)}")
-            arr.setflags(write=False)
-            value = arr
-        out[key] = value
-    if mod.CAPABILITIES.needs_mass_matrix and out.get("mass_matrix") is None:
-        raise FormulationError(f"formulation {name!r} needs mass_matrix=M "
-                               f"(the {n}x{n} joint-space inertia matrix, SPD)")
-    return out
+    Raises:
+        FormulationError: unknown/unavailable formulation, unknown or invalid option.
+        UnsupportedTaskError: the layout holds a task kind the formulation cannot take.
 
-
-def check_support(name: str, caps: Capabilities, stack: TaskStack) -> None:
-    """Raise :class:`UnsupportedTaskError` naming the first task ``caps`` cannot take."""
-    for i, level in enumerate(stack.levels):
-        for t in level:
-            if not t.is_equality and not caps.inequalities:
-                raise UnsupportedTaskError("inequality tasks are not supported",
-                                           formulation=name, task=t.name, level=i)
-            if t.is_equality and not caps.equalities:
-                raise UnsupportedTaskError("equality tasks are not supported",
-                                           formulation=name, task=t.name, level=i)
-        if not caps.weights and len(level) > 1:
-            w = {float(v) for t in level for v in np.unique(t.weight)}
-            if len(w) > 1:
-                raise UnsupportedTaskError("weighted tasks sharing a level are not "
-                                           "supported", formulation=name,
-                                           task=level[0].name, level=i)
+    A formulation that needs ``mass_matrix`` may get it here or with every solve
+    (``solver.solve(stack, mass_matrix=M, bias=b)``: it changes with the state).
+    """
+    mod = get(formulation)
+    if isinstance(stack_or_layout, StackLayout):
+        layout = stack_or_layout
+    elif isinstance(stack_or_layout, (TaskStack, StackData)):
+        layout = stack_or_layout.layout
+    else:
+        layout = TaskStack(stack_or_layout).layout
+    opts = validate_options(formulation, mod.OPTIONS, options, layout.n)
+    return PreparedSolver(formulation, mod, layout, opts, options)
 
 
 def solve(stack, formulation: str = "extended_jacobian", **options: Any) -> Solution:
-    """Solve a task stack with the named formulation.
+    """Solve a task stack with the named formulation: :func:`prepare` + ``solve``.
 
     Args:
-        stack: A :class:`~hierarchy.TaskStack` (or anything ``TaskStack`` accepts).
+        stack: A :class:`~prioik.hierarchy.TaskStack` (or anything ``TaskStack``
+            accepts), or a :class:`~prioik.hierarchy.StackData`.
         formulation: Registry name (see :func:`available`).
         **options: The formulation's options (see its ``OPTIONS``).
 
@@ -189,37 +167,13 @@ def solve(stack, formulation: str = "extended_jacobian", **options: Any) -> Solu
         ``status == "failed"`` with ``info["message"]``, not an exception.
 
     Raises:
-        FormulationError: unknown/unavailable formulation, unknown or missing option.
+        FormulationError: unknown/unavailable formulation, unknown, invalid or missing
+            option.
         UnsupportedTaskError: the stack holds a task the formulation cannot take.
     """
-    mod = get(formulation)
-    if not isinstance(stack, TaskStack):
+    if not isinstance(stack, (TaskStack, StackData)):
         stack = TaskStack(stack)
-    check_support(formulation, mod.CAPABILITIES, stack)
-    opts = _check_options(formulation, mod, stack, options)
-    t0 = time.perf_counter()
-    try:
-        out: Outcome = mod.solve(stack, **opts)
-        elapsed = time.perf_counter() - t0
-    except (np.linalg.LinAlgError, ArithmeticError) as exc:
-        elapsed = time.perf_counter() - t0
-        out = Outcome(np.full(stack.n, np.nan), "failed",
-                      {"message": f"{type(exc).__name__}: {exc}"})
-    x = np.asarray(out.x, dtype=np.float64).reshape(-1)
-    info = dict(out.info)
-    status = out.status
-    if status not in STATUSES:
-        raise RuntimeError(f"formulation {formulation!r} returned unknown status {status!r}")
-    if x.shape != (stack.n,):
-        status = "failed"
-        info.setdefault("message", f"solution has shape {x.shape}, expected ({stack.n},)")
-        x = np.full(stack.n, np.nan)
-    elif status != "failed" and not np.isfinite(x).all():
-        status = "failed"
-        info.setdefault("message", "the formulation produced non-finite values")
-    residuals = (lexicographic_residuals(stack, x) if np.isfinite(x).all()
-                 else np.full(len(stack), np.nan))
-    return Solution(x, formulation, dict(options), status, residuals, elapsed, info)
+    return prepare(stack.layout, formulation, **options).solve(stack)
 
 
 @dataclass
@@ -249,49 +203,26 @@ class BatchSolution:
 
 
 def stack_shape(stack: TaskStack) -> tuple:
-    """What must agree for stacks to share a batch: ``n`` and each task's rows and kind."""
+    """What must agree for stacks to share a batch: ``n`` and each task's rows and kind
+    (the stack's layout, as a tuple)."""
     return (stack.n,) + tuple(tuple((t.m, t.is_equality) for t in level) for level in stack)
 
 
 def solve_batch(stacks, formulation: str = "extended_jacobian", **options: Any) -> BatchSolution:
-    """Solve many stacks of the same shape (sampled states, retargeting frames, sweeps).
+    """Solve many stacks of one layout (sampled states, retargeting frames, sweeps): one
+    prepared solver over every stack.
 
-    Uses the plugin's ``solve_batch`` (stacked numpy linear algebra) when it has one,
-    otherwise loops over its ``solve``.
+    Uses the plugin's batched kernel when it has one (``Prepared.solve_batch`` or a
+    module-level ``solve_batch``), otherwise loops over the prepared solve.
 
     Raises:
-        TaskStackError: the stacks do not share one shape (names the first that differs).
-        FormulationError, UnsupportedTaskError: as :func:`solve`.
+        TaskStackError: an empty batch.
+        FormulationError: the stacks do not share one layout (names the first that
+            differs), and as :func:`solve`.
+        UnsupportedTaskError: as :func:`solve`.
     """
     from prioik.hierarchy import TaskStackError
-    stacks = [s if isinstance(s, TaskStack) else TaskStack(s) for s in stacks]
+    stacks = [s if isinstance(s, (TaskStack, StackData)) else TaskStack(s) for s in stacks]
     if not stacks:
         raise TaskStackError("solve_batch needs at least one stack")
-    mod = get(formulation)
-    shape = stack_shape(stacks[0])
-    for i, s in enumerate(stacks[1:], 1):
-        if stack_shape(s) != shape:
-            raise TaskStackError(f"stack {i} of the batch differs in shape from stack 0 "
-                                 f"(n, rows and kinds of every task must agree)")
-    check_support(formulation, mod.CAPABILITIES, stacks[0])
-    opts = _check_options(formulation, mod, stacks[0], options)
-    batched = hasattr(mod, "solve_batch")
-    t0 = time.perf_counter()
-    if batched:
-        X, statuses = mod.solve_batch(stacks, **opts)
-        X = np.asarray(X, dtype=np.float64)
-        statuses = list(statuses)
-    else:
-        X = np.empty((len(stacks), shape[0]))
-        statuses = []
-        for i, s in enumerate(stacks):
-            try:
-                out = mod.solve(s, **opts)
-                X[i], st = out.x, out.status
-            except (np.linalg.LinAlgError, ArithmeticError):
-                X[i], st = np.nan, "failed"
-            statuses.append(st)
-    elapsed = time.perf_counter() - t0
-    bad = ~np.isfinite(X).all(axis=1)
-    statuses = ["failed" if b else st for b, st in zip(bad, statuses)]
-    return BatchSolution(X, statuses, formulation, dict(options), elapsed, batched)
+    return prepare(stacks[0].layout, formulation, **options).solve_batch(stacks)

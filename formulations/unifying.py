@@ -38,6 +38,7 @@ from scipy.linalg import cho_factor, cho_solve
 from prioik.hierarchy import DEFAULT_RCOND, TaskStack
 
 from .base import Capabilities, FormulationError, Outcome
+from .options import Option, rcond_option
 from .nullspace import check_nonnegative, generalized_inverse
 
 NAME = "unifying"
@@ -45,9 +46,11 @@ DESCRIPTION = "unifying framework (Peters et al. 2008), paper's eq. 36-40 with m
 CAPABILITIES = Capabilities(equalities=True, inequalities=False, weights=True,
                             needs_mass_matrix=True, exact=False)
 OPTIONS = {
-    "mass_matrix": (None, "SPD n×n joint-space inertia M (required)"),
-    "bias": (None, "C + G (n): with it, info['tau'] = M θ̈ + C + G (eq. 40)"),
-    "rcond": (DEFAULT_RCOND, "relative rank threshold: σ counts if σ > rcond·‖J_i M⁻¹‖_F"),
+    "mass_matrix": Option(None, "matrix", "SPD n×n joint-space inertia M (required)",
+                          optional=True),
+    "bias": Option(None, "vector", "C + G (n): with it, info['tau'] = M θ̈ + C + G (eq. 40)",
+                   optional=True),
+    "rcond": rcond_option("‖J_i M⁻¹‖_F"),
 }
 
 
@@ -99,8 +102,7 @@ def torque_recursion(stack: TaskStack, mass_matrix: np.ndarray, bias=None,
     return tau_post + bias_vec, taus
 
 
-def solve(stack: TaskStack, *, mass_matrix=None, bias=None,
-          rcond: float = DEFAULT_RCOND) -> Outcome:
+def solve(stack: TaskStack, *, mass_matrix, bias, rcond: float) -> Outcome:
     """Eq. 40: ``θ̈ = Σ_i N_i J_i^{M²+} h_i``; see the module docstring.
 
     Returns:

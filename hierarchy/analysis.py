@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .layout import level_residuals
 from .errors import UnsupportedTaskError
 from .linalg import DEFAULT_RCOND, matrix_rank, range_basis
 from .stack import TaskStack
@@ -147,10 +148,8 @@ def lexicographic_residuals(stack: TaskStack, x: np.ndarray) -> np.ndarray:
     ``viol_t = max(lower − A x, 0) + max(A x − upper, 0)``.
     """
     x = np.asarray(x, dtype=np.float64)
-    if stack.is_equality:   # every level has rows: one mat-vec over the packed rows
-        packed = stack.packed()
-        r = packed.A @ x - packed.b
-        return np.sqrt(np.add.reduceat(r * r, packed.starts[:-1]))
+    if stack.is_equality:   # one mat-vec over the stack's data
+        return level_residuals(stack.data, x)
     out = np.empty(len(stack))
     for i, level in enumerate(stack.levels):
         total = 0.0

@@ -2,44 +2,13 @@
 
 from __future__ import annotations
 
-import itertools
-import math
-from dataclasses import dataclass
 from typing import Iterator, Sequence
 
 import numpy as np
 
 from .errors import TaskStackError
+from .layout import StackData, StackLayout
 from .task import Level, Task
-
-
-@dataclass(frozen=True)
-class PackedRows:
-    """The weighted equality rows of all levels stacked, for compiled kernels.
-
-    Attributes:
-        A: ``Σ m_i × n`` rows, level after level (``level.A`` of each level).
-        b: ``Σ m_i`` targets.
-        starts: ``k + 1`` row offsets (level ``i`` is ``A[starts[i]:starts[i+1]]``).
-        scales: ``‖A_i‖_F`` per level (the scale of the rank rule).
-    """
-
-    A: np.ndarray
-    b: np.ndarray
-    starts: np.ndarray
-    scales: np.ndarray
-
-    @classmethod
-    def of(cls, stack: "TaskStack") -> "PackedRows":
-        mats = [(level.A, level.b) for level in stack.levels]
-        A = np.vstack([a for a, _ in mats])
-        b = np.concatenate([v for _, v in mats])
-        starts = np.array([0, *itertools.accumulate(a.shape[0] for a, _ in mats)],
-                          dtype=np.int64)
-        scales = np.array([math.sqrt(float(np.dot(a.ravel(), a.ravel()))) for a, _ in mats])
-        for arr in (A, b, starts, scales):
-            arr.setflags(write=False)
-        return cls(A, b, starts, scales)
 
 
 class TaskStack:
@@ -56,10 +25,12 @@ class TaskStack:
             level, or duplicate task names.
 
     A stack is immutable; ``stack / task`` returns a new stack with one more level.
-    The compact form ``t1 / (t2 + t3) / t4`` builds the same stacks.
+    The compact form ``t1 / (t2 + t3) / t4`` builds the same stacks. It is a
+    :class:`~prioik.hierarchy.StackLayout` (:attr:`layout`) with frozen
+    :class:`~prioik.hierarchy.StackData` (:attr:`data`), which is what every solver reads.
     """
 
-    __slots__ = ("_levels", "_n", "_packed")
+    __slots__ = ("_levels", "_n", "_layout", "_data")
 
     def __init__(self, levels: Sequence) -> None:
         if isinstance(levels, (Task, Level)):
@@ -94,7 +65,8 @@ class TaskStack:
             parsed.append(level)
         self._levels = tuple(parsed)
         self._n = int(n)
-        self._packed = None
+        self._layout = None
+        self._data = None
 
     # ------------------------------------------------------------------ access
     @property
@@ -149,11 +121,33 @@ class TaskStack:
     def __rtruediv__(self, other) -> "TaskStack":
         return TaskStack((Level.of(other),) + self._levels)
 
-    def packed(self) -> "PackedRows":
-        """Every level's weighted equality rows in one array (computed once, read-only)."""
-        if self._packed is None:
-            self._packed = PackedRows.of(self)
-        return self._packed
+    @property
+    def layout(self) -> StackLayout:
+        """The stack's shape: ``n`` and per level ``(task name, rows, kind)``."""
+        if self._layout is None:
+            self._layout = StackLayout(self._n, [[(t.name, t.m, t.kind) for t in level]
+                                                 for level in self._levels])
+        return self._layout
+
+    @property
+    def data(self) -> StackData:
+        """The stack's rows, targets, bounds and ``√w`` in one read-only
+        :class:`~prioik.hierarchy.StackData` (built once)."""
+        if self._data is None:
+            layout = self.layout
+            data = StackData(layout)
+            for t in self.tasks:
+                sl = layout.task_slice(t.name)
+                data.A[sl] = t.A
+                if t.is_equality:
+                    data.b[sl] = t.b
+                else:
+                    data.lower[sl], data.upper[sl] = t.bounds()
+                if not t._unit_weight:
+                    data.sqrt_weight[sl] = np.sqrt(t.weight)
+            data._source = self
+            self._data = data.freeze()
+        return self._data
 
     def equality_matrices(self) -> list[tuple[np.ndarray, np.ndarray]]:
         """Per level, the weighted equality rows ``(A_i, b_i)``."""

@@ -7,6 +7,8 @@ certificate for any answer, and a prepared solve path for control loops::
     stack = prioik.Task("contact", J1, h1) / prioik.Task("tip", J2, h2)
     sol = prioik.solve(stack, "extended_jacobian")
     prioik.check_lexicographic(stack, sol.x).ok
+    solver = prioik.prepare(stack.layout, "extended_jacobian")   # once
+    solver.solve(data)                                            # every step
 
 Sub-packages (data flows one way, top to bottom):
 
@@ -27,10 +29,12 @@ import importlib
 from importlib.metadata import PackageNotFoundError, version as _version
 
 from . import formulations, hierarchy
-from .formulations import (BatchSolution, Capabilities, FormulationError, Solution, available,
-                           solve, solve_batch)
-from .hierarchy import (Level, LexicographicReport, Task, TaskStack, TaskStackError,
-                        UnsupportedTaskError, check_lexicographic, load_stack, save_stack)
+from .formulations import (BatchSolution, Capabilities, ConcurrentUseError, FormulationError,
+                           Option, PreparedSolver, Solution, available, prepare, solve,
+                           solve_batch)
+from .hierarchy import (Level, LexicographicReport, StackData, StackLayout, Task, TaskStack,
+                        TaskStackError, UnsupportedTaskError, check_lexicographic, load_stack,
+                        save_stack)
 
 try:
     __version__ = _version("prioik")
@@ -54,8 +58,9 @@ def __dir__() -> list[str]:
 
 
 __all__ = [
-    "BatchSolution", "Capabilities", "FormulationError", "Level", "LexicographicReport",
-    "Solution", "Task", "TaskStack", "TaskStackError", "UnsupportedTaskError", "__version__",
-    "available", "benchmarks", "check_lexicographic", "formulations", "hierarchy",
-    "load_stack", "robots", "save_stack", "solve", "solve_batch",
+    "BatchSolution", "Capabilities", "ConcurrentUseError", "FormulationError", "Level",
+    "LexicographicReport", "Option", "PreparedSolver", "Solution", "StackData", "StackLayout",
+    "Task", "TaskStack", "TaskStackError", "UnsupportedTaskError", "__version__", "available",
+    "benchmarks", "check_lexicographic", "formulations", "hierarchy", "load_stack", "prepare",
+    "robots", "save_stack", "solve", "solve_batch",
 ]

@@ -4,8 +4,9 @@ Data flows one way: ``hierarchy`` ← ``robots``; this package never imports
 ``formulations`` (:func:`simulate` takes any solver callable).
 """
 
-from .models import (LOADERS, ModelNotFoundError, RobotModel, example_robot_data_dir, g1,
-                     load, sample_humanoid, spatial_chain, talos)
+from .models import (LOADERS, PANDA_FINGERS, ModelNotFoundError, RobotModel,
+                     example_robot_data_dir, from_urdf, g1, go2, has_free_flyer, load, panda,
+                     sample_humanoid, solo12, spatial_chain, talos, ur5)
 from .references import Reference, Waypoints, minimum_jerk
 from .rows import TaskRows
 from .simulate import SimulationResult, StepTasks, equality_view, simulate
@@ -14,8 +15,9 @@ from .tasks import (JointLimitActivation, KinematicState, TaskTerm, com_position
                     joint_limit_rows, joint_limit_violation, posture)
 
 __all__ = [
-    "LOADERS", "ModelNotFoundError", "RobotModel", "example_robot_data_dir", "g1", "load",
-    "sample_humanoid", "spatial_chain", "talos", "Reference", "Waypoints", "minimum_jerk",
+    "LOADERS", "PANDA_FINGERS", "ModelNotFoundError", "RobotModel", "example_robot_data_dir",
+    "from_urdf", "g1", "go2", "has_free_flyer", "load", "panda", "sample_humanoid", "solo12",
+    "spatial_chain", "talos", "ur5", "Reference", "Waypoints", "minimum_jerk",
     "TaskRows", "SimulationResult", "StepTasks", "equality_view", "simulate", "JointLimitActivation",
     "KinematicState", "TaskTerm", "com_position", "contact", "frame_orientation",
     "frame_pose", "frame_position", "joint_limit_bounds", "joint_limit_rows",

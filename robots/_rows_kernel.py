@@ -1,6 +1,6 @@
 """Compiled row writers of :class:`robots.rows.TaskRows` (numba).
 
-Each function writes one task's rows of a :class:`~hierarchy.StackBuffer` and its
+Each function writes one task's rows of a :class:`~prioik.hierarchy.StackData` and its
 per-row error, reference velocity and feed-forward from views of a ``pin.Data``
 (joint Jacobians ``data.J``, frame placements ``data.oMf``, ``data.Jcom``,
 ``data.com[0]``), so that one task costs one call. The readable versions are the

@@ -307,7 +307,7 @@ class FencingScenario(Scenario):
 
     def write_velocity_rows(self, rows: TaskRows, state: KinematicState, t: float):
         """Fill ``rows`` (from :meth:`velocity_rows`) at ``(state, t)``; returns its
-        buffer, equal to ``velocity_stack(state, t).stack`` to rounding."""
+        data, equal to ``velocity_stack(state, t).stack`` to rounding."""
         sup = self.right_foot0
         rows.frame_pose(state, "support_foot", "right_foot", sup.translation,
                         sup.rotation)

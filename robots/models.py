@@ -1,11 +1,15 @@
 """Robot models: pinocchio models with a standing configuration and named frames.
 
-Loaders:
+Any robot: :func:`from_urdf` (the base — free flyer or fixed — read from the URDF/SRDF
+when not given); :func:`load` takes a name or a URDF path. Named loaders, all through
+:func:`from_urdf` on example-robot-data's files:
 
 * :func:`g1` — Unitree G1, 29 joints (``g1_29dof_rev_1_0.urdf`` of example-robot-data),
   floating base: ``n_q = 36``, ``n_v = 35``.
 * :func:`talos` — PAL TALOS, ``talos_reduced.urdf`` with grippers and head locked
   (``pin.buildReducedModel``), floating base, ``half_sitting`` from its SRDF.
+* :func:`panda` (fixed, 7 arm + 2 finger joints), :func:`ur5` (fixed, 6),
+  :func:`go2` and :func:`solo12` (quadrupeds, floating, 12 joints).
 * :func:`sample_humanoid` — pinocchio's built-in sample humanoid (no files).
 * :func:`spatial_chain` — an ``N``-link spatial serial chain built in code (any ``N``).
 
@@ -20,13 +24,17 @@ this package: :meth:`RobotModel.with_point_frame` returns a copy with one more f
 from __future__ import annotations
 
 import importlib.metadata
+import os
+import xml.etree.ElementTree as ET
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
 
-__all__ = ["ModelNotFoundError", "RobotModel", "example_robot_data_dir", "g1", "talos",
+__all__ = ["ModelNotFoundError", "RobotModel", "example_robot_data_dir", "from_urdf",
+           "has_free_flyer", "g1", "talos", "panda", "ur5", "go2", "solo12", "PANDA_FINGERS",
            "sample_humanoid", "spatial_chain", "LOADERS", "load"]
 
 
@@ -44,7 +52,12 @@ class RobotModel:
         q0: A standing (or neutral) configuration, ``n_q``.
         frames: Roles → frame names, e.g. ``{"left_foot": "left_ankle_roll_link"}``.
         source: Where the model came from (URDF path or ``"built in"``).
-        floating_base: Whether joint 1 is a free flyer (first 6 velocity rows).
+        floating_base: Whether joint 1 is a free flyer (its 6 velocity rows are the
+            unactuated base). ``None`` (default) reads it from the model; a value that
+            contradicts the model raises :class:`ValueError` (a fixed-base arm marked
+            floating would lose its first 6 joints from the posture and the limits).
+        package_dirs: Folders that ``package://`` mesh paths resolve against (for
+            loading geometry, e.g. a viewer); kinematics do not need them.
     """
 
     name: str
@@ -52,7 +65,27 @@ class RobotModel:
     q0: np.ndarray
     frames: dict[str, str] = field(default_factory=dict)
     source: str = "built in"
-    floating_base: bool = True
+    floating_base: bool | None = None
+    package_dirs: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        detected = has_free_flyer(self.model)
+        if self.floating_base is None:
+            self.floating_base = detected
+        elif bool(self.floating_base) != detected:
+            first = (f"joint 1 ({self.model.names[1]!r}) is a "
+                     f"{self.model.joints[1].shortname()}" if self.model.njoints > 1
+                     else "the model has no joint")
+            raise ValueError(f"robot {self.name!r}: floating_base={self.floating_base!r} "
+                             f"contradicts the model ({first}); a floating base is a "
+                             "free-flyer joint 1 (leave floating_base=None to detect it)")
+        self.floating_base = bool(self.floating_base)
+        q0 = np.array(self.q0, dtype=float).reshape(-1)
+        if q0.shape != (self.model.nq,) or not np.isfinite(q0).all():
+            raise ValueError(f"robot {self.name!r}: q0 must be {self.model.nq} finite "
+                             f"numbers, got shape {np.shape(self.q0)}")
+        self.q0 = q0
+        self.package_dirs = tuple(str(d) for d in self.package_dirs)
 
     @property
     def nq(self) -> int:
@@ -170,7 +203,7 @@ class RobotModel:
         frames = dict(self.frames)
         frames[name] = name
         return RobotModel(self.name, model, self.q0.copy(), frames, self.source,
-                          self.floating_base)
+                          self.floating_base, self.package_dirs)
 
     def with_armature(self, armature: float) -> "RobotModel":
         """A copy of this robot with rotor inertia ``armature`` (kg·m²) on every actuated
@@ -188,7 +221,7 @@ class RobotModel:
         arm[self.n_base:] = a
         model.armature = arm
         return RobotModel(self.name, model, self.q0.copy(), dict(self.frames), self.source,
-                          self.floating_base)
+                          self.floating_base, self.package_dirs)
 
 
 # ------------------------------------------------------------------ locating files
@@ -239,6 +272,242 @@ def _put_feet_on_ground(model: pin.Model, q: np.ndarray, foot_frames) -> None:
     q[2] -= z
 
 
+# ------------------------------------------------------------------------ any URDF
+def has_free_flyer(model: pin.Model) -> bool:
+    """Whether joint 1 of ``model`` is a free flyer attached to the world."""
+    return (model.njoints > 1 and model.parents[1] == 0
+            and model.joints[1].shortname() == "JointModelFreeFlyer")
+
+
+def _parse_xml(path: Path, what: str) -> ET.Element:
+    try:
+        return ET.parse(path).getroot()
+    except ET.ParseError as exc:
+        raise ValueError(f"{what} {path} is not valid XML: {exc}") from None
+
+
+def _urdf_base(root: ET.Element, path: Path) -> tuple[bool | None, str]:
+    """What a URDF says about its base: ``(True, why)`` for a floating joint on its root
+    link, ``(False, why)`` for a root link named ``world`` (the robot is fixed to it),
+    ``(None, why)`` when it says neither."""
+    joints = root.findall("joint")
+    children = {c.get("link") for j in joints for c in j.findall("child")}
+    roots = [link.get("name") for link in root.findall("link")
+             if link.get("name") not in children]
+    for joint in joints:
+        if joint.get("type") != "floating":
+            continue
+        parent = joint.find("parent")
+        parent = parent.get("link") if parent is not None else None
+        if parent not in roots:
+            raise ValueError(f"URDF {path}: floating joint {joint.get('name')!r} hangs from "
+                             f"link {parent!r}, not from the root link; only a floating "
+                             "root is supported")
+        return True, (f"the URDF's joint {joint.get('name')!r} is of type floating on its "
+                      f"root link {parent!r}")
+    if roots == ["world"]:
+        return False, "the URDF's root link is 'world' (the robot is fixed to it)"
+    return None, "the URDF has neither a floating root joint nor a 'world' root link"
+
+
+def _srdf_base(root: ET.Element, urdf_joints: set[str], path: Path) -> tuple[bool | None, str]:
+    """What an SRDF says about the base: its ``virtual_joint`` (floating or fixed), or a
+    group state giving 7 values (position and quaternion) to a joint the URDF lacks."""
+    for joint in root.findall("virtual_joint"):
+        kind = joint.get("type")
+        if kind in ("floating", "fixed"):
+            return kind == "floating", (f"the SRDF's virtual joint {joint.get('name')!r} "
+                                        f"is of type {kind}")
+        raise ValueError(f"SRDF {path}: virtual joint {joint.get('name')!r} is of type "
+                         f"{kind!r}; only floating and fixed bases are supported")
+    for state in root.findall("group_state"):
+        for joint in state.findall("joint"):
+            if joint.get("name") not in urdf_joints and \
+                    len((joint.get("value") or "").split()) == 7:
+                return True, (f"the SRDF's group state {state.get('name')!r} gives joint "
+                              f"{joint.get('name')!r}, which the URDF lacks, 7 values "
+                              "(a free flyer's position and quaternion)")
+    return None, "the SRDF declares no base"
+
+
+#: SRDF reference configurations tried, in order, when ``q0`` is not given
+DEFAULT_CONFIGURATIONS = ("standing", "half_sitting", "default", "neutral")
+
+
+def from_urdf(path: str | os.PathLike, *, floating_base: bool | None = None,
+              package_dirs: Sequence[str | os.PathLike] = (),
+              frames: Mapping[str, str] | None = None,
+              q0: np.ndarray | str | Mapping[str, float] | None = None,
+              srdf: str | os.PathLike | None = None,
+              locked_joints: Sequence[str] = (), name: str | None = None) -> RobotModel:
+    """Load any robot from its URDF (and optionally its SRDF).
+
+    The base is read from the files when ``floating_base`` is not given:
+
+    * a joint of type ``floating`` on the URDF's root link → floating (pinocchio builds
+      it as a free flyer);
+    * a URDF whose root link is ``world`` → fixed;
+    * else the SRDF, if given: a ``virtual_joint`` of type floating or fixed, or a group
+      state giving 7 values (position, quaternion) to a joint the URDF lacks (the
+      ``root_joint`` of example-robot-data's SRDFs) → floating;
+    * else fixed: a URDF tree's root link is fixed in the world unless it says otherwise.
+
+    A ``floating_base`` that contradicts what the files say raises :class:`ValueError`
+    naming the evidence. With a floating base the free flyer is joint 1, named
+    ``root_joint``, and its 6 velocity rows are not part of the posture or the limits.
+
+    Args:
+        path: URDF file.
+        floating_base: ``True``: add a free flyer at the root; ``False``: fixed base;
+            ``None``: detect (above).
+        package_dirs: Folders ``package://`` mesh paths resolve against (kept on the
+            model for loading geometry; kinematics do not need them).
+        frames: Roles → frame names (e.g. ``{"tool": "tool0"}``); every frame must exist.
+        q0: The reference configuration: an array of the loaded model's ``n_q`` (before
+            locking), the name of an SRDF group state, or a mapping joint name → value
+            applied over the default. Default: the first SRDF group state among
+            :data:`DEFAULT_CONFIGURATIONS`, else ``pin.neutral``.
+        srdf: SRDF file (reference configurations, base declaration).
+        locked_joints: Joints fixed at their ``q0`` value and removed from the model
+            (``pin.buildReducedModel``), e.g. a gripper's fingers.
+        name: The robot's name (default: the URDF's ``robot`` name).
+
+    Raises:
+        ModelNotFoundError: ``path``, ``srdf`` or a package dir does not exist.
+        ValueError: a contradicting ``floating_base``, a malformed file, a bad ``q0``.
+        KeyError: an unknown joint (``locked_joints``, ``q0``), frame or group state.
+    """
+    path = _existing_file(path, "URDF")
+    urdf = _parse_xml(path, "URDF")
+    urdf_joints = {j.get("name") for j in urdf.findall("joint")}
+    declared, why = _urdf_base(urdf, path)
+    srdf_path = _existing_file(srdf, "SRDF") if srdf is not None else None
+    if srdf_path is not None:
+        srdf_declared, srdf_why = _srdf_base(_parse_xml(srdf_path, "SRDF"), urdf_joints,
+                                             srdf_path)
+        if declared is not None and srdf_declared is not None and declared != srdf_declared:
+            raise ValueError(f"{path.name} and {srdf_path.name} disagree about the base: "
+                             f"{why}, but {srdf_why}")
+        if declared is None and srdf_declared is not None:
+            declared, why = srdf_declared, srdf_why
+    if floating_base is not None and not isinstance(floating_base, (bool, np.bool_)):
+        raise ValueError(f"floating_base must be True, False or None, got {floating_base!r}")
+    if floating_base is not None and declared is not None and bool(floating_base) != declared:
+        raise ValueError(f"floating_base={bool(floating_base)} contradicts {path.name}: "
+                         f"{why} (leave floating_base=None to use it)")
+    floating = declared if declared is not None else bool(floating_base)
+    try:
+        if floating and not has_free_flyer_joint(urdf):
+            model = pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer(), "root_joint")
+        else:
+            model = pin.buildModelFromUrdf(str(path))
+    except (RuntimeError, ValueError) as exc:
+        raise ValueError(f"pinocchio could not build a model from {path}: {exc}") from None
+    if has_free_flyer(model) != floating:
+        raise ValueError(f"{path}: the model built has joint 1 {model.names[1]!r} "
+                         f"({model.joints[1].shortname()}), expected "
+                         f"{'a free flyer' if floating else 'no free flyer'}")
+    if srdf_path is not None:
+        try:
+            pin.loadReferenceConfigurations(model, str(srdf_path), False)
+        except (RuntimeError, ValueError) as exc:
+            raise ValueError(f"pinocchio could not read the reference configurations of "
+                             f"{srdf_path}: {exc}") from None
+    q = _configuration(model, q0, srdf_path)
+    if locked_joints:
+        model, q = _lock(model, q, locked_joints)
+    dirs = []
+    for d in package_dirs:
+        if not Path(d).is_dir():
+            raise ModelNotFoundError(f"package dir {d} is not a folder")
+        dirs.append(str(d))
+    frames = dict(frames or {})
+    robot_name = name or model.name or path.stem
+    for role, frame in frames.items():
+        if not model.existFrame(frame):
+            raise KeyError(f"robot {robot_name!r} ({path.name}) has no frame {frame!r} "
+                           f"(role {role!r})")
+    return RobotModel(robot_name, model, q, frames, str(path), floating, tuple(dirs))
+
+
+def has_free_flyer_joint(urdf: ET.Element) -> bool:
+    """Whether a parsed URDF declares a joint of type ``floating``."""
+    return any(j.get("type") == "floating" for j in urdf.findall("joint"))
+
+
+def _existing_file(path, what: str) -> Path:
+    p = Path(path)
+    if not p.is_file():
+        raise ModelNotFoundError(f"{what} file {p} does not exist")
+    return p
+
+
+def _configuration(model: pin.Model, q0, srdf: Path | None) -> np.ndarray:
+    """``q0`` of :func:`from_urdf` as an array of ``model.nq``."""
+    refs = model.referenceConfigurations
+    if q0 is None or isinstance(q0, Mapping):
+        base = next((np.array(refs[c]) for c in DEFAULT_CONFIGURATIONS if c in refs),
+                    pin.neutral(model))
+        for joint, value in (q0 or {}).items():
+            _set_joint(model, base, joint, float(value))
+        return base
+    if isinstance(q0, str):
+        if q0 not in refs:
+            known = ", ".join(sorted(entry.key() for entry in refs)) or "none"
+            raise KeyError(f"no group state {q0!r} in "
+                           f"{srdf.name if srdf else 'the model (no SRDF given)'} "
+                           f"(known: {known})")
+        return np.array(refs[q0])
+    q = np.array(q0, dtype=float).reshape(-1)
+    if q.shape != (model.nq,) or not np.isfinite(q).all():
+        raise ValueError(f"q0 must be {model.nq} finite numbers (the loaded model's n_q, "
+                         f"before locking), got shape {np.shape(q0)}")
+    if has_free_flyer(model) and np.linalg.norm(q[3:7]) < 1e-9:
+        raise ValueError("q0's base quaternion (entries 3-6) is zero")
+    return q
+
+
+def _lock(model: pin.Model, q: np.ndarray, joints: Sequence[str]):
+    """The reduced model with ``joints`` fixed at their value in ``q``, and ``q`` of it."""
+    ids = []
+    for joint in joints:
+        if not model.existJointName(joint):
+            raise KeyError(f"cannot lock joint {joint!r}: the model has no such joint")
+        ids.append(model.getJointId(joint))
+    reduced = pin.buildReducedModel(model, ids, q)
+    parts = []
+    for j in range(1, reduced.njoints):
+        full = model.joints[model.getJointId(reduced.names[j])]
+        parts.append(q[full.idx_q:full.idx_q + full.nq])
+    q_red = np.concatenate(parts) if parts else np.zeros(0)
+    return reduced, q_red
+
+
+def _set_joint(model: pin.Model, q: np.ndarray, joint: str, value: float) -> None:
+    if not model.existJointName(joint):
+        raise KeyError(f"no joint {joint!r}")
+    jm = model.joints[model.getJointId(joint)]
+    if jm.nq != 1:
+        raise ValueError(f"joint {joint!r} has {jm.nq} configuration entries; give it in a "
+                         "q0 array")
+    q[jm.idx_q] = value
+
+
+def _put_feet_on_ground(robot: RobotModel, roles) -> RobotModel:
+    """Shift the base height of ``robot.q0`` so that the lowest foot frame is at
+    ``z = 0`` (in place; returns the robot)."""
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, robot.q0)
+    robot.q0[2] -= min(data.oMf[robot.frame_id(r)].translation[2] for r in roles)
+    return robot
+
+
+def _example_robot(relative: str, srdf: str | None = None, **kwargs) -> RobotModel:
+    """:func:`from_urdf` on a file of example-robot-data (meshes resolve against it)."""
+    return from_urdf(_robot_file(relative), srdf=_robot_file(srdf) if srdf else None,
+                     package_dirs=(example_robot_data_dir().parent.parent,), **kwargs)
+
+
 # -------------------------------------------------------------------------- loaders
 G1_URDF = "g1_description/urdf/g1_29dof_rev_1_0.urdf"
 
@@ -256,20 +525,17 @@ G1_STANDING = {
 def g1() -> RobotModel:
     """Unitree G1 (29 actuated joints, floating base; ``n_v = 35``).
 
-    ``q0`` stands with bent knees, feet flat, ankle frames at ``z = 0``. Frame roles:
-    ``left_foot``/``right_foot`` (ankle roll links), ``left_hand``/``right_hand``
-    (rubber hands), ``pelvis``, ``torso``.
+    Its URDF declares no base (the floating joint there is commented out), so the free
+    flyer is asked for. ``q0`` stands with bent knees, feet flat, ankle frames at
+    ``z = 0``. Frame roles: ``left_foot``/``right_foot`` (ankle roll links),
+    ``left_hand``/``right_hand`` (rubber hands), ``pelvis``, ``torso``.
     """
-    path = _robot_file(G1_URDF)
-    model = pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer())
-    q = pin.neutral(model)
-    for joint, value in G1_STANDING.items():
-        _set_joint(model, q, joint, value)
     frames = {"left_foot": "left_ankle_roll_link", "right_foot": "right_ankle_roll_link",
               "left_hand": "left_rubber_hand", "right_hand": "right_rubber_hand",
               "pelvis": "pelvis", "torso": "torso_link"}
-    _put_feet_on_ground(model, q, [frames["left_foot"], frames["right_foot"]])
-    return RobotModel("g1", model, q, frames, str(path))
+    robot = _example_robot(G1_URDF, floating_base=True, frames=frames, q0=G1_STANDING,
+                           name="g1")
+    return _put_feet_on_ground(robot, ("left_foot", "right_foot"))
 
 
 TALOS_URDF = "talos_data/robots/talos_reduced.urdf"
@@ -280,21 +546,75 @@ TALOS_LOCKED = ("gripper_left_joint", "gripper_right_joint", "head_1_joint", "he
 def talos() -> RobotModel:
     """TALOS reduced: ``talos_reduced.urdf`` with grippers and head locked (n_v = 34).
 
-    ``q0`` is the SRDF ``half_sitting`` configuration.
+    The floating base is read from the SRDF (its ``half_sitting`` gives ``root_joint`` a
+    position and quaternion); ``q0`` is ``half_sitting``.
     """
-    path = _robot_file(TALOS_URDF)
-    srdf = _robot_file(TALOS_SRDF)
-    full = pin.buildModelFromUrdf(str(path), pin.JointModelFreeFlyer())
-    pin.loadReferenceConfigurations(full, str(srdf), False)
-    q_full = np.array(full.referenceConfigurations["half_sitting"])
-    locked = [full.getJointId(j) for j in TALOS_LOCKED if full.existJointName(j)]
-    model = pin.buildReducedModel(full, locked, q_full)
-    q = np.array(model.referenceConfigurations["half_sitting"]) \
-        if "half_sitting" in model.referenceConfigurations else pin.neutral(model)
     frames = {"left_foot": "leg_left_6_link", "right_foot": "leg_right_6_link",
               "left_hand": "arm_left_7_link", "right_hand": "arm_right_7_link",
               "pelvis": "base_link", "torso": "torso_2_link"}
-    return RobotModel("talos", model, q, frames, str(path))
+    return _example_robot(TALOS_URDF, TALOS_SRDF, frames=frames, q0="half_sitting",
+                          locked_joints=TALOS_LOCKED, name="talos")
+
+
+PANDA_URDF = "panda_description/urdf/panda.urdf"
+PANDA_SRDF = "panda_description/srdf/panda.srdf"
+
+
+def panda() -> RobotModel:
+    """Franka Panda: fixed base, 7 arm joints and 2 finger joints (``n_v = 9``).
+
+    The fingers stay in the model (the URDF's, as PlaCo and pink load it): they are
+    prismatic joints with limits ``[0, 0.04]`` m, held by the posture task and the limits
+    like any joint (the URDF's mimic tag is ignored: pinocchio's default). For the
+    7-joint arm lock them: ``from_urdf(path, locked_joints=PANDA_FINGERS)``. ``q0`` is the
+    SRDF's ``default`` (``panda_joint4 = −3π/4``, ``panda_joint6 = π/2``). Frame roles:
+    ``hand`` (``panda_hand``), ``tcp`` (``panda_hand_tcp``, between the fingers).
+    """
+    return _example_robot(PANDA_URDF, PANDA_SRDF, name="panda",
+                          frames={"hand": "panda_hand", "tcp": "panda_hand_tcp"})
+
+
+#: the Panda's finger joints (lock them for a 7-joint arm)
+PANDA_FINGERS = ("panda_finger_joint1", "panda_finger_joint2")
+
+UR5_URDF = "ur_description/urdf/ur5_robot.urdf"
+UR5_SRDF = "ur_description/srdf/ur5.srdf"
+#: a bent, non-singular UR5 configuration (the URDF's zero is stretched out)
+UR5_HOME = {"shoulder_lift_joint": -1.2, "elbow_joint": 1.5, "wrist_1_joint": -1.9,
+            "wrist_2_joint": -1.57}
+
+
+def ur5() -> RobotModel:
+    """Universal Robots UR5: fixed to ``world`` (read from the URDF), 6 joints.
+    ``q0`` is :data:`UR5_HOME`; frame role ``tool`` (``tool0``)."""
+    return _example_robot(UR5_URDF, UR5_SRDF, name="ur5", frames={"tool": "tool0"},
+                          q0=UR5_HOME)
+
+
+GO2_URDF = "go2_description/urdf/go2.urdf"
+GO2_SRDF = "go2_description/srdf/go2.srdf"
+SOLO12_URDF = "solo_description/robots/solo12.urdf"
+SOLO12_SRDF = "solo_description/srdf/solo.srdf"
+
+
+def go2() -> RobotModel:
+    """Unitree Go2: floating base (the SRDF's virtual joint), 12 joints (``n_v = 18``).
+    ``q0`` is the SRDF's ``standing`` with the feet at ``z = 0``; frame roles
+    ``front_left_foot`` … ``rear_right_foot``."""
+    frames = {"front_left_foot": "FL_foot", "front_right_foot": "FR_foot",
+              "rear_left_foot": "RL_foot", "rear_right_foot": "RR_foot", "base": "base"}
+    robot = _example_robot(GO2_URDF, GO2_SRDF, name="go2", frames=frames)
+    return _put_feet_on_ground(robot, [r for r in frames if r.endswith("foot")])
+
+
+def solo12() -> RobotModel:
+    """Solo-12: floating base (the SRDF's ``standing`` gives ``root_joint`` a pose),
+    12 joints (``n_v = 18``). ``q0`` is ``standing`` with the feet at ``z = 0``."""
+    frames = {"front_left_foot": "FL_FOOT", "front_right_foot": "FR_FOOT",
+              "rear_left_foot": "HL_FOOT", "rear_right_foot": "HR_FOOT",
+              "base": "base_link"}
+    robot = _example_robot(SOLO12_URDF, SOLO12_SRDF, name="solo12", frames=frames)
+    return _put_feet_on_ground(robot, [r for r in frames if r.endswith("foot")])
 
 
 def sample_humanoid() -> RobotModel:
@@ -340,14 +660,35 @@ def spatial_chain(n_links: int, link_length: float = 0.3, seed: int = 0) -> Robo
 
 
 #: name -> loader (no arguments)
-LOADERS = {"g1": g1, "talos": talos, "sample_humanoid": sample_humanoid,
+LOADERS = {"g1": g1, "talos": talos, "panda": panda, "ur5": ur5, "go2": go2,
+           "solo12": solo12, "sample_humanoid": sample_humanoid,
            "chain7": lambda: spatial_chain(7)}
 
 
-def load(name: str) -> RobotModel:
-    """Load a robot by name (``g1``, ``talos``, ``sample_humanoid``, ``chainN``)."""
-    if name.startswith("chain") and name[5:].isdigit():
-        return spatial_chain(int(name[5:]))
-    if name not in LOADERS:
-        raise ValueError(f"unknown robot {name!r}; known: {', '.join(LOADERS)}, chainN")
-    return LOADERS[name]()
+def load(robot: str | os.PathLike, **kwargs) -> RobotModel:
+    """Load a robot by name or from a URDF path.
+
+    Args:
+        robot: A name (``g1``, ``talos``, ``panda``, ``ur5``, ``go2``, ``solo12``,
+            ``sample_humanoid``, ``chainN``) or a URDF path (a ``Path``, or a string
+            ending in ``.urdf`` or holding a path separator).
+        **kwargs: For a path, :func:`from_urdf`'s options.
+
+    Raises:
+        ValueError: an unknown name, or options given with a name.
+        ModelNotFoundError: the file is missing.
+    """
+    if isinstance(robot, os.PathLike) or (isinstance(robot, str) and (
+            robot.lower().endswith(".urdf") or os.sep in robot or "/" in robot)):
+        return from_urdf(robot, **kwargs)
+    if not isinstance(robot, str):
+        raise ValueError(f"robot must be a name or a URDF path, got {robot!r}")
+    if kwargs:
+        raise ValueError(f"options {sorted(kwargs)} are for a URDF path; robot {robot!r} "
+                         "is a name")
+    if robot.startswith("chain") and robot[5:].isdigit():
+        return spatial_chain(int(robot[5:]))
+    if robot not in LOADERS:
+        raise ValueError(f"unknown robot {robot!r}; known: {', '.join(LOADERS)}, chainN, "
+                         "or a URDF path")
+    return LOADERS[robot]()

@@ -1,4 +1,4 @@
-"""Task builders that write into a preallocated :class:`~hierarchy.StackBuffer`.
+"""Task builders that write into a preallocated :class:`~prioik.hierarchy.StackData`.
 
 The builders of :mod:`robots.tasks` return one :class:`~robots.tasks.TaskTerm` (and
 then a :class:`~hierarchy.Task`) per task and step: clear, and ~100 µs of Python
@@ -27,7 +27,7 @@ from typing import Sequence
 import numpy as np
 import pinocchio as pin
 
-from prioik.hierarchy import StackBuffer
+from prioik.hierarchy import StackData, StackLayout
 
 from . import _rows_kernel as _k
 from .models import RobotModel
@@ -39,16 +39,17 @@ _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 
 
 class TaskRows:
-    """Per-row task quantities beside a :class:`~hierarchy.StackBuffer`.
+    """Per-row task quantities beside a :class:`~prioik.hierarchy.StackData`.
 
     Args:
-        robot: The robot (its ``n_v`` is the buffer's width).
+        robot: The robot (its ``n_v`` is the layout's width).
         levels: Highest priority first; each level a sequence of ``(task name, rows)``.
         gains: Task name → ``K`` (velocity level) or ``(K_p, K_d)`` (acceleration
             level); tasks not named get ``K_p = K_d = 0``.
 
     Attributes:
-        buffer: The rows ``A`` and targets ``b`` (what a solver reads).
+        data: The rows ``A`` and targets ``b`` (what a solver reads; ``data.layout`` is
+            the layout to prepare a solver for).
         error, velocity_ref, feedforward, drift: Per-row ``e``, ``ẋ*``, ``ẍ*``, ``J̇q̇``
             (writable views of one ``6 × M`` array; change them in place).
         kp, kd: Per-row gains (views, likewise).
@@ -57,8 +58,8 @@ class TaskRows:
     def __init__(self, robot: RobotModel, levels: Sequence[Sequence[tuple[str, int]]],
                  gains: dict | None = None) -> None:
         self.robot = robot
-        self.buffer = StackBuffer(robot.nv, levels)
-        self._Q = np.zeros((6, self.buffer.m))   # rows: _rows_kernel.ERROR ... KD
+        self.data = StackLayout(robot.nv, levels).data()
+        self._Q = np.zeros((6, self.data.m))   # rows: _rows_kernel.ERROR ... KD
         self._plans: dict = {}            # (writer, task, frame) -> constants of one writer
         self._views = None                # _DataViews of the last state's pin.Data
         self._without_drift: set[str] = set()
@@ -82,7 +83,7 @@ class TaskRows:
 
     def set_gains(self, name: str, kp: float, kd: float = 0.0) -> None:
         """Gains of one task's rows (``kp`` is ``K`` at velocity level)."""
-        sl = self.buffer.task_slice(name)
+        sl = self.data.layout.task_slice(name)
         self.kp[sl] = kp
         self.kd[sl] = kd
 
@@ -113,7 +114,7 @@ class TaskRows:
         views = self._data_views(state)
         p, R = views.frame(fid)
         drift = self._note_drift(state, name)
-        _k.frame_rows(self.buffer.A, self._Q, s, nrows, views.J, cols, p, R,
+        _k.frame_rows(self.data.A, self._Q, s, nrows, views.J, cols, p, R,
                       _vec(x, 3, name, "x"), rotation, _vec(xd, 3, name, "xd"),
                       _vec(xdd, 3, name, "xdd"), not drift)
         if drift:
@@ -136,7 +137,7 @@ class TaskRows:
         views = self._data_views(state)
         m = idx.size
         drift = self._note_drift(state, name)
-        _k.com_rows(self.buffer.A, self._Q, s, views.Jcom, views.com, idx,
+        _k.com_rows(self.data.A, self._Q, s, views.Jcom, views.com, idx,
                     _vec(x, m, name, "x"), _vec(xd, m, name, "xd"), _vec(xdd, m, name, "xdd"),
                     not drift)
         if drift:
@@ -151,7 +152,7 @@ class TaskRows:
         s = self._plans.get(key)
         if s is None:
             s = self._check_rows(name, robot.nv - nb)
-            A = self.buffer.A[s:s + robot.nv - nb]
+            A = self.data.A[s:s + robot.nv - nb]
             A[:] = 0.0
             A[:, nb:] = np.eye(robot.nv - nb)
             self._plans[key] = s
@@ -168,7 +169,7 @@ class TaskRows:
 
     # ------------------------------------------------------------------ helpers
     def _check_rows(self, name: str, m: int) -> int:
-        sl = self.buffer.task_slice(name)   # raises for an unknown name, listing the tasks
+        sl = self.data.layout.task_slice(name)   # raises for an unknown name, listing the tasks
         if sl.stop - sl.start != m:
             raise ValueError(f"task {name!r} has {sl.stop - sl.start} rows in the layout, "
                              f"the builder writes {m}")
@@ -202,12 +203,12 @@ class TaskRows:
         return False
 
     # ------------------------------------------------------------------ targets
-    def velocity_targets(self) -> StackBuffer:
+    def velocity_targets(self) -> StackData:
         """``b = ẋ* + K e`` into the buffer; returns it."""
-        _k.velocity_targets(self.buffer.b, self._Q)
-        return self.buffer
+        _k.velocity_targets(self.data.b, self._Q)
+        return self.data
 
-    def acceleration_targets(self, v: np.ndarray) -> StackBuffer:
+    def acceleration_targets(self, v: np.ndarray) -> StackData:
         """``b = ẍ* + K_d (ẋ* − J q̇) + K_p e − J̇ q̇`` (eq. 2-4) into the buffer;
         returns it.
 
@@ -219,7 +220,7 @@ class TaskRows:
             raise ValueError(f"tasks {sorted(self._without_drift)} were written from a "
                              "KinematicState(drift=False): acceleration targets need "
                              "J̇q̇ (build the state with drift=True)")
-        buf = self.buffer
+        buf = self.data
         rate = self.velocity_ref - buf.A @ v
         np.multiply(self.kd, rate, out=buf.b)
         buf.b += self.kp * self.error

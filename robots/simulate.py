@@ -33,7 +33,7 @@ from typing import Any, Callable
 import numpy as np
 import pinocchio as pin
 
-from prioik.hierarchy import Task, TaskStack, algorithmic_error_norms
+from prioik.hierarchy import StackData, Task, TaskStack, algorithmic_error_norms
 
 from .models import RobotModel
 from .tasks import KinematicState
@@ -46,14 +46,15 @@ class StepTasks:
     """What a scenario's ``build(state, t)`` returns for one step.
 
     Attributes:
-        stack: The task stack to solve (columns: ``n_v`` accelerations).
+        stack: The task stack to solve (columns: ``n_v`` accelerations), or the
+            :class:`~prioik.hierarchy.StackData` a writer filled in place.
         errors: Task errors to record (name → value, e.g. a norm in metres).
         algorithmic_levels: Number of leading levels over which the algorithmic error
             is recorded (``None``: every level), e.g. to leave out a regularising
             lowest level that is not one of the scenario's tasks.
     """
 
-    stack: TaskStack
+    stack: TaskStack | StackData
     errors: dict[str, float] = field(default_factory=dict)
     algorithmic_levels: int | None = None
 
@@ -256,7 +257,10 @@ def equality_view(stack: TaskStack, x: np.ndarray, tol: float = 1e-7) -> TaskSta
     return TaskStack(levels) if levels else None
 
 
-def _algorithmic_error(stack: TaskStack, x: np.ndarray, levels: int | None = None) -> float:
+def _algorithmic_error(stack: TaskStack | StackData, x: np.ndarray,
+                       levels: int | None = None) -> float:
+    if isinstance(stack, StackData):
+        stack = stack.as_stack()
     if levels is not None:
         stack = TaskStack(stack.levels[:levels])
     eq = equality_view(stack, x)

@@ -120,7 +120,7 @@ def test_ratios_are_the_quotients_of_the_medians():
     batch = {"size": 1000, "batch_us": {"extended_jacobian": 5.0},
              "single_us": {"daqp_hierarchical": 20.0, "daqp_hierarchical[raw]": 10.0},
              "loop_us": {"extended_jacobian": 40.0}}
-    ik = {"prioik_step_us": 150.0, "prioik_buffer_step_us": 80.0, "placo_step_us": 100.0}
+    ik = {"prioik_oneoff_step_us": 150.0, "prioik_prepared_step_us": 70.0, "placo_step_us": 100.0}
     got = {r.name: r for r in ratios(rows, batch, ik)}
     assert got["extended_jacobian / nullspace (λ=0), g1 compatible"].value == pytest.approx(0.2)
     fastest = got["extended_jacobian / fastest cascaded_qp (cascaded_qp[daqp]), g1 compatible"]
@@ -136,13 +136,13 @@ def test_ratios_are_the_quotients_of_the_medians():
     assert got[names[-4]].value == pytest.approx(0.5)       # batch / one raw daqp call
     assert got[names[-3]].value == pytest.approx(0.125)     # batch / loop
     fast, stack_path = got[names[-2]], got[names[-1]]
-    assert "preallocated" in fast.name and "TaskStack" in stack_path.name
-    assert fast.value == pytest.approx(0.8) and fast.met == "yes"
+    assert "prepared solver" in fast.name and "one-off" in stack_path.name
+    assert fast.value == pytest.approx(0.7) and fast.met == "yes"
     assert stack_path.value == pytest.approx(1.5) and math.isinf(stack_path.target)
     # with the shared references timed, the step without them is reported too
     own = ratios(rows, batch, {**ik, "references_us": 20.0})[-1]
     assert "without the shared references" in own.name
-    assert own.value == pytest.approx(60.0 / 80.0) and math.isinf(own.target)
+    assert own.value == pytest.approx(50.0 / 80.0) and math.isinf(own.target)
 
 
 def test_missing_measurements_give_nan_not_a_number():

@@ -91,7 +91,7 @@ def test_inequalities_and_bad_options_are_named():
                    Task("limits", np.eye(3), lower=-np.ones(3), upper=np.ones(3))])
     with pytest.raises(UnsupportedTaskError, match="limits"):
         formulations.solve(s, "chiaverini")
-    with pytest.raises(formulations.FormulationError, match="damping must be"):
+    with pytest.raises(formulations.FormulationError, match="option 'damping' must be"):
         formulations.solve(near_singular(0.1), "chiaverini", damping=float("nan"))
 
 

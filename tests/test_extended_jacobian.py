@@ -108,9 +108,9 @@ def test_selective_damping_is_inactive_far_from_singularities():
 
 def test_bad_options_are_named():
     stack = near_singular(0.1)
-    with pytest.raises(formulations.FormulationError, match="nullspace must be"):
+    with pytest.raises(formulations.FormulationError, match="option 'nullspace' must be one of"):
         formulations.solve(stack, "extended_jacobian", nullspace="lu")
-    with pytest.raises(formulations.FormulationError, match="damping must be"):
+    with pytest.raises(formulations.FormulationError, match="option 'damping' must be"):
         formulations.solve(stack, "extended_jacobian", damping=-1.0)
 
 
@@ -259,73 +259,63 @@ def test_step_bound_batch_matches_solve():
     assert "approximate" in batch.statuses          # the bound acted somewhere
 
 
-# --------------------------------------------------------------- BufferSolver
-def _buffer_of(stack):
-    from prioik.hierarchy import StackBuffer
-    buf = StackBuffer(stack.n, [[(t.name, t.m) for t in level] for level in stack.levels])
+# ----------------------------------------------------------- prepared solver
+def _data_of(stack):
+    """Writable data of ``stack``'s layout, filled from its tasks (not its own data)."""
+    data = stack.layout.data()
     for t in stack.tasks:
-        A, b = buf.rows(t.name)
+        A, b = data.rows(t.name)
         A[:], b[:] = t.A, t.b
-    return buf
+        data.weights(t.name)[:] = np.sqrt(t.weight)
+    return data
 
 
 @pytest.mark.parametrize("family", ["compatible", "conflicting", "rank_deficient",
-                                    "degenerate"])
+                                    "degenerate", "weighted"])
 @pytest.mark.parametrize("options", [{}, {"level_damping": 0.1, "singular_threshold": 0.05},
                                      {"step_bound": 0.5}])
-def test_buffer_solver_equals_solve_bit_for_bit(family, options):
-    from prioik.formulations.extended_jacobian import BufferSolver
+def test_prepared_solver_on_written_data_equals_solve_bit_for_bit(family, options):
     for seed in range(4):
         stack = FAMILIES[family](np.random.default_rng(900 + seed), 14, 4)
-        buf = _buffer_of(stack)
-        A0, b0 = buf.A.copy(), buf.b.copy()
-        out = BufferSolver(buf, **options).solve()
+        data = _data_of(stack)
+        before = data.copy()
+        solver = formulations.prepare(stack.layout, "extended_jacobian", kernel="numba",
+                                      **options)
+        out = solver.solve(data)
         ref = formulations.solve(stack, "extended_jacobian", kernel="numba", **options)
         assert np.array_equal(out.x, ref.x)
+        assert np.array_equal(out.residuals, ref.residuals)
         assert out.status == ref.status
         assert np.array_equal(out.info["rank_profile"], ref.info["rank_profile"])
-        assert np.array_equal(buf.A, A0) and np.array_equal(buf.b, b0)   # not mutated
+        for key in ("A", "b", "sqrt_weight"):                 # the data is not mutated
+            assert np.array_equal(getattr(data, key), getattr(before, key))
 
 
-def test_buffer_solver_refills_and_refuses_other_layouts_and_nan():
-    from prioik.hierarchy import StackBuffer, TaskStackError
+def test_prepared_solver_refills_and_refuses_other_layouts_and_nan():
+    from prioik.hierarchy import StackLayout, TaskStackError
     from prioik.formulations.base import FormulationError
-    from prioik.formulations.extended_jacobian import BufferSolver
     rng = np.random.default_rng(5)
     s1 = compatible(rng, 10, 3)
-    buf = _buffer_of(s1)
-    solver = BufferSolver(buf)
-    x1 = solver.solve().x
-    other = _buffer_of(s1)                      # same layout, new values
+    data = _data_of(s1)
+    solver = formulations.prepare(s1.layout, "extended_jacobian")
+    x1 = solver.solve(data).x
+    other = _data_of(s1)                      # same layout, new values
     other.A[:] = rng.standard_normal(other.A.shape)
     other.b[:] = rng.standard_normal(other.b.shape)
     assert relative_distance(solver.solve(other).x,
                              formulations.solve(other.to_stack(), "reference").x) <= 1e-9
-    assert np.array_equal(solver.solve().x, x1)       # the solver's own buffer again
-    with pytest.raises(FormulationError, match="layout differs"):
-        solver.solve(StackBuffer(10, [[("t", 2)]]))
-    buf.rows(s1.tasks[-1].name)[1][0] = np.nan
+    assert np.array_equal(solver.solve(data).x, x1)
+    with pytest.raises(FormulationError, match="prepared for the layout n=10.*got a stack of "
+                                               "the layout n=10: t\\[2\\]"):
+        solver.solve(StackLayout(10, [[("t", 2)]]).data())
+    data.rows(s1.tasks[-1].name)[1][0] = np.nan
     with pytest.raises(TaskStackError, match=s1.tasks[-1].name):
-        solver.solve()
+        solver.solve(data)
+    data.rows(s1.tasks[-1].name)[1][0] = 1.0
+    data.weights(s1.tasks[0].name)[0] = -1.0
+    with pytest.raises(TaskStackError, match="√w"):
+        solver.solve(data)
     with pytest.raises(FormulationError, match="step_bound"):
-        BufferSolver(buf, step_bound=[1.0, 2.0])
-
-
-def test_buffer_solver_step_bound_can_be_changed_between_solves():
-    from prioik.formulations.base import FormulationError
-    from prioik.formulations.extended_jacobian import BufferSolver
-    stack = near_singular(1e-4)
-    buf = _buffer_of(stack)
-    solver = BufferSolver(buf)
-    free = solver.solve()
-    solver.step_bound = 2.0
-    bounded = solver.solve()
-    ref = formulations.solve(stack, "extended_jacobian", kernel="numba", step_bound=2.0)
-    assert np.array_equal(bounded.x, ref.x) and bounded.status == ref.status
-    assert not np.array_equal(bounded.x, free.x) and "level_damping" in bounded.info
-    with pytest.raises(ValueError):
-        solver.step_bound[0] = 1.0                  # read-only: set the attribute instead
-    with pytest.raises(FormulationError, match="step_bound"):
-        solver.step_bound = -1.0
-    solver.step_bound = 0.0
-    assert np.array_equal(solver.solve().x, free.x)
+        formulations.prepare(s1.layout, "extended_jacobian", step_bound=[1.0, 2.0])
+    with pytest.raises(FormulationError, match="step_bound names task 'nope'"):
+        formulations.prepare(s1.layout, "extended_jacobian", step_bound={"nope": 1.0})

@@ -111,7 +111,7 @@ def test_textbook_step_equals_reference_away_from_singularities(family, seed):
 
 def test_bad_options_and_inequalities_are_named():
     stack = near_singular(0.1)
-    with pytest.raises(formulations.FormulationError, match="damping must be"):
+    with pytest.raises(formulations.FormulationError, match="option 'damping' must be"):
         formulations.solve(stack, "nullspace", damping=-1.0)
     with pytest.raises(formulations.FormulationError, match="no option"):
         formulations.solve(stack, "nullspace", mass_matrix=np.eye(6))

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from prioik import formulations
-from prioik.formulations import Capabilities, FormulationError, Outcome, registry
+from prioik.formulations import Capabilities, FormulationError, Option, Outcome, registry
 from prioik.hierarchy import Task, TaskStack, UnsupportedTaskError
 from prioik.hierarchy.families import compatible
 
@@ -56,7 +56,8 @@ def test_inequality_task_in_closed_form_method_names_the_task():
 def _fake(monkeypatch, name, solve, caps=Capabilities()):
     mod = types.ModuleType(name)
     mod.NAME, mod.DESCRIPTION, mod.CAPABILITIES = name, "test double", caps
-    mod.OPTIONS = {"mass_matrix": (None, "M"), "bias": (None, "C+G")}
+    mod.OPTIONS = {"mass_matrix": Option(None, "matrix", "M", optional=True),
+                   "bias": Option(None, "vector", "C+G", optional=True)}
     mod.solve = solve
     monkeypatch.setitem(registry.PLUGINS, name, (f"tests.{name}", ""))
     monkeypatch.setitem(registry._loaded, name, mod)
@@ -88,11 +89,11 @@ def test_mass_matrix_is_required_validated_and_never_mutated(monkeypatch, stack)
     _fake(monkeypatch, "dyn", record, Capabilities(needs_mass_matrix=True))
     with pytest.raises(FormulationError, match="needs mass_matrix=M .the 6x6"):
         formulations.solve(stack, "dyn")
-    with pytest.raises(FormulationError, match="mass_matrix must be 6x6 .* shape \\(5, 5\\)"):
+    with pytest.raises(FormulationError, match="option 'mass_matrix' must be 6x6 .* shape \\(5, 5\\)"):
         formulations.solve(stack, "dyn", mass_matrix=np.eye(5))
     with pytest.raises(FormulationError, match="must be symmetric"):
         formulations.solve(stack, "dyn", mass_matrix=np.triu(np.ones((6, 6))))
-    with pytest.raises(FormulationError, match="bias must be a finite vector of length 6"):
+    with pytest.raises(FormulationError, match="option 'bias' must be a finite vector of length 6"):
         formulations.solve(stack, "dyn", mass_matrix=np.eye(6), bias=[np.nan] * 6)
     M = np.eye(6)
     formulations.solve(stack, "dyn", mass_matrix=M)
@@ -126,8 +127,8 @@ def test_solve_batch_loops_and_matches_single_solves():
 
 
 def test_solve_batch_rejects_mixed_shapes():
-    from prioik.hierarchy import TaskStackError
     a = TaskStack([Task("a", np.eye(3)[[0]], [1.0])])
     b = TaskStack([Task("a", np.eye(3)[[0, 1]], [1.0, 2.0])])
-    with pytest.raises(TaskStackError, match="stack 1 of the batch differs"):
+    with pytest.raises(FormulationError, match="stack 1 of the batch: .*prepared for the "
+                                               "layout n=3: a\\[1\\]; got .* a\\[2\\]"):
         formulations.solve_batch([a, b], "reference")

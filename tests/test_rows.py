@@ -71,7 +71,7 @@ def test_fencing_velocity_rows_equal_the_velocity_stack(robot, variant, t):
         state = _state(robot, 10 + seed, drift=False)
         buf = scenario.write_velocity_rows(rows, state, t)
         stack = scenario.velocity_stack(_state(robot, 10 + seed), t, gain=10.0).stack
-        assert [lvl.names for lvl in stack.levels] == [n for n in buf.names]
+        assert [lvl.names for lvl in stack.levels] == [n for n in buf.layout.names]
         for level in stack.levels:
             for task in level:
                 A, b = buf.rows(task.name)
@@ -123,7 +123,7 @@ def test_writers_follow_a_reused_data_across_states(robot):
                            }.items():
             A, b = buf.rows(name)
             assert _close(A, term.J) and _close(b, term.velocity(0.0).b), name
-            assert _close(rows.error[rows.buffer.task_slice(name)], term.error), name
+            assert _close(rows.error[rows.data.layout.task_slice(name)], term.error), name
 
 
 def test_acceleration_targets_refuse_rows_written_without_drift(robot):

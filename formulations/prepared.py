@@ -1,0 +1,254 @@
+"""Prepare once, solve many: a formulation bound to one stack layout.
+
+:func:`prioik.prepare` validates the options once and lets the plugin allocate its
+workspaces once; :meth:`PreparedSolver.solve` then takes any stack (or
+:class:`~prioik.hierarchy.StackData`) of that layout. :func:`prioik.solve` is prepare +
+solve, so the one-off and the prepared answers are the same computation.
+
+A plugin provides its own prepared solver as a class ``Prepared(layout, options)`` with
+``solve(data) -> Outcome`` (and optionally ``solve_batch(datas) -> (X, statuses)``);
+for the others a default adapter solves ``data.as_stack()`` with the module's ``solve``.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from types import ModuleType
+from typing import Any, Sequence
+
+import numpy as np
+
+from prioik.hierarchy import (StackData, StackLayout, TaskStack, TaskStackError,
+                              UnsupportedTaskError, level_residuals)
+
+from .base import STATUSES, Capabilities, ConcurrentUseError, FormulationError, Outcome, Solution
+
+__all__ = ["BatchSolution", "PreparedSolver", "check_layout_support", "check_support"]
+
+
+def check_layout_support(name: str, caps: Capabilities, layout: StackLayout) -> None:
+    """Raise :class:`UnsupportedTaskError` naming the first task of ``layout`` whose kind
+    ``caps`` cannot take."""
+    for i, level in enumerate(layout.levels):
+        for task, _, kind in level:
+            if kind == "inequality" and not caps.inequalities:
+                raise UnsupportedTaskError("inequality tasks are not supported",
+                                           formulation=name, task=task, level=i)
+            if kind == "equality" and not caps.equalities:
+                raise UnsupportedTaskError("equality tasks are not supported",
+                                           formulation=name, task=task, level=i)
+
+
+def check_support(name: str, caps: Capabilities, stack: TaskStack) -> None:
+    """Raise :class:`UnsupportedTaskError` naming the first task ``caps`` cannot take
+    (kinds, and differently weighted tasks sharing a level)."""
+    check_layout_support(name, caps, stack.layout)
+    if caps.weights:
+        return
+    for i, level in enumerate(stack.levels):
+        if len(level) > 1:
+            w = {float(v) for t in level for v in np.unique(t.weight)}
+            if len(w) > 1:
+                raise UnsupportedTaskError("weighted tasks sharing a level are not "
+                                           "supported", formulation=name,
+                                           task=level[0].name, level=i)
+
+
+def _step_options(name: str, module: ModuleType, n: int, given: dict) -> dict:
+    from .options import validate_options
+    declared = {k: module.OPTIONS[k] for k in given if k in module.OPTIONS}
+    unknown = sorted(set(given) - set(declared))
+    if unknown:
+        raise FormulationError(f"formulation {name!r} has no option {', '.join(unknown)}; "
+                               f"its options: {', '.join(module.OPTIONS) or 'none'}")
+    return validate_options(name, declared, given, n)
+
+
+class _StackAdapter:
+    """The default prepared solver: the module's ``solve`` on the data's stack."""
+
+    accepts_step_options = True
+
+    def __init__(self, name: str, module: ModuleType, options: dict) -> None:
+        self._name, self._module, self._options = name, module, options
+
+    def solve(self, data: StackData, options: dict | None = None) -> Outcome:
+        stack = data.as_stack()
+        check_support(self._name, self._module.CAPABILITIES, stack)
+        return self._module.solve(stack, **(options or self._options))
+
+
+class PreparedSolver:
+    """A formulation prepared for one :class:`~prioik.hierarchy.StackLayout`.
+
+    Made by :func:`prioik.prepare`; options are validated and workspaces allocated
+    once. Safe to use from one thread at a time: a call while another thread's solve is
+    running raises :class:`~prioik.formulations.ConcurrentUseError` (it never returns a
+    wrong answer); use one prepared solver per thread.
+
+    Attributes:
+        formulation: Registry name.
+        layout: The layout it solves.
+        options: Every option's value (validated; defaults filled in).
+    """
+
+    def __init__(self, formulation: str, module: ModuleType, layout: StackLayout,
+                 options: dict[str, Any], given: dict[str, Any]) -> None:
+        check_layout_support(formulation, module.CAPABILITIES, layout)
+        self.formulation = formulation
+        self.layout = layout
+        self.options = options
+        self._given = dict(given)
+        self._module = module
+        self._lock = threading.Lock()
+        self._n = layout.n
+        self._needs_mass_matrix = module.CAPABILITIES.needs_mass_matrix
+        prepared = getattr(module, "Prepared", None)
+        self._impl = (prepared(layout, options) if prepared is not None
+                      else _StackAdapter(formulation, module, options))
+
+    def _data(self, stack_or_data) -> StackData:
+        if type(stack_or_data) is StackData:
+            data = stack_or_data
+        elif isinstance(stack_or_data, StackData):
+            data = stack_or_data
+        elif isinstance(stack_or_data, TaskStack):
+            data = stack_or_data.data
+        else:
+            data = TaskStack(stack_or_data).data
+        if data.layout is not self.layout and data.layout != self.layout:
+            raise FormulationError(f"this {self.formulation!r} solver was prepared for the "
+                                   f"layout {self.layout.describe()}; got a stack of the "
+                                   f"layout {data.layout.describe()}")
+        return data
+
+    def solve(self, stack_or_data, **step_options: Any) -> Solution:
+        """Solve one stack of the layout.
+
+        Args:
+            stack_or_data: A :class:`~prioik.hierarchy.TaskStack` or
+                :class:`~prioik.hierarchy.StackData` of :attr:`layout`.
+            **step_options: Options that change every step (e.g. ``mass_matrix`` and
+                ``bias`` of the dynamics formulations), validated on each call and
+                merged over the prepared ones; only for formulations without a
+                prepared solver of their own (the others fix their options at
+                :func:`prioik.prepare`).
+
+        Returns:
+            The :class:`~prioik.formulations.Solution` (a numerical failure inside the
+            formulation gives ``status == "failed"`` with ``info["message"]``).
+
+        Raises:
+            FormulationError: the stack has another layout.
+            TaskStackError: a value of the data is not valid (naming task, level, row).
+            ConcurrentUseError: another thread is using this solver.
+        """
+        data = self._data(stack_or_data)
+        merged = None
+        if step_options:
+            if not getattr(self._impl, "accepts_step_options", False):
+                raise FormulationError(f"formulation {self.formulation!r} fixes its options "
+                                       f"when prepared; prepare another solver for "
+                                       f"{', '.join(step_options)}")
+            merged = dict(self.options)
+            merged.update(_step_options(self.formulation, self._module, self._n,
+                                        step_options))
+        if self._needs_mass_matrix and (merged or self.options).get("mass_matrix") is None:
+            raise FormulationError(f"formulation {self.formulation!r} needs mass_matrix=M "
+                                   f"(the {self._n}x{self._n} joint-space inertia matrix, "
+                                   f"SPD)")
+        if not self._lock.acquire(blocking=False):
+            raise ConcurrentUseError(f"this prepared {self.formulation!r} solver is busy in "
+                                     f"another thread; prepare one solver per thread")
+        try:
+            t0 = time.perf_counter()
+            try:
+                out = self._impl.solve(data) if merged is None else \
+                    self._impl.solve(data, merged)
+            except (np.linalg.LinAlgError, ArithmeticError) as exc:
+                out = Outcome(np.full(self._n, np.nan), "failed",
+                              {"message": f"{type(exc).__name__}: {exc}"})
+            elapsed = time.perf_counter() - t0
+        finally:
+            self._lock.release()
+        return self._solution(out, data, elapsed)
+
+    def _solution(self, out: Outcome, data: StackData, elapsed: float) -> Solution:
+        if out.checked:     # the plugin verified x and the residuals (compiled paths)
+            if out.status in STATUSES:
+                return Solution(out.x, self.formulation, self._given, out.status,
+                                out.residuals, elapsed, out.info)
+        status = out.status
+        if status not in STATUSES:
+            raise FormulationError(f"formulation {self.formulation!r} returned unknown "
+                                   f"status {status!r}")
+        x = out.x
+        info = out.info
+        residuals = out.residuals
+        if not (isinstance(x, np.ndarray) and x.shape == (self._n,) and x.dtype == np.float64):
+            try:
+                x = np.asarray(x, dtype=np.float64).reshape(-1)
+            except (TypeError, ValueError):
+                x = np.full(0, np.nan)
+            if x.shape != (self._n,):
+                status = "failed"
+                info = dict(info)
+                info.setdefault("message", f"solution has shape {x.shape}, expected "
+                                           f"({self._n},)")
+                x = np.full(self._n, np.nan)
+                residuals = None
+        if residuals is None:
+            finite = bool(np.isfinite(x).all())
+            residuals = level_residuals(data, x) if finite else np.full(self.layout.k, np.nan)
+        else:
+            finite = bool(np.isfinite(residuals).all())   # NaN in x shows in a residual
+        if status != "failed" and not finite:
+            status = "failed"
+            info = dict(info)
+            info.setdefault("message", "the formulation produced non-finite values")
+        return Solution(x, self.formulation, self._given, status, residuals, elapsed, info)
+
+    def solve_batch(self, stacks_or_data: Sequence) -> "BatchSolution":
+        """Solve many stacks of the layout (the plugin's batched kernel when it has one,
+        else a loop of :meth:`solve`).
+
+        Raises:
+            TaskStackError: an empty batch.
+            FormulationError: a stack has another layout (naming its index).
+        """
+        from .registry import BatchSolution
+        if len(stacks_or_data) == 0:
+            raise TaskStackError("solve_batch needs at least one stack")
+        datas = []
+        for i, s in enumerate(stacks_or_data):
+            try:
+                datas.append(self._data(s))
+            except FormulationError as exc:
+                raise FormulationError(f"stack {i} of the batch: {exc}") from None
+        batched = hasattr(self._impl, "solve_batch") or hasattr(self._module, "solve_batch")
+        t0 = time.perf_counter()
+        if hasattr(self._impl, "solve_batch"):
+            X, statuses = self._impl.solve_batch(datas)
+        elif hasattr(self._module, "solve_batch"):
+            stacks = [d.as_stack() for d in datas]
+            for s in stacks:
+                check_support(self.formulation, self._module.CAPABILITIES, s)
+            X, statuses = self._module.solve_batch(stacks, **self.options)
+        else:
+            X = np.empty((len(datas), self._n))
+            statuses = []
+            for i, d in enumerate(datas):
+                sol = self.solve(d)
+                X[i] = sol.x
+                statuses.append(sol.status)
+        elapsed = time.perf_counter() - t0
+        X = np.asarray(X, dtype=np.float64)
+        bad = ~np.isfinite(X).all(axis=1)
+        statuses = ["failed" if b else st for b, st in zip(bad, statuses)]
+        return BatchSolution(X, statuses, self.formulation, dict(self._given), elapsed, batched)
+
+    def __repr__(self) -> str:
+        opts = ", ".join(f"{k}={v!r}" for k, v in self._given.items())
+        return (f"PreparedSolver({self.formulation!r}{', ' + opts if opts else ''}; "
+                f"{self.layout.describe()})")

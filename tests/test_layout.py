@@ -1,0 +1,134 @@
+"""hierarchy.layout: the stack layout (immutable, hashable), its preallocated data, views and
+boundary check; a TaskStack is a layout with frozen data."""
+
+import numpy as np
+import pytest
+
+from prioik.hierarchy import StackData, StackLayout, Task, TaskStack, TaskStackError
+from prioik.hierarchy.families import FAMILIES
+
+LAYOUT = [[("a", 2)], [("b", 1), ("c", 3)], [("d", 4)]]
+
+
+def test_layout_offsets_and_views_are_writable_slices():
+    layout = StackLayout(5, LAYOUT)
+    buf = layout.data()
+    assert layout.starts.tolist() == [0, 2, 6, 10] and layout.m == 10 and len(layout) == 3
+    assert layout.names == (("a",), ("b", "c"), ("d",))
+    assert not layout.starts.flags.writeable
+    A, b = buf.rows("c")
+    A[:] = 7.0
+    b[:] = [1.0, 2.0, 3.0]
+    assert np.all(buf.A[3:6] == 7.0) and buf.b[3:6].tolist() == [1.0, 2.0, 3.0]
+    assert np.all(buf.A[:3] == 0.0) and np.all(buf.A[6:] == 0.0)
+    assert layout.task_slice("d") == slice(6, 10)
+
+
+def test_layouts_are_values_hashable_and_immutable():
+    a, b = StackLayout(5, LAYOUT), StackLayout(5, [list(level) for level in LAYOUT])
+    assert a == b and hash(a) == hash(b) and len({a, b}) == 1
+    assert StackLayout(6, LAYOUT) != a
+    assert StackLayout(5, [[("a", 2, "inequality")], *LAYOUT[1:]]) != a
+    with pytest.raises(AttributeError):
+        a.n = 3
+
+
+def test_inequality_rows_bounds_and_weights_are_first_class():
+    layout = StackLayout(3, [[("box", 3, "inequality")], [("t", 2)]])
+    assert layout.row_is_equality.tolist() == [False, False, False, True, True]
+    assert not layout.is_equality and layout.kind_of("box") == "inequality"
+    data = layout.data()
+    A, lo, up = data.bounds("box")
+    A[:] = np.eye(3)
+    lo[:], up[:] = -1.0, [1.0, 2.0, np.inf]
+    data.rows("t")[0][:] = [[1.0, 0, 0], [0, 1.0, 0]]
+    data.weights("t")[:] = [2.0, 3.0]
+    stack = data.to_stack()
+    assert stack.layout == layout
+    np.testing.assert_array_equal(stack.task("box").upper, [1.0, 2.0, np.inf])
+    np.testing.assert_array_equal(stack.task("t").weight, [4.0, 9.0])
+    back = stack.data
+    for key in ("A", "b", "lower", "upper", "sqrt_weight"):
+        np.testing.assert_array_equal(getattr(back, key)[layout.task_slice("box")]
+                                      if key != "b" else back.b[3:],
+                                      getattr(data, key)[layout.task_slice("box")]
+                                      if key != "b" else data.b[3:])
+
+
+def test_a_stack_is_a_layout_with_frozen_data():
+    rng = np.random.default_rng(1)
+    stack = TaskStack([[Task("a", rng.standard_normal((2, 4)), [1.0, 2.0], weight=4.0)],
+                       [Task("box", np.eye(4), lower=-np.ones(4), upper=np.ones(4))]])
+    data = stack.data
+    assert data is stack.data and data.as_stack() is stack
+    assert not data.writeable and not data.A.flags.writeable
+    np.testing.assert_array_equal(data.sqrt_weight[:2], [2.0, 2.0])
+    np.testing.assert_array_equal(data.lower[2:], -np.ones(4))
+    assert stack.layout.levels == ((("a", 2, "equality"),), (("box", 4, "inequality"),))
+    copy = data.copy()
+    assert copy.writeable and copy.as_stack() is not stack
+
+
+@pytest.mark.parametrize("family", ["compatible", "conflicting", "rank_deficient"])
+def test_to_stack_round_trips_a_stack(family):
+    stack = FAMILIES[family](np.random.default_rng(4), 9, 3)
+    buf = StackLayout(stack.n, [[(t.name, t.m) for t in level] for level in stack.levels]).data()
+    for t in stack.tasks:
+        A, b = buf.rows(t.name)
+        A[:], b[:] = t.A, t.b
+    back = buf.to_stack()
+    for level, other in zip(stack.levels, back.levels):
+        assert np.array_equal(level.A, other.A) and np.array_equal(level.b, other.b)
+    assert not back.tasks[0].A.flags.writeable       # validated Task copies, not views
+    buf.A[:] = 0.0
+    assert np.any(back.levels[0].A != 0.0)
+
+
+@pytest.mark.parametrize("where, value, what", [("A", np.nan, "A"), ("b", np.inf, "b")])
+def test_check_names_the_task_level_and_row(where, value, what):
+    buf = StackLayout(5, LAYOUT).data()
+    buf.A[:] = 1.0
+    A, b = buf.rows("c")
+    (A if where == "A" else b)[1] = value      # a whole row (A) or one target (b)
+    with pytest.raises(TaskStackError, match=r"level 1, task 'c': " + what) as err:
+        buf.check()
+    assert err.value.task == "c" and err.value.level == 1 and err.value.detail["row"] == 1
+
+
+def test_check_passes_finite_values():
+    StackLayout(5, LAYOUT).data().check()
+
+
+@pytest.mark.parametrize("field, value, what", [
+    ("lower", np.nan, "lower is NaN"), ("upper", -np.inf, "upper is NaN or -inf"),
+    ("sqrt_weight", 0.0, "√w is not finite and > 0")])
+def test_check_names_bad_bounds_and_weights(field, value, what):
+    data = StackLayout(2, [[("box", 2, "inequality")]]).data()
+    getattr(data, field)[1] = value
+    with pytest.raises(TaskStackError, match=f"level 0, task 'box': {what}.*row 1"):
+        data.check()
+    data = StackLayout(2, [[("box", 2, "inequality")]]).data()
+    data.lower[0], data.upper[0] = 2.0, 1.0
+    with pytest.raises(TaskStackError, match="lower > upper in row 0"):
+        data.check()
+
+
+@pytest.mark.parametrize("n, levels, message", [
+    (0, LAYOUT, "n ≥ 1"),
+    (3, [], "empty"),
+    (3, [[("a", 1)], []], "level 1: the level is empty"),
+    (3, [[("a", 1)], [("a", 2)]], "duplicate task name"),
+    (3, [[("a", 0)]], "at least one row"),
+    (3, [[("", 1)]], "non-empty string"),
+    (3, [["a"]], r"\(name, rows\[, kind\]\)"),
+    (3, [[("a", 1, "soft")]], "kind must be one of"),
+    (True, LAYOUT, "n ≥ 1"),
+])
+def test_bad_layouts_are_refused_with_the_place(n, levels, message):
+    with pytest.raises(TaskStackError, match=message):
+        StackLayout(n, levels)
+
+
+def test_unknown_task_names_the_known_ones():
+    with pytest.raises(TaskStackError, match="no task 'z'.*a, b, c, d"):
+        StackLayout(5, LAYOUT).data().rows("z")

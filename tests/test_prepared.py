@@ -1,0 +1,187 @@
+"""formulations.prepared and the typed options: the contract every plugin keeps.
+
+Parametrized over the registry: every available formulation can be prepared once and
+solve many stacks of its layout (the same answers as one-off solves), refuses another
+layout naming both, refuses every wrong option type and value with a FormulationError
+naming the option, and is never wrong when called from two threads.
+"""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+
+import prioik
+from prioik import formulations
+from prioik.formulations import ConcurrentUseError, FormulationError, Option
+from prioik.hierarchy import StackLayout, Task, TaskStack
+from prioik.hierarchy.families import FAMILIES, random_spd, with_inequalities
+
+AVAILABLE = [f for f in formulations.available() if f.available]
+
+
+def _options_for(info, n: int) -> dict:
+    """The options a formulation needs to run at all (a mass matrix)."""
+    if info.capabilities.needs_mass_matrix:
+        return {"mass_matrix": random_spd(np.random.default_rng(1), n)}
+    return {}
+
+
+def _stacks_for(info, count: int = 3, seed: int = 0) -> list[TaskStack]:
+    """``count`` stacks of one layout the formulation can take."""
+    rng = np.random.default_rng(seed)
+    if info.capabilities.inequalities and not info.capabilities.equalities:
+        pytest.skip("no such plugin")
+    family = "weighted" if info.capabilities.weights else "compatible"
+    base = FAMILIES[family](rng, 8, 3)
+    out = []
+    for _ in range(count):
+        out.append(TaskStack([[Task(t.name, rng.standard_normal(t.A.shape),
+                                    rng.standard_normal(t.m), weight=t.weight)
+                               for t in level] for level in base.levels]))
+    return out
+
+
+@pytest.mark.parametrize("info", AVAILABLE, ids=lambda f: f.name)
+def test_prepared_solver_equals_one_off_solves_over_many_stacks(info):
+    stacks = _stacks_for(info)
+    opts = _options_for(info, stacks[0].n)
+    solver = prioik.prepare(stacks[0].layout, info.name, **opts)
+    for stack in stacks + stacks[:1]:        # the first again: nothing leaks between solves
+        one = prioik.solve(stack, info.name, **opts)
+        got = solver.solve(stack)
+        assert got.status == one.status
+        if info.name == "extended_jacobian" or not info.capabilities.inequalities:
+            assert np.array_equal(got.x, one.x), info.name     # same computation
+        else:   # QP back-ends may differ in the last digits between calls
+            np.testing.assert_allclose(got.x, one.x, rtol=1e-8, atol=1e-10)
+    data = stacks[1].layout.data()             # written data of the same layout
+    for t in stacks[1].tasks:
+        A, b = data.rows(t.name)
+        A[:], b[:] = t.A, t.b
+        data.weights(t.name)[:] = np.sqrt(t.weight)
+    np.testing.assert_allclose(solver.solve(data).x, prioik.solve(stacks[1], info.name,
+                                                                  **opts).x,
+                               rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("info", AVAILABLE, ids=lambda f: f.name)
+def test_another_layout_is_refused_naming_both(info):
+    stacks = _stacks_for(info, 1)
+    solver = prioik.prepare(stacks[0], info.name, **_options_for(info, stacks[0].n))
+    other = StackLayout(stacks[0].n, [[("elsewhere", 2)]]).data()
+    with pytest.raises(FormulationError, match=r"prepared for the layout n=8: .* got a stack "
+                                               r"of the layout n=8: elsewhere\[2\]"):
+        solver.solve(other)
+
+
+def _bad_values(opt: Option) -> list:
+    """Values of the wrong type or out of range for ``opt``."""
+    bad = [object()]
+    if not opt.optional:
+        bad.append(None)
+    if opt.kind == "float":
+        bad += ["abc", float("nan"), True, [1.0]]
+        if opt.minimum is not None:
+            bad.append(opt.minimum - 1.0)
+        if opt.maximum is not None:
+            bad.append(opt.maximum + 1.0)
+    elif opt.kind == "int":
+        bad += [1.5, "3", True]
+    elif opt.kind == "bool":
+        bad += ["no", 1, None]
+    elif opt.kind == "str":
+        bad += [3]
+        if opt.choices:
+            bad.append("not-a-choice")
+    elif opt.kind in ("matrix", "vector"):
+        bad += ["a", np.eye(3), np.full(8, np.nan), [[1j] * 8] * 8]
+    return bad
+
+
+CASES = [(info, key, value) for info in AVAILABLE for key, opt in info.options.items()
+         for value in _bad_values(opt)]
+
+
+@pytest.mark.parametrize("info, key, value", CASES,
+                         ids=[f"{i.name}-{k}-{type(v).__name__}" for i, k, v in CASES])
+def test_wrong_option_types_and_values_name_the_option(info, key, value):
+    stack = _stacks_for(info, 1)[0]
+    opts = _options_for(info, stack.n)
+    opts[key] = value
+    with pytest.raises(FormulationError, match=f"'{key}'"):
+        prioik.prepare(stack.layout, info.name, **opts)
+    with pytest.raises(FormulationError, match=f"'{key}'"):
+        prioik.solve(stack, info.name, **opts)
+
+
+def test_every_plugin_declares_typed_options():
+    for info in AVAILABLE:
+        for key, opt in info.options.items():
+            assert isinstance(opt, Option), (info.name, key)
+            assert opt.description, (info.name, key)
+            if opt.default is not None or not opt.optional:
+                assert opt.validate(key, opt.default, 8) is not None or opt.optional
+
+
+def test_unknown_option_lists_the_known_ones():
+    stack = FAMILIES["compatible"](np.random.default_rng(0), 6, 2)
+    with pytest.raises(FormulationError, match="no option dampnig; its options: nullspace, "
+                                               "damping"):
+        prioik.prepare(stack.layout, "extended_jacobian", dampnig=0.1)
+
+
+@pytest.mark.parametrize("name", ["extended_jacobian", "reference"])
+def test_one_solver_from_two_threads_is_never_wrong(name):
+    """Two threads hammer one prepared solver: each call either returns the serial answer
+    of its own stack or raises ConcurrentUseError."""
+    rng = np.random.default_rng(7)
+    base = FAMILIES["conflicting"](rng, 20, 4)
+    stacks = [TaskStack([[Task(t.name, rng.standard_normal(t.A.shape), rng.standard_normal(t.m))
+                          for t in level] for level in base.levels]) for _ in range(2)]
+    serial = [prioik.solve(s, name).x for s in stacks]
+    solver = prioik.prepare(base.layout, name)
+    wrong, busy, done = [], [], []
+
+    def work(i):
+        for _ in range(300):
+            try:
+                x = solver.solve(stacks[i]).x
+            except ConcurrentUseError:
+                busy.append(i)
+                continue
+            done.append(i)
+            if not np.array_equal(x, serial[i]):
+                wrong.append(i)
+
+    threads = [threading.Thread(target=work, args=(i,)) for i in (0, 1)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not wrong
+    assert len(done) + len(busy) == 600 and done
+
+
+def test_inequality_layout_is_refused_by_equality_solvers_at_prepare():
+    stack = with_inequalities(np.random.default_rng(0), 8, 3)
+    with pytest.raises(prioik.UnsupportedTaskError, match="inequality tasks are not supported"):
+        prioik.prepare(stack.layout, "extended_jacobian")
+
+
+def test_solve_batch_is_one_prepared_solver_over_many_stacks():
+    rng = np.random.default_rng(3)
+    base = FAMILIES["weighted"](rng, 12, 3)
+    stacks = [TaskStack([[Task(t.name, rng.standard_normal(t.A.shape), rng.standard_normal(t.m),
+                                weight=t.weight) for t in level] for level in base.levels])
+              for _ in range(6)]
+    solver = prioik.prepare(base.layout, "extended_jacobian")
+    batch = solver.solve_batch(stacks)
+    assert batch.batched and batch.X.shape == (6, 12)
+    for x, s in zip(batch.X, stacks):
+        np.testing.assert_allclose(x, prioik.solve(s, "extended_jacobian").x, rtol=1e-12,
+                                   atol=1e-13)
+    again = prioik.solve_batch(stacks, "extended_jacobian")
+    assert np.array_equal(again.X, batch.X)
