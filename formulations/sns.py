@@ -72,6 +72,7 @@ from prioik.hierarchy import DEFAULT_RCOND, TaskStack, UnsupportedTaskError
 
 from .base import Capabilities, FormulationError, Outcome
 from .nullspace import check_nonnegative, truncated_svd
+from .options import Option, rcond_option
 
 NAME = "sns"
 DESCRIPTION = ("Saturation in the Null Space (Flacco, De Luca, Khatib 2012/2015): strict "
@@ -82,10 +83,11 @@ DESCRIPTION = ("Saturation in the Null Space (Flacco, De Luca, Khatib 2012/2015)
 CAPABILITIES = Capabilities(equalities=True, inequalities=True, weights=True,
                             needs_mass_matrix=False, exact=True)
 OPTIONS = {
-    "rcond": (DEFAULT_RCOND, "relative rank threshold: σ counts if σ > rcond·‖J_k‖_F"),
-    "bound_tolerance": (1e-9, "a bound counts as met within tol·max(1, |bound|)"),
-    "max_saturations": (None, "cap on saturated joints per task (default: the number of "
-                              "bounded columns)"),
+    "rcond": rcond_option("‖J_k‖_F"),
+    "bound_tolerance": Option(1e-9, "float", "a bound counts as met within "
+                              "tol·max(1, |bound|)", minimum=0.0),
+    "max_saturations": Option(None, "int", "cap on saturated joints per task (default: the "
+                              "number of bounded columns)", minimum=0, optional=True),
 }
 
 
