@@ -17,6 +17,7 @@ SUBCOMMAND_MODULES = [
     "prioik.benchmarks.bench",
     "prioik.benchmarks.properties",
     "prioik.benchmarks.validation",
+    "prioik.benchmarks.sweep.command",
 ]
 
 
@@ -106,6 +107,7 @@ def main(argv: list[str] | None = None) -> int:
     from prioik.hierarchy import TaskStackError
     from .threads import blas_threads
     args = build_parser().parse_args(argv)
+    args.command_line = list(sys.argv[1:] if argv is None else argv)
     try:
         with blas_threads(getattr(args, "blas_threads", 1)):
             return int(args.func(args) or 0)
