@@ -107,7 +107,7 @@ def step_times(path: Path, judged: list[dict[str, Any]], labels: list[str], titl
             shown.append(lb)
     fig, ax = plt.subplots(figsize=(7.5, 0.35 * len(shown) + 1.2))
     if data:
-        parts = ax.boxplot(data, vert=False, patch_artist=True, widths=0.6,
+        parts = ax.boxplot(data, orientation="horizontal", patch_artist=True, widths=0.6,
                            flierprops={"markersize": 3})
         for patch, lb in zip(parts["boxes"], shown):
             patch.set_facecolor(color_of(lb))
