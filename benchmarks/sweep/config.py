@@ -3,7 +3,7 @@
 A sweep file (TOML, or JSON with the same keys)::
 
     scenario = "fencing"                 # prioik.benchmarks.sweep.scenarios.SWEEP_SCENARIOS
-    formulations = ["extended_jacobian", "nullspace", "sns"]   # or "default"
+    formulations = ["extended_jacobian", "nullspace", "sns"]   # or "default", "registry"
     options_from = "incompatible"        # which of the scenario's RUNS options a label takes
     seed = 0
     algorithmic_error = false            # record eq. 29 per step (an SVD per level)
@@ -29,6 +29,10 @@ is a run label of the scenario's table (:data:`prioik.benchmarks.fencing.RUNS`:
 ``formulation`` or ``formulation:tag``), taking its options for ``options_from`` (its
 other variant when it has only that one), or a table
 ``{label, formulation, options, level, limits}`` declaring a variant of its own.
+``"default"`` takes the table's default runs; ``"registry"`` every available registry
+formulation (:func:`prioik.benchmarks.variants.from_registry`: one per back-end, the
+plugin's ``REPORT_VARIANTS``, without plugins that opt out of ``"sweep"``), so a new
+formulation is swept without an edit here.
 
 A run's id is a hash of the scenario, its resolved parameters and its variant, so a
 resumed or extended sweep recognises the rows it already has.
@@ -168,9 +172,14 @@ def _variants(cfg: dict, scenario: str) -> list[Variant]:
     entries = cfg.get("formulations", "default")
     if entries == "default":
         entries = [r.label for r in table if r.default]
+    elif entries == "registry":
+        from prioik.benchmarks.variants import from_registry
+        found, _ = from_registry("sweep")
+        entries = [{"label": v.label, "formulation": v.formulation, "options": v.options}
+                   for v in found]
     if isinstance(entries, str) or not isinstance(entries, list):
-        raise _err(cfg, f"'formulations' must be a list of run labels or tables, or "
-                        f"\"default\"; got {entries!r}")
+        raise _err(cfg, f"'formulations' must be a list of run labels or tables, "
+                        f"\"default\" or \"registry\"; got {entries!r}")
     if not entries:
         raise _err(cfg, "'formulations' is empty: nothing to run")
     options_from = cfg.get("options_from", "incompatible")

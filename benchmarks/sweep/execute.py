@@ -160,8 +160,8 @@ def run_sweep(plan: Plan, out, *, workers: int | None = None, scheduler: str | N
             cluster.close()
     info = {"runs_total": len(plan.runs), "runs_computed": len(computed),
             "runs_skipped": len(skipped), "workers": n_workers,
-            "mode": ("in-process" if n_workers == 0 and scheduler is None and todo else
-                     f"scheduler {scheduler}" if scheduler else "LocalCluster"),
+            "mode": ("nothing to run" if not todo else f"scheduler {scheduler}" if scheduler
+                     else "in-process" if workers == 0 else "LocalCluster"),
             "blas_threads_per_worker": 1, "wall_time_s": wall, "cluster_start_s": cluster_s,
             "runs_per_minute": (60.0 * len(computed) / wall) if computed and wall > 0 else None,
             "cpu_count": os.cpu_count(), "load_average_start": load0,
