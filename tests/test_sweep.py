@@ -221,3 +221,14 @@ def test_a_registered_toy_plugin_appears_in_a_registry_sweep_and_runs(tmp_path, 
     out = run_sweep(toy_plan, tmp_path / "toy", workers=0, progress=False)
     (row,) = out.rows.values()
     assert row["label"] == toy.NAME and row["status"] == "ok" and row["steps"] > 0
+
+
+def test_two_sweeps_never_write_one_rows_file(tmp_path):
+    from prioik.benchmarks.sweep.store import RowStore
+    cols = ["run_id", "label"]
+    with RowStore(tmp_path / "rows.csv", cols) as first:
+        first.append({"run_id": "a", "label": "x"})
+        with pytest.raises(ValueError, match="being written by another prioik sweep"):
+            RowStore(tmp_path / "rows.csv", cols)
+    with RowStore(tmp_path / "rows.csv", cols) as again:        # free once closed
+        assert "a" in again and list(again.rows) == ["a"]

@@ -9,6 +9,7 @@ resumed sweep skips.
 from __future__ import annotations
 
 import csv
+import fcntl
 import io
 import math
 import os
@@ -70,13 +71,22 @@ class RowStore:
         columns: The sweep's columns (:func:`.schema.columns`).
 
     Raises:
-        ValueError: the file holds rows of another shape (names the file).
+        ValueError: the file holds rows of another shape, or another sweep is writing
+            it now (an exclusive ``flock`` on ``rows.csv.lock``; names the file).
     """
 
     def __init__(self, path, columns: Iterable[str]) -> None:
         self.path = Path(path)
         self.columns = list(columns)
         self.rows: dict[str, dict[str, Any]] = {}
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._lock = open(self.path.with_name(self.path.name + ".lock"), "w")
+        try:
+            fcntl.flock(self._lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            self._lock.close()
+            raise ValueError(f"{self.path} is being written by another prioik sweep; "
+                             f"wait for it or use another --out") from None
         if self.path.exists() and self.path.stat().st_size:
             raw = self.path.read_bytes()
             header = raw.split(b"\n", 1)[0].decode().rstrip("\r").split(",")
@@ -111,6 +121,7 @@ class RowStore:
 
     def close(self) -> None:
         self._file.close()
+        self._lock.close()
 
     def __enter__(self) -> "RowStore":
         return self
