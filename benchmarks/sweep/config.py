@@ -119,6 +119,7 @@ class Plan:
     algorithmic_error: bool
     swept: list[str]
     title: str = ""
+    source: str = ""
 
     @property
     def points(self) -> int:
@@ -351,4 +352,5 @@ def plan_from_config(cfg: dict) -> Plan:
                         "parameters and formulation)")
     return Plan(scenario, runs, variants, criteria, {k: v for k, v in cfg.items()
                                                      if not k.startswith("_")},
-                bool(cfg.get("algorithmic_error", False)), swept, str(cfg.get("title", "")))
+                bool(cfg.get("algorithmic_error", False)), swept, str(cfg.get("title", "")),
+                str(cfg.get("_source", "")))

@@ -61,6 +61,15 @@ def _loadavg() -> list[float] | None:
         return None
 
 
+def _cpu_pressure() -> float | None:
+    """Share of the last 60 s in which some runnable task waited for a CPU (Linux PSI, %)."""
+    try:
+        first = Path("/proc/pressure/cpu").read_text().splitlines()[0]
+        return float(first.split("avg60=")[1].split()[0])
+    except (OSError, IndexError, ValueError):
+        return None
+
+
 def _progress(total: int, done: int, enabled: bool):
     if not enabled:
         return None
@@ -102,7 +111,7 @@ def run_sweep(plan: Plan, out, *, workers: int | None = None, scheduler: str | N
     if skipped:
         print(f"resuming: {len(skipped)} of {len(plan.runs)} rows already in "
               f"{store.path}; running the {len(todo)} missing", file=sys.stderr)
-    load0 = _loadavg()
+    load0, pressure0 = _loadavg(), _cpu_pressure()
     cluster_s, n_workers, client, cluster = 0.0, 0, None, None
 
     def record(row: dict) -> None:
@@ -165,7 +174,8 @@ def run_sweep(plan: Plan, out, *, workers: int | None = None, scheduler: str | N
             "blas_threads_per_worker": 1, "wall_time_s": wall, "cluster_start_s": cluster_s,
             "runs_per_minute": (60.0 * len(computed) / wall) if computed and wall > 0 else None,
             "cpu_count": os.cpu_count(), "load_average_start": load0,
-            "load_average_end": _loadavg()}
+            "load_average_end": _loadavg(), "cpu_pressure_avg60_start": pressure0,
+            "cpu_pressure_avg60_end": _cpu_pressure()}
     info_path = out / "run_info.json"
     previous = []
     if info_path.exists():

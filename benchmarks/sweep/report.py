@@ -83,6 +83,25 @@ def _time_table(judged: list[dict], labels: list[str]) -> str:
     return "\n".join(lines)
 
 
+def _boundary(judged: list[dict], tip_m: float) -> str:
+    """Where the tip stops reaching its target, as the runs show it."""
+    ok = [r["reach_margin_m"] for r in judged if not r["failed"]
+          and r.get("final_tip_error_m") is not None and r["final_tip_error_m"] <= tip_m]
+    margins = sorted({r["reach_margin_m"] for r in judged})
+    if not margins:
+        return "No runs."
+    if not ok:
+        return f"No run brought the tip within {1e3 * tip_m:g} mm of its target."
+    far = max(ok)
+    beyond = [m for m in margins if m > far]
+    text = (f"The farthest target some formulation reached within {1e3 * tip_m:g} mm has a "
+            f"reach margin of {far:+.3f} m")
+    if beyond:
+        text += (f"; no formulation reached any of the {len(beyond)} target(s) from "
+                 f"{beyond[0]:+.3f} m on")
+    return text + "."
+
+
 def _failures(judged: list[dict], labels: list[str]) -> str:
     lines = []
     for lb in labels:
@@ -144,7 +163,10 @@ def write_report(plan: Plan, rows: dict[str, dict[str, Any]], out, info: dict,
                    f"process(es), one BLAS thread each; cluster start "
                    f"{i['cluster_start_s']:.1f} s){rate}; load average (1, 5, 15 min) "
                    f"{i['load_average_start']} at start, {i['load_average_end']} at end, "
-                   f"{i['cpu_count']} cores.")
+                   f"{i['cpu_count']} cores"
+                   + (f"; CPU pressure (share of time a runnable task waited for a core, "
+                      f"60 s average) {i['cpu_pressure_avg60_start']:.0f} % at start"
+                      if i.get("cpu_pressure_avg60_start") is not None else "") + ".")
     if runs_info:
         info = {**runs_info[-1], **{k: v for k, v in info.items() if k == "invocations"}}
     if errors:
@@ -154,13 +176,17 @@ def write_report(plan: Plan, rows: dict[str, dict[str, Any]], out, info: dict,
         how.append("- Not run (the formulation cannot take the scenario's stack): "
                    + ", ".join(f"`{u}`" for u in unsupported))
     src = plan.config
-    cfg_text = json.dumps(src, indent=2, default=str)
+    cfg_text, cfg_lang, cfg_name = json.dumps(src, indent=2, default=str), "json", "sweep"
+    if plan.source and Path(plan.source).is_file():
+        cfg_text = Path(plan.source).read_text().rstrip("\n")
+        cfg_lang = "json" if plan.source.endswith(".json") else "toml"
+        cfg_name = plan.source
     load = info.get("load_average_start")
 
     def page(img_prefix: str) -> str:
         return _template().substitute(
             title=name, command=command, runs=len(plan.runs), points=plan.points,
-            n_variants=len(plan.variants), config_name=src.get("title") or "sweep",
+            n_variants=len(plan.variants), config_name=cfg_name,
             scenario=plan.scenario, swept_table=_swept_table(plan),
             tip_mm=f"{1e3 * crit['tip_m']:g}", reachable_m=f"{crit['reachable_margin_m']:g}",
             foot_mm=f"{1e3 * crit['support_foot_m']:g}", com_mm=f"{1e3 * crit['com_m']:g}",
@@ -174,7 +200,8 @@ def write_report(plan: Plan, rows: dict[str, dict[str, Any]], out, info: dict,
             cpus=info.get("cpu_count"), load=load,
             time_table=_time_table(judged, labels_shown),
             failures=_failures(judged, labels_shown), how_it_ran="\n".join(how),
-            config_lang="json", config_text=cfg_text)
+            boundary=_boundary(judged, crit["tip_m"]),
+            config_lang=cfg_lang, config_text=cfg_text)
 
     path = out / "report.md"
     path.write_text(page(""))
