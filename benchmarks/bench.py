@@ -459,6 +459,11 @@ def measure_ik_step(settings: Settings, progress: Progress | None = None
                     ) -> tuple[dict[str, Any], str]:
     """The whole G1 IK step (kinematics + solve) of ``extended_jacobian`` against
     PlaCo's ``KinematicsSolver`` (see :mod:`benchmarks.placo_step`)."""
+    from prioik.extras import MissingExtraError, require
+    try:
+        require("robots", "placo", what="the PlaCo IK step")
+    except MissingExtraError as exc:
+        return {}, str(exc)
     try:
         from .placo_step import ik_step_times
     except ImportError as exc:
@@ -467,6 +472,11 @@ def measure_ik_step(settings: Settings, progress: Progress | None = None
         out = ik_step_times(settings.ik_steps)
     except (ImportError, FileNotFoundError, RuntimeError) as exc:
         return {}, f"PlaCo step failed ({type(exc).__name__}: {exc})"
+    from .panda_step import panda_step_times
+    try:
+        out["panda"] = panda_step_times(settings.ik_steps)
+    except (ImportError, FileNotFoundError, RuntimeError) as exc:
+        out["panda_error"] = f"{type(exc).__name__}: {exc}"
     if progress:
         progress.step("IK step: PlaCo vs extended_jacobian")
     return out, ""
@@ -536,6 +546,13 @@ def ratios(rows: list[Row], batch: dict[str, Any], ik: dict[str, Any]) -> list[R
             out.append(Ratio(name, a / b, target, f"{a:.1f} / {b:.1f} µs"))
         else:
             out.append(Ratio(name, math.nan, target, "not measured"))
+    panda = ik.get("panda", {}) if ik else {}
+    for key, what, target in (("prepared_step_us", "prepared path", 2.5),
+                              ("oneoff_step_us", "one-off prioik.solve", math.inf)):
+        name = f"Panda reach step (kinematics + rows + solve), {what}: {ej} / PlaCo"
+        a, b = panda.get(key, math.nan), panda.get("placo_step_us", math.nan)
+        out.append(Ratio(name, a / b, target, f"{a:.1f} / {b:.1f} µs" if panda
+                         else "not measured"))
     if ik and "references_us" in ik:
         # the minimum-jerk references are the same Python in all three steps
         r = ik["references_us"]
@@ -758,6 +775,16 @@ def markdown_report(rows: list[Row], rats: list[Ratio], batch: dict, ik: dict,
                           ("placo", "PlaCo: update_kinematics + KinematicsSolver.solve")):
             md.append(f"| {what} | {_fmt_us(ik[key + '_step_us'])} | "
                       f"{_fmt_us(ik[key + '_p10_us'])} | {_fmt_us(ik[key + '_p90_us'])} |")
+    if ik and ik.get("panda"):
+        panda = ik["panda"]
+        md.append("\n## Panda reach step (kinematics + rows + solve)\n")
+        md.append(panda.get("description", ""))
+        md.append("\n| step | median µs | p10 µs | p90 µs |")
+        md.append("|---|---:|---:|---:|")
+        for key, what in (("prepared", "prioik, prepared"), ("oneoff", "prioik, one-off"),
+                          ("placo", "PlaCo KinematicsSolver")):
+            md.append(f"| {what} | {_fmt_us(panda[key + '_step_us'])} | "
+                      f"{_fmt_us(panda[key + '_p10_us'])} | {_fmt_us(panda[key + '_p90_us'])} |")
     if control:
         md.append("\n## Per control step on G1 (the paper's comparison re-measured)\n")
         md.append("Compatible fencing scenario on the G1 (n = 35: 29 joints and the floating "
@@ -1047,7 +1074,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "loop; 0: leave BLAS's default)")
     p.add_argument("--no-g1", action="store_true",
                    help="random stacks only (no G1 cases, batch, IK-step or control-step runs)")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, extras=("plots",))
 
 
 def _command(args: argparse.Namespace) -> str:

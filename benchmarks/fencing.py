@@ -43,7 +43,8 @@ import numpy as np
 
 #: the keys of one run in summary.json, in order
 SUMMARY_KEYS = ("final_tip_error_m", "max_algorithmic_error", "max_com_error_m",
-                "max_support_foot_error_m", "max_joint_limit_violation_rad", "max_qdd_norm",
+                "max_support_foot_error_m", "max_left_foot_error_m",
+                "max_joint_limit_violation_rad", "max_qdd_norm",
                 "median_step_time_s", "median_solve_time_s", "failed")
 
 
@@ -99,28 +100,42 @@ TIP_STEP_BOUND = 10.0
 #: run, 0.05 keeps them at 65.
 NULLSPACE_DAMPING = 0.05
 
-#: Armature (kg·m²) of the ``unifying:armature`` run. Measured (compatible, 3 s): 0.02
-#: still diverges (t = 1.63 s); 0.1 runs to the end (final tip error 11.5 mm).
+#: Armature (kg·m²) of the ``unifying:armature`` run (``unifying:armature_low`` shows
+#: that 0.02 is not enough; both are measured by the command).
 UNIFYING_ARMATURE = 0.1
+
+#: ``λ`` of the eq. 27 runs
+EQ27_DAMPING = 1e-2
+#: Armature (kg·m²) of the ``unifying:armature_low`` run, which shows that less is
+#: not enough (its divergence time is measured and printed)
+UNIFYING_ARMATURE_LOW = 0.02
 
 #: The per-scenario option table (one row per run).
 RUNS: tuple[RunSpec, ...] = (
-    RunSpec("extended_jacobian", "extended_jacobian",
-            {"compatible": {}, "incompatible": {"step_bound": {"sword_tip": TIP_STEP_BOUND}}},
-            "exact eq. 18 when compatible; when not, the sword-tip level's step is bounded "
-            f"(trust-region damping, ‖Δq̈_tip‖ ≤ {TIP_STEP_BOUND:g} rad/s²): every higher "
-            "level stays exact"),
-    RunSpec("extended_jacobian:exact", "extended_jacobian", {"incompatible": {}},
-            "eq. 18 without any damping in the incompatible run (in the compatible run "
-            "this is the `extended_jacobian` row)", variants=("incompatible",)),
+    RunSpec("extended_jacobian", "extended_jacobian", {"compatible": {}, "incompatible": {}},
+            "the paper's eq. 18 as printed: exact, no damping"),
+    RunSpec("extended_jacobian:step_bound", "extended_jacobian",
+            {"incompatible": {"step_bound": {"sword_tip": TIP_STEP_BOUND}}},
+            "prioik's own variant, not the paper's: the sword-tip level's step is bounded "
+            f"(trust-region damping, ‖Δq̈_tip‖ ≤ {TIP_STEP_BOUND:g} rad/s²); every higher "
+            "level stays exact", variants=("incompatible",)),
+    RunSpec("extended_jacobian:step_bound_all", "extended_jacobian",
+            {"incompatible": {"step_bound": TIP_STEP_BOUND}},
+            f"prioik's own variant: every level's step bounded by {TIP_STEP_BOUND:g} "
+            "(the joint-limit rows included)", variants=("incompatible",)),
     RunSpec("extended_jacobian:selective", "extended_jacobian",
             {"incompatible": {"level_damping": 0.1, "singular_threshold": 0.05}},
-            "selective damping instead: any level whose projected σ_min < 0.05·‖A_i‖_F is "
-            "damped (μ² ≤ 0.1); it also catches the left foot (projected σ_min ≈ "
-            "0.041·‖A‖_F when standing)", variants=("incompatible",)),
+            "prioik's own variant: any level whose projected σ_min < 0.05·‖A_i‖_F is "
+            "damped (μ² ≤ 0.1)", variants=("incompatible",)),
     RunSpec("extended_jacobian:eq27", "extended_jacobian",
-            {"compatible": {"damping": 1e-2}, "incompatible": {"damping": 1e-2}},
-            "the paper's eq. 27 damping λ = 1e-2 on every lower level"),
+            {"compatible": {"damping": EQ27_DAMPING}, "incompatible": {"damping": EQ27_DAMPING}},
+            f"the paper's eq. 27, λ = {EQ27_DAMPING:g}, with Z_i of r_i rows spanning "
+            "range(N_{i-1} J_iᵀ) (`z_basis='task_range'`, eq. 12-13 and Theorem 1)"),
+    RunSpec("extended_jacobian:eq27_null_space", "extended_jacobian",
+            {"compatible": {"damping": EQ27_DAMPING, "z_basis": "null_space"},
+             "incompatible": {"damping": EQ27_DAMPING, "z_basis": "null_space"}},
+            f"eq. 27, λ = {EQ27_DAMPING:g}, read with a basis of the whole null space of the "
+            "higher levels (`z_basis='null_space'`; prioik's reading before issue 17)"),
     RunSpec("nullspace", "nullspace", {},
             "resolved acceleration, recursive null-space projection, λ = 0 (the paper's "
             "'resolved acceleration method')"),
@@ -133,7 +148,10 @@ RUNS: tuple[RunSpec, ...] = (
     RunSpec("unifying", "unifying", {}, "unifying framework, torques from eq. 40"),
     RunSpec("unifying:armature", "unifying", {},
             f"the same with {UNIFYING_ARMATURE:g} kg·m² of rotor inertia on every actuated "
-            "joint, which brings cond(M) from ~1e5 to ~4e2", armature=UNIFYING_ARMATURE),
+            "joint (cond(M) measured below)", armature=UNIFYING_ARMATURE),
+    RunSpec("unifying:armature_low", "unifying", {},
+            f"the same with {UNIFYING_ARMATURE_LOW:g} kg·m² of rotor inertia",
+            armature=UNIFYING_ARMATURE_LOW, variants=("compatible",)),
     RunSpec("operational_space", "operational_space", {},
             "prioritized operational-space control, its own torques"),
     RunSpec("cascaded_qp", "cascaded_qp", {"compatible": {"solver": "daqp"},
@@ -169,6 +187,13 @@ RUNS: tuple[RunSpec, ...] = (
             "(G1, 0.2 s: daqp 161, quadprog 173, proxqp 293, osqp 1143 µs per solve)",
             backend="daqp"),
 )
+
+
+#: runs whose ``q̈`` is cross-checked against ``cascaded_qp`` with the same per-level
+#: Tikhonov terms (``info["level_damping"]``), and in which variants
+CROSSCHECK_RUNS = {"extended_jacobian": ("compatible",),
+                   "extended_jacobian:step_bound": ("incompatible",),
+                   "extended_jacobian:eq27": ("compatible", "incompatible")}
 
 
 def _runs_by_label(runs=None) -> dict[str, RunSpec]:
@@ -247,16 +272,28 @@ def _run(spec: RunSpec, scenario, variant: str, duration: float, dt: float, prog
                                        "inequality tasks (joint limits as bounds on q̇)",
                                        formulation=spec.formulation, task="joint_limits")
 
-        def build_velocity(state, t):
-            return scenario.velocity_stack(state, t, gain=velocity_gain, limits=limits,
-                                           dt=dt)
+        if hasattr(scenario, "written_step") and limits == "bounds":
+            rows = scenario.velocity_rows(velocity_gain, limits=limits, dt=dt)
+
+            def build_velocity(state, t):      # rows written in place: no per-step objects
+                return scenario.written_step(rows, state, t)
+        else:
+            def build_velocity(state, t):
+                return scenario.velocity_stack(state, t, gain=velocity_gain, limits=limits,
+                                               dt=dt)
 
         return simulate(scenario.robot, build_velocity, solve, duration=duration, dt=dt,
                         level="velocity", progress=progress,
                         algorithmic_error=algorithmic_error)
 
-    def build(state, t):
-        return scenario.acceleration_stack(state, t, limits=limits, dt=dt)
+    if hasattr(scenario, "written_step") and limits in ("activation", "bounds"):
+        rows = scenario.acceleration_rows(limits=limits, dt=dt)
+
+        def build(state, t):                   # rows written in place: no per-step objects
+            return scenario.written_step(rows, state, t)
+    else:
+        def build(state, t):
+            return scenario.acceleration_stack(state, t, limits=limits, dt=dt)
 
     return simulate(scenario.robot, build, solve, duration=duration, dt=dt,
                     needs_dynamics=dyn, torque_from_solution=own_tau, progress=progress,
@@ -281,6 +318,7 @@ def summarize(res, extra_errors: tuple[str, ...] = ()) -> dict[str, Any]:
         "max_algorithmic_error": mx(res.algorithmic_error),
         "max_com_error_m": mx(res.errors.get("com_error_m", [])),
         "max_support_foot_error_m": mx(res.errors.get("support_foot_error_m", [])),
+        "max_left_foot_error_m": mx(res.errors.get("left_foot_error_m", [])),
         "max_joint_limit_violation_rad": mx(res.errors.get("joint_limit_violation_rad", [])),
         "max_qdd_norm": mx(np.linalg.norm(res.a, axis=1)) if res.steps else None,
         "median_step_time_s": _finite(np.median(res.step_time_s)) if res.steps else None,
@@ -356,8 +394,10 @@ def crosscheck(variant: str, res, dt: float, every: int = 25,
 
 def unifying_diagnostic(dt: float = 0.002) -> dict[str, float] | None:
     """Why ``unifying`` misbehaves on the G1: at the standing posture (``q̇ = 0``,
-    ``t = 5 dt``), ``‖q̈‖`` of ``unifying`` with the G1's ``M``, with ``M = I`` (which
-    reduces it to Chiaverini's method), and of ``extended_jacobian``, and ``cond(M)``.
+    ``t = 5 dt``), ``‖q̈‖`` of ``unifying`` with the G1's ``M``, with ``M = I`` (Chiaverini's method
+    for two levels only: beyond, eq. 40 projects with ``Π (I − J_j⁺ J_j)`` instead of
+    ``N^A_{i-1}``), and of ``extended_jacobian``; ``cond(M)`` without armature and with
+    the armature of the ``unifying:armature*`` runs.
     ``None`` when ``unifying`` is not available."""
     import pinocchio as pin
 
@@ -370,18 +410,95 @@ def unifying_diagnostic(dt: float = 0.002) -> dict[str, float] | None:
         return None
     sc = FencingScenario("compatible")
     r = sc.robot
+
+    def cond_mass(robot) -> float:
+        M = pin.crba(robot.model, robot.data(), robot.q0)
+        M = np.triu(M) + np.triu(M, 1).T
+        w = np.linalg.eigvalsh(M)
+        return float(w[-1] / w[0])
+
     M = pin.crba(r.model, r.data(), r.q0)
     M = np.triu(M) + np.triu(M, 1).T
     state = KinematicState(r, r.q0, np.zeros(r.nv))
     stack = sc.acceleration_stack(state, 5 * dt, "activation", dt).stack
-    w = np.linalg.eigvalsh(M)
-    return {"cond_M": float(w[-1] / w[0]),
+    return {"cond_M": cond_mass(r),
+            "cond_M_armature": {f"{a:g}": cond_mass(r.with_armature(a))
+                                for a in (UNIFYING_ARMATURE_LOW, UNIFYING_ARMATURE)},
             "qdd_unifying": float(np.linalg.norm(
                 formulations.solve(stack, "unifying", mass_matrix=M).x)),
             "qdd_unifying_identity_M": float(np.linalg.norm(
                 formulations.solve(stack, "unifying", mass_matrix=np.eye(r.nv)).x)),
             "qdd_extended_jacobian": float(np.linalg.norm(
                 formulations.solve(stack, "extended_jacobian").x))}
+
+
+def projected_sigmas(stack) -> dict[str, float]:
+    """Each level's distance to an algorithmic singularity relative to its own scale:
+    ``σ_min(A_i Z_i) / ‖A_i‖_F`` (:func:`hierarchy.singularity_distance`; 0 when the
+    level has no direction left), by the level's first task name."""
+    from prioik.hierarchy import singularity_distance
+    out = {}
+    for level, sigma in zip(stack.levels, singularity_distance(stack)):
+        scale = float(np.linalg.norm(level.A))
+        out[level.names[0]] = sigma / scale if scale > 0 else 0.0
+    return out
+
+
+def standing_sigmas(dt: float = 0.002) -> dict[str, float]:
+    """:func:`projected_sigmas` of the incompatible scenario's stack at the standing
+    posture (``q̇ = 0``, ``t = 5 dt``): what the selective damping's trigger sees
+    before anything moves."""
+    from prioik.robots import KinematicState
+    from prioik.robots.fencing import FencingScenario
+    sc = FencingScenario("incompatible")
+    state = KinematicState(sc.robot, sc.robot.q0, np.zeros(sc.robot.nv))
+    return projected_sigmas(sc.acceleration_stack(state, 5 * dt, "activation", dt).stack)
+
+
+def sigma_trace(variant: str, res, dt: float, samples: int = 8, last: int = 6
+                ) -> list[dict[str, float]]:
+    """Projected ``σ_min / ‖A_i‖_F`` along a recorded run — the sword tip's, and the
+    smallest over the task levels (posture left out) with its name — beside ``‖q̈‖``,
+    the number of joint-limit rows and their largest target ``|h|``: at ``samples``
+    evenly spaced steps and at the ``last`` steps before it stopped (the rebuilt
+    activation-form stacks of the recorded states)."""
+    from prioik.robots import KinematicState
+    from prioik.robots.fencing import FencingScenario
+    if res.steps == 0:
+        return []
+    sc = FencingScenario(variant)
+    picks = sorted(set(np.linspace(0, res.steps - 1, samples).astype(int).tolist()
+                       + list(range(max(0, res.steps - last), res.steps))))
+    rows = []
+    for k in picks:
+        state = KinematicState(sc.robot, res.q[k], res.v[k])
+        stack = sc.acceleration_stack(state, float(res.t[k]), "activation", dt).stack
+        sig = projected_sigmas(stack)
+        owned = {name: v for name, v in sig.items() if v > 0 and name != "posture"}
+        low = min(owned, key=owned.get) if owned else ""
+        jl = [lv for lv in stack.levels if "joint_limits" in lv.names]
+        rows.append({"t": float(res.t[k]), "sigma_tip": sig.get("sword_tip", 0.0),
+                     "lowest_level": low, "sigma_lowest": owned.get(low, 0.0),
+                     "qdd_norm": float(np.linalg.norm(res.a[k])),
+                     "limit_rows": int(jl[0].m) if jl else 0,
+                     "limit_target": float(np.abs(jl[0].b).max()) if jl else 0.0})
+    return rows
+
+
+def max_limit_target(variant: str, res, dt: float, every: int = 25) -> float:
+    """The largest ``|h|`` of the joint-limit activation rows (rad/s²) along a recorded
+    run (every ``every`` steps): the push-back a per-level step bound would cap."""
+    from prioik.robots import KinematicState
+    from prioik.robots.fencing import FencingScenario
+    sc = FencingScenario(variant)
+    top = 0.0
+    for k in range(0, res.steps, every):
+        state = KinematicState(sc.robot, res.q[k], res.v[k])
+        stack = sc.acceleration_stack(state, float(res.t[k]), "activation", dt).stack
+        for level in stack.levels:
+            if "joint_limits" in level.names:
+                top = max(top, float(np.abs(level.b).max()))
+    return top
 
 
 # ------------------------------------------------------------------- plots
@@ -458,10 +575,9 @@ def select_runs(text: str | None, runs=None) -> tuple[list[RunSpec], list[str]]:
     chosen, skipped = [], []
     for spec in specs:
         if spec.formulation == "placo_kinematics_solver":
-            try:
-                import placo  # noqa: F401
-            except ImportError as exc:
-                skipped.append(f"{spec.label}: placo is not installed ({exc})")
+            from prioik.extras import install_hint, missing_distributions
+            if missing_distributions("placo"):
+                skipped.append(f"{spec.label}: placo is not installed; {install_hint('placo')}")
                 continue
             chosen.append(spec)
             continue
@@ -526,6 +642,12 @@ def run_scenario(args: argparse.Namespace, scenario: str, variants: list[str], r
     messages: dict[str, dict[str, str]] = {}
     replays: dict[str, str] = {}
     all_results: dict[str, dict] = {}
+    fencing = scenario == "fencing"
+    diagnostics: dict[str, Any] = {}
+    if fencing:
+        diagnostics["standing_sigmas"] = standing_sigmas(args.dt)
+        print("projected σ_min/‖A_i‖_F per level at the standing posture (incompatible): "
+              + ", ".join(f"{k} {v:.3g}" for k, v in diagnostics["standing_sigmas"].items()))
     wall0 = time.perf_counter()
     for variant in variants:
         results = {}
@@ -561,12 +683,12 @@ def run_scenario(args: argparse.Namespace, scenario: str, variants: list[str], r
                   f"{time.perf_counter() - t0:.1f} s"
                   f"{' — FAILED: ' + res.message if res.failed else ''}",
                   file=sys.stderr, flush=True)
-            if (scenario == "fencing" and spec.label == "extended_jacobian"
+            if (fencing and variant in CROSSCHECK_RUNS.get(spec.label, ())
                     and not args.no_crosscheck):
                 c = crosscheck(variant, res, args.dt,
                                run_options=spec.options.get(variant, {}))
                 if c is not None:
-                    checks[variant] = c
+                    checks.setdefault(variant, {})[spec.label] = c
         all_results[variant] = results
         pngs[variant] = plot_variant(out, variant, results, scenario) if results else []
         if results:
@@ -575,6 +697,22 @@ def run_scenario(args: argparse.Namespace, scenario: str, variants: list[str], r
             replays[variant] = html.name
         print(format_table(variant, summary[variant], phases[variant], scenario))
         print()
+        if fencing and variant == "incompatible" and "extended_jacobian" in results:
+            trace = sigma_trace(variant, results["extended_jacobian"], args.dt)
+            diagnostics["sigma_trace"] = trace
+            print("extended_jacobian (eq. 18), incompatible: projected σ_min/‖A_i‖_F "
+                  "along the run")
+            for row in trace:
+                print(f"  t = {row['t']:.3f} s  tip {row['sigma_tip']:.3e}  lowest "
+                      f"{row['lowest_level']} {row['sigma_lowest']:.3e}  "
+                      f"‖q̈‖ = {row['qdd_norm']:.3e}  joint-limit rows {row['limit_rows']} "
+                      f"(max |h| {row['limit_target']:.3g})")
+        if (fencing and variant == "incompatible"
+                and "extended_jacobian:step_bound" in results):
+            top = max_limit_target(variant, results["extended_jacobian:step_bound"], args.dt)
+            diagnostics["max_limit_target"] = top
+            print(f"largest joint-limit row target along extended_jacobian:step_bound: "
+                  f"{top:.3g} rad/s²")
     pngs["step_time"] = [plot_step_times(out, summary, scenario)]
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     meta = {"scenario": scenario, "duration_s": args.duration, "dt_s": args.dt,
@@ -582,7 +720,7 @@ def run_scenario(args: argparse.Namespace, scenario: str, variants: list[str], r
             "runs": {s.label: {"formulation": s.formulation, "options": s.options,
                                "note": s.note} for s in specs},
             "skipped": skipped_runs, "crosscheck": checks, "phases": phases,
-            "messages": messages, "replays": replays,
+            "messages": messages, "replays": replays, "diagnostics": diagnostics,
             "wall_time_s": time.perf_counter() - wall0}
     (out / "run_info.json").write_text(json.dumps(meta, indent=2, default=str) + "\n")
     print(f"wrote {out / 'summary.json'}, {sum(len(v) for v in pngs.values())} plots and "
@@ -603,9 +741,14 @@ def run_command(args: argparse.Namespace) -> int:
     out = Path(args.out)
     (out / "crosscheck.json").write_text(json.dumps(checks, indent=2) + "\n")
     (out / "run_info.json").write_text(json.dumps(meta, indent=2, default=str) + "\n")
-    if checks:
-        for variant, c in checks.items():
-            print(f"cross-check [{variant}] extended_jacobian vs cascaded_qp: {c}")
+    if meta["unifying_diagnostic"]:
+        ud = meta["unifying_diagnostic"]
+        print(f"cond(M) at the standing posture: {ud['cond_M']:.3g} (no armature); "
+              + ", ".join(f"{v:.3g} ({a} kg·m² armature)"
+                          for a, v in ud["cond_M_armature"].items()))
+    for variant, by_label in checks.items():
+        for label, c in by_label.items():
+            print(f"cross-check [{variant}] {label} vs cascaded_qp: {c}")
     if args.doc:
         path = write_reproduction(Path(args.doc), summary, meta, pngs)
         print(f"wrote {path}", file=sys.stderr)
@@ -634,7 +777,7 @@ def add_parser(subparsers) -> None:
                    help="skip the extended_jacobian vs cascaded_qp q̈ comparison")
     p.add_argument("--quiet", dest="progress", action="store_false",
                    help="no progress bars on stderr")
-    p.set_defaults(func=run_command)
+    p.set_defaults(func=run_command, extras=("robots", "plots"))
 
 
 # ------------------------------------------------------------ reproduction page
@@ -718,13 +861,14 @@ def write_reproduction(path: Path, summary: dict, meta: dict, pngs: dict) -> Pat
         add(f"## Measured: {variant} tasks")
         add("")
         add("| run | final tip error | max algorithmic error | max CoM error | "
-            "max support-foot error | max joint-limit violation | max ‖q̈‖ | "
-            "median step | median solve | status |")
-        add("|---|---|---|---|---|---|---|---|---|---|")
+            "max support-foot error | max left-foot error | max joint-limit violation | "
+            "max ‖q̈‖ | median step | median solve | status |")
+        add("|---|---|---|---|---|---|---|---|---|---|---|")
         for label, s in runs.items():
             add(f"| `{label}` | {_mm(s['final_tip_error_m'])} | "
                 f"{_fmt(s['max_algorithmic_error'])} | {_mm(s['max_com_error_m'])} | "
                 f"{_mm(s['max_support_foot_error_m'])} | "
+                f"{_mm(s.get('max_left_foot_error_m'))} | "
                 f"{_fmt(s['max_joint_limit_violation_rad'])} rad | "
                 f"{_fmt(s['max_qdd_norm'], '.3g')} | "
                 f"{_fmt(None if s['median_step_time_s'] is None else 1e3 * s['median_step_time_s'], '.3f')} ms | "
@@ -787,24 +931,26 @@ def write_reproduction(path: Path, summary: dict, meta: dict, pngs: dict) -> Pat
         add(f"- `{label}`: {'ran to the end' if not s['failed'] else 'FAILED'}; final tip "
             f"error {_mm(s['final_tip_error_m'])}; support foot within "
             f"{_mm(s['max_support_foot_error_m'])}, CoM within {_mm(s['max_com_error_m'])}, "
+            f"left foot within {_mm(s.get('max_left_foot_error_m'))}, "
             f"joint limits within {_fmt(s['max_joint_limit_violation_rad'])} rad, "
             f"max ‖q̈‖ {_fmt(s['max_qdd_norm'], '.3g')}.")
     cc = meta.get("crosscheck", {})
     if cc:
         add("")
-        add("Cross-check of `extended_jacobian` against `cascaded_qp` (DAQP) on the same "
-            "stacks along the extended-Jacobian trajectory (every 25th step); where a "
-            "level was damped, the cascade gets the same Tikhonov term on that level "
-            "(`level_damping` = the extended Jacobian's `info['level_damping']`), so the "
-            "whole `q̈` must agree:")
+        add("Cross-check against `cascaded_qp` (DAQP) on the same stacks along each "
+            "run's own trajectory (every 25th step); where a level was damped, the cascade "
+            "gets the same Tikhonov term on that level (`level_damping` = the extended "
+            "Jacobian's `info['level_damping']`; for eq. 27 with the paper's `Z_i` that is "
+            "`(0, λ, …, λ)`), so the whole `q̈` must agree:")
         add("")
-        for variant, c in cc.items():
-            add(f"- {variant}: {c['steps_compared']} steps compared, "
-                f"{c['steps_with_damping']} with a damped level "
-                f"(damped levels: {c['damped_levels'] or 'none'}); "
-                f"largest relative ‖Δq̈‖ where nothing was damped: "
-                f"{_fmt(c['max_rel_diff_qdd_undamped_steps'])}; where a level was "
-                f"damped: {_fmt(c['max_rel_diff_qdd_damped_steps'])}.")
+        for variant, by_label in cc.items():
+            for label, c in by_label.items():
+                add(f"- `{label}`, {variant}: {c['steps_compared']} steps compared, "
+                    f"{c['steps_with_damping']} with a damped level "
+                    f"(damped levels: {c['damped_levels'] or 'none'}); "
+                    f"largest relative ‖Δq̈‖ where nothing was damped: "
+                    f"{_fmt(c['max_rel_diff_qdd_undamped_steps'])}; where a level was "
+                    f"damped: {_fmt(c['max_rel_diff_qdd_damped_steps'])}.")
     add("")
     add("**4. Computation per control step: proposed 1.4 ms < resolved acceleration "
         "2.7 ms < unifying 3.2 ms < operational space 4.8 ms (2.4 GHz Pentium).**")
@@ -841,13 +987,14 @@ def write_reproduction(path: Path, summary: dict, meta: dict, pngs: dict) -> Pat
     if "step_time" in shown:
         add(f"![median step time per run]({shown['step_time']})")
         add("")
-    trio = [lb for lb in ("placo_kinematics_solver", "cascaded_qp:velocity", "extended_jacobian")
-            if lb in comp or lb in inc]
+    trio = [lb for lb in ("placo_kinematics_solver", "cascaded_qp:velocity", "extended_jacobian",
+                          "extended_jacobian:step_bound") if lb in comp or lb in inc]
     if "placo_kinematics_solver" in trio:
         add("**Beyond the paper: what users run today.** PlaCo's `KinematicsSolver` "
             "(two levels, hard contact and CoM, soft weighted foot/tip/posture, velocity "
             "level) beside the same tasks at velocity level with an exact hierarchy "
-            "(`cascaded_qp:velocity`) and the paper's method at acceleration level:")
+            "(`cascaded_qp:velocity`) and the extended Jacobian at acceleration level "
+            "(eq. 18; in the incompatible run also prioik's step-bounded variant):")
         add("")
         add("| run | variant | final tip error | max CoM error | max support-foot error | "
             "max joint-limit violation | median step |")
@@ -877,34 +1024,113 @@ def write_reproduction(path: Path, summary: dict, meta: dict, pngs: dict) -> Pat
     add("- The paper's joint-limit task is a black box; here it is either activation rows "
         "(`robots.tasks.joint_limit_rows`) or bounds on `q̈` "
         "(`robots.tasks.joint_limit_bounds`). Rows switching on take directions away "
-        "from the lower levels, which is what drives the tip level towards its "
-        "algorithmic singularity in the incompatible run.")
-    exact = inc.get("extended_jacobian:exact")
+        "from the lower levels (see the measured trace of the eq. 18 run below).")
+    diag = meta.get("diagnostics", {})
+    msgs = meta.get("messages", {}).get("incompatible", {})
+    exact = inc.get("extended_jacobian")
+    add("- Which of its methods the paper ran in the incompatible case is not stated: "
+        "it reports the proposed framework performing the tasks \"without algorithmic "
+        "singularities\" but does not say whether that was eq. 18 or the damped eq. 27, "
+        "and its Remark only says that damping \"may be necessary\". Both are run here.")
     if exact is not None:
-        fate = ("diverges (the run stopped: " + str(meta.get("messages", {}).get(
-            "incompatible", {}).get("extended_jacobian:exact", "")) + ")"
-                if exact["failed"] else
-                f"runs to the end here with max ‖q̈‖ {_fmt(exact['max_qdd_norm'], '.3g')}")
-    else:
-        fate = "was not run"
-    add("- The paper reports its exact method surviving the incompatible run; the exact "
-        f"lexicographic `q̈` here (`extended_jacobian:exact`) {fate}: as the arm "
-        "stretches against its limits the tip level's Jacobian projected into the "
-        "remaining null space becomes near-singular (σ_min → 0) and `1/σ` growth makes "
-        "`q̈` diverge. The "
-        "`extended_jacobian` row of the incompatible table bounds the sword-tip level's "
-        f"own step (`step_bound`, Δ = {TIP_STEP_BOUND:g} rad/s²): where the exact step "
-        "is longer, that level alone is solved by damped least squares with the "
-        "damping that makes the step Δ (trust region). Support foot, joint limits, CoM "
-        "and left foot stay exact, `q̈` stays bounded, and the whole `q̈` equals the "
-        "cascade of QPs with the same Tikhonov term (cross-check above); the price is "
-        "the tip's accuracy while the bound is active, which is where no exact "
-        "solution is usable anyway. The damping choices compared: eq. 27 "
-        "(`:eq27`) damps every lower level and lets them trade accuracy; the "
-        "selective damping by σ_min (`:selective`) also damps the left foot, whose "
-        "projected σ_min is ≈ 0.041·‖A‖_F already when standing; bounding *every* "
-        "level's step would also cap the joint-limit rows, whose push-back targets "
-        "reach hundreds of rad/s², and joints would pass their limits.")
+        fate = (f"diverges ({msgs.get('extended_jacobian', 'stopped')})" if exact["failed"]
+                else f"runs to the end (max ‖q̈‖ {_fmt(exact['max_qdd_norm'], '.3g')})")
+        trace = diag.get("sigma_trace") or []
+        text = (f"- Eq. 18 as printed (`extended_jacobian`, exact lexicographic `q̈`) {fate}.")
+        if trace:
+            before = [r for r in trace if r["limit_rows"] == 0]
+            after = [r for r in trace if r["limit_rows"] > 0]
+            low = min(trace, key=lambda r: r["sigma_lowest"])
+            text += (" Measured along that run (every level's projected "
+                     "`σ_min(A_i Z_i)/‖A_i‖_F`, posture left out; table below): the "
+                     f"smallest is {low['sigma_lowest']:.2g} ({low['lowest_level']}, "
+                     f"t = {low['t']:.3f} s)")
+            if before:
+                text += (f"; while no joint-limit row is active (up to t = "
+                         f"{max(r['t'] for r in before):.3f} s) it stays ≥ "
+                         f"{min(r['sigma_lowest'] for r in before):.2g} and ‖q̈‖ ≤ "
+                         f"{max(r['qdd_norm'] for r in before):.3g}")
+            if after:
+                text += (f"; in the last steps {max(r['limit_rows'] for r in after)} "
+                         "joint-limit rows are active with targets up to "
+                         f"|h| = {max(r['limit_target'] for r in after):.3g} rad/s² and "
+                         f"‖q̈‖ reaches {max(r['qdd_norm'] for r in after):.3g}")
+            text += "."
+            if exact["failed"] and after:
+                text += (f" The smallest projected σ is {low['sigma_lowest']:.2g} of its "
+                         "level's scale, not zero: a level's step is "
+                         "`|u_minᵀ(h_i − J_i θ̈_(i−1))|/σ`, and the divergence comes with "
+                         "the joint-limit rows switching on with the targets above, not "
+                         "with σ → 0." if low["sigma_lowest"] > 1e-3 else
+                         f" The projected σ falls to {low['sigma_lowest']:.2g} of its "
+                         "level's scale before the run stops.")
+        add(text)
+        if trace:
+            add("")
+            add("  | t (s) | sword tip σ_min/‖A‖_F | smallest (level) | ‖q̈‖ | joint-limit "
+                "rows | their max \\|h\\| (rad/s²) |")
+            add("  |---|---|---|---|---|---|")
+            for r in trace:
+                add(f"  | {r['t']:.3f} | {r['sigma_tip']:.3g} | {r['sigma_lowest']:.3g} "
+                    f"({r['lowest_level']}) | {r['qdd_norm']:.3g} | {r['limit_rows']} | "
+                    f"{r['limit_target']:.3g} |")
+            add("")
+    for label, what in (("extended_jacobian:eq27", "eq. 27 with the paper's `Z_i` (r_i rows "
+                         "spanning `range(N_{i-1} J_iᵀ)`)"),
+                        ("extended_jacobian:eq27_null_space", "eq. 27 read with a basis of "
+                         "the whole null space (`z_basis='null_space'`)")):
+        r = inc.get(label)
+        if r is not None:
+            add(f"- {what}, λ = {EQ27_DAMPING:g} (`{label}`): "
+                f"{'FAILED' if r['failed'] else 'runs to the end'}; final tip error "
+                f"{_mm(r['final_tip_error_m'])}, support foot within "
+                f"{_mm(r['max_support_foot_error_m'])}, CoM within "
+                f"{_mm(r['max_com_error_m'])}, left foot within "
+                f"{_mm(r.get('max_left_foot_error_m'))}, joint limits within "
+                f"{_fmt(r['max_joint_limit_violation_rad'])} rad, max ‖q̈‖ "
+                f"{_fmt(r['max_qdd_norm'], '.3g')}.")
+    if "extended_jacobian:eq27" in inc:
+        add("  With the paper's `Z_i`, eq. 27 is the hierarchy whose every level below the "
+            "first (joint limits, CoM, left foot, tip, posture) is solved by damped least "
+            "squares with μ² = λ (the cross-check above reproduces it with `cascaded_qp`): "
+            "no level disturbs a higher one, but the CoM and joint-limit levels are damped "
+            "too, so they are not met exactly. Read with the whole null space, the damped "
+            "blocks also pull on the lower levels' directions and the levels trade "
+            "accuracy in one least-squares fit.")
+    sb = inc.get("extended_jacobian:step_bound")
+    if sb is not None:
+        add("- `extended_jacobian:step_bound` is prioik's own variant, not the paper's: it "
+            f"bounds the sword-tip level's own step (`step_bound`, Δ = {TIP_STEP_BOUND:g} "
+            "rad/s²); where the exact step is longer, that level alone is solved by damped "
+            "least squares with the damping that makes the step Δ (trust region). Support "
+            f"foot ({_mm(sb['max_support_foot_error_m'])}), CoM "
+            f"({_mm(sb['max_com_error_m'])}), left foot "
+            f"({_mm(sb.get('max_left_foot_error_m'))}) and joint limits "
+            f"({_fmt(sb['max_joint_limit_violation_rad'])} rad) are the exact hierarchy's, "
+            f"max ‖q̈‖ {_fmt(sb['max_qdd_norm'], '.3g')}, and the whole `q̈` equals the "
+            "cascade of QPs with the same Tikhonov term (cross-check above); the price is "
+            "the tip's accuracy while the bound is active.")
+        allb = inc.get("extended_jacobian:step_bound_all")
+        top = diag.get("max_limit_target")
+        if allb is not None:
+            add(f"  Bounding every level's step by the same Δ (`extended_jacobian:step_bound_all`) "
+                "also caps the joint-limit rows"
+                + (f" (their targets reach {top:.3g} rad/s² along the step-bounded run)"
+                   if top else "")
+                + f": joint limits are then violated by up to "
+                f"{_fmt(allb['max_joint_limit_violation_rad'])} rad.")
+    sel = inc.get("extended_jacobian:selective")
+    sig = diag.get("standing_sigmas", {})
+    if sel is not None:
+        add("- `extended_jacobian:selective` (prioik's own variant) damps any level whose "
+            "projected σ_min falls below 0.05·‖A_i‖_F. At the standing posture, before "
+            "anything moves, the projected σ_min/‖A_i‖_F are "
+            + ", ".join(f"{k} {v:.3g}" for k, v in sig.items())
+            + "; "
+            + (", ".join(k for k, v in sig.items() if 0 < v < 0.05)
+               + " (below 0.05) is damped from the first step, before anything moves and "
+               "before any task conflicts." if any(0 < v < 0.05 for v in sig.values())
+               else "none is below 0.05 there."))
     qp = [lb for lb in ("cascaded_qp", "daqp_hierarchical") if lb in inc]
     if qp:
         parts = [f"`{lb}` {'fails' if inc[lb]['failed'] else 'runs to the end'} "
@@ -917,8 +1143,8 @@ def write_reproduction(path: Path, summary: dict, meta: dict, pngs: dict) -> Pat
         add(f"- `unifying` {'diverges' if comp['unifying']['failed'] else 'runs'} even "
             "with compatible tasks. Measured at the standing posture at rest: its ‖q̈‖ is "
             f"{ud['qdd_unifying']:.3g} where the exact solution's is "
-            f"{ud['qdd_extended_jacobian']:.3g}; with `M = I` (where it reduces to "
-            f"Chiaverini's method) it is {ud['qdd_unifying_identity_M']:.3g}. The G1's "
+            f"{ud['qdd_extended_jacobian']:.3g}; with `M = I` it is "
+            f"{ud['qdd_unifying_identity_M']:.3g}. The G1's "
             f"joint-space inertia has cond(M) = {ud['cond_M']:.2g} (light distal "
             "links against a 33 kg body), so the M²-weighted inverses "
             "`J^{M²+}` and the oblique projectors `N_i` of eq. 40 are ill-conditioned "
@@ -931,15 +1157,23 @@ def write_reproduction(path: Path, summary: dict, meta: dict, pngs: dict) -> Pat
             "ones did to them. The paper's robot did not show it, and its `M` is not "
             "available to compare.")
         arm = comp.get("unifying:armature")
+        conds = ud.get("cond_M_armature", {})
         if arm is not None:
+            low = comp.get("unifying:armature_low")
+            low_msg = meta.get("messages", {}).get("compatible", {}).get(
+                "unifying:armature_low")
             add(f"- With {UNIFYING_ARMATURE:g} kg·m² of rotor inertia added to every "
                 "actuated joint (`unifying:armature`; real actuators have some, the URDF "
-                f"none), cond(M) falls to ~4e2 and `unifying` "
+                f"none), cond(M) at the standing posture falls from {ud['cond_M']:.2g} to "
+                f"{conds.get(f'{UNIFYING_ARMATURE:g}', float('nan')):.2g} and `unifying` "
                 f"{'still fails' if arm['failed'] else 'runs to the end'}: final tip error "
                 f"{_mm(arm['final_tip_error_m'])}, largest algorithmic error "
                 f"{_fmt(arm['max_algorithmic_error'])} — the algorithmic error the paper "
-                "attributes to it, without the divergence. (0.02 kg·m² is not enough: "
-                "it diverges at t ≈ 1.6 s.)")
+                "attributes to it, without the divergence."
+                + (f" With {UNIFYING_ARMATURE_LOW:g} kg·m² (`unifying:armature_low`, cond(M) "
+                   f"{conds.get(f'{UNIFYING_ARMATURE_LOW:g}', float('nan')):.2g}) it "
+                   + (f"diverges: {low_msg}." if low is not None and low["failed"] else
+                      "runs to the end.") if low is not None else ""))
     add("- A low-gain posture level is added at the bottom of the stack so that the "
         "null-space motion left by the five tasks is damped; the algorithmic error is "
         "reported over the five tasks only.")

@@ -253,16 +253,24 @@ def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
         level_mu2: Output, ``k`` damping values ``μ_i²`` (0 where the level is exact).
     """
     M, n = B.shape
+    solve_kernel_ws(B, c, starts, scales, rcond, level_damping, singular_threshold,
+                    step_bound, x, ranks, level_mu2, np.empty((n, n)), np.empty(n),
+                    np.empty(n, dtype=np.int64), np.empty(n), np.empty(M),
+                    np.empty((M, n)), np.empty(M))
+
+
+@njit(cache=True, fastmath=_FAST)
+def solve_kernel_ws(B, c, starts, scales, rcond, level_damping, singular_threshold,
+                    step_bound, x, ranks, level_mu2, V, beta, pos, y, norms, L, rhs):
+    """:func:`solve_kernel` with its scratch arrays given (a prepared solver owns them:
+    no allocation per solve). ``V`` (``n × n``: reflector ``j`` in ``V[j, pos_j:]``),
+    ``beta``, ``pos`` (int), ``y`` (``n``), ``norms``, ``rhs`` (``M``), ``L``
+    (``M × n``); their contents on entry do not matter."""
+    M, n = B.shape
     k = starts.shape[0] - 1
-    V = np.zeros((n, n))          # reflector j stored in V[j, pos_j:]
-    beta = np.zeros(n)
-    pos = np.zeros(n, dtype=np.int64)
     nref = 0
-    y = np.zeros(n)
+    y[:] = 0.0            # coordinates no level claims stay 0 (the minimum norm)
     col = 0
-    norms = np.zeros(M)
-    L = np.zeros((M, n))
-    rhs = np.zeros(M)
     for lev in range(k):
         s0 = starts[lev]
         s1 = starts[lev + 1]
@@ -420,6 +428,12 @@ def level_residuals(A, b, w, starts, x, out):
         out[lev] = np.sqrt(acc)
 
 
+def work_size(M: int, n: int, k: int) -> int:
+    """Floats of :func:`solve_data`'s workspace for ``M`` rows, ``n`` columns, ``k``
+    levels."""
+    return 2 * M * n + 3 * M + k + n * n + 2 * n
+
+
 @njit(cache=True, fastmath=_FAST)
 def solve_data(A, b, w, starts, work, params, out, ranks):
     """The prepared solve of a stack's data, in one call with few arguments (the call's
@@ -431,10 +445,11 @@ def solve_data(A, b, w, starts, work, params, out, ranks):
     Args:
         A, b, w: The data's rows, targets and ``√w`` (``M × n``, ``M``, ``M``).
         starts: ``k + 1`` row offsets.
-        work: Workspace of ``M n + M + k`` floats (weighted rows, targets, scales).
+        work: Workspace of :func:`work_size` floats (weighted rows, targets, scales and
+            the kernel's scratch).
         params: ``rcond, level_damping, singular_threshold`` then the ``k`` step bounds.
         out: Output of ``n + 2 k`` floats: ``x``, the residuals, the damping ``μ_i²``.
-        ranks: Output, ``k`` ranks.
+        ranks: ``k + n`` ints: the ``k`` ranks (output), then the kernel's scratch.
 
     Returns 0 when an input is not finite (nothing solved), 1 when ``x`` and the
     residuals are finite, 2 when they are not (the caller reports a failure).
@@ -444,6 +459,15 @@ def solve_data(A, b, w, starts, work, params, out, ranks):
     B = work[:M * n].reshape((M, n))
     c = work[M * n:M * n + M]
     scales = work[M * n + M:M * n + M + k]
+    o = M * n + M + k                     # scratch of the kernel (see work_size)
+    V = work[o:o + n * n].reshape((n, n))
+    o += n * n
+    beta = work[o:o + n]
+    y = work[o + n:o + 2 * n]
+    norms = work[o + 2 * n:o + 2 * n + M]
+    rhs = work[o + 2 * n + M:o + 2 * n + 2 * M]
+    o += 2 * n + 2 * M
+    L = work[o:o + M * n].reshape((M, n))
     x = out[:n]
     residuals = out[n:n + k]
     mu2 = out[n + k:n + 2 * k]
@@ -451,8 +475,8 @@ def solve_data(A, b, w, starts, work, params, out, ranks):
         return 0
     if not level_scales(B, c, starts, scales):
         return 0
-    solve_kernel(B, c, starts, scales, params[0], params[1], params[2], params[3:], x,
-                 ranks, mu2)
+    solve_kernel_ws(B, c, starts, scales, params[0], params[1], params[2], params[3:], x,
+                    ranks[:k], mu2, V, beta, ranks[k:], y, norms, L, rhs)
     level_residuals(A, b, w, starts, x, residuals)
     acc = 0.0
     for lev in range(k):

@@ -1,6 +1,8 @@
-"""Singularity-robust task priority (Chiaverini 1997).
+"""Singularity-robust task priority (Chiaverini 1997), in its k-level form.
 
-Each level is first solved *on its own* — ``J_i^# h_i``, ignoring the levels above —
+Chiaverini (1997) treats two tasks, ``θ̈ = J_1^# h_1 + (I − J_1⁺J_1) J_2^# h_2``; the
+sum over ``k`` levels with the augmented projectors below is the usual later
+generalisation, not his paper's. Each level is first solved *on its own* — ``J_i^# h_i``, ignoring the levels above —
 and that solution is then projected into the null space of the augmented Jacobian
 of the higher levels (``J_{i-1}^A``, eq. 7 of Jeong & Chang 2009)::
 
@@ -10,9 +12,11 @@ of the higher levels (``J_{i-1}^A``, eq. 7 of Jeong & Chang 2009)::
 Because only each task's own inverse ``J_i^#`` appears (never the projected
 ``J_i N^A_{i-1}``), no algorithmic singularity can occur: ``θ̈`` is bounded by
 ``Σ_i ‖J_i^#‖ ‖h_i‖`` whatever the coupling between levels. The price is the
-*algorithmic error* (eq. 29): a lower task is met exactly only when its rows are
-orthogonal to the higher levels' rows (decoupled tasks); otherwise
-``h_i_feasible − J_i_feasible θ̈ ≠ 0`` even when every task could be met.
+*algorithmic error* (eq. 29): ``h_i_feasible − J_i_feasible θ̈`` is in general
+non-zero even when every task could be met. Rows orthogonal to the higher levels'
+rows (decoupled tasks) are sufficient for it to vanish, not necessary: a level made
+of rows orthogonal to the levels above plus copies of higher rows (its conflicting
+part) has none either (tests).
 
 ``J_i^#`` is the pseudo-inverse (``damping = 0``, the default: the shared rank rule
 ``σ > rcond·‖J_i‖_F``) or the damped least-squares inverse

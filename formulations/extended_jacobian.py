@@ -11,11 +11,12 @@ Two paths compute the same answer:
 * ``nullspace="svd"`` — as the paper: each ``Z_i`` from an SVD of the augmented
   Jacobian ``J_{i-1}^A`` (eq. 7, 13), ``J_E`` built literally, solved with an SVD
   pseudo-inverse keeping ``ρ(J_k^A)`` singular values (the rank Theorem 1 gives).
-  When ``J_1`` is rank-deficient its block is ``J_1ᵀ J_1`` (eq. 14 with ``Z_1 = I``),
-  so that an inconsistent first level is solved in the least-squares sense
-  instead of being mixed with lower levels. Because the blocks hold ``J_iᵀ J_i``
-  this path squares the conditioning: its error relative to the exact optimum is
-  about ``ε κ(J_E)`` (measured ≤ 200 ε κ over 1500 random stacks;
+  When ``J_1`` is rank-deficient its block is ``Z_1 J_1ᵀ J_1`` (eq. 14 with ``Z_1``
+  spanning ``J_1``'s row space, or ``Z_1 = I`` with ``z_basis="null_space"``), so that
+  an inconsistent first level is solved in the least-squares sense instead of being
+  mixed with lower levels. Because the blocks hold ``J_iᵀ J_i`` this path squares
+  the conditioning: its error relative to the exact optimum is about ``ε κ(J_E)``
+  (the tests hold it to ``1e3 ε κ``;
   ``info["condition_number"]`` reports ``κ(J_E)``), while the ``qr`` path works on
   ``A_i`` itself.
 * ``nullspace="qr"`` (default) — every ``Z_i`` from one nested orthogonal
@@ -37,7 +38,8 @@ Two paths compute the same answer:
 alternative to eq. 27: a level is damped only when the smallest singular value of
 its projected rows ``A_i Z_i`` (estimated by the smallest ``|R_jj|`` of the pivoted QR)
 falls below ``ε‖A_i‖_F``, with the variable damping ``μ² = λ_max (1 − (σ/ε‖A_i‖_F)²)``
-of the singular-robust inverse (Nakamura 1986, Chiaverini 1997). The damped level
+(the form of Chiaverini 1997's singularity-robust inverse; Nakamura & Hanafusa 1986
+schedule the damping on manipulability instead). The damped level
 still owns its ``r_i`` directions, so every higher level stays exact and no lower
 level can use them; θ̈ stays bounded (the level's step is at most
 ``‖p‖ / (2√μ²)``). The status is ``"approximate"`` when some level was damped, and
@@ -57,12 +59,45 @@ selective damping (``μ_i² ≥`` the selective value). ``info["level_damping"]`
 every level's ``μ_i²`` (0 where exact), so a cascade of QPs with the same Tikhonov
 terms (``cascaded_qp``'s ``level_damping``) reproduces the whole θ̈.
 
-``damping=λ > 0`` is eq. 27: the lower blocks become ``Z_i (J_iᵀ J_i + λ I)`` and the
-(generally over-determined) system is solved in the least-squares sense (SVD
-pseudo-inverse on the ``svd`` path, complete orthogonal decomposition ``dgelsy`` on
-the ``qr`` path). As the paper notes, this bounds θ̈ near algorithmic singularities
-at the cost of task accuracy; it also lets lower levels trade accuracy with one
-another (every damped block has full rank).
+``damping=λ > 0`` is eq. 27: the lower blocks become ``Z_i (J_iᵀ J_i + λ I)``
+(``J_1``'s block is not damped). What ``Z_i`` is matters here, and the paper is
+ambiguous: it calls ``Z_i`` "the ``r_i`` basis vectors spanning the null space of prior
+tasks" (eq. 13) with ``Z_i ∈ ℜ^{r_i × n}`` and ``r_i = ρ(J_i^A) − ρ(J_{i-1}^A)``
+(eq. 12), and Theorem 1's proof needs ``Z_i J_i_feasibleᵀ`` to be ``r_i × r_i`` and
+invertible (eq. 22-25) — i.e. ``r_i`` rows spanning ``range(N_{i-1} J_iᵀ)``, the
+directions of the higher levels' null space that level ``i`` can use — but a null
+space of prior tasks has ``n − ρ(J_{i-1}^A)`` basis vectors. Eq. 18 gives the same
+answer either way; eq. 27 does not. ``z_basis`` picks the reading:
+
+* ``"task_range"`` (default; the ``r_i`` of eq. 12 and the proof of Theorem 1): the
+  ``r_i`` columns spanning ``range(N_{i-1} J_iᵀ)``, from the same nested pivoted QR
+  (``qr`` path; the first ``r_i`` columns of ``Q`` in ``(J_i Z_i)ᵀ = Q R Pᵀ``) or from
+  the SVD of ``J_i Z_i`` (``svd`` path). ``J_E`` then has ``ρ(J_k^A)`` rows and full
+  row rank; the blocks are scaled to unit norm (which does not change the solutions
+  of a consistent system) and ``x = J_Eᵀ(J_E J_Eᵀ)⁻¹ h_E`` from a QR of ``J_Eᵀ``
+  (``np.linalg.pinv`` on the ``svd`` path). In the rotated coordinates the system is
+  block lower-triangular with diagonal blocks ``M_iᵀM_i + λI`` (``M_i = J_i Z_i``), so
+  eq. 27 *is* the hierarchy whose levels below the first are solved by damped least
+  squares with ``μ² = λ``: every higher level is unaffected by a lower one, the first
+  level stays exact, and ``info["level_damping"]`` (``0, λ, …, λ``) fed to
+  ``reference`` or ``cascaded_qp`` reproduces θ̈ (tests: relative 1e-9 on every shared
+  family).
+* ``"null_space"``: a basis of the whole ``null(J_{i-1}^A)``. Each damped block has
+  ``n − ρ(J_{i-1}^A)`` rows, so ``λ Z_i`` also pulls towards zero on directions that
+  belong to lower levels; the system is over-determined and solved in least squares
+  (SVD pseudo-inverse, or ``dgelsy``), which lets every level — the first included —
+  trade accuracy with the others (measured on seeded conflicting stacks: top-level
+  residual up to 3e-3 of its target where the paper's reading meets it to 1e-15).
+
+The two readings tend to eq. 18 (and to each other) as ``λ → 0``. On the ``svd``
+path of eq. 18 ``z_basis`` chooses which ``J_E`` is built (same answer, measured
+≤ 5e-10 apart); the ``qr`` path of eq. 18 never forms ``Z_i`` and ignores it.
+:func:`extended_system` returns ``J_E`` and ``h_E`` as built, for analysis.
+
+Theorem 1 and its limits: ``J_E⁺`` needs the same rank decision as a recursion (how
+many directions ``r_i`` a level keeps is the rank rule's call), and because the
+blocks hold ``J_iᵀJ_i`` the smallest kept singular value of ``J_E`` goes like ``σ²``
+where the recursion's projected Jacobian has ``σ`` (``near_singular`` family; tests).
 """
 
 from __future__ import annotations
@@ -122,6 +157,10 @@ OPTIONS = {
     "nullspace": Option("qr", "str", "'qr': nested pivoted QR, no SVD; 'svd': SVD of "
                         "J_{i-1}^A as the paper", choices=("qr", "svd")),
     "damping": Option(0.0, "float", "λ of eq. 27 (0: exact eq. 18)", minimum=0.0),
+    "z_basis": Option("task_range", "str", "Z_i of eq. 13-16, 27 (svd path, damping): "
+                      "'task_range': the paper's r_i rows spanning range(N_{i-1} J_iᵀ); "
+                      "'null_space': a basis of the whole null(J_{i-1}^A)",
+                      choices=("task_range", "null_space")),
     "rcond": rcond_option(),
     "level_damping": Option(0.0, "float", "λ_max of the selective damping (qr path; 0: off)",
                             minimum=0.0),
@@ -199,6 +238,7 @@ class Prepared:
         self.kernel = _resolve_kernel(options["kernel"], layout.n)
         self.nullspace = options["nullspace"]
         self.damping = float(options["damping"])
+        self.z_basis = str(options["z_basis"])
         self.rcond = float(options["rcond"])
         self.singular_threshold = float(options["singular_threshold"])
         selective = float(options["level_damping"]) > 0 and self.singular_threshold > 0
@@ -215,10 +255,11 @@ class Prepared:
         self._starts = layout.starts
         if self.compiled:
             m, n, k = layout.m, layout.n, layout.k
-            self._work = np.empty(m * n + m + k)
+            self._work = np.empty(_kernel.work_size(m, n, k))
             self._params = np.concatenate([[self.rcond, self.level_damping,
                                             self.singular_threshold], self.step_bound])
-            self._ranks = np.zeros(k, dtype=np.int64)
+            self._iwork = np.zeros(k + n, dtype=np.int64)      # ranks, then scratch
+            self._ranks = self._iwork[:k]
             self._out_size = n + 2 * k
 
     def solve(self, data: StackData) -> Outcome:
@@ -232,7 +273,7 @@ class Prepared:
             return self._solve_stack(data.as_stack())
         out = np.empty(self._out_size)      # x, residuals, μ² of this answer (one array)
         code = _kernel.solve_data(data.A, data.b, data.sqrt_weight, self._starts,
-                                  self._work, self._params, out, self._ranks)
+                                  self._work, self._params, out, self._iwork)
         if code == 0:
             data.check()     # names the task, level and row of a NaN, inf or bad √w
             raise TaskStackError("the rows' scale overflows float64 (‖A_i‖_F² is not "
@@ -246,9 +287,10 @@ class Prepared:
 
     def _solve_stack(self, stack: TaskStack) -> Outcome:
         if self.damping > 0:
-            return _solve_damped(stack, self.damping, self.rcond, self.nullspace)
+            return _solve_damped(stack, self.damping, self.rcond, self.nullspace,
+                                 self.z_basis)
         if self.nullspace == "svd":
-            return _solve_svd(stack, self.rcond)
+            return _solve_svd(stack, self.rcond, self.z_basis)
         return _solve_qr(stack, self.rcond, self.level_damping, self.singular_threshold,
                          self.step_bound)
 
@@ -448,38 +490,64 @@ def _solve_qr(stack: TaskStack, rcond: float, level_damping: float = 0.0,
 
 
 # -------------------------------------------------------------------------- svd
+#: The two readings of the paper's ``Z_i`` (option ``z_basis``): ``"task_range"``, the
+#: ``r_i`` rows spanning ``range(N_{i-1} J_iᵀ)`` (eq. 12-13, 22-25), and
+#: ``"null_space"``, a basis of the whole ``null(J_{i-1}^A)``.
+Z_BASES = ("task_range", "null_space")
+
+
 def _extended_blocks(stack: TaskStack, rcond: float, damping: float, zs,
-                     equilibrate: bool = False):
+                     equilibrate: bool = False, ranges=None):
     """``J_E`` and ``h_E`` of eq. 15-16 (eq. 27 when ``damping > 0``).
 
-    With ``equilibrate`` each block ``Z_iᵀJ_iᵀJ_i`` is scaled to unit Frobenius norm,
-    which leaves the solutions of the (consistent) undamped system unchanged and keeps
-    the squared scale of ``J_iᵀJ_i`` from hiding a level's singular values.
+    ``zs[i]`` (columns) is a basis of ``null(J_{i-1}^A)``. With ``ranges`` (the paper's
+    reading, ``z_basis="task_range"``) level ``i``'s block is built on ``ranges[i]``
+    instead, the ``r_i`` columns spanning ``range(N_{i-1} J_iᵀ)``: ``r_i`` rows per
+    level, ``ρ(J_k^A)`` rows in all, and eq. 27's ``λ Z_i`` only acts inside the
+    level's own directions (``J_1``'s block is not damped, as in eq. 27). Without it
+    (``"null_space"``) every damped block has ``n − ρ(J_{i-1}^A)`` rows, and
+    ``λ Z_i`` also pulls on the directions that belong to the lower levels.
+
+    With ``equilibrate`` each block is scaled to unit Frobenius norm, which leaves the
+    solutions of the (consistent) undamped system unchanged and keeps the squared
+    scale of ``J_iᵀJ_i`` from hiding a level's singular values.
     """
     rows, rhs = [], []
+    n = stack.n
     for i, ((A, b), Z) in enumerate(zip(stack.equality_matrices(), zs)):
-        n = A.shape[1]
-        if damping == 0 and i + 1 < len(zs) and zs[i + 1].shape[1] == Z.shape[1]:
-            continue  # r_i = 0: Z_i J_iᵀ J_i = 0 up to rounding, no equation (Theorem 1)
-        if i == 0 and Z.shape[1] == n:
-            full_row_rank = np.linalg.matrix_rank(A, tol=rcond * float(np.linalg.norm(A))) \
-                == A.shape[0]
-            if full_row_rank or A.shape[0] == 0:
-                rows.append(A)
+        if ranges is not None:
+            basis = ranges[i]
+            if basis.shape[1] == 0:
+                continue  # r_i = 0: no feasible direction, no equation (Theorem 1)
+            if i == 0 and basis.shape[1] == A.shape[0]:
+                rows.append(A)              # J_1 of full row rank: its own rows (eq. 15)
                 rhs.append(b)
                 continue
-        if Z.shape[1] == 0:
-            continue
-        G = A.T @ A
-        if damping > 0:
-            G = G + damping * np.eye(n)
-        block, target = Z.T @ G, Z.T @ (A.T @ b)
+            lam = damping if i > 0 else 0.0
+        else:
+            if damping == 0 and i + 1 < len(zs) and zs[i + 1].shape[1] == Z.shape[1]:
+                continue  # r_i = 0: Z_i J_iᵀ J_i = 0 up to rounding, no equation (Theorem 1)
+            if i == 0 and Z.shape[1] == n:
+                full_row_rank = np.linalg.matrix_rank(
+                    A, tol=rcond * float(np.linalg.norm(A))) == A.shape[0]
+                if full_row_rank or A.shape[0] == 0:
+                    rows.append(A)
+                    rhs.append(b)
+                    continue
+            if Z.shape[1] == 0:
+                continue
+            basis, lam = Z, damping
+        block, target = basis.T @ (A.T @ A), basis.T @ (A.T @ b)
+        if lam > 0:
+            block = block + lam * basis.T          # Z_i (J_iᵀJ_i + λ I), eq. 27
         if equilibrate:  # a consistent system keeps its solutions under row scaling
             norm = float(np.linalg.norm(block))
             if norm > 0:
                 block, target = block / norm, target / norm
         rows.append(block)
         rhs.append(target)
+    if not rows:
+        return np.zeros((0, n)), np.zeros(0)
     return np.vstack(rows), np.concatenate(rhs)
 
 
@@ -503,27 +571,59 @@ def _augmented_null_spaces(stack: TaskStack, rcond: float) -> tuple[list[np.ndar
     return zs, n - zs[-1].shape[1]
 
 
-def _solve_svd(stack: TaskStack, rcond: float) -> Outcome:
+def _svd_task_ranges(stack: TaskStack, zs: list[np.ndarray]) -> list[np.ndarray]:
+    """The paper's ``Z_i`` (as columns) on the ``svd`` path: the ``r_i`` leading right
+    singular vectors of ``J_i Z_i`` mapped back by ``Z_i``, with
+    ``r_i = dim null(J_{i-1}^A) − dim null(J_i^A)`` (eq. 12) from ``zs``; they span
+    ``range(N_{i-1} J_iᵀ)`` (``N_{i-1} = Z_i Z_iᵀ``)."""
+    out = []
+    for level, Z, Z_next in zip(stack.levels, zs, zs[1:]):
+        r = Z.shape[1] - Z_next.shape[1]
+        if r <= 0:
+            out.append(np.zeros((stack.n, 0)))
+            continue
+        _, _, vt = np.linalg.svd(level.A @ Z, full_matrices=False)
+        out.append(Z @ vt[:r].T)
+    return out
+
+
+def _solve_svd(stack: TaskStack, rcond: float, z_basis: str = "task_range") -> Outcome:
     zs, rank = _augmented_null_spaces(stack, rcond)
-    JE, hE = _extended_blocks(stack, rcond, 0.0, zs, equilibrate=True)
+    ranges = _svd_task_ranges(stack, zs) if z_basis == "task_range" else None
+    JE, hE = _extended_blocks(stack, rcond, 0.0, zs, equilibrate=True, ranges=ranges)
+    if JE.shape[0] == 0:
+        return Outcome(np.zeros(stack.n), "optimal",
+                       {"rank": rank, "nullspace": "svd", "z_basis": z_basis,
+                        "extended_rows": 0, "condition_number": 1.0})
     u, s, vt = np.linalg.svd(JE, full_matrices=False)
     r = min(rank, int(np.count_nonzero(s > 0)))
     x = vt[:r].T @ ((u[:, :r].T @ hE) / s[:r])
     cond = float(s[0] / s[r - 1]) if r else 1.0
-    return Outcome(x, "optimal", {"rank": rank, "nullspace": "svd",
+    return Outcome(x, "optimal", {"rank": rank, "nullspace": "svd", "z_basis": z_basis,
                                   "extended_rows": int(JE.shape[0]),
                                   "condition_number": cond})
 
 
 # ----------------------------------------------------------------------- damped
-def _qr_null_spaces(stack: TaskStack, rcond: float) -> list[np.ndarray]:
-    """Explicit ``Z_i`` (columns) from the nested pivoted QR (no SVD)."""
+def _qr_null_spaces(stack: TaskStack, rcond: float, ranges: bool = False
+                    ) -> tuple[list[np.ndarray], list[np.ndarray] | None]:
+    """Explicit ``Z_i`` (columns) from the nested pivoted QR (no SVD).
+
+    Returns ``(zs, vs)``: ``zs[i]`` spans ``null(J_{i-1}^A)`` (``i = 0 … k−1``); with
+    ``ranges``, ``vs[i]`` holds the ``r_i`` columns spanning ``range(N_{i-1} J_iᵀ)``,
+    the paper's ``Z_i``, from the same factorization: the pivoted QR of
+    ``(J_i Z_i)ᵀ = Q R Pᵀ`` puts ``range`` in ``Q``'s first ``r_i`` columns and the next
+    null space in the others (``vs`` is ``None`` without ``ranges``).
+    """
     n = stack.n
     Z = np.eye(n)
     zs = [Z]
-    for level in stack.levels[:-1]:
+    vs: list[np.ndarray] = []
+    levels = stack.levels if ranges else stack.levels[:-1]
+    for level in levels:
         A = level.A
         d = Z.shape[1]
+        V = np.zeros((n, 0))
         if d and A.shape[0]:
             M_T = np.array((A @ Z).T, order="F")
             qr, _, tau, _, _ = _dgeqp3(M_T, overwrite_a=1)
@@ -531,31 +631,94 @@ def _qr_null_spaces(stack: TaskStack, rcond: float) -> list[np.ndarray]:
             tol = rcond * float(np.linalg.norm(A))
             r = int(np.count_nonzero(np.abs(np.diagonal(qr)[:k]) > tol)) if tol > 0 else 0
             if r:
-                # columns r.. of the full Q span null(A_i Z_i) in the local coordinates
+                # columns :r of the full Q span range((A_i Z_i)ᵀ), columns r.. its null
+                # space, in the local coordinates
                 Q, _, _ = _dormqr("L", "N", qr[:, :r], tau[:r], np.eye(d, order="F"), d)
+                V = Z @ Q[:, :r]
                 Z = Z @ Q[:, r:]
+        vs.append(V)
         zs.append(Z)
-    return zs
+    return zs[:len(stack.levels)], (vs if ranges else None)
 
 
-def _solve_damped(stack: TaskStack, damping: float, rcond: float, nullspace: str) -> Outcome:
+def extended_system(stack: TaskStack, *, damping: float = 0.0,
+                    z_basis: str = "task_range", nullspace: str = "qr",
+                    rcond: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The extended Jacobian ``J_E`` and task vector ``h_E`` built literally.
+
+    Eq. 15-16 (``damping = 0``) or the damped blocks of eq. 27 (``damping = λ > 0``),
+    with the ``Z_i`` of either reading (``z_basis``) from the nested QR
+    (``nullspace="qr"``) or from SVDs of the augmented Jacobians (``"svd"``); blocks
+    not equilibrated. For analysis (its singular values, its size); :func:`solve`
+    is the way to an answer. Options as in :data:`OPTIONS` (``rcond`` ``None``: its
+    default).
+
+    Raises:
+        FormulationError: an option is out of range (naming it).
+    """
+    given = {"damping": damping, "z_basis": z_basis, "nullspace": nullspace}
+    if rcond is not None:
+        given["rcond"] = rcond
+    opts = validate_options(NAME, OPTIONS, given, stack.n)
+    zs, ranges = _damped_bases(stack, float(opts["rcond"]), opts["nullspace"],
+                               opts["z_basis"])
+    return _extended_blocks(stack, float(opts["rcond"]), float(opts["damping"]), zs,
+                            ranges=ranges)
+
+
+def _damped_bases(stack: TaskStack, rcond: float, nullspace: str, z_basis: str):
+    """``(zs, ranges)`` for :func:`_extended_blocks` (``ranges`` ``None`` for the
+    ``"null_space"`` reading)."""
+    paper = z_basis == "task_range"
     if nullspace == "svd":
         zs, _ = _augmented_null_spaces(stack, rcond)
-    else:
-        zs = _qr_null_spaces(stack, rcond)
-    JE, hE = _extended_blocks(stack, rcond, damping, zs)
-    if nullspace == "svd":
+        return zs, (_svd_task_ranges(stack, zs) if paper else None)
+    return _qr_null_spaces(stack, rcond, ranges=paper)
+
+
+def _solve_damped(stack: TaskStack, damping: float, rcond: float, nullspace: str,
+                  z_basis: str = "task_range") -> Outcome:
+    zs, ranges = _damped_bases(stack, rcond, nullspace, z_basis)
+    paper = ranges is not None
+    # With the paper's Z_i, J_E has full row rank ρ(J_k^A): the system is consistent
+    # and its solutions do not change when each block is scaled to unit norm, which
+    # keeps a level's scale (1e-6 or 1e4) out of the conditioning. The whole-null-space
+    # system is over-determined and solved in least squares: scaling its blocks would
+    # change the fit, so it is built as printed.
+    JE, hE = _extended_blocks(stack, rcond, damping, zs, equilibrate=paper, ranges=ranges)
+    m, n = JE.shape
+    if m == 0:
+        x = np.zeros(n)
+    elif nullspace == "svd":
         x = np.linalg.pinv(JE) @ hE
+    elif paper:
+        # full row rank: x = J_Eᵀ (J_E J_Eᵀ)⁻¹ h_E from the QR of J_Eᵀ (no truncation:
+        # every row is a direction the rank rule kept)
+        qr, tau, _, _ = _dgeqrf(np.array(JE.T, order="F"))
+        w, _ = _dtrtrs(qr[:m, :m], hE, trans=1)
+        full = np.zeros((n, 1))
+        full[:m, 0] = w.ravel()
+        xq, _, _ = _dormqr("L", "N", qr, tau, full, 1)
+        x = xq.ravel()
     else:
-        m, n = JE.shape
+        # complete orthogonal decomposition: the minimum-norm least-squares solution
+        # of the over-determined system
         jpvt = np.zeros(n, dtype=np.int32)
         bb = np.zeros(max(m, n))
         bb[:m] = hE
         lwork = max(1, max(m, n) * 8 + 64)
         _, xb, _, _, _ = lapack.dgelsy(JE, bb.reshape(-1, 1), jpvt, 1e-12, lwork)
         x = xb[:n].ravel()
-    return Outcome(x, "approximate", {"damping": damping, "nullspace": nullspace,
-                                      "extended_rows": int(JE.shape[0])})
+    info = {"damping": damping, "nullspace": nullspace, "z_basis": z_basis,
+            "extended_rows": int(m)}
+    if ranges is not None:
+        # with the paper's Z_i, eq. 27 is the damped hierarchy μ² = (0, λ, …, λ) on
+        # the levels that own directions (a cascade given these terms reproduces it)
+        mu2 = np.array([damping if i > 0 and V.shape[1] else 0.0
+                        for i, V in enumerate(ranges)])
+        info["level_damping"] = mu2
+        info["damped_levels"] = np.flatnonzero(mu2 > 0).tolist()
+    return Outcome(x, "approximate", info)
 
 
 def _solve_batch(prepared: "Prepared", datas: list[StackData]) -> tuple[np.ndarray, list[str]]:

@@ -86,8 +86,8 @@ OPTIONS = {
     "rcond": rcond_option("‖J_k‖_F"),
     "bound_tolerance": Option(1e-9, "float", "a bound counts as met within "
                               "tol·max(1, |bound|)", minimum=0.0),
-    "max_saturations": Option(None, "int", "cap on saturated joints per task (default: the "
-                              "number of bounded columns)", minimum=0, optional=True),
+    "max_saturations": Option(None, "int", "cap on saturated joints per task (default: "
+                              "the number of bounded columns)", minimum=0, optional=True),
 }
 
 

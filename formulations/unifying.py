@@ -8,10 +8,12 @@ one torque per level, lowest priority first (eq. 37)::
     τ_i = (J_i M⁻¹)⁺ (h_i − J_i M⁻¹ τ_i_post) ,   τ_i_post = Σ_{j>i} τ_j
 
 so the highest level, computed last, corrects whatever the lower ones did to it.
-(Eq. 37 as printed also carries ``−(C+G)`` inside the bracket; with the bias
-compensated outside, ``M θ̈ = Σ_i τ_i`` and the acceleration the other levels
-produce is ``M⁻¹ τ_i_post``, which is how eq. 38-40 use it, so that is what is
-implemented.) Using ``(J M⁻¹)⁺ = M J^{M²+}`` with the ``M²``-weighted pseudo-inverse
+The paper is inconsistent about the bias here: eq. 37 carries ``−(C+G)`` inside the
+bracket and eq. 38 defines ``θ̈_i_post = M⁻¹[τ_i_post − (C+G)]`` (eq. 39 inherits it
+through ``θ̈_i_post``), while eq. 40 — the form the paper compares against — has no
+bias term in ``θ̈_i``. What is implemented is eq. 40's reading: with the bias
+compensated outside the sum, ``M θ̈ = Σ_i τ_i`` and the acceleration the other levels
+produce is ``M⁻¹ τ_i_post``. Using ``(J M⁻¹)⁺ = M J^{M²+}`` with the ``M²``-weighted pseudo-inverse
 
     J^{M²+} = M⁻² Jᵀ (J M⁻² Jᵀ)⁺        (check: M J^{M²+} = M⁻¹Jᵀ(JM⁻¹(JM⁻¹)ᵀ)⁺ = (JM⁻¹)⁺)
 
@@ -21,10 +23,15 @@ the recursion unrolls into eq. 40::
     N_1 = I ,  N_i = N_{i-1} (I − J_{i-1}^{M²+} J_{i-1})
 
 ``solve`` evaluates eq. 40 forwards (top level first); :func:`torque_recursion` is
-eq. 37 literally (bottom level first), and the tests check that both agree. Like
-Chiaverini's method, each level uses its own inverse ``J_i^{M²+}`` rather than that
-of a projected Jacobian, so there is no algorithmic singularity but there is
-algorithmic error (eq. 34) on coupled lower levels; the top level is met exactly.
+eq. 37 without the bias (bottom level first), and the tests check that both agree.
+Like Chiaverini's method, each level uses its own inverse ``J_i^{M²+}`` rather than
+that of a projected Jacobian, so there is no algorithmic singularity but there is
+algorithmic error (eq. 34); the top level is met exactly. A lower level has none when
+``J_i M⁻² J_jᵀ = 0`` for the levels ``j`` above it (sufficient, not necessary; with
+``M = I``: mutually orthogonal rows). With ``M = I`` the method equals Chiaverini's
+for two levels only: beyond, eq. 40's ``N_i = Π_{j<i}(I − J_j⁺ J_j)`` is a product of
+the levels' own projectors, not the projector ``N^A_{i-1}`` onto the null space of the
+augmented Jacobian that Chiaverini's k-level sum uses (tests).
 
 Every ``M⁻¹`` is applied through the Cholesky factor of ``M``; the pseudo-inverse of
 ``B_i = J_i M⁻¹`` uses an SVD with the shared rank rule relative to ``‖B_i‖_F``.

@@ -33,8 +33,7 @@ from .references import Reference, minimum_jerk
 from .scenario import BaselineTask, Scenario
 from .simulate import StepTasks
 from .tasks import (JointLimitActivation, KinematicState, frame_orientation, frame_position,
-                    joint_limit_bounds, joint_limit_rows, joint_limit_violation, posture,
-                    _actuated_positions)
+                    joint_limit_bounds, joint_limit_rows, joint_limit_violation, posture)
 
 __all__ = ["ArmScenario", "TARGETS", "PANDA_URDF", "panda", "ACCELERATION_LIMITS"]
 
@@ -50,21 +49,14 @@ TOOL = "panda_hand_tcp"
 
 
 def panda() -> RobotModel:
-    """The Panda with its fingers locked open (``n_q = n_v = 7``, fixed base)."""
+    """The Panda with its fingers locked (``n_q = n_v = 7``, fixed base), ``q0`` the
+    ready posture: :func:`robots.from_urdf` with ``locked_joints=PANDA_FINGERS``."""
+    from .models import PANDA_FINGERS, from_urdf
     path = example_robot_data_dir() / PANDA_URDF
-    if not path.is_file():
-        from .models import ModelNotFoundError
-        raise ModelNotFoundError(f"{PANDA_URDF} is not in example-robot-data at {path.parent}")
-    full = pin.buildModelFromUrdf(str(path))
-    q_full = pin.neutral(full)
-    q_full[:7] = PANDA_READY
-    fingers = [full.getJointId(j) for j in ("panda_finger_joint1", "panda_finger_joint2")]
-    for j in fingers:
-        q_full[full.joints[j].idx_q] = 0.04
-    model = pin.buildReducedModel(full, fingers, q_full)
-    return RobotModel("panda", model, np.array(PANDA_READY, dtype=float),
-                      {"tool": TOOL, "hand": "panda_hand", "base": "panda_link0"},
-                      str(path), floating_base=False)
+    names = [f"panda_joint{i}" for i in range(1, 8)]
+    return from_urdf(path, floating_base=False, locked_joints=PANDA_FINGERS,
+                     q0=dict(zip(names, PANDA_READY)), name="panda",
+                     frames={"tool": TOOL, "hand": "panda_hand", "base": "panda_link0"})
 
 
 @dataclass(repr=False)
@@ -170,7 +162,8 @@ class ArmScenario(Scenario):
         acceleration limit enters only through the braking term; 0 is inside the box
         whenever ``q`` is within its limits."""
         lo, hi, vmax = self.robot.joint_limits()
-        q = _actuated_positions(state)
+        idx = self.robot.actuated_q_index()          # a fixed-base arm: every joint
+        q = np.where(idx >= 0, state.q[np.maximum(idx, 0)], 0.0)
         d_lo, d_hi = np.maximum(q - lo, 0.0), np.maximum(hi - q, 0.0)
         lower = np.maximum.reduce([(lo - q) / dt, -vmax, -np.sqrt(2 * self.amax * d_lo)])
         upper = np.minimum.reduce([(hi - q) / dt, vmax, np.sqrt(2 * self.amax * d_hi)])
@@ -200,7 +193,7 @@ class ArmScenario(Scenario):
             levels.append(terms[name].acceleration(*self.gains[name]))
         n_tasks = len(levels)
         levels.append(terms["posture"].acceleration(*self.gains["posture"]))
-        return StepTasks(TaskStack(levels), self.errors(state, t, terms), n_tasks)
+        return StepTasks(TaskStack(levels), lambda: self.errors(state, t, terms), n_tasks)
 
     def velocity_stack(self, state: KinematicState, t: float, gain: float = 10.0,
                        limits: str = "none", dt: float = 0.002) -> StepTasks:
@@ -217,7 +210,7 @@ class ArmScenario(Scenario):
         levels.append(terms["tool_orientation"].velocity(gain))
         n_tasks = len(levels)
         levels.append(terms["posture"].velocity(self.gains["posture"][0]))
-        return StepTasks(TaskStack(levels), self.errors(state, t, terms), n_tasks)
+        return StepTasks(TaskStack(levels), lambda: self.errors(state, t, terms), n_tasks)
 
     # ----------------------------------------------------------------- baselines
     def baseline_tasks(self) -> list[BaselineTask]:

@@ -33,6 +33,8 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from prioik.extras import install_hint
+
 __all__ = ["ModelNotFoundError", "RobotModel", "example_robot_data_dir", "from_urdf",
            "has_free_flyer", "g1", "talos", "panda", "ur5", "go2", "solo12", "PANDA_FINGERS",
            "sample_humanoid", "spatial_chain", "LOADERS", "load"]
@@ -235,8 +237,8 @@ def example_robot_data_dir() -> Path:
         dist = importlib.metadata.distribution("example-robot-data")
     except importlib.metadata.PackageNotFoundError:
         raise ModelNotFoundError("the robot descriptions come from the package "
-                                 "example-robot-data; install it with "
-                                 "`pip install example-robot-data`") from None
+                                 "example-robot-data (the `robots` extra); "
+                                 f"{install_hint('robots')}") from None
     for f in dist.files or ():
         parts = Path(str(f)).parts
         if "example-robot-data" in parts and "robots" in parts:

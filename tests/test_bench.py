@@ -120,7 +120,8 @@ def test_ratios_are_the_quotients_of_the_medians():
     batch = {"size": 1000, "batch_us": {"extended_jacobian": 5.0},
              "single_us": {"daqp_hierarchical": 20.0, "daqp_hierarchical[raw]": 10.0},
              "loop_us": {"extended_jacobian": 40.0}}
-    ik = {"prioik_oneoff_step_us": 150.0, "prioik_prepared_step_us": 70.0, "placo_step_us": 100.0}
+    ik = {"prioik_oneoff_step_us": 150.0, "prioik_prepared_step_us": 70.0, "placo_step_us": 100.0,
+          "panda": {"prepared_step_us": 6.0, "oneoff_step_us": 60.0, "placo_step_us": 3.0}}
     got = {r.name: r for r in ratios(rows, batch, ik)}
     assert got["extended_jacobian / nullspace (λ=0), g1 compatible"].value == pytest.approx(0.2)
     fastest = got["extended_jacobian / fastest cascaded_qp (cascaded_qp[daqp]), g1 compatible"]
@@ -131,14 +132,21 @@ def test_ratios_are_the_quotients_of_the_medians():
     assert raw.value == pytest.approx(1.25) and raw.met == "no"
     assert got["extended_jacobian k=16 / k=2 at n=100"].value == pytest.approx(1.6)
     assert got["nullspace k=16 / k=2 at n=100"].value == pytest.approx(7.0)
-    names = list(got)
-    assert got[names[-5]].value == pytest.approx(0.25)      # batch / one daqp solve
-    assert got[names[-4]].value == pytest.approx(0.5)       # batch / one raw daqp call
-    assert got[names[-3]].value == pytest.approx(0.125)     # batch / loop
-    fast, stack_path = got[names[-2]], got[names[-1]]
-    assert "prepared solver" in fast.name and "one-off" in stack_path.name
+
+    def named(*parts):
+        (hit,) = [r for name, r in got.items() if all(p in name for p in parts)]
+        return hit
+    assert named("of 1000 G1 stacks", "one daqp_hierarchical solve").value == \
+        pytest.approx(0.25)
+    assert named("of 1000 G1 stacks", "daqp_hierarchical[raw]").value == pytest.approx(0.5)
+    assert named("loop of extended_jacobian through solve").value == pytest.approx(0.125)
+    fast = named("G1 IK step", "prepared solver")
+    stack_path = named("G1 IK step", "one-off")
     assert fast.value == pytest.approx(0.7) and fast.met == "yes"
     assert stack_path.value == pytest.approx(1.5) and math.isinf(stack_path.target)
+    panda = named("Panda reach step", "prepared path")
+    assert panda.value == pytest.approx(2.0) and panda.target == 2.5 and panda.met == "yes"
+    assert math.isinf(named("Panda reach step", "one-off").target)
     # with the shared references timed, the step without them is reported too
     own = ratios(rows, batch, {**ik, "references_us": 20.0})[-1]
     assert "without the shared references" in own.name

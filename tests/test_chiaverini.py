@@ -110,3 +110,25 @@ def test_property_shape_finite_top_level_optimal(seed, n, k, family, damping):
         e0 = algorithmic_error_norms(stack, sol.x)[0]
         A, b = stack[0].A, stack[0].b
         assert e0 <= 1e-9 * (np.linalg.norm(A) * np.linalg.norm(sol.x) + np.linalg.norm(b))
+
+
+def test_orthogonal_rows_are_sufficient_not_necessary_for_no_algorithmic_error():
+    """A level made of a row orthogonal to the level above plus a copy of a higher row
+    (its conflicting part, other target) is not orthogonal to level 1, yet Chiaverini's
+    method leaves it no algorithmic error; a coupled row does."""
+    from prioik.hierarchy import algorithmic_error_norms
+    rng = np.random.default_rng(3)
+    n = 6
+    J1 = rng.standard_normal((2, n))
+    free = rng.standard_normal(n)
+    free -= J1.T @ np.linalg.solve(J1 @ J1.T, J1 @ free)          # ⟂ row(J_1)
+    J2 = np.vstack([free, J1[0]])
+    assert np.abs(J2 @ J1.T).max() > 0.1
+    stack = TaskStack([Task("a", J1, rng.standard_normal(2)),
+                       Task("b", J2, rng.standard_normal(2))])
+    x = formulations.solve(stack, "chiaverini").x
+    assert algorithmic_error_norms(stack, x)[1] <= 1e-12
+    coupled = TaskStack([Task("a", J1, stack.levels[0].b),
+                         Task("b", (free + J1[1])[None, :], np.array([1.0]))])
+    y = formulations.solve(coupled, "chiaverini").x
+    assert algorithmic_error_norms(coupled, y)[1] > 1e-3

@@ -319,3 +319,152 @@ def test_prepared_solver_refills_and_refuses_other_layouts_and_nan():
         formulations.prepare(s1.layout, "extended_jacobian", step_bound=[1.0, 2.0])
     with pytest.raises(FormulationError, match="step_bound names task 'nope'"):
         formulations.prepare(s1.layout, "extended_jacobian", step_bound={"nope": 1.0})
+
+
+# ------------------------------------------------- eq. 27: the paper's Z_i and the other
+from prioik.formulations.extended_jacobian import extended_system  # noqa: E402
+from prioik.hierarchy import singularity_distance  # noqa: E402
+
+EQ27_LAMBDA = 1e-2
+
+
+@pytest.mark.parametrize("nullspace", ["qr", "svd"])
+@pytest.mark.parametrize("family", sorted(FAMILIES))
+@pytest.mark.parametrize("seed", range(6))
+def test_eq27_with_the_papers_z_equals_the_damped_hierarchy(nullspace, family, seed):
+    """Eq. 27 with ``Z_i`` of ``r_i`` rows spanning ``range(N_{i-1} J_iᵀ)`` is the
+    hierarchy whose levels below the first are solved by damped least squares with
+    ``μ² = λ``: ``reference(level_damping=[0, λ, …, λ])``, relative 1e-9 (measured
+    worst 8e-11 over 40 stacks per family), and a ``ρ(J_k^A)``-row system."""
+    rng = np.random.default_rng(500 + seed)
+    stack = FAMILIES[family](rng, int(rng.integers(3, 40)), int(rng.integers(2, 7)))
+    k = len(stack)
+    oracle = formulations.solve(stack, "reference",
+                                level_damping=[0.0] + [EQ27_LAMBDA] * (k - 1))
+    sol = formulations.solve(stack, "extended_jacobian", damping=EQ27_LAMBDA,
+                             nullspace=nullspace)
+    assert sol.info["z_basis"] == "task_range"
+    assert np.linalg.norm(sol.x - oracle.x) <= 1e-9 * max(1.0, np.linalg.norm(oracle.x))
+    assert sol.info["extended_rows"] == sum(oracle.info["rank_profile"])
+    # the same damped hierarchy is what info["level_damping"] says it is
+    mu2 = sol.info["level_damping"]
+    again = formulations.solve(stack, "reference", level_damping=mu2).x
+    assert np.linalg.norm(again - oracle.x) <= 1e-12 * max(1.0, np.linalg.norm(oracle.x))
+
+
+@pytest.mark.parametrize("nullspace", ["qr", "svd"])
+def test_eq27_papers_z_keeps_the_top_level_exact_and_the_other_reading_does_not(nullspace):
+    """Conflicting stacks: the paper's reading meets level 1 as well as ``reference``
+    (to 1e-12 of its scale); the whole-null-space reading, whose damped blocks have
+    ``n − ρ(J_{i-1}^A)`` rows, loses it (measured up to 3e-3) on some stacks."""
+    worst_paper, worst_other = 0.0, 0.0
+    for seed in range(10):
+        rng = np.random.default_rng(1000 + seed)
+        stack = FAMILIES["conflicting"](rng, int(rng.integers(6, 30)), int(rng.integers(3, 6)))
+        best = formulations.solve(stack, "reference").residuals[0]
+        scale = max(1.0, np.linalg.norm(stack.levels[0].b))
+        for z_basis in ("task_range", "null_space"):
+            sol = formulations.solve(stack, "extended_jacobian", damping=EQ27_LAMBDA,
+                                     nullspace=nullspace, z_basis=z_basis)
+            excess = (sol.residuals[0] - best) / scale
+            if z_basis == "task_range":
+                worst_paper = max(worst_paper, excess)
+                assert sol.info["extended_rows"] <= stack.n
+            else:
+                worst_other = max(worst_other, excess)
+    assert worst_paper <= 1e-12
+    assert worst_other >= 1e-5
+
+
+def test_eq27_readings_on_the_issue_stack():
+    """12 columns, 4 levels, one exactly and one nearly conflicting row, λ = 0.01: the
+    paper's Z_i give a 12 × 12 system meeting level 1 to round-off; the whole null
+    space gives a 23-row system that does not."""
+    rng = np.random.default_rng(3)
+    n = 12
+    A1, A2, A3, A4 = (rng.standard_normal((m, n)) for m in (3, 3, 3, 4))
+    A2[0] = A1[0] + A1[1]                              # exactly conflicting
+    A3[0] = A2[1] + 1e-4 * rng.standard_normal(n)      # nearly conflicting
+    stack = TaskStack([Task(f"t{i}", A, rng.standard_normal(A.shape[0]))
+                       for i, A in enumerate((A1, A2, A3, A4))])
+    paper = formulations.solve(stack, "extended_jacobian", damping=EQ27_LAMBDA)
+    other = formulations.solve(stack, "extended_jacobian", damping=EQ27_LAMBDA,
+                               z_basis="null_space")
+    oracle = formulations.solve(stack, "reference", level_damping=[0, 1e-2, 1e-2, 1e-2]).x
+    assert paper.info["extended_rows"] == 12 and other.info["extended_rows"] == 23
+    assert extended_system(stack, damping=EQ27_LAMBDA)[0].shape == (12, 12)
+    assert paper.residuals[0] <= 1e-13
+    assert other.residuals[0] >= 1e-4
+    assert np.linalg.norm(paper.x - oracle) <= 1e-10 * np.linalg.norm(oracle)
+    assert np.linalg.norm(other.x - oracle) >= 1e-2 * np.linalg.norm(oracle)
+
+
+@pytest.mark.parametrize("family", sorted(FAMILIES))
+def test_the_two_readings_agree_for_eq18_and_as_damping_vanishes(family):
+    """λ = 0 (eq. 18 on the svd path, which builds either ``J_E``): the same answer to
+    1e-8 (measured 5e-10). λ → 0 (eq. 27): both tend to eq. 18 like O(λ), and to each
+    other (measured 7e-6 apart at λ = 1e-6)."""
+    for seed in range(4):
+        rng = np.random.default_rng(700 + seed)
+        stack = FAMILIES[family](rng, int(rng.integers(3, 30)), int(rng.integers(2, 6)))
+        a = formulations.solve(stack, "extended_jacobian", nullspace="svd")
+        b = formulations.solve(stack, "extended_jacobian", nullspace="svd",
+                               z_basis="null_space")
+        assert np.linalg.norm(a.x - b.x) <= 1e-8 * max(1.0, np.linalg.norm(a.x))
+        assert a.info["extended_rows"] <= b.info["extended_rows"]
+        if family == "degenerate":
+            continue            # 1e-6 / 1e4 levels: λ → 0 is relative to no one scale
+        exact = formulations.solve(stack, "reference").x
+        scale = max(1.0, np.linalg.norm(exact))
+        xs = {(zb, lam): formulations.solve(stack, "extended_jacobian", damping=lam,
+                                            z_basis=zb).x
+              for zb in ("task_range", "null_space") for lam in (1e-3, 1e-6)}
+        for zb in ("task_range", "null_space"):
+            far = np.linalg.norm(xs[zb, 1e-3] - exact) / scale
+            near = np.linalg.norm(xs[zb, 1e-6] - exact) / scale
+            assert near <= 1e-3 and near <= max(1e-8, 0.05 * far)
+        gap = np.linalg.norm(xs["task_range", 1e-6] - xs["null_space", 1e-6]) / scale
+        assert gap <= 1e-4
+
+
+def test_extended_jacobian_is_conditioned_like_sigma_squared_near_a_conflict():
+    """Theorem 1 contrast: on ``near_singular(σ)`` the projected Jacobian of the
+    recursion has σ_min = sin σ, while the smallest singular value of ``J_E``
+    (eq. 15, either reading, unequilibrated) goes like σ² — the pseudo-inverse of
+    ``J_E`` needs the same rank decision, on a squared scale. At σ = 0 the rank rule
+    removes the direction: the paper's ``J_E`` loses the row (r_2 = 1), the other
+    reading keeps a block of rank 1 (the conflicting row adds a zero rank-one term to
+    ``Z_2 J_2ᵀ J_2``: its fourth singular value is round-off)."""
+    for sigma in (1e-2, 1e-3, 1e-4):
+        stack = near_singular(sigma)
+        projected = singularity_distance(stack)[1]
+        assert projected == pytest.approx(np.sin(sigma), rel=1e-6)
+        for zb in ("task_range", "null_space"):
+            JE, _ = extended_system(stack, z_basis=zb)
+            s = np.linalg.svd(JE, compute_uv=False)
+            kept = s[:4]                                  # ρ(J_2^A) = 4
+            assert kept[-1] / sigma ** 2 == pytest.approx(1.0, rel=0.05)
+            assert kept[-2] > 0.1
+    stack = near_singular(0.0)
+    JE, _ = extended_system(stack)
+    assert JE.shape == (3, 6) and np.linalg.svd(JE, compute_uv=False)[-1] > 0.1
+    JE_null, _ = extended_system(stack, z_basis="null_space")
+    assert JE_null.shape == (6, 6)
+    assert np.linalg.matrix_rank(JE_null[2:], tol=1e-12) == 1
+
+
+def test_bad_z_basis_is_named():
+    with pytest.raises(formulations.FormulationError, match="z_basis") as err:
+        formulations.solve(near_singular(0.1), "extended_jacobian", damping=0.1,
+                           z_basis="nullspace")
+    assert "'task_range'" in str(err.value) and "'nullspace'" in str(err.value)
+    with pytest.raises(formulations.FormulationError, match="z_basis"):
+        extended_system(near_singular(0.1), z_basis="rows")
+
+
+def test_theory_page_states_the_kernel_crossover_the_code_uses():
+    """docs/theory.md names the n up to which kernel='auto' compiles: the code's."""
+    from pathlib import Path
+    from prioik.formulations.extended_jacobian import AUTO_NUMBA_MAX_N
+    text = (Path(__file__).parents[1] / "docs" / "theory.md").read_text(encoding="utf-8")
+    assert f"compiled kernel up to n = {AUTO_NUMBA_MAX_N}" in text.replace("\n  ", " ")

@@ -65,3 +65,14 @@ def test_exactly_conflicting_limit_every_formulation_finite_exact_ones_equal_ref
             np.testing.assert_allclose(sol.x, ref_m, atol=1e-12)
         elif "λ=" in v.label:
             assert np.linalg.norm(sol.x - ref) <= 0.05 * np.linalg.norm(ref), v.label
+
+
+def test_conditioning_of_the_extended_system_is_sigma_squared():
+    """The report's Theorem 1 table: σ_min(J_E) ≈ σ², σ_min(J_2 Z_2) ≈ σ (within 5 %)."""
+    from prioik.benchmarks.properties import conditioning
+    cond = conditioning((1e-2, 1e-4, 0.0))
+    assert np.allclose(cond.projected[:2], [1e-2, 1e-4], rtol=0.05)
+    for zb, vals in cond.extended.items():
+        assert np.allclose(vals[:2], [1e-4, 1e-8], rtol=0.05), zb
+        assert vals[2] > 0.1            # σ = 0: the rank rule removed the direction
+    assert list(cond.rows["task_range"]) == list(cond.rank)

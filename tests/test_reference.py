@@ -90,3 +90,20 @@ def test_level_damping_is_damped_least_squares_per_level():
     assert sol.status == "approximate"
     with pytest.raises(formulations.FormulationError, match="option 'level_damping'"):
         formulations.solve(stack, "reference", level_damping=[0.1, -1.0])
+
+
+def test_near_singular_growth_is_the_target_component_over_sigma():
+    """The exact optimum near an algorithmic singularity grows like
+    ``|u_minᵀ(h_2 − J_2 θ̈_1)| / σ``, not like 1/σ whatever the target: with the
+    near-conflicting row's target shrinking like sin σ (a consistent target) it stays
+    bounded, with a fixed target it is 1/sin σ."""
+    from prioik.hierarchy.families import near_singular
+    for sigma in (1e-2, 1e-4, 1e-6):
+        stack = near_singular(sigma)
+        fixed = np.linalg.norm(formulations.solve(stack, "reference").x)
+        A2 = stack.levels[1].A
+        consistent = TaskStack([stack.levels[0][0],
+                                Task("low", A2, np.array([np.sin(sigma), 0.5]))])
+        x = formulations.solve(consistent, "reference").x
+        assert fixed >= 0.9 / np.sin(sigma)
+        assert abs(x[2] - 1.0) <= 1e-6 and np.linalg.norm(x) <= 2.0

@@ -152,7 +152,7 @@ def test_non_intersecting_bounds_and_bad_options_are_refused():
     with pytest.raises(FormulationError, match="bound_tolerance"):
         prioik.solve(stack, "sns", bound_tolerance=-1.0)
     with pytest.raises(FormulationError, match="max_saturations"):
-        prioik.solve(stack, "sns", max_saturations=1.5)
+        prioik.solve(stack, "sns", max_saturations=-1)
 
 
 def test_caller_stack_is_not_mutated():

@@ -55,4 +55,4 @@ def add_parser(subparsers) -> None:
                    help="validate the sweep file and print its size; run nothing")
     p.add_argument("--quiet", dest="progress", action="store_false",
                    help="no progress bar on stderr")
-    p.set_defaults(func=run_command)
+    p.set_defaults(func=run_command, extras=("sweep", "robots", "plots"))
