@@ -114,7 +114,18 @@ def test_local_cluster_rows_equal_in_process_rows(tmp_path):
     from prioik.benchmarks.sweep.execute import rows_by_id
     b = rows_by_id(tmp_path / "cluster" / "rows.csv")
     assert len(a.rows) == len(plan.runs) == 6 and set(b) == set(a.rows)
-    assert deterministic(b) == deterministic(a.rows)
+    # Floats to 1e-9 relative, everything else exactly: extended_jacobian's compiled
+    # kernel lets LLVM reassociate its reductions (fastmath), so the last bits of a sum
+    # depend on the arrays' alignment, which differs between processes.
+    da, db = deterministic(a.rows), deterministic(b)
+
+    def same(x, y):
+        if isinstance(x, float) and isinstance(y, float):
+            return math.isclose(x, y, rel_tol=1e-9, abs_tol=1e-12)
+        return x == y
+    diff = [(da[k]["label"], c, da[k][c], db[k][c]) for k in da for c in da[k]
+            if not same(da[k][c], db[k][c])]
+    assert not diff, diff
     assert all(r["status"] == "ok" and (r["steps"] == 50 or r["failed"]) for r in b.values())
     assert sum(r["steps"] == 50 for r in b.values()) >= 4
     assert len({r["worker"] for r in b.values()}) == 2           # both workers ran
