@@ -105,6 +105,7 @@ def test_wilson_interval_known_values():
 
 
 # ------------------------------------------------------- cluster == process
+@pytest.mark.slow
 def test_local_cluster_rows_equal_in_process_rows(tmp_path):
     cfg = write_config(tmp_path, formulations='["extended_jacobian", "nullspace", "sns:velocity"]')
     plan = plan_from_config(load_config(cfg))
@@ -136,6 +137,7 @@ def test_local_cluster_rows_equal_in_process_rows(tmp_path):
 
 
 # ------------------------------------------------------------ killed worker
+@pytest.mark.slow
 def test_worker_killed_mid_sweep_every_row_once(tmp_path):
     from distributed import LocalCluster
     cfg = write_config(tmp_path, formulations='["extended_jacobian", "nullspace"]',
@@ -168,6 +170,7 @@ def test_worker_killed_mid_sweep_every_row_once(tmp_path):
 
 
 # ------------------------------------------------------------------ resume
+@pytest.mark.slow
 def test_interrupted_sweep_resumes_running_only_the_missing_rows(tmp_path):
     cfg = write_config(tmp_path, formulations='["extended_jacobian", "nullspace"]', n=3)
     plan = plan_from_config(load_config(cfg))
@@ -199,6 +202,7 @@ def test_interrupted_sweep_resumes_running_only_the_missing_rows(tmp_path):
 
 
 # ------------------------------------------------------ registry variants
+@pytest.mark.slow
 def test_a_registered_toy_plugin_appears_in_a_registry_sweep_and_runs(tmp_path, monkeypatch):
     import types
 
