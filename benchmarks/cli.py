@@ -24,6 +24,7 @@ SUBCOMMAND_MODULES = [
     "prioik.benchmarks.bench",
     "prioik.benchmarks.properties",
     "prioik.benchmarks.validation",
+    "prioik.benchmarks.sweep.command",
     "prioik.benchmarks.fuzz",
 ]
 
@@ -123,6 +124,7 @@ def main(argv: list[str] | None = None) -> int:
     from prioik.hierarchy import TaskStackError
     from .threads import blas_threads
     args = build_parser().parse_args(argv)
+    args.command_line = list(sys.argv[1:] if argv is None else argv)
     try:
         require(*getattr(args, "extras", ()), what="this command")
         with blas_threads(getattr(args, "blas_threads", 1)):

@@ -71,6 +71,8 @@ class FencingScenario(Scenario):
         limits: Parameters of the activation-row form of the joint limits.
         bound_horizon: Horizon ``T`` of the inequality form (s).
         with_posture: Include the lowest ``posture`` level.
+        target: The sword-tip target (world, m); ``None``: the variant's
+            (:data:`TARGETS`). Sweeps (``prioik sweep``) set it.
     """
 
     name = "fencing"
@@ -90,6 +92,7 @@ class FencingScenario(Scenario):
     limits: JointLimitActivation = JointLimitActivation()
     bound_horizon: float = 0.1
     with_posture: bool = True
+    target: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.variant not in VARIANTS:
@@ -107,7 +110,8 @@ class FencingScenario(Scenario):
         com0 = np.array(pin.centerOfMass(r.model, data, r.q0))[:2]
         self.com_offset0 = com0 - 0.5 * (self.left_foot0.translation[:2]
                                          + self.right_foot0.translation[:2])
-        self.target = np.array(TARGETS[self.variant], dtype=float)
+        self.target = np.array(TARGETS[self.variant] if self.target is None else self.target,
+                               dtype=float).reshape(3)
         p0 = self.left_foot0.translation
         s0, s1 = self.step_window
         mid = 0.5 * (s0 + s1)
