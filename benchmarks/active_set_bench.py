@@ -159,6 +159,11 @@ def main(argv=None) -> None:
     p.add_argument("--steps", type=int, default=6, help="consecutive steps per stretch")
     p.add_argument("--repeats", type=int, default=3, help="timing repeats (best of)")
     a = p.parse_args(argv)
+    from prioik.extras import MissingExtraError, require
+    try:
+        require("robots", "qp", what="active_set_bench")
+    except MissingExtraError as exc:
+        raise SystemExit(f"active_set_bench: error: {exc}") from None
     results = run(a.windows, a.steps, a.repeats)
     print(format_table(results))
     for r in results:

@@ -459,6 +459,11 @@ def measure_ik_step(settings: Settings, progress: Progress | None = None
                     ) -> tuple[dict[str, Any], str]:
     """The whole G1 IK step (kinematics + solve) of ``extended_jacobian`` against
     PlaCo's ``KinematicsSolver`` (see :mod:`benchmarks.placo_step`)."""
+    from prioik.extras import MissingExtraError, require
+    try:
+        require("robots", "placo", what="the PlaCo IK step")
+    except MissingExtraError as exc:
+        return {}, str(exc)
     try:
         from .placo_step import ik_step_times
     except ImportError as exc:
@@ -1069,7 +1074,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "loop; 0: leave BLAS's default)")
     p.add_argument("--no-g1", action="store_true",
                    help="random stacks only (no G1 cases, batch, IK-step or control-step runs)")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, extras=("plots",))
 
 
 def _command(args: argparse.Namespace) -> str:

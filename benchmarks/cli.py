@@ -1,4 +1,10 @@
-"""The ``prioik`` command line: one sub-command per module (each has ``add_parser``)."""
+"""The ``prioik`` command line: one sub-command per module (each has ``add_parser``).
+
+Building the parser imports no optional dependency: a sub-command module imports what
+it needs when it runs, and a sub-command that needs extras names them in its defaults
+(``p.set_defaults(extras=("robots", "plots"))``); a missing one is reported in one
+line naming the ``pip install prioik[EXTRA]`` to run (exit status 2).
+"""
 
 from __future__ import annotations
 
@@ -11,6 +17,8 @@ import numpy as np
 #: modules that contribute a sub-command through ``add_parser(subparsers)``
 SUBCOMMAND_MODULES = [
     "prioik.benchmarks.fencing",
+    "prioik.benchmarks.arm",
+    "prioik.benchmarks.results",
     "prioik.benchmarks.compare",
     "prioik.benchmarks.bench",
     "prioik.benchmarks.properties",
@@ -18,9 +26,17 @@ SUBCOMMAND_MODULES = [
 ]
 
 
+def _qp_backends_line() -> str:
+    import importlib.util
+    from prioik.extras import install_hint
+    if importlib.util.find_spec("qpsolvers") is None:
+        return f"QP back-ends: none (qpsolvers is not installed; {install_hint('qp')})"
+    import qpsolvers
+    return f"QP back-ends qpsolvers sees here: {', '.join(qpsolvers.available_solvers)}"
+
+
 def _cmd_list(args: argparse.Namespace) -> int:
     from prioik import formulations
-    import qpsolvers
     print(f"{'formulation':<22} {'available':<10} {'ineq.':<6} {'exact':<6} description")
     for f in formulations.available():
         if f.available:
@@ -34,7 +50,7 @@ def _cmd_list(args: argparse.Namespace) -> int:
                     print(f"{'':<22} {key}: {opt.doc()}")
         else:
             print(f"{f.name:<22} {'no':<10} {'':<6} {'':<6} {f.reason}")
-    print(f"\nQP back-ends qpsolvers sees here: {', '.join(qpsolvers.available_solvers)}")
+    print(f"\n{_qp_backends_line()}")
     return 0
 
 
@@ -100,14 +116,16 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``prioik`` console script."""
+    from prioik.extras import MissingExtraError, require
     from prioik.formulations import FormulationError
     from prioik.hierarchy import TaskStackError
     from .threads import blas_threads
     args = build_parser().parse_args(argv)
     try:
+        require(*getattr(args, "extras", ()), what="this command")
         with blas_threads(getattr(args, "blas_threads", 1)):
             return int(args.func(args) or 0)
-    except (TaskStackError, FormulationError, ValueError, OSError) as exc:
+    except (TaskStackError, FormulationError, MissingExtraError, ValueError, OSError) as exc:
         print(f"prioik {args.command}: error: {exc}", file=sys.stderr)
         return 2
 

@@ -78,15 +78,18 @@ def format_table(rows: list[Row]) -> str:
 
 
 def examples_dir() -> Path:
-    """The example stacks shipped in ``docs/examples``."""
-    return Path(__file__).resolve().parent.parent / "docs" / "examples"
+    """The example stacks shipped with the package (``prioik/hierarchy/examples``,
+    installed as package data: ``prioik compare`` works from a wheel)."""
+    from importlib.resources import files
+    return Path(str(files("prioik.hierarchy") / "examples"))
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("compare", help="solve stacks with every formulation, side by side",
                        description=__doc__.split("\n\n")[0])
     p.add_argument("files", nargs="*", type=Path,
-                   help="task-stack JSON files (default: docs/examples/*.json)")
+                   help="task-stack JSON files (default: the shipped examples, "
+                        "hierarchy/examples/*.json)")
     p.add_argument("--formulations", default="", help="comma-separated names (default: all)")
     p.add_argument("--repeats", type=int, default=20, help="solves per formulation (median)")
     p.set_defaults(func=run)

@@ -66,6 +66,10 @@ class RunSpec:
         armature: Rotor inertia (kg·m²) added to every actuated joint's diagonal of
             ``M(q)`` (pinocchio's ``model.armature``, on a copy of the model; the
             URDF has none). Only formulations that use ``M`` see it.
+        limits: The joint-limit form of the stack (``"activation"``, ``"bounds"``,
+            ``"hard_bounds"``); default: bounds for formulations that take inequality
+            tasks, activation rows for the others.
+        backend: QP back-end of the ``"pink"`` baseline (qpsolvers name).
     """
 
     label: str
@@ -76,8 +80,12 @@ class RunSpec:
     variants: tuple[str, ...] = ("compatible", "incompatible")
     level: str = "acceleration"
     armature: float = 0.0
+    limits: str | None = None
+    backend: str = ""
 
 
+#: the runs that are external libraries, not registry formulations
+EXTERNAL = ("placo_kinematics_solver", "pink")
 #: ``K`` (1/s) of the velocity-level runs
 VELOCITY_GAIN = 20.0
 
@@ -160,9 +168,24 @@ RUNS: tuple[RunSpec, ...] = (
             "DAQP's hierarchical solve, joint limits as bounds"),
     RunSpec("placo", "placo", {}, "PlaCo's algebraic QP through the registry"),
     RunSpec("reference", "reference", {}, "the test oracle (nested SVD)", default=False),
+    RunSpec("sns", "sns", {},
+            "Saturation in the Null Space (Flacco et al.): the q̈ bounds as hard limits "
+            "above every task (level 0), strict priorities, task scaling when a task "
+            "cannot be met within them", limits="hard_bounds"),
+    RunSpec("sns:velocity", "sns", {},
+            "SNS at velocity level (J q̇ = ẋ* + 20 e, the q̇ bounds as level 0)",
+            level="velocity", limits="hard_bounds"),
     RunSpec("placo_kinematics_solver", "placo_kinematics_solver", {},
             "PlaCo's own KinematicsSolver at velocity level (hard contact, soft "
             "weighted tasks, its joint and velocity limits): what users run today"),
+    RunSpec("pink", "pink", {},
+            "pink's solve_ik at velocity level: every task a weighted cost (one decade "
+            "per level), its ConfigurationLimit and VelocityLimit; QP back-end "
+            "quadprog (pink's examples' choice)", backend="quadprog"),
+    RunSpec("pink:daqp", "pink", {},
+            "the same with DAQP, the fastest back-end measured here for pink's QPs "
+            "(G1, 0.2 s: daqp 161, quadprog 173, proxqp 293, osqp 1143 µs per solve)",
+            backend="daqp"),
 )
 
 
@@ -173,8 +196,8 @@ CROSSCHECK_RUNS = {"extended_jacobian": ("compatible",),
                    "extended_jacobian:eq27": ("compatible", "incompatible")}
 
 
-def _runs_by_label() -> dict[str, RunSpec]:
-    return {r.label: r for r in RUNS}
+def _runs_by_label(runs=None) -> dict[str, RunSpec]:
+    return {r.label: r for r in (RUNS if runs is None else runs)}
 
 
 # ------------------------------------------------------------------- one run
@@ -184,7 +207,7 @@ def _formulation_solver(spec: RunSpec, variant: str):
     mod = formulations.get(spec.formulation)
     caps = mod.CAPABILITIES
     opts = dict(spec.options.get(variant, {}))
-    limits = "bounds" if caps.inequalities else "activation"
+    limits = spec.limits or ("bounds" if caps.inequalities else "activation")
 
     solvers = {}          # layout -> prepared solver (the joint-limit rows come and go)
 
@@ -199,38 +222,68 @@ def _formulation_solver(spec: RunSpec, variant: str):
 
 
 def run_one(spec: RunSpec, variant: str, duration: float, dt: float,
-            progress=None):
-    """Simulate one run; returns a :class:`robots.SimulationResult`.
+            progress=None, scenario: str = "fencing"):
+    """Simulate one run of a scenario (:func:`robots.scenario.make`); returns a
+    :class:`robots.SimulationResult` with joint names and ``info`` (scenario,
+    variant, run label, formulation, options) filled, ready to save and replay.
 
     Raises:
         UnsupportedTaskError: the formulation cannot take the scenario's stack.
         FormulationError: it is not available here.
     """
-    from prioik.robots import simulate
-    from prioik.robots.fencing import FencingScenario
-    scenario = FencingScenario(variant)
+    from prioik.robots.scenario import make
+    from prioik.robots.simulate import coordinate_names
+    sc = make(scenario, variant)
     if spec.armature:
-        scenario.robot = scenario.robot.with_armature(spec.armature)
+        sc.robot = sc.robot.with_armature(spec.armature)
+    res = _run(spec, sc, variant, duration, dt, progress)
+    res.q_names, res.v_names = coordinate_names(sc.robot)
+    res.info.update({**sc.info(), "label": spec.label, "formulation": spec.formulation,
+                     "options": spec.options.get(variant, {}), "level": spec.level,
+                     "limits": spec.limits, "armature": spec.armature,
+                     "backend": spec.backend, "dt": dt, "duration": duration})
+    return res
+
+
+def _run(spec: RunSpec, scenario, variant: str, duration: float, dt: float, progress):
+    from prioik.robots import simulate
     if spec.formulation == "placo_kinematics_solver":
         from prioik.benchmarks.placo_baseline import run_placo
-        return run_placo(scenario, duration=duration, dt=dt, progress=progress)
+        return run_placo(scenario, duration=duration, dt=dt, progress=progress,
+                         label=spec.label)
+    if spec.formulation == "pink":
+        from prioik.benchmarks.pink_baseline import run_pink
+        return run_pink(scenario, duration=duration, dt=dt, progress=progress,
+                        solver=spec.backend or "quadprog", label=spec.label)
     solve, dyn, own_tau, limits = _formulation_solver(spec, variant)
     if spec.level == "velocity":
-        if limits != "bounds" or dyn:
+        if limits not in ("bounds", "hard_bounds") or dyn:
             from prioik.hierarchy import UnsupportedTaskError
             raise UnsupportedTaskError("velocity-level runs need a formulation that takes "
                                        "inequality tasks (joint limits as bounds on q̇)",
                                        formulation=spec.formulation, task="joint_limits")
 
-        def build_velocity(state, t):
-            return scenario.velocity_stack(state, t, gain=VELOCITY_GAIN, limits="bounds",
-                                           dt=dt)
+        if hasattr(scenario, "written_step") and limits == "bounds":
+            rows = scenario.velocity_rows(VELOCITY_GAIN, limits=limits, dt=dt)
+
+            def build_velocity(state, t):      # rows written in place: no per-step objects
+                return scenario.written_step(rows, state, t)
+        else:
+            def build_velocity(state, t):
+                return scenario.velocity_stack(state, t, gain=VELOCITY_GAIN, limits=limits,
+                                               dt=dt)
 
         return simulate(scenario.robot, build_velocity, solve, duration=duration, dt=dt,
                         level="velocity", progress=progress)
 
-    def build(state, t):
-        return scenario.acceleration_stack(state, t, limits=limits, dt=dt)
+    if hasattr(scenario, "written_step") and limits in ("activation", "bounds"):
+        rows = scenario.acceleration_rows(limits=limits, dt=dt)
+
+        def build(state, t):                   # rows written in place: no per-step objects
+            return scenario.written_step(rows, state, t)
+    else:
+        def build(state, t):
+            return scenario.acceleration_stack(state, t, limits=limits, dt=dt)
 
     return simulate(scenario.robot, build, solve, duration=duration, dt=dt,
                     needs_dynamics=dyn, torque_from_solution=own_tau, progress=progress)
@@ -241,8 +294,9 @@ def _finite(x: float) -> float | None:
     return x if np.isfinite(x) else None
 
 
-def summarize(res) -> dict[str, Any]:
-    """The summary.json entry of one run (non-finite values become ``null``)."""
+def summarize(res, extra_errors: tuple[str, ...] = ()) -> dict[str, Any]:
+    """The summary.json entry of one run (non-finite values become ``null``); each
+    name in ``extra_errors`` adds ``max_<name>``."""
     def mx(a):
         a = np.asarray(a, dtype=float)
         return _finite(np.nanmax(a)) if a.size and not np.isnan(a).all() else None
@@ -259,16 +313,21 @@ def summarize(res) -> dict[str, Any]:
         "median_step_time_s": _finite(np.median(res.step_time_s)) if res.steps else None,
         "median_solve_time_s": _finite(np.median(res.solve_time_s)) if res.steps else None,
         "failed": bool(res.failed),
+        **{f"max_{e}": mx(res.errors.get(e, [])) for e in extra_errors},
     }
 
 
 def write_csv(path: Path, res) -> None:
-    """Trajectory of one run as CSV (header line, one row per step)."""
+    """Trajectory of one run as CSV (header line, one row per step); the joint columns
+    are named ``q:<joint>``, ``v:<joint>``, ``qdd:<joint>``, ``tau:<joint>``
+    (:func:`robots.simulate.coordinate_names`)."""
     cols = ["t"] + list(res.errors) + ["algorithmic_error", "qdd_norm", "kinematics_time_s",
                                        "solve_time_s", "torque_time_s"]
     nq, nv = res.q.shape[1], res.v.shape[1]
-    cols += [f"q{i}" for i in range(nq)] + [f"v{i}" for i in range(nv)]
-    cols += [f"qdd{i}" for i in range(nv)] + [f"tau{i}" for i in range(nv)]
+    qn = list(res.q_names) if len(res.q_names) == nq else [str(i) for i in range(nq)]
+    vn = list(res.v_names) if len(res.v_names) == nv else [str(i) for i in range(nv)]
+    cols += [f"q:{n}" for n in qn] + [f"v:{n}" for n in vn]
+    cols += [f"qdd:{n}" for n in vn] + [f"tau:{n}" for n in vn]
     table = np.column_stack([res.t] + [res.errors[k] for k in res.errors]
                             + [res.algorithmic_error, np.linalg.norm(res.a, axis=1),
                                res.kinematics_time_s, res.solve_time_s, res.torque_time_s,
@@ -432,72 +491,42 @@ def max_limit_target(variant: str, res, dt: float, every: int = 25) -> float:
 
 
 # ------------------------------------------------------------------- plots
-def plot_variant(out: Path, variant: str, results: dict) -> list[Path]:
-    """Tip error, algorithmic error and ‖q̈‖ over time, one curve per run."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    files = []
-    series = [("tip_error", "sword-tip error to the target (m)",
+def plot_variant(out: Path, variant: str, results: dict, scenario: str = "fencing"
+                 ) -> list[Path]:
+    """Tip error, algorithmic error and ‖q̈‖ over time: grouped panels, one colour per
+    run (:mod:`benchmarks.plots`)."""
+    from prioik.benchmarks.plots import grouped_series
+    tip = "sword-tip" if scenario == "fencing" else "tool"
+    series = [("tip_error", f"{tip} error to the target (m)",
                lambda r: r.errors.get("tip_error_m")),
-              ("algorithmic_error", "algorithmic error ‖e_algorithm‖ (eq. 29)",
-               lambda r: r.algorithmic_error),
+              ("algorithmic_error", "‖e_algorithm‖ (eq. 29)", lambda r: r.algorithmic_error),
               ("qdd", "‖q̈‖ (rad/s², m/s²)", lambda r: np.linalg.norm(r.a, axis=1))]
-    for key, ylabel, get in series:
-        fig, ax = plt.subplots(figsize=(7.5, 4.2))
-        colors = plt.get_cmap("tab20").colors
-        for i, (label, res) in enumerate(results.items()):
-            y = get(res)
-            if y is None or res.steps == 0:
-                continue
-            # values below 1e-16 (round-off of an exact answer) are drawn at 1e-16
-            y = np.maximum(np.abs(np.asarray(y, dtype=float)), 1e-16)
-            ax.semilogy(res.t, y, label=label + (" (failed)" if res.failed else ""), lw=1.2,
-                        color=colors[(2 * i) % 20 + (i // 10) % 2],
-                        ls=("-", "--", ":")[(i // 7) % 3])
-        ax.set_xlabel("time (s)")
-        ax.set_ylabel(ylabel)
-        ax.set_title(f"fencing, {variant} tasks")
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=7, ncol=2)
-        fig.tight_layout()
-        path = out / f"{variant}_{key}.png"
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-        files.append(path)
-    return files
+    return [grouped_series(out / f"{variant}_{key}.png", results, get, ylabel,
+                           f"{scenario}, {variant}: {ylabel}")
+            for key, ylabel, get in series]
 
 
-def plot_step_times(out: Path, summary: dict) -> Path:
+def plot_step_times(out: Path, summary: dict, scenario: str = "fencing") -> Path:
     """Median step time per run and variant (kinematics + solve + torque)."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    labels = sorted({k for v in summary.values() for k in v})
-    fig, ax = plt.subplots(figsize=(7.5, 4.2))
-    width = 0.8 / max(1, len(summary))
-    for i, (variant, runs) in enumerate(summary.items()):
-        vals = [1e3 * (runs.get(lb, {}).get("median_step_time_s") or 0.0) for lb in labels]
-        ax.bar(np.arange(len(labels)) + i * width, vals, width, label=variant)
-    ax.set_xticks(np.arange(len(labels)) + 0.4 - width / 2, labels, rotation=35, ha="right",
-                  fontsize=7)
-    ax.set_ylabel("median step time (ms)")
-    ax.set_title("compute time per control step (kinematics + solve + torque)")
-    ax.legend()
-    fig.tight_layout()
-    path = out / "step_time.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    from prioik.benchmarks.plots import step_times
+    return step_times(out / "step_time.png", summary,
+                      f"{scenario}: compute time per control step (kinematics + solve + torque)")
 
 
 # ------------------------------------------------------------------- table
-def format_table(variant: str, runs: dict[str, dict], phases: dict[str, tuple]) -> str:
-    """One row per run: the summary numbers and the median phase times."""
-    head = (f"{'run':<26} {'tip final':>10} {'alg err':>9} {'CoM max':>9} {'foot max':>9} "
+def format_table(variant: str, runs: dict[str, dict], phases: dict[str, tuple],
+                 scenario: str = "fencing") -> str:
+    """One row per run: the summary numbers and the median phase times (the arm
+    scenario shows its orientation error and velocity-limit violation where fencing
+    shows the CoM and support-foot errors)."""
+    arm = scenario != "fencing"
+    c3, c4 = ("ori max", "JV viol") if arm else ("CoM max", "foot max")
+    k3, k4 = (("max_orientation_error_rad", "max_joint_velocity_violation_rad_s") if arm
+              else ("max_com_error_m", "max_support_foot_error_m"))
+    head = (f"{'run':<26} {'tip final':>10} {'alg err':>9} {c3:>9} {c4:>9} "
             f"{'JL viol':>9} {'max|q̈|':>9} {'kin ms':>7} {'solve ms':>8} {'tau ms':>7} "
             f"{'step ms':>8}  status")
-    lines = [f"fencing — {variant} tasks", head, "-" * len(head)]
+    lines = [f"{scenario} — {variant}{'' if arm else ' tasks'}", head, "-" * len(head)]
 
     def f(x, width=9):
         return f"{x:>{width}.2e}" if x is not None else f"{'—':>{width}}"
@@ -507,8 +536,8 @@ def format_table(variant: str, runs: dict[str, dict], phases: dict[str, tuple]) 
         step = s["median_step_time_s"]
         lines.append(
             f"{label:<26} {f(s['final_tip_error_m'], 10)} "
-            f"{f(s['max_algorithmic_error'])} {f(s['max_com_error_m'])} "
-            f"{f(s['max_support_foot_error_m'])} {f(s['max_joint_limit_violation_rad'])} "
+            f"{f(s['max_algorithmic_error'])} {f(s.get(k3))} "
+            f"{f(s.get(k4))} {f(s['max_joint_limit_violation_rad'])} "
             f"{f(s['max_qdd_norm'])} {1e3 * kin:>7.3f} {1e3 * sol:>8.3f} {1e3 * tau:>7.3f} "
             f"{(1e3 * step if step is not None else float('nan')):>8.3f}  "
             f"{'FAILED' if s['failed'] else 'ok'}")
@@ -516,11 +545,13 @@ def format_table(variant: str, runs: dict[str, dict], phases: dict[str, tuple]) 
 
 
 # ------------------------------------------------------------------ command
-def select_runs(text: str | None) -> tuple[list[RunSpec], list[str]]:
-    """Runs to do and skip messages: every default run whose formulation is available,
-    or the comma-separated labels of ``--formulations``."""
+def select_runs(text: str | None, runs=None) -> tuple[list[RunSpec], list[str]]:
+    """Runs to do and skip messages: every default run (of ``runs``, default
+    :data:`RUNS`) whose formulation is available, or the comma-separated labels of
+    ``--formulations``."""
     from prioik import formulations
-    table = _runs_by_label()
+    runs = RUNS if runs is None else runs
+    table = _runs_by_label(runs)
     if text:
         labels = [s.strip() for s in text.split(",") if s.strip()]
         unknown = [lb for lb in labels if lb not in table]
@@ -529,14 +560,25 @@ def select_runs(text: str | None) -> tuple[list[RunSpec], list[str]]:
                              f"{', '.join(table)}")
         specs = [table[lb] for lb in labels]
     else:
-        specs = [r for r in RUNS if r.default]
+        specs = [r for r in runs if r.default]
     chosen, skipped = [], []
     for spec in specs:
         if spec.formulation == "placo_kinematics_solver":
-            try:
-                import placo  # noqa: F401
-            except ImportError as exc:
-                skipped.append(f"{spec.label}: placo is not installed ({exc})")
+            from prioik.extras import install_hint, missing_distributions
+            if missing_distributions("placo"):
+                skipped.append(f"{spec.label}: placo is not installed; {install_hint('placo')}")
+                continue
+            chosen.append(spec)
+            continue
+        if spec.formulation == "pink":
+            from prioik.benchmarks.pink_baseline import unavailable_reason
+            reason = unavailable_reason()
+            if reason is None:
+                import qpsolvers
+                if spec.backend and spec.backend not in qpsolvers.available_solvers:
+                    reason = f"QP back-end {spec.backend} is not available here"
+            if reason:
+                skipped.append(f"{spec.label}: {reason}")
                 continue
             chosen.append(spec)
             continue
@@ -549,13 +591,36 @@ def select_runs(text: str | None) -> tuple[list[RunSpec], list[str]]:
     return chosen, skipped
 
 
-def run_command(args: argparse.Namespace) -> int:
-    """``prioik fencing``: see the module docstring."""
+def _progress_bar(label: str, variant: str, duration: float, enabled: bool):
+    """A tqdm bar over simulated seconds (rate and ETA), or ``None``."""
+    if not enabled:
+        return None, None
+    from tqdm import tqdm
+    bar = tqdm(total=round(duration, 3), desc=f"[{variant}] {label}", unit="sim s",
+               file=sys.stderr, leave=False, bar_format="{desc}: {n:.1f}/{total:.1f} s "
+               "[{elapsed}<{remaining}, {rate_fmt}]")
+
+    def progress(t):
+        bar.update(round(t - bar.n, 6))
+
+    return bar, progress
+
+
+def run_scenario(args: argparse.Namespace, scenario: str, variants: list[str], runs=None,
+                 extra_errors: tuple[str, ...] = ()) -> tuple[dict, dict, dict, dict]:
+    """Run every selected run of ``runs`` (default :data:`RUNS`) on each variant of
+    ``scenario``; write CSVs, saved runs (``.npz``), plots, the replay pages,
+    ``summary.json`` and ``run_info.json`` into ``args.out``.
+
+    Returns:
+        ``(summary, meta, pngs, results)``: ``results[variant][label]`` is the
+        :class:`robots.SimulationResult`.
+    """
+    from prioik.benchmarks.replay import write_replay
     from prioik.hierarchy import UnsupportedTaskError
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    variants = ["compatible", "incompatible"] if args.variant == "both" else [args.variant]
-    specs, skipped = select_runs(args.formulations)
+    specs, skipped = select_runs(args.formulations, runs)
     for msg in skipped:
         print(f"skipping {msg}", file=sys.stderr)
     summary: dict[str, dict] = {}
@@ -564,9 +629,14 @@ def run_command(args: argparse.Namespace) -> int:
     pngs: dict[str, list[Path]] = {}
     skipped_runs: list[str] = list(skipped)
     messages: dict[str, dict[str, str]] = {}
-    diagnostics: dict[str, Any] = {"standing_sigmas": standing_sigmas(args.dt)}
-    print("projected σ_min/‖A_i‖_F per level at the standing posture (incompatible): "
-          + ", ".join(f"{k} {v:.3g}" for k, v in diagnostics["standing_sigmas"].items()))
+    replays: dict[str, str] = {}
+    all_results: dict[str, dict] = {}
+    fencing = scenario == "fencing"
+    diagnostics: dict[str, Any] = {}
+    if fencing:
+        diagnostics["standing_sigmas"] = standing_sigmas(args.dt)
+        print("projected σ_min/‖A_i‖_F per level at the standing posture (incompatible): "
+              + ", ".join(f"{k} {v:.3g}" for k, v in diagnostics["standing_sigmas"].items()))
     wall0 = time.perf_counter()
     for variant in variants:
         results = {}
@@ -576,40 +646,47 @@ def run_command(args: argparse.Namespace) -> int:
             if variant not in spec.variants:
                 continue
             t0 = time.perf_counter()
-
-            def progress(t, _label=spec.label, _variant=variant):
-                print(f"  [{_variant}] {_label}: t = {t:.1f} / {args.duration:.1f} s",
-                      file=sys.stderr, flush=True)
-
+            bar, progress = _progress_bar(spec.label, variant, args.duration, args.progress)
             try:
-                res = run_one(spec, variant, args.duration, args.dt,
-                              progress=progress if args.progress else None)
+                res = run_one(spec, variant, args.duration, args.dt, progress=progress,
+                              scenario=scenario)
             except UnsupportedTaskError as exc:
                 msg = f"{spec.label} ({variant}): cannot take the stack: {exc}"
                 print(f"skipping {msg}", file=sys.stderr)
                 skipped_runs.append(msg)
                 continue
+            finally:
+                if bar is not None:
+                    bar.close()
             results[spec.label] = res
-            summary[variant][spec.label] = summarize(res)
+            summary[variant][spec.label] = summarize(res, extra_errors)
             phases[variant][spec.label] = tuple(
                 float(np.median(x)) if res.steps else float("nan")
                 for x in (res.kinematics_time_s, res.solve_time_s, res.torque_time_s))
-            write_csv(out / f"{variant}_{spec.label.replace(':', '_')}.csv", res)
+            stem = f"{variant}_{spec.label.replace(':', '_')}"
+            write_csv(out / f"{stem}.csv", res)
+            res.save(out / f"{stem}.npz")
             if res.failed:
                 messages.setdefault(variant, {})[spec.label] = res.message
             print(f"[{variant}] {spec.label}: {res.steps} steps in "
                   f"{time.perf_counter() - t0:.1f} s"
                   f"{' — FAILED: ' + res.message if res.failed else ''}",
                   file=sys.stderr, flush=True)
-            if variant in CROSSCHECK_RUNS.get(spec.label, ()) and not args.no_crosscheck:
+            if (fencing and variant in CROSSCHECK_RUNS.get(spec.label, ())
+                    and not args.no_crosscheck):
                 c = crosscheck(variant, res, args.dt,
                                run_options=spec.options.get(variant, {}))
                 if c is not None:
                     checks.setdefault(variant, {})[spec.label] = c
-        pngs[variant] = plot_variant(out, variant, results) if results else []
-        print(format_table(variant, summary[variant], phases[variant]))
+        all_results[variant] = results
+        pngs[variant] = plot_variant(out, variant, results, scenario) if results else []
+        if results:
+            html = write_replay(out / f"{variant}_replay.html", results,
+                                title=f"{scenario}, {variant}")
+            replays[variant] = html.name
+        print(format_table(variant, summary[variant], phases[variant], scenario))
         print()
-        if variant == "incompatible" and "extended_jacobian" in results:
+        if fencing and variant == "incompatible" and "extended_jacobian" in results:
             trace = sigma_trace(variant, results["extended_jacobian"], args.dt)
             diagnostics["sigma_trace"] = trace
             print("extended_jacobian (eq. 18), incompatible: projected σ_min/‖A_i‖_F "
@@ -619,22 +696,38 @@ def run_command(args: argparse.Namespace) -> int:
                       f"{row['lowest_level']} {row['sigma_lowest']:.3e}  "
                       f"‖q̈‖ = {row['qdd_norm']:.3e}  joint-limit rows {row['limit_rows']} "
                       f"(max |h| {row['limit_target']:.3g})")
-        if variant == "incompatible" and "extended_jacobian:step_bound" in results:
+        if (fencing and variant == "incompatible"
+                and "extended_jacobian:step_bound" in results):
             top = max_limit_target(variant, results["extended_jacobian:step_bound"], args.dt)
             diagnostics["max_limit_target"] = top
             print(f"largest joint-limit row target along extended_jacobian:step_bound: "
                   f"{top:.3g} rad/s²")
-    pngs["step_time"] = [plot_step_times(out, summary)]
+    pngs["step_time"] = [plot_step_times(out, summary, scenario)]
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
-    meta = {"duration_s": args.duration, "dt_s": args.dt, "variants": variants,
+    meta = {"scenario": scenario, "duration_s": args.duration, "dt_s": args.dt,
+            "variants": variants,
             "runs": {s.label: {"formulation": s.formulation, "options": s.options,
                                "note": s.note} for s in specs},
             "skipped": skipped_runs, "crosscheck": checks, "phases": phases,
-            "messages": messages, "diagnostics": diagnostics,
-            "unifying_diagnostic": (unifying_diagnostic(args.dt)
-                                    if any(sp.formulation == "unifying" for sp in specs)
-                                    else None),
+            "messages": messages, "replays": replays, "diagnostics": diagnostics,
             "wall_time_s": time.perf_counter() - wall0}
+    (out / "run_info.json").write_text(json.dumps(meta, indent=2, default=str) + "\n")
+    print(f"wrote {out / 'summary.json'}, {sum(len(v) for v in pngs.values())} plots and "
+          f"{len(replays)} replay page(s) in {time.perf_counter() - wall0:.0f} s",
+          file=sys.stderr)
+    return summary, meta, pngs, all_results
+
+
+def run_command(args: argparse.Namespace) -> int:
+    """``prioik fencing``: see the module docstring."""
+    variants = ["compatible", "incompatible"] if args.variant == "both" else [args.variant]
+    summary, meta, pngs, _ = run_scenario(args, "fencing", variants)
+    specs = meta["runs"]
+    meta["unifying_diagnostic"] = (unifying_diagnostic(args.dt)
+                                   if any(r["formulation"] == "unifying"
+                                          for r in specs.values()) else None)
+    checks = meta["crosscheck"]
+    out = Path(args.out)
     (out / "crosscheck.json").write_text(json.dumps(checks, indent=2) + "\n")
     (out / "run_info.json").write_text(json.dumps(meta, indent=2, default=str) + "\n")
     if meta["unifying_diagnostic"]:
@@ -645,8 +738,6 @@ def run_command(args: argparse.Namespace) -> int:
     for variant, by_label in checks.items():
         for label, c in by_label.items():
             print(f"cross-check [{variant}] {label} vs cascaded_qp: {c}")
-    print(f"wrote {out / 'summary.json'} and {sum(len(v) for v in pngs.values())} plots "
-          f"in {time.perf_counter() - wall0:.0f} s", file=sys.stderr)
     if args.doc:
         path = write_reproduction(Path(args.doc), summary, meta, pngs)
         print(f"wrote {path}", file=sys.stderr)
@@ -674,8 +765,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--no-crosscheck", action="store_true",
                    help="skip the extended_jacobian vs cascaded_qp q̈ comparison")
     p.add_argument("--quiet", dest="progress", action="store_false",
-                   help="no per-second progress on stderr")
-    p.set_defaults(func=run_command)
+                   help="no progress bars on stderr")
+    p.set_defaults(func=run_command, extras=("robots", "plots"))
 
 
 # ------------------------------------------------------------ reproduction page

@@ -7,7 +7,7 @@ target at velocity level: two strict levels, the hand position (3 rows,
 same states (PlaCo's trajectory), median of several interleaved rounds:
 
 * prioik, prepared: ``KinematicState(drift=False)``, the rows written in place
-  (``TaskRows.frame_position``, ``posture``, ``velocity_targets``) and a solver prepared
+  (``TaskWriter.frame_position``, ``posture``, ``targets``) and a solver prepared
   once (``solver.solve(rows.data)``) — the path a control loop runs;
 * prioik, one-off: the same kinematics, ``Task`` objects and ``prioik.solve``;
 * PlaCo: ``update_kinematics`` + ``KinematicsSolver.solve(True)`` with a soft position
@@ -60,7 +60,7 @@ def panda_step_times(steps: int = 300, rounds: int = 7) -> dict[str, Any]:
 
     import prioik
     from prioik.hierarchy import Task, TaskStack, relative_distance
-    from prioik.robots import KinematicState, TaskRows, load
+    from prioik.robots import KinematicState, TaskWriter, load
     from prioik.robots.models import example_robot_data_dir
 
     robot = load("panda")
@@ -92,13 +92,15 @@ def panda_step_times(steps: int = 300, rounds: int = 7) -> dict[str, Any]:
 
     data = model.createData()
     zero = np.zeros(nv)
-    rows = TaskRows(robot, [[("hand", 3)], [("posture", nv)]], GAINS)
-    prepared = prioik.prepare(rows.data.layout, "extended_jacobian")
+    rows = TaskWriter(robot, "velocity")
+    rows.add_frame_position("hand", hand, gain=GAINS["hand"], level=0)
+    rows.add_posture("posture", gain=GAINS["posture"], level=1)
+    prepared = prioik.prepare(rows.layout, "extended_jacobian")
     xs: dict[str, list] = {"prepared": [None] * steps, "one-off": [None] * steps}
 
     def prepared_step(i: int) -> None:
         state = KinematicState(robot, states[i], zero, data, drift=False)
-        rows.frame_position(state, "hand", hand, HAND_TARGET)
+        rows.frame_position(state, "hand", HAND_TARGET)
         rows.posture(state, "posture", q0)
         xs["prepared"][i] = prepared.solve(rows.velocity_targets()).x
 
@@ -138,7 +140,7 @@ def panda_step_times(steps: int = 300, rounds: int = 7) -> dict[str, Any]:
         f"{GAINS['hand']:g}) strictly above the posture (K_p = {GAINS['posture']:g}), no "
         "limits, at PlaCo's own states. Each path in its own loop, "
         f"{rounds} interleaved rounds, the fastest round's median: prioik prepared "
-        "(`KinematicState(drift=False)` + `TaskRows` writers + `solver.solve(data)`), "
+        "(`KinematicState(drift=False)` + `TaskWriter` writers + `solver.solve(data)`), "
         "prioik one-off (`Task`/`TaskStack` + `prioik.solve`), PlaCo "
         "(`update_kinematics` + `KinematicsSolver.solve`, soft position and joints "
         "tasks). The two prioik paths agree to "

@@ -18,137 +18,104 @@ fixed link added to a copy of the G1 URDF (``sword_tip``, 0.5 m along
 ``left_rubber_hand``), loaded from text; no file is written.
 
 The recorded quantities are those of :func:`robots.simulate`, computed with the
-toolkit's own kinematics on PlaCo's configurations: ``q̇ = Δq / dt``,
-``q̈ = (q̇_{k+1} − q̇_k) / dt`` and ``τ`` by RNEA. The algorithmic error (eq. 29) is not
-defined for a weighted soft hierarchy and is recorded as NaN.
+toolkit's own kinematics on PlaCo's configurations (:mod:`benchmarks.external`).
+The same runner takes any :class:`robots.scenario.Scenario` (the arm scenario:
+hard tool position, soft hand orientation and posture).
 """
 
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 import numpy as np
-import pinocchio as pin
 
-SOFT_WEIGHTS = {"left_foot": 1.0, "sword_tip": 1.0, "posture": 1e-4}
-
-
-def _sword_urdf(urdf_path: str, parent: str, length: float) -> str:
-    """The URDF text with a ``sword_tip`` link fixed ``length`` along ``parent``'s x."""
-    text = Path(urdf_path).read_text()
-    extra = (f'  <link name="sword_tip"/>\n'
-             f'  <joint name="sword_tip_joint" type="fixed">\n'
-             f'    <parent link="{parent}"/>\n    <child link="sword_tip"/>\n'
-             f'    <origin xyz="{length} 0 0" rpy="0 0 0"/>\n  </joint>\n')
-    end = text.rindex("</robot>")
-    return text[:end] + extra + text[end:]
-
-
-def run_placo(scenario, *, duration: float, dt: float, progress=None):
+def run_placo(scenario, *, duration: float, dt: float, progress=None,
+              label: str = "placo_kinematics_solver"):
     """Run the scenario with ``placo.KinematicsSolver``; returns a
     :class:`robots.SimulationResult`.
 
+    The tasks come from :meth:`robots.scenario.Scenario.baseline_tasks` (``hard``
+    ones as PlaCo hard tasks, the others soft with their ``weight``), the URDF from
+    :meth:`~robots.scenario.Scenario.urdf_text`. PlaCo always models a floating base;
+    for a fixed-base robot it is masked (``mask_fbase(True)``) at the identity.
+
     Args:
-        scenario: A :class:`robots.fencing.FencingScenario` (its G1 model).
+        scenario: A :class:`robots.scenario.Scenario`.
         duration: Simulated seconds.
         dt: Control step (s).
         progress: Called with the simulated time every 250 steps.
     """
     import placo
 
-    from prioik.robots import KinematicState, SimulationResult
-    from prioik.robots.fencing import SWORD_LENGTH
+    from prioik.benchmarks.external import record
     from prioik.robots.models import example_robot_data_dir
 
     robot = scenario.robot
-    hand = robot.frames["left_hand"]
-    urdf = _sword_urdf(robot.source, hand, SWORD_LENGTH)
     # meshes are ``package://example-robot-data/...``: resolved from the share folder
     share = example_robot_data_dir().parent.parent
-    pw = placo.RobotWrapper(str(share), placo.Flags.ignore_collisions, urdf)
-    names = list(robot.model.names)[2:]
+    pw = placo.RobotWrapper(str(share), placo.Flags.ignore_collisions, scenario.urdf_text())
+    names = list(robot.model.names)[2 if robot.floating_base else 1:]
     if list(pw.joint_names()) != names:
-        raise RuntimeError("PlaCo's joint order differs from pinocchio's for the G1")
-    pw.state.q = robot.q0.copy()
+        raise RuntimeError(f"PlaCo's joint order differs from pinocchio's for {robot.name}")
+    nb_q = 0 if robot.floating_base else 7          # PlaCo's own base coordinates
+    nb_v = 0 if robot.floating_base else 6
+
+    def to_placo(q):
+        if robot.floating_base:
+            return q.copy()
+        return np.concatenate([[0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0], q])
+
+    pw.state.q = to_placo(robot.q0)
     pw.update_kinematics()
     solver = placo.KinematicsSolver(pw)
-    solver.mask_fbase(False)
+    solver.mask_fbase(not robot.floating_base)
     solver.enable_joint_limits(True)
     solver.enable_velocity_limits(True)
     solver.dt = dt
-    support = solver.add_frame_task(robot.frames["right_foot"],
-                                    scenario.right_foot0.homogeneous)
-    support.configure("support_foot", "hard", 1.0, 1.0)
-    com0 = np.array(pw.com_world())
-    com = solver.add_com_task(com0)
-    com.configure("com", "hard", 1.0)
-    com.mask.set_axises("xy")
-    foot = solver.add_frame_task(robot.frames["left_foot"], scenario.left_foot0.homogeneous)
-    foot.configure("left_foot", "soft", SOFT_WEIGHTS["left_foot"], SOFT_WEIGHTS["left_foot"])
-    tip = solver.add_position_task("sword_tip", scenario.tip0.copy())
-    tip.configure("sword_tip", "soft", SOFT_WEIGHTS["sword_tip"])
-    joints = solver.add_joints_task()
-    q_ref = {n: float(robot.q0[robot.model.joints[robot.model.getJointId(n)].idx_q])
-             for n in names}
-    joints.set_joints(q_ref)
-    joints.configure("posture", "soft", SOFT_WEIGHTS["posture"])
+    setters = []
+    for spec in scenario.baseline_tasks():
+        prio = "hard" if spec.hard else "soft"
+        target = scenario.baseline_target(spec.name, 0.0)
+        if spec.kind == "frame":
+            task = solver.add_frame_task(spec.frame, np.asarray(target))
+            task.configure(spec.name, prio, spec.weight, spec.weight)
+        elif spec.kind == "position":
+            task = solver.add_position_task(spec.frame, np.asarray(target))
+            task.configure(spec.name, prio, spec.weight)
+        elif spec.kind == "orientation":
+            task = solver.add_orientation_task(spec.frame, np.asarray(target))
+            task.configure(spec.name, prio, spec.weight)
+        elif spec.kind == "com_xy":
+            com0 = np.array(pw.com_world())
+            task = solver.add_com_task(com0)
+            task.configure(spec.name, prio, spec.weight)
+            task.mask.set_axises("xy")
+            task.com0 = com0
+        elif spec.kind == "posture":
+            task = solver.add_joints_task()
+            q_ref = np.asarray(target)
+            task.set_joints({n: float(q_ref[robot.model.joints[robot.model.getJointId(n)].idx_q])
+                             for n in names})
+            task.configure(spec.name, prio, spec.weight)
+        else:  # pragma: no cover - a scenario declaring a kind this module lacks
+            raise ValueError(f"PlaCo baseline: no mapping for task kind {spec.kind!r}")
+        setters.append((spec, task))
 
-    model = robot.model
-    data = model.createData()
-    dyn = model.createData()
-    steps = int(round(duration / dt))
-    q = robot.q0.copy()
-    v = np.zeros(robot.nv)
-    rows = {k: [] for k in ("t", "q", "v", "a", "tau", "tk", "ts", "tt")}
-    errors: dict[str, list] = {}
-    statuses, failed, message = [], False, ""
-    for k in range(steps):
-        t = k * dt
+    def step(q, v, t):
         t0 = time.perf_counter()
         pw.update_kinematics()
-        ref_foot = scenario.left_foot_ref(t + dt)
-        T = np.array(scenario.left_foot0.homogeneous)
-        T[:3, 3] = ref_foot.x
-        foot.T_world_frame = T
-        c = com0.copy()
-        c[:2] = scenario.com_ref(t + dt).x
-        com.target_world = c
-        tip.target_world = scenario.tip_ref(t + dt).x
+        for spec, task in setters:
+            if spec.kind == "frame":
+                task.T_world_frame = np.asarray(scenario.baseline_target(spec.name, t + dt))
+            elif spec.kind == "position":
+                task.target_world = np.asarray(scenario.baseline_target(spec.name, t + dt))
+            elif spec.kind == "com_xy":
+                c = task.com0.copy()
+                c[:2] = scenario.baseline_target(spec.name, t + dt)
+                task.target_world = c
         t1 = time.perf_counter()
-        try:
-            dq = np.array(solver.solve(True))
-        except RuntimeError as exc:       # PlaCo raises on an infeasible QP
-            failed, message = True, f"t = {t:.3f} s: PlaCo: {exc}"
-            break
+        dq = np.array(solver.solve(True))           # raises RuntimeError when infeasible
         t2 = time.perf_counter()
-        v_next = dq / dt
-        q_next = np.array(pw.state.q)
-        if not (np.isfinite(v_next).all() and np.isfinite(q_next).all()):
-            failed, message = True, f"t = {t:.3f} s: PlaCo returned non-finite values"
-            break
-        a = (v_next - v) / dt
-        t2b = time.perf_counter()
-        tau = np.array(pin.rnea(model, dyn, q, v, a))
-        t3 = time.perf_counter()
-        state = KinematicState(robot, q, v, data)
-        step_errors = scenario.errors(state, t, scenario.terms(state, t))
-        for name, value in step_errors.items():
-            errors.setdefault(name, []).append(value)
-        for key, val in (("t", t), ("q", q.copy()), ("v", v.copy()), ("a", a), ("tau", tau),
-                         ("tk", t1 - t0), ("ts", t2 - t1), ("tt", t3 - t2b)):
-            rows[key].append(val)
-        statuses.append("approximate")
-        q, v = q_next, v_next
-        if progress is not None and (k + 1) % 250 == 0:
-            progress(t + dt)
+        return np.array(pw.state.q)[nb_q:], dq[nb_v:] / dt, t1 - t0, t2 - t1
 
-    def arr(key, width):
-        return np.array(rows[key], dtype=float).reshape(-1, width)
-
-    return SimulationResult(np.array(rows["t"], dtype=float), arr("q", robot.nq),
-                            arr("v", robot.nv), arr("a", robot.nv), arr("tau", robot.nv),
-                            {k: np.array(v_, dtype=float) for k, v_ in errors.items()},
-                            np.full(len(rows["t"]), np.nan), np.array(rows["tk"]),
-                            np.array(rows["ts"]), np.array(rows["tt"]), statuses, failed,
-                            message)
+    return record(scenario, step, duration=duration, dt=dt, progress=progress, label=label)

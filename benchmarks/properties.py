@@ -568,10 +568,11 @@ def write_report(out: Path, n_stacks: int = 50) -> str:
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("properties",
                        help="measure algorithmic singularity and algorithmic error "
-                            "(writes docs/properties.md)",
+                            "(writes results/properties.md unless --out says otherwise)",
                        description=__doc__.split("\n\n")[0])
-    p.add_argument("--out", type=Path, default=Path("docs/properties.md"),
-                   help="Markdown file to write (default: docs/properties.md)")
+    p.add_argument("--out", type=Path, default=Path("results/properties.md"),
+                   help="Markdown file to write (default: results/properties.md; the "
+                        "repository's page is regenerated with --out docs/properties.md)")
     p.add_argument("--stacks", type=int, default=50,
                    help="seeded stacks per family for the algorithmic-error table")
     p.set_defaults(func=run)

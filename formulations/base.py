@@ -7,6 +7,8 @@ from typing import Any
 
 import numpy as np
 
+from prioik.hierarchy import DEFAULT_CERTIFICATE_TOL, check_lexicographic
+
 #: Values of :attr:`Solution.status`.
 STATUSES = ("optimal", "approximate", "failed")
 
@@ -91,3 +93,56 @@ class Solution:
     def ok(self) -> bool:
         """``True`` unless the status is ``"failed"``."""
         return self.status != "failed"
+
+    def __repr__(self) -> str:
+        x = np.asarray(self.x)
+        head = np.array2string(x[:4], precision=4, separator=", ")[1:-1]
+        more = f", … ({x.size} values)" if x.size > 4 else ""
+        res = np.array2string(np.asarray(self.residuals), precision=2, separator=", ",
+                              threshold=8)
+        return (f"Solution({self.formulation!r}, {self.status}, x=[{head}{more}], "
+                f"residuals={res}, {1e6 * self.time_s:.1f} µs)")
+
+    def _repr_html_(self) -> str:
+        from html import escape
+        rows = [("formulation", self.formulation), ("status", self.status),
+                ("x", f"{np.asarray(self.x).size} values, ‖x‖ = "
+                      f"{float(np.linalg.norm(self.x)):.4g}"),
+                ("residuals", np.array2string(np.asarray(self.residuals), precision=3)),
+                ("time", f"{1e6 * self.time_s:.1f} µs"),
+                ("options", repr(self.options)), ("info", ", ".join(self.info) or "—")]
+        body = "".join(f"<tr><th style='text-align:left'>{escape(k)}</th>"
+                       f"<td>{escape(v)}</td></tr>" for k, v in rows)
+        return f"<table><caption>Solution</caption>{body}</table>"
+
+def certify(stack, outcome: Outcome, metric=None, tol: float | None = None) -> Outcome:
+    """Keep ``status="optimal"`` only when ``outcome.x`` passes the certificate.
+
+    The certificate is :func:`hierarchy.check_lexicographic` with the minimum-norm
+    tie-break (``xᵀ W x`` with ``metric``) at ``tol`` (default
+    :data:`hierarchy.DEFAULT_CERTIFICATE_TOL`). An answer that fails becomes
+    ``"approximate"``, with ``info["fault_level"]`` (``k`` for the tie-break),
+    ``info["fault_tasks"]`` and ``info["message"]``; ``info["certificate"]`` records the
+    check either way. Other statuses are returned unchanged.
+    """
+    if outcome.status != "optimal":
+        return outcome
+    tol = DEFAULT_CERTIFICATE_TOL if tol is None else float(tol)
+    x = np.asarray(outcome.x, dtype=np.float64).reshape(-1)
+    if x.shape != (stack.n,) or not np.isfinite(x).all():
+        return outcome
+    report = check_lexicographic(stack, x, tol=tol, minimum_norm=True, metric=metric)
+    bad = report.first_failure
+    outcome.info["certificate"] = {"ok": report.ok, "tol": tol,
+                                   "worst_relative": report.worst_relative,
+                                   "fault_level": None if bad is None else bad.level}
+    if bad is not None:
+        outcome.status = "approximate"
+        outcome.info["fault_level"] = bad.level
+        outcome.info["fault_tasks"] = list(bad.tasks)
+        what = ("the minimum-norm tie-break" if bad.tasks == ("minimum-norm",)
+                else f"level {bad.level} ({', '.join(bad.tasks)})")
+        outcome.info["message"] = (f"the answer fails the lexicographic certificate at "
+                                   f"{what}: KKT residual {bad.relative:.1e} relative > "
+                                   f"tol {tol:g}")
+    return outcome

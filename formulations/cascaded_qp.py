@@ -85,6 +85,7 @@ import scipy.sparse as spa
 from prioik.hierarchy import DEFAULT_RCOND, TaskStack
 
 from .base import Capabilities, FormulationError, Outcome
+from .base import certify as certify_outcome
 from .options import Option, dictionary, per_level_nonnegative, positive_semidefinite, rcond_option
 
 NAME = "cascaded_qp"
@@ -138,6 +139,8 @@ OPTIONS = {
     "infeasibility_tol": Option(1e-7, "float", "an inequality task counts as violated above "
                                 "this (relative to max(1, ‖A_t‖_F‖x‖))", minimum=0.0,
                                 exclusive_minimum=True),
+    "certify": Option(True, "bool", "'optimal' only when the answer passes check_lexicographic "
+                      "(DEFAULT_CERTIFICATE_TOL, minimum-norm tie-break), else 'approximate'"),
 }
 
 FIXINGS = ("basis", "rows", "nullspace")
@@ -218,14 +221,20 @@ class LevelRows:
 
 
 def level_rows(level) -> LevelRows:
-    """Split a :class:`~hierarchy.Level` into weighted equality and inequality rows."""
+    """Split a :class:`~hierarchy.Level` into weighted equality and inequality rows.
+
+    Inequality rows without a finite bound, and zero rows (whose violation no ``x``
+    changes), are left out.
+    """
     n = level[0].n
     A_in, lo, up, w, names = [], [], [], [], []
     for t in level:
         if t.is_equality:
             continue
         tl, tu = t.bounds()
-        keep = np.isfinite(tl) | np.isfinite(tu)
+        # a zero row has a fixed violation (0 ∉ [l, u] stays violated whatever x is):
+        # it stays in the level's ‖w_i‖² but not in the QP, where normalising it gave NaN
+        keep = (np.isfinite(tl) | np.isfinite(tu)) & np.any(t.A != 0.0, axis=1)
         A_in.append(t.A[keep])
         lo.append(tl[keep])
         up.append(tu[keep])
@@ -635,7 +644,8 @@ def run_cascade(stack: TaskStack, solve_qp, *, fixing: str, metric, rcond: float
     for j, level in enumerate(stack.levels):
         rows = level_rows(level)
         if rows.A_eq.shape[0] == 0 and rows.A_in.shape[0] == 0:
-            info["levels"].append({"level": j, "skipped": "no finite bound"})
+            info["levels"].append({"level": j, "skipped": "no row with a finite bound that "
+                                                          "x can change"})
             fixed.tasks += list(level.names)
             continue
         scale = float(rows.A_eq.shape[0] + rows.A_in.shape[0])   # ‖A‖_F² after scaling
@@ -665,7 +675,7 @@ def run_cascade(stack: TaskStack, solve_qp, *, fixing: str, metric, rcond: float
 def solve(stack: TaskStack, *, solver: str, tolerance: float | None, backend_options: dict
           | None, fixing: str, metric, rcond: float, regularization: float | None,
           on_infeasible: str, infeasibility_tol: float, margin: float, fix_active: bool,
-          level_damping) -> Outcome:
+          level_damping, certify: bool) -> Outcome:
     """Solve the stack by one QP per level plus a regularisation level.
 
     See the module docstring; every option is listed in :data:`OPTIONS`.
@@ -690,4 +700,6 @@ def solve(stack: TaskStack, *, solver: str, tolerance: float | None, backend_opt
                       margin=float(margin), fix_active=bool(fix_active),
                       level_damping=level_damping)
     out.info["settings"] = settings
+    if certify and level_damping is None:
+        out = certify_outcome(stack, out, metric=metric)
     return out

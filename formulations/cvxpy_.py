@@ -32,6 +32,7 @@ import numpy as np
 from prioik.hierarchy import DEFAULT_RCOND, TaskStack
 
 from .base import Capabilities, FormulationError, Outcome
+from .base import certify as certify_outcome
 from .options import Option, dictionary, positive_semidefinite, rcond_option
 from .cascaded_qp import (ACTIVE_TOL, MULTIPLIER_TOL, Fixed, _unit_rows, level_rows,
                           record_level, scaled_level)
@@ -70,6 +71,8 @@ OPTIONS = {
     "infeasibility_tol": Option(1e-7, "float", "an inequality task counts as violated above "
                                 "this (relative to max(1, ‖A_t‖_F‖x‖))", minimum=0.0,
                                 exclusive_minimum=True),
+    "certify": Option(True, "bool", "'optimal' only when the answer passes check_lexicographic "
+                      "(DEFAULT_CERTIFICATE_TOL, minimum-norm tie-break), else 'approximate'"),
 }
 
 
@@ -105,7 +108,7 @@ def _solve(problem: cp.Problem, solver: str, settings: dict) -> tuple[str, str]:
 
 def solve(stack: TaskStack, *, solver: str, backend_options: dict | None, fixing: str,
           metric, rcond: float, margin: float, on_infeasible: str, infeasibility_tol:
-          float) -> Outcome:
+          float, certify: bool) -> Outcome:
     """Solve the stack level by level with cvxpy; see the module docstring."""
     available = backends()
     if not isinstance(solver, str) or solver.upper() not in available:
@@ -199,5 +202,6 @@ def solve(stack: TaskStack, *, solver: str, backend_options: dict | None, fixing
     if status == cp.OPTIMAL_INACCURATE:
         info["inaccurate_levels"].append(len(stack))
     info["levels"].append({"level": "regularisation", "status": status})
-    return Outcome(np.asarray(x.value, dtype=np.float64),
-                   "approximate" if info["inaccurate_levels"] else "optimal", info)
+    out = Outcome(np.asarray(x.value, dtype=np.float64),
+                  "approximate" if info["inaccurate_levels"] else "optimal", info)
+    return certify_outcome(stack, out, metric=metric) if certify else out

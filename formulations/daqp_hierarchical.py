@@ -30,15 +30,16 @@ Each level is also divided by its RMS row norm (same minimiser; DAQP's absolute
 tolerances become relative to each level: tasks scaled by 1e-6 or 1e4 otherwise
 made DAQP report infeasibility on 42 of 100 ``degenerate`` stacks, 6 after).
 
-``status`` (``check=True``): ``"optimal"`` when DAQP exits with flag 1 or 2 and no
-level's active rows depend on those above (:func:`dependent_active_levels`: the
-count was right, so the answer is the lexicographic optimum up to DAQP's
-tolerances) or, for equality stacks with such a level, when the answer passes
-:func:`hierarchy.check_lexicographic` at ``CHECK_TOL`` (``info["verified"]``);
-``"approximate"`` otherwise, with ``info["conflicting_levels"]`` and a message
-(the levels above the first conflicting one are exact); ``"failed"`` on a
-negative exit flag (``info["message"]``, and for infeasibility the hard inequality
-tasks involved). ``check=False`` skips both tests (``"optimal"`` on flags 1/2).
+``status`` (``check=True``): ``"optimal"`` when DAQP exits with flag 1 or 2 and the
+answer passes the lexicographic certificate (:func:`hierarchy.check_lexicographic`
+with the minimum-norm tie-break at ``DEFAULT_CERTIFICATE_TOL``, see
+:func:`formulations.base.certify`); ``"approximate"`` otherwise, with the level at
+fault in ``info["fault_level"]`` and ``info["conflicting_levels"]`` (levels whose active
+rows depend on those above, where DAQP's count goes wrong: the usual cause);
+``"failed"`` on a negative exit flag (``info["message"]``, and for infeasibility the
+hard inequality tasks involved). ``check=False`` skips the certificate (``"optimal"``
+on flags 1/2). Zero inequality rows (``0·x ∈ [2, 5]``: a fixed violation) are left
+out of DAQP's problem, which would report them infeasible.
 
 ``primal_tol`` defaults to 1e-10 (DAQP's default 1e-6 gives ~1e-7…1e-6 relative
 errors on compatible stacks; 1e-10 gives ≤ 4e-10).
@@ -52,9 +53,9 @@ from typing import Any
 import daqp
 import numpy as np
 
-from prioik.hierarchy import DEFAULT_RCOND, TaskStack, check_lexicographic, nested_null_spaces
+from prioik.hierarchy import DEFAULT_RCOND, TaskStack
 
-from .base import Capabilities, FormulationError, Outcome
+from .base import Capabilities, FormulationError, Outcome, certify
 from .options import Option, dictionary, rcond_option
 
 NAME = "daqp_hierarchical"
@@ -68,8 +69,8 @@ OPTIONS = {
                        exclusive_minimum=True),
     "compress_levels": Option(True, "bool", "replace each equality level by its SVD rows "
                               "(full row rank)"),
-    "check": Option(True, "bool", "decide optimal/approximate from the conflicting-level "
-                    "test (eq. 35)"),
+    "check": Option(True, "bool", "'optimal' only when the answer passes check_lexicographic "
+                    "(DEFAULT_CERTIFICATE_TOL, minimum-norm tie-break), else 'approximate'"),
     "rcond": rcond_option(),
     "settings": Option(None, "any", "dict of extra daqp.solve settings (e.g. iter_limit, "
                        "rho_soft)", optional=True, check=dictionary),
@@ -114,12 +115,18 @@ def build(stack: TaskStack, compress: bool, rcond: float, scale: bool = True):
         for t in level:
             if t.is_equality:
                 continue
+            # a zero row's violation is fixed whatever x is: it stays out of DAQP's
+            # problem (DAQP would report it infeasible)
+            keep = np.any(t.A != 0.0, axis=1)
             tl, tu = t.bounds()
-            sw = np.sqrt(np.broadcast_to(t.weight, (t.m,)))
-            l_rows.append(sw[:, None] * t.A)
+            tl, tu = tl[keep], tu[keep]
+            sw = np.sqrt(np.broadcast_to(t.weight, (t.m,)))[keep]
+            l_rows.append(sw[:, None] * t.A[keep])
             l_up.append(np.where(np.isfinite(tu), sw * tu, np.inf))
             l_lo.append(np.where(np.isfinite(tl), sw * tl, -np.inf))
-            names += [t.name] * t.m
+            names += [t.name] * int(keep.sum())
+        if not l_rows or sum(r.shape[0] for r in l_rows) == 0:
+            continue                       # nothing x can change on this level
         L = np.vstack(l_rows)
         bu_l, bl_l = np.concatenate(l_up), np.concatenate(l_lo)
         sc = float(np.sqrt(np.sum(L ** 2) / max(L.shape[0], 1))) if scale and L.size else 1.0
@@ -171,36 +178,16 @@ def solve(stack: TaskStack, *, primal_tol: float, dual_tol: float, compress_leve
                             f"{', '.join(n for _, ns in ineq for n in ns)}")
         return Outcome(np.full(stack.n, np.nan), "failed", info)
     x = np.asarray(x, dtype=np.float64).copy()
-    status = "optimal"
+    out = Outcome(x, "optimal", info)
     if check:
         conflicts = dependent_active_levels(A, bu, bl, bps, x, float(rcond))
         info["conflicting_levels"] = conflicts
-        if conflicts and stack.is_equality:
-            # not certified by the count; verify the answer instead
-            report = check_lexicographic(stack, x, tol=CHECK_TOL, rcond=float(rcond))
-            Z = nested_null_spaces(stack, float(rcond))[-1]
-            min_norm = float(np.linalg.norm(Z.T @ x)) \
-                <= CHECK_TOL * max(1.0, float(np.linalg.norm(x)))
-            info["verified"] = report.ok and min_norm
-            if not info["verified"]:
-                bad = [c.level for c in report.levels if not c.ok] or [len(stack) - 1]
-                status = "approximate"
-                info["message"] = (f"levels {conflicts} conflict with the levels above "
-                                   f"(eq. 35), DAQP's count of free directions goes wrong, and "
-                                   f"levels {bad} fail the lexicographic check (tol "
-                                   f"{CHECK_TOL:g}) or x is not the minimum-norm point of "
-                                   f"the optimal set; levels 0..{bad[0] - 1} are exact")
-        elif conflicts:
-            status = "approximate"
-            info["message"] = (f"the active rows of levels {conflicts} depend on those of the "
-                               f"levels above (a conflicting level, eq. 35): DAQP's count of "
-                               f"free directions is then wrong; levels 0..{conflicts[0] - 1} "
-                               f"are exact")
-    return Outcome(x, status, info)
+        out = certify(stack, out)
+        if out.status != "optimal" and conflicts:
+            info["message"] += (f"; levels {conflicts} conflict with the levels above "
+                                f"(eq. 35), where DAQP's count of free directions goes wrong")
+    return out
 
-
-#: Relative tolerance of the lexicographic check that certifies equality stacks.
-CHECK_TOL = 1e-7
 
 #: A row counts as active when ``|A x − bound| ≤ ACTIVE_TOL · max(1, |bound|)`` or violated.
 ACTIVE_TOL = 1e-7

@@ -31,6 +31,12 @@ replaced by its feasible rows ``U_rᵀ A_1 x = U_rᵀ b_1`` (``U_r`` the left si
 vectors of its ``r`` non-zero singular values): the same optimal set as the
 least-squares first level, in full row rank (``info["first_level_rank"]``).
 
+*Status.* ``"optimal"`` needs both: a stack of the exact shape above, and an answer
+that passes the lexicographic certificate (:func:`formulations.base.certify`:
+:func:`hierarchy.check_lexicographic` with the minimum-norm tie-break at
+``DEFAULT_CERTIFICATE_TOL``; the ``O(ε)`` regularisation bias can fail it), otherwise
+``"approximate"`` with the level at fault in ``info["fault_level"]``.
+
 *Failures.* PlaCo raises on infeasible hard inequalities; the Solution is then
 ``failed`` and names, in ``info["failed_level"]`` and ``info["failed_tasks"]``,
 the first level whose hard inequalities cannot hold together with those above
@@ -46,7 +52,7 @@ import placo
 
 from prioik.hierarchy import DEFAULT_RCOND, TaskStack
 
-from .base import Capabilities, FormulationError, Outcome
+from .base import Capabilities, FormulationError, Outcome, certify
 from .options import Option, rcond_option
 
 NAME = "placo"
@@ -168,5 +174,6 @@ def solve(stack: TaskStack, *, weight_ratio: float | None, regularization: float
                                                       if not t.is_equality])
         return Outcome(np.full(n, np.nan), "failed", info)
     exact = len(stack) <= 2 and first.is_equality and not low_inequality
-    return Outcome(np.array(x.value, dtype=np.float64), "optimal" if exact else "approximate",
-                   info)
+    out = Outcome(np.array(x.value, dtype=np.float64), "optimal" if exact else "approximate",
+                  info)
+    return certify(stack, out)

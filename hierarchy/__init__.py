@@ -10,17 +10,20 @@ from .analysis import (FeasibleSplit, LevelCheck, LexicographicReport, algorithm
 from .errors import TaskStackError, UnsupportedTaskError
 from .io import (PeerProblem, load_lexls, load_peer, load_peer_json, load_soth, load_stack,
                  save_stack, stack_from_dict, stack_to_dict)
-from .linalg import DEFAULT_RCOND, matrix_rank, null_space_basis, range_basis
+from .linalg import (DEFAULT_CERTIFICATE_TOL, DEFAULT_RCOND, matrix_rank, nonnegative_least_squares,
+                     null_space_basis, range_basis, row_activity)
 from .layout import StackData, StackLayout, level_residuals
 from .stack import TaskStack
 from .task import Level, Task
 
 __all__ = [
-    "DEFAULT_RCOND", "FeasibleSplit", "Level", "LevelCheck", "LexicographicReport", "Task",
+    "DEFAULT_CERTIFICATE_TOL", "DEFAULT_RCOND", "FeasibleSplit", "Level", "LevelCheck",
+    "LexicographicReport", "Task",
     "StackData", "StackLayout", "TaskStack", "level_residuals", "TaskStackError", "UnsupportedTaskError", "algorithmic_error",
     "algorithmic_error_norms", "check_lexicographic", "conflicting_levels",
     "feasible_split", "lexicographic_residuals", "matrix_rank", "nested_null_spaces",
-    "null_space_basis", "range_basis", "rank_profile", "relative_distance",
+    "nonnegative_least_squares", "null_space_basis", "range_basis", "rank_profile",
+    "relative_distance", "row_activity",
     "singularity_distance",
     "PeerProblem", "load_lexls", "load_peer", "load_peer_json", "load_soth",
     "load_stack", "save_stack", "stack_from_dict", "stack_to_dict",

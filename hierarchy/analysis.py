@@ -21,7 +21,8 @@ import numpy as np
 
 from .layout import level_residuals
 from .errors import UnsupportedTaskError
-from .linalg import DEFAULT_RCOND, matrix_rank, range_basis
+from .linalg import (CERTIFICATE_SIGMA_FLOOR, DEFAULT_CERTIFICATE_TOL, DEFAULT_RCOND, matrix_rank,
+                     nonnegative_least_squares, range_basis, row_activity)
 from .stack import TaskStack
 
 
@@ -167,15 +168,25 @@ def lexicographic_residuals(stack: TaskStack, x: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class LevelCheck:
-    """Optimality of one level.
+    """Optimality of one level (or of the final minimum-norm step).
 
     Attributes:
-        level: Level index.
-        tasks: Names of the level's tasks.
-        residual: ``‖A_i x − b_i‖`` (weighted).
-        projected_gradient: ``‖Z_iᵀ A_iᵀ (A_i x − b_i)‖``.
-        scale: ``‖A_i‖_F (‖A_i‖_F ‖x‖ + ‖b_i‖)``, what the tolerance is relative to.
-        ok: ``projected_gradient ≤ tol · max(scale, 1e-300)``.
+        level: Level index (``k`` for the minimum-norm step of a ``k``-level stack).
+        tasks: Names of the level's tasks (``("minimum-norm",)`` for the final step).
+        residual: ``‖w_i(x)‖``, the level's weighted equality residual and inequality
+            violation (``‖x‖`` for the minimum-norm step).
+        projected_gradient: The KKT residual in task space (see
+            :func:`check_lexicographic`): on equality stacks ``‖U_fᵀ (A_i x − b_i)‖``, the
+            algorithmic error of eq. 29, i.e. how far ``A_i x`` is from the level's best
+            reachable value; for the minimum-norm step ``min_μ ‖Z_kᵀ (x + A_Sᵀ μ)‖``.
+        scale: ``‖√w ∘ (|A_i| |x| + |t_i|)‖ + ‖√W_i A_i‖_F`` with ``t_i`` the level's targets
+            (``b`` on equality rows, the nearest point of ``[lower, upper]`` on inequality
+            rows): the size of the terms that make ``A_i x − t_i``, absolute for
+            ``|x| ≲ 1``; ``max(1, ‖x‖)`` for the minimum-norm step.
+        ok: ``projected_gradient ≤ tol · scale``.
+        fixed_rows: Higher rows kept at their value at ``x`` (equality rows, violated rows,
+            rows at both bounds): free multipliers.
+        active_rows: Higher rows at one bound: sign-constrained multipliers.
     """
 
     level: int
@@ -184,6 +195,13 @@ class LevelCheck:
     projected_gradient: float
     scale: float
     ok: bool
+    fixed_rows: int = 0
+    active_rows: int = 0
+
+    @property
+    def relative(self) -> float:
+        """``projected_gradient / scale``, what ``tol`` is compared with."""
+        return self.projected_gradient / max(self.scale, 1e-300)
 
 
 @dataclass(frozen=True)
@@ -191,56 +209,215 @@ class LexicographicReport:
     """Result of :func:`check_lexicographic`.
 
     Attributes:
-        ok: Every level passes.
+        ok: Every level passes, and the minimum-norm step when it was checked.
         tol: Relative tolerance used.
         levels: One :class:`LevelCheck` per level.
+        minimum_norm: The check of the final minimum-norm step (``None`` when not asked).
     """
 
     ok: bool
     tol: float
     levels: tuple[LevelCheck, ...] = field(default_factory=tuple)
+    minimum_norm: LevelCheck | None = None
 
     @property
     def first_failure(self) -> LevelCheck | None:
-        """The highest-priority level that fails, if any."""
-        return next((c for c in self.levels if not c.ok), None)
+        """The highest-priority level that fails, then the minimum-norm step, if any."""
+        bad = next((c for c in self.levels if not c.ok), None)
+        if bad is None and self.minimum_norm is not None and not self.minimum_norm.ok:
+            return self.minimum_norm
+        return bad
+
+    @property
+    def fault_level(self) -> int | None:
+        """Index of :attr:`first_failure` (``len(levels)`` for the minimum-norm step)."""
+        bad = self.first_failure
+        return None if bad is None else bad.level
+
+    @property
+    def worst_relative(self) -> float:
+        """The largest ``projected_gradient / scale`` over the checks."""
+        checks = self.levels + ((self.minimum_norm,) if self.minimum_norm is not None else ())
+        return max((c.relative for c in checks), default=0.0)
 
     def __str__(self) -> str:
         rows = [f"lexicographic check: {'ok' if self.ok else 'FAILED'} (tol {self.tol:g})"]
-        for c in self.levels:
-            rel = c.projected_gradient / max(c.scale, 1e-300)
+        checks = self.levels + ((self.minimum_norm,) if self.minimum_norm is not None else ())
+        for c in checks:
             rows.append(f"  level {c.level} {','.join(c.tasks)}: residual {c.residual:.3e}, "
-                        f"projected gradient {c.projected_gradient:.3e} "
-                        f"(relative {rel:.1e}) {'ok' if c.ok else 'FAIL'}")
+                        f"KKT residual {c.projected_gradient:.3e} "
+                        f"(relative {c.relative:.1e}; {c.fixed_rows} fixed, {c.active_rows} "
+                        f"active rows above) {'ok' if c.ok else 'FAIL'}")
         return "\n".join(rows)
 
 
-def check_lexicographic(stack: TaskStack, x: np.ndarray, tol: float = 1e-8,
-                        rcond: float = DEFAULT_RCOND) -> LexicographicReport:
-    """Whether ``x`` is a lexicographic optimum of an equality stack.
+@dataclass
+class _LevelRows:
+    """One level's rows: unweighted ``A``, bounds (``l = u = b`` on equality rows), √w."""
 
-    ``x`` is optimal iff at every level the gradient of the level's least-squares
-    objective, projected on the null space of the levels above, vanishes:
-    ``Z_iᵀ A_iᵀ (A_i x − b_i) = 0``. Each level is judged relative to its own scale
-    (see :class:`LevelCheck`).
+    A: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    sqrt_weight: np.ndarray
+
+    @classmethod
+    def of(cls, level) -> "_LevelRows":
+        A, lo, up, sw = [], [], [], []
+        for t in level:
+            A.append(t.A)
+            if t.is_equality:
+                lo.append(t.b)
+                up.append(t.b)
+            else:
+                tl, tu = t.bounds()
+                lo.append(tl)
+                up.append(tu)
+            sw.append(np.sqrt(np.broadcast_to(t.weight, (t.m,))))
+        return cls(np.vstack(A), np.concatenate(lo), np.concatenate(up), np.concatenate(sw))
+
+
+def check_lexicographic(stack: TaskStack, x: np.ndarray, tol: float = DEFAULT_CERTIFICATE_TOL,
+                        rcond: float = DEFAULT_RCOND, minimum_norm: bool = False,
+                        metric: np.ndarray | None = None) -> LexicographicReport:
+    """Certificate that ``x`` is a lexicographic optimum of a stack of equality and
+    inequality tasks (weights inside a level).
+
+    Level ``i`` minimises ``‖w_i(x)‖²`` (weighted equality residuals and distances of
+    ``A x`` to ``[lower, upper]``) over the set where every higher level keeps its
+    optimal violation. ``x`` is optimal iff, for every level, it solves that level's
+    problem with the higher levels fixed at ``x``'s own violations (valid by
+    induction: when the higher levels pass, their violations at ``x`` are the unique
+    optimal ones). The level problem is convex, so this is its KKT system
+
+        A_iᵀ W_i r_i + Σ_{j<i} A_{S_j}ᵀ μ_j = 0,
+
+    ``r_i`` the level's signed violation at ``x`` and ``S_j`` the higher rows active at
+    ``x`` (:func:`~hierarchy.linalg.row_activity`, tolerance ``tol`` relative to each
+    row's scale): ``μ ≥ 0`` on rows at their upper bound, ``≤ 0`` at their lower bound,
+    free on equality rows, violated rows and rows at both bounds.
+
+    How it is computed: the free multipliers are projected out with ``Z_i``, the
+    nested null spaces of the fixed rows (rank rule of :mod:`hierarchy.linalg`:
+    ``rcond`` times each level's ``‖√W A_fixed‖_F``). The residual is measured in task
+    space — through the pseudo-inverse of ``B = √W A_act Z_i`` (the level's equality and
+    violated rows, any row with a non-zero violation; singular values below
+    ``CERTIFICATE_SIGMA_FLOOR · ‖√W A_act‖_F`` raised to it) — so that it reads as the change of ``A_i x`` it stands for, however badly
+    conditioned the level is; on equality stacks it is the algorithmic error
+    ``‖U_fᵀ (A_i x − b_i)‖`` (eq. 29). The sign-constrained multipliers minimise it
+    (a non-negative least-squares problem). A level passes when the residual is
+    ``≤ tol · scale_i`` (see :class:`LevelCheck`); rows counted at a bound may lie
+    outside it by the activity tolerance, which is the primal tolerance of the rows
+    fixed for the lower levels.
+
+    With ``minimum_norm=True`` the final tie-break is checked too: ``x`` must minimise
+    ``‖x‖²`` (``xᵀ W x`` with ``metric``) over the optimal set, the KKT test with
+    gradient ``W x`` and every level's active rows, relative to ``‖W‖₂ max(1, ‖x‖)``.
+    It is off by default because formulations differ in their tie-break
+    (operational space: ``xᵀ M x``; lexls: none); the levels alone define the
+    lexicographic optimal set.
+
+    Args:
+        stack: The stack.
+        x: Candidate answer (``n``).
+        tol: Relative tolerance of the KKT residuals and of the activity rule.
+        rcond: Relative rank threshold of the nested null spaces.
+        minimum_norm: Also check the minimum-norm tie-break (reported as level ``k``).
+        metric: SPD ``n × n`` ``W`` of the tie-break ``min xᵀ W x`` (default identity).
 
     Raises:
-        UnsupportedTaskError: for a stack with inequality tasks.
+        ValueError: ``x`` of the wrong shape.
     """
-    _require_equality(stack, "check_lexicographic")
     x = np.asarray(x, dtype=np.float64)
     if x.shape != (stack.n,):
         raise ValueError(f"x has shape {x.shape}, the stack has n = {stack.n}")
-    Zs = nested_null_spaces(stack, rcond)
+    n = stack.n
     xn = float(np.linalg.norm(x))
+    Z = np.eye(n)                      # null space of the fixed rows of the levels above
+    signed: list[np.ndarray] = []      # unit rows at one bound, oriented: multiplier ≥ 0
+    fixed_count = 0
     checks = []
-    for i, (level, Z) in enumerate(zip(stack.levels, Zs)):
-        A, b = level.A, level.b
-        r = A @ x - b
-        g = Z.T @ (A.T @ r)
-        an = float(np.linalg.norm(A))
-        scale = an * (an * xn + float(np.linalg.norm(b)))
-        gn = float(np.linalg.norm(g))
-        ok = bool(np.isfinite(gn) and gn <= tol * max(scale, 1e-300))
-        checks.append(LevelCheck(i, level.names, float(np.linalg.norm(r)), gn, scale, ok))
-    return LexicographicReport(all(c.ok for c in checks), tol, tuple(checks))
+    finite = bool(np.isfinite(x).all())
+
+    def kkt(g: np.ndarray, B: np.ndarray | None, floor_scale: float) -> float:
+        """``min_μ≥0 ‖D Vᵀ Zᵀ (g + Cᵀ μ)‖`` with ``B Z = U Σ Vᵀ``, ``D = 1/max(σ, floor)``."""
+        d = Z.shape[1]
+        if d == 0:
+            return 0.0
+        y = Z.T @ g
+        if B is None:
+            V, D = np.eye(d), np.ones(d)
+            y = D * (V.T @ y)
+        else:
+            BZ = B @ Z
+            floor = CERTIFICATE_SIGMA_FLOOR * (float(np.linalg.norm(B)) or floor_scale)
+            if floor == 0.0:
+                return 0.0            # a level of zero rows: nothing x can change
+            if BZ.shape[0]:
+                _, s, vt = np.linalg.svd(BZ, full_matrices=True)
+                V = vt.T
+                sig = np.zeros(d)
+                sig[:s.shape[0]] = s
+            else:
+                V, sig = np.eye(d), np.zeros(d)
+            D = 1.0 / np.maximum(sig, floor)
+            # the gradient lies in the row space of B: its part along directions that B Z
+            # cannot move by the rank rule is round-off (amplified by 1/floor it would
+            # fail exact answers); the multipliers must still cancel there
+            y = V.T @ y
+            y[sig <= rcond * float(np.linalg.norm(B))] = 0.0
+            y = D * y
+        if not signed:
+            return float(np.linalg.norm(y))
+        M = D[:, None] * (V.T @ (Z.T @ np.vstack(signed).T))
+        norms = np.linalg.norm(M, axis=0)
+        keep = norms > 0
+        # unit columns: the same cone, and a well-scaled NNLS (D spans up to 1e6)
+        _, res = nonnegative_least_squares(M[:, keep] / norms[keep], -y)
+        return res
+
+    def add_level(rows: _LevelRows, side: np.ndarray) -> None:
+        nonlocal Z, fixed_count
+        fix = side == 2
+        if fix.any():
+            F = rows.sqrt_weight[fix, None] * rows.A[fix]
+            tol_r = rcond * float(np.linalg.norm(F))
+            if Z.shape[1] and tol_r > 0:
+                _, s, vt = np.linalg.svd(F @ Z, full_matrices=True)
+                r = int(np.count_nonzero(s > tol_r))
+                Z = Z @ vt[r:].T
+            fixed_count += int(fix.sum())
+        one = (side == 1) | (side == -1)
+        if one.any():
+            A1 = rows.A[one]
+            norms = np.linalg.norm(A1, axis=1)
+            keep = norms > 0
+            signed.extend(list((side[one][keep, None] * A1[keep]) / norms[keep, None]))
+
+    ax = np.abs(x)
+    for i, level in enumerate(stack.levels):
+        rows = _LevelRows.of(level)
+        if finite:
+            side, v = row_activity(rows.A, rows.lower, rows.upper, x, tol)
+        else:
+            side, v = np.full(rows.A.shape[0], 2), np.full(rows.A.shape[0], np.nan)
+        sw = rows.sqrt_weight
+        WA = sw[:, None] * rows.A
+        g = WA.T @ (sw * v)
+        target = rows.A @ x - v
+        an = float(np.linalg.norm(WA))
+        scale = float(np.linalg.norm(sw * (np.abs(rows.A) @ ax + np.abs(target)))) + an
+        res = kkt(g, WA[(side == 2) | (v != 0)], an) if finite else np.nan
+        ok = bool(np.isfinite(res) and res <= tol * max(scale, 1e-300))
+        checks.append(LevelCheck(i, level.names, float(np.linalg.norm(sw * v)), float(res),
+                                 scale, ok, fixed_count, len(signed)))
+        add_level(rows, side)
+    final = None
+    if minimum_norm:
+        W = np.eye(n) if metric is None else np.asarray(metric, dtype=np.float64)
+        scale = (1.0 if metric is None else float(np.linalg.norm(W, 2))) * max(1.0, xn)
+        res = kkt(W @ x, None, 1.0) if finite else np.nan
+        final = LevelCheck(len(stack), ("minimum-norm",), xn, float(res), scale,
+                           bool(np.isfinite(res) and res <= tol * scale),
+                           fixed_count, len(signed))
+    ok = all(c.ok for c in checks) and (final is None or final.ok)
+    return LexicographicReport(ok, tol, tuple(checks), final)

@@ -277,9 +277,95 @@ def infeasible_inequality(rng: np.random.Generator, n: int, k: int) -> TaskStack
                                       rng.standard_normal(m))] for i, m in enumerate(ms)])
 
 
+def random_inequality_hierarchy(rng: np.random.Generator, n: int, k: int) -> TaskStack:
+    """Random hierarchies of equality and inequality tasks, for the inequality solvers
+    and the certificate (:func:`~hierarchy.check_lexicographic`).
+
+    * Level 1 is feasible: a box ``−u ≤ x ≤ u`` (task ``box``, ``u ∈ [0.2, 1]``) and, with
+      probability ½, two-sided or one-sided general rows around a point inside the box
+      (task ``band``).
+    * Each lower level holds one or two tasks (two with different weights, with
+      probability ½): inequality tasks whose rows are two-sided (``[c − δ, c + δ]``),
+      one-sided, or pinned (``lower = upper``), and equality tasks; targets reach
+      beyond the box (scale 2), and about a third of the rows of each lower level are
+      combinations of the rows above with other bounds, so the levels conflict.
+    * With probability ¼ a lower level also holds ``zero``: a zero row with the
+      unreachable interval ``[2, 5]`` (a fixed violation, as in DAQP's degenerate test).
+
+    ``k`` is at least 2, ``n`` at least 2.
+    """
+    n, k = max(2, n), max(2, k)
+    u = rng.uniform(0.2, 1.0, n)
+    first = [Task("box", np.eye(n), lower=-u, upper=u)]
+    above = [np.eye(n)]
+    if rng.random() < 0.5:
+        m = int(rng.integers(1, max(2, n // 2) + 1))
+        A = rng.standard_normal((m, n))
+        c = A @ (rng.uniform(-0.6, 0.6, n) * u)
+        lo, up = c - rng.uniform(0.02, 0.3, m), c + rng.uniform(0.02, 0.3, m)
+        side = rng.integers(0, 3, m)
+        lo[side == 1] = -np.inf
+        up[side == 2] = np.inf
+        first.append(Task("band", A, lower=lo, upper=up))
+        above.append(A)
+    levels: list[list[Task]] = [first]
+    for i in range(1, k):
+        tasks = []
+        for j in range(1 + int(rng.random() < 0.5)):
+            m = int(rng.integers(1, max(2, (2 * n) // 3) + 1))
+            A = rng.standard_normal((m, n))
+            rows = np.vstack(above)
+            shared = int(rng.integers(0, m // 3 + 1)) if m > 1 else int(rng.random() < 0.3)
+            if shared:
+                A[:shared] = rng.standard_normal((shared, rows.shape[0])) @ rows
+            centre = 2.0 * rng.standard_normal(m)
+            weight = float(rng.uniform(0.3, 3.0)) if j or rng.random() < 0.5 else 1.0
+            if rng.random() < 0.3:
+                tasks.append(Task(f"eq{i}_{j}", A, centre, weight=weight))
+            else:
+                half = rng.uniform(0.0, 0.5, m)
+                lo, up = centre - half, centre + half
+                kind = rng.integers(0, 4, m)      # 0 two-sided, 1 upper only, 2 lower only, 3 pinned
+                lo[kind == 1] = -np.inf
+                up[kind == 2] = np.inf
+                lo[kind == 3] = up[kind == 3] = centre[kind == 3]
+                tasks.append(Task(f"ineq{i}_{j}", A, lower=lo, upper=up, weight=weight))
+            above.append(A)
+        if rng.random() < 0.25:
+            tasks.append(Task(f"zero{i}", np.zeros((1, n)), lower=[2.0], upper=[5.0]))
+        levels.append(tasks)
+    return TaskStack(levels)
+
+
 #: stacks with inequality tasks (kept apart from :data:`FAMILIES`, whose consumers
 #: expect equality stacks): family name -> generator ``f(rng, n, k)``
 INEQUALITY_FAMILIES: dict[str, Callable[[np.random.Generator, int, int], TaskStack]] = {
     "with_inequalities": with_inequalities,
     "infeasible_inequality": infeasible_inequality,
+    "random_inequality": random_inequality_hierarchy,
 }
+
+
+def box_bounded(rng: np.random.Generator, n: int, k: int, target_scale: float = 1.0,
+                offset: bool = False) -> TaskStack:
+    """Hard box bounds on top of equality tasks: the stacks of joint-limited IK.
+
+    Level 1 is ``box`` (``l ≤ x ≤ u``; ``−u ≤ x ≤ u`` with ``u ∈ [0.2, 1.5]``, or with
+    ``offset`` a box that may exclude 0, as braking bounds at acceleration level do);
+    then ``k`` equality levels of 1-3 random rows whose targets have norms about
+    ``target_scale`` × U(0.2, 2) — small scales leave the bounds inactive, large ones
+    make the tasks infeasible within the box. Used by the SNS tests against the QP
+    cascade; not in :data:`INEQUALITY_FAMILIES` (the validation report's set).
+    """
+    k = max(1, k)
+    u = rng.uniform(0.2, 1.5, n)
+    lo = -u
+    if offset:
+        shift = rng.uniform(-1.0, 1.0, n) * u
+        lo, u = lo + shift, u + shift
+    levels = [Task("box", np.eye(n), lower=lo, upper=u)]
+    for i in range(k):
+        m = int(rng.integers(1, 4))
+        levels.append(Task(f"task{i}", rng.standard_normal((m, n)),
+                           target_scale * rng.uniform(0.2, 2.0) * rng.standard_normal(m)))
+    return TaskStack(levels)

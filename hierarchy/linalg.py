@@ -64,3 +64,85 @@ def range_basis(A: np.ndarray, rcond: float = DEFAULT_RCOND,
     tol = rcond * (float(np.linalg.norm(A)) if scale is None else scale)
     r = int(np.count_nonzero(s > tol)) if tol > 0 else 0
     return u[:, :r], u[:, r:], s[:r]
+
+
+#: Default relative tolerance of the lexicographic certificate (KKT residual and
+#: activity of inequality rows, see :func:`row_activity`).
+DEFAULT_CERTIFICATE_TOL = 1e-8
+
+
+#: Singular values of a level's active rows below this fraction of their Frobenius norm
+#: are raised to it when the certificate maps a KKT residual back to task space
+#: (bounds the amplification of rounding errors to ``eps / 1e-6 ≈ 2e-10``).
+CERTIFICATE_SIGMA_FLOOR = 1e-6
+
+
+def row_activity(A: np.ndarray, lower: np.ndarray, upper: np.ndarray, x: np.ndarray,
+                 tol: float = DEFAULT_CERTIFICATE_TOL) -> tuple[np.ndarray, np.ndarray]:
+    """Which rows of ``lower ≤ A x ≤ upper`` are at a bound or violated at ``x``.
+
+    The one activity rule of the library: row ``r`` is *at* its upper bound when
+    ``|a_r x − u_r| ≤ tol · (|a_r| |x| + |u_r| + ‖a_r‖)`` (``|a_r| |x| = Σ_j |a_rj x_j|``,
+    the size of the terms that make ``a_r x``; the last term makes it absolute for
+    ``|x| ≲ 1``), likewise for the lower bound; it is *violated* when it lies beyond a
+    bound by more than that.
+
+    Returns:
+        ``(side, v)``: ``side[r]`` is ``0`` inactive, ``+1`` at the upper bound only,
+        ``−1`` at the lower bound only, ``2`` fixed (equality row ``l = u``, violated
+        row, or at both bounds); ``v = A x − clip(A x, lower, upper)`` the signed
+        violation.
+    """
+    a = A @ x
+    v = a - np.clip(a, lower, upper)
+    rs = np.abs(A) @ np.abs(x) + np.linalg.norm(A, axis=1)
+    with np.errstate(invalid="ignore"):
+        eps_u = tol * (rs + np.where(np.isfinite(upper), np.abs(upper), 0.0))
+        eps_l = tol * (rs + np.where(np.isfinite(lower), np.abs(lower), 0.0))
+        at_u = np.isfinite(upper) & (np.abs(a - upper) <= eps_u)
+        at_l = np.isfinite(lower) & (np.abs(a - lower) <= eps_l)
+        violated = (a > upper + eps_u) | (a < lower - eps_l)
+    side = np.zeros(A.shape[0], dtype=np.int64)
+    side[at_u] = 1
+    side[at_l] = -1
+    side[(at_u & at_l) | violated | (lower == upper)] = 2
+    return side, v
+
+
+def nonnegative_least_squares(M: np.ndarray, y: np.ndarray, max_iter: int | None = None
+                              ) -> tuple[np.ndarray, float]:
+    """``min ‖M μ − y‖`` over ``μ ≥ 0`` (Lawson & Hanson's active-set NNLS, 1974).
+
+    Args:
+        M: ``d × p`` matrix.
+        y: ``d`` vector.
+        max_iter: Cap on inner iterations (default ``3 p + 10``).
+
+    Returns:
+        ``(μ, ‖M μ − y‖)``.
+    """
+    d, p = M.shape
+    mu = np.zeros(p)
+    if p == 0 or d == 0:
+        return mu, float(np.linalg.norm(y))
+    cap = 3 * p + 10 if max_iter is None else max_iter
+    tol = 10.0 * np.finfo(float).eps * max(d, p) * max(float(np.abs(M).sum(axis=0).max()), 1e-300)
+    passive = np.zeros(p, dtype=bool)
+    w = M.T @ (y - M @ mu)
+    it = 0
+    while (~passive).any() and float(np.max(np.where(passive, -np.inf, w))) > tol and it < cap:
+        passive[int(np.argmax(np.where(passive, -np.inf, w)))] = True
+        while it < cap and passive.any():
+            it += 1
+            s = np.zeros(p)
+            s[passive] = np.linalg.lstsq(M[:, passive], y, rcond=None)[0]
+            if float(s[passive].min()) > 0:
+                mu = s
+                break
+            neg = passive & (s <= 0)
+            alpha = float(np.min(mu[neg] / (mu[neg] - s[neg])))
+            mu = mu + alpha * (s - mu)
+            passive &= mu > tol
+            mu[~passive] = 0.0
+        w = M.T @ (y - M @ mu)
+    return mu, float(np.linalg.norm(M @ mu - y))

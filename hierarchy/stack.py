@@ -169,4 +169,19 @@ class TaskStack:
         return "\n".join(lines)
 
     def __repr__(self) -> str:
-        return self.summary()
+        """One line: levels (``task[rows]``, ``≤`` marks inequality tasks) and ``n``;
+        :meth:`summary` gives the table with ranks."""
+        parts = []
+        for level in self._levels[:8]:
+            parts.append(" + ".join(f"{t.name}[{t.m}{'' if t.is_equality else '≤'}]"
+                                    for t in level[:4]) + (" + …" if len(level) > 4 else ""))
+        more = f" / … ({len(self) - 8} more)" if len(self) > 8 else ""
+        return f"TaskStack(n={self.n}, {len(self)} levels: {' / '.join(parts)}{more})"
+
+    def _repr_html_(self) -> str:
+        from html import escape
+        rows = "".join(f"<tr><td>{i}</td><td>{escape(t.name)}</td><td>{t.m}</td>"
+                       f"<td>{t.kind}</td></tr>"
+                       for i, level in enumerate(self._levels) for t in level)
+        return (f"<table><caption>TaskStack, n = {self.n}, {len(self)} levels</caption>"
+                f"<tr><th>level</th><th>task</th><th>rows</th><th>kind</th></tr>{rows}</table>")

@@ -2,24 +2,35 @@
 
 Data flows one way: ``hierarchy`` ← ``robots``; this package never imports
 ``formulations`` (:func:`simulate` takes any solver callable).
+
+Needs the ``robots`` extra (``pip install prioik[robots]``): importing it without
+pinocchio raises :class:`prioik.extras.MissingExtraError` saying so.
 """
+
+import importlib.util
+
+from prioik.extras import MissingExtraError
+
+if importlib.util.find_spec("pinocchio") is None:
+    raise MissingExtraError(("robots",), "prioik.robots", ("pinocchio",))
 
 from .models import (LOADERS, PANDA_FINGERS, ModelNotFoundError, RobotModel,
                      example_robot_data_dir, from_urdf, g1, go2, has_free_flyer, load, panda,
                      sample_humanoid, solo12, spatial_chain, talos, ur5)
 from .references import Reference, Waypoints, minimum_jerk
-from .rows import TaskRows
+from .rows import MODES, TaskWriter
 from .simulate import SimulationResult, StepTasks, equality_view, simulate
 from .tasks import (JointLimitActivation, KinematicState, TaskTerm, com_position, contact,
                     frame_orientation, frame_pose, frame_position, joint_limit_bounds,
-                    joint_limit_rows, joint_limit_violation, posture)
+                    joint_limit_rows, joint_limit_violation, joint_velocity_bounds,
+                    point_position, posture)
 
 __all__ = [
     "LOADERS", "PANDA_FINGERS", "ModelNotFoundError", "RobotModel", "example_robot_data_dir",
     "from_urdf", "g1", "go2", "has_free_flyer", "load", "panda", "sample_humanoid", "solo12",
     "spatial_chain", "talos", "ur5", "Reference", "Waypoints", "minimum_jerk",
-    "TaskRows", "SimulationResult", "StepTasks", "equality_view", "simulate", "JointLimitActivation",
+    "MODES", "TaskWriter", "SimulationResult", "StepTasks", "equality_view", "simulate", "JointLimitActivation",
     "KinematicState", "TaskTerm", "com_position", "contact", "frame_orientation",
     "frame_pose", "frame_position", "joint_limit_bounds", "joint_limit_rows",
-    "joint_limit_violation", "posture",
+    "joint_limit_violation", "joint_velocity_bounds", "point_position", "posture",
 ]

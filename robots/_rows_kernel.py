@@ -1,4 +1,4 @@
-"""Compiled row writers of :class:`robots.rows.TaskRows` (numba).
+"""Compiled row writers of :class:`robots.rows.TaskWriter` (numba).
 
 Each function writes one task's rows of a :class:`~prioik.hierarchy.StackData` and its
 per-row error, reference velocity and feed-forward from views of a ``pin.Data``
@@ -54,48 +54,61 @@ def log3(R, out, o):
             out[o + i] = sign * theta * u[i] / norm
 
 
-#: rows of the per-row array ``Q`` (``6 × M``) of :class:`robots.rows.TaskRows`
+#: rows of the per-row array ``Q`` (``6 × M``) of :class:`robots.rows.TaskWriter`
 ERROR, VELOCITY_REF, FEEDFORWARD, DRIFT, KP, KD = range(6)
 
 
-@njit(cache=True)
-def frame_rows(A, Q, s, nrows, J, cols, p, R, x, Rstar, xd, xdd, zero_drift):
-    """One frame's rows at ``s``: position (3 rows) or pose (``nrows = 6``).
+#: row sets of :func:`frame_rows`
+POSITION, ORIENTATION, POSE = 0, 1, 2
 
-    ``A[s:s+3] = J_lin + J_ang × p`` on the columns ``cols`` of the frame's
-    supporting joints (zero elsewhere): the LOCAL_WORLD_ALIGNED Jacobian of the point
-    ``p`` from the world-frame joint Jacobians ``J`` (``v_p = v_O + ω × p``);
-    ``A[s+3:s+6] = J_ang``. Error ``x − p`` (and ``log(R* Rᵀ)``), ``ẋ* = xd``,
-    ``ẍ* = xdd`` (zero on the orientation rows), drift zeroed if ``zero_drift``.
+
+@njit(cache=True)
+def frame_rows(A, Q, s, mode, J, cols, t, R, off, x, xd, xdd, Rstar, w, wd, zero_drift):
+    """One frame's rows at ``s``: position of the point ``p = t + R off`` (3 rows,
+    ``mode = POSITION``), orientation (3 rows, ``ORIENTATION``) or both (6, ``POSE``).
+
+    Position rows: ``J_lin + J_ang × p`` on the columns ``cols`` of the frame's supporting
+    joints (zero elsewhere) — the LOCAL_WORLD_ALIGNED Jacobian of the point ``p`` from the
+    world-frame joint Jacobians ``J`` (``v_p = v_O + ω × p``) —, error ``x − p``,
+    ``ẋ* = xd``, ``ẍ* = xdd``. Orientation rows: ``J_ang``, error ``log(R* Rᵀ)``,
+    ``ω* = w``, ``ω̇* = wd``. Drift zeroed if ``zero_drift``.
     """
+    nrows = 6 if mode == POSE else 3
     for i in range(nrows):
         row = A[s + i]
         for j in range(row.shape[0]):
             row[j] = 0.0
-    for c in cols:
-        wx = J[3, c]
-        wy = J[4, c]
-        wz = J[5, c]
-        A[s, c] = J[0, c] + wy * p[2] - wz * p[1]
-        A[s + 1, c] = J[1, c] + wz * p[0] - wx * p[2]
-        A[s + 2, c] = J[2, c] + wx * p[1] - wy * p[0]
-        if nrows == 6:
-            A[s + 3, c] = wx
-            A[s + 4, c] = wy
-            A[s + 5, c] = wz
-    for i in range(3):
-        Q[ERROR, s + i] = x[i] - p[i]
-        Q[VELOCITY_REF, s + i] = xd[i]
-        Q[FEEDFORWARD, s + i] = xdd[i]
-    if nrows == 6:
+    o = s + 3 if mode == POSE else s        # first orientation row
+    if mode != ORIENTATION:
+        p0 = t[0] + R[0, 0] * off[0] + R[0, 1] * off[1] + R[0, 2] * off[2]
+        p1 = t[1] + R[1, 0] * off[0] + R[1, 1] * off[1] + R[1, 2] * off[2]
+        p2 = t[2] + R[2, 0] * off[0] + R[2, 1] * off[1] + R[2, 2] * off[2]
+        for c in cols:
+            wx = J[3, c]
+            wy = J[4, c]
+            wz = J[5, c]
+            A[s, c] = J[0, c] + wy * p2 - wz * p1
+            A[s + 1, c] = J[1, c] + wz * p0 - wx * p2
+            A[s + 2, c] = J[2, c] + wx * p1 - wy * p0
+        Q[ERROR, s] = x[0] - p0
+        Q[ERROR, s + 1] = x[1] - p1
+        Q[ERROR, s + 2] = x[2] - p2
+        for i in range(3):
+            Q[VELOCITY_REF, s + i] = xd[i]
+            Q[FEEDFORWARD, s + i] = xdd[i]
+    if mode != POSITION:
+        for c in cols:
+            A[o, c] = J[3, c]
+            A[o + 1, c] = J[4, c]
+            A[o + 2, c] = J[5, c]
         E = np.empty((3, 3))
         for i in range(3):
             for j in range(3):
                 E[i, j] = Rstar[i, 0] * R[j, 0] + Rstar[i, 1] * R[j, 1] + Rstar[i, 2] * R[j, 2]
-        log3(E, Q[ERROR], s + 3)
-        for i in range(3, 6):
-            Q[VELOCITY_REF, s + i] = 0.0
-            Q[FEEDFORWARD, s + i] = 0.0
+        log3(E, Q[ERROR], o)
+        for i in range(3):
+            Q[VELOCITY_REF, o + i] = w[i]
+            Q[FEEDFORWARD, o + i] = wd[i]
     if zero_drift:
         for i in range(nrows):
             Q[DRIFT, s + i] = 0.0
@@ -130,7 +143,131 @@ def posture_error(Q, s, q, q_ref, iq):
 
 
 @njit(cache=True)
+def actuated_positions(q, iq, out):
+    """``out[k] = q[iq[k]]`` (0 where ``iq[k] < 0``: a row without one coordinate)."""
+    for k in range(iq.shape[0]):
+        out[k] = q[iq[k]] if iq[k] >= 0 else 0.0
+
+
+@njit(cache=True)
+def limit_activation_rows(A, Q, s, nb, qa, va, lo, hi, width, kp, kd):
+    """Joint-limit activation rows at ``s``, one per actuated joint (fixed size): row
+    ``k`` is the unit row of column ``nb + k`` while the joint is inside its margin
+    ``width[k]`` of a limit, else masked (all zero, target 0).
+
+    Inside, with ``y > 0`` the depth into the margin and ``σ = min(y / width, 1)``: error
+    ``±σ y`` (towards the inside), ``K_p = kp``, ``K_d = σ kd``, so the acceleration target
+    ``K_d (0 − q̇_j) + K_p e`` is ``σ (K_p y − K_d q̇_j)`` in the lower margin and
+    ``−σ (K_p y + K_d q̇_j)`` in the upper one (``kd = 0`` at velocity level: ``q̇_j = ±σ K y``).
+    Returns the number of active rows.
+    """
+    active = 0
+    for k in range(qa.shape[0]):
+        r = s + k
+        c = nb + k
+        e = 0.0
+        g = 0.0
+        on = False
+        if np.isfinite(lo[k]) and np.isfinite(hi[k]):
+            y_lo = lo[k] + width[k] - qa[k]
+            y_hi = qa[k] - (hi[k] - width[k])
+            if y_lo > 0.0:
+                sig = min(y_lo / width[k], 1.0)
+                e = sig * y_lo
+                g = sig
+                on = True
+            elif y_hi > 0.0:
+                sig = min(y_hi / width[k], 1.0)
+                e = -sig * y_hi
+                g = sig
+                on = True
+        A[r, c] = 1.0 if on else 0.0
+        Q[ERROR, r] = e
+        Q[KP, r] = kp if on else 0.0
+        Q[KD, r] = g * kd
+        Q[VELOCITY_REF, r] = 0.0
+        Q[FEEDFORWARD, r] = 0.0
+        Q[DRIFT, r] = 0.0
+        if on:
+            active += 1
+    return active
+
+
+@njit(cache=True)
+def acceleration_bounds(lower, upper, s, qa, va, lo, hi, vmax, T, dt, position, velocity):
+    """Bounds on ``q̈`` of the actuated joints at ``s`` (see
+    :func:`robots.tasks.joint_limit_bounds`): position at the horizon ``T`` and after the
+    next step ``dt`` within limits, braking of at least ``q̇²/2d`` when the horizon bound
+    would make the constant-acceleration path peak before ``T``, and ``|q̇ + q̈ dt| ≤
+    q̇_max``; where they do not intersect, both bounds become the hardest admissible
+    braking. ``position`` / ``velocity`` switch the two kinds of limit."""
+    inf = np.inf
+    for k in range(qa.shape[0]):
+        q = qa[k]
+        v = va[k]
+        p_lo = -inf
+        p_hi = inf
+        if position:
+            h_lo = 2.0 * (lo[k] - q - v * T) / (T * T)
+            h_hi = 2.0 * (hi[k] - q - v * T) / (T * T)
+            d_hi = max(hi[k] - q, 1e-9)
+            d_lo = max(q - lo[k], 1e-9)
+            p_hi = min(h_hi, (hi[k] - q - v * dt) / (dt * dt))
+            p_lo = max(h_lo, (lo[k] - q - v * dt) / (dt * dt))
+            if v > 0.0 and h_hi < -v / T:
+                p_hi = min(p_hi, -v * v / (2.0 * d_hi))
+            if v < 0.0 and h_lo > -v / T:
+                p_lo = max(p_lo, v * v / (2.0 * d_lo))
+        v_lo = -inf
+        v_hi = inf
+        if velocity and np.isfinite(vmax[k]):
+            v_lo = (-vmax[k] - v) / dt
+            v_hi = (vmax[k] - v) / dt
+        a = max(p_lo, v_lo)
+        b = min(p_hi, v_hi)
+        if a > b:
+            mid = min(max(p_hi if v > 0.0 else p_lo, v_lo), v_hi)
+            if not np.isfinite(mid):
+                mid = 0.0
+            a = mid
+            b = mid
+        lower[s + k] = a
+        upper[s + k] = b
+
+
+@njit(cache=True)
+def velocity_bounds(lower, upper, s, qa, lo, hi, vmax, T, position, velocity):
+    """Bounds on ``q̇`` of the actuated joints at ``s``: ``q + q̇ T`` within the position
+    limits and ``|q̇| ≤ q̇_max``; where they do not intersect (a joint already past a limit
+    by more than ``q̇_max T``) the lower bound is lowered to the upper one."""
+    inf = np.inf
+    for k in range(qa.shape[0]):
+        a = -inf
+        b = inf
+        if position:
+            a = (lo[k] - qa[k]) / T
+            b = (hi[k] - qa[k]) / T
+        if velocity:
+            a = max(a, -vmax[k])
+            b = min(b, vmax[k])
+        lower[s + k] = min(a, b)
+        upper[s + k] = b
+
+
+@njit(cache=True)
 def velocity_targets(b, Q):
     """``b = ẋ* + K e`` (per row)."""
     for i in range(b.shape[0]):
         b[i] = Q[VELOCITY_REF, i] + Q[KP, i] * Q[ERROR, i]
+
+
+@njit(cache=True)
+def acceleration_targets(A, b, Q, v):
+    """``b = ẍ* + K_d (ẋ* − J q̇) + K_p e − J̇ q̇`` (eq. 2-4, per row)."""
+    n = A.shape[1]
+    for i in range(b.shape[0]):
+        jv = 0.0
+        for j in range(n):
+            jv += A[i, j] * v[j]
+        b[i] = (Q[KD, i] * (Q[VELOCITY_REF, i] - jv) + Q[KP, i] * Q[ERROR, i]
+                + Q[FEEDFORWARD, i] - Q[DRIFT, i])

@@ -34,15 +34,16 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
-from prioik.hierarchy import TaskStack
+from prioik.hierarchy import StackData, TaskStack
 
 from .models import RobotModel, g1
 from .references import Reference, Waypoints, minimum_jerk, minimum_jerk_profile
-from .rows import TaskRows
+from .rows import TaskWriter
+from .scenario import BaselineTask, Scenario
 from .simulate import StepTasks
 from .tasks import (JointLimitActivation, KinematicState, com_position, contact,
                     frame_pose, frame_position, joint_limit_bounds, joint_limit_rows,
-                    joint_limit_violation, posture)
+                    joint_limit_violation, joint_velocity_bounds, posture)
 
 __all__ = ["VARIANTS", "TARGETS", "FencingScenario", "LEVEL_NAMES"]
 
@@ -54,9 +55,10 @@ LEVEL_NAMES = ("support_foot", "joint_limits", "com", "left_foot", "sword_tip", 
 SWORD_LENGTH = 0.5
 
 
-@dataclass
-class FencingScenario:
-    """The fencing scenario: robot, references and gains; builds each step's stack.
+@dataclass(repr=False)
+class FencingScenario(Scenario):
+    """The fencing scenario: robot, references and gains; builds each step's stack
+    (the :class:`~robots.scenario.Scenario` interface).
 
     Attributes:
         variant: ``"compatible"`` or ``"incompatible"``.
@@ -70,6 +72,11 @@ class FencingScenario:
         bound_horizon: Horizon ``T`` of the inequality form (s).
         with_posture: Include the lowest ``posture`` level.
     """
+
+    name = "fencing"
+    variants = VARIANTS
+    tip_frame = "sword_tip"
+    default_duration = 3.0
 
     variant: str = "compatible"
     robot: RobotModel | None = None
@@ -105,24 +112,32 @@ class FencingScenario:
         s0, s1 = self.step_window
         mid = 0.5 * (s0 + s1)
         self._lift = Waypoints((s0, mid, s1), (p0[2], p0[2] + self.step_height, p0[2]))
+        # the references' constants as plain floats and arrays (computed every step)
+        self._left0 = tuple(float(v) for v in p0)
+        self._right_xy = tuple(float(v) for v in self.right_foot0.translation[:2])
+        self._com_offset = tuple(float(v) for v in self.com_offset0)
+        self._tip_move = self.target - self.tip0
+        self._support_x = np.array(self.right_foot0.translation)
+        self._support_R = np.array(self.right_foot0.rotation)
+        self._left_foot_R = np.array(self.left_foot0.rotation)
 
     # ----------------------------------------------------------------- references
     def left_foot_ref(self, t: float) -> Reference:
         """Reference of the stepping foot's origin (x: one minimum-jerk move;
         z: up and down through two)."""
-        x, xd, xdd = self._foot_xy(t)
+        x, xd, xdd = self._foot_x(t)
         lift = self._lift(t)
-        return Reference(np.array([x[0], x[1], lift.x]), np.array([xd[0], 0.0, lift.xd]),
-                         np.array([xdd[0], 0.0, lift.xdd]))
+        return Reference(np.array([x, self._left0[1], float(lift.x)]),
+                         np.array([xd, 0.0, float(lift.xd)]),
+                         np.array([xdd, 0.0, float(lift.xdd)]))
 
-    def _foot_xy(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The stepping foot's horizontal reference (x moves, y holds)."""
-        p0 = self.left_foot0.translation
+    def _foot_x(self, t: float) -> tuple[float, float, float]:
+        """The stepping foot's forward reference (its y holds): position, velocity and
+        acceleration along x (floats: this runs every control step)."""
         s0, s1 = self.step_window
         p, dp, ddp = minimum_jerk_profile(s0, s1 - s0, t)
         L = self.step_length
-        return (np.array([p0[0] + p * L, p0[1]]), np.array([dp * L, 0.0]),
-                np.array([ddp * L, 0.0]))
+        return self._left0[0] + p * L, dp * L, ddp * L
 
     def com_ref(self, t: float) -> Reference:
         """Horizontal centre of mass over the middle of the feet (xy).
@@ -130,17 +145,20 @@ class FencingScenario:
         The standing posture's centre of mass is not exactly there, so its initial
         offset is removed by a minimum-jerk move over the first ``step_window[0]``
         seconds (no step in the reference at ``t = 0``)."""
-        x, xd, xdd = self._foot_xy(t)
-        right = self.right_foot0.translation
+        x, xd, xdd = self._foot_x(t)
         p, dp, ddp = minimum_jerk_profile(0.0, self.step_window[0], t)
-        off = self.com_offset0
-        return Reference(0.5 * (x + right[:2]) + (1.0 - p) * off, 0.5 * xd - dp * off,
-                         0.5 * xdd - ddp * off)
+        (ox, oy), (rx, ry) = self._com_offset, self._right_xy
+        return Reference(np.array([0.5 * (x + rx) + (1.0 - p) * ox,
+                                   0.5 * (self._left0[1] + ry) + (1.0 - p) * oy]),
+                         np.array([0.5 * xd - dp * ox, -dp * oy]),
+                         np.array([0.5 * xdd - ddp * ox, -ddp * oy]))
 
     def tip_ref(self, t: float) -> Reference:
         """Minimum-jerk from the initial tip to the target, then hold."""
         a, b = self.tip_window
-        return minimum_jerk(self.tip0, self.target, a, b - a, t)
+        p, dp, ddp = minimum_jerk_profile(a, b - a, t)
+        d = self._tip_move
+        return Reference(self.tip0 + p * d, dp * d, ddp * d)
 
     # --------------------------------------------------------------------- stacks
     def terms(self, state: KinematicState, t: float) -> dict:
@@ -182,7 +200,9 @@ class FencingScenario:
 
         Args:
             limits: ``"activation"`` (equality rows; level omitted when no joint is
-                near a limit) or ``"bounds"`` (inequality on ``q̈``).
+                near a limit), ``"bounds"`` (inequality on ``q̈``, level 1) or
+                ``"hard_bounds"`` (the same bounds as level 0, above the support
+                foot: the form SNS takes).
             dt: Control step, for the velocity part of the bounds.
         """
         terms = self.terms(state, t)
@@ -194,14 +214,17 @@ class FencingScenario:
                 levels.append(jl)
         elif limits == "bounds":
             levels.append(joint_limit_bounds(state, self.bound_horizon, dt))
+        elif limits == "hard_bounds":
+            levels.insert(0, joint_limit_bounds(state, self.bound_horizon, dt))
         else:
-            raise ValueError(f"limits must be 'activation' or 'bounds', got {limits!r}")
+            raise ValueError(f"limits must be 'activation', 'bounds' or 'hard_bounds', "
+                             f"got {limits!r}")
         for name in ("com", "left_foot", "sword_tip"):
             levels.append(terms[name].acceleration(*g[name]))
         n_tasks = len(levels)
         if "posture" in terms:
             levels.append(terms["posture"].acceleration(*g["posture"]))
-        return StepTasks(TaskStack(levels), self.errors(state, t, terms), n_tasks)
+        return StepTasks(TaskStack(levels), lambda: self.errors(state, t, terms), n_tasks)
 
     def velocity_stack(self, state: KinematicState, t: float, gain: float = 10.0,
                        limits: str = "none", dt: float = 0.002) -> StepTasks:
@@ -210,22 +233,26 @@ class FencingScenario:
         Args:
             gain: ``K`` of every task but the posture (which keeps its ``K_p``).
             limits: ``"bounds"`` for position/velocity bounds on ``q̇``
-                (``q + q̇ dt`` within limits, ``|q̇| ≤ q̇_max``), ``"none"`` to omit.
+                (``q + q̇ dt`` within limits, ``|q̇| ≤ q̇_max``) at level 1,
+                ``"hard_bounds"`` for the same at level 0, ``"none"`` to omit.
             dt: Step used by the bounds.
         """
         terms = self.terms(state, t)
         k = self.velocity_gains(gain)
         levels = [terms["support_foot"].velocity(k["support_foot"])]
         if limits == "bounds":
-            levels.append(_velocity_bounds(state, dt))
+            levels.append(joint_velocity_bounds(state, dt))
+        elif limits == "hard_bounds":
+            levels.insert(0, joint_velocity_bounds(state, dt))
         elif limits != "none":
-            raise ValueError(f"limits must be 'bounds' or 'none', got {limits!r}")
+            raise ValueError(f"limits must be 'bounds', 'hard_bounds' or 'none', "
+                             f"got {limits!r}")
         for name in ("com", "left_foot", "sword_tip"):
             levels.append(terms[name].velocity(k[name]))
         n_tasks = len(levels)
         if "posture" in terms:
             levels.append(terms["posture"].velocity(k["posture"]))
-        return StepTasks(TaskStack(levels), self.errors(state, t, terms), n_tasks)
+        return StepTasks(TaskStack(levels), lambda: self.errors(state, t, terms), n_tasks)
 
     def velocity_gains(self, gain: float = 10.0) -> dict[str, float]:
         """``K`` per task at velocity level: ``gain`` for every task but the posture,
@@ -236,43 +263,134 @@ class FencingScenario:
             out["posture"] = self.gains["posture"][0]
         return out
 
-    # ------------------------------------------------------- preallocated rows
-    def velocity_rows(self, gain: float = 10.0) -> TaskRows:
-        """Preallocated rows of :meth:`velocity_stack` (``limits="none"``): the same
-        levels and gains, for :meth:`write_velocity_rows` in a control loop."""
-        layout = [[("support_foot", 6)], [("com", 2)], [("left_foot", 6)], [("sword_tip", 3)]]
+    # ------------------------------------------------------------ baselines
+    def baseline_tasks(self) -> list[BaselineTask]:
+        """Hard support foot and CoM, soft left foot and sword tip (weight 1), soft
+        posture (1e-4): the mapping of ``benchmarks/placo_baseline.py``."""
+        out = [BaselineTask("support_foot", "frame", self.robot.frames["right_foot"], 0,
+                            hard=True),
+               BaselineTask("com", "com_xy", None, 1, hard=True),
+               BaselineTask("left_foot", "frame", self.robot.frames["left_foot"], 2),
+               BaselineTask("sword_tip", "position", "sword_tip", 3)]
         if self.with_posture:
-            layout.append([("posture", self.robot.nv - self.robot.n_base)])
-        return TaskRows(self.robot, layout, self.velocity_gains(gain))
+            out.append(BaselineTask("posture", "posture", None, 4, weight=1e-4))
+        return out
 
-    def write_velocity_rows(self, rows: TaskRows, state: KinematicState, t: float):
-        """Fill ``rows`` (from :meth:`velocity_rows`) at ``(state, t)``; returns its
-        data, equal to ``velocity_stack(state, t).stack`` to rounding."""
-        sup = self.right_foot0
-        rows.frame_pose(state, "support_foot", "right_foot", sup.translation,
-                        sup.rotation)
+    def baseline_target(self, name: str, t: float):
+        if name == "support_foot":
+            return np.array(self.right_foot0.homogeneous)
+        if name == "com":
+            return self.com_ref(t).x
+        if name == "left_foot":
+            T = np.array(self.left_foot0.homogeneous)
+            T[:3, 3] = self.left_foot_ref(t).x
+            return T
+        if name == "sword_tip":
+            return self.tip_ref(t).x
+        if name == "posture":
+            return self.robot.q0.copy()
+        raise KeyError(f"the fencing scenario has no baseline task {name!r}")
+
+    def markers(self, t: float) -> dict[str, np.ndarray]:
+        """The sword target and the tip's reference."""
+        return {"target": self.target.copy(), "reference": self.tip_ref(t).x}
+
+    def urdf_text(self) -> str:
+        """The G1 URDF with a ``sword_tip`` link fixed 0.5 m along the left hand's x."""
+        from pathlib import Path
+        text = Path(self.robot.source).read_text()
+        extra = (f'  <link name="sword_tip"/>\n'
+                 f'  <joint name="sword_tip_joint" type="fixed">\n'
+                 f'    <parent link="{self.robot.frames["left_hand"]}"/>\n'
+                 f'    <child link="sword_tip"/>\n'
+                 f'    <origin xyz="{SWORD_LENGTH} 0 0" rpy="0 0 0"/>\n  </joint>\n')
+        end = text.rindex("</robot>")
+        return text[:end] + extra + text[end:]
+
+    # ------------------------------------------------------- preallocated rows
+    def velocity_rows(self, gain: float = 10.0, limits: str = "none",
+                      dt: float = 0.002) -> TaskWriter:
+        """The writer of :meth:`velocity_stack`'s levels and gains (``limits``
+        ``"none"`` or ``"bounds"``: bounds on ``q̇``), for :meth:`write_rows` in a
+        control loop."""
+        if limits not in ("none", "bounds"):
+            raise ValueError(f"limits must be 'bounds' or 'none', got {limits!r}")
+        k = self.velocity_gains(gain)
+        w = TaskWriter(self.robot, "velocity")
+        w.add_contact("support_foot", "right_foot", gain=k["support_foot"])
+        if limits == "bounds":
+            w.add_joint_limits("joint_limits", form="bounds", dt=dt)
+        self._add_tracking_tasks(w, k)
+        return w
+
+    def acceleration_rows(self, limits: str = "activation", dt: float = 0.002) -> TaskWriter:
+        """The writer of :meth:`acceleration_stack`'s levels and gains. ``limits``
+        ``"activation"``: one row per joint, masked outside the margins (fixed size:
+        the level is always there, zero rows where :meth:`acceleration_stack` has
+        none); ``"bounds"``: bounds on ``q̈`` over ``bound_horizon``."""
+        if limits not in ("activation", "bounds"):
+            raise ValueError(f"limits must be 'activation' or 'bounds', got {limits!r}")
+        w = TaskWriter(self.robot, "acceleration")
+        w.add_contact("support_foot", "right_foot", gain=self.gains["support_foot"])
+        if limits == "activation":
+            w.add_joint_limits("joint_limits", form="activation", activation=self.limits)
+        else:
+            w.add_joint_limits("joint_limits", form="bounds", horizon=self.bound_horizon,
+                               dt=dt)
+        self._add_tracking_tasks(w, self.gains)
+        return w
+
+    def _add_tracking_tasks(self, w: TaskWriter, gains: dict) -> None:
+        w.add_com("com", gain=gains["com"], axes=(0, 1))
+        w.add_frame_pose("left_foot", "left_foot", gain=gains["left_foot"])
+        w.add_frame_position("sword_tip", "sword_tip", gain=gains["sword_tip"])
+        if self.with_posture:
+            w.add_posture("posture", gain=gains["posture"])
+
+    def write_rows(self, rows: TaskWriter, state: KinematicState, t: float) -> StackData:
+        """Fill ``rows`` (from :meth:`velocity_rows` or :meth:`acceleration_rows`) at
+        ``(state, t)``; returns its data (equal to :meth:`velocity_stack` /
+        :meth:`acceleration_stack` to rounding, the masked activation rows aside)."""
+        rows.contact(state, "support_foot", translation=self._support_x,
+                     rotation=self._support_R)
+        if "joint_limits" in rows:
+            rows.joint_limits(state, "joint_limits")
         com = self.com_ref(t)
         rows.com(state, "com", com.x, com.xd, com.xdd)
         foot = self.left_foot_ref(t)
-        rows.frame_pose(state, "left_foot", "left_foot", foot.x, self.left_foot0.rotation,
-                        foot.xd, foot.xdd)
+        rows.frame_pose(state, "left_foot", foot.x, self._left_foot_R, foot.xd, foot.xdd)
         tip = self.tip_ref(t)
-        rows.frame_position(state, "sword_tip", "sword_tip", tip.x, tip.xd, tip.xdd)
+        rows.frame_position(state, "sword_tip", tip.x, tip.xd, tip.xdd)
         if self.with_posture:
             rows.posture(state, "posture", self.robot.q0)
-        return rows.velocity_targets()
+        return rows.targets(state)
 
+    #: the same as :meth:`write_rows` (the name the benchmarks use)
+    write_velocity_rows = write_rows
 
-def _velocity_bounds(state: KinematicState, dt: float):
-    from prioik.hierarchy import Task
-    from .tasks import _actuated_positions
-    r = state.robot
-    lo, hi, vmax = r.joint_limits()
-    qa = _actuated_positions(state)
-    k = lo.size
-    A = np.zeros((k, r.nv))
-    A[np.arange(k), r.n_base + np.arange(k)] = 1.0
-    lower = np.maximum((lo - qa) / dt, -vmax)
-    upper = np.minimum((hi - qa) / dt, vmax)
-    lower = np.minimum(lower, upper)
-    return Task("joint_limits", A, lower=lower, upper=upper)
+    def written_step(self, rows: TaskWriter, state: KinematicState, t: float) -> StepTasks:
+        """:meth:`write_rows`, as the step a simulation solves: the writer's data (no
+        per-step objects) and the errors of :meth:`errors`, read from the writer's own
+        per-row errors after the step's timed phases."""
+        data = self.write_rows(rows, state, t)
+        levels = len(data.layout) - (1 if self.with_posture else 0)
+        return StepTasks(data, lambda: self._written_errors(rows, state), levels)
+
+    def _written_errors(self, rows: TaskWriter, state: KinematicState) -> dict[str, float]:
+        layout = rows.layout
+
+        def error(name):
+            return rows.error[layout.task_slice(name)]
+        tip = state.placement("sword_tip").translation
+        sup = state.placement("right_foot")
+        return {
+            "tip_error_m": float(np.linalg.norm(self.target - tip)),
+            "tip_tracking_error_m": float(np.linalg.norm(error("sword_tip"))),
+            "com_error_m": float(np.linalg.norm(error("com"))),
+            "support_foot_error_m": float(np.linalg.norm(sup.translation
+                                                         - self.right_foot0.translation)),
+            "support_foot_rotation_error_rad": float(np.linalg.norm(
+                error("support_foot")[3:])),
+            "left_foot_error_m": float(np.linalg.norm(error("left_foot")[:3])),
+            "joint_limit_violation_rad": joint_limit_violation(self.robot, state.q),
+        }

@@ -33,6 +33,8 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from prioik.extras import install_hint
+
 __all__ = ["ModelNotFoundError", "RobotModel", "example_robot_data_dir", "from_urdf",
            "has_free_flyer", "g1", "talos", "panda", "ur5", "go2", "solo12", "PANDA_FINGERS",
            "sample_humanoid", "spatial_chain", "LOADERS", "load"]
@@ -42,7 +44,7 @@ class ModelNotFoundError(FileNotFoundError):
     """A robot description (package or file) is not installed here."""
 
 
-@dataclass
+@dataclass(repr=False)
 class RobotModel:
     """A pinocchio model with what the task builders need to know about it.
 
@@ -101,6 +103,22 @@ class RobotModel:
     def n_base(self) -> int:
         """Number of unactuated velocity rows (6 with a floating base, else 0)."""
         return 6 if self.floating_base else 0
+
+    def __repr__(self) -> str:
+        base = "floating base" if self.floating_base else "fixed base"
+        return (f"RobotModel({self.name!r}, n_q={self.nq}, n_v={self.nv}, {base}, "
+                f"{self.model.njoints - 1} joints, frames: {', '.join(self.frames) or 'none'})")
+
+    def _repr_html_(self) -> str:
+        from html import escape
+        rows = [("name", self.name), ("n_q, n_v", f"{self.nq}, {self.nv}"),
+                ("base", "floating" if self.floating_base else "fixed"),
+                ("joints", ", ".join(list(self.model.names)[1:])),
+                ("frames", ", ".join(f"{k} → {v}" for k, v in self.frames.items())),
+                ("source", self.source)]
+        body = "".join(f"<tr><th style='text-align:left'>{escape(k)}</th><td>{escape(v)}</td>"
+                       f"</tr>" for k, v in rows)
+        return f"<table><caption>RobotModel</caption>{body}</table>"
 
     def data(self) -> pin.Data:
         """A fresh ``pin.Data`` for the model."""
@@ -219,8 +237,8 @@ def example_robot_data_dir() -> Path:
         dist = importlib.metadata.distribution("example-robot-data")
     except importlib.metadata.PackageNotFoundError:
         raise ModelNotFoundError("the robot descriptions come from the package "
-                                 "example-robot-data; install it with "
-                                 "`pip install example-robot-data`") from None
+                                 "example-robot-data (the `robots` extra); "
+                                 f"{install_hint('robots')}") from None
     for f in dist.files or ():
         parts = Path(str(f)).parts
         if "example-robot-data" in parts and "robots" in parts:

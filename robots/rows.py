@@ -1,74 +1,349 @@
-"""Task builders that write into a preallocated :class:`~prioik.hierarchy.StackData`.
+"""One set of robot task writers: robot state → rows of a :class:`~prioik.hierarchy.StackData`.
 
-The builders of :mod:`robots.tasks` return one :class:`~robots.tasks.TaskTerm` (and
-then a :class:`~hierarchy.Task`) per task and step: clear, and ~100 µs of Python
-per G1 step. :class:`TaskRows` computes the same quantities — Jacobian rows ``J``,
-error ``e = x* − x``, reference velocity ``ẋ*``, feed-forward ``ẍ*`` and drift
-``J̇ q̇`` — straight into per-row arrays beside a buffer whose layout is fixed once,
-then forms every target in one line:
+A :class:`TaskWriter` is declared once — its tasks, their priority levels, gains and
+weights (``writer.add_frame_pose("left_foot", "left_foot", level=3, gain=10.0)``, ...) —
+which fixes ``writer.layout`` (a :class:`~prioik.hierarchy.StackLayout`) and
+``writer.data`` (its preallocated :class:`~prioik.hierarchy.StackData`). At every step
+each writer call fills its task's rows in place from a
+:class:`~robots.tasks.KinematicState`: the Jacobian rows ``J`` into ``data.A`` and, per
+row, the error ``e = x* − x``, the reference velocity ``ẋ*``, the feed-forward ``ẍ*`` and
+the drift ``J̇ q̇``; :meth:`TaskWriter.targets` then forms every equality target in one
+pass:
 
-* velocity level: ``b = ẋ* + K e`` (:meth:`TaskRows.velocity_targets`);
-* acceleration level (eq. 2-4): ``b = ẍ* + K_d (ẋ* − J q̇) + K_p e − J̇ q̇``
-  (:meth:`TaskRows.acceleration_targets`).
+* ``mode="velocity"``: ``b = ẋ* + K e`` (``J q̇ = ẋ* + K e``; no drift is computed, so a
+  ``KinematicState(drift=False)`` suffices);
+* ``mode="acceleration"``: ``b = ẍ* + K_d (ẋ* − J q̇) + K_p e − J̇ q̇`` (eq. 2-4).
 
-Each writer is one compiled call (:mod:`robots._rows_kernel`) on views of the
-state's ``pin.Data`` — the joint Jacobians ``data.J`` (a frame's LOCAL_WORLD_ALIGNED
-Jacobian is formed from them), ``data.oMf``, ``data.Jcom``, ``data.com[0]`` — taken
-once per ``Data``, so that a G1 step of five tasks costs a few µs instead of ~20.
-Each writer matches the builder of the same name in :mod:`robots.tasks` to rounding
-(``tests/test_rows.py`` compares both on G1 states). Kinematics come from a
-:class:`~robots.tasks.KinematicState` (``drift=False`` suffices at velocity level).
+Task kinds: frame position, a point fixed on a frame, frame orientation (error
+``log(R* Rᵀ)``), frame pose, contact (a pose held at a placement), centre of mass,
+posture, and joint limits in two forms — activation rows (one per actuated joint,
+masked to zero outside the margins: fixed size, for the equality formulations) and
+bounds (an inequality task: ``data.lower``/``data.upper`` on ``q̇`` or ``q̈`` from the
+position limits, the velocity limits or both, for the inequality formulations).
+
+Each writer is one compiled call (:mod:`robots._rows_kernel`) on views of the state's
+``pin.Data`` — the world-frame joint Jacobians ``data.J`` (a frame's
+LOCAL_WORLD_ALIGNED Jacobian is formed from them), ``data.oMf``, ``data.Jcom``,
+``data.com[0]`` — taken once per ``Data``. The readable builders of
+:mod:`robots.tasks` (``frame_position(state, frame, ref)`` → ``TaskTerm`` → ``Task``)
+are thin wrappers over these writers; ``tests/test_rows.py`` checks the writers against
+independent pinocchio/numpy formulas and ``tests/test_tasks.py`` every Jacobian and drift
+against finite differences.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
 import pinocchio as pin
 
-from prioik.hierarchy import StackData, StackLayout
+from prioik.hierarchy import StackData, StackLayout, TaskStackError
 
 from . import _rows_kernel as _k
 from .models import RobotModel
-from .tasks import KinematicState
 
-__all__ = ["TaskRows"]
+__all__ = ["MODES", "TaskWriter", "JointLimitActivation"]
 
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 
+#: levels of a :class:`TaskWriter`
+MODES = ("velocity", "acceleration")
 
-class TaskRows:
-    """Per-row task quantities beside a :class:`~prioik.hierarchy.StackData`.
+
+@dataclass(frozen=True)
+class JointLimitActivation:
+    """Parameters of the equality (activation-row) form of joint limits.
+
+    A joint's row is active while it is within ``margin`` of a limit. With
+    ``s ∈ (0, 1]`` the depth into the margin (0 at the margin's edge, 1 at the limit)
+    and ``y = s·margin`` the same depth in radians, the row is
+    ``q̈_j = ± s (K_p y + K_d ẏ)`` pointing away from the limit (acceleration level) or
+    ``q̇_j = ± s k y`` (velocity level). The blend ``s`` makes the target continuous: a
+    row enters asking ``q̈_j = 0`` and grows stiffer the deeper the joint goes; with the
+    defaults (margin 0.1 rad, ``K_p = 2500``, ``K_d = 100``) a joint entering at up to
+    ~5 rad/s stops inside the margin (a 1-D check is in ``tests/test_tasks.py``). The row
+    *set* still switches discretely (an exact hierarchy enforces any present row fully),
+    which is what makes ``q̈`` jump at activation; the rows never ask more than the
+    pushing target, so ``q`` and ``q̇`` stay continuous.
+
+    Attributes:
+        margin: Width of the activation zone inside each limit (rad); it is capped
+            at a quarter of the joint's range.
+        kp: Stiffness of the push-back (acceleration level).
+        kd: Damping of the push-back (acceleration level).
+        k: Gain of the push-back at velocity level (1/s).
+    """
+
+    margin: float = 0.1
+    kp: float = 2500.0
+    kd: float = 100.0
+    k: float = 20.0
+
+
+@dataclass
+class _Task:
+    """One declared task: what its writer needs, fixed at declaration."""
+
+    kind: str                 # "position", "orientation", "pose", "com", "posture", "limits"
+    name: str
+    level: int
+    rows: int
+    inequality: bool
+    kp: float = 0.0
+    kd: float = 0.0
+    weight: float = 1.0
+    start: int = -1
+    fid: int = -1
+    cols: np.ndarray | None = None
+    offset: np.ndarray | None = None     # point on the frame (frame coordinates)
+    axes: np.ndarray | None = None       # com axes
+    form: str = ""                       # limits: "activation" or "bounds"
+    position: bool = True                # limits: position limits in the bounds
+    velocity: bool = True                # limits: velocity limits in the bounds
+    horizon: float = 0.0
+    dt: float = 0.0
+    activation: JointLimitActivation | None = None
+    width: np.ndarray | None = None      # activation margins per joint
+
+
+class TaskWriter:
+    """Robot task writers over one :class:`~prioik.hierarchy.StackData`.
 
     Args:
         robot: The robot (its ``n_v`` is the layout's width).
-        levels: Highest priority first; each level a sequence of ``(task name, rows)``.
-        gains: Task name → ``K`` (velocity level) or ``(K_p, K_d)`` (acceleration
-            level); tasks not named get ``K_p = K_d = 0``.
+        mode: ``"velocity"`` (``J q̇ = ẋ* + K e``) or ``"acceleration"`` (eq. 2-4).
+
+    Declare tasks with the ``add_*`` methods (each takes ``level``: the priority, 0 the
+    highest; ``None`` puts the task on a new level below every level so far; tasks of one
+    level keep their declaration order). Gains: ``gain=K`` at velocity level,
+    ``gain=(K_p, K_d)`` at acceleration level; ``weight`` is the task's weight within its
+    level (``data.sqrt_weight = √weight``). The first read of :attr:`layout` or
+    :attr:`data` (or the first write) fixes the layout; no task can be added after.
+
+    Per step: one writer call per task (named like the ``add_`` method without its
+    prefix), then :meth:`targets`. A writer call with a ``KinematicState(drift=False)``
+    is refused at acceleration level for tasks that have a drift (frames, CoM).
+
+    A writer writes into its one :class:`~prioik.hierarchy.StackData`: use it from one
+    thread at a time (one writer per thread; the builders of :mod:`robots.tasks` keep
+    one per thread).
 
     Attributes:
-        data: The rows ``A`` and targets ``b`` (what a solver reads; ``data.layout`` is
-            the layout to prepare a solver for).
-        error, velocity_ref, feedforward, drift: Per-row ``e``, ``ẋ*``, ``ẍ*``, ``J̇q̇``
-            (writable views of one ``6 × M`` array; change them in place).
-        kp, kd: Per-row gains (views, likewise).
+        robot: The robot.
+        mode: ``"velocity"`` or ``"acceleration"``.
+        error, velocity_ref, feedforward, drift, kp, kd: Per-row ``e``, ``ẋ*``, ``ẍ*``,
+            ``J̇q̇`` and gains (views of one ``6 × m`` array, valid once the layout is
+            fixed; ``kp`` is ``K`` at velocity level).
     """
 
-    def __init__(self, robot: RobotModel, levels: Sequence[Sequence[tuple[str, int]]],
-                 gains: dict | None = None) -> None:
+    def __init__(self, robot: RobotModel, mode: str = "velocity") -> None:
+        if mode not in MODES:
+            raise ValueError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
         self.robot = robot
-        self.data = StackLayout(robot.nv, levels).data()
-        self._Q = np.zeros((6, self.data.m))   # rows: _rows_kernel.ERROR ... KD
-        self._plans: dict = {}            # (writer, task, frame) -> constants of one writer
-        self._views = None                # _DataViews of the last state's pin.Data
-        self._without_drift: set[str] = set()
+        self.mode = mode
+        self._accel = mode == "acceleration"
+        self._tasks: dict[str, _Task] = {}
+        self._layout: StackLayout | None = None
+        self._data: StackData | None = None
+        self._Q = np.zeros((6, 0))
+        self._views: _DataViews | None = None
+        self._last_level = -1
         q_index = robot.actuated_q_index()
+        self._q_index = q_index
         #: q entries of the actuated joints when q_ref ⊖ q is q_ref − q for all of them
         self._posture_q = q_index if np.all(q_index >= 0) else None
-        for name, gain in (gains or {}).items():
-            kp, kd = (gain, 0.0) if np.isscalar(gain) else gain
-            self.set_gains(name, kp, kd)
+        self._limits = None                     # (lo, hi, vmax) of the actuated joints
+        self._qa = np.zeros(robot.nv - robot.n_base)
+
+    # ----------------------------------------------------------------- declaring
+    def add_frame_position(self, name: str, frame: str, *, gain, level: int | None = None,
+                           weight: float = 1.0) -> None:
+        """A frame origin's world position (3 rows)."""
+        self._add_frame(name, frame, "position", 3, gain, level, weight, np.zeros(3))
+
+    def add_point(self, name: str, frame: str, offset, *, gain, level: int | None = None,
+                  weight: float = 1.0) -> None:
+        """The world position of a point fixed on a frame (3 rows), ``offset`` in the
+        frame's coordinates (e.g. a tool tip; no extra frame is added to the model)."""
+        off = np.array(offset, dtype=float).reshape(-1)
+        if off.shape != (3,) or not np.isfinite(off).all():
+            raise ValueError(f"task {name!r}: offset must be 3 finite numbers, got {offset!r}")
+        self._add_frame(name, frame, "position", 3, gain, level, weight, off)
+
+    def add_frame_orientation(self, name: str, frame: str, *, gain,
+                              level: int | None = None, weight: float = 1.0) -> None:
+        """A frame's orientation (3 rows, world axes; error ``log(R* Rᵀ)``)."""
+        self._add_frame(name, frame, "orientation", 3, gain, level, weight, np.zeros(3))
+
+    def add_frame_pose(self, name: str, frame: str, *, gain, level: int | None = None,
+                       weight: float = 1.0) -> None:
+        """A frame's position (rows 0-2) and orientation (rows 3-5)."""
+        self._add_frame(name, frame, "pose", 6, gain, level, weight, np.zeros(3))
+
+    def add_contact(self, name: str, frame: str, *, gain, level: int | None = None,
+                    weight: float = 1.0) -> None:
+        """A support contact: the frame's pose held at a placement (6 rows, zero reference
+        velocity and acceleration); write it with :meth:`contact`."""
+        self._add_frame(name, frame, "pose", 6, gain, level, weight, np.zeros(3))
+        self._tasks[name].kind = "contact"
+
+    def add_com(self, name: str = "com", *, gain, axes: Sequence[int] = (0, 1),
+                level: int | None = None, weight: float = 1.0) -> None:
+        """The centre of mass on world ``axes`` (default horizontal; eq. 32-33)."""
+        idx = np.array(axes, dtype=np.int64).reshape(-1)
+        if idx.size < 1 or idx.size > 3 or not np.all((idx >= 0) & (idx < 3)) \
+                or np.unique(idx).size != idx.size:
+            raise ValueError(f"task {name!r}: com axes must be distinct among 0, 1, 2, got "
+                             f"{list(axes)}")
+        task = self._add(name, "com", idx.size, level, gain, weight)
+        task.axes = idx
+
+    def add_posture(self, name: str = "posture", *, gain, level: int | None = None,
+                    weight: float = 1.0) -> None:
+        """The actuated joints (velocity rows ``n_base:``) to a reference configuration."""
+        self._add(name, "posture", self.robot.nv - self.robot.n_base, level, gain, weight)
+
+    def add_joint_limits(self, name: str = "joint_limits", *, form: str,
+                         level: int | None = None, position: bool = True,
+                         velocity: bool = True, horizon: float | None = None,
+                         dt: float | None = None,
+                         activation: JointLimitActivation | None = None,
+                         weight: float = 1.0) -> None:
+        """Joint limits of the actuated joints, one row per joint.
+
+        Args:
+            form: ``"activation"`` — equality rows pushing a joint out of its margin
+                (:class:`JointLimitActivation`; position limits only), masked to zero
+                rows while outside; ``"bounds"`` — an inequality task.
+            position, velocity: Which limits the bounds hold (position and/or velocity).
+            horizon: Bounds: at velocity level ``q + q̇ T`` stays within the position
+                limits for ``T = horizon`` (default ``dt``); at acceleration level the
+                constant-acceleration position at ``T`` does (required).
+            dt: The control step (required for the bounds; see
+                :func:`robots.tasks.joint_limit_bounds`).
+            activation: Parameters of the activation rows (defaults if omitted).
+        """
+        if form not in ("activation", "bounds"):
+            raise ValueError(f"task {name!r}: form must be 'activation' or 'bounds', got "
+                             f"{form!r}")
+        lo, hi, _ = self._joint_limits()
+        if form == "activation":
+            params = activation or JointLimitActivation()
+            task = self._add(name, "limits", lo.size, level, None, weight)
+            task.form, task.activation = form, params
+            task.kp, task.kd = (params.kp, params.kd) if self._accel else (params.k, 0.0)
+            with np.errstate(invalid="ignore"):
+                task.width = np.where(np.isfinite(lo) & np.isfinite(hi),
+                                      np.minimum(params.margin, 0.25 * (hi - lo)), 1.0)
+            return
+        if not (position or velocity):
+            raise ValueError(f"task {name!r}: bounds need position or velocity limits")
+        if dt is None or not (dt > 0 and np.isfinite(dt)):
+            raise ValueError(f"task {name!r}: joint-limit bounds need dt > 0, got {dt!r}")
+        if horizon is None and self._accel and position:
+            raise ValueError(f"task {name!r}: acceleration-level bounds need a horizon")
+        T = dt if horizon is None else horizon
+        if not (T > 0 and np.isfinite(T)):
+            raise ValueError(f"task {name!r}: horizon must be > 0, got {horizon!r}")
+        task = self._add(name, "limits", lo.size, level, None, weight, inequality=True)
+        task.form = form
+        task.position, task.velocity = bool(position), bool(velocity)
+        task.horizon, task.dt = float(T), float(dt)
+
+    def _add_frame(self, name, frame, kind, rows, gain, level, weight, offset) -> None:
+        fid = self.robot.frame_id(frame)              # KeyError naming a missing frame
+        task = self._add(name, kind, rows, level, gain, weight)
+        model = self.robot.model
+        joint = model.frames[fid].parentJoint
+        cols = [c for j in model.supports[joint] if j > 0
+                for c in range(model.joints[j].idx_v,
+                               model.joints[j].idx_v + model.joints[j].nv)]
+        task.fid = fid
+        task.cols = np.array(sorted(cols), dtype=np.int64)
+        task.offset = offset
+
+    def _add(self, name, kind, rows, level, gain, weight, inequality=False) -> _Task:
+        if self._layout is not None:
+            raise TaskStackError("the layout is fixed (it was read or written): declare "
+                                 "every task before", task=name)
+        if not isinstance(name, str) or not name:
+            raise TaskStackError(f"a task name must be a non-empty string, got {name!r}")
+        if name in self._tasks:
+            raise TaskStackError("duplicate task name", task=name)
+        if level is None:
+            level = self._last_level + 1
+        if isinstance(level, bool) or not isinstance(level, (int, np.integer)) or level < 0:
+            raise TaskStackError(f"level must be an integer ≥ 0 or None, got {level!r}",
+                                 task=name)
+        if not (np.isfinite(weight) and weight > 0):
+            raise TaskStackError(f"weight must be finite and > 0, got {weight!r}", task=name)
+        task = _Task(kind, name, int(level), int(rows), inequality, weight=float(weight))
+        if kind != "limits":
+            task.kp, task.kd = self._gains(name, gain)
+        self._last_level = max(self._last_level, int(level))
+        self._tasks[name] = task
+        return task
+
+    def _gains(self, name: str, gain) -> tuple[float, float]:
+        if self._accel:
+            try:
+                kp, kd = (float(g) for g in gain)
+            except (TypeError, ValueError):
+                raise ValueError(f"task {name!r}: at acceleration level gain is (K_p, K_d), "
+                                 f"got {gain!r}") from None
+        else:
+            if not np.isscalar(gain) or isinstance(gain, (str, bool)):
+                raise ValueError(f"task {name!r}: at velocity level gain is one number K, "
+                                 f"got {gain!r}")
+            kp, kd = float(gain), 0.0
+        if not (np.isfinite(kp) and np.isfinite(kd)):
+            raise ValueError(f"task {name!r}: gains must be finite, got {gain!r}")
+        return kp, kd
+
+    # ------------------------------------------------------------------- layout
+    @property
+    def layout(self) -> StackLayout:
+        """The layout of the declared tasks (fixes it)."""
+        if self._layout is None:
+            self._fix()
+        return self._layout
+
+    @property
+    def data(self) -> StackData:
+        """The preallocated rows (fixes the layout)."""
+        if self._data is None:
+            self._fix()
+        return self._data
+
+    def _fix(self) -> None:
+        if not self._tasks:
+            raise TaskStackError("no task declared: add tasks before reading the layout")
+        levels: dict[int, list[_Task]] = {}
+        for task in self._tasks.values():
+            levels.setdefault(task.level, []).append(task)
+        missing = sorted(set(range(max(levels) + 1)) - set(levels))
+        if missing:
+            raise TaskStackError(f"levels {missing} have no task (levels are 0, 1, ... "
+                                 "without gaps)", level=missing[0])
+        self._layout = StackLayout(self.robot.nv, [
+            [(t.name, t.rows, "inequality" if t.inequality else "equality")
+             for t in levels[i]] for i in range(len(levels))])
+        self._data = data = self._layout.data()
+        self._Q = np.zeros((6, data.m))
+        nb = self.robot.n_base
+        for task in self._tasks.values():
+            sl = self._layout.task_slice(task.name)
+            task.start = sl.start
+            data.sqrt_weight[sl] = np.sqrt(task.weight)
+            if task.kind != "limits" or task.form == "bounds":
+                self._Q[_k.KP, sl] = task.kp
+                self._Q[_k.KD, sl] = task.kd
+            if task.kind in ("posture", "limits") and not (
+                    task.kind == "limits" and task.form == "activation"):
+                A = data.A[sl]
+                A[:, nb:] = np.eye(task.rows)      # constant unit rows, written once
 
     error = property(lambda self: self._Q[_k.ERROR],
                      doc="Per-row error ``e = x* − x`` (a view).")
@@ -81,152 +356,194 @@ class TaskRows:
                   doc="Per-row ``K_p`` (``K`` at velocity level; a view).")
     kd = property(lambda self: self._Q[_k.KD], doc="Per-row ``K_d`` (a view).")
 
-    def set_gains(self, name: str, kp: float, kd: float = 0.0) -> None:
-        """Gains of one task's rows (``kp`` is ``K`` at velocity level)."""
-        sl = self.data.layout.task_slice(name)
-        self.kp[sl] = kp
-        self.kd[sl] = kd
+    def set_gains(self, name: str, gain) -> None:
+        """New gains of one task (``K`` or ``(K_p, K_d)`` as at declaration)."""
+        task = self._task(name, None)
+        if task.kind == "limits":
+            raise ValueError(f"task {name!r}: joint-limit gains are set by its "
+                             "JointLimitActivation")
+        task.kp, task.kd = self._gains(name, gain)
+        if self._layout is not None:
+            sl = slice(task.start, task.start + task.rows)
+            self.kp[sl] = task.kp
+            self.kd[sl] = task.kd
+
+    def tasks(self) -> tuple[str, ...]:
+        """The declared tasks' names, in declaration order."""
+        return tuple(self._tasks)
+
+    def __contains__(self, name: str) -> bool:
+        return name in self._tasks
 
     # ------------------------------------------------------------------ writers
-    def frame_position(self, state: KinematicState, name: str, frame: str, x,
-                       xd=None, xdd=None) -> None:
-        """A frame origin's world position (3 rows), as
-        :func:`robots.tasks.frame_position`."""
-        self._frame(state, name, frame, 3, x, _EYE3, xd, xdd)
+    def frame_position(self, state, name: str, x, xd=None, xdd=None) -> None:
+        """A frame origin's (or a point's, :meth:`add_point`) position: ``x*`` and its
+        rates ``ẋ*``, ``ẍ*`` (zero if omitted)."""
+        task = self._task(name, "position")
+        self._frame(state, task, _k.POSITION, _vec(x, 3, name, "x"), _vec(xd, 3, name, "xd"),
+                    _vec(xdd, 3, name, "xdd"), _EYE3, _ZERO3, _ZERO3)
 
-    def frame_pose(self, state: KinematicState, name: str, frame: str, x,
-                   rotation: np.ndarray, xd=None, xdd=None) -> None:
-        """Position (rows 0-2, following ``x``) and orientation (rows 3-5, held at
-        ``rotation``, error ``log(R* Rᵀ)``) of a frame, as
-        :func:`robots.tasks.frame_pose` (and :func:`robots.tasks.contact` with
-        ``xd = xdd = 0``)."""
-        rot = rotation
-        if type(rot) is not np.ndarray or rot.dtype != _F64:
-            rot = np.asarray(rotation, dtype=np.float64)
-        if rot.shape != (3, 3):
-            raise ValueError(f"task {name!r}: rotation must be 3 × 3, got {rot.shape}")
-        self._frame(state, name, frame, 6, x, rot, xd, xdd)
+    point = frame_position
 
-    def _frame(self, state: KinematicState, name: str, frame: str, nrows: int, x,
-               rotation: np.ndarray, xd, xdd) -> None:
-        """The frame writers' common body: ``nrows`` 3 (position) or 6 (pose)."""
-        s, fid, cols = self._frame_plan(name, frame, nrows)
+    def frame_orientation(self, state, name: str, rotation, angular_velocity=None,
+                          angular_acceleration=None) -> None:
+        """A frame's orientation: target ``R*`` (3×3), ``ω*``, ``ω̇*`` (world; zero if
+        omitted)."""
+        task = self._task(name, "orientation")
+        self._frame(state, task, _k.ORIENTATION, _ZERO3, _ZERO3, _ZERO3,
+                    _rotation(rotation, name), _vec(angular_velocity, 3, name, "ω*"),
+                    _vec(angular_acceleration, 3, name, "ω̇*"))
+
+    def frame_pose(self, state, name: str, x, rotation, xd=None, xdd=None,
+                   angular_velocity=None, angular_acceleration=None) -> None:
+        """A frame's pose: position ``x*`` (rates ``ẋ*``, ``ẍ*``) and rotation ``R*``
+        (rates ``ω*``, ``ω̇*``); omitted rates are zero."""
+        task = self._task(name, "pose")
+        self._frame(state, task, _k.POSE, _vec(x, 3, name, "x"), _vec(xd, 3, name, "xd"),
+                    _vec(xdd, 3, name, "xdd"), _rotation(rotation, name),
+                    _vec(angular_velocity, 3, name, "ω*"),
+                    _vec(angular_acceleration, 3, name, "ω̇*"))
+
+    def contact(self, state, name: str, placement: pin.SE3 | None = None, *,
+                translation=None, rotation=None) -> None:
+        """A contact held at ``placement`` (or ``translation`` and ``rotation``: the same
+        without building an SE3), zero reference velocity and acceleration."""
+        task = self._task(name, "contact")
+        if placement is not None:
+            translation, rotation = placement.translation, placement.rotation
+        self._frame(state, task, _k.POSE, _vec(translation, 3, name, "translation"),
+                    _ZERO3, _ZERO3, _rotation(rotation, name), _ZERO3, _ZERO3)
+
+    def com(self, state, name: str, x, xd=None, xdd=None) -> None:
+        """The centre of mass: ``x*``, ``ẋ*``, ``ẍ*`` given on the task's axes."""
+        task = self._task(name, "com")
         views = self._data_views(state)
-        p, R = views.frame(fid)
-        drift = self._note_drift(state, name)
-        _k.frame_rows(self.data.A, self._Q, s, nrows, views.J, cols, p, R,
-                      _vec(x, 3, name, "x"), rotation, _vec(xd, 3, name, "xd"),
-                      _vec(xdd, 3, name, "xdd"), not drift)
-        if drift:
-            acc = pin.getFrameClassicalAcceleration(state.model, state.data, fid, _LWA)
-            self.drift[s:s + nrows] = acc.vector[:nrows]
-
-    def com(self, state: KinematicState, name: str, x, xd=None, xdd=None,
-            axes: Sequence[int] = (0, 1)) -> None:
-        """The centre of mass on ``axes`` (``x``, ``xd``, ``xdd`` given on those axes),
-        as :func:`robots.tasks.com_position`."""
-        key = ("com", name, tuple(axes))
-        plan = self._plans.get(key)
-        if plan is None:
-            idx = np.array(axes, dtype=np.int64)
-            if idx.ndim != 1 or not np.all((idx >= 0) & (idx < 3)):
-                raise ValueError(f"task {name!r}: com axes must be among 0, 1, 2, got "
-                                 f"{list(axes)}")
-            plan = self._plans[key] = (self._check_rows(name, idx.size), idx)
-        s, idx = plan
-        views = self._data_views(state)
-        m = idx.size
-        drift = self._note_drift(state, name)
-        _k.com_rows(self.data.A, self._Q, s, views.Jcom, views.com, idx,
+        m = task.rows
+        drift = self._drift(state, task)
+        _k.com_rows(self._data.A, self._Q, task.start, views.Jcom, views.com, task.axes,
                     _vec(x, m, name, "x"), _vec(xd, m, name, "xd"), _vec(xdd, m, name, "xdd"),
                     not drift)
         if drift:
-            self.drift[s:s + m] = state.acom_drift[idx]
+            self._Q[_k.DRIFT, task.start:task.start + m] = state.acom_drift[task.axes]
 
-    def posture(self, state: KinematicState, name: str, q_ref) -> None:
-        """The actuated joints to ``q_ref``, as :func:`robots.tasks.posture` (the
-        constant unit rows are written on the first call only)."""
+    def posture(self, state, name: str, q_ref) -> None:
+        """The actuated joints to ``q_ref`` (``n_q``): error ``q_ref ⊖ q`` on rows
+        ``n_base:`` of the velocity (``q_ref − q`` where every actuated joint has one
+        coordinate; pinocchio's ``difference`` otherwise), no drift."""
+        task = self._task(name, "posture")
         robot = self.robot
-        nb = robot.n_base
-        key = ("posture", name)
-        s = self._plans.get(key)
-        if s is None:
-            s = self._check_rows(name, robot.nv - nb)
-            A = self.data.A[s:s + robot.nv - nb]
-            A[:] = 0.0
-            A[:, nb:] = np.eye(robot.nv - nb)
-            self._plans[key] = s
         q_ref = _vec(q_ref, robot.nq, name, "q_ref")
         if self._posture_q is not None:
-            _k.posture_error(self._Q, s, state.q, q_ref, self._posture_q)
+            _k.posture_error(self._Q, task.start, state.q, q_ref, self._posture_q)
         else:
-            sl = slice(s, s + robot.nv - nb)
-            self.error[sl] = pin.difference(robot.model, state.q, q_ref)[nb:]
+            sl = slice(task.start, task.start + task.rows)
+            self.error[sl] = pin.difference(robot.model, state.q, q_ref)[robot.n_base:]
             self.velocity_ref[sl] = 0.0
             self.feedforward[sl] = 0.0
             self.drift[sl] = 0.0
-        self._without_drift.discard(name)      # a posture has no drift
+
+    def joint_limits(self, state, name: str = "joint_limits") -> int:
+        """The joint-limit rows at ``state``: activation rows (returns how many are
+        active) or bounds (``data.lower``/``upper``; returns the row count)."""
+        task = self._task(name, "limits")
+        lo, hi, vmax = self._joint_limits()
+        qa = self._qa
+        _k.actuated_positions(state.q, self._q_index, qa)
+        va = state.v[self.robot.n_base:]
+        data = self._data
+        if task.form == "activation":
+            return int(_k.limit_activation_rows(data.A, self._Q, task.start,
+                                                self.robot.n_base, qa, va, lo, hi,
+                                                task.width, task.kp, task.kd))
+        if self._accel:
+            _k.acceleration_bounds(data.lower, data.upper, task.start, qa, va, lo, hi, vmax,
+                                   task.horizon, task.dt, task.position, task.velocity)
+        else:
+            _k.velocity_bounds(data.lower, data.upper, task.start, qa, lo, hi, vmax,
+                               task.horizon, task.position, task.velocity)
+        return task.rows
+
+    # ------------------------------------------------------------------ targets
+    def targets(self, state) -> StackData:
+        """Every equality target from the rows written (velocity level:
+        ``b = ẋ* + K e``; acceleration level: eq. 2-4 with ``q̇ = state.v``); returns
+        :attr:`data`. Inequality rows keep the bounds their writer set (``b`` = 0)."""
+        if self._accel:
+            return self.acceleration_targets(state.v)
+        return self.velocity_targets()
+
+    def velocity_targets(self) -> StackData:
+        """``b = ẋ* + K e`` into the data; returns it."""
+        data = self.data
+        _k.velocity_targets(data.b, self._Q)
+        return data
+
+    def acceleration_targets(self, v: np.ndarray) -> StackData:
+        """``b = ẍ* + K_d (ẋ* − J q̇) + K_p e − J̇ q̇`` (eq. 2-4) into the data; returns it."""
+        data = self.data
+        _k.acceleration_targets(data.A, data.b, self._Q, v)
+        return data
 
     # ------------------------------------------------------------------ helpers
-    def _check_rows(self, name: str, m: int) -> int:
-        sl = self.data.layout.task_slice(name)   # raises for an unknown name, listing the tasks
-        if sl.stop - sl.start != m:
-            raise ValueError(f"task {name!r} has {sl.stop - sl.start} rows in the layout, "
-                             f"the builder writes {m}")
-        return sl.start
+    def _task(self, name: str, kind: str | None) -> _Task:
+        task = self._tasks.get(name)
+        if task is None:
+            raise TaskStackError(f"no task {name!r} declared (tasks: "
+                                 f"{', '.join(self._tasks) or 'none'})")
+        if kind is not None and task.kind != kind:
+            raise TaskStackError(f"task {name!r} was declared as {task.kind}, not {kind}",
+                                 task=name)
+        if self._layout is None:
+            self._fix()
+        return task
 
-    def _frame_plan(self, name: str, frame: str, m: int):
-        key = (m, name, frame)
-        plan = self._plans.get(key)
-        if plan is None:
-            start = self._check_rows(name, m)
-            fid = self.robot.frame_id(frame)
-            model = self.robot.model
-            joint = model.frames[fid].parentJoint
-            cols = [c for j in model.supports[joint] if j > 0
-                    for c in range(model.joints[j].idx_v,
-                                   model.joints[j].idx_v + model.joints[j].nv)]
-            plan = self._plans[key] = (start, fid, np.array(sorted(cols), dtype=np.int64))
-        return plan
-
-    def _data_views(self, state: KinematicState) -> "_DataViews":
+    def _frame(self, state, task: _Task, mode: int, x, xd, xdd, rot, w, wd) -> None:
         views = self._views
         if views is None or views.data is not state.data:
+            views = self._data_views(state)
+        t, R = views.frame(task.fid)
+        drift = self._accel and self._drift(state, task)
+        s = task.start
+        _k.frame_rows(self._data.A, self._Q, s, mode, views.J, task.cols, t, R, task.offset,
+                      x, xd, xdd, rot, w, wd, not drift)
+        if drift:
+            acc = pin.getFrameClassicalAcceleration(state.model, state.data, task.fid,
+                                                    _LWA).vector
+            if mode == _k.ORIENTATION:
+                self._Q[_k.DRIFT, s:s + 3] = acc[3:]
+            else:
+                self._Q[_k.DRIFT, s:s + task.rows] = acc[:task.rows]
+                if task.offset.any():
+                    # a point r = R·offset from the origin: a_p = a_O + α × r + ω × (ω × r)
+                    r = R @ task.offset
+                    om = pin.getFrameVelocity(state.model, state.data, task.fid,
+                                              _LWA).angular
+                    self._Q[_k.DRIFT, s:s + 3] += np.cross(acc[3:], r) \
+                        + np.cross(om, np.cross(om, r))
+
+    def _drift(self, state, task: _Task) -> bool:
+        """Whether to write the drift: at acceleration level (refusing a drift-free
+        state), never at velocity level."""
+        if not self._accel:
+            return False
+        if not state.has_drift:
+            raise ValueError(f"task {task.name!r}: an acceleration-level writer needs "
+                             "J̇q̇, but the KinematicState was built with drift=False")
+        return True
+
+    def _data_views(self, state) -> "_DataViews":
+        views = self._views
+        if views is None or views.data is not state.data:
+            if state.robot.model is not self.robot.model:
+                raise ValueError(f"the state is of robot {state.robot.name!r}, the writer "
+                                 f"of {self.robot.name!r}")
             views = self._views = _DataViews(state.data)
         return views
 
-    def _note_drift(self, state: KinematicState, name: str) -> bool:
-        if state.has_drift:
-            self._without_drift.discard(name)
-            return True
-        self._without_drift.add(name)
-        return False
-
-    # ------------------------------------------------------------------ targets
-    def velocity_targets(self) -> StackData:
-        """``b = ẋ* + K e`` into the buffer; returns it."""
-        _k.velocity_targets(self.data.b, self._Q)
-        return self.data
-
-    def acceleration_targets(self, v: np.ndarray) -> StackData:
-        """``b = ẍ* + K_d (ẋ* − J q̇) + K_p e − J̇ q̇`` (eq. 2-4) into the buffer;
-        returns it.
-
-        Raises:
-            ValueError: a task was last written from a ``drift=False`` state (its
-                ``J̇ q̇`` is unknown), naming it.
-        """
-        if self._without_drift:
-            raise ValueError(f"tasks {sorted(self._without_drift)} were written from a "
-                             "KinematicState(drift=False): acceleration targets need "
-                             "J̇q̇ (build the state with drift=True)")
-        buf = self.data
-        rate = self.velocity_ref - buf.A @ v
-        np.multiply(self.kd, rate, out=buf.b)
-        buf.b += self.kp * self.error
-        buf.b += self.feedforward
-        buf.b -= self.drift
-        return buf
+    def _joint_limits(self):
+        if self._limits is None:
+            self._limits = self.robot.joint_limits()
+        return self._limits
 
 
 class _DataViews:
@@ -244,13 +561,14 @@ class _DataViews:
 
     def frame(self, fid: int) -> tuple[np.ndarray, np.ndarray]:
         views = self._frames.get(fid)
-        if views is None:
+        if views is None:      # views of data.oMf[fid]: they follow every later update
             placement = self.data.oMf[fid]
             views = self._frames[fid] = (placement.translation, placement.rotation)
         return views
 
 
 _EYE3 = np.eye(3)
+_ZERO3 = np.zeros(3)                     # never written
 _F64 = np.dtype(np.float64)
 _ZEROS: dict[int, np.ndarray] = {}        # m -> zeros(m), never written
 
@@ -269,3 +587,12 @@ def _vec(value, m: int, task: str, what: str) -> np.ndarray:
     if out.shape != (m,):
         raise ValueError(f"task {task!r}: {what} must have {m} entries, got shape {out.shape}")
     return out
+
+
+def _rotation(rotation, task: str) -> np.ndarray:
+    rot = rotation
+    if type(rot) is not np.ndarray or rot.dtype != _F64:
+        rot = np.asarray(rotation, dtype=np.float64)
+    if rot.shape != (3, 3):
+        raise ValueError(f"task {task!r}: rotation must be 3 × 3, got {rot.shape}")
+    return rot

@@ -1,8 +1,12 @@
 """Task builders: robot state → ``hierarchy`` tasks at acceleration or velocity level.
 
 Every builder returns a :class:`TaskTerm` holding, for one task ``x = f(q)``:
-its Jacobian ``J`` (``ẋ = J q̇``), the drift ``J̇ q̇``, the error ``e = x* − x``, the
-rate error ``ė = ẋ* − ẋ`` and the feed-forward ``ẍ*``. From these
+its Jacobian ``J`` (``ẋ = J q̇``), the drift ``J̇ q̇`` (``None`` from a
+``KinematicState(drift=False)``), the error ``e = x* − x``, the rate error
+``ė = ẋ* − ẋ`` and the feed-forward ``ẍ*``. The builders are one-off, readable
+wrappers over the task writers of :mod:`robots.rows` (a one-task
+:class:`~robots.rows.TaskWriter` per task kind, kept per thread): the same rows, copied
+out. From these
 
 * :meth:`TaskTerm.acceleration` gives the paper's task ``J θ̈ = h`` with
   ``h = ẍ* + K_d (ẋ* − ẋ) + K_p (x* − x) − J̇ θ̇`` (eq. 2-4);
@@ -14,13 +18,14 @@ the world velocity of the frame origin, angular rows the world angular velocity)
 ``J̇ q̇`` as the frame's classical acceleration at ``q̈ = 0``, and the centre of mass
 with its Jacobian and its drift (``pin.centerOfMass`` at ``q̈ = 0``).
 
-Joint limits come in two forms (see :func:`joint_limit_rows` and
-:func:`joint_limit_bounds`): activation rows for the equality formulations and bounds
-on ``q̈`` for the QP formulations.
+Joint limits come in two forms (see :func:`joint_limit_rows`, :func:`joint_limit_bounds`
+and :func:`joint_velocity_bounds`): activation rows for the equality formulations and
+bounds on ``q̈`` or ``q̇`` for the QP formulations.
 """
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -30,10 +35,12 @@ from prioik.hierarchy import Task
 
 from .models import RobotModel
 from .references import Reference
+from .rows import JointLimitActivation, TaskWriter
 
-__all__ = ["KinematicState", "TaskTerm", "frame_position", "frame_orientation",
-           "frame_pose", "com_position", "contact", "posture", "joint_limit_rows",
-           "joint_limit_bounds", "JointLimitActivation"]
+__all__ = ["KinematicState", "TaskTerm", "frame_position", "point_position",
+           "frame_orientation", "frame_pose", "com_position", "contact", "posture",
+           "joint_limit_rows", "joint_limit_bounds", "joint_velocity_bounds",
+           "JointLimitActivation"]
 
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 
@@ -47,8 +54,8 @@ class KinematicState:
         v: Velocity (``n_v``); copied.
         data: A ``pin.Data`` to reuse (a fresh one if omitted).
         drift: Compute the drift terms ``J̇ q̇`` (acceleration level); ``False``
-            skips them (velocity level: ``frame_drift`` and ``acom_drift`` are then
-            unavailable).
+            skips them (velocity level: ``frame_drift`` raises, ``acom_drift`` is
+            ``None`` and the builders' terms have ``drift=None``).
 
     After construction ``data`` holds the joint Jacobians, frame placements, the
     velocities and the accelerations at ``q̈ = 0`` (the drift terms), the centre of
@@ -149,7 +156,8 @@ class TaskTerm:
     Attributes:
         name: Task name (unique in a stack).
         J: Task Jacobian (``m × n``).
-        drift: ``J̇ q̇`` (``m``).
+        drift: ``J̇ q̇`` (``m``), or ``None`` when built from a
+            ``KinematicState(drift=False)`` (then only :meth:`velocity` applies).
         error: ``e = x* − x`` (``m``).
         rate_error: ``ė = ẋ* − ẋ`` (``m``).
         feedforward: ``ẍ*`` (``m``).
@@ -158,14 +166,22 @@ class TaskTerm:
 
     name: str
     J: np.ndarray
-    drift: np.ndarray
+    drift: np.ndarray | None
     error: np.ndarray
     rate_error: np.ndarray
     feedforward: np.ndarray
     velocity_ref: np.ndarray
 
     def acceleration(self, kp: float, kd: float, weight=1.0) -> Task:
-        """``J θ̈ = ẍ* + K_d ė + K_p e − J̇ θ̇`` (eq. 2-4)."""
+        """``J θ̈ = ẍ* + K_d ė + K_p e − J̇ θ̇`` (eq. 2-4).
+
+        Raises:
+            ValueError: the term has no drift (built with ``drift=False``), naming it.
+        """
+        if self.drift is None:
+            raise ValueError(f"task {self.name!r} was built from a KinematicState("
+                             "drift=False): an acceleration task needs J̇q̇ (build the "
+                             "state with drift=True, or use .velocity(k))")
         h = self.feedforward + kd * self.rate_error + kp * self.error - self.drift
         return Task(self.name, self.J, h, weight=weight)
 
@@ -176,25 +192,68 @@ class TaskTerm:
     def select(self, rows) -> "TaskTerm":
         """The term restricted to some rows (e.g. the horizontal axes)."""
         idx = list(rows)
-        return TaskTerm(self.name, self.J[idx], self.drift[idx], self.error[idx],
+        return TaskTerm(self.name, self.J[idx],
+                        None if self.drift is None else self.drift[idx], self.error[idx],
                         self.rate_error[idx], self.feedforward[idx], self.velocity_ref[idx])
 
 
-def _ref3(ref: Reference | None, fallback: np.ndarray) -> Reference:
-    if ref is None:
-        return Reference(fallback.copy(), np.zeros(3), np.zeros(3))
-    return ref
+# ------------------------------------------------------- one-task writers, per thread
+_LOCAL = threading.local()
+_MAX_WRITERS = 256      # per thread; the cache is cleared beyond (a builder is one-off)
+_T = "task"             # the one task's name inside a builder's writer
+
+
+def _writer(state: KinematicState, key: tuple, declare, mode: str | None = None
+            ) -> TaskWriter:
+    """The thread's one-task writer of ``state``'s robot for ``key`` (declared by
+    ``declare(writer, gain)`` on first use); ``mode`` defaults to what the state allows
+    (acceleration with drift, else velocity)."""
+    cache = getattr(_LOCAL, "writers", None)
+    if cache is None:
+        cache = _LOCAL.writers = {}
+    if mode is None:
+        mode = "acceleration" if state.has_drift else "velocity"
+    robot = state.robot
+    full = (id(robot), mode) + key
+    entry = cache.get(full)
+    if entry is None or entry[0] is not robot:
+        if len(cache) >= _MAX_WRITERS:
+            cache.clear()
+        w = TaskWriter(robot, mode)
+        declare(w, (0.0, 0.0) if mode == "acceleration" else 0.0)
+        w.layout
+        entry = cache[full] = (robot, w)
+    return entry[1]
+
+
+def _term(w: TaskWriter, state: KinematicState, name: str) -> TaskTerm:
+    """The writer's one task as a :class:`TaskTerm` (copied out)."""
+    sl = w.layout.task_slice(_T)
+    J = w.data.A[sl].copy()
+    vref = w.velocity_ref[sl].copy()
+    drift = w.drift[sl].copy() if w.mode == "acceleration" else None
+    return TaskTerm(name, J, drift, w.error[sl].copy(), vref - J @ state.v,
+                    w.feedforward[sl].copy(), vref)
 
 
 def frame_position(state: KinematicState, frame: str, ref: Reference,
                    name: str | None = None) -> TaskTerm:
-    """Position of a frame origin (a point fixed on a body: add it with
-    :meth:`RobotModel.with_point_frame`), world coordinates (3 rows)."""
-    J = state.frame_jacobian(frame)[:3]
-    p = state.placement(frame).translation
-    return TaskTerm(name or f"{frame}_position", J, state.frame_drift(frame)[:3],
-                    np.asarray(ref.x) - p, np.asarray(ref.xd) - J @ state.v,
-                    np.asarray(ref.xdd, dtype=float), np.asarray(ref.xd, dtype=float))
+    """Position of a frame origin, world coordinates (3 rows)."""
+    w = _writer(state, ("position", frame),
+                lambda w, g: w.add_frame_position(_T, frame, gain=g))
+    w.frame_position(state, _T, ref.x, ref.xd, ref.xdd)
+    return _term(w, state, name or f"{frame}_position")
+
+
+def point_position(state: KinematicState, frame: str, offset, ref: Reference,
+                   name: str | None = None) -> TaskTerm:
+    """Position of a point fixed on a frame (``offset`` in the frame's coordinates),
+    world coordinates (3 rows); :meth:`RobotModel.with_point_frame` is the other way."""
+    off = tuple(float(v) for v in np.asarray(offset, dtype=float).reshape(-1))
+    w = _writer(state, ("point", frame, off),
+                lambda w, g: w.add_point(_T, frame, off, gain=g))
+    w.point(state, _T, ref.x, ref.xd, ref.xdd)
+    return _term(w, state, name or f"{frame}_point")
 
 
 def frame_orientation(state: KinematicState, frame: str, rotation: np.ndarray,
@@ -207,129 +266,74 @@ def frame_orientation(state: KinematicState, frame: str, rotation: np.ndarray,
         angular_velocity: ``ω*`` (world), zero if omitted.
         angular_acceleration: ``ω̇*`` (world), zero if omitted.
     """
-    J = state.frame_jacobian(frame)[3:]
-    R = state.placement(frame).rotation
-    err = pin.log3(np.asarray(rotation) @ R.T)
-    w_ref = np.zeros(3) if angular_velocity is None else np.asarray(angular_velocity, float)
-    dw_ref = np.zeros(3) if angular_acceleration is None else np.asarray(angular_acceleration,
-                                                                          float)
-    return TaskTerm(name or f"{frame}_orientation", J, state.frame_drift(frame)[3:], err,
-                    w_ref - J @ state.v, dw_ref, w_ref)
+    w = _writer(state, ("orientation", frame),
+                lambda w, g: w.add_frame_orientation(_T, frame, gain=g))
+    w.frame_orientation(state, _T, rotation, angular_velocity, angular_acceleration)
+    return _term(w, state, name or f"{frame}_orientation")
 
 
 def frame_pose(state: KinematicState, frame: str, ref: Reference, rotation: np.ndarray,
                name: str | None = None) -> TaskTerm:
     """Position (rows 0-2, following ``ref``) and orientation (rows 3-5, fixed
     ``rotation``) of a frame: 6 rows."""
-    p = frame_position(state, frame, ref)
-    o = frame_orientation(state, frame, rotation)
-    return TaskTerm(name or f"{frame}_pose", np.vstack([p.J, o.J]),
-                    np.concatenate([p.drift, o.drift]), np.concatenate([p.error, o.error]),
-                    np.concatenate([p.rate_error, o.rate_error]),
-                    np.concatenate([p.feedforward, o.feedforward]),
-                    np.concatenate([p.velocity_ref, o.velocity_ref]))
+    w = _writer(state, ("pose", frame), lambda w, g: w.add_frame_pose(_T, frame, gain=g))
+    w.frame_pose(state, _T, ref.x, rotation, ref.xd, ref.xdd)
+    return _term(w, state, name or f"{frame}_pose")
 
 
 def contact(state: KinematicState, frame: str, placement: pin.SE3,
             name: str | None = None) -> TaskTerm:
     """A support contact: the frame held at ``placement`` (6 rows, zero reference
     velocity and acceleration; with gains this is ``ẍ = −K_d ẋ + K_p e``)."""
-    ref = Reference(np.array(placement.translation), np.zeros(3), np.zeros(3))
-    return frame_pose(state, frame, ref, np.array(placement.rotation),
-                      name=name or f"{frame}_contact")
+    w = _writer(state, ("contact", frame), lambda w, g: w.add_contact(_T, frame, gain=g))
+    w.contact(state, _T, placement)
+    return _term(w, state, name or f"{frame}_contact")
 
 
 def com_position(state: KinematicState, ref: Reference, axes=(0, 1),
                  name: str = "com") -> TaskTerm:
-    """Centre of mass (eq. 32-33) on the selected world axes (default horizontal)."""
-    idx = list(axes)
-    ref_x = np.asarray(ref.x, float)
-    full = TaskTerm(name, state.Jcom, state.acom_drift,
-                    _pad(ref_x, idx) - state.com,
-                    _pad(np.asarray(ref.xd, float), idx) - state.Jcom @ state.v,
-                    _pad(np.asarray(ref.xdd, float), idx), _pad(np.asarray(ref.xd, float), idx))
-    return full.select(idx)
+    """Centre of mass (eq. 32-33) on the selected world axes (default horizontal);
+    ``ref`` given on those axes or as 3-vectors."""
+    idx = tuple(int(a) for a in axes)
+    w = _writer(state, ("com", idx), lambda w, g: w.add_com(_T, gain=g, axes=idx))
+    w.com(state, _T, *(_on_axes(v, idx) for v in (ref.x, ref.xd, ref.xdd)))
+    return _term(w, state, name)
 
 
-def _pad(values: np.ndarray, idx) -> np.ndarray:
-    """A 3-vector from values given on the axes ``idx`` (or already 3 long)."""
-    if values.shape == (3,):
-        return values
-    out = np.zeros(3)
-    out[idx] = values
-    return out
+def _on_axes(values, idx: tuple) -> np.ndarray:
+    """A CoM reference on the axes ``idx``: given so, or as a 3-vector."""
+    v = np.asarray(values, dtype=float).reshape(-1)
+    return v[list(idx)] if v.shape == (3,) and len(idx) != 3 else v
 
 
 def posture(state: KinematicState, q_ref, name: str = "posture") -> TaskTerm:
-    """Actuated joints to ``q_ref`` (rows ``n_base:`` of the velocity)."""
-    robot = state.robot
-    nb = robot.n_base
-    k = robot.nv - nb
-    J = np.zeros((k, robot.nv))
-    J[:, nb:] = np.eye(k)
-    err = pin.difference(robot.model, state.q, np.asarray(q_ref, float))[nb:]
-    return TaskTerm(name, J, np.zeros(k), err, -state.v[nb:], np.zeros(k), np.zeros(k))
+    """Actuated joints to ``q_ref`` (rows ``n_base:`` of the velocity); no drift."""
+    w = _writer(state, ("posture",), lambda w, g: w.add_posture(_T, gain=g))
+    w.posture(state, _T, q_ref)
+    term = _term(w, state, name)
+    if term.drift is None:
+        term.drift = np.zeros(term.J.shape[0])     # a posture has no drift at all
+    return term
 
 
 # ------------------------------------------------------------------ joint limits
-@dataclass(frozen=True)
-class JointLimitActivation:
-    """Parameters of the equality (activation-row) form of joint limits.
-
-    A joint's row is active while it is within ``margin`` of a limit. With
-    ``s ∈ (0, 1]`` the depth into the margin (0 at the margin's edge, 1 at the limit)
-    and ``y = s·margin`` the same depth in radians, the row is
-    ``q̈_j = ± s (K_p y + K_d ẏ)`` pointing away from the limit. The blend ``s``
-    makes the target continuous: a row enters asking ``q̈_j = 0`` and grows
-    stiffer the deeper the joint goes; with the defaults (margin 0.1 rad,
-    ``K_p = 2500``, ``K_d = 100``) a joint entering at up to ~5 rad/s stops inside the
-    margin (a 1-D check is in ``tests/test_tasks.py``). The row *set* still switches
-    discretely (an exact hierarchy enforces any present row fully), which is what
-    makes ``q̈`` jump at activation; the rows never ask more than the pushing
-    target, so ``q`` and ``q̇`` stay continuous.
-
-    Attributes:
-        margin: Width of the activation zone inside each limit (rad); it is capped
-            at a quarter of the joint's range.
-        kp: Stiffness of the push-back.
-        kd: Damping of the push-back.
-    """
-
-    margin: float = 0.1
-    kp: float = 2500.0
-    kd: float = 100.0
-
-
 def joint_limit_rows(state: KinematicState, params: JointLimitActivation = JointLimitActivation(),
-                     name: str = "joint_limits") -> Task | None:
-    """Equality form of joint limits: one row ``q̈_j = target`` per joint inside its
-    margin (see :class:`JointLimitActivation`), or ``None`` when no joint is.
+                     name: str = "joint_limits", mode: str = "acceleration") -> Task | None:
+    """Equality form of joint limits: one row per joint inside its margin (see
+    :class:`JointLimitActivation`), or ``None`` when no joint is. ``mode``
+    ``"acceleration"``: ``q̈_j = ± s (K_p y − K_d ẏ)``; ``"velocity"``: ``q̇_j = ± s k y``.
 
-    The task's rows are unit rows on the actuated joints' columns.
+    The task's rows are unit rows on the actuated joints' columns (the active rows of
+    the writer's fixed-size, masked task).
     """
-    robot = state.robot
-    nb = robot.n_base
-    lo, hi, _ = robot.joint_limits()
-    qa = _actuated_positions(state)
-    va = state.v[nb:]
-    finite = np.isfinite(lo) & np.isfinite(hi)
-    with np.errstate(invalid="ignore"):
-        width = np.where(finite, np.minimum(params.margin, 0.25 * (hi - lo)), 1.0)
-        y_lo = np.where(finite, lo + width - qa, -1.0)     # depth into the lower margin
-        y_hi = np.where(finite, qa - (hi - width), -1.0)   # depth into the upper margin
-    in_lo = y_lo > 0
-    in_hi = (y_hi > 0) & ~in_lo
-    s_lo = np.minimum(y_lo / width, 1.0)
-    s_hi = np.minimum(y_hi / width, 1.0)
-    # lower margin: ẏ = −q̇, push towards +q; upper margin: ẏ = q̇, push towards −q
-    target = np.where(in_lo, s_lo * (params.kp * y_lo - params.kd * va),
-                      -s_hi * (params.kp * y_hi + params.kd * va))
-    rows = np.flatnonzero(in_lo | in_hi)
-    if rows.size == 0:
+    w = _writer(state, ("limits", "activation", params), lambda w, g: w.add_joint_limits(
+        _T, form="activation", activation=params), mode)
+    if w.joint_limits(state, _T) == 0:
         return None
-    A = np.zeros((rows.size, robot.nv))
-    A[np.arange(rows.size), nb + rows] = 1.0
-    return Task(name, A, target[rows])
+    data = w.targets(state)
+    A, b = data.rows(_T)
+    rows = np.flatnonzero(A.any(axis=1))
+    return Task(name, A[rows], b[rows])
 
 
 def joint_limit_bounds(state: KinematicState, horizon: float, dt: float,
@@ -352,48 +356,26 @@ def joint_limit_bounds(state: KinematicState, horizon: float, dt: float,
     towards, clipped to the speed range (the hardest admissible braking), so the
     task stays feasible.
     """
-    robot = state.robot
-    nb = robot.n_base
-    lo, hi, vmax = robot.joint_limits()
-    qa = _actuated_positions(state)
-    va = state.v[nb:]
-    T = float(horizon)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        h_lo = 2.0 * (lo - qa - va * T) / T ** 2          # horizon bounds
-        h_hi = 2.0 * (hi - qa - va * T) / T ** 2
-        d_hi = np.maximum(hi - qa, 1e-9)
-        d_lo = np.maximum(qa - lo, 1e-9)
-        # the constant-acceleration path peaks before T (and would overshoot) when
-        # the horizon bound decelerates faster than -v/T: then brake by v²/2d
-        brake_hi = np.where((va > 0) & (h_hi < -va / T), -va ** 2 / (2.0 * d_hi), np.inf)
-        brake_lo = np.where((va < 0) & (h_lo > -va / T), va ** 2 / (2.0 * d_lo), -np.inf)
-        p_hi = np.minimum.reduce([np.nan_to_num(h_hi, nan=np.inf), brake_hi,
-                                  (hi - qa - va * dt) / dt ** 2])
-        p_lo = np.maximum.reduce([np.nan_to_num(h_lo, nan=-np.inf), brake_lo,
-                                  (lo - qa - va * dt) / dt ** 2])
-        p_hi = np.nan_to_num(p_hi, nan=np.inf)
-        p_lo = np.nan_to_num(p_lo, nan=-np.inf)
-        v_lo = (-vmax - va) / dt
-        v_hi = (vmax - va) / dt
-    lower = np.maximum(p_lo, np.nan_to_num(v_lo, nan=-np.inf))
-    upper = np.minimum(p_hi, np.nan_to_num(v_hi, nan=np.inf))
-    bad = lower > upper
-    if bad.any():
-        mid = np.where(va[bad] > 0, np.clip(p_hi[bad], v_lo[bad], v_hi[bad]),
-                       np.clip(p_lo[bad], v_lo[bad], v_hi[bad]))
-        mid = np.where(np.isfinite(mid), mid, 0.0)
-        lower[bad] = upper[bad] = mid
-    k = lo.size
-    A = np.zeros((k, robot.nv))
-    A[np.arange(k), nb + np.arange(k)] = 1.0
+    key = ("limits", "bounds", float(horizon), float(dt))
+    w = _writer(state, key, lambda w, g: w.add_joint_limits(
+        _T, form="bounds", horizon=horizon, dt=dt), "acceleration")
+    w.joint_limits(state, _T)
+    A, lower, upper = w.data.bounds(_T)
     return Task(name, A, lower=lower, upper=upper)
 
 
-def _actuated_positions(state: KinematicState) -> np.ndarray:
-    """Positions of the actuated one-dof joints, ordered like their velocity rows
-    (0 for a row without a single configuration entry)."""
-    idx = state.robot.actuated_q_index()
-    return np.where(idx >= 0, state.q[np.maximum(idx, 0)], 0.0)
+def joint_velocity_bounds(state: KinematicState, dt: float, horizon: float | None = None,
+                          name: str = "joint_limits") -> Task:
+    """Inequality form of joint limits at velocity level: bounds on ``q̇``, with
+    ``q + q̇ T`` within the position limits (``T = horizon``, default ``dt``) and
+    ``|q̇| ≤ q̇_max``; a joint past a limit by more than ``q̇_max T`` gets
+    ``lower = upper`` (the fastest return)."""
+    key = ("limits", "velocity_bounds", float(dt), None if horizon is None else float(horizon))
+    w = _writer(state, key, lambda w, g: w.add_joint_limits(
+        _T, form="bounds", horizon=horizon, dt=dt), "velocity")
+    w.joint_limits(state, _T)
+    A, lower, upper = w.data.bounds(_T)
+    return Task(name, A, lower=lower, upper=upper)
 
 
 def joint_limit_violation(robot: RobotModel, q) -> float:

@@ -82,10 +82,3 @@ def test_check_accepts_any_point_of_the_optimal_set_and_reports_levels():
     report = check_lexicographic(s, x + np.array([0.0, 0.0, 0.0, 1e-3]))
     assert not report.ok and report.first_failure.tasks == ("c",)
     assert "FAIL" in str(report)
-
-
-def test_check_rejects_inequality_stacks_by_name():
-    from prioik.hierarchy import UnsupportedTaskError
-    s = TaskStack([Task("box", np.eye(2), lower=[0, 0])])
-    with pytest.raises(UnsupportedTaskError, match="'box'"):
-        check_lexicographic(s, np.zeros(2))

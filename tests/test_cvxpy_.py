@@ -1,6 +1,7 @@
 """cvxpy: the cascade modelled in cvxpy against reference and cascaded_qp."""
 
 import numpy as np
+from conftest import assert_truthful
 import pytest
 
 from prioik import formulations
@@ -42,7 +43,8 @@ def test_inequality_stacks_agree_with_cascaded_qp():
         stack = with_inequalities(rng, int(rng.integers(5, 12)), int(rng.integers(3, 5)))
         a = formulations.solve(stack, "cvxpy")
         b = formulations.solve(stack, "cascaded_qp")
-        assert a.status == b.status == "optimal"
+        assert_truthful(a, stack)
+        assert_truthful(b, stack)
         assert relative_distance(a.x, b.x) <= 1e-7
         np.testing.assert_allclose(a.residuals, b.residuals, rtol=1e-6, atol=1e-8)
 
@@ -65,3 +67,13 @@ def test_unavailable_solver_names_it_and_lists_available():
     assert "NOPE" in str(exc.value)
     for s in cvxpy_.backends():
         assert s in str(exc.value)
+
+
+def test_zero_row_with_unreachable_bounds_keeps_its_fixed_violation():
+    from pathlib import Path
+    from prioik.hierarchy import load_peer_json
+    p = load_peer_json(Path(__file__).parent / "data" / "peer" / "daqp_jl_degenerate1.json")
+    sol = formulations.solve(p.stack, "cvxpy")
+    assert sol.status == "optimal", sol.info.get("message")
+    np.testing.assert_allclose(sol.x, [3.0, 1.5, 0.0], atol=1e-7)
+    np.testing.assert_allclose(sol.residuals ** 2, [0.0, 2.25, 20.0], atol=1e-6)

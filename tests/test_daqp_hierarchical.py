@@ -1,6 +1,7 @@
 """daqp_hierarchical: exact where DAQP's free-direction count is right, flagged otherwise."""
 
 import numpy as np
+from conftest import assert_truthful
 import pytest
 
 from prioik import formulations
@@ -18,13 +19,11 @@ def test_exact_on_non_conflicting_stacks(family, seed):
     stack = FAMILIES[family](rng, int(rng.integers(4, 16)), int(rng.integers(2, 5)))
     ref = formulations.solve(stack, "reference").x
     sol = formulations.solve(stack, "daqp_hierarchical")
-    if any(conflicting_levels(stack)) and sol.status == "approximate":
-        # rank-deficient levels may also conflict: then DAQP is not certified
-        assert sol.info["conflicting_levels"] and not sol.info["verified"]
-        return
-    assert sol.status == "optimal", sol.info
-    assert relative_distance(sol.x, ref) <= 1e-8          # measured ≤ 1.3e-10 with primal_tol 1e-10
-    assert check_lexicographic(stack, sol.x, tol=1e-8).ok
+    assert_truthful(sol, stack)
+    if not any(conflicting_levels(stack)):
+        assert sol.status == "optimal", sol.info
+    if sol.status == "optimal":
+        assert relative_distance(sol.x, ref) <= 1e-8      # measured ≤ 1.3e-10 with primal_tol 1e-10
 
 
 def test_rank_deficient_level_needs_compression():
@@ -41,11 +40,11 @@ def test_conflicting_stacks_are_flagged_approximate():
         stack = FAMILIES["conflicting"](rng, int(rng.integers(5, 14)), 3)
         ref = formulations.solve(stack, "reference").x
         sol = formulations.solve(stack, "daqp_hierarchical")
+        assert_truthful(sol, stack)
         if sol.status == "optimal":
             assert relative_distance(sol.x, ref) <= 1e-8
         else:
-            assert sol.status == "approximate" and sol.info["conflicting_levels"]
-            assert sol.info["verified"] is False and "lexicographic check" in sol.info["message"]
+            assert sol.info["conflicting_levels"] and "certificate" in sol.info["message"]
             assert relative_distance(sol.x, ref) > 1e-3          # and it is indeed off
             flagged += 1
     assert flagged >= 1
@@ -69,9 +68,9 @@ def test_box_then_task():
                        Task("goal", np.eye(2), [2.0, 0.5])])
     sol = formulations.solve(stack, "daqp_hierarchical")
     np.testing.assert_allclose(sol.x, [1.0, 0.5], atol=1e-8)
-    # the goal's row x0 depends on the active box row x0 ≤ 1: right here, but the
-    # free-direction count is not certified, so the check reports "approximate"
-    assert sol.status == "approximate" and sol.info["conflicting_levels"] == [1]
+    # the goal's row x0 depends on the active box row x0 ≤ 1, where DAQP's count of free
+    # directions is not to be trusted; here the answer is right, and the certificate says so
+    assert sol.info["conflicting_levels"] == [1] and sol.status == "optimal"
     lone = formulations.solve(TaskStack([Task("goal", np.eye(2), [2.0, 0.5])]),
                               "daqp_hierarchical")
     assert lone.status == "optimal"
@@ -97,3 +96,29 @@ def test_optimal_status_is_truthful_on_badly_scaled_stacks():
             assert relative_distance(sol.x, ref) <= 1e-6
             checked += 1
     assert checked >= 4
+
+
+def test_zero_row_with_unreachable_bounds_keeps_its_fixed_violation():
+    from pathlib import Path
+    from prioik.hierarchy import load_peer_json
+    p = load_peer_json(Path(__file__).parent / "data" / "peer" / "daqp_jl_degenerate1.json")
+    sol = formulations.solve(p.stack, "daqp_hierarchical")
+    assert sol.status == "optimal", sol.info.get("message")
+    np.testing.assert_allclose(sol.x, [3.0, 1.5, 0.0], atol=1e-7)
+    np.testing.assert_allclose(sol.residuals ** 2, [0.0, 2.25, 20.0], atol=1e-6)
+
+
+def test_wrong_answers_are_not_optimal_on_inequality_stacks():
+    """DAQP's raw hierarchical answer is off on some random inequality stacks; with the
+    certificate every one of them says "approximate" (without it: "optimal")."""
+    from prioik.hierarchy.families import random_inequality_hierarchy
+    wrong_raw = 0
+    for seed in range(40):
+        rng = np.random.default_rng(seed)
+        stack = random_inequality_hierarchy(rng, int(rng.integers(3, 12)), int(rng.integers(2, 5)))
+        raw = formulations.solve(stack, "daqp_hierarchical", check=False)
+        if raw.status != "optimal":
+            continue
+        wrong_raw += not check_lexicographic(stack, raw.x, minimum_norm=True).ok
+        assert_truthful(formulations.solve(stack, "daqp_hierarchical"), stack)
+    assert wrong_raw >= 1

@@ -130,8 +130,11 @@ def test_fencing_command_writes_summary_csv_plots_and_doc(tmp_path, capsys):
             assert run["max_support_foot_error_m"] < 1e-4
         csv = out / f"{variant}_extended_jacobian.csv"
         header = csv.read_text().splitlines()[0].split(",")
-        assert header[0] == "t" and "tip_error_m" in header and "qdd34" in header
+        assert header[0] == "t" and "tip_error_m" in header
+        assert "q:root_joint.qw" in header and "qdd:right_wrist_yaw_joint" in header
         assert np.loadtxt(csv, delimiter=",", skiprows=1).shape == (50, len(header))
+        assert (out / f"{variant}_extended_jacobian.npz").is_file()
+        assert (out / f"{variant}_replay.html").stat().st_size > 1000
         for key in ("tip_error", "algorithmic_error", "qdd"):
             assert (out / f"{variant}_{key}.png").stat().st_size > 1000
     text = doc.read_text()

@@ -1,6 +1,8 @@
-"""robots.rows: the in-place builders give the same rows and targets as the
-TaskTerm builders of robots.tasks (velocity and acceleration level), and the fencing
-velocity rows equal the scenario's velocity stack."""
+"""robots.rows: every task writer against independent pinocchio/numpy formulas (the
+previous builders' math: frame Jacobians from ``pin.getFrameJacobian``, drifts from
+``pin.getFrameClassicalAcceleration``, ``pin.log3``, the joint-limit formulas in numpy),
+at velocity and acceleration level; the fencing rows against the scenario's stacks;
+masked activation rows solve like the rows they mask; the errors name the task."""
 
 import numpy as np
 import pinocchio as pin
@@ -9,13 +11,19 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from prioik.robots import KinematicState, Reference, TaskRows, com_position, frame_pose, \
-    frame_position, g1, posture
+from prioik import formulations
+from prioik.hierarchy import Task, TaskStack, TaskStackError
+from prioik.robots import (JointLimitActivation, KinematicState, Reference, TaskWriter,
+                           com_position, contact, frame_orientation, frame_pose,
+                           frame_position, g1, joint_limit_bounds, joint_limit_rows,
+                           joint_velocity_bounds, panda, point_position, posture,
+                           spatial_chain)
 from prioik.robots import _rows_kernel as _k
 from prioik.robots.fencing import FencingScenario
 
 #: the two paths do the same arithmetic in another order: rows agree to rounding
 TOL = 1e-12
+LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 
 
 @pytest.fixture(scope="module")
@@ -23,152 +31,408 @@ def robot():
     return g1().with_point_frame("sword_tip", "left_hand", (0.5, 0.0, 0.0))
 
 
-def _state(robot, seed, drift=True):
+def _state(robot, seed, drift=True, spread=0.2):
     rng = np.random.default_rng(seed)
     q = robot.q0.copy()
-    q[7:] += rng.uniform(-0.2, 0.2, robot.nq - 7)
+    nb = 7 if robot.floating_base else 0
+    q[nb:] += rng.uniform(-spread, spread, robot.nq - nb)
     return KinematicState(robot, q, rng.normal(size=robot.nv), drift=drift)
 
 
-def _close(a, b):
-    return np.allclose(a, b, rtol=TOL, atol=TOL)
+def _close(a, b, tol=TOL):
+    return np.allclose(a, b, rtol=tol, atol=tol)
 
 
+# ------------------------------------------------- the oracle: the previous math
+def _ref_frame(state, frame, offset=np.zeros(3)):
+    """(J, p, drift) of a point ``offset`` on ``frame`` (6 rows: the point's linear,
+    the frame's angular), from pinocchio's frame Jacobian and classical acceleration."""
+    m, d = state.model, state.data
+    fid = m.getFrameId(state.robot.frames.get(frame, frame))
+    J = pin.computeFrameJacobian(m, m.createData(), state.q, fid, LWA)
+    M = d.oMf[fid]
+    r = M.rotation @ offset
+    J = J.copy()
+    J[:3] += -pin.skew(r) @ J[3:]                     # v_p = v_O + ω × r
+    drift = None
+    if state.has_drift:
+        acc = pin.getFrameClassicalAcceleration(m, d, fid, LWA)
+        om = pin.getFrameVelocity(m, d, fid, LWA).angular
+        drift = np.concatenate([acc.linear + np.cross(acc.angular, r)
+                                + np.cross(om, np.cross(om, r)), acc.angular])
+    return J, M.translation + r, M.rotation, drift
+
+
+def _targets(J, v, e, xd, xdd, drift, gain):
+    """b at velocity (gain K) or acceleration level (gain (K_p, K_d), eq. 2-4)."""
+    if np.isscalar(gain):
+        return xd + gain * e
+    kp, kd = gain
+    return xdd + kd * (xd - J @ v) + kp * e - drift
+
+
+@pytest.mark.parametrize("mode", ["velocity", "acceleration"])
 @pytest.mark.parametrize("seed", range(3))
-def test_every_writer_matches_its_task_builder(robot, seed):
-    state = _state(robot, seed)
+def test_every_frame_and_com_writer_matches_pinocchios_formulas(robot, mode, seed):
+    accel = mode == "acceleration"
+    state = _state(robot, seed, drift=accel)
     rng = np.random.default_rng(50 + seed)
-    ref = Reference(rng.normal(size=3), rng.normal(size=3), rng.normal(size=3))
+    x, xd, xdd = rng.normal(size=(3, 3))
+    w_ref, dw_ref = rng.normal(size=(2, 3))
     rot = pin.exp3(rng.normal(size=3))
-    com_ref = Reference(rng.normal(size=2), rng.normal(size=2), rng.normal(size=2))
-    terms = {"pose": frame_pose(state, "left_foot", ref, rot, name="pose"),
-             "tip": frame_position(state, "sword_tip", ref, name="tip"),
-             "com": com_position(state, com_ref, name="com"),
-             "posture": posture(state, robot.q0, name="posture")}
-    gains = {"pose": (25.0, 10.0), "tip": (16.0, 8.0), "com": (9.0, 6.0), "posture": (4.0, 4.0)}
-    rows = TaskRows(robot, [[("pose", 6)], [("tip", 3), ("com", 2)],
-                            [("posture", robot.nv - 6)]], gains)
-    rows.frame_pose(state, "pose", "left_foot", ref.x, rot, ref.xd, ref.xdd)
-    rows.frame_position(state, "tip", "sword_tip", ref.x, ref.xd, ref.xdd)
-    rows.com(state, "com", com_ref.x, com_ref.xd, com_ref.xdd)
-    rows.posture(state, "posture", robot.q0)
-    buf = rows.acceleration_targets(state.v)
-    for name, term in terms.items():
-        A, b = buf.rows(name)
-        assert _close(A, term.J), name
-        assert _close(b, term.acceleration(*gains[name]).b), name
-    rows.velocity_targets()
-    for name, term in terms.items():
-        assert _close(buf.rows(name)[1], term.velocity(gains[name][0]).b), name
+    off = np.array([0.1, -0.05, 0.2])
+    c_x, c_xd, c_xdd = rng.normal(size=(3, 2))
+    g = {"velocity": 3.0, "acceleration": (25.0, 10.0)}[mode]
+    w = TaskWriter(robot, mode)
+    w.add_frame_pose("pose", "left_foot", gain=g, level=0)
+    w.add_frame_position("tip", "sword_tip", gain=g, level=1)
+    w.add_point("point", "left_hand", off, gain=g, level=1)
+    w.add_com("com", gain=g, level=1)
+    w.add_frame_orientation("orient", "torso", gain=g, level=2)
+    w.add_contact("contact", "right_foot", gain=g, level=2)
+    w.add_posture("posture", gain=g, level=3)
+    placement = pin.SE3(rot, x)
+    w.frame_pose(state, "pose", x, rot, xd, xdd, w_ref, dw_ref)
+    w.frame_position(state, "tip", x, xd, xdd)
+    w.point(state, "point", x, xd, xdd)
+    w.com(state, "com", c_x, c_xd, c_xdd)
+    w.frame_orientation(state, "orient", rot, w_ref, dw_ref)
+    w.contact(state, "contact", placement)
+    w.posture(state, "posture", robot.q0)
+    data = w.targets(state)
+    v = state.v
+    zero = np.zeros(3)
+    for name, frame, o, rows in (("pose", "left_foot", zero, slice(0, 6)),
+                                 ("tip", "sword_tip", zero, slice(0, 3)),
+                                 ("point", "left_hand", off, slice(0, 3)),
+                                 ("orient", "torso", zero, slice(3, 6)),
+                                 ("contact", "right_foot", zero, slice(0, 6))):
+        J, p, R, drift = _ref_frame(state, frame, o)
+        e = np.concatenate([x - p, pin.log3(rot @ R.T)])
+        ref_v = {"contact": np.zeros(6)}.get(name, np.concatenate([xd, w_ref]))
+        ref_a = {"contact": np.zeros(6)}.get(name, np.concatenate([xdd, dw_ref]))
+        d = None if drift is None else drift[rows]
+        b = _targets(J[rows], v, e[rows], ref_v[rows], ref_a[rows], d, g)
+        A, bw = data.rows(name)
+        assert _close(A, J[rows]), name
+        assert _close(bw, b, 1e-10), name
+    Jc = pin.jacobianCenterOfMass(robot.model, robot.model.createData(), state.q)[:2]
+    com = pin.centerOfMass(robot.model, robot.model.createData(), state.q)[:2]
+    dc = state.acom_drift[:2] if accel else None
+    A, b = data.rows("com")
+    assert _close(A, Jc) and _close(b, _targets(Jc, v, c_x - com, c_xd, c_xdd, dc, g), 1e-10)
+    A, b = data.rows("posture")
+    Jp = np.hstack([np.zeros((29, 6)), np.eye(29)])
+    e = pin.difference(robot.model, state.q, robot.q0)[6:]
+    assert np.array_equal(A, Jp)
+    assert _close(b, _targets(Jp, v, e, np.zeros(29), np.zeros(29), np.zeros(29), g))
+
+
+@pytest.mark.parametrize("seed", range(2))
+def test_builders_work_at_both_levels_and_are_the_writers_rows(robot, seed):
+    """The one-off builders from a drift-free state (velocity level) give the same
+    ``J``, error and velocity targets as from a full state, with ``drift = None`` and an
+    ``acceleration()`` that names the task."""
+    full, light = _state(robot, seed), _state(robot, seed, drift=False)
+    rng = np.random.default_rng(seed)
+    ref = Reference(*rng.normal(size=(3, 3)))
+    cref = Reference(*rng.normal(size=(3, 2)))
+    rot = pin.exp3(rng.normal(size=3))
+    M = pin.SE3(rot, ref.x)
+    build = {"position": lambda s: frame_position(s, "sword_tip", ref),
+             "point": lambda s: point_position(s, "left_hand", (0.5, 0, 0), ref),
+             "orientation": lambda s: frame_orientation(s, "torso", rot),
+             "pose": lambda s: frame_pose(s, "left_foot", ref, rot),
+             "contact": lambda s: contact(s, "right_foot", M),
+             "com": lambda s: com_position(s, cref),
+             "posture": lambda s: posture(s, robot.q0)}
+    for kind, f in build.items():
+        a, b = f(full), f(light)
+        assert np.array_equal(a.J, b.J) and np.array_equal(a.error, b.error), kind
+        assert _close(a.velocity(2.0).b, b.velocity(2.0).b), kind
+        assert a.drift is not None and np.all(np.isfinite(a.acceleration(4.0, 2.0).b))
+        if kind != "posture":
+            assert b.drift is None, kind
+            with pytest.raises(ValueError, match=f"task {b.name!r} was built from a "
+                                                 r"KinematicState\(drift=False\)"):
+                b.acceleration(4.0, 2.0)
+    # the point on the hand equals the sword-tip frame at the same place
+    tip, pt = build["position"](full), build["point"](full)
+    assert _close(tip.J, pt.J) and _close(tip.drift, pt.drift, 1e-10)
+
+
+# ------------------------------------------------------------------ joint limits
+def _ref_activation(robot, q, v, p, velocity):
+    """The previous numpy activation rows (active rows and targets)."""
+    nb = robot.n_base
+    lo, hi, _ = robot.joint_limits()
+    qa = q[robot.actuated_q_index()]
+    va = v[nb:]
+    width = np.minimum(p.margin, 0.25 * (hi - lo))
+    y_lo, y_hi = lo + width - qa, qa - (hi - width)
+    in_lo, in_hi = y_lo > 0, (y_hi > 0) & ~(y_lo > 0)
+    s_lo, s_hi = np.minimum(y_lo / width, 1.0), np.minimum(y_hi / width, 1.0)
+    if velocity:
+        target = np.where(in_lo, s_lo * p.k * y_lo, -s_hi * p.k * y_hi)
+    else:
+        target = np.where(in_lo, s_lo * (p.kp * y_lo - p.kd * va),
+                          -s_hi * (p.kp * y_hi + p.kd * va))
+    rows = np.flatnonzero(in_lo | in_hi)
+    return rows, target[rows]
+
+
+def _ref_acceleration_bounds(robot, q, v, T, dt):
+    """The previous numpy bounds on q̈ (robots.tasks.joint_limit_bounds before the writers)."""
+    nb = robot.n_base
+    lo, hi, vmax = robot.joint_limits()
+    qa, va = q[robot.actuated_q_index()], v[nb:]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        h_lo = 2.0 * (lo - qa - va * T) / T ** 2
+        h_hi = 2.0 * (hi - qa - va * T) / T ** 2
+        d_hi, d_lo = np.maximum(hi - qa, 1e-9), np.maximum(qa - lo, 1e-9)
+        brake_hi = np.where((va > 0) & (h_hi < -va / T), -va ** 2 / (2.0 * d_hi), np.inf)
+        brake_lo = np.where((va < 0) & (h_lo > -va / T), va ** 2 / (2.0 * d_lo), -np.inf)
+        p_hi = np.minimum.reduce([h_hi, brake_hi, (hi - qa - va * dt) / dt ** 2])
+        p_lo = np.maximum.reduce([h_lo, brake_lo, (lo - qa - va * dt) / dt ** 2])
+        v_lo, v_hi = (-vmax - va) / dt, (vmax - va) / dt
+    lower, upper = np.maximum(p_lo, v_lo), np.minimum(p_hi, v_hi)
+    bad = lower > upper
+    mid = np.where(va[bad] > 0, np.clip(p_hi[bad], v_lo[bad], v_hi[bad]),
+                   np.clip(p_lo[bad], v_lo[bad], v_hi[bad]))
+    lower[bad] = upper[bad] = np.where(np.isfinite(mid), mid, 0.0)
+    return lower, upper
+
+
+def _limit_states(robot, n, seed):
+    """States spread over (and past) the joint ranges, at speeds up to twice the limit."""
+    rng = np.random.default_rng(seed)
+    lo, hi, vmax = robot.joint_limits()
+    idx = robot.actuated_q_index()
+    for _ in range(n):
+        q = robot.q0.copy()
+        q[idx] = rng.uniform(lo - 0.05, hi + 0.05)
+        v = np.zeros(robot.nv)
+        v[robot.n_base:] = rng.uniform(-2, 2, lo.size) * np.minimum(vmax, 10.0)
+        yield q, v
+
+
+@pytest.mark.parametrize("name", ["g1", "panda"])
+def test_joint_limit_writers_match_the_previous_formulas(robot, name):
+    r = robot if name == "g1" else panda()
+    nb, k = r.n_base, r.nv - r.n_base
+    p = JointLimitActivation()
+    T, dt = 0.1, 0.002
+    writers = {mode: TaskWriter(r, mode) for mode in ("velocity", "acceleration")}
+    for mode, w in writers.items():
+        w.add_joint_limits("rows", form="activation", activation=p)
+        w.add_joint_limits("bounds", form="bounds", horizon=T if mode == "acceleration"
+                           else None, dt=dt, level=1)
+    _, hi, vmax = r.joint_limits()
+    n_active = 0
+    for q, v in _limit_states(r, 40, 3):
+        state = KinematicState(r, q, v, drift=False)
+        for mode, w in writers.items():
+            active = w.joint_limits(state, "rows")
+            w.joint_limits(state, "bounds")
+            data = w.targets(state)
+            rows, target = _ref_activation(r, q, v, p, mode == "velocity")
+            A, b = data.rows("rows")
+            assert active == rows.size
+            assert np.array_equal(np.flatnonzero(A.any(axis=1)), rows)
+            assert np.array_equal(A[rows], np.eye(r.nv)[nb + rows])
+            assert not b[np.setdiff1d(np.arange(k), rows)].any()     # masked rows ask 0
+            assert _close(b[rows], target, 1e-9)
+            A, lower, upper = data.bounds("bounds")
+            assert np.array_equal(A, np.eye(r.nv)[nb:])
+            if mode == "acceleration":
+                ref_lo, ref_up = _ref_acceleration_bounds(r, q, v, T, dt)
+            else:
+                qa = q[r.actuated_q_index()]
+                lo_ = r.joint_limits()[0]
+                ref_up = np.minimum((hi - qa) / dt, vmax)
+                ref_lo = np.minimum(np.maximum((lo_ - qa) / dt, -vmax), ref_up)
+            assert _close(lower, ref_lo, 1e-9) and _close(upper, ref_up, 1e-9), mode
+            assert np.all(lower <= upper)
+        n_active += active
+    assert n_active > 10        # the states reach the margins: the check is not vacuous
+    # the builders are these writers' rows
+    state = KinematicState(r, q, v)
+    assert np.array_equal(joint_limit_bounds(state, T, dt).lower,
+                          _ref_acceleration_bounds(r, q, v, T, dt)[0])
+    qa = q[r.actuated_q_index()]
+    assert np.array_equal(joint_velocity_bounds(state, dt).upper,
+                          np.minimum((hi - qa) / dt, vmax))
+
+
+def test_masked_activation_rows_solve_like_the_active_rows(robot):
+    """The fixed-size, masked activation level gives the same q̈ as the level of its
+    active rows only (and, when no joint is near a limit, as no level at all)."""
+    sc = FencingScenario("compatible", robot=robot)
+    w = sc.acceleration_rows("activation")
+    solver = formulations.prepare(w.layout, "extended_jacobian")
+    for seed, spread in ((0, 0.0), (1, 1.5), (2, 1.5)):
+        state = _state(robot, seed, spread=spread)
+        data = sc.write_rows(w, state, 0.8)
+        stack = sc.acceleration_stack(state, 0.8, "activation").stack
+        x = solver.solve(data).x
+        y = formulations.solve(stack, "extended_jacobian").x
+        assert np.allclose(x, y, rtol=0, atol=1e-8 * (1 + np.abs(y).max())), seed
+        has_level = "joint_limits" in [t.name for lvl in stack.levels for t in lvl.tasks]
+        assert has_level == (seed > 0)
 
 
 @pytest.mark.parametrize("variant", ["compatible", "incompatible"])
 @pytest.mark.parametrize("t", [0.0, 0.7, 1.9, 3.0])
-def test_fencing_velocity_rows_equal_the_velocity_stack(robot, variant, t):
+def test_fencing_rows_equal_the_scenario_stacks(robot, variant, t):
     scenario = FencingScenario(variant, robot=robot)
-    rows = scenario.velocity_rows(10.0)
+    writers = {("velocity", "none"): scenario.velocity_rows(10.0),
+               ("velocity", "bounds"): scenario.velocity_rows(10.0, "bounds", dt=0.002),
+               ("acceleration", "bounds"): scenario.acceleration_rows("bounds", dt=0.002)}
     for seed in range(2):
-        state = _state(robot, 10 + seed, drift=False)
-        buf = scenario.write_velocity_rows(rows, state, t)
-        stack = scenario.velocity_stack(_state(robot, 10 + seed), t, gain=10.0).stack
-        assert [lvl.names for lvl in stack.levels] == [n for n in buf.layout.names]
-        for level in stack.levels:
-            for task in level:
-                A, b = buf.rows(task.name)
-                assert _close(A, task.A) and _close(b, task.b), task.name
+        for (mode, limits), w in writers.items():
+            state = _state(robot, 10 + seed, drift=mode == "acceleration")
+            data = scenario.write_rows(w, state, t)
+            full = _state(robot, 10 + seed)
+            stack = (scenario.velocity_stack(full, t, gain=10.0, limits=limits, dt=0.002)
+                     if mode == "velocity" else
+                     scenario.acceleration_stack(full, t, "bounds", dt=0.002)).stack
+            assert [lvl.names for lvl in stack.levels] == list(data.layout.names)
+            for level in stack.levels:
+                for task in level:
+                    if task.is_equality:
+                        A, b = data.rows(task.name)
+                        assert _close(A, task.A) and _close(b, task.b, 1e-10), task.name
+                    else:
+                        A, lo, up = data.bounds(task.name)
+                        assert np.array_equal(A, task.A)
+                        assert _close(lo, task.lower, 1e-10) and _close(up, task.upper, 1e-10)
 
 
-def test_velocity_state_has_no_drift_and_says_so(robot):
-    state = _state(robot, 0, drift=False)
-    assert state.acom_drift is None
-    with pytest.raises(ValueError, match="drift=False"):
-        state.frame_drift("left_foot")
-    rows = TaskRows(robot, [[("tip", 3)]])
-    rows.frame_position(state, "tip", "sword_tip", np.zeros(3))
-    assert np.all(rows.drift == 0.0)
+# ------------------------------------------------------------------ declaring
+def test_writer_builds_its_layout_from_the_declared_tasks(robot):
+    w = TaskWriter(robot, "velocity")
+    w.add_contact("support", "right_foot", gain=10.0)                 # level 0
+    w.add_joint_limits("limits", form="bounds", dt=0.01)              # level 1
+    w.add_com("com", gain=5.0, axes=(0, 1, 2), level=2)
+    w.add_frame_position("tip", "sword_tip", gain=5.0, level=2, weight=4.0)
+    w.add_posture("posture", gain=1.0)                                # level 3
+    layout = w.layout
+    assert layout.names == (("support",), ("limits",), ("com", "tip"), ("posture",))
+    assert layout.kind_of("limits") == "inequality" and layout.kind_of("tip") == "equality"
+    assert layout.m == 6 + 29 + 3 + 3 + 29 and layout.n == 35
+    assert np.all(w.data.weights("tip") == 2.0) and np.all(w.data.weights("com") == 1.0)
+    assert "tip" in w and "elbow" not in w
+    with pytest.raises(TaskStackError, match="layout is fixed"):
+        w.add_posture("again", gain=1.0)
 
 
-def test_wrong_row_count_and_unknown_task_are_named(robot):
-    state = _state(robot, 0)
-    rows = TaskRows(robot, [[("tip", 2)]])
-    with pytest.raises(ValueError, match="'tip' has 2 rows in the layout, the builder writes 3"):
-        rows.frame_position(state, "tip", "sword_tip", np.zeros(3))
-    from prioik.hierarchy import TaskStackError
-    with pytest.raises(TaskStackError, match="no task 'com'"):
-        rows.com(state, "com", np.zeros(2))
+def test_declaration_errors_are_named(robot):
+    w = TaskWriter(robot, "acceleration")
+    with pytest.raises(ValueError, match="task 'tip': at acceleration level gain is"):
+        w.add_frame_position("tip", "sword_tip", gain=3.0)
+    with pytest.raises(KeyError, match="no frame 'sword'"):
+        w.add_frame_position("tip", "sword", gain=(1.0, 1.0))
+    with pytest.raises(ValueError, match="com axes must be distinct among 0, 1, 2"):
+        w.add_com("c", gain=(1.0, 1.0), axes=(3,))
+    with pytest.raises(ValueError, match="need a horizon"):
+        w.add_joint_limits("jl", form="bounds", dt=0.01)
+    with pytest.raises(ValueError, match="need dt > 0"):
+        w.add_joint_limits("jl", form="bounds", horizon=0.1)
+    with pytest.raises(ValueError, match="form must be"):
+        w.add_joint_limits("jl", form="soft")
+    with pytest.raises(ValueError, match="mode must be one of"):
+        TaskWriter(robot, "jerk")
+    v = TaskWriter(robot, "velocity")
+    with pytest.raises(ValueError, match="at velocity level gain is one number"):
+        v.add_com("c", gain=(1.0, 2.0))
+    v.add_com("c", gain=1.0, level=0)
+    v.add_posture("p", gain=1.0, level=2)
+    with pytest.raises(TaskStackError, match=r"levels \[1\] have no task"):
+        v.layout
+    with pytest.raises(TaskStackError, match="duplicate task name"):
+        v.add_com("c", gain=1.0)
+
+
+def test_writer_errors_name_the_task(robot):
+    w = TaskWriter(robot, "acceleration")
+    w.add_frame_position("tip", "sword_tip", gain=(1.0, 1.0))
+    w.add_com("com", gain=(1.0, 1.0))
+    w.add_frame_pose("pose", "left_foot", gain=(1.0, 1.0))
+    full, light = _state(robot, 0), _state(robot, 0, drift=False)
+    with pytest.raises(ValueError, match="task 'tip': an acceleration-level writer needs"):
+        w.frame_position(light, "tip", np.zeros(3))
+    with pytest.raises(ValueError, match="task 'tip': x must have 3 entries"):
+        w.frame_position(full, "tip", np.zeros(2))
+    with pytest.raises(ValueError, match="task 'com': xd must have 2 entries"):
+        w.com(full, "com", np.zeros(2), np.zeros(3))
+    with pytest.raises(ValueError, match="task 'pose': rotation must be 3 × 3"):
+        w.frame_pose(full, "pose", np.zeros(3), np.eye(2))
+    with pytest.raises(TaskStackError, match="task 'pose' was declared as pose, not position"):
+        w.frame_position(full, "pose", np.zeros(3))
+    with pytest.raises(TaskStackError, match="no task 'foot' declared"):
+        w.frame_pose(full, "foot", np.zeros(3), np.eye(3))
+    other = spatial_chain(3)
+    with pytest.raises(ValueError, match="the state is of robot 'chain3'"):
+        w.com(KinematicState(other, other.q0, np.zeros(3)), "com", np.zeros(2))
 
 
 def test_writers_follow_a_reused_data_across_states(robot):
     """The writers read views of the state's ``pin.Data`` taken once: refilled by
-    later states on the same ``Data``, they still equal the builders."""
+    later states on the same ``Data``, they still equal pinocchio's formulas."""
     data = robot.model.createData()
-    rows = TaskRows(robot, [[("tip", 3), ("com", 2)], [("pose", 6)]])
+    w = TaskWriter(robot, "velocity")
+    w.add_frame_position("tip", "sword_tip", gain=0.0)
     target = np.array([0.3, 0.2, 0.9])
-    rot = pin.exp3(np.array([0.1, -0.2, 0.3]))
     for seed in range(3):
         rng = np.random.default_rng(seed)
         q = robot.q0.copy()
         q[7:] += rng.uniform(-0.3, 0.3, robot.nq - 7)
         state = KinematicState(robot, q, np.zeros(robot.nv), data, drift=False)
-        rows.frame_position(state, "tip", "sword_tip", target)
-        rows.com(state, "com", target[:2])
-        rows.frame_pose(state, "pose", "left_foot", target, rot)
-        buf = rows.velocity_targets()
-        fresh = KinematicState(robot, q, np.zeros(robot.nv))
-        ref = Reference(target, np.zeros(3), np.zeros(3))
-        for name, term in {"tip": frame_position(fresh, "sword_tip", ref, name="tip"),
-                           "com": com_position(fresh, Reference(target[:2], np.zeros(2),
-                                                                np.zeros(2)), name="com"),
-                           "pose": frame_pose(fresh, "left_foot", ref, rot, name="pose")
-                           }.items():
-            A, b = buf.rows(name)
-            assert _close(A, term.J) and _close(b, term.velocity(0.0).b), name
-            assert _close(rows.error[rows.data.layout.task_slice(name)], term.error), name
+        w.frame_position(state, "tip", target)
+        A, b = w.targets(state).rows("tip")
+        J, p, _, _ = _ref_frame(KinematicState(robot, q, np.zeros(robot.nv)), "sword_tip")
+        assert _close(A, J[:3]) and _close(b, np.zeros(3))
+        assert _close(w.error, target - p)
 
 
-def test_acceleration_targets_refuse_rows_written_without_drift(robot):
-    rows = TaskRows(robot, [[("tip", 3)], [("com", 2)]])
-    slow, fast = _state(robot, 0, drift=True), _state(robot, 0, drift=False)
-    rows.frame_position(slow, "tip", "sword_tip", np.zeros(3))
-    rows.com(fast, "com", np.zeros(2))
-    with pytest.raises(ValueError, match=r"\['com'\].*drift=False"):
-        rows.acceleration_targets(slow.v)
-    rows.com(slow, "com", np.zeros(2))
-    assert np.all(np.isfinite(rows.acceleration_targets(slow.v).b))
-
-
-def test_targets_of_the_wrong_size_name_the_task(robot):
-    state = _state(robot, 0)
-    rows = TaskRows(robot, [[("tip", 3), ("com", 2), ("pose", 6)]])
-    with pytest.raises(ValueError, match="task 'tip': x must have 3 entries"):
-        rows.frame_position(state, "tip", "sword_tip", np.zeros(2))
-    with pytest.raises(ValueError, match="task 'com': xd must have 2 entries"):
-        rows.com(state, "com", np.zeros(2), np.zeros(3))
-    with pytest.raises(ValueError, match="task 'pose': rotation must be 3 × 3"):
-        rows.frame_pose(state, "pose", "left_foot", np.zeros(3), np.eye(2))
-    with pytest.raises(ValueError, match="com axes must be among 0, 1, 2"):
-        TaskRows(robot, [[("c", 1)]]).com(state, "c", np.zeros(1), axes=(3,))
+def test_panda_writer_covers_all_nine_joints():
+    r = panda()
+    w = TaskWriter(r, "velocity")
+    w.add_frame_pose("hand", "tcp", gain=1.0)
+    w.add_joint_limits("limits", form="bounds", dt=0.01)
+    w.add_posture("posture", gain=1.0)
+    state = KinematicState(r, r.q0, np.zeros(9), drift=False)
+    w.frame_pose(state, "hand", np.zeros(3), np.eye(3))
+    w.joint_limits(state, "limits")
+    w.posture(state, "posture", r.q0)
+    data = w.targets(state)
+    assert np.array_equal(data.rows("posture")[0], np.eye(9))
+    A, lo, up = data.bounds("limits")
+    assert np.array_equal(A, np.eye(9)) and np.all(np.isfinite(lo)) and np.all(lo < up)
+    assert np.abs(data.rows("hand")[0][:, :7]).max() > 0.1      # the arm joints move the hand
 
 
 def test_posture_of_joints_without_a_single_coordinate_uses_the_lie_difference():
     """A spherical joint (``n_q = 4``, ``n_v = 3``): the posture error is
-    ``q_ref ⊖ q`` (pinocchio's ``difference``), as the builder."""
-    from prioik.robots import RobotModel, posture as posture_term
+    ``q_ref ⊖ q`` (pinocchio's ``difference``)."""
+    from prioik.robots import RobotModel
     model = pin.Model()
     j1 = model.addJoint(0, pin.JointModelSpherical(), pin.SE3.Identity(), "ball")
     model.appendBodyToJoint(j1, pin.Inertia.Random(), pin.SE3.Identity())
     j2 = model.addJoint(j1, pin.JointModelRY(), pin.SE3(np.eye(3), np.array([0.3, 0, 0])),
                         "elbow")
     model.appendBodyToJoint(j2, pin.Inertia.Random(), pin.SE3.Identity())
-    robot = RobotModel("ball", model, pin.neutral(model), floating_base=False)
+    robot = RobotModel("ball", model, pin.neutral(model))
+    assert not robot.floating_base
     q = pin.integrate(model, robot.q0, np.array([0.3, -0.2, 0.5, 0.4]))
     state = KinematicState(robot, q, np.zeros(4))
-    rows = TaskRows(robot, [[("posture", 4)]], {"posture": 2.0})
-    rows.posture(state, "posture", robot.q0)
-    term = posture_term(state, robot.q0, name="posture")
-    A, b = rows.velocity_targets().rows("posture")
-    assert _close(A, term.J) and _close(b, term.velocity(2.0).b)
-    assert not np.allclose(rows.error, robot.q0[[0, 1, 2, 4]] - q[[0, 1, 2, 4]])
+    w = TaskWriter(robot, "velocity")
+    w.add_posture("posture", gain=2.0)
+    w.posture(state, "posture", robot.q0)
+    A, b = w.velocity_targets().rows("posture")
+    assert np.array_equal(A, np.eye(4))
+    assert _close(b, 2.0 * pin.difference(model, q, robot.q0))
+    assert not np.allclose(w.error, robot.q0[[0, 1, 2, 4]] - q[[0, 1, 2, 4]])
 
 
 @settings(max_examples=300, deadline=None)
@@ -196,3 +460,60 @@ def test_log3_at_half_a_turn_is_either_of_the_two_rotation_vectors(axis):
     _k.log3(R, out, 0)
     assert min(np.abs(out - np.pi * u).max(), np.abs(out + np.pi * u).max()) <= 1e-12
     assert np.allclose(pin.exp3(out), R, atol=1e-12)
+
+
+def test_fencing_closed_loop_with_masked_activation_rows_follows_the_stack_path(robot):
+    """0.3 s of the compatible fencing run from a knee inside its limit margin: the
+    writer's fixed-size masked activation level under one prepared solver follows the
+    one-off path whose activation level comes and goes (same trajectory to 1e-6)."""
+    from prioik.robots import StepTasks, simulate
+    sc = FencingScenario("compatible", robot=robot)
+    q0 = robot.q0.copy()
+    q0[7 + 3] = -0.05                        # left knee near its -0.087 limit
+    w = sc.acceleration_rows("activation")
+    solver = formulations.prepare(w.layout, "extended_jacobian")
+    active = []
+
+    def build_rows(state, t):
+        data = sc.write_rows(w, state, t)
+        active.append(int(data.rows("joint_limits")[0].any(axis=1).sum()))
+        return StepTasks(data)
+
+    run = dict(duration=0.3, dt=0.002, q0=q0, algorithmic_error=False)
+    a = simulate(robot, build_rows, lambda d, **kw: solver.solve(d), **run)
+    b = simulate(robot, lambda s, t: sc.acceleration_stack(s, t, "activation"),
+                 lambda s, **kw: formulations.solve(s, "extended_jacobian"), **run)
+    assert not a.failed and not b.failed
+    assert max(active) >= 1                  # the masked level had active rows
+    assert np.abs(a.q - b.q).max() < 1e-6 and np.abs(a.v - b.v).max() < 1e-5
+
+
+def test_builders_from_several_threads_give_each_its_own_rows(robot):
+    """The builders' writers are per thread: two threads building at once get the
+    same terms as one thread alone."""
+    import threading
+    states = [_state(robot, seed) for seed in range(6)]
+    ref = Reference(np.array([0.3, 0.2, 0.9]), np.zeros(3), np.zeros(3))
+    expected = [frame_position(s, "sword_tip", ref).acceleration(25.0, 10.0).b
+                for s in states]
+    wrong = []
+
+    def run(k):
+        for j in range(400):
+            i = (k + j) % len(states)
+            b = frame_position(states[i], "sword_tip", ref).acceleration(25.0, 10.0).b
+            if not np.array_equal(b, expected[i]):
+                wrong.append(i)
+
+    import sys
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)          # switch threads as often as possible
+    try:
+        threads = [threading.Thread(target=run, args=(k,)) for k in range(3)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+    finally:
+        sys.setswitchinterval(interval)
+    assert not wrong

@@ -53,8 +53,16 @@ def test_arrays_are_copied_and_read_only():
 
 
 def test_summary_names_levels_tasks_and_ranks():
-    text = repr(eq("reach") / Task("lim", A, lower=[0, 0]))
+    text = (eq("reach") / Task("lim", A, lower=[0, 0])).summary()
     assert "reach" in text and "lim" in text and "inequality" in text and "r_i" in text
+
+
+def test_repr_is_one_short_line_and_html_is_a_table():
+    stack = TaskStack([Task(f"t{i}", np.eye(3)[:1], [0.0]) for i in range(20)])
+    text = repr(stack)
+    assert "\n" not in text and len(text) < 200 and "t0[1]" in text and "12 more" in text
+    assert repr(eq("reach") / Task("lim", A, lower=[0, 0])).endswith("lim[2≤])")
+    assert stack._repr_html_().count("<tr>") == 21
 
 
 # ------------------------------------------------------------------- validation

@@ -11,10 +11,11 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from prioik.robots import (JointLimitActivation, KinematicState, Reference, Waypoints, com_position,
-                    contact, frame_orientation, frame_pose, frame_position, g1,
-                    joint_limit_bounds, joint_limit_rows, joint_limit_violation,
-                    minimum_jerk, posture, sample_humanoid, spatial_chain)
+from prioik.robots import (JointLimitActivation, KinematicState, Reference, Waypoints,
+                           com_position, contact, frame_orientation, frame_pose,
+                           frame_position, g1, go2, joint_limit_bounds, joint_limit_rows,
+                           joint_limit_violation, joint_velocity_bounds, minimum_jerk, panda,
+                           point_position, posture, sample_humanoid, spatial_chain)
 
 H = 1e-6
 TOL = 1e-6
@@ -25,7 +26,9 @@ def robots_under_test():
     sword = g1().with_point_frame("sword_tip", "left_hand", (0.5, 0.0, 0.0))
     return {"g1": (sword, ["sword_tip", "left_foot", "right_foot", "torso"]),
             "sample_humanoid": (sample_humanoid(), ["left_hand", "right_foot"]),
-            "chain7": (spatial_chain(7), ["tip"])}
+            "chain7": (spatial_chain(7), ["tip"]),
+            "panda": (panda(), ["tcp", "panda_link4"]),
+            "go2": (go2(), ["front_left_foot", "rear_right_foot"])}
 
 
 def _random_state(robot, seed):
@@ -68,6 +71,47 @@ def test_frame_jacobians_and_drift_match_finite_differences(robots_under_test, n
         dJv = (sp.frame_jacobian(f) @ v - sm.frame_jacobian(f) @ v) / (2 * H)
         assert _close(s0.frame_drift(f), dJv), f
         assert np.abs(s0.frame_drift(f)).max() > 1e-3  # the check is not vacuous
+
+
+@pytest.mark.parametrize("name", ["g1", "sample_humanoid", "chain7", "panda", "go2"])
+@pytest.mark.parametrize("seed", range(2))
+def test_every_writer_jacobian_and_drift_match_finite_differences(robots_under_test, name,
+                                                                   seed):
+    """The builders' (i.e. the compiled writers') rows: frame position, a point on a
+    frame, orientation, pose, CoM — ``J v`` against the rate of the task value and
+    ``J̇ v`` against the rate of ``J v``; the drift-free state gives the same ``J``."""
+    robot, frames = robots_under_test[name]
+    q, v = _random_state(robot, 20 + seed)
+    s0, sp, sm = _states(robot, q, v)
+    light = KinematicState(robot, q, v, drift=False)
+    ref = Reference(np.zeros(3), np.zeros(3), np.zeros(3))
+    off = np.array([0.05, -0.1, 0.2])
+
+    def point(s, f):
+        M = s.placement(f)
+        return M.translation + M.rotation @ off
+
+    for f in frames:
+        for build, value in (
+                (lambda s: frame_position(s, f, ref), lambda s: s.placement(f).translation),
+                (lambda s: point_position(s, f, off, ref), lambda s: point(s, f))):
+            t0, tp, tm = build(s0), build(sp), build(sm)
+            assert _close(t0.J @ v, (value(sp) - value(sm)) / (2 * H)), f
+            assert _close(t0.drift, (tp.J @ v - tm.J @ v) / (2 * H)), f
+            assert np.array_equal(build(light).J, t0.J) and build(light).drift is None
+        R = s0.placement(f).rotation
+        for build in (lambda s: frame_orientation(s, f, R),
+                      lambda s: frame_pose(s, f, ref, R)):
+            t0, tp, tm = build(s0), build(sp), build(sm)
+            dR = pin.log3(sp.placement(f).rotation @ sm.placement(f).rotation.T) / (2 * H)
+            assert _close((t0.J @ v)[-3:], dR), f
+            assert _close(t0.drift, (tp.J @ v - tm.J @ v) / (2 * H)), f
+            assert np.abs(t0.drift).max() > 1e-3                  # not vacuous
+    cref = Reference(np.zeros(3), np.zeros(3), np.zeros(3))
+    c0, cp, cm = (com_position(s, cref, axes=(0, 1, 2)) for s in (s0, sp, sm))
+    assert _close(c0.J @ v, (sp.com - sm.com) / (2 * H))
+    assert _close(c0.drift, (cp.J @ v - cm.J @ v) / (2 * H))
+    assert np.array_equal(com_position(light, cref, axes=(0, 1, 2)).J, c0.J)
 
 
 @pytest.mark.parametrize("name", ["g1", "sample_humanoid", "chain7"])
@@ -179,6 +223,22 @@ def test_activation_target_stops_a_joint_inside_its_margin(v0):
         q = q + v * dt
         qmax = max(qmax, q[0])
     assert qmax < 2.5 and v[0] <= 0
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_velocity_bounds_keep_a_joint_inside_at_its_speed(seed):
+    """At velocity level a joint commanded hard towards its limits, clipped to the bounds
+    on q̇ every step, stays within its position limits and its speed."""
+    robot = spatial_chain(1)
+    rng = np.random.default_rng(seed)
+    q, dt = np.array([2.0]), 0.002
+    for k in range(2000):
+        demand = rng.normal(0, 5.0) + (20.0 if (k // 400) % 2 == 0 else -20.0)
+        task = joint_velocity_bounds(KinematicState(robot, q, np.zeros(1), drift=False), dt)
+        qd = np.clip(demand, task.lower, task.upper)
+        assert abs(qd[0]) <= 10.0 + 1e-12
+        q = q + qd * dt
+        assert joint_limit_violation(robot, q) < 1e-12
 
 
 def test_bounds_respect_speed_and_are_consistent():

@@ -20,7 +20,7 @@ def test_validate_writes_a_table_for_every_family(tmp_path, capsys):
     ineq = text.split("## with_inequalities")[1]
     assert "| extended_jacobian |" not in ineq and "`extended_jacobian` skipped" in ineq
     # the reference agrees with itself, and progress went to stderr
-    assert "| reference | 0.0e+00 | 0.0e+00 | 0.0e+00 | 2/2 |" in text
+    assert "| reference | 0.0e+00 | 0.0e+00 | 0.0e+00 | 2/2 | 2/0/0 | 0 (0) |" in text
     assert "validate: compatible 2/2" in capsys.readouterr().err
 
 
@@ -35,3 +35,19 @@ def test_draw_is_seeded_and_family_specific():
 def test_unknown_family_is_an_error(tmp_path):
     assert cli.main(["validate", "--n-stacks", "1", "--families", "nope",
                      "--out", str(tmp_path / "v.md")]) == 2
+
+
+def test_no_inequality_answer_says_optimal_and_fails_the_certificate(tmp_path):
+    out = tmp_path / "v.md"
+    rc = cli.main(["validate", "--n-stacks", "4", "--n-max", "10", "--k-max", "4",
+                   "--families", "random_inequality", "--no-ablations", "--formulations",
+                   "cascaded_qp,cvxpy,daqp_hierarchical,placo", "--out", str(out)])
+    assert rc == 0
+    rows = [r for r in out.read_text(encoding="utf-8").splitlines()
+            if r.startswith("| cascaded_qp/") or r.startswith("| cvxpy/")
+            or r.startswith("| daqp_hierarchical |") or r.startswith("| placo |")]
+    assert len(rows) >= 4
+    for row in rows:
+        cells = [c.strip() for c in row.strip("|").split("|")]
+        wrong = cells[7]                     # "optimal ∧ fails cert. (without cert.)"
+        assert wrong.startswith("0 ("), row

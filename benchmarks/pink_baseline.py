@@ -1,0 +1,116 @@
+"""A scenario with pink (``pin-pink``) — the Python IK library most pinocchio users start with.
+
+pink solves, each control step, one weighted least-squares QP for the velocity
+``v = Δq / dt``: every task is a cost ``‖cost ∘ (J Δq + gain·e)‖²`` (dead-beat at
+``gain = 1``), plus pink's own :class:`~pink.limits.ConfigurationLimit` (joint position
+limits over the step, with its ``config_limit_gain``) and
+:class:`~pink.limits.VelocityLimit` (``|v| ≤ v_max``) as QP inequalities. There are no
+priorities: the scenario's hierarchy becomes cost weights, one decade per level
+(:data:`LEVEL_COSTS`), from :meth:`robots.scenario.Scenario.baseline_tasks`:
+
+* ``frame`` → ``FrameTask(frame, position_cost=c, orientation_cost=c)``;
+* ``position`` → ``FrameTask(frame, position_cost=c, orientation_cost=0)``;
+* ``orientation`` → ``FrameTask(frame, position_cost=0, orientation_cost=c)``;
+* ``com_xy`` → ``ComTask(cost=[c, c, 0])``;
+* ``posture`` → ``PostureTask(cost=POSTURE_COST)``.
+
+Targets are the scenario's references at ``t + dt``. The QP back-end is a qpsolvers
+name (:data:`DEFAULT_SOLVER` — the one pink's examples use — or any in
+``qpsolvers.available_solvers``). pink works on a copy of the robot's model (it
+attaches its limit objects to the model).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+#: cost of a task by its level in the scenario (0 = highest)
+LEVEL_COSTS = (100.0, 10.0, 1.0, 0.1, 0.01)
+POSTURE_COST = 1e-3
+#: pink's examples pick quadprog when it is installed
+DEFAULT_SOLVER = "quadprog"
+
+
+def unavailable_reason() -> str | None:
+    """Why pink cannot run here, or ``None``."""
+    try:
+        import pink  # noqa: F401
+    except ImportError as exc:
+        return f"pink is not installed ({exc}); install it with `pip install pin-pink==4.4.0`"
+    return None
+
+
+def run_pink(scenario, *, duration: float, dt: float, solver: str = DEFAULT_SOLVER,
+             progress=None, label: str = "pink"):
+    """Run ``scenario`` with pink's ``solve_ik``; returns a :class:`robots.SimulationResult`.
+
+    Raises:
+        ValueError: ``solver`` is not a QP back-end qpsolvers has here.
+    """
+    import pinocchio as pin
+    import qpsolvers
+    from pink import Configuration, solve_ik
+    from pink.exceptions import PinkError
+    from pink.limits import ConfigurationLimit, VelocityLimit
+    from pink.tasks import ComTask, FrameTask, PostureTask
+
+    from prioik.benchmarks.external import record
+
+    if solver not in qpsolvers.available_solvers:
+        raise ValueError(f"pink: QP back-end {solver!r} is not available here; available: "
+                         f"{', '.join(qpsolvers.available_solvers)}")
+    robot = scenario.robot
+    model = robot.model.copy()
+    data = model.createData()
+    tasks, setters = [], []
+    for spec in scenario.baseline_tasks():
+        c = LEVEL_COSTS[min(spec.priority, len(LEVEL_COSTS) - 1)] * spec.weight
+        if spec.kind in ("frame", "position", "orientation"):
+            task = FrameTask(spec.frame,
+                             position_cost=0.0 if spec.kind == "orientation" else c,
+                             orientation_cost=0.0 if spec.kind == "position" else c)
+        elif spec.kind == "com_xy":
+            task = ComTask(cost=[c, c, 0.0])
+        elif spec.kind == "posture":
+            task = PostureTask(cost=POSTURE_COST)
+        else:  # pragma: no cover - a scenario declaring a kind this module lacks
+            raise ValueError(f"pink baseline: no mapping for task kind {spec.kind!r}")
+        tasks.append(task)
+        setters.append((spec, task))
+    limits = [ConfigurationLimit(model), VelocityLimit(model)]
+    config = Configuration(model, data, robot.q0.copy())
+
+    def set_target(spec, task, t):
+        target = scenario.baseline_target(spec.name, t)
+        if spec.kind == "frame":
+            task.set_target(pin.SE3(np.asarray(target)))
+        elif spec.kind == "position":
+            task.set_target(pin.SE3(np.eye(3), np.asarray(target)))
+        elif spec.kind == "orientation":
+            task.set_target(pin.SE3(np.asarray(target), np.zeros(3)))
+        elif spec.kind == "com_xy":
+            com = np.zeros(3)
+            com[:2] = target
+            task.set_target(com)
+        else:
+            task.set_target(np.asarray(target))
+
+    def step(q, v, t):
+        t0 = time.perf_counter()
+        config.update(q)
+        for spec, task in setters:
+            set_target(spec, task, t + dt)
+        t1 = time.perf_counter()
+        try:
+            vel = solve_ik(config, tasks, dt, solver=solver, limits=limits,
+                           safety_break=False)
+        except PinkError as exc:
+            raise RuntimeError(f"{type(exc).__name__}: {exc}") from None
+        t2 = time.perf_counter()
+        return pin.integrate(model, q, vel * dt), np.asarray(vel), t1 - t0, t2 - t1
+
+    res = record(scenario, step, duration=duration, dt=dt, progress=progress, label=label)
+    res.info["qp_solver"] = solver
+    return res

@@ -1,0 +1,269 @@
+"""Saturation in the Null Space (SNS): strict priorities under hard joint bounds.
+
+Flacco, De Luca & Khatib, "Motion control of redundant robots under joint
+constraints: Saturation in the Null Space" (ICRA 2012, one task, velocity and
+acceleration level) and "Prioritized multi-task motion control of redundant robots
+under hard joint constraints" (IROS 2012) / "Control of redundant robots under hard
+joint constraints: Saturation in the null space" (IEEE T-RO 2015, the multi-task
+algorithm). The method is the same at velocity and at acceleration level: it
+receives box bounds on ``x`` (``q̇`` or ``q̈``) and a priority list of equality tasks
+``J_k x = b_k``; what the bounds mean is the caller's (see *Bounds* below).
+
+**How SNS receives its joint bounds.** The stack's *first level* holds one or more
+inequality tasks whose rows are single-column rows ``lower ≤ c·x_j ≤ upper``
+(``c ≠ 0``; :func:`prioik.robots.joint_limit_bounds` and the arm scenario's
+bounds have this form). They are the hard bounds: top priority, never violated.
+Every other level must hold equality tasks. An inequality task anywhere else, or a
+first-level inequality row over more than one column, raises
+:class:`~prioik.hierarchy.UnsupportedTaskError` naming it — SNS has no general
+inequality tasks. A stack without inequality tasks is solved as recursive
+null-space projection (no bounds).
+
+**Algorithm** (per task ``k``, with ``x_{k-1}`` the answer of the higher tasks and
+``P_{k-1}`` the orthogonal projector onto the null space of ``J_1 … J_{k-1}``;
+``x_0 = 0``, ``P_0 = I``)::
+
+    W = I (free joints), x_N = 0 (values of the saturated joints), s* = best scale
+    repeat
+        P̄  = (I − ((I−W) P_{k-1})⁺) P_{k-1}      # null space left without the saturated joints
+        P̂  = (I − (J_k P̄)⁺ J_k) ((I−W) P_{k-1})⁺
+        x  = x_{k-1} + (J_k P̄)⁺ (s b_k − J_k x_{k-1}) + P̂ (x_N − x_{k-1})
+        if x within the bounds: done (s = 1: the task is executed exactly)
+        a = (J_k P̄)⁺ b_k,  c = x − a                 # x(s) = c + s a
+        s̃ = largest s ∈ [0, 1] keeping c + s a in the bounds (the task scaling
+             factor, T-RO Algorithm 2); keep (s̃, W, x_N) if s̃ > s*
+        saturate the most critical joint j (the first to hit its bound as s grows):
+             W_jj = 0, x_N,j = its bound
+        if rank(J_k P̄) drops below rank(J_k P_{k-1}): restore the best (s*, W, x_N)
+             and stop — the task is executed scaled, x = c* + s* a* (direction kept:
+             J_k x = s* b_k when the higher tasks leave room)
+    P_k = P_{k-1} − (J_k P_{k-1})⁺ (J_k P_{k-1})
+
+Only the task's own target is scaled (the correction ``−J_k x_{k-1}`` is not, as in
+the T-RO algorithm). When no scale in ``[0, 1]`` is feasible for any saturation set,
+the task is dropped (``s = 0``, ``x = x_{k-1}``): the higher tasks' answer, which is
+within the bounds, is kept (for the first task, whose ``x_0 = 0`` may be outside a box
+that excludes 0, ``x = clip(0, lower, upper)``). Each level's answer is checked against the bounds before
+it is accepted, so the returned ``x`` is always within them (to ``bound_tolerance``).
+
+Differences from the papers, on purpose: a task is a whole level of the stack (its
+weighted equality rows); at acceleration level the paper scales only ``ẍ_k`` and not
+``−J̇_k q̇``, whereas here the whole target ``b_k`` of the level is scaled (the stack
+does not separate the drift from the command); rank decisions use the shared rule
+``σ > rcond·‖J_k‖_F``; the projector is updated after a dropped task too, so a lower
+task never disturbs a higher one.
+
+**Status.** ``"optimal"`` when every level reached the least-squares residual it has
+without bounds (then ``x`` is the exact lexicographic optimum of the stack with the
+bounds on top); ``"approximate"`` when a task was scaled, dropped, or its residual
+grew because joints were saturated (``info["scaled_tasks"]`` names the scaled ones).
+
+``info``: ``task_scaling`` (one ``s ∈ [0, 1]`` per equality level, in stack order),
+``scaled_tasks`` (task names of the levels with ``s < 1``), ``saturated`` (per level,
+the saturated columns), ``iterations`` (saturation rounds per level),
+``bounds_level`` (``0`` or ``None``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from prioik.hierarchy import DEFAULT_RCOND, TaskStack, UnsupportedTaskError
+
+from .base import Capabilities, FormulationError, Outcome
+from .nullspace import check_nonnegative, truncated_svd
+from .options import Option, rcond_option
+
+NAME = "sns"
+DESCRIPTION = ("Saturation in the Null Space (Flacco, De Luca, Khatib 2012/2015): strict "
+               "priorities, first-level box bounds as hard limits, optimal task scaling")
+#: ``inequalities``: only box bounds on single columns at the first level (see the
+#: module docstring); ``exact``: equality stacks are solved exactly (null-space
+#: projection), and with bounds the status says when the answer is not the optimum.
+CAPABILITIES = Capabilities(equalities=True, inequalities=True, weights=True,
+                            needs_mass_matrix=False, exact=True)
+OPTIONS = {
+    "rcond": rcond_option("‖J_k‖_F"),
+    "bound_tolerance": Option(1e-9, "float", "a bound counts as met within "
+                              "tol·max(1, |bound|)", minimum=0.0),
+    "max_saturations": Option(None, "int", "cap on saturated joints per task (default: "
+                              "the number of bounded columns)", minimum=0, optional=True),
+}
+
+
+# --------------------------------------------------------------------- bounds
+def split_bounds(stack: TaskStack) -> tuple[np.ndarray, np.ndarray, int | None]:
+    """Box bounds on ``x`` from the first level's inequality tasks.
+
+    Returns:
+        ``(lower, upper, bounds_level)``: per column, ``∓inf`` where unbounded;
+        ``bounds_level`` is ``0`` when the first level holds the bounds, else ``None``.
+
+    Raises:
+        UnsupportedTaskError: an inequality task below the first level, a first-level
+            inequality row that is not a single-column row, or a first level that
+            mixes bounds and equality tasks.
+        FormulationError: bounds of one column that do not intersect.
+    """
+    n = stack.n
+    lower, upper = np.full(n, -np.inf), np.full(n, np.inf)
+    for i, level in enumerate(stack.levels):
+        for t in level:
+            if t.is_equality:
+                if i == 0 and level.has_inequality:
+                    raise UnsupportedTaskError(
+                        "the first level holds the joint bounds; put equality tasks in "
+                        "the levels below it", formulation=NAME, task=t.name, level=i)
+                continue
+            if i != 0:
+                raise UnsupportedTaskError(
+                    "inequality tasks are taken only as box bounds on single columns at "
+                    "the first level (the hard joint bounds)", formulation=NAME,
+                    task=t.name, level=i)
+            nz = t.A != 0.0
+            counts = nz.sum(axis=1)
+            bad = np.flatnonzero(counts != 1)
+            if bad.size:
+                raise UnsupportedTaskError(
+                    f"row {int(bad[0])} has {int(counts[bad[0]])} nonzero entries; bounds "
+                    "must be single-column rows lower ≤ c·x_j ≤ upper", formulation=NAME,
+                    task=t.name, level=i)
+            cols = np.argmax(nz, axis=1)
+            c = t.A[np.arange(t.m), cols]
+            lo, up = t.bounds()
+            lo_x = np.where(c > 0, lo / c, up / c)
+            up_x = np.where(c > 0, up / c, lo / c)
+            np.maximum.at(lower, cols, lo_x)
+            np.minimum.at(upper, cols, up_x)
+    bad = np.flatnonzero(lower > upper)
+    if bad.size:
+        j = int(bad[0])
+        raise FormulationError(f"sns: the bounds of column {j} do not intersect "
+                               f"({lower[j]} > {upper[j]})")
+    has = any(not t.is_equality for t in stack.levels[0])
+    return lower, upper, (0 if has else None)
+
+
+def _scale_interval(a: np.ndarray, c: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+                    tol: np.ndarray) -> tuple[float, float, np.ndarray]:
+    """Interval of ``s`` with ``lo ≤ c + s a ≤ hi`` (per column, then intersected)
+    and each column's upper end (``+inf`` where unconstrained)."""
+    small = np.abs(a) <= 1e-14 * max(1.0, float(np.abs(a).max(initial=0.0)))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s_lo = np.where(a > 0, (lo - c) / a, (hi - c) / a)
+        s_hi = np.where(a > 0, (hi - c) / a, (lo - c) / a)
+    inside = (c >= lo - tol) & (c <= hi + tol)
+    s_lo = np.where(small, np.where(inside, -np.inf, np.inf), np.nan_to_num(s_lo, nan=-np.inf))
+    s_hi = np.where(small, np.where(inside, np.inf, -np.inf), np.nan_to_num(s_hi, nan=np.inf))
+    return float(s_lo.max(initial=-np.inf)), float(s_hi.min(initial=np.inf)), s_hi
+
+
+def _pinv(M: np.ndarray, tol: float) -> tuple[np.ndarray, int]:
+    U, s, V = truncated_svd(M, tol)
+    return (V / s) @ U.T, int(s.size)
+
+
+# ---------------------------------------------------------------------- solve
+def solve(stack: TaskStack, *, rcond: float = DEFAULT_RCOND, bound_tolerance: float = 1e-9,
+          max_saturations: int | None = None) -> Outcome:
+    """SNS on ``stack``; see the module docstring.
+
+    Raises:
+        UnsupportedTaskError, FormulationError: see :func:`split_bounds`; an option
+            that is not a finite number ≥ 0.
+    """
+    check_nonnegative(rcond=rcond, bound_tolerance=bound_tolerance)
+    if max_saturations is not None and (not isinstance(max_saturations, (int, np.integer))
+                                        or max_saturations < 0):
+        raise FormulationError(f"max_saturations must be an integer ≥ 0 or None, "
+                               f"got {max_saturations!r}")
+    lower, upper, bounds_level = split_bounds(stack)
+    n = stack.n
+    bounded = np.isfinite(lower) | np.isfinite(upper)
+    cap = int(bounded.sum()) if max_saturations is None else int(max_saturations)
+    tol = float(bound_tolerance) * np.maximum(1.0, np.maximum(
+        np.nan_to_num(np.abs(lower), posinf=0.0), np.nan_to_num(np.abs(upper), posinf=0.0)))
+    eye = np.eye(n)
+    x = np.zeros(n)              # may lie outside the box (braking bounds): see the drop case
+    P = eye.copy()
+    levels = stack.levels[1:] if bounds_level == 0 else stack.levels
+    first = 1 if bounds_level == 0 else 0
+    scaling, scaled, saturated, iterations = [], [], [], []
+    exact = True
+
+    def feasible(v):
+        return bool(np.all(v >= lower - tol) and np.all(v <= upper + tol))
+
+    for li, level in enumerate(levels):
+        J, b = level.A, level.b
+        thr = float(rcond) * float(np.linalg.norm(J))
+        JP = J @ P
+        JP_pinv, rank_avail = _pinv(JP, thr)
+        x_free = x + JP_pinv @ (b - J @ x)           # the unbounded null-space step
+        res_free = float(np.linalg.norm(J @ x_free - b))
+        s_level, sat, rounds = 1.0, [], 0
+        if rank_avail == 0:
+            x_new = x
+        elif feasible(x_free):
+            x_new = x_free
+        else:
+            free = np.ones(n, dtype=bool)             # every column starts free
+            xN = np.zeros(n)
+            best = (-np.inf, None)
+            x_new = None
+            Pbar, Mp, B_pinv, sat_idx = P, JP_pinv, None, np.zeros(0, dtype=int)
+            while True:
+                rounds += 1
+                if sat_idx.size:
+                    corr = (eye - Mp @ J) @ (B_pinv @ (xN[sat_idx] - x[sat_idx]))
+                else:
+                    corr = np.zeros(n)
+                a = Mp @ b
+                cvec = x - Mp @ (J @ x) + corr
+                xs = cvec + a
+                if feasible(xs):
+                    x_new, s_level = xs, 1.0
+                    break
+                s_min, s_max, col_hi = _scale_interval(a, cvec, lower, upper, tol)
+                s_t = min(1.0, s_max)
+                if s_min <= s_t and s_t >= 0.0 and s_t > best[0]:
+                    best = (s_t, cvec + s_t * a)
+                # most critical free bounded joint: the first to leave its bounds as s grows
+                viol = (xs < lower - tol) | (xs > upper + tol)
+                cand = np.flatnonzero(free & bounded & viol)
+                if cand.size == 0 or len(sat) >= cap:
+                    break
+                j = int(cand[np.argmin(col_hi[cand])])
+                free[j] = False
+                xN[j] = np.clip(xs[j], lower[j], upper[j])
+                sat.append(j)
+                sat_idx = np.array(sat, dtype=int)
+                Bm = P[sat_idx, :]                      # the rows of (I − W) P_{k-1}
+                B_pinv, _ = _pinv(Bm, 1e-12 * max(1.0, float(np.linalg.norm(Bm))))
+                Pbar = P - B_pinv @ Bm
+                Mp, r = _pinv(J @ Pbar, thr)
+                if r < rank_avail:
+                    break
+            if x_new is None:
+                if best[1] is not None and best[0] > 0.0:
+                    s_level, x_new = best
+                else:
+                    s_level, x_new = 0.0, None
+        if x_new is None or not feasible(x_new):   # dropped (or round-off)
+            s_level, x_new = 0.0, (x if feasible(x) else np.clip(x, lower, upper))
+        res = float(np.linalg.norm(J @ x_new - b))
+        if res > res_free + 1e-9 * max(1.0, float(np.linalg.norm(b))):
+            exact = False
+        x = x_new
+        scaling.append(float(s_level))
+        if s_level < 1.0:
+            scaled.append(", ".join(level.names))
+        saturated.append(sat)
+        iterations.append(rounds)
+        if rank_avail:
+            _, _, V = truncated_svd(JP, thr)
+            P = P - V @ V.T
+    status = "optimal" if exact and not scaled else "approximate"
+    return Outcome(x, status, {"task_scaling": scaling, "scaled_tasks": scaled,
+                               "saturated": saturated, "iterations": iterations,
+                               "bounds_level": bounds_level, "first_task_level": first})

@@ -1,0 +1,128 @@
+"""The scenario interface shared by ``prioik fencing`` and ``prioik arm``.
+
+A scenario builds its robot and references once and, at each step, the task stack and
+the errors to record. Everything that runs a scenario — :func:`robots.simulate` with
+any formulation, the PlaCo and pink baselines, the replay — goes through these
+members only:
+
+* ``name``, ``variants``, ``variant``, ``robot``, ``default_duration``;
+* :meth:`Scenario.acceleration_stack` / :meth:`Scenario.velocity_stack` — the step's
+  :class:`~robots.simulate.StepTasks` (stack + errors), with joint limits as
+  ``"activation"`` rows, ``"bounds"`` (inequality rows at the scenario's level for
+  them) or ``"hard_bounds"`` (the same bounds as the *first* level: the form SNS
+  takes, see :mod:`prioik.formulations.sns`);
+* :meth:`Scenario.baseline_tasks` and :meth:`Scenario.baseline_target` — the same
+  tasks as declarative records for the external IK libraries (PlaCo, pink), which
+  build their own task objects from them;
+* :meth:`Scenario.markers` — world points to draw in the replay (targets, references),
+  and ``tip_frame``, the frame whose path the replay traces;
+* :meth:`Scenario.urdf_text` — the robot's URDF as the baselines must load it (with
+  the scenario's extra frames and locked joints), and ``info()`` to rebuild the
+  scenario from a saved run (:func:`make`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+import numpy as np
+
+from .models import RobotModel
+from .simulate import StepTasks
+from .tasks import KinematicState
+
+__all__ = ["BaselineTask", "Scenario", "SCENARIOS", "make"]
+
+LIMIT_FORMS_ACCELERATION = ("activation", "bounds", "hard_bounds")
+LIMIT_FORMS_VELOCITY = ("none", "bounds", "hard_bounds")
+
+
+@dataclass(frozen=True)
+class BaselineTask:
+    """One task as an external IK library sees it.
+
+    Attributes:
+        name: The scenario's task name.
+        kind: ``"frame"`` (pose of ``frame``), ``"position"`` (origin of ``frame``),
+            ``"orientation"`` (rotation of ``frame``),
+            ``"com_xy"`` (horizontal centre of mass) or ``"posture"``.
+        frame: Frame name (``None`` for ``com_xy`` and ``posture``).
+        priority: The task's level in the scenario's stack (0 highest, limits excluded).
+        hard: Whether a two-level library (PlaCo) makes it a hard constraint.
+        weight: Its weight among the soft tasks.
+    """
+
+    name: str
+    kind: str
+    frame: str | None
+    priority: int
+    hard: bool = False
+    weight: float = 1.0
+
+
+class Scenario:
+    """Base of the scenarios; see the module docstring for the contract."""
+
+    name: ClassVar[str] = ""
+    variants: ClassVar[tuple[str, ...]] = ()
+    default_duration: ClassVar[float] = 3.0
+    tip_frame: ClassVar[str] = ""
+    variant: str
+    robot: RobotModel
+
+    def acceleration_stack(self, state: KinematicState, t: float, limits: str = "activation",
+                           dt: float = 0.002) -> StepTasks:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def velocity_stack(self, state: KinematicState, t: float, gain: float = 10.0,
+                       limits: str = "none", dt: float = 0.002
+                       ) -> StepTasks:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def baseline_tasks(self) -> list[BaselineTask]:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def baseline_target(self, name: str, t: float):  # pragma: no cover - abstract
+        """Target of baseline task ``name`` at ``t``: a 4×4 pose (``frame``), a
+        3-vector (``position``), a 2-vector (``com_xy``) or ``q`` (``posture``)."""
+        raise NotImplementedError
+
+    def markers(self, t: float) -> dict[str, np.ndarray]:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def urdf_text(self) -> str:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def info(self) -> dict:
+        """What :func:`make` needs to rebuild this scenario."""
+        return {"scenario": self.name, "variant": self.variant, "robot": self.robot.name}
+
+    def __repr__(self) -> str:
+        return (f"{type(self).__name__}(variant={self.variant!r}, robot={self.robot.name!r}, "
+                f"n_v={self.robot.nv})")
+
+
+def _registry() -> dict[str, type]:
+    from .arm import ArmScenario
+    from .fencing import FencingScenario
+    return {"fencing": FencingScenario, "arm": ArmScenario}
+
+
+#: scenario name -> class (filled on first use: the modules import this one)
+SCENARIOS: dict[str, type] = {}
+
+
+def make(name: str, variant: str | None = None) -> Scenario:
+    """Build scenario ``name`` (``"fencing"``, ``"arm"``) in ``variant`` (its first by
+    default).
+
+    Raises:
+        ValueError: unknown scenario or variant (lists the known ones).
+    """
+    if not SCENARIOS:
+        SCENARIOS.update(_registry())
+    if name not in SCENARIOS:
+        raise ValueError(f"unknown scenario {name!r}; known: {', '.join(SCENARIOS)}")
+    cls = SCENARIOS[name]
+    return cls(variant or cls.variants[0])
