@@ -357,6 +357,16 @@ def _lift(p, col, px, nf, Vf, betaf, posf):
                 xq[c] -= f * v[c]
 
 
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _odot(Bo, ucol, j, v):
+    """``Bo[j] · v``; ``ucol[j] ≥ 0``: the row's only non-zero column (a bound on one
+    variable, e.g. a joint limit: one product instead of ``n``)."""
+    c = ucol[j]
+    if c >= 0:
+        return Bo[j, c] * v[c]
+    return _dot(Bo[j], v)
+
+
 @njit(cache=True, inline="always")
 def _tol(primal_tol, rnorm_j, ynorm, bound):
     """Feasibility tolerance of one row: relative to ``‖a_j‖ ‖y‖ + |bound|``."""
@@ -407,8 +417,10 @@ def workspace_offsets(M: int, n: int, k: int) -> dict[str, tuple[int, int]]:
 
     float64: ``params`` (rcond, primal_tol, dual_tol, max_iter, use_warm), ``B``,
     ``T``, ``Lw``, ``Bo``, ``flat`` (``R × n`` each), ``V``, ``Vf`` (``n × n``), ``fvec``
-    (``15 × R``), ``x`` (``n``), ``w2`` (``k``); int64: ``k``, ``starts`` (``k + 1``),
-    ``ivec`` (``4 × R``), ``perm`` (``n``), ``counts`` (``3 × (k + 1)``); int8: ``row_eq``
+    (``15 × R``), ``x`` (``n``), ``w2`` and ``res = √w2`` (``k``); the kernel writes
+    ``‖x‖`` into ``params[5]`` and, into ``params[6]``, ``1`` when an iteration cap was
+    hit, ``-1`` when ``x`` or a residual is not finite; int64: ``k``, ``starts`` (``k + 1``),
+    ``ivec`` (``5 × R``), ``perm`` (``n``), ``counts`` (``3 × (k + 1)``); int8: ``row_eq``
     (``M``), ``bvec`` (``2 × R``), ``eqr`` (``R``), ``warm_state`` (``(k + 1) × R``),
     ``warm_valid`` (``k + 1``).
     """
@@ -417,8 +429,8 @@ def workspace_offsets(M: int, n: int, k: int) -> dict[str, tuple[int, int]]:
     for kind, parts in (("f", (("params", N_PARAMS), ("B", R * n), ("T", R * n),
                                 ("Lw", R * n), ("Bo", R * n), ("flat", R * n),
                                 ("V", n * n), ("Vf", n * n), ("fvec", N_FVEC * R),
-                                ("x", n), ("w2", k))),
-                        ("i", (("k", 1), ("starts", k + 1), ("ivec", 4 * R), ("perm", n),
+                                ("x", n), ("w2", k), ("res", k))),
+                        ("i", (("k", 1), ("starts", k + 1), ("ivec", 5 * R), ("perm", n),
                                ("counts", 3 * (k + 1)))),
                         ("b", (("row_eq", M), ("bvec", 2 * R), ("eqr", R),
                                ("warm_state", (k + 1) * R), ("warm_valid", k + 1)))):
@@ -488,10 +500,11 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     x = fwork[o:o + n]
     o += n
     w2 = fwork[o:o + k]
+    res = fwork[o + k:o + 2 * k]
     starts = iwork[1:k + 2]
     o = k + 2
-    ivec = iwork[o:o + 4 * R].reshape((4, R))
-    o += 4 * R
+    ivec = iwork[o:o + 5 * R].reshape((5, R))
+    o += 5 * R
     perm = iwork[o:o + n]
     o += n
     counts = iwork[o:o + 3 * (k + 1)].reshape((3, k + 1))
@@ -527,6 +540,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     g = fvec[10, :n]
     nu = fvec[11]
     nrot = ivec[3]
+    ucol = ivec[4]
     px = fvec[12, :n]
     xc = fvec[13, :n]
     xs = fvec[14, :n]
@@ -537,9 +551,15 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
         s = sw[j]
         if not (np.isfinite(s) and s > 0.0):
             return False
+        nz = 0
         for c in range(n):
             B[j, c] = s * A[j, c]
             Bo[j, c] = B[j, c]
+            if A[j, c] != 0.0:
+                nz += 1
+                ucol[j] = c
+        if nz != 1:
+            ucol[j] = -1
         nrot[j] = 0
         if row_eq[j]:
             if not np.isfinite(b[j]):
@@ -611,7 +631,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
             if eqr[j]:
                 state[j] = 3
             else:
-                r = _dot(Bo[j], xc)
+                r = _odot(Bo, ucol, j, xc)
                 state[j] = _violated_side(r, blo[j], bup[j],
                                           _tol(primal_tol, rnorm[j], ynorm, blo[j]),
                                           _tol(primal_tol, rnorm[j], ynorm, bup[j]))
@@ -654,7 +674,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
             for j in range(hard_end):
                 if state[j] != 0 or eqr[j]:
                     continue
-                r = _dot(Bo[j], xc)
+                r = _odot(Bo, ucol, j, xc)
                 if _violated_side(r, blo[j], bup[j],
                                   _tol(primal_tol, rnorm[j], ynorm, blo[j]),
                                   _tol(primal_tol, rnorm[j], ynorm, bup[j])) != 0:
@@ -666,7 +686,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                 have_step = hr == nh
                 for j in range(s0, s1):
                     if state[j] == 0:
-                        r = _dot(Bo[j], xc)
+                        r = _odot(Bo, ucol, j, xc)
                         state[j] = _violated_side(r, blo[j], bup[j],
                                                   _tol(primal_tol, rnorm[j], ynorm, blo[j]),
                                                   _tol(primal_tol, rnorm[j], ynorm, bup[j]))
@@ -711,13 +731,13 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                     for j in range(s1):
                         if state[j] != 0 or eqr[j] or (j >= hard_end and j < s0):
                             continue
-                        cp = _dot(Bo[j], px)
+                        cp = _odot(Bo, ucol, j, px)
                         thr = block_eps * rnorm[j] * pn
                         if cp < -thr and np.isfinite(blo[j]):
-                            a = (blo[j] - _dot(Bo[j], xc)) / cp
+                            a = (blo[j] - _odot(Bo, ucol, j, xc)) / cp
                             side = -1
                         elif cp > thr and np.isfinite(bup[j]):
-                            a = (bup[j] - _dot(Bo[j], xc)) / cp
+                            a = (bup[j] - _odot(Bo, ucol, j, xc)) / cp
                             side = 1
                         else:
                             continue
@@ -743,7 +763,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
             for j in range(s0, s1):
                 st = state[j]
                 if st == -1 or st == 1:
-                    r = _dot(Bo[j], xc)
+                    r = _odot(Bo, ucol, j, xc)
                     tl = _tol(primal_tol, rnorm[j], ynorm, blo[j])
                     tu = _tol(primal_tol, rnorm[j], ynorm, bup[j])
                     if st == -1 and r > blo[j] + tl:
@@ -792,7 +812,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
             fix = eqr[j]
             if st == -1 or st == 1:
                 tb = blo[j] if st == -1 else bup[j]
-                fix = abs(_dot(Bo[j], xc) - tb) > _tol(primal_tol, rnorm[j], ynorm, tb)
+                fix = abs(_odot(Bo, ucol, j, xc) - tb) > _tol(primal_tol, rnorm[j], ynorm, tb)
             if fix:
                 _bring(B, j, nrot, nf, Vf, betaf, posf)
                 rows[nfix] = j
@@ -890,6 +910,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
         for c in range(n - q):
             xq[c] -= f * vx[c]
     # each level's weighted squared violation at x
+    total = 0.0
     for lev in range(k):
         acc = 0.0
         for j in range(starts[lev], starts[lev + 1]):
@@ -902,5 +923,14 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                 e = lo - ax if ax < lo else (ax - up if ax > up else 0.0)
             acc += e * e
         w2[lev] = acc
+        res[lev] = np.sqrt(acc)
+        total += acc
+    xn = np.sqrt(_dot(x, x))
+    fwork[5] = xn
+    capped = 0.0
+    for lev in range(k + 1):
+        if flags[lev] != FLAG_OK:
+            capped = 1.0
+    fwork[6] = capped if (np.isfinite(xn) and np.isfinite(total)) else -1.0
     return True
 

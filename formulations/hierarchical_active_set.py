@@ -165,8 +165,9 @@ class Prepared:
         self.warm_state = part(self._bwork, "warm_state", (k + 1, rows))
         #: per level: whether :attr:`warm_state` holds a working set (``1``) or not
         self.warm_valid = part(self._bwork, "warm_valid")
-        #: the kernel's outputs: ``x`` then each level's ``‖w_i‖²`` (contiguous: one copy)
-        self._out = self._fwork[off["x"][0]:off["w2"][1]]
+        #: the kernel's outputs: ``x``, each level's ``‖w_i‖²``, its root (one copy)
+        self._out = self._fwork[off["x"][0]:off["res"][1]]
+        self._summary = self._fwork[5:7]          # ‖x‖, cap/non-finite flag
         self._counts = part(self._iwork, "counts", (3, k + 1))
 
     def reset(self) -> None:
@@ -190,16 +191,17 @@ class Prepared:
     def _outcome(self) -> Outcome:
         n, k = self.layout.n, self.layout.k
         out = self._out.copy()
-        x, w2 = out[:n], out[n:]
-        residuals = np.sqrt(w2)
+        x, w2, residuals = out[:n], out[n:n + k], out[n + k:]
         counts = self._counts.copy()
-        xn = math.sqrt(float(x @ x))
+        xn, flag = self._summary.tolist()
         tol = self.primal_tol * max(1.0, xn)
         info = {"iterations": counts[0], "rank_profile": counts[2, :k],
                 "level_violation": w2,
                 "infeasible_levels": [i for i, r in enumerate(residuals.tolist()) if r > tol],
                 "warm_start": self.warm_start}
-        if not (math.isfinite(xn) and math.isfinite(float(w2.sum()))):
+        if flag == 0.0:
+            return Outcome(x, "optimal", info, residuals=residuals, checked=True)
+        if flag < 0.0:
             self.warm_valid[:] = 0
             info["message"] = "the active-set iterations produced non-finite values"
             return Outcome(x, "failed", info, residuals=residuals)
@@ -213,5 +215,4 @@ class Prepared:
                                 f"working set did not settle (degenerate or cycling); the "
                                 f"levels above are optimal and x keeps their optimum, but it "
                                 f"is not certified optimal from that level down")
-            return Outcome(x, "approximate", info, residuals=residuals, checked=True)
-        return Outcome(x, "optimal", info, residuals=residuals, checked=True)
+        return Outcome(x, "approximate", info, residuals=residuals, checked=True)
