@@ -16,7 +16,9 @@ velocity-level stack with bounds on ``q̇``. Every solver gets the same stacks:
   level compression, as ``daqp_hierarchical[raw]``);
 * ``cascaded_qp[daqp]``: ``prioik.solve(stack, "cascaded_qp", solver="daqp")``.
 
-Times are medians of per-solve ``perf_counter`` wall times (numba compiled beforehand,
+Times: each solver runs ``repeats`` passes over the trajectory in order (as a control
+loop runs it), the passes of the three interleaved; per stack the fastest pass's
+``perf_counter`` wall time, then the median over the stacks (numba compiled beforehand,
 BLAS limited to one thread). Exactness: every level's ``‖w_i‖²`` of the active-set
 answer against ``cascaded_qp[quadprog]``'s (relative to ``max(1, value)``; where they
 differ the lower one at the first differing level is the better answer).
@@ -85,23 +87,29 @@ def measure(stacks: list, repeats: int = 3, cascade_every: int = 1) -> dict[str,
     cold = prioik.prepare(layout, NAME, warm_start=False)
     warm = prioik.prepare(layout, NAME)
     cold.solve(same[0])                       # numba compiled (cached) before timing
-    t_cold = [_time(lambda s=s: cold.solve(s), repeats) for s in same]
-    t_warm = []
-    for _ in range(repeats):                  # passes over the trajectory, in order
-        times = []
-        for s in same:
-            t0 = time.perf_counter()
-            warm.solve(s)
-            times.append(time.perf_counter() - t0)
-        t_warm.append(times)
-    t_warm = np.min(np.array(t_warm), axis=0)
-    t_daqp = []
+    daqp_args = []
     for s in same:
         A, bu, bl, bps, _ = build(s, False, 1e-9)
-        sense = np.zeros(len(bu), dtype=c_int)
-        t_daqp.append(_time(lambda: daqp.solve(None, None, A, bu.copy(), bl.copy(), sense,
-                                               break_points=bps, primal_tol=1e-10,
-                                               dual_tol=1e-12), repeats))
+        daqp_args.append((A, bu, bl, bps, np.zeros(len(bu), dtype=c_int)))
+
+    def daqp_raw(i: int) -> None:
+        A, bu, bl, bps, sense = daqp_args[i]
+        daqp.solve(None, None, A, bu.copy(), bl.copy(), sense, break_points=bps,
+                   primal_tol=1e-10, dual_tol=1e-12)
+
+    # every solver as a control loop runs it: passes over the trajectory in order, the
+    # passes of the three interleaved (same machine load); per stack the fastest pass
+    paths = {"cold": lambda i: cold.solve(same[i]), "warm": lambda i: warm.solve(same[i]),
+             "daqp": daqp_raw}
+    times = {name: np.full(len(same), np.inf) for name in paths}
+    for _ in range(repeats):
+        for name, fn in paths.items():
+            t = times[name]
+            for i in range(len(same)):
+                t0 = time.perf_counter()
+                fn(i)
+                t[i] = min(t[i], time.perf_counter() - t0)
+    t_cold, t_warm, t_daqp = times["cold"], times["warm"], times["daqp"]
     sub = same[::cascade_every]
     t_cas = [_time(lambda s=s: prioik.solve(s, "cascaded_qp", solver="daqp"), 1) for s in sub]
     worst, statuses, cold_warm = 0.0, set(), 0.0
