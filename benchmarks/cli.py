@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 import numpy as np
@@ -23,6 +24,7 @@ SUBCOMMAND_MODULES = [
     "prioik.benchmarks.bench",
     "prioik.benchmarks.properties",
     "prioik.benchmarks.validation",
+    "prioik.benchmarks.fuzz",
 ]
 
 
@@ -124,10 +126,26 @@ def main(argv: list[str] | None = None) -> int:
     try:
         require(*getattr(args, "extras", ()), what="this command")
         with blas_threads(getattr(args, "blas_threads", 1)):
-            return int(args.func(args) or 0)
+            code = int(args.func(args) or 0)
+            sys.stdout.flush()          # a closed pipe shows here, not at exit
+            return code
+    except BrokenPipeError:
+        # the reader (e.g. `| head -1`) closed the pipe: exit quietly, and keep
+        # Python's own flush at exit from failing on the closed descriptor again
+        try:
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())
+        except (OSError, ValueError):
+            pass
+        return 0
     except (TaskStackError, FormulationError, MissingExtraError, ValueError, OSError) as exc:
-        print(f"prioik {args.command}: error: {exc}", file=sys.stderr)
+        print(f"prioik {args.command}: error: {_one_line(exc)}", file=sys.stderr)
         return 2
+
+
+def _one_line(exc: BaseException) -> str:
+    """The error message on one line (a multi-line message is joined with ' | ')."""
+    return " | ".join(line.strip() for line in str(exc).splitlines() if line.strip())
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -97,7 +97,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     files = args.files or sorted(examples_dir().glob("*.json"))
-    names = [s for s in args.formulations.split(",") if s] or None
+    names = [s.strip() for s in args.formulations.split(",") if s.strip()] or None
+    unknown = [name for name in names or [] if name not in formulations.names()]
+    if unknown:
+        raise formulations.FormulationError(
+            f"unknown formulation {', '.join(map(repr, unknown))}; known: "
+            f"{', '.join(formulations.names())}")
     for path in files:
         stack = load_stack(path)
         rows, skipped = compare_stack(stack, args.repeats, names)

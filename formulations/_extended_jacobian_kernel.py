@@ -130,7 +130,7 @@ def _small_lstsq(L, rhs, m, r, mu2, out, col):
 
 
 @njit(cache=True, fastmath=_FAST)
-def _pivoted_lstsq_if_full_rank(B, s0, m, col, rhs, tol, out):
+def _pivoted_lstsq_if_full_rank(B, s0, m, col, rhs, tol, out, margin):
     """One level with ``m ≥ d`` rows on its ``d = n − col`` free coordinates.
 
     Householder QR with column pivoting of ``A_i Z_i = B[s0:s0+m, col:]`` (held
@@ -140,9 +140,11 @@ def _pivoted_lstsq_if_full_rank(B, s0, m, col, rhs, tol, out):
     factorization instead of an LQ and then a least-squares QR) is written into
     ``out[col:]`` and ``True`` returned; the level leaves no null space. Otherwise
     nothing is written and ``False`` returned (``B`` is never modified).
+    ``margin[0]`` receives the smallest pivot norm (the rank decision's margin).
     """
     n = B.shape[1]
     d = n - col
+    margin[0] = np.inf
     Tt = np.empty((d, m))
     for i in range(m):
         row = B[s0 + i]
@@ -164,6 +166,7 @@ def _pivoted_lstsq_if_full_rank(B, s0, m, col, rhs, tol, out):
         exact = _dot(tail, tail)      # exactly (downdated norms lose accuracy)
         if not (np.sqrt(exact) > tol) or tol <= 0.0:
             return False
+        margin[0] = min(margin[0], np.sqrt(exact))
         # the step of _reflect_column with the pivot norms downdated in the same pass
         # (calling the shared step and downdating after measured ~0.5 µs slower on G1)
         cj = Tt[j, j:]
@@ -237,7 +240,7 @@ def _bounded_step(L, rhs, m, r, mu2_min, step_bound, out, col):
 
 @njit(cache=True, fastmath=_FAST)
 def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
-                 step_bound, x, ranks, level_mu2):
+                 step_bound, x, ranks, level_mu2, margins):
     """Solve one stack in place.
 
     Args:
@@ -251,23 +254,29 @@ def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
         x: Output, ``n``.
         ranks: Output, ``k`` ranks ``r_i``.
         level_mu2: Output, ``k`` damping values ``μ_i²`` (0 where the level is exact).
+        margins: Output, ``k`` margins of the rank decisions: the smallest of (kept
+            pivot norm / threshold) and (threshold / largest rejected pivot norm),
+            ``inf`` when the level decided nothing (``hierarchy.linalg``: a margin
+            ``≤ AMBIGUITY`` is an ambiguous decision).
     """
     M, n = B.shape
     solve_kernel_ws(B, c, starts, scales, rcond, level_damping, singular_threshold,
-                    step_bound, x, ranks, level_mu2, np.empty((n, n)), np.empty(n),
+                    step_bound, x, ranks, level_mu2, margins, np.empty((n, n)), np.empty(n),
                     np.empty(n, dtype=np.int64), np.empty(n), np.empty(M),
                     np.empty((M, n)), np.empty(M))
 
 
 @njit(cache=True, fastmath=_FAST)
 def solve_kernel_ws(B, c, starts, scales, rcond, level_damping, singular_threshold,
-                    step_bound, x, ranks, level_mu2, V, beta, pos, y, norms, L, rhs):
+                    step_bound, x, ranks, level_mu2, margins, V, beta, pos, y, norms, L,
+                    rhs):
     """:func:`solve_kernel` with its scratch arrays given (a prepared solver owns them:
     no allocation per solve). ``V`` (``n × n``: reflector ``j`` in ``V[j, pos_j:]``),
     ``beta``, ``pos`` (int), ``y`` (``n``), ``norms``, ``rhs`` (``M``), ``L``
     (``M × n``); their contents on entry do not matter."""
     M, n = B.shape
     k = starts.shape[0] - 1
+    margin = np.empty(1)
     nref = 0
     y[:] = 0.0            # coordinates no level claims stay 0 (the minimum norm)
     col = 0
@@ -277,6 +286,7 @@ def solve_kernel_ws(B, c, starts, scales, rcond, level_damping, singular_thresho
         m = s1 - s0
         ranks[lev] = 0
         level_mu2[lev] = 0.0
+        margins[lev] = np.inf
         if m == 0 or col >= n:
             continue
         tol = rcond * scales[lev]
@@ -290,19 +300,34 @@ def solve_kernel_ws(B, c, starts, scales, rcond, level_damping, singular_thresho
         d = n - col
         if (m >= d and step_bound[lev] <= 0.0
                 and not (level_damping > 0.0 and singular_threshold > 0.0)
-                and _pivoted_lstsq_if_full_rank(B, s0, m, col, rhs, tol, y)):
+                and _pivoted_lstsq_if_full_rank(B, s0, m, col, rhs, tol, y, margin)):
             ranks[lev] = d
+            margins[lev] = margin[0] / tol
             col = n
             continue
         r = 0
+        kept_min = np.inf
         while r < m and r < d:
             # pivot: the remaining row of largest norm on the free columns
             p = _argmax_from(norms, r, m)
             # recompute exactly (downdating loses accuracy)
             tail = B[s0 + p, col + r:]
             exact = _dot(tail, tail)
+            if not (np.sqrt(exact) > tol) and tol > 0.0:
+                # the downdated norms may have lost the largest remaining row (their
+                # cancellation error is ~ε·‖row‖², above the rows a heavy first pivot
+                # leaves; fuzzing found ranks 1 for 3): recompute them before stopping
+                for i in range(r, m):
+                    rest = B[s0 + i, col + r:]
+                    norms[i] = _dot(rest, rest)
+                p = _argmax_from(norms, r, m)
+                tail = B[s0 + p, col + r:]
+                exact = _dot(tail, tail)
             if not (np.sqrt(exact) > tol) or tol <= 0.0:
+                if tol > 0.0 and exact > 0.0:
+                    margins[lev] = min(kept_min / tol, tol / np.sqrt(exact))
                 break
+            kept_min = min(kept_min, np.sqrt(exact))
             if p != r:
                 _swap_rows(B, s0 + r, s0 + p)
                 _swap(rhs, r, p)
@@ -337,6 +362,8 @@ def solve_kernel_ws(B, c, starts, scales, rcond, level_damping, singular_thresho
             nref += 1
             r += 1
         ranks[lev] = r
+        if tol > 0.0:
+            margins[lev] = min(margins[lev], kept_min / tol)
         if r == 0:
             continue
         # L = B_i[:, col:col+r] (lower trapezoidal, rows in pivot order)
@@ -384,8 +411,11 @@ def level_scales(A, b, starts, scales):
     """``scales[i] = ‖A_i‖_F`` of every level (rows ``starts[i]:starts[i+1]``).
 
     Returns ``False`` when a scale or ``‖b‖`` is not finite — a NaN or inf in the
-    rows (or an overflow of the squares): the caller then looks for the entry at
-    fault. The same pass serves as the finite check of the hot path.
+    rows (or an overflow of the squares) — or when a level's scale is outside
+    ``[1e-100, 1e100]`` with a non-zero entry (its squares lose precision or
+    underflow: the caller equilibrates it, ``TaskStack.equilibrated``): the caller
+    then looks for the entry at fault. The same pass serves as the finite check of
+    the hot path.
     """
     M, n = A.shape
     finite = True
@@ -394,10 +424,16 @@ def level_scales(A, b, starts, scales):
         for i in range(starts[lev], starts[lev + 1]):
             acc += _dot(A[i], A[i])
         scales[lev] = np.sqrt(acc)
-        if not np.isfinite(scales[lev]):
+        if not np.isfinite(scales[lev]) or scales[lev] > 1e100:
             finite = False
-    if not np.isfinite(_dot(b, b)):
-        finite = False
+        elif scales[lev] < 1e-100:
+            for i in range(starts[lev], starts[lev + 1]):   # a zero level is fine
+                for j in range(n):
+                    if A[i, j] != 0.0:
+                        finite = False
+    for i in range(b.shape[0]):      # entry by entry: b may be large (x is then large)
+        if not np.isfinite(b[i]):
+            finite = False
     return finite
 
 
@@ -448,7 +484,8 @@ def solve_data(A, b, w, starts, work, params, out, ranks):
         work: Workspace of :func:`work_size` floats (weighted rows, targets, scales and
             the kernel's scratch).
         params: ``rcond, level_damping, singular_threshold`` then the ``k`` step bounds.
-        out: Output of ``n + 2 k`` floats: ``x``, the residuals, the damping ``μ_i²``.
+        out: Output of ``n + 3 k`` floats: ``x``, the residuals, the damping ``μ_i²``,
+            the rank decisions' margins (see :func:`solve_kernel`).
         ranks: ``k + n`` ints: the ``k`` ranks (output), then the kernel's scratch.
 
     Returns 0 when an input is not finite (nothing solved), 1 when ``x`` and the
@@ -471,12 +508,13 @@ def solve_data(A, b, w, starts, work, params, out, ranks):
     x = out[:n]
     residuals = out[n:n + k]
     mu2 = out[n + k:n + 2 * k]
+    margins = out[n + 2 * k:n + 3 * k]
     if not weigh_rows(A, b, w, B, c):
         return 0
     if not level_scales(B, c, starts, scales):
         return 0
     solve_kernel_ws(B, c, starts, scales, params[0], params[1], params[2], params[3:], x,
-                    ranks[:k], mu2, V, beta, ranks[k:], y, norms, L, rhs)
+                    ranks[:k], mu2, margins, V, beta, ranks[k:], y, norms, L, rhs)
     level_residuals(A, b, w, starts, x, residuals)
     acc = 0.0
     for lev in range(k):
@@ -486,8 +524,9 @@ def solve_data(A, b, w, starts, work, params, out, ranks):
 
 @njit(cache=True, parallel=True)
 def solve_batch_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
-                       step_bound, X, ranks, level_mu2):
+                       step_bound, X, ranks, level_mu2, margins):
     """:func:`solve_kernel` over a batch (``B``: ``N × M × n``), in parallel."""
     for b in prange(B.shape[0]):
         solve_kernel(B[b], c[b], starts, scales[b], rcond, level_damping,
-                     singular_threshold, step_bound[b], X[b], ranks[b], level_mu2[b])
+                     singular_threshold, step_bound[b], X[b], ranks[b], level_mu2[b],
+                     margins[b])

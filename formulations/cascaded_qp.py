@@ -74,6 +74,9 @@ be met gives its least-violation answer (slacks); it is listed in
 
 from __future__ import annotations
 
+import contextlib
+import sys
+import threading
 import warnings
 from dataclasses import dataclass, field
 from typing import Any
@@ -181,6 +184,64 @@ def backend_settings(solver: str, tolerance: float | None) -> dict[str, Any]:
     if solver == "daqp":
         return {"primal_tol": t, "dual_tol": min(t, 1e-12)}
     return {}
+
+
+class _ThreadSilencer:
+    """A ``sys.stdout`` stand-in that drops the writes of the threads it silences and
+    passes every other thread's writes to the stream it replaced."""
+
+    def __init__(self, target) -> None:
+        self.target = target
+        self.silenced: dict[int, int] = {}          # thread id -> nesting depth
+
+    def write(self, text: str) -> int:
+        if threading.get_ident() in self.silenced:
+            return len(text)
+        return self.target.write(text)
+
+    def __getattr__(self, name: str):
+        return getattr(self.target, name)
+
+
+_silencer_lock = threading.Lock()
+_silencer: _ThreadSilencer | None = None
+
+
+@contextlib.contextmanager
+def _silence_this_thread():
+    global _silencer
+    tid = threading.get_ident()
+    with _silencer_lock:
+        if _silencer is None or sys.stdout is not _silencer:
+            _silencer = _ThreadSilencer(sys.stdout)
+            sys.stdout = _silencer
+        _silencer.silenced[tid] = _silencer.silenced.get(tid, 0) + 1
+        mine = _silencer
+    try:
+        yield
+    finally:
+        with _silencer_lock:
+            depth = mine.silenced.pop(tid) - 1
+            if depth:
+                mine.silenced[tid] = depth
+            if not mine.silenced and sys.stdout is mine:
+                sys.stdout = mine.target
+                _silencer = None
+
+
+def quiet_unless_verbose(settings: dict[str, Any]):
+    """A context that discards what a back-end prints unless ``settings["verbose"]``.
+
+    OSQP prints "Polishing not needed ..." through Python's ``sys.stdout`` at every
+    solve with ``polishing=True`` (which :func:`backend_settings` sets), even with
+    ``verbose=False``; a back-end's own log is asked for with
+    ``backend_options={"verbose": True}``. Only the calling thread is silenced
+    (``contextlib.redirect_stdout`` swaps the stream of every thread, and concurrent
+    solves could leave it swapped).
+    """
+    if settings.get("verbose"):
+        return contextlib.nullcontext()
+    return _silence_this_thread()
 
 
 def resolve_solver(solver: str) -> str:
@@ -309,8 +370,10 @@ class Fixed:
         if rows.A_in.shape[0]:
             # a violated row keeps A x = bound + v at every optimum (v is unique)
             viol = np.abs(v) > ACTIVE_TOL * np.maximum(1.0, np.abs(rows.A_in @ x))
+            norms = np.linalg.norm(rows.A_in, axis=1)
+            viol &= norms > 0     # a violated zero row (0 ∉ [lower, upper]) fixes nothing
             if viol.any():
-                extra.append(rows.A_in[viol] / np.linalg.norm(rows.A_in[viol], axis=1)[:, None])
+                extra.append(rows.A_in[viol] / norms[viol, None])
         eq = rows.A_eq
         if extra:
             blocks = [eq / max(float(np.linalg.norm(eq)) / np.sqrt(eq.shape[0]), 1e-300)] \
@@ -496,7 +559,8 @@ def solve_level_qp(qp: LevelQP, solver: str, settings: dict[str, Any]
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
-            sol = qpsolvers.solve_problem(problem, solver=solver, **settings)
+            with quiet_unless_verbose(settings):
+                sol = qpsolvers.solve_problem(problem, solver=solver, **settings)
         except _CAUGHT as exc:
             return None, f"{solver} raised {type(exc).__name__}: {exc}", extras
     if caught:

@@ -35,7 +35,7 @@ from .base import Capabilities, FormulationError, Outcome
 from .base import certify as certify_outcome
 from .options import Option, dictionary, positive_semidefinite, rcond_option
 from .cascaded_qp import (ACTIVE_TOL, MULTIPLIER_TOL, Fixed, _unit_rows, level_rows,
-                          record_level, scaled_level)
+                          quiet_unless_verbose, record_level, scaled_level)
 
 NAME = "cvxpy"
 DESCRIPTION = "the cascaded QP modelled in cvxpy (independent reference for inequalities)"
@@ -100,7 +100,8 @@ def _solve(problem: cp.Problem, solver: str, settings: dict) -> tuple[str, str]:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         try:
-            problem.solve(solver=solver, **settings)
+            with quiet_unless_verbose(settings):
+                problem.solve(solver=solver, **settings)
         except (cp.error.SolverError, ValueError, ArithmeticError, RuntimeError) as exc:
             return "error", f"{solver} raised {type(exc).__name__}: {exc}"
     return problem.status, ""

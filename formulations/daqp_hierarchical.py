@@ -137,6 +137,9 @@ def build(stack: TaskStack, compress: bool, rcond: float, scale: bool = True):
         lo.append(np.where(np.isfinite(bl_l), bl_l / sc, -_INF))
         total += L.shape[0]
         bps.append(total)
+    if not rows:      # no level has a row x can change (all zero): nothing to solve
+        return (np.zeros((0, stack.n)), np.zeros(0), np.zeros(0), np.zeros(0, dtype=np.intc),
+                names)
     A = np.ascontiguousarray(np.vstack(rows), dtype=np.float64)
     return (A, np.ascontiguousarray(np.concatenate(up)), np.ascontiguousarray(np.concatenate(lo)),
             np.array(bps, dtype=np.intc), names)
@@ -151,6 +154,10 @@ def solve(stack: TaskStack, *, primal_tol: float, dual_tol: float, compress_leve
         if not np.isfinite(float(val)) or float(val) <= 0:
             raise FormulationError(f"{key} must be a finite number > 0, got {val}")
     A, bu, bl, bps, names = build(stack, bool(compress_levels), float(rcond))
+    if A.shape[0] == 0:     # every row is zero: any x keeps the (fixed) violations; x = 0
+        return Outcome(np.zeros(stack.n), "optimal",
+                       {"exitflag": 1, "exit": "no row to solve (every row is zero)",
+                        "iterations": 0, "break_points": []})
     sense = np.zeros(len(bu), dtype=c_int)
     kwargs = {"primal_tol": float(primal_tol), "dual_tol": float(dual_tol), **(settings or {})}
     try:

@@ -76,7 +76,13 @@ class _StackAdapter:
     def solve(self, data: StackData, options: dict | None = None) -> Outcome:
         stack = data.as_stack()
         check_support(self._name, self._module.CAPABILITIES, stack)
-        return self._module.solve(stack, **(options or self._options))
+        levels = []
+        if self._module.CAPABILITIES.exact:     # levels of extreme scale rescaled
+            stack, levels = stack.equilibrated()
+        out = self._module.solve(stack, **(options or self._options))
+        if levels:
+            out.info = {**out.info, "equilibrated_levels": levels}
+        return out
 
 
 class PreparedSolver:
@@ -234,6 +240,8 @@ class PreparedSolver:
             stacks = [d.as_stack() for d in datas]
             for s in stacks:
                 check_support(self.formulation, self._module.CAPABILITIES, s)
+            if self._module.CAPABILITIES.exact:     # as solve: extreme levels rescaled
+                stacks = [s.equilibrated()[0] for s in stacks]
             X, statuses = self._module.solve_batch(stacks, **self.options)
         else:
             X = np.empty((len(datas), self._n))

@@ -6,7 +6,8 @@ The ground truth of the tests. For levels ``i = 1..k`` (highest first)::
     Z_{i+1} = Z_i · null(M_i)
 
 with ``Z_1 = I`` and every pseudo-inverse and null space from an SVD in float64
-(rank threshold ``rcond · ‖A_i‖_F``). Each level is solved in the least-squares
+(rank threshold ``rcond · ‖A_i‖_F``, :mod:`hierarchy.linalg`; a decision within
+``AMBIGUITY`` of it makes the status ``approximate``). Each level is solved in the least-squares
 sense, so rank-deficient and infeasible levels are handled. Because every ``y_i``
 lies in the row space of ``M_i``, the result is the minimum-norm point of the
 lexicographic optimal set; ``metric=W`` instead minimises ``xᵀ W x`` over that set.
@@ -21,7 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from prioik.hierarchy import DEFAULT_RCOND, TaskStack
+from prioik.hierarchy import (AMBIGUITY, DEFAULT_RCOND, TaskStack, ambiguity_reason,
+                              ambiguous_decision, level_scale, rank_threshold)
 
 from .base import Capabilities, FormulationError, Outcome
 from .options import Option, per_level_nonnegative, positive_semidefinite, rcond_option
@@ -62,7 +64,7 @@ def solve(stack: TaskStack, *, rcond: float, metric, level_damping) -> Outcome:
     n = stack.n
     x = np.zeros(n)
     Z = np.eye(n)
-    ranks = []
+    ranks, ambiguous = [], []
     for i, level in enumerate(stack.levels):
         A, b = level.A, level.b
         if Z.shape[1] == 0:
@@ -70,8 +72,10 @@ def solve(stack: TaskStack, *, rcond: float, metric, level_damping) -> Outcome:
             continue
         M = A @ Z
         u, s, vt = np.linalg.svd(M, full_matrices=True)
-        tol = rcond * float(np.linalg.norm(A))
+        tol = rank_threshold(A, rcond)
         r = int(np.count_nonzero(s > tol)) if tol > 0 else 0
+        if ambiguous_decision(s, tol):
+            ambiguous.append(i)
         if r:
             c = b - A @ x
             y = vt[:r].T @ ((u[:, :r].T @ c) * s[:r] / (s[:r] ** 2 + mu2[i]))
@@ -88,8 +92,11 @@ def solve(stack: TaskStack, *, rcond: float, metric, level_damping) -> Outcome:
                                         "remaining null space") from None
         z = np.linalg.solve(L.T, np.linalg.solve(L, -(Z.T @ (W @ x))))
         x = x + Z @ z
-    return Outcome(x, "approximate" if mu2.any() else "optimal",
-                   {"rank_profile": ranks, "null_space_dim": int(Z.shape[1])})
+    info = {"rank_profile": ranks, "null_space_dim": int(Z.shape[1])}
+    if ambiguous:
+        info["ambiguous_levels"] = ambiguous
+        info["reason"] = ambiguity_reason(ambiguous)
+    return Outcome(x, "approximate" if mu2.any() or ambiguous else "optimal", info)
 
 
 def solve_batch(stacks, *, rcond: float = DEFAULT_RCOND, metric=None, level_damping=None
@@ -113,7 +120,8 @@ def solve_batch(stacks, *, rcond: float = DEFAULT_RCOND, metric=None, level_damp
 
     Returns:
         ``(X, statuses)``: ``X`` is ``B × n`` (row ``b`` is :func:`solve` of stack
-        ``b``); a status is ``"optimal"``, or ``"failed"`` (row of NaN) where
+        ``b``); a status is ``"optimal"``, ``"approximate"`` (damped, or a rank
+        decision ambiguous as in :func:`solve`), or ``"failed"`` (row of NaN) where
         ``ZᵀWZ`` is not positive definite.
     """
     stacks = list(stacks)
@@ -121,13 +129,14 @@ def solve_batch(stacks, *, rcond: float = DEFAULT_RCOND, metric=None, level_damp
     mu2 = level_damping_values(stacks[0], level_damping)
     X = np.zeros((B, n))
     statuses = ["approximate" if mu2.any() else "optimal"] * B
+    ambiguous: list[list[int]] = [[] for _ in range(B)]
     # groups: null-space dimension d -> (stack indices, Z of shape (G, n, d))
     groups: dict[int, tuple[np.ndarray, np.ndarray]] = {
         n: (np.arange(B), np.broadcast_to(np.eye(n), (B, n, n)))}
     for li in range(len(stacks[0].levels)):
         A_all = np.stack([s.levels[li].A for s in stacks])       # (B, m, n)
         b_all = np.stack([s.levels[li].b for s in stacks])       # (B, m)
-        tol_all = rcond * np.linalg.norm(A_all, axis=(1, 2))     # (B,)
+        tol_all = rcond * np.array([level_scale(a) for a in A_all])   # (B,)
         new_groups: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {}
         for d, (idx, Z) in groups.items():
             if d == 0:
@@ -139,6 +148,10 @@ def solve_batch(stacks, *, rcond: float = DEFAULT_RCOND, metric=None, level_damp
             p = s.shape[1]
             keep = (s > tol[:, None]) & (tol[:, None] > 0)        # σ_j counts, per stack
             r = keep.sum(axis=1)                                  # rank per stack
+            near = ((s > tol[:, None] / AMBIGUITY) & (s <= tol[:, None] * AMBIGUITY)
+                    & (tol[:, None] > 0)).any(axis=1)             # ambiguous decision
+            for gi in idx[near]:
+                ambiguous[gi].append(li)
             c = b - np.einsum("gmn,gn->gm", A, X[idx])            # c = b − A x
             w = np.einsum("gmp,gm->gp", u[:, :, :p], c)           # U_pᵀ c
             w = np.where(keep, w * s / np.where(keep, s * s + mu2[li], 1.0), 0.0)
@@ -152,6 +165,7 @@ def solve_batch(stacks, *, rcond: float = DEFAULT_RCOND, metric=None, level_damp
         groups = {d: (np.concatenate([i for i, _ in parts]),
                       np.concatenate([z for _, z in parts]))
                   for d, parts in new_groups.items()}
+    statuses = ["approximate" if amb else st for st, amb in zip(statuses, ambiguous)]
     if metric is not None:
         W = np.asarray(metric, dtype=np.float64)
         for d, (idx, Z) in groups.items():

@@ -173,7 +173,9 @@ def solve(stack, formulation: str = "extended_jacobian", **options: Any) -> Solu
 
     Returns:
         A :class:`Solution`. A numerical failure inside the formulation gives
-        ``status == "failed"`` with ``info["message"]``, not an exception.
+        ``status == "failed"`` with ``info["message"]``, not an exception. An exact
+        formulation solves the stack with its levels of extreme scale equilibrated
+        (:meth:`~hierarchy.TaskStack.equilibrated`; ``info["equilibrated_levels"]``).
 
     Raises:
         FormulationError: unknown/unavailable formulation, unknown, invalid or missing

@@ -10,15 +10,17 @@ from .analysis import (FeasibleSplit, LevelCheck, LexicographicReport, algorithm
 from .errors import TaskStackError, UnsupportedTaskError
 from .io import (PeerProblem, load_lexls, load_peer, load_peer_json, load_soth, load_stack,
                  save_stack, stack_from_dict, stack_to_dict)
-from .linalg import (DEFAULT_CERTIFICATE_TOL, DEFAULT_RCOND, matrix_rank, nonnegative_least_squares,
-                     null_space_basis, range_basis, row_activity)
+from .linalg import (AMBIGUITY, DEFAULT_CERTIFICATE_TOL, DEFAULT_RCOND, ambiguity_reason,
+                     ambiguous_decision, level_scale, matrix_rank, nonnegative_least_squares,
+                     null_space_basis, range_basis, rank_threshold, row_activity)
 from .layout import StackData, StackLayout, level_residuals
 from .stack import TaskStack
 from .task import Level, Task
 
 __all__ = [
-    "DEFAULT_CERTIFICATE_TOL", "DEFAULT_RCOND", "FeasibleSplit", "Level", "LevelCheck",
-    "LexicographicReport", "Task",
+    "AMBIGUITY", "DEFAULT_CERTIFICATE_TOL", "DEFAULT_RCOND", "FeasibleSplit", "Level",
+    "LevelCheck", "LexicographicReport", "Task", "ambiguity_reason", "ambiguous_decision",
+    "level_scale", "rank_threshold",
     "StackData", "StackLayout", "TaskStack", "level_residuals", "TaskStackError", "UnsupportedTaskError", "algorithmic_error",
     "algorithmic_error_norms", "check_lexicographic", "conflicting_levels",
     "feasible_split", "lexicographic_residuals", "matrix_rank", "nested_null_spaces",

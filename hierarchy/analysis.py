@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .layout import level_residuals
-from .errors import UnsupportedTaskError
+from .errors import TaskStackError, UnsupportedTaskError
 from .linalg import (CERTIFICATE_SIGMA_FLOOR, DEFAULT_CERTIFICATE_TOL, DEFAULT_RCOND, matrix_rank,
                      nonnegative_least_squares, range_basis, row_activity)
 from .stack import TaskStack
@@ -251,6 +251,18 @@ class LexicographicReport:
         return "\n".join(rows)
 
 
+def _candidate(x, n: int) -> np.ndarray:
+    """``x`` as a float64 vector of length ``n``; :class:`TaskStackError` otherwise."""
+    try:
+        arr = np.asarray(x, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise TaskStackError(f"x cannot be read as a vector of numbers ({exc})") from None
+    if arr.shape != (n,):
+        raise TaskStackError(f"x has shape {arr.shape}, the stack has n = {n} "
+                             f"(x must have shape ({n},))", shape=arr.shape)
+    return arr
+
+
 @dataclass
 class _LevelRows:
     """One level's rows: unweighted ``A``, bounds (``l = u = b`` on equality rows), √w."""
@@ -325,11 +337,9 @@ def check_lexicographic(stack: TaskStack, x: np.ndarray, tol: float = DEFAULT_CE
         metric: SPD ``n × n`` ``W`` of the tie-break ``min xᵀ W x`` (default identity).
 
     Raises:
-        ValueError: ``x`` of the wrong shape.
+        TaskStackError: ``x`` is not a vector of ``n`` numbers.
     """
-    x = np.asarray(x, dtype=np.float64)
-    if x.shape != (stack.n,):
-        raise ValueError(f"x has shape {x.shape}, the stack has n = {stack.n}")
+    x = _candidate(x, stack.n)
     n = stack.n
     xn = float(np.linalg.norm(x))
     Z = np.eye(n)                      # null space of the fixed rows of the levels above

@@ -18,6 +18,21 @@ from .task import Task
 
 FORMAT_VERSION = 1
 
+#: Keys a task-stack file may hold at the top level and in a task object.
+TOP_LEVEL_KEYS = ("description", "format", "n", "levels")
+TASK_KEYS = ("name", "A", "b", "lower", "upper", "weight")
+
+#: Longest integer literal read (float64 overflows past 309 digits).
+MAX_INTEGER_DIGITS = 309
+
+
+def _read_int(text: str) -> int | float:
+    digits = len(text.lstrip("-"))
+    if digits > MAX_INTEGER_DIGITS:
+        raise TaskStackError(f"an integer of {digits} digits is beyond float64 "
+                             f"(at most {MAX_INTEGER_DIGITS} digits)")
+    return int(text)
+
 
 def _bound(values, name: str, what: str, sign: float):
     if values is None:
@@ -28,9 +43,27 @@ def _bound(values, name: str, what: str, sign: float):
 
 
 def stack_from_dict(data: dict[str, Any]) -> TaskStack:
-    """Build a :class:`TaskStack` from the JSON structure (see the format doc)."""
+    """Build a :class:`TaskStack` from the JSON structure (see the format doc).
+
+    Raises:
+        TaskStackError: naming the key, level or task at fault: an unknown key
+            anywhere, a ``format`` other than :data:`FORMAT_VERSION`, a non-integer
+            ``n``, a non-string ``description``, and every :class:`TaskStack` error.
+    """
     if not isinstance(data, dict) or "levels" not in data:
         raise TaskStackError("a task-stack file is a JSON object with a 'levels' list")
+    unknown = sorted(set(data) - set(TOP_LEVEL_KEYS))
+    if unknown:
+        raise TaskStackError(f"unknown top-level keys {unknown} (known: "
+                             f"{', '.join(TOP_LEVEL_KEYS)})")
+    if "format" in data and (type(data["format"]) is not int
+                             or data["format"] != FORMAT_VERSION):
+        raise TaskStackError(f"unsupported format {data['format']!r}: this prioik reads "
+                             f"format {FORMAT_VERSION}")
+    if "n" in data and (type(data["n"]) is not int or data["n"] < 1):
+        raise TaskStackError(f"'n' must be a positive integer, got {data['n']!r}")
+    if "description" in data and not isinstance(data["description"], str):
+        raise TaskStackError("'description' must be a string")
     levels = data["levels"]
     if not isinstance(levels, list):
         raise TaskStackError("'levels' must be a list of levels")
@@ -42,9 +75,12 @@ def stack_from_dict(data: dict[str, Any]) -> TaskStack:
             if not isinstance(t, dict):
                 raise TaskStackError(f"task {j} must be a JSON object", level=i)
             name = t.get("name", f"level{i}_task{j}")
+            if not isinstance(name, str):
+                raise TaskStackError(f"task {j}: 'name' must be a string, got {name!r}",
+                                     level=i)
             if "A" not in t:
                 raise TaskStackError("missing 'A'", task=name, level=i)
-            unknown = set(t) - {"name", "A", "b", "lower", "upper", "weight"}
+            unknown = set(t) - set(TASK_KEYS)
             if unknown:
                 raise TaskStackError(f"unknown keys {sorted(unknown)}", task=name, level=i)
             try:
@@ -93,18 +129,29 @@ def load_stack(path: str | Path) -> TaskStack:
     """Read a task-stack JSON file.
 
     Raises:
-        TaskStackError: unreadable file, invalid JSON or an invalid stack; the
-            message names the file and, where it applies, the task and level.
+        TaskStackError: unreadable file, not UTF-8 text, invalid JSON, nesting too
+            deep, an integer beyond float64, or an invalid stack; the message names
+            the file and, where it applies, the key, task and level.
     """
     path = Path(path)
     try:
-        text = path.read_text()
+        raw = path.read_bytes()
     except OSError as exc:
         raise TaskStackError(f"cannot read {path}: {exc.strerror}") from None
     try:
-        data = json.loads(text)
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise TaskStackError(f"{path}: not a UTF-8 JSON text file (byte {exc.start} is "
+                             f"{raw[exc.start:exc.start + 1]!r})") from None
+    try:
+        data = json.loads(text, parse_int=_read_int)
     except json.JSONDecodeError as exc:
         raise TaskStackError(f"{path}: invalid JSON at line {exc.lineno}: {exc.msg}") from None
+    except RecursionError:
+        raise TaskStackError(f"{path}: JSON nested too deeply (a task-stack file nests "
+                             f"5 levels: levels, level, task, A, row)") from None
+    except TaskStackError as exc:
+        raise TaskStackError(f"{path}: {exc}") from None
     try:
         return stack_from_dict(data)
     except TaskStackError as exc:

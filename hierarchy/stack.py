@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import Iterator, Sequence
 
 import numpy as np
@@ -9,6 +10,16 @@ import numpy as np
 from .errors import TaskStackError
 from .layout import StackData, StackLayout
 from .task import Level, Task
+
+
+#: Levels whose largest entry lies outside this range are equilibrated
+#: (:meth:`TaskStack.equilibrated`): their squares would lose precision in float64.
+EQUILIBRATE_BELOW = 1e-100
+EQUILIBRATE_ABOVE = 1e100
+
+
+def _peak(level: Level) -> float:
+    return max(float(np.max(np.abs(t.A))) for t in level)
 
 
 class TaskStack:
@@ -148,6 +159,28 @@ class TaskStack:
             data._source = self
             self._data = data.freeze()
         return self._data
+
+    def equilibrated(self) -> tuple["TaskStack", list[int]]:
+        """The stack with every level of extreme scale rescaled, and those levels.
+
+        A level whose largest entry lies outside ``[EQUILIBRATE_BELOW,
+        EQUILIBRATE_ABOVE]`` has its tasks' ``A``, ``b`` and bounds multiplied by the
+        power of two that brings that entry into ``[0.5, 1)``. The lexicographic
+        optimal set (and every minimum-norm tie-break) is unchanged: each level's
+        objective is multiplied by a constant. Without it, squares of entries below
+        ~1e-154 underflow (a ``1e-200·I`` level read as zero gave ``x = 0``,
+        "optimal"). Returns ``self`` (and ``[]``) when no level needs it.
+        """
+        peaks = [_peak(level) for level in self._levels]
+        levels = [i for i, p in enumerate(peaks)
+                  if p > 0 and not EQUILIBRATE_BELOW <= p <= EQUILIBRATE_ABOVE]
+        if not levels:
+            return self, []
+        out = list(self._levels)
+        for i in levels:
+            factor = math.ldexp(1.0, -math.frexp(peaks[i])[1])    # 2^-e: peak -> [0.5, 1)
+            out[i] = Level(t.scaled(factor) for t in self._levels[i])
+        return TaskStack(out), levels
 
     def equality_matrices(self) -> list[tuple[np.ndarray, np.ndarray]]:
         """Per level, the weighted equality rows ``(A_i, b_i)``."""

@@ -6,6 +6,7 @@ library is agnostic of what ``x`` is (accelerations, velocities, torques).
 
 from __future__ import annotations
 
+import numbers
 from typing import TYPE_CHECKING, Iterable, Sequence
 
 import numpy as np
@@ -17,9 +18,35 @@ if TYPE_CHECKING:  # pragma: no cover
 
 
 def _as_float_array(value, name: str, what: str) -> np.ndarray:
+    """``value`` as a read-only float64 copy; only real numbers are accepted.
+
+    Complex values (their imaginary part would be dropped), strings (``"1"`` would
+    be parsed), booleans and other objects raise :class:`TaskStackError` naming the
+    task and the array.
+    """
+    if isinstance(value, np.ndarray):
+        raw = value
+    else:
+        try:
+            raw = np.asarray(value)
+        except (TypeError, ValueError) as exc:
+            raise TaskStackError(f"{what} cannot be read as an array of numbers ({exc})",
+                                 task=name) from None
+    kind = raw.dtype.kind
+    if kind == "O":     # e.g. Python ints beyond int64: accept real numbers only
+        for v in raw.flat:
+            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (numbers.Real)):
+                raise TaskStackError(f"{what} must hold real numbers, got "
+                                     f"{type(v).__name__} {v!r}", task=name)
+    elif kind not in "iuf":
+        what_kind = {"c": "complex numbers", "b": "booleans", "U": "strings",
+                     "S": "bytes", "M": "dates", "m": "time deltas", "V": "records"}
+        raise TaskStackError(f"{what} must hold real numbers, got "
+                             f"{what_kind.get(kind, raw.dtype.name)} (dtype {raw.dtype})",
+                             task=name)
     try:
-        arr = np.array(value, dtype=np.float64, copy=True)
-    except (TypeError, ValueError) as exc:
+        arr = np.array(raw, dtype=np.float64, copy=True)
+    except (TypeError, ValueError, OverflowError) as exc:
         raise TaskStackError(f"{what} cannot be read as float64 numbers ({exc})",
                              task=name) from None
     arr.setflags(write=False)
@@ -192,6 +219,16 @@ class Task:
         return Task(f"{self.name}[{','.join(str(int(i)) for i in idx)}]", self.A[idx],
                     pick(self.b), lower=pick(self.lower), upper=pick(self.upper),
                     weight=self.weight[idx] if self.weight.ndim == 1 else self.weight)
+
+    def scaled(self, factor: float) -> "Task":
+        """A copy with ``A``, ``b`` and the bounds multiplied by ``factor > 0`` (same
+        weight): the task's optimal set is unchanged."""
+        w = self.weight if not self._unit_weight else 1.0
+        if self.is_equality:
+            return Task(self.name, self.A * factor, self.b * factor, weight=w)
+        lo = None if self.lower is None else self.lower * factor
+        up = None if self.upper is None else self.upper * factor
+        return Task(self.name, self.A * factor, lower=lo, upper=up, weight=w)
 
     def with_weight(self, weight) -> "Task":
         """A copy of this task with another weight."""

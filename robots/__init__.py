@@ -14,22 +14,24 @@ from prioik.extras import MissingExtraError
 if importlib.util.find_spec("pinocchio") is None:
     raise MissingExtraError(("robots",), "prioik.robots", ("pinocchio",))
 
-from .models import (LOADERS, PANDA_FINGERS, ModelNotFoundError, RobotModel,
-                     example_robot_data_dir, from_urdf, g1, go2, has_free_flyer, load, panda,
-                     sample_humanoid, solo12, spatial_chain, talos, ur5)
+from .models import (LOADERS, PANDA_FINGERS, ModelNotFoundError, RobotModel, StateError,
+                     check_configuration, check_velocity, example_robot_data_dir, from_urdf,
+                     g1, go2, has_free_flyer, load, panda, sample_humanoid, solo12,
+                     spatial_chain, talos, ur5)
 from .references import Reference, Waypoints, minimum_jerk
 from .rows import MODES, TaskWriter
-from .simulate import SimulationResult, StepTasks, equality_view, simulate
+from .simulate import SimulationError, SimulationResult, StepTasks, equality_view, simulate
 from .tasks import (JointLimitActivation, KinematicState, TaskTerm, com_position, contact,
                     frame_orientation, frame_pose, frame_position, joint_limit_bounds,
                     joint_limit_rows, joint_limit_violation, joint_velocity_bounds,
                     point_position, posture)
 
 __all__ = [
-    "LOADERS", "PANDA_FINGERS", "ModelNotFoundError", "RobotModel", "example_robot_data_dir",
+    "LOADERS", "PANDA_FINGERS", "ModelNotFoundError", "RobotModel", "StateError",
+    "check_configuration", "check_velocity", "example_robot_data_dir",
     "from_urdf", "g1", "go2", "has_free_flyer", "load", "panda", "sample_humanoid", "solo12",
     "spatial_chain", "talos", "ur5", "Reference", "Waypoints", "minimum_jerk",
-    "MODES", "TaskWriter", "SimulationResult", "StepTasks", "equality_view", "simulate", "JointLimitActivation",
+    "MODES", "TaskWriter", "SimulationError", "SimulationResult", "StepTasks", "equality_view", "simulate", "JointLimitActivation",
     "KinematicState", "TaskTerm", "com_position", "contact", "frame_orientation",
     "frame_pose", "frame_position", "joint_limit_bounds", "joint_limit_rows",
     "joint_limit_violation", "joint_velocity_bounds", "point_position", "posture",

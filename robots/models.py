@@ -24,6 +24,7 @@ this package: :meth:`RobotModel.with_point_frame` returns a copy with one more f
 from __future__ import annotations
 
 import importlib.metadata
+import math
 import os
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping, Sequence
@@ -35,13 +36,74 @@ import pinocchio as pin
 
 from prioik.extras import install_hint
 
-__all__ = ["ModelNotFoundError", "RobotModel", "example_robot_data_dir", "from_urdf",
+__all__ = ["ModelNotFoundError", "StateError", "check_configuration", "check_velocity",
+           "RobotModel", "example_robot_data_dir", "from_urdf",
            "has_free_flyer", "g1", "talos", "panda", "ur5", "go2", "solo12", "PANDA_FINGERS",
            "sample_humanoid", "spatial_chain", "LOADERS", "load"]
 
 
 class ModelNotFoundError(FileNotFoundError):
     """A robot description (package or file) is not installed here."""
+
+
+class StateError(ValueError):
+    """A robot state (``q``, ``v``) is malformed: wrong size, not finite, or a joint's
+    quaternion / unit complex number not of unit norm. The message names the argument,
+    the entry and the joint."""
+
+
+#: ``|‖quaternion‖ − 1|`` above which a configuration is refused (pinocchio uses the
+#: quaternion as given: a non-unit one gives a scaled, non-orthogonal rotation).
+UNIT_NORM_TOL = 1e-6
+
+#: Joint short names -> (offset, size) of their unit-norm part within the joint's q.
+_UNIT_PARTS = {"JointModelFreeFlyer": (3, 4), "JointModelSpherical": (0, 4),
+               "JointModelPlanar": (2, 2), "JointModelRUBX": (0, 2),
+               "JointModelRUBY": (0, 2), "JointModelRUBZ": (0, 2),
+               "JointModelRevoluteUnboundedUnaligned": (0, 2)}
+
+
+def check_configuration(robot: "RobotModel", q, what: str = "q") -> np.ndarray:
+    """``q`` as a float copy of ``n_q`` finite values with unit quaternions.
+
+    A ``q`` outside the joint limits is accepted (the limit tasks push it back and
+    :func:`~robots.tasks.joint_limit_violation` reports by how much).
+
+    Raises:
+        StateError: naming ``what``, the entry and the joint at fault.
+    """
+    return _check_vector(robot, q, robot.nq, what, unit=True)
+
+
+def check_velocity(robot: "RobotModel", v, what: str = "v") -> np.ndarray:
+    """``v`` as a float copy of ``n_v`` finite values (:class:`StateError` otherwise)."""
+    return _check_vector(robot, v, robot.nv, what, unit=False)
+
+
+def _check_vector(robot: "RobotModel", value, size: int, what: str, unit: bool
+                  ) -> np.ndarray:
+    try:
+        arr = np.array(value, dtype=float, copy=True)
+    except (TypeError, ValueError) as exc:
+        raise StateError(f"{what} cannot be read as numbers ({exc})") from None
+    if arr.shape != (size,):
+        raise StateError(f"{what} must have {size} entries for robot {robot.name!r}, got "
+                         f"shape {arr.shape}")
+    # one dot product finds NaN/inf (finite ⇒ every entry finite; it may also overflow
+    # on huge finite entries, which the scan then lets through); the scan names them
+    bad = np.flatnonzero(~np.isfinite(arr)) if not math.isfinite(float(arr @ arr)) else ()
+    if len(bad):
+        raise StateError(f"{what} holds non-finite values at entries {bad[:5].tolist()} "
+                         f"({arr[bad[0]]})")
+    if unit:
+        for lo, size, joint in robot.unit_norm_parts():
+            seg = arr[lo:lo + size]
+            norm = math.sqrt(float(seg @ seg))
+            if abs(norm - 1.0) > UNIT_NORM_TOL:
+                raise StateError(f"{what}[{lo}:{lo + size}] (joint {joint!r}, "
+                                 f"{'quaternion' if size == 4 else 'unit complex'}) has "
+                                 f"norm {norm:.6g}; it must be 1 (within {UNIT_NORM_TOL:g})")
+    return arr
 
 
 @dataclass(repr=False)
@@ -158,6 +220,20 @@ class RobotModel:
                     idx[jm.idx_v - self.n_base] = jm.idx_q
             self.__dict__["_q_index"] = idx
         return self.__dict__["_q_index"].copy()
+
+    def unit_norm_parts(self) -> list[tuple[int, int, str]]:
+        """``(start, size, joint name)`` of each unit-norm part of ``q`` (a free flyer's
+        or spherical joint's quaternion, an unbounded joint's ``(cos, sin)``)."""
+        if "_unit_parts" not in self.__dict__:
+            m = self.model
+            parts = []
+            for j in range(1, m.njoints):
+                jm = m.joints[j]
+                part = _UNIT_PARTS.get(jm.shortname())
+                if part is not None:
+                    parts.append((jm.idx_q + part[0], part[1], m.names[j]))
+            self.__dict__["_unit_parts"] = parts
+        return self.__dict__["_unit_parts"]
 
     def _compute_joint_limits(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         m = self.model

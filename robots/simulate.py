@@ -14,9 +14,12 @@
 
 It records ``q, q̇, q̈, τ``, every task's error (from ``build``), the algorithmic
 error of eq. 29 (:func:`hierarchy.algorithmic_error_norms`, the norm over the
-levels) of the equality view of the stack (:func:`equality_view`), and the wall time of the three phases. A failed
-solution, a non-finite value or ``‖q̈‖`` above ``divergence_limit`` stops the run
-cleanly with ``failed = True``.
+levels) of the equality view of the stack (:func:`equality_view`), and the wall time
+of the three phases. The run never loses what it recorded: an exception from
+``build`` or ``solve``, a failed solution, a bad answer (``x`` missing, of the wrong
+length or not finite, an unknown status), a non-finite state or ``‖q̈‖`` above
+``divergence_limit`` ends it with ``failed = True``, the message (time, step and
+cause), ``failed_step`` and the trajectory up to that step.
 
 The floating base is integrated like the joints (no contact forces are modelled);
 ``τ`` of the base rows is then the wrench the contacts would have to supply.
@@ -25,6 +28,7 @@ The floating base is integrated like the joints (no contact forces are modelled)
 from __future__ import annotations
 
 import json
+import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,7 +42,12 @@ from prioik.hierarchy import StackData, Task, TaskStack, algorithmic_error_norms
 from .models import RobotModel
 from .tasks import KinematicState
 
-__all__ = ["StepTasks", "SimulationResult", "simulate", "equality_view", "coordinate_names"]
+#: The statuses a solution may have (``formulations.STATUSES``; robots/ takes any
+#: solver callable and does not import formulations/).
+STATUSES = ("optimal", "approximate", "failed")
+
+__all__ = ["StepTasks", "SimulationError", "SimulationResult", "simulate", "equality_view",
+           "coordinate_names"]
 
 
 @dataclass
@@ -73,11 +82,14 @@ class SimulationResult:
         kinematics_time_s, solve_time_s, torque_time_s: ``k`` wall times per step.
         statuses: Solution status per step.
         failed: Whether the run stopped early.
-        message: Why it stopped (empty when it completed).
+        message: Why it stopped (empty when it completed): the time, the step and
+            the solver's error or what was wrong with its answer.
         q_names, v_names: Column names of ``q`` and of ``v``/``a``/``tau``
             (:func:`coordinate_names`; empty when the producer did not set them).
         info: Anything else the producer records (scenario, formulation, options);
             JSON-serialisable, saved with the run.
+        failed_step: Index of the step that failed (the trajectory holds the
+            ``failed_step`` steps before it), ``None`` when the run completed.
     """
 
     t: np.ndarray
@@ -96,6 +108,7 @@ class SimulationResult:
     q_names: tuple[str, ...] = ()
     v_names: tuple[str, ...] = ()
     info: dict[str, Any] = field(default_factory=dict)
+    failed_step: int | None = None
 
     @property
     def steps(self) -> int:
@@ -130,7 +143,8 @@ class SimulationResult:
                 raise ValueError(f"SimulationResult.info[{key!r}] cannot be saved as JSON "
                                  f"({exc})") from None
         meta = {"format": "prioik.SimulationResult/1", "failed": bool(self.failed),
-                "message": self.message, "q_names": list(self.q_names),
+                "message": self.message, "failed_step": self.failed_step,
+                "q_names": list(self.q_names),
                 "v_names": list(self.v_names), "error_names": list(self.errors),
                 "info": self.info, "versions": _versions()}
         arrays = {k: np.asarray(getattr(self, k)) for k in self._ARRAYS}
@@ -169,7 +183,7 @@ class SimulationResult:
                    arrays["algorithmic_error"], arrays["kinematics_time_s"],
                    arrays["solve_time_s"], arrays["torque_time_s"], statuses,
                    bool(meta["failed"]), str(meta["message"]), tuple(meta["q_names"]),
-                   tuple(meta["v_names"]), info)
+                   tuple(meta["v_names"]), info, meta.get("failed_step"))
 
     # ---------------------------------------------------------------- display
     def _summary_items(self) -> list[tuple[str, str]]:
@@ -272,6 +286,61 @@ def _algorithmic_error(stack: TaskStack | StackData, x: np.ndarray,
     return float(np.sqrt(np.sum(np.square(norms))))
 
 
+class SimulationError(ValueError):
+    """:func:`simulate` was called with a ``duration``, ``dt`` or ``level`` it cannot run."""
+
+
+def _check_times(duration: float, dt: float) -> None:
+    """``duration`` and ``dt`` finite, > 0 and ``dt ≤ duration`` (at least one step)."""
+    for name, value in (("duration", duration), ("dt", dt)):
+        try:
+            ok = math.isfinite(float(value)) and float(value) > 0
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            raise SimulationError(f"{name} must be a finite number > 0 (s), got {value!r}")
+    if int(round(duration / dt)) < 1:
+        raise SimulationError(f"dt = {dt} s is longer than duration = {duration} s: "
+                         f"the run would have no step")
+
+
+def _answer(sol: Any, nv: int) -> tuple[np.ndarray | None, str]:
+    """``sol.x`` as ``nv`` finite floats, or ``(None, why not)``."""
+    status = getattr(sol, "status", None)
+    if status not in STATUSES:
+        return None, f"the solver returned {type(sol).__name__} with status {status!r} " \
+                     f"(expected one of {', '.join(STATUSES)})"
+    info = getattr(sol, "info", None)
+    if status == "failed":
+        detail = info.get("message", "") if isinstance(info, dict) else ""
+        return None, f"solution failed{': ' + str(detail) if detail else ''}"
+    try:
+        x = np.asarray(getattr(sol, "x", None), dtype=float)
+    except (TypeError, ValueError) as exc:
+        return None, f"solution x cannot be read as numbers ({exc}) (status {status})"
+    if x.shape != (nv,):
+        return None, f"solution x has shape {x.shape}, expected ({nv},) (status {status})"
+    if not np.isfinite(x).all():
+        bad = np.flatnonzero(~np.isfinite(x))[:5].tolist()
+        return None, f"solution x holds non-finite values at {bad} although its " \
+                     f"status is {status!r}"
+    return x, ""
+
+
+def _torque(sol: Any, nv: int) -> tuple[np.ndarray | None, str]:
+    """``sol.info["tau"]`` as ``nv`` finite floats, or ``(None, why not)``."""
+    info = getattr(sol, "info", None)
+    if not isinstance(info, dict) or "tau" not in info:
+        return None, "torque_from_solution=True but the solution has no info['tau']"
+    try:
+        tau = np.asarray(info["tau"], dtype=float)
+    except (TypeError, ValueError) as exc:
+        return None, f"info['tau'] cannot be read as numbers ({exc})"
+    if tau.shape != (nv,) or not np.isfinite(tau).all():
+        return None, f"info['tau'] must be {nv} finite values, got shape {tau.shape}"
+    return tau, ""
+
+
 SolveFn = Callable[..., Any]
 BuildFn = Callable[[KinematicState, float], StepTasks]
 
@@ -305,11 +374,15 @@ def simulate(robot: RobotModel, build: BuildFn, solve: SolveFn, *, duration: flo
 
     Returns:
         A :class:`SimulationResult`.
+
+    Raises:
+        SimulationError: (a ``ValueError``) ``duration`` or ``dt`` not finite and > 0,
+            ``dt > duration``, or an unknown ``level``. Errors during the run end it as
+            ``failed`` instead.
     """
-    if not (dt > 0 and duration > 0):
-        raise ValueError(f"dt and duration must be > 0, got dt={dt}, duration={duration}")
+    _check_times(duration, dt)
     if level not in ("acceleration", "velocity"):
-        raise ValueError(f"level must be 'acceleration' or 'velocity', got {level!r}")
+        raise SimulationError(f"level must be 'acceleration' or 'velocity', got {level!r}")
     model = robot.model
     data = model.createData()
     dyn = model.createData()
@@ -318,39 +391,49 @@ def simulate(robot: RobotModel, build: BuildFn, solve: SolveFn, *, duration: flo
     steps = int(round(duration / dt))
     T, Q, V, A, TAU, ALG, TK, TS, TT, ST = [], [], [], [], [], [], [], [], [], []
     errors: dict[str, list[float]] = {}
-    failed, message = False, ""
+    failed, message, failed_step = False, "", None
     for k in range(steps):
         t = k * dt
         t0 = time.perf_counter()
-        state = KinematicState(robot, q, v, data)
-        step = build(state, t)
+        try:
+            state = KinematicState(robot, q, v, data)
+            step = build(state, t)
+        except Exception as exc:  # noqa: BLE001 - the run ends, the trajectory is kept
+            failed, failed_step = True, k
+            message = f"t = {t:.3f} s (step {k}): build raised {type(exc).__name__}: {exc}"
+            break
         kw = {}
         if needs_dynamics:
             M = pin.crba(model, dyn, q)
             M = np.triu(M) + np.triu(M, 1).T
             kw = {"mass_matrix": M, "bias": np.array(pin.nonLinearEffects(model, dyn, q, v))}
         t1 = time.perf_counter()
-        sol = solve(step.stack, **kw)
-        t2 = time.perf_counter()
-        x = np.asarray(sol.x, dtype=float)
-        x_solved = x
-        if level == "velocity" and np.isfinite(x).all():
-            x = (x_solved - v) / dt                    # recorded q̈
-        if sol.status == "failed" or not np.isfinite(x).all():
-            failed = True
-            message = (f"t = {t:.3f} s: solution {sol.status}"
-                       f"{': ' + str(sol.info.get('message', '')) if sol.info else ''}")
+        try:
+            sol = solve(step.stack, **kw)
+        except Exception as exc:  # noqa: BLE001 - the run ends, the trajectory is kept
+            failed, failed_step = True, k
+            message = f"t = {t:.3f} s (step {k}): solve raised {type(exc).__name__}: {exc}"
             break
+        t2 = time.perf_counter()
+        x, why = _answer(sol, robot.nv)
+        if why:
+            failed, failed_step = True, k
+            message = f"t = {t:.3f} s (step {k}): {why}"
+            break
+        x_solved = x
+        if level == "velocity":
+            x = (x_solved - v) / dt                    # recorded q̈
         if np.linalg.norm(x) > divergence_limit:
-            failed = True
-            message = (f"t = {t:.3f} s: diverged (‖q̈‖ = {np.linalg.norm(x):.3g} > "
-                       f"{divergence_limit:g})")
+            failed, failed_step = True, k
+            message = (f"t = {t:.3f} s (step {k}): diverged (‖q̈‖ = "
+                       f"{np.linalg.norm(x):.3g} > {divergence_limit:g})")
             break
         if torque_from_solution:
-            if "tau" not in sol.info:
-                raise ValueError("torque_from_solution=True but the solution has no "
-                                 "info['tau']")
-            tau = np.asarray(sol.info["tau"], dtype=float)
+            tau, why = _torque(sol, robot.nv)
+            if why:
+                failed, failed_step = True, k
+                message = f"t = {t:.3f} s (step {k}): {why}"
+                break
         else:
             tau = np.array(pin.rnea(model, dyn, q, v, x))
         t3 = time.perf_counter()
@@ -379,7 +462,8 @@ def simulate(robot: RobotModel, build: BuildFn, solve: SolveFn, *, duration: flo
         v = v + x * dt if level == "acceleration" else x_solved.copy()
         q = pin.integrate(model, q, v * dt)
         if not (np.isfinite(q).all() and np.isfinite(v).all()):
-            failed, message = True, f"t = {t:.3f} s: state became non-finite"
+            failed, failed_step = True, k + 1
+            message = f"t = {t + dt:.3f} s (step {k + 1}): state became non-finite"
             break
         if progress is not None and (k + 1) % 250 == 0:
             progress(t + dt)
@@ -394,4 +478,4 @@ def simulate(robot: RobotModel, build: BuildFn, solve: SolveFn, *, duration: flo
                             np.array([np.nan if a is None else _algorithmic_error(*a)
                                       for a in ALG], dtype=float),
                             np.array(TK), np.array(TS),
-                            np.array(TT), ST, failed, message)
+                            np.array(TT), ST, failed, message, failed_step=failed_step)

@@ -33,7 +33,7 @@ import pinocchio as pin
 
 from prioik.hierarchy import Task
 
-from .models import RobotModel
+from .models import RobotModel, check_configuration, check_velocity
 from .references import Reference
 from .rows import JointLimitActivation, TaskWriter
 
@@ -57,6 +57,13 @@ class KinematicState:
             skips them (velocity level: ``frame_drift`` raises, ``acom_drift`` is
             ``None`` and the builders' terms have ``drift=None``).
 
+    Raises:
+        StateError: ``q`` or ``v`` of the wrong size or not finite, or a joint's
+            quaternion not of unit norm (a zero quaternion included). A ``q``
+            outside the joint limits is accepted: :func:`joint_limit_rows` and
+            :func:`joint_limit_bounds` push it back and :attr:`limit_violation`
+            reports it.
+
     After construction ``data`` holds the joint Jacobians, frame placements, the
     velocities and the accelerations at ``q̈ = 0`` (the drift terms), the centre of
     mass ``com``, its velocity ``vcom``, drift ``acom_drift`` and Jacobian ``Jcom``.
@@ -68,11 +75,8 @@ class KinematicState:
                  drift: bool = True) -> None:
         self.robot = robot
         self.model = robot.model
-        self.q = np.array(q, dtype=float, copy=True)
-        self.v = np.array(v, dtype=float, copy=True)
-        if self.q.shape != (robot.nq,) or self.v.shape != (robot.nv,):
-            raise ValueError(f"q must have {robot.nq} and v {robot.nv} entries, got "
-                             f"{self.q.shape} and {self.v.shape}")
+        self.q = check_configuration(robot, q)
+        self.v = check_velocity(robot, v)
         self.data = data if data is not None else robot.model.createData()
         self.has_drift = bool(drift)
         m, d = self.model, self.data
@@ -89,6 +93,12 @@ class KinematicState:
         pin.updateFramePlacements(m, d)
         pin.jacobianCenterOfMass(m, d, False)           # data.Jcom and data.com[0]
         self._cache: dict = {}
+
+    @property
+    def limit_violation(self) -> float:
+        """How far (rad, ≥ 0) an actuated joint of ``q`` is past a limit
+        (:func:`joint_limit_violation`)."""
+        return joint_limit_violation(self.robot, self.q)
 
     @property
     def Jcom(self) -> np.ndarray:
@@ -379,10 +389,15 @@ def joint_velocity_bounds(state: KinematicState, dt: float, horizon: float | Non
 
 
 def joint_limit_violation(robot: RobotModel, q) -> float:
-    """Largest amount by which an actuated joint of ``q`` is past a limit (rad, ≥ 0)."""
+    """Largest amount by which an actuated joint of ``q`` is past a limit (rad, ≥ 0).
+
+    Raises:
+        StateError: ``q`` of the wrong size or not finite (a NaN ``q`` is not within
+            its limits, nor 0 rad past them).
+    """
     lo, hi, _ = robot.joint_limits()
     idx = robot.actuated_q_index()
-    q = np.asarray(q, dtype=float)
+    q = check_configuration(robot, q)
     st = np.where(idx >= 0, q[np.maximum(idx, 0)], 0.0)
     with np.errstate(invalid="ignore"):
         over = np.maximum(np.nan_to_num(lo - st, nan=0.0, neginf=0.0),

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from prioik import formulations
-from prioik.hierarchy import (Task, TaskStack, check_lexicographic, conflicting_levels,
+from prioik.hierarchy import (Task, TaskStack, TaskStackError, check_lexicographic, conflicting_levels,
                        lexicographic_residuals, nested_null_spaces, rank_profile,
                        singularity_distance)
 from prioik.hierarchy.families import FAMILIES, near_singular
@@ -82,3 +82,11 @@ def test_check_accepts_any_point_of_the_optimal_set_and_reports_levels():
     report = check_lexicographic(s, x + np.array([0.0, 0.0, 0.0, 1e-3]))
     assert not report.ok and report.first_failure.tasks == ("c",)
     assert "FAIL" in str(report)
+
+
+@pytest.mark.parametrize("x", [np.zeros(2), np.zeros((1, 4)), np.zeros(5), [[1.0], [2.0]],
+                               "abc", [1.0, "a", 2.0, 3.0]])
+def test_check_refuses_a_wrong_shape_x_with_a_task_stack_error(x):
+    stack = TaskStack([Task("a", np.eye(4), np.ones(4))])
+    with pytest.raises(TaskStackError, match="x "):      # was numpy's plain ValueError
+        check_lexicographic(stack, x)

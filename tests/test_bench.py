@@ -15,6 +15,9 @@ from prioik.benchmarks.bench import CSV_COLUMNS, Row, Settings, ratios, run_benc
 from prioik.benchmarks.cli import main
 from prioik.benchmarks.stacks import random_case, random_mass_matrix
 
+#: whole-scenario runs (see the `slow` marker in pyproject.toml)
+pytestmark = pytest.mark.slow
+
 TINY = dict(sizes=(6, 9), levels=(2, 3), repeats=6, min_repeats=2, warmup=1, cap_s=2.0,
             samples=2, g1=False, blas_threads=1,
             only=("reference", "extended_jacobian", "nullspace", "operational_space",
@@ -59,10 +62,27 @@ def test_one_row_per_case_and_variant_with_the_csv_columns(tiny_run):
     assert len(rows) == len(cases) * len(labels)
 
 
+def _capped(r) -> bool:
+    """A QP back-end row the bench's per-case time cap left untimed (SCS takes seconds
+    per solve on some of these stacks): the one documented reason a row is untimed."""
+    return (r["status"] == "skipped" and r["label"].startswith("cascaded_qp[")
+            and ("> 2·cap/min_repeats" in r["note"] or "over the cap" in r["note"]))
+
+
+def test_every_row_is_timed_and_no_formulation_errors(tiny_run):
+    """On the tiny configuration every variant runs: a formulation that raised
+    ("error"), an unsupported row or an untimed row is a failure (not a tolerated
+    fraction), except a QP back-end over the time cap (:func:`_capped`)."""
+    _, _, _, rows = tiny_run
+    bad = [(r["case"], r["label"], r["status"], r["note"]) for r in rows
+           if r["status"] not in ("ok", "reduced") and not _capped(r)]
+    assert not bad, bad
+
+
 def test_numbers_are_consistent(tiny_run):
     _, _, _, rows = tiny_run
     timed = [r for r in rows if r["status"] in ("ok", "reduced")]
-    assert len(timed) >= 0.8 * len(rows)
+    assert timed and len(timed) == len([r for r in rows if not _capped(r)])
     for r in timed:
         p10, med, p90 = float(r["p10_us"]), float(r["median_us"]), float(r["p90_us"])
         assert 0 < p10 <= med <= p90, r
@@ -81,11 +101,16 @@ def test_exact_formulations_succeed_and_match_reference(tiny_run):
     """reference is its own reference; extended_jacobian and nullspace are exact on
     these stacks; operational_space is measured against reference with metric=M."""
     _, _, _, rows = tiny_run
-    for r in rows:
-        if r["label"] in ("reference", "extended_jacobian", "extended_jacobian[svd]",
-                          "nullspace", "operational_space") and r["status"] == "ok":
-            assert float(r["success_rate"]) == 1.0, r
-            assert float(r["dist_max"]) <= 1e-8, r
+    exact = ("reference", "extended_jacobian", "extended_jacobian[svd]", "nullspace",
+             "operational_space")
+    checked = [r for r in rows if r["label"] in exact]
+    # every exact variant on every case: a missing or errored row fails here
+    assert {(r["case"], r["label"]) for r in checked} == \
+        {(c, label) for c in {r["case"] for r in rows} for label in exact}
+    for r in checked:
+        assert r["status"] in ("ok", "reduced"), r
+        assert float(r["success_rate"]) == 1.0, r
+        assert float(r["dist_max"]) <= 1e-8, r
         if r["label"] == "reference":
             assert float(r["dist_max"]) == 0.0
 

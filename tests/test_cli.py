@@ -56,3 +56,38 @@ def test_console_script_runs():
     exe = [sys.executable, "-m", "prioik.benchmarks.cli", "list"]
     res = subprocess.run(exe, capture_output=True, text=True, timeout=120)
     assert res.returncode == 0 and "reference" in res.stdout
+
+
+SMALL = str(examples_dir() / "small_4x3.json")
+
+
+@pytest.mark.parametrize("content, message", [
+    (b"\x89PNG\r\n\x1a\n\x00\xff\xfe", "bad.json: not a UTF-8 JSON text file"),
+    ('{"levels": [[{"A": [[' + "9" * 400 + ']], "b": [1]}]]}', "bad.json: an integer of 400"),
+    ('{"levels": ' + "[" * 100_000 + "]" * 100_000 + "}", "bad.json: JSON nested too deeply"),
+    ('{"format": 2, "levels": [[{"A": [[1]], "b": [1]}]]}', "bad.json: unsupported format 2"),
+    ('{"extra": 0, "levels": [[{"A": [[1]], "b": [1]}]]}', "bad.json: unknown top-level keys"),
+])
+def test_bad_files_print_one_line_naming_the_file_and_exit_2(tmp_path, capsys, content,
+                                                             message):
+    bad = tmp_path / "bad.json"
+    (bad.write_bytes if isinstance(content, bytes) else bad.write_text)(content)
+    assert main(["solve", str(bad)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and len(err.splitlines()) == 1, err
+
+
+def test_compare_refuses_an_unknown_formulation(capsys):
+    assert main(["compare", SMALL, "--formulations", "foo", "--repeats", "1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "unknown formulation 'foo'" in err and len(err.splitlines()) == 1
+
+
+def test_closed_pipe_exits_quietly():
+    # `prioik solve FILE | head -0`: the reader leaves before the output is written
+    exe = [sys.executable, "-m", "prioik.benchmarks.cli", "solve", SMALL]
+    proc = subprocess.Popen(exe, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc.stdout.close()          # closed before the first write: every write fails
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=120) == 0
+    assert "Broken pipe" not in err and "Error" not in err, err

@@ -122,3 +122,13 @@ def test_wrong_answers_are_not_optimal_on_inequality_stacks():
         wrong_raw += not check_lexicographic(stack, raw.x, minimum_norm=True).ok
         assert_truthful(formulations.solve(stack, "daqp_hierarchical"), stack)
     assert wrong_raw >= 1
+
+
+def test_a_stack_of_zero_rows_only_gives_x_zero():
+    """Every row zero (an all-zero inequality task): nothing for DAQP to solve (it
+    crashed on numpy's empty vstack)."""
+    from prioik.hierarchy import Task, TaskStack
+    stack = TaskStack([[Task("z", np.zeros((2, 3)), lower=[-1.0, 1.0], upper=[1.0, 2.0])]])
+    sol = formulations.solve(stack, "daqp_hierarchical")
+    assert sol.status != "failed"
+    np.testing.assert_array_equal(sol.x, np.zeros(3))

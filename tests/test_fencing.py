@@ -12,6 +12,9 @@ from prioik.benchmarks.cli import main
 from prioik.robots import KinematicState, simulate
 from prioik.robots.fencing import LEVEL_NAMES, TARGETS, FencingScenario
 
+#: whole-scenario runs (see the `slow` marker in pyproject.toml)
+pytestmark = pytest.mark.slow
+
 
 @pytest.fixture(scope="module")
 def scenarios():

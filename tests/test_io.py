@@ -49,3 +49,41 @@ def test_errors_name_file_task_and_level(tmp_path):
         stack_from_dict({"levels": [{"name": "x", "A": [[1.0]], "B": [1.0]}]})
     with pytest.raises(TaskStackError, match="the file says n = 3"):
         stack_from_dict({"n": 3, "levels": [{"name": "x", "A": [[1.0]], "b": [1.0]}]})
+
+
+def _file(tmp_path, text: str | bytes, name: str = "f.json"):
+    path = tmp_path / name
+    (path.write_bytes if isinstance(text, bytes) else path.write_text)(text)
+    return path
+
+
+GOOD_TASK = '{"name": "t", "A": [[1.0, 2.0]], "b": [1.0]}'
+
+
+@pytest.mark.parametrize("text, message", [
+    ('{"levels": [[' + GOOD_TASK + ']], "levls": 1}', r"unknown top-level keys \['levls'\]"),
+    ('{"format": 2, "levels": [[' + GOOD_TASK + ']]}', "unsupported format 2"),
+    ('{"format": "1", "levels": [[' + GOOD_TASK + ']]}', "unsupported format '1'"),
+    ('{"format": true, "levels": [[' + GOOD_TASK + ']]}', "unsupported format True"),
+    ('{"n": 2.5, "levels": [[' + GOOD_TASK + ']]}', "'n' must be a positive integer"),
+    ('{"description": 3, "levels": [[' + GOOD_TASK + ']]}', "'description' must be a string"),
+    ('{"levels": [[{"name": 7, "A": [[1.0]], "b": [1.0]}]]}', "'name' must be a string"),
+    ('{"levels": [[{"A": [[' + "9" * 400 + ']], "b": [1]}]]}',
+     "an integer of 400 digits is beyond float64"),
+    ('{"levels": ' + "[" * 100_000 + "]" * 100_000 + '}', "nested too deeply"),
+    ("[" * 100_000 + "]" * 100_000, "nested too deeply"),
+    ('{"levels": [[{"A": ' + "[" * 40 + "1" + "]" * 40 + ', "b": [1]}]]}',
+     "A must be a 2-D matrix"),
+    (b"\x89PNG\r\n\x1a\n\x00\x00\xff\xfe", "not a UTF-8 JSON text file"),
+])
+def test_bad_files_name_the_file_and_the_fault(tmp_path, text, message):
+    path = _file(tmp_path, text, "bad_file.json")
+    with pytest.raises(TaskStackError, match=message) as exc:
+        load_stack(path)
+    assert "bad_file.json: " in str(exc.value)
+
+
+def test_format_1_and_known_keys_load(tmp_path):
+    path = _file(tmp_path, '{"description": "d", "format": 1, "n": 2, "levels": [['
+                 + GOOD_TASK + ']]}')
+    assert load_stack(path).n == 2

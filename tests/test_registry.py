@@ -8,7 +8,7 @@ import pytest
 from prioik import formulations
 from prioik.formulations import Capabilities, FormulationError, Option, Outcome, registry
 from prioik.hierarchy import Task, TaskStack, UnsupportedTaskError
-from prioik.hierarchy.families import compatible
+from prioik.hierarchy.families import compatible, same_shape_batch
 
 
 @pytest.fixture
@@ -115,15 +115,38 @@ def test_solve_accepts_a_plain_list_of_levels():
     np.testing.assert_allclose(sol.x, [1.0, 2.0])
 
 
-def test_solve_batch_loops_and_matches_single_solves():
-    stacks = [compatible(np.random.default_rng(s), 10, 3) for s in range(4)]
-    # the families draw row counts at random: keep those with the first one's shape
-    shape = registry.stack_shape(stacks[0])
-    stacks = [s for s in stacks if registry.stack_shape(s) == shape] or stacks[:1]
-    batch = formulations.solve_batch(stacks, "reference")
-    for x, s in zip(batch.X, stacks):
-        np.testing.assert_allclose(x, formulations.solve(s, "reference").x, atol=1e-12)
-    assert batch.statuses == ["optimal"] * len(stacks) and batch.time_per_stack_s > 0
+@pytest.mark.parametrize("name, batched", [("reference", True), ("chiaverini", False),
+                                           ("cascaded_qp", False)])
+def test_solve_batch_loops_and_matches_single_solves(name, batched):
+    # four stacks of one shape (same_shape_batch keeps the rows, turns and re-targets
+    # them): every one is compared, through the plugin's batched kernel (reference)
+    # and through the registry's loop over solve (plugins without solve_batch)
+    base = compatible(np.random.default_rng(0), 10, 3)
+    stacks = same_shape_batch(base, np.random.default_rng(1), 4)
+    assert len(stacks) == 4
+    batch = formulations.solve_batch(stacks, name)
+    assert batch.batched is batched
+    assert batch.X.shape == (4, 10)
+    singles = [formulations.solve(s, name) for s in stacks]
+    for x, one in zip(batch.X, singles):
+        np.testing.assert_allclose(x, one.x, atol=1e-9)
+    assert batch.statuses == [one.status for one in singles]
+    assert "failed" not in batch.statuses and batch.time_per_stack_s > 0
+
+
+def test_solve_batch_loop_marks_a_failing_stack_failed(monkeypatch):
+    def boom(stack, **kw):
+        if stack.levels[0].b[0] > 0:
+            raise np.linalg.LinAlgError("singular")
+        return Outcome(np.zeros(stack.n))
+    mod = types.SimpleNamespace(NAME="fake", DESCRIPTION="", OPTIONS={},
+                                CAPABILITIES=Capabilities(), solve=boom)
+    monkeypatch.setitem(registry._loaded, "fake", mod)
+    monkeypatch.setitem(registry.PLUGINS, "fake", ("fake", ""))
+    stacks = [TaskStack([Task("a", np.eye(2), [v, 0.0])]) for v in (-1.0, 1.0)]
+    batch = formulations.solve_batch(stacks, "fake")
+    assert not batch.batched and batch.statuses == ["optimal", "failed"]
+    assert np.isnan(batch.X[1]).all()
 
 
 def test_solve_batch_rejects_mixed_shapes():

@@ -8,7 +8,7 @@ import pytest
 
 from prioik import formulations
 from prioik.hierarchy import Task, TaskStack, algorithmic_error_norms
-from prioik.robots import (Reference, StepTasks, equality_view, frame_position, posture, simulate,
+from prioik.robots import (SimulationError, Reference, StepTasks, equality_view, frame_position, posture, simulate,
                     spatial_chain)
 
 TARGET = np.array([1.2, 0.6, 0.4])
@@ -37,7 +37,7 @@ def test_tip_converges_and_everything_is_recorded(chain):
     assert res.q.shape == (1000, 6) and res.v.shape == res.a.shape == res.tau.shape
     assert res.errors["tip_error"][0] > 0.5 and res.errors["tip_error"][-1] < 1e-3
     assert np.all(res.kinematics_time_s > 0) and np.all(res.solve_time_s > 0)
-    assert np.all(res.torque_time_s >= 0)
+    assert np.all(res.torque_time_s > 0)     # RNEA ran at every step (it takes µs)
     assert np.allclose(res.step_time_s, res.kinematics_time_s + res.solve_time_s
                        + res.torque_time_s)
     # an exact solution of a compatible-then-conflicting stack: no algorithmic error
@@ -132,3 +132,75 @@ def test_velocity_level_integrates_the_solved_velocity(chain):
     assert np.allclose(res.q[k + 1], res.q[k] + res.v[k + 1] * 0.002, atol=1e-12)
     with pytest.raises(ValueError, match="level"):
         simulate(chain, build, None, duration=0.1, dt=0.01, level="jerk")
+
+
+def _answer_at_step(bad, at: int = 3):
+    """A solver that answers zeros, then ``bad(stack)`` from call ``at`` on."""
+    calls = []
+
+    def solve(stack, **kw):
+        calls.append(1)
+        if len(calls) <= at:
+            return SimpleNamespace(x=np.zeros(stack.n), status="optimal", info={})
+        return bad(stack)
+    return solve
+
+
+def _raise(stack):
+    raise RuntimeError("solver exploded")
+
+
+@pytest.mark.parametrize("bad, message", [
+    (_raise, "solve raised RuntimeError: solver exploded"),
+    (lambda s: SimpleNamespace(x=np.full(s.n, np.nan), status="optimal", info={}),
+     "non-finite values at [0, 1, 2, 3, 4] although its status is 'optimal'"),
+    (lambda s: SimpleNamespace(x=np.zeros(s.n + 1), status="optimal", info={}),
+     "solution x has shape (7,), expected (6,)"),
+    (lambda s: SimpleNamespace(x=None, status="optimal", info={}),
+     "solution x has shape (), expected (6,)"),
+    (lambda s: None, "status None"),
+    (lambda s: SimpleNamespace(x=np.zeros(s.n), status="great", info={}), "status 'great'"),
+    (lambda s: SimpleNamespace(x=np.zeros(s.n), status="failed", info={"message": "boom"}),
+     "solution failed: boom"),
+    (lambda s: SimpleNamespace(x=["a"] * s.n, status="optimal", info={}),
+     "solution x cannot be read as numbers"),
+])
+def test_a_solver_error_or_bad_answer_ends_the_run_with_the_trajectory(chain, bad, message):
+    res = simulate(chain, _build(chain), _answer_at_step(bad), duration=1.0, dt=0.01)
+    assert res.failed and res.failed_step == 3
+    assert message in res.message and "t = 0.030 s (step 3)" in res.message, res.message
+    assert res.steps == 3 and res.q.shape == (3, 6) and len(res.statuses) == 3
+    assert np.isfinite(res.q).all() and np.isfinite(res.tau).all()
+
+
+def test_a_build_error_ends_the_run_with_the_trajectory(chain):
+    inner = _build(chain)
+
+    def build(state, t):
+        if t > 0.015:
+            raise KeyError("no frame 'hand'")
+        return inner(state, t)
+
+    res = simulate(chain, build, lambda s, **kw: formulations.solve(s, "extended_jacobian"),
+                   duration=1.0, dt=0.01)
+    assert res.failed and res.failed_step == 2 and res.steps == 2
+    assert "build raised KeyError" in res.message
+
+
+def test_torque_from_solution_without_tau_fails_the_run(chain):
+    res = simulate(chain, _build(chain),
+                   lambda s, **kw: SimpleNamespace(x=np.zeros(s.n), status="optimal", info={}),
+                   duration=0.1, dt=0.01, torque_from_solution=True)
+    assert res.failed and res.failed_step == 0 and "no info['tau']" in res.message
+
+
+@pytest.mark.parametrize("duration, dt, message", [
+    (float("inf"), 0.01, "duration must be a finite number > 0"),     # was OverflowError
+    (1.0, float("nan"), "dt must be a finite number > 0"),
+    (-1.0, 0.01, "duration must be a finite number > 0"),
+    (0.01, 0.1, "longer than duration"),                              # was 0 steps, not failed
+    (None, 0.01, "duration must be a finite number > 0"),
+])
+def test_bad_duration_or_step_is_refused(chain, duration, dt, message):
+    with pytest.raises(SimulationError, match=message):
+        simulate(chain, _build(chain), None, duration=duration, dt=dt)

@@ -154,8 +154,37 @@ def test_error_b_and_bounds_together():
 
 
 def test_error_not_numbers():
-    with pytest.raises(TaskStackError, match="'words': A cannot be read as float64"):
+    with pytest.raises(TaskStackError, match="'words': A must hold real numbers, got strings"):
         Task("words", [["a", "b"]], [0])
+
+
+@pytest.mark.parametrize("what, value, message", [
+    ("A", [["1", "2"]], "A must hold real numbers, got strings"),      # was read as 1, 2
+    ("A", np.array([[1 + 1j, 2.0]]), "A must hold real numbers, got complex"),  # was a warning
+    ("A", [[1 + 0j, 2.0]], "A must hold real numbers, got complex"),
+    ("A", [[True, False]], "A must hold real numbers, got booleans"),
+    ("A", np.array([[1, "x"]], dtype=object), "A must hold real numbers, got str"),
+    ("A", [[10 ** 400, 1]], "A cannot be read as float64 numbers"),
+    ("A", [[1.0, [2.0]]], "A cannot be read as an array of numbers"),
+    ("b", ["1"], "b must hold real numbers, got strings"),
+    ("b", [1j], "b must hold real numbers, got complex"),
+    ("weight", "2", "weight must hold real numbers, got strings"),
+    ("lower", [1 + 2j], "lower must hold real numbers, got complex"),
+])
+def test_error_only_real_numbers(what, value, message):
+    kw = {"A": [[1.0, 2.0]], "b": [1.0]}
+    if what in ("lower", "upper"):
+        kw.pop("b")
+    kw[what] = value
+    with pytest.raises(TaskStackError, match=f"task 'real': {message}"):
+        Task("real", kw.pop("A"), kw.pop("b", None), **kw)
+
+
+def test_integer_and_object_real_arrays_are_read():
+    np.testing.assert_array_equal(Task("i", np.array([[1, 2]], dtype=np.int32), [3]).A,
+                                  [[1.0, 2.0]])
+    np.testing.assert_array_equal(Task("o", np.array([[10 ** 30, 2]], dtype=object), [3]).A,
+                                  [[1e30, 2.0]])
 
 
 def test_error_bad_weight():

@@ -11,8 +11,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from prioik.robots import (JointLimitActivation, KinematicState, Reference, Waypoints,
-                           com_position, contact, frame_orientation, frame_pose,
+from prioik.robots import (JointLimitActivation, KinematicState, Reference, StateError,
+                           Waypoints, com_position, contact, frame_orientation, frame_pose,
                            frame_position, g1, go2, joint_limit_bounds, joint_limit_rows,
                            joint_limit_violation, joint_velocity_bounds, minimum_jerk, panda,
                            point_position, posture, sample_humanoid, spatial_chain)
@@ -279,6 +279,59 @@ def test_joint_limit_violation():
     robot = spatial_chain(3)
     assert joint_limit_violation(robot, np.array([0.0, 2.5, -2.5])) == 0.0
     assert joint_limit_violation(robot, np.array([0.0, 2.6, -2.7])) == pytest.approx(0.2)
+
+
+@pytest.mark.parametrize("q, message", [
+    (np.array([0.0, np.nan, 0.0]), r"q holds non-finite values at entries \[1\]"),  # was 0.0
+    (np.zeros(4), r"q must have 3 entries for robot 'chain3', got shape \(4,\)"),  # IndexError
+    (np.zeros((3, 1)), r"got shape \(3, 1\)"),
+    (["a", 0, 0], "q cannot be read as numbers"),
+])
+def test_joint_limit_violation_refuses_a_bad_q(q, message):
+    with pytest.raises(StateError, match=message):
+        joint_limit_violation(spatial_chain(3), q)
+
+
+# ------------------------------------------------------------------ robot states
+def _g1_state():
+    robot = g1()
+    return robot, robot.q0.copy(), np.zeros(robot.nv)
+
+
+@pytest.mark.parametrize("change, message", [
+    (lambda q, v: q.__setitem__(slice(3, 7), 0.0),
+     r"q\[3:7\] \(joint 'root_joint', quaternion\) has norm 0"),      # was accepted
+    (lambda q, v: q.__setitem__(slice(3, 7), [0, 0, 0, 2.0]), "has norm 2"),
+    (lambda q, v: q.__setitem__(10, np.nan), r"q holds non-finite values at entries \[10\]"),
+    (lambda q, v: q.__setitem__(0, np.inf), r"q holds non-finite values at entries \[0\]"),
+    (lambda q, v: v.__setitem__(4, np.nan), r"v holds non-finite values at entries \[4\]"),
+])
+def test_kinematic_state_refuses_a_bad_state(change, message):
+    robot, q, v = _g1_state()
+    change(q, v)
+    with pytest.raises(StateError, match=message):
+        KinematicState(robot, q, v)
+
+
+@pytest.mark.parametrize("q, v", [(np.zeros(35), np.zeros(35)), (None, np.zeros(34))])
+def test_kinematic_state_refuses_wrong_sizes(q, v):
+    robot, q0, _ = _g1_state()
+    with pytest.raises(StateError, match="must have 3[56] entries for robot 'g1'"):
+        KinematicState(robot, q0 if q is None else q, v)
+
+
+def test_a_q_outside_the_limits_is_accepted_and_reported_by_the_limit_tasks():
+    robot = spatial_chain(3)
+    lo, hi, _ = robot.joint_limits()
+    q = np.array([0.0, hi[1] + 1e6, lo[2] - 0.5])
+    state = KinematicState(robot, q, np.zeros(3))
+    assert state.limit_violation == pytest.approx(1e6)
+    assert joint_limit_violation(robot, q) == pytest.approx(1e6)
+    rows = joint_limit_rows(state)                  # both joints get a push-back row
+    assert rows.A[:, 1:].tolist() == [[1.0, 0.0], [0.0, 1.0]]
+    assert rows.b[0] < 0 < rows.b[1]
+    bounds = joint_limit_bounds(state, 0.1, 0.002)  # q̈ must move them back inside
+    assert bounds.upper[1] < 0 and bounds.lower[2] > 0
 
 
 # ------------------------------------------------------------------- references

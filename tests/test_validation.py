@@ -1,8 +1,12 @@
 """benchmarks/validation.py on a tiny N (the committed report uses N ≥ 200)."""
 
 import numpy as np
+import pytest
 
 from prioik.benchmarks import cli, validation
+
+#: whole-scenario runs (see the `slow` marker in pyproject.toml)
+pytestmark = pytest.mark.slow
 
 
 def test_validate_writes_a_table_for_every_family(tmp_path, capsys):

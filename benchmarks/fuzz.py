@@ -1,0 +1,403 @@
+"""Property fuzzing of the formulations on seeded random stacks.
+
+``prioik fuzz --n 100000 --seed S --out DIR`` draws stacks with
+:func:`hierarchy.fuzz.equality_case` / :func:`~hierarchy.fuzz.inequality_case` (case
+``i`` from ``numpy.random.default_rng([S, i])``, so any case can be drawn again alone)
+and runs every fuzzed path on each. A path fails a case when:
+
+* ``crash`` — it raised anything but the library's own errors on a valid stack
+  (a :class:`~hierarchy.TaskStackError` / ``FormulationError`` refusal is counted
+  as ``refused``, not as a crash);
+* ``nan`` — ``x`` is not finite while the status is not ``failed``;
+* ``wrong`` — the status is ``optimal`` on a well-conditioned equality stack
+  (:attr:`~hierarchy.fuzz.FuzzCase.well_conditioned`) but ``x`` is more than
+  :data:`WRONG_TOL` (relative, :func:`hierarchy.relative_distance`) from the
+  independent ground truth :func:`hierarchy.fuzz.nested_truth`, or fails
+  :func:`hierarchy.check_lexicographic`;
+* ``uncertified`` — the status is ``optimal`` on any stack (equality or
+  inequality) but :func:`~hierarchy.check_lexicographic` rejects ``x``;
+* ``mismatch`` — ``solve_batch`` (on the stack and two same-shape variants) or one
+  prepared solver (:func:`prioik.prepare`) reused over those stacks disagree with
+  one-off ``solve`` calls: their statuses differ, or on a
+  well-conditioned stack their answers differ by more than
+  ``MATCH_TOL / min_sigma`` (at most :data:`WRONG_TOL`; ``min_sigma`` is the smallest
+  kept ``σ / ‖A_i‖_F``, by which a level amplifies rounding), or on
+  another stack two answers both called ``optimal`` differ by more than
+  :data:`WRONG_TOL` (rounding amplified by an ill-conditioned level may separate
+  them by more than ``MATCH_TOL``, not by more than an ``optimal`` answer may err);
+* ``threads`` — the same solve run from several threads differs from the serial
+  answer: on one shared prepared solver (which may refuse a concurrent call with
+  ``ConcurrentUseError``, never answer wrongly) and on one prepared solver per thread.
+
+Every failing case is saved as ``DIR/<kind>-<seed>-<index>.json``
+(:func:`hierarchy.save_stack` format, so ``prioik solve`` reloads it) with the
+path, the failure and the reproduction in its description.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from prioik import formulations
+from prioik.formulations import FormulationError
+from prioik.formulations import ConcurrentUseError
+from prioik.hierarchy import (TaskStack, TaskStackError, check_lexicographic,
+                              relative_distance, save_stack)
+from prioik.hierarchy.families import same_shape_batch
+from prioik.hierarchy.fuzz import FuzzCase, equality_case, inequality_case
+
+#: Relative distance from the ground truth above which an ``optimal`` answer is wrong.
+WRONG_TOL = 1e-6
+#: Relative distance between two paths' answers to one stack above which they differ.
+MATCH_TOL = 1e-9
+#: Failure kinds, in report order.
+KINDS = ("crash", "nan", "wrong", "uncertified", "mismatch", "threads")
+
+DOCUMENTED_ERRORS = (TaskStackError, FormulationError)
+
+
+@dataclass(frozen=True)
+class Path_:
+    """One fuzzed path: a formulation with options, and whether it has a batch or a
+    preallocated solver to compare with."""
+
+    name: str
+    formulation: str
+    options: dict
+    kinds: tuple[str, ...] = ("equality",)
+
+
+#: The paths ``prioik fuzz`` runs by default.
+PATHS: dict[str, Path_] = {p.name: p for p in (
+    Path_("reference", "reference", {}),
+    Path_("ej_qr_numba", "extended_jacobian", {"kernel": "numba"}),
+    Path_("ej_qr_lapack", "extended_jacobian", {"kernel": "lapack"}),
+    Path_("ej_svd", "extended_jacobian", {"nullspace": "svd"}),
+    Path_("nullspace", "nullspace", {}),
+    Path_("cascaded_qp", "cascaded_qp", {}, kinds=("inequality",)),
+    Path_("daqp_hierarchical", "daqp_hierarchical", {}, kinds=("inequality",)),
+)}
+
+
+@dataclass
+class Failure:
+    """One failing (case, path)."""
+
+    kind: str
+    path: str
+    case: str
+    message: str
+
+
+@dataclass
+class FuzzReport:
+    """Counts of one fuzz run.
+
+    Attributes:
+        stacks: Stacks tried, per stack kind.
+        well_conditioned: How many equality stacks were well-conditioned.
+        solves: Solves per path.
+        counts: ``counts[path][kind]`` failures.
+        statuses: ``statuses[path][status]``.
+        refused: Valid stacks a path refused with a documented error, per path.
+        failures: Every failure (the first ``keep`` of them with details).
+        time_s: Wall time.
+    """
+
+    stacks: dict[str, int] = field(default_factory=dict)
+    well_conditioned: int = 0
+    solves: dict[str, int] = field(default_factory=dict)
+    counts: dict[str, dict[str, int]] = field(default_factory=dict)
+    statuses: dict[str, dict[str, int]] = field(default_factory=dict)
+    refused: dict[str, int] = field(default_factory=dict)
+    failures: list[Failure] = field(default_factory=list)
+    time_s: float = 0.0
+
+    @property
+    def total_failures(self) -> int:
+        return sum(sum(c.values()) for c in self.counts.values())
+
+    def add(self, failure: Failure) -> None:
+        self.counts.setdefault(failure.path, dict.fromkeys(KINDS, 0))[failure.kind] += 1
+        self.failures.append(failure)
+
+    def table(self) -> str:
+        """A markdown table: one row per path, one column per failure kind."""
+        head = "| path | solves | " + " | ".join(KINDS) + " | refused | statuses |"
+        out = [head, "|---|" + "---:|" * (len(KINDS) + 2) + "---|"]
+        for path, solves in self.solves.items():
+            c = self.counts.get(path, dict.fromkeys(KINDS, 0))
+            st = ", ".join(f"{k} {v}" for k, v in sorted(self.statuses.get(path, {}).items()))
+            out.append(f"| {path} | {solves} | " + " | ".join(str(c[k]) for k in KINDS)
+                       + f" | {self.refused.get(path, 0)} | {st} |")
+        return "\n".join(out)
+
+
+def _case(kind: str, seed: int, index: int, sizes: dict | None = None) -> FuzzCase:
+    rng = np.random.default_rng([seed, index])
+    make = equality_case if kind == "equality" else inequality_case
+    return make(rng, seed=index, **(sizes or {}))
+
+
+def draw(kind: str, seed: int, index: int, sizes: dict | None = None) -> FuzzCase:
+    """Case ``index`` of the run with ``seed`` (what the saved file's description names;
+    ``sizes``: the generator's ``max_n``, ``max_levels``, ``max_rows`` if not the
+    defaults)."""
+    return _case(kind, seed, index, sizes)
+
+
+def _solve(path: Path_, stack: TaskStack):
+    return formulations.solve(stack, path.formulation, **path.options)
+
+
+class _Runner:
+    def __init__(self, report: FuzzReport, threads: int, keep: int) -> None:
+        self.report = report
+        self.threads = threads
+        self.keep = keep
+        self.failing: dict[str, tuple[FuzzCase, list[Failure]]] = {}
+
+    def fail(self, case_id: str, case: FuzzCase, kind: str, path: str, msg: str) -> None:
+        f = Failure(kind, path, case_id, msg)
+        self.report.add(f)
+        if len(self.report.failures) > self.keep:
+            self.report.failures.pop()
+        self.failing.setdefault(case_id, (case, []))[1].append(f)
+
+    def run_case(self, case_id: str, case: FuzzCase, paths: list[Path_],
+                 check_threads: bool, check_batch: bool = True) -> None:
+        stack = case.stack
+        rep = self.report
+        for path in paths:
+            if case.kind not in path.kinds:
+                continue
+            rep.solves[path.name] = rep.solves.get(path.name, 0) + 1
+            try:
+                sol = _solve(path, stack)
+            except DOCUMENTED_ERRORS as exc:
+                rep.refused[path.name] = rep.refused.get(path.name, 0) + 1
+                rep.statuses.setdefault(path.name, {}).setdefault("refused", 0)
+                rep.statuses[path.name]["refused"] += 1
+                continue
+            except Exception as exc:  # noqa: BLE001 - counting crashes is the point
+                self.fail(case_id, case, "crash", path.name, f"{type(exc).__name__}: {exc}")
+                continue
+            st = rep.statuses.setdefault(path.name, {})
+            st[sol.status] = st.get(sol.status, 0) + 1
+            finite = bool(np.isfinite(sol.x).all())
+            if sol.status != "failed" and not finite:
+                self.fail(case_id, case, "nan", path.name, f"status {sol.status} with "
+                          f"non-finite x")
+                continue
+            if case.kind == "equality" and sol.status == "optimal":
+                cert = check_lexicographic(stack, sol.x)
+                if case.well_conditioned:
+                    dist = relative_distance(sol.x, case.truth)
+                    if dist > WRONG_TOL or not cert.ok:
+                        self.fail(case_id, case, "wrong", path.name,
+                                  f"optimal but {dist:.2e} from the truth, certificate "
+                                  f"{'ok' if cert.ok else 'fails at level ' + str(cert.first_failure.level)}")
+                elif not cert.ok:
+                    self.fail(case_id, case, "uncertified", path.name,
+                              f"optimal but the certificate fails at level "
+                              f"{cert.first_failure.level}")
+            elif sol.status == "optimal":         # inequality stacks: the KKT certificate
+                cert = check_lexicographic(stack, sol.x)
+                if not cert.ok:
+                    self.fail(case_id, case, "uncertified", path.name,
+                              f"optimal but the certificate fails at level "
+                              f"{cert.first_failure.level}")
+            if check_batch:
+                self._compare_batch(case_id, case, path, sol)
+            if check_batch:
+                self._compare_prepared(case_id, case, path, sol)
+            if check_threads:
+                self._compare_threads(case_id, case, path, sol)
+
+    def _mismatch(self, a, b, sa, sb, well: bool, min_sigma: float = 1.0) -> str:
+        fa, fb = np.isfinite(a).all(), np.isfinite(b).all()
+        if sa != sb:
+            return f"status {sa} vs {sb}"
+        if fa != fb:
+            return "one answer is finite, the other not"
+        if not fa or sa == "failed":
+            return ""
+        dist = relative_distance(a, b)
+        tol = min(MATCH_TOL / max(min_sigma, 1e-300), WRONG_TOL) if well else WRONG_TOL
+        if dist > tol and (well or sa == "optimal"):
+            return f"answers differ by {dist:.2e}"
+        return ""
+
+    def _compare_batch(self, case_id, case, path, sol) -> None:
+        stack = case.stack
+        rng = np.random.default_rng(case.seed + 7)
+        try:
+            variants = [stack] + (same_shape_batch(stack, rng, 2, reduce=0.3)
+                                  if case.kind == "equality" else [stack])
+            batch = formulations.solve_batch(variants, path.formulation, **path.options)
+        except DOCUMENTED_ERRORS as exc:
+            self.fail(case_id, case, "mismatch", path.name,
+                      f"solve_batch refused what solve took: {exc}")
+            return
+        except Exception as exc:  # noqa: BLE001
+            self.fail(case_id, case, "crash", path.name,
+                      f"solve_batch: {type(exc).__name__}: {exc}")
+            return
+        for j, s in enumerate(variants):
+            one = sol if j == 0 else _solve(path, s)
+            # the variants keep the stack's ranks (or lower them) but not its verdict
+            well = case.well_conditioned and j == 0
+            why = self._mismatch(batch.X[j], one.x, batch.statuses[j], one.status, well,
+                                 case.min_sigma)
+            if why:
+                self.fail(case_id, case, "mismatch", path.name,
+                          f"solve_batch row {j} vs solve: {why}")
+                return
+
+    def _compare_prepared(self, case_id, case, path, sol) -> None:
+        """One prepared solver reused over same-layout stacks equals one-off solves."""
+        stack = case.stack
+        rng = np.random.default_rng(case.seed + 11)
+        variants = (same_shape_batch(stack, rng, 2, reduce=0.3)
+                    if case.kind == "equality" else []) + [stack]
+        try:
+            solver = formulations.prepare(stack.layout, path.formulation, **path.options)
+            for j, s in enumerate(variants):
+                one = sol if s is stack else _solve(path, s)
+                got = solver.solve(s)
+                well = case.well_conditioned and s is stack
+                why = self._mismatch(got.x, one.x, got.status, one.status, well,
+                                     case.min_sigma)
+                if why:
+                    self.fail(case_id, case, "mismatch", path.name,
+                              f"prepared solve {j} (reused) vs solve: {why}")
+                    return
+        except Exception as exc:  # noqa: BLE001
+            self.fail(case_id, case, "crash" if not isinstance(exc, DOCUMENTED_ERRORS)
+                      else "mismatch", path.name,
+                      f"prepared solver: {type(exc).__name__}: {exc}")
+
+    def _compare_threads(self, case_id, case, path, sol) -> None:
+        """4 threads: one shared prepared solver (answers or ConcurrentUseError, never a
+        wrong answer) and one solver per thread (the serial answers)."""
+        reps = 4 * self.threads
+        shared = formulations.prepare(case.stack.layout, path.formulation, **path.options)
+        serial = shared.solve(case.stack).x
+
+        def on_shared(_):
+            try:
+                return shared.solve(case.stack).x
+            except ConcurrentUseError:
+                return None
+
+        def own(_):
+            return formulations.prepare(case.stack.layout, path.formulation,
+                                        **path.options).solve(case.stack).x
+        try:
+            with ThreadPoolExecutor(self.threads) as pool:
+                xs = list(pool.map(on_shared, range(reps))) + list(pool.map(own, range(reps)))
+        except Exception as exc:  # noqa: BLE001
+            self.fail(case_id, case, "threads", path.name, f"{type(exc).__name__}: {exc}")
+            return
+        for x in xs:
+            if x is not None and not np.array_equal(x, serial, equal_nan=True):
+                self.fail(case_id, case, "threads", path.name,
+                          "a concurrent solve differs from the serial one")
+                return
+
+
+def run(n: int, seed: int, *, kinds=("equality",), paths: list[str] | None = None,
+        threads: int = 4, thread_every: int = 10, batch_every: int = 1,
+        sizes: dict | None = None, out: Path | None = None, keep: int = 1000,
+        progress: Callable[[str], None] | None = None) -> FuzzReport:
+    """Fuzz ``n`` stacks of each kind; see the module docstring.
+
+    Args:
+        n: Stacks per kind.
+        seed: Run seed.
+        kinds: ``"equality"`` and/or ``"inequality"``.
+        paths: Names in :data:`PATHS` (default: all whose formulation is available).
+        threads: Threads of the concurrency check.
+        thread_every: Run the concurrency check on every ``thread_every``-th case.
+        batch_every: Compare with ``solve_batch`` on every ``batch_every``-th case.
+        sizes: ``max_n``, ``max_levels``, ``max_rows`` for the generators (their
+            defaults otherwise: the issue's families).
+        out: Folder for the failing stacks (not written when ``None``).
+        keep: Failures kept with details in the report.
+        progress: Called with a line every 1000 cases.
+    """
+    avail = {f.name for f in formulations.available() if f.available}
+    chosen = [PATHS[p] for p in (paths or PATHS)] if paths else \
+        [p for p in PATHS.values() if p.formulation in avail]
+    report = FuzzReport()
+    runner = _Runner(report, threads, keep)
+    t0 = time.perf_counter()
+    for kind in kinds:
+        report.stacks[kind] = n
+        for i in range(n):
+            case = _case(kind, seed, i, sizes)
+            if kind == "equality":
+                report.well_conditioned += int(case.well_conditioned)
+            runner.run_case(f"{kind}-{seed}-{i}", case, chosen,
+                            thread_every > 0 and i % thread_every == 0,
+                            batch_every > 0 and i % batch_every == 0)
+            if progress is not None and (i + 1) % 1000 == 0:
+                progress(f"{kind}: {i + 1}/{n} stacks, {report.total_failures} failures, "
+                         f"{time.perf_counter() - t0:.0f} s")
+    report.time_s = time.perf_counter() - t0
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        for case_id, (case, fails) in runner.failing.items():
+            kind, s, i = case_id.split("-")
+            text = "; ".join(f"{f.path}: {f.kind}: {f.message}" for f in fails[:5])
+            save_stack(case.stack, out / f"{case_id}.json",
+                       description=f"prioik fuzz case {i} of --seed {s} ({kind}, "
+                                   f"well-conditioned: {case.well_conditioned}): {text}")
+    return report
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("fuzz", help="property-fuzz the formulations on seeded random stacks",
+                       description=__doc__.split("\n\n")[0])
+    p.add_argument("--n", type=int, default=1000, help="stacks per kind (default 1000)")
+    p.add_argument("--seed", type=int, default=0, help="run seed (default 0)")
+    p.add_argument("--kind", choices=("equality", "inequality", "both"), default="both")
+    p.add_argument("--paths", default="", help=f"comma-separated paths (default: all of "
+                                               f"{', '.join(PATHS)})")
+    p.add_argument("--threads", type=int, default=4, help="threads of the concurrency check")
+    p.add_argument("--thread-every", type=int, default=10,
+                   help="concurrency check on every N-th stack (0: never)")
+    p.add_argument("--out", type=Path, default=None,
+                   help="folder for failing stacks as JSON (reload with `prioik solve`)")
+    p.set_defaults(func=_cmd)
+
+
+def _cmd(args: argparse.Namespace) -> int:
+    if args.n < 1:
+        raise ValueError(f"--n must be ≥ 1, got {args.n}")
+    paths = [s for s in args.paths.split(",") if s] or None
+    for p in paths or []:
+        if p not in PATHS:
+            raise ValueError(f"unknown fuzz path {p!r}; known: {', '.join(PATHS)}")
+    kinds = ("equality", "inequality") if args.kind == "both" else (args.kind,)
+    report = run(args.n, args.seed, kinds=kinds, paths=paths, threads=args.threads,
+                 thread_every=args.thread_every, out=args.out,
+                 progress=lambda line: print(line, file=sys.stderr, flush=True))
+    print(f"prioik fuzz --n {args.n} --seed {args.seed}: "
+          + ", ".join(f"{v} {k} stacks" for k, v in report.stacks.items())
+          + f" ({report.well_conditioned} equality well-conditioned), {report.time_s:.0f} s")
+    print(report.table())
+    for f in report.failures[:20]:
+        print(f"  {f.case} {f.path}: {f.kind}: {f.message}")
+    if args.out is not None and report.failures:
+        print(f"failing stacks saved in {args.out}")
+    return 1 if report.total_failures else 0

@@ -1,0 +1,175 @@
+"""Fuzzing: seeded random stacks (hierarchy/fuzz.py) through every fuzzed path
+(benchmarks/fuzz.py), plus hypothesis over the generator's seed.
+
+Every property of ``prioik fuzz`` must hold on every stack: no exception but the
+library's own, no NaN unless ``failed``, ``optimal`` only when
+``check_lexicographic`` passes (and, on well-conditioned stacks, within 1e-6 of the
+independent nested-SVD truth), ``solve`` = ``solve_batch`` = a reused prepared solver, and
+threads sharing a solver give the serial answers. The bulk runs use the issue's
+families at smaller sizes (``n ≤ 12``, ``≤ 5`` levels of ``≤ 8`` rows a task) so that
+a few thousand stacks fit in the suite; ``prioik fuzz`` runs the full sizes.
+"""
+
+import json
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from prioik import formulations
+from prioik.benchmarks import fuzz
+from prioik.benchmarks.cli import main
+from prioik.formulations import Outcome, registry
+from prioik.hierarchy import check_lexicographic, load_stack, relative_distance
+from prioik.hierarchy.fuzz import (ROW_FEATURES, equality_case, inequality_case,
+                                   nested_truth)
+
+SMALL = {"max_n": 12, "max_levels": 5, "max_rows": 8}
+SMALL_INEQ = {"max_n": 8, "max_levels": 4, "max_rows": 6}
+
+
+def _assert_clean(report: fuzz.FuzzReport) -> None:
+    lines = [f"{f.case} {f.path}: {f.kind}: {f.message}" for f in report.failures[:20]]
+    assert report.total_failures == 0, "\n" + report.table() + "\n" + "\n".join(lines)
+
+
+# ------------------------------------------------------------------ generator
+def test_generator_draws_every_family_and_size():
+    cases = [equality_case(np.random.default_rng([7, i])) for i in range(300)]
+    features = {f for c in cases for level in c.features for f in level}
+    assert features == set(ROW_FEATURES)
+    ns = [c.stack.n for c in cases]
+    ks = [len(c.stack) for c in cases]
+    assert min(ns) <= 3 and max(ns) >= 55 and min(ks) == 1 and max(ks) == 12
+    assert max(t.m for c in cases for t in c.stack.tasks) >= 35
+    weights = [float(w) for c in cases for t in c.stack.tasks for w in t.weight]
+    assert min(weights) < 1e-4 and max(weights) > 1e4
+    scales = [np.abs(t.A).max() for c in cases for t in c.stack.tasks if np.abs(t.A).max()]
+    assert min(scales) < 1e-10 and max(scales) > 1e7
+    well = [c.well_conditioned for c in cases]
+    assert 0.3 < np.mean(well) < 0.95          # both kinds are drawn
+
+
+def test_generator_is_reproducible_from_the_seed():
+    a = equality_case(np.random.default_rng([3, 17]))
+    b = fuzz.draw("equality", 3, 17)
+    assert [t.name for t in a.stack.tasks] == [t.name for t in b.stack.tasks]
+    assert all(np.array_equal(s.A, t.A) for s, t in zip(a.stack.tasks, b.stack.tasks))
+
+
+def test_truth_is_the_lexicographic_optimum_of_well_conditioned_stacks():
+    """The independent truth agrees with reference and passes the certificate."""
+    checked = 0
+    for i in range(60):
+        case = equality_case(np.random.default_rng([11, i]), **SMALL)
+        if not case.well_conditioned:
+            continue
+        checked += 1
+        assert check_lexicographic(case.stack, case.truth).ok
+        ref = formulations.solve(case.stack, "reference").x
+        assert relative_distance(ref, case.truth) <= fuzz.WRONG_TOL
+    assert checked >= 20
+
+
+def test_truth_reports_an_ambiguous_decision():
+    from prioik.hierarchy import Task, TaskStack
+    A = np.array([[1.0, 0.0], [0.0, 1e-10]])         # σ/‖A‖ = 1e-10: in the band
+    x, gap, sigma = nested_truth(TaskStack([Task("a", A, [1.0, 1.0])]))
+    assert gap < 0
+    x, gap, sigma = nested_truth(TaskStack([Task("a", np.eye(2), [1.0, 1.0])]))
+    assert gap > 0 and sigma == pytest.approx(1 / np.sqrt(2))
+
+
+# ------------------------------------------------------------------ bulk runs
+@pytest.mark.slow
+@pytest.mark.parametrize("chunk", range(4))
+def test_equality_stacks_hold_every_property(chunk):
+    """1,600 equality stacks (4 × 400), every path; batch compared on every 4th,
+    threads on every 100th."""
+    report = fuzz.run(400, 1000 + chunk, sizes=SMALL, batch_every=4, thread_every=100)
+    _assert_clean(report)
+    assert report.solves["ej_qr_numba"] == 400 and report.well_conditioned > 100
+
+
+@pytest.mark.slow
+def test_full_size_equality_stacks_hold_every_property():
+    """Stacks of the full sizes (n ≤ 60, 12 levels of 40 rows a task)."""
+    _assert_clean(fuzz.run(40, 77, batch_every=4, thread_every=20))
+
+
+@pytest.mark.slow
+def test_inequality_stacks_hold_every_property():
+    """400 inequality stacks through the QP formulations."""
+    report = fuzz.run(400, 5, kinds=("inequality",), sizes=SMALL_INEQ, batch_every=4,
+                      thread_every=100)
+    _assert_clean(report)
+    assert report.solves["cascaded_qp"] == 400
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 2 ** 32 - 1))
+def test_hypothesis_equality_stacks(seed):
+    case = equality_case(np.random.default_rng(seed), seed, **SMALL)
+    report = fuzz.FuzzReport()
+    fuzz._Runner(report, threads=2, keep=20).run_case(
+        f"equality-{seed}", case, [p for p in fuzz.PATHS.values() if "equality" in p.kinds],
+        check_threads=False)
+    _assert_clean(report)
+
+
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(seed=st.integers(0, 2 ** 32 - 1))
+def test_hypothesis_inequality_stacks(seed):
+    case = inequality_case(np.random.default_rng(seed), seed, **SMALL_INEQ)
+    report = fuzz.FuzzReport()
+    fuzz._Runner(report, threads=2, keep=20).run_case(
+        f"inequality-{seed}", case, [fuzz.PATHS["cascaded_qp"]], check_threads=False)
+    _assert_clean(report)
+
+
+# ------------------------------------------------------------ the fuzz itself
+@pytest.fixture
+def wrong_plugin(monkeypatch):
+    """A formulation that answers 0 and says ``optimal``: every check must see it."""
+    mod = type("fake", (), {})()
+    mod.NAME, mod.DESCRIPTION, mod.OPTIONS = "always_zero", "", {}
+    mod.CAPABILITIES = formulations.Capabilities()
+    mod.solve = lambda stack: Outcome(np.zeros(stack.n), "optimal")
+    monkeypatch.setitem(registry._loaded, "always_zero", mod)
+    monkeypatch.setitem(registry.PLUGINS, "always_zero", ("always_zero", ""))
+    monkeypatch.setitem(fuzz.PATHS, "always_zero",
+                        fuzz.Path_("always_zero", "always_zero", {}))
+    return "always_zero"
+
+
+def test_a_wrong_formulation_is_caught_and_its_stacks_saved_for_prioik_solve(
+        wrong_plugin, tmp_path, capsys):
+    report = fuzz.run(30, 4, paths=[wrong_plugin], sizes=SMALL, thread_every=0,
+                      out=tmp_path)
+    counts = report.counts[wrong_plugin]
+    assert counts["wrong"] > 0 and counts["uncertified"] > 0
+    files = sorted(tmp_path.glob("equality-4-*.json"))
+    assert len(files) == len({f.case for f in report.failures})
+    text = json.loads(files[0].read_text())
+    assert "always_zero: " in text["description"]
+    index = int(files[0].stem.split("-")[-1])
+    saved = load_stack(files[0])
+    drawn = fuzz.draw("equality", 4, index, SMALL).stack
+    assert all(np.array_equal(a.A, b.A) for a, b in zip(saved.tasks, drawn.tasks))
+    assert main(["solve", str(files[0]), "-f", "reference"]) == 0
+    assert "status: " in capsys.readouterr().out
+
+
+def test_prioik_fuzz_command(tmp_path, capsys):
+    code = main(["fuzz", "--n", "5", "--seed", "3", "--kind", "both", "--thread-every", "0",
+                 "--out", str(tmp_path)])
+    out = capsys.readouterr().out
+    assert "5 equality stacks" in out and "5 inequality stacks" in out
+    assert "| ej_qr_numba | 5 |" in out and "| cascaded_qp | 5 |" in out
+    assert code == (1 if "failing stacks saved" in out else 0)
+
+
+def test_prioik_fuzz_refuses_an_unknown_path(capsys):
+    assert main(["fuzz", "--n", "1", "--paths", "magic"]) == 2
+    assert "unknown fuzz path 'magic'" in capsys.readouterr().err
