@@ -16,12 +16,19 @@ velocity-level stack with bounds on ``q̇``. Every solver gets the same stacks:
   level compression, as ``daqp_hierarchical[raw]``);
 * ``cascaded_qp[daqp]``: ``prioik.solve(stack, "cascaded_qp", solver="daqp")``.
 
-Times are medians of per-solve ``perf_counter`` wall times (numba compiled beforehand,
+Times: each solver runs ``repeats`` passes over the trajectory in order (as a control
+loop runs it), the passes of the three interleaved; per stack the fastest pass's
+``perf_counter`` wall time, then the median over the stacks (numba compiled beforehand,
 BLAS limited to one thread). Exactness: every level's ``‖w_i‖²`` of the active-set
 answer against ``cascaded_qp[quadprog]``'s (relative to ``max(1, value)``; where they
 differ the lower one at the first differing level is the better answer).
 
-Run: ``python -m prioik.benchmarks.active_set_bench [--windows 4 --steps 6 --repeats 3]``.
+Also the whole G1 velocity IK step and the Panda reach with joint position and velocity
+limits against PlaCo (:func:`g1_limits_step`, :func:`panda_limits_step`); :func:`run`
+returns every row and the ratios against issue 13's targets.
+
+Run: ``python -m prioik.benchmarks.active_set_bench [--windows 4 --steps 6 --repeats 3
+--ik-steps 300 --no-ik --no-stacks]``.
 """
 
 from __future__ import annotations
@@ -80,23 +87,29 @@ def measure(stacks: list, repeats: int = 3, cascade_every: int = 1) -> dict[str,
     cold = prioik.prepare(layout, NAME, warm_start=False)
     warm = prioik.prepare(layout, NAME)
     cold.solve(same[0])                       # numba compiled (cached) before timing
-    t_cold = [_time(lambda s=s: cold.solve(s), repeats) for s in same]
-    t_warm = []
-    for _ in range(repeats):                  # passes over the trajectory, in order
-        times = []
-        for s in same:
-            t0 = time.perf_counter()
-            warm.solve(s)
-            times.append(time.perf_counter() - t0)
-        t_warm.append(times)
-    t_warm = np.min(np.array(t_warm), axis=0)
-    t_daqp = []
+    daqp_args = []
     for s in same:
         A, bu, bl, bps, _ = build(s, False, 1e-9)
-        sense = np.zeros(len(bu), dtype=c_int)
-        t_daqp.append(_time(lambda: daqp.solve(None, None, A, bu.copy(), bl.copy(), sense,
-                                               break_points=bps, primal_tol=1e-10,
-                                               dual_tol=1e-12), repeats))
+        daqp_args.append((A, bu, bl, bps, np.zeros(len(bu), dtype=c_int)))
+
+    def daqp_raw(i: int) -> None:
+        A, bu, bl, bps, sense = daqp_args[i]
+        daqp.solve(None, None, A, bu.copy(), bl.copy(), sense, break_points=bps,
+                   primal_tol=1e-10, dual_tol=1e-12)
+
+    # every solver as a control loop runs it: passes over the trajectory in order, the
+    # passes of the three interleaved (same machine load); per stack the fastest pass
+    paths = {"cold": lambda i: cold.solve(same[i]), "warm": lambda i: warm.solve(same[i]),
+             "daqp": daqp_raw}
+    times = {name: np.full(len(same), np.inf) for name in paths}
+    for _ in range(repeats):
+        for name, fn in paths.items():
+            t = times[name]
+            for i in range(len(same)):
+                t0 = time.perf_counter()
+                fn(i)
+                t[i] = min(t[i], time.perf_counter() - t0)
+    t_cold, t_warm, t_daqp = times["cold"], times["warm"], times["daqp"]
     sub = same[::cascade_every]
     t_cas = [_time(lambda s=s: prioik.solve(s, "cascaded_qp", solver="daqp"), 1) for s in sub]
     worst, statuses, cold_warm = 0.0, set(), 0.0
@@ -125,24 +138,185 @@ def measure(stacks: list, repeats: int = 3, cascade_every: int = 1) -> dict[str,
             "max_warm_vs_cold_rel": cold_warm}
 
 
-def run(windows: int = 4, steps: int = 6, repeats: int = 3) -> list[dict[str, Any]]:
-    """:func:`measure` on both fencing variants at acceleration and velocity level."""
+def g1_limits_step(steps: int = 300, rounds: int = 5) -> dict[str, Any]:
+    """The whole G1 velocity IK step with joint position and velocity limits, prioik's
+    prepared path against PlaCo's ``KinematicsSolver`` step with the same limits.
+
+    prioik: six strict levels (support foot, joint-limit bounds on ``q̇`` — ``q + q̇ dt``
+    within the position limits, ``|q̇| ≤ q̇_max`` —, CoM, left foot, sword tip, posture),
+    ``KinematicState(drift=False)`` + the scenario's writers
+    (:meth:`~prioik.robots.fencing.FencingScenario.velocity_rows` ``limits="bounds"``)
+    + a ``hierarchical_active_set`` solver prepared once (warm-started). PlaCo:
+    ``update_kinematics`` + target updates + ``KinematicsSolver.solve(True)`` with
+    ``enable_joint_limits`` and ``enable_velocity_limits``
+    (:func:`prioik.benchmarks.placo_baseline.run_placo`), at the same states (PlaCo's
+    trajectory). prioik's step is timed in ``rounds`` passes over the states, the
+    fastest pass's median reported (PlaCo's run is one pass)."""
+    import prioik
+    from prioik.robots.fencing import FencingScenario
+    from prioik.robots.tasks import KinematicState
+
+    from .placo_baseline import run_placo
+    from .placo_step import DT, GAIN
+
+    scenario = FencingScenario("compatible")
+    robot = scenario.robot
+    placo_run = run_placo(scenario, duration=steps * DT, dt=DT)
+    if placo_run.failed or placo_run.steps == 0:
+        raise RuntimeError(f"PlaCo's run failed: {placo_run.message}")
+    placo = (placo_run.kinematics_time_s + placo_run.solve_time_s)
+    states = [(placo_run.q[i], placo_run.v[i], float(placo_run.t[i]))
+              for i in range(placo_run.steps)]
+    data = robot.model.createData()
+    rows = scenario.velocity_rows(GAIN, limits="bounds", dt=DT)
+    solver = prioik.prepare(rows.layout, NAME)
+    statuses = set()
+    best = None
+    for _ in range(rounds):
+        times = np.empty((3, len(states)))
+        for i, (q, v, t) in enumerate(states):
+            t0 = time.perf_counter()
+            state = KinematicState(robot, q, v, data, drift=False)
+            t1 = time.perf_counter()
+            d = scenario.write_rows(rows, state, t)
+            t2 = time.perf_counter()
+            sol = solver.solve(d)
+            t3 = time.perf_counter()
+            statuses.add(sol.status)
+            times[:, i] = (t1 - t0, t2 - t1, t3 - t2)
+        if best is None or np.median(times.sum(0)) < np.median(best.sum(0)):
+            best = times
+    step = best.sum(0)
+    return {"steps": len(states), "layout": rows.layout.describe(),
+            "prioik_step_us": float(np.median(step)) * 1e6,
+            "prioik_kinematics_us": float(np.median(best[0])) * 1e6,
+            "prioik_rows_us": float(np.median(best[1])) * 1e6,
+            "prioik_solve_us": float(np.median(best[2])) * 1e6,
+            "placo_step_us": float(np.median(placo)) * 1e6,
+            "placo_kinematics_us": float(np.median(placo_run.kinematics_time_s)) * 1e6,
+            "placo_solve_us": float(np.median(placo_run.solve_time_s)) * 1e6,
+            "statuses": sorted(statuses)}
+
+
+def panda_limits_step(steps: int = 300, rounds: int = 7) -> dict[str, Any]:
+    """The 9-DoF Panda reach of :mod:`prioik.benchmarks.panda_step` with joint position
+    and velocity limits: prioik's prepared path (joint-limit bounds on ``q̇`` above the
+    hand position above the posture, ``hierarchical_active_set``, warm-started) against
+    PlaCo's ``KinematicsSolver`` (the same soft tasks, ``enable_joint_limits`` and
+    ``enable_velocity_limits``), at PlaCo's states, interleaved rounds (fastest round's
+    median per path)."""
+    from pathlib import Path
+
+    import placo
+
+    import prioik
+    from prioik.robots import KinematicState, TaskWriter, load
+    from prioik.robots.models import example_robot_data_dir
+
+    from .panda_step import DT, GAINS, HAND_TARGET, _rounds
+
+    robot = load("panda")
+    model, q0, nv = robot.model, robot.q0, robot.nv
+    hand = robot.frames["hand"]
+    share = example_robot_data_dir().parent.parent
+    pw = placo.RobotWrapper(str(share), placo.Flags.ignore_collisions,
+                            Path(robot.source).read_text())
+    base = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0])
+    pw.state.q = np.concatenate([base, q0])
+    pw.update_kinematics()
+    sp = placo.KinematicsSolver(pw)
+    sp.mask_fbase(True)
+    sp.enable_joint_limits(True)
+    sp.enable_velocity_limits(True)
+    sp.dt = DT
+    sp.add_position_task(hand, HAND_TARGET).configure("hand", "soft", 1.0)
+    joints = sp.add_joints_task()
+    joints.set_joints({name: float(q0[model.joints[model.getJointId(name)].idx_q])
+                       for name in pw.joint_names()})
+    joints.configure("posture", "soft", 1e-4)
+    states = []
+    for _ in range(steps):
+        states.append(np.array(pw.state.q)[7:].copy())
+        pw.update_kinematics()
+        sp.solve(True)
+    pw.state.q = np.concatenate([base, q0])
+
+    data = model.createData()
+    zero = np.zeros(nv)
+    rows = TaskWriter(robot, "velocity")
+    rows.add_joint_limits("joint_limits", form="bounds", dt=DT, level=0)
+    rows.add_frame_position("hand", hand, gain=GAINS["hand"], level=1)
+    rows.add_posture("posture", gain=GAINS["posture"], level=2)
+    solver = prioik.prepare(rows.layout, NAME)
+    statuses = set()
+
+    def prepared_step(i: int) -> None:
+        state = KinematicState(robot, states[i], zero, data, drift=False)
+        rows.joint_limits(state, "joint_limits")
+        rows.frame_position(state, "hand", HAND_TARGET)
+        rows.posture(state, "posture", q0)
+        statuses.add(solver.solve(rows.targets(state)).status)
+
+    def placo_step(i: int) -> None:
+        pw.update_kinematics()
+        sp.solve(True)
+
+    for path in (prepared_step, placo_step):
+        for i in range(min(50, steps)):
+            path(i)
+    pw.state.q = np.concatenate([base, q0])
+    best = _rounds({"prepared": prepared_step, "placo": placo_step}, steps, rounds)
+    return {"steps": steps, "prioik_step_us": float(np.median(best["prepared"])) * 1e6,
+            "placo_step_us": float(np.median(best["placo"])) * 1e6,
+            "statuses": sorted(statuses)}
+
+
+def run(windows: int = 4, steps: int = 6, repeats: int = 3, ik_steps: int = 300,
+        stacks: bool = True, ik: bool = True) -> dict[str, Any]:
+    """Every timing of this module in one run: :func:`measure` on both fencing variants
+    at acceleration and velocity level (``stacks``), :func:`g1_limits_step` and
+    :func:`panda_limits_step` (``ik``), and the ratios against issue 13's targets.
+
+    Returns:
+        ``{"rows": [...], "g1_step": {...}, "panda_step": {...}, "ratios": [...]}``; each
+        ratio a dict ``name, value, target`` (``value ≤ target`` meets it).
+    """
     from prioik.benchmarks.threads import blas_threads
-    out = []
+    out: dict[str, Any] = {"rows": [], "ratios": []}
     with blas_threads(1):
-        for variant in ("compatible", "incompatible"):
-            for level in ("acceleration", "velocity"):
-                res = measure(bounds_stacks(variant, windows, steps, level), repeats)
-                res.update(variant=variant, level=level)
-                out.append(res)
+        if stacks:
+            for variant in ("compatible", "incompatible"):
+                for level in ("acceleration", "velocity"):
+                    res = measure(bounds_stacks(variant, windows, steps, level), repeats)
+                    res.update(variant=variant, level=level)
+                    out["rows"].append(res)
+        if ik:
+            out["g1_step"] = g1_limits_step(ik_steps)
+            out["panda_step"] = panda_limits_step(ik_steps)
+    for r in out["rows"]:
+        tag = f"{r['variant']} {r['level']}"
+        out["ratios"] += [
+            {"name": f"active_set cold / DAQP raw ({tag})", "value": r["cold/daqp_raw"],
+             "target": 1.0},
+            {"name": f"active_set warm / DAQP raw ({tag})", "value": r["warm/daqp_raw"],
+             "target": 0.3},
+            {"name": f"active_set warm / cascaded_qp[daqp] ({tag})",
+             "value": r["warm/cascaded_qp[daqp]"], "target": 0.03}]
+    for key, what, target in (("g1_step", "G1 velocity IK step with limits", 0.8),
+                              ("panda_step", "Panda reach with limits", 3.0)):
+        if key in out:
+            s = out[key]
+            out["ratios"].append({"name": f"{what} / PlaCo", "target": target,
+                                  "value": s["prioik_step_us"] / s["placo_step_us"]})
     return out
 
 
-def format_table(results: list[dict[str, Any]]) -> str:
+def format_table(results: dict[str, Any]) -> str:
+    """Markdown tables of :func:`run`'s result."""
     head = ("| stacks | n, rows | cold µs | warm µs | DAQP raw µs | cascaded_qp[daqp] µs | "
             "cold/raw | warm/raw | warm/cascade | max Δ‖w‖² vs quadprog cascade |")
-    lines = [head, "|" + "---|" * 10]
-    for r in results:
+    lines = [head, "|" + "---|" * 10] if results["rows"] else []
+    for r in results["rows"]:
         m = r["median_s"]
         lines.append(f"| {r['variant']} {r['level']} ({r['stacks']}) | {r['n']}, {r['rows']} | "
                      f"{m['active_set cold'] * 1e6:.1f} | {m['active_set warm'] * 1e6:.1f} | "
@@ -150,6 +324,19 @@ def format_table(results: list[dict[str, Any]]) -> str:
                      f"{r['cold/daqp_raw']:.2f} | {r['warm/daqp_raw']:.2f} | "
                      f"{r['warm/cascaded_qp[daqp]']:.3f} | "
                      f"{r['max_level_rel_diff_vs_quadprog_cascade']:.1e} |")
+    for key, what in (("g1_step", "G1 velocity IK step, limits"),
+                      ("panda_step", "Panda reach, limits")):
+        if key in results:
+            s = results[key]
+            extra = (f" (kinematics {s['prioik_kinematics_us']:.1f}, rows "
+                     f"{s['prioik_rows_us']:.1f}, solve {s['prioik_solve_us']:.1f})"
+                     if "prioik_solve_us" in s else "")
+            lines.append(f"\n{what}: prioik prepared {s['prioik_step_us']:.1f} µs{extra}, "
+                         f"PlaCo {s['placo_step_us']:.1f} µs, statuses {s['statuses']}")
+    lines.append("")
+    for r in results["ratios"]:
+        ok = "met" if r["value"] <= r["target"] else "MISSED"
+        lines.append(f"- {r['name']}: {r['value']:.3f} (target ≤ {r['target']}) {ok}")
     return "\n".join(lines)
 
 
@@ -158,13 +345,23 @@ def main(argv=None) -> None:
     p.add_argument("--windows", type=int, default=4, help="stretches of the run")
     p.add_argument("--steps", type=int, default=6, help="consecutive steps per stretch")
     p.add_argument("--repeats", type=int, default=3, help="timing repeats (best of)")
+    p.add_argument("--ik-steps", type=int, default=300, help="IK steps (G1, Panda)")
+    p.add_argument("--no-ik", action="store_true", help="skip the IK-step timings")
+    p.add_argument("--no-stacks", action="store_true", help="skip the G1 bounds stacks")
     a = p.parse_args(argv)
-    results = run(a.windows, a.steps, a.repeats)
+    from prioik.extras import MissingExtraError, require
+    try:
+        require("robots", "qp", what="active_set_bench")
+        if not a.no_ik:
+            require("placo", what="active_set_bench's IK steps (or --no-ik)")
+    except MissingExtraError as exc:
+        raise SystemExit(f"active_set_bench: error: {exc}") from None
+    results = run(a.windows, a.steps, a.repeats, a.ik_steps, stacks=not a.no_stacks,
+                  ik=not a.no_ik)
     print(format_table(results))
-    for r in results:
+    for r in results["rows"]:
         print(r["variant"], r["level"], "statuses", r["statuses"], "warm vs cold",
               f"{r['max_warm_vs_cold_rel']:.1e}")
-
 
 if __name__ == "__main__":
     main()

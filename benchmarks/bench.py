@@ -459,6 +459,11 @@ def measure_ik_step(settings: Settings, progress: Progress | None = None
                     ) -> tuple[dict[str, Any], str]:
     """The whole G1 IK step (kinematics + solve) of ``extended_jacobian`` against
     PlaCo's ``KinematicsSolver`` (see :mod:`benchmarks.placo_step`)."""
+    from prioik.extras import MissingExtraError, require
+    try:
+        require("robots", "placo", what="the PlaCo IK step")
+    except MissingExtraError as exc:
+        return {}, str(exc)
     try:
         from .placo_step import ik_step_times
     except ImportError as exc:
@@ -472,6 +477,15 @@ def measure_ik_step(settings: Settings, progress: Progress | None = None
         out["panda"] = panda_step_times(settings.ik_steps)
     except (ImportError, FileNotFoundError, RuntimeError) as exc:
         out["panda_error"] = f"{type(exc).__name__}: {exc}"
+    # hierarchical_active_set with joint limits as bounds: the G1 bounds stacks (cold,
+    # warm, DAQP's raw call, cascaded_qp[daqp]) and the like-for-like IK steps with limits
+    from . import active_set_bench
+    try:
+        sizes = dict(windows=1, steps=3, repeats=1) if settings.quick else {}
+        out["active_set"] = active_set_bench.run(ik_steps=settings.ik_steps, **sizes)
+        out["active_set_table"] = active_set_bench.format_table(out["active_set"])
+    except (ImportError, FileNotFoundError, RuntimeError) as exc:
+        out["active_set_error"] = f"{type(exc).__name__}: {exc}"
     if progress:
         progress.step("IK step: PlaCo vs extended_jacobian")
     return out, ""
@@ -541,6 +555,9 @@ def ratios(rows: list[Row], batch: dict[str, Any], ik: dict[str, Any]) -> list[R
             out.append(Ratio(name, a / b, target, f"{a:.1f} / {b:.1f} µs"))
         else:
             out.append(Ratio(name, math.nan, target, "not measured"))
+    for r in (ik.get("active_set", {}).get("ratios", []) if ik else []):
+        out.append(Ratio(r["name"], float(r["value"]), float(r["target"]),
+                         "hierarchical_active_set (benchmarks/active_set_bench.py)"))
     panda = ik.get("panda", {}) if ik else {}
     for key, what, target in (("prepared_step_us", "prepared path", 2.5),
                               ("oneoff_step_us", "one-off prioik.solve", math.inf)):
@@ -770,6 +787,13 @@ def markdown_report(rows: list[Row], rats: list[Ratio], batch: dict, ik: dict,
                           ("placo", "PlaCo: update_kinematics + KinematicsSolver.solve")):
             md.append(f"| {what} | {_fmt_us(ik[key + '_step_us'])} | "
                       f"{_fmt_us(ik[key + '_p10_us'])} | {_fmt_us(ik[key + '_p90_us'])} |")
+    if ik and ik.get("active_set_table"):
+        md.append("\n## hierarchical_active_set: bounds stacks and IK steps with limits\n")
+        md.append("Joint position and velocity limits as bounds (inequality rows) on the G1 "
+                  "fencing stacks, and the whole IK step with the same limits on both sides "
+                  "(prioik's prepared path against PlaCo's `KinematicsSolver`); "
+                  "see docs/active-set.md.\n")
+        md.append(ik["active_set_table"])
     if ik and ik.get("panda"):
         panda = ik["panda"]
         md.append("\n## Panda reach step (kinematics + rows + solve)\n")
@@ -1069,7 +1093,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "loop; 0: leave BLAS's default)")
     p.add_argument("--no-g1", action="store_true",
                    help="random stacks only (no G1 cases, batch, IK-step or control-step runs)")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, extras=("plots",))
 
 
 def _command(args: argparse.Namespace) -> str:

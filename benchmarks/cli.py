@@ -1,4 +1,10 @@
-"""The ``prioik`` command line: one sub-command per module (each has ``add_parser``)."""
+"""The ``prioik`` command line: one sub-command per module (each has ``add_parser``).
+
+Building the parser imports no optional dependency: a sub-command module imports what
+it needs when it runs, and a sub-command that needs extras names them in its defaults
+(``p.set_defaults(extras=("robots", "plots"))``); a missing one is reported in one
+line naming the ``pip install prioik[EXTRA]`` to run (exit status 2).
+"""
 
 from __future__ import annotations
 
@@ -18,13 +24,22 @@ SUBCOMMAND_MODULES = [
     "prioik.benchmarks.bench",
     "prioik.benchmarks.properties",
     "prioik.benchmarks.validation",
+    "prioik.benchmarks.sweep.command",
     "prioik.benchmarks.fuzz",
 ]
 
 
+def _qp_backends_line() -> str:
+    import importlib.util
+    from prioik.extras import install_hint
+    if importlib.util.find_spec("qpsolvers") is None:
+        return f"QP back-ends: none (qpsolvers is not installed; {install_hint('qp')})"
+    import qpsolvers
+    return f"QP back-ends qpsolvers sees here: {', '.join(qpsolvers.available_solvers)}"
+
+
 def _cmd_list(args: argparse.Namespace) -> int:
     from prioik import formulations
-    import qpsolvers
     print(f"{'formulation':<22} {'available':<10} {'ineq.':<6} {'exact':<6} description")
     for f in formulations.available():
         if f.available:
@@ -38,7 +53,7 @@ def _cmd_list(args: argparse.Namespace) -> int:
                     print(f"{'':<22} {key}: {opt.doc()}")
         else:
             print(f"{f.name:<22} {'no':<10} {'':<6} {'':<6} {f.reason}")
-    print(f"\nQP back-ends qpsolvers sees here: {', '.join(qpsolvers.available_solvers)}")
+    print(f"\n{_qp_backends_line()}")
     return 0
 
 
@@ -104,11 +119,14 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``prioik`` console script."""
+    from prioik.extras import MissingExtraError, require
     from prioik.formulations import FormulationError
     from prioik.hierarchy import TaskStackError
     from .threads import blas_threads
     args = build_parser().parse_args(argv)
+    args.command_line = list(sys.argv[1:] if argv is None else argv)
     try:
+        require(*getattr(args, "extras", ()), what="this command")
         with blas_threads(getattr(args, "blas_threads", 1)):
             code = int(args.func(args) or 0)
             sys.stdout.flush()          # a closed pipe shows here, not at exit
@@ -122,7 +140,7 @@ def main(argv: list[str] | None = None) -> int:
         except (OSError, ValueError):
             pass
         return 0
-    except (TaskStackError, FormulationError, ValueError, OSError) as exc:
+    except (TaskStackError, FormulationError, MissingExtraError, ValueError, OSError) as exc:
         print(f"prioik {args.command}: error: {_one_line(exc)}", file=sys.stderr)
         return 2
 

@@ -222,10 +222,18 @@ def _formulation_solver(spec: RunSpec, variant: str):
 
 
 def run_one(spec: RunSpec, variant: str, duration: float, dt: float,
-            progress=None, scenario: str = "fencing"):
-    """Simulate one run of a scenario (:func:`robots.scenario.make`); returns a
-    :class:`robots.SimulationResult` with joint names and ``info`` (scenario,
-    variant, run label, formulation, options) filled, ready to save and replay.
+            progress=None, scenario="fencing", algorithmic_error: bool = True,
+            velocity_gain: float = VELOCITY_GAIN):
+    """Simulate one run of a scenario; returns a :class:`robots.SimulationResult` with
+    joint names and ``info`` (scenario, variant, run label, formulation, options)
+    filled, ready to save and replay.
+
+    Args:
+        scenario: A scenario name (built by :func:`robots.scenario.make` in
+            ``variant``) or a built :class:`robots.scenario.Scenario` (a sweep's, with
+            its own target and gains; ``variant`` then only selects the run's options).
+        algorithmic_error: Record eq. 29 at every step (an SVD per level per step).
+        velocity_gain: ``K`` of the velocity-level runs.
 
     Raises:
         UnsupportedTaskError: the formulation cannot take the scenario's stack.
@@ -233,10 +241,10 @@ def run_one(spec: RunSpec, variant: str, duration: float, dt: float,
     """
     from prioik.robots.scenario import make
     from prioik.robots.simulate import coordinate_names
-    sc = make(scenario, variant)
+    sc = make(scenario, variant) if isinstance(scenario, str) else scenario
     if spec.armature:
         sc.robot = sc.robot.with_armature(spec.armature)
-    res = _run(spec, sc, variant, duration, dt, progress)
+    res = _run(spec, sc, variant, duration, dt, progress, algorithmic_error, velocity_gain)
     res.q_names, res.v_names = coordinate_names(sc.robot)
     res.info.update({**sc.info(), "label": spec.label, "formulation": spec.formulation,
                      "options": spec.options.get(variant, {}), "level": spec.level,
@@ -245,7 +253,8 @@ def run_one(spec: RunSpec, variant: str, duration: float, dt: float,
     return res
 
 
-def _run(spec: RunSpec, scenario, variant: str, duration: float, dt: float, progress):
+def _run(spec: RunSpec, scenario, variant: str, duration: float, dt: float, progress,
+         algorithmic_error: bool = True, velocity_gain: float = VELOCITY_GAIN):
     from prioik.robots import simulate
     if spec.formulation == "placo_kinematics_solver":
         from prioik.benchmarks.placo_baseline import run_placo
@@ -263,18 +272,32 @@ def _run(spec: RunSpec, scenario, variant: str, duration: float, dt: float, prog
                                        "inequality tasks (joint limits as bounds on q̇)",
                                        formulation=spec.formulation, task="joint_limits")
 
-        def build_velocity(state, t):
-            return scenario.velocity_stack(state, t, gain=VELOCITY_GAIN, limits=limits,
-                                           dt=dt)
+        if hasattr(scenario, "written_step") and limits == "bounds":
+            rows = scenario.velocity_rows(velocity_gain, limits=limits, dt=dt)
+
+            def build_velocity(state, t):      # rows written in place: no per-step objects
+                return scenario.written_step(rows, state, t)
+        else:
+            def build_velocity(state, t):
+                return scenario.velocity_stack(state, t, gain=velocity_gain, limits=limits,
+                                               dt=dt)
 
         return simulate(scenario.robot, build_velocity, solve, duration=duration, dt=dt,
-                        level="velocity", progress=progress)
+                        level="velocity", progress=progress,
+                        algorithmic_error=algorithmic_error)
 
-    def build(state, t):
-        return scenario.acceleration_stack(state, t, limits=limits, dt=dt)
+    if hasattr(scenario, "written_step") and limits in ("activation", "bounds"):
+        rows = scenario.acceleration_rows(limits=limits, dt=dt)
+
+        def build(state, t):                   # rows written in place: no per-step objects
+            return scenario.written_step(rows, state, t)
+    else:
+        def build(state, t):
+            return scenario.acceleration_stack(state, t, limits=limits, dt=dt)
 
     return simulate(scenario.robot, build, solve, duration=duration, dt=dt,
-                    needs_dynamics=dyn, torque_from_solution=own_tau, progress=progress)
+                    needs_dynamics=dyn, torque_from_solution=own_tau, progress=progress,
+                    algorithmic_error=algorithmic_error)
 
 
 def _finite(x: float) -> float | None:
@@ -552,10 +575,9 @@ def select_runs(text: str | None, runs=None) -> tuple[list[RunSpec], list[str]]:
     chosen, skipped = [], []
     for spec in specs:
         if spec.formulation == "placo_kinematics_solver":
-            try:
-                import placo  # noqa: F401
-            except ImportError as exc:
-                skipped.append(f"{spec.label}: placo is not installed ({exc})")
+            from prioik.extras import install_hint, missing_distributions
+            if missing_distributions("placo"):
+                skipped.append(f"{spec.label}: placo is not installed; {install_hint('placo')}")
                 continue
             chosen.append(spec)
             continue
@@ -755,7 +777,7 @@ def add_parser(subparsers) -> None:
                    help="skip the extended_jacobian vs cascaded_qp q̈ comparison")
     p.add_argument("--quiet", dest="progress", action="store_false",
                    help="no progress bars on stderr")
-    p.set_defaults(func=run_command)
+    p.set_defaults(func=run_command, extras=("robots", "plots"))
 
 
 # ------------------------------------------------------------ reproduction page

@@ -10,18 +10,18 @@ left foot, sword tip and posture soft; joint and velocity limits); its step is
 prioik's step is timed at the same states (PlaCo's trajectory), two ways, each in its
 own loop over the states (as PlaCo's step runs in its own):
 
-* **TaskStack path** — :class:`robots.tasks.KinematicState` (pinocchio Jacobians,
+* **one-off path** — :class:`robots.tasks.KinematicState` (pinocchio Jacobians,
   frame placements, centre of mass), building the velocity-level stack of the same
   five tasks in the scenario's priority order (support foot, com, left foot, sword
   tip, posture; ``J q̇ = ẋ* + K e``, ``K = 10``, the posture its ``K_p = 4``) —
   :meth:`robots.fencing.FencingScenario.terms`, :meth:`robots.tasks.TaskTerm.velocity`
-  and :class:`hierarchy.TaskStack` — and ``extended_jacobian``'s plugin ``solve``
-  (called directly, without the registry's checks);
-* **preallocated path** — ``KinematicState(..., drift=False)``,
+  and :class:`hierarchy.TaskStack` — and ``prioik.solve`` (prepare + solve each step);
+* **prepared path** — ``KinematicState(..., drift=False)``,
   :meth:`robots.fencing.FencingScenario.write_velocity_rows` into a
-  :class:`robots.TaskWriter`, and
-  :class:`formulations.extended_jacobian.BufferSolver` (same kernel, no ``Task``
-  objects). Both paths' answers are compared at every state (``max_path_distance``).
+  :class:`robots.TaskWriter`'s data, and a solver prepared once
+  (``prioik.prepare(layout, "extended_jacobian").solve(data)``: the same kernel, no
+  per-step objects). Both paths' answers are compared at every state
+  (``max_path_distance``).
 
 The references alone are timed in a third loop (``references_us``), so that a
 reader can subtract them from every step.

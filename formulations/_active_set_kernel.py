@@ -82,7 +82,7 @@ def _reflect_row(T, i, q, w, V, beta, nref, first, last):
                 other[c] -= f * v[c]
 
 
-@njit(cache=True, fastmath=_FAST)
+@njit(cache=True, fastmath=_FAST, inline="always")
 def _eqp(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T, rhs, norms, V, beta,
          vpos, Lw, p, reach):
     """One equality-constrained least-squares step from ``y``.
@@ -210,7 +210,84 @@ def _eqp(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T, rhs, norms, V,
     return hr, rs, nref
 
 
-@njit(cache=True, fastmath=_FAST)
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _full_rank_step(B, y, col, rows, nw, tgt, soft_tol, flat, t, norms, perm, p):
+    """The step of ``nw ≥ d`` working soft rows and no hard row, when they have full
+    column rank on the ``d`` free coordinates: ``p = R⁻¹ Qᵀ (tgt − B y)`` by one
+    column-pivoted Householder QR (held transposed in ``flat``, so that the inner loops
+    run over contiguous memory; the extended Jacobian's ``_pivoted_lstsq_if_full_rank``
+    with the level's threshold ``soft_tol`` on every pivot). Such a level leaves no free
+    coordinate. Returns ``False`` (``p`` not written) when a pivot fails the threshold:
+    the caller then takes the row-pivoted LQ of :func:`_eqp`."""
+    n = B.shape[1]
+    d = n - col
+    Tt = flat[:d * nw].reshape((d, nw))
+    for i in range(nw):
+        j = rows[i]
+        Bj = B[j]
+        t[i] = tgt[i] - _dot(Bj, y)
+        for c in range(d):
+            Tt[c, i] = Bj[col + c]
+    for c in range(d):
+        norms[c] = _dot(Tt[c], Tt[c])
+        perm[c] = c
+    for c in range(d):
+        piv = c
+        best = norms[c]
+        for k in range(c + 1, d):
+            if norms[k] > best:
+                best = norms[k]
+                piv = k
+        if piv != c:
+            _swap_rows_upto(Tt, c, piv, nw)
+            _swap(norms, c, piv)
+            _swap(perm, c, piv)
+        cj = Tt[c, c:]
+        exact = _dot(cj, cj)
+        if not (np.sqrt(exact) > soft_tol) or soft_tol <= 0.0:
+            return False
+        norm = np.sqrt(exact)
+        c0 = cj[0]
+        alpha = -norm if c0 >= 0.0 else norm
+        cj[0] = c0 - alpha
+        vtv = 2.0 * (exact - alpha * c0)
+        w = nw - c
+        for k in range(c + 1, d):
+            ck = Tt[k, c:]
+            f = 2.0 * _dot(ck, cj) / vtv
+            for i in range(w):
+                ck[i] -= f * cj[i]
+            norms[k] -= ck[0] * ck[0]
+        tj = t[c:nw]
+        f = 2.0 * _dot(tj, cj) / vtv
+        for i in range(w):
+            tj[i] -= f * cj[i]
+        cj[0] = alpha
+    for c in range(d - 1, -1, -1):
+        acc = t[c]
+        for k in range(c + 1, d):
+            acc -= Tt[k, c] * norms[k]
+        norms[c] = acc / Tt[c, c]          # norms: z in pivot order
+    for c in range(d):
+        p[perm[c]] = norms[c]
+    return True
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _step(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T, rhs, norms, V, beta,
+          vpos, Lw, p, reach, flat, perm):
+    """:func:`_full_rank_step` when it applies, else :func:`_eqp`; returns
+    ``(hr, rs, nref, full)``."""
+    d = B.shape[1] - col
+    if nh == 0 and nw >= d and _full_rank_step(B, y, col, rows, nw, tgt, soft_tol, flat,
+                                               rhs, norms, perm, p):
+        return 0, d, 0, True
+    hr, rs, nref = _eqp(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T, rhs, norms,
+                        V, beta, vpos, Lw, p, reach)
+    return hr, rs, nref, False
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
 def _hard_multipliers(B, y, col, rows, nh, hr, nw, tgt, T, V, beta, vpos, g, nu):
     """Multipliers ``ν`` of the kept hard rows at the step's end point.
 
@@ -246,19 +323,65 @@ def _hard_multipliers(B, y, col, rows, nh, hr, nw, tgt, T, V, beta, vpos, g, nu)
     return gn
 
 
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _bring(B, j, nrot, nf, Vf, betaf, posf):
+    """Apply the fixing reflectors ``nrot[j] … nf − 1`` to row ``B[j]`` (rows are
+    rotated lazily: only when they enter a factorization)."""
+    Bj = B[j]
+    for t in range(nrot[j], nf):
+        q = posf[t]
+        v = Vf[t, q:]
+        row = Bj[q:]
+        f = betaf[t] * _dot(row, v)
+        if f != 0.0:
+            for c in range(row.shape[0]):
+                row[c] -= f * v[c]
+    nrot[j] = nf
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _lift(p, col, px, nf, Vf, betaf, posf):
+    """``px = Q [0; p]``: the step ``p`` of the free coordinates ``col:`` in ``x``."""
+    n = px.shape[0]
+    for c in range(col):
+        px[c] = 0.0
+    for c in range(n - col):
+        px[col + c] = p[c]
+    for t in range(nf - 1, -1, -1):
+        q = posf[t]
+        v = Vf[t, q:]
+        xq = px[q:]
+        f = betaf[t] * _dot(v, xq)
+        if f != 0.0:
+            for c in range(n - q):
+                xq[c] -= f * v[c]
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _odot(Bo, ucol, j, v):
+    """``Bo[j] · v``; ``ucol[j] ≥ 0``: the row's only non-zero column (a bound on one
+    variable, e.g. a joint limit: one product instead of ``n``)."""
+    c = ucol[j]
+    if c >= 0:
+        return Bo[j, c] * v[c]
+    return _dot(Bo[j], v)
+
+
 @njit(cache=True, inline="always")
 def _tol(primal_tol, rnorm_j, ynorm, bound):
     """Feasibility tolerance of one row: relative to ``‖a_j‖ ‖y‖ + |bound|``."""
     return primal_tol * (rnorm_j * ynorm + abs(bound))
 
 
-@njit(cache=True, fastmath=_FAST)
-def _gather(state, hard_end, s0, s1, blo, bup, rows, tgt):
-    """Working rows: hard ones (``j < hard_end``, state ±1) first, then the level's."""
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _gather(state, hard_end, s0, s1, blo, bup, rows, tgt, B, nrot, nf, Vf, betaf, posf):
+    """Working rows: hard ones (``j < hard_end``, state ±1) first, then the level's;
+    each brought up to date with the fixing reflectors."""
     nh = 0
     for j in range(hard_end):
         st = state[j]
         if st == -1 or st == 1:
+            _bring(B, j, nrot, nf, Vf, betaf, posf)
             rows[nh] = j
             tgt[nh] = blo[j] if st == -1 else bup[j]
             nh += 1
@@ -266,13 +389,14 @@ def _gather(state, hard_end, s0, s1, blo, bup, rows, tgt):
     for j in range(s0, s1):
         st = state[j]
         if st != 0:
+            _bring(B, j, nrot, nf, Vf, betaf, posf)
             rows[nh + nw] = j
             tgt[nh + nw] = bup[j] if st == 1 else blo[j]
             nw += 1
     return nh, nw
 
 
-@njit(cache=True, fastmath=_FAST)
+@njit(cache=True, fastmath=_FAST, inline="always")
 def _violated_side(r, lo, up, tol_lo, tol_up):
     if r < lo - tol_lo:
         return -1
@@ -281,31 +405,71 @@ def _violated_side(r, lo, up, tol_lo, tol_up):
     return 0
 
 
+#: floats of the ``params`` header of the float workspace
+N_PARAMS = 8
+#: float rows of length ``R`` in the float workspace (``fvec``)
+N_FVEC = 15
+
+
+def workspace_offsets(M: int, n: int, k: int) -> dict[str, tuple[int, int]]:
+    """``name -> (start, stop)`` of every part of the three flat workspaces of
+    :func:`solve_data` (``R = M + n``); ``"size"`` gives each workspace's length.
+
+    float64: ``params`` (rcond, primal_tol, dual_tol, max_iter, use_warm), ``B``,
+    ``T``, ``Lw``, ``Bo``, ``flat`` (``R × n`` each), ``V``, ``Vf`` (``n × n``), ``fvec``
+    (``15 × R``), ``x`` (``n``), ``w2`` and ``res = √w2`` (``k``); the kernel writes
+    ``‖x‖`` into ``params[5]`` and, into ``params[6]``, ``1`` when an iteration cap was
+    hit, ``-1`` when ``x`` or a residual is not finite; int64: ``k``, ``starts`` (``k + 1``),
+    ``ivec`` (``5 × R``), ``perm`` (``n``), ``counts`` (``3 × (k + 1)``); int8: ``row_eq``
+    (``M``), ``bvec`` (``2 × R``), ``eqr`` (``R``), ``warm_state`` (``(k + 1) × R``),
+    ``warm_valid`` (``k + 1``).
+    """
+    R = M + n
+    out: dict[str, tuple[int, int]] = {}
+    for kind, parts in (("f", (("params", N_PARAMS), ("B", R * n), ("T", R * n),
+                                ("Lw", R * n), ("Bo", R * n), ("flat", R * n),
+                                ("V", n * n), ("Vf", n * n), ("fvec", N_FVEC * R),
+                                ("x", n), ("w2", k), ("res", k))),
+                        ("i", (("k", 1), ("starts", k + 1), ("ivec", 5 * R), ("perm", n),
+                               ("counts", 3 * (k + 1)))),
+                        ("b", (("row_eq", M), ("bvec", 2 * R), ("eqr", R),
+                               ("warm_state", (k + 1) * R), ("warm_valid", k + 1)))):
+        at = 0
+        for name, size in parts:
+            out[name] = (at, at + size)
+            at += size
+        out["size_" + kind] = (0, at)
+    return out
+
+
 @njit(cache=True, fastmath=_FAST)
-def solve_kernel(A, b, lower, upper, sw, row_eq, starts, rcond, primal_tol, dual_tol,
-                 max_iter, use_warm, warm_state, warm_valid,
-                 B, blo, bup, rnorm, eqr, state, saved, T, rhs, norms, rows, tgt,
-                 V, beta, vpos, Vf, betaf, posf, y, p, g, nu, Lw,
-                 x, iters, flags, ranks, w2):
+def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     """Solve one stack; see the module docstring.
 
+    One compiled call with few arguments: every workspace, parameter and output lives
+    in three flat arrays (float64, int64, int8; parts at :func:`workspace_offsets`)
+    and the helpers are inlined (in numba, each array passed to a compiled call costs
+    about as much as a short loop: 50 of them cost ~2 µs per call).
+
     Args:
-        A, b, lower, upper, sw, row_eq, starts: The stack's rows (``M × n``), targets,
-            bounds, ``√w`` per row, equality flags and ``k + 1`` level offsets.
-        rcond: Relative rank threshold (soft rows: ``rcond ‖A_i‖_F``; hard and fixed
-            rows: as the extended Jacobian, and relative to the row's norm).
-        primal_tol, dual_tol: Relative feasibility and multiplier tolerances.
-        max_iter: Iteration cap of each level.
-        use_warm: Start every level from ``warm_state`` where ``warm_valid``.
-        warm_state, warm_valid: ``(k + 1) × (M + n)`` working sets at each level's end
-            (read when ``use_warm``, always written).
-        B … Lw: Workspaces (``B``, ``T``: ``(M + n) × n``; the ``n`` extra rows are the
-            minimum-norm level ``y[col:] = 0``).
-        x: Output ``n``.
-        iters, flags, ranks: Outputs per level (``k + 1``, the last is the minimum-norm
-            level): iterations, :data:`FLAG_ITERATION_CAP` when the cap was hit, rank
-            fixed.
-        w2: Output ``k``: each level's weighted squared violation at ``x``.
+        A, b, lower, upper, sw: The stack's rows (``M × n``), targets, bounds and ``√w``
+            per row (a :class:`~prioik.hierarchy.StackData`'s arrays).
+        fwork: float64: ``params`` (``rcond``: relative rank threshold, soft and fixed
+            rows ``rcond ‖A_i‖_F``, hard rows relative to the row's norm;
+            ``primal_tol``, ``dual_tol``: relative feasibility and multiplier
+            tolerances; ``max_iter``: iteration cap of each level; ``use_warm``: start
+            every level from ``warm_state`` where ``warm_valid``), workspaces (``B``,
+            ``T``: ``(M + n) × n``; the ``n`` extra rows are the minimum-norm level
+            ``y[col:] = 0``; ``B`` holds the rows in rotated coordinates, brought up to
+            date lazily (``nrot``), ``Bo`` the weighted rows in ``x``, where rows outside
+            the working set are checked against ``xc = Q y``), outputs ``x`` (``n``) and
+            ``w2`` (``k``: each level's weighted squared violation at ``x``).
+        iwork: int64: ``k``, the ``k + 1`` level offsets, workspaces, outputs
+            ``counts`` (``3 × (k + 1)``, the last column the minimum-norm level:
+            iterations, :data:`FLAG_ITERATION_CAP` when the cap was hit, rank fixed).
+        bwork: int8: the rows' equality flags, workspaces, ``warm_state`` and
+            ``warm_valid`` (``(k + 1) × (M + n)`` working sets at each level's end, read
+            when ``use_warm``, always written).
 
     Returns:
         ``False`` (nothing solved) when a value is not valid: a non-finite entry of
@@ -313,19 +477,96 @@ def solve_kernel(A, b, lower, upper, sw, row_eq, starts, rcond, primal_tol, dual
         ``lower = +inf``, ``upper = −inf`` or ``lower > upper``; the caller names it.
     """
     M, n = A.shape
-    k = starts.shape[0] - 1
+    k = iwork[0]
+    R = M + n
+    Rn = R * n
+    o = N_PARAMS
+    B = fwork[o:o + Rn].reshape((R, n))
+    o += Rn
+    T = fwork[o:o + Rn].reshape((R, n))
+    o += Rn
+    Lw = fwork[o:o + Rn].reshape((R, n))
+    o += Rn
+    Bo = fwork[o:o + Rn].reshape((R, n))
+    o += Rn
+    flat = fwork[o:o + Rn]
+    o += Rn
+    V = fwork[o:o + n * n].reshape((n, n))
+    o += n * n
+    Vf = fwork[o:o + n * n].reshape((n, n))
+    o += n * n
+    fvec = fwork[o:o + N_FVEC * R].reshape((N_FVEC, R))
+    o += N_FVEC * R
+    x = fwork[o:o + n]
+    o += n
+    w2 = fwork[o:o + k]
+    res = fwork[o + k:o + 2 * k]
+    starts = iwork[1:k + 2]
+    o = k + 2
+    ivec = iwork[o:o + 5 * R].reshape((5, R))
+    o += 5 * R
+    perm = iwork[o:o + n]
+    o += n
+    counts = iwork[o:o + 3 * (k + 1)].reshape((3, k + 1))
+    row_eq = bwork[:M]
+    o = M
+    bvec = bwork[o:o + 2 * R].reshape((2, R))
+    o += 2 * R
+    eqr = bwork[o:o + R]
+    o += R
+    warm_state = bwork[o:o + (k + 1) * R].reshape((k + 1, R))
+    o += (k + 1) * R
+    warm_valid = bwork[o:o + k + 1]
+    rcond = fwork[0]
+    primal_tol = fwork[1]
+    dual_tol = fwork[2]
+    max_iter = int(fwork[3])
+    use_warm = fwork[4] != 0.0
+    blo = fvec[0]
+    bup = fvec[1]
+    rnorm = fvec[2]
+    state = bvec[0]
+    saved = bvec[1]
+    rhs = fvec[3]
+    norms = fvec[4]
+    rows = ivec[0]
+    tgt = fvec[5]
+    beta = fvec[6, :n]
+    vpos = ivec[1, :n]
+    betaf = fvec[7, :n]
+    posf = ivec[2, :n]
+    y = fvec[8, :n]
+    p = fvec[9, :n]
+    g = fvec[10, :n]
+    nu = fvec[11]
+    nrot = ivec[3]
+    ucol = ivec[4]
+    px = fvec[12, :n]
+    xc = fvec[13, :n]
+    xs = fvec[14, :n]
+    iters = counts[0]
+    flags = counts[1]
+    ranks = counts[2]
     for j in range(M):
         s = sw[j]
         if not (np.isfinite(s) and s > 0.0):
             return False
+        nz = 0
         for c in range(n):
             B[j, c] = s * A[j, c]
+            Bo[j, c] = B[j, c]
+            if A[j, c] != 0.0:
+                nz += 1
+                ucol[j] = c
+        if nz != 1:
+            ucol[j] = -1
+        nrot[j] = 0
         if row_eq[j]:
             if not np.isfinite(b[j]):
                 return False
             blo[j] = s * b[j]
             bup[j] = blo[j]
-            eqr[j] = True
+            eqr[j] = 1
         else:
             lo = lower[j]
             up = upper[j]
@@ -333,7 +574,7 @@ def solve_kernel(A, b, lower, upper, sw, row_eq, starts, rcond, primal_tol, dual
                 return False
             blo[j] = s * lo
             bup[j] = s * up
-            eqr[j] = lo == up
+            eqr[j] = 1 if lo == up else 0
         rnorm[j] = np.sqrt(_dot(B[j], B[j]))
         if not np.isfinite(rnorm[j]):
             return False
@@ -341,11 +582,12 @@ def solve_kernel(A, b, lower, upper, sw, row_eq, starts, rcond, primal_tol, dual
     for j in range(M, M + n):
         blo[j] = 0.0
         bup[j] = 0.0
-        eqr[j] = True
+        eqr[j] = 1
         rnorm[j] = 1.0
         state[j] = 0
     for c in range(n):
         y[c] = 0.0
+        xc[c] = 0.0
     col = 0
     nf = 0
     for lev in range(k + 1):
@@ -375,6 +617,7 @@ def solve_kernel(A, b, lower, upper, sw, row_eq, starts, rcond, primal_tol, dual
                 for c in range(n):
                     B[j, c] = 0.0
                 B[j, j - M] = 1.0
+                nrot[j] = nf
         if s1 == s0:
             continue
         d = n - col
@@ -388,7 +631,7 @@ def solve_kernel(A, b, lower, upper, sw, row_eq, starts, rcond, primal_tol, dual
             if eqr[j]:
                 state[j] = 3
             else:
-                r = _dot(B[j], y)
+                r = _odot(Bo, ucol, j, xc)
                 state[j] = _violated_side(r, blo[j], bup[j],
                                           _tol(primal_tol, rnorm[j], ynorm, blo[j]),
                                           _tol(primal_tol, rnorm[j], ynorm, bup[j]))
@@ -398,6 +641,7 @@ def solve_kernel(A, b, lower, upper, sw, row_eq, starts, rcond, primal_tol, dual
         nw = 0
         hr = 0
         rs = 0
+        full = False
         if use_warm and warm_valid[lev]:
             for j in range(s1):
                 saved[j] = state[j]
@@ -411,21 +655,26 @@ def solve_kernel(A, b, lower, upper, sw, row_eq, starts, rcond, primal_tol, dual
                     state[j] = 1
                 elif j < hard_end:
                     state[j] = 0
-            nh, nw = _gather(state, hard_end, s0, s1, blo, bup, rows, tgt)
-            hr, rs, nref = _eqp(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T,
-                                rhs, norms, V, beta, vpos, Lw, p, True)
+            nh, nw = _gather(state, hard_end, s0, s1, blo, bup, rows, tgt, B, nrot, nf,
+                                 Vf, betaf, posf)
+            hr, rs, nref, full = _step(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol,
+                                       T, rhs, norms, V, beta, vpos, Lw, p, True, flat, perm)
             iters[lev] += 1
             for i in range(hr, nh):
                 state[rows[i]] = 0
             for c in range(d):
                 g[c] = y[col + c]
                 y[col + c] += p[c]
+            _lift(p, col, px, nf, Vf, betaf, posf)
+            for c in range(n):
+                xs[c] = xc[c]
+                xc[c] += px[c]
             ynorm = np.sqrt(_dot(y, y))
             feasible = True
             for j in range(hard_end):
                 if state[j] != 0 or eqr[j]:
                     continue
-                r = _dot(B[j], y)
+                r = _odot(Bo, ucol, j, xc)
                 if _violated_side(r, blo[j], bup[j],
                                   _tol(primal_tol, rnorm[j], ynorm, blo[j]),
                                   _tol(primal_tol, rnorm[j], ynorm, bup[j])) != 0:
@@ -437,7 +686,7 @@ def solve_kernel(A, b, lower, upper, sw, row_eq, starts, rcond, primal_tol, dual
                 have_step = hr == nh
                 for j in range(s0, s1):
                     if state[j] == 0:
-                        r = _dot(B[j], y)
+                        r = _odot(Bo, ucol, j, xc)
                         state[j] = _violated_side(r, blo[j], bup[j],
                                                   _tol(primal_tol, rnorm[j], ynorm, blo[j]),
                                                   _tol(primal_tol, rnorm[j], ynorm, bup[j]))
@@ -446,6 +695,8 @@ def solve_kernel(A, b, lower, upper, sw, row_eq, starts, rcond, primal_tol, dual
             else:
                 for c in range(d):
                     y[col + c] = g[c]
+                for c in range(n):
+                    xc[c] = xs[c]
                 for j in range(s1):
                     state[j] = saved[j]
         # ---- primal active-set iterations
@@ -459,9 +710,11 @@ def solve_kernel(A, b, lower, upper, sw, row_eq, starts, rcond, primal_tol, dual
                     flags[lev] = FLAG_ITERATION_CAP
                     break
                 iters[lev] += 1
-                nh, nw = _gather(state, hard_end, s0, s1, blo, bup, rows, tgt)
-                hr, rs, nref = _eqp(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T,
-                                    rhs, norms, V, beta, vpos, Lw, p, False)
+                nh, nw = _gather(state, hard_end, s0, s1, blo, bup, rows, tgt, B, nrot, nf,
+                                 Vf, betaf, posf)
+                hr, rs, nref, full = _step(B, y, col, rows, nh, nw, tgt, rnorm, rcond,
+                                           soft_tol, T, rhs, norms, V, beta, vpos, Lw, p,
+                                           False, flat, perm)
                 for i in range(hr, nh):
                     state[rows[i]] = 0          # dependent on the kept hard rows
                 pn = np.sqrt(_dot(p[:d], p[:d]))
@@ -474,16 +727,17 @@ def solve_kernel(A, b, lower, upper, sw, row_eq, starts, rcond, primal_tol, dual
                 block_eps = max(_BLOCK_EPS, rcond)
                 bside = 0
                 if pn > 0.0:
+                    _lift(p, col, px, nf, Vf, betaf, posf)
                     for j in range(s1):
                         if state[j] != 0 or eqr[j] or (j >= hard_end and j < s0):
                             continue
-                        cp = _dot(B[j, col:], p[:d])
+                        cp = _odot(Bo, ucol, j, px)
                         thr = block_eps * rnorm[j] * pn
                         if cp < -thr and np.isfinite(blo[j]):
-                            a = (blo[j] - _dot(B[j], y)) / cp
+                            a = (blo[j] - _odot(Bo, ucol, j, xc)) / cp
                             side = -1
                         elif cp > thr and np.isfinite(bup[j]):
-                            a = (bup[j] - _dot(B[j], y)) / cp
+                            a = (bup[j] - _odot(Bo, ucol, j, xc)) / cp
                             side = 1
                         else:
                             continue
@@ -493,8 +747,11 @@ def solve_kernel(A, b, lower, upper, sw, row_eq, starts, rcond, primal_tol, dual
                             alpha = a
                             blk = j
                             bside = side
-                for c in range(d):
-                    y[col + c] += alpha * p[c]
+                if pn > 0.0:
+                    for c in range(d):
+                        y[col + c] += alpha * p[c]
+                    for c in range(n):
+                        xc[c] += alpha * px[c]
                 if blk >= 0:
                     state[blk] = bside
                     bland = alpha <= _DEGENERATE
@@ -506,7 +763,7 @@ def solve_kernel(A, b, lower, upper, sw, row_eq, starts, rcond, primal_tol, dual
             for j in range(s0, s1):
                 st = state[j]
                 if st == -1 or st == 1:
-                    r = _dot(B[j], y)
+                    r = _odot(Bo, ucol, j, xc)
                     tl = _tol(primal_tol, rnorm[j], ynorm, blo[j])
                     tu = _tol(primal_tol, rnorm[j], ynorm, bup[j])
                     if st == -1 and r > blo[j] + tl:
@@ -545,7 +802,7 @@ def solve_kernel(A, b, lower, upper, sw, row_eq, starts, rcond, primal_tol, dual
         for j in range(s1):
             st = state[j]
             warm_state[lev, j] = st if (st == -1 or st == 1) else 0
-        warm_valid[lev] = True
+        warm_valid[lev] = 1
         if lev == k:
             break
         ynorm = np.sqrt(_dot(y, y))
@@ -555,13 +812,22 @@ def solve_kernel(A, b, lower, upper, sw, row_eq, starts, rcond, primal_tol, dual
             fix = eqr[j]
             if st == -1 or st == 1:
                 tb = blo[j] if st == -1 else bup[j]
-                fix = abs(_dot(B[j], y) - tb) > _tol(primal_tol, rnorm[j], ynorm, tb)
+                fix = abs(_odot(Bo, ucol, j, xc) - tb) > _tol(primal_tol, rnorm[j], ynorm, tb)
             if fix:
+                _bring(B, j, nrot, nf, Vf, betaf, posf)
                 rows[nfix] = j
                 norms[nfix] = _dot(B[j, col:], B[j, col:])
                 nfix += 1
                 state[j] = 5            # being fixed: rotated until its pivot is taken
         rf = 0
+        if settled and full and nfix == nw:
+            # the level has full column rank on the free coordinates (the step's
+            # column-pivoted QR): it fixes them all, y[col:] is its answer
+            ranks[lev] = d
+            col = n
+            for i in range(nfix):
+                state[rows[i]] = 2
+            continue
         if settled and hr == 0 and nfix == nw:
             # the last step's factorization is that of exactly these rows (no hard row
             # was held, every held row is fixed): its reflectors are the fixing ones
@@ -575,14 +841,6 @@ def solve_kernel(A, b, lower, upper, sw, row_eq, starts, rcond, primal_tol, dual
                 bt = beta[t]
                 betaf[nf] = bt
                 posf[nf] = q
-                for i in range(M):
-                    if state[i] == 2 or state[i] == 5:
-                        continue
-                    other = B[i, q:]
-                    f = bt * _dot(other, vf)
-                    if f != 0.0:
-                        for c in range(n - q):
-                            other[c] -= f * vf[c]
                 yq = y[q:]
                 f = bt * _dot(yq, vf)
                 for c in range(n - q):
@@ -621,14 +879,13 @@ def solve_kernel(A, b, lower, upper, sw, row_eq, starts, rcond, primal_tol, dual
             tail[0] = alpha
             for c in range(1, n - col):
                 tail[c] = 0.0
-            for i in range(M):
-                if i == jp or state[i] == 2:   # fixed rows above are done with
-                    continue
-                other = B[i, col:]
+            for i in range(rf + 1, nfix):   # the other rows: lazily, when needed
+                other = B[rows[i], col:]
                 f = bt * _dot(other, vf)
                 if f != 0.0:
                     for c in range(n - col):
                         other[c] -= f * vf[c]
+                nrot[rows[i]] = nf + 1
             yq = y[col:]
             f = bt * _dot(yq, vf)
             for c in range(n - col):
@@ -653,6 +910,7 @@ def solve_kernel(A, b, lower, upper, sw, row_eq, starts, rcond, primal_tol, dual
         for c in range(n - q):
             xq[c] -= f * vx[c]
     # each level's weighted squared violation at x
+    total = 0.0
     for lev in range(k):
         acc = 0.0
         for j in range(starts[lev], starts[lev + 1]):
@@ -665,25 +923,14 @@ def solve_kernel(A, b, lower, upper, sw, row_eq, starts, rcond, primal_tol, dual
                 e = lo - ax if ax < lo else (ax - up if ax > up else 0.0)
             acc += e * e
         w2[lev] = acc
+        res[lev] = np.sqrt(acc)
+        total += acc
+    xn = np.sqrt(_dot(x, x))
+    fwork[5] = xn
+    capped = 0.0
+    for lev in range(k + 1):
+        if flags[lev] != FLAG_OK:
+            capped = 1.0
+    fwork[6] = capped if (np.isfinite(xn) and np.isfinite(total)) else -1.0
     return True
 
-
-@njit(cache=True)
-def solve_data(A, b, lower, upper, sw, row_eq, starts, params, use_warm, warm_state,
-               warm_valid, fmat, fsq, fvec, ivec, bvec, eqr, x, counts, w2):
-    """:func:`solve_kernel` with its workspaces packed into a few arrays (one compiled
-    call with few arguments: numba's dispatch costs per argument).
-
-    ``params`` = ``(rcond, primal_tol, dual_tol, max_iter)``; ``fmat`` ``3 × R × n``
-    (``B``, ``T``, ``Lw``), ``fsq`` ``2 × n × n`` (``V``, ``Vf``), ``fvec`` ``12 × R``,
-    ``ivec`` ``3 × R`` (int64), ``bvec`` ``2 × R`` (int8), ``eqr`` ``R`` (bool) with
-    ``R = M + n``; ``counts`` ``3 × (k + 1)`` (iterations, flags, ranks).
-    """
-    n = A.shape[1]
-    return solve_kernel(A, b, lower, upper, sw, row_eq, starts, params[0], params[1],
-                        params[2], int(params[3]), use_warm, warm_state, warm_valid,
-                        fmat[0], fvec[0], fvec[1], fvec[2], eqr, bvec[0], bvec[1], fmat[1],
-                        fvec[3], fvec[4], ivec[0], fvec[5], fsq[0], fvec[6, :n],
-                        ivec[1, :n], fsq[1], fvec[7, :n], ivec[2, :n], fvec[8, :n],
-                        fvec[9, :n], fvec[10, :n], fvec[11], fmat[2], x, counts[0],
-                        counts[1], counts[2], w2)

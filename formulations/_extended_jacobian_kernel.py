@@ -23,6 +23,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from prioik.hierarchy.linalg import AMBIGUITY as _AMBIGUITY
+
 #: LLVM may reassociate and contract (vectorised reductions, FMA) but not assume
 #: finite values: inputs are validated finite and a non-finite result must show.
 _FAST = {"reassoc", "contract", "nsz", "arcp"}
@@ -489,7 +491,8 @@ def solve_data(A, b, w, starts, work, params, out, ranks):
         ranks: ``k + n`` ints: the ``k`` ranks (output), then the kernel's scratch.
 
     Returns 0 when an input is not finite (nothing solved), 1 when ``x`` and the
-    residuals are finite, 2 when they are not (the caller reports a failure).
+    residuals are finite, 2 when they are not (the caller reports a failure); plus 4
+    when some level's rank decision margin is within :data:`AMBIGUITY` of its threshold.
     """
     M, n = A.shape
     k = starts.shape[0] - 1
@@ -517,9 +520,13 @@ def solve_data(A, b, w, starts, work, params, out, ranks):
                     ranks[:k], mu2, margins, V, beta, ranks[k:], y, norms, L, rhs)
     level_residuals(A, b, w, starts, x, residuals)
     acc = 0.0
+    ambiguous = False
     for lev in range(k):
         acc += residuals[lev]
-    return 1 if np.isfinite(acc) else 2
+        if margins[lev] <= _AMBIGUITY:
+            ambiguous = True
+    code = 1 if np.isfinite(acc) else 2
+    return code + 4 if ambiguous else code
 
 
 @njit(cache=True, parallel=True)

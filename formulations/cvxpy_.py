@@ -55,6 +55,10 @@ DEFAULT_SETTINGS: dict[str, dict[str, Any]] = {
     "SCS": {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iters": 200_000},
 }
 
+#: reports this plugin stays out of (benchmarks/variants.py)
+REPORT_OPT_OUTS = {"sweep": "a modelling layer, tens of ms per level QP: a scenario run "
+                            "takes minutes; cascaded_qp solves the same cascade"}
+
 OPTIONS = {
     "solver": Option(DEFAULT_SOLVER, "str", "cvxpy solver name (see backends())"),
     "backend_options": Option(None, "any", "dict of keyword arguments for the solver "

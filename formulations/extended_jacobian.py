@@ -293,10 +293,10 @@ class Prepared:
         if self._selective or self._bounded:
             status = _damping_info(info, out[n + k:n + 2 * k], self._selective,
                                    self._bounded)
-        margins = out[n + 2 * k:]
-        if margins.min() <= AMBIGUITY:
+        if code & 4:          # a rank decision within AMBIGUITY of its threshold
+            margins = out[n + 2 * k:]
             status = _ambiguity_status(info, status, np.flatnonzero(margins <= AMBIGUITY))
-        return Outcome(out[:n], status, info, out[n:n + k], code == 1)
+        return Outcome(out[:n], status, info, out[n:n + k], (code & 3) == 1)
 
     def _solve_stack(self, stack: TaskStack) -> Outcome:
         if self.damping > 0:
@@ -326,6 +326,8 @@ def level_step_bounds(stack: TaskStack | StackLayout, step_bound) -> np.ndarray:
     """
     layout = stack.layout if isinstance(stack, TaskStack) else stack
     k = len(layout)
+    if type(step_bound) in (float, int) and step_bound == 0:
+        return np.zeros(k)                       # the default: every level unbounded
     if isinstance(step_bound, dict):
         out = np.zeros(k)
         for name, val in step_bound.items():
@@ -811,6 +813,6 @@ def _solve_batch(prepared: "Prepared", datas: list[StackData]) -> tuple[np.ndarr
     bounds = np.broadcast_to(prepared.step_bound, (N, k)).copy()
     _kernel.solve_batch_kernel(B, c, starts, scales, prepared.rcond, prepared.level_damping,
                                prepared.singular_threshold, bounds, X, ranks, mu2, margins)
-    statuses = ["approximate" if (d > 0).any() or (g <= AMBIGUITY).any() else "optimal"
-                for d, g in zip(mu2, margins)]
+    approximate = (mu2 > 0).any(axis=1) | (margins <= AMBIGUITY).any(axis=1)
+    statuses = ["approximate" if a else "optimal" for a in approximate.tolist()]
     return X, statuses

@@ -146,24 +146,33 @@ class Prepared:
         self.warm_start = bool(options["warm_start"])
         m, n, k = layout.m, layout.n, layout.k
         rows = m + n
-        self._params = np.array([self.rcond, self.primal_tol, self.dual_tol, self.max_iter])
-        self._fmat = np.zeros((3, rows, n))
-        self._fsq = np.zeros((2, n, n))
-        self._fvec = np.zeros((12, rows))
-        self._ivec = np.zeros((3, rows), dtype=np.int64)
-        self._bvec = np.zeros((2, rows), dtype=np.int8)
-        self._eqr = np.zeros(rows, dtype=np.bool_)
+        off = _kernel.workspace_offsets(m, n, k)
+        self._fwork = np.zeros(off["size_f"][1])
+        self._iwork = np.zeros(off["size_i"][1], dtype=np.int64)
+        self._bwork = np.zeros(off["size_b"][1], dtype=np.int8)
+
+        def part(work, name, shape=None):
+            v = work[slice(*off[name])]
+            return v if shape is None else v.reshape(shape)
+
+        part(self._fwork, "params")[:5] = (self.rcond, self.primal_tol, self.dual_tol,
+                                           self.max_iter, float(self.warm_start))
+        self._iwork[0] = k
+        part(self._iwork, "starts")[:] = layout.starts
+        part(self._bwork, "row_eq")[:] = layout.row_is_equality
         #: per level (and the minimum-norm level last), the working set at its optimum:
         #: ``-1``/``+1`` a row held at its lower/upper bound, ``0`` not held
-        self.warm_state = np.zeros((k + 1, rows), dtype=np.int8)
-        self.warm_valid = np.zeros(k + 1, dtype=np.bool_)
-        self._x = np.zeros(n)
-        self._counts = np.zeros((3, k + 1), dtype=np.int64)
-        self._w2 = np.zeros(k)
+        self.warm_state = part(self._bwork, "warm_state", (k + 1, rows))
+        #: per level: whether :attr:`warm_state` holds a working set (``1``) or not
+        self.warm_valid = part(self._bwork, "warm_valid")
+        #: the kernel's outputs: ``x``, each level's ``‖w_i‖²``, its root (one copy)
+        self._out = self._fwork[off["x"][0]:off["res"][1]]
+        self._summary = self._fwork[5:7]          # ‖x‖, cap/non-finite flag
+        self._counts = part(self._iwork, "counts", (3, k + 1))
 
     def reset(self) -> None:
         """Forget the kept working sets (the next solve starts cold)."""
-        self.warm_valid[:] = False
+        self.warm_valid[:] = 0
 
     def solve(self, data: StackData) -> Outcome:
         """Solve one stack of the layout (its data; the registry checked the layout).
@@ -171,32 +180,29 @@ class Prepared:
         Raises:
             TaskStackError: a value is not valid (naming the task, level and row).
         """
-        L = self.layout
         ok = _kernel.solve_data(data.A, data.b, data.lower, data.upper, data.sqrt_weight,
-                                L.row_is_equality, L.starts, self._params, self.warm_start,
-                                self.warm_state, self.warm_valid, self._fmat, self._fsq,
-                                self._fvec, self._ivec, self._bvec, self._eqr, self._x,
-                                self._counts, self._w2)
+                                self._fwork, self._iwork, self._bwork)
         if not ok:
-            self.warm_valid[:] = False
+            self.warm_valid[:] = 0
             data.check()     # names the task, level and row at fault
             raise TaskStackError("the rows' values overflow float64: scale the tasks down")
         return self._outcome()
 
     def _outcome(self) -> Outcome:
-        x = self._x.copy()
-        k = self.layout.k
-        w2 = self._w2.copy()
-        residuals = np.sqrt(w2)
-        counts = self._counts
-        xn = math.sqrt(float(x @ x))
+        n, k = self.layout.n, self.layout.k
+        out = self._out.copy()
+        x, w2, residuals = out[:n], out[n:n + k], out[n + k:]
+        counts = self._counts.copy()
+        xn, flag = self._summary.tolist()
         tol = self.primal_tol * max(1.0, xn)
-        info = {"iterations": counts[0].copy(), "rank_profile": counts[2, :k].copy(),
+        info = {"iterations": counts[0], "rank_profile": counts[2, :k],
                 "level_violation": w2,
                 "infeasible_levels": [i for i, r in enumerate(residuals.tolist()) if r > tol],
                 "warm_start": self.warm_start}
-        if not (math.isfinite(xn) and math.isfinite(float(w2.sum()))):
-            self.warm_valid[:] = False
+        if flag == 0.0:
+            return Outcome(x, "optimal", info, residuals=residuals, checked=True)
+        if flag < 0.0:
+            self.warm_valid[:] = 0
             info["message"] = "the active-set iterations produced non-finite values"
             return Outcome(x, "failed", info, residuals=residuals)
         if counts[1].any():
@@ -209,5 +215,4 @@ class Prepared:
                                 f"working set did not settle (degenerate or cycling); the "
                                 f"levels above are optimal and x keeps their optimum, but it "
                                 f"is not certified optimal from that level down")
-            return Outcome(x, "approximate", info, residuals=residuals)
-        return Outcome(x, "optimal", info, residuals=residuals)
+        return Outcome(x, "approximate", info, residuals=residuals, checked=True)

@@ -13,8 +13,9 @@ A plugin is a module that defines
 * optionally ``solve_batch(stacks, **options) -> (X, statuses)`` for many stacks of one
   shape (stacked linear algebra); :func:`solve_batch` loops over ``solve`` otherwise.
 
-An optional dependency that fails to import makes the plugin unavailable; the
-reason is recorded and repeated when that formulation is asked for.
+A plugin whose optional dependency is not installed is unavailable; the reason,
+ending with the extra to install (``install it with `pip install prioik[qp]```), is
+recorded and repeated when that formulation is asked for.
 """
 
 from __future__ import annotations
@@ -24,13 +25,15 @@ from dataclasses import dataclass, field
 from types import ModuleType
 from typing import Any
 
+from prioik.extras import install_hint
 from prioik.hierarchy import StackData, StackLayout, TaskStack
 
 from .base import Capabilities, FormulationError, Solution
 from .options import Option, validate_options
 from .prepared import PreparedSolver, check_support  # noqa: F401  (re-exported)
 
-#: name -> (module, pip package(s) that provide its optional dependency)
+#: name -> (module, the extra of pyproject.toml that brings its dependencies; "" for the
+#: core). prioik.extras.EXTRAS names the extras.
 PLUGINS: dict[str, tuple[str, str]] = {
     "reference": ("prioik.formulations.reference", ""),
     "extended_jacobian": ("prioik.formulations.extended_jacobian", ""),
@@ -38,11 +41,11 @@ PLUGINS: dict[str, tuple[str, str]] = {
     "chiaverini": ("prioik.formulations.chiaverini", ""),
     "unifying": ("prioik.formulations.unifying", ""),
     "operational_space": ("prioik.formulations.operational_space", ""),
-    "cascaded_qp": ("prioik.formulations.cascaded_qp", "qpsolvers[open_source_solvers]"),
+    "cascaded_qp": ("prioik.formulations.cascaded_qp", "qp"),
     "cvxpy": ("prioik.formulations.cvxpy_", "cvxpy"),
-    "placo": ("prioik.formulations.placo_", "placo==0.10.2 pin==3.8.0"),
-    "daqp_hierarchical": ("prioik.formulations.daqp_hierarchical", "daqp"),
-    "hierarchical_active_set": ("prioik.formulations.hierarchical_active_set", "numba"),
+    "placo": ("prioik.formulations.placo_", "placo"),
+    "daqp_hierarchical": ("prioik.formulations.daqp_hierarchical", "qp"),
+    "hierarchical_active_set": ("prioik.formulations.hierarchical_active_set", ""),
     "sns": ("prioik.formulations.sns", ""),
 }
 
@@ -62,6 +65,7 @@ class FormulationInfo:
         capabilities: What it supports (``None`` when it could not be imported).
         options: Accepted options (typed :class:`~prioik.formulations.options.Option`).
         backends: Back-ends it can use here (QP solvers), if it has any.
+        extra: The extra that brings its dependencies (``""``: in the core).
     """
 
     name: str
@@ -71,6 +75,7 @@ class FormulationInfo:
     capabilities: Capabilities | None = None
     options: dict[str, Option] = field(default_factory=dict)
     backends: tuple[str, ...] = ()
+    extra: str = ""
 
 
 def _load(name: str) -> ModuleType | None:
@@ -78,14 +83,16 @@ def _load(name: str) -> ModuleType | None:
         return _loaded[name]
     if name in _failed:
         return None
-    module_name, package = PLUGINS[name]
+    module_name, extra = PLUGINS[name]
     try:
         mod = importlib.import_module(module_name)
     except ImportError as exc:
         missing = getattr(exc, "name", None) or ""
-        own = missing == module_name or missing.startswith("prioik.formulations")
-        hint = f"; install it with `pip install {package}`" if package and not own else ""
-        _failed[name] = f"{type(exc).__name__}: {exc}{hint}"
+        own = missing == module_name or missing.startswith("prioik.")
+        if extra and not own:  # an optional dependency: say which extra brings it
+            _failed[name] = f"{exc} (the `{extra}` extra); {install_hint(extra)}"
+        else:  # a broken installation or a bug: the error as it is
+            _failed[name] = f"{type(exc).__name__}: {exc}"
         return None
     _loaded[name] = mod
     return mod
@@ -101,12 +108,13 @@ def available() -> list[FormulationInfo]:
     out = []
     for name in PLUGINS:
         mod = _load(name)
+        extra = PLUGINS[name][1]
         if mod is None:
-            out.append(FormulationInfo(name, False, _failed[name]))
+            out.append(FormulationInfo(name, False, _failed[name], extra=extra))
             continue
         backends = tuple(mod.backends()) if hasattr(mod, "backends") else ()
         out.append(FormulationInfo(name, True, "", mod.DESCRIPTION, mod.CAPABILITIES,
-                                   dict(mod.OPTIONS), backends))
+                                   dict(mod.OPTIONS), backends, extra))
     return out
 
 

@@ -17,7 +17,9 @@ Sub-packages (data flows one way, top to bottom):
 * :mod:`prioik.formulations` — the formulation plugins and their registry;
 * :mod:`prioik.robots` — robot models (pinocchio) and task writers (imported on first
   use: it needs the ``robots`` extra);
-* :mod:`prioik.benchmarks` — comparisons, reports and the ``prioik`` command line.
+* :mod:`prioik.benchmarks` — comparisons, reports and the ``prioik`` command line;
+* :mod:`prioik.extras` — which ``pip install prioik[EXTRA]`` brings which part
+  (``pip install prioik`` is the core: numpy, scipy, numba, threadpoolctl).
 
 Importing prioik changes nothing in the process (no environment variable, no BLAS
 thread setting).
@@ -28,7 +30,8 @@ from __future__ import annotations
 import importlib
 from importlib.metadata import PackageNotFoundError, version as _version
 
-from . import formulations, hierarchy
+from . import extras, formulations, hierarchy
+from .extras import MissingExtraError
 from .formulations import (BatchSolution, Capabilities, ConcurrentUseError, FormulationError,
                            Option, PreparedSolver, Solution, available, prepare, solve,
                            solve_batch)
@@ -59,8 +62,8 @@ def __dir__() -> list[str]:
 
 __all__ = [
     "BatchSolution", "Capabilities", "ConcurrentUseError", "FormulationError", "Level",
-    "LexicographicReport", "Option", "PreparedSolver", "Solution", "StackData", "StackLayout",
-    "Task", "TaskStack", "TaskStackError", "UnsupportedTaskError", "__version__", "available",
-    "benchmarks", "check_lexicographic", "formulations", "hierarchy", "load_stack", "prepare",
-    "robots", "save_stack", "solve", "solve_batch",
+    "LexicographicReport", "MissingExtraError", "Option", "PreparedSolver", "Solution",
+    "StackData", "StackLayout", "Task", "TaskStack", "TaskStackError", "UnsupportedTaskError",
+    "__version__", "available", "benchmarks", "check_lexicographic", "extras", "formulations",
+    "hierarchy", "load_stack", "prepare", "robots", "save_stack", "solve", "solve_batch",
 ]

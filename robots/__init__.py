@@ -2,7 +2,17 @@
 
 Data flows one way: ``hierarchy`` ← ``robots``; this package never imports
 ``formulations`` (:func:`simulate` takes any solver callable).
+
+Needs the ``robots`` extra (``pip install prioik[robots]``): importing it without
+pinocchio raises :class:`prioik.extras.MissingExtraError` saying so.
 """
+
+import importlib.util
+
+from prioik.extras import MissingExtraError
+
+if importlib.util.find_spec("pinocchio") is None:
+    raise MissingExtraError(("robots",), "prioik.robots", ("pinocchio",))
 
 from .models import (LOADERS, PANDA_FINGERS, ModelNotFoundError, RobotModel, StateError,
                      check_configuration, check_velocity, example_robot_data_dir, from_urdf,

@@ -259,3 +259,35 @@ def velocity_targets(b, Q):
     """``b = ẋ* + K e`` (per row)."""
     for i in range(b.shape[0]):
         b[i] = Q[VELOCITY_REF, i] + Q[KP, i] * Q[ERROR, i]
+
+
+@njit(cache=True)
+def acceleration_targets(A, b, Q, v):
+    """``b = ẍ* + K_d (ẋ* − J q̇) + K_p e − J̇ q̇`` (eq. 2-4, per row)."""
+    n = A.shape[1]
+    for i in range(b.shape[0]):
+        jv = 0.0
+        for j in range(n):
+            jv += A[i, j] * v[j]
+        b[i] = (Q[KD, i] * (Q[VELOCITY_REF, i] - jv) + Q[KP, i] * Q[ERROR, i]
+                + Q[FEEDFORWARD, i] - Q[DRIFT, i])
+
+
+@njit(cache=True)
+def state_is_valid(q, v, unit_starts, unit_sizes, tol):
+    """Every entry of ``q`` and ``v`` finite and every unit-norm part of ``q``
+    (quaternions, unit complexes: ``unit_starts``, ``unit_sizes``) of norm 1 within
+    ``tol`` — the fast check of a control step's state (the slow one names the fault)."""
+    for i in range(q.shape[0]):
+        if not np.isfinite(q[i]):
+            return False
+    for i in range(v.shape[0]):
+        if not np.isfinite(v[i]):
+            return False
+    for p in range(unit_starts.shape[0]):
+        acc = 0.0
+        for i in range(unit_starts[p], unit_starts[p] + unit_sizes[p]):
+            acc += q[i] * q[i]
+        if abs(np.sqrt(acc) - 1.0) > tol:
+            return False
+    return True

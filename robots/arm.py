@@ -193,7 +193,7 @@ class ArmScenario(Scenario):
             levels.append(terms[name].acceleration(*self.gains[name]))
         n_tasks = len(levels)
         levels.append(terms["posture"].acceleration(*self.gains["posture"]))
-        return StepTasks(TaskStack(levels), self.errors(state, t, terms), n_tasks)
+        return StepTasks(TaskStack(levels), lambda: self.errors(state, t, terms), n_tasks)
 
     def velocity_stack(self, state: KinematicState, t: float, gain: float = 10.0,
                        limits: str = "none", dt: float = 0.002) -> StepTasks:
@@ -210,7 +210,7 @@ class ArmScenario(Scenario):
         levels.append(terms["tool_orientation"].velocity(gain))
         n_tasks = len(levels)
         levels.append(terms["posture"].velocity(self.gains["posture"][0]))
-        return StepTasks(TaskStack(levels), self.errors(state, t, terms), n_tasks)
+        return StepTasks(TaskStack(levels), lambda: self.errors(state, t, terms), n_tasks)
 
     # ----------------------------------------------------------------- baselines
     def baseline_tasks(self) -> list[BaselineTask]:

@@ -71,6 +71,8 @@ class FencingScenario(Scenario):
         limits: Parameters of the activation-row form of the joint limits.
         bound_horizon: Horizon ``T`` of the inequality form (s).
         with_posture: Include the lowest ``posture`` level.
+        target: The sword-tip target (world, m); ``None``: the variant's
+            (:data:`TARGETS`). Sweeps (``prioik sweep``) set it.
     """
 
     name = "fencing"
@@ -90,6 +92,7 @@ class FencingScenario(Scenario):
     limits: JointLimitActivation = JointLimitActivation()
     bound_horizon: float = 0.1
     with_posture: bool = True
+    target: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.variant not in VARIANTS:
@@ -107,11 +110,17 @@ class FencingScenario(Scenario):
         com0 = np.array(pin.centerOfMass(r.model, data, r.q0))[:2]
         self.com_offset0 = com0 - 0.5 * (self.left_foot0.translation[:2]
                                          + self.right_foot0.translation[:2])
-        self.target = np.array(TARGETS[self.variant], dtype=float)
+        self.target = np.array(TARGETS[self.variant] if self.target is None else self.target,
+                               dtype=float).reshape(3)
         p0 = self.left_foot0.translation
         s0, s1 = self.step_window
         mid = 0.5 * (s0 + s1)
         self._lift = Waypoints((s0, mid, s1), (p0[2], p0[2] + self.step_height, p0[2]))
+        # the references' constants as plain floats and arrays (computed every step)
+        self._left0 = tuple(float(v) for v in p0)
+        self._right_xy = tuple(float(v) for v in self.right_foot0.translation[:2])
+        self._com_offset = tuple(float(v) for v in self.com_offset0)
+        self._tip_move = self.target - self.tip0
         self._support_x = np.array(self.right_foot0.translation)
         self._support_R = np.array(self.right_foot0.rotation)
         self._left_foot_R = np.array(self.left_foot0.rotation)
@@ -120,19 +129,19 @@ class FencingScenario(Scenario):
     def left_foot_ref(self, t: float) -> Reference:
         """Reference of the stepping foot's origin (x: one minimum-jerk move;
         z: up and down through two)."""
-        x, xd, xdd = self._foot_xy(t)
+        x, xd, xdd = self._foot_x(t)
         lift = self._lift(t)
-        return Reference(np.array([x[0], x[1], lift.x]), np.array([xd[0], 0.0, lift.xd]),
-                         np.array([xdd[0], 0.0, lift.xdd]))
+        return Reference(np.array([x, self._left0[1], float(lift.x)]),
+                         np.array([xd, 0.0, float(lift.xd)]),
+                         np.array([xdd, 0.0, float(lift.xdd)]))
 
-    def _foot_xy(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The stepping foot's horizontal reference (x moves, y holds)."""
-        p0 = self.left_foot0.translation
+    def _foot_x(self, t: float) -> tuple[float, float, float]:
+        """The stepping foot's forward reference (its y holds): position, velocity and
+        acceleration along x (floats: this runs every control step)."""
         s0, s1 = self.step_window
         p, dp, ddp = minimum_jerk_profile(s0, s1 - s0, t)
         L = self.step_length
-        return (np.array([p0[0] + p * L, p0[1]]), np.array([dp * L, 0.0]),
-                np.array([ddp * L, 0.0]))
+        return self._left0[0] + p * L, dp * L, ddp * L
 
     def com_ref(self, t: float) -> Reference:
         """Horizontal centre of mass over the middle of the feet (xy).
@@ -140,17 +149,20 @@ class FencingScenario(Scenario):
         The standing posture's centre of mass is not exactly there, so its initial
         offset is removed by a minimum-jerk move over the first ``step_window[0]``
         seconds (no step in the reference at ``t = 0``)."""
-        x, xd, xdd = self._foot_xy(t)
-        right = self.right_foot0.translation
+        x, xd, xdd = self._foot_x(t)
         p, dp, ddp = minimum_jerk_profile(0.0, self.step_window[0], t)
-        off = self.com_offset0
-        return Reference(0.5 * (x + right[:2]) + (1.0 - p) * off, 0.5 * xd - dp * off,
-                         0.5 * xdd - ddp * off)
+        (ox, oy), (rx, ry) = self._com_offset, self._right_xy
+        return Reference(np.array([0.5 * (x + rx) + (1.0 - p) * ox,
+                                   0.5 * (self._left0[1] + ry) + (1.0 - p) * oy]),
+                         np.array([0.5 * xd - dp * ox, -dp * oy]),
+                         np.array([0.5 * xdd - ddp * ox, -ddp * oy]))
 
     def tip_ref(self, t: float) -> Reference:
         """Minimum-jerk from the initial tip to the target, then hold."""
         a, b = self.tip_window
-        return minimum_jerk(self.tip0, self.target, a, b - a, t)
+        p, dp, ddp = minimum_jerk_profile(a, b - a, t)
+        d = self._tip_move
+        return Reference(self.tip0 + p * d, dp * d, ddp * d)
 
     # --------------------------------------------------------------------- stacks
     def terms(self, state: KinematicState, t: float) -> dict:
@@ -216,7 +228,7 @@ class FencingScenario(Scenario):
         n_tasks = len(levels)
         if "posture" in terms:
             levels.append(terms["posture"].acceleration(*g["posture"]))
-        return StepTasks(TaskStack(levels), self.errors(state, t, terms), n_tasks)
+        return StepTasks(TaskStack(levels), lambda: self.errors(state, t, terms), n_tasks)
 
     def velocity_stack(self, state: KinematicState, t: float, gain: float = 10.0,
                        limits: str = "none", dt: float = 0.002) -> StepTasks:
@@ -244,7 +256,7 @@ class FencingScenario(Scenario):
         n_tasks = len(levels)
         if "posture" in terms:
             levels.append(terms["posture"].velocity(k["posture"]))
-        return StepTasks(TaskStack(levels), self.errors(state, t, terms), n_tasks)
+        return StepTasks(TaskStack(levels), lambda: self.errors(state, t, terms), n_tasks)
 
     def velocity_gains(self, gain: float = 10.0) -> dict[str, float]:
         """``K`` per task at velocity level: ``gain`` for every task but the posture,
@@ -359,3 +371,30 @@ class FencingScenario(Scenario):
 
     #: the same as :meth:`write_rows` (the name the benchmarks use)
     write_velocity_rows = write_rows
+
+    def written_step(self, rows: TaskWriter, state: KinematicState, t: float) -> StepTasks:
+        """:meth:`write_rows`, as the step a simulation solves: the writer's data (no
+        per-step objects) and the errors of :meth:`errors`, read from the writer's own
+        per-row errors after the step's timed phases."""
+        data = self.write_rows(rows, state, t)
+        levels = len(data.layout) - (1 if self.with_posture else 0)
+        return StepTasks(data, lambda: self._written_errors(rows, state), levels)
+
+    def _written_errors(self, rows: TaskWriter, state: KinematicState) -> dict[str, float]:
+        layout = rows.layout
+
+        def error(name):
+            return rows.error[layout.task_slice(name)]
+        tip = state.placement("sword_tip").translation
+        sup = state.placement("right_foot")
+        return {
+            "tip_error_m": float(np.linalg.norm(self.target - tip)),
+            "tip_tracking_error_m": float(np.linalg.norm(error("sword_tip"))),
+            "com_error_m": float(np.linalg.norm(error("com"))),
+            "support_foot_error_m": float(np.linalg.norm(sup.translation
+                                                         - self.right_foot0.translation)),
+            "support_foot_rotation_error_rad": float(np.linalg.norm(
+                error("support_foot")[3:])),
+            "left_foot_error_m": float(np.linalg.norm(error("left_foot")[:3])),
+            "joint_limit_violation_rad": joint_limit_violation(self.robot, state.q),
+        }

@@ -34,6 +34,8 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from prioik.extras import install_hint
+
 __all__ = ["ModelNotFoundError", "StateError", "check_configuration", "check_velocity",
            "RobotModel", "example_robot_data_dir", "from_urdf",
            "has_free_flyer", "g1", "talos", "panda", "ur5", "go2", "solo12", "PANDA_FINGERS",
@@ -233,6 +235,16 @@ class RobotModel:
             self.__dict__["_unit_parts"] = parts
         return self.__dict__["_unit_parts"]
 
+    def unit_norm_index(self) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`unit_norm_parts` as two ``int64`` arrays (starts, sizes), for the
+        compiled state check."""
+        if "_unit_index" not in self.__dict__:
+            parts = self.unit_norm_parts()
+            self.__dict__["_unit_index"] = (
+                np.array([p[0] for p in parts], dtype=np.int64),
+                np.array([p[1] for p in parts], dtype=np.int64))
+        return self.__dict__["_unit_index"]
+
     def _compute_joint_limits(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         m = self.model
         lo = np.full(self.nv - self.n_base, -np.inf)
@@ -311,8 +323,8 @@ def example_robot_data_dir() -> Path:
         dist = importlib.metadata.distribution("example-robot-data")
     except importlib.metadata.PackageNotFoundError:
         raise ModelNotFoundError("the robot descriptions come from the package "
-                                 "example-robot-data; install it with "
-                                 "`pip install example-robot-data`") from None
+                                 "example-robot-data (the `robots` extra); "
+                                 f"{install_hint('robots')}") from None
     for f in dist.files or ():
         parts = Path(str(f)).parts
         if "example-robot-data" in parts and "robots" in parts:

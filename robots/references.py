@@ -9,16 +9,16 @@ are continuous (no step in ``h``).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
+from typing import NamedTuple, Sequence
 
 import numpy as np
 
 __all__ = ["Reference", "minimum_jerk", "minimum_jerk_profile", "Waypoints"]
 
 
-@dataclass(frozen=True)
-class Reference:
-    """Reference position, velocity and acceleration at one instant."""
+class Reference(NamedTuple):
+    """Reference position, velocity and acceleration at one instant (a named tuple:
+    references are made every control step, and a tuple is the cheapest record)."""
 
     x: np.ndarray
     xd: np.ndarray

@@ -417,6 +417,7 @@ class TaskWriter:
     def com(self, state, name: str, x, xd=None, xdd=None) -> None:
         """The centre of mass: ``x*``, ``ẋ*``, ``ẍ*`` given on the task's axes."""
         task = self._task(name, "com")
+        state.ensure_com()
         views = self._data_views(state)
         m = task.rows
         drift = self._drift(state, task)
@@ -481,11 +482,7 @@ class TaskWriter:
     def acceleration_targets(self, v: np.ndarray) -> StackData:
         """``b = ẍ* + K_d (ẋ* − J q̇) + K_p e − J̇ q̇`` (eq. 2-4) into the data; returns it."""
         data = self.data
-        rate = self.velocity_ref - data.A @ v
-        np.multiply(self.kd, rate, out=data.b)
-        data.b += self.kp * self.error
-        data.b += self.feedforward
-        data.b -= self.drift
+        _k.acceleration_targets(data.A, data.b, self._Q, v)
         return data
 
     # ------------------------------------------------------------------ helpers

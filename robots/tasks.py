@@ -33,7 +33,8 @@ import pinocchio as pin
 
 from prioik.hierarchy import Task
 
-from .models import RobotModel, check_configuration, check_velocity
+from . import _rows_kernel as _rk
+from .models import UNIT_NORM_TOL, RobotModel, check_configuration, check_velocity
 from .references import Reference
 from .rows import JointLimitActivation, TaskWriter
 
@@ -43,6 +44,22 @@ __all__ = ["KinematicState", "TaskTerm", "frame_position", "point_position",
            "JointLimitActivation"]
 
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+
+
+_F64 = np.dtype(np.float64)
+
+
+def _checked_state(robot: RobotModel, q, v) -> tuple[np.ndarray, np.ndarray]:
+    """Copies of ``q`` and ``v``, checked: one compiled pass for the common case (float
+    arrays of the right sizes, finite, unit quaternions), the naming checks of
+    :func:`~robots.models.check_configuration` otherwise."""
+    if (type(q) is np.ndarray and type(v) is np.ndarray and q.dtype == _F64
+            and v.dtype == _F64 and q.shape == (robot.nq,) and v.shape == (robot.nv,)):
+        qc, vc = q.copy(), v.copy()
+        starts, sizes = robot.unit_norm_index()
+        if _rk.state_is_valid(qc, vc, starts, sizes, UNIT_NORM_TOL):
+            return qc, vc
+    return check_configuration(robot, q), check_velocity(robot, v)
 
 
 class KinematicState:
@@ -75,8 +92,7 @@ class KinematicState:
                  drift: bool = True) -> None:
         self.robot = robot
         self.model = robot.model
-        self.q = check_configuration(robot, q)
-        self.v = check_velocity(robot, v)
+        self.q, self.v = _checked_state(robot, q, v)
         self.data = data if data is not None else robot.model.createData()
         self.has_drift = bool(drift)
         m, d = self.model, self.data
@@ -91,8 +107,15 @@ class KinematicState:
             pin.computeJointJacobians(m, d, self.q)     # placements and Jacobians
             self.acom_drift = None
         pin.updateFramePlacements(m, d)
-        pin.jacobianCenterOfMass(m, d, False)           # data.Jcom and data.com[0]
+        self._com_ready = False       # data.Jcom and data.com[0]: on first use
         self._cache: dict = {}
+
+    def ensure_com(self) -> None:
+        """Compute ``data.Jcom`` and ``data.com[0]`` once for this state (the writers of
+        CoM tasks call it; a state without a CoM task never pays for it)."""
+        if not self._com_ready:
+            pin.jacobianCenterOfMass(self.model, self.data, False)
+            self._com_ready = True
 
     @property
     def limit_violation(self) -> float:
@@ -104,6 +127,7 @@ class KinematicState:
     def Jcom(self) -> np.ndarray:
         """``3 × n_v`` Jacobian of the centre of mass."""
         if "Jcom" not in self._cache:
+            self.ensure_com()
             self._cache["Jcom"] = np.array(self.data.Jcom)
         return self._cache["Jcom"]
 
@@ -111,6 +135,7 @@ class KinematicState:
     def com(self) -> np.ndarray:
         """Centre of mass (world, 3)."""
         if "com" not in self._cache:
+            self.ensure_com()
             self._cache["com"] = np.array(self.data.com[0])
         return self._cache["com"]
 

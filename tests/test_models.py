@@ -102,7 +102,8 @@ def test_missing_package_gives_a_clear_error(monkeypatch):
     def missing(name):
         raise importlib.metadata.PackageNotFoundError(name)
     monkeypatch.setattr(models.importlib.metadata, "distribution", missing)
-    with pytest.raises(ModelNotFoundError, match="pip install example-robot-data"):
+    with pytest.raises(ModelNotFoundError, match=r"example-robot-data \(the `robots` extra\); "
+                                                 r"install it with `pip install prioik\[robots\]`"):
         g1()
 
 

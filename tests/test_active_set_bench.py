@@ -1,0 +1,30 @@
+"""benchmarks/active_set_bench.py: run() returns its rows and the ratios against
+issue 13's targets (structure and exactness only; timings are never asserted)."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+pytest.importorskip("daqp")
+pytest.importorskip("pinocchio")
+pytest.importorskip("quadprog")
+
+
+def test_run_returns_rows_and_ratios_for_the_g1_bounds_stacks():
+    from prioik.benchmarks.active_set_bench import format_table, run
+    out = run(windows=1, steps=2, repeats=1, ik=False)
+    assert [(r["variant"], r["level"]) for r in out["rows"]] == [
+        ("compatible", "acceleration"), ("compatible", "velocity"),
+        ("incompatible", "acceleration"), ("incompatible", "velocity")]
+    for r in out["rows"]:
+        assert r["statuses"] == ["optimal"]
+        assert r["max_warm_vs_cold_rel"] <= 1e-9
+        # against cascaded_qp[quadprog], per level ‖w_i‖² (docs/active-set.md: the
+        # posture level of the incompatible run differs by up to 2.3e-8 relative)
+        assert r["max_level_rel_diff_vs_quadprog_cascade"] <= 1e-7
+    names = [x["name"] for x in out["ratios"]]
+    assert len(names) == 12 and len(set(names)) == 12
+    assert all(math.isfinite(x["value"]) and x["value"] > 0 for x in out["ratios"])
+    assert "cold/raw" in format_table(out)
