@@ -561,6 +561,12 @@ def solve_level_qp(qp: LevelQP, solver: str, settings: dict[str, Any]
         try:
             with quiet_unless_verbose(settings):
                 sol = qpsolvers.solve_problem(problem, solver=solver, **settings)
+        except (AttributeError, TypeError) as exc:
+            # a back-end refusing a keyword: the settings came from backend_options
+            raise FormulationError(f"option 'backend_options': the {solver} back-end "
+                                   f"does not take these settings "
+                                   f"({', '.join(sorted(settings))}): "
+                                   f"{type(exc).__name__}: {exc}") from None
         except _CAUGHT as exc:
             return None, f"{solver} raised {type(exc).__name__}: {exc}", extras
     if caught:

@@ -278,3 +278,12 @@ def test_zero_row_with_unreachable_bounds_keeps_its_fixed_violation(backend):
     # level 1: x0 = 3 is 1.5 short of 4.5; level 2: the zero row misses [2, 5] by 2
     # and x0 = 3 misses [7, 10] by 4
     np.testing.assert_allclose(sol.residuals ** 2, [0.0, 2.25, 20.0], atol=1e-6)
+
+
+def test_backend_options_a_backend_refuses_name_the_option():
+    """``backend_options={"bogus": 1}`` raised Clarabel's raw AttributeError."""
+    stack = TaskStack([Task("a", np.eye(2), [1.0, 2.0]), Task("b", np.eye(2), [0.0, 0.0])])
+    with pytest.raises(FormulationError, match="option 'backend_options': the clarabel "
+                                               "back-end does not take .*bogus"):
+        formulations.solve(stack, "cascaded_qp", solver="clarabel",
+                           backend_options={"bogus": 1})
