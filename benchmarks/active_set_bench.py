@@ -205,41 +205,15 @@ def panda_limits_step(steps: int = 300, rounds: int = 7) -> dict[str, Any]:
     PlaCo's ``KinematicsSolver`` (the same soft tasks, ``enable_joint_limits`` and
     ``enable_velocity_limits``), at PlaCo's states, interleaved rounds (fastest round's
     median per path)."""
-    from pathlib import Path
-
-    import placo
-
     import prioik
     from prioik.robots import KinematicState, TaskWriter, load
-    from prioik.robots.models import example_robot_data_dir
 
-    from .panda_step import DT, GAINS, HAND_TARGET, _rounds
+    from .panda_step import DT, GAINS, HAND_TARGET, _rounds, placo_panda
 
     robot = load("panda")
     model, q0, nv = robot.model, robot.q0, robot.nv
     hand = robot.frames["hand"]
-    share = example_robot_data_dir().parent.parent
-    pw = placo.RobotWrapper(str(share), placo.Flags.ignore_collisions,
-                            Path(robot.source).read_text())
-    base = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0])
-    pw.state.q = np.concatenate([base, q0])
-    pw.update_kinematics()
-    sp = placo.KinematicsSolver(pw)
-    sp.mask_fbase(True)
-    sp.enable_joint_limits(True)
-    sp.enable_velocity_limits(True)
-    sp.dt = DT
-    sp.add_position_task(hand, HAND_TARGET).configure("hand", "soft", 1.0)
-    joints = sp.add_joints_task()
-    joints.set_joints({name: float(q0[model.joints[model.getJointId(name)].idx_q])
-                       for name in pw.joint_names()})
-    joints.configure("posture", "soft", 1e-4)
-    states = []
-    for _ in range(steps):
-        states.append(np.array(pw.state.q)[7:].copy())
-        pw.update_kinematics()
-        sp.solve(True)
-    pw.state.q = np.concatenate([base, q0])
+    placo_step, states, placo_reset = placo_panda(robot, steps, limits=True)
 
     data = model.createData()
     zero = np.zeros(nv)
@@ -257,14 +231,10 @@ def panda_limits_step(steps: int = 300, rounds: int = 7) -> dict[str, Any]:
         rows.posture(state, "posture", q0)
         statuses.add(solver.solve(rows.targets(state)).status)
 
-    def placo_step(i: int) -> None:
-        pw.update_kinematics()
-        sp.solve(True)
-
     for path in (prepared_step, placo_step):
         for i in range(min(50, steps)):
             path(i)
-    pw.state.q = np.concatenate([base, q0])
+    placo_reset()
     best = _rounds({"prepared": prepared_step, "placo": placo_step}, steps, rounds)
     return {"steps": steps, "prioik_step_us": float(np.median(best["prepared"])) * 1e6,
             "placo_step_us": float(np.median(best["placo"])) * 1e6,

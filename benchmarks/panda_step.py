@@ -48,38 +48,32 @@ def _rounds(paths: dict[str, Callable[[int], None]], states: int, rounds: int
     return best
 
 
-def panda_step_times(steps: int = 300, rounds: int = 7) -> dict[str, Any]:
-    """Median, p10 and p90 (µs) of the three step paths; see the module docstring.
-
-    Raises:
-        ImportError: placo or pinocchio is missing.
-        RuntimeError: a path failed, or the prioik paths disagree.
-    """
-    import pinocchio as pin
+def placo_panda(robot, steps: int, limits: bool = False):
+    """PlaCo's ``KinematicsSolver`` on the Panda with the reach's two soft tasks (hand
+    position, weight 1; joints, 1e-4), base masked, and its joint and velocity limits when
+    ``limits``; returns ``(step, states, reset)``: a function doing one PlaCo step
+    (``update_kinematics`` + ``solve``), the ``steps`` configurations of PlaCo's own
+    trajectory from ``robot.q0``, and a function putting PlaCo back at ``q0`` (done once
+    here)."""
     import placo
 
-    import prioik
-    from prioik.hierarchy import Task, TaskStack, relative_distance
-    from prioik.robots import KinematicState, TaskWriter, load
     from prioik.robots.models import example_robot_data_dir
 
-    robot = load("panda")
-    model, q0, nv = robot.model, robot.q0, robot.nv
-    hand = robot.frames["hand"]
-
-    # PlaCo: its trajectory gives the states every path is timed on
+    model, q0, hand = robot.model, robot.q0, robot.frames["hand"]
     share = example_robot_data_dir().parent.parent
     pw = placo.RobotWrapper(str(share), placo.Flags.ignore_collisions,
                             Path(robot.source).read_text())
     base = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0])     # PlaCo adds a free flyer
     pw.state.q = np.concatenate([base, q0])
     pw.update_kinematics()
-    solver_placo = placo.KinematicsSolver(pw)
-    solver_placo.mask_fbase(True)
-    solver_placo.dt = DT
-    position = solver_placo.add_position_task(hand, HAND_TARGET)
-    position.configure("hand", "soft", 1.0)
-    joints = solver_placo.add_joints_task()
+    solver = placo.KinematicsSolver(pw)
+    solver.mask_fbase(True)
+    if limits:
+        solver.enable_joint_limits(True)
+        solver.enable_velocity_limits(True)
+    solver.dt = DT
+    solver.add_position_task(hand, HAND_TARGET).configure("hand", "soft", 1.0)
+    joints = solver.add_joints_task()
     joints.set_joints({name: float(q0[model.joints[model.getJointId(name)].idx_q])
                        for name in pw.joint_names()})
     joints.configure("posture", "soft", 1e-4)
@@ -87,8 +81,35 @@ def panda_step_times(steps: int = 300, rounds: int = 7) -> dict[str, Any]:
     for _ in range(steps):
         states.append(np.array(pw.state.q)[7:].copy())
         pw.update_kinematics()
-        solver_placo.solve(True)
-    pw.state.q = np.concatenate([base, q0])
+        solver.solve(True)
+
+    def reset() -> None:
+        pw.state.q = np.concatenate([base, q0])
+
+    def step(_i: int = 0) -> None:
+        pw.update_kinematics()
+        solver.solve(True)
+    reset()
+    return step, states, reset
+
+
+def panda_step_times(steps: int = 300, rounds: int = 7) -> dict[str, Any]:
+    """Median, p10 and p90 (µs) of the three step paths; see the module docstring.
+
+    Raises:
+        ImportError: placo or pinocchio is missing.
+        RuntimeError: a path failed, or the prioik paths disagree.
+    """
+    import prioik
+    from prioik.hierarchy import Task, TaskStack, relative_distance
+    from prioik.robots import KinematicState, TaskWriter, load
+
+    robot = load("panda")
+    model, q0, nv = robot.model, robot.q0, robot.nv
+    hand = robot.frames["hand"]
+
+    # PlaCo: its trajectory gives the states every path is timed on
+    placo_step, states, placo_reset = placo_panda(robot, steps)
 
     data = model.createData()
     zero = np.zeros(nv)
@@ -112,14 +133,10 @@ def panda_step_times(steps: int = 300, rounds: int = 7) -> dict[str, Any]:
                            Task("posture", np.eye(nv), GAINS["posture"] * (q0 - states[i]))])
         xs["one-off"][i] = prioik.solve(stack, "extended_jacobian").x
 
-    def placo_step(i: int) -> None:
-        pw.update_kinematics()
-        solver_placo.solve(True)
-
     for path in (prepared_step, oneoff_step, placo_step):     # warm-up: JIT, caches
         for i in range(min(50, steps)):
             path(i)
-    pw.state.q = np.concatenate([base, q0])
+    placo_reset()
     best = _rounds({"prepared": prepared_step, "one-off": oneoff_step, "placo": placo_step},
                    steps, rounds)
     distance = max(relative_distance(a, b) for a, b in zip(xs["prepared"], xs["one-off"]))

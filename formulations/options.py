@@ -155,15 +155,20 @@ class Option:
         return f"{self.description} ({'; '.join(parts)})"
 
 
-def _matrix(name: str, value: Any, n: int | None) -> np.ndarray:
+def _real_array(name: str, value: Any, what: str) -> np.ndarray:
+    """A float64 copy of ``value``; refuses what cannot be read and non-real dtypes."""
     try:
         arr = np.array(value, copy=True)
     except (TypeError, ValueError) as exc:
-        raise FormulationError(f"option {name!r} cannot be read as a matrix ({exc})") from None
+        raise FormulationError(f"option {name!r} cannot be read as a {what} ({exc})") from None
     if arr.dtype.kind not in "iuf":
         raise FormulationError(f"option {name!r} must hold real numbers, got dtype "
                                f"{arr.dtype}")
-    arr = arr.astype(np.float64)
+    return arr.astype(np.float64)
+
+
+def _matrix(name: str, value: Any, n: int | None) -> np.ndarray:
+    arr = _real_array(name, value, "matrix")
     if arr.ndim != 2 or (n is not None and arr.shape != (n, n)):
         raise FormulationError(f"option {name!r} must be {n}x{n} for this stack, got shape "
                                f"{arr.shape}")
@@ -177,14 +182,7 @@ def _matrix(name: str, value: Any, n: int | None) -> np.ndarray:
 
 
 def _vector(name: str, value: Any, n: int | None) -> np.ndarray:
-    try:
-        arr = np.array(value, copy=True)
-    except (TypeError, ValueError) as exc:
-        raise FormulationError(f"option {name!r} cannot be read as a vector ({exc})") from None
-    if arr.dtype.kind not in "iuf":
-        raise FormulationError(f"option {name!r} must hold real numbers, got dtype "
-                               f"{arr.dtype}")
-    arr = arr.astype(np.float64).reshape(-1)
+    arr = _real_array(name, value, "vector").reshape(-1)
     if (n is not None and arr.shape != (n,)) or not np.isfinite(arr).all():
         raise FormulationError(f"option {name!r} must be a finite vector of length {n}, got "
                                f"shape {np.shape(value)}")
