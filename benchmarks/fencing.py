@@ -166,6 +166,12 @@ RUNS: tuple[RunSpec, ...] = (
             default=False),
     RunSpec("daqp_hierarchical", "daqp_hierarchical", {},
             "DAQP's hierarchical solve, joint limits as bounds"),
+    RunSpec("hierarchical_active_set", "hierarchical_active_set", {},
+            "the exact lexicographic optimum with joint position and velocity limits as "
+            "bounds on q̈ (compiled active set per level, warm-started; docs/active-set.md)"),
+    RunSpec("hierarchical_active_set:velocity", "hierarchical_active_set", {},
+            "the same at velocity level (J q̇ = ẋ* + 20 e, the limits as bounds on q̇): "
+            "exact, like for like with PlaCo's KinematicsSolver", level="velocity"),
     RunSpec("placo", "placo", {}, "PlaCo's algebraic QP through the registry"),
     RunSpec("reference", "reference", {}, "the test oracle (nested SVD)", default=False),
     RunSpec("sns", "sns", {},
