@@ -15,7 +15,7 @@ import shutil
 import sys
 from pathlib import Path
 
-from prioik.benchmarks.fencing import RunSpec, VELOCITY_GAIN, run_scenario
+from prioik.benchmarks.fencing import RunSpec, VELOCITY_GAIN, run_scenario, stops_and_figures
 
 VARIANTS = ("reach",)
 EXTRA_ERRORS = ("orientation_error_rad", "joint_velocity_violation_rad_s")
@@ -126,17 +126,9 @@ def write_page(path: Path, summary: dict, meta: dict, pngs: dict, command: str) 
                 f"{_ms(s['median_solve_time_s'])} | "
                 f"{'failed' if s['failed'] else 'ran to the end'} |")
         add("")
-        for label, msg in meta.get("messages", {}).get(variant, {}).items():
-            add(f"- `{label}` stopped at {msg}.")
-        if meta.get("messages", {}).get(variant):
-            add("")
-        for key, caption in (("tip_error", "tool error to the current target"),
-                             ("algorithmic_error", "algorithmic error, eq. 29"),
-                             ("qdd", "‖q̈‖")):
-            stem = f"{variant}_{key}"
-            if stem in shown:
-                add(f"![{caption}]({shown[stem]})")
-                add("")
+        stops_and_figures(add, meta, variant, shown, (
+            ("tip_error", "tool error to the current target"),
+            ("algorithmic_error", "algorithmic error, eq. 29"), ("qdd", "‖q̈‖")))
     if "step_time" in shown:
         add(f"![median step time per run]({shown['step_time']})")
         add("")

@@ -787,6 +787,22 @@ def add_parser(subparsers) -> None:
 
 
 # ------------------------------------------------------------ reproduction page
+def stops_and_figures(add, meta: dict, variant: str, shown: dict, figures) -> None:
+    """The page lines after a variant's table (this page's and the arm page's): where
+    each stopped run stopped, then the variant's figures ``(key, caption)`` found in
+    ``shown`` (stem ``{variant}_{key}`` → path)."""
+    stops = meta.get("messages", {}).get(variant, {})
+    for label, msg in stops.items():
+        add(f"- `{label}` stopped at {msg}.")
+    if stops:
+        add("")
+    for key, caption in figures:
+        stem = f"{variant}_{key}"
+        if stem in shown:
+            add(f"![{caption}]({shown[stem]})")
+            add("")
+
+
 PAPER_STEP_TIMES_MS = {"extended_jacobian": 1.4, "nullspace": 2.7, "unifying": 3.2,
                        "operational_space": 4.8}
 PAPER_NAMES = {"extended_jacobian": "proposed framework (extended Jacobian)",
@@ -881,17 +897,10 @@ def write_reproduction(path: Path, summary: dict, meta: dict, pngs: dict) -> Pat
                 f"{_fmt(None if s['median_solve_time_s'] is None else 1e3 * s['median_solve_time_s'], '.3f')} ms | "
                 f"{'failed' if s['failed'] else 'ran to the end'} |")
         add("")
-        for label, msg in meta.get("messages", {}).get(variant, {}).items():
-            add(f"- `{label}` stopped at {msg}.")
-        if meta.get("messages", {}).get(variant):
-            add("")
-        for key, caption in (("tip_error", "sword-tip error (paper Fig. 2 / Fig. 4)"),
-                             ("algorithmic_error", "algorithmic error, eq. 29 (paper Fig. 3)"),
-                             ("qdd", "‖q̈‖: spikes of algorithmic singularities")):
-            stem = f"{variant}_{key}"
-            if stem in shown:
-                add(f"![{variant}: {caption}]({shown[stem]})")
-                add("")
+        stops_and_figures(add, meta, variant, shown, (
+            ("tip_error", f"{variant}: sword-tip error (paper Fig. 2 / Fig. 4)"),
+            ("algorithmic_error", f"{variant}: algorithmic error, eq. 29 (paper Fig. 3)"),
+            ("qdd", f"{variant}: ‖q̈‖: spikes of algorithmic singularities")))
     # --------------------------------------------------------------- claims
     add("## The paper's claims beside the measurements")
     add("")

@@ -639,26 +639,6 @@ def strongly_active(qp: LevelQP, z: np.ndarray, lam: np.ndarray) -> np.ndarray:
     return qp.G_x[act]
 
 
-def check_options(solver: str, fixing: str, on_infeasible: str, tolerance,
-                  backend_options) -> dict[str, Any]:
-    """Validate the options shared with :mod:`formulations.cvxpy_`; returns settings."""
-    if fixing not in FIXINGS:
-        raise FormulationError(f"fixing must be one of {', '.join(FIXINGS)}, got {fixing!r}")
-    if on_infeasible not in ("relax", "fail"):
-        raise FormulationError(f"on_infeasible must be 'relax' or 'fail', got {on_infeasible!r}")
-    if tolerance is not None:
-        try:
-            ok = np.isfinite(float(tolerance)) and float(tolerance) > 0
-        except (TypeError, ValueError):
-            ok = False
-        if not ok:
-            raise FormulationError(f"tolerance must be a finite number > 0, got {tolerance!r}")
-    if backend_options is not None and not isinstance(backend_options, dict):
-        raise FormulationError(f"backend_options must be a dict, got "
-                               f"{type(backend_options).__name__}")
-    return dict(backend_options or {})
-
-
 def record_level(info: dict, rec: dict, level, x: np.ndarray, tol: float,
                  on_infeasible: str, fail) -> Outcome | None:
     """Append level ``rec["level"]``'s record to ``info`` and diagnose its inequalities.
@@ -757,7 +737,7 @@ def solve(stack: TaskStack, *, solver: str, tolerance: float | None, backend_opt
             raise FormulationError(f"level_damping must hold {len(stack)} finite values "
                                    f"≥ 0 (one μ² per level), got {level_damping.tolist()}")
     solver = resolve_solver(solver)
-    extra = check_options(solver, fixing, on_infeasible, tolerance, backend_options)
+    extra = dict(backend_options or {})   # OPTIONS validated fixing, tolerance, ...
     tol = DEFAULT_TOLERANCES.get(solver) if tolerance is None else float(tolerance)
     settings = {**backend_settings(solver, tol), **extra}
     eps = NEEDS_DEFINITE_P.get(solver, 0.0) if regularization is None else float(regularization)
