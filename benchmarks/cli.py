@@ -19,7 +19,7 @@ import numpy as np
 SUBCOMMAND_MODULES = [
     "prioik.benchmarks.fencing",
     "prioik.benchmarks.arm",
-    "prioik.benchmarks.results",
+    "prioik.benchmarks.saved_runs",
     "prioik.benchmarks.compare",
     "prioik.benchmarks.bench",
     "prioik.benchmarks.properties",

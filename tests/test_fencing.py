@@ -9,6 +9,9 @@ import pytest
 from prioik import formulations
 from prioik.benchmarks import fencing as cmd
 from prioik.benchmarks.cli import main
+from prioik.benchmarks.results import RunSummary
+from prioik.benchmarks.scenario_runs import run_one, run_table
+from prioik.benchmarks.variants import Variant
 from prioik.robots import KinematicState, simulate
 from prioik.robots.fencing import LEVEL_NAMES, TARGETS, FencingScenario
 
@@ -128,7 +131,7 @@ def test_fencing_command_writes_summary_csv_plots_and_doc(tmp_path, capsys):
     for variant in summary:
         assert list(summary[variant]) == ["extended_jacobian", "nullspace"]
         for run in summary[variant].values():
-            assert tuple(run) == cmd.SUMMARY_KEYS
+            assert tuple(run) == RunSummary.keys(FencingScenario.summary_errors)
             assert run["failed"] is False and run["median_step_time_s"] > 0
             assert run["max_support_foot_error_m"] < 1e-4
         csv = out / f"{variant}_extended_jacobian.csv"
@@ -159,7 +162,7 @@ def test_fencing_command_rejects_unknown_runs_and_skips_unavailable(tmp_path, mo
         return real_get(name)
 
     monkeypatch.setattr(formulations, "get", get)
-    chosen, skipped = cmd.select_runs("extended_jacobian,nullspace")
+    chosen, skipped = run_table("fencing").select("extended_jacobian,nullspace")
     assert [c.label for c in chosen] == ["extended_jacobian"]
     assert skipped and "nullspace" in skipped[0] and "not available" in skipped[0]
 
@@ -176,15 +179,15 @@ def test_placo_baseline_runs_the_same_scenario(scenarios):
 
 
 def test_velocity_level_qp_run(scenarios):
-    spec = cmd._runs_by_label()["cascaded_qp:velocity"]
-    res = cmd.run_one(spec, "compatible", 0.05, 0.002)
+    spec = run_table("fencing")["cascaded_qp[daqp,velocity]"]
+    res = run_one(spec, "compatible", 0.05, 0.002)
     assert not res.failed and res.steps == 25
     assert res.errors["support_foot_error_m"].max() < 1e-5
     assert np.nanmax(res.algorithmic_error) < 1e-6
-    unsupported = cmd.RunSpec("nullspace:velocity", "nullspace", level="velocity")
+    unsupported = Variant("nullspace", "velocity", level="velocity")
     from prioik.hierarchy import UnsupportedTaskError
     with pytest.raises(UnsupportedTaskError, match="inequality"):
-        cmd.run_one(unsupported, "compatible", 0.01, 0.002)
+        run_one(unsupported, "compatible", 0.01, 0.002)
 
 
 @pytest.mark.parametrize("t", [0.05, 0.15, 0.3, 0.55, 0.72, 0.95, 1.1, 1.6, 2.2])
@@ -210,7 +213,7 @@ def test_fencing_diagnostics_are_measured(tmp_path):
     assert set(sig) >= {"support_foot", "com", "left_foot", "sword_tip"}
     assert 0 < sig["left_foot"] < 0.05 < sig["com"]
     rc = main(["fencing", "--variant", "incompatible", "--formulations",
-               "extended_jacobian,extended_jacobian:eq27", "--duration", "0.06",
+               "extended_jacobian,extended_jacobian[eq27]", "--duration", "0.06",
                "--out", str(tmp_path), "--quiet", "--no-crosscheck"])
     assert rc == 0
     meta = json.loads((tmp_path / "run_info.json").read_text())

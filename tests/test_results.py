@@ -10,15 +10,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from prioik.benchmarks.fencing import RUNS, run_one
+from prioik.benchmarks.scenario_runs import run_one, run_table
 from prioik.robots import SimulationResult
 
-SPECS = {s.label: s for s in RUNS}
+
+
+def spec(label: str):
+    return run_table("fencing")[label]
 
 
 @pytest.fixture(scope="module")
 def fencing_run():
-    return run_one(SPECS["extended_jacobian"], "compatible", 0.1, 0.002)
+    return run_one(spec("extended_jacobian"), "compatible", 0.1, 0.002)
 
 
 def test_a_saved_run_reloads_identical_arrays(fencing_run, tmp_path):
@@ -86,7 +89,7 @@ def test_replay_page_draws_the_robot_in_headless_chromium(tmp_path):
     from PIL import Image
 
     from prioik.benchmarks.replay import ROBOT_RGB, write_replay
-    res = run_one(SPECS["extended_jacobian"], "compatible", 0.1, 0.002)
+    res = run_one(spec("extended_jacobian"), "compatible", 0.1, 0.002)
     page = write_replay(tmp_path / "replay.html", {"extended_jacobian": res}, "test")
     shot = tmp_path / "shot.png"
     subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu",

@@ -107,7 +107,7 @@ def test_wilson_interval_known_values():
 # ------------------------------------------------------- cluster == process
 @pytest.mark.slow
 def test_local_cluster_rows_equal_in_process_rows(tmp_path):
-    cfg = write_config(tmp_path, formulations='["extended_jacobian", "nullspace", "sns:velocity"]')
+    cfg = write_config(tmp_path, formulations='["extended_jacobian", "nullspace", "sns[velocity]"]')
     plan = plan_from_config(load_config(cfg))
     a = run_sweep(plan, tmp_path / "inproc", workers=0, progress=False)
     assert main(["sweep", str(cfg), "--out", str(tmp_path / "cluster"), "--workers", "2",
@@ -210,7 +210,7 @@ def test_a_registered_toy_plugin_appears_in_a_registry_sweep_and_runs(tmp_path, 
 
     from prioik.formulations import Capabilities, registry
     from prioik.formulations.base import Outcome
-    from prioik.benchmarks.variants import from_registry
+    from prioik.benchmarks.variants import table
 
     def solve(stack):
         A = np.vstack([t.A for t in stack.tasks])
@@ -222,12 +222,13 @@ def test_a_registered_toy_plugin_appears_in_a_registry_sweep_and_runs(tmp_path, 
     toy.CAPABILITIES, toy.OPTIONS, toy.solve = Capabilities(exact=False), {}, solve
     monkeypatch.setitem(registry.PLUGINS, toy.NAME, ("tests.toy_flat_lstsq", ""))
     monkeypatch.setitem(registry._loaded, toy.NAME, toy)
-    variants, notes = from_registry("sweep")
-    labels = [v.label for v in variants]
+    found = table("sweep")
+    labels = [v.label for v in found.rows if v.origin not in ("study", "baseline")]
     assert "toy_flat_lstsq" in labels and "extended_jacobian" in labels
     assert not any(lb.startswith("cvxpy") for lb in labels)         # cvxpy_ opts out
     if any(i.name == "cvxpy" and i.available for i in registry.available()):
-        assert any(n.startswith("cvxpy: left out of sweep (a modelling layer") for n in notes)
+        assert any(n.startswith("cvxpy: left out of sweep (a modelling layer")
+                   for n in found.notes)
     text = TINY.format(formulations='"registry"', duration=0.2, n=1)
     plan = plan_from_config(load_config(write_config(tmp_path, text=text)))
     assert [v.label for v in plan.variants] == labels
