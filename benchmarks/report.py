@@ -65,16 +65,16 @@ class Page:
         text = self._fill("body", self.body, values)
         return re.sub(r"\n{3,}", "\n\n", text).strip("\n") + "\n"
 
-    def block(self, name: str, **values: Any) -> str:
-        """Block ``name`` with ``values`` filled in."""
-        if name not in self.blocks:
-            raise KeyError(f"template {self.name} has no block {name!r}")
-        return self._fill(f"block {name}", self.blocks[name], values)
+    def block(self, block: str, /, **values: Any) -> str:
+        """Block ``block`` with ``values`` filled in."""
+        if block not in self.blocks:
+            raise KeyError(f"template {self.name} has no block {block!r}")
+        return self._fill(f"block {block}", self.blocks[block], values)
 
-    def inline(self, name: str, **values: Any) -> str:
-        """Block ``name`` filled in, on one line: whitespace runs become one space (a
+    def inline(self, block: str, /, **values: Any) -> str:
+        """Block ``block`` filled in, on one line: whitespace runs become one space (a
         block that starts with a space, a sentence's continuation, keeps one)."""
-        text = self.block(name, **values)
+        text = self.block(block, **values)
         return (" " if text[:1].isspace() else "") + " ".join(text.split())
 
 
