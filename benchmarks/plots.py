@@ -35,9 +35,9 @@ GROUP_TITLES = {"exact": "exact methods", "damped": "damped / step-bounded metho
 @lru_cache(maxsize=1)
 def known_labels() -> tuple[str, ...]:
     """Every run label of the scenario reports, in table order (index → colour)."""
-    from prioik.benchmarks.variants import table
+    from prioik.benchmarks.variants import STUDY_MODULES, table
     out: list[str] = []
-    for report in ("fencing", "arm"):
+    for report in STUDY_MODULES:
         try:
             labels = table(report).known
         except Exception:  # noqa: BLE001 - a broken optional plugin must not stop a figure

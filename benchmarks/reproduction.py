@@ -87,7 +87,7 @@ def _claims(page: Page, comp: dict, inc: dict, settings: dict) -> tuple[str, str
                        value=sci(comp[label]["max_algorithmic_error"]),
                        failed="" if not comp[label]["failed"] else page.inline("run_failed"))
            for label in _pick(comp, CLAIM_ALGORITHMIC, settings)]
-    incompatible = [page.block("claim_incompatible", label=label,
+    incompatible = [page.inline("claim_incompatible", label=label,
                                fate=page.inline("FAILED" if s["failed"] else "ran_to_the_end"),
                                tip=mm(s["final_tip_error_m"]),
                                foot=mm(s.get("max_support_foot_error_m")),
@@ -102,7 +102,7 @@ def _claims(page: Page, comp: dict, inc: dict, settings: dict) -> tuple[str, str
 def _crosscheck(page: Page, cc: dict) -> str:
     if not cc:
         return ""
-    items = [page.block("crosscheck_item", label=label, variant=variant,
+    items = [page.inline("crosscheck_item", label=label, variant=variant,
                         compared=c["steps_compared"], damped=c["steps_with_damping"],
                         levels=c["damped_levels"] or "none",
                         undamped_diff=sci(c["max_rel_diff_qdd_undamped_steps"]),
@@ -123,7 +123,7 @@ def _order(page: Page, comp: dict, inc: dict, settings: dict) -> str:
     ranked = [by_name[n] for n in sorted(paper.STEP_TIMES_MS, key=paper.STEP_TIMES_MS.get)
               if n in by_name]
     same = measured == ranked
-    return page.block("order", measured=" < ".join(f"`{m}`" for m in measured),
+    return page.inline("order", measured=" < ".join(f"`{m}`" for m in measured),
                       paper=" < ".join(f"`{p}`" for p in ranked),
                       same="the same" if same else "different",
                       why="" if same else page.inline("order_differs"))
@@ -209,25 +209,25 @@ def _differences(page: Page, summary: dict, meta: dict) -> str:
                          ("extended_jacobian[eq27_null_space]", "eq27_null_space")):
         r = inc.get(label)
         if r is not None:
-            out.append(page.block(block, label=label,
+            out.append(page.inline(block, label=label,
                                   lam=f"{runs[label]['options'].get('damping', 0):g}",
                                   fate=page.inline("FAILED" if r["failed"] else
                                                    "runs_to_the_end"), **_errors(r)))
     if "extended_jacobian[eq27]" in inc:
-        out.append(page.block("eq27_explained"))
+        out.append("  " + page.inline("eq27_explained").strip())
     sb = inc.get("extended_jacobian[step_bound]")
     if sb is not None:
         bound = runs["extended_jacobian[step_bound]"]["options"]["step_bound"]
         bound = max(bound.values()) if isinstance(bound, dict) else bound
-        out.append(page.block("step_bound", label="extended_jacobian[step_bound]",
+        out.append(page.inline("step_bound", label="extended_jacobian[step_bound]",
                               bound=f"{bound:g}", **_errors(sb)))
         allb = inc.get("extended_jacobian[step_bound_all]")
         top = diag.get("max_limit_target")
         if allb is not None:
             targets = page.inline("step_bound_all_targets", top=f"{top:.3g}") if top else ""
-            out.append(page.block("step_bound_all", label="extended_jacobian[step_bound_all]",
-                                  targets=targets,
-                                  limits=sci(allb.get("max_joint_limit_violation_rad"))))
+            out.append("  " + page.inline(
+                "step_bound_all", label="extended_jacobian[step_bound_all]", targets=targets,
+                limits=sci(allb.get("max_joint_limit_violation_rad"))).strip())
     if "extended_jacobian[selective]" in inc:
         threshold = runs["extended_jacobian[selective]"]["options"]["singular_threshold"]
         sig = diag.get("standing_sigmas", {})
@@ -235,7 +235,7 @@ def _differences(page: Page, summary: dict, meta: dict) -> str:
         verdict = (page.inline("selective_damped", levels=", ".join(low),
                                threshold=f"{threshold:g}") if low
                    else page.inline("selective_none", threshold=f"{threshold:g}"))
-        out.append(page.block("selective", label="extended_jacobian[selective]",
+        out.append(page.inline("selective", label="extended_jacobian[selective]",
                               threshold=f"{threshold:g}",
                               sigmas=", ".join(f"{k} {v:.3g}" for k, v in sig.items()),
                               verdict=verdict))
@@ -245,10 +245,10 @@ def _differences(page: Page, summary: dict, meta: dict) -> str:
                              fate=page.inline("fails" if inc[lb]["failed"] else
                                               "runs_to_the_end"),
                              qdd=sci(inc[lb]["max_qdd_norm"], ".3g")) for lb in qp]
-        out.append(page.block("qp", parts=", ".join(parts)))
+        out.append(page.inline("qp", parts=", ".join(parts)))
     ud = meta.get("unifying_diagnostic")
     if ud and "unifying" in comp:
-        out.append(page.block(
+        out.append(page.inline(
             "unifying", fate=page.inline("diverges" if comp["unifying"]["failed"] else "runs"),
             qdd_unifying=f"{ud['qdd_unifying']:.3g}",
             qdd_exact=f"{ud['qdd_extended_jacobian']:.3g}",
@@ -268,7 +268,7 @@ def _differences(page: Page, summary: dict, meta: dict) -> str:
                     cond=f"{conds.get(f'{a_low:g}', float('nan')):.2g}",
                     fate=(page.inline("armature_low_diverges", message=msg) if low["failed"]
                           else page.inline("runs_to_the_end")))
-            out.append(page.block(
+            out.append(page.inline(
                 "armature", armature=f"{a:g}", label="unifying[armature]",
                 cond=f"{ud['cond_M']:.2g}",
                 cond_armature=f"{conds.get(f'{a:g}', float('nan')):.2g}",

@@ -757,7 +757,7 @@ def solve(stack: TaskStack, *, solver: str, tolerance: float | None, backend_opt
 # ------------------------------------------------------------------------ reports
 #: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
 REPORT_VARIANTS = (
-    ReportVariant("daqp", {"solver": "daqp"}, reports=("fencing", "sweep"),
+    ReportVariant("daqp", {"solver": "daqp"}, reports=("fencing", "sweep", "control_step"),
                   replaces_default=True,
                   note="one QP per level with DAQP, the fastest exact back-end on the G1 "
                        "stacks; joint limits as bounds"),

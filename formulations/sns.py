@@ -271,7 +271,8 @@ def solve(stack: TaskStack, *, rcond: float = DEFAULT_RCOND, bound_tolerance: fl
 # ------------------------------------------------------------------------ reports
 #: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
 REPORT_VARIANTS = (
-    ReportVariant("", limits="hard_bounds", reports=("scenario",), replaces_default=True,
+    ReportVariant("", limits="hard_bounds", reports=("scenario", "control_step"),
+                  replaces_default=True,
                   note="the joint-limit bounds as hard limits above every task (level 0), "
                        "strict priorities, task scaling when a task cannot be met within "
                        "them"),

@@ -282,6 +282,6 @@ def test_control_step_table_normalises_to_the_extended_jacobian():
         {"label": "reference", "formulation": "reference", "paper_ms": None, "steps": 0,
          "note": "t = 0.1 s: diverged"}]
     md = page.results_markdown([], [], {}, {}, control, [], Settings(), [])
-    assert ("| `nullspace` (resolved acceleration method) | 5 | 1.0 | 5.0 | 3.0 | 9.0 | "
+    assert ("| `nullspace` — resolved acceleration method | 5 | 1.0 | 5.0 | 3.0 | 9.0 | "
             "1.50 | 2.7 | 1.93 | shortened to 5 steps (time cap) |") in md
     assert "| `reference` | 0 |" in md and "stopped: t = 0.1 s: diverged" in md

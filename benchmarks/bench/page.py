@@ -83,7 +83,7 @@ def control_table(control: list[dict]) -> str:
         run = (note_ if note_.startswith("shortened") else
                page.inline("control_stopped", note=note_)) if note_ else \
             page.inline("control_completed")
-        what = f"`{c['label']}`" + (f" ({paper.METHOD_NAMES[c['formulation']]})"
+        what = f"`{c['label']}`" + (f" — {paper.METHOD_NAMES[c['formulation']]}"
                                     if c["paper_ms"] and c["formulation"] in paper.METHOD_NAMES
                                     else "")
         pms = f"{c['paper_ms']:g}" if c["paper_ms"] else "–"
