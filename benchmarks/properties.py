@@ -11,6 +11,12 @@ writes ``docs/properties.md``:
 2. **Algorithmic error** (eq. 29) of every formulation on seeded ``coupled``,
    ``decoupled`` and ``conflicting`` stacks (``hierarchy.analysis.algorithmic_error``).
 
+The columns are the ``properties`` report's variants (:mod:`benchmarks.variants`: every
+formulation of the registry, and the settings plugins declare for it); the rotated
+table adds the ``roundoff`` report's declared rows. The prose is
+``templates/properties.md``; which sentence a column gets follows its capabilities
+(exact or not) and options (damped or not), not its name.
+
 Everything is computed when the script runs (deterministic seeds); nothing is typed in.
 """
 

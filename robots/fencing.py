@@ -383,11 +383,13 @@ class FencingScenario(Scenario):
         levels = len(data.layout) - (1 if self.with_posture else 0)
         return StepTasks(data, lambda: self._written_errors(rows, state), levels)
 
-    def step_builder(self, level: str = "acceleration", limits: str = "activation",
+    def step_builder(self, level: str = "acceleration", limits: str | None = None,
                      dt: float = 0.002, gain: float = 10.0):
         """As :meth:`Scenario.step_builder`, with the rows written in place
         (:meth:`written_step`: no per-step objects) wherever a writer exists: bounds at
         velocity level, activation rows or bounds at acceleration level."""
+        if limits is None:
+            limits = "none" if level == "velocity" else "activation"
         if level == "velocity" and limits == "bounds":
             rows = self.velocity_rows(gain, limits=limits, dt=dt)
         elif level == "acceleration" and limits in ("activation", "bounds"):

@@ -92,11 +92,14 @@ class Scenario:
         final target's distance is ``"tip_error_m"``."""
         raise NotImplementedError
 
-    def step_builder(self, level: str = "acceleration", limits: str = "activation",
+    def step_builder(self, level: str = "acceleration", limits: str | None = None,
                      dt: float = 0.002, gain: float = 10.0):
         """The ``build(state, t) -> StepTasks`` of a simulation at ``level``
         (``"acceleration"`` or ``"velocity"``, with ``gain`` ``K``) with the joint
-        limits as ``limits``: :meth:`acceleration_stack` or :meth:`velocity_stack`."""
+        limits as ``limits`` (default: ``"activation"`` rows at acceleration level, none
+        at velocity level): :meth:`acceleration_stack` or :meth:`velocity_stack`."""
+        if limits is None:
+            limits = "none" if level == "velocity" else "activation"
         if level == "velocity":
             return lambda state, t: self.velocity_stack(state, t, gain=gain, limits=limits,
                                                         dt=dt)

@@ -222,3 +222,24 @@ def test_fencing_diagnostics_are_measured(tmp_path):
     assert all(0 < r["sigma_tip"] < 1 and r["qdd_norm"] >= 0 for r in trace)
     ud = cmd.unifying_diagnostic()
     assert ud["cond_M"] > ud["cond_M_armature"]["0.02"] > ud["cond_M_armature"]["0.1"] > 1
+
+
+def test_step_builder_writes_rows_in_place_where_it_can(scenarios):
+    """The scenario interface's step builder: written rows (StackData) for the forms the
+    fencing writers have, equal to the stack built from task objects; the other forms
+    through acceleration_stack / velocity_stack."""
+    from prioik.hierarchy import StackData, TaskStack
+    sc = scenarios["compatible"]
+    rng = np.random.default_rng(3)
+    state = KinematicState(sc.robot, sc.robot.q0, rng.normal(scale=0.1, size=35))
+    for level, limits in (("acceleration", "bounds"), ("velocity", "bounds")):
+        step = sc.step_builder(level, limits, 0.002, 20.0)(state, 0.7)
+        assert isinstance(step.stack, StackData), (level, limits)
+        ref = (sc.acceleration_stack(state, 0.7, limits, 0.002) if level == "acceleration"
+               else sc.velocity_stack(state, 0.7, 20.0, limits, 0.002)).stack
+        assert np.allclose(step.stack.A, np.vstack([t.A for t in ref.tasks]), atol=1e-10)
+        assert step.algorithmic_levels == 5
+    hard = sc.step_builder("velocity", "hard_bounds", 0.002, 20.0)(state, 0.7)
+    assert isinstance(hard.stack, TaskStack) and hard.stack.levels[0].names == ("joint_limits",)
+    plain = sc.step_builder("velocity")(state, 0.7).stack          # default: no limits
+    assert "joint_limits" not in [t.name for t in plain.tasks]
