@@ -456,8 +456,9 @@ def workspace_offsets(M: int, n: int, k: int) -> dict[str, tuple[int, int]]:
     float64: ``params`` (rcond, primal_tol, dual_tol, max_iter, use_warm), ``B``,
     ``T``, ``Lw``, ``Bo``, ``flat`` (``R × n`` each), ``V``, ``Vf`` (``n × n``), ``fvec``
     (``15 × R``), ``x`` (``n``), ``w2`` and ``res = √w2`` (``k``); the kernel writes
-    ``‖x‖`` into ``params[5]`` and, into ``params[6]``, ``1`` when an iteration cap was
-    hit, ``-1`` when ``x`` or a residual is not finite; int64: ``k``, ``starts`` (``k + 1``),
+    ``‖x‖`` into ``params[5]``, into ``params[6]`` ``1`` when an iteration cap was
+    hit, ``-1`` when ``x`` or a residual is not finite, and into ``params[7]`` the number
+    of levels whose violation exceeds ``primal_tol max(1, ‖x‖)``; int64: ``k``, ``starts`` (``k + 1``),
     ``ivec`` (``5 × R``), ``perm`` (``n``), ``counts`` (``3 × (k + 1)``); int8: ``row_eq``
     (``M``), ``bvec`` (``2 × R``), ``eqr`` (``R``), ``warm_state`` (``(k + 1) × R``),
     ``warm_valid`` (``k + 1``).
@@ -974,6 +975,11 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
         total += acc
     xn = np.sqrt(_dot(x, x))
     fwork[5] = xn
+    infeasible = 0
+    for lev in range(k):
+        if res[lev] > primal_tol * max(1.0, xn):
+            infeasible += 1
+    fwork[7] = infeasible
     capped = 0.0
     for lev in range(k + 1):
         if flags[lev] != FLAG_OK:

@@ -82,7 +82,7 @@ class ReportVariant:
     limits: str | None = None
 
 
-@dataclass
+@dataclass(slots=True)
 class Outcome:
     """What a plugin's ``solve`` returns; the registry turns it into a :class:`Solution`.
 
@@ -104,7 +104,7 @@ class Outcome:
     checked: bool = False
 
 
-@dataclass
+@dataclass(slots=True)
 class Solution:
     """The answer of a formulation to a task stack.
 
