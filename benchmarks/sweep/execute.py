@@ -119,7 +119,7 @@ def run_sweep(plan: Plan, out, *, workers: int | None = None, scheduler: str | N
     (out / "sweep.json").write_text(json.dumps(
         {"config": plan.config, "fingerprint": plan.fingerprint(), "runs": len(plan.runs)},
         indent=2, default=str) + "\n")
-    store = RowStore(out / "rows.csv", columns(plan.runs[0].params))
+    store = RowStore(out / "rows.csv", columns(plan.runs[0].params, plan.scenario))
     todo = [r for r in plan.runs if r.run_id not in store]
     skipped = [r.run_id for r in plan.runs if r.run_id in store]
     computed: list[str] = []
