@@ -131,7 +131,7 @@ def unifying_diagnostic(dt: float = 0.002) -> dict[str, float] | None:
     ``t = 5 dt``), ``‖q̈‖`` of ``unifying`` with the G1's ``M``, with ``M = I`` (Chiaverini's method
     for two levels only: beyond, eq. 40 projects with ``Π (I − J_j⁺ J_j)`` instead of
     ``N^A_{i-1}``), and of ``extended_jacobian``; ``cond(M)`` without armature and with
-    the armature of the ``unifying:armature*`` runs.
+    the armature of the ``unifying[armature*]`` runs.
     ``None`` when ``unifying`` is not available."""
     import pinocchio as pin
 

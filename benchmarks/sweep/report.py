@@ -185,7 +185,8 @@ def write_report(plan: Plan, rows: dict[str, dict[str, Any]], out, info: dict,
         cfg_text = Path(plan.source).read_text().rstrip("\n")
         cfg_lang = "json" if plan.source.endswith(".json") else "toml"
         cfg_name = plan.source
-    load = info.get("load_average_start")
+    load = (f"{info.get('load_average_start')} when the runs started and "
+            f"{info.get('load_average_end')} when they ended")
 
     def page(img_prefix: str) -> str:
         return _template().substitute(
