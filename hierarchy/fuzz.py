@@ -29,7 +29,7 @@ import numpy as np
 from .stack import TaskStack
 from .task import Task
 
-__all__ = ["FuzzCase", "equality_case", "inequality_case", "nested_truth",
+__all__ = ["FuzzCase", "equality_case", "inequality_case", "judged", "nested_truth",
            "rounding_error", "AMBIGUOUS_BAND", "CONDITIONED_ERROR", "ROW_FEATURES"]
 
 #: Singular values ``σ / ‖A_i‖_F`` in this band make a rank decision ambiguous (the
@@ -141,12 +141,19 @@ def equality_case(rng: np.random.Generator, seed: int = -1, *, max_n: int = 60,
         above = np.vstack([above] + new_rows)
         levels.append(tasks)
         features.append(feats)
-    case = FuzzCase(TaskStack(levels), seed, "equality", features)
-    if truth:
-        case.truth, case.min_gap, case.min_sigma = nested_truth(case.stack)
-        case.rounding_error = rounding_error(case.stack, case.truth)
-        case.well_conditioned = bool(case.min_gap > 0 and np.isfinite(case.truth).all()
-                                     and case.rounding_error <= CONDITIONED_ERROR)
+    return judged(TaskStack(levels), seed, features) if truth else \
+        FuzzCase(TaskStack(levels), seed, "equality", features)
+
+
+def judged(stack: TaskStack, seed: int = -1, features: list[list[str]] | None = None
+           ) -> FuzzCase:
+    """An equality stack as a :class:`FuzzCase` with its ground truth and conditioning
+    verdict (what :func:`equality_case` returns; for stacks saved by ``prioik fuzz``)."""
+    case = FuzzCase(stack, seed, "equality", features or [])
+    case.truth, case.min_gap, case.min_sigma = nested_truth(case.stack)
+    case.rounding_error = rounding_error(case.stack, case.truth)
+    case.well_conditioned = bool(case.min_gap > 0 and np.isfinite(case.truth).all()
+                                 and case.rounding_error <= CONDITIONED_ERROR)
     return case
 
 
