@@ -211,23 +211,60 @@ def _eqp(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T, rhs, norms, V,
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
-def _full_rank_step(B, y, col, rows, nw, tgt, soft_tol, flat, t, norms, perm, p):
+def _full_rank_step(B, y, col, rows, nw, tgt, soft_tol, flat, t, norms, perm, p, nrot, nf,
+                    Vf, betaf, posf):
     """The step of ``nw ≥ d`` working soft rows and no hard row, when they have full
     column rank on the ``d`` free coordinates: ``p = R⁻¹ Qᵀ (tgt − B y)`` by one
-    column-pivoted Householder QR (held transposed in ``flat``, so that the inner loops
-    run over contiguous memory; the extended Jacobian's ``_pivoted_lstsq_if_full_rank``
-    with the level's threshold ``soft_tol`` on every pivot). Such a level leaves no free
-    coordinate. Returns ``False`` (``p`` not written) when a pivot fails the threshold:
-    the caller then takes the row-pivoted LQ of :func:`_eqp`."""
+    column-pivoted Householder QR (the extended Jacobian's
+    ``_pivoted_lstsq_if_full_rank`` with the level's threshold ``soft_tol`` on every
+    pivot). Such a level leaves no free coordinate.
+
+    The rows are copied transposed into ``flat`` (``n × nw``) and the fixing
+    reflectors they still lack are applied there, all rows at once: every inner loop
+    then runs over the ``nw`` rows, contiguous (a posture level of a humanoid brought
+    row by row through ~20 reflectors costs several times more). ``B`` itself is not
+    rotated (``nrot`` unchanged: a row brought here is brought again if it enters
+    another factorization). Returns ``False`` (``p`` not written) when the rows lack
+    different numbers of reflectors or a pivot fails the threshold: the caller then
+    brings them and takes the row-pivoted LQ of :func:`_eqp`."""
     n = B.shape[1]
     d = n - col
-    Tt = flat[:d * nw].reshape((d, nw))
+    r0 = nrot[rows[0]]
+    for i in range(1, nw):
+        if nrot[rows[i]] != r0:
+            return False
+    W = flat[:n * nw].reshape((n, nw))
     for i in range(nw):
-        j = rows[i]
-        Bj = B[j]
-        t[i] = tgt[i] - _dot(Bj, y)
-        for c in range(d):
-            Tt[c, i] = Bj[col + c]
+        Bj = B[rows[i]]
+        for c in range(n):
+            W[c, i] = Bj[c]
+    w = norms[:nw]                 # scratch until the column norms
+    for tf in range(r0, nf):
+        q = posf[tf]
+        v = Vf[tf]
+        for i in range(nw):
+            w[i] = 0.0
+        for c in range(q, n):
+            vc = v[c]
+            Wc = W[c]
+            for i in range(nw):
+                w[i] += vc * Wc[i]
+        bt = betaf[tf]
+        for i in range(nw):
+            w[i] *= bt
+        for c in range(q, n):
+            vc = v[c]
+            Wc = W[c]
+            for i in range(nw):
+                Wc[i] -= vc * w[i]
+    for i in range(nw):
+        t[i] = tgt[i]
+    for c in range(n):
+        yc = y[c]
+        Wc = W[c]
+        for i in range(nw):
+            t[i] -= yc * Wc[i]
+    Tt = W[col:]
     for c in range(d):
         norms[c] = _dot(Tt[c], Tt[c])
         perm[c] = c
@@ -251,16 +288,16 @@ def _full_rank_step(B, y, col, rows, nw, tgt, soft_tol, flat, t, norms, perm, p)
         alpha = -norm if c0 >= 0.0 else norm
         cj[0] = c0 - alpha
         vtv = 2.0 * (exact - alpha * c0)
-        w = nw - c
+        wn = nw - c
         for k in range(c + 1, d):
             ck = Tt[k, c:]
             f = 2.0 * _dot(ck, cj) / vtv
-            for i in range(w):
+            for i in range(wn):
                 ck[i] -= f * cj[i]
             norms[k] -= ck[0] * ck[0]
         tj = t[c:nw]
         f = 2.0 * _dot(tj, cj) / vtv
-        for i in range(w):
+        for i in range(wn):
             tj[i] -= f * cj[i]
         cj[0] = alpha
     for c in range(d - 1, -1, -1):
@@ -275,13 +312,16 @@ def _full_rank_step(B, y, col, rows, nw, tgt, soft_tol, flat, t, norms, perm, p)
 
 @njit(cache=True, fastmath=_FAST, inline="always")
 def _step(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T, rhs, norms, V, beta,
-          vpos, Lw, p, reach, flat, perm):
+          vpos, Lw, p, reach, flat, perm, nrot, nf, Vf, betaf, posf):
     """:func:`_full_rank_step` when it applies, else :func:`_eqp`; returns
     ``(hr, rs, nref, full)``."""
     d = B.shape[1] - col
     if nh == 0 and nw >= d and _full_rank_step(B, y, col, rows, nw, tgt, soft_tol, flat,
-                                               rhs, norms, perm, p):
+                                               rhs, norms, perm, p, nrot, nf, Vf, betaf,
+                                               posf):
         return 0, d, 0, True
+    for i in range(nh + nw):
+        _bring(B, rows[i], nrot, nf, Vf, betaf, posf)
     hr, rs, nref = _eqp(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T, rhs, norms,
                         V, beta, vpos, Lw, p, reach)
     return hr, rs, nref, False
@@ -381,7 +421,6 @@ def _gather(state, hard_end, s0, s1, blo, bup, rows, tgt, B, nrot, nf, Vf, betaf
     for j in range(hard_end):
         st = state[j]
         if st == -1 or st == 1:
-            _bring(B, j, nrot, nf, Vf, betaf, posf)
             rows[nh] = j
             tgt[nh] = blo[j] if st == -1 else bup[j]
             nh += 1
@@ -389,7 +428,6 @@ def _gather(state, hard_end, s0, s1, blo, bup, rows, tgt, B, nrot, nf, Vf, betaf
     for j in range(s0, s1):
         st = state[j]
         if st != 0:
-            _bring(B, j, nrot, nf, Vf, betaf, posf)
             rows[nh + nw] = j
             tgt[nh + nw] = bup[j] if st == 1 else blo[j]
             nw += 1
@@ -418,8 +456,9 @@ def workspace_offsets(M: int, n: int, k: int) -> dict[str, tuple[int, int]]:
     float64: ``params`` (rcond, primal_tol, dual_tol, max_iter, use_warm), ``B``,
     ``T``, ``Lw``, ``Bo``, ``flat`` (``R × n`` each), ``V``, ``Vf`` (``n × n``), ``fvec``
     (``15 × R``), ``x`` (``n``), ``w2`` and ``res = √w2`` (``k``); the kernel writes
-    ``‖x‖`` into ``params[5]`` and, into ``params[6]``, ``1`` when an iteration cap was
-    hit, ``-1`` when ``x`` or a residual is not finite; int64: ``k``, ``starts`` (``k + 1``),
+    ``‖x‖`` into ``params[5]``, into ``params[6]`` ``1`` when an iteration cap was
+    hit, ``-1`` when ``x`` or a residual is not finite, and into ``params[7]`` the number
+    of levels whose violation exceeds ``primal_tol max(1, ‖x‖)``; int64: ``k``, ``starts`` (``k + 1``),
     ``ivec`` (``5 × R``), ``perm`` (``n``), ``counts`` (``3 × (k + 1)``); int8: ``row_eq``
     (``M``), ``bvec`` (``2 × R``), ``eqr`` (``R``), ``warm_state`` (``(k + 1) × R``),
     ``warm_valid`` (``k + 1``).
@@ -551,15 +590,21 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
         s = sw[j]
         if not (np.isfinite(s) and s > 0.0):
             return False
-        nz = 0
+        Bj = B[j]
+        Boj = Bo[j]
+        Aj = A[j]
         for c in range(n):
-            B[j, c] = s * A[j, c]
-            Bo[j, c] = B[j, c]
-            if A[j, c] != 0.0:
-                nz += 1
-                ucol[j] = c
-        if nz != 1:
-            ucol[j] = -1
+            Bj[c] = s * Aj[c]
+            Boj[c] = Bj[c]
+        ucol[j] = -1
+        if not row_eq[j]:
+            nz = 0
+            for c in range(n):
+                if Aj[c] != 0.0:
+                    nz += 1
+                    ucol[j] = c
+            if nz != 1:
+                ucol[j] = -1
         nrot[j] = 0
         if row_eq[j]:
             if not np.isfinite(b[j]):
@@ -658,7 +703,8 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
             nh, nw = _gather(state, hard_end, s0, s1, blo, bup, rows, tgt, B, nrot, nf,
                                  Vf, betaf, posf)
             hr, rs, nref, full = _step(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol,
-                                       T, rhs, norms, V, beta, vpos, Lw, p, True, flat, perm)
+                                       T, rhs, norms, V, beta, vpos, Lw, p, True, flat, perm,
+                                       nrot, nf, Vf, betaf, posf)
             iters[lev] += 1
             for i in range(hr, nh):
                 state[rows[i]] = 0
@@ -714,7 +760,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                                  Vf, betaf, posf)
                 hr, rs, nref, full = _step(B, y, col, rows, nh, nw, tgt, rnorm, rcond,
                                            soft_tol, T, rhs, norms, V, beta, vpos, Lw, p,
-                                           False, flat, perm)
+                                           False, flat, perm, nrot, nf, Vf, betaf, posf)
                 for i in range(hr, nh):
                     state[rows[i]] = 0          # dependent on the kept hard rows
                 pn = np.sqrt(_dot(p[:d], p[:d]))
@@ -814,9 +860,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                 tb = blo[j] if st == -1 else bup[j]
                 fix = abs(_odot(Bo, ucol, j, xc) - tb) > _tol(primal_tol, rnorm[j], ynorm, tb)
             if fix:
-                _bring(B, j, nrot, nf, Vf, betaf, posf)
                 rows[nfix] = j
-                norms[nfix] = _dot(B[j, col:], B[j, col:])
                 nfix += 1
                 state[j] = 5            # being fixed: rotated until its pivot is taken
         rf = 0
@@ -851,6 +895,10 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
             for j in range(s0, s1):
                 if state[j] == 5:
                     state[j] = 2
+        for i in range(nfix):
+            j = rows[i]
+            _bring(B, j, nrot, nf, Vf, betaf, posf)
+            norms[i] = _dot(B[j, col:], B[j, col:])
         while rf < nfix and col < n:
             piv = rf
             best = norms[rf]
@@ -927,6 +975,11 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
         total += acc
     xn = np.sqrt(_dot(x, x))
     fwork[5] = xn
+    infeasible = 0
+    for lev in range(k):
+        if res[lev] > primal_tol * max(1.0, xn):
+            infeasible += 1
+    fwork[7] = infeasible
     capped = 0.0
     for lev in range(k + 1):
         if flags[lev] != FLAG_OK:

@@ -44,7 +44,7 @@ class Capabilities:
     exact: bool = True
 
 
-@dataclass
+@dataclass(slots=True)
 class Outcome:
     """What a plugin's ``solve`` returns; the registry turns it into a :class:`Solution`.
 
@@ -66,7 +66,7 @@ class Outcome:
     checked: bool = False
 
 
-@dataclass
+@dataclass(slots=True)
 class Solution:
     """The answer of a formulation to a task stack.
 

@@ -167,7 +167,9 @@ class Prepared:
         self.warm_valid = part(self._bwork, "warm_valid")
         #: the kernel's outputs: ``x``, each level's ``‖w_i‖²``, its root (one copy)
         self._out = self._fwork[off["x"][0]:off["res"][1]]
-        self._summary = self._fwork[5:7]          # ‖x‖, cap/non-finite flag
+        #: ‖x‖, cap/non-finite flag, number of levels with a violation above tolerance
+        self._summary = self._fwork[5:8]
+        self._n, self._k = n, k
         self._counts = part(self._iwork, "counts", (3, k + 1))
 
     def reset(self) -> None:
@@ -189,15 +191,16 @@ class Prepared:
         return self._outcome()
 
     def _outcome(self) -> Outcome:
-        n, k = self.layout.n, self.layout.k
+        n, k = self._n, self._k
         out = self._out.copy()
         x, w2, residuals = out[:n], out[n:n + k], out[n + k:]
         counts = self._counts.copy()
-        xn, flag = self._summary.tolist()
-        tol = self.primal_tol * max(1.0, xn)
+        xn, flag, infeasible = self._summary.tolist()
+        if infeasible:
+            tol = self.primal_tol * max(1.0, xn)
+            infeasible = [i for i, r in enumerate(residuals.tolist()) if r > tol]
         info = {"iterations": counts[0], "rank_profile": counts[2, :k],
-                "level_violation": w2,
-                "infeasible_levels": [i for i, r in enumerate(residuals.tolist()) if r > tol],
+                "level_violation": w2, "infeasible_levels": infeasible or [],
                 "warm_start": self.warm_start}
         if flag == 0.0:
             return Outcome(x, "optimal", info, residuals=residuals, checked=True)

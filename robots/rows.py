@@ -98,6 +98,7 @@ class _Task:
     fid: int = -1
     cols: np.ndarray | None = None
     offset: np.ndarray | None = None     # point on the frame (frame coordinates)
+    has_offset: bool = False             # offset ≠ 0 (read every step: a bool, not .any())
     axes: np.ndarray | None = None       # com axes
     form: str = ""                       # limits: "activation" or "bounds"
     position: bool = True                # limits: position limits in the bounds
@@ -263,6 +264,7 @@ class TaskWriter:
         task.fid = fid
         task.cols = np.array(sorted(cols), dtype=np.int64)
         task.offset = offset
+        task.has_offset = bool(np.any(offset))
 
     def _add(self, name, kind, rows, level, gain, weight, inequality=False) -> _Task:
         if self._layout is not None:
@@ -514,7 +516,7 @@ class TaskWriter:
                 self._Q[_k.DRIFT, s:s + 3] = acc[3:]
             else:
                 self._Q[_k.DRIFT, s:s + task.rows] = acc[:task.rows]
-                if task.offset.any():
+                if task.has_offset:
                     # a point r = R·offset from the origin: a_p = a_O + α × r + ω × (ω × r)
                     r = R @ task.offset
                     om = pin.getFrameVelocity(state.model, state.data, task.fid,

@@ -248,3 +248,36 @@ def test_two_sweeps_never_write_one_rows_file(tmp_path):
             RowStore(tmp_path / "rows.csv", cols)
     with RowStore(tmp_path / "rows.csv", cols) as again:        # free once closed
         assert "a" in again and list(again.rows) == ["a"]
+
+
+# ------------------------------------------------------------------ throughput
+def test_spread_runs_takes_runs_evenly_and_refuses_bad_counts(tmp_path):
+    from prioik.benchmarks.sweep.throughput import spread_runs
+    plan = plan_from_config(load_config(write_config(tmp_path, n=5)))      # 10 runs
+    sub = spread_runs(plan, 4)
+    ids = [r.run_id for r in plan.runs]
+    assert [ids.index(r.run_id) for r in sub.runs] == [0, 3, 6, 9]
+    assert {r.variant.label for r in sub.runs} == {v.label for v in plan.variants}
+    for bad in (1, 11):
+        with pytest.raises(SweepConfigError, match="--throughput takes 2 to 10 runs"):
+            spread_runs(plan, bad)
+
+
+def test_throughput_runs_each_worker_count_from_scratch_and_reports_it(tmp_path):
+    """`prioik sweep --throughput 3` times the same 3 runs on 1 and 2 workers, every run
+    computed on each (a pass never resumes from the other's rows), then runs the sweep;
+    the page reports both rates and their ratio."""
+    import json
+    cfg = write_config(tmp_path, n=2)
+    out = tmp_path / "out"
+    assert main(["sweep", str(cfg), "--out", str(out), "--quiet", "--throughput", "3"]) == 0
+    result = json.loads((out / "throughput.json").read_text())
+    assert result["runs"] == 3 and [p["workers"] for p in result["passes"]] == [1, 2]
+    assert [p["runs_computed"] for p in result["passes"]] == [3, 3]
+    rates = [p["runs_per_minute"] for p in result["passes"]]
+    assert result["speedup"] == pytest.approx(rates[1] / rates[0])
+    for w in (1, 2):
+        assert len(raw_ids(out / "throughput" / f"workers-{w}" / "rows.csv")) == 3
+    assert len(raw_ids(out / "rows.csv")) == 4        # the sweep itself, complete
+    page = (out / "report.md").read_text()
+    assert "Throughput (`--throughput 3`" in page and f"{result['speedup']:.2f} ×" in page

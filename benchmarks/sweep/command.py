@@ -18,6 +18,13 @@ def run_command(args: argparse.Namespace) -> int:
           f"formulation variants) into {args.out}", file=sys.stderr)
     if args.dry_run:
         return 0
+    if args.throughput:
+        from .throughput import measure
+        result = measure(plan, args.out, args.throughput, progress=args.progress)
+        print(f"sweep: throughput {result['speedup']:.2f} x with "
+              f"{result['worker_counts'][-1]} workers against 1"
+              if result["speedup"] else "sweep: throughput: one worker count only",
+              file=sys.stderr)
     outcome = run_sweep(plan, args.out, workers=args.workers, scheduler=args.scheduler,
                         progress=args.progress)
     command = "prioik " + " ".join(shlex.quote(a) for a in getattr(args, "command_line",
@@ -51,6 +58,10 @@ def add_parser(subparsers) -> None:
     p.add_argument("--doc", default=None, metavar="PATH",
                    help="also write the page at PATH (e.g. docs/sweep.md; plots copied to "
                         "img/ beside it)")
+    p.add_argument("--throughput", type=int, default=0, metavar="N",
+                   help="first time N of the sweep's runs (spread over it) on 1 worker and "
+                        "on one worker per core, each from scratch, and report the speed-up "
+                        "(DIR/throughput.json and the page)")
     p.add_argument("--dry-run", action="store_true",
                    help="validate the sweep file and print its size; run nothing")
     p.add_argument("--quiet", dest="progress", action="store_false",
