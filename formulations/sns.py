@@ -274,6 +274,8 @@ def solve(stack: TaskStack, *, rcond: float = DEFAULT_RCOND, bound_tolerance: fl
         saturated.append(sat)
         iterations.append(rounds)
         P = P_next
+    if not levels and not feasible(x):
+        x = np.clip(x, lower, upper)        # bounds alone: the box's minimum-norm point
     status = "optimal" if exact and not scaled and not ambiguous else "approximate"
     info = {"task_scaling": scaling, "scaled_tasks": scaled, "saturated": saturated,
             "iterations": iterations, "bounds_level": bounds_level, "first_task_level": first}

@@ -188,3 +188,14 @@ def test_many_levels_keep_the_projector_on_the_fuzz_stack():
     assert "ambiguous at levels 4, 5" in sol.info["reason"]
     assert relative_distance(sol.x, case.truth) <= 1e-8
     assert check_lexicographic(case.stack, sol.x).ok
+
+
+def test_bounds_alone_give_the_boxs_minimum_norm_point():
+    """A stack of the bounds level only (the fuzz drew one, tests/test_fuzz.py seed 5,
+    case 228): x was 0, outside a box that excludes it, called optimal."""
+    lo, hi = np.array([1.5, -4.0, -0.7]), np.array([np.inf, np.inf, 0.4])
+    stack = TaskStack([Task("box", np.eye(3), lower=lo, upper=hi)])
+    sol = prioik.solve(stack, "sns")
+    assert sol.status == "optimal" and np.array_equal(sol.x, [1.5, 0.0, 0.0])
+    from prioik.hierarchy import check_lexicographic
+    assert check_lexicographic(stack, sol.x, minimum_norm=True).ok
