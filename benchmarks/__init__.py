@@ -1,5 +1,25 @@
 """Comparisons, validation reports, benchmarks and the ``prioik`` command line.
 
+One concern per module:
+
+* :mod:`.variants` — the rows of every report, derived from the formulation registry
+  (one ``Variant`` class, one label syntax ``formulation[tag]``);
+* :mod:`.stacks` — the stacks the benchmarks time (random families, G1 fencing states);
+* :mod:`.timing` — repeats under a time budget, medians and percentiles;
+  :mod:`.threads` — BLAS threads (``threadpoolctl``); :mod:`.progress`, :mod:`.machine`;
+* :mod:`.results` — the result records (one dataclass per kind of row) and their CSV
+  writer and reader;
+* :mod:`.report` — pages from the templates of ``templates/`` (package data);
+  :mod:`.plots` — every figure;
+* :mod:`.scenario_runs` — running a scenario's report (fencing, arm, sweeps) through the
+  scenario interface of :mod:`prioik.robots.scenario`; :mod:`.placo_baseline`,
+  :mod:`.pink_baseline`, :mod:`.external` — the external IK libraries;
+* one module per experiment: :mod:`.bench` (a package), :mod:`.validation`,
+  :mod:`.properties`, :mod:`.fencing` (with :mod:`.reproduction`, its page),
+  :mod:`.arm`, :mod:`.sweep`, :mod:`.fuzz`, :mod:`.compare`, :mod:`.saved_runs`;
+* :mod:`.cli` — argument parsing and dispatch only (:mod:`.library`: ``prioik list``
+  and ``solve``).
+
 Importing this package changes nothing in the process: the ``prioik`` command limits
 BLAS to one thread itself (:mod:`prioik.benchmarks.threads`, with ``threadpoolctl``),
 because every matrix here is small and a multi-threaded BLAS spends more on waking

@@ -1,152 +1,82 @@
 """``prioik arm``: the arm-reach scenario (Panda) with every formulation, PlaCo, pink and SNS.
 
 Runs :class:`robots.arm.ArmScenario` through the same machinery as ``prioik fencing``
-(:func:`benchmarks.fencing.run_scenario`: the shared scenario interface, the same
-summary, CSVs, saved runs, plots and replay page) with the runs of :data:`RUNS`, and
-with ``--doc PATH`` writes the scenario's page (``docs/arm.md``) from the measured
-numbers, copying its plots to ``img/`` beside it. The joint limits are the first level
-here (no contact above them), so the QP formulations and SNS receive the same stack.
+(:func:`benchmarks.scenario_runs.run_scenario`: the shared scenario interface, the same
+summary, CSVs, saved runs, plots and replay page) with the runs of its report (every
+available formulation of the registry with the settings plugins declare for ``arm``,
+and the external IK libraries; :mod:`prioik.benchmarks.variants`), and with
+``--doc PATH`` writes the scenario's page (``docs/arm.md``) from the measured numbers
+(``templates/arm.md``), copying its plots to ``img/`` beside it. The joint limits are
+the first level here (no contact above them), so the QP formulations and SNS receive
+the same stack.
 """
 
 from __future__ import annotations
 
 import argparse
-import shutil
 import sys
 from pathlib import Path
 
-from prioik.benchmarks.fencing import RunSpec, VELOCITY_GAIN, run_scenario, stops_and_figures
+from .report import (Page, copy_figures, ms, replays_line, run_settings, sci,
+                     step_time_figure, stops_and_figures, table)
+from .variants import Variant
 
 VARIANTS = ("reach",)
-EXTRA_ERRORS = ("orientation_error_rad", "joint_velocity_violation_rad_s")
-_V = ("reach",)
-
-#: the runs of the arm scenario (one per row of its tables)
-RUNS: tuple[RunSpec, ...] = (
-    RunSpec("extended_jacobian", "extended_jacobian", {}, "eq. 18, undamped; joint limits "
-            "as activation rows", variants=_V),
-    RunSpec("extended_jacobian:eq27", "extended_jacobian", {"reach": {"damping": 1e-2}},
-            "eq. 27 damping λ = 1e-2 on the lower levels", variants=_V),
-    RunSpec("nullspace", "nullspace", {}, "recursive null-space projection", variants=_V),
-    RunSpec("nullspace:damped", "nullspace", {"reach": {"damping": 0.05}},
-            "the same with the damped least-squares inverse, λ = 0.05", variants=_V),
-    RunSpec("chiaverini", "chiaverini", {}, "Chiaverini's singularity-robust priority",
-            variants=_V),
-    RunSpec("unifying", "unifying", {}, "unifying framework, torques from eq. 40",
-            variants=_V),
-    RunSpec("operational_space", "operational_space", {},
-            "prioritized operational-space control", variants=_V),
-    RunSpec("cascaded_qp", "cascaded_qp", {"reach": {"solver": "quadprog"}},
-            "one QP per level (quadprog), joint limits as bounds on q̈", variants=_V),
-    RunSpec("cascaded_qp:velocity", "cascaded_qp", {"reach": {"solver": "quadprog"}},
-            f"the same at velocity level (J q̇ = ẋ* + {VELOCITY_GAIN:g} e, bounds on q̇)",
-            variants=_V, level="velocity"),
-    RunSpec("daqp_hierarchical", "daqp_hierarchical", {}, "DAQP's hierarchical solve",
-            variants=_V),
-    RunSpec("placo", "placo", {}, "PlaCo's algebraic QP through the registry", variants=_V),
-    RunSpec("sns", "sns", {}, "SNS at acceleration level: position (horizon), velocity "
-            "and acceleration bounds on q̈ as hard limits", variants=_V,
-            limits="hard_bounds"),
-    RunSpec("sns:velocity", "sns", {}, "SNS at velocity level: position, velocity and "
-            "braking-distance bounds on q̇", variants=_V, level="velocity",
-            limits="hard_bounds"),
-    RunSpec("placo_kinematics_solver", "placo_kinematics_solver", {},
-            "PlaCo's KinematicsSolver: hard tool position, soft orientation (0.1) and "
-            "posture (1e-4), its joint and velocity limits", variants=_V),
-    RunSpec("pink", "pink", {}, "pink's solve_ik, tasks as costs (tool 100, orientation "
-            "1, posture 1e-3), ConfigurationLimit + VelocityLimit, quadprog", variants=_V,
-            backend="quadprog"),
-    RunSpec("pink:daqp", "pink", {}, "the same with DAQP", variants=_V, backend="daqp"),
-)
+#: this experiment's own runs beside the registry's (none: every setting it runs is a
+#: plugin's declaration for the ``arm`` report)
+STUDIES: tuple[Variant, ...] = ()
 
 
-def _fmt(x, spec=".2e"):
-    return "—" if x is None else format(x, spec)
-
-
-def _ms(x):
-    return "—" if x is None else f"{1e3 * x:.3f} ms"
-
-
-def write_page(path: Path, summary: dict, meta: dict, pngs: dict, command: str) -> Path:
+def write_page(path: Path, summary: dict, meta: dict, pngs: dict, command: str,
+               gain: float) -> Path:
     """The arm scenario's page from measured numbers; plots copied to ``img/``."""
     path = Path(path)
-    img = path.parent / "img"
-    img.mkdir(parents=True, exist_ok=True)
-    shown = {}
-    for files in pngs.values():
-        for f in files:
-            target = img / f"arm_{Path(f).name}"
-            shutil.copyfile(f, target)
-            shown[Path(f).stem] = f"img/{target.name}"
-    L: list[str] = []
-    add = L.append
-    add("# The arm-reach scenario: a Panda, four targets, one out of reach")
-    add("")
-    add("<!-- generated by `prioik arm --doc docs/arm.md`; do not edit -->")
-    add("")
-    add(f"Generated by `{command}` (wall time {meta['wall_time_s']:.0f} s on this machine). "
-        "Every number below is measured by that command; timings are noisy on a shared "
-        "machine.")
-    add("")
-    add("The Franka Panda of example-robot-data (7 joints, fingers locked) moves its tool "
-        "point `panda_hand_tcp` through four targets, 0.8 s minimum-jerk moves and 0.4 s "
-        "holds; the third target, (1.0, 0.1, 0.55) m, is ≈ 0.97 m from the shoulder "
-        "while the arm reaches ≈ 0.86 m. Levels: joint limits (activation rows for the "
-        "equality formulations; bounds on q̈ or q̇ — position, velocity and the "
-        "datasheet acceleration limits — for the QP formulations and SNS), tool "
-        "position, hand orientation, posture (`robots/arm.py`). PlaCo and pink are "
-        "velocity-level weighted QPs with their own limits (`benchmarks/placo_baseline.py`, "
-        "`benchmarks/pink_baseline.py`).")
-    add("")
-    add("| run | formulation | options | why |")
-    add("|---|---|---|---|")
+    page = Page("arm.md")
+    shown = copy_figures(pngs, path, "arm")
+    variants = list(summary)
+    rows = []
     for label, r in meta["runs"].items():
-        add(f"| `{label}` | `{r['formulation']}` | `{r['options'].get('reach', {})}` | "
-            f"{r['note']} |")
-    if meta.get("skipped"):
-        add("")
-        add("Not run here: " + "; ".join(meta["skipped"]) + ".")
-    add("")
+        opts, stack, _ = run_settings(r, variants)
+        rows.append([f"`{label}`", f"`{r['formulation']}`", opts, stack, r["note"]])
+    head = ["run", "final tool error", "max algorithmic error", "max orientation error",
+            "max joint-limit violation", "max velocity-limit violation", "max ‖q̈‖",
+            "median step", "median solve", "status"]
+    measured = []
     for variant, runs in summary.items():
-        add("## Measured")
-        add("")
-        add("| run | final tool error | max algorithmic error | max orientation error | "
-            "max joint-limit violation | max velocity-limit violation | max ‖q̈‖ | "
-            "median step | median solve | status |")
-        add("|---|---|---|---|---|---|---|---|---|---|")
-        for label, s in runs.items():
-            tip = s["final_tip_error_m"]
-            add(f"| `{label}` | {'—' if tip is None else f'{1e3 * tip:.3g} mm'} | "
-                f"{_fmt(s['max_algorithmic_error'])} | "
-                f"{_fmt(s.get('max_orientation_error_rad'))} rad | "
-                f"{_fmt(s['max_joint_limit_violation_rad'])} rad | "
-                f"{_fmt(s.get('max_joint_velocity_violation_rad_s'))} rad/s | "
-                f"{_fmt(s['max_qdd_norm'], '.3g')} | {_ms(s['median_step_time_s'])} | "
-                f"{_ms(s['median_solve_time_s'])} | "
-                f"{'failed' if s['failed'] else 'ran to the end'} |")
-        add("")
-        stops_and_figures(add, meta, variant, shown, (
-            ("tip_error", "tool error to the current target"),
-            ("algorithmic_error", "algorithmic error, eq. 29"), ("qdd", "‖q̈‖")))
-    if "step_time" in shown:
-        add(f"![median step time per run]({shown['step_time']})")
-        add("")
-    if meta.get("replays"):
-        add("Replay: `" + "`, `".join(meta["replays"].values()) + "` in the output folder "
-            "(a self-contained HTML page; `prioik replay RUN.npz` for one saved run).")
-        add("")
-    path.write_text("\n".join(L) + "\n")
+        body = [[f"`{label}`", "—" if s["final_tip_error_m"] is None
+                 else f"{1e3 * s['final_tip_error_m']:.3g} mm",
+                 sci(s["max_algorithmic_error"]),
+                 f"{sci(s.get('max_orientation_error_rad'))} rad",
+                 f"{sci(s.get('max_joint_limit_violation_rad'))} rad",
+                 f"{sci(s.get('max_joint_velocity_violation_rad_s'))} rad/s",
+                 sci(s["max_qdd_norm"], ".3g"), ms(s["median_step_time_s"]),
+                 ms(s["median_solve_time_s"]), "failed" if s["failed"] else "ran to the end"]
+                for label, s in runs.items()]
+        figures = [(key, page.inline(f"{key}_figure"))
+                   for key in ("tip_error", "algorithmic_error", "qdd")]
+        measured.append(page.block("measured", table=table(head, body),
+                                   after=stops_and_figures(meta, variant, shown, figures)))
+    text = page.render(
+        command=command, wall_s=f"{meta['wall_time_s']:.0f}", gain=f"{gain:g}",
+        runs_table=table(["run", "formulation", "options", "stack", "why"], rows),
+        not_run=(page.block("not_run", skipped="; ".join(meta["skipped"]))
+                 if meta.get("skipped") else ""),
+        measured="\n\n".join(measured), step_time=step_time_figure(shown),
+        replays=replays_line(meta))
+    path.write_text(text)
     return path
 
 
 def run_command(args: argparse.Namespace) -> int:
     """``prioik arm``."""
-    summary, meta, pngs, _ = run_scenario(args, "arm", list(VARIANTS), RUNS, EXTRA_ERRORS)
+    from .scenario_runs import VELOCITY_GAIN, run_scenario
+    runs = run_scenario("arm", list(VARIANTS), args.out, args.formulations, args.duration,
+                        args.dt, args.progress)
     if args.doc:
         command = (f"prioik arm --duration {args.duration:g} --dt {args.dt:g} "
                    f"--out {args.out} --doc {args.doc}")
-        p = write_page(Path(args.doc), summary, meta, pngs, command)
+        p = write_page(Path(args.doc), runs.summary, runs.meta, runs.pngs, command,
+                       VELOCITY_GAIN)
         print(f"wrote {p}", file=sys.stderr)
     return 0
 
@@ -161,8 +91,9 @@ def add_parser(subparsers) -> None:
                     "print a table, write summary.json, CSVs, saved runs, plots and a "
                     "replay page into --out.")
     p.add_argument("--formulations", default=None, metavar="A,B,...",
-                   help="runs to do (labels of benchmarks.arm.RUNS; default: every "
-                        "available one)")
+                   help="run labels, e.g. extended_jacobian,cascaded_qp[quadprog] (default: "
+                        "every run of the scenario's table whose formulation is available; "
+                        "an unknown label is an error that lists the known ones)")
     p.add_argument("--duration", type=float, default=6.0, help="simulated seconds")
     p.add_argument("--dt", type=float, default=0.002, help="control step (s)")
     p.add_argument("--out", default="results/arm", help="output folder")
@@ -171,4 +102,4 @@ def add_parser(subparsers) -> None:
                         "to img/ beside it)")
     p.add_argument("--quiet", dest="progress", action="store_false",
                    help="no progress bars on stderr")
-    p.set_defaults(func=run_command, no_crosscheck=True)
+    p.set_defaults(func=run_command, extras=("robots", "plots"))

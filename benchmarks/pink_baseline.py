@@ -26,20 +26,45 @@ import time
 
 import numpy as np
 
+from prioik.formulations.base import ReportVariant
+
 #: cost of a task by its level in the scenario (0 = highest)
 LEVEL_COSTS = (100.0, 10.0, 1.0, 0.1, 0.01)
 POSTURE_COST = 1e-3
 #: pink's examples pick quadprog when it is installed
 DEFAULT_SOLVER = "quadprog"
 
+#: the baseline's name in the scenario reports (:data:`prioik.benchmarks.variants.BASELINES`)
+NAME = "pink"
+DESCRIPTION = ("pink's solve_ik at velocity level: every task a weighted cost (one decade "
+               "per level), its ConfigurationLimit and VelocityLimit; QP back-end "
+               f"{DEFAULT_SOLVER} (pink's examples' choice)")
+#: rows beside the default one (``options["solver"]``: the QP back-end)
+REPORT_VARIANTS = (
+    ReportVariant("daqp", {"solver": "daqp"}, reports=("scenario",),
+                  note="the same with DAQP, the fastest back-end measured here for pink's "
+                       "QPs (G1, 0.2 s: daqp 161, quadprog 173, proxqp 293, osqp 1143 µs "
+                       "per solve)"),
+)
 
-def unavailable_reason() -> str | None:
-    """Why pink cannot run here, or ``None``."""
+
+def unavailable_reason(options: dict | None = None) -> str | None:
+    """Why pink cannot run here with ``options`` (its ``solver``), or ``None``."""
     try:
         import pink  # noqa: F401
     except ImportError as exc:
         return f"pink is not installed ({exc}); install it with `pip install pin-pink==4.4.0`"
+    solver = (options or {}).get("solver", DEFAULT_SOLVER)
+    import qpsolvers
+    if solver not in qpsolvers.available_solvers:
+        return f"QP back-end {solver} is not available here"
     return None
+
+
+def run(scenario, variant, *, duration: float, dt: float, progress=None):
+    """A scenario run of ``variant`` (:class:`prioik.benchmarks.variants.Variant`)."""
+    return run_pink(scenario, duration=duration, dt=dt, progress=progress,
+                    solver=variant.options.get("solver", DEFAULT_SOLVER), label=variant.label)
 
 
 def run_pink(scenario, *, duration: float, dt: float, solver: str = DEFAULT_SOLVER,

@@ -29,6 +29,27 @@ import time
 
 import numpy as np
 
+#: the baseline's name in the scenario reports (:data:`prioik.benchmarks.variants.BASELINES`)
+NAME = "placo_kinematics_solver"
+DESCRIPTION = ("PlaCo's own KinematicsSolver at velocity level (hard tasks, soft weighted "
+               "tasks, its joint and velocity limits): what users run today")
+REPORT_VARIANTS = ()
+
+
+def unavailable_reason(options: dict | None = None) -> str | None:
+    """Why PlaCo cannot run here, or ``None``."""
+    from prioik.extras import install_hint, missing_distributions
+    if missing_distributions("placo"):
+        return f"placo is not installed; {install_hint('placo')}"
+    return None
+
+
+def run(scenario, variant, *, duration: float, dt: float, progress=None):
+    """A scenario run of ``variant`` (:class:`prioik.benchmarks.variants.Variant`)."""
+    return run_placo(scenario, duration=duration, dt=dt, progress=progress,
+                     label=variant.label)
+
+
 def run_placo(scenario, *, duration: float, dt: float, progress=None,
               label: str = "placo_kinematics_solver"):
     """Run the scenario with ``placo.KinematicsSolver``; returns a

@@ -1,9 +1,11 @@
-"""Figures of the scenario runs that people can read.
+"""Every figure of the benchmark commands.
+
+Scenario runs (``prioik fencing``, ``arm``, ``plot``):
 
 * **One colour per run label, the same in every figure**: :func:`color_of` assigns
-  colours from a fixed list of the known labels (fencing and arm runs), so
-  ``extended_jacobian`` is the same blue in the tip-error, algorithmic-error, ``‖q̈‖``
-  and step-time figures of every scenario.
+  colours in the order of the scenario reports' run tables
+  (:mod:`prioik.benchmarks.variants`), so ``extended_jacobian`` is the same blue in the
+  tip-error, algorithmic-error, ``‖q̈‖`` and step-time figures of every scenario.
 * **Grouped panels** instead of 25 lines on one axis (:func:`group_of`): exact methods,
   damped methods (a damping or step-bound option), approximate methods (formulations
   that declare ``exact=False``) and external baselines (PlaCo, pink).
@@ -12,10 +14,15 @@
   of the positive values of the figure (at most 12 decades); values outside are drawn
   at the edge. **Failures are marked** where they happen: an ✕ at the last recorded
   time of a run that stopped, at its (clipped) last value.
+
+Timings (``prioik bench``): :func:`time_vs_size`, log-log median solve time against
+``n`` (one panel per ``k``) and against ``k`` (one panel per ``n``).
 """
 
 from __future__ import annotations
 
+import math
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -23,16 +30,20 @@ import numpy as np
 GROUPS = ("exact", "damped", "approximate", "external")
 GROUP_TITLES = {"exact": "exact methods", "damped": "damped / step-bounded methods",
                 "approximate": "approximate methods", "external": "external baselines"}
-EXTERNAL = ("placo_kinematics_solver", "pink")
-_DAMPING_OPTIONS = ("damping", "level_damping", "step_bound", "singular_threshold")
 
-#: every run label the scenarios know, in a fixed order: index → colour
-KNOWN_LABELS = (
-    "extended_jacobian", "extended_jacobian:exact", "extended_jacobian:selective",
-    "extended_jacobian:eq27", "nullspace", "nullspace:damped", "chiaverini", "unifying",
-    "unifying:armature", "operational_space", "cascaded_qp", "cascaded_qp:velocity", "cvxpy",
-    "daqp_hierarchical", "placo", "reference", "sns", "sns:velocity",
-    "placo_kinematics_solver", "pink", "pink:daqp")
+
+@lru_cache(maxsize=1)
+def known_labels() -> tuple[str, ...]:
+    """Every run label of the scenario reports, in table order (index → colour)."""
+    from prioik.benchmarks.variants import STUDY_MODULES, table
+    out: list[str] = []
+    for report in STUDY_MODULES:
+        try:
+            labels = table(report).known
+        except Exception:  # noqa: BLE001 - a broken optional plugin must not stop a figure
+            continue
+        out += [lb for lb in labels if lb not in out]
+    return tuple(out)
 
 
 def _palette() -> list:
@@ -45,25 +56,23 @@ def _palette() -> list:
 def color_of(label: str):
     """The colour of a run label (stable across figures and runs)."""
     pal = _palette()
-    if label in KNOWN_LABELS:
-        return pal[KNOWN_LABELS.index(label) % len(pal)]
+    known = known_labels()
+    if label in known:
+        return pal[known.index(label) % len(pal)]
     return pal[(sum(map(ord, label)) * 7) % len(pal)]
 
 
 def group_of(label: str, formulation: str | None = None, options: dict | None = None) -> str:
     """``"exact"``, ``"damped"``, ``"approximate"`` or ``"external"`` for a run."""
-    formulation = formulation or label.split(":")[0]
-    if formulation in EXTERNAL:
+    from prioik.benchmarks.variants import BASELINES, capabilities, is_damped, parse_label
+    formulation = formulation or parse_label(label)[0]
+    if formulation in BASELINES:
         return "external"
-    if options and any(k in options and options[k] not in (None, 0, 0.0, {})
-                       for k in _DAMPING_OPTIONS):
+    if is_damped(options or {}):
         return "damped"
-    try:
-        from prioik import formulations
-        if not formulations.get(formulation).CAPABILITIES.exact:
-            return "approximate"
-    except Exception:  # noqa: BLE001 - an unavailable plugin: judge by name only
-        pass
+    caps = capabilities(formulation)
+    if caps is not None and not caps.exact:
+        return "approximate"
     return "exact"
 
 
@@ -133,8 +142,9 @@ def step_times(path: Path, summary: dict, title: str) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     variants = list(summary)
+    known = known_labels()
     labels = sorted({k for v in summary.values() for k in v},
-                    key=lambda lb: (KNOWN_LABELS.index(lb) if lb in KNOWN_LABELS else 99, lb))
+                    key=lambda lb: (known.index(lb) if lb in known else len(known), lb))
     fig, axes = plt.subplots(1, len(variants), figsize=(4.5 * len(variants) + 1.5,
                                                           0.28 * len(labels) + 1.2),
                              sharey=True, squeeze=False)
@@ -157,3 +167,87 @@ def step_times(path: Path, summary: dict, title: str) -> Path:
     fig.savefig(path, dpi=110, bbox_inches="tight")
     plt.close(fig)
     return path
+
+
+def scenario_figures(out: Path, variant: str, results: dict, scenario: str = "fencing",
+                     tip_label: str = "tip") -> list[Path]:
+    """Tip error, algorithmic error and ‖q̈‖ over time of one scenario variant's runs
+    (``<variant>_tip_error.png``, ``_algorithmic_error.png``, ``_qdd.png``)."""
+    series = [("tip_error", f"{tip_label} error to the target (m)",
+               lambda r: r.errors.get("tip_error_m")),
+              ("algorithmic_error", "‖e_algorithm‖ (eq. 29)", lambda r: r.algorithmic_error),
+              ("qdd", "‖q̈‖ (rad/s², m/s²)", lambda r: np.linalg.norm(r.a, axis=1))]
+    return [grouped_series(Path(out) / f"{variant}_{key}.png", results, get, ylabel,
+                           f"{scenario}, {variant}: {ylabel}")
+            for key, ylabel, get in series]
+
+
+def step_time_figure(out: Path, summary: dict, scenario: str = "fencing") -> Path:
+    """Median step time per run and variant (``step_time.png``)."""
+    return step_times(Path(out) / "step_time.png", summary,
+                      f"{scenario}: compute time per control step (kinematics + solve + "
+                      "torque)")
+
+
+def time_vs_size(rows: list, out: Path) -> list[str]:
+    """Log-log plots of the median time (:class:`~prioik.benchmarks.results.TimingRow`
+    of the random cases) against ``n`` (one panel per ``k``) and against ``k`` (one
+    panel per ``n``): ``time_vs_n.png``, ``time_vs_k.png``; returns the names written."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import NullFormatter
+
+    from prioik.benchmarks.variants import parse_label
+
+    sub = [r for r in rows if r.suite == "random" and math.isfinite(r.median_us)]
+    if not sub:
+        return []
+    labels = sorted({r.label for r in sub})
+    cmap = plt.get_cmap("tab10")
+    families = sorted({parse_label(lb)[0] for lb in labels})
+
+    def style(label: str) -> dict:
+        fam, tag = parse_label(label)
+        if label == "extended_jacobian":
+            return {"color": "black", "lw": 2.6, "ls": "-", "marker": "o", "zorder": 5}
+        same = sorted(lb for lb in labels if lb.startswith(fam + "["))
+        if tag and r_backends.get(label):        # one line per QP back-end: own colour
+            return {"color": cmap(same.index(label) % 10), "lw": 1.0, "marker": "x",
+                    "ls": ("--", ":", (0, (3, 1, 1, 1)))[backend_families.index(fam) % 3]}
+        if tag:                # extra paths of one formulation: same colour, own marker
+            return {"color": cmap(families.index(fam) % 10), "lw": 1.4, "ls": "-.",
+                    "marker": "s^vD"[same.index(label) % 4]}
+        return {"color": cmap(families.index(fam) % 10), "lw": 1.6, "marker": "o", "ls": "-"}
+
+    r_backends = {r.label: bool(r.backend) for r in sub}
+    backend_families = sorted({parse_label(lb)[0] for lb, b in r_backends.items() if b})
+    written = []
+    for axis, other, fname in (("n", "k", "time_vs_n.png"), ("k", "n", "time_vs_k.png")):
+        panels = sorted({getattr(r, other) for r in sub})
+        ticks = sorted({getattr(r, axis) for r in sub})
+        fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels) + 2.5, 4.6),
+                                 squeeze=False, sharey=True)
+        for ax, p in zip(axes[0], panels):
+            for lb in labels:
+                pts = sorted((getattr(r, axis), r.median_us) for r in sub
+                             if r.label == lb and getattr(r, other) == p)
+                if pts:
+                    xs, ys = zip(*pts)
+                    ax.plot(xs, ys, ms=3, label=lb, **style(lb))
+            ax.set_xscale("log")
+            ax.set_yscale("log")
+            ax.set_xticks(ticks)
+            ax.set_xticklabels([str(t) for t in ticks])
+            ax.xaxis.set_minor_formatter(NullFormatter())
+            ax.set_title(f"{other} = {p}")
+            ax.set_xlabel(axis + (" (unknowns)" if axis == "n" else " (levels)"))
+            ax.grid(True, which="both", alpha=0.3)
+        axes[0][0].set_ylabel("median solve time (µs)")
+        handles, names = axes[0][0].get_legend_handles_labels()
+        fig.legend(handles, names, loc="center right", fontsize=7)
+        fig.tight_layout(rect=(0, 0, 1 - 2.3 / (4.2 * len(panels) + 2.5), 1))
+        fig.savefig(Path(out) / fname, dpi=110)
+        plt.close(fig)
+        written.append(fname)
+    return written

@@ -11,6 +11,12 @@ writes ``docs/properties.md``:
 2. **Algorithmic error** (eq. 29) of every formulation on seeded ``coupled``,
    ``decoupled`` and ``conflicting`` stacks (``hierarchy.analysis.algorithmic_error``).
 
+The columns are the ``properties`` report's variants (:mod:`benchmarks.variants`: every
+formulation of the registry, and the settings plugins declare for it); the rotated
+table adds the ``roundoff`` report's declared rows. The prose is
+``templates/properties.md``; which sentence a column gets follows its capabilities
+(exact or not) and options (damped or not), not its name.
+
 Everything is computed when the script runs (deterministic seeds); nothing is typed in.
 """
 
@@ -26,84 +32,45 @@ import numpy as np
 
 from prioik import formulations
 from prioik.hierarchy import (DEFAULT_RCOND, Task, TaskStack, algorithmic_error_norms,
-                       check_lexicographic, rank_profile)
+                              check_lexicographic, rank_profile)
 from prioik.hierarchy.families import FAMILIES, near_singular, random_spd
+
+from .report import Page, table
+from .variants import Variant, capabilities, table as variant_table
 
 #: σ values of the near-singular sweep (0: exactly conflicting)
 SIGMAS = (1e-1, 1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-10, 0.0)
 #: σ range of the fitted slope
 SLOPE_RANGE = (1e-7, 1e-1)
-#: damping used by the damped variants
-LAMBDA = 1e-2
 #: condition number of the fixed SPD mass matrices
 MASS_CONDITION = 10.0
 
 
-@dataclass(frozen=True)
-class Variant:
-    """One formulation with fixed options; ``mass`` says which mass matrix it gets.
-
-    Attributes:
-        label: Column label.
-        name: Registry name.
-        options: Options other than the mass matrix.
-        mass: ``None`` (no mass matrix), ``"identity"`` or ``"spd"`` (fixed seeded SPD).
-    """
-
-    label: str
-    name: str
-    options: tuple[tuple[str, object], ...] = ()
-    mass: str | None = None
+def report_variants() -> list[Variant]:
+    """The columns: the ``properties`` report's variants (:mod:`benchmarks.variants`)."""
+    return variant_table("properties").rows
 
 
-VARIANTS: tuple[Variant, ...] = (
-    Variant("reference", "reference"),
-    Variant("ext_jac qr", "extended_jacobian", (("nullspace", "qr"),)),
-    Variant("ext_jac svd", "extended_jacobian", (("nullspace", "svd"),)),
-    Variant(f"ext_jac qr λ={LAMBDA:g}", "extended_jacobian",
-            (("nullspace", "qr"), ("damping", LAMBDA))),
-    Variant(f"ext_jac svd λ={LAMBDA:g}", "extended_jacobian",
-            (("nullspace", "svd"), ("damping", LAMBDA))),
-    Variant(f"ext_jac qr λ={LAMBDA:g} null_space", "extended_jacobian",
-            (("nullspace", "qr"), ("damping", LAMBDA), ("z_basis", "null_space"))),
-    Variant(f"ext_jac svd λ={LAMBDA:g} null_space", "extended_jacobian",
-            (("nullspace", "svd"), ("damping", LAMBDA), ("z_basis", "null_space"))),
-    Variant("nullspace", "nullspace"),
-    Variant(f"nullspace λ={LAMBDA:g}", "nullspace", (("damping", LAMBDA),)),
-    Variant("chiaverini", "chiaverini"),
-    Variant("unifying M=I", "unifying", (), "identity"),
-    Variant("unifying M", "unifying", (), "spd"),
-    Variant("op_space M", "operational_space", (), "spd"),
-)
-
-
-#: variants added to the rotated-coordinates table only: the textbook step of the
-#: projector recursions, without the extra ``N_{i-1}`` (see ``formulations/nullspace.py``)
-ROUNDOFF_VARIANTS: tuple[Variant, ...] = (
-    Variant("nullspace, no reproject", "nullspace", (("reproject", False),)),
-    Variant("op_space M, no reproject", "operational_space", (("reproject", False),), "spd"),
-)
-
-
-def random_mass_matrix(rng: np.random.Generator, n: int,
-                       condition: float = MASS_CONDITION) -> np.ndarray:
-    """Seeded SPD matrix with eigenvalues geometrically spread over ``[1, condition]``."""
-    return random_spd(rng, n, condition)
+def roundoff_variants() -> list[Variant]:
+    """The columns added to the rotated-coordinates table only: the rows plugins declare
+    for ``roundoff`` (the textbook step of the projector recursions, without the extra
+    ``N_{i-1}``; see ``formulations/nullspace.py``)."""
+    return [v for v in variant_table("roundoff").rows if v.origin == "declared"]
 
 
 def solve_variant(stack: TaskStack, variant: Variant, mass: np.ndarray):
-    """Solve ``stack`` with ``variant``; ``mass`` is the SPD matrix for ``"spd"``."""
+    """Solve ``stack`` with ``variant``; a formulation that takes a mass matrix gets
+    ``mass`` (``M = I`` when the variant says ``mass="identity"``)."""
     options = dict(variant.options)
-    if variant.mass == "identity":
-        options["mass_matrix"] = np.eye(stack.n)
-    elif variant.mass == "spd":
-        options["mass_matrix"] = mass
-    return formulations.solve(stack, variant.name, **options)
+    if variant.needs_mass_matrix:
+        options["mass_matrix"] = np.eye(stack.n) if variant.mass == "identity" else mass
+    return formulations.solve(stack, variant.formulation, **options)
 
 
-def _available(variants) -> list[Variant]:
-    ok = {f.name for f in formulations.available() if f.available}
-    return [v for v in variants if v.name in ok]
+def _exact(v: Variant) -> bool:
+    """An exact formulation's undamped column (its answer is the optimum)."""
+    caps = capabilities(v.formulation)
+    return bool(caps and caps.exact) and not v.damped
 
 
 # ------------------------------------------------------------ near singularity
@@ -116,7 +83,7 @@ class SingularitySweep:
     norms: np.ndarray          # len(sigmas) × len(variants)
     residuals: np.ndarray      # lower level's residual ‖A_2 θ̈ − b_2‖
     slopes: np.ndarray         # fitted d log‖θ̈‖ / d log σ over SLOPE_RANGE
-    rotated_variants: list[Variant]   # variants + ROUNDOFF_VARIANTS
+    rotated_variants: list[Variant]   # variants + the roundoff columns
     rotated_top: np.ndarray    # level 1's residual on the column-rotated stack
     rotated_lower: np.ndarray  # level 2's residual on the column-rotated stack
 
@@ -127,14 +94,17 @@ def rotate_columns(stack: TaskStack, Q: np.ndarray) -> TaskStack:
                       for level in stack.levels])
 
 
-def singularity_sweep(sigmas=SIGMAS, variants=VARIANTS) -> SingularitySweep:
-    """Solve ``near_singular(σ)`` with every variant (one fixed SPD ``M``, seed 0)."""
-    variants = _available(variants)
-    mass = random_mass_matrix(np.random.default_rng(0), near_singular(0.1).n)
+def singularity_sweep(sigmas=SIGMAS, variants=None, roundoff=None) -> SingularitySweep:
+    """Solve ``near_singular(σ)`` with every variant (one fixed SPD ``M``, seed 0);
+    ``variants`` / ``roundoff`` default to :func:`report_variants` /
+    :func:`roundoff_variants`."""
+    variants = report_variants() if variants is None else list(variants)
+    roundoff = roundoff_variants() if roundoff is None else list(roundoff)
+    mass = random_spd(np.random.default_rng(0), near_singular(0.1).n, MASS_CONDITION)
     Q, _ = np.linalg.qr(np.random.default_rng(1).standard_normal((mass.shape[0],) * 2))
     norms = np.full((len(sigmas), len(variants)), np.nan)
     residuals = np.full_like(norms, np.nan)
-    rot_variants = variants + _available(ROUNDOFF_VARIANTS)
+    rot_variants = variants + roundoff
     rot_top = np.full((len(sigmas), len(rot_variants)), np.nan)
     rot_lower = np.full_like(rot_top, np.nan)
     for i, s in enumerate(sigmas):
@@ -221,13 +191,14 @@ class ErrorSummary:
 ERROR_FAMILIES = ("coupled", "decoupled", "conflicting")
 
 
-def error_table(n_stacks: int = 50, families=ERROR_FAMILIES, variants=VARIANTS,
+def error_table(n_stacks: int = 50, families=ERROR_FAMILIES, variants=None,
                 seed: int = 12345) -> dict[str, dict[str, ErrorSummary]]:
     """``{family: {variant label: ErrorSummary}}`` over seeded stacks, n 6..30, 2..5 levels.
 
-    Each stack gets its own seeded SPD ``M`` (condition ``MASS_CONDITION``).
+    Each stack gets its own seeded SPD ``M`` (condition ``MASS_CONDITION``); ``variants``
+    defaults to :func:`report_variants`.
     """
-    variants = _available(variants)
+    variants = report_variants() if variants is None else list(variants)
     out: dict[str, dict[str, ErrorSummary]] = {}
     for fam_index, family in enumerate(families):
         rows: dict[str, list[tuple[float, float, bool]]] = {v.label: [] for v in variants}
@@ -236,7 +207,7 @@ def error_table(n_stacks: int = 50, families=ERROR_FAMILIES, variants=VARIANTS,
             rng = np.random.default_rng([seed, fam_index, s])
             n = int(rng.integers(6, 31))
             stack = FAMILIES[family](rng, n, int(rng.integers(2, 6)))
-            mass = random_mass_matrix(rng, n)
+            mass = random_spd(rng, n, MASS_CONDITION)
             trivial += int(sum(rank_profile(stack)[1:]) == 0)
             scale = np.array([max(np.linalg.norm(level.b), 1e-300) for level in stack.levels])
             for v in variants:
@@ -274,286 +245,185 @@ def _find(sweep: SingularitySweep, label: str) -> int | None:
     return labels.index(label) if label in labels else None
 
 
+def _code(labels) -> str:
+    return ", ".join(f"`{lb}`" for lb in labels)
+
+
+def _lam(variants: list[Variant]) -> str:
+    """The damping value(s) of the damped variants."""
+    values = sorted({float(v.options["damping"]) for v in variants if v.options.get("damping")})
+    return ", ".join(f"{x:g}" for x in values) or "–"
+
+
 def render(sweep: SingularitySweep, errors: dict[str, dict[str, ErrorSummary]],
            n_stacks: int, cond: Conditioning | None = None) -> str:
-    """The Markdown of ``docs/properties.md``."""
+    """The Markdown of ``docs/properties.md`` (``templates/properties.md``)."""
+    page = Page("properties.md")
     labels = [v.label for v in sweep.variants]
-    lines = [
-        "# Measured properties: algorithmic singularity and algorithmic error",
-        "",
-        "Generated by `prioik properties --out docs/properties.md` "
-        "(`benchmarks/properties.py`); do not edit by hand. "
-        f"Generated {_dt.datetime.now(_dt.timezone.utc):%Y-%m-%d %H:%M} UTC, "
-        f"numpy {np.__version__}, Python {platform.python_version()}.",
-        "",
-        "Formulations (columns): `reference` (exact nested-SVD lexicographic least squares), "
-        "`extended_jacobian` (the paper's eq. 18 on the `qr` and `svd` paths, and eq. 27 with "
-        f"`damping=λ={LAMBDA:g}` in both readings of `Z_i`: the paper's `r_i` rows spanning "
-        "`range(N_{i-1} J_iᵀ)` (default, `z_basis=\"task_range\"`) and a basis of the whole "
-        "null space of the higher levels (`null_space` columns) — the paper defines "
-        "`Z_i ∈ ℜ^{r_i × n}` (eq. 12-13) but calls it a basis of the null space of prior "
-        "tasks, which has `n − ρ(J_{i-1}^A)` vectors: an ambiguity), `nullspace` (recursive "
-        "null-space projection, plain "
-        f"pseudo-inverse and damped least-squares inverse with λ={LAMBDA:g}), `chiaverini` "
-        "(Chiaverini 1997), `unifying` (the paper's appendix eq. 36-40) with `M = I` and with "
-        f"a fixed seeded SPD `M` (condition {MASS_CONDITION:g}), `operational_space` "
-        "(Khatib/Sentis) with the same `M`. λ multiplies `I` everywhere "
-        "(`Jᵀ(JJᵀ + λI)⁻¹`, eq. 27's `JᵀJ + λI`).",
-        "",
-        "## 1. Approaching an algorithmic singularity",
-        "",
-        "Stack `hierarchy.families.near_singular(σ)` (n = 6): level 1 `x_0 = 0, x_1 = 0`; "
-        "level 2 `cos σ · x_0 + sin σ · x_2 = 1` plus a free row on `x_3..x_5`. As σ → 0 the "
-        "lower row tends to the row space of level 1; the smallest singular value of the "
-        "projected Jacobian `J_2 N_1` is `sin σ`. The exact lexicographic optimum has "
-        "`x_2 = 1/sin σ`: the *problem* is ill-conditioned, not only some methods. At σ = 0 the "
-        "row is exactly conflicting (eq. 35) and is split off (eq. 20).",
-        "",
-        "### ‖θ̈‖ against σ",
-        "",
-        "| σ | " + " | ".join(labels) + " |",
-        "|---|" + "---:|" * len(labels),
-    ]
-    for i, s in enumerate(sweep.sigmas):
-        lines.append(f"| {_sigma(s)} | " + " | ".join(_fmt(v) for v in sweep.norms[i]) + " |")
-    lines.append(f"| **slope** (log‖θ̈‖ vs log σ, σ = {SLOPE_RANGE[0]:.0e} … "
-                 f"{SLOPE_RANGE[1]:.0e}) | " + " | ".join(f"**{v:+.3f}**" for v in sweep.slopes)
-                 + " |")
-    lines += [
-        "",
-        "### Lower task's residual ‖J_2 θ̈ − h_2‖ against σ",
-        "",
-        "| σ | " + " | ".join(labels) + " |",
-        "|---|" + "---:|" * len(labels),
-    ]
-    for i, s in enumerate(sweep.sigmas):
-        lines.append(f"| {_sigma(s)} | " + " | ".join(_fmt(v) for v in sweep.residuals[i])
-                     + " |")
-    lines += [
-        "",
-        "### Same stack in rotated coordinates: residual of level 1 / level 2",
-        "",
-        "`near_singular(σ)` above is axis-aligned (level 1 fixes coordinates), which spares "
-        "the projector-based recursions any cancellation. Here the columns are rotated by a "
-        "fixed random orthogonal `Q` (`A_i → A_i Q`, `M → Qᵀ M Q`): the same problem, the same "
-        "optimum norms, generic round-off. The last columns are the textbook steps of the "
-        "projector recursions (`reproject=False`: without the extra `N_{i-1}`).",
-        "",
-        "| σ | " + " | ".join(v.label for v in sweep.rotated_variants) + " |",
-        "|---|" + "---:|" * len(sweep.rotated_variants),
-    ]
-    for i, s in enumerate(sweep.sigmas):
-        lines.append(f"| {_sigma(s)} | " + " | ".join(
-            f"{_fmt(a)} / {_fmt(b)}" for a, b in zip(sweep.rotated_top[i],
-                                                     sweep.rotated_lower[i])) + " |")
-    lines += ["", "### What the tables show", ""]
-    lines += _singularity_findings(sweep)
-    if cond is not None:
-        lines += _conditioning_section(cond)
-    lines += [
-        "",
-        "## 2. Algorithmic error (eq. 29)",
-        "",
-        "`e_i = h_i_feasible − J_i_feasible θ̈`, with the feasible rows of eq. 19-21 taken "
-        "basis-free as `range(J_i Z_i)` (`hierarchy.analysis.algorithmic_error`). Reported "
-        "relative to the level's target, `‖e_i‖ / ‖h_i‖`, over "
-        f"{n_stacks} seeded stacks per family (n 6..30, 2..5 levels; each stack its own SPD "
-        f"`M`, condition {MASS_CONDITION:g}). `coupled`: compatible full-rank levels whose rows "
-        "lean on the rows above; `decoupled`: levels on disjoint columns (mutually orthogonal "
-        "rows); `conflicting`: about a third of each lower level's rows are combinations of "
-        "higher rows, with disagreeing targets. \"lex. opt.\" is the fraction of stacks "
-        "passing `check_lexicographic` (tol 1e-8).",
-        "",
-    ]
-    for family, table in errors.items():
-        lines += [f"### `{family}`", "",
-                  "| formulation | top level max | lower levels: median | min | max "
-                  "| lex. opt. |",
-                  "|---|---:|---:|---:|---:|---:|"]
-        for label, e in table.items():
-            lines.append(f"| {label} | {_fmt(e.top_max)} | {_fmt(e.lower_median)} | "
-                         f"{_fmt(e.lower_min)} | {_fmt(e.lower_max)} | "
-                         f"{e.lexicographic:.0%} |")
-        lines.append("")
-    lines += ["### What the tables show", ""]
-    lines += _error_findings(errors)
-    lines.append("")
-    return "\n".join(lines)
+    head = ["σ", *labels]
+    align = "l" + "r" * len(labels)
+    norms = [[_sigma(s), *(_fmt(v) for v in sweep.norms[i])]
+             for i, s in enumerate(sweep.sigmas)]
+    norms.append([page.inline("slope_row", low=f"{SLOPE_RANGE[0]:.0e}",
+                              high=f"{SLOPE_RANGE[1]:.0e}"),
+                  *(f"**{v:+.3f}**" for v in sweep.slopes)])
+    residuals = [[_sigma(s), *(_fmt(v) for v in sweep.residuals[i])]
+                 for i, s in enumerate(sweep.sigmas)]
+    rot = [v.label for v in sweep.rotated_variants]
+    rotated = [[_sigma(s), *(f"{_fmt(a)} / {_fmt(b)}" for a, b in
+                             zip(sweep.rotated_top[i], sweep.rotated_lower[i]))]
+               for i, s in enumerate(sweep.sigmas)]
+    error_tables = []
+    for family, tbl in errors.items():
+        rows = [[label, _fmt(e.top_max), _fmt(e.lower_median), _fmt(e.lower_min),
+                 _fmt(e.lower_max), f"{e.lexicographic:.0%}"] for label, e in tbl.items()]
+        error_tables.append(page.block("error_table", family=family, table=table(
+            ["formulation", "top level max", "lower levels: median", "min", "max",
+             "lex. opt."], rows, "lrrrrr")))
+    columns = [page.inline("column", label=v.label, note=v.note)
+               for v in sweep.rotated_variants]
+    return page.render(
+        when=f"{_dt.datetime.now(_dt.timezone.utc):%Y-%m-%d %H:%M}", numpy=np.__version__,
+        python=platform.python_version(), mass_condition=f"{MASS_CONDITION:g}",
+        columns="\n".join(columns), norms_table=table(head, norms, align),
+        residuals_table=table(head, residuals, align),
+        rotated_table=table(["σ", *rot], rotated, "l" + "r" * len(rot)),
+        singularity_findings="\n".join(_singularity_findings(sweep, page)),
+        conditioning=_conditioning_section(cond, page) if cond is not None else "",
+        n_stacks=n_stacks, error_tables="\n\n".join(error_tables),
+        error_findings="\n".join(_error_findings(errors, sweep.variants, page)))
 
 
-def _singularity_findings(sweep: SingularitySweep) -> list[str]:
+def _singularity_findings(sweep: SingularitySweep, page: Page) -> list[str]:
     sig = np.array(sweep.sigmas)
     out = []
     ref = _find(sweep, "reference")
-    exact = [lab for lab in ("ext_jac qr", "ext_jac svd", "nullspace", "op_space M")
-             if _find(sweep, lab) is not None]
+    exact = [v.label for v in sweep.variants if _exact(v) and v.label != "reference"]
     if ref is not None:
         track = [lab for lab in exact if np.allclose(sweep.norms[:, _find(sweep, lab)],
                                                      sweep.norms[:, ref], rtol=1e-6)]
-        out.append(f"* The exact optimum grows like 1/σ: `reference` has slope "
-                   f"{sweep.slopes[ref]:+.3f}. Every exact formulation follows it: "
-                   + ", ".join(f"`{lab}` (slope {sweep.slopes[_find(sweep, lab)]:+.3f})"
-                               for lab in exact)
-                   + (f"; {', '.join(f'`{t}`' for t in track)} equal `reference`'s norms to "
-                      f"1e-6 at every σ" if track else "") + ".")
-        if "ext_jac qr" in track and "ext_jac svd" in track:
-            out.append("  In particular the undamped extended Jacobian (eq. 18) tracks the exact "
-                       "optimum just as the recursive null-space projection does: near (but "
-                       "not at) an algorithmic singularity it is no more bounded than "
-                       "`nullspace`, because a bounded answer would not be the optimum.")
+        out.append(page.block(
+            "exact_track", slope=f"{sweep.slopes[ref]:+.3f}",
+            exact=", ".join(f"`{lab}` (slope {sweep.slopes[_find(sweep, lab)]:+.3f})"
+                            for lab in exact),
+            track=page.inline("exact_track_equal", labels=_code(track)) if track else ""))
+        if "extended_jacobian" in track and "extended_jacobian[svd]" in track:
+            out.append(page.block("eq18_tracks"))
         zero = int(np.flatnonzero(sig == 0)[0]) if (sig == 0).any() else None
         if zero is not None:
             finite = bool(np.isfinite(sweep.norms[zero]).all())
             A2 = near_singular(0.0)[1].A
             threshold = DEFAULT_RCOND * float(np.linalg.norm(A2))
-            out.append(f"* At σ = 0 (exactly conflicting, Theorem 1's case) every formulation "
-                       f"is {'finite' if finite else 'NOT finite'}: the largest ‖θ̈‖ is "
-                       f"{_fmt(np.nanmax(sweep.norms[zero]))}, and the exact ones equal "
-                       f"`reference`. The rank rule drops the conflicting direction instead of "
-                       f"dividing by it. The same happens once sin σ falls below the rank "
-                       f"threshold `rcond·‖J_2‖_F` = {threshold:.2g} (rows σ = "
-                       + ", ".join(_sigma(v) for v in sig if 0 < v < threshold)
-                       + "): ‖θ̈‖ falls back to O(1) and the lower row counts as conflicting.")
+            out.append(page.block(
+                "at_zero", finite="finite" if finite else "NOT finite",
+                largest=_fmt(np.nanmax(sweep.norms[zero])), threshold=f"{threshold:.2g}",
+                rows=", ".join(_sigma(v) for v in sig if 0 < v < threshold)))
     threshold = DEFAULT_RCOND * float(np.linalg.norm(near_singular(0.0)[1].A))
     rows = sig > threshold                     # rows where the exact optimum is 1/sin σ
     rot_labels = [v.label for v in sweep.rotated_variants]
     if ref is not None and rows.any():
         worst = np.nanmax(np.maximum(sweep.rotated_top, sweep.rotated_lower)[rows], axis=0)
-        candidates = ["reference"] + exact + [v.label for v in ROUNDOFF_VARIANTS]
+        candidates = (["reference"] + exact
+                      + [v.label for v in sweep.rotated_variants[len(sweep.variants):]])
         candidates = [lab for lab in candidates if lab in rot_labels]
         good = [lab for lab in candidates if worst[rot_labels.index(lab)] <= 1e-6]
         bad = [lab for lab in candidates if worst[rot_labels.index(lab)] > 1e-6]
         show = lambda lab: f"`{lab}` {_fmt(worst[rot_labels.index(lab)])}"  # noqa: E731
-        out.append(f"* Accuracy near the singularity (third table, σ = "
-                   f"{_sigma(sig[rows].min())} … {_sigma(sig[rows].max())}, largest residual "
-                   f"of either level, where ‖θ̈‖ reaches {_fmt(np.nanmax(sweep.norms[rows, ref]))}): "
-                   + ", ".join(show(lab) for lab in good)
-                   + (" stay at round-off times ‖θ̈‖ (≈ ε/σ)" if good else "")
-                   + ("; " + ", ".join(show(lab) for lab in bad)
-                      + " lose accuracy like ε/σ²." if bad else ".")
-                   + " The `svd` path of `extended_jacobian` builds `Z_i J_iᵀ J_i`, which "
-                   "squares the conditioning. The textbook projector steps "
-                   "`Ĵ_i^#(h_i − J_i θ̈)` leak O(ε/σ) out of `range(N_{i-1})` and the 1/σ step "
-                   "multiplies the leak; applying `N_{i-1}` once more (the default "
-                   "`reproject=True` of `nullspace` and `operational_space`, an exact no-op) "
-                   "removes it. The axis-aligned stack of the second table hides the "
-                   "difference for `nullspace` (its projectors are exact there).")
-    damped = [lab for lab in sweep.variants if "λ=" in lab.label]
+        good_text = page.inline("accuracy_good", labels=", ".join(show(lab) for lab in good)) \
+            if good else ""
+        bad_text = (("; " if good else "") + page.inline(
+            "accuracy_bad", labels=", ".join(show(lab) for lab in bad))) if bad else "."
+        out.append(page.block("accuracy", low=_sigma(sig[rows].min()),
+                              high=_sigma(sig[rows].max()),
+                              largest=_fmt(np.nanmax(sweep.norms[rows, ref])),
+                              good=good_text, bad=bad_text))
+    damped = [v for v in sweep.variants if v.damped]
+    lam = [float(v.options["damping"]) for v in damped if v.options.get("damping")]
     if damped:
-        parts = []
-        for v in damped:
-            j = _find(sweep, v.label)
-            parts.append(f"`{v.label}` max {_fmt(np.nanmax(sweep.norms[:, j]))}")
-        out.append(f"* The damped variants stay bounded (λ = {LAMBDA:g}, bound 1/(2√λ) + O(1) "
-                   f"= {1 / (2 * np.sqrt(LAMBDA)) + 1:.1f}): " + ", ".join(parts)
-                   + ". They pay with the lower task's residual (second table), which is "
-                   "O(1) near the singularity instead of 0. (Here the two damped methods "
-                   "coincide: with two levels and `h_1 = 0`, eq. 27 and the damped "
-                   "null-space recursion give the same `σ/(σ² + λ)`.)")
-    for lab in ("chiaverini", "unifying M=I", "unifying M"):
-        j = _find(sweep, lab)
-        if j is not None:
-            out.append(f"* `{lab}` is bounded for every σ (max ‖θ̈‖ "
-                       f"{_fmt(np.nanmax(sweep.norms[:, j]))}, slope {sweep.slopes[j]:+.3f}): "
-                       f"it never inverts a projected Jacobian. Its lower-task residual is "
-                       f"{_fmt(sweep.residuals[0, j])} already at σ = {_sigma(sig[0])}, where "
-                       f"the exact methods meet the task "
-                       f"({_fmt(sweep.residuals[0, ref]) if ref is not None else '-'}): that "
-                       f"is the algorithmic error of section 2.")
+        parts = [f"`{v.label}` max {_fmt(np.nanmax(sweep.norms[:, _find(sweep, v.label)]))}"
+                 for v in damped]
+        out.append(page.block("damped_bounded", lam=_lam(damped),
+                              bound=f"{1 / (2 * np.sqrt(max(lam))) + 1:.1f}" if lam else "–",
+                              parts=", ".join(parts)))
+    for v in sweep.variants:
+        caps = capabilities(v.formulation)
+        if caps is None or caps.exact or v.damped:
+            continue
+        j = _find(sweep, v.label)
+        values = dict(label=v.label, largest=_fmt(np.nanmax(sweep.norms[:, j])),
+                      slope=f"{sweep.slopes[j]:+.3f}", residual=_fmt(sweep.residuals[0, j]),
+                      sigma=_sigma(sig[0]),
+                      exact_residual=_fmt(sweep.residuals[0, ref]) if ref is not None else "-")
+        out.append(page.block("approximate_bounded" if abs(sweep.slopes[j]) <= 0.2
+                              else "approximate_grows", **values))
     return out
 
 
-def _conditioning_section(cond: Conditioning) -> list[str]:
+def _conditioning_section(cond: Conditioning, page: Page) -> str:
     """Theorem 1 against the recursion: σ_min of ``J_2 Z_2`` and of ``J_E``."""
     zbs = list(cond.extended)
-    out = ["", "### Conditioning of the extended system (Theorem 1)", "",
-           "Same stack. `σ_min(J_2 Z_2)`: the smallest singular value above the rank "
-           "threshold of the lower level's projected Jacobian (what the recursion "
-           "divides by; `hierarchy.singularity_distance`, 0 when none is left). "
-           "`σ_min(J_E)`: the smallest of the `ρ(J_2^A)` singular values a pseudo-inverse "
-           "of `J_E` keeps (eq. 15, undamped, unequilibrated; "
-           "`formulations.extended_jacobian.extended_system`), for each reading of `Z_i`.",
-           "",
-           "| σ | ρ(J_2^A) | σ_min(J_2 Z_2) | " + " | ".join(
-               f"σ_min(J_E), {zb} (rows)" for zb in zbs) + " |",
-           "|---|---:|---:|" + "---:|" * len(zbs)]
-    for i, sig in enumerate(cond.sigmas):
-        out.append(f"| {_sigma(sig)} | {cond.rank[i]} | {_fmt(cond.projected[i])} | "
-                   + " | ".join(f"{_fmt(cond.extended[zb][i])} ({cond.rows[zb][i]})"
-                                for zb in zbs) + " |")
+    rows = [[_sigma(sig), cond.rank[i], _fmt(cond.projected[i]),
+             *(f"{_fmt(cond.extended[zb][i])} ({cond.rows[zb][i]})" for zb in zbs)]
+            for i, sig in enumerate(cond.sigmas)]
+    tbl = table(["σ", "ρ(J_2^A)", "σ_min(J_2 Z_2)",
+                 *(f"σ_min(J_E), {zb} (rows)" for zb in zbs)], rows, "l" + "r" * (2 + len(zbs)))
     sig = np.array(cond.sigmas)
     fit = (sig > 0) & (cond.projected > 0)
     slope_p = np.polyfit(np.log(sig[fit]), np.log(cond.projected[fit]), 1)[0]
     slopes = {zb: np.polyfit(np.log(sig[fit]), np.log(cond.extended[zb][fit]), 1)[0]
               for zb in zbs}
-    out += ["",
-            f"* Fitted over σ = {_sigma(sig[fit].min())} … {_sigma(sig[fit].max())}: "
-            f"`σ_min(J_2 Z_2)` goes like σ^{slope_p:.2f}, `σ_min(J_E)` like "
-            + ", ".join(f"σ^{v:.2f} ({zb})" for zb, v in slopes.items())
-            + (". The extended system does not escape the near-singularity: because its "
-               "blocks hold `J_iᵀJ_i`, its smallest kept singular value is the square of the "
-               "recursion's" if all(abs(v - 2 * slope_p) < 0.1 for v in slopes.values())
-               else ". Its smallest kept singular value does not scale like the square of "
-               "the recursion's here")
-            + ", and `J_E⁺` needs the same rank decision — how many directions "
-            "`r_i` a level keeps (eq. 12) is the rank rule's call on either path. Theorem 1's "
-            "\"no algorithmic singularity\" holds at an exact conflict (σ = 0), where the "
-            "rank rule has removed the direction; a conflicting row then adds a zero "
-            "rank-one term to `Z_i J_iᵀ J_i` (the `null_space` reading keeps rows of rank "
-            "`r_i` only), not a zero row, and with the paper's `Z_i` there is no row for it "
-            "at all."]
-    return out
+    square = all(abs(v - 2 * slope_p) < 0.1 for v in slopes.values())
+    return page.block("conditioning", table=tbl, low=_sigma(sig[fit].min()),
+                      high=_sigma(sig[fit].max()), slope=f"{slope_p:.2f}",
+                      slopes=", ".join(f"σ^{v:.2f} ({zb})" for zb, v in slopes.items()),
+                      square=page.inline("square" if square else "not_square").lstrip())
 
 
-def _error_findings(errors: dict[str, dict[str, ErrorSummary]]) -> list[str]:
+def _error_findings(errors: dict[str, dict[str, ErrorSummary]], variants: list[Variant],
+                    page: Page) -> list[str]:
     out = []
-    exact = ["reference", "ext_jac qr", "ext_jac svd", "nullspace", "op_space M"]
-    approx = ["chiaverini", "unifying M=I", "unifying M"]
-    for family, table in errors.items():
-        ex = [table[lab] for lab in exact if lab in table]
-        ap = {lab: table[lab] for lab in approx if lab in table}
+    by_label = {v.label: v for v in variants}
+    exact = [v.label for v in variants if _exact(v)]
+    approx = [v.label for v in variants if not _exact(v) and not v.damped]
+    for family, tbl in errors.items():
+        ex = {lab: tbl[lab] for lab in exact if lab in tbl}
         if ex:
-            worst = max(max(e.top_max, e.lower_max) for e in ex)
-            lex = min(e.lexicographic for e in ex)
-            names = ", ".join(f"`{lab}`" for lab in exact if lab in table)
-            out.append(f"* `{family}`: the exact formulations ({names}) "
-                       f"have no algorithmic error (largest relative ‖e_i‖ {_fmt(worst)}, "
-                       f"lexicographic on {lex:.0%} of the stacks).")
-        for lab, e in ap.items():
-            out.append(f"  `{lab}`: top level {_fmt(e.top_max)}; lower levels median "
-                       f"{_fmt(e.lower_median)} (min {_fmt(e.lower_min)}, max "
-                       f"{_fmt(e.lower_max)}); lexicographic on {e.lexicographic:.0%}.")
-        any_e = next(iter(table.values()))
+            worst = {lab: max(e.top_max, e.lower_max) for lab, e in ex.items()}
+            clean = [lab for lab in ex if worst[lab] <= 1e-8]
+            loose = [lab for lab in ex if worst[lab] > 1e-8]
+            if clean:
+                out.append(page.block("exact_no_error", family=family, labels=_code(clean),
+                                      worst=_fmt(max(worst[lab] for lab in clean)),
+                                      lex=f"{min(ex[lab].lexicographic for lab in clean):.0%}"))
+            if loose:
+                out.append(page.block("exact_tolerance", labels=_code(loose),
+                                      worst=_fmt(max(worst[lab] for lab in loose)),
+                                      lex=f"{min(ex[lab].lexicographic for lab in loose):.0%}"))
+        for lab in approx:
+            if lab in tbl:
+                e = tbl[lab]
+                out.append(page.block("approximate_error", label=lab, top=_fmt(e.top_max),
+                                      median=_fmt(e.lower_median), low=_fmt(e.lower_min),
+                                      high=_fmt(e.lower_max), lex=f"{e.lexicographic:.0%}"))
+        any_e = next(iter(tbl.values()))
         if any_e.trivial > 0:
-            out.append(f"  ({any_e.trivial:.0%} of these stacks leave no feasible direction "
-                       f"to the lower levels (r_i = 0 for i ≥ 2, eq. 12); every method is "
-                       f"trivially optimal there, hence the minima of 0.)")
-        if family == "decoupled" and "unifying M" in table:
-            out.append("  Decoupled means orthogonal rows; the unifying framework needs "
-                       "`J_i M⁻² J_jᵀ = 0`, which a full SPD `M` breaks (with `M = I`, or a "
-                       "diagonal `M` on these disjoint-column stacks, its error is 0 — "
-                       "`tests/test_unifying.py`).")
-    damped = [lab for lab in next(iter(errors.values())) if "λ=" in lab]
-    top = {lab: max(errors[f][lab].top_max for f in errors) for lab in damped}
-    exact_top = [lab for lab in damped if top[lab] <= 1e-10]
-    mixed_top = [lab for lab in damped if top[lab] > 1e-10]
-    out.append("* The damped variants (λ = "
-               f"{LAMBDA:g}) trade exactness for boundedness: their error is the damping's, "
-               "not an algorithmic error in the paper's sense, and it vanishes as λ → 0 "
-               "(`tests/test_nullspace.py`, `tests/test_extended_jacobian.py`). Top-level "
-               "relative error (worst over the families): "
-               + ", ".join(f"`{lab}` {_fmt(top[lab])}" for lab in damped) + "."
-               + (" " + ", ".join(f"`{lab}`" for lab in exact_top)
-                  + " keep the top level exact: with the paper's `Z_i` eq. 27 is the "
-                  "hierarchy whose levels below the first are solved by damped least "
-                  "squares (μ² = λ; equal to `reference(level_damping=[0, λ, …])`, "
-                  "`tests/test_extended_jacobian.py`)." if exact_top else "")
-               + (" " + ", ".join(f"`{lab}`" for lab in mixed_top)
-                  + " do not: the whole-null-space reading of eq. 27 has "
-                  "`n − ρ(J_{i-1}^A)` rows per damped block and is solved as one "
-                  "over-determined least-squares fit, and the damped least-squares "
-                  "inverse of `nullspace` damps every level, the first included."
-                  if mixed_top else ""))
+            out.append(page.block("trivial", share=f"{any_e.trivial:.0%}"))
+        unifying_spd = [lab for lab in approx if by_label[lab].formulation == "unifying"
+                        and by_label[lab].mass != "identity"]
+        if family == "decoupled" and any(lab in tbl for lab in unifying_spd):
+            out.append(page.block("decoupled_unifying"))
+    damped = [v for v in variants if v.damped]
+    if damped:
+        top = {v.label: max(errors[f][v.label].top_max for f in errors) for v in damped}
+        exact_top = [lab for lab in top if top[lab] <= 1e-10]
+        mixed_top = [lab for lab in top if top[lab] > 1e-10]
+        out.append(page.block(
+            "damped_errors", lam=_lam(damped),
+            tops=", ".join(f"`{lab}` {_fmt(v)}" for lab, v in top.items()),
+            exact_top=page.inline("damped_exact_top", labels=_code(exact_top))
+            if exact_top else "",
+            mixed_top=page.inline("damped_mixed_top", labels=_code(mixed_top))
+            if mixed_top else ""))
     return out
 
 

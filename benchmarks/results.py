@@ -1,74 +1,185 @@
-"""``prioik replay RESULT`` and ``prioik plot RESULT``: work on saved runs (``.npz``).
+"""The result records of the benchmark commands and their files.
 
-A run saved by :meth:`robots.SimulationResult.save` (``prioik fencing`` and
-``prioik arm`` save every run next to its CSV) reloads with its joint names and the
-scenario it came from, which is all a replay or a plot needs.
+One dataclass per kind of row — :class:`TimingRow` (``prioik bench``: one variant timed
+on one case) and :class:`RunSummary` (one scenario run: ``prioik fencing``, ``arm``,
+``sweep``) — and one CSV writer and reader for every record: the columns are the
+record's fields, in order (a field with ``metadata={"csv": False}`` stays out), and the
+reader converts each cell back to its field's type (``nan``, ``inf`` and empty cells
+included), so a written file reads back as the records that were written.
 """
 
 from __future__ import annotations
 
-import argparse
-import sys
+import csv
+import math
+import typing
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
+from typing import Any, TypeVar
+
+import numpy as np
+
+__all__ = ["TimingRow", "RunSummary", "csv_columns", "write_csv", "read_csv"]
+
+R = TypeVar("R")
 
 
-def _load(paths: list[str]) -> dict:
-    from prioik.robots import SimulationResult
-    out = {}
-    for p in paths:
-        res = SimulationResult.load(p)
-        out[res.info.get("label") or Path(p).stem] = res
-    return out
+@dataclass
+class TimingRow:
+    """One variant timed on one case (``results.csv`` of ``prioik bench``; times in µs).
+
+    Attributes:
+        suite: ``"random"`` or ``"g1"``.
+        case: The case's name (``"random n=35 k=4"``, ``"g1 compatible"``).
+        n, k, rows: Unknowns, levels and total rows of the case.
+        label: The variant's label (:mod:`prioik.benchmarks.variants`).
+        formulation, backend, options: What the label stands for.
+        repeats: Timed solves.
+        median_us, p10_us, p90_us: Of the timed solves.
+        success_rate: Share of solves that are not failed and match ``reference``'s
+            residuals level by level.
+        dist_median, dist_max: ``‖x − x_ref‖ / max(1, ‖x_ref‖)`` over the solves.
+        status: ``ok``, ``reduced``, ``skipped``, ``unsupported`` or ``error``.
+        note: Why, when the status is not ``ok``.
+        probe_s: A skipped row's measured solve (s; not written to the CSV).
+    """
+
+    suite: str
+    case: str
+    n: int
+    k: int
+    rows: int
+    label: str
+    formulation: str
+    backend: str
+    options: str
+    repeats: int = 0
+    median_us: float = math.nan
+    p10_us: float = math.nan
+    p90_us: float = math.nan
+    success_rate: float = math.nan
+    dist_median: float = math.nan
+    dist_max: float = math.nan
+    status: str = "ok"
+    note: str = ""
+    probe_s: float = field(default=math.nan, metadata={"csv": False})
 
 
-def _out_dir(args, first: str) -> Path:
-    return Path(args.out) if args.out else Path("results")
+def _finite(x) -> float | None:
+    x = float(x)
+    return x if math.isfinite(x) else None
 
 
-def cmd_replay(args: argparse.Namespace) -> int:
-    """Write the HTML replay of saved runs (or play one live in meshcat)."""
-    results = _load(args.results)
-    if args.live:
-        from prioik.benchmarks.replay import live_view
-        live_view(next(iter(results.values())), open_browser=args.open)
-        return 0
-    from prioik.benchmarks.replay import write_replay
-    out = _out_dir(args, args.results[0])
-    path = out / (Path(args.results[0]).stem + "_replay.html") if len(results) == 1 \
-        else out / "replay.html"
-    write_replay(path, results, title=", ".join(results))
-    print(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB)")
-    return 0
+def _max(values) -> float | None:
+    a = np.asarray(values, dtype=float)
+    return _finite(np.nanmax(a)) if a.size and not np.isnan(a).all() else None
 
 
-def cmd_plot(args: argparse.Namespace) -> int:
-    """Plot saved runs: tip error, algorithmic error and ‖q̈‖ (grouped panels)."""
-    from prioik.benchmarks.fencing import plot_variant
-    results = _load(args.results)
-    out = _out_dir(args, args.results[0])
-    out.mkdir(parents=True, exist_ok=True)
-    first = next(iter(results.values()))
-    scenario = first.info.get("scenario", "run")
-    files = plot_variant(out, first.info.get("variant", "run"), results, scenario)
-    for f in files:
-        print(f"wrote {f}")
-    return 0
+@dataclass
+class RunSummary:
+    """What one scenario run measured (a ``summary.json`` entry, a sweep row's metrics).
+
+    Non-finite values are ``None``. Errors in m or rad, times in s.
+
+    Attributes:
+        final_tip_error_m: The tip's distance to its target at the last step.
+        max_algorithmic_error: Largest ``‖e_algorithm‖`` (eq. 29).
+        maxima: ``max_<error>`` of each of the scenario's ``summary_errors``.
+        max_qdd_norm: Largest ``‖q̈‖``.
+        median_step_time_s, p90_step_time_s: Of kinematics + solve + torque.
+        median_solve_time_s: Of the solve alone.
+        failed: The run stopped early.
+    """
+
+    final_tip_error_m: float | None = None
+    max_algorithmic_error: float | None = None
+    maxima: dict[str, float | None] = field(default_factory=dict)
+    max_qdd_norm: float | None = None
+    median_step_time_s: float | None = None
+    p90_step_time_s: float | None = None
+    median_solve_time_s: float | None = None
+    failed: bool = False
+
+    @classmethod
+    def of(cls, res, errors: tuple[str, ...]) -> "RunSummary":
+        """The summary of a :class:`~prioik.robots.SimulationResult` with the maxima of
+        ``errors`` (keys of ``res.errors``; a missing one is ``None``)."""
+        tip = res.errors.get("tip_error_m", np.array([]))
+        steps = res.steps
+        return cls(
+            final_tip_error_m=_finite(tip[-1]) if len(tip) else None,
+            max_algorithmic_error=_max(res.algorithmic_error),
+            maxima={f"max_{e}": _max(res.errors.get(e, [])) for e in errors},
+            max_qdd_norm=_max(np.linalg.norm(res.a, axis=1)) if steps else None,
+            median_step_time_s=_finite(np.median(res.step_time_s)) if steps else None,
+            p90_step_time_s=_finite(np.percentile(res.step_time_s, 90)) if steps else None,
+            median_solve_time_s=_finite(np.median(res.solve_time_s)) if steps else None,
+            failed=bool(res.failed))
+
+    @staticmethod
+    def keys(errors: tuple[str, ...]) -> tuple[str, ...]:
+        """The keys of :meth:`to_dict` for a scenario whose summary errors are ``errors``."""
+        return ("final_tip_error_m", "max_algorithmic_error",
+                *(f"max_{e}" for e in errors), "max_qdd_norm", "median_step_time_s",
+                "p90_step_time_s", "median_solve_time_s", "failed")
+
+    def to_dict(self) -> dict[str, Any]:
+        """Flat, in the order of :meth:`keys`."""
+        return {"final_tip_error_m": self.final_tip_error_m,
+                "max_algorithmic_error": self.max_algorithmic_error, **self.maxima,
+                "max_qdd_norm": self.max_qdd_norm,
+                "median_step_time_s": self.median_step_time_s,
+                "p90_step_time_s": self.p90_step_time_s,
+                "median_solve_time_s": self.median_solve_time_s, "failed": self.failed}
 
 
-def add_parser(subparsers) -> None:
-    """Register ``prioik replay`` and ``prioik plot``."""
-    p = subparsers.add_parser("replay", help="replay saved runs (.npz) in a browser page "
-                                             "or live in meshcat")
-    p.add_argument("results", nargs="+", metavar="RESULT.npz",
-                   help="runs saved by prioik fencing / arm (SimulationResult.save)")
-    p.add_argument("--out", default=None, help="output folder (default: ./results)")
-    p.add_argument("--live", action="store_true",
-                   help="play the first run in meshcat (pinocchio's MeshcatVisualizer) "
-                        "instead of writing HTML")
-    p.add_argument("--open", action="store_true", help="with --live: open the browser")
-    p.set_defaults(func=cmd_replay)
-    p = subparsers.add_parser("plot", help="plot saved runs (.npz): tip error, "
-                                           "algorithmic error, ‖q̈‖")
-    p.add_argument("results", nargs="+", metavar="RESULT.npz")
-    p.add_argument("--out", default=None, help="output folder (default: ./results)")
-    p.set_defaults(func=cmd_plot)
+# ------------------------------------------------------------------------ CSV
+def csv_columns(cls) -> tuple[str, ...]:
+    """The CSV columns of record class ``cls``: its fields in order, those with
+    ``metadata={"csv": False}`` left out."""
+    return tuple(f.name for f in fields(cls) if f.metadata.get("csv", True))
+
+
+def write_csv(path, records: list, cls=None) -> Path:
+    """Write ``records`` (dataclass instances of one class; ``cls`` names it when the
+    list may be empty) with a header line of :func:`csv_columns`."""
+    path = Path(path)
+    cls = cls or (type(records[0]) if records else None)
+    if cls is None:
+        raise ValueError(f"{path}: no records and no record class to name the columns")
+    cols = csv_columns(cls)
+    with open(path, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=cols, extrasaction="ignore")
+        w.writeheader()
+        for r in records:
+            w.writerow({k: v for k, v in asdict(r).items() if k in cols})
+    return path
+
+
+def _convert(text: str, kind, default):
+    if kind in (float, "float"):
+        return float(text) if text != "" else default
+    if kind in (int, "int"):
+        return int(text) if text != "" else default
+    if kind in (bool, "bool"):
+        return text == "True"
+    return text
+
+
+def read_csv(path, cls: type[R]) -> list[R]:
+    """The records of a file written by :func:`write_csv` for ``cls``.
+
+    Raises:
+        ValueError: the header is not ``cls``'s columns (names the file).
+    """
+    path = Path(path)
+    hints = typing.get_type_hints(cls)
+    cols = csv_columns(cls)
+    defaults = {f.name: f.default for f in fields(cls)}
+    with open(path, newline="") as fh:
+        reader = csv.DictReader(fh)
+        if tuple(reader.fieldnames or ()) != cols:
+            raise ValueError(f"{path}: columns {reader.fieldnames} are not those of "
+                             f"{cls.__name__} ({', '.join(cols)})")
+        return [cls(**{k: _convert(row[k], hints[k], defaults[k]) for k in cols})
+                for row in reader]

@@ -22,6 +22,8 @@ import numpy as np
 from prioik.hierarchy import TaskStack
 from prioik.hierarchy.families import FAMILIES, random_spd
 
+from .fencing import TIP_STEP_BOUND
+
 __all__ = ["Case", "random_mass_matrix", "random_case", "FencingSamples",
            "g1_fencing_samples", "g1_fencing_cases", "G1_DURATION_S"]
 
@@ -30,10 +32,11 @@ __all__ = ["Case", "random_mass_matrix", "random_case", "FencingSamples",
 G1_DURATION_S = 3.0
 #: what drives the sampled run of each variant: ``reference`` where the tasks are
 #: compatible; where they are not, the exact methods' accelerations blow up at the
-#: algorithmic singularity (t ≈ 1.8 s), so the run uses the extended Jacobian with the
-#: sword-tip step bound of ``prioik fencing``
+#: algorithmic singularity (t ≈ 1.8 s), so the run uses ``prioik fencing``'s
+#: ``extended_jacobian[step_bound]`` (the sword-tip step bound)
 G1_DRIVERS = {"compatible": ("reference", {}),
-              "incompatible": ("extended_jacobian", {"step_bound": {"sword_tip": 10.0}})}
+              "incompatible": ("extended_jacobian",
+                               {"step_bound": {"sword_tip": TIP_STEP_BOUND}})}
 
 
 @dataclass

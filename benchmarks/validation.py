@@ -5,8 +5,10 @@
 ``conflicting``, ``rank_deficient`` (equality stacks, :data:`hierarchy.families.FAMILIES`)
 and ``with_inequalities``, ``infeasible_inequality``, ``random_inequality``
 (:data:`hierarchy.families.INEQUALITY_FAMILIES`) — ``N`` stacks with seeded sizes,
-solves each with every available formulation and every QP back-end of
-``cascaded_qp``, and writes a markdown table per family:
+solves each with every variant of the ``validate`` report (:mod:`benchmarks.variants`:
+every available formulation, one row per back-end of those that have several, and the
+ablations plugins declare for ``validate``), and writes a markdown table per family
+(``templates/validation.md``):
 
 * distance ``‖x − x_ref‖ / max(1, ‖x_ref‖)`` (max and median, and max over the
   answers reported ``"optimal"``) to ``reference`` on equality stacks, to the
@@ -36,7 +38,6 @@ import statistics
 import sys
 import time
 from dataclasses import dataclass, field
-from importlib import metadata
 from pathlib import Path
 
 import numpy as np
@@ -47,23 +48,20 @@ from prioik.hierarchy import (DEFAULT_CERTIFICATE_TOL, TaskStack, UnsupportedTas
                               check_lexicographic, relative_distance)
 from prioik.hierarchy.families import FAMILIES, INEQUALITY_FAMILIES
 
+from .machine import versions
+from .report import Page
+from .variants import Variant, table as variant_table
+
 EQUALITY_FAMILY_NAMES = ("compatible", "conflicting", "rank_deficient")
 INEQUALITY_FAMILY_NAMES = ("with_inequalities", "infeasible_inequality", "random_inequality")
 LEX_TOL = 1e-6
+#: the libraries whose versions the page gives
+LIBRARIES = ("numpy", "qpsolvers", "clarabel", "osqp", "proxsuite", "quadprog", "daqp",
+             "highspy", "scs", "cvxpy", "placo")
 
 #: seed offset per family, so that families draw independent streams
 _SEED_OFFSET = {name: 10_000 * (i + 1) for i, name in
                 enumerate(EQUALITY_FAMILY_NAMES + INEQUALITY_FAMILY_NAMES)}
-
-
-@dataclass
-class Variant:
-    """One formulation with one back-end (or none)."""
-
-    label: str
-    formulation: str
-    options: dict = field(default_factory=dict)
-    needs_mass_matrix: bool = False
 
 
 @dataclass
@@ -84,55 +82,22 @@ class Tally:
     wrong_trusted: int = 0
 
 
-#: Non-default settings measured alongside the defaults (``--no-ablations`` drops them):
-#: how higher optima are fixed in the cascade, and DAQP without level compression.
-ABLATIONS = [
-    Variant("cascaded_qp/clarabel fixing=rows", "cascaded_qp",
-            {"solver": "clarabel", "fixing": "rows"}),
-    Variant("cascaded_qp/clarabel fixing=nullspace", "cascaded_qp",
-            {"solver": "clarabel", "fixing": "nullspace"}),
-    Variant("cascaded_qp/quadprog fixing=rows", "cascaded_qp",
-            {"solver": "quadprog", "fixing": "rows"}),
-    Variant("cascaded_qp/proxqp fixing=nullspace", "cascaded_qp",
-            {"solver": "proxqp", "fixing": "nullspace"}),
-    Variant("cascaded_qp/quadprog fix_active=False", "cascaded_qp",
-            {"solver": "quadprog", "fix_active": False}),
-    Variant("daqp_hierarchical compress_levels=False", "daqp_hierarchical",
-            {"compress_levels": False}),
-]
-
-
 def variants(include_cvxpy_backends: bool = False, ablations: bool = True
              ) -> tuple[list[Variant], list[str]]:
-    """Every available formulation × back-end, and the notes on what was left out."""
-    out, notes = [], []
-    for info in formulations.available():
-        if not info.available:
-            notes.append(f"`{info.name}`: not available here ({info.reason})")
-            continue
-        mm = bool(info.capabilities and info.capabilities.needs_mass_matrix)
-        if mm:
-            notes.append(f"`{info.name}`: needs a mass matrix; run with `mass_matrix = I`")
-        if info.name == "cascaded_qp":
-            for be in info.backends:
-                out.append(Variant(f"cascaded_qp/{be}", info.name, {"solver": be}))
-        elif info.name == "cvxpy" and include_cvxpy_backends:
-            for be in info.backends:
-                out.append(Variant(f"cvxpy/{be}", info.name, {"solver": be}))
-        elif info.name == "cvxpy":
-            out.append(Variant("cvxpy/CLARABEL", info.name, {"solver": "CLARABEL"}))
-        else:
-            out.append(Variant(info.name, info.name, {}, mm))
-    if ablations:
-        names = {v.formulation for v in out}
-        out += [v for v in ABLATIONS if v.formulation in names
-                and v.options.get("solver") in (None, *_backends(v.formulation))]
-    return out, notes
+    """The rows of the report and the notes on what was left out or changed.
 
-
-def _backends(name: str) -> tuple[str, ...]:
-    mod = formulations.get(name)
-    return tuple(mod.backends()) if hasattr(mod, "backends") else ()
+    Args:
+        include_cvxpy_backends: One row per back-end for every formulation, also those
+            whose plugin keeps one row here (``cvxpy``: Clarabel alone otherwise).
+        ablations: Keep the rows plugins declare for ``validate``.
+    """
+    page = Page("validation.md")
+    t = variant_table("validate", all_backends=include_cvxpy_backends)
+    rows = [v for v in t.rows if ablations or v.origin != "declared"]
+    notes = [f"`{n.split(':', 1)[0]}`:{n.split(':', 1)[1]}" for n in t.notes]
+    notes += [page.inline("note_mass_matrix", name=v.formulation) for v in rows
+              if v.needs_mass_matrix and not v.tag]
+    return rows, notes
 
 
 def draw(family: str, index: int, n_range: tuple[int, int], k_range: tuple[int, int]
@@ -215,7 +180,8 @@ def run_family(family: str, n_stacks: int, vs: list[Variant], n_range, k_range,
         if progress is not None:
             progress(family, i + 1, n_stacks)
     tallies = {k: t for k, t in tallies.items() if t.times or t.errors}
-    notes = [f"`{k}` skipped: {why}" for k, why in sorted(skipped.items())
+    page = Page("validation.md")
+    notes = [page.inline("skipped", label=k, why=why) for k, why in sorted(skipped.items())
              if k not in tallies]
     return tallies, notes
 
@@ -224,57 +190,45 @@ def _fmt(v: float) -> str:
     return "–" if not np.isfinite(v) else f"{v:.1e}"
 
 
-def table(family: str, tallies: dict[str, Tally], equality: bool) -> str:
-    """The markdown table of one family."""
-    ref = "`reference`" if equality else "`cvxpy`/Clarabel"
-    head = ("| formulation / back-end | max dist. | median dist. | max dist. if optimal | "
-            "lex. check | "
-            + ("" if equality else "max extra violation | ")
-            + "optimal / approx. / failed | optimal ∧ fails cert. (without cert.) | errors | "
-              "median time |")
-    sep = "|" + "---|" * (head.count("|") - 1)
-    rows = [f"Distance to {ref}; lexicographic check (`check_lexicographic`, levels) at tol "
-            f"{LEX_TOL:g}; \"optimal ∧ fails cert.\": answers reported `optimal` that fail "
-            f"the certificate with the minimum-norm tie-break at tol "
-            f"{DEFAULT_CERTIFICATE_TOL:g} (in brackets: with the status the back-end gave "
-            f"before the certificate).", "", head, sep]
+def table(family: str, tallies: dict[str, Tally], equality: bool,
+          skip_notes: list[str] | None = None) -> str:
+    """The markdown section of one family."""
+    from .report import table as md_table
+    page = Page("validation.md")
+    head = (["formulation / back-end", "max dist.", "median dist.", "max dist. if optimal",
+             "lex. check"] + ([] if equality else ["max extra violation"])
+            + ["optimal / approx. / failed", "optimal ∧ fails cert. (without cert.)",
+               "errors", "median time"])
+    rows = []
     for label, t in tallies.items():
         d = np.array(t.distances) if t.distances else np.array([np.nan])
         d_opt = float(np.max(t.optimal_distances)) if t.optimal_distances else np.nan
         lex = f"{t.lex_pass}/{t.lex_total}" if t.lex_total else "–"
         st = "/".join(str(t.statuses.get(s, 0)) for s in ("optimal", "approximate", "failed"))
         tm = f"{statistics.median(t.times) * 1e6:.0f} µs" if t.times else "–"
-        viol = "" if equality else f"{_fmt(t.violation)} | "
-        rows.append(f"| {label} | {_fmt(float(np.max(d)))} | {_fmt(float(np.median(d)))} | "
-                    f"{_fmt(d_opt)} | {lex} | {viol}{st} | {t.wrong_optimal} "
-                    f"({t.wrong_trusted}) | {t.errors} | {tm} |")
-    fails = [(k, t.first_failure) for k, t in tallies.items() if t.first_failure]
-    errs = [(k, t.first_error) for k, t in tallies.items() if t.first_error]
-    if fails or errs:
-        rows.append("")
-        for k, msg in fails:
-            rows.append(f"- `{k}` first failure: {msg[:300]}")
-        for k, msg in errs:
-            rows.append(f"- `{k}` first error: {msg[:300]}")
-    return "\n".join(rows)
-
-
-def _versions() -> str:
-    out = []
-    for pkg in ("numpy", "qpsolvers", "clarabel", "osqp", "proxsuite", "quadprog", "daqp",
-                "highspy", "scs", "cvxpy", "placo"):
-        try:
-            out.append(f"{pkg} {metadata.version(pkg)}")
-        except metadata.PackageNotFoundError:
-            pass
-    return ", ".join(out)
+        rows.append([label, _fmt(float(np.max(d))), _fmt(float(np.median(d))), _fmt(d_opt),
+                     lex] + ([] if equality else [_fmt(t.violation)])
+                    + [st, f"{t.wrong_optimal} ({t.wrong_trusted})", t.errors, tm])
+    failures = [page.inline("first_failure", label=k, message=t.first_failure[:300])
+                for k, t in tallies.items() if t.first_failure]
+    failures += [page.inline("first_error", label=k, message=t.first_error[:300])
+                 for k, t in tallies.items() if t.first_error]
+    doc = (FAMILIES.get(family) or INEQUALITY_FAMILIES[family]).__doc__ or ""
+    return page.block("family", family=family, doc=doc.strip().splitlines()[0],
+                      reference=page.inline("reference_equality" if equality
+                                            else "reference_inequality"),
+                      lex_tol=f"{LEX_TOL:g}", cert_tol=f"{DEFAULT_CERTIFICATE_TOL:g}",
+                      table=md_table(head, rows),
+                      failures="\n".join(failures),
+                      skipped="\n".join(skip_notes or []))
 
 
 def inequality_reference_reason() -> str:
     """Why the inequality families cannot be checked here (``""``: they can): their
     reference is the ``cvxpy`` formulation."""
     info = {f.name: f for f in formulations.available()}["cvxpy"]
-    return "" if info.available else f"their reference, `cvxpy`, is not available here ({info.reason})"
+    return "" if info.available else Page("validation.md").inline(
+        "inequality_reference_missing", reason=info.reason)
 
 
 def report(n_stacks: int, families: list[str], n_range, k_range, include_cvxpy_backends=False,
@@ -283,6 +237,7 @@ def report(n_stacks: int, families: list[str], n_range, k_range, include_cvxpy_b
     """Run everything and return the markdown report (``notes``: more lines for its
     notes)."""
     stream = sys.stderr if stream is None else stream
+    page = Page("validation.md")
     vs, variant_notes = variants(include_cvxpy_backends, ablations)
     notes = list(notes) + variant_notes
     if only:
@@ -299,11 +254,7 @@ def report(n_stacks: int, families: list[str], n_range, k_range, include_cvxpy_b
     sections = []
     for family in families:
         tallies, skip_notes = run_family(family, n_stacks, vs, n_range, k_range, progress)
-        equality = family in FAMILIES
-        doc = (FAMILIES.get(family) or INEQUALITY_FAMILIES[family]).__doc__ or ""
-        sections.append(f"## {family}\n\n{doc.strip().splitlines()[0]}\n\n"
-                        + table(family, tallies, equality)
-                        + ("\n\n" + "\n".join(f"- {s}" for s in skip_notes) if skip_notes else ""))
+        sections.append(table(family, tallies, family in FAMILIES, skip_notes))
     elapsed = time.perf_counter() - t0
     cmd = (f"prioik validate --n-stacks {n_stacks} --n-min {n_range[0]} --n-max {n_range[1]} "
            f"--k-min {k_range[0]} --k-max {k_range[1]}")
@@ -311,29 +262,18 @@ def report(n_stacks: int, families: list[str], n_range, k_range, include_cvxpy_b
         cmd += f" --families {','.join(families)}"
     if not ablations:
         cmd += " --no-ablations"
+    if include_cvxpy_backends:
+        cmd += " --cvxpy-backends"
     if only:
         cmd += f" --formulations {','.join(only)}"
-    header = [
-        "# Validation report",
-        "",
-        f"Generated by `benchmarks/validation.py` (`{cmd}`) on "
-        f"{datetime.date.today().isoformat()}, {platform.machine()}, Python "
-        f"{platform.python_version()}; {elapsed:.0f} s in total. Do not edit by hand: re-run "
-        f"the command.",
-        "",
-        f"{n_stacks} seeded stacks per family, `n` in [{n_range[0]}, {n_range[1]}] unknowns, "
-        f"`k` in [{k_range[0]}, {k_range[1]}] levels (drawn per stack). Every formulation is "
-        "called with its default options (`cascaded_qp` once per back-end); rows whose label "
-        "ends with a setting (e.g. `fixing=rows`) are ablations of one option. Distances are "
-        "relative: `‖x − x_ref‖ / max(1, ‖x_ref‖)`. Times are wall-clock per solve on a "
-        "shared 2-core machine (noisy; see `prioik bench` for timing).",
-        "",
-        f"Versions: {_versions()}.",
-        "",
-    ]
-    if notes:
-        header += ["Notes:", ""] + [f"- {s}" for s in notes] + [""]
-    return "\n".join(header) + "\n" + "\n\n".join(sections) + "\n"
+    return page.render(
+        command=cmd, date=datetime.date.today().isoformat(), machine=platform.machine(),
+        python=platform.python_version(), seconds=f"{elapsed:.0f}", n_stacks=n_stacks,
+        n_min=n_range[0], n_max=n_range[1], k_min=k_range[0], k_max=k_range[1],
+        versions=versions(LIBRARIES),
+        notes=(page.block("notes", items="\n".join(f"- {s}" for s in notes))
+               if notes else ""),
+        sections="\n\n".join(sections))
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -353,15 +293,18 @@ def _arguments(p: argparse.ArgumentParser) -> None:
                    help="comma-separated family names (default: "
                         f"{','.join(EQUALITY_FAMILY_NAMES + INEQUALITY_FAMILY_NAMES)}; the "
                         "inequality ones only where the cvxpy extra is installed)")
-    p.add_argument("--formulations", default="", help="comma-separated names (default: all)")
+    p.add_argument("--formulations", default="",
+                   help="comma-separated formulation names or row labels (default: all)")
     p.add_argument("--n-min", type=int, default=4)
     p.add_argument("--n-max", type=int, default=20)
     p.add_argument("--k-min", type=int, default=2)
     p.add_argument("--k-max", type=int, default=5)
     p.add_argument("--cvxpy-backends", action="store_true",
-                   help="run cvxpy with every solver it has (default: Clarabel only)")
+                   help="one row per back-end also for formulations that keep one here "
+                        "(cvxpy: every solver it has; default: Clarabel only)")
     p.add_argument("--no-ablations", action="store_true",
-                   help="only default settings (drop the rows marked with a setting)")
+                   help="only default settings (drop the rows plugins declare with a "
+                        "setting, e.g. cascaded_qp[clarabel,fixing=rows])")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -380,12 +323,14 @@ def run(args: argparse.Namespace) -> int:
                                             f"{', '.join(inequality)}: {why}")
     if why:
         families = [f for f in families if f not in INEQUALITY_FAMILIES]
-        notes.append(f"inequality families ({', '.join(inequality)}) left out: {why}")
+        notes.append(Page("validation.md").inline("note_inequality_left_out",
+                                                  families=", ".join(inequality), why=why))
         print(f"validate: {notes[-1]}", file=sys.stderr)
     if args.n_stacks < 1 or args.n_min < 2 or args.n_max < args.n_min or args.k_min < 1 \
             or args.k_max < args.k_min:
         raise ValueError("need n-stacks ≥ 1, 2 ≤ n-min ≤ n-max, 1 ≤ k-min ≤ k-max")
-    only = [s for s in args.formulations.split(",") if s] or None
+    from .variants import split_labels
+    only = split_labels(args.formulations) or None
     text = report(args.n_stacks, families, (args.n_min, args.n_max), (args.k_min, args.k_max),
                   args.cvxpy_backends, only, ablations=not args.no_ablations,
                   notes=tuple(notes))

@@ -120,7 +120,7 @@ from prioik.hierarchy import (AMBIGUITY, StackData, StackLayout, TaskStack, Task
                               UnsupportedTaskError, ambiguity_reason, ambiguous_decision,
                               level_scale, rank_threshold)
 
-from .base import Capabilities, FormulationError, Outcome
+from .base import Capabilities, FormulationError, Outcome, ReportVariant
 from .options import Option, rcond_option, validate_options
 
 try:  # the compiled kernel is optional: the lapack path is the readable reference
@@ -825,3 +825,25 @@ def _solve_batch(prepared: "Prepared", datas: list[StackData]) -> tuple[np.ndarr
     approximate = (mu2 > 0).any(axis=1) | (margins <= AMBIGUITY).any(axis=1)
     statuses = ["approximate" if a else "optimal" for a in approximate.tolist()]
     return X, statuses
+
+# ------------------------------------------------------------------------ reports
+#: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
+REPORT_VARIANTS = (
+    ReportVariant("svd", {"nullspace": "svd"}, reports=("bench", "properties"),
+                  note="the paper's SVD path (J_{i-1}^A by SVD)"),
+    ReportVariant("lapack", {"kernel": "lapack"}, reports=("bench",),
+                  note="the readable LAPACK nested-QR path (the default, kernel='auto', is "
+                       f"the compiled kernel up to n = {AUTO_NUMBA_MAX_N}, LAPACK above)"),
+    ReportVariant("eq27", {"damping": 1e-2}, reports=("scenario", "properties"),
+                  note="the paper's eq. 27, λ = 0.01, with Z_i of r_i rows spanning "
+                       "range(N_{i-1} J_iᵀ) (z_basis='task_range', eq. 12-13 and Theorem 1)"),
+    ReportVariant("eq27_null_space", {"damping": 1e-2, "z_basis": "null_space"},
+                  reports=("fencing", "properties"),
+                  note="eq. 27, λ = 0.01, read with a basis of the whole null space of the "
+                       "higher levels (z_basis='null_space')"),
+    ReportVariant("svd,eq27", {"nullspace": "svd", "damping": 1e-2}, reports=("properties",),
+                  note="eq. 27 on the SVD path"),
+    ReportVariant("svd,eq27_null_space",
+                  {"nullspace": "svd", "damping": 1e-2, "z_basis": "null_space"},
+                  reports=("properties",), note="eq. 27, whole null space, on the SVD path"),
+)

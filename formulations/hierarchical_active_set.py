@@ -91,7 +91,7 @@ import numpy as np
 from prioik.hierarchy import (AMBIGUITY, StackData, StackLayout, TaskStack, TaskStackError,
                               ambiguity_reason)
 
-from .base import Capabilities, FormulationError, Outcome
+from .base import Capabilities, FormulationError, Outcome, ReportVariant
 from .options import Option, rcond_option, validate_options
 
 try:
@@ -245,3 +245,11 @@ class Prepared:
                                 f"levels above are optimal and x keeps their optimum, but it "
                                 f"is not certified optimal from that level down")
         return Outcome(x, "approximate", info, residuals=residuals, checked=True)
+
+# ------------------------------------------------------------------------ reports
+#: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
+REPORT_VARIANTS = (
+    ReportVariant("velocity", level="velocity", reports=("scenario",),
+                  note="the same at velocity level (J q̇ = ẋ* + K e, the limits as bounds on "
+                       "q̇): exact, like for like with PlaCo's KinematicsSolver"),
+)

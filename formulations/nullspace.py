@@ -52,7 +52,7 @@ import numpy as np
 from prioik.hierarchy import (AMBIGUITY, DEFAULT_RCOND, TaskStack, ambiguity_reason,
                               ambiguous_decision, level_scale, rank_threshold)
 
-from .base import Capabilities, FormulationError, Outcome
+from .base import Capabilities, FormulationError, Outcome, ReportVariant
 from .options import Option, rcond_option
 
 NAME = "nullspace"
@@ -218,3 +218,16 @@ def solve_batch(stacks: list[TaskStack], *, damping: float = 0.0,
         X, N, _, _, amb = project_levels(A, b, X, N, tol, damping, reproject)
         near |= amb
     return X, ["approximate" if damping > 0 or amb else "optimal" for amb in near]
+
+# ------------------------------------------------------------------------ reports
+#: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
+REPORT_VARIANTS = (
+    ReportVariant("damped", {"damping": 0.05}, reports=("scenario",),
+                  note="the SR (damped least-squares) inverse on every level, λ = 0.05 "
+                       "(λ = 1e-2 left q̈ peaks of 355 in the incompatible fencing run, 0.05 "
+                       "keeps them at 65)"),
+    ReportVariant("damping=0.01", {"damping": 1e-2}, reports=("properties",),
+                  note="the damped least-squares inverse with the λ of eq. 27's rows"),
+    ReportVariant("reproject=False", {"reproject": False}, reports=("roundoff",),
+                  note="the textbook projector step, without the extra N_{i-1}"),
+)

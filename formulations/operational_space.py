@@ -43,7 +43,7 @@ from scipy.linalg import solve_triangular
 
 from prioik.hierarchy import DEFAULT_RCOND, TaskStack
 
-from .base import Capabilities, FormulationError, Outcome
+from .base import Capabilities, FormulationError, Outcome, ReportVariant
 from .options import Option, rcond_option
 from .nullspace import check_nonnegative, truncated_svd
 
@@ -139,3 +139,10 @@ def solve(stack: TaskStack, *, mass_matrix, bias, rcond: float, reproject: bool)
     if bias is not None:
         info["tau"] = M @ x + np.asarray(bias, dtype=np.float64)
     return Outcome(x, "optimal", info)
+
+# ------------------------------------------------------------------------ reports
+#: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
+REPORT_VARIANTS = (
+    ReportVariant("reproject=False", {"reproject": False}, reports=("roundoff",),
+                  note="the textbook projector step, without the extra N_{i-1}"),
+)

@@ -79,7 +79,7 @@ import numpy as np
 from prioik.hierarchy import (DEFAULT_RCOND, TaskStack, UnsupportedTaskError, ambiguity_reason,
                               rank_threshold)
 
-from .base import Capabilities, FormulationError, Outcome
+from .base import Capabilities, FormulationError, Outcome, ReportVariant
 from .nullspace import check_nonnegative, project_level, truncated_svd
 from .options import Option, rcond_option
 
@@ -283,3 +283,15 @@ def solve(stack: TaskStack, *, rcond: float = DEFAULT_RCOND, bound_tolerance: fl
         info["ambiguous_levels"] = ambiguous
         info["reason"] = ambiguity_reason(ambiguous)
     return Outcome(x, status, info)
+
+# ------------------------------------------------------------------------ reports
+#: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
+REPORT_VARIANTS = (
+    ReportVariant("", limits="hard_bounds", reports=("scenario", "control_step"),
+                  replaces_default=True,
+                  note="the joint-limit bounds as hard limits above every task (level 0), "
+                       "strict priorities, task scaling when a task cannot be met within "
+                       "them"),
+    ReportVariant("velocity", level="velocity", limits="hard_bounds", reports=("scenario",),
+                  note="SNS at velocity level (J q̇ = ẋ* + K e, the q̇ bounds as level 0)"),
+)

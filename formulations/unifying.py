@@ -44,7 +44,7 @@ from scipy.linalg import cho_factor, cho_solve
 
 from prioik.hierarchy import DEFAULT_RCOND, TaskStack
 
-from .base import Capabilities, FormulationError, Outcome
+from .base import Capabilities, FormulationError, Outcome, ReportVariant
 from .options import Option, rcond_option
 from .nullspace import check_nonnegative, generalized_inverse
 
@@ -133,3 +133,10 @@ def solve(stack: TaskStack, *, mass_matrix, bias, rcond: float) -> Outcome:
     if bias is not None:
         info["tau"] = M @ x + np.asarray(bias, dtype=np.float64)
     return Outcome(x, "approximate", info)
+
+# ------------------------------------------------------------------------ reports
+#: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
+REPORT_VARIANTS = (
+    ReportVariant("M=I", mass="identity", reports=("properties",),
+                  note="with M = I (the report's other row has a seeded SPD M)"),
+)

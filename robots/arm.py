@@ -77,6 +77,9 @@ class ArmScenario(Scenario):
     name = "arm"
     variants = ("reach",)
     tip_frame = TOOL
+    tip_label = "tool"
+    summary_errors = ("orientation_error_rad", "joint_limit_violation_rad",
+                      "joint_velocity_violation_rad_s")
     default_duration = 6.0
 
     variant: str = "reach"

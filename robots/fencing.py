@@ -78,6 +78,9 @@ class FencingScenario(Scenario):
     name = "fencing"
     variants = VARIANTS
     tip_frame = "sword_tip"
+    tip_label = "sword-tip"
+    summary_errors = ("com_error_m", "support_foot_error_m", "left_foot_error_m",
+                      "joint_limit_violation_rad")
     default_duration = 3.0
 
     variant: str = "compatible"
@@ -379,6 +382,21 @@ class FencingScenario(Scenario):
         data = self.write_rows(rows, state, t)
         levels = len(data.layout) - (1 if self.with_posture else 0)
         return StepTasks(data, lambda: self._written_errors(rows, state), levels)
+
+    def step_builder(self, level: str = "acceleration", limits: str | None = None,
+                     dt: float = 0.002, gain: float = 10.0):
+        """As :meth:`Scenario.step_builder`, with the rows written in place
+        (:meth:`written_step`: no per-step objects) wherever a writer exists: bounds at
+        velocity level, activation rows or bounds at acceleration level."""
+        if limits is None:
+            limits = "none" if level == "velocity" else "activation"
+        if level == "velocity" and limits == "bounds":
+            rows = self.velocity_rows(gain, limits=limits, dt=dt)
+        elif level == "acceleration" and limits in ("activation", "bounds"):
+            rows = self.acceleration_rows(limits=limits, dt=dt)
+        else:
+            return super().step_builder(level, limits, dt, gain)
+        return lambda state, t: self.written_step(rows, state, t)
 
     def _written_errors(self, rows: TaskWriter, state: KinematicState) -> dict[str, float]:
         layout = rows.layout

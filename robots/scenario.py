@@ -6,11 +6,18 @@ any formulation, the PlaCo and pink baselines, the replay — goes through these
 members only:
 
 * ``name``, ``variants``, ``variant``, ``robot``, ``default_duration``;
+* :meth:`Scenario.terms` (the task terms at a state: references and Jacobians) and
+  :meth:`Scenario.errors` (the errors to record, name → value); ``summary_errors``,
+  the recorded errors whose maxima summarise a run beside the tip's final error, and
+  ``tip_label``, what the tip is (for figure labels);
 * :meth:`Scenario.acceleration_stack` / :meth:`Scenario.velocity_stack` — the step's
   :class:`~robots.simulate.StepTasks` (stack + errors), with joint limits as
   ``"activation"`` rows, ``"bounds"`` (inequality rows at the scenario's level for
   them) or ``"hard_bounds"`` (the same bounds as the *first* level: the form SNS
   takes, see :mod:`prioik.formulations.sns`);
+* :meth:`Scenario.step_builder` — the ``build(state, t)`` a simulation calls: one of
+  the two above, or the scenario's own faster path (the fencing scenario writes its
+  rows in place);
 * :meth:`Scenario.baseline_tasks` and :meth:`Scenario.baseline_target` — the same
   tasks as declarative records for the external IK libraries (PlaCo, pink), which
   build their own task objects from them;
@@ -68,8 +75,37 @@ class Scenario:
     variants: ClassVar[tuple[str, ...]] = ()
     default_duration: ClassVar[float] = 3.0
     tip_frame: ClassVar[str] = ""
+    #: what the tip is, in words (``"sword-tip"``, ``"tool"``)
+    tip_label: ClassVar[str] = "tip"
+    #: recorded errors (keys of :meth:`errors`) whose maxima summarise a run
+    summary_errors: ClassVar[tuple[str, ...]] = ("joint_limit_violation_rad",)
     variant: str
     robot: RobotModel
+
+    def terms(self, state: KinematicState, t: float) -> dict:  # pragma: no cover - abstract
+        """The task terms (name → :class:`~robots.tasks.TaskTerm`) at ``(state, t)``."""
+        raise NotImplementedError
+
+    def errors(self, state: KinematicState, t: float, terms: dict
+               ) -> dict[str, float]:  # pragma: no cover - abstract
+        """The errors to record at ``(state, t)`` (``terms`` from :meth:`terms`); the
+        final target's distance is ``"tip_error_m"``."""
+        raise NotImplementedError
+
+    def step_builder(self, level: str = "acceleration", limits: str | None = None,
+                     dt: float = 0.002, gain: float = 10.0):
+        """The ``build(state, t) -> StepTasks`` of a simulation at ``level``
+        (``"acceleration"`` or ``"velocity"``, with ``gain`` ``K``) with the joint
+        limits as ``limits`` (default: ``"activation"`` rows at acceleration level, none
+        at velocity level): :meth:`acceleration_stack` or :meth:`velocity_stack`."""
+        if limits is None:
+            limits = "none" if level == "velocity" else "activation"
+        if level == "velocity":
+            return lambda state, t: self.velocity_stack(state, t, gain=gain, limits=limits,
+                                                        dt=dt)
+        if level != "acceleration":
+            raise ValueError(f"level must be 'acceleration' or 'velocity', got {level!r}")
+        return lambda state, t: self.acceleration_stack(state, t, limits=limits, dt=dt)
 
     def acceleration_stack(self, state: KinematicState, t: float, limits: str = "activation",
                            dt: float = 0.002) -> StepTasks:  # pragma: no cover - abstract

@@ -25,3 +25,40 @@ def assert_truthful(sol, stack, metric=None):
 from prioik import extras as _extras  # noqa: E402
 
 collect_ignore = ["core"] if _extras.installed() else []
+
+
+import pytest  # noqa: E402
+
+#: the toy formulation of :func:`toy_plugin`
+TOY = "toy_flat_lstsq"
+
+
+@pytest.fixture
+def toy_plugin(monkeypatch):
+    """A formulation registered for one test (registry.PLUGINS and its loaded module):
+    every row of every level in one least-squares problem, with a ``scale`` option, one
+    declared bench row (``toy_flat_lstsq[half]``) and an opt-out of the arm report. The
+    reports must show it with no edit of their own."""
+    import types
+
+    import numpy as np
+
+    from prioik.formulations import Capabilities, Option, ReportVariant, registry
+    from prioik.formulations.base import Outcome
+
+    def solve(stack, *, scale=1.0):
+        A = np.vstack([t.A for t in stack.tasks])
+        b = np.concatenate([t.b for t in stack.tasks])
+        return Outcome(scale * np.linalg.lstsq(A, b, rcond=None)[0], "approximate")
+
+    toy = types.ModuleType(TOY)
+    toy.NAME, toy.DESCRIPTION = TOY, "every row in one least-squares problem"
+    toy.CAPABILITIES = Capabilities(exact=False)
+    toy.OPTIONS = {"scale": Option(1.0, "float", "factor on the answer", minimum=0.0)}
+    toy.solve = solve
+    toy.REPORT_VARIANTS = (ReportVariant("half", {"scale": 0.5}, reports=("bench",),
+                                         note="the answer halved"),)
+    toy.REPORT_OPT_OUTS = {"arm": "a toy: not for robots"}
+    monkeypatch.setitem(registry.PLUGINS, TOY, ("tests.toy_flat_lstsq", ""))
+    monkeypatch.setitem(registry._loaded, TOY, toy)
+    return toy

@@ -10,7 +10,7 @@ import pytest
 
 import prioik
 from prioik.benchmarks import arm as cmd
-from prioik.benchmarks.fencing import run_one
+from prioik.benchmarks.scenario_runs import run_one, run_table
 from prioik.robots import KinematicState
 from prioik.robots.arm import ACCELERATION_LIMITS, OUT_OF_REACH, ArmScenario
 
@@ -47,7 +47,7 @@ def test_stacks_have_the_documented_levels(scenario):
 def test_sns_run_keeps_every_bound_and_reaches(scenario):
     """SNS at acceleration level through the shared runner: position, velocity and
     acceleration limits hold at every step, the first target is reached."""
-    spec = {s.label: s for s in cmd.RUNS}["sns"]
+    spec = run_table("arm")["sns"]
     res = run_one(spec, "reach", 1.0, 0.002, scenario="arm")
     assert not res.failed and res.steps == 500
     assert res.errors["joint_limit_violation_rad"].max() == 0.0

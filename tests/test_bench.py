@@ -12,6 +12,8 @@ import pytest
 
 from prioik.benchmarks import bench
 from prioik.benchmarks.bench import CSV_COLUMNS, Row, Settings, ratios, run_benchmark
+from prioik.benchmarks.bench import page, tables
+from prioik.benchmarks.variants import table
 from prioik.benchmarks.cli import main
 from prioik.benchmarks.stacks import random_case, random_mass_matrix
 
@@ -187,10 +189,10 @@ def test_missing_measurements_give_nan_not_a_number():
 def test_skipped_and_unsupported_rows_are_recorded_not_timed():
     """A per-case cap below one solve records the variant as skipped with a reason."""
     case = random_case(12, 2, samples=2)
-    variants, _ = bench.variants(("reference",))
+    variants = table("bench").only(("reference",))
     settings = Settings(cap_s=1e-9, min_repeats=2)
-    ref = bench._references(case, False)
-    row = bench.time_case(case, variants[0], ref, settings)
+    ref = tables.references(case, False)
+    row = tables.time_case(case, variants[0], ref, settings)
     assert row.status == "skipped" and row.repeats == 0 and "ms" in row.note
     assert math.isnan(row.median_us)
 
@@ -250,14 +252,14 @@ def test_g1_fencing_samples_give_robot_stacks_and_mass_matrices():
 
 
 def test_a_plugin_error_is_recorded_and_the_run_goes_on(tmp_path, monkeypatch):
-    real = bench.time_case
+    real = tables.time_case
 
     def broken(case, variant, ref, settings):
         if variant.label == "extended_jacobian[svd]":
             raise RuntimeError("boom in a plugin")
         return real(case, variant, ref, settings)
 
-    monkeypatch.setattr(bench, "time_case", broken)
+    monkeypatch.setattr(tables, "time_case", broken)
     settings = Settings(sizes=(5,), levels=(2,), repeats=3, min_repeats=2, warmup=1,
                         samples=1, g1=False, only=("reference", "extended_jacobian"))
     run_benchmark(settings, tmp_path)
@@ -271,15 +273,15 @@ def test_a_plugin_error_is_recorded_and_the_run_goes_on(tmp_path, monkeypatch):
 
 def test_control_step_table_normalises_to_the_extended_jacobian():
     control = [
-        {"formulation": "extended_jacobian", "what": "EJ", "paper_ms": "1.4", "steps": 5,
-         "kinematics_us": 1.0, "solve_us": 2.0, "torque_us": 3.0, "total_us": 6.0,
-         "note": ""},
-        {"formulation": "nullspace", "what": "NS", "paper_ms": "2.7", "steps": 5,
+        {"label": "extended_jacobian", "formulation": "extended_jacobian", "paper_ms": 1.4,
+         "steps": 5, "kinematics_us": 1.0, "solve_us": 2.0, "torque_us": 3.0,
+         "total_us": 6.0, "note": ""},
+        {"label": "nullspace", "formulation": "nullspace", "paper_ms": 2.7, "steps": 5,
          "kinematics_us": 1.0, "solve_us": 5.0, "torque_us": 3.0, "total_us": 9.0,
          "note": "shortened to 5 steps (time cap)"},
-        {"formulation": "reference", "what": "R", "paper_ms": "", "steps": 0,
+        {"label": "reference", "formulation": "reference", "paper_ms": None, "steps": 0,
          "note": "t = 0.1 s: diverged"}]
-    md = bench.markdown_report([], [], {}, {}, control, [], Settings(), [])
-    assert "| NS (`nullspace`) | 5 | 1.0 | 5.0 | 3.0 | 9.0 | 1.50 | 2.7 | 1.93 | " \
-           "shortened to 5 steps (time cap) |" in md
-    assert "| R | 0 |" in md and "stopped: t = 0.1 s: diverged" in md
+    md = page.results_markdown([], [], {}, {}, control, [], Settings(), [])
+    assert ("| `nullspace` — resolved acceleration method | 5 | 1.0 | 5.0 | 3.0 | 9.0 | "
+            "1.50 | 2.7 | 1.93 | shortened to 5 steps (time cap) |") in md
+    assert "| `reference` | 0 |" in md and "stopped: t = 0.1 s: diverged" in md

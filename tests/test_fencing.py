@@ -9,6 +9,9 @@ import pytest
 from prioik import formulations
 from prioik.benchmarks import fencing as cmd
 from prioik.benchmarks.cli import main
+from prioik.benchmarks.results import RunSummary
+from prioik.benchmarks.scenario_runs import run_one, run_table
+from prioik.benchmarks.variants import Variant
 from prioik.robots import KinematicState, simulate
 from prioik.robots.fencing import LEVEL_NAMES, TARGETS, FencingScenario
 
@@ -128,7 +131,7 @@ def test_fencing_command_writes_summary_csv_plots_and_doc(tmp_path, capsys):
     for variant in summary:
         assert list(summary[variant]) == ["extended_jacobian", "nullspace"]
         for run in summary[variant].values():
-            assert tuple(run) == cmd.SUMMARY_KEYS
+            assert tuple(run) == RunSummary.keys(FencingScenario.summary_errors)
             assert run["failed"] is False and run["median_step_time_s"] > 0
             assert run["max_support_foot_error_m"] < 1e-4
         csv = out / f"{variant}_extended_jacobian.csv"
@@ -159,7 +162,7 @@ def test_fencing_command_rejects_unknown_runs_and_skips_unavailable(tmp_path, mo
         return real_get(name)
 
     monkeypatch.setattr(formulations, "get", get)
-    chosen, skipped = cmd.select_runs("extended_jacobian,nullspace")
+    chosen, skipped = run_table("fencing").select("extended_jacobian,nullspace")
     assert [c.label for c in chosen] == ["extended_jacobian"]
     assert skipped and "nullspace" in skipped[0] and "not available" in skipped[0]
 
@@ -176,15 +179,15 @@ def test_placo_baseline_runs_the_same_scenario(scenarios):
 
 
 def test_velocity_level_qp_run(scenarios):
-    spec = cmd._runs_by_label()["cascaded_qp:velocity"]
-    res = cmd.run_one(spec, "compatible", 0.05, 0.002)
+    spec = run_table("fencing")["cascaded_qp[daqp,velocity]"]
+    res = run_one(spec, "compatible", 0.05, 0.002)
     assert not res.failed and res.steps == 25
     assert res.errors["support_foot_error_m"].max() < 1e-5
     assert np.nanmax(res.algorithmic_error) < 1e-6
-    unsupported = cmd.RunSpec("nullspace:velocity", "nullspace", level="velocity")
+    unsupported = Variant("nullspace", "velocity", level="velocity")
     from prioik.hierarchy import UnsupportedTaskError
     with pytest.raises(UnsupportedTaskError, match="inequality"):
-        cmd.run_one(unsupported, "compatible", 0.01, 0.002)
+        run_one(unsupported, "compatible", 0.01, 0.002)
 
 
 @pytest.mark.parametrize("t", [0.05, 0.15, 0.3, 0.55, 0.72, 0.95, 1.1, 1.6, 2.2])
@@ -210,7 +213,7 @@ def test_fencing_diagnostics_are_measured(tmp_path):
     assert set(sig) >= {"support_foot", "com", "left_foot", "sword_tip"}
     assert 0 < sig["left_foot"] < 0.05 < sig["com"]
     rc = main(["fencing", "--variant", "incompatible", "--formulations",
-               "extended_jacobian,extended_jacobian:eq27", "--duration", "0.06",
+               "extended_jacobian,extended_jacobian[eq27]", "--duration", "0.06",
                "--out", str(tmp_path), "--quiet", "--no-crosscheck"])
     assert rc == 0
     meta = json.loads((tmp_path / "run_info.json").read_text())
@@ -219,3 +222,24 @@ def test_fencing_diagnostics_are_measured(tmp_path):
     assert all(0 < r["sigma_tip"] < 1 and r["qdd_norm"] >= 0 for r in trace)
     ud = cmd.unifying_diagnostic()
     assert ud["cond_M"] > ud["cond_M_armature"]["0.02"] > ud["cond_M_armature"]["0.1"] > 1
+
+
+def test_step_builder_writes_rows_in_place_where_it_can(scenarios):
+    """The scenario interface's step builder: written rows (StackData) for the forms the
+    fencing writers have, equal to the stack built from task objects; the other forms
+    through acceleration_stack / velocity_stack."""
+    from prioik.hierarchy import StackData, TaskStack
+    sc = scenarios["compatible"]
+    rng = np.random.default_rng(3)
+    state = KinematicState(sc.robot, sc.robot.q0, rng.normal(scale=0.1, size=35))
+    for level, limits in (("acceleration", "bounds"), ("velocity", "bounds")):
+        step = sc.step_builder(level, limits, 0.002, 20.0)(state, 0.7)
+        assert isinstance(step.stack, StackData), (level, limits)
+        ref = (sc.acceleration_stack(state, 0.7, limits, 0.002) if level == "acceleration"
+               else sc.velocity_stack(state, 0.7, 20.0, limits, 0.002)).stack
+        assert np.allclose(step.stack.A, np.vstack([t.A for t in ref.tasks]), atol=1e-10)
+        assert step.algorithmic_levels == 5
+    hard = sc.step_builder("velocity", "hard_bounds", 0.002, 20.0)(state, 0.7)
+    assert isinstance(hard.stack, TaskStack) and hard.stack.levels[0].names == ("joint_limits",)
+    plain = sc.step_builder("velocity")(state, 0.7).stack          # default: no limits
+    assert "joint_limits" not in [t.name for t in plain.tasks]

@@ -9,16 +9,18 @@ from prioik.benchmarks.properties import error_table, singularity_sweep
 def test_sweep_slopes_and_bounds():
     sweep = singularity_sweep()
     slope = {v.label: s for v, s in zip(sweep.variants, sweep.slopes)}
-    for label in ("reference", "ext_jac qr", "ext_jac svd", "nullspace", "op_space M"):
+    for label in ("reference", "extended_jacobian", "extended_jacobian[svd]", "nullspace",
+                  "operational_space"):
         assert -1.01 <= slope[label] <= -0.99, (label, slope[label])
-    for label in ("chiaverini", "unifying M=I", "unifying M", "nullspace λ=0.01"):
+    for label in ("chiaverini", "unifying[M=I]", "unifying", "nullspace[damping=0.01]"):
         assert abs(slope[label]) <= 0.2, (label, slope[label])
     assert np.isfinite(sweep.norms).all()
-    damped = [j for j, v in enumerate(sweep.variants) if "λ=" in v.label]
+    damped = [j for j, v in enumerate(sweep.variants) if v.damped]
+    assert len(damped) == 5
     assert sweep.norms[:, damped].max() <= 1 / (2 * np.sqrt(1e-2)) + 1
     # rotated coordinates: the basis methods keep both residuals at round-off × ‖θ̈‖
     # (measured ≤ 5.3e-9 at ‖θ̈‖ = 1e8)
-    for label in ("reference", "ext_jac qr"):
+    for label in ("reference", "extended_jacobian"):
         j = [v.label for v in sweep.variants].index(label)
         worst = np.maximum(sweep.rotated_top[:, j], sweep.rotated_lower[:, j])
         sig = np.array(sweep.sigmas)
@@ -27,10 +29,10 @@ def test_sweep_slopes_and_bounds():
 
 def test_error_table_separates_exact_from_projected_methods():
     table = error_table(n_stacks=4, families=("coupled", "decoupled"))
-    for label in ("reference", "ext_jac qr", "nullspace", "op_space M"):
+    for label in ("reference", "extended_jacobian", "nullspace", "operational_space"):
         assert table["coupled"][label].lower_max <= 1e-10
         assert table["coupled"][label].lexicographic == 1.0
-    for label in ("chiaverini", "unifying M=I", "unifying M"):
+    for label in ("chiaverini", "unifying[M=I]", "unifying"):
         assert table["coupled"][label].lower_min > 0.05
         assert table["coupled"][label].top_max <= 1e-10
     assert table["decoupled"]["chiaverini"].lower_max <= 1e-10
@@ -50,20 +52,20 @@ def test_exactly_conflicting_limit_every_formulation_finite_exact_ones_equal_ref
     (operational_space: reference with metric=M); the damped ones (λ = 1e-2) within
     5 % of it (measured 2.2 % = λ/(σ² + λ) for the free row, σ² = 0.44)."""
     from prioik import formulations
-    from prioik.benchmarks.properties import VARIANTS, random_mass_matrix, solve_variant
-    from prioik.hierarchy.families import near_singular
+    from prioik.benchmarks.properties import MASS_CONDITION, report_variants, solve_variant
+    from prioik.hierarchy.families import near_singular, random_spd
     stack = near_singular(0.0)
-    mass = random_mass_matrix(np.random.default_rng(0), stack.n)
+    mass = random_spd(np.random.default_rng(0), stack.n, MASS_CONDITION)
     ref = formulations.solve(stack, "reference").x
     ref_m = formulations.solve(stack, "reference", metric=mass).x
-    for v in VARIANTS:
+    for v in report_variants():
         sol = solve_variant(stack, v, mass)
         assert sol.ok and np.isfinite(sol.x).all() and np.linalg.norm(sol.x) < 2.0, v.label
-        if v.label in ("ext_jac qr", "ext_jac svd", "nullspace"):
+        if v.label in ("extended_jacobian", "extended_jacobian[svd]", "nullspace"):
             np.testing.assert_allclose(sol.x, ref, atol=1e-12)
-        elif v.label == "op_space M":
+        elif v.label == "operational_space":
             np.testing.assert_allclose(sol.x, ref_m, atol=1e-12)
-        elif "λ=" in v.label:
+        elif v.damped:
             assert np.linalg.norm(sol.x - ref) <= 0.05 * np.linalg.norm(ref), v.label
 
 

@@ -1,111 +1,50 @@
-"""Saved runs (SimulationResult.save/load), their command-line replay and plots, the
-self-contained HTML replay in a real headless browser, and the short reprs."""
+"""benchmarks/results.py: one schema per record, and its CSV reads back as written."""
 
 from __future__ import annotations
 
-import shutil
-import subprocess
-from pathlib import Path
+import math
 
 import numpy as np
 import pytest
 
-from prioik.benchmarks.fencing import RUNS, run_one
-from prioik.robots import SimulationResult
-
-SPECS = {s.label: s for s in RUNS}
+from prioik.benchmarks.results import RunSummary, TimingRow, csv_columns, read_csv, write_csv
 
 
-@pytest.fixture(scope="module")
-def fencing_run():
-    return run_one(SPECS["extended_jacobian"], "compatible", 0.1, 0.002)
+def test_timing_rows_read_back_as_written(tmp_path):
+    rows = [TimingRow("random", "random n=5 k=2", 5, 2, 7, "cascaded_qp[daqp]", "cascaded_qp",
+                      "daqp", "solver=daqp", 3, 12.5, 10.0, 20.0, 1.0, 1e-15, 2e-15),
+            TimingRow("g1", "g1 compatible", 35, 5, 46, "sns", "sns", "", "", status="skipped",
+                      note="one solve took 9 ms > cap 0.001 s", probe_s=0.009)]
+    path = write_csv(tmp_path / "r.csv", rows)
+    assert path.read_text().splitlines()[0].split(",") == list(csv_columns(TimingRow))
+    assert "probe_s" not in csv_columns(TimingRow)          # not part of the file
+    back = read_csv(path, TimingRow)
+    assert back[0] == rows[0]
+    assert back[1].status == "skipped" and math.isnan(back[1].median_us)
+    assert back[1].repeats == 0 and math.isnan(back[1].probe_s)
 
 
-def test_a_saved_run_reloads_identical_arrays(fencing_run, tmp_path):
-    path = fencing_run.save(tmp_path / "run")
-    assert path.suffix == ".npz"
-    back = SimulationResult.load(path)
-    for key in SimulationResult._ARRAYS:
-        a, b = getattr(fencing_run, key), getattr(back, key)
-        assert a.dtype == b.dtype and np.array_equal(a, b, equal_nan=True), key
-    assert back.errors.keys() == fencing_run.errors.keys()
-    for k in back.errors:
-        assert np.array_equal(back.errors[k], fencing_run.errors[k], equal_nan=True)
-    assert back.statuses == fencing_run.statuses
-    assert back.q_names == fencing_run.q_names and len(back.q_names) == 36
-    assert back.v_names[6] == "left_hip_pitch_joint"
-    assert back.info["formulation"] == "extended_jacobian"
-    assert set(back.info["versions"]) == {"numpy", "pinocchio", "prioik"}
-    assert (back.failed, back.message) == (fencing_run.failed, fencing_run.message)
+def test_reading_another_records_file_names_it(tmp_path):
+    path = tmp_path / "x.csv"
+    path.write_text("a,b\n1,2\n")
+    with pytest.raises(ValueError, match="x.csv: columns"):
+        read_csv(path, TimingRow)
+    with pytest.raises(ValueError, match="no records and no record class"):
+        write_csv(tmp_path / "y.csv", [])
 
 
-def test_load_refuses_other_files(tmp_path):
-    bad = tmp_path / "x.npz"
-    np.savez(bad, a=np.zeros(3))
-    with pytest.raises(ValueError, match="not a saved SimulationResult"):
-        SimulationResult.load(bad)
-    res = SimulationResult(*[np.zeros(0)] * 5, {}, *[np.zeros(0)] * 4, [],
-                           info={"bad": object()})
-    with pytest.raises(ValueError, match="info\\['bad'\\]"):
-        res.save(tmp_path / "y.npz")
+def test_run_summary_keys_follow_the_scenario_errors():
+    class Res:
+        steps = 3
+        errors = {"tip_error_m": np.array([0.3, 0.2, 0.1]), "com_error_m": np.array([1, 2, np.nan])}
+        algorithmic_error = np.array([np.nan, np.nan, np.nan])
+        a = np.ones((3, 2))
+        step_time_s = np.array([1.0, 2.0, 3.0])
+        solve_time_s = np.array([0.5, 0.5, 0.5])
+        failed = False
 
-
-def test_reprs_are_short(fencing_run):
-    text = repr(fencing_run)
-    assert len(text) < 300 and "50 steps" in text and "extended_jacobian" in text
-    assert "<table>" in fencing_run._repr_html_()
-    from prioik.robots.scenario import make
-    sc = make("fencing")
-    assert len(repr(sc.robot)) < 250 and len(repr(sc)) < 120
-    assert "left_hip_pitch_joint" in sc.robot._repr_html_()
-
-
-def test_replay_and_plot_commands_work_on_saved_runs(fencing_run, tmp_path, capsys):
-    from prioik.benchmarks.cli import main
-    path = fencing_run.save(tmp_path / "compatible_extended_jacobian.npz")
-    assert main(["replay", str(path), "--out", str(tmp_path / "r")]) == 0
-    html = tmp_path / "r" / "compatible_extended_jacobian_replay.html"
-    assert html.is_file() and "const DATA" in html.read_text()
-    assert main(["plot", str(path), "--out", str(tmp_path / "p")]) == 0
-    assert {f.name for f in (tmp_path / "p").iterdir()} >= {"compatible_tip_error.png",
-                                                           "compatible_qdd.png"}
-    assert main(["replay", str(tmp_path / "missing.npz")]) == 2
-
-
-def _chromium() -> str | None:
-    return shutil.which("chromium") or shutil.which("chromium-browser")
-
-
-def test_replay_page_draws_the_robot_in_headless_chromium(tmp_path):
-    """Open the replay of a fencing run in Debian's chromium (headless), take a
-    screenshot and count the pixels drawn in the robot's link colour: a blank page,
-    a script error or a robot off the canvas gives none."""
-    browser = _chromium()
-    if browser is None:
-        pytest.skip("chromium is not installed (.ci/run installs it)")
-    from PIL import Image
-
-    from prioik.benchmarks.replay import ROBOT_RGB, write_replay
-    res = run_one(SPECS["extended_jacobian"], "compatible", 0.1, 0.002)
-    page = write_replay(tmp_path / "replay.html", {"extended_jacobian": res}, "test")
-    shot = tmp_path / "shot.png"
-    subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu",
-                    "--hide-scrollbars", "--window-size=900,600",
-                    "--virtual-time-budget=1500", f"--screenshot={shot}",
-                    page.resolve().as_uri()], check=True, capture_output=True, timeout=120)
-    img = np.asarray(Image.open(shot).convert("RGB")).astype(int)
-    robot = np.all(np.abs(img - np.array(ROBOT_RGB)) <= 2, axis=2)
-    assert robot.sum() > 500
-    rows, cols = np.nonzero(robot)
-    # the robot is drawn inside the canvas (below the control bar), not in a corner
-    assert rows.min() > 40 and 100 < cols.mean() < 800
-    # an empty page (the same HTML without data) draws no robot pixels
-    empty = tmp_path / "empty.html"
-    empty.write_text(page.read_text().replace('"segments":', '"segments_off":'))
-    shot2 = tmp_path / "shot2.png"
-    subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu",
-                    "--window-size=900,600", "--virtual-time-budget=1500",
-                    f"--screenshot={shot2}", empty.resolve().as_uri()], capture_output=True,
-                   timeout=120)
-    img2 = np.asarray(Image.open(shot2).convert("RGB")).astype(int)
-    assert np.all(np.abs(img2 - np.array(ROBOT_RGB)) <= 2, axis=2).sum() == 0
+    s = RunSummary.of(Res(), ("com_error_m", "missing_m")).to_dict()
+    assert tuple(s) == RunSummary.keys(("com_error_m", "missing_m"))
+    assert s["final_tip_error_m"] == pytest.approx(0.1) and s["max_com_error_m"] == 2.0
+    assert s["max_missing_m"] is None and s["max_algorithmic_error"] is None
+    assert s["median_step_time_s"] == 2.0 and s["max_qdd_norm"] == pytest.approx(np.sqrt(2))

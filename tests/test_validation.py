@@ -17,8 +17,8 @@ def test_validate_writes_a_table_for_every_family(tmp_path, capsys):
     text = out.read_text(encoding="utf-8")
     for family in validation.EQUALITY_FAMILY_NAMES + validation.INEQUALITY_FAMILY_NAMES:
         assert f"## {family}" in text
-    for label in ("cascaded_qp/clarabel", "cascaded_qp/quadprog", "cvxpy/CLARABEL", "placo",
-                  "daqp_hierarchical", "reference"):
+    for label in ("cascaded_qp[clarabel]", "cascaded_qp[quadprog]", "cvxpy", "placo",
+                  "daqp_hierarchical", "reference", "cascaded_qp[clarabel,fixing=rows]"):
         assert f"| {label} |" in text
     # closed-form methods are skipped on inequality stacks, with the reason
     ineq = text.split("## with_inequalities")[1]
@@ -48,7 +48,7 @@ def test_no_inequality_answer_says_optimal_and_fails_the_certificate(tmp_path):
                    "cascaded_qp,cvxpy,daqp_hierarchical,placo", "--out", str(out)])
     assert rc == 0
     rows = [r for r in out.read_text(encoding="utf-8").splitlines()
-            if r.startswith("| cascaded_qp/") or r.startswith("| cvxpy/")
+            if r.startswith("| cascaded_qp[") or r.startswith("| cvxpy |")
             or r.startswith("| daqp_hierarchical |") or r.startswith("| placo |")]
     assert len(rows) >= 4
     for row in rows:

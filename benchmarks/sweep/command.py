@@ -60,7 +60,8 @@ def add_parser(subparsers) -> None:
                         "img/ beside it)")
     p.add_argument("--throughput", type=int, default=0, metavar="N",
                    help="first time N of the sweep's runs (spread over it) on 1 worker and "
-                        "on one worker per core, each from scratch, and report the speed-up "
+                        "on one worker per core, twice each, alternating, every pass from "
+                        "scratch, and report the fastest passes' speed-up "
                         "(DIR/throughput.json and the page)")
     p.add_argument("--dry-run", action="store_true",
                    help="validate the sweep file and print its size; run nothing")

@@ -3,8 +3,7 @@
 A sweep file (TOML, or JSON with the same keys)::
 
     scenario = "fencing"                 # prioik.benchmarks.sweep.scenarios.SWEEP_SCENARIOS
-    formulations = ["extended_jacobian", "nullspace", "sns"]   # or "default", "registry"
-    options_from = "incompatible"        # which of the scenario's RUNS options a label takes
+    formulations = ["extended_jacobian", "nullspace", "sns[velocity]"]   # or "default", "registry"
     seed = 0
     algorithmic_error = false            # record eq. 29 per step (an SVD per level)
 
@@ -25,14 +24,15 @@ A sweep file (TOML, or JSON with the same keys)::
     tip_m = 1e-3
 
 Every run is one point (grid × sample) × one formulation variant. A formulation entry
-is a run label of the scenario's table (:data:`prioik.benchmarks.fencing.RUNS`:
-``formulation`` or ``formulation:tag``), taking its options for ``options_from`` (its
-other variant when it has only that one), or a table
-``{label, formulation, options, level, limits}`` declaring a variant of its own.
-``"default"`` takes the table's default runs; ``"registry"`` every available registry
-formulation (:func:`prioik.benchmarks.variants.from_registry`: one per back-end, the
-plugin's ``REPORT_VARIANTS``, without plugins that opt out of ``"sweep"``), so a new
-formulation is swept without an edit here.
+is a run label of the scenario's table for sweeps
+(:func:`prioik.benchmarks.scenario_runs.run_table` with report ``"sweep"``:
+``formulation`` or ``formulation[tag]``, the same labels as ``prioik fencing``), or a
+table ``{label, formulation, options, level, limits, armature}`` declaring a variant of
+its own (``label``, if given, is ``formulation[tag]``). ``"default"`` takes the table's
+default selection (registry formulations, plugins that opt out of ``"sweep"`` left out,
+the scenario's studies and the external baselines); ``"registry"`` the registry's rows
+alone (:mod:`prioik.benchmarks.variants`: every available formulation, the settings
+plugins declare for sweeps), so a new formulation is swept without an edit here.
 
 A run's id is a hash of the scenario, its resolved parameters and its variant, so a
 resumed or extended sweep recognises the rows it already has.
@@ -50,45 +50,18 @@ from typing import Any
 
 import numpy as np
 
+from prioik.benchmarks.variants import Variant, parse_label
+
 from .scenarios import SWEEP_SCENARIOS, SweepScenario
 
-__all__ = ["SweepConfigError", "Variant", "Run", "Plan", "load_config", "plan_from_config"]
+__all__ = ["SweepConfigError", "Run", "Plan", "load_config", "plan_from_config"]
 
-TOP_KEYS = ("scenario", "formulations", "options_from", "seed", "algorithmic_error",
-            "fixed", "grid", "sample", "criteria", "title")
+TOP_KEYS = ("scenario", "formulations", "seed", "algorithmic_error", "fixed", "grid",
+            "sample", "criteria", "title")
 
 
 class SweepConfigError(ValueError):
     """A sweep file that cannot run; the message names the file, key and value."""
-
-
-@dataclass(frozen=True)
-class Variant:
-    """A formulation with fixed options under one label (one sweep column).
-
-    Attributes:
-        label: ``formulation`` or ``formulation:tag``.
-        formulation: Registry name, or an external baseline (``pink``,
-            ``placo_kinematics_solver``).
-        options: Options of every solve.
-        level: ``"acceleration"`` or ``"velocity"``.
-        limits: Joint-limit form (``None``: the scenario's default for the formulation).
-        armature: Rotor inertia added to ``M`` (kg·m²).
-        backend: QP back-end of the pink baseline.
-    """
-
-    label: str
-    formulation: str
-    options: dict = field(default_factory=dict, hash=False)
-    level: str = "acceleration"
-    limits: str | None = None
-    armature: float = 0.0
-    backend: str = ""
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"label": self.label, "formulation": self.formulation,
-                "options": self.options, "level": self.level, "limits": self.limits,
-                "armature": self.armature, "backend": self.backend}
 
 
 @dataclass(frozen=True)
@@ -165,77 +138,79 @@ def _err(cfg: dict, msg: str) -> SweepConfigError:
 
 
 # ------------------------------------------------------------------- variants
-def _variants(cfg: dict, scenario: str) -> list[Variant]:
+def _table_variant(cfg: dict, e: dict) -> Variant:
+    """A variant declared by a table of the sweep file."""
     from prioik import formulations
-    from prioik.benchmarks import fencing
-    table = {"fencing": fencing.RUNS}[scenario]
-    by_label = {r.label: r for r in table}
+    from prioik.formulations.options import validate_options
+    extra = sorted(set(e) - {"label", "formulation", "options", "level", "limits",
+                             "armature"})
+    if extra or "formulation" not in e:
+        raise _err(cfg, f"formulation table {e!r}: needs 'formulation'"
+                        f"{'; unknown key(s) ' + ', '.join(extra) if extra else ''}")
+    name = e["formulation"]
+    try:
+        mod = formulations.get(name)
+    except formulations.FormulationError as exc:
+        raise _err(cfg, f"formulation {name!r}: {exc}") from None
+    opts = dict(e.get("options", {}))
+    try:
+        validate_options(name, mod.OPTIONS, opts, None)
+    except formulations.FormulationError as exc:
+        raise _err(cfg, str(exc)) from None
+    level = e.get("level", "acceleration")
+    if level not in ("acceleration", "velocity"):
+        raise _err(cfg, f"formulation {name!r}: level must be 'acceleration' or "
+                        f"'velocity', got {level!r}")
+    if "label" in e:
+        try:
+            own, tag = parse_label(str(e["label"]))
+        except ValueError as exc:
+            raise _err(cfg, str(exc)) from None
+        if own != name:
+            raise _err(cfg, f"formulation table {e!r}: its label names {own!r}, not {name!r}")
+    else:
+        tag = ",".join([f"{k}={v}" for k, v in opts.items()]
+                       + (["velocity"] if level == "velocity" else []))
+    return Variant(name, tag, opts, level=level, limits=e.get("limits"),
+                   armature=float(e.get("armature", 0.0)))
+
+
+def _variants(cfg: dict, scenario: str) -> list[Variant]:
+    from prioik.benchmarks.scenario_runs import run_table
+    runs = run_table(scenario, "sweep")
     entries = cfg.get("formulations", "default")
     if entries == "default":
-        entries = [r.label for r in table if r.default]
+        entries = list(runs.rows)
     elif entries == "registry":
-        from prioik.benchmarks.variants import from_registry
-        found, _ = from_registry("sweep")
-        entries = [{"label": v.label, "formulation": v.formulation, "options": v.options}
-                   for v in found]
+        entries = [v for v in runs.rows if v.origin not in ("study", "baseline")]
     if isinstance(entries, str) or not isinstance(entries, list):
         raise _err(cfg, f"'formulations' must be a list of run labels or tables, "
                         f"\"default\" or \"registry\"; got {entries!r}")
     if not entries:
         raise _err(cfg, "'formulations' is empty: nothing to run")
-    options_from = cfg.get("options_from", "incompatible")
-    known_variants = {v for r in table for v in r.variants}
-    if options_from not in known_variants:
-        raise _err(cfg, f"'options_from' = {options_from!r}; the {scenario} runs have "
-                        f"{', '.join(sorted(known_variants))}")
     out: list[Variant] = []
-    named: list[str] = []
     for e in entries:
-        if isinstance(e, str):
-            if e not in by_label:
+        if isinstance(e, Variant):
+            out.append(e)
+        elif isinstance(e, str):
+            chosen, skipped = [], []
+            try:
+                chosen, skipped = runs.select([e])
+            except ValueError:
                 raise _err(cfg, f"unknown formulation {e!r}; the {scenario} runs are "
-                                f"{', '.join(by_label)} (or a table with label, "
-                                f"formulation, options)")
-            spec = by_label[e]
-            opts = spec.options.get(options_from)
-            if opts is None:
-                opts = next(iter(spec.options.values()), {}) if spec.options else {}
-            out.append(Variant(spec.label, spec.formulation, dict(opts), spec.level,
-                               spec.limits, spec.armature, spec.backend))
-            named.append(e)
+                                f"{', '.join(runs.known)} (or a table with label, "
+                                f"formulation, options)") from None
+            if skipped:
+                raise _err(cfg, "formulation(s) not available here: " + "; ".join(skipped))
+            out += chosen
         elif isinstance(e, dict):
-            extra = sorted(set(e) - {"label", "formulation", "options", "level", "limits",
-                                     "armature", "backend"})
-            if extra or "formulation" not in e:
-                raise _err(cfg, f"formulation table {e!r}: needs 'formulation'"
-                                f"{'; unknown key(s) ' + ', '.join(extra) if extra else ''}")
-            name = e["formulation"]
-            try:
-                mod = formulations.get(name)
-            except formulations.FormulationError as exc:
-                raise _err(cfg, f"formulation {name!r}: {exc}") from None
-            opts = dict(e.get("options", {}))
-            from prioik.formulations.options import validate_options
-            try:
-                validate_options(name, mod.OPTIONS, opts, None)
-            except formulations.FormulationError as exc:
-                raise _err(cfg, str(exc)) from None
-            level = e.get("level", "acceleration")
-            if level not in ("acceleration", "velocity"):
-                raise _err(cfg, f"formulation {name!r}: level must be 'acceleration' or "
-                                f"'velocity', got {level!r}")
-            out.append(Variant(e.get("label", name), name, opts, level, e.get("limits"),
-                               float(e.get("armature", 0.0)), e.get("backend", "")))
+            out.append(_table_variant(cfg, e))
         else:
             raise _err(cfg, f"formulation entry {e!r} is neither a label nor a table")
     labels = [v.label for v in out]
     dup = sorted({lb for lb in labels if labels.count(lb) > 1})
     if dup:
         raise _err(cfg, f"formulation label(s) listed twice: {', '.join(dup)}")
-    if named:
-        _, skipped = fencing.select_runs(",".join(named), table)
-        if skipped:
-            raise _err(cfg, "formulation(s) not available here: " + "; ".join(skipped))
     return out
 
 

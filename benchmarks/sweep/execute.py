@@ -80,6 +80,22 @@ def _progress(total: int, done: int, enabled: bool):
                            "{postfix}")
 
 
+def warm_up() -> None:
+    """What every worker process does once before its first run (part of the cluster
+    start, not of the runs' wall time): import the scenario and solver modules and load
+    the compiled kernels from numba's cache (seconds in a fresh process, the same for
+    each worker however many there are)."""
+    import prioik
+    from prioik.hierarchy import Task, TaskStack
+
+    from . import task  # noqa: F401 - the worker's entry point and its imports
+    from prioik.benchmarks import fencing  # noqa: F401
+
+    tiny = TaskStack([[Task("a", [[1.0, 0.0]], [1.0])], [Task("b", [[0.0, 1.0]], [2.0])]])
+    for name in ("extended_jacobian", "hierarchical_active_set"):
+        prioik.solve(tiny, name)
+
+
 def run_sweep(plan: Plan, out, *, workers: int | None = None, scheduler: str | None = None,
               progress: bool = True,
               on_row: Callable[[dict, Any], None] | None = None) -> SweepOutcome:
@@ -103,7 +119,7 @@ def run_sweep(plan: Plan, out, *, workers: int | None = None, scheduler: str | N
     (out / "sweep.json").write_text(json.dumps(
         {"config": plan.config, "fingerprint": plan.fingerprint(), "runs": len(plan.runs)},
         indent=2, default=str) + "\n")
-    store = RowStore(out / "rows.csv", columns(plan.runs[0].params))
+    store = RowStore(out / "rows.csv", columns(plan.runs[0].params, plan.scenario))
     todo = [r for r in plan.runs if r.run_id not in store]
     skipped = [r.run_id for r in plan.runs if r.run_id in store]
     computed: list[str] = []
@@ -141,6 +157,7 @@ def run_sweep(plan: Plan, out, *, workers: int | None = None, scheduler: str | N
                                        dashboard_address=None)
                 client = Client(cluster)
             n_workers = len(client.scheduler_info()["workers"])
+            client.run(warm_up)
             cluster_s = time.perf_counter() - t_start
             t_start = time.perf_counter()
             by_key = {f"run-{r.run_id}": r for r in todo}

@@ -2,12 +2,13 @@
 
 Identity and variant: ``run_id``, ``point``, ``scenario``, ``label``, ``formulation``,
 ``options`` (JSON), ``level``. Parameters: one column per scenario parameter (a
-3-vector as ``<name>_x``, ``_y``, ``_z``). Metrics (:data:`METRICS`, from
-:func:`prioik.benchmarks.fencing.summarize`; empty when not measured): errors in m /
-rad, ``max_qdd_norm``, median and 90th-percentile step time and median solve time
-(s). Outcome: ``steps``, ``failed`` (stopped early: a failed solve, a non-finite value
-or divergence), ``status`` (``ok``, ``unsupported``, ``error``), ``message``,
-``wall_s`` (the run's wall time on its worker) and ``worker`` (``host:pid``).
+3-vector as ``<name>_x``, ``_y``, ``_z``). Metrics (:func:`metrics`: the scenario's
+:class:`~prioik.benchmarks.results.RunSummary` without ``failed``; empty when not
+measured): errors in m / rad, ``max_qdd_norm``, median and 90th-percentile step time and
+median solve time (s). Outcome: ``steps``, ``failed`` (stopped early: a failed solve, a
+non-finite value or divergence), ``status`` (``ok``, ``unsupported``, ``error``),
+``message``, ``wall_s`` (the run's wall time on its worker) and ``worker``
+(``host:pid``).
 
 Success is judged from these columns at report time (:mod:`.stats`), so changing a
 bound needs no rerun.
@@ -18,13 +19,10 @@ from __future__ import annotations
 import json
 from typing import Any
 
-__all__ = ["METRICS", "IDENTITY", "OUTCOME", "columns", "empty_row", "flatten_params",
+__all__ = ["metrics", "IDENTITY", "OUTCOME", "columns", "empty_row", "flatten_params",
            "DETERMINISTIC_EXCLUDE"]
 
 IDENTITY = ("run_id", "point", "scenario", "label", "formulation", "options", "level")
-METRICS = ("final_tip_error_m", "max_com_error_m", "max_support_foot_error_m",
-           "max_left_foot_error_m", "max_joint_limit_violation_rad", "max_algorithmic_error",
-           "max_qdd_norm", "median_step_time_s", "p90_step_time_s", "median_solve_time_s")
 OUTCOME = ("steps", "failed", "status", "message", "wall_s", "worker")
 #: columns that depend on the machine and its load, not on the computation
 DETERMINISTIC_EXCLUDE = ("median_step_time_s", "p90_step_time_s", "median_solve_time_s",
@@ -43,9 +41,18 @@ def flatten_params(params: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def columns(params: dict[str, Any]) -> list[str]:
-    """Every column, in order, of a sweep whose runs have ``params``."""
-    return [*IDENTITY, *flatten_params(params), *METRICS, *OUTCOME]
+def metrics(scenario: str) -> tuple[str, ...]:
+    """The metric columns of ``scenario``'s runs: its run summary's keys
+    (:meth:`~prioik.benchmarks.results.RunSummary.keys`) but ``failed``."""
+    from prioik.benchmarks.results import RunSummary
+    from prioik.benchmarks.scenario_runs import scenario_class
+    keys = RunSummary.keys(tuple(scenario_class(scenario).summary_errors))
+    return tuple(k for k in keys if k != "failed")
+
+
+def columns(params: dict[str, Any], scenario: str) -> list[str]:
+    """Every column, in order, of a sweep of ``scenario`` whose runs have ``params``."""
+    return [*IDENTITY, *flatten_params(params), *metrics(scenario), *OUTCOME]
 
 
 def empty_row(task: dict[str, Any]) -> dict[str, Any]:
@@ -57,7 +64,7 @@ def empty_row(task: dict[str, Any]) -> dict[str, Any]:
                            "options": json.dumps(v["options"], sort_keys=True),
                            "level": v["level"]}
     row.update(flatten_params(task["params"]))
-    row.update({k: None for k in METRICS})
+    row.update({k: None for k in metrics(task["scenario"])})
     row.update({"steps": 0, "failed": True, "status": "", "message": "", "wall_s": None,
                 "worker": ""})
     return row

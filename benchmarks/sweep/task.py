@@ -1,9 +1,9 @@
 """One sweep run: plain data in, one summary row out (what a worker executes).
 
 The run goes through the same path as ``prioik fencing``
-(:func:`prioik.benchmarks.fencing.run_one`: a solver prepared once per stack layout,
-:func:`prioik.robots.simulate`), with one BLAS thread (``threadpoolctl``) so that the
-workers of one machine do not compete inside each solve.
+(:func:`prioik.benchmarks.scenario_runs.run_one`: a solver prepared once per stack
+layout, :func:`prioik.robots.simulate`), with one BLAS thread (``threadpoolctl``) so that
+the workers of one machine do not compete inside each solve.
 """
 
 from __future__ import annotations
@@ -14,9 +14,7 @@ import time
 import traceback
 from typing import Any
 
-import numpy as np
-
-from .schema import METRICS, empty_row
+from .schema import empty_row, metrics
 
 __all__ = ["run_task"]
 
@@ -26,30 +24,26 @@ def run_task(task: dict[str, Any]) -> dict[str, Any]:
     (:mod:`.schema`). A formulation that cannot take the stack gives a row with
     ``status = "unsupported"``; any other exception a row with ``status = "error"``
     and the message — both are results, written like any row."""
-    from prioik.benchmarks.fencing import RunSpec, run_one, summarize
+    from prioik.benchmarks.scenario_runs import run_one, scenario_class, summarize
     from prioik.benchmarks.threads import blas_threads
+    from prioik.benchmarks.variants import Variant
     from prioik.hierarchy import UnsupportedTaskError
 
     from .scenarios import SWEEP_SCENARIOS
 
     t0 = time.perf_counter()
-    params, v = task["params"], task["variant"]
+    params = task["params"]
     row = empty_row(task)
     try:
         with blas_threads(1):
             sc = SWEEP_SCENARIOS[task["scenario"]]().build(params)
-            spec = RunSpec(v["label"], v["formulation"], {"sweep": dict(v["options"])},
-                           variants=("sweep",), level=v["level"], armature=v["armature"],
-                           limits=v["limits"], backend=v["backend"])
-            res = run_one(spec, "sweep", params["duration"], params["dt"], scenario=sc,
+            res = run_one(Variant.from_dict(task["variant"]), "sweep", params["duration"],
+                          params["dt"], scenario=sc,
                           algorithmic_error=task["algorithmic_error"],
                           velocity_gain=params.get("velocity_gain", 20.0))
-        s = summarize(res, ("left_foot_error_m",))
-        for key in METRICS:
-            if key in s:
-                row[key] = s[key]
-        row["p90_step_time_s"] = (float(np.percentile(res.step_time_s, 90))
-                                  if res.steps else None)
+        s = summarize(res, tuple(scenario_class(task["scenario"]).summary_errors))
+        for key in metrics(task["scenario"]):
+            row[key] = s[key]
         row["steps"] = res.steps
         row["failed"] = bool(res.failed)
         row["message"] = res.message

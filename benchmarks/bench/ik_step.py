@@ -1,0 +1,51 @@
+"""The whole IK step (kinematics + rows + solve) against PlaCo: G1 fencing, Panda reach,
+and hierarchical_active_set with joint limits as bounds (the lead's modules
+:mod:`~prioik.benchmarks.placo_step`, :mod:`~prioik.benchmarks.panda_step`,
+:mod:`~prioik.benchmarks.active_set_bench` measure; this module runs them)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from prioik.benchmarks.progress import Progress
+
+from .settings import Settings
+
+__all__ = ["measure_ik_step"]
+
+
+def measure_ik_step(settings: Settings, progress: Progress | None = None
+                    ) -> tuple[dict[str, Any], str]:
+    """The whole G1 IK step of ``extended_jacobian`` against PlaCo's
+    ``KinematicsSolver``, the Panda reach step, and the active-set benchmark; or
+    ``({}, reason)`` when PlaCo or the robots cannot run here."""
+    from prioik.extras import MissingExtraError, require
+    try:
+        require("robots", "placo", what="the PlaCo IK step")
+    except MissingExtraError as exc:
+        return {}, str(exc)
+    try:
+        from prioik.benchmarks.placo_step import ik_step_times
+    except ImportError as exc:
+        return {}, f"PlaCo step unavailable ({type(exc).__name__}: {exc})"
+    try:
+        out = ik_step_times(settings.ik_steps)
+    except (ImportError, FileNotFoundError, RuntimeError) as exc:
+        return {}, f"PlaCo step failed ({type(exc).__name__}: {exc})"
+    from prioik.benchmarks.panda_step import panda_step_times
+    try:
+        out["panda"] = panda_step_times(settings.ik_steps)
+    except (ImportError, FileNotFoundError, RuntimeError) as exc:
+        out["panda_error"] = f"{type(exc).__name__}: {exc}"
+    # hierarchical_active_set with joint limits as bounds: the G1 bounds stacks (cold,
+    # warm, DAQP's raw call, cascaded_qp[daqp]) and the like-for-like IK steps with limits
+    from prioik.benchmarks import active_set_bench
+    try:
+        sizes = dict(windows=1, steps=3, repeats=1) if settings.quick else {}
+        out["active_set"] = active_set_bench.run(ik_steps=settings.ik_steps, **sizes)
+        out["active_set_table"] = active_set_bench.format_table(out["active_set"])
+    except (ImportError, FileNotFoundError, RuntimeError) as exc:
+        out["active_set_error"] = f"{type(exc).__name__}: {exc}"
+    if progress:
+        progress.step("IK step: PlaCo vs extended_jacobian")
+    return out, ""
