@@ -50,7 +50,7 @@ from __future__ import annotations
 import numpy as np
 
 from prioik.hierarchy import (AMBIGUITY, DEFAULT_RCOND, TaskStack, ambiguity_reason,
-                              ambiguous_decision, level_scale, rank_threshold)
+                              ambiguous_decision, rank_threshold)
 
 from .base import Capabilities, FormulationError, Outcome, ReportVariant
 from .options import Option, rcond_option
