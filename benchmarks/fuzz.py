@@ -1,9 +1,10 @@
 """Property fuzzing of the formulations on seeded random stacks.
 
 ``prioik fuzz --n 100000 --seed S --out DIR`` draws stacks with
-:func:`hierarchy.fuzz.equality_case` / :func:`~hierarchy.fuzz.inequality_case` (case
-``i`` from ``numpy.random.default_rng([S, i])``, so any case can be drawn again alone)
-and runs every fuzzed path on each. A path fails a case when:
+:func:`hierarchy.fuzz.equality_case`, :func:`~hierarchy.fuzz.inequality_case` or
+:func:`~hierarchy.fuzz.bounds_case` (``--kind``; case ``i`` from
+``numpy.random.default_rng([S, i])``, so any case can be drawn again alone) and runs
+every fuzzed path that takes the kind on each. A path fails a case when:
 
 * ``crash`` — it raised anything but the library's own errors on a valid stack
   (a :class:`~hierarchy.TaskStackError` / ``FormulationError`` refusal is counted
@@ -29,7 +30,10 @@ and runs every fuzzed path on each. A path fails a case when:
   the certificate);
 * ``threads`` — the same solve run from several threads differs from the serial
   answer: on one shared prepared solver (which may refuse a concurrent call with
-  ``ConcurrentUseError``, never answer wrongly) and on one prepared solver per thread.
+  ``ConcurrentUseError``, never answer wrongly) and on one prepared solver per thread;
+  bit for bit, against a reused solver's serial answer and a fresh one's respectively
+  (a warm-started solver reused on a stack starts from its last working set: the same
+  optimum, other rounding).
 
 Every failing case is saved as ``DIR/<kind>-<seed>-<index>.json``
 (:func:`hierarchy.save_stack` format, so ``prioik solve`` reloads it) with the
@@ -55,8 +59,8 @@ from prioik.formulations import ConcurrentUseError
 from prioik.hierarchy import (TaskStack, TaskStackError, check_lexicographic,
                               relative_distance, save_stack)
 from prioik.hierarchy.families import same_shape_batch
-from prioik.hierarchy.fuzz import (FuzzCase, equality_case, inequality_case, nested_truth,
-                                   rounding_error)
+from prioik.hierarchy.fuzz import (FuzzCase, bounds_case, equality_case, inequality_case,
+                                   nested_truth, rounding_error)
 
 #: Relative distance from the ground truth above which an ``optimal`` answer is wrong.
 WRONG_TOL = 1e-6
@@ -86,9 +90,18 @@ PATHS: dict[str, Path_] = {p.name: p for p in (
     Path_("ej_qr_lapack", "extended_jacobian", {"kernel": "lapack"}),
     Path_("ej_svd", "extended_jacobian", {"nullspace": "svd"}),
     Path_("nullspace", "nullspace", {}),
-    Path_("cascaded_qp", "cascaded_qp", {}, kinds=("inequality",)),
-    Path_("daqp_hierarchical", "daqp_hierarchical", {}, kinds=("inequality",)),
+    Path_("cascaded_qp", "cascaded_qp", {}, kinds=("inequality", "bounds")),
+    Path_("daqp_hierarchical", "daqp_hierarchical", {}, kinds=("inequality", "bounds")),
+    Path_("hierarchical_active_set", "hierarchical_active_set", {},
+          kinds=("equality", "inequality", "bounds")),
+    # sns takes inequality tasks only as first-level box bounds: the inequality kind's
+    # other stacks are refused (counted as refused, not failures); bounds are its own
+    Path_("sns", "sns", {}, kinds=("equality", "inequality", "bounds")),
 )}
+
+#: The generator of each stack kind.
+GENERATORS = {"equality": equality_case, "inequality": inequality_case,
+              "bounds": bounds_case}
 
 
 @dataclass
@@ -147,8 +160,7 @@ class FuzzReport:
 
 def _case(kind: str, seed: int, index: int, sizes: dict | None = None) -> FuzzCase:
     rng = np.random.default_rng([seed, index])
-    make = equality_case if kind == "equality" else inequality_case
-    return make(rng, seed=index, **(sizes or {}))
+    return GENERATORS[kind](rng, seed=index, **(sizes or {}))
 
 
 def draw(kind: str, seed: int, index: int, sizes: dict | None = None) -> FuzzCase:
@@ -213,7 +225,7 @@ class _Runner:
                     self.fail(case_id, case, "uncertified", path.name,
                               f"optimal but the certificate fails at level "
                               f"{cert.first_failure.level}")
-            elif sol.status == "optimal":         # inequality stacks: the KKT certificate
+            elif sol.status == "optimal":         # inequality, bounds: the KKT certificate
                 cert = check_lexicographic(stack, sol.x)
                 if not cert.ok:
                     self.fail(case_id, case, "uncertified", path.name,
@@ -301,25 +313,28 @@ class _Runner:
         wrong answer) and one solver per thread (the serial answers)."""
         reps = 4 * self.threads
         shared = formulations.prepare(case.stack.layout, path.formulation, **path.options)
-        serial = shared.solve(case.stack).x
+        serial = shared.solve(case.stack).x          # a fresh solver's answer
+        # a reused one's: a warm-started solver starts from its last solve's working set
+        # (same optimum, other rounding), the same state for every solve of this stack
+        reused = shared.solve(case.stack).x
 
         def on_shared(_):
             try:
-                return shared.solve(case.stack).x
+                return shared.solve(case.stack).x, reused
             except ConcurrentUseError:
-                return None
+                return None, None
 
         def own(_):
             return formulations.prepare(case.stack.layout, path.formulation,
-                                        **path.options).solve(case.stack).x
+                                        **path.options).solve(case.stack).x, serial
         try:
             with ThreadPoolExecutor(self.threads) as pool:
                 xs = list(pool.map(on_shared, range(reps))) + list(pool.map(own, range(reps)))
         except Exception as exc:  # noqa: BLE001
             self.fail(case_id, case, "threads", path.name, f"{type(exc).__name__}: {exc}")
             return
-        for x in xs:
-            if x is not None and not np.array_equal(x, serial, equal_nan=True):
+        for x, expected in xs:
+            if x is not None and not np.array_equal(x, expected, equal_nan=True):
                 self.fail(case_id, case, "threads", path.name,
                           "a concurrent solve differs from the serial one")
                 return
@@ -334,7 +349,7 @@ def run(n: int, seed: int, *, kinds=("equality",), paths: list[str] | None = Non
     Args:
         n: Stacks per kind.
         seed: Run seed.
-        kinds: ``"equality"`` and/or ``"inequality"``.
+        kinds: Of :data:`GENERATORS`: ``"equality"``, ``"inequality"``, ``"bounds"``.
         paths: Names in :data:`PATHS` (default: all whose formulation is available).
         threads: Threads of the concurrency check.
         thread_every: Run the concurrency check on every ``thread_every``-th case.
@@ -380,7 +395,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        description=__doc__.split("\n\n")[0])
     p.add_argument("--n", type=int, default=1000, help="stacks per kind (default 1000)")
     p.add_argument("--seed", type=int, default=0, help="run seed (default 0)")
-    p.add_argument("--kind", choices=("equality", "inequality", "both"), default="both")
+    p.add_argument("--kind", choices=("equality", "inequality", "bounds", "both", "all"),
+                   default="both", help="stack kind (both: equality and inequality; all: "
+                                        "the three; default both)")
     p.add_argument("--paths", default="", help=f"comma-separated paths (default: all of "
                                                f"{', '.join(PATHS)})")
     p.add_argument("--threads", type=int, default=4, help="threads of the concurrency check")
@@ -398,7 +415,8 @@ def _cmd(args: argparse.Namespace) -> int:
     for p in paths or []:
         if p not in PATHS:
             raise ValueError(f"unknown fuzz path {p!r}; known: {', '.join(PATHS)}")
-    kinds = ("equality", "inequality") if args.kind == "both" else (args.kind,)
+    kinds = {"both": ("equality", "inequality"), "all": tuple(GENERATORS)}.get(
+        args.kind, (args.kind,))
     report = run(args.n, args.seed, kinds=kinds, paths=paths, threads=args.threads,
                  thread_every=args.thread_every, out=args.out,
                  progress=lambda line: print(line, file=sys.stderr, flush=True))

@@ -28,6 +28,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from prioik.hierarchy.linalg import AMBIGUITY as _AMBIGUITY
+
 from ._extended_jacobian_kernel import _dot, _small_lstsq, _swap
 
 #: the same fast-math set as the extended-Jacobian kernel (no finite-math assumption)
@@ -101,9 +103,14 @@ def _eqp(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T, rhs, norms, V,
     ``tgt`` are permuted in place into pivot order.
 
     Returns:
-        ``(hr, rs, nref)``: hard rows kept (``rows[hr:nh]`` depend on them and are
-        not enforced), rank of the soft rows on the rest, reflectors used (the
-        first ``hr`` factor the hard rows; :func:`_hard_multipliers` uses them).
+        ``(hr, rs, nref, margin)``: hard rows kept (``rows[hr:nh]`` depend on them and
+        are not enforced), rank of the soft rows on the rest, reflectors used (the
+        first ``hr`` factor the hard rows; :func:`_hard_multipliers` uses them), and the
+        soft rows' rank decisions' margin (``hierarchy.linalg``: the smallest of kept
+        pivot / ``soft_tol`` and ``soft_tol`` / first rejected pivot; ``inf`` when none
+        was made). The hard rows' dependency test is not a margin: held hard rows are
+        at their bounds together, so a nearly dependent one left out does not move the
+        step's answer (the step test watches it).
     """
     n = B.shape[1]
     d = n - col
@@ -115,6 +122,7 @@ def _eqp(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T, rhs, norms, V,
         for c in range(d):
             T[i, c] = Bj[col + c]
     nref = 0
+    margin = np.inf
     # --- hard rows: row-pivoted LQ, scale-free pivot (residual² / ‖a_j‖²)
     for i in range(nh):
         norms[i] = _dot(T[i, :d], T[i, :d])
@@ -172,8 +180,20 @@ def _eqp(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T, rhs, norms, V,
                 piv = i
         tail = T[piv, q:d]
         exact = _dot(tail, tail)
+        if not (np.sqrt(exact) > soft_tol) and soft_tol > 0.0:
+            # the downdated norms may have lost the largest remaining row (cancellation
+            # ~ε‖row‖², as in the extended Jacobian's kernel): recompute before stopping
+            for i in range(top, nr):
+                rest = T[i, q:d]
+                norms[i] = _dot(rest, rest)
+                if norms[i] > exact:
+                    exact = norms[i]
+                    piv = i
         if not (np.sqrt(exact) > soft_tol) or soft_tol <= 0.0:
+            if exact > 0.0 and soft_tol > 0.0:
+                margin = min(margin, soft_tol / np.sqrt(exact))
             break
+        margin = min(margin, np.sqrt(exact) / soft_tol)
         if piv != top:
             _swap_rows_upto(T, top, piv, d)
             _swap(rhs, top, piv)
@@ -207,7 +227,7 @@ def _eqp(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T, rhs, norms, V,
         if f != 0.0:
             for c in range(d - q):
                 pq[c] -= f * v[c]
-    return hr, rs, nref
+    return hr, rs, nref, margin
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
@@ -224,15 +244,16 @@ def _full_rank_step(B, y, col, rows, nw, tgt, soft_tol, flat, t, norms, perm, p,
     then runs over the ``nw`` rows, contiguous (a posture level of a humanoid brought
     row by row through ~20 reflectors costs several times more). ``B`` itself is not
     rotated (``nrot`` unchanged: a row brought here is brought again if it enters
-    another factorization). Returns ``False`` (``p`` not written) when the rows lack
-    different numbers of reflectors or a pivot fails the threshold: the caller then
-    brings them and takes the row-pivoted LQ of :func:`_eqp`."""
+    another factorization). Returns the smallest pivot / ``soft_tol`` (the rank
+    decision's margin), or ``-1`` (``p`` not written) when the rows lack different
+    numbers of reflectors or a pivot fails the threshold: the caller then brings them
+    and takes the row-pivoted LQ of :func:`_eqp`."""
     n = B.shape[1]
     d = n - col
     r0 = nrot[rows[0]]
     for i in range(1, nw):
         if nrot[rows[i]] != r0:
-            return False
+            return -1.0
     W = flat[:n * nw].reshape((n, nw))
     for i in range(nw):
         Bj = B[rows[i]]
@@ -268,6 +289,7 @@ def _full_rank_step(B, y, col, rows, nw, tgt, soft_tol, flat, t, norms, perm, p,
     for c in range(d):
         norms[c] = _dot(Tt[c], Tt[c])
         perm[c] = c
+    margin = np.inf
     for c in range(d):
         piv = c
         best = norms[c]
@@ -282,7 +304,8 @@ def _full_rank_step(B, y, col, rows, nw, tgt, soft_tol, flat, t, norms, perm, p,
         cj = Tt[c, c:]
         exact = _dot(cj, cj)
         if not (np.sqrt(exact) > soft_tol) or soft_tol <= 0.0:
-            return False
+            return -1.0
+        margin = min(margin, np.sqrt(exact) / soft_tol)
         norm = np.sqrt(exact)
         c0 = cj[0]
         alpha = -norm if c0 >= 0.0 else norm
@@ -307,24 +330,25 @@ def _full_rank_step(B, y, col, rows, nw, tgt, soft_tol, flat, t, norms, perm, p,
         norms[c] = acc / Tt[c, c]          # norms: z in pivot order
     for c in range(d):
         p[perm[c]] = norms[c]
-    return True
+    return margin
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
 def _step(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T, rhs, norms, V, beta,
           vpos, Lw, p, reach, flat, perm, nrot, nf, Vf, betaf, posf):
     """:func:`_full_rank_step` when it applies, else :func:`_eqp`; returns
-    ``(hr, rs, nref, full)``."""
+    ``(hr, rs, nref, full, margin)`` (``margin``: of the soft rows' rank decisions)."""
     d = B.shape[1] - col
-    if nh == 0 and nw >= d and _full_rank_step(B, y, col, rows, nw, tgt, soft_tol, flat,
-                                               rhs, norms, perm, p, nrot, nf, Vf, betaf,
-                                               posf):
-        return 0, d, 0, True
+    if nh == 0 and nw >= d:
+        margin = _full_rank_step(B, y, col, rows, nw, tgt, soft_tol, flat, rhs, norms, perm,
+                                 p, nrot, nf, Vf, betaf, posf)
+        if margin >= 0.0:
+            return 0, d, 0, True, margin
     for i in range(nh + nw):
         _bring(B, rows[i], nrot, nf, Vf, betaf, posf)
-    hr, rs, nref = _eqp(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T, rhs, norms,
-                        V, beta, vpos, Lw, p, reach)
-    return hr, rs, nref, False
+    hr, rs, nref, margin = _eqp(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T, rhs,
+                                norms, V, beta, vpos, Lw, p, reach)
+    return hr, rs, nref, False, margin
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
@@ -434,6 +458,16 @@ def _gather(state, hard_end, s0, s1, blo, bup, rows, tgt, B, nrot, nf, Vf, betaf
     return nh, nw
 
 
+@njit(cache=True, inline="always")
+def _dual_scale(dual_tol, scale, ynorm, tgt, nh, nw):
+    """The level's multiplier tolerance without its gradient term (as in the dual
+    test): ``dual_tol ‖A_i‖_F (‖A_i‖_F ‖x‖ + ‖targets of the working soft rows‖)``."""
+    tn = 0.0
+    for i in range(nh, nh + nw):
+        tn += tgt[i] * tgt[i]
+    return dual_tol * scale * (scale * ynorm + np.sqrt(tn))
+
+
 @njit(cache=True, fastmath=_FAST, inline="always")
 def _violated_side(r, lo, up, tol_lo, tol_up):
     if r < lo - tol_lo:
@@ -444,7 +478,7 @@ def _violated_side(r, lo, up, tol_lo, tol_up):
 
 
 #: floats of the ``params`` header of the float workspace
-N_PARAMS = 8
+N_PARAMS = 9
 #: float rows of length ``R`` in the float workspace (``fvec``)
 N_FVEC = 15
 
@@ -455,10 +489,12 @@ def workspace_offsets(M: int, n: int, k: int) -> dict[str, tuple[int, int]]:
 
     float64: ``params`` (rcond, primal_tol, dual_tol, max_iter, use_warm), ``B``,
     ``T``, ``Lw``, ``Bo``, ``flat`` (``R × n`` each), ``V``, ``Vf`` (``n × n``), ``fvec``
-    (``15 × R``), ``x`` (``n``), ``w2`` and ``res = √w2`` (``k``); the kernel writes
+    (``15 × R``), ``x`` (``n``), ``w2`` and ``res = √w2`` (``k``), ``margins`` (``k + 1``:
+    each level's and the tie-break's rank-decision margin); the kernel writes
     ``‖x‖`` into ``params[5]``, into ``params[6]`` ``1`` when an iteration cap was
     hit, ``-1`` when ``x`` or a residual is not finite, and into ``params[7]`` the number
-    of levels whose violation exceeds ``primal_tol max(1, ‖x‖)``; int64: ``k``, ``starts`` (``k + 1``),
+    of levels whose violation exceeds ``primal_tol max(1, ‖x‖)``, into ``params[8]`` the
+    number of levels (the tie-break included) whose ``margins`` are ambiguous; int64: ``k``, ``starts`` (``k + 1``),
     ``ivec`` (``5 × R``), ``perm`` (``n``), ``counts`` (``3 × (k + 1)``); int8: ``row_eq``
     (``M``), ``bvec`` (``2 × R``), ``eqr`` (``R``), ``warm_state`` (``(k + 1) × R``),
     ``warm_valid`` (``k + 1``).
@@ -468,7 +504,7 @@ def workspace_offsets(M: int, n: int, k: int) -> dict[str, tuple[int, int]]:
     for kind, parts in (("f", (("params", N_PARAMS), ("B", R * n), ("T", R * n),
                                 ("Lw", R * n), ("Bo", R * n), ("flat", R * n),
                                 ("V", n * n), ("Vf", n * n), ("fvec", N_FVEC * R),
-                                ("x", n), ("w2", k), ("res", k))),
+                                ("x", n), ("w2", k), ("res", k), ("margins", k + 1))),
                         ("i", (("k", 1), ("starts", k + 1), ("ivec", 5 * R), ("perm", n),
                                ("counts", 3 * (k + 1)))),
                         ("b", (("row_eq", M), ("bvec", 2 * R), ("eqr", R),
@@ -502,7 +538,9 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
             ``y[col:] = 0``; ``B`` holds the rows in rotated coordinates, brought up to
             date lazily (``nrot``), ``Bo`` the weighted rows in ``x``, where rows outside
             the working set are checked against ``xc = Q y``), outputs ``x`` (``n``) and
-            ``w2`` (``k``: each level's weighted squared violation at ``x``).
+            ``w2`` (``k``: each level's weighted squared violation at ``x``), ``margins``
+            (``k + 1``: the margin of the rank decisions of each level's last step and
+            of its fixing, the tie-break last; ``≤ hierarchy.AMBIGUITY``: ambiguous).
         iwork: int64: ``k``, the ``k + 1`` level offsets, workspaces, outputs
             ``counts`` (``3 × (k + 1)``, the last column the minimum-norm level:
             iterations, :data:`FLAG_ITERATION_CAP` when the cap was hit, rank fixed).
@@ -540,6 +578,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     o += n
     w2 = fwork[o:o + k]
     res = fwork[o + k:o + 2 * k]
+    margins = fwork[o + 2 * k:o + 3 * k + 1]
     starts = iwork[1:k + 2]
     o = k + 2
     ivec = iwork[o:o + 5 * R].reshape((5, R))
@@ -639,6 +678,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
         iters[lev] = 0
         flags[lev] = FLAG_OK
         ranks[lev] = 0
+        margins[lev] = np.inf
         if col >= n:
             continue
         if lev < k:
@@ -687,6 +727,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
         hr = 0
         rs = 0
         full = False
+        step_margin = np.inf
         if use_warm and warm_valid[lev]:
             for j in range(s1):
                 saved[j] = state[j]
@@ -702,9 +743,10 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                     state[j] = 0
             nh, nw = _gather(state, hard_end, s0, s1, blo, bup, rows, tgt, B, nrot, nf,
                                  Vf, betaf, posf)
-            hr, rs, nref, full = _step(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol,
-                                       T, rhs, norms, V, beta, vpos, Lw, p, True, flat, perm,
-                                       nrot, nf, Vf, betaf, posf)
+            hr, rs, nref, full, step_margin = _step(B, y, col, rows, nh, nw, tgt, rnorm,
+                                                    rcond, soft_tol, T, rhs, norms, V, beta,
+                                                    vpos, Lw, p, True, flat, perm, nrot, nf,
+                                                    Vf, betaf, posf)
             iters[lev] += 1
             for i in range(hr, nh):
                 state[rows[i]] = 0
@@ -758,9 +800,10 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                 iters[lev] += 1
                 nh, nw = _gather(state, hard_end, s0, s1, blo, bup, rows, tgt, B, nrot, nf,
                                  Vf, betaf, posf)
-                hr, rs, nref, full = _step(B, y, col, rows, nh, nw, tgt, rnorm, rcond,
-                                           soft_tol, T, rhs, norms, V, beta, vpos, Lw, p,
-                                           False, flat, perm, nrot, nf, Vf, betaf, posf)
+                hr, rs, nref, full, step_margin = _step(B, y, col, rows, nh, nw, tgt, rnorm,
+                                                        rcond, soft_tol, T, rhs, norms, V,
+                                                        beta, vpos, Lw, p, False, flat, perm,
+                                                        nrot, nf, Vf, betaf, posf)
                 for i in range(hr, nh):
                     state[rows[i]] = 0          # dependent on the kept hard rows
                 pn = np.sqrt(_dot(p[:d], p[:d]))
@@ -844,7 +887,9 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                 settled = True
                 break
             state[drop] = 0
-        # ---- level done: remember its working set, fix its non-zero slacks
+        # ---- level done: remember its working set, fix its non-zero slacks. The margin:
+        # the last step's rank decisions (they made the level's point) and the fixing's
+        margins[lev] = step_margin
         for j in range(s1):
             st = state[j]
             warm_state[lev, j] = st if (st == -1 or st == 1) else 0
@@ -852,13 +897,20 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
         if lev == k:
             break
         ynorm = np.sqrt(_dot(y, y))
+        # a held row is off its bound (violated: fixed at its violation for every level
+        # below) beyond the primal tolerance and beyond the dual one, its violation
+        # being its multiplier: a row 1e-4 the size of the level's others is off by the
+        # level's rounding (~1e-12) at an optimum where it meets its bound, and fixing it
+        # took a direction the lower levels need (fuzzing: a level 4x worse, 'optimal')
+        dscale = _dual_scale(dual_tol, scale, ynorm, tgt, nh, nw)
         nfix = 0
         for j in range(s0, s1):
             st = state[j]
             fix = eqr[j]
             if st == -1 or st == 1:
                 tb = blo[j] if st == -1 else bup[j]
-                fix = abs(_odot(Bo, ucol, j, xc) - tb) > _tol(primal_tol, rnorm[j], ynorm, tb)
+                off = abs(_odot(Bo, ucol, j, xc) - tb)
+                fix = off > _tol(primal_tol, rnorm[j], ynorm, tb) and off * rnorm[j] > dscale
             if fix:
                 rows[nfix] = j
                 nfix += 1
@@ -909,8 +961,19 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
             jp = rows[piv]
             tail = B[jp, col:]
             exact = _dot(tail, tail)
+            if not (np.sqrt(exact) > soft_tol) and soft_tol > 0.0:
+                for i in range(rf, nfix):       # downdated norms: as in _eqp
+                    norms[i] = _dot(B[rows[i], col:], B[rows[i], col:])
+                    if norms[i] > exact:
+                        exact = norms[i]
+                        piv = i
+                jp = rows[piv]
+                tail = B[jp, col:]
             if not (np.sqrt(exact) > soft_tol) or soft_tol <= 0.0:
+                if exact > 0.0 and soft_tol > 0.0:
+                    margins[lev] = min(margins[lev], soft_tol / np.sqrt(exact))
                 break
+            margins[lev] = min(margins[lev], np.sqrt(exact) / soft_tol)
             if piv != rf:
                 _swap(rows, rf, piv)
                 _swap(norms, rf, piv)
@@ -985,5 +1048,10 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
         if flags[lev] != FLAG_OK:
             capped = 1.0
     fwork[6] = capped if (np.isfinite(xn) and np.isfinite(total)) else -1.0
+    ambiguous = 0
+    for lev in range(k + 1):
+        if margins[lev] <= _AMBIGUITY:
+            ambiguous += 1
+    fwork[8] = ambiguous
     return True
 

@@ -56,6 +56,19 @@ level has an iteration cap (``max_iter``): when it is hit the status is
 *Tolerances.* A row counts as violated when it is outside its interval by more than
 ``primal_tol (‖√w_j a_j‖ ‖x‖ + |bound|)``; a multiplier is wrong-signed when
 ``|ν_j| ‖√w_j a_j‖ > dual_tol · max(‖∇f‖, ‖A_i‖_F (‖A_i‖_F ‖x‖ + ‖targets‖))``.
+A held row is fixed at the end of its level as *violated* only when it is off its
+bound beyond the primal tolerance and its violation (its multiplier) times
+``‖√w_j a_j‖`` exceeds the second term of the dual tolerance: rows far smaller than
+their level's others end an optimum where they meet their bounds off them by the
+level's rounding, and fixing them would take directions the lower levels need.
+Every pivot norm of the last step's soft rows and of the fixing is checked against
+its threshold with the shared rule of :mod:`hierarchy.linalg`: within
+:data:`~hierarchy.AMBIGUITY` of it the decision is ambiguous (rounding may flip it,
+and with it ``x`` by ``O(1)``) and the status is ``approximate``,
+``info["ambiguous_levels"]`` and ``info["reason"]`` naming the levels (level ``k``:
+the minimum-norm tie-break); on equality stacks these are the extended Jacobian's
+decisions and statuses. Pivots are re-measured exactly before a rank decision stops
+(downdated norms lose the largest remaining row to cancellation).
 
 *Warm start.* :class:`Prepared` keeps each level's working set at its optimum; the
 next solve first tries, per level, the step of last time's working set: when the
@@ -75,7 +88,8 @@ import math
 
 import numpy as np
 
-from prioik.hierarchy import StackData, StackLayout, TaskStack, TaskStackError
+from prioik.hierarchy import (AMBIGUITY, StackData, StackLayout, TaskStack, TaskStackError,
+                              ambiguity_reason)
 
 from .base import Capabilities, FormulationError, Outcome, ReportVariant
 from .options import Option, rcond_option, validate_options
@@ -168,7 +182,9 @@ class Prepared:
         #: the kernel's outputs: ``x``, each level's ``‖w_i‖²``, its root (one copy)
         self._out = self._fwork[off["x"][0]:off["res"][1]]
         #: ‖x‖, cap/non-finite flag, number of levels with a violation above tolerance
-        self._summary = self._fwork[5:8]
+        self._summary = self._fwork[5:9]
+        #: each level's (and the tie-break's) rank-decision margin (hierarchy.linalg)
+        self._margins = part(self._fwork, "margins")
         self._n, self._k = n, k
         self._counts = part(self._iwork, "counts", (3, k + 1))
 
@@ -195,15 +211,25 @@ class Prepared:
         out = self._out.copy()
         x, w2, residuals = out[:n], out[n:n + k], out[n + k:]
         counts = self._counts.copy()
-        xn, flag, infeasible = self._summary.tolist()
+        xn, flag, infeasible, ambiguous = self._summary.tolist()
         if infeasible:
             tol = self.primal_tol * max(1.0, xn)
             infeasible = [i for i, r in enumerate(residuals.tolist()) if r > tol]
         info = {"iterations": counts[0], "rank_profile": counts[2, :k],
                 "level_violation": w2, "infeasible_levels": infeasible or [],
                 "warm_start": self.warm_start}
-        if flag == 0.0:
+        if flag == 0.0 and not ambiguous:
             return Outcome(x, "optimal", info, residuals=residuals, checked=True)
+        if flag == 0.0:
+            # a pivot within AMBIGUITY of its threshold: rounding may flip the decision
+            # and with it x by O(1) (the shared rule of hierarchy.linalg)
+            levels = np.flatnonzero(self._margins <= AMBIGUITY).tolist()
+            reasons = [ambiguity_reason([i for i in levels if i < k])] if levels[0] < k else []
+            if levels[-1] == k:
+                reasons.append(f"rank decision ambiguous at the minimum-norm tie-break (a "
+                               f"pivot within {AMBIGUITY:g}x of its threshold)")
+            info.update(ambiguous_levels=levels, reason="; ".join(reasons))
+            return Outcome(x, "approximate", info, residuals=residuals, checked=True)
         if flag < 0.0:
             self.warm_valid[:] = 0
             info["message"] = "the active-set iterations produced non-finite values"

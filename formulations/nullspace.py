@@ -50,7 +50,7 @@ from __future__ import annotations
 import numpy as np
 
 from prioik.hierarchy import (AMBIGUITY, DEFAULT_RCOND, TaskStack, ambiguity_reason,
-                              ambiguous_decision, level_scale, rank_threshold)
+                              ambiguous_decision, rank_threshold)
 
 from .base import Capabilities, FormulationError, Outcome, ReportVariant
 from .options import Option, rcond_option
@@ -111,6 +111,65 @@ def generalized_inverse(M: np.ndarray, tol: float, damping: float = 0.0
     return (V * gain) @ U.T, V, U
 
 
+def project_levels(A: np.ndarray, b: np.ndarray, X: np.ndarray, N: np.ndarray,
+                   tol: np.ndarray, damping: float = 0.0, reproject: bool = True
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """One level of the recursion (module docstring) for ``B`` stacks at once:
+    ``Ĵ_i = A N_{i-1}``, the step ``x_i = x_{i-1} + N_{i-1} Ĵ_i^# (b − A x_{i-1})``
+    (without the leading ``N_{i-1}`` when not ``reproject``) and
+    ``N_i = N_{i-1} − V Vᵀ`` with ``V`` re-orthonormalised in ``range(N_{i-1})``.
+
+    The one implementation of a level: :func:`solve` runs it on one stack (``B = 1``),
+    :func:`solve_batch` on many, ``sns`` for its unbounded step — so every path makes
+    the same rank decisions with the same arithmetic (a stacked SVD or product is the
+    per-matrix one), and ``solve`` equals ``solve_batch`` bit for bit. Singular values
+    are masked by the rank rule instead of truncated, so stacks of different ranks
+    share the arrays.
+
+    Args:
+        A, b: ``B × m × n`` rows and ``B × m`` targets of the level (weighted).
+        X, N: ``B × n`` answers and ``B × n × n`` projectors so far (not modified).
+        tol: ``B`` absolute rank thresholds (:func:`hierarchy.rank_threshold` of each
+            ``A``; ``≤ 0``: the level keeps nothing).
+        damping: ``λ`` of the damped inverse (0: pseudo-inverse).
+        reproject: Multiply the step by ``N_{i-1}`` once more.
+
+    Returns:
+        ``(X_i, N_i, keep, σ, ambiguous)``: ``keep`` (``B × p``) masks the kept singular
+        values ``σ`` of ``Ĵ_i`` (sorted, largest first); ``ambiguous`` (``B``) flags a
+        singular value within :data:`hierarchy.AMBIGUITY` of ``tol``.
+    """
+    count, m, n = A.shape
+    if m == 0:
+        return (X, N, np.zeros((count, 0), dtype=bool), np.zeros((count, 0)),
+                np.zeros(count, dtype=bool))
+    U, sv, Vt = np.linalg.svd(A @ N, full_matrices=False)
+    t = tol[:, None]
+    keep = (sv > t) & (t > 0)
+    near = ((sv > t / AMBIGUITY) & (sv <= t * AMBIGUITY) & (t > 0)).any(axis=1)
+    safe = np.where(keep, sv, 1.0)
+    gain = np.where(keep, safe / (safe * safe + damping) if damping > 0 else 1.0 / safe, 0.0)
+    residual = b[:, :, None] - A @ X[:, :, None]                       # B × m × 1
+    step = np.swapaxes(Vt, 1, 2) @ (gain[:, :, None] * (np.swapaxes(U, 1, 2) @ residual))
+    if reproject:
+        step = N @ step                                            # N_{i-1} Ĵ_i^# = Ĵ_i^#
+    X = X + step[:, :, 0]
+    # V in range(N_{i-1}) to rounding (module docstring): the kept singular vectors come
+    # first (σ sorted), so the QR's leading columns span N V_r; the others are masked
+    V, _ = np.linalg.qr(N @ np.swapaxes(Vt, 1, 2))                  # B × n × p
+    V = V * keep[:, None, :]
+    return X, N - V @ np.swapaxes(V, 1, 2), keep, sv, near         # N_i = N_{i-1} − Ĵ⁺Ĵ
+
+
+def project_level(A: np.ndarray, b: np.ndarray, x: np.ndarray, N: np.ndarray, tol: float,
+                  damping: float = 0.0, reproject: bool = True
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+    """:func:`project_levels` on one stack: ``(x_i, N_i, σ_kept, ambiguous)``."""
+    X, N, keep, sv, near = project_levels(A[None], b[None], x[None], N[None],
+                                          np.array([tol]), damping, reproject)
+    return X[0], N[0], sv[0][keep[0]], bool(near[0])
+
+
 def solve(stack: TaskStack, *, damping: float, rcond: float, reproject: bool) -> Outcome:
     """Recursive null-space projection; see the module docstring.
 
@@ -126,21 +185,13 @@ def solve(stack: TaskStack, *, damping: float, rcond: float, reproject: bool) ->
     N = np.eye(n)
     ranks, sigmas, ambiguous = [], [], []
     for i, level in enumerate(stack.levels):
-        A, b = level.A, level.b
-        J_hat = A @ N
-        tol = rank_threshold(A, float(rcond))
-        U, s, V, near = truncated_svd(J_hat, tol, report=True)
+        x, N, s, near = project_level(level.A, level.b, x, N,
+                                      rank_threshold(level.A, float(rcond)), damping,
+                                      reproject)
         if near:
             ambiguous.append(i)
         ranks.append(int(s.size))
         sigmas.append(float(s.min()) if s.size else 0.0)
-        if s.size == 0:
-            continue
-        gain = s / (s * s + damping) if damping > 0 else 1.0 / s
-        step = V @ (gain * (U.T @ (b - A @ x)))
-        x = x + (N @ step if reproject else step)        # N_{i-1} Ĵ_i^# = Ĵ_i^#
-        V, _ = np.linalg.qr(N @ V)   # V in range(N_{i-1}) to rounding (see module doc)
-        N = N - V @ V.T          # N_i = N_{i-1} − Ĵ_i⁺ Ĵ_i
     status = "approximate" if damping > 0 or ambiguous else "optimal"
     info = {"rank_profile": ranks, "min_singular_values": sigmas, "damping": damping}
     if ambiguous:
@@ -152,12 +203,8 @@ def solve(stack: TaskStack, *, damping: float, rcond: float, reproject: bool) ->
 def solve_batch(stacks: list[TaskStack], *, damping: float = 0.0,
                 rcond: float = DEFAULT_RCOND, reproject: bool = True
                 ) -> tuple[np.ndarray, list[str]]:
-    """:func:`solve` for many stacks of one shape with stacked numpy linear algebra.
-
-    One batched SVD per level (``np.linalg.svd`` on a ``B × m × n`` array); each
-    stack's rank rule is applied with a mask on its singular values instead of
-    truncating, so stacks of different ranks share the arrays.
-    """
+    """:func:`solve` for many stacks of one shape: :func:`project_levels` on the
+    stacked levels (one stacked SVD per level), the same arithmetic as :func:`solve`."""
     check_nonnegative(damping=damping, rcond=rcond)
     damping = float(damping)
     count, n = len(stacks), stacks[0].n
@@ -166,28 +213,10 @@ def solve_batch(stacks: list[TaskStack], *, damping: float = 0.0,
     near = np.zeros(count, dtype=bool)          # some rank decision was ambiguous
     for li in range(len(stacks[0])):
         A = np.stack([s.levels[li].A for s in stacks])              # B × m × n
-        if A.shape[1] == 0:
-            continue
         b = np.stack([s.levels[li].b for s in stacks])              # B × m
-        J_hat = A @ N
-        U, sv, Vt = np.linalg.svd(J_hat, full_matrices=False)
-        tol = float(rcond) * np.array([level_scale(a) for a in A])
-        keep = (sv > tol[:, None]) & (tol[:, None] > 0)
-        near |= ((sv > tol[:, None] / AMBIGUITY) & (sv <= tol[:, None] * AMBIGUITY)
-                 & (tol[:, None] > 0)).any(axis=1)
-        safe = np.where(keep, sv, 1.0)
-        gain = np.where(keep, safe / (safe * safe + damping) if damping > 0 else 1.0 / safe,
-                        0.0)
-        residual = b - np.einsum("bmn,bn->bm", A, X)
-        step = np.einsum("brn,br->bn", Vt, gain * np.einsum("bmr,bm->br", U, residual))
-        if reproject:
-            step = np.einsum("bij,bj->bi", N, step)
-        X += step
-        # kept singular vectors come first (σ sorted): the QR's leading columns span
-        # N V_r, the trailing ones (masked out) belong to no direction
-        Vk, _ = np.linalg.qr(N @ np.swapaxes(Vt, 1, 2))            # B × n × p
-        Vk = Vk * keep[:, None, :]
-        N -= np.einsum("bnr,bpr->bnp", Vk, Vk)                     # N_i = N_{i-1} − Ĵ⁺Ĵ
+        tol = np.array([rank_threshold(a, float(rcond)) for a in A])
+        X, N, _, _, amb = project_levels(A, b, X, N, tol, damping, reproject)
+        near |= amb
     return X, ["approximate" if damping > 0 or amb else "optimal" for amb in near]
 
 # ------------------------------------------------------------------------ reports

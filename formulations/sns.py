@@ -51,12 +51,20 @@ weighted equality rows); at acceleration level the paper scales only ``ẍ_k`` a
 ``−J̇_k q̇``, whereas here the whole target ``b_k`` of the level is scaled (the stack
 does not separate the drift from the command); rank decisions use the shared rule
 ``σ > rcond·‖J_k‖_F``; the projector is updated after a dropped task too, so a lower
-task never disturbs a higher one.
+task never disturbs a higher one. The unbounded step ``x_{k-1} + (J_k P_{k-1})⁺ (b_k −
+J_k x_{k-1})`` and the projector update are null-space projection's own level
+(:func:`~prioik.formulations.nullspace.project_level`: the step reprojected onto
+``P_{k-1}``, the kept singular vectors re-orthonormalised inside it), so that
+``P_k`` stays a projector over many levels (without it fuzzing found 8-level stacks
+whose answer was 1e7 off, called ``optimal``) and a stack without bounds gets
+``nullspace``'s answer bit for bit.
 
 **Status.** ``"optimal"`` when every level reached the least-squares residual it has
 without bounds (then ``x`` is the exact lexicographic optimum of the stack with the
 bounds on top); ``"approximate"`` when a task was scaled, dropped, or its residual
-grew because joints were saturated (``info["scaled_tasks"]`` names the scaled ones).
+grew because joints were saturated (``info["scaled_tasks"]`` names the scaled ones),
+or when a rank decision was ambiguous (:mod:`hierarchy.linalg`; ``info["reason"]``
+names the levels).
 
 ``info``: ``task_scaling`` (one ``s ∈ [0, 1]`` per equality level, in stack order),
 ``scaled_tasks`` (task names of the levels with ``s < 1``), ``saturated`` (per level,
@@ -68,10 +76,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from prioik.hierarchy import DEFAULT_RCOND, TaskStack, UnsupportedTaskError
+from prioik.hierarchy import (DEFAULT_RCOND, TaskStack, UnsupportedTaskError, ambiguity_reason,
+                              rank_threshold)
 
 from .base import Capabilities, FormulationError, Outcome, ReportVariant
-from .nullspace import check_nonnegative, truncated_svd
+from .nullspace import check_nonnegative, project_level, truncated_svd
 from .options import Option, rcond_option
 
 NAME = "sns"
@@ -188,7 +197,7 @@ def solve(stack: TaskStack, *, rcond: float = DEFAULT_RCOND, bound_tolerance: fl
     P = eye.copy()
     levels = stack.levels[1:] if bounds_level == 0 else stack.levels
     first = 1 if bounds_level == 0 else 0
-    scaling, scaled, saturated, iterations = [], [], [], []
+    scaling, scaled, saturated, iterations, ambiguous = [], [], [], [], []
     exact = True
 
     def feasible(v):
@@ -196,10 +205,12 @@ def solve(stack: TaskStack, *, rcond: float = DEFAULT_RCOND, bound_tolerance: fl
 
     for li, level in enumerate(levels):
         J, b = level.A, level.b
-        thr = float(rcond) * float(np.linalg.norm(J))
-        JP = J @ P
-        JP_pinv, rank_avail = _pinv(JP, thr)
-        x_free = x + JP_pinv @ (b - J @ x)           # the unbounded null-space step
+        thr = rank_threshold(J, float(rcond))
+        # the unbounded step and the next projector: null-space projection's own level
+        x_free, P_next, sv, near = project_level(J, b, x, P, thr)
+        if near:
+            ambiguous.append(li + first)
+        rank_avail = int(sv.size)
         res_free = float(np.linalg.norm(J @ x_free - b))
         s_level, sat, rounds = 1.0, [], 0
         if rank_avail == 0:
@@ -207,6 +218,8 @@ def solve(stack: TaskStack, *, rcond: float = DEFAULT_RCOND, bound_tolerance: fl
         elif feasible(x_free):
             x_new = x_free
         else:
+            JP = J @ P
+            JP_pinv, _ = _pinv(JP, thr)
             free = np.ones(n, dtype=bool)             # every column starts free
             xN = np.zeros(n)
             best = (-np.inf, None)
@@ -260,13 +273,16 @@ def solve(stack: TaskStack, *, rcond: float = DEFAULT_RCOND, bound_tolerance: fl
             scaled.append(", ".join(level.names))
         saturated.append(sat)
         iterations.append(rounds)
-        if rank_avail:
-            _, _, V = truncated_svd(JP, thr)
-            P = P - V @ V.T
-    status = "optimal" if exact and not scaled else "approximate"
-    return Outcome(x, status, {"task_scaling": scaling, "scaled_tasks": scaled,
-                               "saturated": saturated, "iterations": iterations,
-                               "bounds_level": bounds_level, "first_task_level": first})
+        P = P_next
+    if not levels and not feasible(x):
+        x = np.clip(x, lower, upper)        # bounds alone: the box's minimum-norm point
+    status = "optimal" if exact and not scaled and not ambiguous else "approximate"
+    info = {"task_scaling": scaling, "scaled_tasks": scaled, "saturated": saturated,
+            "iterations": iterations, "bounds_level": bounds_level, "first_task_level": first}
+    if ambiguous:
+        info["ambiguous_levels"] = ambiguous
+        info["reason"] = ambiguity_reason(ambiguous)
+    return Outcome(x, status, info)
 
 # ------------------------------------------------------------------------ reports
 #: rows of prioik's reports beside the default one (prioik.benchmarks.variants)

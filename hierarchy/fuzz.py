@@ -1,6 +1,7 @@
 """Seeded random task stacks for fuzzing, and an independent ground truth.
 
-:func:`equality_case` and :func:`inequality_case` draw one stack each from a
+:func:`equality_case`, :func:`inequality_case` and :func:`bounds_case` (box bounds on
+top of equality levels, the stacks of joint-limited IK) draw one stack each from a
 ``numpy.random.Generator``; the draws cover what breaks solvers: ``n`` from 1 to 60,
 1 to 12 levels of 1 to 40 rows (a level may hold several weighted tasks),
 rank-deficient tasks, rows duplicated from higher levels or within the task, zero
@@ -29,7 +30,8 @@ import numpy as np
 from .stack import TaskStack
 from .task import Task
 
-__all__ = ["FuzzCase", "equality_case", "inequality_case", "nested_truth",
+__all__ = ["FuzzCase", "bounds_case", "equality_case", "inequality_case", "judged",
+           "nested_truth",
            "rounding_error", "AMBIGUOUS_BAND", "CONDITIONED_ERROR", "ROW_FEATURES"]
 
 #: Singular values ``σ / ‖A_i‖_F`` in this band make a rank decision ambiguous (the
@@ -53,7 +55,7 @@ class FuzzCase:
         stack: The stack.
         seed: Seed of the generator that drew it (``equality_case(default_rng(seed))``
             draws it again).
-        kind: ``"equality"`` or ``"inequality"``.
+        kind: ``"equality"``, ``"inequality"`` or ``"bounds"``.
         features: Row feature of every task, level by level.
         well_conditioned: Every rank decision is unambiguous and the exact answer is
             finite (equality stacks; see the module docstring).
@@ -141,12 +143,19 @@ def equality_case(rng: np.random.Generator, seed: int = -1, *, max_n: int = 60,
         above = np.vstack([above] + new_rows)
         levels.append(tasks)
         features.append(feats)
-    case = FuzzCase(TaskStack(levels), seed, "equality", features)
-    if truth:
-        case.truth, case.min_gap, case.min_sigma = nested_truth(case.stack)
-        case.rounding_error = rounding_error(case.stack, case.truth)
-        case.well_conditioned = bool(case.min_gap > 0 and np.isfinite(case.truth).all()
-                                     and case.rounding_error <= CONDITIONED_ERROR)
+    return judged(TaskStack(levels), seed, features) if truth else \
+        FuzzCase(TaskStack(levels), seed, "equality", features)
+
+
+def judged(stack: TaskStack, seed: int = -1, features: list[list[str]] | None = None
+           ) -> FuzzCase:
+    """An equality stack as a :class:`FuzzCase` with its ground truth and conditioning
+    verdict (what :func:`equality_case` returns; for stacks saved by ``prioik fuzz``)."""
+    case = FuzzCase(stack, seed, "equality", features or [])
+    case.truth, case.min_gap, case.min_sigma = nested_truth(case.stack)
+    case.rounding_error = rounding_error(case.stack, case.truth)
+    case.well_conditioned = bool(case.min_gap > 0 and np.isfinite(case.truth).all()
+                                 and case.rounding_error <= CONDITIONED_ERROR)
     return case
 
 
@@ -254,3 +263,61 @@ def inequality_case(rng: np.random.Generator, seed: int = -1, *, max_n: int = 30
         levels.append(tasks)
         features.append(feats)
     return FuzzCase(TaskStack(levels), seed, "inequality", features)
+
+
+def bounds_case(rng: np.random.Generator, seed: int = -1, *, max_n: int = 30,
+                max_levels: int = 6, max_rows: int = 20) -> FuzzCase:
+    """Draw one stack of box bounds on top of equality levels (joint-limited IK: the
+    stacks ``sns`` takes, which :func:`inequality_case` almost never draws).
+
+    Level 1 is one inequality task of single-column rows ``lower ≤ c·x_j ≤ upper``:
+    every column, or a random subset, some columns twice (two boxes that intersect), the
+    factor ``c`` of either sign and log-uniform in [1e-3, 1e3]; boxes around 0 or
+    shifted so that they may exclude it (braking bounds), some one-sided, some of zero
+    width, widths log-uniform in [1e-3, 10]; with probability 1/10 two boxes of one
+    column do not intersect (an infeasible first level). Below it, 1 to ``max_levels``
+    equality levels drawn as in :func:`equality_case` (row features, scales, weights).
+    """
+    n = int(rng.integers(1, max_n + 1))
+    k = int(rng.integers(1, max_levels + 1))
+    cols = np.arange(n) if rng.random() < 0.5 else \
+        np.flatnonzero(rng.random(n) < rng.uniform(0.2, 1.0))
+    if cols.size == 0:
+        cols = np.array([int(rng.integers(n))])
+    if rng.random() < 0.3:                                   # a second box on some columns
+        cols = np.concatenate([cols, rng.choice(cols, int(rng.integers(1, cols.size + 1)))])
+    m = cols.size
+    c = np.array([_log_uniform(rng, 1e-3, 1e3) for _ in range(m)]) * rng.choice([-1.0, 1.0], m)
+    width = np.array([_log_uniform(rng, 1e-3, 10.0) for _ in range(m)])
+    width[rng.random(m) < 0.05] = 0.0
+    centre = np.where(rng.random(m) < 0.5, 0.0, rng.uniform(-1.5, 1.5, m) * width)
+    centre = centre + (np.where(rng.random(m) < 0.1, 3.0 * width + 1.0, 0.0)
+                       if rng.random() < 0.1 else 0.0)        # boxes that miss each other
+    lo_x, up_x = centre - width, centre + width
+    side = rng.integers(0, 6, m)
+    lo_x[side == 4] = -np.inf
+    up_x[side == 5] = np.inf
+    A = np.zeros((m, n))
+    A[np.arange(m), cols] = c
+    lower = np.where(c > 0, c * lo_x, c * up_x)
+    upper = np.where(c > 0, c * up_x, c * lo_x)
+    levels = [[Task("box", A, lower=lower, upper=upper)]]
+    features = [["bounds"]]
+    above = np.zeros((0, n))
+    for i in range(1, k + 1):
+        n_tasks = 1 if rng.random() < 0.7 else int(rng.integers(2, 4))
+        tasks, feats, new_rows = [], [], []
+        for j in range(n_tasks):
+            rows = int(rng.integers(1, max_rows + 1))
+            feature = ROW_FEATURES[int(rng.integers(len(ROW_FEATURES)))]
+            Ai = _task_rows(rng, feature, rows, n, above)
+            new_rows.append(Ai)
+            scale = _log_uniform(rng, 1e-6, 1e4) if rng.random() < 0.3 else 1.0
+            weight = _log_uniform(rng, 1e-3, 1e3) if rng.random() < 0.3 else 1.0
+            tasks.append(Task(f"l{i}t{j}", scale * Ai, scale * rng.standard_normal(rows),
+                              weight=weight))
+            feats.append(feature)
+        above = np.vstack([above] + new_rows)
+        levels.append(tasks)
+        features.append(feats)
+    return FuzzCase(TaskStack(levels), seed, "bounds", features)
