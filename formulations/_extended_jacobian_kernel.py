@@ -530,6 +530,26 @@ def solve_data(A, b, w, starts, work, params, out, ranks):
 
 
 @njit(cache=True, parallel=True)
+def weigh_batch(B, c, W, starts, scales, ok):
+    """:func:`weigh_rows` and :func:`level_scales` over a batch, in place and in
+    parallel: ``B`` (``N × M × n``) and ``c`` (``N × M``) hold the stacks' rows and
+    targets and become ``diag(√w) A`` and ``√w ∘ b`` (``W``: ``N × M`` of ``√w``);
+    ``ok[s]`` as the two functions' verdicts on stack ``s``."""
+    for s in prange(B.shape[0]):
+        good = True
+        Bs = B[s]
+        cs = c[s]
+        for i in range(Bs.shape[0]):
+            wi = W[s, i]
+            if not (wi > 0.0 and wi < np.inf):
+                good = False
+            for j in range(Bs.shape[1]):
+                Bs[i, j] = wi * Bs[i, j]
+            cs[i] = wi * cs[i]
+        ok[s] = level_scales(Bs, cs, starts, scales[s]) and good
+
+
+@njit(cache=True, parallel=True)
 def solve_batch_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
                        step_bound, X, ranks, level_mu2, margins):
     """:func:`solve_kernel` over a batch (``B``: ``N × M × n``), in parallel."""

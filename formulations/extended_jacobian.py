@@ -805,16 +805,20 @@ def _solve_batch(prepared: "Prepared", datas: list[StackData]) -> tuple[np.ndarr
         return np.array([o.x for o in outs]), [o.status for o in outs]
     N, k, n = len(datas), prepared.layout.k, prepared.layout.n
     starts = prepared.layout.starts
-    B = np.empty((N, prepared.layout.m, n))
-    c = np.empty((N, prepared.layout.m))
+    # the rows copied in one C call each, weighed and measured in parallel in place
+    # (a compiled call per stack cost ~4 µs of dispatch per stack)
+    B = np.stack([d.A for d in datas])
+    c = np.stack([d.b for d in datas])
+    W = np.stack([d.sqrt_weight for d in datas])
     scales = np.zeros((N, k))
-    for i, d in enumerate(datas):
-        if not (_kernel.weigh_rows(d.A, d.b, d.sqrt_weight, B[i], c[i])
-                and _kernel.level_scales(B[i], c[i], starts, scales[i])):
-            d.check()
-            # finite rows of extreme scale: one by one, equilibrated as in solve
-            outs = [prepared.solve(one) for one in datas]
-            return np.array([o.x for o in outs]), [o.status for o in outs]
+    ok = np.zeros(N, dtype=np.bool_)
+    _kernel.weigh_batch(B, c, W, starts, scales, ok)
+    if not ok.all():
+        for i in np.flatnonzero(~ok).tolist():
+            datas[i].check()
+        # finite rows of extreme scale: one by one, equilibrated as in solve
+        outs = [prepared.solve(one) for one in datas]
+        return np.array([o.x for o in outs]), [o.status for o in outs]
     X = np.empty((N, n))
     ranks = np.zeros((N, k), dtype=np.int64)
     mu2 = np.zeros((N, k))
