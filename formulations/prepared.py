@@ -26,6 +26,8 @@ from .base import STATUSES, Capabilities, ConcurrentUseError, FormulationError, 
 
 __all__ = ["BatchSolution", "PreparedSolver", "check_layout_support", "check_support"]
 
+_clock = time.perf_counter
+
 
 def check_layout_support(name: str, caps: Capabilities, layout: StackLayout) -> None:
     """Raise :class:`UnsupportedTaskError` naming the first task of ``layout`` whose kind
@@ -113,6 +115,8 @@ class PreparedSolver:
         prepared = getattr(module, "Prepared", None)
         self._impl = (prepared(layout, options) if prepared is not None
                       else _StackAdapter(formulation, module, options))
+        self._impl_solve = self._impl.solve
+        self._plain = not self._needs_mass_matrix     # no per-call option to check
 
     def _data(self, stack_or_data) -> StackData:
         if type(stack_or_data) is StackData:
@@ -150,7 +154,27 @@ class PreparedSolver:
             TaskStackError: a value of the data is not valid (naming task, level, row).
             ConcurrentUseError: another thread is using this solver.
         """
-        data = self._data(stack_or_data)
+        data = stack_or_data
+        if type(data) is not StackData or data.layout is not self.layout:
+            data = self._data(stack_or_data)
+        if self._plain and not step_options:    # the control-loop call
+            if not self._lock.acquire(blocking=False):
+                raise ConcurrentUseError(f"this prepared {self.formulation!r} solver is busy "
+                                         f"in another thread; prepare one solver per thread")
+            try:
+                t0 = _clock()
+                try:
+                    out = self._impl_solve(data)
+                except (np.linalg.LinAlgError, ArithmeticError) as exc:
+                    out = Outcome(np.full(self._n, np.nan), "failed",
+                                  {"message": f"{type(exc).__name__}: {exc}"})
+                elapsed = _clock() - t0
+            finally:
+                self._lock.release()
+            if out.checked and out.status in STATUSES:
+                return Solution(out.x, self.formulation, self._given, out.status,
+                                out.residuals, elapsed, out.info)
+            return self._solution(out, data, elapsed)
         merged = None
         if step_options:
             if not getattr(self._impl, "accepts_step_options", False):

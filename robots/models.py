@@ -154,12 +154,26 @@ class RobotModel:
     @property
     def nq(self) -> int:
         """Configuration size."""
-        return int(self.model.nq)
+        return self.state_sizes()[1]
 
     @property
     def nv(self) -> int:
         """Velocity (and acceleration) size: the number of task-stack columns."""
-        return int(self.model.nv)
+        return self.state_sizes()[2]
+
+    def state_sizes(self) -> tuple:
+        """``(model, n_q, n_v, unit starts, unit sizes)``, read from the model once (a
+        control step reads them several times; pinocchio attributes are slow to read).
+        Recomputed if :attr:`model` was replaced."""
+        sizes = self.__dict__.get("_state_sizes")
+        if sizes is None or sizes[0] is not self.model:
+            if sizes is not None:      # a replaced model: its unit-norm parts again
+                self.__dict__.pop("_unit_parts", None)
+                self.__dict__.pop("_unit_index", None)
+            starts, lengths = self.unit_norm_index()
+            sizes = self.__dict__["_state_sizes"] = (
+                self.model, int(self.model.nq), int(self.model.nv), starts, lengths)
+        return sizes
 
     @property
     def n_base(self) -> int:
