@@ -162,17 +162,20 @@ class RobotModel:
         return self.state_sizes()[2]
 
     def state_sizes(self) -> tuple:
-        """``(model, n_q, n_v, unit starts, unit sizes)``, read from the model once (a
-        control step reads them several times; pinocchio attributes are slow to read).
-        Recomputed if :attr:`model` was replaced."""
+        """``(model, n_q, n_v, unit)``: the sizes read from the model once (a control step
+        reads them several times; pinocchio attributes are slow to read) and the
+        unit-norm parts of ``q`` as one ``int64`` array ``[start_0, size_0, …]`` (for the
+        compiled state check). Recomputed if :attr:`model` was replaced."""
         sizes = self.__dict__.get("_state_sizes")
         if sizes is None or sizes[0] is not self.model:
             if sizes is not None:      # a replaced model: its unit-norm parts again
                 self.__dict__.pop("_unit_parts", None)
                 self.__dict__.pop("_unit_index", None)
-            starts, lengths = self.unit_norm_index()
+            unit = np.array([v for p in self.unit_norm_parts() for v in p[:2]],
+                            dtype=np.int64)
+            unit.setflags(write=False)
             sizes = self.__dict__["_state_sizes"] = (
-                self.model, int(self.model.nq), int(self.model.nv), starts, lengths)
+                self.model, int(self.model.nq), int(self.model.nv), unit)
         return sizes
 
     @property

@@ -47,17 +47,20 @@ _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 
 
 _F64 = np.dtype(np.float64)
+_NDARRAY = np.ndarray
+_state_is_valid = _rk.state_is_valid
 
 
 def _checked_state(robot: RobotModel, q, v) -> tuple[np.ndarray, np.ndarray]:
     """Copies of ``q`` and ``v``, checked: one compiled pass for the common case (float
     arrays of the right sizes, finite, unit quaternions), the naming checks of
     :func:`~robots.models.check_configuration` otherwise."""
-    _, nq, nv, starts, sizes = robot.state_sizes()
-    if (type(q) is np.ndarray and type(v) is np.ndarray and q.dtype is _F64
+    _, nq, nv, unit = robot.state_sizes()
+    if (q.__class__ is _NDARRAY and v.__class__ is _NDARRAY and q.dtype is _F64
             and v.dtype is _F64 and q.shape == (nq,) and v.shape == (nv,)):
-        qc, vc = q.copy(), v.copy()
-        if _rk.state_is_valid(qc, vc, starts, sizes, UNIT_NORM_TOL):
+        qc = q.copy()
+        vc = v.copy()
+        if _state_is_valid(qc, vc, unit, UNIT_NORM_TOL):
             return qc, vc
     return check_configuration(robot, q), check_velocity(robot, v)
 
