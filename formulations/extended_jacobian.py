@@ -275,6 +275,9 @@ class Prepared:
             self._work, self._iwork = _kernel.prepare_workspaces(layout.starts, n, params)
             self._ranks = self._iwork[k + 2:2 * k + 2]
             self._out_size = n + 3 * k     # x, residuals, μ², decision margins
+            # what the common case of solve reads, in one attribute
+            self._hot = (self._out_size, self._work, self._iwork, n, n + k, self._ranks,
+                         self._damped)
 
     def solve(self, data: StackData) -> Outcome:
         """Solve one stack of the layout (its data; the registry checked the layout).
@@ -285,13 +288,13 @@ class Prepared:
         """
         if not self.compiled:
             return self._solve_stack(data.as_stack())
-        out = np.empty(self._out_size)      # x, residuals, μ², margins (one array)
-        code = _solve_data(data.A, data.b, data.sqrt_weight, self._work, out, self._iwork)
-        n = self._n
-        if code == 1 and not self._damped:      # the common case: finite, unambiguous
-            return Outcome(out[:n], "optimal", {"rank_profile": self._ranks.copy(),
+        size, work, iwork, n, nk, ranks, damped = self._hot
+        out = np.empty(size)      # x, residuals, μ², margins (one array)
+        code = _solve_data(data.A, data.b, data.sqrt_weight, work, out, iwork)
+        if code == 1 and not damped:      # the common case: finite, unambiguous
+            return Outcome(out[:n], "optimal", {"rank_profile": ranks.copy(),
                                                 "nullspace": "qr", "kernel": "numba"},
-                           out[n:n + self._k], True)
+                           out[n:nk], True)
         if code == 0:
             data.check()     # names the task, level and row of a NaN, inf or bad √w
             # finite rows of extreme scale: solve the equilibrated stack (same optimum)

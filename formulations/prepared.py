@@ -158,7 +158,7 @@ class PreparedSolver:
         if type(data) is not StackData or data.layout is not self.layout:
             data = self._data(stack_or_data)
         if self._plain and not step_options:    # the control-loop call
-            if not self._lock.acquire(blocking=False):
+            if not self._lock.acquire(False):       # (positional: a cheaper call)
                 raise ConcurrentUseError(f"this prepared {self.formulation!r} solver is busy "
                                          f"in another thread; prepare one solver per thread")
             try:

@@ -51,20 +51,6 @@ _NDARRAY = np.ndarray
 _state_is_valid = _rk.state_is_valid
 
 
-def _checked_state(robot: RobotModel, q, v) -> tuple[np.ndarray, np.ndarray]:
-    """Copies of ``q`` and ``v``, checked: one compiled pass for the common case (float
-    arrays of the right sizes, finite, unit quaternions), the naming checks of
-    :func:`~robots.models.check_configuration` otherwise."""
-    _, nq, nv, unit = robot.state_sizes()
-    if (q.__class__ is _NDARRAY and v.__class__ is _NDARRAY and q.dtype is _F64
-            and v.dtype is _F64 and q.shape == (nq,) and v.shape == (nv,)):
-        qc = q.copy()
-        vc = v.copy()
-        if _state_is_valid(qc, vc, unit, UNIT_NORM_TOL):
-            return qc, vc
-    return check_configuration(robot, q), check_velocity(robot, v)
-
-
 class KinematicState:
     """Pinocchio kinematics of one state ``(q, v)``, computed once.
 
@@ -95,7 +81,19 @@ class KinematicState:
                  drift: bool = True) -> None:
         self.robot = robot
         self.model = m = robot.model
-        self.q, self.v = qc, vc = _checked_state(robot, q, v)
+        # the common case (float arrays of the right sizes, finite, unit quaternions) in
+        # one compiled pass; the naming checks of check_configuration otherwise
+        _, nq, nv, unit = robot.state_sizes()
+        if (q.__class__ is _NDARRAY and v.__class__ is _NDARRAY and q.dtype is _F64
+                and v.dtype is _F64 and q.shape == (nq,) and v.shape == (nv,)):
+            qc = q.copy()
+            vc = v.copy()
+            if not _state_is_valid(qc, vc, unit, UNIT_NORM_TOL):
+                qc, vc = check_configuration(robot, q), check_velocity(robot, v)
+        else:
+            qc, vc = check_configuration(robot, q), check_velocity(robot, v)
+        self.q = qc
+        self.v = vc
         self.data = d = data if data is not None else m.createData()
         self.has_drift = drift = bool(drift)
         # one forward pass (at q̈ = 0 for the drifts); the Jacobians, frames and the
