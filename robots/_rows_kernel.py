@@ -68,7 +68,9 @@ SPEC_START, SPEC_MODE, SPEC_ZERO_DRIFT, SPEC_COLS = 0, 1, 2, 3
 
 
 @njit(cache=True, inline="always")
-def _position_rows(A, Q, J, t, R, spec, off, x, xd, xdd):
+def _position_rows(A, Q, J, t, R, spec, off, x, xd, xdd, rates):
+    """Position rows of a frame task (see :func:`frame_rows`); ``ẋ* = ẍ* = 0`` unless
+    ``rates``."""
     s = spec[SPEC_START]
     p0 = t[0] + R[0, 0] * off[0] + R[0, 1] * off[1] + R[0, 2] * off[2]
     p1 = t[1] + R[1, 0] * off[0] + R[1, 1] * off[1] + R[1, 2] * off[2]
@@ -85,8 +87,8 @@ def _position_rows(A, Q, J, t, R, spec, off, x, xd, xdd):
     Q[ERROR, s + 1] = x[1] - p1
     Q[ERROR, s + 2] = x[2] - p2
     for i in range(3):
-        Q[VELOCITY_REF, s + i] = xd[i]
-        Q[FEEDFORWARD, s + i] = xdd[i]
+        Q[VELOCITY_REF, s + i] = xd[i] if rates else 0.0
+        Q[FEEDFORWARD, s + i] = xdd[i] if rates else 0.0
 
 
 @njit(cache=True, inline="always")
@@ -105,7 +107,15 @@ def position_rows(A, Q, J, t, R, spec, off, x, xd, xdd):
     ``p = t + R off`` of the frame at ``(t, R)``; :func:`frame_rows` with
     ``mode = POSITION`` in fewer arguments."""
     _zero_rows(A, Q, spec[SPEC_START], 3, spec[SPEC_ZERO_DRIFT] != 0)
-    _position_rows(A, Q, J, t, R, spec, off, x, xd, xdd)
+    _position_rows(A, Q, J, t, R, spec, off, x, xd, xdd, True)
+
+
+@njit(cache=True)
+def position_target_rows(A, Q, J, t, R, spec, off, x):
+    """:func:`position_rows` with ``ẋ* = ẍ* = 0`` (a fixed target: two arguments fewer)."""
+    s = spec[SPEC_START]
+    _zero_rows(A, Q, s, 3, spec[SPEC_ZERO_DRIFT] != 0)
+    _position_rows(A, Q, J, t, R, spec, off, x, x, x, False)
 
 
 @njit(cache=True)
@@ -126,7 +136,7 @@ def frame_rows(A, Q, J, t, R, spec, off, x, xd, xdd, Rstar, w, wd):
     _zero_rows(A, Q, s, nrows, spec[SPEC_ZERO_DRIFT] != 0)
     o = s + 3 if mode == POSE else s        # first orientation row
     if mode != ORIENTATION:
-        _position_rows(A, Q, J, t, R, spec, off, x, xd, xdd)
+        _position_rows(A, Q, J, t, R, spec, off, x, xd, xdd, True)
     if mode != POSITION:
         for k in range(SPEC_COLS, spec.shape[0]):
             c = spec[k]

@@ -392,10 +392,14 @@ class TaskWriter:
         if views is None or views.data is not state.data:
             views = self._data_views(state)
         t, R = views.frame(task.fid)
-        x, xd, xdd = _vec3(x, name, "x"), _vec3(xd, name, "xd"), _vec3(xdd, name, "xdd")
+        x = _vec3(x, name, "x")
         accel = self._accel and self._drift(state, task)    # refuses a drift-free state
-        _k.position_rows(self._data.A, self._Q, views.J, t, R, task.spec, task.offset,
-                         x, xd, xdd)
+        if xd is None and xdd is None:        # a fixed target: two arguments fewer
+            _k.position_target_rows(self._data.A, self._Q, views.J, t, R, task.spec,
+                                    task.offset, x)
+        else:
+            _k.position_rows(self._data.A, self._Q, views.J, t, R, task.spec, task.offset,
+                             x, _vec3(xd, name, "xd"), _vec3(xdd, name, "xdd"))
         if accel:
             self._frame_drift(state, task, R)
 
