@@ -286,15 +286,27 @@ class Prepared:
             TaskStackError: a value is not finite (naming the task, level and row), or
                 the rows' squares overflow.
         """
+        out = self.solve_checked(data)
+        return Outcome(*out, True) if type(out) is tuple else out
+
+    def solve_checked(self, data: StackData) -> tuple | Outcome:
+        """:meth:`solve`, its common case (the compiled kernel's answer, finite, every
+        rank decision clear, no damping) as the tuple ``(x, "optimal", info,
+        residuals)`` of a checked :class:`Outcome` without the object (the registry's
+        :class:`~prioik.formulations.PreparedSolver` makes the Solution from it); an
+        :class:`Outcome` otherwise.
+
+        Raises:
+            TaskStackError: as :meth:`solve`.
+        """
         if not self.compiled:
             return self._solve_stack(data.as_stack())
         size, work, iwork, n, nk, ranks, damped = self._hot
         out = np.empty(size)      # x, residuals, μ², margins (one array)
         code = _solve_data(data.A, data.b, data.sqrt_weight, work, out, iwork)
         if code == 1 and not damped:      # the common case: finite, unambiguous
-            return Outcome(out[:n], "optimal", {"rank_profile": ranks.copy(),
-                                                "nullspace": "qr", "kernel": "numba"},
-                           out[n:nk], True)
+            return (out[:n], "optimal", {"rank_profile": ranks.copy(), "nullspace": "qr",
+                                         "kernel": "numba"}, out[n:nk])
         if code == 0:
             data.check()     # names the task, level and row of a NaN, inf or bad √w
             # finite rows of extreme scale: solve the equilibrated stack (same optimum)

@@ -107,8 +107,17 @@ class KinematicState:
             pin.computeJointJacobians(m, d, qc)     # placements and Jacobians
             self.acom_drift = None
         pin.updateFramePlacements(m, d)
-        self._com_ready = False       # data.Jcom and data.com[0]: on first use
-        self._cache: dict = {}
+
+    #: data.Jcom and data.com[0] computed for this state (on first use)
+    _com_ready = False
+
+    def __getattr__(self, name: str):
+        # the copies of the quantities read from data, made on first use (a state that
+        # reads none never builds the dict)
+        if name == "_cache":
+            cache = self._cache = {}
+            return cache
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
     def ensure_com(self) -> None:
         """Compute ``data.Jcom`` and ``data.com[0]`` once for this state (the writers of
