@@ -98,6 +98,7 @@ class _Task:
     fid: int = -1
     cols: np.ndarray | None = None
     spec: np.ndarray | None = None       # frame tasks: the kernels' int64 spec (at _fix)
+    hot: tuple | None = None             # frame tasks: (pin.Data, the kernel's arguments)
     offset: np.ndarray | None = None     # point on the frame (frame coordinates)
     has_offset: bool = False             # offset ≠ 0 (read every step: a bool, not .any())
     axes: np.ndarray | None = None       # com axes
@@ -158,6 +159,7 @@ class TaskWriter:
         self._posture_q = q_index if np.all(q_index >= 0) else None
         self._limits = None                     # (lo, hi, vmax) of the actuated joints
         self._nq = robot.nq
+        self._q_shape = (robot.nq,)
         self._qa = np.zeros(robot.nv - robot.n_base)
 
     # ----------------------------------------------------------------- declaring
@@ -387,21 +389,21 @@ class TaskWriter:
     def frame_position(self, state, name: str, x, xd=None, xdd=None) -> None:
         """A frame origin's (or a point's, :meth:`add_point`) position: ``x*`` and its
         rates ``ẋ*``, ``ẍ*`` (zero if omitted)."""
-        task = self._task(name, "position")
-        views = self._views
-        if views is None or views.data is not state.data:
-            views = self._data_views(state)
-        t, R = views.frame(task.fid)
-        x = _vec3(x, name, "x")
+        task = self._tasks.get(name)
+        if task is None or task.kind != "position" or task.spec is None:
+            task = self._task(name, "position")
+        hot = task.hot
+        if hot is None or hot[0] is not state.data:
+            hot = self._frame_args(task, state)
+        if not (x.__class__ is _NDARRAY and x.dtype is _F64 and x.shape == _SHAPE3):
+            x = _vec3(x, name, "x")
         accel = self._accel and self._drift(state, task)    # refuses a drift-free state
         if xd is None and xdd is None:        # a fixed target: two arguments fewer
-            _k.position_target_rows(self._data.A, self._Q, views.J, t, R, task.spec,
-                                    task.offset, x)
+            _k.position_target_rows(*hot[1], x)
         else:
-            _k.position_rows(self._data.A, self._Q, views.J, t, R, task.spec, task.offset,
-                             x, _vec3(xd, name, "xd"), _vec3(xdd, name, "xdd"))
+            _k.position_rows(*hot[1], x, _vec3(xd, name, "xd"), _vec3(xdd, name, "xdd"))
         if accel:
-            self._frame_drift(state, task, R)
+            self._frame_drift(state, task, hot[1][4])
 
     point = frame_position
 
@@ -451,8 +453,12 @@ class TaskWriter:
         """The actuated joints to ``q_ref`` (``n_q``): error ``q_ref ⊖ q`` on rows
         ``n_base:`` of the velocity (``q_ref − q`` where every actuated joint has one
         coordinate; pinocchio's ``difference`` otherwise), no drift."""
-        task = self._task(name, "posture")
-        q_ref = _vec(q_ref, self._nq, name, "q_ref")
+        task = self._tasks.get(name)
+        if task is None or task.kind != "posture" or self._layout is None:
+            task = self._task(name, "posture")
+        if not (q_ref.__class__ is _NDARRAY and q_ref.dtype is _F64
+                and q_ref.shape == self._q_shape):
+            q_ref = _vec(q_ref, self._nq, name, "q_ref")
         if self._posture_q is not None:
             _k.posture_error(self._Q, task.start, state.q, q_ref, self._posture_q)
         else:
@@ -495,7 +501,9 @@ class TaskWriter:
 
     def velocity_targets(self) -> StackData:
         """``b = ẋ* + K e`` into the data; returns it."""
-        data = self.data
+        data = self._data
+        if data is None:
+            data = self.data
         _k.velocity_targets(data.b, self._Q)
         return data
 
@@ -519,15 +527,23 @@ class TaskWriter:
         return task
 
     def _frame(self, state, task: _Task, x, xd, xdd, rot, w, wd) -> None:
-        views = self._views
-        if views is None or views.data is not state.data:
-            views = self._data_views(state)
-        t, R = views.frame(task.fid)
+        hot = task.hot
+        if hot is None or hot[0] is not state.data:
+            hot = self._frame_args(task, state)
         accel = self._accel and self._drift(state, task)    # refuses a drift-free state
-        _k.frame_rows(self._data.A, self._Q, views.J, t, R, task.spec, task.offset,
-                      x, xd, xdd, rot, w, wd)
+        _k.frame_rows(*hot[1], x, xd, xdd, rot, w, wd)
         if accel:
-            self._frame_drift(state, task, R)
+            self._frame_drift(state, task, hot[1][4])
+
+    def _frame_args(self, task: _Task, state) -> tuple:
+        """``(state.data, (A, Q, J, t, R, spec, offset))``: the frame kernels' arguments
+        that stay the same while the states share one ``pin.Data`` (its storage is fixed,
+        so the views follow every later kinematics call), kept on the task."""
+        views = self._data_views(state)          # refuses another robot's state
+        t, R = views.frame(task.fid)
+        task.hot = (state.data, (self._data.A, self._Q, views.J, t, R, task.spec,
+                                 task.offset))
+        return task.hot
 
     def _frame_drift(self, state, task: _Task, R: np.ndarray) -> None:
         """The drift rows ``J̇ q̇`` of a frame task (acceleration level)."""
@@ -597,6 +613,7 @@ _ZERO3 = np.zeros(3)                     # never written
 _FRAME_MODES = {"position": _k.POSITION, "orientation": _k.ORIENTATION, "pose": _k.POSE,
                 "contact": _k.POSE}
 _F64 = np.dtype(np.float64)
+_NDARRAY = np.ndarray
 _ZEROS: dict[int, np.ndarray] = {}        # m -> zeros(m), never written
 
 
