@@ -162,10 +162,11 @@ class RobotModel:
         return self.state_sizes()[2]
 
     def state_sizes(self) -> tuple:
-        """``(model, n_q, n_v, unit)``: the sizes read from the model once (a control step
-        reads them several times; pinocchio attributes are slow to read) and the
-        unit-norm parts of ``q`` as one ``int64`` array ``[start_0, size_0, …]`` (for the
-        compiled state check). Recomputed if :attr:`model` was replaced."""
+        """``(model, n_q, n_v, unit, (n_q,), (n_v,))``: the sizes read from the model once
+        (a control step reads them several times; pinocchio attributes are slow to read),
+        the unit-norm parts of ``q`` as one ``int64`` array ``[start_0, size_0, …]`` (for
+        the compiled state check) and the shapes of ``q`` and ``v``. Recomputed if
+        :attr:`model` was replaced."""
         sizes = self.__dict__.get("_state_sizes")
         if sizes is None or sizes[0] is not self.model:
             if sizes is not None:      # a replaced model: its unit-norm parts again
@@ -174,8 +175,8 @@ class RobotModel:
             unit = np.array([v for p in self.unit_norm_parts() for v in p[:2]],
                             dtype=np.int64)
             unit.setflags(write=False)
-            sizes = self.__dict__["_state_sizes"] = (
-                self.model, int(self.model.nq), int(self.model.nv), unit)
+            nq, nv = int(self.model.nq), int(self.model.nv)
+            sizes = self.__dict__["_state_sizes"] = (self.model, nq, nv, unit, (nq,), (nv,))
         return sizes
 
     @property

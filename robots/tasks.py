@@ -49,6 +49,8 @@ _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 _F64 = np.dtype(np.float64)
 _NDARRAY = np.ndarray
 _state_is_valid = _rk.state_is_valid
+_joint_jacobians = pin.computeJointJacobians
+_frame_placements = pin.updateFramePlacements
 
 
 class KinematicState:
@@ -83,9 +85,12 @@ class KinematicState:
         self.model = m = robot.model
         # the common case (float arrays of the right sizes, finite, unit quaternions) in
         # one compiled pass; the naming checks of check_configuration otherwise
-        _, nq, nv, unit = robot.state_sizes()
+        sizes = robot.__dict__.get("_state_sizes")      # RobotModel.state_sizes, cached
+        if sizes is None or sizes[0] is not m:
+            sizes = robot.state_sizes()
+        unit = sizes[3]
         if (q.__class__ is _NDARRAY and v.__class__ is _NDARRAY and q.dtype is _F64
-                and v.dtype is _F64 and q.shape == (nq,) and v.shape == (nv,)):
+                and v.dtype is _F64 and q.shape == sizes[4] and v.shape == sizes[5]):
             qc = q.copy()
             vc = v.copy()
             if not _state_is_valid(qc, vc, unit, UNIT_NORM_TOL):
@@ -104,12 +109,13 @@ class KinematicState:
             pin.centerOfMass(m, d, pin.KinematicLevel.ACCELERATION, False)
             self.acom_drift = np.array(d.acom[0])
         else:
-            pin.computeJointJacobians(m, d, qc)     # placements and Jacobians
-            self.acom_drift = None
-        pin.updateFramePlacements(m, d)
+            _joint_jacobians(m, d, qc)     # placements and Jacobians
+        _frame_placements(m, d)
 
     #: data.Jcom and data.com[0] computed for this state (on first use)
     _com_ready = False
+    #: ``J̇_com q̇`` (3), ``None`` from a ``drift=False`` state
+    acom_drift = None
 
     def __getattr__(self, name: str):
         # the copies of the quantities read from data, made on first use (a state that
