@@ -420,17 +420,24 @@ class TaskWriter:
                    angular_velocity=None, angular_acceleration=None) -> None:
         """A frame's pose: position ``x*`` (rates ``ẋ*``, ``ẍ*``) and rotation ``R*``
         (rates ``ω*``, ``ω̇*``); omitted rates are zero."""
-        task = self._task(name, "pose")
-        self._frame(state, task, _vec3(x, name, "x"), _vec3(xd, name, "xd"),
-                    _vec3(xdd, name, "xdd"), _rotation(rotation, name),
-                    _vec3(angular_velocity, name, "ω*"),
-                    _vec3(angular_acceleration, name, "ω̇*"))
+        task = self._tasks.get(name)
+        if task is None or task.kind != "pose" or task.spec is None:
+            task = self._task(name, "pose")
+        self._frame(state, task, _vec3(x, name, "x"),
+                    _ZERO3 if xd is None else _vec3(xd, name, "xd"),
+                    _ZERO3 if xdd is None else _vec3(xdd, name, "xdd"),
+                    _rotation(rotation, name),
+                    _ZERO3 if angular_velocity is None else _vec3(angular_velocity, name, "ω*"),
+                    _ZERO3 if angular_acceleration is None
+                    else _vec3(angular_acceleration, name, "ω̇*"))
 
     def contact(self, state, name: str, placement: pin.SE3 | None = None, *,
                 translation=None, rotation=None) -> None:
         """A contact held at ``placement`` (or ``translation`` and ``rotation``: the same
         without building an SE3), zero reference velocity and acceleration."""
-        task = self._task(name, "contact")
+        task = self._tasks.get(name)
+        if task is None or task.kind != "contact" or task.spec is None:
+            task = self._task(name, "contact")
         if placement is not None:
             translation, rotation = placement.translation, placement.rotation
         self._frame(state, task, _vec(translation, 3, name, "translation"),
@@ -438,11 +445,15 @@ class TaskWriter:
 
     def com(self, state, name: str, x, xd=None, xdd=None) -> None:
         """The centre of mass: ``x*``, ``ẋ*``, ``ẍ*`` given on the task's axes."""
-        task = self._task(name, "com")
+        task = self._tasks.get(name)
+        if task is None or task.kind != "com" or self._layout is None:
+            task = self._task(name, "com")
         state.ensure_com()
-        views = self._data_views(state)
+        views = self._views
+        if views is None or views.data is not state.data:
+            views = self._data_views(state)
         m = task.rows
-        drift = self._drift(state, task)
+        drift = self._accel and self._drift(state, task)
         _k.com_rows(self._data.A, self._Q, task.start, views.Jcom, views.com, task.axes,
                     _vec(x, m, name, "x"), _vec(xd, m, name, "xd"), _vec(xdd, m, name, "xdd"),
                     not drift)
