@@ -123,7 +123,6 @@ class PreparedSolver:
         # a plugin's solve_checked may give its verified answers as a tuple (no Outcome)
         self._impl_solve = getattr(self._impl, "solve_checked", None) or self._impl.solve
         self._acquire, self._release = self._lock.acquire, self._lock.release
-        self._plain = not self._needs_mass_matrix     # no per-call option to check
 
     def _data(self, stack_or_data) -> StackData:
         if type(stack_or_data) is StackData:
@@ -164,28 +163,33 @@ class PreparedSolver:
         data = stack_or_data
         if type(data) is not StackData or data.layout is not self.layout:
             data = self._data(stack_or_data)
-        if self._plain and not step_options:    # the control-loop call
-            if not self._acquire(False):       # (positional: a cheaper call)
-                raise ConcurrentUseError(f"this prepared {self.formulation!r} solver is busy "
-                                         f"in another thread; prepare one solver per thread")
+        merged = None
+        if step_options or self._needs_mass_matrix:
+            merged = self._step_options(step_options)
+        if not self._acquire(False):       # (positional: a cheaper call)
+            raise ConcurrentUseError(f"this prepared {self.formulation!r} solver is busy in "
+                                     f"another thread; prepare one solver per thread")
+        try:
+            t0 = _clock()
             try:
-                t0 = _clock()
-                try:
-                    out = self._impl_solve(data)
-                except (np.linalg.LinAlgError, ArithmeticError) as exc:
-                    out = Outcome(np.full(self._n, np.nan), "failed",
-                                  {"message": f"{type(exc).__name__}: {exc}"})
-                elapsed = _clock() - t0
-            finally:
-                self._release()
-            if type(out) is tuple:      # solve_checked's verified answer
-                x, status, info, residuals = out
-                return Solution(x, self.formulation, self._given, status, residuals,
-                                elapsed, info)
-            if out.checked and out.status in STATUSES:
-                return Solution(out.x, self.formulation, self._given, out.status,
-                                out.residuals, elapsed, out.info)
-            return self._solution(out, data, elapsed)
+                out = self._impl_solve(data) if merged is None else \
+                    self._impl.solve(data, merged)
+            except (np.linalg.LinAlgError, ArithmeticError) as exc:
+                out = Outcome(np.full(self._n, np.nan), "failed",
+                              {"message": f"{type(exc).__name__}: {exc}"})
+            elapsed = _clock() - t0
+        finally:
+            self._release()
+        if type(out) is tuple:      # solve_checked's verified answer (see the module doc)
+            x, status, info, residuals = out
+            return Solution(x, self.formulation, self._given, status, residuals, elapsed,
+                            info)
+        return self._solution(out, data, elapsed)
+
+    def _step_options(self, step_options: dict) -> dict | None:
+        """The options of one call: the prepared ones with ``step_options`` over them
+        (validated), or ``None`` when there are none; a formulation that needs
+        ``mass_matrix`` refuses a call without one."""
         merged = None
         if step_options:
             if not getattr(self._impl, "accepts_step_options", False):
@@ -199,21 +203,7 @@ class PreparedSolver:
             raise FormulationError(f"formulation {self.formulation!r} needs mass_matrix=M "
                                    f"(the {self._n}x{self._n} joint-space inertia matrix, "
                                    f"SPD)")
-        if not self._lock.acquire(blocking=False):
-            raise ConcurrentUseError(f"this prepared {self.formulation!r} solver is busy in "
-                                     f"another thread; prepare one solver per thread")
-        try:
-            t0 = time.perf_counter()
-            try:
-                out = self._impl.solve(data) if merged is None else \
-                    self._impl.solve(data, merged)
-            except (np.linalg.LinAlgError, ArithmeticError) as exc:
-                out = Outcome(np.full(self._n, np.nan), "failed",
-                              {"message": f"{type(exc).__name__}: {exc}"})
-            elapsed = time.perf_counter() - t0
-        finally:
-            self._lock.release()
-        return self._solution(out, data, elapsed)
+        return merged
 
     def _solution(self, out: Outcome, data: StackData, elapsed: float) -> Solution:
         if out.checked:     # the plugin verified x and the residuals (compiled paths)
