@@ -171,7 +171,6 @@ class RobotModel:
         if sizes is None or sizes[0] is not self.model:
             if sizes is not None:      # a replaced model: its unit-norm parts again
                 self.__dict__.pop("_unit_parts", None)
-                self.__dict__.pop("_unit_index", None)
             unit = np.array([v for p in self.unit_norm_parts() for v in p[:2]],
                             dtype=np.int64)
             unit.setflags(write=False)
@@ -252,16 +251,6 @@ class RobotModel:
                     parts.append((jm.idx_q + part[0], part[1], m.names[j]))
             self.__dict__["_unit_parts"] = parts
         return self.__dict__["_unit_parts"]
-
-    def unit_norm_index(self) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`unit_norm_parts` as two ``int64`` arrays (starts, sizes), for the
-        compiled state check."""
-        if "_unit_index" not in self.__dict__:
-            parts = self.unit_norm_parts()
-            self.__dict__["_unit_index"] = (
-                np.array([p[0] for p in parts], dtype=np.int64),
-                np.array([p[1] for p in parts], dtype=np.int64))
-        return self.__dict__["_unit_index"]
 
     def _compute_joint_limits(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         m = self.model

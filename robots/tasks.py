@@ -111,19 +111,12 @@ class KinematicState:
         else:
             _joint_jacobians(m, d, qc)     # placements and Jacobians
         _frame_placements(m, d)
+        self._cache: dict = {}        # copies of what is read from data, on first use
 
     #: data.Jcom and data.com[0] computed for this state (on first use)
     _com_ready = False
     #: ``J̇_com q̇`` (3), ``None`` from a ``drift=False`` state
     acom_drift = None
-
-    def __getattr__(self, name: str):
-        # the copies of the quantities read from data, made on first use (a state that
-        # reads none never builds the dict)
-        if name == "_cache":
-            cache = self._cache = {}
-            return cache
-        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
     def ensure_com(self) -> None:
         """Compute ``data.Jcom`` and ``data.com[0]`` once for this state (the writers of
