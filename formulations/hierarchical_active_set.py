@@ -54,7 +54,14 @@ level has an iteration cap (``max_iter``): when it is hit the status is
 ``approximate`` and ``info["message"]`` names the level.
 
 *Tolerances.* A row counts as violated when it is outside its interval by more than
-``primal_tol (‖√w_j a_j‖ ‖x‖ + |bound|)``; a multiplier is wrong-signed when
+``primal_tol (s_j + |bound|)``, ``s_j = ‖√w_j a_j‖ ‖x‖`` (a box row on one column ``c``:
+``|√w_j a_jc| (|x_c| + 1)``); a soft row leaves the working set once it is on the
+satisfied side by ``1e-3`` of that (rows 1e-5 the size of their level's others move the
+optimum by what the others' slack at ``primal_tol`` would hide). A box row held at its
+bound and off it by the reflectors' rounding (``16 eps ‖x‖``) is put on it exactly; when
+that rounding exceeds a box row's tolerance near its bound (a level of tiny rows drives
+``‖x‖`` to 1e10), the status is ``approximate`` with the reason. A multiplier is
+wrong-signed when
 ``|ν_j| ‖√w_j a_j‖ > dual_tol · max(‖∇f‖, ‖A_i‖_F (‖A_i‖_F ‖x‖ + ‖targets‖))``.
 A held row is fixed at the end of its level as *violated* only when it is off its
 bound beyond the primal tolerance and its violation (its multiplier) times
@@ -109,7 +116,8 @@ CAPABILITIES = Capabilities(equalities=True, inequalities=True, weights=True,
 OPTIONS = {
     "rcond": rcond_option("‖A_i‖_F (soft and fixed rows), rcond·‖a_j‖ (hard rows)"),
     "primal_tol": Option(1e-10, "float", "relative bound tolerance: a row is violated when "
-                         "outside by more than primal_tol·(‖a_j‖‖x‖ + |bound|)",
+                         "outside by more than primal_tol·(‖a_j‖‖x‖ + |bound|) "
+                         "(a box row: primal_tol·(|a_jc|(|x_c| + 1) + |bound|))",
                          minimum=0.0, maximum=1.0, exclusive_maximum=True),
     "dual_tol": Option(1e-12, "float", "relative tolerance on the sign of a hard row's "
                        "multiplier", minimum=0.0, maximum=1.0, exclusive_maximum=True),
@@ -181,8 +189,9 @@ class Prepared:
         self.warm_valid = part(self._bwork, "warm_valid")
         #: the kernel's outputs: ``x``, each level's ``‖w_i‖²``, its root (one copy)
         self._out = self._fwork[off["x"][0]:off["res"][1]]
-        #: ‖x‖, cap/non-finite flag, number of levels with a violation above tolerance
-        self._summary = self._fwork[5:9]
+        #: ‖x‖, cap/non-finite flag, number of levels with a violation above tolerance,
+        #: of ambiguous rank decisions, of box rows x's precision cannot resolve
+        self._summary = self._fwork[5:10]
         #: each level's (and the tie-break's) rank-decision margin (hierarchy.linalg)
         self._margins = part(self._fwork, "margins")
         self._n, self._k = n, k
@@ -211,15 +220,21 @@ class Prepared:
         out = self._out.copy()
         x, w2, residuals = out[:n], out[n:n + k], out[n + k:]
         counts = self._counts.copy()
-        xn, flag, infeasible, ambiguous = self._summary.tolist()
+        xn, flag, infeasible, ambiguous, unresolved = self._summary.tolist()
         if infeasible:
             tol = self.primal_tol * max(1.0, xn)
             infeasible = [i for i, r in enumerate(residuals.tolist()) if r > tol]
         info = {"iterations": counts[0], "rank_profile": counts[2, :k],
                 "level_violation": w2, "infeasible_levels": infeasible or [],
                 "warm_start": self.warm_start}
-        if flag == 0.0 and not ambiguous:
+        if flag == 0.0 and not ambiguous and not unresolved:
             return Outcome(x, "optimal", info, residuals=residuals, checked=True)
+        if flag == 0.0 and not ambiguous:
+            info["reason"] = (f"‖x‖ = {xn:.3g}: x's coordinates are known to about "
+                              f"{_kernel.X_PRECISION * xn:.2g}, coarser than the primal "
+                              f"tolerance of {int(unresolved)} box row(s) near a bound "
+                              f"(whether they are held is rounding)")
+            return Outcome(x, "approximate", info, residuals=residuals, checked=True)
         if flag == 0.0:
             # a pivot within AMBIGUITY of its threshold: rounding may flip the decision
             # and with it x by O(1) (the shared rule of hierarchy.linalg)

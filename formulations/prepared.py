@@ -242,7 +242,8 @@ class PreparedSolver:
 
     def solve_batch(self, stacks_or_data: Sequence) -> "BatchSolution":
         """Solve many stacks of the layout (the plugin's batched kernel when it has one,
-        else a loop of :meth:`solve`).
+        else a loop of :meth:`solve`), each on its own: a plugin's warm start is reset
+        before each stack, so that row ``i`` equals ``prioik.solve(stacks[i])``.
 
         Raises:
             TaskStackError: an empty batch.
@@ -272,9 +273,16 @@ class PreparedSolver:
         return BatchSolution(X, statuses, self.formulation, dict(self._given), elapsed, batched)
 
     def _one_by_one(self, datas: list[StackData]) -> tuple[np.ndarray, list[str]]:
+        # the stacks of a batch are independent: a plugin that warm-starts from its last
+        # solve (``reset()``) starts each one cold, so row i is prioik.solve(stack_i)
+        # (a warm start decides ranks on another path: another status on a rank near
+        # its threshold, fuzzing found); a sequence of solve() calls stays warm
+        reset = getattr(self._impl, "reset", None)
         X = np.empty((len(datas), self._n))
         statuses = []
         for i, d in enumerate(datas):
+            if reset is not None:
+                reset()
             sol = self.solve(d)
             X[i] = sol.x
             statuses.append(sol.status)

@@ -313,7 +313,9 @@ def check_lexicographic(stack: TaskStack, x: np.ndarray, tol: float = DEFAULT_CE
     ``rcond`` times each level's ``‖√W A_fixed‖_F``). The residual is measured in task
     space — through the pseudo-inverse of ``B = √W A_act Z_i`` (the level's equality and
     violated rows, any row with a non-zero violation; singular values below
-    ``CERTIFICATE_SIGMA_FLOOR · ‖√W A_act‖_F`` raised to it) — so that it reads as the change of ``A_i x`` it stands for, however badly
+    ``CERTIFICATE_SIGMA_FLOOR · ‖√W A_act‖_F`` raised to it; directions ``B Z`` cannot
+    move by the rank rule, where the multipliers must cancel alone, read at ``1/‖B‖``)
+    — so that it reads as the change of ``A_i x`` it stands for, however badly
     conditioned the level is; on equality stacks it is the algorithmic error
     ``‖U_fᵀ (A_i x − b_i)‖`` (eq. 29). The sign-constrained multipliers minimise it
     (a non-negative least-squares problem). A level passes when the residual is
@@ -369,12 +371,20 @@ def check_lexicographic(stack: TaskStack, x: np.ndarray, tol: float = DEFAULT_CE
                 sig[:s.shape[0]] = s
             else:
                 V, sig = np.eye(d), np.zeros(d)
+            bn = float(np.linalg.norm(B))
+            null = sig <= rcond * bn
             D = 1.0 / np.maximum(sig, floor)
             # the gradient lies in the row space of B: its part along directions that B Z
             # cannot move by the rank rule is round-off (amplified by 1/floor it would
-            # fail exact answers); the multipliers must still cancel there
+            # fail exact answers); the multipliers must still cancel there. Those
+            # directions do not move A_i x at all, so there is no task-space change to
+            # map the residual to: it is read at the level's own gain 1/‖B‖ (with
+            # 1/floor, the rounding of Σ μ_j c_j there, ~eps·κ·|μ|, was read as a
+            # task-space change up to 1e6 times larger and failed exact answers)
+            if bn > 0:
+                D[null] = 1.0 / bn
             y = V.T @ y
-            y[sig <= rcond * float(np.linalg.norm(B))] = 0.0
+            y[null] = 0.0
             y = D * y
         if not signed:
             return float(np.linalg.norm(y))

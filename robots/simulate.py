@@ -45,6 +45,7 @@ from .tasks import KinematicState
 #: The statuses a solution may have (``formulations.STATUSES``; robots/ takes any
 #: solver callable and does not import formulations/).
 STATUSES = ("optimal", "approximate", "failed")
+_ANSWERED = frozenset(("optimal", "approximate"))
 
 __all__ = ["StepTasks", "SimulationError", "SimulationResult", "simulate", "equality_view",
            "coordinate_names"]
@@ -307,6 +308,12 @@ def _check_times(duration: float, dt: float) -> None:
 def _answer(sol: Any, nv: int) -> tuple[np.ndarray | None, str]:
     """``sol.x`` as ``nv`` finite floats, or ``(None, why not)``."""
     status = getattr(sol, "status", None)
+    x = getattr(sol, "x", None)
+    # the common case in one dot product: a finite x @ x means every entry is finite
+    # (an overflowing sum takes the checks below, which name what is wrong, if anything)
+    if (status in _ANSWERED and type(x) is np.ndarray and x.dtype == np.float64
+            and x.shape == (nv,) and math.isfinite(float(x @ x))):
+        return x, ""
     if status not in STATUSES:
         return None, f"the solver returned {type(sol).__name__} with status {status!r} " \
                      f"(expected one of {', '.join(STATUSES)})"
@@ -423,7 +430,7 @@ def simulate(robot: RobotModel, build: BuildFn, solve: SolveFn, *, duration: flo
         x_solved = x
         if level == "velocity":
             x = (x_solved - v) / dt                    # recorded q̈
-        if np.linalg.norm(x) > divergence_limit:
+        if not math.sqrt(float(x @ x)) <= divergence_limit:
             failed, failed_step = True, k
             message = (f"t = {t:.3f} s (step {k}): diverged (‖q̈‖ = "
                        f"{np.linalg.norm(x):.3g} > {divergence_limit:g})")

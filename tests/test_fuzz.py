@@ -38,22 +38,11 @@ def _assert_clean(report: fuzz.FuzzReport, known: dict | None = None) -> None:
     assert found == set(known or {}), "\n" + report.table() + "\n" + "\n".join(lines)
 
 
-#: Failures of the in-suite runs that are open (reported, not resolved), each with why.
-#: hierarchical_active_set's answer on these passes the independent KKT check of
-#: tests/test_hierarchical_active_set.py (kkt_report, ≤ 2e-13) and matches
-#: cascaded_qp's level values, but check_lexicographic rejects it by a relative
-#: residual of 6e-8 / 1.1e-7 (the disagreement the active-set tests list as
-#: CERTIFICATE_DISAGREES); bounds-5-77 is an active-set defect: ‖x‖ is 1e11 (a level of
-#: one 4e-12 row), and its bound and step tolerances, relative to ‖a_j‖‖x‖, let a
-#: one-column box row be violated by 6e-6 (the certificate measures Σ|a_jc x_c|).
-KNOWN_OPEN = {
-    ("inequality-5-363", "hierarchical_active_set", "uncertified"):
-        "certificate disagrees (kkt_report 5e-14; cascaded_qp agrees to 3e-11)",
-    ("bounds-5-57", "hierarchical_active_set", "uncertified"):
-        "certificate disagrees (kkt_report 2e-13; cascaded_qp[clarabel] agrees)",
-    ("bounds-5-77", "hierarchical_active_set", "uncertified"):
-        "box row violated by 6e-6 within a primal tolerance relative to ‖a_j‖‖x‖ = 4",
-}
+#: Failures of the in-suite runs that are open (reported, not resolved), each with why:
+#: none. (inequality-5-363, bounds-5-57: the certificate read rounding along the null
+#: directions of a level at 1/floor; bounds-5-77: a box row's tolerance was relative to
+#: ‖a_j‖‖x‖ = 1e11 — both fixed, a failure here is new.)
+KNOWN_OPEN: dict = {}
 
 
 # ------------------------------------------------------------------ generator
