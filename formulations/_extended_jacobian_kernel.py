@@ -468,12 +468,33 @@ def level_residuals(A, b, w, starts, x, out):
 
 def work_size(M: int, n: int, k: int) -> int:
     """Floats of :func:`solve_data`'s workspace for ``M`` rows, ``n`` columns, ``k``
-    levels."""
-    return 2 * M * n + 3 * M + k + n * n + 2 * n
+    levels (its parameters included)."""
+    return 3 + k + 2 * M * n + 3 * M + k + n * n + 2 * n
+
+
+def iwork_size(n: int, k: int) -> int:
+    """Ints of :func:`solve_data`'s integer workspace: ``k``, the ``k + 1`` level
+    offsets, the ``k`` ranks, ``n`` of scratch."""
+    return 1 + (k + 1) + k + n
+
+
+def prepare_workspaces(starts: np.ndarray, n: int, params: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """The ``(work, iwork)`` of :func:`solve_data` for a layout's ``starts``, ``n``
+    columns and the ``3 + k`` parameters (``rcond``, ``level_damping``,
+    ``singular_threshold``, the ``k`` step bounds), which they hold from then on."""
+    k = starts.shape[0] - 1
+    M = int(starts[-1])
+    work = np.empty(work_size(M, n, k))
+    work[:3 + k] = params
+    iwork = np.zeros(iwork_size(n, k), dtype=np.int64)
+    iwork[0] = k
+    iwork[1:k + 2] = starts
+    return work, iwork
 
 
 @njit(cache=True, fastmath=_FAST)
-def solve_data(A, b, w, starts, work, params, out, ranks):
+def solve_data(A, b, w, work, out, iwork):
     """The prepared solve of a stack's data, in one call with few arguments (the call's
     cost on small stacks is mostly numba unboxing its arguments).
 
@@ -482,32 +503,37 @@ def solve_data(A, b, w, starts, work, params, out, ranks):
 
     Args:
         A, b, w: The data's rows, targets and ``√w`` (``M × n``, ``M``, ``M``).
-        starts: ``k + 1`` row offsets.
-        work: Workspace of :func:`work_size` floats (weighted rows, targets, scales and
-            the kernel's scratch).
-        params: ``rcond, level_damping, singular_threshold`` then the ``k`` step bounds.
+        work: Workspace of :func:`work_size` floats: the parameters ``rcond,
+            level_damping, singular_threshold`` then the ``k`` step bounds, and the
+            scratch (weighted rows, targets, scales and the kernel's own).
         out: Output of ``n + 3 k`` floats: ``x``, the residuals, the damping ``μ_i²``,
             the rank decisions' margins (see :func:`solve_kernel`).
-        ranks: ``k + n`` ints: the ``k`` ranks (output), then the kernel's scratch.
+        iwork: :func:`iwork_size` ints: ``k``, the ``k + 1`` row offsets of the levels,
+            the ``k`` ranks (output), then the kernel's scratch
+            (:func:`prepare_workspaces` fills the first two).
 
     Returns 0 when an input is not finite (nothing solved), 1 when ``x`` and the
     residuals are finite, 2 when they are not (the caller reports a failure); plus 4
     when some level's rank decision margin is within :data:`AMBIGUITY` of its threshold.
     """
+    k = iwork[0]
+    starts = iwork[1:k + 2]
+    ranks = iwork[k + 2:]
+    params = work[:3 + k]
+    ws = work[3 + k:]                     # the scratch (see work_size)
     M, n = A.shape
-    k = starts.shape[0] - 1
-    B = work[:M * n].reshape((M, n))
-    c = work[M * n:M * n + M]
-    scales = work[M * n + M:M * n + M + k]
-    o = M * n + M + k                     # scratch of the kernel (see work_size)
-    V = work[o:o + n * n].reshape((n, n))
+    B = ws[:M * n].reshape((M, n))
+    c = ws[M * n:M * n + M]
+    scales = ws[M * n + M:M * n + M + k]
+    o = M * n + M + k                     # scratch of the kernel
+    V = ws[o:o + n * n].reshape((n, n))
     o += n * n
-    beta = work[o:o + n]
-    y = work[o + n:o + 2 * n]
-    norms = work[o + 2 * n:o + 2 * n + M]
-    rhs = work[o + 2 * n + M:o + 2 * n + 2 * M]
+    beta = ws[o:o + n]
+    y = ws[o + n:o + 2 * n]
+    norms = ws[o + 2 * n:o + 2 * n + M]
+    rhs = ws[o + 2 * n + M:o + 2 * n + 2 * M]
     o += 2 * n + 2 * M
-    L = work[o:o + M * n].reshape((M, n))
+    L = ws[o:o + M * n].reshape((M, n))
     x = out[:n]
     residuals = out[n:n + k]
     mu2 = out[n + k:n + 2 * k]

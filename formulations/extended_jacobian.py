@@ -125,9 +125,10 @@ from .options import Option, rcond_option, validate_options
 
 try:  # the compiled kernel is optional: the lapack path is the readable reference
     from . import _extended_jacobian_kernel as _kernel
+    _solve_data = _kernel.solve_data        # one global lookup per prepared solve
     _kernel_error = ""
 except ImportError as exc:  # pragma: no cover - numba is a declared dependency
-    _kernel = None
+    _kernel = _solve_data = None
     _kernel_error = f"{type(exc).__name__}: {exc}"
 
 def step_bound_value(value):
@@ -262,15 +263,21 @@ class Prepared:
         self.compiled = (self.kernel == "numba" and self.nullspace == "qr"
                          and self.damping == 0)
         self._selective = self.level_damping > 0
+        self._damped = self._selective or self._bounded
         self._starts = layout.starts
+        self._n, self._k = layout.n, layout.k
         if self.compiled:
-            m, n, k = layout.m, layout.n, layout.k
-            self._work = np.empty(_kernel.work_size(m, n, k))
-            self._params = np.concatenate([[self.rcond, self.level_damping,
-                                            self.singular_threshold], self.step_bound])
-            self._iwork = np.zeros(k + n, dtype=np.int64)      # ranks, then scratch
-            self._ranks = self._iwork[:k]
+            n, k = layout.n, layout.k
+            params = np.concatenate([[self.rcond, self.level_damping,
+                                      self.singular_threshold], self.step_bound])
+            # the parameters and the level offsets live in the workspaces: the kernel
+            # call's cost is mostly numba unboxing its arguments
+            self._work, self._iwork = _kernel.prepare_workspaces(layout.starts, n, params)
+            self._ranks = self._iwork[k + 2:2 * k + 2]
             self._out_size = n + 3 * k     # x, residuals, μ², decision margins
+            # what the common case of solve reads, in one attribute
+            self._hot = (self._out_size, self._work, self._iwork, n, n + k, self._ranks,
+                         self._damped)
 
     def solve(self, data: StackData) -> Outcome:
         """Solve one stack of the layout (its data; the registry checked the layout).
@@ -279,11 +286,27 @@ class Prepared:
             TaskStackError: a value is not finite (naming the task, level and row), or
                 the rows' squares overflow.
         """
+        out = self.solve_checked(data)
+        return Outcome(*out, True) if type(out) is tuple else out
+
+    def solve_checked(self, data: StackData) -> tuple | Outcome:
+        """:meth:`solve`, its common case (the compiled kernel's answer, finite, every
+        rank decision clear, no damping) as the tuple ``(x, "optimal", info,
+        residuals)`` of a checked :class:`Outcome` without the object (the registry's
+        :class:`~prioik.formulations.PreparedSolver` makes the Solution from it); an
+        :class:`Outcome` otherwise.
+
+        Raises:
+            TaskStackError: as :meth:`solve`.
+        """
         if not self.compiled:
             return self._solve_stack(data.as_stack())
-        out = np.empty(self._out_size)      # x, residuals, μ², margins (one array)
-        code = _kernel.solve_data(data.A, data.b, data.sqrt_weight, self._starts,
-                                  self._work, self._params, out, self._iwork)
+        size, work, iwork, n, nk, ranks, damped = self._hot
+        out = np.empty(size)      # x, residuals, μ², margins (one array)
+        code = _solve_data(data.A, data.b, data.sqrt_weight, work, out, iwork)
+        if code == 1 and not damped:      # the common case: finite, unambiguous
+            return (out[:n], "optimal", {"rank_profile": ranks.copy(), "nullspace": "qr",
+                                         "kernel": "numba"}, out[n:nk])
         if code == 0:
             data.check()     # names the task, level and row of a NaN, inf or bad √w
             # finite rows of extreme scale: solve the equilibrated stack (same optimum)
@@ -294,10 +317,10 @@ class Prepared:
             out = self.solve(stack.data)
             out.info["equilibrated_levels"] = levels
             return out
-        n, k = self.layout.n, self.layout.k
+        k = self._k
         info = {"rank_profile": self._ranks.copy(), "nullspace": "qr", "kernel": "numba"}
         status = "optimal"
-        if self._selective or self._bounded:
+        if self._damped:
             status = _damping_info(info, out[n + k:n + 2 * k], self._selective,
                                    self._bounded)
         if code & 4:          # a rank decision within AMBIGUITY of its threshold

@@ -8,6 +8,11 @@ solve, so the one-off and the prepared answers are the same computation.
 A plugin provides its own prepared solver as a class ``Prepared(layout, options)`` with
 ``solve(data) -> Outcome`` (and optionally ``solve_batch(datas) -> (X, statuses)``);
 for the others a default adapter solves ``data.as_stack()`` with the module's ``solve``.
+A ``Prepared`` may also define ``solve_checked(data)``, called instead of ``solve`` by
+:meth:`PreparedSolver.solve`: it returns either an ``Outcome`` or, for an answer the
+plugin verified itself (what ``Outcome(..., checked=True)`` means) with a status of
+:data:`~prioik.formulations.base.STATUSES`, the tuple ``(x, status, info, residuals)``
+— one object fewer per solve on a control loop's path.
 """
 
 from __future__ import annotations
@@ -25,6 +30,8 @@ from prioik.hierarchy import (StackData, StackLayout, TaskStack, TaskStackError,
 from .base import STATUSES, Capabilities, ConcurrentUseError, FormulationError, Outcome, Solution
 
 __all__ = ["BatchSolution", "PreparedSolver", "check_layout_support", "check_support"]
+
+_clock = time.perf_counter
 
 
 def check_layout_support(name: str, caps: Capabilities, layout: StackLayout) -> None:
@@ -113,6 +120,9 @@ class PreparedSolver:
         prepared = getattr(module, "Prepared", None)
         self._impl = (prepared(layout, options) if prepared is not None
                       else _StackAdapter(formulation, module, options))
+        # a plugin's solve_checked may give its verified answers as a tuple (no Outcome)
+        self._impl_solve = getattr(self._impl, "solve_checked", None) or self._impl.solve
+        self._acquire, self._release = self._lock.acquire, self._lock.release
 
     def _data(self, stack_or_data) -> StackData:
         if type(stack_or_data) is StackData:
@@ -150,7 +160,36 @@ class PreparedSolver:
             TaskStackError: a value of the data is not valid (naming task, level, row).
             ConcurrentUseError: another thread is using this solver.
         """
-        data = self._data(stack_or_data)
+        data = stack_or_data
+        if type(data) is not StackData or data.layout is not self.layout:
+            data = self._data(stack_or_data)
+        merged = None
+        if step_options or self._needs_mass_matrix:
+            merged = self._step_options(step_options)
+        if not self._acquire(False):       # (positional: a cheaper call)
+            raise ConcurrentUseError(f"this prepared {self.formulation!r} solver is busy in "
+                                     f"another thread; prepare one solver per thread")
+        try:
+            t0 = _clock()
+            try:
+                out = self._impl_solve(data) if merged is None else \
+                    self._impl.solve(data, merged)
+            except (np.linalg.LinAlgError, ArithmeticError) as exc:
+                out = Outcome(np.full(self._n, np.nan), "failed",
+                              {"message": f"{type(exc).__name__}: {exc}"})
+            elapsed = _clock() - t0
+        finally:
+            self._release()
+        if type(out) is tuple:      # solve_checked's verified answer (see the module doc)
+            x, status, info, residuals = out
+            return Solution(x, self.formulation, self._given, status, residuals, elapsed,
+                            info)
+        return self._solution(out, data, elapsed)
+
+    def _step_options(self, step_options: dict) -> dict | None:
+        """The options of one call: the prepared ones with ``step_options`` over them
+        (validated), or ``None`` when there are none; a formulation that needs
+        ``mass_matrix`` refuses a call without one."""
         merged = None
         if step_options:
             if not getattr(self._impl, "accepts_step_options", False):
@@ -164,21 +203,7 @@ class PreparedSolver:
             raise FormulationError(f"formulation {self.formulation!r} needs mass_matrix=M "
                                    f"(the {self._n}x{self._n} joint-space inertia matrix, "
                                    f"SPD)")
-        if not self._lock.acquire(blocking=False):
-            raise ConcurrentUseError(f"this prepared {self.formulation!r} solver is busy in "
-                                     f"another thread; prepare one solver per thread")
-        try:
-            t0 = time.perf_counter()
-            try:
-                out = self._impl.solve(data) if merged is None else \
-                    self._impl.solve(data, merged)
-            except (np.linalg.LinAlgError, ArithmeticError) as exc:
-                out = Outcome(np.full(self._n, np.nan), "failed",
-                              {"message": f"{type(exc).__name__}: {exc}"})
-            elapsed = time.perf_counter() - t0
-        finally:
-            self._lock.release()
-        return self._solution(out, data, elapsed)
+        return merged
 
     def _solution(self, out: Outcome, data: StackData, elapsed: float) -> Solution:
         if out.checked:     # the plugin verified x and the residuals (compiled paths)

@@ -61,43 +61,85 @@ ERROR, VELOCITY_REF, FEEDFORWARD, DRIFT, KP, KD = range(6)
 #: row sets of :func:`frame_rows`
 POSITION, ORIENTATION, POSE = 0, 1, 2
 
+#: layout of a frame task's ``spec`` (int64): first row, row set, whether to zero the
+#: drift, then the columns of the frame's supporting joints (fixed at declaration: one
+#: array instead of four arguments, as every argument costs the call ~50 ns to unbox)
+SPEC_START, SPEC_MODE, SPEC_ZERO_DRIFT, SPEC_COLS = 0, 1, 2, 3
 
-@njit(cache=True)
-def frame_rows(A, Q, s, mode, J, cols, t, R, off, x, xd, xdd, Rstar, w, wd, zero_drift):
-    """One frame's rows at ``s``: position of the point ``p = t + R off`` (3 rows,
-    ``mode = POSITION``), orientation (3 rows, ``ORIENTATION``) or both (6, ``POSE``).
 
-    Position rows: ``J_lin + J_ang × p`` on the columns ``cols`` of the frame's supporting
-    joints (zero elsewhere) — the LOCAL_WORLD_ALIGNED Jacobian of the point ``p`` from the
-    world-frame joint Jacobians ``J`` (``v_p = v_O + ω × p``) —, error ``x − p``,
-    ``ẋ* = xd``, ``ẍ* = xdd``. Orientation rows: ``J_ang``, error ``log(R* Rᵀ)``,
-    ``ω* = w``, ``ω̇* = wd``. Drift zeroed if ``zero_drift``.
-    """
-    nrows = 6 if mode == POSE else 3
+@njit(cache=True, inline="always")
+def _position_rows(A, Q, J, t, R, spec, off, x, xd, xdd, rates):
+    """Position rows of a frame task (see :func:`frame_rows`); ``ẋ* = ẍ* = 0`` unless
+    ``rates``."""
+    s = spec[SPEC_START]
+    p0 = t[0] + R[0, 0] * off[0] + R[0, 1] * off[1] + R[0, 2] * off[2]
+    p1 = t[1] + R[1, 0] * off[0] + R[1, 1] * off[1] + R[1, 2] * off[2]
+    p2 = t[2] + R[2, 0] * off[0] + R[2, 1] * off[1] + R[2, 2] * off[2]
+    for k in range(SPEC_COLS, spec.shape[0]):
+        c = spec[k]
+        wx = J[3, c]
+        wy = J[4, c]
+        wz = J[5, c]
+        A[s, c] = J[0, c] + wy * p2 - wz * p1
+        A[s + 1, c] = J[1, c] + wz * p0 - wx * p2
+        A[s + 2, c] = J[2, c] + wx * p1 - wy * p0
+    Q[ERROR, s] = x[0] - p0
+    Q[ERROR, s + 1] = x[1] - p1
+    Q[ERROR, s + 2] = x[2] - p2
+    for i in range(3):
+        Q[VELOCITY_REF, s + i] = xd[i] if rates else 0.0
+        Q[FEEDFORWARD, s + i] = xdd[i] if rates else 0.0
+
+
+@njit(cache=True, inline="always")
+def _zero_rows(A, Q, s, nrows, zero_drift):
     for i in range(nrows):
         row = A[s + i]
         for j in range(row.shape[0]):
             row[j] = 0.0
+        if zero_drift:
+            Q[DRIFT, s + i] = 0.0
+
+
+@njit(cache=True)
+def position_rows(A, Q, J, t, R, spec, off, x, xd, xdd):
+    """A point's position rows (3, ``spec``: see :data:`SPEC_COLS`): the point
+    ``p = t + R off`` of the frame at ``(t, R)``; :func:`frame_rows` with
+    ``mode = POSITION`` in fewer arguments."""
+    _zero_rows(A, Q, spec[SPEC_START], 3, spec[SPEC_ZERO_DRIFT] != 0)
+    _position_rows(A, Q, J, t, R, spec, off, x, xd, xdd, True)
+
+
+@njit(cache=True)
+def position_target_rows(A, Q, J, t, R, spec, off, x):
+    """:func:`position_rows` with ``ẋ* = ẍ* = 0`` (a fixed target: two arguments fewer)."""
+    s = spec[SPEC_START]
+    _zero_rows(A, Q, s, 3, spec[SPEC_ZERO_DRIFT] != 0)
+    _position_rows(A, Q, J, t, R, spec, off, x, x, x, False)
+
+
+@njit(cache=True)
+def frame_rows(A, Q, J, t, R, spec, off, x, xd, xdd, Rstar, w, wd):
+    """One frame's rows at ``s = spec[0]``: position of the point ``p = t + R off``
+    (3 rows, ``spec[1] = POSITION``), orientation (3 rows, ``ORIENTATION``) or both (6,
+    ``POSE``); ``spec[2]``: zero the drift; ``spec[3:]``: the columns ``cols`` of the
+    frame's supporting joints.
+
+    Position rows: ``J_lin + J_ang × p`` on the columns ``cols`` (zero elsewhere) — the
+    LOCAL_WORLD_ALIGNED Jacobian of the point ``p`` from the world-frame joint Jacobians
+    ``J`` (``v_p = v_O + ω × p``) —, error ``x − p``, ``ẋ* = xd``, ``ẍ* = xdd``.
+    Orientation rows: ``J_ang``, error ``log(R* Rᵀ)``, ``ω* = w``, ``ω̇* = wd``.
+    """
+    s = spec[SPEC_START]
+    mode = spec[SPEC_MODE]
+    nrows = 6 if mode == POSE else 3
+    _zero_rows(A, Q, s, nrows, spec[SPEC_ZERO_DRIFT] != 0)
     o = s + 3 if mode == POSE else s        # first orientation row
     if mode != ORIENTATION:
-        p0 = t[0] + R[0, 0] * off[0] + R[0, 1] * off[1] + R[0, 2] * off[2]
-        p1 = t[1] + R[1, 0] * off[0] + R[1, 1] * off[1] + R[1, 2] * off[2]
-        p2 = t[2] + R[2, 0] * off[0] + R[2, 1] * off[1] + R[2, 2] * off[2]
-        for c in cols:
-            wx = J[3, c]
-            wy = J[4, c]
-            wz = J[5, c]
-            A[s, c] = J[0, c] + wy * p2 - wz * p1
-            A[s + 1, c] = J[1, c] + wz * p0 - wx * p2
-            A[s + 2, c] = J[2, c] + wx * p1 - wy * p0
-        Q[ERROR, s] = x[0] - p0
-        Q[ERROR, s + 1] = x[1] - p1
-        Q[ERROR, s + 2] = x[2] - p2
-        for i in range(3):
-            Q[VELOCITY_REF, s + i] = xd[i]
-            Q[FEEDFORWARD, s + i] = xdd[i]
+        _position_rows(A, Q, J, t, R, spec, off, x, xd, xdd, True)
     if mode != POSITION:
-        for c in cols:
+        for k in range(SPEC_COLS, spec.shape[0]):
+            c = spec[k]
             A[o, c] = J[3, c]
             A[o + 1, c] = J[4, c]
             A[o + 2, c] = J[5, c]
@@ -109,9 +151,6 @@ def frame_rows(A, Q, s, mode, J, cols, t, R, off, x, xd, xdd, Rstar, w, wd, zero
         for i in range(3):
             Q[VELOCITY_REF, o + i] = w[i]
             Q[FEEDFORWARD, o + i] = wd[i]
-    if zero_drift:
-        for i in range(nrows):
-            Q[DRIFT, s + i] = 0.0
 
 
 @njit(cache=True)
@@ -274,19 +313,20 @@ def acceleration_targets(A, b, Q, v):
 
 
 @njit(cache=True)
-def state_is_valid(q, v, unit_starts, unit_sizes, tol):
+def state_is_valid(q, v, unit, tol):
     """Every entry of ``q`` and ``v`` finite and every unit-norm part of ``q``
-    (quaternions, unit complexes: ``unit_starts``, ``unit_sizes``) of norm 1 within
-    ``tol`` — the fast check of a control step's state (the slow one names the fault)."""
+    (quaternions, unit complexes: ``unit = [start_0, size_0, start_1, size_1, …]``) of
+    norm 1 within ``tol`` — the fast check of a control step's state (the slow one names
+    the fault)."""
     for i in range(q.shape[0]):
         if not np.isfinite(q[i]):
             return False
     for i in range(v.shape[0]):
         if not np.isfinite(v[i]):
             return False
-    for p in range(unit_starts.shape[0]):
+    for p in range(0, unit.shape[0], 2):
         acc = 0.0
-        for i in range(unit_starts[p], unit_starts[p] + unit_sizes[p]):
+        for i in range(unit[p], unit[p] + unit[p + 1]):
             acc += q[i] * q[i]
         if abs(np.sqrt(acc) - 1.0) > tol:
             return False

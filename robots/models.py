@@ -154,12 +154,29 @@ class RobotModel:
     @property
     def nq(self) -> int:
         """Configuration size."""
-        return int(self.model.nq)
+        return self.state_sizes()[1]
 
     @property
     def nv(self) -> int:
         """Velocity (and acceleration) size: the number of task-stack columns."""
-        return int(self.model.nv)
+        return self.state_sizes()[2]
+
+    def state_sizes(self) -> tuple:
+        """``(model, n_q, n_v, unit, (n_q,), (n_v,))``: the sizes read from the model once
+        (a control step reads them several times; pinocchio attributes are slow to read),
+        the unit-norm parts of ``q`` as one ``int64`` array ``[start_0, size_0, …]`` (for
+        the compiled state check) and the shapes of ``q`` and ``v``. Recomputed if
+        :attr:`model` was replaced."""
+        sizes = self.__dict__.get("_state_sizes")
+        if sizes is None or sizes[0] is not self.model:
+            if sizes is not None:      # a replaced model: its unit-norm parts again
+                self.__dict__.pop("_unit_parts", None)
+            unit = np.array([v for p in self.unit_norm_parts() for v in p[:2]],
+                            dtype=np.int64)
+            unit.setflags(write=False)
+            nq, nv = int(self.model.nq), int(self.model.nv)
+            sizes = self.__dict__["_state_sizes"] = (self.model, nq, nv, unit, (nq,), (nv,))
+        return sizes
 
     @property
     def n_base(self) -> int:
@@ -234,16 +251,6 @@ class RobotModel:
                     parts.append((jm.idx_q + part[0], part[1], m.names[j]))
             self.__dict__["_unit_parts"] = parts
         return self.__dict__["_unit_parts"]
-
-    def unit_norm_index(self) -> tuple[np.ndarray, np.ndarray]:
-        """:meth:`unit_norm_parts` as two ``int64`` arrays (starts, sizes), for the
-        compiled state check."""
-        if "_unit_index" not in self.__dict__:
-            parts = self.unit_norm_parts()
-            self.__dict__["_unit_index"] = (
-                np.array([p[0] for p in parts], dtype=np.int64),
-                np.array([p[1] for p in parts], dtype=np.int64))
-        return self.__dict__["_unit_index"]
 
     def _compute_joint_limits(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         m = self.model

@@ -97,6 +97,8 @@ class _Task:
     start: int = -1
     fid: int = -1
     cols: np.ndarray | None = None
+    spec: np.ndarray | None = None       # frame tasks: the kernels' int64 spec (at _fix)
+    hot: tuple | None = None             # frame tasks: (pin.Data, the kernel's arguments)
     offset: np.ndarray | None = None     # point on the frame (frame coordinates)
     has_offset: bool = False             # offset ≠ 0 (read every step: a bool, not .any())
     axes: np.ndarray | None = None       # com axes
@@ -156,6 +158,8 @@ class TaskWriter:
         #: q entries of the actuated joints when q_ref ⊖ q is q_ref − q for all of them
         self._posture_q = q_index if np.all(q_index >= 0) else None
         self._limits = None                     # (lo, hi, vmax) of the actuated joints
+        self._nq = robot.nq
+        self._q_shape = (robot.nq,)
         self._qa = np.zeros(robot.nv - robot.n_base)
 
     # ----------------------------------------------------------------- declaring
@@ -338,6 +342,10 @@ class TaskWriter:
         for task in self._tasks.values():
             sl = self._layout.task_slice(task.name)
             task.start = sl.start
+            if task.kind in _FRAME_MODES:
+                task.spec = np.array([sl.start, _FRAME_MODES[task.kind], not self._accel,
+                                      *task.cols], dtype=np.int64)
+                task.spec.setflags(write=False)
             data.sqrt_weight[sl] = np.sqrt(task.weight)
             if task.kind != "limits" or task.form == "bounds":
                 self._Q[_k.KP, sl] = task.kp
@@ -381,9 +389,21 @@ class TaskWriter:
     def frame_position(self, state, name: str, x, xd=None, xdd=None) -> None:
         """A frame origin's (or a point's, :meth:`add_point`) position: ``x*`` and its
         rates ``ẋ*``, ``ẍ*`` (zero if omitted)."""
-        task = self._task(name, "position")
-        self._frame(state, task, _k.POSITION, _vec(x, 3, name, "x"), _vec(xd, 3, name, "xd"),
-                    _vec(xdd, 3, name, "xdd"), _EYE3, _ZERO3, _ZERO3)
+        task = self._tasks.get(name)
+        if task is None or task.kind != "position" or task.spec is None:
+            task = self._task(name, "position")
+        hot = task.hot
+        if hot is None or hot[0] is not state.data:
+            hot = self._frame_args(task, state)
+        if not (x.__class__ is _NDARRAY and x.dtype is _F64 and x.shape == _SHAPE3):
+            x = _vec3(x, name, "x")
+        accel = self._accel and self._drift(state, task)    # refuses a drift-free state
+        if xd is None and xdd is None:        # a fixed target: two arguments fewer
+            _k.position_target_rows(*hot[1], x)
+        else:
+            _k.position_rows(*hot[1], x, _vec3(xd, name, "xd"), _vec3(xdd, name, "xdd"))
+        if accel:
+            self._frame_drift(state, task, hot[1][4])
 
     point = frame_position
 
@@ -392,37 +412,48 @@ class TaskWriter:
         """A frame's orientation: target ``R*`` (3×3), ``ω*``, ``ω̇*`` (world; zero if
         omitted)."""
         task = self._task(name, "orientation")
-        self._frame(state, task, _k.ORIENTATION, _ZERO3, _ZERO3, _ZERO3,
-                    _rotation(rotation, name), _vec(angular_velocity, 3, name, "ω*"),
-                    _vec(angular_acceleration, 3, name, "ω̇*"))
+        self._frame(state, task, _ZERO3, _ZERO3, _ZERO3, _rotation(rotation, name),
+                    _vec3(angular_velocity, name, "ω*"),
+                    _vec3(angular_acceleration, name, "ω̇*"))
 
     def frame_pose(self, state, name: str, x, rotation, xd=None, xdd=None,
                    angular_velocity=None, angular_acceleration=None) -> None:
         """A frame's pose: position ``x*`` (rates ``ẋ*``, ``ẍ*``) and rotation ``R*``
         (rates ``ω*``, ``ω̇*``); omitted rates are zero."""
-        task = self._task(name, "pose")
-        self._frame(state, task, _k.POSE, _vec(x, 3, name, "x"), _vec(xd, 3, name, "xd"),
-                    _vec(xdd, 3, name, "xdd"), _rotation(rotation, name),
-                    _vec(angular_velocity, 3, name, "ω*"),
-                    _vec(angular_acceleration, 3, name, "ω̇*"))
+        task = self._tasks.get(name)
+        if task is None or task.kind != "pose" or task.spec is None:
+            task = self._task(name, "pose")
+        self._frame(state, task, _vec3(x, name, "x"),
+                    _ZERO3 if xd is None else _vec3(xd, name, "xd"),
+                    _ZERO3 if xdd is None else _vec3(xdd, name, "xdd"),
+                    _rotation(rotation, name),
+                    _ZERO3 if angular_velocity is None else _vec3(angular_velocity, name, "ω*"),
+                    _ZERO3 if angular_acceleration is None
+                    else _vec3(angular_acceleration, name, "ω̇*"))
 
     def contact(self, state, name: str, placement: pin.SE3 | None = None, *,
                 translation=None, rotation=None) -> None:
         """A contact held at ``placement`` (or ``translation`` and ``rotation``: the same
         without building an SE3), zero reference velocity and acceleration."""
-        task = self._task(name, "contact")
+        task = self._tasks.get(name)
+        if task is None or task.kind != "contact" or task.spec is None:
+            task = self._task(name, "contact")
         if placement is not None:
             translation, rotation = placement.translation, placement.rotation
-        self._frame(state, task, _k.POSE, _vec(translation, 3, name, "translation"),
+        self._frame(state, task, _vec(translation, 3, name, "translation"),
                     _ZERO3, _ZERO3, _rotation(rotation, name), _ZERO3, _ZERO3)
 
     def com(self, state, name: str, x, xd=None, xdd=None) -> None:
         """The centre of mass: ``x*``, ``ẋ*``, ``ẍ*`` given on the task's axes."""
-        task = self._task(name, "com")
+        task = self._tasks.get(name)
+        if task is None or task.kind != "com" or self._layout is None:
+            task = self._task(name, "com")
         state.ensure_com()
-        views = self._data_views(state)
+        views = self._views
+        if views is None or views.data is not state.data:
+            views = self._data_views(state)
         m = task.rows
-        drift = self._drift(state, task)
+        drift = self._accel and self._drift(state, task)
         _k.com_rows(self._data.A, self._Q, task.start, views.Jcom, views.com, task.axes,
                     _vec(x, m, name, "x"), _vec(xd, m, name, "xd"), _vec(xdd, m, name, "xdd"),
                     not drift)
@@ -433,12 +464,16 @@ class TaskWriter:
         """The actuated joints to ``q_ref`` (``n_q``): error ``q_ref ⊖ q`` on rows
         ``n_base:`` of the velocity (``q_ref − q`` where every actuated joint has one
         coordinate; pinocchio's ``difference`` otherwise), no drift."""
-        task = self._task(name, "posture")
-        robot = self.robot
-        q_ref = _vec(q_ref, robot.nq, name, "q_ref")
+        task = self._tasks.get(name)
+        if task is None or task.kind != "posture" or self._layout is None:
+            task = self._task(name, "posture")
+        if not (q_ref.__class__ is _NDARRAY and q_ref.dtype is _F64
+                and q_ref.shape == self._q_shape):
+            q_ref = _vec(q_ref, self._nq, name, "q_ref")
         if self._posture_q is not None:
             _k.posture_error(self._Q, task.start, state.q, q_ref, self._posture_q)
         else:
+            robot = self.robot
             sl = slice(task.start, task.start + task.rows)
             self.error[sl] = pin.difference(robot.model, state.q, q_ref)[robot.n_base:]
             self.velocity_ref[sl] = 0.0
@@ -477,7 +512,9 @@ class TaskWriter:
 
     def velocity_targets(self) -> StackData:
         """``b = ẋ* + K e`` into the data; returns it."""
-        data = self.data
+        data = self._data
+        if data is None:
+            data = self.data
         _k.velocity_targets(data.b, self._Q)
         return data
 
@@ -500,29 +537,41 @@ class TaskWriter:
             self._fix()
         return task
 
-    def _frame(self, state, task: _Task, mode: int, x, xd, xdd, rot, w, wd) -> None:
-        views = self._views
-        if views is None or views.data is not state.data:
-            views = self._data_views(state)
+    def _frame(self, state, task: _Task, x, xd, xdd, rot, w, wd) -> None:
+        hot = task.hot
+        if hot is None or hot[0] is not state.data:
+            hot = self._frame_args(task, state)
+        accel = self._accel and self._drift(state, task)    # refuses a drift-free state
+        _k.frame_rows(*hot[1], x, xd, xdd, rot, w, wd)
+        if accel:
+            self._frame_drift(state, task, hot[1][4])
+
+    def _frame_args(self, task: _Task, state) -> tuple:
+        """``(state.data, (A, Q, J, t, R, spec, offset))``: the frame kernels' arguments
+        that stay the same while the states share one ``pin.Data`` (its storage is fixed,
+        so the views follow every later kinematics call), kept on the task."""
+        views = self._data_views(state)          # refuses another robot's state
         t, R = views.frame(task.fid)
-        drift = self._accel and self._drift(state, task)
+        task.hot = (state.data, (self._data.A, self._Q, views.J, t, R, task.spec,
+                                 task.offset))
+        return task.hot
+
+    def _frame_drift(self, state, task: _Task, R: np.ndarray) -> None:
+        """The drift rows ``J̇ q̇`` of a frame task (acceleration level)."""
         s = task.start
-        _k.frame_rows(self._data.A, self._Q, s, mode, views.J, task.cols, t, R, task.offset,
-                      x, xd, xdd, rot, w, wd, not drift)
-        if drift:
-            acc = pin.getFrameClassicalAcceleration(state.model, state.data, task.fid,
-                                                    _LWA).vector
-            if mode == _k.ORIENTATION:
-                self._Q[_k.DRIFT, s:s + 3] = acc[3:]
-            else:
-                self._Q[_k.DRIFT, s:s + task.rows] = acc[:task.rows]
-                if task.has_offset:
-                    # a point r = R·offset from the origin: a_p = a_O + α × r + ω × (ω × r)
-                    r = R @ task.offset
-                    om = pin.getFrameVelocity(state.model, state.data, task.fid,
-                                              _LWA).angular
-                    self._Q[_k.DRIFT, s:s + 3] += np.cross(acc[3:], r) \
-                        + np.cross(om, np.cross(om, r))
+        acc = pin.getFrameClassicalAcceleration(state.model, state.data, task.fid,
+                                                _LWA).vector
+        if task.kind == "orientation":
+            self._Q[_k.DRIFT, s:s + 3] = acc[3:]
+        else:
+            self._Q[_k.DRIFT, s:s + task.rows] = acc[:task.rows]
+            if task.has_offset:
+                # a point r = R·offset from the origin: a_p = a_O + α × r + ω × (ω × r)
+                r = R @ task.offset
+                om = pin.getFrameVelocity(state.model, state.data, task.fid,
+                                          _LWA).angular
+                self._Q[_k.DRIFT, s:s + 3] += np.cross(acc[3:], r) \
+                    + np.cross(om, np.cross(om, r))
 
     def _drift(self, state, task: _Task) -> bool:
         """Whether to write the drift: at acceleration level (refusing a drift-free
@@ -570,9 +619,12 @@ class _DataViews:
         return views
 
 
-_EYE3 = np.eye(3)
 _ZERO3 = np.zeros(3)                     # never written
+#: the kernels' row set of each frame task kind
+_FRAME_MODES = {"position": _k.POSITION, "orientation": _k.ORIENTATION, "pose": _k.POSE,
+                "contact": _k.POSE}
 _F64 = np.dtype(np.float64)
+_NDARRAY = np.ndarray
 _ZEROS: dict[int, np.ndarray] = {}        # m -> zeros(m), never written
 
 
@@ -590,6 +642,18 @@ def _vec(value, m: int, task: str, what: str) -> np.ndarray:
     if out.shape != (m,):
         raise ValueError(f"task {task!r}: {what} must have {m} entries, got shape {out.shape}")
     return out
+
+
+def _vec3(value, task: str, what: str) -> np.ndarray:
+    """:func:`_vec` of 3 entries (the frame writers' references)."""
+    if value is None:
+        return _ZERO3
+    if type(value) is np.ndarray and value.dtype is _F64 and value.shape == _SHAPE3:
+        return value
+    return _vec(value, 3, task, what)
+
+
+_SHAPE3 = (3,)
 
 
 def _rotation(rotation, task: str) -> np.ndarray:

@@ -47,19 +47,10 @@ _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 
 
 _F64 = np.dtype(np.float64)
-
-
-def _checked_state(robot: RobotModel, q, v) -> tuple[np.ndarray, np.ndarray]:
-    """Copies of ``q`` and ``v``, checked: one compiled pass for the common case (float
-    arrays of the right sizes, finite, unit quaternions), the naming checks of
-    :func:`~robots.models.check_configuration` otherwise."""
-    if (type(q) is np.ndarray and type(v) is np.ndarray and q.dtype == _F64
-            and v.dtype == _F64 and q.shape == (robot.nq,) and v.shape == (robot.nv,)):
-        qc, vc = q.copy(), v.copy()
-        starts, sizes = robot.unit_norm_index()
-        if _rk.state_is_valid(qc, vc, starts, sizes, UNIT_NORM_TOL):
-            return qc, vc
-    return check_configuration(robot, q), check_velocity(robot, v)
+_NDARRAY = np.ndarray
+_state_is_valid = _rk.state_is_valid
+_joint_jacobians = pin.computeJointJacobians
+_frame_placements = pin.updateFramePlacements
 
 
 class KinematicState:
@@ -91,24 +82,41 @@ class KinematicState:
     def __init__(self, robot: RobotModel, q, v, data: pin.Data | None = None,
                  drift: bool = True) -> None:
         self.robot = robot
-        self.model = robot.model
-        self.q, self.v = _checked_state(robot, q, v)
-        self.data = data if data is not None else robot.model.createData()
-        self.has_drift = bool(drift)
-        m, d = self.model, self.data
+        self.model = m = robot.model
+        # the common case (float arrays of the right sizes, finite, unit quaternions) in
+        # one compiled pass; the naming checks of check_configuration otherwise
+        sizes = robot.__dict__.get("_state_sizes")      # RobotModel.state_sizes, cached
+        if sizes is None or sizes[0] is not m:
+            sizes = robot.state_sizes()
+        unit = sizes[3]
+        if (q.__class__ is _NDARRAY and v.__class__ is _NDARRAY and q.dtype is _F64
+                and v.dtype is _F64 and q.shape == sizes[4] and v.shape == sizes[5]):
+            qc = q.copy()
+            vc = v.copy()
+            if not _state_is_valid(qc, vc, unit, UNIT_NORM_TOL):
+                qc, vc = check_configuration(robot, q), check_velocity(robot, v)
+        else:
+            qc, vc = check_configuration(robot, q), check_velocity(robot, v)
+        self.q = qc
+        self.v = vc
+        self.data = d = data if data is not None else m.createData()
+        self.has_drift = drift = bool(drift)
         # one forward pass (at q̈ = 0 for the drifts); the Jacobians, frames and the
-        # centre of mass are then read from it (was three passes: 9.5 -> 4.6 µs on G1)
-        if self.has_drift:
-            pin.forwardKinematics(m, d, self.q, self.v, np.zeros(robot.nv))
+        # centre of mass are then read from it
+        if drift:
+            pin.forwardKinematics(m, d, qc, vc, np.zeros(vc.shape[0]))
             pin.computeJointJacobians(m, d)
             pin.centerOfMass(m, d, pin.KinematicLevel.ACCELERATION, False)
             self.acom_drift = np.array(d.acom[0])
         else:
-            pin.computeJointJacobians(m, d, self.q)     # placements and Jacobians
-            self.acom_drift = None
-        pin.updateFramePlacements(m, d)
-        self._com_ready = False       # data.Jcom and data.com[0]: on first use
-        self._cache: dict = {}
+            _joint_jacobians(m, d, qc)     # placements and Jacobians
+        _frame_placements(m, d)
+        self._cache: dict = {}        # copies of what is read from data, on first use
+
+    #: data.Jcom and data.com[0] computed for this state (on first use)
+    _com_ready = False
+    #: ``J̇_com q̇`` (3), ``None`` from a ``drift=False`` state
+    acom_drift = None
 
     def ensure_com(self) -> None:
         """Compute ``data.Jcom`` and ``data.com[0]`` once for this state (the writers of

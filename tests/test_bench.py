@@ -180,6 +180,40 @@ def test_ratios_are_the_quotients_of_the_medians():
     assert own.value == pytest.approx(50.0 / 80.0) and math.isinf(own.target)
 
 
+def test_solve_overhead_and_row_writing_rows_are_the_measured_times():
+    ik = {"solve_overhead": {"g1": {"solve_us": 12.0, "kernel_us": 10.5, "overhead_us": 1.5},
+                             "panda": {"solve_us": 4.0, "kernel_us": 1.5, "overhead_us": 2.5}},
+          "rows": {"none": {"write_us": 8.0, "rows": 46},
+                   "bounds": {"write_us": 11.0, "rows": 75}}}
+    got = {r.name: r for r in ratios([], {}, ik)}
+
+    def named(*parts):
+        (hit,) = [r for name, r in got.items() if all(p in name for p in parts)]
+        return hit
+    g1 = named("prepared.solve overhead", "G1")
+    assert g1.value == 1.5 and g1.target == 2.0 and g1.met == "yes"
+    panda = named("prepared.solve overhead", "Panda")
+    assert panda.value == 2.5 and panda.met == "no"
+    rows = named("G1 fencing rows", "five fencing tasks")
+    assert rows.value == 8.0 and rows.target == 10.0 and rows.met == "yes"
+    assert named("G1 fencing rows", "bounds").value == 11.0
+    empty = {r.name: r for r in ratios([], {}, {"placo_step_us": 1.0})}
+    assert all(math.isnan(r.value) for name, r in empty.items()
+               if "overhead" in name or "fencing rows" in name)
+
+
+def test_solve_overhead_times_the_public_call_and_its_kernel_on_the_same_rows():
+    import prioik
+    from prioik.benchmarks import solve_overhead
+    solver, datas = solve_overhead.panda_rows(states=3)
+    r = solve_overhead.solve_overhead(solver, datas, rounds=1, calls=5)
+    assert set(r) >= {"solve_us", "kernel_us", "overhead_us"}
+    assert r["overhead_us"] == pytest.approx(r["solve_us"] - r["kernel_us"])
+    lapack = prioik.prepare(solver.layout, "extended_jacobian", kernel="lapack")
+    with pytest.raises(RuntimeError, match="compiled"):
+        solve_overhead.solve_overhead(lapack, datas, rounds=1, calls=5)
+
+
 def test_missing_measurements_give_nan_not_a_number():
     got = ratios([_row("g1 compatible", "extended_jacobian", 20.0)], {}, {})
     for r in got:

@@ -276,3 +276,18 @@ def test_from_urdf_names_bad_arguments(tmp_path):
         from_urdf(bad)
     with pytest.raises(ValueError, match="base quaternion"):
         from_urdf(plain, floating_base=True, q0=np.zeros(8))
+
+
+def test_state_sizes_follow_a_replaced_model():
+    """The cached sizes and unit-norm parts (read every control step) are those of the
+    model the robot holds now."""
+    robot = spatial_chain(3)
+    assert (robot.nq, robot.nv) == (3, 3) and robot.state_sizes()[3].size == 0
+    robot.model = sample_humanoid().model          # a free flyer: a quaternion at q[3:7]
+    nq, nv = robot.model.nq, robot.model.nv
+    assert (robot.nq, robot.nv) == (nq, nv)
+    assert robot.state_sizes()[3].tolist() == [3, 4]
+    q = pin.neutral(robot.model)
+    q[3:7] = 0.0
+    with pytest.raises(models.StateError, match="quaternion"):
+        KinematicState(robot, q, np.zeros(nv))

@@ -128,6 +128,36 @@ def test_every_frame_and_com_writer_matches_pinocchios_formulas(robot, mode, see
     assert _close(b, _targets(Jp, v, e, np.zeros(29), np.zeros(29), np.zeros(29), g))
 
 
+@pytest.mark.parametrize("mode", ["velocity", "acceleration"])
+def test_a_fixed_position_target_zeroes_the_rates_of_the_previous_step(robot, mode):
+    """frame_position / point without ẋ*, ẍ* (their own compiled writer) after a step
+    with them: the rows are those of zero rates, at both levels."""
+    accel = mode == "acceleration"
+    g = {"velocity": 3.0, "acceleration": (25.0, 10.0)}[mode]
+    off = np.array([0.1, -0.05, 0.2])
+    w = TaskWriter(robot, mode)
+    w.add_frame_position("tip", "sword_tip", gain=g, level=0)
+    w.add_point("point", "left_hand", off, gain=g, level=1)
+    rng = np.random.default_rng(7)
+    x, xd, xdd = rng.normal(size=(3, 3))
+    before = _state(robot, 1, drift=accel)
+    w.frame_position(before, "tip", x, xd, xdd)
+    w.point(before, "point", x, xd, xdd)
+    state = _state(robot, 2, drift=accel)
+    w.frame_position(state, "tip", x)
+    w.point(state, "point", list(x))            # converted like any reference
+    data = w.targets(state)
+    zero = np.zeros(3)
+    for name, frame, o in (("tip", "sword_tip", zero), ("point", "left_hand", off)):
+        J, p, _, drift = _ref_frame(state, frame, o)
+        d = None if drift is None else drift[:3]
+        A, b = data.rows(name)
+        assert _close(A, J[:3]), name
+        assert _close(b, _targets(J[:3], state.v, x - p, zero, zero, d, g), 1e-10), name
+        rows = w.layout.task_slice(name)
+        assert not w.velocity_ref[rows].any() and not w.feedforward[rows].any()
+
+
 @pytest.mark.parametrize("seed", range(2))
 def test_builders_work_at_both_levels_and_are_the_writers_rows(robot, seed):
     """The one-off builders from a drift-free state (velocity level) give the same

@@ -313,6 +313,33 @@ def test_kinematic_state_refuses_a_bad_state(change, message):
         KinematicState(robot, q, v)
 
 
+@pytest.mark.parametrize("change, message", [
+    (lambda q, v: q.__setitem__(2, np.nan), r"q holds non-finite values at entries \[2\]"),
+    (lambda q, v: v.__setitem__(8, -np.inf), r"v holds non-finite values at entries \[8\]"),
+])
+def test_kinematic_state_of_a_fixed_base_arm_refuses_a_bad_state(change, message):
+    """The Panda (no unit-norm part: the compiled check alone decides) names the entry."""
+    from prioik.robots import panda
+    robot = panda()
+    q, v = robot.q0.copy(), np.zeros(robot.nv)
+    change(q, v)
+    with pytest.raises(StateError, match=message):
+        KinematicState(robot, q, v, drift=False)
+
+
+def test_kinematic_state_copies_its_state_and_reads_any_sequence():
+    robot, q, v = _g1_state()
+    state = KinematicState(robot, q, v, drift=False)
+    q[10] += 1.0
+    v[3] = 5.0
+    assert state.q[10] == robot.q0[10] and state.v[3] == 0.0
+    listed = KinematicState(robot, robot.q0.tolist(), [0] * robot.nv, drift=False)
+    assert np.array_equal(listed.q, robot.q0) and listed.v.dtype == np.float64
+    assert np.array_equal(listed.data.oMf[3].homogeneous,
+                          KinematicState(robot, robot.q0, v * 0, drift=False).data.oMf[3]
+                          .homogeneous)
+
+
 @pytest.mark.parametrize("q, v", [(np.zeros(35), np.zeros(35)), (None, np.zeros(34))])
 def test_kinematic_state_refuses_wrong_sizes(q, v):
     robot, q0, _ = _g1_state()

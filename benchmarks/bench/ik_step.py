@@ -1,7 +1,10 @@
 """The whole IK step (kinematics + rows + solve) against PlaCo: G1 fencing, Panda reach,
 and hierarchical_active_set with joint limits as bounds (the lead's modules
 :mod:`~prioik.benchmarks.placo_step`, :mod:`~prioik.benchmarks.panda_step`,
-:mod:`~prioik.benchmarks.active_set_bench` measure; this module runs them)."""
+:mod:`~prioik.benchmarks.active_set_bench` measure; this module runs them), with two
+parts of the step on their own: ``prepared.solve``'s cost on top of its compiled kernel
+(:mod:`~prioik.benchmarks.solve_overhead`) and writing the G1 fencing rows without the
+references (:mod:`~prioik.benchmarks.row_writing`)."""
 
 from __future__ import annotations
 
@@ -37,6 +40,22 @@ def measure_ik_step(settings: Settings, progress: Progress | None = None
         out["panda"] = panda_step_times(settings.ik_steps)
     except (ImportError, FileNotFoundError, RuntimeError) as exc:
         out["panda_error"] = f"{type(exc).__name__}: {exc}"
+    # the issue's two Python-cost targets: prepared.solve on top of its compiled kernel,
+    # and writing the G1 fencing rows without the references (computed beforehand)
+    from prioik.benchmarks import row_writing, solve_overhead
+    sizes = dict(rounds=2, calls=200) if settings.quick else {}
+    try:
+        out["solve_overhead"] = {
+            "g1": solve_overhead.solve_overhead(*solve_overhead.fencing_rows(), **sizes),
+            "panda": solve_overhead.solve_overhead(*solve_overhead.panda_rows(), **sizes)}
+    except (ImportError, FileNotFoundError, RuntimeError) as exc:
+        out["solve_overhead_error"] = f"{type(exc).__name__}: {exc}"
+    try:
+        steps = dict(n_steps=50, repeats=2) if settings.quick else {}
+        out["rows"] = {limits: row_writing.time_fencing_rows(limits=limits, **steps)
+                       for limits in ("none", "bounds")}
+    except (ImportError, FileNotFoundError, RuntimeError) as exc:
+        out["rows_error"] = f"{type(exc).__name__}: {exc}"
     # hierarchical_active_set with joint limits as bounds: the G1 bounds stacks (cold,
     # warm, DAQP's raw call, cascaded_qp[daqp]) and the like-for-like IK steps with limits
     from prioik.benchmarks import active_set_bench

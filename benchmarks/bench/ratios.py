@@ -93,6 +93,21 @@ def ratios(rows: list[TimingRow], batch: dict[str, Any], ik: dict[str, Any]) -> 
         a, b = panda.get(key, math.nan), panda.get("placo_step_us", math.nan)
         out.append(Ratio(name, a / b, target, f"{a:.1f} / {b:.1f} µs" if panda
                          else "not measured"))
+    overhead = ik.get("solve_overhead", {}) if ik else {}
+    for key, what in (("g1", "G1 fencing rows"), ("panda", "Panda reach rows")):
+        r = overhead.get(key)
+        out.append(Ratio(f"prepared.solve overhead on top of the compiled kernel (µs), {what}",
+                         r["overhead_us"] if r else math.nan, 2.0,
+                         f"{r['solve_us']:.2f} − {r['kernel_us']:.2f} µs" if r
+                         else "not measured"))
+    written = ik.get("rows", {}) if ik else {}
+    for key, what, target in (("none", "the five fencing tasks", 10.0),
+                              ("bounds", "plus joint-limit bounds", math.inf)):
+        r = written.get(key)
+        out.append(Ratio(f"Writing the G1 fencing rows per step, references excluded (µs), "
+                         f"{what}", r["write_us"] if r else math.nan, target,
+                         f"{r['rows']} rows (benchmarks/row_writing.py)" if r
+                         else "not measured"))
     if ik and "references_us" in ik:
         # the minimum-jerk references are the same Python in all three steps
         r = ik["references_us"]

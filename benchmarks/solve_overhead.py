@@ -1,0 +1,142 @@
+"""What :meth:`PreparedSolver.solve` costs on top of the compiled kernel it calls.
+
+A prepared ``extended_jacobian`` solve is one call of the compiled kernel
+(``formulations/_extended_jacobian_kernel.py`` ``solve_data``) plus the Python around
+it: the layout check, the one-thread-at-a-time guard, the timing and the
+:class:`~prioik.formulations.Solution` (the plugin's ``Outcome``, ``info``, residuals).
+Both are timed here on the same rows, in interleaved rounds: ``solver.solve(data)``
+(the public call) and the kernel called directly on the solver's own workspaces (the
+floor; a measurement only, nothing else calls the kernel this way). The overhead is
+the difference of the two medians.
+
+Run: ``python -m prioik.benchmarks.solve_overhead`` (the Panda reach and G1 fencing
+rows at a few states).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from typing import Any, Sequence
+
+import numpy as np
+
+__all__ = ["solve_overhead", "panda_rows", "fencing_rows"]
+
+
+def solve_overhead(solver, datas: Sequence, rounds: int = 7, calls: int = 2000
+                   ) -> dict[str, Any]:
+    """Medians (µs) of ``solver.solve(data)`` and of its compiled kernel alone.
+
+    Args:
+        solver: A prepared ``extended_jacobian`` solver on its compiled path.
+        datas: :class:`~prioik.hierarchy.StackData` of the solver's layout, cycled
+            through (the same ones for both calls).
+        rounds: Interleaved rounds (the machine is shared): per call, the lowest
+            round median is kept.
+        calls: Calls per round.
+
+    Returns:
+        ``{"solve_us", "kernel_us", "overhead_us", "rounds", "calls"}``.
+
+    Raises:
+        RuntimeError: the solver is not on the compiled path, or the two calls give
+            different answers.
+    """
+    from prioik.formulations import _extended_jacobian_kernel as kernel
+
+    impl = solver._impl
+    if solver.formulation != "extended_jacobian" or not getattr(impl, "compiled", False):
+        raise RuntimeError(f"{solver!r} is not on the compiled extended_jacobian path")
+    work, iwork, size = impl._work, impl._iwork, impl._out_size
+    out = np.empty(size)
+    n = solver.layout.n
+    for d in datas:                         # the same answers, bit for bit
+        code = kernel.solve_data(d.A, d.b, d.sqrt_weight, work, out, iwork)
+        x = solver.solve(d).x
+        if code & 3 != 1 or not np.array_equal(out[:n], x):
+            raise RuntimeError("the kernel and solver.solve disagree")
+    N = len(datas)
+    clock = time.perf_counter
+
+    def public(i: int) -> None:
+        solver.solve(datas[i % N])
+
+    def floor(i: int) -> None:
+        d = datas[i % N]
+        kernel.solve_data(d.A, d.b, d.sqrt_weight, work, np.empty(size), iwork)
+
+    best = {"solve": np.inf, "kernel": np.inf}
+    for _ in range(rounds):
+        for name, call in (("solve", public), ("kernel", floor)):
+            times = np.empty(calls)
+            for i in range(calls):
+                t0 = clock()
+                call(i)
+                times[i] = clock() - t0
+            best[name] = min(best[name], float(np.median(times)))
+    return {"solve_us": best["solve"] * 1e6, "kernel_us": best["kernel"] * 1e6,
+            "overhead_us": (best["solve"] - best["kernel"]) * 1e6,
+            "rounds": rounds, "calls": calls}
+
+
+def panda_rows(states: int = 20, seed: int = 0) -> tuple[Any, list]:
+    """The Panda reach's prepared solver and its rows (:mod:`.panda_step`'s tasks) at
+    ``states`` configurations near ``q0``."""
+    import prioik
+    from prioik.robots import KinematicState, TaskWriter, load
+
+    from .panda_step import GAINS, HAND_TARGET
+    robot = load("panda")
+    rows = TaskWriter(robot, "velocity")
+    rows.add_frame_position("hand", robot.frames["hand"], gain=GAINS["hand"], level=0)
+    rows.add_posture("posture", gain=GAINS["posture"], level=1)
+    solver = prioik.prepare(rows.layout, "extended_jacobian")
+    rng = np.random.default_rng(seed)
+    data, zero, datas = robot.data(), np.zeros(robot.nv), []
+    for _ in range(states):
+        q = robot.q0 + rng.uniform(-0.1, 0.1, robot.nq)
+        state = KinematicState(robot, q, zero, data, drift=False)
+        rows.frame_position(state, "hand", HAND_TARGET)
+        rows.posture(state, "posture", robot.q0)
+        datas.append(rows.targets(state).copy())
+    return solver, datas
+
+
+def fencing_rows(states: int = 20, seed: int = 0) -> tuple[Any, list]:
+    """The G1 fencing step's prepared solver and its velocity rows
+    (:meth:`~prioik.robots.fencing.FencingScenario.velocity_rows`, the five tasks of
+    :mod:`.placo_step`) at ``states`` perturbed standing states."""
+    import prioik
+    from prioik.robots import KinematicState
+    from prioik.robots.fencing import FencingScenario
+
+    from .placo_step import DT, GAIN
+    scenario = FencingScenario("compatible")
+    robot = scenario.robot
+    rows = scenario.velocity_rows(GAIN)
+    solver = prioik.prepare(rows.layout, "extended_jacobian")
+    rng = np.random.default_rng(seed)
+    data, datas = robot.data(), []
+    for i in range(states):
+        q = robot.q0.copy()
+        q[7:] += rng.uniform(-0.1, 0.1, robot.nq - 7)
+        state = KinematicState(robot, q, np.zeros(robot.nv), data, drift=False)
+        datas.append(scenario.write_rows(rows, state, 50 * i * DT).copy())
+    return solver, datas
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rounds", type=int, default=7)
+    parser.add_argument("--calls", type=int, default=2000)
+    args = parser.parse_args(argv)
+    for label, make in (("Panda reach", panda_rows), ("G1 fencing", fencing_rows)):
+        r = solve_overhead(*make(), rounds=args.rounds, calls=args.calls)
+        print(f"{label}: solver.solve {r['solve_us']:.2f} µs, kernel {r['kernel_us']:.2f} µs, "
+              f"overhead {r['overhead_us']:.2f} µs (lowest of {args.rounds} round medians "
+              f"of {args.calls} calls)")
+
+
+if __name__ == "__main__":
+    main()
