@@ -210,10 +210,41 @@ class Prepared:
         ok = _kernel.solve_data(data.A, data.b, data.lower, data.upper, data.sqrt_weight,
                                 self._fwork, self._iwork, self._bwork)
         if not ok:
-            self.warm_valid[:] = 0
-            data.check()     # names the task, level and row at fault
-            raise TaskStackError("the rows' values overflow float64: scale the tasks down")
+            self._fault(data)
         return self._outcome()
+
+    def solve_checked(self, data: StackData) -> tuple | Outcome:
+        """:meth:`solve`, its common case (settled, finite, every rank decision clear,
+        every box row resolved) as the tuple ``(x, "optimal", info, residuals)`` of a
+        checked :class:`Outcome` without the object (see :mod:`formulations.prepared`).
+
+        Raises:
+            TaskStackError: as :meth:`solve`.
+        """
+        ok = _kernel.solve_data(data.A, data.b, data.lower, data.upper, data.sqrt_weight,
+                                self._fwork, self._iwork, self._bwork)
+        if not ok:
+            self._fault(data)
+        xn, flag, infeasible, ambiguous, unresolved = self._summary.tolist()
+        if flag == 0.0 and ambiguous == 0.0 and unresolved == 0.0:
+            n, k = self._n, self._k
+            out = self._out.copy()
+            counts = self._counts.copy()
+            residuals = out[n + k:]
+            if infeasible:
+                tol = self.primal_tol * max(1.0, xn)
+                infeasible = [i for i, r in enumerate(residuals.tolist()) if r > tol]
+            return (out[:n], "optimal",
+                    {"iterations": counts[0], "rank_profile": counts[2, :k],
+                     "level_violation": out[n:n + k], "infeasible_levels": infeasible or [],
+                     "warm_start": self.warm_start}, residuals)
+        return self._outcome()
+
+    def _fault(self, data: StackData) -> None:
+        """The kernel refused the data: forget the warm start and name the fault."""
+        self.warm_valid[:] = 0
+        data.check()     # names the task, level and row at fault
+        raise TaskStackError("the rows' values overflow float64: scale the tasks down")
 
     def _outcome(self) -> Outcome:
         n, k = self._n, self._k
