@@ -109,6 +109,8 @@ class _Task:
     dt: float = 0.0
     activation: JointLimitActivation | None = None
     width: np.ndarray | None = None      # activation margins per joint
+    limits: np.ndarray | None = None     # bounds: lo, hi, q̇_max (3 × n_a, fixed)
+    bound_params: np.ndarray | None = None   # bounds: start, T, dt, flags (at _fix)
 
 
 class TaskWriter:
@@ -256,6 +258,9 @@ class TaskWriter:
         task.form = form
         task.position, task.velocity = bool(position), bool(velocity)
         task.horizon, task.dt = float(T), float(dt)
+        _, _, vmax = self._joint_limits()
+        task.limits = np.ascontiguousarray(np.vstack([lo, hi, vmax]), dtype=np.float64)
+        task.limits.setflags(write=False)
 
     def _add_frame(self, name, frame, kind, rows, gain, level, weight, offset) -> None:
         fid = self.robot.frame_id(frame)              # KeyError naming a missing frame
@@ -346,6 +351,11 @@ class TaskWriter:
                 task.spec = np.array([sl.start, _FRAME_MODES[task.kind], not self._accel,
                                       *task.cols], dtype=np.int64)
                 task.spec.setflags(write=False)
+            elif task.kind == "limits" and task.form != "activation":
+                task.bound_params = np.array([sl.start, task.horizon, task.dt,
+                                              task.position, task.velocity, self._accel],
+                                             dtype=np.float64)
+                task.bound_params.setflags(write=False)
             data.sqrt_weight[sl] = np.sqrt(task.weight)
             if task.kind != "limits" or task.form == "bounds":
                 self._Q[_k.KP, sl] = task.kp
@@ -484,22 +494,18 @@ class TaskWriter:
         """The joint-limit rows at ``state``: activation rows (returns how many are
         active) or bounds (``data.lower``/``upper``; returns the row count)."""
         task = self._task(name, "limits")
+        data = self._data
+        if task.form != "activation":
+            _k.bounds_at(data.lower, data.upper, state.q, state.v, self._q_index,
+                         task.limits, task.bound_params)
+            return task.rows
         lo, hi, vmax = self._joint_limits()
         qa = self._qa
         _k.actuated_positions(state.q, self._q_index, qa)
         va = state.v[self.robot.n_base:]
-        data = self._data
-        if task.form == "activation":
-            return int(_k.limit_activation_rows(data.A, self._Q, task.start,
-                                                self.robot.n_base, qa, va, lo, hi,
-                                                task.width, task.kp, task.kd))
-        if self._accel:
-            _k.acceleration_bounds(data.lower, data.upper, task.start, qa, va, lo, hi, vmax,
-                                   task.horizon, task.dt, task.position, task.velocity)
-        else:
-            _k.velocity_bounds(data.lower, data.upper, task.start, qa, lo, hi, vmax,
-                               task.horizon, task.position, task.velocity)
-        return task.rows
+        return int(_k.limit_activation_rows(data.A, self._Q, task.start,
+                                            self.robot.n_base, qa, va, lo, hi,
+                                            task.width, task.kp, task.kd))
 
     # ------------------------------------------------------------------ targets
     def targets(self, state) -> StackData:
