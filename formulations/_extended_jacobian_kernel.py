@@ -268,14 +268,15 @@ def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
                     np.empty((M, n)), np.empty(M))
 
 
-@njit(cache=True, fastmath=_FAST)
+@njit(cache=True, fastmath=_FAST, inline="always")
 def solve_kernel_ws(B, c, starts, scales, rcond, level_damping, singular_threshold,
                     step_bound, x, ranks, level_mu2, margins, V, beta, pos, y, norms, L,
                     rhs):
     """:func:`solve_kernel` with its scratch arrays given (a prepared solver owns them:
     no allocation per solve). ``V`` (``n × n``: reflector ``j`` in ``V[j, pos_j:]``),
     ``beta``, ``pos`` (int), ``y`` (``n``), ``norms``, ``rhs`` (``M``), ``L``
-    (``M × n``); their contents on entry do not matter."""
+    (``M × n``); their contents on entry do not matter. Inlined into its callers (the
+    call of a function of 19 arguments cost the G1 solve ~0.3 µs, the Panda's ~0.1)."""
     M, n = B.shape
     k = starts.shape[0] - 1
     margin = np.empty(1)
