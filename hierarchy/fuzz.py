@@ -24,6 +24,7 @@ same rank decisions) and the exact answer is finite in float64.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 
@@ -123,9 +124,30 @@ def equality_case(rng: np.random.Generator, seed: int = -1, *, max_n: int = 60,
     """
     n = int(rng.integers(1, max_n + 1))
     k = int(rng.integers(1, max_levels + 1))
+
+    def task(name: str, A: np.ndarray, feature: str) -> Task:
+        m = A.shape[0]
+        scale = _log_uniform(rng, 1e-12, 1e8) if rng.random() < 0.5 else 1.0
+        b = rng.standard_normal(m)
+        if feature == "conflict" or rng.random() < 0.5:
+            b = b * scale           # targets on the rows' scale (else unit targets)
+        weight = _log_uniform(rng, 1e-6, 1e6) if rng.random() < 0.3 else 1.0
+        return Task(name, scale * A, b, weight=weight)
+
+    levels, features = _equality_levels(rng, n, range(k), max_rows, task)
+    return judged(TaskStack(levels), seed, features) if truth else \
+        FuzzCase(TaskStack(levels), seed, "equality", features)
+
+
+def _equality_levels(rng: np.random.Generator, n: int, indices: range, max_rows: int,
+                     task: Callable[[str, np.ndarray, str], Task]
+                     ) -> tuple[list[list[Task]], list[list[str]]]:
+    """Equality levels ``indices`` of ``n`` columns: per level one task (or 2-3), each of
+    1 to ``max_rows`` rows of a random row feature (:func:`_task_rows`, relative to the
+    rows above); ``task(name, A, feature)`` draws its scale, targets and weight."""
     levels, features = [], []
     above = np.zeros((0, n))
-    for i in range(k):
+    for i in indices:
         n_tasks = 1 if rng.random() < 0.7 else int(rng.integers(2, 4))
         tasks, feats, new_rows = [], [], []
         for j in range(n_tasks):
@@ -133,18 +155,12 @@ def equality_case(rng: np.random.Generator, seed: int = -1, *, max_n: int = 60,
             feature = ROW_FEATURES[int(rng.integers(len(ROW_FEATURES)))]
             A = _task_rows(rng, feature, m, n, above)
             new_rows.append(A)
-            scale = _log_uniform(rng, 1e-12, 1e8) if rng.random() < 0.5 else 1.0
-            b = rng.standard_normal(m)
-            if feature == "conflict" or rng.random() < 0.5:
-                b = b * scale           # targets on the rows' scale (else unit targets)
-            weight = _log_uniform(rng, 1e-6, 1e6) if rng.random() < 0.3 else 1.0
-            tasks.append(Task(f"l{i}t{j}", scale * A, b, weight=weight))
+            tasks.append(task(f"l{i}t{j}", A, feature))
             feats.append(feature)
         above = np.vstack([above] + new_rows)
         levels.append(tasks)
         features.append(feats)
-    return judged(TaskStack(levels), seed, features) if truth else \
-        FuzzCase(TaskStack(levels), seed, "equality", features)
+    return levels, features
 
 
 def judged(stack: TaskStack, seed: int = -1, features: list[list[str]] | None = None
@@ -301,23 +317,13 @@ def bounds_case(rng: np.random.Generator, seed: int = -1, *, max_n: int = 30,
     A[np.arange(m), cols] = c
     lower = np.where(c > 0, c * lo_x, c * up_x)
     upper = np.where(c > 0, c * up_x, c * lo_x)
-    levels = [[Task("box", A, lower=lower, upper=upper)]]
-    features = [["bounds"]]
-    above = np.zeros((0, n))
-    for i in range(1, k + 1):
-        n_tasks = 1 if rng.random() < 0.7 else int(rng.integers(2, 4))
-        tasks, feats, new_rows = [], [], []
-        for j in range(n_tasks):
-            rows = int(rng.integers(1, max_rows + 1))
-            feature = ROW_FEATURES[int(rng.integers(len(ROW_FEATURES)))]
-            Ai = _task_rows(rng, feature, rows, n, above)
-            new_rows.append(Ai)
-            scale = _log_uniform(rng, 1e-6, 1e4) if rng.random() < 0.3 else 1.0
-            weight = _log_uniform(rng, 1e-3, 1e3) if rng.random() < 0.3 else 1.0
-            tasks.append(Task(f"l{i}t{j}", scale * Ai, scale * rng.standard_normal(rows),
-                              weight=weight))
-            feats.append(feature)
-        above = np.vstack([above] + new_rows)
-        levels.append(tasks)
-        features.append(feats)
-    return FuzzCase(TaskStack(levels), seed, "bounds", features)
+
+    def task(name: str, Ai: np.ndarray, feature: str) -> Task:
+        scale = _log_uniform(rng, 1e-6, 1e4) if rng.random() < 0.3 else 1.0
+        weight = _log_uniform(rng, 1e-3, 1e3) if rng.random() < 0.3 else 1.0
+        return Task(name, scale * Ai, scale * rng.standard_normal(Ai.shape[0]),
+                    weight=weight)
+
+    levels, features = _equality_levels(rng, n, range(1, k + 1), max_rows, task)
+    return FuzzCase(TaskStack([[Task("box", A, lower=lower, upper=upper)]] + levels), seed,
+                    "bounds", [["bounds"]] + features)
