@@ -1048,17 +1048,32 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
         f = betaf[tf] * _dot(vx, xq)
         for c in range(n - q):
             xq[c] -= f * vx[c]
-    # a box row held at its bound puts x_c on it exactly when it is off only by the
-    # reflectors' rounding (eps ‖x‖ in every coordinate: not small for a bounded joint
-    # when another level drives ‖x‖ to 1e10, the row then reads as off by 1e-5); a row
-    # of the last level off by its least-squares slack keeps it
+    # box rows, one pass. x's coordinates are known to about X_PRECISION ‖x‖ (the
+    # reflectors round every coordinate to eps ‖x‖: not small for a bounded joint when
+    # another level drives ‖x‖ to 1e10, a held row then reads as off by 1e-5). A held
+    # row off its bound by no more than that is put on it exactly (a row of the last
+    # level off by its least-squares slack keeps it); a row near a bound whose primal
+    # tolerance is finer than that precision is counted as unresolved (whether it is
+    # held is then rounding)
     xn = np.sqrt(_dot(x, x))
+    unresolved = 0
     for j in range(M):
         c = ucol[j]
-        if c >= 0 and (state[j] == 1 or state[j] == -1):
+        if c < 0:
+            continue
+        a = Bo[j, c]
+        precision = X_PRECISION * xn * abs(a)
+        if state[j] == 1 or state[j] == -1:
             bound = bup[j] if state[j] == 1 else blo[j]
-            if abs(Bo[j, c] * x[c] - bound) <= X_PRECISION * xn * abs(Bo[j, c]):
-                x[c] = bound / Bo[j, c]
+            if abs(a * x[c] - bound) <= precision:
+                x[c] = bound / a
+        ax = a * x[c]
+        for bound in (blo[j], bup[j]):
+            if np.isfinite(bound):
+                tol = _tol(primal_tol, _size(Bo, ucol, j, rnorm[j], xn, x), bound)
+                if precision > tol and abs(ax - bound) <= precision + tol:
+                    unresolved += 1
+                    break
     # each level's weighted squared violation at x
     total = 0.0
     for lev in range(k):
@@ -1092,22 +1107,6 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
         if margins[lev] <= _AMBIGUITY:
             ambiguous += 1
     fwork[8] = ambiguous
-    # box rows near a bound that x cannot resolve: its coordinates are known to about
-    # eps ‖x‖ (the reflectors), coarser than the row's primal tolerance when another
-    # level drives ‖x‖ far above the box (whether the row is held is then rounding)
-    unresolved = 0
-    for j in range(M):
-        c = ucol[j]
-        if c < 0:
-            continue
-        ax = Bo[j, c] * x[c]
-        precision = X_PRECISION * xn * abs(Bo[j, c])
-        for bound in (blo[j], bup[j]):
-            if np.isfinite(bound):
-                tol = _tol(primal_tol, _size(Bo, ucol, j, rnorm[j], xn, x), bound)
-                if precision > tol and abs(ax - bound) <= precision + tol:
-                    unresolved += 1
-                    break
     fwork[9] = unresolved
     return True
 

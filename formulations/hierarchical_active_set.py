@@ -207,10 +207,7 @@ class Prepared:
         Raises:
             TaskStackError: a value is not valid (naming the task, level and row).
         """
-        ok = _kernel.solve_data(data.A, data.b, data.lower, data.upper, data.sqrt_weight,
-                                self._fwork, self._iwork, self._bwork)
-        if not ok:
-            self._fault(data)
+        self._run(data)
         return self._outcome()
 
     def solve_checked(self, data: StackData) -> tuple | Outcome:
@@ -221,32 +218,19 @@ class Prepared:
         Raises:
             TaskStackError: as :meth:`solve`.
         """
-        ok = _kernel.solve_data(data.A, data.b, data.lower, data.upper, data.sqrt_weight,
-                                self._fwork, self._iwork, self._bwork)
-        if not ok:
-            self._fault(data)
-        xn, flag, infeasible, ambiguous, unresolved = self._summary.tolist()
-        if flag == 0.0 and ambiguous == 0.0 and unresolved == 0.0:
-            n, k = self._n, self._k
-            out = self._out.copy()
-            counts = self._counts.copy()
-            residuals = out[n + k:]
-            if infeasible:
-                tol = self.primal_tol * max(1.0, xn)
-                infeasible = [i for i, r in enumerate(residuals.tolist()) if r > tol]
-            return (out[:n], "optimal",
-                    {"iterations": counts[0], "rank_profile": counts[2, :k],
-                     "level_violation": out[n:n + k], "infeasible_levels": infeasible or [],
-                     "warm_start": self.warm_start}, residuals)
-        return self._outcome()
+        self._run(data)
+        return self._outcome(as_tuple=True)
 
-    def _fault(self, data: StackData) -> None:
-        """The kernel refused the data: forget the warm start and name the fault."""
-        self.warm_valid[:] = 0
-        data.check()     # names the task, level and row at fault
-        raise TaskStackError("the rows' values overflow float64: scale the tasks down")
+    def _run(self, data: StackData) -> None:
+        """The kernel on ``data``; when it refuses the data, forget the warm start and
+        name the fault."""
+        if not _kernel.solve_data(data.A, data.b, data.lower, data.upper, data.sqrt_weight,
+                                  self._fwork, self._iwork, self._bwork):
+            self.warm_valid[:] = 0
+            data.check()     # names the task, level and row at fault
+            raise TaskStackError("the rows' values overflow float64: scale the tasks down")
 
-    def _outcome(self) -> Outcome:
+    def _outcome(self, as_tuple: bool = False) -> tuple | Outcome:
         n, k = self._n, self._k
         out = self._out.copy()
         x, w2, residuals = out[:n], out[n:n + k], out[n + k:]
@@ -259,6 +243,8 @@ class Prepared:
                 "level_violation": w2, "infeasible_levels": infeasible or [],
                 "warm_start": self.warm_start}
         if flag == 0.0 and not ambiguous and not unresolved:
+            if as_tuple:
+                return x, "optimal", info, residuals
             return Outcome(x, "optimal", info, residuals=residuals, checked=True)
         if flag == 0.0 and not ambiguous:
             info["reason"] = (f"‖x‖ = {xn:.3g}: x's coordinates are known to about "
