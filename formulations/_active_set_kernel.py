@@ -28,9 +28,12 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from prioik._jit import kernel
+
 from prioik.hierarchy.linalg import AMBIGUITY as _AMBIGUITY
 
-from ._extended_jacobian_kernel import _dot, _small_lstsq, _swap
+from ._extended_jacobian_kernel import (_UNIT_ROWS_GAP, _dot, _small_lstsq_ws, _swap,
+                                        _unit_rows_solve)
 
 #: the same fast-math set as the extended-Jacobian kernel (no finite-math assumption)
 _FAST = {"reassoc", "contract", "nsz", "arcp"}
@@ -92,7 +95,7 @@ def _reflect_row(T, i, q, w, V, beta, nref, first, last):
 
 @njit(cache=True, fastmath=_FAST, inline="always")
 def _eqp(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T, rhs, norms, V, beta,
-         vpos, Lw, p, reach):
+         vpos, Lw, p, reach, flat, tq):
     """One equality-constrained least-squares step from ``y``.
 
     Finds the minimum-norm step ``p`` (free coordinates ``col:``) that keeps the
@@ -223,7 +226,7 @@ def _eqp(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T, rhs, norms, V,
             for i in range(nw):
                 for c in range(rs):
                     Lw[i, c] = T[nh + i, hr + c] if c <= i else 0.0
-            _small_lstsq(Lw, rhs[nh:], nw, rs, 0.0, p, hr)
+            _small_lstsq_ws(Lw, rhs[nh:], nw, rs, 0.0, p, hr, flat, tq)
     # p = H_1 … H_R [u; 0]
     for t in range(nref - 1, -1, -1):
         q = vpos[t]
@@ -340,12 +343,70 @@ def _full_rank_step(B, y, col, rows, nw, tgt, soft_tol, flat, t, norms, perm, p,
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
+def _unit_rows_step(Bo, xc, col, rows, nw, tgt, soft_tol, colrow, p, nf, Vf, betaf, posf,
+                    Zu, G, g):
+    """The step of a level of *unit rows* — ``nw`` working rows, each ``±s e_cᵀ`` in ``x``
+    (one non-zero, the same magnitude ``s``, distinct columns: a posture task of uniform
+    weight) — with no hard row: :func:`_unit_rows_solve` of the extended Jacobian's
+    kernel (a rank-``|U|`` update of the identity instead of bringing the ``nw`` rows
+    through the fixing reflectors and factorizing them: on G1's posture, 29 rows on 18
+    free coordinates below 17 reflectors, a fifth of :func:`_full_rank_step`'s work).
+
+    Returns the level's margin over ``soft_tol`` (``s √g / soft_tol``, a lower bound of
+    the pivots' margin, ``g`` = ``_UNIT_ROWS_GAP``; ``s / soft_tol`` with no uncovered
+    column), or ``-1.0`` — the rows are not such unit rows, ``S Z`` is not far from
+    rank deficient, or the bound is within :data:`~hierarchy.AMBIGUITY` of
+    ``soft_tol`` (``p`` may be written) — and the caller then takes
+    :func:`_full_rank_step`, whose pivots decide. Scratch: ``colrow`` (``n`` ints),
+    ``Zu``, ``G`` (``≥ 2n × n``), ``g`` (``n``)."""
+    n = Bo.shape[1]
+    if not soft_tol > 0.0:       # (as _full_rank_step: no rank rule, no full-rank step)
+        return -1.0
+    s = -1.0
+    for c in range(n):
+        colrow[c] = -1
+    for i in range(nw):
+        Boj = Bo[rows[i]]
+        c1 = -1
+        for c in range(n):
+            if Boj[c] != 0.0:
+                if c1 >= 0:
+                    return -1.0
+                c1 = c
+        if c1 < 0 or colrow[c1] >= 0:
+            return -1.0
+        a = abs(Boj[c1])
+        if s < 0.0:
+            s = a
+        elif a != s:
+            return -1.0
+        colrow[c1] = i
+    # g = Sᵀ t / s², t = tgt − S x
+    for c in range(n):
+        g[c] = 0.0
+        i = colrow[c]
+        if i >= 0:
+            a = Bo[rows[i], c]
+            g[c] = a * (tgt[i] - a * xc[c]) / (s * s)
+    nu = _unit_rows_solve(colrow, g, col, p, nf, Vf, betaf, posf, Zu, G)
+    if nu < 0:
+        return -1.0
+    margin = s * np.sqrt(_UNIT_ROWS_GAP) if nu > 0 else s
+    return margin / soft_tol if margin > _AMBIGUITY * soft_tol else -1.0
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
 def _step(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T, rhs, norms, V, beta,
-          vpos, Lw, p, reach, flat, perm, nrot, nf, Vf, betaf, posf):
-    """:func:`_full_rank_step` when it applies, else :func:`_eqp`; returns
-    ``(hr, rs, nref, full, margin)`` (``margin``: of the soft rows' rank decisions)."""
+          vpos, Lw, p, reach, flat, perm, nrot, nf, Vf, betaf, posf, tq, Bo, xc):
+    """:func:`_unit_rows_step` or :func:`_full_rank_step` when one applies, else
+    :func:`_eqp`; returns ``(hr, rs, nref, full, margin)`` (``margin``: of the soft rows'
+    rank decisions)."""
     d = B.shape[1] - col
     if nh == 0 and nw >= d:
+        margin = _unit_rows_step(Bo, xc, col, rows, nw, tgt, soft_tol, perm, p, nf, Vf,
+                                 betaf, posf, T, Lw, flat[:B.shape[1]])
+        if margin >= 0.0:
+            return 0, d, 0, True, margin
         margin = _full_rank_step(B, y, col, rows, nw, tgt, soft_tol, flat, rhs, norms, perm,
                                  p, nrot, nf, Vf, betaf, posf)
         if margin >= 0.0:
@@ -353,7 +414,7 @@ def _step(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T, rhs, norms, V
     for i in range(nh + nw):
         _bring(B, rows[i], nrot, nf, Vf, betaf, posf)
     hr, rs, nref, margin = _eqp(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T, rhs,
-                                norms, V, beta, vpos, Lw, p, reach)
+                                norms, V, beta, vpos, Lw, p, reach, flat, tq)
     return hr, rs, nref, False, margin
 
 
@@ -500,7 +561,7 @@ def _violated_side(r, lo, up, tol_lo, tol_up):
 #: floats of the ``params`` header of the float workspace
 N_PARAMS = 10
 #: float rows of length ``R`` in the float workspace (``fvec``)
-N_FVEC = 15
+N_FVEC = 16
 
 
 def workspace_offsets(M: int, n: int, k: int) -> dict[str, tuple[int, int]]:
@@ -509,7 +570,7 @@ def workspace_offsets(M: int, n: int, k: int) -> dict[str, tuple[int, int]]:
 
     float64: ``params`` (rcond, primal_tol, dual_tol, max_iter, use_warm), ``B``,
     ``T``, ``Lw``, ``Bo``, ``flat`` (``R × n`` each), ``V``, ``Vf`` (``n × n``), ``fvec``
-    (``15 × R``), ``x`` (``n``), ``w2`` and ``res = √w2`` (``k``), ``margins`` (``k + 1``:
+    (``16 × R``), ``x`` (``n``), ``w2`` and ``res = √w2`` (``k``), ``margins`` (``k + 1``:
     each level's and the tie-break's rank-decision margin); the kernel writes
     ``‖x‖`` into ``params[5]``, into ``params[6]`` ``1`` when an iteration cap was
     hit, ``-1`` when ``x`` or a residual is not finite, and into ``params[7]`` the number
@@ -539,7 +600,7 @@ def workspace_offsets(M: int, n: int, k: int) -> dict[str, tuple[int, int]]:
     return out
 
 
-@njit(cache=True, fastmath=_FAST)
+@kernel(fastmath=_FAST)
 def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     """Solve one stack; see the module docstring.
 
@@ -644,6 +705,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     px = fvec[12, :n]
     xc = fvec[13, :n]
     xs = fvec[14, :n]
+    tq = fvec[15]
     iters = counts[0]
     flags = counts[1]
     ranks = counts[2]
@@ -768,7 +830,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
             hr, rs, nref, full, step_margin = _step(B, y, col, rows, nh, nw, tgt, rnorm,
                                                     rcond, soft_tol, T, rhs, norms, V, beta,
                                                     vpos, Lw, p, True, flat, perm, nrot, nf,
-                                                    Vf, betaf, posf)
+                                                    Vf, betaf, posf, tq, Bo, xc)
             iters[lev] += 1
             for i in range(hr, nh):
                 state[rows[i]] = 0
@@ -826,7 +888,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                 hr, rs, nref, full, step_margin = _step(B, y, col, rows, nh, nw, tgt, rnorm,
                                                         rcond, soft_tol, T, rhs, norms, V,
                                                         beta, vpos, Lw, p, False, flat, perm,
-                                                        nrot, nf, Vf, betaf, posf)
+                                                        nrot, nf, Vf, betaf, posf, tq, Bo, xc)
                 for i in range(hr, nh):
                     state[rows[i]] = 0          # dependent on the kept hard rows
                 pn = np.sqrt(_dot(p[:d], p[:d]))

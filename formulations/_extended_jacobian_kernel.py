@@ -23,6 +23,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from prioik._jit import kernel
+
 from prioik.hierarchy.linalg import AMBIGUITY as _AMBIGUITY
 
 #: LLVM may reassociate and contract (vectorised reductions, FMA) but not assume
@@ -105,16 +107,23 @@ def _back_substitute(Tt, t, r, out, col):
         out[col + j] = acc / Tt[j, j]
 
 
-@njit(cache=True, fastmath=_FAST)
-def _small_lstsq(L, rhs, m, r, mu2, out, col):
-    """min ‖L[:m, :r] z − rhs‖² + mu2 ‖z‖², by Householder QR of [L; √mu2 I].
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _small_lstsq_ws(L, rhs, m, r, mu2, out, col, flat, tbuf):
+    """min ‖L[:m, :r] z − rhs‖² + mu2 ‖z‖², by Householder QR of [L; √mu2 I], into
+    ``out[col:col + r]``, on the scratch ``flat`` (``≥ r (m + r)``) and ``tbuf`` (``≥ m + r``):
+    no allocation, so that a kernel without numba's runtime can inline it.
 
     The matrix is held transposed (``Tt[j]`` is column ``j``) so that every inner
     loop runs over contiguous memory.
     """
     rows = m + r if mu2 > 0.0 else m
-    Tt = np.zeros((r, rows))
-    t = np.zeros(rows)
+    Tt = flat[:r * rows].reshape((r, rows))
+    t = tbuf[:rows]          # (its length is the reflectors' length)
+    for j in range(r):
+        for i in range(rows):
+            Tt[j, i] = 0.0
+    for i in range(rows):
+        t[i] = 0.0
     for i in range(m):
         for j in range(r):
             Tt[j, i] = L[i, j]
@@ -129,6 +138,147 @@ def _small_lstsq(L, rhs, m, r, mu2, out, col):
         if exact > 0.0:
             _reflect_column(Tt, j, t, exact)
     _back_substitute(Tt, t, r, out, col)
+
+
+@njit(cache=True, fastmath=_FAST)
+def _small_lstsq(L, rhs, m, r, mu2, out, col):
+    """:func:`_small_lstsq_ws` on scratch it allocates."""
+    rows = m + r if mu2 > 0.0 else m
+    _small_lstsq_ws(L, rhs, m, r, mu2, out, col, np.empty(r * rows), np.empty(rows))
+
+
+
+#: the unit-rows step is taken only when the smallest eigenvalue of ``I − Z_U Z_Uᵀ``
+#: exceeds this: the normal equations' ``κ²`` is then below ``1 / this`` (their rounding
+#: ~``eps κ²`` relative, 2e-13), else the general path (a column-pivoted QR)
+_UNIT_ROWS_GAP = 1e-3
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _cholesky_lower(G, m):
+    """``G[:m, :m] = L Lᵀ`` in place (the lower triangle read and overwritten by ``L``);
+    ``False`` at a pivot that is not positive (``G`` not positive definite)."""
+    for a in range(m):
+        for b in range(a + 1):
+            acc = G[a, b]
+            for c in range(b):
+                acc -= G[a, c] * G[b, c]
+            if a == b:
+                if not acc > 0.0:
+                    return False
+                G[a, a] = np.sqrt(acc)
+            else:
+                G[a, b] = acc / G[b, b]
+    return True
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _unit_rows_solve(cover, g, col, p, nf, Vf, betaf, posf, Zu, G):
+    """The least-squares step of a level of *unit rows* on the free coordinates.
+
+    The level's rows ``S`` are ``±s e_cᵀ`` in ``x`` (one non-zero each, one magnitude
+    ``s``, distinct columns: a posture task of uniform weight), ``cover[c] < 0`` marks
+    the columns ``U`` no row covers (a floating base). With ``Q = H_0 … H_{nf-1}`` the
+    fixing reflectors (``Vf[t, posf[t]:]``, ``betaf[t]``) and ``Z = Q[:, col:]`` the free
+    directions (orthonormal), ``SᵀS = s² (I − P_U)``, so ``min ‖S Z p − t‖`` solves
+    ``(I − Z_Uᵀ Z_U) p = h``, ``h = Zᵀ g``, ``g = Sᵀ t / s²`` (given, overwritten), ``Z_U``
+    the rows ``U`` of ``Z``: a rank-``|U|`` update of the identity, solved by Woodbury,
+    ``p = h + Z_Uᵀ (I − Z_U Z_Uᵀ)⁻¹ Z_U h``. The reflectors are applied to ``|U| + 1``
+    vectors (``Qᵀ e_u``, ``Qᵀ g``) instead of the level's rows, and nothing of size
+    ``rows × d`` is factorized.
+
+    Taken only when ``I − Z_U Z_Uᵀ − g I`` is positive definite (its Cholesky
+    factorization exists), ``g`` = :data:`_UNIT_ROWS_GAP`: then ``σ_min(S Z) ≥ s √g`` and
+    the normal equations' rounding is ``≲ eps / g`` relative. Writes ``p[:n − col]``;
+    returns ``|U|``, or ``-1`` when the test fails (``p`` may be written). Scratch:
+    ``Zu`` (``≥ |U| × (n − col)``), ``G`` (``≥ max(1, 2|U|) × n``)."""
+    n = Vf.shape[1]
+    d = n - col
+    nu = 0
+    for u in range(n):
+        if cover[u] >= 0:
+            continue
+        z = G[0]                # (G: scratch until the Gram matrix)
+        for c in range(n):
+            z[c] = 0.0
+        z[u] = 1.0
+        for tf in range(nf):
+            q = posf[tf]
+            v = Vf[tf, q:]
+            zq = z[q:]
+            f = betaf[tf] * _dot(v, zq)
+            if f != 0.0:
+                for c in range(n - q):
+                    zq[c] -= f * v[c]
+        for c in range(d):
+            Zu[nu, c] = z[col + c]
+        nu += 1
+    for tf in range(nf):
+        q = posf[tf]
+        v = Vf[tf, q:]
+        gq = g[q:]
+        f = betaf[tf] * _dot(v, gq)
+        if f != 0.0:
+            for c in range(n - q):
+                gq[c] -= f * v[c]
+    for c in range(d):
+        p[c] = g[col + c]
+    if nu == 0:
+        return 0
+    # G = I − Z_U Z_Uᵀ (lower triangle), and below it G − gap·I
+    for a in range(nu):
+        for b in range(a + 1):
+            v = (1.0 if a == b else 0.0) - _dot(Zu[a, :d], Zu[b, :d])
+            G[a, b] = v
+            G[nu + a, b] = v - _UNIT_ROWS_GAP if a == b else v
+    if not _cholesky_lower(G[nu:2 * nu], nu):
+        return -1
+    _cholesky_lower(G, nu)
+    # w = G⁻¹ Z_U h into g[:nu], then p = h + Z_Uᵀ w
+    for a in range(nu):
+        acc = _dot(Zu[a, :d], p[:d])
+        for c in range(a):
+            acc -= G[a, c] * g[c]
+        g[a] = acc / G[a, a]
+    for a in range(nu - 1, -1, -1):
+        acc = g[a]
+        for c in range(a + 1, nu):
+            acc -= G[c, a] * g[c]
+        g[a] = acc / G[a, a]
+    for a in range(nu):
+        wa = g[a]
+        Za = Zu[a]
+        for c in range(d):
+            p[c] += wa * Za[c]
+    return nu
+
+
+@njit(cache=True, inline="always")
+def _unit_rows_of(B, s0, s1, cover):
+    """Whether the rows ``B[s0:s1]`` are unit rows (one non-zero each, of one magnitude,
+    on distinct columns): their magnitude ``s``, else ``-1.0``. ``cover[c]`` is then the
+    row (offset from ``s0``) on column ``c``, ``-1`` where none is."""
+    n = B.shape[1]
+    for c in range(n):
+        cover[c] = -1
+    s = -1.0
+    for i in range(s1 - s0):
+        row = B[s0 + i]
+        c1 = -1
+        for c in range(n):
+            if row[c] != 0.0:
+                if c1 >= 0:
+                    return -1.0
+                c1 = c
+        if c1 < 0 or cover[c1] >= 0:
+            return -1.0
+        a = abs(row[c1])
+        if s < 0.0:
+            s = a
+        elif a != s:
+            return -1.0
+        cover[c1] = i
+    return s
 
 
 @njit(cache=True, fastmath=_FAST)
@@ -279,10 +429,21 @@ def solve_kernel_ws(B, c, starts, scales, rcond, level_damping, singular_thresho
     call of a function of 19 arguments cost the G1 solve ~0.3 µs, the Panda's ~0.1)."""
     M, n = B.shape
     k = starts.shape[0] - 1
-    margin = np.empty(1)
     nref = 0
     y[:] = 0.0            # coordinates no level claims stay 0 (the minimum norm)
     col = 0
+    # A last level of unit rows (a posture of uniform weight, x marking its columns
+    # until x is written) is not rotated with the others: at its turn it is solved by
+    # _unit_rows_solve on its rows as given, or else brought through the reflectors then
+    # (the same operations, in the same order, as rotating it level by level)
+    rot_end = M
+    unit_s = -1.0
+    if (k > 0 and rcond > 0.0 and step_bound[k - 1] <= 0.0
+            and not (level_damping > 0.0 and singular_threshold > 0.0)
+            and starts[k - 1] < M):
+        unit_s = _unit_rows_of(B, starts[k - 1], M, x)
+        if unit_s > 0.0:
+            rot_end = starts[k - 1]
     for lev in range(k):
         s0 = starts[lev]
         s1 = starts[lev + 1]
@@ -293,6 +454,49 @@ def solve_kernel_ws(B, c, starts, scales, rcond, level_damping, singular_thresho
         if m == 0 or col >= n:
             continue
         tol = rcond * scales[lev]
+        if lev == k - 1 and rot_end < M:          # the deferred unit-row level's turn
+            d = n - col
+            nu = n - m
+            if m >= d and nu + max(1, 2 * nu) <= M:
+                xp = rhs[:n]                      # x of the levels above: Q [y[:col]; 0]
+                for j in range(n):
+                    xp[j] = y[j]
+                for t in range(nref - 1, -1, -1):
+                    q = pos[t]
+                    vq = V[t, q:]
+                    xq = xp[q:]
+                    f = beta[t] * _dot(vq, xq)
+                    for j in range(n - q):
+                        xq[j] -= f * vq[j]
+                g = norms[:n]                     # Sᵀ (c − S x) / s²
+                for j in range(n):
+                    g[j] = 0.0
+                    i = int(x[j])
+                    if i >= 0:
+                        a = B[s0 + i, j]
+                        g[j] = a * (c[s0 + i] - a * xp[j]) / (unit_s * unit_s)
+                got = _unit_rows_solve(x, g, col, y[col:], nref, V, beta, pos, L[:nu],
+                                       L[nu:nu + max(1, 2 * nu)])
+                margin = unit_s * np.sqrt(_UNIT_ROWS_GAP) if got > 0 else unit_s
+                if got >= 0 and margin > _AMBIGUITY * tol:
+                    ranks[lev] = d
+                    margins[lev] = margin / tol
+                    col = n
+                    continue
+                for j in range(col, n):
+                    y[j] = 0.0
+            for i in range(rot_end, M):
+                row = B[i]
+                for t in range(nref):
+                    q = pos[t]
+                    vq = V[t, q:]
+                    rq = row[q:]
+                    dot = _dot(rq, vq)
+                    if dot != 0.0:
+                        f = beta[t] * dot
+                        for j in range(n - q):
+                            rq[j] -= f * vq[j]
+            rot_end = M
         # right-hand side in rotated coordinates: c_i - B_i[:, :col] y[:col]
         # (1-D views throughout: they let LLVM vectorise the loops; measured 2x on G1)
         yc = y[:col]
@@ -303,11 +507,13 @@ def solve_kernel_ws(B, c, starts, scales, rcond, level_damping, singular_thresho
         d = n - col
         if (m >= d and step_bound[lev] <= 0.0
                 and not (level_damping > 0.0 and singular_threshold > 0.0)
-                and _pivoted_lstsq_if_full_rank(B, s0, m, col, rhs, tol, y, margin)):
+                and _pivoted_lstsq_if_full_rank(B, s0, m, col, rhs, tol, y,
+                                                margins[lev:lev + 1])):
             ranks[lev] = d
-            margins[lev] = margin[0] / tol
+            margins[lev] = margins[lev] / tol
             col = n
             continue
+        margins[lev] = np.inf        # (a full-rank attempt that failed wrote its pivots)
         r = 0
         kept_min = np.inf
         while r < m and r < d:
@@ -353,7 +559,7 @@ def solve_kernel_ws(B, c, starts, scales, rcond, level_damping, singular_thresho
             # apply to the level's other rows and to every lower level's rows
             vq = V[nref, q:]
             w = n - q
-            for i in range(s0 + r + 1, M):
+            for i in range(s0 + r + 1, rot_end):
                 row = B[i, q:]
                 dot = _dot(row, vq)
                 if dot != 0.0:
@@ -409,7 +615,7 @@ def solve_kernel_ws(B, c, starts, scales, rcond, level_damping, singular_thresho
             xq[j] -= f * vq[j]
 
 
-@njit(cache=True, fastmath=_FAST)
+@kernel(fastmath=_FAST)
 def level_scales(A, b, starts, scales):
     """``scales[i] = ‖A_i‖_F`` of every level (rows ``starts[i]:starts[i+1]``).
 
@@ -440,7 +646,7 @@ def level_scales(A, b, starts, scales):
     return finite
 
 
-@njit(cache=True, fastmath=_FAST)
+@kernel(fastmath=_FAST)
 def weigh_rows(A, b, w, B, c):
     """``B = diag(w) A``, ``c = w ∘ b`` (the level's weighted rows, into the workspace);
     returns ``False`` when a ``√w`` is not finite and > 0."""
@@ -456,7 +662,7 @@ def weigh_rows(A, b, w, B, c):
     return ok
 
 
-@njit(cache=True, fastmath=_FAST)
+@kernel(fastmath=_FAST)
 def level_residuals(A, b, w, starts, x, out):
     """``out[i] = ‖w ∘ (A_i x − b_i)‖`` per level (equality rows)."""
     for lev in range(starts.shape[0] - 1):

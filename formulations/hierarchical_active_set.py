@@ -196,6 +196,8 @@ class Prepared:
         self._margins = part(self._fwork, "margins")
         self._n, self._k = n, k
         self._counts = part(self._iwork, "counts", (3, k + 1))
+        self._iterations = self._counts[0]
+        self._ranks = self._counts[2, :k]
 
     def reset(self) -> None:
         """Forget the kept working sets (the next solve starts cold)."""
@@ -218,28 +220,45 @@ class Prepared:
         Raises:
             TaskStackError: as :meth:`solve`.
         """
-        self._run(data)
+        if not _kernel.solve_data(data.A, data.b, data.lower, data.upper, data.sqrt_weight,
+                                  self._fwork, self._iwork, self._bwork):
+            self._refused(data)
+        xn, flag, infeasible, ambiguous, unresolved = self._summary.tolist()
+        if flag == 0.0 and not (ambiguous or unresolved):
+            # (the common case of _outcome, inline: a control loop's path)
+            n, k = self._n, self._k
+            out = self._out.copy()
+            residuals = out[n + k:]
+            if infeasible:
+                tol = self.primal_tol * max(1.0, xn)
+                infeasible = [i for i, r in enumerate(residuals.tolist()) if r > tol]
+            return out[:n], "optimal", {
+                "iterations": self._iterations.copy(), "rank_profile": self._ranks.copy(),
+                "level_violation": out[n:n + k], "infeasible_levels": infeasible or [],
+                "warm_start": self.warm_start}, residuals
         return self._outcome(as_tuple=True)
 
     def _run(self, data: StackData) -> None:
-        """The kernel on ``data``; when it refuses the data, forget the warm start and
-        name the fault."""
+        """The kernel on ``data`` (:meth:`_refused` when it refuses the data)."""
         if not _kernel.solve_data(data.A, data.b, data.lower, data.upper, data.sqrt_weight,
                                   self._fwork, self._iwork, self._bwork):
-            self.warm_valid[:] = 0
-            data.check()     # names the task, level and row at fault
-            raise TaskStackError("the rows' values overflow float64: scale the tasks down")
+            self._refused(data)
+
+    def _refused(self, data: StackData) -> None:
+        """The kernel refused ``data``: forget the warm start and name the fault."""
+        self.warm_valid[:] = 0
+        data.check()     # names the task, level and row at fault
+        raise TaskStackError("the rows' values overflow float64: scale the tasks down")
 
     def _outcome(self, as_tuple: bool = False) -> tuple | Outcome:
         n, k = self._n, self._k
         out = self._out.copy()
         x, w2, residuals = out[:n], out[n:n + k], out[n + k:]
-        counts = self._counts.copy()
         xn, flag, infeasible, ambiguous, unresolved = self._summary.tolist()
         if infeasible:
             tol = self.primal_tol * max(1.0, xn)
             infeasible = [i for i, r in enumerate(residuals.tolist()) if r > tol]
-        info = {"iterations": counts[0], "rank_profile": counts[2, :k],
+        info = {"iterations": self._iterations.copy(), "rank_profile": self._ranks.copy(),
                 "level_violation": w2, "infeasible_levels": infeasible or [],
                 "warm_start": self.warm_start}
         if flag == 0.0 and not ambiguous and not unresolved:
@@ -266,8 +285,9 @@ class Prepared:
             self.warm_valid[:] = 0
             info["message"] = "the active-set iterations produced non-finite values"
             return Outcome(x, "failed", info, residuals=residuals)
-        if counts[1].any():
-            capped = np.flatnonzero(counts[1] == _kernel.FLAG_ITERATION_CAP).tolist()
+        flags = self._counts[1]
+        if flags.any():
+            capped = np.flatnonzero(flags == _kernel.FLAG_ITERATION_CAP).tolist()
             lv = capped[0]
             what = (f"level {lv} ({', '.join(self.layout.names[lv])})" if lv < k
                     else "the minimum-norm tie-break")

@@ -12,21 +12,24 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from prioik._jit import kernel
 
-@njit(cache=True)
-def log3(R, out, o):
-    """``out[o:o+3] = log(R)``, the rotation vector ``θ u`` of ``R`` (``θ ∈ [0, π]``).
+
+@njit(cache=True, inline="always")
+def _log3(r00, r01, r02, r10, r11, r12, r20, r21, r22, out, o):
+    """``out[o:o+3] = log(R)``, the rotation vector ``θ u`` of ``R`` (``θ ∈ [0, π]``),
+    from its nine entries (no array: the kernels that call it allocate nothing).
 
     ``θ = atan2(‖w‖/2, (tr R − 1)/2)`` with ``w = vee(R − Rᵀ) = 2 sin θ u``; then
     ``θ u = θ/(2 sin θ) w`` (a Taylor series below ``θ = 1e-4``), and near ``π``,
     where ``sin θ`` vanishes, ``u`` from the symmetric part
     ``R + Rᵀ = 2 cos θ I + 2 (1 − cos θ) u uᵀ``, its sign from ``w``.
     """
-    wx = R[2, 1] - R[1, 2]
-    wy = R[0, 2] - R[2, 0]
-    wz = R[1, 0] - R[0, 1]
+    wx = r21 - r12
+    wy = r02 - r20
+    wz = r10 - r01
     s = 0.5 * np.sqrt(wx * wx + wy * wy + wz * wz)
-    c = 0.5 * (R[0, 0] + R[1, 1] + R[2, 2] - 1.0)
+    c = 0.5 * (r00 + r11 + r22 - 1.0)
     theta = np.arctan2(s, c)
     if theta < 1e-4:
         f = 0.5 + theta * theta / 12.0
@@ -40,18 +43,28 @@ def log3(R, out, o):
         out[o + 2] = f * wz
     else:
         # u uᵀ = (R + Rᵀ − 2c I) / (2 (1 − c)); the column of the largest diagonal
-        k = 0
-        for i in range(1, 3):
-            if R[i, i] > R[k, k]:
-                k = i
         one_c = 2.0 * (1.0 - c)
-        u = np.empty(3)
-        for i in range(3):
-            u[i] = (R[i, k] + R[k, i] - (2.0 * c if i == k else 0.0)) / one_c
-        norm = np.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
-        sign = 1.0 if u[0] * wx + u[1] * wy + u[2] * wz >= 0.0 else -1.0
-        for i in range(3):
-            out[o + i] = sign * theta * u[i] / norm
+        if r00 >= r11 and r00 >= r22:
+            u0, u1, u2 = 2.0 * r00 - 2.0 * c, r10 + r01, r20 + r02
+        elif r11 >= r22:
+            u0, u1, u2 = r01 + r10, 2.0 * r11 - 2.0 * c, r21 + r12
+        else:
+            u0, u1, u2 = r02 + r20, r12 + r21, 2.0 * r22 - 2.0 * c
+        u0 /= one_c
+        u1 /= one_c
+        u2 /= one_c
+        norm = np.sqrt(u0 * u0 + u1 * u1 + u2 * u2)
+        sign = 1.0 if u0 * wx + u1 * wy + u2 * wz >= 0.0 else -1.0
+        out[o] = sign * theta * u0 / norm
+        out[o + 1] = sign * theta * u1 / norm
+        out[o + 2] = sign * theta * u2 / norm
+
+
+@kernel()
+def log3(R, out, o):
+    """``out[o:o+3] = log(R)`` of a ``3 × 3`` rotation matrix (see :func:`_log3`)."""
+    _log3(R[0, 0], R[0, 1], R[0, 2], R[1, 0], R[1, 1], R[1, 2], R[2, 0], R[2, 1], R[2, 2],
+          out, o)
 
 
 #: rows of the per-row array ``Q`` (``6 × M``) of :class:`robots.rows.TaskWriter`
@@ -101,7 +114,7 @@ def _zero_rows(A, Q, s, nrows, zero_drift):
             Q[DRIFT, s + i] = 0.0
 
 
-@njit(cache=True)
+@kernel()
 def position_rows(A, Q, J, t, R, spec, off, x, xd, xdd):
     """A point's position rows (3, ``spec``: see :data:`SPEC_COLS`): the point
     ``p = t + R off`` of the frame at ``(t, R)``; :func:`frame_rows` with
@@ -110,7 +123,7 @@ def position_rows(A, Q, J, t, R, spec, off, x, xd, xdd):
     _position_rows(A, Q, J, t, R, spec, off, x, xd, xdd, True)
 
 
-@njit(cache=True)
+@kernel()
 def position_target_rows(A, Q, J, t, R, spec, off, x):
     """:func:`position_rows` with ``ẋ* = ẍ* = 0`` (a fixed target: two arguments fewer)."""
     s = spec[SPEC_START]
@@ -118,7 +131,13 @@ def position_target_rows(A, Q, J, t, R, spec, off, x):
     _position_rows(A, Q, J, t, R, spec, off, x, x, x, False)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
+def _rrt(A, B, i, j):
+    """``(A Bᵀ)[i, j]`` of two ``3 × 3`` matrices."""
+    return A[i, 0] * B[j, 0] + A[i, 1] * B[j, 1] + A[i, 2] * B[j, 2]
+
+
+@kernel()
 def frame_rows(A, Q, J, t, R, spec, off, x, xd, xdd, Rstar, w, wd):
     """One frame's rows at ``s = spec[0]``: position of the point ``p = t + R off``
     (3 rows, ``spec[1] = POSITION``), orientation (3 rows, ``ORIENTATION``) or both (6,
@@ -143,17 +162,15 @@ def frame_rows(A, Q, J, t, R, spec, off, x, xd, xdd, Rstar, w, wd):
             A[o, c] = J[3, c]
             A[o + 1, c] = J[4, c]
             A[o + 2, c] = J[5, c]
-        E = np.empty((3, 3))
-        for i in range(3):
-            for j in range(3):
-                E[i, j] = Rstar[i, 0] * R[j, 0] + Rstar[i, 1] * R[j, 1] + Rstar[i, 2] * R[j, 2]
-        log3(E, Q[ERROR], o)
+        _log3(_rrt(Rstar, R, 0, 0), _rrt(Rstar, R, 0, 1), _rrt(Rstar, R, 0, 2),
+              _rrt(Rstar, R, 1, 0), _rrt(Rstar, R, 1, 1), _rrt(Rstar, R, 1, 2),
+              _rrt(Rstar, R, 2, 0), _rrt(Rstar, R, 2, 1), _rrt(Rstar, R, 2, 2), Q[ERROR], o)
         for i in range(3):
             Q[VELOCITY_REF, o + i] = w[i]
             Q[FEEDFORWARD, o + i] = wd[i]
 
 
-@njit(cache=True)
+@kernel()
 def com_rows(A, Q, s, Jcom, com, axes, x, xd, xdd, zero_drift):
     """Centre-of-mass rows at ``s`` on ``axes``: ``A = J_com[axes]``, error
     ``x − c[axes]``, ``ẋ* = xd``, ``ẍ* = xdd``, drift zeroed if ``zero_drift``."""
@@ -169,7 +186,7 @@ def com_rows(A, Q, s, Jcom, com, axes, x, xd, xdd, zero_drift):
             Q[DRIFT, s + i] = 0.0
 
 
-@njit(cache=True)
+@kernel()
 def posture_error(Q, s, q, q_ref, iq):
     """Posture rows' targets at ``s`` for joints whose configuration is their
     coordinate (``n_q = n_v``, where ``q_ref ⊖ q = q_ref − q``): error
@@ -181,14 +198,14 @@ def posture_error(Q, s, q, q_ref, iq):
         Q[DRIFT, s + i] = 0.0
 
 
-@njit(cache=True)
+@kernel()
 def actuated_positions(q, iq, out):
     """``out[k] = q[iq[k]]`` (0 where ``iq[k] < 0``: a row without one coordinate)."""
     for k in range(iq.shape[0]):
         out[k] = q[iq[k]] if iq[k] >= 0 else 0.0
 
 
-@njit(cache=True)
+@kernel()
 def limit_activation_rows(A, Q, s, nb, qa, va, lo, hi, width, kp, kd):
     """Joint-limit activation rows at ``s``, one per actuated joint (fixed size): row
     ``k`` is the unit row of column ``nb + k`` while the joint is inside its margin
@@ -232,7 +249,7 @@ def limit_activation_rows(A, Q, s, nb, qa, va, lo, hi, width, kp, kd):
     return active
 
 
-@njit(cache=True)
+@kernel()
 def acceleration_bounds(lower, upper, s, qa, va, lo, hi, vmax, T, dt, position, velocity):
     """Bounds on ``q̈`` of the actuated joints at ``s`` (see
     :func:`robots.tasks.joint_limit_bounds`): position at the horizon ``T`` and after the
@@ -274,7 +291,7 @@ def acceleration_bounds(lower, upper, s, qa, va, lo, hi, vmax, T, dt, position, 
         upper[s + k] = b
 
 
-@njit(cache=True)
+@kernel()
 def velocity_bounds(lower, upper, s, qa, lo, hi, vmax, T, position, velocity):
     """Bounds on ``q̇`` of the actuated joints at ``s``: ``q + q̇ T`` within the position
     limits and ``|q̇| ≤ q̇_max``; where they do not intersect (a joint already past a limit
@@ -293,8 +310,8 @@ def velocity_bounds(lower, upper, s, qa, lo, hi, vmax, T, position, velocity):
         upper[s + k] = b
 
 
-@njit(cache=True)
-def bounds_at(lower, upper, q, v, iq, lim, params):
+@kernel()
+def bounds_at(lower, upper, q, v, iq, lim, params, qa):
     """The joint-limit bounds of one task in one call, from the state itself: ``lim``
     holds the task's fixed ``lo``, ``hi``, ``q̇_max`` (``3 × n_a``) and ``q̇`` of the
     actuated joints (``v[n_v − n_a:]``); ``params``: row start, horizon ``T``, ``dt``,
@@ -303,7 +320,6 @@ def bounds_at(lower, upper, q, v, iq, lim, params):
     ``q[iq[k]]`` (one call: the two calls and ten arguments of the writer's other
     path cost ~1.5 µs of dispatch)."""
     na = iq.shape[0]
-    qa = np.empty(na)
     actuated_positions(q, iq, qa)
     s = int(params[0])
     if params[5] != 0.0:
@@ -315,14 +331,14 @@ def bounds_at(lower, upper, q, v, iq, lim, params):
                         params[3] != 0.0, params[4] != 0.0)
 
 
-@njit(cache=True)
+@kernel()
 def velocity_targets(b, Q):
     """``b = ẋ* + K e`` (per row)."""
     for i in range(b.shape[0]):
         b[i] = Q[VELOCITY_REF, i] + Q[KP, i] * Q[ERROR, i]
 
 
-@njit(cache=True)
+@kernel()
 def acceleration_targets(A, b, Q, v):
     """``b = ẍ* + K_d (ẋ* − J q̇) + K_p e − J̇ q̇`` (eq. 2-4, per row)."""
     n = A.shape[1]
@@ -334,7 +350,7 @@ def acceleration_targets(A, b, Q, v):
                 + Q[FEEDFORWARD, i] - Q[DRIFT, i])
 
 
-@njit(cache=True)
+@kernel()
 def state_is_valid(q, v, unit, tol):
     """Every entry of ``q`` and ``v`` finite and every unit-norm part of ``q``
     (quaternions, unit complexes: ``unit = [start_0, size_0, start_1, size_1, …]``) of

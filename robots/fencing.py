@@ -123,7 +123,8 @@ class FencingScenario(Scenario):
         self._left0 = tuple(float(v) for v in p0)
         self._right_xy = tuple(float(v) for v in self.right_foot0.translation[:2])
         self._com_offset = tuple(float(v) for v in self.com_offset0)
-        self._tip_move = self.target - self.tip0
+        self._tip0 = tuple(float(v) for v in self.tip0)
+        self._tip_move_xyz = tuple(float(v) for v in self.target - self.tip0)
         self._support_x = np.array(self.right_foot0.translation)
         self._support_R = np.array(self.right_foot0.rotation)
         self._left_foot_R = np.array(self.left_foot0.rotation)
@@ -133,10 +134,9 @@ class FencingScenario(Scenario):
         """Reference of the stepping foot's origin (x: one minimum-jerk move;
         z: up and down through two)."""
         x, xd, xdd = self._foot_x(t)
-        lift = self._lift(t)
-        return Reference(np.array([x, self._left0[1], float(lift.x)]),
-                         np.array([xd, 0.0, float(lift.xd)]),
-                         np.array([xdd, 0.0, float(lift.xdd)]))
+        z, zd, zdd = self._lift.scalar(t)
+        return Reference(np.array([x, self._left0[1], z]), np.array([xd, 0.0, zd]),
+                         np.array([xdd, 0.0, zdd]))
 
     def _foot_x(self, t: float) -> tuple[float, float, float]:
         """The stepping foot's forward reference (its y holds): position, velocity and
@@ -164,8 +164,10 @@ class FencingScenario(Scenario):
         """Minimum-jerk from the initial tip to the target, then hold."""
         a, b = self.tip_window
         p, dp, ddp = minimum_jerk_profile(a, b - a, t)
-        d = self._tip_move
-        return Reference(self.tip0 + p * d, dp * d, ddp * d)
+        (x, y, z), (dx, dy, dz) = self._tip0, self._tip_move_xyz
+        return Reference(np.array([x + p * dx, y + p * dy, z + p * dz]),
+                         np.array([dp * dx, dp * dy, dp * dz]),
+                         np.array([ddp * dx, ddp * dy, ddp * dz]))
 
     # --------------------------------------------------------------------- stacks
     def terms(self, state: KinematicState, t: float) -> dict:

@@ -86,11 +86,13 @@ class Waypoints:
         object.__setattr__(self, "_times", tuple(float(t) for t in self.times))
         object.__setattr__(self, "_points", tuple(pts))
 
-    def __call__(self, t: float) -> Reference:
-        times, pts = self._times, self._points
+    def _segment(self, t: float) -> tuple[int, float, float, float]:
+        """The move at ``t``: its index ``i`` (from point ``i`` to ``i + 1``) and time
+        scaling ``p, ṗ, p̈``; ``i = -1`` before the first time (hold the first point),
+        and after the last the last move at its end."""
+        times = self._times
         if t <= times[0] or len(times) == 1:
-            hold = pts[0] if t <= times[0] else pts[-1]
-            return Reference(hold.copy(), np.zeros_like(hold), np.zeros_like(hold))
+            return (-1 if t <= times[0] else len(times) - 1), 0.0, 0.0, 0.0
         i = len(times) - 2
         for j in range(len(times) - 1):
             if t < times[j + 1]:
@@ -98,6 +100,31 @@ class Waypoints:
                 break
         else:
             t = times[-1]
-        p, dp, ddp = minimum_jerk_profile(times[i], times[i + 1] - times[i], t)
+        return (i, *minimum_jerk_profile(times[i], times[i + 1] - times[i], t))
+
+    def __call__(self, t: float) -> Reference:
+        pts = self._points
+        i, p, dp, ddp = self._segment(t)
+        if i < 0 or i == len(pts) - 1:
+            hold = pts[0] if i < 0 else pts[-1]
+            return Reference(hold.copy(), np.zeros_like(hold), np.zeros_like(hold))
         d = pts[i + 1] - pts[i]
         return Reference(pts[i] + p * d, dp * d, ddp * d)
+
+    def scalar(self, t: float) -> tuple[float, float, float]:
+        """Position, velocity and acceleration at ``t`` as floats, for scalar waypoints
+        (the value of ``self(t)`` without its three 0-d arrays: a control step's
+        reference).
+
+        Raises:
+            ValueError: the waypoints are not scalars.
+        """
+        pts = self._points
+        if pts[0].shape != ():
+            raise ValueError(f"Waypoints.scalar needs scalar points, these have shape "
+                             f"{pts[0].shape}")
+        i, p, dp, ddp = self._segment(t)
+        if i < 0 or i == len(pts) - 1:
+            return float(pts[0] if i < 0 else pts[-1]), 0.0, 0.0
+        a, b = float(pts[i]), float(pts[i + 1])
+        return a + p * (b - a), dp * (b - a), ddp * (b - a)

@@ -497,7 +497,7 @@ class TaskWriter:
         data = self._data
         if task.form != "activation":
             _k.bounds_at(data.lower, data.upper, state.q, state.v, self._q_index,
-                         task.limits, task.bound_params)
+                         task.limits, task.bound_params, self._qa)
             return task.rows
         lo, hi, vmax = self._joint_limits()
         qa = self._qa

@@ -5,6 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import prioik
 from prioik import formulations
 from prioik.hierarchy import (Task, TaskStack, check_lexicographic, load_stack,
                               relative_distance)
@@ -523,3 +524,42 @@ def test_theory_page_states_the_kernel_crossover_the_code_uses():
     from prioik.formulations.extended_jacobian import AUTO_NUMBA_MAX_N
     text = (Path(__file__).parents[1] / "docs" / "theory.md").read_text(encoding="utf-8")
     assert f"compiled kernel up to n = {AUTO_NUMBA_MAX_N}" in text.replace("\n  ", " ")
+
+
+@pytest.mark.parametrize("weights", ["uniform", "mixed"])
+@pytest.mark.parametrize("base", [0, 6])
+@pytest.mark.parametrize("seed", range(4))
+def test_posture_level_last_equals_reference(seed, base, weights):
+    """A posture last (unit rows, a floating base's columns uncovered or none): with one
+    weight it is solved from its rows as given (a rank-|U| update of the identity, its
+    rows never rotated), with mixed weights by the column-pivoted QR; both equal
+    reference, and the prepared solver equals the one-off solve bit for bit."""
+    rng = np.random.default_rng([seed, base])
+    n = 18
+    levels = [[Task(f"task{i}", rng.standard_normal((m, n)), rng.standard_normal(m))]
+              for i, m in enumerate((4, 3, 5))]
+    w = 0.25 if weights == "uniform" else rng.uniform(0.1, 1.0, n - base)
+    levels.append([Task("posture", np.eye(n)[base:], rng.standard_normal(n - base),
+                        weight=w)])
+    stack = TaskStack(levels)
+    sol = prioik.solve(stack, "extended_jacobian")
+    ref = prioik.solve(stack, "reference").x
+    assert sol.status == "optimal"
+    assert np.linalg.norm(sol.x - ref) <= 1e-10 * max(1.0, np.linalg.norm(ref))
+    solver = prioik.prepare(stack.layout, "extended_jacobian")
+    assert np.array_equal(solver.solve(stack).x, sol.x)
+    # which path solved the posture: the unit-row step reports its margin bound
+    # s √(gap) / tol (s / tol with every column covered), the column-pivoted QR its
+    # smallest pivot over tol
+    from prioik.formulations import _extended_jacobian_kernel as ejk
+    data = stack.data
+    B, c = data.sqrt_weight[:, None] * data.A, data.sqrt_weight * data.b
+    starts = np.asarray(stack.layout.starts, dtype=np.int64)
+    k = len(starts) - 1
+    scales = np.array([np.linalg.norm(B[starts[i]:starts[i + 1]]) for i in range(k)])
+    x, ranks, mu2, margins = np.empty(n), np.empty(k, np.int64), np.empty(k), np.empty(k)
+    ejk.solve_kernel(B.copy(), c.copy(), starts, scales, 1e-9, 0.0, 0.0, np.zeros(k), x,
+                     ranks, mu2, margins)
+    assert np.linalg.norm(x - ref) <= 1e-10 * max(1.0, np.linalg.norm(ref))
+    unit_bound = 0.5 * (np.sqrt(ejk._UNIT_ROWS_GAP) if base else 1.0) / (1e-9 * scales[-1])
+    assert (margins[-1] == pytest.approx(unit_bound, rel=1e-12)) == (weights == "uniform")

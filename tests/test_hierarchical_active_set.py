@@ -535,6 +535,131 @@ def test_a_held_row_off_its_bound_by_rounding_is_not_fixed():
     qp = prioik.solve(stack, "cascaded_qp", solver="clarabel")
     assert qp.status == "optimal" and check_lexicographic(stack, qp.x).ok
     assert sol.status == "optimal"
-    assert lexicographically_no_worse(level_w2(stack, sol.x), level_w2(stack, qp.x), 1e-9)
+    # Clarabel's interior-point answer is known to ~1e-9 relative at the lower levels,
+    # and moves with its version (0.11.1: 1.04e-9 above ours at level 3, below at level
+    # 1 by 5.9e-10); the fault this guards against was 4.4x at level 1
+    assert lexicographically_no_worse(level_w2(stack, sol.x), level_w2(stack, qp.x), 1e-7)
     assert max(kkt_report(stack, sol.x)) <= KKT_TOL
     assert check_lexicographic(stack, sol.x).ok
+
+
+# ------------------------------------------------------- unit-row (posture) levels
+def _householder_lq(C: np.ndarray):
+    """Reflectors of the kernel's form (``Vf[t, t:]``, ``betaf[t]``, ``posf[t] = t``) with
+    ``C H_0 … H_{F-1} = [L 0]``; returns them and ``Z = (H_0 … H_{F-1})[:, F:]``."""
+    F, n = C.shape
+    M = C.copy()
+    V, beta, pos = np.zeros((n, n)), np.zeros(n), np.arange(n)
+    for t in range(F):
+        row = M[t, t:]
+        norm = np.linalg.norm(row)
+        v = row.copy()
+        v[0] -= -norm if row[0] >= 0 else norm
+        V[t, t:], beta[t] = v, 2.0 / (v @ v)
+        M[:, t:] -= beta[t] * np.outer(M[:, t:] @ v, v)
+    Q = np.eye(n)
+    for t in range(F - 1, -1, -1):
+        Q[t:] -= beta[t] * np.outer(V[t, t:], V[t, t:] @ Q[t:])
+    return V, beta, pos, Q[:, F:]
+
+
+_UNIT_ROWS_CALL = []
+
+
+def _unit_rows_step(Bo, x, col, tgt, soft_tol, V, beta, pos):
+    """The kernel's inlined ``_unit_rows_step`` on these arrays (compiled once)."""
+    if not _UNIT_ROWS_CALL:
+        from numba import njit
+        from prioik.formulations._active_set_kernel import _unit_rows_step as step
+
+        @njit
+        def call(Bo, xc, col, rows, nw, tgt, soft_tol, nf, Vf, betaf, posf):
+            n = Bo.shape[1]
+            p = np.zeros(n)
+            margin = step(Bo, xc, col, rows, nw, tgt, soft_tol, np.empty(n, np.int64), p,
+                          nf, Vf, betaf, posf, np.zeros((n, n)), np.zeros((2 * n, n)),
+                          np.zeros(n))
+            return margin, p
+        _UNIT_ROWS_CALL.append(call)
+    nw = Bo.shape[0]
+    return _UNIT_ROWS_CALL[0](Bo, x, col, np.arange(nw), nw, tgt, soft_tol, col, V, beta,
+                              pos)
+
+
+@pytest.mark.parametrize("base", [0, 6])
+@pytest.mark.parametrize("seed", range(3))
+def test_unit_rows_step_is_the_levels_least_squares_step(seed, base):
+    """A posture level (``±s e_cᵀ`` rows on every column but a floating base's ``base``)
+    below ``col`` fixed rows: the Woodbury step equals ``lstsq(S Z, tgt − S x)``."""
+    rng = np.random.default_rng(seed)
+    n, col = 20, 7
+    V, beta, pos, Z = _householder_lq(rng.standard_normal((col, n)))
+    s = 0.7
+    cols = rng.permutation(np.arange(base, n))
+    Bo = np.zeros((n - base, n))
+    Bo[np.arange(n - base), cols] = s * rng.choice([-1.0, 1.0], n - base)
+    x, tgt = rng.standard_normal(n), rng.standard_normal(n - base)
+    margin, p = _unit_rows_step(Bo, x, col, tgt, 1e-9, V, beta, pos)
+    want = np.linalg.lstsq(Bo @ Z, tgt - Bo @ x, rcond=None)[0]
+    assert margin > 0
+    assert np.linalg.norm(p[:n - col] - want) <= 1e-12 * max(1.0, np.linalg.norm(want))
+    # the margin is a lower bound of the smallest singular value, over soft_tol
+    assert margin * 1e-9 <= np.linalg.svd(Bo @ Z, compute_uv=False)[-1] * (1 + 1e-12)
+
+
+@pytest.mark.parametrize("fault", ["two_nonzeros", "two_magnitudes", "same_column",
+                                   "nearly_dependent"])
+def test_unit_rows_step_declines_other_levels(fault):
+    """-1 (the general full-rank step decides) for rows that are not unit rows of one
+    magnitude on distinct columns, and where S Z is close to rank deficient."""
+    rng = np.random.default_rng(0)
+    n, col, base = 12, 4, 3
+    C = rng.standard_normal((col, n))
+    if fault == "nearly_dependent":
+        # the fixed rows pin every covered column but the last: three of the four free
+        # directions lie in the uncovered columns, where S Z has rank 1
+        C = np.eye(n)[base:n - 1]
+        col = C.shape[0]
+    V, beta, pos, Z = _householder_lq(C)
+    Bo = np.zeros((n - base, n))
+    Bo[np.arange(n - base), np.arange(base, n)] = 2.0
+    if fault == "two_nonzeros":
+        Bo[1, 0] = 0.5
+    elif fault == "two_magnitudes":
+        Bo[2, base + 2] = 2.5
+    elif fault == "same_column":
+        Bo[3] = Bo[4]
+    margin, _ = _unit_rows_step(Bo, rng.standard_normal(n), col,
+                                rng.standard_normal(n - base), 1e-9, V, beta, pos)
+    assert margin == -1.0
+
+
+def _posture_stack(rng: np.random.Generator, n: int, base: int, limits: bool) -> TaskStack:
+    """Dense equality levels (rank < n), optional feasible box bounds on the actuated
+    columns on top, and a uniform posture on columns ``base:`` last."""
+    tasks = []
+    if limits:
+        A = np.eye(n)[base:]
+        tasks.append([Task("limits", A, lower=-np.full(n - base, 2.0),
+                           upper=np.full(n - base, 2.0))])
+    for i, m in enumerate((3, 2, 4)):
+        tasks.append([Task(f"task{i}", rng.standard_normal((m, n)), rng.standard_normal(m))])
+    tasks.append([Task("posture", np.eye(n)[base:], 0.3 * rng.standard_normal(n - base),
+                       weight=0.25)])
+    return TaskStack(tasks)
+
+
+@pytest.mark.parametrize("limits", [False, True])
+@pytest.mark.parametrize("base", [0, 6])
+@pytest.mark.parametrize("seed", range(5))
+def test_posture_level_below_tasks_is_exact(seed, base, limits):
+    """The stacks the unit-rows step serves (a posture last, a floating base or not):
+    equal to reference on equality stacks, KKT-exact with joint-limit-like bounds."""
+    stack = _posture_stack(np.random.default_rng([seed, base]), 16, base, limits)
+    sol = prioik.solve(stack, NAME)
+    assert sol.status == "optimal"
+    if limits:
+        assert_exact(stack, sol)
+    else:
+        ref = prioik.solve(stack, "reference").x
+        assert np.linalg.norm(sol.x - ref) <= 1e-9 * max(1.0, np.linalg.norm(ref))

@@ -387,3 +387,14 @@ def test_waypoints_pass_through_points_and_hold():
     assert 0 < w(0.5).x < 0.5 and w(0.5).xd > 0 and w(1.5).xd < 0
     with pytest.raises(ValueError, match="increase"):
         Waypoints((0.0, 0.0), (1.0, 2.0))
+
+
+def test_waypoints_scalar_is_the_reference_as_floats():
+    w = Waypoints((0.0, 1.0, 2.0), (0.1, 0.5, -0.2))
+    for t in (-1.0, 0.0, 0.3, 1.0, 1.7, 2.0, 5.0):
+        r, f = w(t), w.scalar(t)
+        assert all(type(v) is float for v in f)
+        assert f == pytest.approx((float(r.x), float(r.xd), float(r.xdd)), abs=1e-15)
+    assert w.scalar(1.7)[1] < 0 and w.scalar(5.0) == pytest.approx((-0.2, 0.0, 0.0), abs=1e-15)
+    with pytest.raises(ValueError, match="scalar points"):
+        Waypoints((0.0, 1.0), ((0.0, 1.0), (1.0, 2.0))).scalar(0.5)
