@@ -32,8 +32,8 @@ from prioik._jit import kernel
 
 from prioik.hierarchy.linalg import AMBIGUITY as _AMBIGUITY
 
-from ._extended_jacobian_kernel import (_UNIT_ROWS_GAP, _dot, _small_lstsq_ws, _swap,
-                                        _unit_rows_solve)
+from ._extended_jacobian_kernel import (_UNIT_ROWS_GAP, _apply_q, _dot, _small_lstsq_ws,
+                                        _swap, _unit_rows_of, _unit_rows_solve)
 
 #: the same fast-math set as the extended-Jacobian kernel (no finite-math assumption)
 _FAST = {"reassoc", "contract", "nsz", "arcp"}
@@ -362,25 +362,11 @@ def _unit_rows_step(Bo, xc, col, rows, nw, tgt, soft_tol, colrow, p, nf, Vf, bet
     n = Bo.shape[1]
     if not soft_tol > 0.0:       # (as _full_rank_step: no rank rule, no full-rank step)
         return -1.0
-    s = -1.0
-    for c in range(n):
-        colrow[c] = -1
-    for i in range(nw):
-        Boj = Bo[rows[i]]
-        c1 = -1
-        for c in range(n):
-            if Boj[c] != 0.0:
-                if c1 >= 0:
-                    return -1.0
-                c1 = c
-        if c1 < 0 or colrow[c1] >= 0:
-            return -1.0
-        a = abs(Boj[c1])
-        if s < 0.0:
-            s = a
-        elif a != s:
-            return -1.0
-        colrow[c1] = i
+    if rows[nw - 1] - rows[0] != nw - 1:    # (in order: the level's rows, all working)
+        return -1.0
+    s = _unit_rows_of(Bo, rows[0], rows[0] + nw, colrow)
+    if s < 0.0:
+        return -1.0
     # g = Sᵀ t / s², t = tgt − S x
     for c in range(n):
         g[c] = 0.0
@@ -1103,13 +1089,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     # x = H_1 … H_F y
     for c in range(n):
         x[c] = y[c]
-    for tf in range(nf - 1, -1, -1):
-        q = posf[tf]
-        vx = Vf[tf, q:]
-        xq = x[q:]
-        f = betaf[tf] * _dot(vx, xq)
-        for c in range(n - q):
-            xq[c] -= f * vx[c]
+    _apply_q(x, nf, Vf, betaf, posf)
     # box rows, one pass. x's coordinates are known to about X_PRECISION ‖x‖ (the
     # reflectors round every coordinate to eps ‖x‖: not small for a bounded joint when
     # another level drives ‖x‖ to 1e10, a held row then reads as off by 1e-5). A held

@@ -148,6 +148,34 @@ def _small_lstsq(L, rhs, m, r, mu2, out, col):
 
 
 
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _apply_qt(v, nf, V, beta, pos):
+    """``v = Qᵀ v`` in place, ``Q = H_0 … H_{nf-1}`` (reflector ``t`` in ``V[t, pos[t]:]``,
+    ``beta[t]``): ``H_0`` first."""
+    n = v.shape[0]
+    for t in range(nf):
+        q = pos[t]
+        vt = V[t, q:]
+        vq = v[q:]
+        f = beta[t] * _dot(vt, vq)
+        if f != 0.0:
+            for c in range(n - q):
+                vq[c] -= f * vt[c]
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _apply_q(v, nf, V, beta, pos):
+    """``v = Q v`` in place (``H_{nf-1}`` first; see :func:`_apply_qt`)."""
+    n = v.shape[0]
+    for t in range(nf - 1, -1, -1):
+        q = pos[t]
+        vt = V[t, q:]
+        vq = v[q:]
+        f = beta[t] * _dot(vt, vq)
+        for c in range(n - q):
+            vq[c] -= f * vt[c]
+
+
 #: the unit-rows step is taken only when the smallest eigenvalue of ``I − Z_U Z_Uᵀ``
 #: exceeds this: the normal equations' ``κ²`` is then below ``1 / this`` (their rounding
 #: ~``eps κ²`` relative, 2e-13), else the general path (a column-pivoted QR)
@@ -198,29 +226,15 @@ def _unit_rows_solve(cover, g, col, p, nf, Vf, betaf, posf, Zu, G):
     for u in range(n):
         if cover[u] >= 0:
             continue
-        z = G[0]                # (G: scratch until the Gram matrix)
+        z = G[0, :n]            # (G: scratch until the Gram matrix)
         for c in range(n):
             z[c] = 0.0
         z[u] = 1.0
-        for tf in range(nf):
-            q = posf[tf]
-            v = Vf[tf, q:]
-            zq = z[q:]
-            f = betaf[tf] * _dot(v, zq)
-            if f != 0.0:
-                for c in range(n - q):
-                    zq[c] -= f * v[c]
+        _apply_qt(z, nf, Vf, betaf, posf)
         for c in range(d):
             Zu[nu, c] = z[col + c]
         nu += 1
-    for tf in range(nf):
-        q = posf[tf]
-        v = Vf[tf, q:]
-        gq = g[q:]
-        f = betaf[tf] * _dot(v, gq)
-        if f != 0.0:
-            for c in range(n - q):
-                gq[c] -= f * v[c]
+    _apply_qt(g[:n], nf, Vf, betaf, posf)
     for c in range(d):
         p[c] = g[col + c]
     if nu == 0:
@@ -461,13 +475,7 @@ def solve_kernel_ws(B, c, starts, scales, rcond, level_damping, singular_thresho
                 xp = rhs[:n]                      # x of the levels above: Q [y[:col]; 0]
                 for j in range(n):
                     xp[j] = y[j]
-                for t in range(nref - 1, -1, -1):
-                    q = pos[t]
-                    vq = V[t, q:]
-                    xq = xp[q:]
-                    f = beta[t] * _dot(vq, xq)
-                    for j in range(n - q):
-                        xq[j] -= f * vq[j]
+                _apply_q(xp, nref, V, beta, pos)
                 g = norms[:n]                     # Sᵀ (c − S x) / s²
                 for j in range(n):
                     g[j] = 0.0
