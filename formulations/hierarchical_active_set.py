@@ -220,35 +220,17 @@ class Prepared:
         Raises:
             TaskStackError: as :meth:`solve`.
         """
-        if not _kernel.solve_data(data.A, data.b, data.lower, data.upper, data.sqrt_weight,
-                                  self._fwork, self._iwork, self._bwork):
-            self._refused(data)
-        xn, flag, infeasible, ambiguous, unresolved = self._summary.tolist()
-        if flag == 0.0 and not (ambiguous or unresolved):
-            # (the common case of _outcome, inline: a control loop's path)
-            n, k = self._n, self._k
-            out = self._out.copy()
-            residuals = out[n + k:]
-            if infeasible:
-                tol = self.primal_tol * max(1.0, xn)
-                infeasible = [i for i, r in enumerate(residuals.tolist()) if r > tol]
-            return out[:n], "optimal", {
-                "iterations": self._iterations.copy(), "rank_profile": self._ranks.copy(),
-                "level_violation": out[n:n + k], "infeasible_levels": infeasible or [],
-                "warm_start": self.warm_start}, residuals
+        self._run(data)
         return self._outcome(as_tuple=True)
 
     def _run(self, data: StackData) -> None:
-        """The kernel on ``data`` (:meth:`_refused` when it refuses the data)."""
+        """The kernel on ``data``; when it refuses the data, forget the warm start and
+        name the fault."""
         if not _kernel.solve_data(data.A, data.b, data.lower, data.upper, data.sqrt_weight,
                                   self._fwork, self._iwork, self._bwork):
-            self._refused(data)
-
-    def _refused(self, data: StackData) -> None:
-        """The kernel refused ``data``: forget the warm start and name the fault."""
-        self.warm_valid[:] = 0
-        data.check()     # names the task, level and row at fault
-        raise TaskStackError("the rows' values overflow float64: scale the tasks down")
+            self.warm_valid[:] = 0
+            data.check()     # names the task, level and row at fault
+            raise TaskStackError("the rows' values overflow float64: scale the tasks down")
 
     def _outcome(self, as_tuple: bool = False) -> tuple | Outcome:
         n, k = self._n, self._k
