@@ -464,14 +464,7 @@ def _lift(p, col, px, nf, Vf, betaf, posf):
         px[c] = 0.0
     for c in range(n - col):
         px[col + c] = p[c]
-    for t in range(nf - 1, -1, -1):
-        q = posf[t]
-        v = Vf[t, q:]
-        xq = px[q:]
-        f = betaf[t] * _dot(v, xq)
-        if f != 0.0:
-            for c in range(n - q):
-                xq[c] -= f * v[c]
+    _apply_q(px, nf, Vf, betaf, posf)
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")

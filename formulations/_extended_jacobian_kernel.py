@@ -172,8 +172,9 @@ def _apply_q(v, nf, V, beta, pos):
         vt = V[t, q:]
         vq = v[q:]
         f = beta[t] * _dot(vt, vq)
-        for c in range(n - q):
-            vq[c] -= f * vt[c]
+        if f != 0.0:
+            for c in range(n - q):
+                vq[c] -= f * vt[c]
 
 
 #: the unit-rows step is taken only when the smallest eigenvalue of ``I − Z_U Z_Uᵀ``
@@ -614,13 +615,7 @@ def solve_kernel_ws(B, c, starts, scales, rcond, level_damping, singular_thresho
         col += r
     for j in range(n):
         x[j] = y[j]
-    for t in range(nref - 1, -1, -1):
-        q = pos[t]
-        vq = V[t, q:]
-        xq = x[q:]
-        f = beta[t] * _dot(vq, xq)
-        for j in range(n - q):
-            xq[j] -= f * vq[j]
+    _apply_q(x, nref, V, beta, pos)
 
 
 @kernel(fastmath=_FAST)
