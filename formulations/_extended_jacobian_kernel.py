@@ -149,11 +149,12 @@ def _small_lstsq(L, rhs, m, r, mu2, out, col):
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
-def _apply_qt(v, nf, V, beta, pos):
-    """``v = Qᵀ v`` in place, ``Q = H_0 … H_{nf-1}`` (reflector ``t`` in ``V[t, pos[t]:]``,
-    ``beta[t]``): ``H_0`` first."""
+def _apply_reflectors(v, nf, V, beta, pos, transposed):
+    """``v = Qᵀ v`` (``transposed``: ``H_0`` first) or ``v = Q v`` (``H_{nf-1}`` first) in
+    place, ``Q = H_0 … H_{nf-1}`` (reflector ``t`` in ``V[t, pos[t]:]``, ``beta[t]``)."""
     n = v.shape[0]
-    for t in range(nf):
+    for i in range(nf):
+        t = i if transposed else nf - 1 - i
         q = pos[t]
         vt = V[t, q:]
         vq = v[q:]
@@ -164,17 +165,15 @@ def _apply_qt(v, nf, V, beta, pos):
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
+def _apply_qt(v, nf, V, beta, pos):
+    """``v = Qᵀ v`` in place (:func:`_apply_reflectors`)."""
+    _apply_reflectors(v, nf, V, beta, pos, True)
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
 def _apply_q(v, nf, V, beta, pos):
-    """``v = Q v`` in place (``H_{nf-1}`` first; see :func:`_apply_qt`)."""
-    n = v.shape[0]
-    for t in range(nf - 1, -1, -1):
-        q = pos[t]
-        vt = V[t, q:]
-        vq = v[q:]
-        f = beta[t] * _dot(vt, vq)
-        if f != 0.0:
-            for c in range(n - q):
-                vq[c] -= f * vt[c]
+    """``v = Q v`` in place (:func:`_apply_reflectors`)."""
+    _apply_reflectors(v, nf, V, beta, pos, False)
 
 
 #: the unit-rows step is taken only when the smallest eigenvalue of ``I − Z_U Z_Uᵀ``
