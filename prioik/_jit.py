@@ -6,8 +6,9 @@ prepared workspaces), so they do not need numba's reference-counting runtime (NR
 Without it numba neither creates a reference-counted handle for every array argument
 when the call unboxes it, nor increments and decrements the parent's count for every
 view a kernel takes (``B[j]``, ``T[i, q:w]``, the workspace parts): on the 9-DoF Panda
-limits stack the active-set kernel took 6.1 µs with the runtime and 4.2 µs without,
-the call alone 0.55 µs and 0.32 µs (``prioik bench`` has the side-by-side figures).
+limits stack the active-set kernel took 6.1 µs with the runtime and 3.8 µs without,
+the call of eight arrays alone 0.55 µs and 0.32 µs (interleaved timings of the same
+rows; ``prioik bench`` times the solves that result).
 
 A kernel compiled this way cannot allocate an array (numba refuses to compile it:
 "NRT required but not enabled"); helpers that allocate stay ordinary ``njit``
