@@ -75,16 +75,62 @@ ERROR, VELOCITY_REF, FEEDFORWARD, DRIFT, KP, KD = range(6)
 POSITION, ORIENTATION, POSE = 0, 1, 2
 
 #: layout of a frame task's ``spec`` (int64): first row, row set, whether to zero the
-#: drift, then the columns of the frame's supporting joints (fixed at declaration: one
-#: array instead of four arguments, as every argument costs the call ~50 ns to unbox)
+#: drift (else it is computed), then the columns of the frame's supporting joints (fixed
+#: at declaration: one array instead of four arguments, as every argument costs the
+#: call ~50 ns to unbox)
 SPEC_START, SPEC_MODE, SPEC_ZERO_DRIFT, SPEC_COLS = 0, 1, 2, 3
+
+#: rows of a frame task's constant geometry ``geo`` (``5 × 3``): the point's offset in
+#: the frame, the point in the parent joint's frame (``r = p_jf + R_jf offset``), then
+#: the frame's rotation in the joint's frame ``R_jf`` (three rows)
+GEO_OFFSET, GEO_POINT, GEO_ROTATION = 0, 1, 2
 
 
 @njit(cache=True, inline="always")
-def _position_rows(A, Q, J, t, R, spec, off, x, xd, xdd, rates):
+def _frame_drift(Q, s, mode, R, geo, aj, vj):
+    """The drift ``J̇ q̇`` of a frame task's rows at ``s`` (LOCAL_WORLD_ALIGNED, as
+    ``pin.getFrameClassicalAcceleration``), from the parent joint's spatial velocity
+    ``vj`` and its acceleration at ``q̈ = 0`` ``aj`` (``data.v[j]``, ``data.a[j]``: linear
+    then angular, joint frame).
+
+    In the joint frame, the point ``r`` moves at ``v_r = v + ω × r`` and its classical
+    acceleration is ``a + α × r + ω × v_r``; the angular rows take ``α``. Both are turned
+    to world axes by ``R R_jfᵀ`` (the joint's rotation; ``R``: the frame's).
+    """
+    r0 = geo[GEO_POINT, 0]
+    r1 = geo[GEO_POINT, 1]
+    r2 = geo[GEO_POINT, 2]
+    w0, w1, w2 = vj[3], vj[4], vj[5]
+    al0, al1, al2 = aj[3], aj[4], aj[5]
+    v0 = vj[0] + w1 * r2 - w2 * r1
+    v1 = vj[1] + w2 * r0 - w0 * r2
+    v2 = vj[2] + w0 * r1 - w1 * r0
+    a0 = aj[0] + al1 * r2 - al2 * r1 + w1 * v2 - w2 * v1
+    a1 = aj[1] + al2 * r0 - al0 * r2 + w2 * v0 - w0 * v2
+    a2 = aj[2] + al0 * r1 - al1 * r0 + w0 * v1 - w1 * v0
+    C = geo[GEO_ROTATION:GEO_ROTATION + 3]
+    if mode != ORIENTATION:
+        # frame axes: R_jfᵀ y, then world axes: R (R_jfᵀ y)
+        f0 = C[0, 0] * a0 + C[1, 0] * a1 + C[2, 0] * a2
+        f1 = C[0, 1] * a0 + C[1, 1] * a1 + C[2, 1] * a2
+        f2 = C[0, 2] * a0 + C[1, 2] * a1 + C[2, 2] * a2
+        for i in range(3):
+            Q[DRIFT, s + i] = R[i, 0] * f0 + R[i, 1] * f1 + R[i, 2] * f2
+    if mode != POSITION:
+        o = s + 3 if mode == POSE else s
+        f0 = C[0, 0] * al0 + C[1, 0] * al1 + C[2, 0] * al2
+        f1 = C[0, 1] * al0 + C[1, 1] * al1 + C[2, 1] * al2
+        f2 = C[0, 2] * al0 + C[1, 2] * al1 + C[2, 2] * al2
+        for i in range(3):
+            Q[DRIFT, o + i] = R[i, 0] * f0 + R[i, 1] * f1 + R[i, 2] * f2
+
+
+@njit(cache=True, inline="always")
+def _position_rows(A, Q, J, t, R, spec, geo, x, xd, xdd, rates):
     """Position rows of a frame task (see :func:`frame_rows`); ``ẋ* = ẍ* = 0`` unless
     ``rates``."""
     s = spec[SPEC_START]
+    off = geo[GEO_OFFSET]
     p0 = t[0] + R[0, 0] * off[0] + R[0, 1] * off[1] + R[0, 2] * off[2]
     p1 = t[1] + R[1, 0] * off[0] + R[1, 1] * off[1] + R[1, 2] * off[2]
     p2 = t[2] + R[2, 0] * off[0] + R[2, 1] * off[1] + R[2, 2] * off[2]
@@ -115,20 +161,27 @@ def _zero_rows(A, Q, s, nrows, zero_drift):
 
 
 @kernel()
-def position_rows(A, Q, J, t, R, spec, off, x, xd, xdd):
+def position_rows(A, Q, J, t, R, spec, geo, aj, vj, x, xd, xdd):
     """A point's position rows (3, ``spec``: see :data:`SPEC_COLS`): the point
     ``p = t + R off`` of the frame at ``(t, R)``; :func:`frame_rows` with
     ``mode = POSITION`` in fewer arguments."""
-    _zero_rows(A, Q, spec[SPEC_START], 3, spec[SPEC_ZERO_DRIFT] != 0)
-    _position_rows(A, Q, J, t, R, spec, off, x, xd, xdd, True)
+    s = spec[SPEC_START]
+    zero_drift = spec[SPEC_ZERO_DRIFT] != 0
+    _zero_rows(A, Q, s, 3, zero_drift)
+    _position_rows(A, Q, J, t, R, spec, geo, x, xd, xdd, True)
+    if not zero_drift:
+        _frame_drift(Q, s, POSITION, R, geo, aj, vj)
 
 
 @kernel()
-def position_target_rows(A, Q, J, t, R, spec, off, x):
+def position_target_rows(A, Q, J, t, R, spec, geo, aj, vj, x):
     """:func:`position_rows` with ``ẋ* = ẍ* = 0`` (a fixed target: two arguments fewer)."""
     s = spec[SPEC_START]
-    _zero_rows(A, Q, s, 3, spec[SPEC_ZERO_DRIFT] != 0)
-    _position_rows(A, Q, J, t, R, spec, off, x, x, x, False)
+    zero_drift = spec[SPEC_ZERO_DRIFT] != 0
+    _zero_rows(A, Q, s, 3, zero_drift)
+    _position_rows(A, Q, J, t, R, spec, geo, x, x, x, False)
+    if not zero_drift:
+        _frame_drift(Q, s, POSITION, R, geo, aj, vj)
 
 
 @njit(cache=True, inline="always")
@@ -138,11 +191,12 @@ def _rrt(A, B, i, j):
 
 
 @kernel()
-def frame_rows(A, Q, J, t, R, spec, off, x, xd, xdd, Rstar, w, wd):
+def frame_rows(A, Q, J, t, R, spec, geo, aj, vj, x, xd, xdd, Rstar, w, wd):
     """One frame's rows at ``s = spec[0]``: position of the point ``p = t + R off``
     (3 rows, ``spec[1] = POSITION``), orientation (3 rows, ``ORIENTATION``) or both (6,
-    ``POSE``); ``spec[2]``: zero the drift; ``spec[3:]``: the columns ``cols`` of the
-    frame's supporting joints.
+    ``POSE``); ``spec[2]``: zero the drift, else compute it (:func:`_frame_drift`, from
+    the joint motion ``aj``, ``vj``); ``spec[3:]``: the columns ``cols`` of the
+    frame's supporting joints; ``geo``: the constant geometry (:data:`GEO_POINT`).
 
     Position rows: ``J_lin + J_ang × p`` on the columns ``cols`` (zero elsewhere) — the
     LOCAL_WORLD_ALIGNED Jacobian of the point ``p`` from the world-frame joint Jacobians
@@ -152,10 +206,13 @@ def frame_rows(A, Q, J, t, R, spec, off, x, xd, xdd, Rstar, w, wd):
     s = spec[SPEC_START]
     mode = spec[SPEC_MODE]
     nrows = 6 if mode == POSE else 3
-    _zero_rows(A, Q, s, nrows, spec[SPEC_ZERO_DRIFT] != 0)
+    zero_drift = spec[SPEC_ZERO_DRIFT] != 0
+    _zero_rows(A, Q, s, nrows, zero_drift)
+    if not zero_drift:
+        _frame_drift(Q, s, mode, R, geo, aj, vj)
     o = s + 3 if mode == POSE else s        # first orientation row
     if mode != ORIENTATION:
-        _position_rows(A, Q, J, t, R, spec, off, x, xd, xdd, True)
+        _position_rows(A, Q, J, t, R, spec, geo, x, xd, xdd, True)
     if mode != POSITION:
         for k in range(SPEC_COLS, spec.shape[0]):
             c = spec[k]
@@ -171,9 +228,10 @@ def frame_rows(A, Q, J, t, R, spec, off, x, xd, xdd, Rstar, w, wd):
 
 
 @kernel()
-def com_rows(A, Q, s, Jcom, com, axes, x, xd, xdd, zero_drift):
+def com_rows(A, Q, s, Jcom, com, acom, axes, x, xd, xdd, zero_drift):
     """Centre-of-mass rows at ``s`` on ``axes``: ``A = J_com[axes]``, error
-    ``x − c[axes]``, ``ẋ* = xd``, ``ẍ* = xdd``, drift zeroed if ``zero_drift``."""
+    ``x − c[axes]``, ``ẋ* = xd``, ``ẍ* = xdd``, drift ``acom[axes]`` (the centre of
+    mass's acceleration at ``q̈ = 0``, ``J̇_com q̇``), zeroed if ``zero_drift``."""
     for i in range(axes.shape[0]):
         a = axes[i]
         row = A[s + i]
@@ -182,8 +240,7 @@ def com_rows(A, Q, s, Jcom, com, axes, x, xd, xdd, zero_drift):
         Q[ERROR, s + i] = x[i] - com[a]
         Q[VELOCITY_REF, s + i] = xd[i]
         Q[FEEDFORWARD, s + i] = xdd[i]
-        if zero_drift:
-            Q[DRIFT, s + i] = 0.0
+        Q[DRIFT, s + i] = 0.0 if zero_drift else acom[a]
 
 
 @kernel()

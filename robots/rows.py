@@ -46,7 +46,6 @@ from .models import RobotModel
 
 __all__ = ["MODES", "TaskWriter", "JointLimitActivation"]
 
-_LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 
 #: levels of a :class:`TaskWriter`
 MODES = ("velocity", "acceleration")
@@ -100,7 +99,8 @@ class _Task:
     spec: np.ndarray | None = None       # frame tasks: the kernels' int64 spec (at _fix)
     hot: tuple | None = None             # frame tasks: (pin.Data, the kernel's arguments)
     offset: np.ndarray | None = None     # point on the frame (frame coordinates)
-    has_offset: bool = False             # offset ≠ 0 (read every step: a bool, not .any())
+    joint: int = -1                      # frame tasks: the frame's parent joint
+    geo: np.ndarray | None = None        # frame tasks: the kernels' constant geometry
     axes: np.ndarray | None = None       # com axes
     form: str = ""                       # limits: "activation" or "bounds"
     position: bool = True                # limits: position limits in the bounds
@@ -271,9 +271,13 @@ class TaskWriter:
                 for c in range(model.joints[j].idx_v,
                                model.joints[j].idx_v + model.joints[j].nv)]
         task.fid = fid
+        task.joint = joint
         task.cols = np.array(sorted(cols), dtype=np.int64)
         task.offset = offset
-        task.has_offset = bool(np.any(offset))
+        placement = model.frames[fid].placement          # in the parent joint's frame
+        rotation = np.array(placement.rotation)
+        task.geo = np.vstack([offset, placement.translation + rotation @ offset, rotation])
+        task.geo.setflags(write=False)
 
     def _add(self, name, kind, rows, level, gain, weight, inequality=False) -> _Task:
         if self._layout is not None:
@@ -407,13 +411,12 @@ class TaskWriter:
             hot = self._frame_args(task, state)
         if not (x.__class__ is _NDARRAY and x.dtype is _F64 and x.shape == _SHAPE3):
             x = _vec3(x, name, "x")
-        accel = self._accel and self._drift(state, task)    # refuses a drift-free state
+        if self._accel and not state.has_drift:
+            self._drift(state, task)                          # refuses a drift-free state
         if xd is None and xdd is None:        # a fixed target: two arguments fewer
             _k.position_target_rows(*hot[1], x)
         else:
             _k.position_rows(*hot[1], x, _vec3(xd, name, "xd"), _vec3(xdd, name, "xdd"))
-        if accel:
-            self._frame_drift(state, task, hot[1][4])
 
     point = frame_position
 
@@ -464,11 +467,9 @@ class TaskWriter:
             views = self._data_views(state)
         m = task.rows
         drift = self._accel and self._drift(state, task)
-        _k.com_rows(self._data.A, self._Q, task.start, views.Jcom, views.com, task.axes,
-                    _vec(x, m, name, "x"), _vec(xd, m, name, "xd"), _vec(xdd, m, name, "xdd"),
-                    not drift)
-        if drift:
-            self._Q[_k.DRIFT, task.start:task.start + m] = state.acom_drift[task.axes]
+        _k.com_rows(self._data.A, self._Q, task.start, views.Jcom, views.com, views.acom,
+                    task.axes, _vec(x, m, name, "x"), _vec(xd, m, name, "xd"),
+                    _vec(xdd, m, name, "xdd"), not drift)
 
     def posture(self, state, name: str, q_ref) -> None:
         """The actuated joints to ``q_ref`` (``n_q``): error ``q_ref ⊖ q`` on rows
@@ -547,37 +548,20 @@ class TaskWriter:
         hot = task.hot
         if hot is None or hot[0] is not state.data:
             hot = self._frame_args(task, state)
-        accel = self._accel and self._drift(state, task)    # refuses a drift-free state
+        if self._accel and not state.has_drift:
+            self._drift(state, task)                          # refuses a drift-free state
         _k.frame_rows(*hot[1], x, xd, xdd, rot, w, wd)
-        if accel:
-            self._frame_drift(state, task, hot[1][4])
 
     def _frame_args(self, task: _Task, state) -> tuple:
-        """``(state.data, (A, Q, J, t, R, spec, offset))``: the frame kernels' arguments
-        that stay the same while the states share one ``pin.Data`` (its storage is fixed,
-        so the views follow every later kinematics call), kept on the task."""
+        """``(state.data, (A, Q, J, t, R, spec, geo, a_j, v_j))``: the frame kernels'
+        arguments that stay the same while the states share one ``pin.Data`` (its storage
+        is fixed, so the views follow every later kinematics call), kept on the task."""
         views = self._data_views(state)          # refuses another robot's state
         t, R = views.frame(task.fid)
+        aj, vj = views.motion(task.joint)
         task.hot = (state.data, (self._data.A, self._Q, views.J, t, R, task.spec,
-                                 task.offset))
+                                 task.geo, aj, vj))
         return task.hot
-
-    def _frame_drift(self, state, task: _Task, R: np.ndarray) -> None:
-        """The drift rows ``J̇ q̇`` of a frame task (acceleration level)."""
-        s = task.start
-        acc = pin.getFrameClassicalAcceleration(state.model, state.data, task.fid,
-                                                _LWA).vector
-        if task.kind == "orientation":
-            self._Q[_k.DRIFT, s:s + 3] = acc[3:]
-        else:
-            self._Q[_k.DRIFT, s:s + task.rows] = acc[:task.rows]
-            if task.has_offset:
-                # a point r = R·offset from the origin: a_p = a_O + α × r + ω × (ω × r)
-                r = R @ task.offset
-                om = pin.getFrameVelocity(state.model, state.data, task.fid,
-                                          _LWA).angular
-                self._Q[_k.DRIFT, s:s + 3] += np.cross(acc[3:], r) \
-                    + np.cross(om, np.cross(om, r))
 
     def _drift(self, state, task: _Task) -> bool:
         """Whether to write the drift: at acceleration level (refusing a drift-free
@@ -607,15 +591,22 @@ class TaskWriter:
 class _DataViews:
     """Views into one ``pin.Data`` (its storage is fixed at creation, so views taken
     once follow every later kinematics call on it): ``J`` (``6 × n_v`` world-frame
-    joint Jacobians), ``Jcom``, ``com``, and per frame the placement's translation
-    and rotation. Holds ``data`` so that the views never outlive it."""
+    joint Jacobians), ``Jcom``, ``com``, ``acom`` (the centre of mass's acceleration),
+    per frame the placement's translation and rotation and per joint its spatial
+    acceleration and velocity. Holds ``data`` so that the views never outlive it."""
 
     def __init__(self, data: pin.Data) -> None:
         self.data = data
         self.J = data.J
         self.Jcom = data.Jcom
         self.com = data.com[0]
+        self.acom = data.acom[0]
         self._frames: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+
+    def motion(self, joint: int) -> tuple[np.ndarray, np.ndarray]:
+        """Views of ``data.a[joint]`` and ``data.v[joint]`` (6 each: linear, angular;
+        the joint's frame)."""
+        return self.data.a[joint].vector, self.data.v[joint].vector
 
     def frame(self, fid: int) -> tuple[np.ndarray, np.ndarray]:
         views = self._frames.get(fid)
