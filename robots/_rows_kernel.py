@@ -263,7 +263,7 @@ def actuated_positions(q, iq, out):
 
 
 @kernel()
-def limit_activation_rows(A, Q, s, nb, qa, va, lo, hi, width, kp, kd):
+def limit_activation_rows(A, Q, s, nb, qa, lo, hi, width, kp, kd):
     """Joint-limit activation rows at ``s``, one per actuated joint (fixed size): row
     ``k`` is the unit row of column ``nb + k`` while the joint is inside its margin
     ``width[k]`` of a limit, else masked (all zero, target 0).
@@ -386,6 +386,18 @@ def bounds_at(lower, upper, q, v, iq, lim, params, qa):
     else:
         velocity_bounds(lower, upper, s, qa, lim[0], lim[1], lim[2], params[1],
                         params[3] != 0.0, params[4] != 0.0)
+
+
+@kernel()
+def activation_at(A, Q, q, iq, lim, params, qa):
+    """The activation rows of one joint-limit task in one call, from the state itself:
+    ``lim`` holds the task's fixed ``lo``, ``hi`` and margin widths (``3 × n_a``);
+    ``params``: row start, ``n_base``, ``K_p``, ``K_d`` — then
+    :func:`limit_activation_rows` on the positions ``q[iq[k]]`` (scratch ``qa``).
+    Returns the number of active rows."""
+    actuated_positions(q, iq, qa)
+    return limit_activation_rows(A, Q, int(params[0]), int(params[1]), qa, lim[0],
+                                 lim[1], lim[2], params[2], params[3])
 
 
 @kernel()

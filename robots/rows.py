@@ -109,8 +109,8 @@ class _Task:
     dt: float = 0.0
     activation: JointLimitActivation | None = None
     width: np.ndarray | None = None      # activation margins per joint
-    limits: np.ndarray | None = None     # bounds: lo, hi, q̇_max (3 × n_a, fixed)
-    bound_params: np.ndarray | None = None   # bounds: start, T, dt, flags (at _fix)
+    limits: np.ndarray | None = None     # lo, hi, then q̇_max (bounds) or width (3 × n_a)
+    bound_params: np.ndarray | None = None   # the kernel's parameters (at _fix)
 
 
 class TaskWriter:
@@ -244,6 +244,9 @@ class TaskWriter:
             with np.errstate(invalid="ignore"):
                 task.width = np.where(np.isfinite(lo) & np.isfinite(hi),
                                       np.minimum(params.margin, 0.25 * (hi - lo)), 1.0)
+            task.limits = np.ascontiguousarray(np.vstack([lo, hi, task.width]),
+                                               dtype=np.float64)
+            task.limits.setflags(write=False)
             return
         if not (position or velocity):
             raise ValueError(f"task {name!r}: bounds need position or velocity limits")
@@ -358,6 +361,10 @@ class TaskWriter:
             elif task.kind == "limits" and task.form != "activation":
                 task.bound_params = np.array([sl.start, task.horizon, task.dt,
                                               task.position, task.velocity, self._accel],
+                                             dtype=np.float64)
+                task.bound_params.setflags(write=False)
+            elif task.kind == "limits":
+                task.bound_params = np.array([sl.start, nb, task.kp, task.kd],
                                              dtype=np.float64)
                 task.bound_params.setflags(write=False)
             data.sqrt_weight[sl] = np.sqrt(task.weight)
@@ -500,13 +507,8 @@ class TaskWriter:
             _k.bounds_at(data.lower, data.upper, state.q, state.v, self._q_index,
                          task.limits, task.bound_params, self._qa)
             return task.rows
-        lo, hi, vmax = self._joint_limits()
-        qa = self._qa
-        _k.actuated_positions(state.q, self._q_index, qa)
-        va = state.v[self.robot.n_base:]
-        return int(_k.limit_activation_rows(data.A, self._Q, task.start,
-                                            self.robot.n_base, qa, va, lo, hi,
-                                            task.width, task.kp, task.kd))
+        return _k.activation_at(data.A, self._Q, state.q, self._q_index, task.limits,
+                                task.bound_params, self._qa)
 
     # ------------------------------------------------------------------ targets
     def targets(self, state) -> StackData:

@@ -51,6 +51,9 @@ _NDARRAY = np.ndarray
 _state_is_valid = _rk.state_is_valid
 _joint_jacobians = pin.computeJointJacobians
 _frame_placements = pin.updateFramePlacements
+_center_of_mass = pin.centerOfMass
+#: n_v → zeros(n_v), the q̈ = 0 of the drift pass (never written)
+_ZERO_ACCELERATION: dict[int, np.ndarray] = {}
 
 
 class KinematicState:
@@ -104,10 +107,13 @@ class KinematicState:
         # one forward pass (at q̈ = 0 for the drifts); the Jacobians, frames and the
         # centre of mass are then read from it
         if drift:
-            pin.forwardKinematics(m, d, qc, vc, np.zeros(vc.shape[0]))
-            pin.computeJointJacobians(m, d)
-            pin.centerOfMass(m, d, pin.KinematicLevel.ACCELERATION, False)
-            self.acom_drift = np.array(d.acom[0])
+            zeros = _ZERO_ACCELERATION.get(vc.shape[0])
+            if zeros is None:
+                zeros = np.zeros(vc.shape[0])
+                zeros.setflags(write=False)
+                zeros = _ZERO_ACCELERATION.setdefault(vc.shape[0], zeros)
+            _center_of_mass(m, d, qc, vc, zeros, False)     # with forwardKinematics
+            _joint_jacobians(m, d)
         else:
             _joint_jacobians(m, d, qc)     # placements and Jacobians
         _frame_placements(m, d)
@@ -115,8 +121,15 @@ class KinematicState:
 
     #: data.Jcom and data.com[0] computed for this state (on first use)
     _com_ready = False
-    #: ``J̇_com q̇`` (3), ``None`` from a ``drift=False`` state
-    acom_drift = None
+
+    @property
+    def acom_drift(self) -> np.ndarray | None:
+        """``J̇_com q̇`` (3), ``None`` from a ``drift=False`` state."""
+        if not self.has_drift:
+            return None
+        if "acom" not in self._cache:
+            self._cache["acom"] = np.array(self.data.acom[0])
+        return self._cache["acom"]
 
     def ensure_com(self) -> None:
         """Compute ``data.Jcom`` and ``data.com[0]`` once for this state (the writers of
