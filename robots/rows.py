@@ -24,7 +24,8 @@ position limits, the velocity limits or both, for the inequality formulations).
 Each writer is one compiled call (:mod:`robots._rows_kernel`) on views of the state's
 ``pin.Data`` — the world-frame joint Jacobians ``data.J`` (a frame's
 LOCAL_WORLD_ALIGNED Jacobian is formed from them), ``data.oMf``, ``data.Jcom``,
-``data.com[0]`` — taken once per ``Data``. The readable builders of
+``data.com[0]``, and for the drifts the joints' spatial velocities and accelerations at
+``q̈ = 0`` ``data.v``, ``data.a`` and ``data.acom[0]`` — taken once per ``Data``. The readable builders of
 :mod:`robots.tasks` (``frame_position(state, frame, ref)`` → ``TaskTerm`` → ``Task``)
 are thin wrappers over these writers; ``tests/test_rows.py`` checks the writers against
 independent pinocchio/numpy formulas and ``tests/test_tasks.py`` every Jacobian and drift
