@@ -32,8 +32,9 @@ from prioik._jit import kernel
 
 from prioik.hierarchy.linalg import AMBIGUITY as _AMBIGUITY
 
-from ._extended_jacobian_kernel import (_UNIT_ROWS_GAP, _apply_q, _dot, _small_lstsq_ws,
-                                        _swap, _unit_rows_of, _unit_rows_solve)
+from ._extended_jacobian_kernel import (_UNIT_ROWS_GAP, _apply_q, _apply_qt,
+                                        _cholesky_lower, _dot, _small_lstsq_ws, _swap,
+                                        _unit_rows_of, _unit_rows_solve)
 
 #: the same fast-math set as the extended-Jacobian kernel (no finite-math assumption)
 _FAST = {"reassoc", "contract", "nsz", "arcp"}
@@ -343,65 +344,183 @@ def _full_rank_step(B, y, col, rows, nw, tgt, soft_tol, flat, t, norms, perm, p,
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
-def _unit_rows_step(Bo, xc, col, rows, nw, tgt, soft_tol, colrow, p, nf, Vf, betaf, posf,
-                    Zu, G, g):
+def _woodbury_apply(v, Zu, G, nu, d, t):
+    """``v = (I − Z_Uᵀ Z_U)⁻¹ v`` in place: ``v + Z_Uᵀ (L Lᵀ)⁻¹ Z_U v`` with ``Z_U`` in
+    ``Zu[:nu, :d]`` and ``L`` (Cholesky of ``I − Z_U Z_Uᵀ``) in ``G[:nu, :nu]``, as
+    :func:`_unit_rows_solve` leaves them; scratch ``t`` (``nu``)."""
+    for a in range(nu):
+        acc = _dot(Zu[a, :d], v[:d])
+        for c in range(a):
+            acc -= G[a, c] * t[c]
+        t[a] = acc / G[a, a]
+    for a in range(nu - 1, -1, -1):
+        acc = t[a]
+        for c in range(a + 1, nu):
+            acc -= G[c, a] * t[c]
+        t[a] = acc / G[a, a]
+    for a in range(nu):
+        ta = t[a]
+        Za = Zu[a]
+        for c in range(d):
+            v[c] += ta * Za[c]
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _unit_rows_step(Bo, ucol, xc, col, rows, nh, nw, tgt, rcond, soft_tol, reach, colrow, p,
+                    nf, Vf, betaf, posf, Zu, G, flat, nu_out):
     """The step of a level of *unit rows* — ``nw`` working rows, each ``±s e_cᵀ`` in ``x``
     (one non-zero, the same magnitude ``s``, distinct columns: a posture task of uniform
-    weight) — with no hard row: :func:`_unit_rows_solve` of the extended Jacobian's
-    kernel (a rank-``|U|`` update of the identity instead of bringing the ``nw`` rows
-    through the fixing reflectors and factorizing them: on G1's posture, 29 rows on 18
-    free coordinates below 17 reflectors, a fifth of :func:`_full_rank_step`'s work).
+    weight) — under ``nh`` working hard rows that are box rows (``a_i e_cᵀ x = β_i``, one
+    column each, distinct): :func:`_unit_rows_solve` of the extended Jacobian's kernel
+    (a rank-``|U|`` update of the identity instead of bringing the ``nw`` rows through
+    the fixing reflectors and factorizing them: on G1's posture, 29 rows on 18 free
+    coordinates below 17 reflectors, a fifth of :func:`_full_rank_step`'s work).
 
-    Returns the level's margin over ``soft_tol`` (``s √g / soft_tol``, a lower bound of
-    the pivots' margin, ``g`` = ``_UNIT_ROWS_GAP``; ``s / soft_tol`` with no uncovered
-    column), or ``-1.0`` — the rows are not such unit rows, ``S Z`` is not far from
-    rank deficient, or the bound is within :data:`~hierarchy.AMBIGUITY` of
-    ``soft_tol`` (``p`` may be written) — and the caller then takes
-    :func:`_full_rank_step`, whose pivots decide. Scratch: ``colrow`` (``n`` ints),
-    ``Zu``, ``G`` (``≥ 2n × n``), ``g`` (``n``)."""
+    The hard rows, ``Z_H p = ρ`` (``Z_H``: their columns' rows of the free directions
+    ``Z``; ``ρ_i = (β_i − a_i x_c)/a_i`` when ``reach``, else 0), enter by the Schur
+    complement of the normal equations ``N p = h`` (``N = I − Z_Uᵀ Z_U``, applied by
+    Woodbury): ``W = N⁻¹ Z_Hᵀ``, ``(Z_H W) λ = Z_H N⁻¹ h − ρ``, ``p = N⁻¹ h − W λ``. Their
+    multipliers in the convention of :func:`_hard_multipliers` (``C_Hᵀ ν = g``, the
+    level objective's half gradient ``g = s² (N p − h) = −s² Z_Hᵀ λ``) are
+    ``ν_i = −s² λ_i / a_i``, written to ``nu_out``.
+
+    Returns ``(margin, ‖g‖)``: the level's margin over ``soft_tol`` (``s √g / soft_tol``,
+    a lower bound of the pivots' margin, ``g`` = ``_UNIT_ROWS_GAP``; ``s / soft_tol`` with
+    no uncovered column), or ``(-1.0, -1.0)`` — the rows are not such unit rows, ``S Z``
+    is not far from rank deficient, the bound is within :data:`~hierarchy.AMBIGUITY` of
+    ``soft_tol``, a hard row is not a box row or the hard rows are not clearly
+    independent (a Cholesky pivot of ``Z_H Z_Hᵀ`` within ``AMBIGUITY`` of ``rcond``: the
+    general path's hard-row rule decides then) — and the caller takes the general
+    path (``p`` may be written). Scratch: ``colrow`` (``n`` ints), ``Zu``, ``G``
+    (``≥ 2n × n``), ``flat`` (``≥ 3n``)."""
     n = Bo.shape[1]
+    d = n - col
+    R = Zu.shape[0]
     if not soft_tol > 0.0:       # (as _full_rank_step: no rank rule, no full-rank step)
-        return -1.0
-    if rows[nw - 1] - rows[0] != nw - 1:    # (in order: the level's rows, all working)
-        return -1.0
-    s = _unit_rows_of(Bo, rows[0], rows[0] + nw, colrow)
+        return -1.0, -1.0
+    s0 = rows[nh]
+    if rows[nh + nw - 1] - s0 != nw - 1:    # (in order: the level's rows, all working)
+        return -1.0, -1.0
+    if nh >= d:
+        return -1.0, -1.0
+    for i in range(nh):
+        if ucol[rows[i]] < 0:
+            return -1.0, -1.0
+    s = _unit_rows_of(Bo, s0, s0 + nw, colrow)
     if s < 0.0:
-        return -1.0
+        return -1.0, -1.0
+    nun = 0
+    for c in range(n):
+        if colrow[c] < 0:
+            nun += 1
+    if nun + 2 * nh > R or 2 * nun + 2 * nh > G.shape[0]:
+        return -1.0, -1.0
+    g = flat[:n]
+    z = flat[n:2 * n]
+    t = flat[2 * n:3 * n]
     # g = Sᵀ t / s², t = tgt − S x
     for c in range(n):
         g[c] = 0.0
         i = colrow[c]
         if i >= 0:
-            a = Bo[rows[i], c]
-            g[c] = a * (tgt[i] - a * xc[c]) / (s * s)
+            a = Bo[s0 + i, c]
+            g[c] = a * (tgt[nh + i] - a * xc[c]) / (s * s)
     nu = _unit_rows_solve(colrow, g, col, p, nf, Vf, betaf, posf, Zu, G)
     if nu < 0:
-        return -1.0
+        return -1.0, -1.0
     margin = s * np.sqrt(_UNIT_ROWS_GAP) if nu > 0 else s
-    return margin / soft_tol if margin > _AMBIGUITY * soft_tol else -1.0
+    if not margin > _AMBIGUITY * soft_tol:
+        return -1.0, -1.0
+    if nh == 0:
+        return margin / soft_tol, 0.0
+    # the hard rows: Z_H (rows nu:nu+nh of Zu), W = N⁻¹ Z_Hᵀ (rows nu+nh:nu+2nh)
+    Zh = Zu[nu:nu + nh]
+    W = Zu[nu + nh:nu + 2 * nh]
+    for i in range(nh):
+        c = ucol[rows[i]]
+        for k in range(n):
+            z[k] = 0.0
+        z[c] = 1.0
+        _apply_qt(z, nf, Vf, betaf, posf)
+        for k in range(d):
+            Zh[i, k] = z[col + k]
+            W[i, k] = z[col + k]
+        _woodbury_apply(W[i], Zu, G, nu, d, t)
+    # independence: Cholesky of K = Z_H Z_Hᵀ, every pivot clearly above rcond
+    K = G[2 * nu:2 * nu + nh]
+    S = G[2 * nu + nh:2 * nu + 2 * nh]
+    for a in range(nh):
+        for b in range(a + 1):
+            K[a, b] = _dot(Zh[a, :d], Zh[b, :d])
+            S[a, b] = _dot(Zh[a, :d], W[b, :d])
+    if not _cholesky_lower(K, nh):
+        return -1.0, -1.0
+    for a in range(nh):
+        if not K[a, a] > _AMBIGUITY * rcond:
+            return -1.0, -1.0
+    if not _cholesky_lower(S, nh):
+        return -1.0, -1.0
+    # λ = S⁻¹ (Z_H p0 − ρ), in t
+    for i in range(nh):
+        j = rows[i]
+        c = ucol[j]
+        a = Bo[j, c]
+        rho = (tgt[i] - a * xc[c]) / a if reach else 0.0
+        acc = _dot(Zh[i, :d], p[:d]) - rho
+        for k in range(i):
+            acc -= S[i, k] * t[k]
+        t[i] = acc / S[i, i]
+    for i in range(nh - 1, -1, -1):
+        acc = t[i]
+        for k in range(i + 1, nh):
+            acc -= S[k, i] * t[k]
+        t[i] = acc / S[i, i]
+    # p = p0 − Wᵀ λ; ν = −s² λ / a; ‖g‖ = s² ‖Z_Hᵀ λ‖ (z: Z_Hᵀ λ)
+    for k in range(d):
+        z[k] = 0.0
+    for i in range(nh):
+        li = t[i]
+        Wi = W[i]
+        Zi = Zh[i]
+        for k in range(d):
+            p[k] -= li * Wi[k]
+            z[k] += li * Zi[k]
+        j = rows[i]
+        nu_out[i] = -s * s * li / Bo[j, ucol[j]]
+    return margin / soft_tol, s * s * np.sqrt(_dot(z[:d], z[:d]))
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
-def _step(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T, rhs, norms, V, beta,
-          vpos, Lw, p, reach, flat, perm, nrot, nf, Vf, betaf, posf, tq, Bo, xc):
+def _step(B, y, col, rows, nh, nw, fvec, rcond, soft_tol, T, V, beta, vpos, Lw, p, reach,
+          flat, perm, nrot, nf, Vf, betaf, posf, Bo, xc, ucol):
     """:func:`_unit_rows_step` or :func:`_full_rank_step` when one applies, else
-    :func:`_eqp`; returns ``(hr, rs, nref, full, margin)`` (``margin``: of the soft rows'
-    rank decisions)."""
+    :func:`_eqp`; returns ``(hr, rs, nref, full, margin, gn)`` (``margin``: of the soft
+    rows' rank decisions; ``gn ≥ 0``: the hard rows' multipliers are in ``nu`` already
+    and ``gn`` is :func:`_hard_multipliers`' ``‖g‖``, ``-1``: they are not). The rows of
+    ``fvec`` it uses are taken here (a call of more than 30 arguments compiles to
+    ``f(*args)``, which numba does not inline)."""
+    rnorm = fvec[2]
+    rhs = fvec[3]
+    norms = fvec[4]
+    tgt = fvec[5]
+    nu = fvec[11]
+    tq = fvec[15]
     d = B.shape[1] - col
-    if nh == 0 and nw >= d:
-        margin = _unit_rows_step(Bo, xc, col, rows, nw, tgt, soft_tol, perm, p, nf, Vf,
-                                 betaf, posf, T, Lw, flat[:B.shape[1]])
+    if nw >= d:
+        margin, gn = _unit_rows_step(Bo, ucol, xc, col, rows, nh, nw, tgt, rcond, soft_tol,
+                                     reach, perm, p, nf, Vf, betaf, posf, T, Lw, flat, nu)
         if margin >= 0.0:
-            return 0, d, 0, True, margin
-        margin = _full_rank_step(B, y, col, rows, nw, tgt, soft_tol, flat, rhs, norms, perm,
-                                 p, nrot, nf, Vf, betaf, posf)
-        if margin >= 0.0:
-            return 0, d, 0, True, margin
+            return nh, d - nh, 0, True, margin, gn
+        if nh == 0:
+            margin = _full_rank_step(B, y, col, rows, nw, tgt, soft_tol, flat, rhs, norms,
+                                     perm, p, nrot, nf, Vf, betaf, posf)
+            if margin >= 0.0:
+                return 0, d, 0, True, margin, -1.0
     for i in range(nh + nw):
         _bring(B, rows[i], nrot, nf, Vf, betaf, posf)
     hr, rs, nref, margin = _eqp(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T, rhs,
                                 norms, V, beta, vpos, Lw, p, reach, flat, tq)
-    return hr, rs, nref, False, margin
+    return hr, rs, nref, False, margin, -1.0
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
@@ -791,6 +910,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
         rs = 0
         full = False
         step_margin = np.inf
+        gn_step = -1.0
         if use_warm and warm_valid[lev]:
             for j in range(s1):
                 saved[j] = state[j]
@@ -806,10 +926,9 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                     state[j] = 0
             nh, nw = _gather(state, hard_end, s0, s1, blo, bup, rows, tgt, B, nrot, nf,
                                  Vf, betaf, posf)
-            hr, rs, nref, full, step_margin = _step(B, y, col, rows, nh, nw, tgt, rnorm,
-                                                    rcond, soft_tol, T, rhs, norms, V, beta,
-                                                    vpos, Lw, p, True, flat, perm, nrot, nf,
-                                                    Vf, betaf, posf, tq, Bo, xc)
+            hr, rs, nref, full, step_margin, gn_step = _step(
+                B, y, col, rows, nh, nw, fvec, rcond, soft_tol, T, V, beta, vpos, Lw, p,
+                True, flat, perm, nrot, nf, Vf, betaf, posf, Bo, xc, ucol)
             iters[lev] += 1
             for i in range(hr, nh):
                 state[rows[i]] = 0
@@ -864,10 +983,9 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                 iters[lev] += 1
                 nh, nw = _gather(state, hard_end, s0, s1, blo, bup, rows, tgt, B, nrot, nf,
                                  Vf, betaf, posf)
-                hr, rs, nref, full, step_margin = _step(B, y, col, rows, nh, nw, tgt, rnorm,
-                                                        rcond, soft_tol, T, rhs, norms, V,
-                                                        beta, vpos, Lw, p, False, flat, perm,
-                                                        nrot, nf, Vf, betaf, posf, tq, Bo, xc)
+                hr, rs, nref, full, step_margin, gn_step = _step(
+                    B, y, col, rows, nh, nw, fvec, rcond, soft_tol, T, V, beta, vpos, Lw, p,
+                    False, flat, perm, nrot, nf, Vf, betaf, posf, Bo, xc, ucol)
                 for i in range(hr, nh):
                     state[rows[i]] = 0          # dependent on the kept hard rows
                 pn = np.sqrt(_dot(p[:d], p[:d]))
@@ -934,7 +1052,11 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
             if hr == 0:
                 settled = True
                 break
-            gn = _hard_multipliers(B, y, col, rows, nh, hr, nw, tgt, T, V, beta, vpos, g, nu)
+            if gn_step >= 0.0:      # the unit-row step's Schur complement gave them
+                gn = gn_step
+            else:
+                gn = _hard_multipliers(B, y, col, rows, nh, hr, nw, tgt, T, V, beta, vpos,
+                                       g, nu)
             tn = 0.0
             for i in range(nh, nh + nw):
                 tn += tgt[i] * tgt[i]

@@ -566,24 +566,32 @@ def _householder_lq(C: np.ndarray):
 _UNIT_ROWS_CALL = []
 
 
-def _unit_rows_step(Bo, x, col, tgt, soft_tol, V, beta, pos):
-    """The kernel's inlined ``_unit_rows_step`` on these arrays (compiled once)."""
+def _unit_rows_step(Bo, x, col, tgt, soft_tol, V, beta, pos, nh=0, reach=True,
+                    rcond=1e-10):
+    """The kernel's inlined ``_unit_rows_step`` on these arrays (compiled once): rows
+    ``Bo[:nh]`` are the working hard rows, the rest the level's; returns ``(margin, p,
+    ‖g‖, ν)``."""
     if not _UNIT_ROWS_CALL:
         from numba import njit
         from prioik.formulations._active_set_kernel import _unit_rows_step as step
 
         @njit
-        def call(Bo, xc, col, rows, nw, tgt, soft_tol, nf, Vf, betaf, posf):
+        def call(Bo, ucol, xc, col, rows, nh, nw, tgt, rcond, soft_tol, reach, nf, Vf,
+                 betaf, posf):
             n = Bo.shape[1]
             p = np.zeros(n)
-            margin = step(Bo, xc, col, rows, nw, tgt, soft_tol, np.empty(n, np.int64), p,
-                          nf, Vf, betaf, posf, np.zeros((n, n)), np.zeros((2 * n, n)),
-                          np.zeros(n))
-            return margin, p
+            nu = np.zeros(Bo.shape[0])
+            margin, gn = step(Bo, ucol, xc, col, rows, nh, nw, tgt.copy(), rcond, soft_tol,
+                              reach, np.empty(n, np.int64), p, nf, Vf, betaf, posf,
+                              np.zeros((3 * n, n)), np.zeros((4 * n, n)), np.zeros(3 * n),
+                              nu)
+            return margin, p, gn, nu
         _UNIT_ROWS_CALL.append(call)
-    nw = Bo.shape[0]
-    return _UNIT_ROWS_CALL[0](Bo, x, col, np.arange(nw), nw, tgt, soft_tol, col, V, beta,
-                              pos)
+    m = Bo.shape[0]
+    ucol = np.array([np.flatnonzero(r)[0] if np.count_nonzero(r) == 1 else -1 for r in Bo],
+                    dtype=np.int64)
+    return _UNIT_ROWS_CALL[0](Bo, ucol, x, col, np.arange(m), nh, m - nh, tgt, rcond,
+                              soft_tol, reach, col, V, beta, pos)
 
 
 @pytest.mark.parametrize("base", [0, 6])
@@ -599,7 +607,7 @@ def test_unit_rows_step_is_the_levels_least_squares_step(seed, base):
     Bo = np.zeros((n - base, n))
     Bo[np.arange(n - base), cols] = s * rng.choice([-1.0, 1.0], n - base)
     x, tgt = rng.standard_normal(n), rng.standard_normal(n - base)
-    margin, p = _unit_rows_step(Bo, x, col, tgt, 1e-9, V, beta, pos)
+    margin, p, _, _ = _unit_rows_step(Bo, x, col, tgt, 1e-9, V, beta, pos)
     want = np.linalg.lstsq(Bo @ Z, tgt - Bo @ x, rcond=None)[0]
     assert margin > 0
     assert np.linalg.norm(p[:n - col] - want) <= 1e-12 * max(1.0, np.linalg.norm(want))
@@ -629,8 +637,66 @@ def test_unit_rows_step_declines_other_levels(fault):
         Bo[2, base + 2] = 2.5
     elif fault == "same_column":
         Bo[3] = Bo[4]
-    margin, _ = _unit_rows_step(Bo, rng.standard_normal(n), col,
-                                rng.standard_normal(n - base), 1e-9, V, beta, pos)
+    margin, _, _, _ = _unit_rows_step(Bo, rng.standard_normal(n), col,
+                                      rng.standard_normal(n - base), 1e-9, V, beta, pos)
+    assert margin == -1.0
+
+
+@pytest.mark.parametrize("reach", [True, False])
+@pytest.mark.parametrize("base", [0, 6])
+@pytest.mark.parametrize("seed", range(3))
+def test_unit_rows_step_with_held_box_rows_solves_the_kkt_system(seed, base, reach):
+    """Held box rows ``a_i x_c = β_i`` above a posture level (the Schur complement of the
+    Woodbury step): ``p`` equals the equality-constrained least-squares step (its KKT
+    system, by numpy), and ``ν`` solves ``C_Hᵀ ν = Zᵀ Sᵀ (S Z p − t)``, the convention
+    of the general path's ``_hard_multipliers``."""
+    rng = np.random.default_rng(seed)
+    n, col, nh = 20, 7, 4
+    V, beta, pos, Z = _householder_lq(rng.standard_normal((col, n)))
+    s = 0.7
+    cols = rng.permutation(np.arange(base, n))
+    S = np.zeros((n - base, n))
+    S[np.arange(n - base), cols] = s * rng.choice([-1.0, 1.0], n - base)
+    held = rng.choice(np.arange(n), nh, replace=False)
+    H = np.zeros((nh, n))
+    H[np.arange(nh), held] = rng.uniform(0.5, 2.0, nh) * rng.choice([-1.0, 1.0], nh)
+    x = rng.standard_normal(n)
+    bounds = H @ x + (rng.standard_normal(nh) if reach else 0.0)
+    t = rng.standard_normal(n - base)
+    margin, p, gn, nu = _unit_rows_step(np.vstack([H, S]), x, col,
+                                        np.concatenate([bounds, t]), 1e-9, V, beta, pos,
+                                        nh=nh, reach=reach)
+    assert margin > 0
+    d = n - col
+    A, C = S @ Z, H @ Z
+    rho = bounds - H @ x
+    kkt = np.block([[A.T @ A, C.T], [C, np.zeros((nh, nh))]])
+    want = np.linalg.solve(kkt, np.concatenate([A.T @ (t - S @ x), rho]))[:d]
+    assert np.linalg.norm(p[:d] - want) <= 1e-11 * max(1.0, np.linalg.norm(want))
+    g = A.T @ (A @ p[:d] - (t - S @ x))
+    assert np.linalg.norm(C.T @ nu[:nh] - g) <= 1e-10 * max(1.0, np.linalg.norm(g))
+    assert abs(gn - np.linalg.norm(g)) <= 1e-10 * max(1.0, np.linalg.norm(g))
+
+
+@pytest.mark.parametrize("fault", ["not_a_box_row", "same_column", "as_many_as_free"])
+def test_unit_rows_step_declines_held_rows_it_cannot_take(fault):
+    """-1 (the general path decides) for a held row of two non-zeros, two held rows on one
+    column (dependent) and as many held rows as free coordinates (a vertex: degenerate
+    active sets are left to the general path's rules)."""
+    rng = np.random.default_rng(1)
+    n, col = 12, 4
+    V, beta, pos, _ = _householder_lq(rng.standard_normal((col, n)))
+    S = 2.0 * np.eye(n)
+    nh = n - col if fault == "as_many_as_free" else 2
+    H = np.zeros((nh, n))
+    H[np.arange(nh), np.arange(nh)] = 1.0
+    if fault == "not_a_box_row":
+        H[0, 5] = 0.3
+    elif fault == "same_column":
+        H[1] = 2.0 * H[0]
+    margin, _, _, _ = _unit_rows_step(np.vstack([H, S]), rng.standard_normal(n), col,
+                                      rng.standard_normal(n + nh), 1e-9, V, beta, pos,
+                                      nh=nh)
     assert margin == -1.0
 
 
