@@ -19,6 +19,9 @@ prints one table per variant and writes into ``--out``:
   (Sec. III-B.3);
 * ``crosscheck.json`` — ``extended_jacobian``'s ``q̈`` against ``cascaded_qp`` on the
   same stacks along its own trajectory;
+* in ``run_info.json`` (``headline_timing``), when both runs are selected: the median
+  step of ``extended_jacobian`` and of PlaCo's ``KinematicsSolver`` side by side
+  (:func:`headline_timing`: the two simulated in alternation, the fastest round of each);
 
 and, with ``--doc PATH``, regenerates the reproduction page (``docs/reproduction.md``,
 :mod:`benchmarks.reproduction`) with the measured numbers, copying the plots it shows
@@ -236,6 +239,32 @@ def max_limit_target(variant: str, res, dt: float, every: int = 25) -> float:
 
 
 # ------------------------------------------------------------------ command
+#: the two runs compared side by side (:func:`headline_timing`)
+HEADLINE = ("extended_jacobian", "placo_kinematics_solver")
+#: rounds of :func:`headline_timing`
+HEADLINE_ROUNDS = 5
+
+
+def headline_timing(variant: str, duration: float, dt: float,
+                    rounds: int = HEADLINE_ROUNDS) -> dict[str, Any]:
+    """The median step of the :data:`HEADLINE` runs measured side by side: each simulated
+    ``rounds`` times, the two in alternation (timing only: no algorithmic error), the
+    fastest round of each and their ratio. The table's runs are minutes apart and the
+    machine's speed drifts over minutes (on a shared 2-core machine the same run's median
+    step varied by 1.5x between runs); alternating the two and taking each one's fastest
+    round compares them under the same conditions."""
+    from .scenario_runs import run_one, run_table
+    table = run_table("fencing")
+    steps: dict[str, list[float]] = {label: [] for label in HEADLINE}
+    for _ in range(rounds):
+        for label in HEADLINE:
+            res = run_one(table[label], variant, duration, dt, algorithmic_error=False)
+            steps[label].append(float(np.median(res.step_time_s)))
+    best = {label: min(v) for label, v in steps.items()}
+    return {"rounds": rounds, "median_step_s": steps, "best_median_step_s": best,
+            "ratio": best[HEADLINE[0]] / best[HEADLINE[1]]}
+
+
 def run_command(args: argparse.Namespace) -> int:
     """``prioik fencing``: see the module docstring."""
     from .reproduction import write_page
@@ -276,6 +305,16 @@ def run_command(args: argparse.Namespace) -> int:
                         args.dt, args.progress, on_run, on_variant, diagnostics)
     meta = runs.meta
     meta["crosscheck"] = checks
+    ran = {label for by_label in runs.summary.values() for label in by_label}
+    if all(label in ran for label in HEADLINE) and args.headline_rounds > 0:
+        meta["headline_timing"] = {}
+        for variant in variants:
+            h = headline_timing(variant, args.duration, args.dt, args.headline_rounds)
+            meta["headline_timing"][variant] = h
+            b = h["best_median_step_s"]
+            print(f"side by side [{variant}] ({h['rounds']} alternating rounds, the fastest "
+                  f"of each): {HEADLINE[0]} {1e3 * b[HEADLINE[0]]:.3f} ms, {HEADLINE[1]} "
+                  f"{1e3 * b[HEADLINE[1]]:.3f} ms, ratio {h['ratio']:.2f}")
     meta["unifying_diagnostic"] = (unifying_diagnostic(args.dt)
                                    if any(r["formulation"] == "unifying"
                                           for r in meta["runs"].values()) else None)
@@ -318,6 +357,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--doc", default=None, metavar="PATH",
                    help="also (re)generate the reproduction page here "
                         "(e.g. docs/reproduction.md; plots copied to img/ beside it)")
+    p.add_argument("--headline-rounds", type=int, default=HEADLINE_ROUNDS,
+                   help="rounds of the side-by-side timing of extended_jacobian and PlaCo's "
+                        "KinematicsSolver (alternating, the fastest of each; 0: skip)")
     p.add_argument("--no-crosscheck", action="store_true",
                    help="skip the extended_jacobian vs cascaded_qp q̈ comparison")
     p.add_argument("--quiet", dest="progress", action="store_false",

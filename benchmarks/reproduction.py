@@ -149,8 +149,22 @@ def _beyond(page: Page, summary: dict, meta: dict) -> str:
                              _fmt_ms(r["median_step_time_s"])])
     head = ["run", "variant", "final tip error", "max CoM error", "max support-foot error",
             "max joint-limit violation", "median step"]
-    return page.block("beyond", velocity_qp=velocity_qp or "cascaded_qp",
+    text = page.block("beyond", velocity_qp=velocity_qp or "cascaded_qp",
                       table=table(head, rows))
+    side = meta.get("headline_timing") or {}
+    if side:
+        rows = []
+        for variant, h in side.items():
+            (a, b), best = h["median_step_s"].keys(), h["best_median_step_s"]
+            rows.append([variant, f"`{a}`", _fmt_ms(best[a]), f"`{b}`", _fmt_ms(best[b]),
+                         f"{h['ratio']:.2f}",
+                         ", ".join(_fmt_ms(t) for t in h["median_step_s"][a]) + " / "
+                         + ", ".join(_fmt_ms(t) for t in h["median_step_s"][b])])
+        text = text.rstrip("\n") + "\n\n" + page.block("side_by_side", rounds=next(iter(side.values()))["rounds"],
+                           table=table(["variant", "run", "median step", "beside",
+                                        "median step", "ratio", "each round"], rows))
+        text = text.rstrip("\n") + "\n\n"
+    return text
 
 
 def _eq18(page: Page, inc: dict, meta: dict) -> list[str]:

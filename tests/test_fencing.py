@@ -150,6 +150,26 @@ def test_fencing_command_writes_summary_csv_plots_and_doc(tmp_path, capsys):
             assert (doc.parent / line.rsplit("](", 1)[1].rstrip(")")).is_file()
 
 
+def test_fencing_command_times_the_headline_pair_side_by_side(tmp_path):
+    """extended_jacobian and PlaCo's KinematicsSolver simulated in alternating rounds: each
+    one's round medians, the fastest kept, their ratio, in run_info.json and on the page."""
+    pytest.importorskip("placo")
+    out, doc = tmp_path / "results", tmp_path / "reproduction.md"
+    rc = main(["fencing", "--variant", "compatible", "--formulations",
+               "extended_jacobian,placo_kinematics_solver", "--duration", "0.02",
+               "--headline-rounds", "2", "--out", str(out), "--doc", str(doc), "--quiet",
+               "--no-crosscheck"])
+    assert rc == 0
+    side = json.loads((out / "run_info.json").read_text())["headline_timing"]["compatible"]
+    steps, best = side["median_step_s"], side["best_median_step_s"]
+    assert side["rounds"] == 2 and list(steps) == list(cmd.HEADLINE)
+    assert all(len(v) == 2 and min(v) > 0 for v in steps.values())
+    assert best == {k: min(v) for k, v in steps.items()}
+    assert side["ratio"] == pytest.approx(best["extended_jacobian"]
+                                          / best["placo_kinematics_solver"])
+    assert "**Side by side.**" in doc.read_text()
+
+
 def test_fencing_command_rejects_unknown_runs_and_skips_unavailable(tmp_path, monkeypatch,
                                                                      capsys):
     rc = main(["fencing", "--formulations", "no_such_method", "--out", str(tmp_path)])
