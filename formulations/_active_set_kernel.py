@@ -32,9 +32,10 @@ from prioik._jit import kernel
 
 from prioik.hierarchy.linalg import AMBIGUITY as _AMBIGUITY
 
-from ._extended_jacobian_kernel import (_UNIT_ROWS_GAP, _apply_q, _apply_qt,
-                                        _cholesky_lower, _dot, _small_lstsq_ws, _swap,
-                                        _unit_rows_of, _unit_rows_solve)
+from ._extended_jacobian_kernel import (_UNIT_ROWS_GAP, _apply_q, _cholesky_lower,
+                                        _cholesky_solve, _dot, _free_direction,
+                                        _small_lstsq_ws, _swap, _unit_rows_of,
+                                        _unit_rows_solve, _woodbury_apply)
 
 #: the same fast-math set as the extended-Jacobian kernel (no finite-math assumption)
 _FAST = {"reassoc", "contract", "nsz", "arcp"}
@@ -344,28 +345,6 @@ def _full_rank_step(B, y, col, rows, nw, tgt, soft_tol, flat, t, norms, perm, p,
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
-def _woodbury_apply(v, Zu, G, nu, d, t):
-    """``v = (I − Z_Uᵀ Z_U)⁻¹ v`` in place: ``v + Z_Uᵀ (L Lᵀ)⁻¹ Z_U v`` with ``Z_U`` in
-    ``Zu[:nu, :d]`` and ``L`` (Cholesky of ``I − Z_U Z_Uᵀ``) in ``G[:nu, :nu]``, as
-    :func:`_unit_rows_solve` leaves them; scratch ``t`` (``nu``)."""
-    for a in range(nu):
-        acc = _dot(Zu[a, :d], v[:d])
-        for c in range(a):
-            acc -= G[a, c] * t[c]
-        t[a] = acc / G[a, a]
-    for a in range(nu - 1, -1, -1):
-        acc = t[a]
-        for c in range(a + 1, nu):
-            acc -= G[c, a] * t[c]
-        t[a] = acc / G[a, a]
-    for a in range(nu):
-        ta = t[a]
-        Za = Zu[a]
-        for c in range(d):
-            v[c] += ta * Za[c]
-
-
-@njit(cache=True, fastmath=_FAST, inline="always")
 def _unit_rows_step(Bo, ucol, xc, col, rows, nh, nw, tgt, rcond, soft_tol, reach, colrow, p,
                     nf, Vf, betaf, posf, Zu, G, flat, nu_out):
     """The step of a level of *unit rows* — ``nw`` working rows, each ``±s e_cᵀ`` in ``x``
@@ -437,14 +416,9 @@ def _unit_rows_step(Bo, ucol, xc, col, rows, nh, nw, tgt, rcond, soft_tol, reach
     Zh = Zu[nu:nu + nh]
     W = Zu[nu + nh:nu + 2 * nh]
     for i in range(nh):
-        c = ucol[rows[i]]
-        for k in range(n):
-            z[k] = 0.0
-        z[c] = 1.0
-        _apply_qt(z, nf, Vf, betaf, posf)
+        _free_direction(ucol[rows[i]], z, Zh[i], col, nf, Vf, betaf, posf)
         for k in range(d):
-            Zh[i, k] = z[col + k]
-            W[i, k] = z[col + k]
+            W[i, k] = Zh[i, k]
         _woodbury_apply(W[i], Zu, G, nu, d, t)
     # independence: Cholesky of K = Z_H Z_Hᵀ, every pivot clearly above rcond
     K = G[2 * nu:2 * nu + nh]
@@ -466,15 +440,8 @@ def _unit_rows_step(Bo, ucol, xc, col, rows, nh, nw, tgt, rcond, soft_tol, reach
         c = ucol[j]
         a = Bo[j, c]
         rho = (tgt[i] - a * xc[c]) / a if reach else 0.0
-        acc = _dot(Zh[i, :d], p[:d]) - rho
-        for k in range(i):
-            acc -= S[i, k] * t[k]
-        t[i] = acc / S[i, i]
-    for i in range(nh - 1, -1, -1):
-        acc = t[i]
-        for k in range(i + 1, nh):
-            acc -= S[k, i] * t[k]
-        t[i] = acc / S[i, i]
+        t[i] = _dot(Zh[i, :d], p[:d]) - rho
+    _cholesky_solve(S, t, nh)
     # p = p0 − Wᵀ λ; ν = −s² λ / a; ‖g‖ = s² ‖Z_Hᵀ λ‖ (z: Z_Hᵀ λ)
     for k in range(d):
         z[k] = 0.0

@@ -200,6 +200,19 @@ def _cholesky_lower(G, m):
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
+def _free_direction(c, z, out, col, nf, Vf, betaf, posf):
+    """``out[:n − col] = (Qᵀ e_c)[col:]``: row ``c`` of the free directions
+    ``Z = Q[:, col:]`` (``Q = H_0 … H_{nf-1}``); scratch ``z`` (``n``)."""
+    n = z.shape[0]
+    for k in range(n):
+        z[k] = 0.0
+    z[c] = 1.0
+    _apply_qt(z, nf, Vf, betaf, posf)
+    for k in range(n - col):
+        out[k] = z[col + k]
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
 def _unit_rows_solve(cover, g, col, p, nf, Vf, betaf, posf, Zu, G):
     """The least-squares step of a level of *unit rows* on the free coordinates.
 
@@ -225,13 +238,8 @@ def _unit_rows_solve(cover, g, col, p, nf, Vf, betaf, posf, Zu, G):
     for u in range(n):
         if cover[u] >= 0:
             continue
-        z = G[0, :n]            # (G: scratch until the Gram matrix)
-        for c in range(n):
-            z[c] = 0.0
-        z[u] = 1.0
-        _apply_qt(z, nf, Vf, betaf, posf)
-        for c in range(d):
-            Zu[nu, c] = z[col + c]
+        # (G: scratch until the Gram matrix)
+        _free_direction(u, G[0, :n], Zu[nu], col, nf, Vf, betaf, posf)
         nu += 1
     _apply_qt(g[:n], nf, Vf, betaf, posf)
     for c in range(d):
@@ -247,23 +255,38 @@ def _unit_rows_solve(cover, g, col, p, nf, Vf, betaf, posf, Zu, G):
     if not _cholesky_lower(G[nu:2 * nu], nu):
         return -1
     _cholesky_lower(G, nu)
-    # w = G⁻¹ Z_U h into g[:nu], then p = h + Z_Uᵀ w
-    for a in range(nu):
-        acc = _dot(Zu[a, :d], p[:d])
+    _woodbury_apply(p, Zu, G, nu, d, g)      # p = h + Z_Uᵀ G⁻¹ Z_U h (scratch g[:nu])
+    return nu
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _cholesky_solve(L, t, m):
+    """``t = (L Lᵀ)⁻¹ t`` in place, ``L`` in the lower triangle of ``L[:m, :m]``."""
+    for a in range(m):
+        acc = t[a]
         for c in range(a):
-            acc -= G[a, c] * g[c]
-        g[a] = acc / G[a, a]
-    for a in range(nu - 1, -1, -1):
-        acc = g[a]
-        for c in range(a + 1, nu):
-            acc -= G[c, a] * g[c]
-        g[a] = acc / G[a, a]
+            acc -= L[a, c] * t[c]
+        t[a] = acc / L[a, a]
+    for a in range(m - 1, -1, -1):
+        acc = t[a]
+        for c in range(a + 1, m):
+            acc -= L[c, a] * t[c]
+        t[a] = acc / L[a, a]
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _woodbury_apply(v, Zu, G, nu, d, t):
+    """``v = (I − Z_Uᵀ Z_U)⁻¹ v`` in place: ``v + Z_Uᵀ (L Lᵀ)⁻¹ Z_U v`` with ``Z_U`` in
+    ``Zu[:nu, :d]`` and ``L`` (Cholesky of ``I − Z_U Z_Uᵀ``) in ``G[:nu, :nu]``, as
+    :func:`_unit_rows_solve` leaves them; scratch ``t`` (``nu``)."""
     for a in range(nu):
-        wa = g[a]
+        t[a] = _dot(Zu[a, :d], v[:d])
+    _cholesky_solve(G, t, nu)
+    for a in range(nu):
+        ta = t[a]
         Za = Zu[a]
         for c in range(d):
-            p[c] += wa * Za[c]
-    return nu
+            v[c] += ta * Za[c]
 
 
 @njit(cache=True, inline="always")

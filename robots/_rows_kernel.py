@@ -160,28 +160,29 @@ def _zero_rows(A, Q, s, nrows, zero_drift):
             Q[DRIFT, s + i] = 0.0
 
 
+@njit(cache=True, inline="always")
+def _point_rows(A, Q, J, t, R, spec, geo, aj, vj, x, xd, xdd, rates):
+    """:func:`position_rows` (``ẋ* = ẍ* = 0`` unless ``rates``)."""
+    s = spec[SPEC_START]
+    zero_drift = spec[SPEC_ZERO_DRIFT] != 0
+    _zero_rows(A, Q, s, 3, zero_drift)
+    _position_rows(A, Q, J, t, R, spec, geo, x, xd, xdd, rates)
+    if not zero_drift:
+        _frame_drift(Q, s, POSITION, R, geo, aj, vj)
+
+
 @kernel()
 def position_rows(A, Q, J, t, R, spec, geo, aj, vj, x, xd, xdd):
     """A point's position rows (3, ``spec``: see :data:`SPEC_COLS`): the point
     ``p = t + R off`` of the frame at ``(t, R)``; :func:`frame_rows` with
     ``mode = POSITION`` in fewer arguments."""
-    s = spec[SPEC_START]
-    zero_drift = spec[SPEC_ZERO_DRIFT] != 0
-    _zero_rows(A, Q, s, 3, zero_drift)
-    _position_rows(A, Q, J, t, R, spec, geo, x, xd, xdd, True)
-    if not zero_drift:
-        _frame_drift(Q, s, POSITION, R, geo, aj, vj)
+    _point_rows(A, Q, J, t, R, spec, geo, aj, vj, x, xd, xdd, True)
 
 
 @kernel()
 def position_target_rows(A, Q, J, t, R, spec, geo, aj, vj, x):
     """:func:`position_rows` with ``ẋ* = ẍ* = 0`` (a fixed target: two arguments fewer)."""
-    s = spec[SPEC_START]
-    zero_drift = spec[SPEC_ZERO_DRIFT] != 0
-    _zero_rows(A, Q, s, 3, zero_drift)
-    _position_rows(A, Q, J, t, R, spec, geo, x, x, x, False)
-    if not zero_drift:
-        _frame_drift(Q, s, POSITION, R, geo, aj, vj)
+    _point_rows(A, Q, J, t, R, spec, geo, aj, vj, x, x, x, False)
 
 
 @njit(cache=True, inline="always")
