@@ -459,13 +459,16 @@ def _unit_rows_step(Bo, ucol, xc, col, rows, nh, nw, tgt, rcond, soft_tol, reach
 
 @njit(cache=True, fastmath=_FAST, inline="always")
 def _step(B, y, col, rows, nh, nw, fvec, rcond, soft_tol, T, V, beta, vpos, Lw, p, reach,
-          flat, perm, nrot, nf, Vf, betaf, posf, Bo, xc, ucol):
+          flat, perm, nrot, nf, Vf, betaf, posf, Bo, xc, ucol, held_rows_step):
     """:func:`_unit_rows_step` or :func:`_full_rank_step` when one applies, else
     :func:`_eqp`; returns ``(hr, rs, nref, full, margin, gn)`` (``margin``: of the soft
     rows' rank decisions; ``gn ≥ 0``: the hard rows' multipliers are in ``nu`` already
     and ``gn`` is :func:`_hard_multipliers`' ``‖g‖``, ``-1``: they are not). The rows of
     ``fvec`` it uses are taken here (a call of more than 30 arguments compiles to
-    ``f(*args)``, which numba does not inline)."""
+    ``f(*args)``, which numba does not inline). ``held_rows_step``: the unit-row step may
+    take held hard rows (a level's first step only: mixed with the general path's steps
+    inside one level's iterations, its different rounding made ratio tests tie the other
+    way at degenerate points and cycle — a Panda reach and a G1 stack, 500 iterations)."""
     rnorm = fvec[2]
     rhs = fvec[3]
     norms = fvec[4]
@@ -473,7 +476,7 @@ def _step(B, y, col, rows, nh, nw, fvec, rcond, soft_tol, T, V, beta, vpos, Lw, 
     nu = fvec[11]
     tq = fvec[15]
     d = B.shape[1] - col
-    if nw >= d:
+    if nw >= d and (nh == 0 or held_rows_step):
         margin, gn = _unit_rows_step(Bo, ucol, xc, col, rows, nh, nw, tgt, rcond, soft_tol,
                                      reach, perm, p, nf, Vf, betaf, posf, T, Lw, flat, nu)
         if margin >= 0.0:
@@ -895,7 +898,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                                  Vf, betaf, posf)
             hr, rs, nref, full, step_margin, gn_step = _step(
                 B, y, col, rows, nh, nw, fvec, rcond, soft_tol, T, V, beta, vpos, Lw, p,
-                True, flat, perm, nrot, nf, Vf, betaf, posf, Bo, xc, ucol)
+                True, flat, perm, nrot, nf, Vf, betaf, posf, Bo, xc, ucol, True)
             iters[lev] += 1
             for i in range(hr, nh):
                 state[rows[i]] = 0
@@ -952,7 +955,8 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                                  Vf, betaf, posf)
                 hr, rs, nref, full, step_margin, gn_step = _step(
                     B, y, col, rows, nh, nw, fvec, rcond, soft_tol, T, V, beta, vpos, Lw, p,
-                    False, flat, perm, nrot, nf, Vf, betaf, posf, Bo, xc, ucol)
+                    False, flat, perm, nrot, nf, Vf, betaf, posf, Bo, xc, ucol,
+                    iters[lev] == 1)
                 for i in range(hr, nh):
                     state[rows[i]] = 0          # dependent on the kept hard rows
                 pn = np.sqrt(_dot(p[:d], p[:d]))
