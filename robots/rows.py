@@ -25,9 +25,9 @@ Each writer is one compiled call (:mod:`robots._rows_kernel`) on views of the st
 ``pin.Data`` — the world-frame joint Jacobians ``data.J`` (a frame's
 LOCAL_WORLD_ALIGNED Jacobian is formed from them), ``data.oMf``, ``data.Jcom``,
 ``data.com[0]``, and for the drifts the joints' spatial velocities and accelerations at
-``q̈ = 0`` ``data.v``, ``data.a`` and ``data.acom[0]`` — taken once per ``Data``. The readable builders of
-:mod:`robots.tasks` (``frame_position(state, frame, ref)`` → ``TaskTerm`` → ``Task``)
-are thin wrappers over these writers; ``tests/test_rows.py`` checks the writers against
+``q̈ = 0`` ``data.v``, ``data.a`` and ``data.acom[0]`` — taken once per ``Data``.
+The readable builders of :mod:`robots.tasks` (``frame_position(state, frame, ref)`` →
+``TaskTerm`` → ``Task``) are thin wrappers over these writers; ``tests/test_rows.py`` checks the writers against
 independent pinocchio/numpy formulas and ``tests/test_tasks.py`` every Jacobian and drift
 against finite differences.
 """
@@ -109,8 +109,7 @@ class _Task:
     horizon: float = 0.0
     dt: float = 0.0
     activation: JointLimitActivation | None = None
-    width: np.ndarray | None = None      # activation margins per joint
-    limits: np.ndarray | None = None     # lo, hi, then q̇_max (bounds) or width (3 × n_a)
+    limits: np.ndarray | None = None     # lo, hi, then q̇_max (bounds) or margin widths (3 × n_a)
     bound_params: np.ndarray | None = None   # the kernel's parameters (at _fix)
 
 
@@ -243,9 +242,9 @@ class TaskWriter:
             task.form, task.activation = form, params
             task.kp, task.kd = (params.kp, params.kd) if self._accel else (params.k, 0.0)
             with np.errstate(invalid="ignore"):
-                task.width = np.where(np.isfinite(lo) & np.isfinite(hi),
-                                      np.minimum(params.margin, 0.25 * (hi - lo)), 1.0)
-            task.limits = np.ascontiguousarray(np.vstack([lo, hi, task.width]),
+                width = np.where(np.isfinite(lo) & np.isfinite(hi),
+                                 np.minimum(params.margin, 0.25 * (hi - lo)), 1.0)
+            task.limits = np.ascontiguousarray(np.vstack([lo, hi, width]),
                                                dtype=np.float64)
             task.limits.setflags(write=False)
             return
