@@ -59,6 +59,12 @@ X_PRECISION = 16 * 2.220446049250313e-16
 FLAG_OK = 0
 FLAG_ITERATION_CAP = 1
 
+#: what :func:`solve_data` returns
+NOT_SOLVED = 0
+SOLVED_CLEAN = 1
+SOLVED_INFEASIBLE = 2
+SOLVED_OTHER = 3
+
 
 @njit(cache=True, inline="always")
 def _swap_rows_upto(M, i, j, w):
@@ -646,7 +652,7 @@ def workspace_offsets(M: int, n: int, k: int) -> dict[str, tuple[int, int]]:
     number of levels (the tie-break included) whose ``margins`` are ambiguous, into
     ``params[9]`` the number of box rows near a bound that ``x``'s precision (``eps ‖x‖``)
     cannot resolve; int64: ``k``, ``starts`` (``k + 1``),
-    ``ivec`` (``5 × R``), ``perm`` (``n``), ``counts`` (``3 × (k + 1)``); int8: ``row_eq``
+    ``ivec`` (``5 × R``), ``perm`` (``n``), ``counts`` (``4 × (k + 1)``); int8: ``row_eq``
     (``M``), ``bvec`` (``2 × R``), ``eqr`` (``R``), ``warm_state`` (``(k + 1) × R``),
     ``warm_valid`` (``k + 1``).
     """
@@ -657,7 +663,7 @@ def workspace_offsets(M: int, n: int, k: int) -> dict[str, tuple[int, int]]:
                                 ("V", n * n), ("Vf", n * n), ("fvec", N_FVEC * R),
                                 ("x", n), ("w2", k), ("res", k), ("margins", k + 1))),
                         ("i", (("k", 1), ("starts", k + 1), ("ivec", 5 * R), ("perm", n),
-                               ("counts", 3 * (k + 1)))),
+                               ("counts", 4 * (k + 1)))),
                         ("b", (("row_eq", M), ("bvec", 2 * R), ("eqr", R),
                                ("warm_state", (k + 1) * R), ("warm_valid", k + 1)))):
         at = 0
@@ -693,16 +699,21 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
             (``k + 1``: the margin of the rank decisions of each level's last step and
             of its fixing, the tie-break last; ``≤ hierarchy.AMBIGUITY``: ambiguous).
         iwork: int64: ``k``, the ``k + 1`` level offsets, workspaces, outputs
-            ``counts`` (``3 × (k + 1)``, the last column the minimum-norm level:
-            iterations, :data:`FLAG_ITERATION_CAP` when the cap was hit, rank fixed).
+            ``counts`` (``4 × (k + 1)``, the last column the minimum-norm level:
+            iterations, :data:`FLAG_ITERATION_CAP` when the cap was hit, rank fixed,
+            ``1`` where the level's violation exceeds ``primal_tol max(1, ‖x‖)``).
         bwork: int8: the rows' equality flags, workspaces, ``warm_state`` and
             ``warm_valid`` (``(k + 1) × (M + n)`` working sets at each level's end, read
             when ``use_warm``, always written).
 
     Returns:
-        ``False`` (nothing solved) when a value is not valid: a non-finite entry of
-        ``A``, of an equality target or of ``√w``, ``√w ≤ 0``, a NaN bound,
-        ``lower = +inf``, ``upper = −inf`` or ``lower > upper``; the caller names it.
+        :data:`NOT_SOLVED` when a value is not valid (a non-finite entry of ``A``, of
+        an equality target or of ``√w``, ``√w ≤ 0``, a NaN bound, ``lower = +inf``,
+        ``upper = −inf`` or ``lower > upper``; the caller names it); else
+        :data:`SOLVED_CLEAN` (finite, every level settled, every rank decision clear,
+        every box row resolved, every level's violation within ``primal_tol``),
+        :data:`SOLVED_INFEASIBLE` (the same with some levels' violation above it) or
+        :data:`SOLVED_OTHER` (the caller reads the summary in ``params``).
     """
     M, n = A.shape
     k = iwork[0]
@@ -736,7 +747,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     o += 5 * R
     perm = iwork[o:o + n]
     o += n
-    counts = iwork[o:o + 3 * (k + 1)].reshape((3, k + 1))
+    counts = iwork[o:o + 4 * (k + 1)].reshape((4, k + 1))
     row_eq = bwork[:M]
     o = M
     bvec = bwork[o:o + 2 * R].reshape((2, R))
@@ -780,7 +791,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     for j in range(M):
         s = sw[j]
         if not (np.isfinite(s) and s > 0.0):
-            return False
+            return NOT_SOLVED
         Bj = B[j]
         Boj = Bo[j]
         Aj = A[j]
@@ -799,7 +810,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
         nrot[j] = 0
         if row_eq[j]:
             if not np.isfinite(b[j]):
-                return False
+                return NOT_SOLVED
             blo[j] = s * b[j]
             bup[j] = blo[j]
             eqr[j] = 1
@@ -807,13 +818,13 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
             lo = lower[j]
             up = upper[j]
             if np.isnan(lo) or np.isnan(up) or lo == np.inf or up == -np.inf or lo > up:
-                return False
+                return NOT_SOLVED
             blo[j] = s * lo
             bup[j] = s * up
             eqr[j] = 1 if lo == up else 0
         rnorm[j] = np.sqrt(_dot(B[j], B[j]))
         if not np.isfinite(rnorm[j]):
-            return False
+            return NOT_SOLVED
         state[j] = 0
     for j in range(M, M + n):
         blo[j] = 0.0
@@ -1222,8 +1233,9 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     fwork[5] = xn
     infeasible = 0
     for lev in range(k):
-        if res[lev] > primal_tol * max(1.0, xn):
-            infeasible += 1
+        over = res[lev] > primal_tol * max(1.0, xn)
+        counts[3, lev] = over
+        infeasible += over
     fwork[7] = infeasible
     capped = 0.0
     for lev in range(k + 1):
@@ -1236,5 +1248,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
             ambiguous += 1
     fwork[8] = ambiguous
     fwork[9] = unresolved
-    return True
+    if fwork[6] != 0.0 or ambiguous or unresolved:
+        return SOLVED_OTHER
+    return SOLVED_INFEASIBLE if infeasible else SOLVED_CLEAN
 

@@ -107,6 +107,9 @@ try:
 except ImportError as exc:  # pragma: no cover - numba is a declared dependency
     _kernel = None
     _kernel_error = f"{type(exc).__name__}: {exc}"
+#: the kernel's codes of a clean solve (module constants: read once, not per call)
+_SOLVED_CLEAN, _SOLVED_INFEASIBLE = ((_kernel.SOLVED_CLEAN, _kernel.SOLVED_INFEASIBLE)
+                                     if _kernel is not None else (-1, -1))
 
 NAME = "hierarchical_active_set"
 DESCRIPTION = ("exact lexicographic optimum of equality and inequality stacks: compiled "
@@ -195,7 +198,7 @@ class Prepared:
         #: each level's (and the tie-break's) rank-decision margin (hierarchy.linalg)
         self._margins = part(self._fwork, "margins")
         self._n, self._k = n, k
-        self._counts = part(self._iwork, "counts", (3, k + 1))
+        self._counts = part(self._iwork, "counts", (4, k + 1))
         self._iterations = self._counts[0]
         self._ranks = self._counts[2, :k]
 
@@ -209,8 +212,11 @@ class Prepared:
         Raises:
             TaskStackError: a value is not valid (naming the task, level and row).
         """
-        self._run(data)
-        return self._outcome()
+        out = self.solve_checked(data)
+        if type(out) is tuple:
+            x, status, info, residuals = out
+            return Outcome(x, status, info, residuals=residuals, checked=True)
+        return out
 
     def solve_checked(self, data: StackData) -> tuple | Outcome:
         """:meth:`solve`, its common case (settled, finite, every rank decision clear,
@@ -220,33 +226,35 @@ class Prepared:
         Raises:
             TaskStackError: as :meth:`solve`.
         """
-        self._run(data)
-        return self._outcome(as_tuple=True)
-
-    def _run(self, data: StackData) -> None:
-        """The kernel on ``data``; when it refuses the data, forget the warm start and
-        name the fault."""
-        if not _kernel.solve_data(data.A, data.b, data.lower, data.upper, data.sqrt_weight,
-                                  self._fwork, self._iwork, self._bwork):
+        code = _kernel.solve_data(data.A, data.b, data.lower, data.upper, data.sqrt_weight,
+                                  self._fwork, self._iwork, self._bwork)
+        if code == _SOLVED_CLEAN or code == _SOLVED_INFEASIBLE:
+            out = self._out.copy()
+            n, k = self._n, self._k
+            counts = self._counts.copy()
+            return (out[:n], "optimal",
+                    {"iterations": counts[0], "rank_profile": counts[2, :k],
+                     "level_violation": out[n:n + k],
+                     "infeasible_levels": [] if code == _SOLVED_CLEAN else
+                     [i for i, over in enumerate(counts[3, :k].tolist()) if over],
+                     "warm_start": self.warm_start}, out[n + k:])
+        if code == _kernel.NOT_SOLVED:
             self.warm_valid[:] = 0
             data.check()     # names the task, level and row at fault
             raise TaskStackError("the rows' values overflow float64: scale the tasks down")
+        return self._outcome()
 
-    def _outcome(self, as_tuple: bool = False) -> tuple | Outcome:
+    def _outcome(self) -> Outcome:
+        """The answer of a solve that is not clean (capped, non-finite, ambiguous or
+        unresolved), read from the kernel's summary."""
         n, k = self._n, self._k
         out = self._out.copy()
         x, w2, residuals = out[:n], out[n:n + k], out[n + k:]
-        xn, flag, infeasible, ambiguous, unresolved = self._summary.tolist()
-        if infeasible:
-            tol = self.primal_tol * max(1.0, xn)
-            infeasible = [i for i, r in enumerate(residuals.tolist()) if r > tol]
+        xn, flag, _, ambiguous, unresolved = self._summary.tolist()
+        infeasible = np.flatnonzero(self._counts[3, :k]).tolist()
         info = {"iterations": self._iterations.copy(), "rank_profile": self._ranks.copy(),
-                "level_violation": w2, "infeasible_levels": infeasible or [],
+                "level_violation": w2, "infeasible_levels": infeasible,
                 "warm_start": self.warm_start}
-        if flag == 0.0 and not ambiguous and not unresolved:
-            if as_tuple:
-                return x, "optimal", info, residuals
-            return Outcome(x, "optimal", info, residuals=residuals, checked=True)
         if flag == 0.0 and not ambiguous:
             info["reason"] = (f"‖x‖ = {xn:.3g}: x's coordinates are known to about "
                               f"{_kernel.X_PRECISION * xn:.2g}, coarser than the primal "

@@ -98,11 +98,12 @@ class _Task:
     fid: int = -1
     cols: np.ndarray | None = None
     spec: np.ndarray | None = None       # frame tasks: the kernels' int64 spec (at _fix)
-    hot: tuple | None = None             # frame tasks: (pin.Data, the kernel's arguments)
+    hot: tuple | None = None             # frame, CoM tasks: (pin.Data, the kernel's arguments)
     offset: np.ndarray | None = None     # point on the frame (frame coordinates)
     joint: int = -1                      # frame tasks: the frame's parent joint
     geo: np.ndarray | None = None        # frame tasks: the kernels' constant geometry
     axes: np.ndarray | None = None       # com axes
+    shape: tuple = ()                    # (rows,): a reference's shape
     form: str = ""                       # limits: "activation" or "bounds"
     position: bool = True                # limits: position limits in the bounds
     velocity: bool = True                # limits: velocity limits in the bounds
@@ -297,7 +298,8 @@ class TaskWriter:
                                  task=name)
         if not (np.isfinite(weight) and weight > 0):
             raise TaskStackError(f"weight must be finite and > 0, got {weight!r}", task=name)
-        task = _Task(kind, name, int(level), int(rows), inequality, weight=float(weight))
+        task = _Task(kind, name, int(level), int(rows), inequality, weight=float(weight),
+                     shape=(int(rows),))
         if kind != "limits":
             task.kp, task.kd = self._gains(name, gain)
         self._last_level = max(self._last_level, int(level))
@@ -443,13 +445,24 @@ class TaskWriter:
         task = self._tasks.get(name)
         if task is None or task.kind != "pose" or task.spec is None:
             task = self._task(name, "pose")
-        self._frame(state, task, _vec3(x, name, "x"),
-                    _ZERO3 if xd is None else _vec3(xd, name, "xd"),
-                    _ZERO3 if xdd is None else _vec3(xdd, name, "xdd"),
-                    _rotation(rotation, name),
-                    _ZERO3 if angular_velocity is None else _vec3(angular_velocity, name, "ω*"),
-                    _ZERO3 if angular_acceleration is None
-                    else _vec3(angular_acceleration, name, "ω̇*"))
+        # the common case (float64 arrays of the right shapes) checked inline: a helper
+        # call per argument costs more than the compiled call itself
+        if not (x.__class__ is _NDARRAY and x.dtype is _F64 and x.shape == _SHAPE3):
+            x = _vec3(x, name, "x")
+        if not (rotation.__class__ is _NDARRAY and rotation.dtype is _F64
+                and rotation.shape == _SHAPE33):
+            rotation = _rotation(rotation, name)
+        if xd is None:
+            xd = _ZERO3
+        elif not (xd.__class__ is _NDARRAY and xd.dtype is _F64 and xd.shape == _SHAPE3):
+            xd = _vec3(xd, name, "xd")
+        if xdd is None:
+            xdd = _ZERO3
+        elif not (xdd.__class__ is _NDARRAY and xdd.dtype is _F64 and xdd.shape == _SHAPE3):
+            xdd = _vec3(xdd, name, "xdd")
+        self._frame(state, task, x, xd, xdd, rotation,
+                    _vec3(angular_velocity, name, "ω*"),
+                    _vec3(angular_acceleration, name, "ω̇*"))
 
     def contact(self, state, name: str, placement: pin.SE3 | None = None, *,
                 translation=None, rotation=None) -> None:
@@ -460,23 +473,36 @@ class TaskWriter:
             task = self._task(name, "contact")
         if placement is not None:
             translation, rotation = placement.translation, placement.rotation
-        self._frame(state, task, _vec(translation, 3, name, "translation"),
-                    _ZERO3, _ZERO3, _rotation(rotation, name), _ZERO3, _ZERO3)
+        if not (translation.__class__ is _NDARRAY and translation.dtype is _F64
+                and translation.shape == _SHAPE3):
+            translation = _vec(translation, 3, name, "translation")
+        if not (rotation.__class__ is _NDARRAY and rotation.dtype is _F64
+                and rotation.shape == _SHAPE33):
+            rotation = _rotation(rotation, name)
+        self._frame(state, task, translation, _ZERO3, _ZERO3, rotation, _ZERO3, _ZERO3)
 
     def com(self, state, name: str, x, xd=None, xdd=None) -> None:
         """The centre of mass: ``x*``, ``ẋ*``, ``ẍ*`` given on the task's axes."""
         task = self._tasks.get(name)
         if task is None or task.kind != "com" or self._layout is None:
             task = self._task(name, "com")
-        state.ensure_com()
-        views = self._views
-        if views is None or views.data is not state.data:
-            views = self._data_views(state)
-        m = task.rows
-        drift = self._accel and self._drift(state, task)
-        _k.com_rows(self._data.A, self._Q, task.start, views.Jcom, views.com, views.acom,
-                    task.axes, _vec(x, m, name, "x"), _vec(xd, m, name, "xd"),
-                    _vec(xdd, m, name, "xdd"), not drift)
+        if not state._com_ready:
+            state.ensure_com()
+        hot = task.hot
+        if hot is None or hot[0] is not state.data:
+            views = self._data_views(state)      # refuses another robot's state
+            hot = task.hot = (state.data, (self._data.A, self._Q, task.start, views.Jcom,
+                                           views.com, views.acom, task.axes))
+        shape = task.shape
+        if not (x.__class__ is _NDARRAY and x.dtype is _F64 and x.shape == shape):
+            x = _vec(x, task.rows, name, "x")
+        if xd is None or not (xd.__class__ is _NDARRAY and xd.dtype is _F64
+                              and xd.shape == shape):
+            xd = _vec(xd, task.rows, name, "xd")
+        if xdd is None or not (xdd.__class__ is _NDARRAY and xdd.dtype is _F64
+                               and xdd.shape == shape):
+            xdd = _vec(xdd, task.rows, name, "xdd")
+        _k.com_rows(*hot[1], x, xd, xdd, not (self._accel and self._drift(state, task)))
 
     def posture(self, state, name: str, q_ref) -> None:
         """The actuated joints to ``q_ref`` (``n_q``): error ``q_ref ⊖ q`` on rows
@@ -501,7 +527,9 @@ class TaskWriter:
     def joint_limits(self, state, name: str = "joint_limits") -> int:
         """The joint-limit rows at ``state``: activation rows (returns how many are
         active) or bounds (``data.lower``/``upper``; returns the row count)."""
-        task = self._task(name, "limits")
+        task = self._tasks.get(name)
+        if task is None or task.kind != "limits" or self._layout is None:
+            task = self._task(name, "limits")
         data = self._data
         if task.form != "activation":
             _k.bounds_at(data.lower, data.upper, state.q, state.v, self._q_index,
@@ -653,6 +681,7 @@ def _vec3(value, task: str, what: str) -> np.ndarray:
 
 
 _SHAPE3 = (3,)
+_SHAPE33 = (3, 3)
 
 
 def _rotation(rotation, task: str) -> np.ndarray:
