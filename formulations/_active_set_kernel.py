@@ -48,6 +48,10 @@ _BLOCK_EPS = 1e-13
 _ZERO_STEP = 1e-13
 #: a step of at most this length (of the full step) counts as degenerate
 _DEGENERATE = 1e-12
+#: a hard row's wrong-signed multiplier below this times the level's gradient scale
+#: (``max(‖∇f‖, ‖A_i‖_F (‖A_i‖_F ‖x‖ + ‖targets‖))``, ~50 eps) is rounding: the release
+#: test by the level's gain (:func:`_freed_gain`) never reads one smaller
+_DUAL_FLOOR = 1e-14
 #: a soft row of the working set leaves it when on the satisfied side of its bound by
 #: more than this times ``primal_tol`` (relative to its size)
 _RELEASE = 1e-3
@@ -533,6 +537,41 @@ def _hard_multipliers(B, y, col, rows, nh, hr, nw, tgt, T, V, beta, vpos, g, nu)
             acc -= T[c, i] * nu[c]
         nu[i] = acc / T[i, i]
     return gn
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _freed_gain(T, nh, hr, nw, rs, i, w, v, p, flat, tq):
+    """What releasing the kept hard row ``i`` (pivot order) of :func:`_eqp`'s last
+    factorization frees, from that factorization (``T`` as :func:`_eqp` left it).
+
+    The released row frees the direction ``u = Q_H L⁻¹ e_i`` of the hard rows' row
+    space (orthogonal to the other kept hard rows): the level's gradient along ``u/‖u‖``
+    is ``ν_i / ‖u‖``. The soft rows move along it by ``T_soft[:, :hr] u/‖u‖``, of which
+    only the part outside the range of their factor ``L_s`` on the directions already
+    free (``T_soft[:, hr:hr+rs]``) is new: its norm ``γ`` is the level's gain along
+    the freed direction, and releasing the row changes the soft rows' values by
+    ``|ν_i| / (‖u‖ γ)`` (the minimum of ``h α + γ² α²/2``).
+
+    Scratch: ``w`` (``≥ hr``), ``v`` (``≥ nw``), ``p[hr:hr+rs]``, ``flat``, ``tq``.
+
+    Returns:
+        ``(‖u‖, γ)``.
+    """
+    for c in range(i):
+        w[c] = 0.0
+    w[i] = 1.0 / T[i, i]
+    for c in range(i + 1, hr):
+        acc = 0.0
+        for t in range(i, c):
+            acc -= T[c, t] * w[t]
+        w[c] = acc / T[c, c]
+    un = np.sqrt(_dot(w[:hr], w[:hr]))
+    for r in range(nw):
+        v[r] = _dot(T[nh + r, :hr], w[:hr]) / un
+    # Qᵀ v by the Householder QR of L_s: its trailing nw − rs entries are v's part
+    # outside range(L_s)
+    _small_lstsq_ws(T[nh:, hr:], v, nw, rs, 0.0, p, hr, flat, tq)
+    return un, np.sqrt(_dot(tq[rs:nw], tq[rs:nw]))
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
@@ -1042,7 +1081,8 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
             tn = 0.0
             for i in range(nh, nh + nw):
                 tn += tgt[i] * tgt[i]
-            gscale = dual_tol * max(gn, scale * (scale * ynorm + np.sqrt(tn)))
+            gfull = max(gn, scale * (scale * ynorm + np.sqrt(tn)))
+            gscale = dual_tol * gfull
             drop = -1
             worst = 0.0
             for i in range(hr):
@@ -1055,6 +1095,33 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                     elif wrong > worst:
                         worst = wrong
                         drop = j
+            if drop < 0 and gn_step < 0.0 and rs < nw:
+                # gscale is a gradient: at the level's full gain ‖A_i‖_F it stands for
+                # a change of the level's values of gscale / ‖A_i‖_F, but releasing a
+                # row frees a direction of gain γ, where the same multiplier changes
+                # them by ν / γ (the certificate's reading): on a level whose rows differ
+                # widely in scale, multipliers under gscale can hold rows whose release
+                # moves the level's values far beyond the tolerance. Directions the
+                # level cannot move (γ at the rank rule) keep the test above, as the
+                # certificate reads them at ‖A_i‖_F
+                floor = _DUAL_FLOOR * gfull
+                worst = 0.0
+                for i in range(hr):
+                    j = rows[i]
+                    wrong = (-nu[i] if state[j] == -1 else nu[i]) * rnorm[j]
+                    if not wrong > floor:
+                        continue
+                    un, gain = _freed_gain(T, nh, hr, nw, rs, i, px, rhs, p, flat, tq)
+                    if not gain > soft_tol:
+                        continue
+                    move = abs(nu[i]) / (un * gain)
+                    if move * scale > gscale:
+                        if bland:
+                            if drop < 0 or j < drop:
+                                drop = j
+                        elif move > worst:
+                            worst = move
+                            drop = j
             if drop < 0:
                 settled = True
                 break

@@ -62,7 +62,11 @@ bound and off it by the reflectors' rounding (``16 eps ‖x‖``) is put on it e
 that rounding exceeds a box row's tolerance near its bound (a level of tiny rows drives
 ``‖x‖`` to 1e10), the status is ``approximate`` with the reason. A multiplier is
 wrong-signed when
-``|ν_j| ‖√w_j a_j‖ > dual_tol · max(‖∇f‖, ‖A_i‖_F (‖A_i‖_F ‖x‖ + ‖targets‖))``.
+``|ν_j| ‖√w_j a_j‖ > dual_tol · max(‖∇f‖, ‖A_i‖_F (‖A_i‖_F ‖x‖ + ‖targets‖))``,
+or, read at the level's gain ``γ_j`` along the direction its release frees (a row of
+multiplier ``ν`` there changes the level's values by ``ν / γ_j``, as the certificate
+reads it), when that change exceeds the threshold's over ``‖A_i‖_F`` (``γ_j`` above the
+rank rule, the multiplier above ``1e-14`` of the threshold's scale: its rounding).
 A held row is fixed at the end of its level as *violated* only when it is off its
 bound beyond the primal tolerance and its violation (its multiplier) times
 ``‖√w_j a_j‖`` exceeds the second term of the dual tolerance: rows far smaller than

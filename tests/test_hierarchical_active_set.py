@@ -543,6 +543,40 @@ def test_a_held_row_off_its_bound_by_rounding_is_not_fixed():
     assert check_lexicographic(stack, sol.x).ok
 
 
+def test_a_wrong_signed_multiplier_is_read_at_the_levels_gain():
+    """prioik fuzz --kind bounds --seed 2026 case 434 (15 unknowns, a box level, then a
+    level whose rows differ by 1e5 in scale): the level ended with two box rows held at
+    wrong-signed multipliers of 7.5e-12 and 7.0e-11, under the dual test's gradient
+    threshold 1.6e-10, on directions of gain ~1e-4 ‖A_1‖_F: its values 4.7e-7 from the
+    optimum, 'optimal', the certificate at 1.24e-8 > 1e-8. Now read at that gain, as the
+    certificate reads them, they are released: level 1 equals an independent
+    bounded-variable least squares (scipy's BVLS) in task space."""
+    from prioik.hierarchy import check_lexicographic
+    from prioik.hierarchy.fuzz import bounds_case
+    stack = bounds_case(np.random.default_rng([2026, 434]), 434).stack
+    sol = prioik.solve(stack, NAME)
+    assert sol.status == "optimal"
+    report = check_lexicographic(stack, sol.x, minimum_norm=True)
+    assert report.ok and report.worst_relative <= 1e-10, str(report)   # measured 1.2e-12
+    assert max(kkt_report(stack, sol.x)) <= KKT_TOL
+    # level 1 alone: min ‖B x − t‖ over the box (one column per box row)
+    box = stack.levels[0][0]
+    lo, up = box.bounds()
+    xl, xu = np.full(stack.n, -np.inf), np.full(stack.n, np.inf)
+    for r in range(box.m):
+        c = int(np.flatnonzero(box.A[r])[0])
+        a = box.A[r, c]
+        bl, bu = (lo[r] / a, up[r] / a) if a > 0 else (up[r] / a, lo[r] / a)
+        xl[c], xu[c] = max(xl[c], bl), min(xu[c], bu)
+    level = stack.levels[1]
+    sw = np.concatenate([np.sqrt(np.broadcast_to(t.weight, (t.m,))) for t in level])
+    B = sw[:, None] * np.vstack([t.A for t in level])
+    target = sw * np.concatenate([t.b for t in level])
+    best = lsq_linear(B, target, bounds=(xl, xu), method="bvls", tol=1e-15, lsmr_tol=None)
+    # was 4.7e-7; float64 determines B x here to ~1e-15 (measured 5.6e-16)
+    assert np.linalg.norm(B @ (sol.x - best.x)) <= 1e-12 * np.linalg.norm(B)
+
+
 # ------------------------------------------------------- unit-row (posture) levels
 def _householder_lq(C: np.ndarray):
     """Reflectors of the kernel's form (``Vf[t, t:]``, ``betaf[t]``, ``posf[t] = t``) with
