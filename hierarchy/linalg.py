@@ -154,9 +154,26 @@ def row_activity(A: np.ndarray, lower: np.ndarray, upper: np.ndarray, x: np.ndar
     return side, v
 
 
+def _face_solve(M: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares ``min ‖M s − y‖`` (``lstsq``'s rank rule) and its residual
+    ``y − U Uᵀ y``, projected: accurate to ``eps ‖y‖`` where ``y − M s`` carries the
+    rounding of ``M s``, ``eps ‖M‖ ‖s‖`` (huge for an ill-conditioned face)."""
+    u, sig, vt = np.linalg.svd(M, full_matrices=False)
+    r = int(np.count_nonzero(sig > np.finfo(float).eps * max(M.shape) * sig[0])) \
+        if sig.size and sig[0] > 0 else 0
+    c = u[:, :r].T @ y
+    return vt[:r].T @ (c / sig[:r]), y - u[:, :r] @ c
+
+
 def nonnegative_least_squares(M: np.ndarray, y: np.ndarray, max_iter: int | None = None
                               ) -> tuple[np.ndarray, float]:
     """``min ‖M μ − y‖`` over ``μ ≥ 0`` (Lawson & Hanson's active-set NNLS, 1974).
+
+    At a face's least-squares solution the residual (and the gradient ``Mᵀ r`` whose
+    sign decides whether a column joins) is the projection of ``y`` off the face's
+    columns, not ``y − M μ``: on an ill-conditioned face ``μ`` reaches 1e10 and the
+    rounding of ``M μ`` (``eps ‖M‖ ‖μ‖``, 1e-6) swamped a gradient of 1e-7, ending the
+    search at a residual 1e8 times the optimum (a certificate failing an exact answer).
 
     Args:
         M: ``d × p`` matrix.
@@ -173,21 +190,27 @@ def nonnegative_least_squares(M: np.ndarray, y: np.ndarray, max_iter: int | None
     cap = 3 * p + 10 if max_iter is None else max_iter
     tol = 10.0 * np.finfo(float).eps * max(d, p) * max(float(np.abs(M).sum(axis=0).max()), 1e-300)
     passive = np.zeros(p, dtype=bool)
-    w = M.T @ (y - M @ mu)
+    res = y.astype(np.float64, copy=True)     # y − M μ (projected at a face's solution)
+    w = M.T @ res
     it = 0
     while (~passive).any() and float(np.max(np.where(passive, -np.inf, w))) > tol and it < cap:
         passive[int(np.argmax(np.where(passive, -np.inf, w)))] = True
         while it < cap and passive.any():
             it += 1
             s = np.zeros(p)
-            s[passive] = np.linalg.lstsq(M[:, passive], y, rcond=None)[0]
+            s[passive], face_res = _face_solve(M[:, passive], y)
             if float(s[passive].min()) > 0:
                 mu = s
+                res = face_res
                 break
             neg = passive & (s <= 0)
-            alpha = float(np.min(mu[neg] / (mu[neg] - s[neg])))
+            den = mu[neg] - s[neg]
+            # a column just added with s = 0 exactly (0/0): it leaves again, alpha = 0
+            alpha = float(np.min(np.where(den > 0, mu[neg] / np.where(den > 0, den, 1.0),
+                                          0.0)))
             mu = mu + alpha * (s - mu)
             passive &= mu > tol
             mu[~passive] = 0.0
-        w = M.T @ (y - M @ mu)
-    return mu, float(np.linalg.norm(M @ mu - y))
+            res = y - M @ mu
+        w = M.T @ res
+    return mu, float(np.linalg.norm(res))

@@ -193,6 +193,23 @@ def test_nonnegative_least_squares_matches_scipy():
         assert res == pytest.approx(nnls(M, y)[1], abs=1e-10)
 
 
+def test_nonnegative_least_squares_on_an_ill_conditioned_face():
+    """prioik fuzz inequality seed 3 case 1861: level 3's NNLS (15 x 8, singular values
+    2.7 down to 3e-9, the optimal multipliers ~1e10). Its gradient Mᵀ(y − M μ) carried
+    the rounding of M μ (~1e-6) over true values of ~1e-7: the search stopped with two
+    columns out at residual 86 (|y| 135) where scipy reaches 7e-7, and the certificate
+    failed hierarchical_active_set's exact answer at 0.61 relative (it also depended on
+    M's memory order: 2e-6 for a C-ordered copy). Checked independently: clarabel on
+    level 3 given the answer's level 0-2 violations gives its value to 11 digits."""
+    from prioik.hierarchy.fuzz import inequality_case
+    stack = inequality_case(np.random.default_rng([3, 1861]), 1861).stack
+    sol = formulations.solve(stack, "hierarchical_active_set")
+    report = check_lexicographic(stack, sol.x, minimum_norm=True)
+    assert report.ok, str(report)
+    stack = inequality_case(np.random.default_rng([3, 1186]), 1186).stack   # 8e-3 before
+    assert check_lexicographic(stack, formulations.solve(stack, "hierarchical_active_set").x).ok
+
+
 def test_levels_left_without_usable_directions_pass_on_round_off():
     """Seven one-row levels on two columns, each row a combination of the rows above
     (hypothesis found it): the reference and extended_jacobian agree to 1e-16, and the
