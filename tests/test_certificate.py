@@ -210,6 +210,25 @@ def test_nonnegative_least_squares_on_an_ill_conditioned_face():
     assert check_lexicographic(stack, formulations.solve(stack, "hierarchical_active_set").x).ok
 
 
+def test_nonnegative_least_squares_tolerance_follows_the_target_scale():
+    """prioik fuzz bounds seed 2 case 1322: a level of rows of norm ~5e-4 below box rows
+    of norm 818 (‖y‖ 1.3e-4, M's smallest singular value 2e-6). With a stopping
+    tolerance of ‖M‖ alone (7.8e-14) the search stopped at residual 1.2e-9 where scipy
+    reaches 1.6e-20, rejecting an answer the quadprog and clarabel cascades agree with
+    to ~10 digits (5.1e-7 relative)."""
+    from scipy.optimize import nnls
+    from prioik.hierarchy.fuzz import bounds_case
+    from prioik.hierarchy.linalg import nonnegative_least_squares
+    stack = bounds_case(np.random.default_rng([2, 1322]), 1322).stack
+    sol = formulations.solve(stack, "hierarchical_active_set")
+    assert check_lexicographic(stack, sol.x, minimum_norm=True).ok
+    rng = np.random.default_rng(3)
+    M = 1e-4 * rng.standard_normal((8, 5))
+    y = 1e-4 * rng.standard_normal(8)
+    mu, res = nonnegative_least_squares(M, y)
+    assert res == pytest.approx(nnls(M, y)[1], rel=1e-9, abs=1e-18)
+
+
 def test_levels_left_without_usable_directions_pass_on_round_off():
     """Seven one-row levels on two columns, each row a combination of the rows above
     (hypothesis found it): the reference and extended_jacobian agree to 1e-16, and the
