@@ -539,6 +539,19 @@ def _hard_multipliers(B, y, col, rows, nh, hr, nw, tgt, T, V, beta, vpos, g, nu)
     return gn
 
 
+@njit(cache=True, inline="always")
+def _pick_release(bland, j, value, drop, worst):
+    """The row to release among the wrong-signed ones so far: by Bland's rule the
+    lowest row (anti-cycling), else the largest ``value``; returns ``(drop, worst)``."""
+    if bland:
+        if drop < 0 or j < drop:
+            return j, worst
+        return drop, worst
+    if value > worst:
+        return j, value
+    return drop, worst
+
+
 @njit(cache=True, fastmath=_FAST, inline="always")
 def _freed_gain(T, nh, hr, nw, rs, i, w, v, p, flat, tq):
     """What releasing the kept hard row ``i`` (pivot order) of :func:`_eqp`'s last
@@ -1089,12 +1102,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                 j = rows[i]
                 wrong = (-nu[i] if state[j] == -1 else nu[i]) * rnorm[j]
                 if wrong > gscale:
-                    if bland:
-                        if drop < 0 or j < drop:
-                            drop = j
-                    elif wrong > worst:
-                        worst = wrong
-                        drop = j
+                    drop, worst = _pick_release(bland, j, wrong, drop, worst)
             if drop < 0 and gn_step < 0.0 and rs < nw:
                 # gscale is a gradient: at the level's full gain ‖A_i‖_F it stands for
                 # a change of the level's values of gscale / ‖A_i‖_F, but releasing a
@@ -1116,12 +1124,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                         continue
                     move = abs(nu[i]) / (un * gain)
                     if move * scale > gscale:
-                        if bland:
-                            if drop < 0 or j < drop:
-                                drop = j
-                        elif move > worst:
-                            worst = move
-                            drop = j
+                        drop, worst = _pick_release(bland, j, move, drop, worst)
             if drop < 0:
                 settled = True
                 break
