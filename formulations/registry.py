@@ -190,7 +190,13 @@ def solve(stack, formulation: str = "extended_jacobian", **options: Any) -> Solu
     """
     if not isinstance(stack, (TaskStack, StackData)):
         stack = TaskStack(stack)
-    return prepare(stack.layout, formulation, **options).solve(stack)
+    solver = prepare(stack.layout, formulation, **options)
+    if isinstance(stack, TaskStack) and getattr(solver._impl, "solve_checked", None):
+        # a compiled kernel reads the arrays alone; on the stack's read-only arrays numba
+        # would run another specialization than on the writable data of a control loop,
+        # whose code (and rounding) need not match it bit for bit
+        return solver.solve(stack.data.copy())
+    return solver.solve(stack)
 
 
 @dataclass
