@@ -31,6 +31,8 @@ from numba import njit
 from prioik._jit import kernel
 
 from prioik.hierarchy.linalg import AMBIGUITY as _AMBIGUITY
+from prioik.hierarchy.linalg import PRECISION_LIMIT_NORM as _PRECISION_LIMIT_NORM
+from prioik.hierarchy.linalg import X_PRECISION
 
 from ._extended_jacobian_kernel import (_UNIT_ROWS_GAP, _apply_q, _cholesky_lower,
                                         _cholesky_solve, _dot, _free_direction,
@@ -55,10 +57,6 @@ _DUAL_FLOOR = 1e-14
 #: a soft row of the working set leaves it when on the satisfied side of its bound by
 #: more than this times ``primal_tol`` (relative to its size)
 _RELEASE = 1e-3
-#: the coordinates of x are known to about this times ``‖x‖`` (16 eps: the reflectors
-#: that map y back to x, each rounding every coordinate to eps ‖x‖)
-X_PRECISION = 16 * 2.220446049250313e-16
-
 #: values of ``flags``
 FLAG_OK = 0
 FLAG_ITERATION_CAP = 1
@@ -699,8 +697,9 @@ def workspace_offsets(M: int, n: int, k: int) -> dict[str, tuple[int, int]]:
     (``16 × R``), ``x`` (``n``), ``w2`` and ``res = √w2`` (``k``), ``margins`` (``k + 1``:
     each level's and the tie-break's rank-decision margin); the kernel writes
     ``‖x‖`` into ``params[5]``, into ``params[6]`` ``1`` when an iteration cap was
-    hit, ``-1`` when ``x`` or a residual is not finite, and into ``params[7]`` the number
-    of levels whose violation exceeds ``primal_tol max(1, ‖x‖)``, into ``params[8]`` the
+    hit, ``-1`` when ``x`` or a residual is not finite, into ``params[7]`` ``1`` when
+    ``‖x‖`` exceeds :data:`~prioik.hierarchy.linalg.PRECISION_LIMIT_NORM` (the caller
+    then asks :func:`~prioik.hierarchy.precision_limited_levels`), into ``params[8]`` the
     number of levels (the tie-break included) whose ``margins`` are ambiguous, into
     ``params[9]`` the number of box rows near a bound that ``x``'s precision (``eps ‖x‖``)
     cannot resolve; int64: ``k``, ``starts`` (``k + 1``),
@@ -1306,7 +1305,8 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
         over = res[lev] > primal_tol * max(1.0, xn)
         counts[3, lev] = over
         infeasible += over
-    fwork[7] = infeasible
+    large = xn > _PRECISION_LIMIT_NORM
+    fwork[7] = 1.0 if large else 0.0
     capped = 0.0
     for lev in range(k + 1):
         if flags[lev] != FLAG_OK:
@@ -1318,7 +1318,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
             ambiguous += 1
     fwork[8] = ambiguous
     fwork[9] = unresolved
-    if fwork[6] != 0.0 or ambiguous or unresolved:
+    if fwork[6] != 0.0 or ambiguous or unresolved or large:
         return SOLVED_OTHER
     return SOLVED_INFEASIBLE if infeasible else SOLVED_CLEAN
 

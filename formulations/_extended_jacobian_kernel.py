@@ -26,6 +26,7 @@ from numba import njit, prange
 from prioik._jit import kernel
 
 from prioik.hierarchy.linalg import AMBIGUITY as _AMBIGUITY
+from prioik.hierarchy.linalg import PRECISION_LIMIT_NORM as _PRECISION_LIMIT_NORM
 
 #: LLVM may reassociate and contract (vectorised reductions, FMA) but not assume
 #: finite values: inputs are validated finite and a non-finite result must show.
@@ -736,7 +737,9 @@ def solve_data(A, b, w, work, out, iwork):
 
     Returns 0 when an input is not finite (nothing solved), 1 when ``x`` and the
     residuals are finite, 2 when they are not (the caller reports a failure); plus 4
-    when some level's rank decision margin is within :data:`AMBIGUITY` of its threshold.
+    when some level's rank decision margin is within :data:`AMBIGUITY` of its threshold;
+    plus 8 when ``‖x‖`` exceeds :data:`~prioik.hierarchy.linalg.PRECISION_LIMIT_NORM`
+    (the caller asks :func:`~prioik.hierarchy.precision_limited_levels`).
     """
     k = iwork[0]
     starts = iwork[1:k + 2]
@@ -774,7 +777,14 @@ def solve_data(A, b, w, work, out, iwork):
         if margins[lev] <= _AMBIGUITY:
             ambiguous = True
     code = 1 if np.isfinite(acc) else 2
-    return code + 4 if ambiguous else code
+    if ambiguous:
+        code += 4
+    xx = 0.0
+    for c in range(n):
+        xx += x[c] * x[c]
+    if xx > _PRECISION_LIMIT_NORM * _PRECISION_LIMIT_NORM:
+        code += 8
+    return code
 
 
 @njit(cache=True, parallel=True)

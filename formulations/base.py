@@ -7,7 +7,8 @@ from typing import Any
 
 import numpy as np
 
-from prioik.hierarchy import DEFAULT_CERTIFICATE_TOL, check_lexicographic
+from prioik.hierarchy import (DEFAULT_CERTIFICATE_TOL, check_lexicographic,
+                              precision_limited_levels, precision_reason)
 
 #: Values of :attr:`Solution.status`.
 STATUSES = ("optimal", "approximate", "failed")
@@ -152,6 +153,24 @@ class Solution:
         body = "".join(f"<tr><th style='text-align:left'>{escape(k)}</th>"
                        f"<td>{escape(v)}</td></tr>" for k, v in rows)
         return f"<table><caption>Solution</caption>{body}</table>"
+
+def precision_status(status: str, info: dict, data, x: np.ndarray) -> str:
+    """``status``, or ``"approximate"`` when float64 cannot give some level's values at
+    ``x`` to the certificate's tolerance (:func:`~prioik.hierarchy.precision_limited_levels`:
+    a huge ``‖x‖`` along directions the level does not take); the levels go in
+    ``info["precision_limited_levels"]`` and the reason in ``info["reason"]``. Only an
+    ``optimal`` status changes; ``data`` is the stack's :class:`~prioik.hierarchy.StackData`.
+    """
+    if status != "optimal":
+        return status
+    levels = precision_limited_levels(data, x)
+    if not levels:
+        return status
+    info["precision_limited_levels"] = levels
+    reason = precision_reason(levels, float(np.linalg.norm(x)))
+    info["reason"] = f"{info['reason']}; {reason}" if info.get("reason") else reason
+    return "approximate"
+
 
 def certify(stack, outcome: Outcome, metric=None, tol: float | None = None) -> Outcome:
     """Keep ``status="optimal"`` only when ``outcome.x`` passes the certificate.

@@ -120,7 +120,7 @@ from prioik.hierarchy import (AMBIGUITY, StackData, StackLayout, TaskStack, Task
                               UnsupportedTaskError, ambiguity_reason, ambiguous_decision,
                               level_scale, rank_threshold)
 
-from .base import Capabilities, FormulationError, Outcome, ReportVariant
+from .base import Capabilities, FormulationError, Outcome, ReportVariant, precision_status
 from .options import Option, rcond_option, validate_options
 
 try:  # the compiled kernel is optional: the lapack path is the readable reference
@@ -326,6 +326,8 @@ class Prepared:
         if code & 4:          # a rank decision within AMBIGUITY of its threshold
             margins = out[n + 2 * k:]
             status = _ambiguity_status(info, status, np.flatnonzero(margins <= AMBIGUITY))
+        if code & 8 and (code & 3) == 1:    # ‖x‖ at which float64 may limit a level
+            status = precision_status(status, info, data, out[:n])
         return Outcome(out[:n], status, info, out[n:n + k], (code & 3) == 1)
 
     def _solve_stack(self, stack: TaskStack) -> Outcome:

@@ -99,8 +99,9 @@ import math
 
 import numpy as np
 
-from prioik.hierarchy import (AMBIGUITY, StackData, StackLayout, TaskStack, TaskStackError,
-                              ambiguity_reason)
+from prioik.hierarchy import (AMBIGUITY, X_PRECISION, StackData, StackLayout, TaskStack,
+                              TaskStackError, ambiguity_reason, precision_limited_levels,
+                              precision_reason)
 
 from .base import Capabilities, FormulationError, Outcome, ReportVariant
 from .options import Option, rcond_option, validate_options
@@ -246,41 +247,27 @@ class Prepared:
             self.warm_valid[:] = 0
             data.check()     # names the task, level and row at fault
             raise TaskStackError("the rows' values overflow float64: scale the tasks down")
-        return self._outcome()
+        return self._outcome(data)
 
-    def _outcome(self) -> Outcome:
-        """The answer of a solve that is not clean (capped, non-finite, ambiguous or
-        unresolved), read from the kernel's summary."""
+    def _outcome(self, data: StackData) -> Outcome:
+        """The answer of a solve that is not clean (capped, non-finite, ambiguous,
+        unresolved, or of an ``‖x‖`` at which float64 may limit a level), read from the
+        kernel's summary: ``optimal`` only when none of these holds."""
         n, k = self._n, self._k
         out = self._out.copy()
         x, w2, residuals = out[:n], out[n:n + k], out[n + k:]
-        xn, flag, _, ambiguous, unresolved = self._summary.tolist()
+        xn, flag, large, ambiguous, unresolved = self._summary.tolist()
         infeasible = np.flatnonzero(self._counts[3, :k]).tolist()
         info = {"iterations": self._iterations.copy(), "rank_profile": self._ranks.copy(),
                 "level_violation": w2, "infeasible_levels": infeasible,
                 "warm_start": self.warm_start}
-        if flag == 0.0 and not ambiguous:
-            info["reason"] = (f"‖x‖ = {xn:.3g}: x's coordinates are known to about "
-                              f"{_kernel.X_PRECISION * xn:.2g}, coarser than the primal "
-                              f"tolerance of {int(unresolved)} box row(s) near a bound "
-                              f"(whether they are held is rounding)")
-            return Outcome(x, "approximate", info, residuals=residuals, checked=True)
-        if flag == 0.0:
-            # a pivot within AMBIGUITY of its threshold: rounding may flip the decision
-            # and with it x by O(1) (the shared rule of hierarchy.linalg)
-            levels = np.flatnonzero(self._margins <= AMBIGUITY).tolist()
-            reasons = [ambiguity_reason([i for i in levels if i < k])] if levels[0] < k else []
-            if levels[-1] == k:
-                reasons.append(f"rank decision ambiguous at the minimum-norm tie-break (a "
-                               f"pivot within {AMBIGUITY:g}x of its threshold)")
-            info.update(ambiguous_levels=levels, reason="; ".join(reasons))
-            return Outcome(x, "approximate", info, residuals=residuals, checked=True)
         if flag < 0.0:
             self.warm_valid[:] = 0
             info["message"] = "the active-set iterations produced non-finite values"
             return Outcome(x, "failed", info, residuals=residuals)
-        flags = self._counts[1]
-        if flags.any():
+        reasons = []
+        if flag > 0.0:
+            flags = self._counts[1]
             capped = np.flatnonzero(flags == _kernel.FLAG_ITERATION_CAP).tolist()
             lv = capped[0]
             what = (f"level {lv} ({', '.join(self.layout.names[lv])})" if lv < k
@@ -290,7 +277,30 @@ class Prepared:
                                 f"working set did not settle (degenerate or cycling); the "
                                 f"levels above are optimal and x keeps their optimum, but it "
                                 f"is not certified optimal from that level down")
-        return Outcome(x, "approximate", info, residuals=residuals, checked=True)
+        if ambiguous:
+            # a pivot within AMBIGUITY of its threshold: rounding may flip the decision
+            # and with it x by O(1) (the shared rule of hierarchy.linalg)
+            levels = np.flatnonzero(self._margins <= AMBIGUITY).tolist()
+            if levels[0] < k:
+                reasons.append(ambiguity_reason([i for i in levels if i < k]))
+            if levels[-1] == k:
+                reasons.append(f"rank decision ambiguous at the minimum-norm tie-break (a "
+                               f"pivot within {AMBIGUITY:g}x of its threshold)")
+            info["ambiguous_levels"] = levels
+        if unresolved:
+            reasons.append(f"‖x‖ = {xn:.3g}: x's coordinates are known to about "
+                           f"{X_PRECISION * xn:.2g}, coarser than the primal tolerance of "
+                           f"{int(unresolved)} box row(s) near a bound (whether they are "
+                           f"held is rounding)")
+        if large:
+            limited = precision_limited_levels(data, x)
+            if limited:
+                info["precision_limited_levels"] = limited
+                reasons.append(precision_reason(limited, xn))
+        if reasons:
+            info["reason"] = "; ".join(reasons)
+        status = "approximate" if (flag > 0.0 or reasons) else "optimal"
+        return Outcome(x, status, info, residuals=residuals, checked=True)
 
 # ------------------------------------------------------------------------ reports
 #: rows of prioik's reports beside the default one (prioik.benchmarks.variants)

@@ -26,8 +26,10 @@ import numpy as np
 
 from prioik.hierarchy import (StackData, StackLayout, TaskStack, TaskStackError,
                               UnsupportedTaskError, level_residuals)
+from prioik.hierarchy.linalg import PRECISION_LIMIT_NORM
 
-from .base import STATUSES, Capabilities, ConcurrentUseError, FormulationError, Outcome, Solution
+from .base import (STATUSES, Capabilities, ConcurrentUseError, FormulationError, Outcome,
+                   Solution, precision_status)
 
 __all__ = ["BatchSolution", "PreparedSolver", "check_layout_support", "check_support"]
 
@@ -238,6 +240,9 @@ class PreparedSolver:
             status = "failed"
             info = dict(info)
             info.setdefault("message", "the formulation produced non-finite values")
+        elif status == "optimal":       # float64 cannot give every level at a huge ‖x‖
+            info = dict(info)
+            status = precision_status(status, info, data, x)
         return Solution(x, self.formulation, self._given, status, residuals, elapsed, info)
 
     def solve_batch(self, stacks_or_data: Sequence) -> "BatchSolution":
@@ -270,6 +275,10 @@ class PreparedSolver:
         X = np.asarray(X, dtype=np.float64)
         bad = ~np.isfinite(X).all(axis=1)
         statuses = ["failed" if b else st for b, st in zip(bad, statuses)]
+        # as solve: float64 cannot give every level at a huge ‖x‖ (a batched kernel's
+        # statuses do not know it)
+        for i in np.flatnonzero(np.linalg.norm(X, axis=1) > PRECISION_LIMIT_NORM).tolist():
+            statuses[i] = precision_status(statuses[i], {}, datas[i], X[i])
         return BatchSolution(X, statuses, self.formulation, dict(self._given), elapsed, batched)
 
     def _one_by_one(self, datas: list[StackData]) -> tuple[np.ndarray, list[str]]:

@@ -12,8 +12,10 @@ from .io import (PeerProblem, load_lexls, load_peer, load_peer_json, load_soth, 
                  save_stack, stack_from_dict, stack_to_dict)
 from .linalg import (AMBIGUITY, DEFAULT_CERTIFICATE_TOL, DEFAULT_RCOND, ambiguity_reason,
                      ambiguous_decision, level_scale, matrix_rank, nonnegative_least_squares,
-                     null_space_basis, range_basis, rank_threshold, row_activity)
-from .layout import StackData, StackLayout, level_residuals
+                     null_space_basis, range_basis, rank_threshold, row_activity,
+                     X_PRECISION)
+from .layout import (StackData, StackLayout, level_residuals, precision_limited_levels,
+                     precision_reason)
 from .stack import TaskStack
 from .task import Level, Task
 

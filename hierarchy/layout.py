@@ -29,8 +29,10 @@ from typing import Sequence
 import numpy as np
 
 from .errors import TaskStackError
+from .linalg import DEFAULT_CERTIFICATE_TOL, X_PRECISION
 
-__all__ = ["KINDS", "StackData", "StackLayout", "level_residuals"]
+__all__ = ["KINDS", "StackData", "StackLayout", "level_residuals", "precision_limited_levels",
+           "precision_reason"]
 
 #: Task kinds of a layout.
 KINDS = ("equality", "inequality")
@@ -363,3 +365,55 @@ def level_residuals(data: StackData, x: np.ndarray) -> np.ndarray:
         r = np.where(eq, r - data.b, v)
     r *= data.sqrt_weight
     return np.sqrt(np.add.reduceat(r * r, layout.starts[:-1]))
+
+
+def precision_limited_levels(data: StackData, x: np.ndarray,
+                             tol: float = DEFAULT_CERTIFICATE_TOL) -> list[int]:
+    """The levels whose values at ``x`` float64 cannot give to ``tol``.
+
+    An answer computed through orthogonal transformations has every coordinate rounded
+    to about :data:`~prioik.hierarchy.linalg.X_PRECISION` ``‖x‖``, which moves a level's
+    ``√W_i A_i x`` by up to ``X_PRECISION ‖x‖ ‖√W_i A_i‖_F``. When a level far above
+    drives ``‖x‖`` to 1e12 along directions another level does not touch, that level's
+    rows are small numbers computed from huge ones: its values are rounding at a
+    precision coarser than ``tol`` times its scale (the scale of
+    :func:`~prioik.hierarchy.check_lexicographic`:
+    ``‖√w ∘ (|A_i| |x| + |t_i|)‖ + ‖√W_i A_i‖_F``, ``t_i`` the level's targets), and no
+    float64 method can stand behind them. Such a level is listed; a solver then says
+    ``approximate``.
+
+    Args:
+        data: The stack's rows.
+        x: The answer (``n``, finite).
+        tol: The relative accuracy asked of a level (the certificate's default).
+
+    Returns:
+        The indices of the levels whose precision bound exceeds ``tol`` times their
+        scale (empty when ``X_PRECISION ‖x‖ ≤ tol``: no level can be).
+    """
+    xn = float(np.linalg.norm(x))
+    if not X_PRECISION * xn > tol:
+        return []
+    layout = data.layout
+    WA = data.sqrt_weight[:, None] * data.A
+    ax = data.A @ x
+    if layout.is_equality:
+        target = data.b
+    else:
+        target = np.where(layout.row_is_equality, data.b,
+                          np.clip(ax, data.lower, data.upper))
+    size = data.sqrt_weight * (np.abs(data.A) @ np.abs(x) + np.abs(target))
+    starts = layout.starts[:-1]
+    fro = np.sqrt(np.add.reduceat((WA * WA).sum(axis=1), starts))
+    scale = np.sqrt(np.add.reduceat(size * size, starts)) + fro
+    return np.flatnonzero(X_PRECISION * xn * fro > tol * scale).tolist()
+
+
+def precision_reason(levels: list[int], x_norm: float) -> str:
+    """The ``info["reason"]`` of an ``approximate`` status due to
+    :func:`precision_limited_levels`."""
+    return (f"‖x‖ = {x_norm:.3g}: x's coordinates are known to about "
+            f"{X_PRECISION * x_norm:.2g}, too coarse for level"
+            f"{'s' if len(levels) > 1 else ''} {', '.join(map(str, levels))} to "
+            f"{DEFAULT_CERTIFICATE_TOL:g} of its scale (float64's limit: another level drives "
+            f"‖x‖ up along directions this one does not take)")

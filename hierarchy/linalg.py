@@ -115,6 +115,17 @@ def range_basis(A: np.ndarray, rcond: float = DEFAULT_RCOND,
 #: activity of inequality rows, see :func:`row_activity`).
 DEFAULT_CERTIFICATE_TOL = 1e-8
 
+#: The coordinates of an answer computed through orthogonal transformations (nested QR,
+#: the reflectors mapping rotated coordinates back to ``x``) are known to about this
+#: times ``‖x‖`` (16 eps: each reflector rounds every coordinate to eps ‖x‖).
+X_PRECISION = 16 * float(np.finfo(np.float64).eps)
+
+#: ``‖x‖`` above which :data:`X_PRECISION` may limit a level at
+#: :data:`DEFAULT_CERTIFICATE_TOL` (``X_PRECISION ‖x‖ ‖√W A_i‖_F`` can only exceed the
+#: tolerance times the level's scale, itself at least ``‖√W A_i‖_F``, beyond it): the
+#: compiled solvers check :func:`~prioik.hierarchy.precision_limited_levels` only then.
+PRECISION_LIMIT_NORM = DEFAULT_CERTIFICATE_TOL / X_PRECISION
+
 
 #: Singular values of a level's active rows below this fraction of their Frobenius norm
 #: are raised to it when the certificate maps a KKT residual back to task space

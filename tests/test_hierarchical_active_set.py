@@ -763,3 +763,35 @@ def test_posture_level_below_tasks_is_exact(seed, base, limits):
     else:
         ref = prioik.solve(stack, "reference").x
         assert np.linalg.norm(sol.x - ref) <= 1e-9 * max(1.0, np.linalg.norm(ref))
+
+
+@pytest.mark.parametrize("seed, case, level", [(2, 939, 2), (1, 2374, 2)])
+def test_a_level_float64_cannot_give_at_a_huge_x_is_approximate(seed, case, level):
+    """Fuzz inequality stacks where a level of rows of norm ~1e-11 drives ‖x‖ to ~1e12:
+    x's coordinates are then known to ~6e-3 (16 eps ‖x‖), and the level below, whose
+    rows do not touch the huge directions, is off its optimum by that rounding (the
+    certificate rejects it at 2.0e-5 and 1.4e-5 relative; a nearby point certifies).
+    No float64 method does better there: the solver says 'approximate' and names the
+    level, where it had said 'optimal'."""
+    from prioik.hierarchy import check_lexicographic
+    from prioik.hierarchy.fuzz import inequality_case
+    stack = inequality_case(np.random.default_rng([seed, case]), case).stack
+    sol = prioik.solve(stack, NAME)
+    assert not check_lexicographic(stack, sol.x, minimum_norm=True).ok
+    assert sol.status == "approximate"
+    assert sol.info["precision_limited_levels"] == [level]
+    assert f"level {level} " in sol.info["reason"] and "‖x‖ = " in sol.info["reason"]
+
+
+@pytest.mark.parametrize("name", ["extended_jacobian", "reference", NAME])
+def test_an_equality_stack_at_float64s_limit_is_approximate_for_every_exact_method(name):
+    """Fuzz inequality seed 2 case 827 holds only equality tasks, ‖x‖ ~5e13 (rows of norm
+    1e-12): every exact method misses level 3 by ~1e-3 relative, the limit of float64
+    there; each says so (the compiled paths, prepared and one-off, and the batch)."""
+    from prioik.hierarchy import check_lexicographic
+    from prioik.hierarchy.fuzz import inequality_case
+    stack = inequality_case(np.random.default_rng([2, 827]), 827).stack
+    sol = prioik.solve(stack, name)
+    assert not check_lexicographic(stack, sol.x).ok
+    assert sol.status == "approximate" and sol.info["precision_limited_levels"] == [3]
+    assert prioik.solve_batch([stack, stack], name).statuses == ["approximate"] * 2

@@ -4,7 +4,8 @@ boundary check; a TaskStack is a layout with frozen data."""
 import numpy as np
 import pytest
 
-from prioik.hierarchy import StackData, StackLayout, Task, TaskStack, TaskStackError
+from prioik.hierarchy import (StackData, StackLayout, Task, TaskStack, TaskStackError,
+                              precision_limited_levels, precision_reason)
 from prioik.hierarchy.families import FAMILIES
 
 LAYOUT = [[("a", 2)], [("b", 1), ("c", 3)], [("d", 4)]]
@@ -132,3 +133,33 @@ def test_bad_layouts_are_refused_with_the_place(n, levels, message):
 def test_unknown_task_names_the_known_ones():
     with pytest.raises(TaskStackError, match="no task 'z'.*a, b, c, d"):
         StackLayout(5, LAYOUT).data().rows("z")
+
+
+def _tiny_above_unit_stack(tiny: float) -> TaskStack:
+    """Level 0 ``tiny · x0 = 1`` drives ``x0`` to ``1/tiny``; level 1 ``x1 = 1`` does
+    not touch it."""
+    return TaskStack([Task("far", np.array([[tiny, 0.0]]), np.array([1.0])),
+                      Task("near", np.array([[0.0, 1.0]]), np.array([1.0]))])
+
+
+@pytest.mark.parametrize("tiny, limited", [(1e-3, []), (1e-5, []), (1e-12, [1])])
+def test_precision_limited_levels_names_levels_float64_cannot_give(tiny, limited):
+    # x = (1/tiny, 1): level 1's precision bound X_PRECISION·‖x‖·‖A_1‖ against 1e-8 of its
+    # scale (|A_1||x| + |b_1| + ‖A_1‖ = 3): 3.6e-12 and 3.6e-10 pass, 3.6e-3 does not;
+    # level 0's own scale holds the huge term (|A_0||x| = 1)
+    stack = _tiny_above_unit_stack(tiny)
+    x = np.array([1.0 / tiny, 1.0])
+    assert precision_limited_levels(stack.data, x) == limited
+    if limited:
+        reason = precision_reason(limited, float(np.linalg.norm(x)))
+        assert "level 1 " in reason and "1e+12" in reason
+
+
+def test_precision_limited_levels_reads_inequality_targets_and_weights():
+    # the same far level as an inequality row held at its lower bound, weights on both
+    far = Task("far", np.array([[1e-12, 0.0]]), lower=np.array([1.0]), weight=4.0)
+    near = Task("near", np.array([[0.0, 1.0]]), lower=np.array([0.5]), upper=np.array([2.0]),
+                weight=9.0)
+    stack = TaskStack([far, near])
+    assert precision_limited_levels(stack.data, np.array([1e12, 1.0])) == [1]
+    assert precision_limited_levels(stack.data, np.array([1e5, 1.0])) == []
