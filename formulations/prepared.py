@@ -106,6 +106,7 @@ class PreparedSolver:
         formulation: Registry name.
         layout: The layout it solves.
         options: Every option's value (validated; defaults filled in).
+        compiled: The plugin solves the data's arrays in a compiled kernel.
     """
 
     def __init__(self, formulation: str, module: ModuleType, layout: StackLayout,
@@ -123,7 +124,12 @@ class PreparedSolver:
         self._impl = (prepared(layout, options) if prepared is not None
                       else _StackAdapter(formulation, module, options))
         # a plugin's solve_checked may give its verified answers as a tuple (no Outcome)
-        self._impl_solve = getattr(self._impl, "solve_checked", None) or self._impl.solve
+        checked = getattr(self._impl, "solve_checked", None)
+        self._impl_solve = checked or self._impl.solve
+        #: whether the plugin's own prepared solver reads the data's arrays in a compiled
+        #: kernel (``solve_checked``): numba specializes on the arrays' flags, so read-only
+        #: and writable data run different machine code (see :func:`prioik.solve`)
+        self.compiled = checked is not None and bool(getattr(self._impl, "compiled", True))
         self._acquire, self._release = self._lock.acquire, self._lock.release
 
     def _data(self, stack_or_data) -> StackData:

@@ -191,7 +191,7 @@ def solve(stack, formulation: str = "extended_jacobian", **options: Any) -> Solu
     if not isinstance(stack, (TaskStack, StackData)):
         stack = TaskStack(stack)
     solver = prepare(stack.layout, formulation, **options)
-    if isinstance(stack, TaskStack) and getattr(solver._impl, "solve_checked", None):
+    if isinstance(stack, TaskStack) and solver.compiled:
         # a compiled kernel reads the arrays alone; on the stack's read-only arrays numba
         # would run another specialization than on the writable data of a control loop,
         # whose code (and rounding) need not match it bit for bit

@@ -185,3 +185,16 @@ def test_solve_batch_is_one_prepared_solver_over_many_stacks():
                                    atol=1e-13)
     again = prioik.solve_batch(stacks, "extended_jacobian")
     assert np.array_equal(again.X, batch.X)
+
+
+@pytest.mark.parametrize("name, options, compiled", [
+    ("extended_jacobian", {}, True), ("extended_jacobian", {"nullspace": "svd"}, False),
+    ("hierarchical_active_set", {}, True), ("reference", {}, False),
+    ("nullspace", {}, False)])
+def test_compiled_says_whether_a_kernel_reads_the_datas_arrays(name, options, compiled):
+    # prioik.solve gives such a solver a writable copy of a TaskStack's read-only data
+    # (numba specializes on the arrays' flags: the control loop's machine code)
+    stack = FAMILIES["compatible"](np.random.default_rng(3), 8, 3)
+    solver = prioik.prepare(stack.layout, name, **options)
+    assert solver.compiled is compiled
+    assert np.array_equal(prioik.solve(stack, name, **options).x, solver.solve(stack.data.copy()).x)
