@@ -100,10 +100,9 @@ import math
 import numpy as np
 
 from prioik.hierarchy import (AMBIGUITY, X_PRECISION, StackData, StackLayout, TaskStack,
-                              TaskStackError, ambiguity_reason, precision_limited_levels,
-                              precision_reason)
+                              TaskStackError, ambiguity_reason)
 
-from .base import Capabilities, FormulationError, Outcome, ReportVariant
+from .base import Capabilities, FormulationError, Outcome, ReportVariant, precision_status
 from .options import Option, rcond_option, validate_options
 
 try:
@@ -292,14 +291,11 @@ class Prepared:
                            f"{X_PRECISION * xn:.2g}, coarser than the primal tolerance of "
                            f"{int(unresolved)} box row(s) near a bound (whether they are "
                            f"held is rounding)")
-        if large:
-            limited = precision_limited_levels(data, x)
-            if limited:
-                info["precision_limited_levels"] = limited
-                reasons.append(precision_reason(limited, xn))
         if reasons:
             info["reason"] = "; ".join(reasons)
         status = "approximate" if (flag > 0.0 or reasons) else "optimal"
+        if large:
+            status = precision_status(status, info, data, x)
         return Outcome(x, status, info, residuals=residuals, checked=True)
 
 # ------------------------------------------------------------------------ reports
