@@ -4,10 +4,13 @@ A prepared ``extended_jacobian`` solve is one call of the compiled kernel
 (``formulations/_extended_jacobian_kernel.py`` ``solve_data``) plus the Python around
 it: the layout check, the one-thread-at-a-time guard, the timing and the
 :class:`~prioik.formulations.Solution` (the plugin's ``Outcome``, ``info``, residuals).
-Both are timed here on the same rows, in interleaved rounds: ``solver.solve(data)``
+Both are timed here on the same rows, alternating call by call: ``solver.solve(data)``
 (the public call) and the kernel called directly on the solver's own workspaces (the
 floor; a measurement only, nothing else calls the kernel this way). The overhead is
-the difference of the two medians.
+the median of the paired differences (each public call minus the kernel call beside
+it, the two taking turns to go first), the lowest over the rounds: the kernel's own time varies by more than the
+overhead between rounds on a shared machine, and a difference of two separately timed
+medians carried that variation.
 
 Run: ``python -m prioik.benchmarks.solve_overhead`` (the Panda reach and G1 fencing
 rows at a few states).
@@ -32,9 +35,9 @@ def solve_overhead(solver, datas: Sequence, rounds: int = 7, calls: int = 2000
         solver: A prepared ``extended_jacobian`` solver on its compiled path.
         datas: :class:`~prioik.hierarchy.StackData` of the solver's layout, cycled
             through (the same ones for both calls).
-        rounds: Interleaved rounds (the machine is shared): per call, the lowest
-            round median is kept.
-        calls: Calls per round.
+        rounds: Rounds (the machine is shared): per figure, the lowest round median
+            is kept.
+        calls: Paired calls per round.
 
     Returns:
         ``{"solve_us", "kernel_us", "overhead_us", "rounds", "calls"}``.
@@ -66,18 +69,32 @@ def solve_overhead(solver, datas: Sequence, rounds: int = 7, calls: int = 2000
         d = datas[i % N]
         kernel.solve_data(d.A, d.b, d.sqrt_weight, work, np.empty(size), iwork)
 
-    best = {"solve": np.inf, "kernel": np.inf}
+    best = {"solve": np.inf, "kernel": np.inf, "overhead": np.inf}
     for _ in range(rounds):
-        for name, call in (("solve", public), ("kernel", floor)):
-            times = np.empty(calls)
-            for i in range(calls):
+        # the two calls alternate on the same rows, so both see the machine in the same
+        # state, and which goes first alternates too (the second finds the rows in the
+        # cache); the overhead is the median of their paired differences
+        public_s, kernel_s = np.empty(calls), np.empty(calls)
+        for i in range(calls):
+            if i & 1:
                 t0 = clock()
-                call(i)
-                times[i] = clock() - t0
-            best[name] = min(best[name], float(np.median(times)))
+                floor(i)
+                t1 = clock()
+                public(i)
+                t2 = clock()
+                kernel_s[i], public_s[i] = t1 - t0, t2 - t1
+            else:
+                t0 = clock()
+                public(i)
+                t1 = clock()
+                floor(i)
+                t2 = clock()
+                public_s[i], kernel_s[i] = t1 - t0, t2 - t1
+        best["solve"] = min(best["solve"], float(np.median(public_s)))
+        best["kernel"] = min(best["kernel"], float(np.median(kernel_s)))
+        best["overhead"] = min(best["overhead"], float(np.median(public_s - kernel_s)))
     return {"solve_us": best["solve"] * 1e6, "kernel_us": best["kernel"] * 1e6,
-            "overhead_us": (best["solve"] - best["kernel"]) * 1e6,
-            "rounds": rounds, "calls": calls}
+            "overhead_us": best["overhead"] * 1e6, "rounds": rounds, "calls": calls}
 
 
 def panda_rows(states: int = 20, seed: int = 0) -> tuple[Any, list]:
@@ -135,7 +152,7 @@ def main(argv=None) -> None:
         r = solve_overhead(*make(), rounds=args.rounds, calls=args.calls)
         print(f"{label}: solver.solve {r['solve_us']:.2f} µs, kernel {r['kernel_us']:.2f} µs, "
               f"overhead {r['overhead_us']:.2f} µs (lowest of {args.rounds} round medians "
-              f"of {args.calls} calls)")
+              f"of {args.calls} paired calls)")
 
 
 if __name__ == "__main__":

@@ -208,7 +208,10 @@ def test_solve_overhead_times_the_public_call_and_its_kernel_on_the_same_rows():
     solver, datas = solve_overhead.panda_rows(states=3)
     r = solve_overhead.solve_overhead(solver, datas, rounds=1, calls=5)
     assert set(r) >= {"solve_us", "kernel_us", "overhead_us"}
-    assert r["overhead_us"] == pytest.approx(r["solve_us"] - r["kernel_us"])
+    # the median of the paired differences (public minus kernel, call by call): every
+    # difference is below its public call's time, so the median is below theirs
+    assert 0.0 < r["kernel_us"] and 0.0 < r["solve_us"]
+    assert math.isfinite(r["overhead_us"]) and r["overhead_us"] < r["solve_us"]
     lapack = prioik.prepare(solver.layout, "extended_jacobian", kernel="lapack")
     with pytest.raises(RuntimeError, match="compiled"):
         solve_overhead.solve_overhead(lapack, datas, rounds=1, calls=5)

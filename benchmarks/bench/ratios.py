@@ -98,7 +98,8 @@ def ratios(rows: list[TimingRow], batch: dict[str, Any], ik: dict[str, Any]) -> 
         r = overhead.get(key)
         out.append(Ratio(f"prepared.solve overhead on top of the compiled kernel (µs), {what}",
                          r["overhead_us"] if r else math.nan, 2.0,
-                         f"{r['solve_us']:.2f} − {r['kernel_us']:.2f} µs" if r
+                         f"paired; solve {r['solve_us']:.2f}, kernel {r['kernel_us']:.2f} µs"
+                         if r
                          else "not measured"))
     written = ik.get("rows", {}) if ik else {}
     for key, what, target in (("none", "the five fencing tasks", 10.0),
