@@ -37,7 +37,7 @@ from prioik.hierarchy.linalg import X_PRECISION
 from ._extended_jacobian_kernel import (_UNIT_ROWS_GAP, _apply_q, _cholesky_lower,
                                         _cholesky_solve, _dot, _free_direction,
                                         _small_lstsq_ws, _swap, _unit_rows_of,
-                                        _unit_rows_solve, _woodbury_apply)
+                                        _unit_rows_solve, _woodbury_apply, solve_kernel_ws)
 
 #: the same fast-math set as the extended-Jacobian kernel (no finite-math assumption)
 _FAST = {"reassoc", "contract", "nsz", "arcp"}
@@ -682,8 +682,195 @@ def _violated_side(r, lo, up, tol_lo, tol_up):
     return 0
 
 
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _load_rows(A, b, lower, upper, sw, row_eq, B, Bo, blo, bup, rnorm, eqr, ucol, nrot,
+               state):
+    """The first pass over the data: every row weighed by ``√w`` into ``B`` and ``Bo``,
+    its bounds (``blo``, ``bup``, weighed), norm, equality flag (``lower = upper``
+    included) and single column (``ucol``, ``-1`` if none), the ``n`` minimum-norm rows
+    after them; ``False`` at the first value that is not valid (see
+    :func:`solve_data`)."""
+    M, n = A.shape
+    for j in range(M):
+        s = sw[j]
+        if not (np.isfinite(s) and s > 0.0):
+            return False
+        Bj = B[j]
+        Boj = Bo[j]
+        Aj = A[j]
+        for c in range(n):
+            Bj[c] = s * Aj[c]
+            Boj[c] = Bj[c]
+        ucol[j] = -1
+        if not row_eq[j]:
+            nz = 0
+            for c in range(n):
+                if Aj[c] != 0.0:
+                    nz += 1
+                    ucol[j] = c
+            if nz != 1:
+                ucol[j] = -1
+        nrot[j] = 0
+        if row_eq[j]:
+            if not np.isfinite(b[j]):
+                return False
+            blo[j] = s * b[j]
+            bup[j] = blo[j]
+            eqr[j] = 1
+        else:
+            lo = lower[j]
+            up = upper[j]
+            if np.isnan(lo) or np.isnan(up) or lo == np.inf or up == -np.inf or lo > up:
+                return False
+            blo[j] = s * lo
+            bup[j] = s * up
+            eqr[j] = 1 if lo == up else 0
+        rnorm[j] = np.sqrt(_dot(B[j], B[j]))
+        if not np.isfinite(rnorm[j]):
+            return False
+        state[j] = 0
+    for j in range(M, M + n):
+        blo[j] = 0.0
+        bup[j] = 0.0
+        eqr[j] = 1
+        rnorm[j] = 1.0
+        state[j] = 0
+    return True
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _equality_first(B, Bo, blo, bup, rnorm, eqr, ucol, starts, k, rcond, primal_tol, eB,
+                    eL, eV, evec, eint, x, ranks, margins):
+    """The stack's equality rows alone (every row with ``lower = upper``), solved by the
+    extended Jacobian's nested QR (:func:`solve_kernel_ws`, its rank rule at the
+    thresholds of this kernel: ``rcond`` times each level's whole ``‖A_i‖_F``); ``True``
+    when that answer ``x*`` satisfies every other row (within its interval, no
+    tolerance), every rank decision is clear and ``x``'s precision resolves every box
+    row, with ``x``, ``ranks[:k]`` and ``margins[:k]`` written.
+
+    Then ``x*`` is the stack's answer: by induction over the levels, ``X_i ⊆ X_i^E``
+    (the optimal sets without the inequality rows) and ``x* ∈ X_i`` (its inequality
+    rows are satisfied, so each level's value equals its equality part's least
+    value), and ``x*``, the minimum-norm point of ``X_k^E``, is that of ``X_k``.
+    ``False``: nothing else was written (the active set then runs).
+    """
+    M = blo.shape[0] - x.shape[0]
+    n = x.shape[0]
+    c = evec[:M]
+    norms = evec[M:2 * M]
+    rhs = evec[2 * M:3 * M]
+    o = 3 * M
+    beta = evec[o:o + n]
+    y = evec[o + n:o + 2 * n]
+    o += 2 * n
+    scales = evec[o:o + k]
+    mu2 = evec[o + k:o + 2 * k]
+    emargins = evec[o + 2 * k:o + 3 * k]
+    step_bound = evec[o + 3 * k:o + 4 * k]
+    estarts = eint[:k + 1]
+    eranks = eint[k + 1:2 * k + 1]
+    pos = eint[2 * k + 1:2 * k + 1 + n]
+    m = 0
+    estarts[0] = 0
+    for lev in range(k):
+        acc = 0.0
+        for j in range(starts[lev], starts[lev + 1]):
+            acc += rnorm[j] * rnorm[j]
+            if eqr[j]:
+                for col in range(n):
+                    eB[m, col] = B[j, col]
+                c[m] = blo[j]
+                m += 1
+        scales[lev] = np.sqrt(acc)
+        step_bound[lev] = 0.0
+        estarts[lev + 1] = m
+    solve_kernel_ws(eB[:m], c[:m], estarts, scales, rcond, 0.0, 0.0, step_bound, x, eranks,
+                    mu2, emargins, eV, beta, pos, y, norms[:m], eL[:m], rhs[:m])
+    xx = _dot(x, x)
+    if not (xx <= _PRECISION_LIMIT_NORM * _PRECISION_LIMIT_NORM):
+        return False
+    for lev in range(k):
+        if emargins[lev] <= _AMBIGUITY:
+            return False
+    xn = np.sqrt(xx)
+    for j in range(M):
+        if eqr[j]:
+            continue
+        r = _odot(Bo, ucol, j, x)
+        if r < blo[j] or r > bup[j]:
+            return False
+        col = ucol[j]
+        if col >= 0:       # as the active set's box-row pass: x's precision decides
+            a = Bo[j, col]
+            precision = X_PRECISION * xn * abs(a)
+            for bound in (blo[j], bup[j]):
+                if np.isfinite(bound):
+                    tol = _tol(primal_tol, _size(Bo, ucol, j, rnorm[j], xn, x), bound)
+                    if precision > tol and abs(r - bound) <= precision + tol:
+                        return False
+    for lev in range(k):
+        ranks[lev] = eranks[lev]
+        margins[lev] = emargins[lev]
+    return True
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _inequalities_inactive(state, eqr, M):
+    """Whether no inequality row ended the solve held at a bound or fixed at a
+    violation (its state ``0``)."""
+    for j in range(M):
+        if state[j] != 0 and not eqr[j]:
+            return False
+    return True
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _finish(A, b, lower, upper, sw, row_eq, starts, k, primal_tol, x, w2, res, counts,
+            flags, margins, fwork, unresolved):
+    """Each level's weighted squared violation at ``x`` and the summary in ``params``;
+    returns :func:`solve_data`'s code."""
+    total = 0.0
+    for lev in range(k):
+        acc = 0.0
+        for j in range(starts[lev], starts[lev + 1]):
+            ax = sw[j] * _dot(A[j], x)
+            if row_eq[j]:
+                e = ax - sw[j] * b[j]
+            else:
+                lo = sw[j] * lower[j]
+                up = sw[j] * upper[j]
+                e = lo - ax if ax < lo else (ax - up if ax > up else 0.0)
+            acc += e * e
+        w2[lev] = acc
+        res[lev] = np.sqrt(acc)
+        total += acc
+    xn = np.sqrt(_dot(x, x))
+    fwork[5] = xn
+    infeasible = 0
+    for lev in range(k):
+        over = res[lev] > primal_tol * max(1.0, xn)
+        counts[3, lev] = over
+        infeasible += over
+    large = xn > _PRECISION_LIMIT_NORM
+    fwork[7] = 1.0 if large else 0.0
+    capped = 0.0
+    for lev in range(k + 1):
+        if flags[lev] != FLAG_OK:
+            capped = 1.0
+    fwork[6] = capped if (np.isfinite(xn) and np.isfinite(total)) else -1.0
+    ambiguous = 0
+    for lev in range(k + 1):
+        if margins[lev] <= _AMBIGUITY:
+            ambiguous += 1
+    fwork[8] = ambiguous
+    fwork[9] = unresolved
+    if fwork[6] != 0.0 or ambiguous or unresolved or large:
+        return SOLVED_OTHER
+    return SOLVED_INFEASIBLE if infeasible else SOLVED_CLEAN
+
+
 #: floats of the ``params`` header of the float workspace
-N_PARAMS = 10
+N_PARAMS = 12
 #: float rows of length ``R`` in the float workspace (``fvec``)
 N_FVEC = 16
 
@@ -695,15 +882,20 @@ def workspace_offsets(M: int, n: int, k: int) -> dict[str, tuple[int, int]]:
     float64: ``params`` (rcond, primal_tol, dual_tol, max_iter, use_warm), ``B``,
     ``T``, ``Lw``, ``Bo``, ``flat`` (``R × n`` each), ``V``, ``Vf`` (``n × n``), ``fvec``
     (``16 × R``), ``x`` (``n``), ``w2`` and ``res = √w2`` (``k``), ``margins`` (``k + 1``:
-    each level's and the tie-break's rank-decision margin); the kernel writes
+    each level's and the tie-break's rank-decision margin), and the equality-first
+    solve's ``eB``, ``eL`` (``M × n``), ``eV`` (``n × n``), ``evec`` (``3 M + 2 n + 4 k``);
+    the kernel writes
     ``‖x‖`` into ``params[5]``, into ``params[6]`` ``1`` when an iteration cap was
     hit, ``-1`` when ``x`` or a residual is not finite, into ``params[7]`` ``1`` when
     ``‖x‖`` exceeds :data:`~prioik.hierarchy.linalg.PRECISION_LIMIT_NORM` (the caller
     then asks :func:`~prioik.hierarchy.precision_limited_levels`), into ``params[8]`` the
     number of levels (the tie-break included) whose ``margins`` are ambiguous, into
     ``params[9]`` the number of box rows near a bound that ``x``'s precision (``eps ‖x‖``)
-    cannot resolve; int64: ``k``, ``starts`` (``k + 1``),
-    ``ivec`` (``5 × R``), ``perm`` (``n``), ``counts`` (``4 × (k + 1)``); int8: ``row_eq``
+    cannot resolve, into ``params[10]`` ``1`` when the answer is the equality-first
+    solve's and ``params[11]`` ``1`` when the next warm solve should try it (the answer
+    held no inequality row); int64: ``k``, ``starts`` (``k + 1``),
+    ``ivec`` (``5 × R``), ``perm`` (``n``), ``counts`` (``4 × (k + 1)``), ``eint``
+    (``2 k + 1 + n``); int8: ``row_eq``
     (``M``), ``bvec`` (``2 × R``), ``eqr`` (``R``), ``warm_state`` (``(k + 1) × R``),
     ``warm_valid`` (``k + 1``).
     """
@@ -712,9 +904,11 @@ def workspace_offsets(M: int, n: int, k: int) -> dict[str, tuple[int, int]]:
     for kind, parts in (("f", (("params", N_PARAMS), ("B", R * n), ("T", R * n),
                                 ("Lw", R * n), ("Bo", R * n), ("flat", R * n),
                                 ("V", n * n), ("Vf", n * n), ("fvec", N_FVEC * R),
-                                ("x", n), ("w2", k), ("res", k), ("margins", k + 1))),
+                                ("x", n), ("w2", k), ("res", k), ("margins", k + 1),
+                                ("eB", M * n), ("eL", M * n), ("eV", n * n),
+                                ("evec", 3 * M + 2 * n + 4 * k))),
                         ("i", (("k", 1), ("starts", k + 1), ("ivec", 5 * R), ("perm", n),
-                               ("counts", 4 * (k + 1)))),
+                               ("counts", 4 * (k + 1)), ("eint", 2 * k + 1 + n))),
                         ("b", (("row_eq", M), ("bvec", 2 * R), ("eqr", R),
                                ("warm_state", (k + 1) * R), ("warm_valid", k + 1)))):
         at = 0
@@ -792,6 +986,14 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     w2 = fwork[o:o + k]
     res = fwork[o + k:o + 2 * k]
     margins = fwork[o + 2 * k:o + 3 * k + 1]
+    o += 3 * k + 1
+    eB = fwork[o:o + M * n].reshape((M, n))
+    o += M * n
+    eL = fwork[o:o + M * n].reshape((M, n))
+    o += M * n
+    eV = fwork[o:o + n * n].reshape((n, n))
+    o += n * n
+    evec = fwork[o:o + 3 * M + 2 * n + 4 * k]
     starts = iwork[1:k + 2]
     o = k + 2
     ivec = iwork[o:o + 5 * R].reshape((5, R))
@@ -799,6 +1001,8 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     perm = iwork[o:o + n]
     o += n
     counts = iwork[o:o + 4 * (k + 1)].reshape((4, k + 1))
+    o += 4 * (k + 1)
+    eint = iwork[o:o + 2 * k + 1 + n]
     row_eq = bwork[:M]
     o = M
     bvec = bwork[o:o + 2 * R].reshape((2, R))
@@ -839,50 +1043,10 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     iters = counts[0]
     flags = counts[1]
     ranks = counts[2]
-    for j in range(M):
-        s = sw[j]
-        if not (np.isfinite(s) and s > 0.0):
-            return NOT_SOLVED
-        Bj = B[j]
-        Boj = Bo[j]
-        Aj = A[j]
-        for c in range(n):
-            Bj[c] = s * Aj[c]
-            Boj[c] = Bj[c]
-        ucol[j] = -1
-        if not row_eq[j]:
-            nz = 0
-            for c in range(n):
-                if Aj[c] != 0.0:
-                    nz += 1
-                    ucol[j] = c
-            if nz != 1:
-                ucol[j] = -1
-        nrot[j] = 0
-        if row_eq[j]:
-            if not np.isfinite(b[j]):
-                return NOT_SOLVED
-            blo[j] = s * b[j]
-            bup[j] = blo[j]
-            eqr[j] = 1
-        else:
-            lo = lower[j]
-            up = upper[j]
-            if np.isnan(lo) or np.isnan(up) or lo == np.inf or up == -np.inf or lo > up:
-                return NOT_SOLVED
-            blo[j] = s * lo
-            bup[j] = s * up
-            eqr[j] = 1 if lo == up else 0
-        rnorm[j] = np.sqrt(_dot(B[j], B[j]))
-        if not np.isfinite(rnorm[j]):
-            return NOT_SOLVED
-        state[j] = 0
-    for j in range(M, M + n):
-        blo[j] = 0.0
-        bup[j] = 0.0
-        eqr[j] = 1
-        rnorm[j] = 1.0
-        state[j] = 0
+    if not _load_rows(A, b, lower, upper, sw, row_eq, B, Bo, blo, bup, rnorm, eqr, ucol,
+                      nrot, state):
+        return NOT_SOLVED
+    fwork[10] = 0.0
     for c in range(n):
         y[c] = 0.0
         xc[c] = 0.0
@@ -1282,43 +1446,81 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                 if precision > tol and abs(ax - bound) <= precision + tol:
                     unresolved += 1
                     break
-    # each level's weighted squared violation at x
-    total = 0.0
-    for lev in range(k):
-        acc = 0.0
-        for j in range(starts[lev], starts[lev + 1]):
-            ax = sw[j] * _dot(A[j], x)
-            if row_eq[j]:
-                e = ax - sw[j] * b[j]
-            else:
-                lo = sw[j] * lower[j]
-                up = sw[j] * upper[j]
-                e = lo - ax if ax < lo else (ax - up if ax > up else 0.0)
-            acc += e * e
-        w2[lev] = acc
-        res[lev] = np.sqrt(acc)
-        total += acc
-    xn = np.sqrt(_dot(x, x))
-    fwork[5] = xn
-    infeasible = 0
-    for lev in range(k):
-        over = res[lev] > primal_tol * max(1.0, xn)
-        counts[3, lev] = over
-        infeasible += over
-    large = xn > _PRECISION_LIMIT_NORM
-    fwork[7] = 1.0 if large else 0.0
-    capped = 0.0
-    for lev in range(k + 1):
-        if flags[lev] != FLAG_OK:
-            capped = 1.0
-    fwork[6] = capped if (np.isfinite(xn) and np.isfinite(total)) else -1.0
-    ambiguous = 0
-    for lev in range(k + 1):
-        if margins[lev] <= _AMBIGUITY:
-            ambiguous += 1
-    fwork[8] = ambiguous
-    fwork[9] = unresolved
-    if fwork[6] != 0.0 or ambiguous or unresolved or large:
-        return SOLVED_OTHER
-    return SOLVED_INFEASIBLE if infeasible else SOLVED_CLEAN
+    fwork[11] = 1.0 if _inequalities_inactive(state, eqr, M) else 0.0
+    return _finish(A, b, lower, upper, sw, row_eq, starts, k, primal_tol, x, w2, res,
+                   counts, flags, margins, fwork, unresolved)
 
+
+
+#: what :func:`equality_first_data` returns when its answer is not the stack's (the
+#: caller then runs :func:`solve_data`)
+NOT_TRIED = -1
+
+
+@njit(cache=True, fastmath=_FAST)
+def equality_first_data(A, b, lower, upper, sw, fwork, iwork, bwork):
+    """The warm start's first try, with :func:`solve_data`'s arguments: when the last
+    answer held no inequality row (``params[11]``), the stack's equality rows alone by
+    the extended Jacobian's nested QR (:func:`_equality_first`); if that answer
+    satisfies every inequality row it is the stack's, written as :func:`solve_data`
+    writes its own (zero iterations, ``params[10] = 1``) and its code returned, else
+    :data:`NOT_TRIED` (also when a value is not valid: :func:`solve_data` names it).
+
+    Compiled with numba's runtime (not :func:`~prioik._jit.kernel`): the extended
+    Jacobian's full-rank step allocates its scratch.
+    """
+    M, n = A.shape
+    k = iwork[0]
+    fwork[10] = 0.0
+    if fwork[4] == 0.0 or fwork[11] == 0.0:
+        return NOT_TRIED
+    R = M + n
+    Rn = R * n
+    o = N_PARAMS
+    B = fwork[o:o + Rn].reshape((R, n))
+    o += 3 * Rn                                   # B, T, Lw, then Bo
+    Bo = fwork[o:o + Rn].reshape((R, n))
+    o += 2 * Rn + 2 * n * n                       # Bo, flat, V, Vf
+    fvec = fwork[o:o + N_FVEC * R].reshape((N_FVEC, R))
+    o += N_FVEC * R
+    x = fwork[o:o + n]
+    o += n
+    w2 = fwork[o:o + k]
+    res = fwork[o + k:o + 2 * k]
+    margins = fwork[o + 2 * k:o + 3 * k + 1]
+    o += 3 * k + 1
+    eB = fwork[o:o + M * n].reshape((M, n))
+    o += M * n
+    eL = fwork[o:o + M * n].reshape((M, n))
+    o += M * n
+    eV = fwork[o:o + n * n].reshape((n, n))
+    o += n * n
+    evec = fwork[o:o + 3 * M + 2 * n + 4 * k]
+    starts = iwork[1:k + 2]
+    o = k + 2
+    ivec = iwork[o:o + 5 * R].reshape((5, R))
+    o += 5 * R + n
+    counts = iwork[o:o + 4 * (k + 1)].reshape((4, k + 1))
+    o += 4 * (k + 1)
+    eint = iwork[o:o + 2 * k + 1 + n]
+    row_eq = bwork[:M]
+    bvec = bwork[M:M + 2 * R].reshape((2, R))
+    eqr = bwork[M + 2 * R:M + 3 * R]
+    blo = fvec[0]
+    bup = fvec[1]
+    rnorm = fvec[2]
+    if not _load_rows(A, b, lower, upper, sw, row_eq, B, Bo, blo, bup, rnorm, eqr, ivec[4],
+                      ivec[3], bvec[0]):
+        return NOT_TRIED
+    primal_tol = fwork[1]
+    if not _equality_first(B, Bo, blo, bup, rnorm, eqr, ivec[4], starts, k, fwork[0],
+                           primal_tol, eB, eL, eV, evec, eint, x, counts[2], margins):
+        return NOT_TRIED
+    for lev in range(k + 1):
+        counts[0, lev] = 0
+        counts[1, lev] = FLAG_OK
+    counts[2, k] = 0
+    margins[k] = np.inf
+    fwork[10] = 1.0
+    return _finish(A, b, lower, upper, sw, row_eq, starts, k, primal_tol, x, w2, res,
+                   counts, counts[1], margins, fwork, 0)

@@ -86,6 +86,17 @@ next solve first tries, per level, the step of last time's working set: when the
 point it reaches keeps every hard row feasible, the level continues from there
 (usually: one factorization and one multiplier check), else from the cold start.
 Both paths end at the same optimum (within the tolerances above; tested at 1e-9).
+When the last answer held no inequality row (none at a bound, none violated), the
+next solve first tries the **equality rows alone** (rows with ``lower = upper``
+included), solved by the extended Jacobian's nested QR with this solver's rank rule
+(``_active_set_kernel.equality_first_data``): if that point ``x*`` satisfies every
+inequality row it is the answer (``info["equality_first"]``, zero iterations), else
+the active set runs. Why it is exact: with ``X_i^E`` the optimal sets of the stack
+without its inequality rows, by induction ``X_i ⊆ X_i^E`` and ``x* ∈ X_i`` (its
+inequality rows add no violation, so each level's value at ``x*`` is its equality
+part's least value over ``X_{i−1}^E ⊇ X_{i−1}``), and ``x*``, the minimum-norm point
+of ``X_k^E``, is that of ``X_k``. A control loop whose limits are inactive pays the
+extended Jacobian's solve plus one pass over the inequality rows.
 
 *Complexity.* Per iteration ``O((h + w) d²)`` for ``h`` working hard rows, ``w``
 working soft rows and ``d`` free coordinates, plus ``O(M n)`` for the step test;
@@ -112,8 +123,9 @@ except ImportError as exc:  # pragma: no cover - numba is a declared dependency
     _kernel = None
     _kernel_error = f"{type(exc).__name__}: {exc}"
 #: the kernel's codes of a clean solve (module constants: read once, not per call)
-_SOLVED_CLEAN, _SOLVED_INFEASIBLE = ((_kernel.SOLVED_CLEAN, _kernel.SOLVED_INFEASIBLE)
-                                     if _kernel is not None else (-1, -1))
+_SOLVED_CLEAN, _SOLVED_INFEASIBLE, _NOT_TRIED = (
+    (_kernel.SOLVED_CLEAN, _kernel.SOLVED_INFEASIBLE, _kernel.NOT_TRIED)
+    if _kernel is not None else (-1, -1, -2))
 
 NAME = "hierarchical_active_set"
 DESCRIPTION = ("exact lexicographic optimum of equality and inequality stacks: compiled "
@@ -131,7 +143,9 @@ OPTIONS = {
     "max_iter": Option(500, "int", "iteration cap of each level (status 'approximate' "
                        "naming the level when hit)", minimum=1),
     "warm_start": Option(True, "bool", "prepared solver: start each level from the last "
-                         "solve's working set (False: every solve cold)"),
+                         "solve's working set, and when it held no inequality row try "
+                         "the equality rows' own solution first (False: every solve "
+                         "cold)"),
 }
 
 
@@ -173,6 +187,9 @@ class Prepared:
         self.dual_tol = float(options["dual_tol"])
         self.max_iter = int(options["max_iter"])
         self.warm_start = bool(options["warm_start"])
+        # the equality-first try needs the equality rows' solve (an inequality-only stack
+        # has none to try)
+        self._try_first = self.warm_start and bool(layout.row_is_equality.any())
         m, n, k = layout.m, layout.n, layout.k
         rows = m + n
         off = _kernel.workspace_offsets(m, n, k)
@@ -209,6 +226,7 @@ class Prepared:
     def reset(self) -> None:
         """Forget the kept working sets (the next solve starts cold)."""
         self.warm_valid[:] = 0
+        self._fwork[11] = 0.0            # nor is the equality-first solve tried
 
     def solve(self, data: StackData) -> Outcome:
         """Solve one stack of the layout (its data; the registry checked the layout).
@@ -230,8 +248,15 @@ class Prepared:
         Raises:
             TaskStackError: as :meth:`solve`.
         """
-        code = _kernel.solve_data(data.A, data.b, data.lower, data.upper, data.sqrt_weight,
-                                  self._fwork, self._iwork, self._bwork)
+        code = _NOT_TRIED
+        if self._try_first and self._fwork[11] != 0.0:    # the module doc's warm start
+            code = _kernel.equality_first_data(data.A, data.b, data.lower, data.upper,
+                                               data.sqrt_weight, self._fwork, self._iwork,
+                                               self._bwork)
+        if code == _NOT_TRIED:
+            code = _kernel.solve_data(data.A, data.b, data.lower, data.upper,
+                                      data.sqrt_weight, self._fwork, self._iwork,
+                                      self._bwork)
         if code == _SOLVED_CLEAN or code == _SOLVED_INFEASIBLE:
             out = self._out.copy()
             n, k = self._n, self._k
@@ -241,9 +266,10 @@ class Prepared:
                      "level_violation": out[n:n + k],
                      "infeasible_levels": [] if code == _SOLVED_CLEAN else
                      [i for i, over in enumerate(counts[3, :k].tolist()) if over],
-                     "warm_start": self.warm_start}, out[n + k:])
+                     "warm_start": self.warm_start,
+                     "equality_first": self._fwork[10] != 0.0}, out[n + k:])
         if code == _kernel.NOT_SOLVED:
-            self.warm_valid[:] = 0
+            self.reset()
             data.check()     # names the task, level and row at fault
             raise TaskStackError("the rows' values overflow float64: scale the tasks down")
         return self._outcome(data)
@@ -259,9 +285,9 @@ class Prepared:
         infeasible = np.flatnonzero(self._counts[3, :k]).tolist()
         info = {"iterations": self._iterations.copy(), "rank_profile": self._ranks.copy(),
                 "level_violation": w2, "infeasible_levels": infeasible,
-                "warm_start": self.warm_start}
+                "warm_start": self.warm_start, "equality_first": self._fwork[10] != 0.0}
         if flag < 0.0:
-            self.warm_valid[:] = 0
+            self.reset()
             info["message"] = "the active-set iterations produced non-finite values"
             return Outcome(x, "failed", info, residuals=residuals)
         reasons = []

@@ -401,6 +401,118 @@ def test_two_sided_row_switches_sides_under_warm_start():
     assert n == 2
 
 
+def _limits_stack(n, target, *, box=1.0, level_of_box=1, equal_rows=False):
+    """A task on the first two coordinates, joint-limit-like bounds ``|x| ≤ box`` and a
+    posture below (``x → 0``)."""
+    rng = np.random.default_rng(7)
+    A = np.hstack([np.eye(2), 0.3 * rng.standard_normal((2, n - 2))])
+    lower, upper = -box * np.ones(n), box * np.ones(n)
+    if equal_rows:                      # an inequality row with lower = upper: an equality
+        lower[-1] = upper[-1] = 0.25
+    task = Task("reach", A, target)
+    limits = Task("limits", np.eye(n), lower=lower, upper=upper)
+    posture = Task("posture", np.eye(n), np.zeros(n), weight=0.1)
+    levels = [[task], [posture]]
+    levels.insert(level_of_box, [limits])
+    return TaskStack(levels)
+
+
+@pytest.mark.parametrize("equal_rows", [False, True])
+@pytest.mark.parametrize("level_of_box", [0, 1, 2])
+def test_equality_first_answers_while_no_inequality_row_is_held(level_of_box, equal_rows):
+    """A warm solve whose last answer held no inequality row first solves the equality
+    rows alone (the extended Jacobian's nested QR); that answer satisfies every bound
+    here, so it is the answer: zero iterations, info['equality_first'], the cold answer
+    to 1e-12 and the independent KKT check. The first solve has no last answer."""
+    n = 6
+    warm = prioik.prepare(_limits_stack(n, [0.1, 0.2], level_of_box=level_of_box,
+                                        equal_rows=equal_rows), NAME)
+    cold = prioik.prepare(warm.layout, NAME, warm_start=False)
+    firsts = []
+    for step in range(8):
+        stack = _limits_stack(n, [0.1 + 0.05 * step, 0.2 - 0.03 * step],
+                              level_of_box=level_of_box, equal_rows=equal_rows)
+        a, b = warm.solve(stack), cold.solve(stack)
+        assert_exact(stack, a)
+        assert np.linalg.norm(a.x - b.x) <= 1e-12 * max(1.0, np.linalg.norm(b.x))
+        assert np.allclose(a.residuals, b.residuals, rtol=1e-12, atol=1e-14)
+        assert list(a.info["rank_profile"]) == list(b.info["rank_profile"])
+        assert not b.info["equality_first"]
+        firsts.append(a.info["equality_first"])
+        if a.info["equality_first"]:
+            assert not a.info["iterations"].any()
+    assert firsts == [False] + [True] * 7
+
+
+def test_equality_first_gives_way_to_the_active_set_when_a_bound_is_crossed():
+    """The target walks out of the box and back: where the equality rows' answer
+    leaves the box the active set runs (the bound held), the next solve runs it too
+    (the last answer held a row), and once an answer holds none again the equality
+    rows are tried first again. Every answer equals the cold one."""
+    n = 6
+    targets = [0.2, 0.5, 0.8, 1.3, 1.6, 1.2, 0.7, 0.4, 0.3]
+    warm = prioik.prepare(_limits_stack(n, [targets[0], 0.0]), NAME)
+    cold = prioik.prepare(warm.layout, NAME, warm_start=False)
+    firsts, held = [], []
+    for t in targets:
+        stack = _limits_stack(n, [t, 0.0])
+        a, b = warm.solve(stack), cold.solve(stack)
+        assert_exact(stack, a)
+        assert np.linalg.norm(a.x - b.x) <= 1e-12 * max(1.0, np.linalg.norm(b.x))
+        firsts.append(a.info["equality_first"])
+        held.append(bool(abs(a.x[0]) >= 1.0 - 1e-12))
+    assert held == [False, False, False, True, True, True, False, False, False]
+    assert firsts == [False, True, True, False, False, False, False, True, True]
+
+
+def test_equality_first_is_off_without_warm_start_and_after_reset():
+    n = 5
+    stack = _limits_stack(n, [0.1, 0.1])
+    off = prioik.prepare(stack, NAME, warm_start=False)
+    assert not any(off.solve(stack).info["equality_first"] for _ in range(3))
+    on = prioik.prepare(stack, NAME)
+    assert [on.solve(stack).info["equality_first"] for _ in range(2)] == [False, True]
+    on._impl.reset()
+    assert not on.solve(stack).info["equality_first"]
+    assert prioik.solve_batch([stack] * 3, NAME).statuses == ["optimal"] * 3
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(2, 10), k=st.integers(1, 5),
+       loose=st.booleans())
+def test_warm_answers_equal_cold_ones_with_or_without_equality_first(seed, n, k, loose):
+    """Random stacks (loose bounds: the equality-first try mostly answers; tight: it
+    mostly gives way), solved warm twice with their targets moved a little in between:
+    each warm answer is the cold one to 1e-9 and passes the independent KKT check."""
+    rng = np.random.default_rng(seed)
+    base = random_inequality_stack(rng, n, k)
+    scale = 50.0 if loose else 1.0
+
+    def moved(step):
+        levels = []
+        for lv in base.levels:
+            tasks = []
+            for t in lv:
+                if t.is_equality:
+                    tasks.append(Task(t.name, t.A, t.b * (1 + 0.01 * step), weight=t.weight))
+                else:
+                    lo, up = t.bounds()
+                    tasks.append(Task(t.name, t.A, lower=scale * lo, upper=scale * up,
+                                      weight=t.weight))
+            levels.append(tasks)
+        return TaskStack(levels)
+    warm = prioik.prepare(base, NAME)
+    cold = prioik.prepare(base, NAME, warm_start=False)
+    for step in range(3):
+        stack = moved(step)
+        a, b = warm.solve(stack), cold.solve(stack)
+        assert a.status == b.status
+        if b.status != "optimal":
+            continue
+        assert_exact(stack, a)
+        assert np.linalg.norm(a.x - b.x) <= 1e-9 * max(1.0, np.linalg.norm(b.x))
+
+
 # ------------------------------------------------------------ boundaries
 def test_bad_data_is_named():
     stack = random_inequality_stack(np.random.default_rng(2), 5, 3)
