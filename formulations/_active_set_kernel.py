@@ -739,23 +739,24 @@ def _load_rows(A, b, lower, upper, sw, row_eq, B, Bo, blo, bup, rnorm, eqr, ucol
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
-def _equality_first(B, Bo, blo, bup, rnorm, eqr, ucol, starts, k, rcond, primal_tol, eB,
-                    eL, eV, evec, eint, x, ranks, margins):
-    """The stack's equality rows alone (every row with ``lower = upper``), solved by the
-    extended Jacobian's nested QR (:func:`solve_kernel_ws`, its rank rule at the
-    thresholds of this kernel: ``rcond`` times each level's whole ``‖A_i‖_F``); ``True``
-    when that answer ``x*`` satisfies every other row (within its interval, no
-    tolerance), every rank decision is clear and ``x``'s precision resolves every box
-    row, with ``x``, ``ranks[:k]`` and ``margins[:k]`` written.
+def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol, eB, eL,
+                    eV, evec, eint, x, ranks, margins, w2, res):
+    """The stack's equality rows alone (rows with ``lower = upper`` included), weighed
+    into ``eB`` and solved by the extended Jacobian's nested QR
+    (:func:`solve_kernel_ws`) with this kernel's rank rule (``rcond`` times each level's
+    whole ``‖√W_i A_i‖_F``); ``True`` when that answer ``x*`` satisfies every other row
+    (inside its interval, no tolerance), every rank decision is clear and ``x``'s
+    precision resolves every box row, with ``x``, ``ranks[:k]``, ``margins[:k]`` and
+    the levels' violations ``w2``, ``res`` written.
 
     Then ``x*`` is the stack's answer: by induction over the levels, ``X_i ⊆ X_i^E``
     (the optimal sets without the inequality rows) and ``x* ∈ X_i`` (its inequality
     rows are satisfied, so each level's value equals its equality part's least
     value), and ``x*``, the minimum-norm point of ``X_k^E``, is that of ``X_k``.
-    ``False``: nothing else was written (the active set then runs).
+    ``False`` (also for a value :func:`_load_rows` refuses): the active set runs.
+    Reads the data directly (one pass; the active set's own rows are not built).
     """
-    M = blo.shape[0] - x.shape[0]
-    n = x.shape[0]
+    M, n = A.shape
     c = evec[:M]
     norms = evec[M:2 * M]
     rhs = evec[2 * M:3 * M]
@@ -770,17 +771,50 @@ def _equality_first(B, Bo, blo, bup, rnorm, eqr, ucol, starts, k, rcond, primal_
     estarts = eint[:k + 1]
     eranks = eint[k + 1:2 * k + 1]
     pos = eint[2 * k + 1:2 * k + 1 + n]
+    ucol = eint[2 * k + 1 + n:2 * k + 1 + n + M]      # -2: an equality row
     m = 0
     estarts[0] = 0
     for lev in range(k):
         acc = 0.0
         for j in range(starts[lev], starts[lev + 1]):
-            acc += rnorm[j] * rnorm[j]
-            if eqr[j]:
+            s = sw[j]
+            if not (np.isfinite(s) and s > 0.0):
+                return False
+            Aj = A[j]
+            if row_eq[j]:
+                lo = b[j]
+                up = lo
+                if not np.isfinite(lo):
+                    return False
+            else:
+                lo = lower[j]
+                up = upper[j]
+                if np.isnan(lo) or np.isnan(up) or lo == np.inf or up == -np.inf or lo > up:
+                    return False
+            nn = 0.0
+            if lo == up:
+                row = eB[m]
                 for col in range(n):
-                    eB[m, col] = B[j, col]
-                c[m] = blo[j]
+                    v = s * Aj[col]
+                    row[col] = v
+                    nn += v * v
+                c[m] = s * lo
                 m += 1
+                ucol[j] = -2
+            else:
+                nz = 0
+                uc = -1
+                for col in range(n):
+                    a = Aj[col]
+                    nn += a * a
+                    if a != 0.0:
+                        nz += 1
+                        uc = col
+                nn *= s * s
+                ucol[j] = uc if nz == 1 else -1
+            if not np.isfinite(nn):
+                return False
+            acc += nn
         scales[lev] = np.sqrt(acc)
         step_bound[lev] = 0.0
         estarts[lev + 1] = m
@@ -794,21 +828,32 @@ def _equality_first(B, Bo, blo, bup, rnorm, eqr, ucol, starts, k, rcond, primal_
             return False
     xn = np.sqrt(xx)
     for j in range(M):
-        if eqr[j]:
+        uc = ucol[j]
+        if uc == -2:
             continue
-        r = _odot(Bo, ucol, j, x)
-        if r < blo[j] or r > bup[j]:
+        lo = lower[j]
+        up = upper[j]
+        r = A[j, uc] * x[uc] if uc >= 0 else _dot(A[j], x)
+        if r < lo or r > up:
             return False
-        col = ucol[j]
-        if col >= 0:       # as the active set's box-row pass: x's precision decides
-            a = Bo[j, col]
+        if uc >= 0:        # as the active set's box-row pass: x's precision decides
+            s = sw[j]
+            a = s * A[j, uc]
             precision = X_PRECISION * xn * abs(a)
-            for bound in (blo[j], bup[j]):
+            size = abs(a) * (abs(x[uc]) + 1.0)
+            for bound in (s * lo, s * up):
                 if np.isfinite(bound):
-                    tol = _tol(primal_tol, _size(Bo, ucol, j, rnorm[j], xn, x), bound)
-                    if precision > tol and abs(r - bound) <= precision + tol:
+                    if precision > _tol(primal_tol, size, bound) and \
+                            abs(s * r - bound) <= precision + _tol(primal_tol, size, bound):
                         return False
     for lev in range(k):
+        acc = 0.0
+        for j in range(starts[lev], starts[lev + 1]):
+            if ucol[j] == -2:
+                e = sw[j] * (_dot(A[j], x) - (b[j] if row_eq[j] else lower[j]))
+                acc += e * e
+        w2[lev] = acc
+        res[lev] = np.sqrt(acc)
         ranks[lev] = eranks[lev]
         margins[lev] = emargins[lev]
     return True
@@ -827,8 +872,7 @@ def _inequalities_inactive(state, eqr, M):
 @njit(cache=True, fastmath=_FAST, inline="always")
 def _finish(A, b, lower, upper, sw, row_eq, starts, k, primal_tol, x, w2, res, counts,
             flags, margins, fwork, unresolved):
-    """Each level's weighted squared violation at ``x`` and the summary in ``params``;
-    returns :func:`solve_data`'s code."""
+    """Each level's weighted squared violation at ``x`` and :func:`_summary`."""
     total = 0.0
     for lev in range(k):
         acc = 0.0
@@ -844,6 +888,14 @@ def _finish(A, b, lower, upper, sw, row_eq, starts, k, primal_tol, x, w2, res, c
         w2[lev] = acc
         res[lev] = np.sqrt(acc)
         total += acc
+    return _summary(k, primal_tol, x, res, total, counts, flags, margins, fwork, unresolved)
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _summary(k, primal_tol, x, res, total, counts, flags, margins, fwork, unresolved):
+    """The summary in ``params`` (see :func:`workspace_offsets`) from the levels'
+    violations ``res`` (``total``: the sum of their squares); returns
+    :func:`solve_data`'s code."""
     xn = np.sqrt(_dot(x, x))
     fwork[5] = xn
     infeasible = 0
@@ -895,7 +947,7 @@ def workspace_offsets(M: int, n: int, k: int) -> dict[str, tuple[int, int]]:
     solve's and ``params[11]`` ``1`` when the next warm solve should try it (the answer
     held no inequality row); int64: ``k``, ``starts`` (``k + 1``),
     ``ivec`` (``5 × R``), ``perm`` (``n``), ``counts`` (``4 × (k + 1)``), ``eint``
-    (``2 k + 1 + n``); int8: ``row_eq``
+    (``2 k + 1 + n + M``); int8: ``row_eq``
     (``M``), ``bvec`` (``2 × R``), ``eqr`` (``R``), ``warm_state`` (``(k + 1) × R``),
     ``warm_valid`` (``k + 1``).
     """
@@ -908,7 +960,7 @@ def workspace_offsets(M: int, n: int, k: int) -> dict[str, tuple[int, int]]:
                                 ("eB", M * n), ("eL", M * n), ("eV", n * n),
                                 ("evec", 3 * M + 2 * n + 4 * k))),
                         ("i", (("k", 1), ("starts", k + 1), ("ivec", 5 * R), ("perm", n),
-                               ("counts", 4 * (k + 1)), ("eint", 2 * k + 1 + n))),
+                               ("counts", 4 * (k + 1)), ("eint", 2 * k + 1 + n + M))),
                         ("b", (("row_eq", M), ("bvec", 2 * R), ("eqr", R),
                                ("warm_state", (k + 1) * R), ("warm_valid", k + 1)))):
         at = 0
@@ -986,14 +1038,6 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     w2 = fwork[o:o + k]
     res = fwork[o + k:o + 2 * k]
     margins = fwork[o + 2 * k:o + 3 * k + 1]
-    o += 3 * k + 1
-    eB = fwork[o:o + M * n].reshape((M, n))
-    o += M * n
-    eL = fwork[o:o + M * n].reshape((M, n))
-    o += M * n
-    eV = fwork[o:o + n * n].reshape((n, n))
-    o += n * n
-    evec = fwork[o:o + 3 * M + 2 * n + 4 * k]
     starts = iwork[1:k + 2]
     o = k + 2
     ivec = iwork[o:o + 5 * R].reshape((5, R))
@@ -1001,8 +1045,6 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     perm = iwork[o:o + n]
     o += n
     counts = iwork[o:o + 4 * (k + 1)].reshape((4, k + 1))
-    o += 4 * (k + 1)
-    eint = iwork[o:o + 2 * k + 1 + n]
     row_eq = bwork[:M]
     o = M
     bvec = bwork[o:o + 2 * R].reshape((2, R))
@@ -1475,14 +1517,7 @@ def equality_first_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     if fwork[4] == 0.0 or fwork[11] == 0.0:
         return NOT_TRIED
     R = M + n
-    Rn = R * n
-    o = N_PARAMS
-    B = fwork[o:o + Rn].reshape((R, n))
-    o += 3 * Rn                                   # B, T, Lw, then Bo
-    Bo = fwork[o:o + Rn].reshape((R, n))
-    o += 2 * Rn + 2 * n * n                       # Bo, flat, V, Vf
-    fvec = fwork[o:o + N_FVEC * R].reshape((N_FVEC, R))
-    o += N_FVEC * R
+    o = N_PARAMS + 5 * R * n + 2 * n * n + N_FVEC * R      # after B … fvec
     x = fwork[o:o + n]
     o += n
     w2 = fwork[o:o + k]
@@ -1497,30 +1532,23 @@ def equality_first_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     o += n * n
     evec = fwork[o:o + 3 * M + 2 * n + 4 * k]
     starts = iwork[1:k + 2]
-    o = k + 2
-    ivec = iwork[o:o + 5 * R].reshape((5, R))
-    o += 5 * R + n
+    o = k + 2 + 5 * R + n                                   # after ivec and perm
     counts = iwork[o:o + 4 * (k + 1)].reshape((4, k + 1))
     o += 4 * (k + 1)
-    eint = iwork[o:o + 2 * k + 1 + n]
-    row_eq = bwork[:M]
-    bvec = bwork[M:M + 2 * R].reshape((2, R))
-    eqr = bwork[M + 2 * R:M + 3 * R]
-    blo = fvec[0]
-    bup = fvec[1]
-    rnorm = fvec[2]
-    if not _load_rows(A, b, lower, upper, sw, row_eq, B, Bo, blo, bup, rnorm, eqr, ivec[4],
-                      ivec[3], bvec[0]):
-        return NOT_TRIED
+    eint = iwork[o:o + 2 * k + 1 + n + M]
     primal_tol = fwork[1]
-    if not _equality_first(B, Bo, blo, bup, rnorm, eqr, ivec[4], starts, k, fwork[0],
-                           primal_tol, eB, eL, eV, evec, eint, x, counts[2], margins):
+    if not _equality_first(A, b, lower, upper, sw, bwork[:M], starts, k, fwork[0],
+                           primal_tol, eB, eL, eV, evec, eint, x, counts[2], margins, w2,
+                           res):
         return NOT_TRIED
-    for lev in range(k + 1):
+    total = 0.0
+    for lev in range(k):
+        total += w2[lev]
         counts[0, lev] = 0
         counts[1, lev] = FLAG_OK
+    counts[0, k] = 0
+    counts[1, k] = FLAG_OK
     counts[2, k] = 0
     margins[k] = np.inf
     fwork[10] = 1.0
-    return _finish(A, b, lower, upper, sw, row_eq, starts, k, primal_tol, x, w2, res,
-                   counts, counts[1], margins, fwork, 0)
+    return _summary(k, primal_tol, x, res, total, counts, counts[1], margins, fwork, 0)
