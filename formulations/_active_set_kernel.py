@@ -944,7 +944,8 @@ def workspace_offsets(M: int, n: int, k: int) -> dict[str, tuple[int, int]]:
     number of levels (the tie-break included) whose ``margins`` are ambiguous, into
     ``params[9]`` the number of box rows near a bound that ``x``'s precision (``eps ‖x‖``)
     cannot resolve, into ``params[10]`` ``1`` when the answer is the equality-first
-    solve's and ``params[11]`` ``1`` when the next warm solve should try it (the answer
+    solve's (``-1`` when that try was refuted: the next :func:`solve_data` call starts
+    cold) and ``params[11]`` ``1`` when the next warm solve should try it (the answer
     held no inequality row); int64: ``k``, ``starts`` (``k + 1``),
     ``ivec`` (``5 × R``), ``perm`` (``n``), ``counts`` (``4 × (k + 1)``), ``eint``
     (``2 k + 1 + n + M``); int8: ``row_eq``
@@ -1058,7 +1059,9 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     primal_tol = fwork[1]
     dual_tol = fwork[2]
     max_iter = int(fwork[3])
-    use_warm = fwork[4] != 0.0
+    # a refuted equality-first try (params[10] = -1) refuted the kept working sets too:
+    # they held no inequality row, which is what it tried; this solve starts cold
+    use_warm = fwork[4] != 0.0 and fwork[10] != -1.0
     blo = fvec[0]
     bup = fvec[1]
     rnorm = fvec[2]
@@ -1506,7 +1509,10 @@ def equality_first_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     the extended Jacobian's nested QR (:func:`_equality_first`); if that answer
     satisfies every inequality row it is the stack's, written as :func:`solve_data`
     writes its own (zero iterations, ``params[10] = 1``) and its code returned, else
-    :data:`NOT_TRIED` (also when a value is not valid: :func:`solve_data` names it).
+    :data:`NOT_TRIED` (also when a value is not valid: :func:`solve_data` names it);
+    after a refuted try ``params[10] = -1``, and the :func:`solve_data` call that
+    follows starts cold (the kept working sets held no inequality row: the guess the
+    try refuted).
 
     Compiled with numba's runtime (not :func:`~prioik._jit.kernel`): the extended
     Jacobian's full-rank step allocates its scratch.
@@ -1540,6 +1546,7 @@ def equality_first_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     if not _equality_first(A, b, lower, upper, sw, bwork[:M], starts, k, fwork[0],
                            primal_tol, eB, eL, eV, evec, eint, x, counts[2], margins, w2,
                            res):
+        fwork[10] = -1.0         # tried and refuted: solve_data then starts cold
         return NOT_TRIED
     total = 0.0
     for lev in range(k):

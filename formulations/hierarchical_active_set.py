@@ -91,7 +91,8 @@ next solve first tries the **equality rows alone** (rows with ``lower = upper``
 included), solved by the extended Jacobian's nested QR with this solver's rank rule
 (``_active_set_kernel.equality_first_data``): if that point ``x*`` satisfies every
 inequality row it is the answer (``info["equality_first"]``, zero iterations), else
-the active set runs. Why it is exact: with ``X_i^E`` the optimal sets of the stack
+the active set runs from the cold start (the kept working sets held no inequality row:
+the guess the try refuted). Why it is exact: with ``X_i^E`` the optimal sets of the stack
 without its inequality rows, by induction ``X_i ⊆ X_i^E`` and ``x* ∈ X_i`` (its
 inequality rows add no violation, so each level's value at ``x*`` is its equality
 part's least value over ``X_{i−1}^E ⊇ X_{i−1}``), and ``x*``, the minimum-norm point
@@ -226,7 +227,7 @@ class Prepared:
     def reset(self) -> None:
         """Forget the kept working sets (the next solve starts cold)."""
         self.warm_valid[:] = 0
-        self._fwork[11] = 0.0            # nor is the equality-first solve tried
+        self._fwork[10:12] = 0.0         # nor is the equality-first solve tried
 
     def solve(self, data: StackData) -> Outcome:
         """Solve one stack of the layout (its data; the registry checked the layout).
@@ -267,7 +268,7 @@ class Prepared:
                      "infeasible_levels": [] if code == _SOLVED_CLEAN else
                      [i for i, over in enumerate(counts[3, :k].tolist()) if over],
                      "warm_start": self.warm_start,
-                     "equality_first": self._fwork[10] != 0.0}, out[n + k:])
+                     "equality_first": self._fwork[10] == 1.0}, out[n + k:])
         if code == _kernel.NOT_SOLVED:
             self.reset()
             data.check()     # names the task, level and row at fault
@@ -285,7 +286,7 @@ class Prepared:
         infeasible = np.flatnonzero(self._counts[3, :k]).tolist()
         info = {"iterations": self._iterations.copy(), "rank_profile": self._ranks.copy(),
                 "level_violation": w2, "infeasible_levels": infeasible,
-                "warm_start": self.warm_start, "equality_first": self._fwork[10] != 0.0}
+                "warm_start": self.warm_start, "equality_first": self._fwork[10] == 1.0}
         if flag < 0.0:
             self.reset()
             info["message"] = "the active-set iterations produced non-finite values"
