@@ -76,20 +76,14 @@ def solve_overhead(solver, datas: Sequence, rounds: int = 7, calls: int = 2000
         # cache); the overhead is the median of their paired differences
         public_s, kernel_s = np.empty(calls), np.empty(calls)
         for i in range(calls):
-            if i & 1:
-                t0 = clock()
-                floor(i)
-                t1 = clock()
-                public(i)
-                t2 = clock()
-                kernel_s[i], public_s[i] = t1 - t0, t2 - t1
-            else:
-                t0 = clock()
-                public(i)
-                t1 = clock()
-                floor(i)
-                t2 = clock()
-                public_s[i], kernel_s[i] = t1 - t0, t2 - t1
+            odd = i & 1
+            first, second = (floor, public) if odd else (public, floor)
+            t0 = clock()
+            first(i)
+            t1 = clock()
+            second(i)
+            t2 = clock()
+            public_s[i], kernel_s[i] = (t2 - t1, t1 - t0) if odd else (t1 - t0, t2 - t1)
         best["solve"] = min(best["solve"], float(np.median(public_s)))
         best["kernel"] = min(best["kernel"], float(np.median(kernel_s)))
         best["overhead"] = min(best["overhead"], float(np.median(public_s - kernel_s)))
