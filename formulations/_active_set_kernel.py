@@ -37,7 +37,7 @@ from prioik.hierarchy.linalg import X_PRECISION
 from ._extended_jacobian_kernel import (_UNIT_ROWS_GAP, _apply_q, _cholesky_lower,
                                         _cholesky_solve, _dot, _free_direction,
                                         _small_lstsq_ws, _swap, _unit_rows_of,
-                                        _unit_rows_solve, _woodbury_apply, solve_kernel_ws)
+                                        _unit_rows_solve, _woodbury_apply, solve_kernel)
 
 #: the same fast-math set as the extended-Jacobian kernel (no finite-math assumption)
 _FAST = {"reassoc", "contract", "nsz", "arcp"}
@@ -682,6 +682,20 @@ def _violated_side(r, lo, up, tol_lo, tol_up):
     return 0
 
 
+@njit(cache=True, inline="always")
+def _row_interval(j, row_eq, b, lower, upper):
+    """Row ``j``'s interval ``(lo, up)`` (an equality row: ``b_j`` twice) and whether it
+    is valid: finite target, no NaN bound, ``lower < +inf``, ``upper > −inf``,
+    ``lower ≤ upper``."""
+    if row_eq[j]:
+        lo = b[j]
+        return lo, lo, np.isfinite(lo)
+    lo = lower[j]
+    up = upper[j]
+    return lo, up, not (np.isnan(lo) or np.isnan(up) or lo == np.inf or up == -np.inf
+                        or lo > up)
+
+
 @njit(cache=True, fastmath=_FAST, inline="always")
 def _load_rows(A, b, lower, upper, sw, row_eq, B, Bo, blo, bup, rnorm, eqr, ucol, nrot,
                state):
@@ -711,20 +725,12 @@ def _load_rows(A, b, lower, upper, sw, row_eq, B, Bo, blo, bup, rnorm, eqr, ucol
             if nz != 1:
                 ucol[j] = -1
         nrot[j] = 0
-        if row_eq[j]:
-            if not np.isfinite(b[j]):
-                return False
-            blo[j] = s * b[j]
-            bup[j] = blo[j]
-            eqr[j] = 1
-        else:
-            lo = lower[j]
-            up = upper[j]
-            if np.isnan(lo) or np.isnan(up) or lo == np.inf or up == -np.inf or lo > up:
-                return False
-            blo[j] = s * lo
-            bup[j] = s * up
-            eqr[j] = 1 if lo == up else 0
+        lo, up, valid = _row_interval(j, row_eq, b, lower, upper)
+        if not valid:
+            return False
+        blo[j] = s * lo
+        bup[j] = s * up
+        eqr[j] = 1 if lo == up else 0
         rnorm[j] = np.sqrt(_dot(B[j], B[j]))
         if not np.isfinite(rnorm[j]):
             return False
@@ -781,16 +787,9 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
             if not (np.isfinite(s) and s > 0.0):
                 return False
             Aj = A[j]
-            if row_eq[j]:
-                lo = b[j]
-                up = lo
-                if not np.isfinite(lo):
-                    return False
-            else:
-                lo = lower[j]
-                up = upper[j]
-                if np.isnan(lo) or np.isnan(up) or lo == np.inf or up == -np.inf or lo > up:
-                    return False
+            lo, up, valid = _row_interval(j, row_eq, b, lower, upper)
+            if not valid:
+                return False
             nn = 0.0
             if lo == up:
                 row = eB[m]
@@ -818,8 +817,10 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
         scales[lev] = np.sqrt(acc)
         step_bound[lev] = 0.0
         estarts[lev + 1] = m
-    solve_kernel_ws(eB[:m], c[:m], estarts, scales, rcond, 0.0, 0.0, step_bound, x, eranks,
-                    mu2, emargins, eV, beta, pos, y, norms[:m], eL[:m], rhs[:m])
+    # the extended Jacobian's own compiled solve (not its body inlined here: inlined
+    # into a second module it changed that kernel's rounding in the first one)
+    solve_kernel(eB[:m], c[:m], estarts, scales, rcond, 0.0, 0.0, step_bound, x, eranks,
+                 mu2, emargins)
     xx = _dot(x, x)
     if not (xx <= _PRECISION_LIMIT_NORM * _PRECISION_LIMIT_NORM):
         return False
@@ -843,8 +844,8 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
             size = abs(a) * (abs(x[uc]) + 1.0)
             for bound in (s * lo, s * up):
                 if np.isfinite(bound):
-                    if precision > _tol(primal_tol, size, bound) and \
-                            abs(s * r - bound) <= precision + _tol(primal_tol, size, bound):
+                    tol = _tol(primal_tol, size, bound)
+                    if precision > tol and abs(s * r - bound) <= precision + tol:
                         return False
     for lev in range(k):
         acc = 0.0
@@ -925,6 +926,16 @@ def _summary(k, primal_tol, x, res, total, counts, flags, margins, fwork, unreso
 N_PARAMS = 12
 #: float rows of length ``R`` in the float workspace (``fvec``)
 N_FVEC = 16
+
+
+@njit(cache=True, inline="always")
+def _outputs(fwork, M, n, k):
+    """The float workspace's outputs (:func:`workspace_offsets`): ``x``, ``w2``, ``res``,
+    ``margins``, and the offset after them."""
+    R = M + n
+    o = N_PARAMS + 5 * R * n + 2 * n * n + N_FVEC * R      # after B … fvec
+    return (fwork[o:o + n], fwork[o + n:o + n + k], fwork[o + n + k:o + n + 2 * k],
+            fwork[o + n + 2 * k:o + n + 3 * k + 1], o + n + 3 * k + 1)
 
 
 def workspace_offsets(M: int, n: int, k: int) -> dict[str, tuple[int, int]]:
@@ -1033,12 +1044,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     Vf = fwork[o:o + n * n].reshape((n, n))
     o += n * n
     fvec = fwork[o:o + N_FVEC * R].reshape((N_FVEC, R))
-    o += N_FVEC * R
-    x = fwork[o:o + n]
-    o += n
-    w2 = fwork[o:o + k]
-    res = fwork[o + k:o + 2 * k]
-    margins = fwork[o + 2 * k:o + 3 * k + 1]
+    x, w2, res, margins, o = _outputs(fwork, M, n, k)
     starts = iwork[1:k + 2]
     o = k + 2
     ivec = iwork[o:o + 5 * R].reshape((5, R))
@@ -1523,13 +1529,7 @@ def equality_first_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     if fwork[4] == 0.0 or fwork[11] == 0.0:
         return NOT_TRIED
     R = M + n
-    o = N_PARAMS + 5 * R * n + 2 * n * n + N_FVEC * R      # after B … fvec
-    x = fwork[o:o + n]
-    o += n
-    w2 = fwork[o:o + k]
-    res = fwork[o + k:o + 2 * k]
-    margins = fwork[o + 2 * k:o + 3 * k + 1]
-    o += 3 * k + 1
+    x, w2, res, margins, o = _outputs(fwork, M, n, k)
     eB = fwork[o:o + M * n].reshape((M, n))
     o += M * n
     eL = fwork[o:o + M * n].reshape((M, n))
