@@ -122,17 +122,19 @@ def test_does_not_touch_the_callers_arrays():
     assert np.array_equal(M, M0) and np.array_equal(bias, b0)
 
 
-from hypothesis import given, settings, strategies as st  # noqa: E402
+from hypothesis import example, given, settings, strategies as st  # noqa: E402
 
 
 @settings(max_examples=60, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(2, 30), k=st.integers(1, 6),
        family=st.sampled_from(sorted(FAMILIES)), cond=st.sampled_from([1.0, 10.0, 1e3]))
+@example(seed=1195, n=2, k=2, family="degenerate", cond=1e3)
 def test_property_shape_finite_and_eq37_on_any_family(seed, n, k, family, cond):
     """Any family, M with condition 1 … 1e3: shape (n,), finite, τ of eq. 40 equals
-    the eq. 37 recursion (relative 1e-7), top level optimal (1e-8 relative to the
-    levels' contributions; over 1500 seeded draws the worst relative to ‖θ̈‖ alone was
-    3e-7, a 1e-6-scaled level under a 1e4-scaled one)."""
+    the eq. 37 recursion (relative 1e-7, plus 1e-12 of the levels' torques), top level
+    optimal (1e-8 relative to the levels' contributions; over 1500 seeded draws the
+    worst relative to ‖θ̈‖ alone was 3e-7, a 1e-6-scaled level under a 1e4-scaled
+    one)."""
     rng = np.random.default_rng(seed)
     stack = FAMILIES[family](rng, n, k)
     M = random_spd(rng, n, cond)
@@ -140,7 +142,12 @@ def test_property_shape_finite_and_eq37_on_any_family(seed, n, k, family, cond):
     sol = formulations.solve(stack, "unifying", mass_matrix=M, bias=bias)
     assert sol.ok and sol.x.shape == (stack.n,) and np.isfinite(sol.x).all()
     tau, taus = torque_recursion(stack, M, bias)
-    assert np.linalg.norm(sol.info["tau"] - tau) <= 1e-7 * max(1.0, np.linalg.norm(tau))
+    # both sum per-level torques, whose round-off is on the scale of the terms: a
+    # 1e-6-scaled level at condition 1e3 gives τ_i ~ 1e7 that cancel to ‖τ‖ ~ 1
+    # (seed 1195, n = k = 2, degenerate: 1.9e-6 apart, 6e-14 of Σ‖τ_i‖)
+    contributions = sum(np.linalg.norm(t) for t in taus)
+    assert np.linalg.norm(sol.info["tau"] - tau) <= 1e-7 * max(1.0, np.linalg.norm(tau)) \
+        + 1e-12 * contributions
     # the top level is met up to round-off on the scale of the levels' contributions
     # M⁻¹τ_i (a tiny lower level can contribute far more than the final θ̈)
     e0 = algorithmic_error_norms(stack, sol.x)[0]
