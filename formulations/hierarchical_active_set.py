@@ -118,6 +118,8 @@ from .base import Capabilities, FormulationError, Outcome, ReportVariant, precis
 from .options import Option, rcond_option, validate_options
 
 try:
+    from prioik._jit import (ROWS_1D, ROWS_2D, WORK_B, WORK_F, WORK_I, compile_once)
+
     from . import _active_set_kernel as _kernel
     _kernel_error = ""
 except ImportError as exc:  # pragma: no cover - numba is a declared dependency
@@ -127,6 +129,20 @@ except ImportError as exc:  # pragma: no cover - numba is a declared dependency
 _SOLVED_CLEAN, _SOLVED_INFEASIBLE, _NOT_TRIED = (
     (_kernel.SOLVED_CLEAN, _kernel.SOLVED_INFEASIBLE, _kernel.NOT_TRIED)
     if _kernel is not None else (-1, -1, -2))
+
+#: the kernels' one signature (prioik._jit.compile_once): the stack's five row arrays,
+#: then the float, int and int8 workspaces
+_SIGNATURE = ((ROWS_2D, ROWS_1D, ROWS_1D, ROWS_1D, ROWS_1D, WORK_F, WORK_I, WORK_B)
+              if _kernel is not None else ())
+
+
+def _compile_kernels(warm_start: bool) -> None:
+    """Compile (or load) ``solve_data`` and, for a warm-starting solver, the
+    equality-first try, for :data:`_SIGNATURE` alone."""
+    compile_once(_kernel.solve_data, _SIGNATURE)
+    if warm_start:
+        compile_once(_kernel.equality_first_data, _SIGNATURE)
+
 
 NAME = "hierarchical_active_set"
 DESCRIPTION = ("exact lexicographic optimum of equality and inequality stacks: compiled "
@@ -188,6 +204,7 @@ class Prepared:
         self.dual_tol = float(options["dual_tol"])
         self.max_iter = int(options["max_iter"])
         self.warm_start = bool(options["warm_start"])
+        _compile_kernels(self.warm_start)
         # the equality-first try needs the equality rows' solve (an inequality-only stack
         # has none to try)
         self._try_first = self.warm_start and bool(layout.row_is_equality.any())

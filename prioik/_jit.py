@@ -18,9 +18,18 @@ count, which numba's increments skip).
 
 from __future__ import annotations
 
-from numba import njit
+from numba import njit, types
 
-__all__ = ["kernel"]
+__all__ = ["kernel", "compile_once", "ROWS_2D", "ROWS_1D", "WORK_F", "WORK_I", "WORK_B"]
+
+#: a stack's rows as a kernel reads them (:class:`~prioik.hierarchy.StackData`'s
+#: C-contiguous float64 arrays), typed read-only: a writable array converts to it
+ROWS_2D = types.Array(types.float64, 2, "C", readonly=True)
+ROWS_1D = types.Array(types.float64, 1, "C", readonly=True)
+#: a prepared solver's flat workspaces (float64, int64, int8)
+WORK_F = types.Array(types.float64, 1, "C")
+WORK_I = types.Array(types.int64, 1, "C")
+WORK_B = types.Array(types.int8, 1, "C")
 
 
 def kernel(**options):
@@ -28,3 +37,21 @@ def kernel(**options):
     numba's reference-counting runtime (see the module docstring); ``options`` are
     ``njit``'s (e.g. ``fastmath``)."""
     return njit(cache=True, _nrt=False, **options)
+
+
+def compile_once(dispatcher, signature: tuple) -> None:
+    """Compile ``dispatcher`` for ``signature`` alone (loaded from numba's disk cache when
+    there) and stop it compiling any other: later calls convert their arguments to it.
+
+    A kernel that reads a stack's rows is called with a
+    :class:`~prioik.hierarchy.TaskStack`'s frozen (read-only) arrays and with a
+    writable :class:`~prioik.hierarchy.StackData`; left to itself numba compiles one
+    specialization for each (the active-set kernel: minutes each on a fresh cache), and
+    the two may round differently. With the rows typed read-only (:data:`ROWS_2D`,
+    :data:`ROWS_1D`) both calls run the same machine code; the conversion costs nothing
+    at the call. Idempotent; call it where the solver is prepared, not at import.
+    """
+    signature = tuple(signature)
+    if signature not in {tuple(s) for s in dispatcher.signatures}:
+        dispatcher.compile(signature)
+    dispatcher.disable_compile()
