@@ -1,7 +1,8 @@
 # prioik: `make test` and `make demo` build .venv from pyproject.toml themselves
 # (re-installing only when pyproject.toml changed) and then run.
 # .venv holds every extra (`pip install -e ".[all,test]"`); `make test` also builds
-# .venv-core, the core alone (`pip install -e .` and pytest), and runs tests/core there.
+# .venv-core, the core alone (`pip install -e .` and pytest), and runs tests/core there,
+# beside the full suite.
 
 PYTHON ?= python3
 VENV   := .venv
@@ -39,8 +40,16 @@ venv-core: $(CORE_STAMP)
 test-core: $(CORE_STAMP)
 	NUMBA_CACHE_DIR=$(CORE_VENV)/numba-cache $(CORE_PY) -m pytest -q -p no:cacheprovider tests/core
 
-test: $(STAMP) test-core
-	$(PY) -m pytest -q -p no:cacheprovider
+# The core's tests run beside the full suite (each compiles its numba kernels on a fresh
+# clone, single-threaded, into its own cache: side by side on two cores the wall time is
+# the full suite's); the core's output follows the suite's.
+test: $(STAMP) $(CORE_STAMP)
+	@NUMBA_CACHE_DIR=$(CORE_VENV)/numba-cache $(CORE_PY) -m pytest -q -p no:cacheprovider \
+		tests/core > $(CORE_VENV)/test-core.log 2>&1 & core=$$!; \
+	$(PY) -m pytest -q -p no:cacheprovider; full=$$?; \
+	wait $$core; status=$$?; \
+	echo "--- tests/core in $(CORE_VENV) (the core alone):"; cat $(CORE_VENV)/test-core.log; \
+	test $$full -eq 0 && test $$status -eq 0
 
 demo: $(STAMP)
 	$(VENV)/bin/prioik fencing --variant both --out $(OUT)

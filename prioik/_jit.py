@@ -11,7 +11,8 @@ the call of eight arrays alone 0.55 µs and 0.32 µs (interleaved timings of the
 rows; ``prioik bench`` times the solves that result).
 
 A kernel compiled this way cannot allocate an array (numba refuses to compile it:
-"NRT required but not enabled"); helpers that allocate stay ordinary ``njit``
+"NRT required but not enabled", or for an array it returns "Only accept returning of
+array passed into the function as argument"); helpers that allocate stay ordinary ``njit``
 functions that it calls (they keep their runtime; the views they receive carry no
 count, which numba's increments skip).
 """

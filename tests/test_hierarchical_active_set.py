@@ -219,6 +219,26 @@ def test_random_inequality_stacks_hypothesis(seed, n, k):
     assert_exact(stack, prioik.solve(stack, NAME))
 
 
+@pytest.mark.parametrize("seed", range(10))
+def test_frozen_and_writable_rows_give_the_same_answer_bit_for_bit(seed):
+    """A TaskStack's frozen arrays and a writable copy run the kernels' one compiled
+    signature (prioik._jit.compile_once), so their answers are the same bits."""
+    from prioik.formulations import _active_set_kernel
+    rng = np.random.default_rng(1000 + seed)
+    stack = random_inequality_stack(rng, int(rng.integers(3, 16)), int(rng.integers(2, 6)))
+    writable = stack.data.copy()
+    assert not stack.data.writeable and writable.writeable
+    for warm_start in (False, True):
+        frozen_solver = prioik.prepare(stack.layout, NAME, warm_start=warm_start)
+        writable_solver = prioik.prepare(stack.layout, NAME, warm_start=warm_start)
+        for _ in range(2):        # the second solve of a warm solver tries equality first
+            a, b = frozen_solver.solve(stack), writable_solver.solve(writable)
+            assert a.status == b.status and np.array_equal(a.x, b.x)
+            assert a.info["equality_first"] == b.info["equality_first"]
+    for f in (_active_set_kernel.solve_data, _active_set_kernel.equality_first_data):
+        assert len(f.signatures) == 1 and f.signatures[0][0].mutable is False
+
+
 def test_check_rejects_wrong_answers():
     """The KKT check used above is not vacuous: it fails a perturbed optimum and the
     optimum of the reordered stack."""
