@@ -749,11 +749,11 @@ def _load_rows(A, b, lower, upper, sw, row_eq, B, Bo, blo, bup, rnorm, eqr, ucol
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
-def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol, eB, eL,
-                    eV, evec, eint, x, ranks, margins, w2, res):
+def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol, eB, evec,
+                    eint, x, ranks, margins, w2, res):
     """The stack's equality rows alone (rows with ``lower = upper`` included), weighed
     into ``eB`` and solved by the extended Jacobian's nested QR
-    (:func:`solve_kernel_ws`) with this kernel's rank rule (``rcond`` times each level's
+    (its compiled :func:`solve_kernel`) with this kernel's rank rule (``rcond`` times each level's
     whole ``‖√W_i A_i‖_F``); ``True`` when that answer ``x*`` satisfies every other row
     (inside its interval, no tolerance), every rank decision is clear and ``x``'s
     precision resolves every box row, with ``x``, ``ranks[:k]``, ``margins[:k]`` and
@@ -768,20 +768,14 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
     """
     M, n = A.shape
     c = evec[:M]
-    norms = evec[M:2 * M]
-    rhs = evec[2 * M:3 * M]
-    o = 3 * M
-    beta = evec[o:o + n]
-    y = evec[o + n:o + 2 * n]
-    o += 2 * n
+    o = M
     scales = evec[o:o + k]
     mu2 = evec[o + k:o + 2 * k]
     emargins = evec[o + 2 * k:o + 3 * k]
     step_bound = evec[o + 3 * k:o + 4 * k]
     estarts = eint[:k + 1]
     eranks = eint[k + 1:2 * k + 1]
-    pos = eint[2 * k + 1:2 * k + 1 + n]
-    ucol = eint[2 * k + 1 + n:2 * k + 1 + n + M]      # -2: an equality row
+    ucol = eint[2 * k + 1:2 * k + 1 + M]      # -2: an equality row
     m = 0
     estarts[0] = 0
     for lev in range(k):
@@ -950,7 +944,7 @@ def workspace_offsets(M: int, n: int, k: int) -> dict[str, tuple[int, int]]:
     ``T``, ``Lw``, ``Bo``, ``flat`` (``R × n`` each), ``V``, ``Vf`` (``n × n``), ``fvec``
     (``16 × R``), ``x`` (``n``), ``w2`` and ``res = √w2`` (``k``), ``margins`` (``k + 1``:
     each level's and the tie-break's rank-decision margin), and the equality-first
-    solve's ``eB``, ``eL`` (``M × n``), ``eV`` (``n × n``), ``evec`` (``3 M + 2 n + 4 k``);
+    solve's ``eB`` (``M × n``) and ``evec`` (``M + 4 k``);
     the kernel writes
     ``‖x‖`` into ``params[5]``, into ``params[6]`` ``1`` when an iteration cap was
     hit, ``-1`` when ``x`` or a residual is not finite, into ``params[7]`` ``1`` when
@@ -963,7 +957,7 @@ def workspace_offsets(M: int, n: int, k: int) -> dict[str, tuple[int, int]]:
     cold) and ``params[11]`` ``1`` when the next warm solve should try it (the answer
     held no inequality row); int64: ``k``, ``starts`` (``k + 1``),
     ``ivec`` (``5 × R``), ``perm`` (``n``), ``counts`` (``4 × (k + 1)``), ``eint``
-    (``2 k + 1 + n + M``); int8: ``row_eq``
+    (``2 k + 1 + M``); int8: ``row_eq``
     (``M``), ``bvec`` (``2 × R``), ``eqr`` (``R``), ``warm_state`` (``(k + 1) × R``),
     ``warm_valid`` (``k + 1``).
     """
@@ -973,10 +967,9 @@ def workspace_offsets(M: int, n: int, k: int) -> dict[str, tuple[int, int]]:
                                 ("Lw", R * n), ("Bo", R * n), ("flat", R * n),
                                 ("V", n * n), ("Vf", n * n), ("fvec", N_FVEC * R),
                                 ("x", n), ("w2", k), ("res", k), ("margins", k + 1),
-                                ("eB", M * n), ("eL", M * n), ("eV", n * n),
-                                ("evec", 3 * M + 2 * n + 4 * k))),
+                                ("eB", M * n), ("evec", M + 4 * k))),
                         ("i", (("k", 1), ("starts", k + 1), ("ivec", 5 * R), ("perm", n),
-                               ("counts", 4 * (k + 1)), ("eint", 2 * k + 1 + n + M))),
+                               ("counts", 4 * (k + 1)), ("eint", 2 * k + 1 + M))),
                         ("b", (("row_eq", M), ("bvec", 2 * R), ("eqr", R),
                                ("warm_state", (k + 1) * R), ("warm_valid", k + 1)))):
         at = 0
@@ -1536,19 +1529,15 @@ def equality_first_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     x, w2, res, margins, o = _outputs(fwork, M, n, k)
     eB = fwork[o:o + M * n].reshape((M, n))
     o += M * n
-    eL = fwork[o:o + M * n].reshape((M, n))
-    o += M * n
-    eV = fwork[o:o + n * n].reshape((n, n))
-    o += n * n
-    evec = fwork[o:o + 3 * M + 2 * n + 4 * k]
+    evec = fwork[o:o + M + 4 * k]
     starts = iwork[1:k + 2]
     o = k + 2 + 5 * R + n                                   # after ivec and perm
     counts = iwork[o:o + 4 * (k + 1)].reshape((4, k + 1))
     o += 4 * (k + 1)
-    eint = iwork[o:o + 2 * k + 1 + n + M]
+    eint = iwork[o:o + 2 * k + 1 + M]
     primal_tol = fwork[1]
     if not _equality_first(A, b, lower, upper, sw, bwork[:M], starts, k, fwork[0],
-                           primal_tol, eB, eL, eV, evec, eint, x, counts[2], margins, w2,
+                           primal_tol, eB, evec, eint, x, counts[2], margins, w2,
                            res):
         fwork[10] = -1.0         # tried and refuted: solve_data then starts cold
         return NOT_TRIED
