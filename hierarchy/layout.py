@@ -225,12 +225,22 @@ class StackData:
         lower, upper: ``m`` bounds of inequality rows.
         sqrt_weight: ``m`` values ``√w`` (1 by default).
 
-    The arrays are written in place (``data.rows(name)`` gives views); a formulation
-    reads them without copying. :meth:`check` is the boundary check a prepared solver
+    The arrays are written in place (``data.rows(name)`` gives views), never replaced
+    (assigning one raises :class:`TaskStackError`); a formulation reads them without
+    copying. :meth:`check` is the boundary check a prepared solver
     runs when a value looks wrong.
     """
 
     __slots__ = ("layout", "A", "b", "lower", "upper", "sqrt_weight", "_source")
+
+    def __setattr__(self, name: str, value) -> None:
+        # the arrays are the ones the prepared solvers' compiled kernels read (typed
+        # C-contiguous float64 of the layout's shape): written in place, never replaced
+        # (a replaced array of another shape would be read past its end)
+        if name != "_source" and hasattr(self, name):
+            raise TaskStackError(f"StackData.{name} is written in place "
+                                 f"(data.{name}[...] = values), not replaced")
+        object.__setattr__(self, name, value)
 
     def __init__(self, layout: StackLayout) -> None:
         if not isinstance(layout, StackLayout):

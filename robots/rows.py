@@ -125,7 +125,7 @@ class TaskWriter:
     highest; ``None`` puts the task on a new level below every level so far; tasks of one
     level keep their declaration order). Gains: ``gain=K`` at velocity level,
     ``gain=(K_p, K_d)`` at acceleration level; ``weight`` is the task's weight within its
-    level (``data.sqrt_weight = √weight``). The first read of :attr:`layout` or
+    level (its rows of ``data.sqrt_weight`` hold ``√weight``). The first read of :attr:`layout` or
     :attr:`data` (or the first write) fixes the layout; no task can be added after.
 
     Per step: one writer call per task (named like the ``add_`` method without its

@@ -25,6 +25,19 @@ def test_layout_offsets_and_views_are_writable_slices():
     assert layout.task_slice("d") == slice(6, 10)
 
 
+@pytest.mark.parametrize("name", ["layout", "A", "b", "lower", "upper", "sqrt_weight"])
+def test_data_arrays_are_written_in_place_not_replaced(name):
+    """A prepared solver's compiled kernel reads the arrays as the layout's C-contiguous
+    float64 ones: replacing one (another shape, dtype or order) is refused by name."""
+    buf = StackLayout(5, LAYOUT).data()
+    before = getattr(buf, name)
+    with pytest.raises(TaskStackError, match=f"StackData.{name} is written in place"):
+        setattr(buf, name, np.asfortranarray(np.zeros((10, 5))))
+    assert getattr(buf, name) is before
+    buf.A[...] = 1.0                                   # in place: allowed
+    assert np.all(buf.copy().A == 1.0)
+
+
 def test_layouts_are_values_hashable_and_immutable():
     a, b = StackLayout(5, LAYOUT), StackLayout(5, [list(level) for level in LAYOUT])
     assert a == b and hash(a) == hash(b) and len({a, b}) == 1
