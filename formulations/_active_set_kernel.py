@@ -929,7 +929,14 @@ N_FVEC = 16
 @njit(cache=True, inline="always")
 def _outputs(fwork, M, n, k):
     """The float workspace's outputs (:func:`workspace_offsets`): ``x``, ``w2``, ``res``,
-    ``margins``, and the offset after them."""
+    ``margins``, and the offset after them.
+
+    Inlined, never called: it returns views, and it serves both :func:`solve_data`
+    (compiled without numba's runtime) and :func:`equality_first_data` (with it). As a
+    call, numba compiled it once, with the flags of the caller that came first: compiled
+    without the runtime, it returned views without a reference the other caller then
+    released (heap corruption, "malloc(): unaligned tcache chunk", on the second
+    equality-first answer)."""
     R = M + n
     o = N_PARAMS + 5 * R * n + 2 * n * n + N_FVEC * R      # after B … fvec
     return (fwork[o:o + n], fwork[o + n:o + n + k], fwork[o + n + k:o + n + 2 * k],
