@@ -12,9 +12,15 @@ rows; ``prioik bench`` times the solves that result).
 
 A kernel compiled this way cannot allocate an array (numba refuses to compile it:
 "NRT required but not enabled", or for an array it returns "Only accept returning of
-array passed into the function as argument"); helpers that allocate stay ordinary ``njit``
-functions that it calls (they keep their runtime; the views they receive carry no
-count, which numba's increments skip).
+array passed into the function as argument"). Nor can the ``njit`` helpers it calls:
+numba compiles a callee with its caller's flags (an allocating helper reached from such
+a kernel was refused the same way). A helper shared by a kernel without the runtime and
+a function with it is compiled once, with the flags of whichever caller came first, so
+one that returns arrays must be inlined (``inline="always"``): compiled without the
+runtime, the views it returned were released once too often by the other caller (heap
+corruption; ``formulations/_active_set_kernel.py``'s ``_outputs``). Helpers that return
+scalars may be calls (the views they receive carry no count, which numba's increments
+skip).
 """
 
 from __future__ import annotations
