@@ -37,15 +37,16 @@ venv-core: $(CORE_STAMP)
 # Its own numba cache: the two environments resolve different numpy versions, and with
 # one shared cache (formulations/__pycache__) BufferSolver and solve differed in the last
 # bits in .venv on a fresh clone (test_buffer_solver_equals_solve_bit_for_bit).
+CORE_TEST := NUMBA_CACHE_DIR=$(CORE_VENV)/numba-cache $(CORE_PY) -m pytest -q -p no:cacheprovider tests/core
+
 test-core: $(CORE_STAMP)
-	NUMBA_CACHE_DIR=$(CORE_VENV)/numba-cache $(CORE_PY) -m pytest -q -p no:cacheprovider tests/core
+	$(CORE_TEST)
 
 # The core's tests run beside the full suite (each compiles its numba kernels on a fresh
 # clone, single-threaded, into its own cache: side by side on two cores the wall time is
 # the full suite's); the core's output follows the suite's.
 test: $(STAMP) $(CORE_STAMP)
-	@NUMBA_CACHE_DIR=$(CORE_VENV)/numba-cache $(CORE_PY) -m pytest -q -p no:cacheprovider \
-		tests/core > $(CORE_VENV)/test-core.log 2>&1 & core=$$!; \
+	@$(CORE_TEST) > $(CORE_VENV)/test-core.log 2>&1 & core=$$!; \
 	$(PY) -m pytest -q -p no:cacheprovider; full=$$?; \
 	wait $$core; status=$$?; \
 	echo "--- tests/core in $(CORE_VENV) (the core alone):"; cat $(CORE_VENV)/test-core.log; \

@@ -646,6 +646,22 @@ def _size(Bo, ucol, j, rnorm_j, ynorm, x):
     return rnorm_j * ynorm
 
 
+@njit(cache=True, inline="always")
+def _box_row_unresolved(a, xc, ax, lo, up, xn, primal_tol):
+    """Whether ``x``'s precision cannot resolve a box row ``a x_c`` (weighted, ``ax``
+    its value, ``[lo, up]`` its weighted interval): a finite bound within that
+    precision (``X_PRECISION ‖x‖ |a|``) plus the row's tolerance (:func:`_tol` at
+    :func:`_size`'s ``|a| (|x_c| + 1)``) while the precision is the coarser."""
+    precision = X_PRECISION * xn * abs(a)
+    size = abs(a) * (abs(xc) + 1.0)
+    for bound in (lo, up):
+        if np.isfinite(bound):
+            tol = _tol(primal_tol, size, bound)
+            if precision > tol and abs(ax - bound) <= precision + tol:
+                return True
+    return False
+
+
 @njit(cache=True, fastmath=_FAST, inline="always")
 def _gather(state, hard_end, s0, s1, blo, bup, rows, tgt, B, nrot, nf, Vf, betaf, posf):
     """Working rows: hard ones (``j < hard_end``, state ±1) first, then the level's;
@@ -837,14 +853,9 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
             return False
         if uc >= 0:        # as the active set's box-row pass: x's precision decides
             s = sw[j]
-            a = s * A[j, uc]
-            precision = X_PRECISION * xn * abs(a)
-            size = abs(a) * (abs(x[uc]) + 1.0)
-            for bound in (s * lo, s * up):
-                if np.isfinite(bound):
-                    tol = _tol(primal_tol, size, bound)
-                    if precision > tol and abs(s * r - bound) <= precision + tol:
-                        return False
+            if _box_row_unresolved(s * A[j, uc], x[uc], s * r, s * lo, s * up, xn,
+                                   primal_tol):
+                return False
     for lev in range(k):
         acc = 0.0
         for j in range(starts[lev], starts[lev + 1]):
@@ -1494,13 +1505,8 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
             bound = bup[j] if state[j] == 1 else blo[j]
             if abs(a * x[c] - bound) <= precision:
                 x[c] = bound / a
-        ax = a * x[c]
-        for bound in (blo[j], bup[j]):
-            if np.isfinite(bound):
-                tol = _tol(primal_tol, _size(Bo, ucol, j, rnorm[j], xn, x), bound)
-                if precision > tol and abs(ax - bound) <= precision + tol:
-                    unresolved += 1
-                    break
+        if _box_row_unresolved(a, x[c], a * x[c], blo[j], bup[j], xn, primal_tol):
+            unresolved += 1
     fwork[11] = 1.0 if _inequalities_inactive(state, eqr, M) else 0.0
     return _finish(A, b, lower, upper, sw, row_eq, starts, k, primal_tol, x, w2, res,
                    counts, flags, margins, fwork, unresolved)
