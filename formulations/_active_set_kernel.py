@@ -60,6 +60,8 @@ _RELEASE = 1e-3
 #: values of ``flags``
 FLAG_OK = 0
 FLAG_ITERATION_CAP = 1
+#: the level's last step decided its ranks clearly, an earlier step of it did not
+FLAG_AMBIGUOUS_PATH = 2
 
 #: what :func:`solve_data` returns
 NOT_SOLVED = 0
@@ -917,12 +919,12 @@ def _summary(k, primal_tol, x, res, total, counts, flags, margins, fwork, unreso
     fwork[7] = 1.0 if large else 0.0
     capped = 0.0
     for lev in range(k + 1):
-        if flags[lev] != FLAG_OK:
+        if flags[lev] == FLAG_ITERATION_CAP:
             capped = 1.0
     fwork[6] = capped if (np.isfinite(xn) and np.isfinite(total)) else -1.0
     ambiguous = 0
     for lev in range(k + 1):
-        if margins[lev] <= _AMBIGUITY:
+        if margins[lev] <= _AMBIGUITY or flags[lev] == FLAG_AMBIGUOUS_PATH:
             ambiguous += 1
     fwork[8] = ambiguous
     fwork[9] = unresolved
@@ -968,7 +970,8 @@ def workspace_offsets(M: int, n: int, k: int) -> dict[str, tuple[int, int]]:
     hit, ``-1`` when ``x`` or a residual is not finite, into ``params[7]`` ``1`` when
     ``‖x‖`` exceeds :data:`~prioik.hierarchy.linalg.PRECISION_LIMIT_NORM` (the caller
     then asks :func:`~prioik.hierarchy.precision_limited_levels`), into ``params[8]`` the
-    number of levels (the tie-break included) whose ``margins`` are ambiguous, into
+    number of levels (the tie-break included) whose ``margins`` are ambiguous or whose
+    path was (:data:`FLAG_AMBIGUOUS_PATH`), into
     ``params[9]`` the number of box rows near a bound that ``x``'s precision (``eps ‖x‖``)
     cannot resolve, into ``params[10]`` ``1`` when the answer is the equality-first
     solve's (``-1`` when that try was refuted: the next :func:`solve_data` call starts
@@ -1024,7 +1027,9 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
             of its fixing, the tie-break last; ``≤ hierarchy.AMBIGUITY``: ambiguous).
         iwork: int64: ``k``, the ``k + 1`` level offsets, workspaces, outputs
             ``counts`` (``4 × (k + 1)``, the last column the minimum-norm level:
-            iterations, :data:`FLAG_ITERATION_CAP` when the cap was hit, rank fixed,
+            iterations, :data:`FLAG_ITERATION_CAP` when the cap was hit or
+            :data:`FLAG_AMBIGUOUS_PATH` when a step before the last made an ambiguous
+            rank decision, rank fixed,
             ``1`` where the level's violation exceeds ``primal_tol max(1, ‖x‖)``).
         bwork: int8: the rows' equality flags, workspaces, ``warm_state`` and
             ``warm_valid`` (``(k + 1) × (M + n)`` working sets at each level's end, read
@@ -1172,6 +1177,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
         rs = 0
         full = False
         step_margin = np.inf
+        path_margin = np.inf    # the least margin of the steps the level took
         gn_step = -1.0
         if use_warm and warm_valid[lev]:
             for j in range(s1):
@@ -1215,6 +1221,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
             if feasible:
                 # the point is the step's end for this working set: go straight to the
                 # optimality test unless rows had to leave or join it
+                path_margin = step_margin
                 have_step = hr == nh
                 for j in range(s0, s1):
                     if state[j] == 0:
@@ -1249,6 +1256,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                     B, y, col, rows, nh, nw, fvec, rcond, soft_tol, T, V, beta, vpos, Lw, p,
                     False, flat, perm, nrot, nf, Vf, betaf, posf, Bo, xc, ucol,
                     iters[lev] == 1)
+                path_margin = min(path_margin, step_margin)
                 for i in range(hr, nh):
                     state[rows[i]] = 0          # dependent on the kept hard rows
                 pn = np.sqrt(_dot(p[:d], p[:d]))
@@ -1359,8 +1367,15 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                 break
             state[drop] = 0
         # ---- level done: remember its working set, fix its non-zero slacks. The margin:
-        # the last step's rank decisions (they made the level's point) and the fixing's
+        # the last step's rank decisions (they made the level's point) and the fixing's.
+        # An earlier step's ambiguous decision may have led the level to a working set
+        # whose clear last step is not its optimum (a pair of rows 2e-9 from parallel:
+        # taken as independent, a huge step; an answer 2.8x worse than the optimum):
+        # flagged, the caller certifies the answer
         margins[lev] = step_margin
+        if (path_margin <= _AMBIGUITY and step_margin > _AMBIGUITY
+                and flags[lev] == FLAG_OK):
+            flags[lev] = FLAG_AMBIGUOUS_PATH
         for j in range(s1):
             st = state[j]
             warm_state[lev, j] = st if (st == -1 or st == 1) else 0

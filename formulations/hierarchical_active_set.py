@@ -79,7 +79,11 @@ and with it ``x`` by ``O(1)``) and the status is ``approximate``,
 ``info["ambiguous_levels"]`` and ``info["reason"]`` naming the levels (level ``k``:
 the minimum-norm tie-break); on equality stacks these are the extended Jacobian's
 decisions and statuses. Pivots are re-measured exactly before a rank decision stops
-(downdated norms lose the largest remaining row to cancellation).
+(downdated norms lose the largest remaining row to cancellation). When only an earlier
+step of a level decided ambiguously (its last step clear), the working set it led to
+may not be the optimum: the answer is then checked by
+:func:`~prioik.hierarchy.check_lexicographic` and is ``optimal`` only if it passes
+(``info["path_certified"]``, ``info["ambiguous_path_levels"]``).
 
 *Warm start.* :class:`Prepared` keeps each level's working set at its optimum; the
 next solve first tries, per level, the step of last time's working set: when the
@@ -320,16 +324,20 @@ class Prepared:
                                 f"working set did not settle (degenerate or cycling); the "
                                 f"levels above are optimal and x keeps their optimum, but it "
                                 f"is not certified optimal from that level down")
-        if ambiguous:
+        levels = np.flatnonzero(self._margins <= AMBIGUITY).tolist() if ambiguous else []
+        if levels:
             # a pivot within AMBIGUITY of its threshold: rounding may flip the decision
             # and with it x by O(1) (the shared rule of hierarchy.linalg)
-            levels = np.flatnonzero(self._margins <= AMBIGUITY).tolist()
             if levels[0] < k:
                 reasons.append(ambiguity_reason([i for i in levels if i < k]))
             if levels[-1] == k:
                 reasons.append(f"rank decision ambiguous at the minimum-norm tie-break (a "
                                f"pivot within {AMBIGUITY:g}x of its threshold)")
             info["ambiguous_levels"] = levels
+        path = (np.flatnonzero(self._counts[1] == _kernel.FLAG_AMBIGUOUS_PATH).tolist()
+                if ambiguous else [])
+        if path and not levels and flag == 0.0:
+            reasons.extend(self._certify_path(data, x, path, info))
         if unresolved:
             reasons.append(f"‖x‖ = {xn:.3g}: x's coordinates are known to about "
                            f"{X_PRECISION * xn:.2g}, coarser than the primal tolerance of "
@@ -341,6 +349,31 @@ class Prepared:
         if large:
             status = precision_status(status, info, data, x)
         return Outcome(x, status, info, residuals=residuals, checked=True)
+
+    def _certify_path(self, data: StackData, x: np.ndarray, path: list[int],
+                      info: dict) -> list[str]:
+        """The reasons against ``x`` when levels ``path`` took an ambiguous rank
+        decision before their clear last step (``FLAG_AMBIGUOUS_PATH``): the working set
+        such a step led to may not be the level's optimum, so the answer is checked by
+        :func:`~prioik.hierarchy.check_lexicographic` (at its default tolerance, the
+        minimum-norm tie-break too when it is among ``path``); ``[]`` when it passes."""
+        from prioik.hierarchy.analysis import check_lexicographic
+        k = self._k
+        report = check_lexicographic(data.as_stack(), x, minimum_norm=k in path)
+        info["ambiguous_path_levels"] = path
+        info["path_certified"] = report.ok
+        if report.ok:
+            return []
+        bad = report.first_failure
+        where = (f"level {bad.level} ({', '.join(bad.tasks)})" if bad.level < k
+                 else "the minimum-norm tie-break")
+        info["ambiguous_levels"] = path
+        named = ", ".join(f"level {i}" if i < k else "the tie-break" for i in path)
+        return [f"{named} passed through an ambiguous rank decision (a pivot within "
+                f"{AMBIGUITY:g}x of its threshold) before settling, and the certificate "
+                f"rejects {where} (KKT residual {bad.relative:.2g} relative, tolerance "
+                f"{report.tol:g})"]
+
 
 # ------------------------------------------------------------------------ reports
 #: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
