@@ -407,7 +407,11 @@ def _check_lexicographic(stack: TaskStack, x: np.ndarray, tol: float, rcond: flo
             else:
                 V, sig = np.eye(d), np.zeros(d)
             bn = float(np.linalg.norm(B))
-            null = sig <= rcond * bn
+            # the solvers' rank rule: rcond times the whole level's ‖√W A_i‖_F (its held
+            # and inactive rows too), not the active rows' alone: a level whose violated
+            # rows are 1e-13 of its satisfied ones cannot move them (fuzz 5-32: rows of
+            # 5e-17 beside rows of 7e-4, read as movable, failed the exact answer x = 0)
+            null = sig <= rcond * max(bn, floor_scale)
             D = 1.0 / np.maximum(sig, floor)
             # the gradient lies in the row space of B: its part along directions that B Z
             # cannot move by the rank rule is round-off (amplified by 1/floor it would

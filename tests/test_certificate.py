@@ -239,3 +239,49 @@ def test_levels_left_without_usable_directions_pass_on_round_off():
     stack = FAMILIES["conflicting"](np.random.default_rng(2), 2, 7)
     for name in ("reference", "extended_jacobian"):
         assert check_lexicographic(stack, formulations.solve(stack, name).x, tol=1e-8).ok
+
+
+def _fuzz_stack(seed, case):
+    from prioik.hierarchy.fuzz import inequality_case
+    return inequality_case(np.random.default_rng([seed, case]), case).stack
+
+
+def test_a_level_cannot_move_rows_below_its_rank_rule():
+    """Fuzz inequality seed 5 case 32: level 0 is zero rows (a constant violation);
+    level 1 holds two inequality rows of norm ~7e-4, satisfied at x = 0, and ten
+    equality rows of norm ~5e-17 that miss their targets. By the solvers' rank rule
+    (rcond times the whole level's ‖√W A_i‖_F) the tiny rows cannot move, and x = 0 is
+    the answer; the certificate had measured them against their own norm, read them as
+    movable and rejected x = 0 at 0.78. Pushing an inequality row past its bound by
+    1e-3 is still rejected."""
+    stack = _fuzz_stack(5, 32)
+    sol = formulations.solve(stack, "hierarchical_active_set")
+    assert np.linalg.norm(sol.x) == 0.0 and sol.status == "optimal"
+    report = check_lexicographic(stack, sol.x, minimum_norm=True)
+    assert report.ok and report.levels[1].projected_gradient == 0.0
+    level1 = stack.levels[1]
+    task = next(t for t in level1 if not t.is_equality)
+    _, upper = task.bounds()
+    row = int(np.argmax(np.linalg.norm(task.A, axis=1)))
+    a = task.A[row]
+    bad = sol.x + a * (upper[row] + 1e-3) / float(a @ a)
+    worse = check_lexicographic(stack, bad)
+    assert not worse.ok and worse.fault_level == 1
+
+
+def test_rows_just_beyond_a_bound_may_be_read_as_fixed():
+    """Fuzz inequality seed 1 case 448: rows of level 0 end 1e-10..1e-8 (of their size)
+    beyond their bounds. Read as held, level 1 may move them inward and fails; read as
+    fixed — what the solver did, the level's optimum leaving them violated — every
+    level passes. The certificate tries the second reading when the first fails and
+    counts the rows it read so; a perturbation of 1e-6 is still rejected."""
+    stack = _fuzz_stack(1, 448)
+    sol = formulations.solve(stack, "hierarchical_active_set")
+    report = check_lexicographic(stack, sol.x, minimum_norm=True)
+    assert report.ok and report.band_rows_fixed == 6
+    assert "6 row(s) just beyond a bound read as fixed" in str(report)
+    rng = np.random.default_rng(0)
+    d = rng.standard_normal(stack.n)
+    bad = sol.x + 1e-6 * max(1.0, float(np.linalg.norm(sol.x))) * d / np.linalg.norm(d)
+    worse = check_lexicographic(stack, bad)
+    assert not worse.ok and worse.band_rows_fixed == 0
