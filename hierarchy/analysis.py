@@ -321,7 +321,9 @@ def check_lexicographic(stack: TaskStack, x: np.ndarray, tol: float = DEFAULT_CE
     space — through the pseudo-inverse of ``B = √W A_act Z_i`` (the level's equality and
     violated rows, any row with a non-zero violation; singular values below
     ``CERTIFICATE_SIGMA_FLOOR · ‖√W A_act‖_F`` raised to it; directions ``B Z`` cannot
-    move by the rank rule, where the multipliers must cancel alone, read at ``1/‖B‖``)
+    move by the rank rule — singular values ``≤ rcond`` times the whole level's
+    ``‖√W A_i‖_F``, its satisfied rows included, as the solvers decide — where the
+    multipliers must cancel alone, read at ``1/‖B‖``)
     — so that it reads as the change of ``A_i x`` it stands for, however badly
     conditioned the level is; on equality stacks it is the algorithmic error
     ``‖U_fᵀ (A_i x − b_i)‖`` (eq. 29). The sign-constrained multipliers minimise it
