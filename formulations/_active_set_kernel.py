@@ -480,7 +480,8 @@ def _step(B, y, col, rows, nh, nw, fvec, rcond, soft_tol, T, V, beta, vpos, Lw, 
     and ``gn`` is :func:`_hard_multipliers`' ``‖g‖``, ``-1``: they are not). The rows of
     ``fvec`` it uses are taken here (a call of more than 30 arguments compiles to
     ``f(*args)``, which numba does not inline). ``held_rows_step``: the unit-row step may
-    take held hard rows (a level's first step only: mixed with the general path's steps
+    take held hard rows (a level's first step only — after a refuted warm step, which is
+    undone, the cold start's first: mixed with the general path's steps
     inside one level's iterations, its different rounding made ratio tests tie the other
     way at degenerate points and cycle — a Panda reach and a G1 stack, 500 iterations)."""
     rnorm = fvec[2]
@@ -1171,6 +1172,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                                           _tol(primal_tol, sz, bup[j]))
         # ---- warm start: jump to the step of last time's working set if it is feasible
         have_step = False
+        refuted = False         # a warm step tried and undone: the level starts cold
         nh = 0
         nw = 0
         hr = 0
@@ -1233,6 +1235,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                         if state[j] != 0:
                             have_step = False
             else:
+                refuted = True
                 for c in range(d):
                     y[col + c] = g[c]
                 for c in range(n):
@@ -1255,7 +1258,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                 hr, rs, nref, full, step_margin, gn_step = _step(
                     B, y, col, rows, nh, nw, fvec, rcond, soft_tol, T, V, beta, vpos, Lw, p,
                     False, flat, perm, nrot, nf, Vf, betaf, posf, Bo, xc, ucol,
-                    iters[lev] == 1)
+                    iters[lev] == 1 or (refuted and iters[lev] == 2))
                 path_margin = min(path_margin, step_margin)
                 for i in range(hr, nh):
                     state[rows[i]] = 0          # dependent on the kept hard rows

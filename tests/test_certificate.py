@@ -285,3 +285,25 @@ def test_rows_just_beyond_a_bound_may_be_read_as_fixed():
     bad = sol.x + 1e-6 * max(1.0, float(np.linalg.norm(sol.x))) * d / np.linalg.norm(d)
     worse = check_lexicographic(stack, bad)
     assert not worse.ok and worse.band_rows_fixed == 0
+
+
+@pytest.mark.parametrize("index", [27, 44])
+def test_rows_beyond_a_feasible_levels_bounds_are_not_read_as_fixed(index):
+    """Validation stacks (random_inequality 27, 44): daqp_hierarchical leaves box rows of
+    the feasible level 0 1e-10 beyond their bounds (its slack) and is worse than the
+    active set at a lower level (by 77 and 0.13). Read as fixed, those rows pinned the
+    lower levels and the answer passed; only a level violated beyond the tolerance may
+    hold a row at a small optimal violation, so it is rejected, and daqp_hierarchical
+    does not say 'optimal'."""
+    from prioik.benchmarks.validation import draw
+    stack = draw("random_inequality", index, (3, 20), (2, 6))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sol = formulations.solve(stack, "daqp_hierarchical")
+    best = formulations.solve(stack, "hierarchical_active_set")
+    worse = lexicographic_residuals(stack, sol.x) ** 2 - lexicographic_residuals(stack, best.x) ** 2
+    assert worse.max() > 0.1
+    report = check_lexicographic(stack, sol.x, minimum_norm=True)
+    assert not report.ok and report.band_rows_fixed == 0
+    assert sol.status != "optimal"
+    assert check_lexicographic(stack, best.x, minimum_norm=True).ok
