@@ -307,3 +307,29 @@ def test_rows_beyond_a_feasible_levels_bounds_are_not_read_as_fixed(index):
     assert not report.ok and report.band_rows_fixed == 0
     assert sol.status != "optimal"
     assert check_lexicographic(stack, best.x, minimum_norm=True).ok
+
+
+@pytest.mark.parametrize("index", [167, 472])
+def test_a_level_left_violated_by_a_solvers_slack_is_not_read_as_its_optimum(index):
+    """Validation stacks (random_inequality 167, 472): cascaded_qp[highs] leaves level 1
+    violated by 2.5e-7..7e-7 (about 1e-8 of its scale) where its optimum is feasible
+    (hierarchical_active_set: 0), and level 2 worse by 0.71 and 0.64. The level's KKT
+    residual is within the tolerance; fixed at those violations, the rows pinned level 2
+    and the answer passed. The certificate now asks (an LP) whether a point meets those
+    rows while keeping everything else: it does, so the level's optimum is zero; on 167
+    the violation exceeds the tolerance (level 1 fails), on 472 it is within it and the
+    rows are read as held (level 2 fails). The active set's answer passes."""
+    pytest.importorskip("highspy")
+    from prioik.benchmarks.validation import draw
+    stack = draw("random_inequality", index, (3, 20), (2, 6))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        raw = formulations.solve(stack, "cascaded_qp", solver="highs", certify=False)
+        sol = formulations.solve(stack, "cascaded_qp", solver="highs")
+    best = formulations.solve(stack, "hierarchical_active_set")
+    gap = lexicographic_residuals(stack, raw.x) ** 2 - lexicographic_residuals(stack, best.x) ** 2
+    assert 0 < gap[1] < 1e-12 and gap[2] > 0.5
+    report = check_lexicographic(stack, raw.x, minimum_norm=True)
+    assert not report.ok and report.fault_level == {167: 1, 472: 2}[index]
+    assert sol.status != "optimal"
+    assert check_lexicographic(stack, best.x, minimum_norm=True).ok and best.status == "optimal"
