@@ -388,8 +388,8 @@ def _feasible(above: list, rows: "_LevelRows", small: np.ndarray, x: np.ndarray)
     """Whether some point keeps the rows read above (fixed at their values, the others
     inside their intervals), meets the level's ``small`` rows and keeps its other rows
     at their values at ``x`` (violated) or inside their intervals (an LP, HiGHS,
-    tolerance 1e-10 on unit rows): then the level's optimum does not violate the
-    ``small`` rows."""
+    tolerance 1e-10 on unit rows): then the level's value can drop by what the
+    ``small`` rows add (and is zero when they are all of its violation)."""
     from scipy.optimize import linprog
     a = rows.A @ x
     inside = (a >= rows.lower) & (a <= rows.upper)
@@ -526,7 +526,7 @@ def _check_lexicographic(stack: TaskStack, x: np.ndarray, tol: float, rcond: flo
         ok = bool(np.isfinite(res) and res <= tol * max(scale, 1e-300))
         violation = float(np.linalg.norm(sw * v))
         slack = None
-        if finite and ok and len(stack) > 1:
+        if finite and ok:
             # rows left violated by little (beyond rounding, within _NEARLY_FEASIBLE of
             # their size) may be a solver's slack on rows the level's optimum satisfies.
             # If a point keeps the rows above and the level's other violations and meets
