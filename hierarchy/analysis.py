@@ -540,11 +540,16 @@ def _check_lexicographic(stack: TaskStack, x: np.ndarray, tol: float, rcond: flo
             norms = np.linalg.norm(rows.A, axis=1)
             size = np.abs(rows.A) @ ax + norms
             small = (np.abs(v) > _BAND_FLOOR * size) & (np.abs(v) <= _NEARLY_FEASIBLE * size)
-            if small.any() and _feasible(above, rows, small, x):
-                extra = float(np.linalg.norm(sw[small] * v[small]))
+            extra = float(np.linalg.norm(sw[small] * v[small]))
+            alone = not ((np.abs(v) > _BAND_FLOOR * size) & ~small & (norms > 0)).any()
+            # the LP only where its answer changes the check: the level's value could fail,
+            # or rows beyond the activity tolerance would be fixed (equality rows stay
+            # fixed; rows inside it are read as held already)
+            reread = alone and (small & (side == 2) & (rows.lower != rows.upper)).any()
+            if (extra > tol * scale or reread) and _feasible(above, rows, small, x):
                 if extra > tol * scale:
                     res, ok = extra, False
-                if not ((np.abs(v) > _BAND_FLOOR * size) & ~small & (norms > 0)).any():
+                if alone:
                     slack = small & (rows.lower != rows.upper)   # equality rows stay fixed
                     side = side.copy()
                     side[slack] = np.where(v[slack] > 0, 1, -1)
