@@ -21,7 +21,8 @@ prints one table per variant and writes into ``--out``:
   same stacks along its own trajectory;
 * in ``run_info.json`` (``headline_timing``), when both runs are selected: the median
   step of ``extended_jacobian`` and of PlaCo's ``KinematicsSolver`` side by side
-  (:func:`headline_timing`: the two simulated in alternation, the fastest round of each);
+  (:func:`headline_timing`: the two simulated in alternation, the fastest round of each),
+  also marked on ``step_time.png``;
 
 and, with ``--doc PATH``, regenerates the reproduction page (``docs/reproduction.md``,
 :mod:`benchmarks.reproduction`) with the measured numbers, copying the plots it shows
@@ -315,6 +316,9 @@ def run_command(args: argparse.Namespace) -> int:
             print(f"side by side [{variant}] ({h['rounds']} alternating rounds, the fastest "
                   f"of each): {HEADLINE[0]} {1e3 * b[HEADLINE[0]]:.3f} ms, {HEADLINE[1]} "
                   f"{1e3 * b[HEADLINE[1]]:.3f} ms, ratio {h['ratio']:.2f}")
+        # the chart again, with the side-by-side medians marked on it
+        from .plots import step_time_figure
+        step_time_figure(args.out, runs.summary, "fencing", meta["headline_timing"])
     meta["unifying_diagnostic"] = (unifying_diagnostic(args.dt)
                                    if any(r["formulation"] == "unifying"
                                           for r in meta["runs"].values()) else None)

@@ -135,9 +135,13 @@ def grouped_series(path: Path, results: dict, get, ylabel: str, title: str) -> P
     return path
 
 
-def step_times(path: Path, summary: dict, title: str) -> Path:
+def step_times(path: Path, summary: dict, title: str,
+               side_by_side: dict[str, dict] | None = None) -> Path:
     """Median step time per run (horizontal bars, one colour per run, one panel per
-    variant; failed runs hatched)."""
+    variant; failed runs hatched). ``side_by_side``: per variant, a
+    :func:`~prioik.benchmarks.fencing.headline_timing` record, whose runs get a black
+    diamond at their fastest round's median (the table's runs are minutes apart on a
+    machine whose speed drifts; these were timed in alternation)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -156,6 +160,14 @@ def step_times(path: Path, summary: dict, title: str) -> Path:
                 continue
             ax.barh(i, 1e3 * s["median_step_time_s"], color=color_of(lb),
                     hatch="//" if s.get("failed") else None, edgecolor="k", lw=0.3)
+        h = (side_by_side or {}).get(variant)
+        if h:
+            best = h["best_median_step_s"]
+            rows = [(labels.index(lb), t) for lb, t in best.items() if lb in labels]
+            ax.plot([1e3 * t for _, t in rows], [i for i, _ in rows], "kD", ms=5,
+                    label=f"side by side ({h['rounds']} alternating rounds, the fastest; "
+                          f"ratio {h['ratio']:.2f})")
+            ax.legend(fontsize=7, loc="lower right")
         ax.set_xscale("log")
         ax.set_title(variant, fontsize=9)
         ax.set_xlabel("median step (ms, log)")
@@ -182,11 +194,13 @@ def scenario_figures(out: Path, variant: str, results: dict, scenario: str = "fe
             for key, ylabel, get in series]
 
 
-def step_time_figure(out: Path, summary: dict, scenario: str = "fencing") -> Path:
-    """Median step time per run and variant (``step_time.png``)."""
+def step_time_figure(out: Path, summary: dict, scenario: str = "fencing",
+                     side_by_side: dict[str, dict] | None = None) -> Path:
+    """Median step time per run and variant (``step_time.png``; ``side_by_side`` as
+    :func:`step_times`)."""
     return step_times(Path(out) / "step_time.png", summary,
                       f"{scenario}: compute time per control step (kinematics + solve + "
-                      "torque)")
+                      "torque)", side_by_side)
 
 
 def time_vs_size(rows: list, out: Path) -> list[str]:
