@@ -116,7 +116,7 @@ import math
 import numpy as np
 
 from prioik.hierarchy import (AMBIGUITY, X_PRECISION, StackData, StackLayout, TaskStack,
-                              TaskStackError, ambiguity_reason)
+                              TaskStackError, ambiguity_reason, check_lexicographic)
 
 from .base import Capabilities, FormulationError, Outcome, ReportVariant, precision_status
 from .options import Option, rcond_option, validate_options
@@ -357,7 +357,6 @@ class Prepared:
         such a step led to may not be the level's optimum, so the answer is checked by
         :func:`~prioik.hierarchy.check_lexicographic` (at its default tolerance, the
         minimum-norm tie-break too when it is among ``path``); ``[]`` when it passes."""
-        from prioik.hierarchy.analysis import check_lexicographic
         k = self._k
         report = check_lexicographic(data.as_stack(), x, minimum_norm=k in path)
         info["ambiguous_path_levels"] = path

@@ -385,18 +385,19 @@ _NEARLY_FEASIBLE = 1e-6
 
 
 def _feasible(above: list, rows: "_LevelRows", small: np.ndarray, x: np.ndarray) -> bool:
-    """Whether some point keeps the rows read above (fixed at their values, the others
+    """Whether some point keeps the rows read above (``above``: each higher level's rows
+    and the mask of those read as fixed; fixed rows at their values at ``x``, the others
     inside their intervals), meets the level's ``small`` rows and keeps its other rows
     at their values at ``x`` (violated) or inside their intervals (an LP, HiGHS,
     tolerance 1e-10 on unit rows): then the level's value can drop by what the
     ``small`` rows add (and is zero when they are all of its violation)."""
     from scipy.optimize import linprog
-    a = rows.A @ x
-    inside = (a >= rows.lower) & (a <= rows.upper)
-    keep = ~small & ~inside
-    lo = np.where(keep, a, rows.lower)
-    up = np.where(keep, a, rows.upper)
-    parts = above + [(rows.A, lo, up)]
+    parts = []
+    for higher, fix in above + [(rows, None)]:
+        a = higher.A @ x
+        if fix is None:             # the level: violated rows kept unless small
+            fix = ~small & ~((a >= rows.lower) & (a <= rows.upper))
+        parts.append((higher.A, np.where(fix, a, higher.lower), np.where(fix, a, higher.upper)))
     A = np.vstack([p[0] for p in parts])
     lo = np.concatenate([p[1] for p in parts])
     up = np.concatenate([p[2] for p in parts])
@@ -434,7 +435,7 @@ def _check_lexicographic(stack: TaskStack, x: np.ndarray, tol: float, rcond: flo
     Z = np.eye(n)                      # null space of the fixed rows of the levels above
     signed: list[np.ndarray] = []      # unit rows at one bound, oriented: multiplier ≥ 0
     fixed_count = 0
-    above: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []   # (A, lower, upper) read above
+    above: list[tuple[_LevelRows, np.ndarray]] = []   # higher levels' rows, fixed masks
     checks = []
     finite = bool(np.isfinite(x).all())
 
@@ -490,9 +491,7 @@ def _check_lexicographic(stack: TaskStack, x: np.ndarray, tol: float, rcond: flo
     def add_level(rows: _LevelRows, side: np.ndarray) -> None:
         nonlocal Z, fixed_count
         fix = side == 2
-        kept = rows.A[fix] @ x
-        above.append((rows.A[fix], kept, kept))
-        above.append((rows.A[~fix], rows.lower[~fix], rows.upper[~fix]))
+        above.append((rows, fix))
         if fix.any():
             F = rows.sqrt_weight[fix, None] * rows.A[fix]
             tol_r = rcond * float(np.linalg.norm(F))
@@ -526,6 +525,9 @@ def _check_lexicographic(stack: TaskStack, x: np.ndarray, tol: float, rcond: flo
         ok = bool(np.isfinite(res) and res <= tol * max(scale, 1e-300))
         violation = float(np.linalg.norm(sw * v))
         slack = None
+        if finite:
+            norms = np.linalg.norm(rows.A, axis=1)
+            size = np.abs(rows.A) @ ax + norms      # the activity rule's row sizes
         if finite and ok:
             # rows left violated by little (beyond rounding, within _NEARLY_FEASIBLE of
             # their size) may be a solver's slack on rows the level's optimum satisfies.
@@ -537,8 +539,6 @@ def _check_lexicographic(stack: TaskStack, x: np.ndarray, tol: float, rcond: flo
             # them inward: held, not fixed. Read as fixed they had pinned the lower levels
             # far from their optimum (cascaded_qp[highs]: level 1 left 3e-8 violated,
             # level 2 worse by 0.7, passed on the KKT test alone)
-            norms = np.linalg.norm(rows.A, axis=1)
-            size = np.abs(rows.A) @ ax + norms
             small = (np.abs(v) > _BAND_FLOOR * size) & (np.abs(v) <= _NEARLY_FEASIBLE * size)
             extra = float(np.linalg.norm(sw[small] * v[small]))
             alone = not ((np.abs(v) > _BAND_FLOOR * size) & ~small & (norms > 0)).any()
@@ -562,7 +562,6 @@ def _check_lexicographic(stack: TaskStack, x: np.ndarray, tol: float, rcond: flo
             # solver's slack and the lower levels may move it (cascaded_qp[daqp] and
             # daqp_hierarchical answers, 1e-10 beyond level 0's bounds and worse at a
             # lower level, passed when it was read as fixed there)
-            size = np.abs(rows.A) @ ax + np.linalg.norm(rows.A, axis=1)
             in_band = (np.abs(side) == 1) & (np.abs(v) > _BAND_FLOOR * size)
             if slack is not None:       # shown satisfiable by the level's optimum
                 in_band &= ~slack
