@@ -668,15 +668,16 @@ def _box_row_unresolved(a, xc, ax, lo, up, xn, primal_tol):
 @njit(cache=True, fastmath=_FAST, inline="always")
 def _gather(state, hard_end, s0, s1, blo, bup, rows, tgt, B, nrot, nf, Vf, betaf, posf):
     """Working rows: hard ones (``j < hard_end``, state ±1) first, then the level's;
-    each brought up to date with the fixing reflectors."""
-    nh = 0
+    each brought up to date with the fixing reflectors. The counts are int64 from the
+    start (see :func:`solve_data`: a literal 0 makes numba compile ``_step`` again)."""
+    nh = np.int64(0)
     for j in range(hard_end):
         st = state[j]
         if st == -1 or st == 1:
             rows[nh] = j
             tgt[nh] = blo[j] if st == -1 else bup[j]
             nh += 1
-    nw = 0
+    nw = np.int64(0)
     for j in range(s0, s1):
         st = state[j]
         if st != 0:
@@ -1122,8 +1123,16 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     for c in range(n):
         y[c] = 0.0
         xc[c] = 0.0
-    col = 0
-    nf = 0
+    # The arguments of the _step calls are typed as they settle (int64, bool), never as
+    # literals: numba compiles a called function once per argument type it meets, and
+    # a loop-carried `col = 0` is Literal[int](0) until type inference reaches the
+    # loop's back edge, a `True` is Literal[bool](True). _step, most of this kernel's
+    # code, had been compiled four times (~100 of the 143 s a fresh install's first
+    # solve took).
+    col = np.int64(0)
+    nf = np.int64(0)
+    yes = col == 0
+    no = not yes
     for lev in range(k + 1):
         iters[lev] = 0
         flags[lev] = FLAG_OK
@@ -1173,8 +1182,8 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
         # ---- warm start: jump to the step of last time's working set if it is feasible
         have_step = False
         refuted = False         # a warm step tried and undone: the level starts cold
-        nh = 0
-        nw = 0
+        nh = np.int64(0)
+        nw = np.int64(0)
         hr = 0
         rs = 0
         full = False
@@ -1198,7 +1207,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                                  Vf, betaf, posf)
             hr, rs, nref, full, step_margin, gn_step = _step(
                 B, y, col, rows, nh, nw, fvec, rcond, soft_tol, T, V, beta, vpos, Lw, p,
-                True, flat, perm, nrot, nf, Vf, betaf, posf, Bo, xc, ucol, True)
+                yes, flat, perm, nrot, nf, Vf, betaf, posf, Bo, xc, ucol, yes)
             iters[lev] += 1
             for i in range(hr, nh):
                 state[rows[i]] = 0
@@ -1257,7 +1266,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                                  Vf, betaf, posf)
                 hr, rs, nref, full, step_margin, gn_step = _step(
                     B, y, col, rows, nh, nw, fvec, rcond, soft_tol, T, V, beta, vpos, Lw, p,
-                    False, flat, perm, nrot, nf, Vf, betaf, posf, Bo, xc, ucol,
+                    no, flat, perm, nrot, nf, Vf, betaf, posf, Bo, xc, ucol,
                     iters[lev] == 1 or (refuted and iters[lev] == 2))
                 path_margin = min(path_margin, step_margin)
                 for i in range(hr, nh):

@@ -468,7 +468,9 @@ def solve_kernel_ws(B, c, starts, scales, rcond, level_damping, singular_thresho
     k = starts.shape[0] - 1
     nref = 0
     y[:] = 0.0            # coordinates no level claims stay 0 (the minimum norm)
-    col = 0
+    # int64 from the start: a literal 0 carried through the loop made numba compile each
+    # called helper twice (once for Literal[int](0), before inference settles on int64)
+    col = np.int64(0)
     # A last level of unit rows (a posture of uniform weight, x marking its columns
     # until x is written) is not rotated with the others: at its turn it is solved by
     # _unit_rows_solve on its rows as given, or else brought through the reflectors then

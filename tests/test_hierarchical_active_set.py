@@ -15,10 +15,12 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from numba import njit
 from scipy.optimize import lsq_linear
 
 import prioik
 from prioik import formulations
+from prioik.formulations._active_set_kernel import _unit_rows_step as _unit_rows_step_kernel
 from prioik.hierarchy import Task, TaskStack, TaskStackError, lexicographic_residuals
 from prioik.hierarchy.families import FAMILIES, INEQUALITY_FAMILIES
 from prioik.hierarchy.io import load_peer, load_soth
@@ -733,35 +735,30 @@ def _householder_lq(C: np.ndarray):
     return V, beta, pos, Q[:, F:]
 
 
-_UNIT_ROWS_CALL = []
+@njit(cache=True)
+def _unit_rows_call(Bo, ucol, xc, col, rows, nh, nw, tgt, rcond, soft_tol, reach, nf, Vf,
+                    betaf, posf):
+    """The kernel's inlined ``_unit_rows_step`` in a compiled function of its own (cached
+    on disk like the kernels: compiled anew each run, it took 17 s of the suite)."""
+    n = Bo.shape[1]
+    p = np.zeros(n)
+    nu = np.zeros(Bo.shape[0])
+    margin, gn = _unit_rows_step_kernel(
+        Bo, ucol, xc, col, rows, nh, nw, tgt.copy(), rcond, soft_tol, reach,
+        np.empty(n, np.int64), p, nf, Vf, betaf, posf, np.zeros((3 * n, n)),
+        np.zeros((4 * n, n)), np.zeros(3 * n), nu)
+    return margin, p, gn, nu
 
 
 def _unit_rows_step(Bo, x, col, tgt, soft_tol, V, beta, pos, nh=0, reach=True,
                     rcond=1e-10):
-    """The kernel's inlined ``_unit_rows_step`` on these arrays (compiled once): rows
-    ``Bo[:nh]`` are the working hard rows, the rest the level's; returns ``(margin, p,
-    ‖g‖, ν)``."""
-    if not _UNIT_ROWS_CALL:
-        from numba import njit
-        from prioik.formulations._active_set_kernel import _unit_rows_step as step
-
-        @njit
-        def call(Bo, ucol, xc, col, rows, nh, nw, tgt, rcond, soft_tol, reach, nf, Vf,
-                 betaf, posf):
-            n = Bo.shape[1]
-            p = np.zeros(n)
-            nu = np.zeros(Bo.shape[0])
-            margin, gn = step(Bo, ucol, xc, col, rows, nh, nw, tgt.copy(), rcond, soft_tol,
-                              reach, np.empty(n, np.int64), p, nf, Vf, betaf, posf,
-                              np.zeros((3 * n, n)), np.zeros((4 * n, n)), np.zeros(3 * n),
-                              nu)
-            return margin, p, gn, nu
-        _UNIT_ROWS_CALL.append(call)
+    """The kernel's inlined ``_unit_rows_step`` on these arrays: rows ``Bo[:nh]`` are the
+    working hard rows, the rest the level's; returns ``(margin, p, ‖g‖, ν)``."""
     m = Bo.shape[0]
     ucol = np.array([np.flatnonzero(r)[0] if np.count_nonzero(r) == 1 else -1 for r in Bo],
                     dtype=np.int64)
-    return _UNIT_ROWS_CALL[0](Bo, ucol, x, col, np.arange(m), nh, m - nh, tgt, rcond,
-                              soft_tol, reach, col, V, beta, pos)
+    return _unit_rows_call(Bo, ucol, x, col, np.arange(m), nh, m - nh, tgt, rcond,
+                           soft_tol, reach, col, V, beta, pos)
 
 
 @pytest.mark.parametrize("base", [0, 6])
