@@ -124,9 +124,16 @@ from .base import Capabilities, FormulationError, Outcome, ReportVariant, precis
 from .options import Option, rcond_option, validate_options
 
 try:  # the compiled kernel is optional: the lapack path is the readable reference
+    from prioik._jit import ROWS_1D, ROWS_2D, WORK_F, WORK_I, compile_once
+
     from . import _extended_jacobian_kernel as _kernel
     _solve_data = _kernel.solve_data        # one global lookup per prepared solve
     _kernel_error = ""
+    #: the prepared kernel's one signature (:func:`prioik._jit.compile_once`): the rows,
+    #: targets and √w (a frozen stack's read-only arrays and a writable StackData's run
+    #: the same machine code; left to itself numba compiled one specialization for each,
+    #: ~18 s apiece on a fresh cache), then the workspace, the output, the int workspace
+    _SIGNATURE = (ROWS_2D, ROWS_1D, ROWS_1D, WORK_F, WORK_F, WORK_I)
 except ImportError as exc:  # pragma: no cover - numba is a declared dependency
     _kernel = _solve_data = None
     _kernel_error = f"{type(exc).__name__}: {exc}"
@@ -267,6 +274,7 @@ class Prepared:
         self._starts = layout.starts
         self._n, self._k = layout.n, layout.k
         if self.compiled:
+            compile_once(_solve_data, _SIGNATURE)
             n, k = layout.n, layout.k
             params = np.concatenate([[self.rcond, self.level_damping,
                                       self.singular_threshold], self.step_bound])

@@ -347,6 +347,21 @@ def test_prepared_solver_on_written_data_equals_solve_bit_for_bit(family, option
             assert np.array_equal(getattr(data, key), getattr(before, key))
 
 
+def test_frozen_and_writable_rows_run_the_kernels_one_signature():
+    """A TaskStack's frozen arrays and a writable StackData run the one compiled
+    signature of the prepared kernel (prioik._jit.compile_once: numba would otherwise
+    compile a second specialization for the writable arrays), with the same bits."""
+    from prioik.formulations import _extended_jacobian_kernel
+    stack = FAMILIES["conflicting"](np.random.default_rng(5), 14, 4)
+    writable = stack.data.copy()
+    assert not stack.data.writeable and writable.writeable
+    solver = formulations.prepare(stack.layout, "extended_jacobian", kernel="numba")
+    a, b = solver.solve(stack), solver.solve(writable)
+    assert np.array_equal(a.x, b.x) and a.status == b.status == "optimal"
+    signatures = _extended_jacobian_kernel.solve_data.signatures
+    assert len(signatures) == 1 and signatures[0][0].mutable is False
+
+
 def test_prepared_solver_refills_and_refuses_other_layouts_and_nan():
     from prioik.hierarchy import StackLayout, TaskStackError
     from prioik.formulations.base import FormulationError
