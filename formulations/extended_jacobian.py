@@ -837,7 +837,9 @@ def _solve_batch(prepared: "Prepared", datas: list[StackData]) -> tuple[np.ndarr
         outs = [prepared.solve(d) for d in datas]
         return np.array([o.x for o in outs]), [o.status for o in outs]
     N, k, n = len(datas), prepared.layout.k, prepared.layout.n
-    starts = prepared.layout.starts
+    # a writable copy of the (read-only) offsets: the kernels' other callers pass
+    # writable ones, and numba compiles solve_kernel and level_scales once for both
+    starts = np.array(prepared.layout.starts)
     # the rows copied in one C call each, weighed and measured in parallel in place
     # (a compiled call per stack cost ~4 µs of dispatch per stack)
     B = np.stack([d.A for d in datas])
