@@ -204,3 +204,32 @@ def test_torque_from_solution_without_tau_fails_the_run(chain):
 def test_bad_duration_or_step_is_refused(chain, duration, dt, message):
     with pytest.raises(SimulationError, match=message):
         simulate(chain, _build(chain), None, duration=duration, dt=dt)
+
+
+def test_rows_written_in_place_keep_each_steps_algorithmic_error(chain):
+    """A build that writes one StackData in place (as prepared writers do): the loop
+    copies each step's rows for the algorithmic error computed after the run (in
+    blocks of _RowRecord.CHUNK steps), which equals that of fresh stacks, step by step,
+    across block boundaries."""
+    from prioik.robots.simulate import _RowRecord
+    fresh_build = _build(chain)
+    written = {}
+
+    def in_place(state, t):
+        step = fresh_build(state, t)
+        data = written.setdefault("data", step.stack.layout.data())
+        for key in ("A", "b", "lower", "upper", "sqrt_weight"):
+            getattr(data, key)[...] = getattr(step.stack.data, key)
+        return StepTasks(data, step.errors)
+
+    # eq. 27's damping leaves an algorithmic error that changes from step to step
+    def solve(s, **kw):
+        return formulations.solve(s, "extended_jacobian", damping=0.05)
+
+    steps = _RowRecord.CHUNK + 44
+    runs = [simulate(chain, build, solve, duration=steps * 0.002, dt=0.002)
+            for build in (fresh_build, in_place)]
+    assert all(r.steps == steps and not r.failed for r in runs)
+    errors = [r.algorithmic_error for r in runs]
+    assert np.all(errors[0][10:] > 1e-7) and np.ptp(errors[0]) > 1e-3
+    np.testing.assert_array_equal(errors[1], errors[0])
