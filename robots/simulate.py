@@ -38,7 +38,8 @@ from typing import Any, Callable
 import numpy as np
 import pinocchio as pin
 
-from prioik.hierarchy import StackData, Task, TaskStack, algorithmic_error_norms
+from prioik.hierarchy import (StackData, StackLayout, Task, TaskStack,
+                              algorithmic_error_norms)
 
 from .models import RobotModel
 from .tasks import KinematicState
@@ -289,7 +290,7 @@ class _RowRecord:
 
     CHUNK = 256
 
-    def __init__(self, layout) -> None:
+    def __init__(self, layout: StackLayout) -> None:
         self.layout = layout
         self.n = layout.n
         self.chunks: list[np.ndarray] = []
