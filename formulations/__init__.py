@@ -9,9 +9,10 @@ from .base import (STATUSES, Capabilities, ConcurrentUseError, FormulationError,
                    ReportVariant, Solution)
 from .options import Option
 from .prepared import PreparedSolver
-from .registry import (PLUGINS, BatchSolution, FormulationInfo, available, get, names, prepare,
-                       solve, solve_batch)
+from .registry import (PLUGINS, BatchSolution, FormulationInfo, available, compile_kernels,
+                       get, names, prepare, solve, solve_batch)
 
 __all__ = ["BatchSolution", "STATUSES", "Capabilities", "ConcurrentUseError", "FormulationError",
            "FormulationInfo", "Option", "Outcome", "PLUGINS", "PreparedSolver", "ReportVariant",
-           "Solution", "available", "get", "names", "prepare", "solve", "solve_batch"]
+           "Solution", "available", "compile_kernels", "get", "names", "prepare", "solve",
+           "solve_batch"]

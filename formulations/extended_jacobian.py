@@ -116,7 +116,7 @@ import math
 import numpy as np
 from scipy.linalg import lapack
 
-from prioik.hierarchy import (AMBIGUITY, StackData, StackLayout, TaskStack, TaskStackError,
+from prioik.hierarchy import (AMBIGUITY, StackData, StackLayout, Task, TaskStack, TaskStackError,
                               UnsupportedTaskError, ambiguity_reason, ambiguous_decision,
                               level_scale, rank_threshold)
 
@@ -214,6 +214,26 @@ def _resolve_kernel(kernel: str, n: int = 0) -> str:
         raise FormulationError(f"kernel='numba' is not available here: {_kernel_error}; "
                                f"install it with `pip install numba`")
     return "numba"
+
+
+def compile_kernels() -> None:
+    """Compile (or load from numba's disk cache) the prepared solve's kernel and the
+    batch kernels (:func:`prioik.formulations.compile_kernels`).
+
+    Raises:
+        FormulationError: numba is not importable here.
+    """
+    if _kernel is None:
+        raise FormulationError(f"{NAME}'s compiled kernel needs numba: {_kernel_error}; "
+                               f"install it with `pip install numba`")
+    compile_once(_solve_data, _SIGNATURE)
+    # the batch kernels' argument types do not depend on the stack: a tiny one compiles
+    # them for every stack
+    stack = TaskStack([[Task("a", np.array([[1.0, 0.0]]), np.array([1.0]))],
+                       [Task("b", np.array([[0.0, 1.0]]), np.array([2.0]))]])
+    prepared = Prepared(stack.layout, validate_options(NAME, OPTIONS, {"kernel": "numba"},
+                                                       stack.n))
+    _solve_batch(prepared, [stack.data, stack.data])
 
 
 def solve(stack: TaskStack, **options) -> Outcome:

@@ -170,6 +170,19 @@ OPTIONS = {
 }
 
 
+def compile_kernels() -> None:
+    """Compile (or load from numba's disk cache) the solve's kernel and the warm start's
+    equality-first kernel (:func:`prioik.formulations.compile_kernels`).
+
+    Raises:
+        FormulationError: numba is not importable here.
+    """
+    if _kernel is None:
+        raise FormulationError(f"{NAME} needs numba: {_kernel_error}; install it with "
+                               f"`pip install numba`")
+    _compile_kernels(True)
+
+
 def solve(stack: TaskStack, **options) -> Outcome:
     """The lexicographic optimum of ``stack`` (a cold solve): :class:`Prepared` for the
     stack's layout, then its :meth:`Prepared.solve` (see the module docstring)."""

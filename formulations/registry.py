@@ -12,6 +12,8 @@ A plugin is a module that defines
 * optionally ``backends() -> list[str]``, the back-ends it can use here,
 * optionally ``solve_batch(stacks, **options) -> (X, statuses)`` for many stacks of one
   shape (stacked linear algebra); :func:`solve_batch` loops over ``solve`` otherwise,
+* optionally ``compile_kernels()``: compile (or load from numba's disk cache) every
+  compiled kernel its solves use (:func:`compile_kernels`, ``prioik compile``),
 * optionally, for prioik's reports (:mod:`prioik.benchmarks.variants`; the reports read
   nothing else, so a new plugin appears in every one of them by itself):
   ``REPORT_VARIANTS``, a tuple of :class:`~.base.ReportVariant` (settings worth a row of
@@ -29,7 +31,7 @@ from __future__ import annotations
 import importlib
 from dataclasses import dataclass, field
 from types import ModuleType
-from typing import Any
+from typing import Any, Callable
 
 from prioik.extras import install_hint
 from prioik.hierarchy import StackData, StackLayout, TaskStack
@@ -121,6 +123,48 @@ def available() -> list[FormulationInfo]:
         backends = tuple(mod.backends()) if hasattr(mod, "backends") else ()
         out.append(FormulationInfo(name, True, "", mod.DESCRIPTION, mod.CAPABILITIES,
                                    dict(mod.OPTIONS), backends, extra))
+    return out
+
+
+def compile_kernels(names: list[str] | None = None,
+                    progress: Callable[[str, float | None], None] | None = None
+                    ) -> list[tuple[str, float]]:
+    """Compile, or load from numba's disk cache, the kernels of every available
+    formulation that has compiled ones (its module's ``compile_kernels()``), or of
+    ``names``; returns ``(formulation, seconds)`` for each.
+
+    numba compiles a kernel on its first use after an install and caches it on disk;
+    the first solve of ``hierarchical_active_set`` then takes about 80 s on a 2-core
+    machine. Running this once (``prioik compile``) moves that wait out of a control
+    loop's first step; later processes load the kernels in under a second.
+
+    Args:
+        names: The formulations (default: every available one with compiled kernels).
+        progress: Called with ``(name, None)`` before each formulation's kernels and
+            ``(name, seconds)`` after.
+
+    Raises:
+        FormulationError: a name is unknown, not available here, or has no compiled
+            kernels (checked before anything is compiled).
+    """
+    import time
+    if names is None:
+        chosen = [(n, _loaded[n]) for n in PLUGINS
+                  if _load(n) is not None and hasattr(_loaded[n], "compile_kernels")]
+    else:
+        chosen = [(n, get(n)) for n in names]
+        for name, mod in chosen:
+            if not hasattr(mod, "compile_kernels"):
+                raise FormulationError(f"formulation {name!r} has no compiled kernels")
+    out = []
+    for name, mod in chosen:
+        if progress is not None:
+            progress(name, None)
+        t0 = time.perf_counter()
+        mod.compile_kernels()
+        out.append((name, time.perf_counter() - t0))
+        if progress is not None:
+            progress(name, out[-1][1])
     return out
 
 

@@ -91,3 +91,15 @@ def test_closed_pipe_exits_quietly():
     err = proc.stderr.read().decode()
     assert proc.wait(timeout=120) == 0
     assert "Broken pipe" not in err and "Error" not in err, err
+
+
+def test_compile_prints_each_compiled_formulation_and_refuses_others(capsys):
+    assert main(["compile"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    for name in ("extended_jacobian", "hierarchical_active_set"):
+        assert f"{name}: compiling or loading its kernels ..." in lines
+        assert any(line.startswith(f"{name}: done in ") for line in lines)
+    assert len(lines) == 4
+    assert main(["compile", "--formulations", "reference"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "'reference' has no compiled kernels" in err and len(err.splitlines()) == 1

@@ -155,3 +155,33 @@ def test_solve_batch_rejects_mixed_shapes():
     with pytest.raises(FormulationError, match="stack 1 of the batch: .*prepared for the "
                                                "layout n=3: a\\[1\\]; got .* a\\[2\\]"):
         formulations.solve_batch([a, b], "reference")
+
+
+def test_compile_kernels_builds_every_compiled_formulations_kernels_in_a_fresh_process():
+    """In a fresh process no kernel is compiled or loaded until used; compile_kernels()
+    builds (or loads from numba's cache) each compiled formulation's kernels, so that
+    the first solve then needs neither."""
+    import subprocess
+    import sys
+    code = (
+        "from prioik import formulations\n"
+        "from prioik.formulations import _active_set_kernel as a, "
+        "_extended_jacobian_kernel as e\n"
+        "kernels = (a.solve_data, a.equality_first_data, e.solve_data, "
+        "e.solve_batch_kernel, e.weigh_batch)\n"
+        "assert not any(k.signatures for k in kernels)\n"
+        "seen = []\n"
+        "done = formulations.compile_kernels(progress=lambda n, s: seen.append((n, s)))\n"
+        "print(sorted(n for n, _ in done), all(s >= 0 for _, s in done), seen[0][1])\n"
+        "print([len(k.signatures) for k in kernels])\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=600, check=True).stdout.splitlines()
+    assert out == ["['extended_jacobian', 'hierarchical_active_set'] True None",
+                   "[1, 1, 1, 1, 1]"]
+
+
+def test_compile_kernels_refuses_unknown_names_and_formulations_without_kernels():
+    with pytest.raises(FormulationError, match="unknown formulation 'nope'"):
+        formulations.compile_kernels(["nope"])
+    with pytest.raises(FormulationError, match="'reference' has no compiled kernels"):
+        formulations.compile_kernels(["extended_jacobian", "reference"])

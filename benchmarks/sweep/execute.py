@@ -85,15 +85,12 @@ def warm_up() -> None:
     start, not of the runs' wall time): import the scenario and solver modules and load
     the compiled kernels from numba's cache (seconds in a fresh process, the same for
     each worker however many there are)."""
-    import prioik
-    from prioik.hierarchy import Task, TaskStack
+    from prioik import formulations
 
     from . import task  # noqa: F401 - the worker's entry point and its imports
     from prioik.benchmarks import fencing  # noqa: F401
 
-    tiny = TaskStack([[Task("a", [[1.0, 0.0]], [1.0])], [Task("b", [[0.0, 1.0]], [2.0])]])
-    for name in ("extended_jacobian", "hierarchical_active_set"):
-        prioik.solve(tiny, name)
+    formulations.compile_kernels()
 
 
 def run_sweep(plan: Plan, out, *, workers: int | None = None, scheduler: str | None = None,

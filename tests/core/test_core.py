@@ -148,6 +148,10 @@ def test_prioik_solve_and_validate_run_on_the_core(tmp_path, capsys):
     assert re.search(r"inequality families \(with_inequalities, infeasible_inequality, "
                      r"random_inequality\) "
                      r"left out: .*pip install prioik\[cvxpy\]", text)
+    # the compiled kernels are the core's own: `prioik compile` needs no extra
+    assert main(["compile"]) == 0
+    out = capsys.readouterr().out
+    assert "extended_jacobian: done in" in out and "hierarchical_active_set: done in" in out
 
 
 @pytest.mark.parametrize("argv, extra", [
