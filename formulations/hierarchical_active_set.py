@@ -83,7 +83,11 @@ decisions and statuses. Pivots are re-measured exactly before a rank decision st
 step of a level decided ambiguously (its last step clear), the working set it led to
 may not be the optimum: the answer is then checked by
 :func:`~prioik.hierarchy.check_lexicographic` and is ``optimal`` only if it passes
-(``info["path_certified"]``, ``info["ambiguous_path_levels"]``).
+(``info["path_certified"]``, ``info["ambiguous_path_levels"]``). So is a level that
+ends with a held soft row inside its bound beyond ``x``'s precision but within its
+release tolerance (``info["near_release_levels"]``): a row of norm 739 held beside one
+of norm 0.0021 stayed held 4.4e-11 inside its bound, under a tolerance of 7.4e-11, and
+left its level at 2.6x the optimum.
 
 *Warm start.* :class:`Prepared` keeps each level's working set at its optimum; the
 next solve first tries, per level, the step of last time's working set: when the
@@ -347,10 +351,13 @@ class Prepared:
                 reasons.append(f"rank decision ambiguous at the minimum-norm tie-break (a "
                                f"pivot within {AMBIGUITY:g}x of its threshold)")
             info["ambiguous_levels"] = levels
-        path = (np.flatnonzero(self._counts[1] == _kernel.FLAG_AMBIGUOUS_PATH).tolist()
+        flags = self._counts[1]
+        path = (np.flatnonzero(flags == _kernel.FLAG_AMBIGUOUS_PATH).tolist()
                 if ambiguous else [])
-        if path and not levels and flag == 0.0:
-            reasons.extend(self._certify_path(data, x, path, info))
+        near = (np.flatnonzero(flags == _kernel.FLAG_NEAR_RELEASE).tolist()
+                if ambiguous else [])
+        if (path or near) and not levels and flag == 0.0:
+            reasons.extend(self._certify_path(data, x, path, near, info))
         if unresolved:
             reasons.append(f"‖x‖ = {xn:.3g}: x's coordinates are known to about "
                            f"{X_PRECISION * xn:.2g}, coarser than the primal tolerance of "
@@ -364,27 +371,40 @@ class Prepared:
         return Outcome(x, status, info, residuals=residuals, checked=True)
 
     def _certify_path(self, data: StackData, x: np.ndarray, path: list[int],
-                      info: dict) -> list[str]:
+                      near: list[int], info: dict) -> list[str]:
         """The reasons against ``x`` when levels ``path`` took an ambiguous rank
-        decision before their clear last step (``FLAG_AMBIGUOUS_PATH``): the working set
-        such a step led to may not be the level's optimum, so the answer is checked by
+        decision before their clear last step (``FLAG_AMBIGUOUS_PATH``: the working set
+        such a step led to may not be the level's optimum) or levels ``near`` ended with
+        a held soft row inside its bound within its release tolerance
+        (``FLAG_NEAR_RELEASE``: releasing it may lower the level by more than the
+        tolerance shows): the answer is checked by
         :func:`~prioik.hierarchy.check_lexicographic` (at its default tolerance, the
         minimum-norm tie-break too when it is among ``path``); ``[]`` when it passes."""
         k = self._k
         report = check_lexicographic(data.as_stack(), x, minimum_norm=k in path)
-        info["ambiguous_path_levels"] = path
+        if path:
+            info["ambiguous_path_levels"] = path
+        if near:
+            info["near_release_levels"] = near
         info["path_certified"] = report.ok
         if report.ok:
             return []
         bad = report.first_failure
         where = (f"level {bad.level} ({', '.join(bad.tasks)})" if bad.level < k
                  else "the minimum-norm tie-break")
-        info["ambiguous_levels"] = path
-        named = ", ".join(f"level {i}" if i < k else "the tie-break" for i in path)
-        return [f"{named} passed through an ambiguous rank decision (a pivot within "
-                f"{AMBIGUITY:g}x of its threshold) before settling, and the certificate "
-                f"rejects {where} (KKT residual {bad.relative:.2g} relative, tolerance "
-                f"{report.tol:g})"]
+        info["ambiguous_levels"] = sorted(set(path) | set(near))
+        rejects = (f"the certificate rejects {where} (KKT residual {bad.relative:.2g} "
+                   f"relative, tolerance {report.tol:g})")
+        reasons = []
+        if path:
+            named = ", ".join(f"level {i}" if i < k else "the tie-break" for i in path)
+            reasons.append(f"{named} passed through an ambiguous rank decision (a pivot "
+                           f"within {AMBIGUITY:g}x of its threshold) before settling")
+        if near:
+            named = ", ".join(f"level {i}" for i in near)
+            reasons.append(f"{named} ended with a held row inside its bound by less than "
+                           f"its release tolerance (releasing it may lower the level)")
+        return [f"{'; '.join(reasons)}, and {rejects}"]
 
 
 # ------------------------------------------------------------------------ reports

@@ -986,11 +986,7 @@ def test_independent_12_407_level_1_reaches_its_optimum():
     assert sol.status != "optimal" or sol.residuals[1] ** 2 <= 149.888905
 
 
-@pytest.mark.xfail(strict=True, reason="open: a held box row of norm 739 is inside its "
-                   "bound by 4.4e-11, under its release tolerance (7.4e-11: the box-row size "
-                   "|a|(|x_c| + 1)), so it is not released and level 0 ends 2.6x its optimum, "
-                   "'optimal' and uncertified")
-def test_bounds_31_1103_says_optimal_only_when_certified():
+def test_bounds_31_1103_held_row_within_its_release_tolerance_is_certified():
     """prioik fuzz --seed 31 --kind bounds, case 1103 (n 7, found at stop 29). Level 0
     holds four box rows on x_0 of norms 739, 24.5, 0.0036 and 0.0021 whose intervals
     do not meet: the optimum (cascaded_qp[quadprog], certified) leaves 9.16e-11 at
@@ -998,13 +994,22 @@ def test_bounds_31_1103_says_optimal_only_when_certified():
     0.0021 row at its lower one; their least-squares point leaves the 739 row inside
     its bound by 4.4e-11, under the release tolerance primal_tol·_RELEASE·(|a|(|x_0| +
     1) + |bound|) = 7.4e-11 (the row's value is 0.24, its size 739), so the row stays
-    held, and level 0 ends at 2.34e-10, 'optimal'. The certificate rejects it (a
-    gradient of 1.5e-5 at level 0)."""
+    held and level 0 ends at 2.34e-10 (2.6x). The kernel flags such a level
+    (FLAG_NEAR_RELEASE: a held row inside its bound beyond x's precision, within its
+    release tolerance) and the solver certifies the answer: rejected (a gradient of
+    1.5e-5 at level 0), it says 'approximate' and names the level."""
     from prioik.benchmarks.fuzz import draw
     from prioik.hierarchy import check_lexicographic
     stack = draw("bounds", 31, 1103).stack
     sol = prioik.solve(stack, NAME)
-    assert sol.status != "optimal" or check_lexicographic(stack, sol.x).ok
+    assert not check_lexicographic(stack, sol.x).ok
+    assert sol.status == "approximate" and sol.info["path_certified"] is False
+    assert sol.info["near_release_levels"] == [0] and sol.info["ambiguous_levels"] == [0]
+    assert "level 0 ended with a held row inside its bound" in sol.info["reason"]
+    # the optimum it misses: quadprog's cascade, certified, 2.6x lower at level 0
+    ref = prioik.solve(stack, "cascaded_qp", solver="quadprog")
+    assert ref.status == "optimal" and check_lexicographic(stack, ref.x).ok
+    assert sol.residuals[0] ** 2 > 2.5 * ref.residuals[0] ** 2
 
 
 def test_independent_13_783_right_answer_is_certified():
