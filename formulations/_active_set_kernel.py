@@ -1037,7 +1037,8 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
             ``counts`` (``4 × (k + 1)``, the last column the minimum-norm level:
             iterations, :data:`FLAG_ITERATION_CAP` when the cap was hit or
             :data:`FLAG_AMBIGUOUS_PATH` when a step before the last made an ambiguous
-            rank decision, rank fixed,
+            rank decision, :data:`FLAG_NEAR_RELEASE` when a held soft row ended inside
+            its bound within its release tolerance, rank fixed,
             ``1`` where the level's violation exceeds ``primal_tol max(1, ‖x‖)``).
         bwork: int8: the rows' equality flags, workspaces, ``warm_state`` and
             ``warm_valid`` (``(k + 1) × (M + n)`` working sets at each level's end, read
