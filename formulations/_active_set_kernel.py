@@ -1261,6 +1261,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
         # ---- primal active-set iterations
         bland = False
         settled = False
+        near_release = False
         while True:
             if have_step:
                 have_step = False
@@ -1319,8 +1320,11 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                     continue
             bland = False
             ynorm = np.sqrt(_dot(y, y))
-            # soft rows on the wrong side of their bound: release or switch sides
+            # soft rows on the wrong side of their bound: release or switch sides; a
+            # held row left inside its bound beyond x's precision but within the
+            # release tolerance is noted (FLAG_NEAR_RELEASE if the level settles here)
             changed = False
+            near_release = False
             for j in range(s0, s1):
                 st = state[j]
                 if st == -1 or st == 1:
@@ -1337,6 +1341,9 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                     elif st == 1 and r < bup[j] - tu:
                         state[j] = -1 if r < blo[j] - tl else 0
                         changed = True
+                    elif ((r - blo[j] if st == -1 else bup[j] - r)
+                          > X_PRECISION * ynorm * rnorm[j]):
+                        near_release = True
             if changed:
                 continue
             if hr == 0:
@@ -1395,20 +1402,8 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
         if (path_margin <= _AMBIGUITY and step_margin > _AMBIGUITY
                 and flags[lev] == FLAG_OK):
             flags[lev] = FLAG_AMBIGUOUS_PATH
-        if settled and flags[lev] == FLAG_OK:
-            ynorm = np.sqrt(_dot(y, y))
-            for j in range(s0, s1):
-                st = state[j]
-                if st == -1 or st == 1:
-                    tb = blo[j] if st == -1 else bup[j]
-                    inside = _odot(Bo, ucol, j, xc) - tb
-                    if st == 1:
-                        inside = -inside
-                    if (inside > X_PRECISION * ynorm * rnorm[j] and inside <= _tol(
-                            primal_tol * _RELEASE,
-                            _size(Bo, ucol, j, rnorm[j], ynorm, xc), tb)):
-                        flags[lev] = FLAG_NEAR_RELEASE
-                        break
+        if settled and near_release and flags[lev] == FLAG_OK:
+            flags[lev] = FLAG_NEAR_RELEASE
         for j in range(s1):
             st = state[j]
             warm_state[lev, j] = st if (st == -1 or st == 1) else 0

@@ -226,9 +226,8 @@ def compile_kernels() -> None:
     if _kernel is None:
         raise FormulationError(f"{NAME}'s compiled kernel needs numba: {_kernel_error}; "
                                f"install it with `pip install numba`")
-    compile_once(_solve_data, _SIGNATURE)
-    # the batch kernels' argument types do not depend on the stack: a tiny one compiles
-    # them for every stack
+    # Prepared compiles the prepared kernel; the batch kernels' argument types do not
+    # depend on the stack: a tiny one compiles them for every stack
     stack = TaskStack([[Task("a", np.array([[1.0, 0.0]]), np.array([1.0]))],
                        [Task("b", np.array([[0.0, 1.0]]), np.array([2.0]))]])
     prepared = Prepared(stack.layout, validate_options(NAME, OPTIONS, {"kernel": "numba"},
