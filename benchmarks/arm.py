@@ -71,7 +71,7 @@ def run_command(args: argparse.Namespace) -> int:
     """``prioik arm``."""
     from .scenario_runs import VELOCITY_GAIN, run_scenario
     runs = run_scenario("arm", list(VARIANTS), args.out, args.formulations, args.duration,
-                        args.dt, args.progress)
+                        args.dt, args.progress, turn_steps=args.turn_steps)
     if args.doc:
         command = (f"prioik arm --duration {args.duration:g} --dt {args.dt:g} "
                    f"--out {args.out} --doc {args.doc}")
@@ -83,6 +83,7 @@ def run_command(args: argparse.Namespace) -> int:
 
 def add_parser(subparsers) -> None:
     """Register ``prioik arm``."""
+    from .scenario_runs import add_turn_steps_argument
     p = subparsers.add_parser(
         "arm", help="the arm-reach scenario (Panda, one target out of reach), every "
                     "formulation, PlaCo, pink and SNS",
@@ -100,6 +101,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--doc", default=None, metavar="PATH",
                    help="also write the scenario page here (e.g. docs/arm.md; plots copied "
                         "to img/ beside it)")
+    add_turn_steps_argument(p)
     p.add_argument("--quiet", dest="progress", action="store_false",
                    help="no progress bars on stderr")
     p.set_defaults(func=run_command, extras=("robots", "plots"))

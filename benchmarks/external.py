@@ -25,6 +25,16 @@ StepFn = Callable[[np.ndarray, np.ndarray, float], tuple[np.ndarray, np.ndarray,
 def record(scenario, step: StepFn, *, duration: float, dt: float, progress=None,
            status: str = "approximate", label: str = ""):
     """Run ``step`` for ``duration`` and record a :class:`robots.SimulationResult`."""
+    from prioik.robots import run_to_end
+    return run_to_end(record_steps(scenario, step, duration=duration, dt=dt,
+                                   progress=progress, status=status, label=label))
+
+
+def record_steps(scenario, step: StepFn, *, duration: float, dt: float, progress=None,
+                 status: str = "approximate", label: str = ""):
+    """:func:`record` one step at a time: a generator that yields after each step and
+    returns the :class:`robots.SimulationResult` (as
+    :func:`robots.simulation_steps`)."""
     from prioik.robots import KinematicState, SimulationResult
     from prioik.robots.simulate import coordinate_names
     robot = scenario.robot
@@ -61,6 +71,7 @@ def record(scenario, step: StepFn, *, duration: float, dt: float, progress=None,
         q, v = q_next, v_next
         if progress is not None and (k + 1) % 250 == 0:
             progress(t + dt)
+        yield k
 
     def arr(key, width):
         return np.array(rows[key], dtype=float).reshape(-1, width)

@@ -250,10 +250,11 @@ def headline_timing(variant: str, duration: float, dt: float,
                     rounds: int = HEADLINE_ROUNDS) -> dict[str, Any]:
     """The median step of the :data:`HEADLINE` runs measured side by side: each simulated
     ``rounds`` times, the two in alternation (timing only: no algorithmic error), the
-    fastest round of each and their ratio. The table's runs are minutes apart and the
-    machine's speed drifts over minutes (on a shared 2-core machine the same run's median
-    step varied by 1.5x between runs); alternating the two and taking each one's fastest
-    round compares them under the same conditions."""
+    fastest round of each and their ratio. The table's runs advance in turns
+    (:func:`~prioik.benchmarks.scenario_runs.in_turns`) beside every other run of the
+    table; here the two run alone, each one's fastest round kept, which a machine whose
+    speed drifts over minutes (the same run's median step varied by 1.5x between runs
+    on a shared 2-core machine) slows least."""
     from .scenario_runs import run_one, run_table
     table = run_table("fencing")
     steps: dict[str, list[float]] = {label: [] for label in HEADLINE}
@@ -303,7 +304,8 @@ def run_command(args: argparse.Namespace) -> int:
                   f"{top:.3g} rad/s²")
 
     runs = run_scenario("fencing", variants, args.out, args.formulations, args.duration,
-                        args.dt, args.progress, on_run, on_variant, diagnostics)
+                        args.dt, args.progress, on_run, on_variant, diagnostics,
+                        args.turn_steps)
     meta = runs.meta
     meta["crosscheck"] = checks
     ran = {label for by_label in runs.summary.values() for label in by_label}
@@ -344,6 +346,7 @@ def run_command(args: argparse.Namespace) -> int:
 
 def add_parser(subparsers) -> None:
     """Register ``prioik fencing``."""
+    from .scenario_runs import add_turn_steps_argument
     p = subparsers.add_parser(
         "fencing", help="the paper's fencing scenario on the G1, every formulation",
         description="Simulate the fencing scenario (Jeong & Chang 2009, Sec. III) on the "
@@ -364,6 +367,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--headline-rounds", type=int, default=HEADLINE_ROUNDS,
                    help="rounds of the side-by-side timing of extended_jacobian and PlaCo's "
                         "KinematicsSolver (alternating, the fastest of each; 0: skip)")
+    add_turn_steps_argument(p)
     p.add_argument("--no-crosscheck", action="store_true",
                    help="skip the extended_jacobian vs cascaded_qp q̈ comparison")
     p.add_argument("--quiet", dest="progress", action="store_false",

@@ -61,15 +61,28 @@ def unavailable_reason(options: dict | None = None) -> str | None:
     return None
 
 
-def run(scenario, variant, *, duration: float, dt: float, progress=None):
-    """A scenario run of ``variant`` (:class:`prioik.benchmarks.variants.Variant`)."""
-    return run_pink(scenario, duration=duration, dt=dt, progress=progress,
-                    solver=variant.options.get("solver", DEFAULT_SOLVER), label=variant.label)
+def steps(scenario, variant, *, duration: float, dt: float, progress=None):
+    """A scenario run of ``variant`` (:class:`prioik.benchmarks.variants.Variant`), one
+    step at a time (:func:`pink_steps`)."""
+    return pink_steps(scenario, duration=duration, dt=dt, progress=progress,
+                      solver=variant.options.get("solver", DEFAULT_SOLVER),
+                      label=variant.label)
 
 
 def run_pink(scenario, *, duration: float, dt: float, solver: str = DEFAULT_SOLVER,
              progress=None, label: str = "pink"):
-    """Run ``scenario`` with pink's ``solve_ik``; returns a :class:`robots.SimulationResult`.
+    """Run ``scenario`` with pink's ``solve_ik``; returns a :class:`robots.SimulationResult`
+    (:func:`pink_steps` to its end)."""
+    from prioik.robots import run_to_end
+    return run_to_end(pink_steps(scenario, duration=duration, dt=dt, solver=solver,
+                                 progress=progress, label=label))
+
+
+def pink_steps(scenario, *, duration: float, dt: float, solver: str = DEFAULT_SOLVER,
+               progress=None, label: str = "pink"):
+    """``scenario`` with pink's ``solve_ik``, set up now and run one step at a time: a
+    generator that yields after each step and returns the
+    :class:`robots.SimulationResult` (:func:`prioik.benchmarks.external.record_steps`).
 
     Raises:
         ValueError: ``solver`` is not a QP back-end qpsolvers has here.
@@ -81,7 +94,7 @@ def run_pink(scenario, *, duration: float, dt: float, solver: str = DEFAULT_SOLV
     from pink.limits import ConfigurationLimit, VelocityLimit
     from pink.tasks import ComTask, FrameTask, PostureTask
 
-    from prioik.benchmarks.external import record
+    from prioik.benchmarks.external import record_steps
 
     if solver not in qpsolvers.available_solvers:
         raise ValueError(f"pink: QP back-end {solver!r} is not available here; available: "
@@ -136,6 +149,12 @@ def run_pink(scenario, *, duration: float, dt: float, solver: str = DEFAULT_SOLV
         t2 = time.perf_counter()
         return pin.integrate(model, q, vel * dt), np.asarray(vel), t1 - t0, t2 - t1
 
-    res = record(scenario, step, duration=duration, dt=dt, progress=progress, label=label)
-    res.info["qp_solver"] = solver
+    return _with_info(record_steps(scenario, step, duration=duration, dt=dt,
+                                   progress=progress, label=label), qp_solver=solver)
+
+
+def _with_info(steps, **info):
+    """``steps`` whose result's ``info`` gets ``info``."""
+    res = yield from steps
+    res.info.update(info)
     return res

@@ -44,16 +44,27 @@ def unavailable_reason(options: dict | None = None) -> str | None:
     return None
 
 
-def run(scenario, variant, *, duration: float, dt: float, progress=None):
-    """A scenario run of ``variant`` (:class:`prioik.benchmarks.variants.Variant`)."""
-    return run_placo(scenario, duration=duration, dt=dt, progress=progress,
-                     label=variant.label)
+def steps(scenario, variant, *, duration: float, dt: float, progress=None):
+    """A scenario run of ``variant`` (:class:`prioik.benchmarks.variants.Variant`), one
+    step at a time (:func:`placo_steps`)."""
+    return placo_steps(scenario, duration=duration, dt=dt, progress=progress,
+                       label=variant.label)
 
 
 def run_placo(scenario, *, duration: float, dt: float, progress=None,
               label: str = "placo_kinematics_solver"):
     """Run the scenario with ``placo.KinematicsSolver``; returns a
-    :class:`robots.SimulationResult`.
+    :class:`robots.SimulationResult` (:func:`placo_steps` to its end)."""
+    from prioik.robots import run_to_end
+    return run_to_end(placo_steps(scenario, duration=duration, dt=dt, progress=progress,
+                                  label=label))
+
+
+def placo_steps(scenario, *, duration: float, dt: float, progress=None,
+                label: str = "placo_kinematics_solver"):
+    """The scenario with ``placo.KinematicsSolver``, set up now and run one step at a
+    time: a generator that yields after each step and returns the
+    :class:`robots.SimulationResult` (:func:`prioik.benchmarks.external.record_steps`).
 
     The tasks come from :meth:`robots.scenario.Scenario.baseline_tasks` (``hard``
     ones as PlaCo hard tasks, the others soft with their ``weight``), the URDF from
@@ -68,7 +79,7 @@ def run_placo(scenario, *, duration: float, dt: float, progress=None,
     """
     import placo
 
-    from prioik.benchmarks.external import record
+    from prioik.benchmarks.external import record_steps
     from prioik.robots.models import example_robot_data_dir
 
     robot = scenario.robot
@@ -139,4 +150,5 @@ def run_placo(scenario, *, duration: float, dt: float, progress=None,
         t2 = time.perf_counter()
         return np.array(pw.state.q)[nb_q:], dq[nb_v:] / dt, t1 - t0, t2 - t1
 
-    return record(scenario, step, duration=duration, dt=dt, progress=progress, label=label)
+    return record_steps(scenario, step, duration=duration, dt=dt, progress=progress,
+                        label=label)

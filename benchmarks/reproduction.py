@@ -160,9 +160,15 @@ def _beyond(page: Page, summary: dict, meta: dict) -> str:
                          f"{h['ratio']:.2f}",
                          ", ".join(_fmt_ms(t) for t in h["median_step_s"][a]) + " / "
                          + ", ".join(_fmt_ms(t) for t in h["median_step_s"][b])])
-        text = text.rstrip("\n") + "\n\n" + page.block("side_by_side", rounds=next(iter(side.values()))["rounds"],
-                           table=table(["variant", "run", "median step", "beside",
-                                        "median step", "ratio", "each round"], rows))
+        turn = meta.get("turn_steps", 0)
+        turns = (f"advanced in turns of {turn} steps each, so their step times met the same "
+                 f"machine speed (which drifts over minutes here)" if turn else
+                 "ran one after another, minutes apart, on a machine whose speed drifts "
+                 "over minutes")
+        text = text.rstrip("\n") + "\n\n" + page.block(
+            "side_by_side", rounds=next(iter(side.values()))["rounds"], turns=turns,
+            table=table(["variant", "run", "median step", "beside", "median step", "ratio",
+                         "each round"], rows))
         text = text.rstrip("\n") + "\n\n"
     return text
 

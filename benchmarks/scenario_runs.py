@@ -27,18 +27,25 @@ import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Generator
 
 import numpy as np
 
 from .results import RunSummary
 from .variants import BASELINES, Variant, VariantTable, capabilities, table
 
-__all__ = ["VELOCITY_GAIN", "run_table", "run_one", "summarize", "write_trajectory",
-           "format_table", "ScenarioRuns", "run_scenario", "file_stem"]
+__all__ = ["VELOCITY_GAIN", "TURN_STEPS", "run_table", "run_one", "run_steps", "in_turns",
+           "add_turn_steps_argument",
+           "summarize", "write_trajectory", "format_table", "ScenarioRuns", "run_scenario",
+           "file_stem"]
 
 #: ``K`` (1/s) of the velocity-level runs
 VELOCITY_GAIN = 20.0
+#: steps each run of :func:`run_scenario` takes per turn (:func:`in_turns`): at the G1's
+#: 50-100 µs per step a turn lasts milliseconds, so the runs meet the same machine speed;
+#: a run's first step in a turn (caches warmed by the others) moves its median by
+#: less than one step in a hundred
+TURN_STEPS = 100
 
 
 def run_table(scenario: str, report: str | None = None) -> VariantTable:
@@ -90,7 +97,7 @@ def run_one(variant: Variant, scenario_variant: str, duration: float, dt: float,
             velocity_gain: float = VELOCITY_GAIN):
     """Simulate one run; returns a :class:`robots.SimulationResult` with joint names and
     ``info`` (scenario, its variant, the run's label, formulation, options, stack form)
-    filled, ready to save and replay.
+    filled, ready to save and replay (:func:`run_steps` to its end).
 
     Args:
         variant: The run (:func:`run_table` lists a scenario's).
@@ -105,8 +112,23 @@ def run_one(variant: Variant, scenario_variant: str, duration: float, dt: float,
         UnsupportedTaskError: the formulation cannot take the scenario's stack.
         FormulationError: it is not available here.
     """
+    from prioik.robots import run_to_end
+    return run_to_end(run_steps(variant, scenario_variant, duration, dt, progress, scenario,
+                                algorithmic_error, velocity_gain))
+
+
+def run_steps(variant: Variant, scenario_variant: str, duration: float, dt: float,
+              progress=None, scenario="fencing", algorithmic_error: bool = True,
+              velocity_gain: float = VELOCITY_GAIN) -> Generator[int, None, Any]:
+    """:func:`run_one` one step at a time: the run set up now (its errors raised here),
+    as a generator that yields after each step (outside the timed phases) and returns
+    the result (:func:`prioik.robots.simulation_steps`); :func:`run_scenario` advances
+    its runs in turns.
+
+    Raises:
+        UnsupportedTaskError, FormulationError: as :func:`run_one`.
+    """
     from prioik.robots.scenario import make
-    from prioik.robots.simulate import coordinate_names
     sc = make(scenario, scenario_variant) if isinstance(scenario, str) else scenario
     if variant.armature:
         robot = sc.robot.with_armature(variant.armature)
@@ -114,20 +136,27 @@ def run_one(variant: Variant, scenario_variant: str, duration: float, dt: float,
             sc = dataclasses.replace(sc, robot=robot)
         else:  # pragma: no cover - every scenario is a dataclass
             sc.robot = robot
-    res = _run(variant, sc, duration, dt, progress, algorithmic_error, velocity_gain)
-    res.q_names, res.v_names = coordinate_names(sc.robot)
-    res.info.update({**sc.info(), **variant.to_dict(), "backend": variant.backend,
+    steps = _steps(variant, sc, duration, dt, progress, algorithmic_error, velocity_gain)
+    return _labelled(steps, variant, sc, dt, duration)
+
+
+def _labelled(steps, variant: Variant, scenario, dt: float, duration: float):
+    """``steps`` whose result gets the joint names and the run's ``info``."""
+    from prioik.robots.simulate import coordinate_names
+    res = yield from steps
+    res.q_names, res.v_names = coordinate_names(scenario.robot)
+    res.info.update({**scenario.info(), **variant.to_dict(), "backend": variant.backend,
                      "dt": dt, "duration": duration})
     return res
 
 
-def _run(variant: Variant, scenario, duration: float, dt: float, progress,
-         algorithmic_error: bool, velocity_gain: float):
+def _steps(variant: Variant, scenario, duration: float, dt: float, progress,
+           algorithmic_error: bool, velocity_gain: float):
     from prioik.hierarchy import UnsupportedTaskError
-    from prioik.robots import simulate
+    from prioik.robots import simulation_steps
     if variant.external:
         mod = importlib.import_module(BASELINES[variant.formulation])
-        return mod.run(scenario, variant, duration=duration, dt=dt, progress=progress)
+        return mod.steps(scenario, variant, duration=duration, dt=dt, progress=progress)
     from prioik import formulations
     caps = formulations.get(variant.formulation).CAPABILITIES
     limits = stack_limits(variant)
@@ -138,14 +167,66 @@ def _run(variant: Variant, scenario, duration: float, dt: float, progress,
                                        "inequality tasks (joint limits as bounds on q̇)",
                                        formulation=variant.formulation, task="joint_limits")
         build = scenario.step_builder("velocity", limits, dt, velocity_gain)
-        return simulate(scenario.robot, build, solve, duration=duration, dt=dt,
-                        level="velocity", progress=progress,
-                        algorithmic_error=algorithmic_error)
+        return simulation_steps(scenario.robot, build, solve, duration=duration, dt=dt,
+                                level="velocity", progress=progress,
+                                algorithmic_error=algorithmic_error)
     build = scenario.step_builder("acceleration", limits, dt)
     dyn = caps.needs_mass_matrix
-    return simulate(scenario.robot, build, solve, duration=duration, dt=dt,
-                    needs_dynamics=dyn, torque_from_solution=dyn, progress=progress,
-                    algorithmic_error=algorithmic_error)
+    return simulation_steps(scenario.robot, build, solve, duration=duration, dt=dt,
+                            needs_dynamics=dyn, torque_from_solution=dyn,
+                            progress=progress, algorithmic_error=algorithmic_error)
+
+
+def add_turn_steps_argument(parser) -> None:
+    """The ``--turn-steps`` option of the scenario commands (:func:`run_scenario`)."""
+    def steps(text: str) -> int:
+        value = int(text)
+        if value < 0:
+            raise ValueError(text)
+        return value
+    steps.__name__ = "non-negative integer"       # argparse's "invalid … value" message
+    parser.add_argument("--turn-steps", type=steps, default=TURN_STEPS, metavar="N",
+                        help=f"steps each run takes per turn: a variant's runs advance in "
+                             f"turns, so their step times meet the same machine speed (0: "
+                             f"one run after another; default {TURN_STEPS})")
+
+
+def in_turns(runs: dict[str, Generator], block: int,
+             on_turn: Callable[[int], None] | None = None
+             ) -> tuple[dict[str, Any], dict[str, float]]:
+    """Advance step generators (:func:`run_steps`) in turns, ``block`` steps of each at a
+    time (``0``: each to its end before the next), until every one has ended.
+
+    Runs that follow one another are minutes apart, and a shared machine's speed drifts
+    over minutes (the same run's median step varied by 1.5x between runs); runs advanced
+    in turns of a few hundred milliseconds meet the same drift, so their medians compare.
+
+    Args:
+        runs: Label → step generator.
+        block: Steps per turn.
+        on_turn: Called after each turn with the steps it took (a progress bar).
+
+    Returns:
+        ``(results, seconds)``: each run's result and the wall time spent in it.
+    """
+    results: dict[str, Any] = {}
+    seconds = {label: 0.0 for label in runs}
+    live = dict(runs)
+    while live:
+        for label, steps in list(live.items()):
+            t0 = time.perf_counter()
+            taken = 0
+            try:
+                while block == 0 or taken < block:
+                    next(steps)
+                    taken += 1
+            except StopIteration as stop:
+                results[label] = stop.value
+                del live[label]
+            seconds[label] += time.perf_counter() - t0
+            if on_turn is not None:
+                on_turn(taken)
+    return {label: results[label] for label in runs}, seconds
 
 
 def summarize(res, errors: tuple[str, ...]) -> dict[str, Any]:
@@ -233,8 +314,11 @@ def run_scenario(scenario: str, variants: list[str], out, labels: str | None = N
                  duration: float = 3.0, dt: float = 0.002, progress: bool = True,
                  on_run: Callable[[str, Variant, Any], None] | None = None,
                  on_variant: Callable[[str, dict], None] | None = None,
-                 diagnostics: dict[str, Any] | None = None) -> ScenarioRuns:
-    """Run the selected runs of ``scenario``'s table on each of its ``variants``.
+                 diagnostics: dict[str, Any] | None = None,
+                 turn_steps: int = TURN_STEPS) -> ScenarioRuns:
+    """Run the selected runs of ``scenario``'s table on each of its ``variants``: the
+    runs of a variant advanced in turns of ``turn_steps`` steps (:func:`in_turns`), so
+    the table's step times are measured under the same machine conditions.
 
     Args:
         labels: Comma-separated run labels (``None``: the table's default selection).
@@ -243,6 +327,8 @@ def run_scenario(scenario: str, variants: list[str], out, labels: str | None = N
         on_variant: Called after each scenario variant with its results by label.
         diagnostics: The experiment's measurements, stored in ``run_info.json``
             (hooks may add to it).
+        turn_steps: Steps per run and turn (``0``: each run to its end before the
+            next).
     """
     from prioik.benchmarks.plots import scenario_figures, step_time_figure
     from prioik.benchmarks.progress import simulated_time_bar
@@ -266,25 +352,36 @@ def run_scenario(scenario: str, variants: list[str], out, labels: str | None = N
     diagnostics = {} if diagnostics is None else diagnostics
     wall0 = time.perf_counter()
     for sv in variants:
-        results = {}
         summary[sv] = {}
         phases[sv] = {}
+        started: dict[str, Generator] = {}
         for v in chosen:
             if not v.runs_in(sv):
                 continue
-            t0 = time.perf_counter()
-            bar, tick = simulated_time_bar(f"[{sv}] {v.label}", duration, progress)
             try:
-                res = run_one(v, sv, duration, dt, progress=tick, scenario=scenario)
+                started[v.label] = run_steps(v, sv, duration, dt, scenario=scenario)
             except UnsupportedTaskError as exc:
                 msg = f"{v.label} ({sv}): cannot take the stack: {exc}"
                 print(f"skipping {msg}", file=sys.stderr)
                 skipped_runs.append(msg)
+        bar, tick = simulated_time_bar(f"[{sv}] {len(started)} runs in turns",
+                                       duration * len(started), progress)
+        simulated = [0.0]
+
+        def on_turn(steps: int) -> None:
+            simulated[0] += steps * dt
+            tick(simulated[0])
+
+        try:
+            results, seconds = in_turns(started, turn_steps,
+                                        on_turn if tick is not None else None)
+        finally:
+            if bar is not None:
+                bar.close()
+        for v in chosen:
+            if v.label not in results:
                 continue
-            finally:
-                if bar is not None:
-                    bar.close()
-            results[v.label] = res
+            res = results[v.label]
             summary[sv][v.label] = summarize(res, errors)
             phases[sv][v.label] = tuple(
                 float(np.median(x)) if res.steps else float("nan")
@@ -294,7 +391,7 @@ def run_scenario(scenario: str, variants: list[str], out, labels: str | None = N
             res.save(out / f"{stem}.npz")
             if res.failed:
                 messages.setdefault(sv, {})[v.label] = res.message
-            print(f"[{sv}] {v.label}: {res.steps} steps in {time.perf_counter() - t0:.1f} s"
+            print(f"[{sv}] {v.label}: {res.steps} steps in {seconds[v.label]:.1f} s"
                   f"{' — FAILED: ' + res.message if res.failed else ''}",
                   file=sys.stderr, flush=True)
             if on_run is not None:
@@ -318,7 +415,7 @@ def run_scenario(scenario: str, variants: list[str], out, labels: str | None = N
                                "armature": v.armature, "only_in": list(v.only_in),
                                "origin": v.origin} for v in chosen},
             "skipped": skipped_runs, "phases": phases, "messages": messages,
-            "replays": replays, "diagnostics": diagnostics,
+            "replays": replays, "diagnostics": diagnostics, "turn_steps": turn_steps,
             "wall_time_s": time.perf_counter() - wall0}
     (out / "run_info.json").write_text(json.dumps(meta, indent=2, default=str) + "\n")
     print(f"wrote {out / 'summary.json'}, {sum(len(v) for v in pngs.values())} plots and "

@@ -51,7 +51,8 @@ SCENARIO_REPORTS = ("fencing", "arm", "sweep")
 BACKEND_REPORTS = ("bench", "validate")
 #: external IK libraries run in the scenario reports: name → module (``NAME``,
 #: ``DESCRIPTION``, ``REPORT_VARIANTS``, ``unavailable_reason(options)``,
-#: ``run(scenario, variant, duration=, dt=, progress=)``)
+#: ``steps(scenario, variant, duration=, dt=, progress=)``: the run as a step generator
+#: that returns its result, as :func:`prioik.robots.simulation_steps`)
 BASELINES = {"placo_kinematics_solver": "prioik.benchmarks.placo_baseline",
              "pink": "prioik.benchmarks.pink_baseline"}
 #: scenario → the experiment module whose ``STUDIES`` (a tuple of :class:`Variant`) add

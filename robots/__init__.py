@@ -20,7 +20,8 @@ from .models import (LOADERS, PANDA_FINGERS, ModelNotFoundError, RobotModel, Sta
                      spatial_chain, talos, ur5)
 from .references import Reference, Waypoints, minimum_jerk
 from .rows import MODES, TaskWriter
-from .simulate import SimulationError, SimulationResult, StepTasks, equality_view, simulate
+from .simulate import (SimulationError, SimulationResult, StepTasks, equality_view, run_to_end,
+                       simulate, simulation_steps)
 from .tasks import (JointLimitActivation, KinematicState, TaskTerm, com_position, contact,
                     frame_orientation, frame_pose, frame_position, joint_limit_bounds,
                     joint_limit_rows, joint_limit_violation, joint_velocity_bounds,
@@ -31,7 +32,8 @@ __all__ = [
     "check_configuration", "check_velocity", "example_robot_data_dir",
     "from_urdf", "g1", "go2", "has_free_flyer", "load", "panda", "sample_humanoid", "solo12",
     "spatial_chain", "talos", "ur5", "Reference", "Waypoints", "minimum_jerk",
-    "MODES", "TaskWriter", "SimulationError", "SimulationResult", "StepTasks", "equality_view", "simulate", "JointLimitActivation",
+    "MODES", "TaskWriter", "SimulationError", "SimulationResult", "StepTasks", "equality_view", "simulate",
+    "simulation_steps", "run_to_end", "JointLimitActivation",
     "KinematicState", "TaskTerm", "com_position", "contact", "frame_orientation",
     "frame_pose", "frame_position", "joint_limit_bounds", "joint_limit_rows",
     "joint_limit_violation", "joint_velocity_bounds", "point_position", "posture",

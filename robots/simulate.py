@@ -33,7 +33,7 @@ import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Generator
 
 import numpy as np
 import pinocchio as pin
@@ -49,8 +49,8 @@ from .tasks import KinematicState
 STATUSES = ("optimal", "approximate", "failed")
 _ANSWERED = frozenset(("optimal", "approximate"))
 
-__all__ = ["StepTasks", "SimulationError", "SimulationResult", "simulate", "equality_view",
-           "coordinate_names"]
+__all__ = ["StepTasks", "SimulationError", "SimulationResult", "simulate", "simulation_steps",
+           "run_to_end", "equality_view", "coordinate_names"]
 
 
 @dataclass
@@ -450,9 +450,39 @@ def simulate(robot: RobotModel, build: BuildFn, solve: SolveFn, *, duration: flo
             ``dt > duration``, or an unknown ``level``. Errors during the run end it as
             ``failed`` instead.
     """
+    return run_to_end(simulation_steps(
+        robot, build, solve, duration=duration, dt=dt, q0=q0, v0=v0,
+        needs_dynamics=needs_dynamics, torque_from_solution=torque_from_solution,
+        algorithmic_error=algorithmic_error, divergence_limit=divergence_limit, level=level,
+        progress=progress))
+
+
+def simulation_steps(robot: RobotModel, build: BuildFn, solve: SolveFn, *, duration: float,
+                     dt: float, q0=None, v0=None, needs_dynamics: bool = False,
+                     torque_from_solution: bool = False, algorithmic_error: bool = True,
+                     divergence_limit: float = 1e6, level: str = "acceleration",
+                     progress: Callable[[float], None] | None = None
+                     ) -> Generator[int, None, SimulationResult]:
+    """:func:`simulate` one step at a time: a generator that yields the step's index
+    after each step (outside the timed phases) and returns the
+    :class:`SimulationResult` (``StopIteration.value``; :func:`run_to_end` drives it).
+    Several runs advanced in turns are timed under the same machine conditions (see
+    :func:`prioik.benchmarks.scenario_runs.run_scenario`). The arguments are
+    :func:`simulate`'s, checked here, before the first step.
+
+    Raises:
+        SimulationError: as :func:`simulate`.
+    """
     _check_times(duration, dt)
     if level not in ("acceleration", "velocity"):
         raise SimulationError(f"level must be 'acceleration' or 'velocity', got {level!r}")
+    return _steps(robot, build, solve, duration, dt, q0, v0, needs_dynamics,
+                  torque_from_solution, algorithmic_error, divergence_limit, level, progress)
+
+
+def _steps(robot, build, solve, duration, dt, q0, v0, needs_dynamics, torque_from_solution,
+           algorithmic_error, divergence_limit, level, progress):
+    """The generator of :func:`simulation_steps` (its arguments checked)."""
     model = robot.model
     data = model.createData()
     dyn = model.createData()
@@ -546,6 +576,7 @@ def simulate(robot: RobotModel, build: BuildFn, solve: SolveFn, *, duration: flo
             break
         if progress is not None and (k + 1) % 250 == 0:
             progress(t + dt)
+        yield k
     nq, nv = robot.nq, robot.nv
 
     def arr(rows, width):
@@ -558,3 +589,13 @@ def simulate(robot: RobotModel, build: BuildFn, solve: SolveFn, *, duration: flo
                                      dtype=float),
                             np.array(TK), np.array(TS),
                             np.array(TT), ST, failed, message, failed_step=failed_step)
+
+
+def run_to_end(steps: Generator[Any, None, Any]) -> Any:
+    """Advance a step generator (:func:`simulation_steps`) to its end; its return
+    value (the result)."""
+    while True:
+        try:
+            next(steps)
+        except StopIteration as stop:
+            return stop.value

@@ -103,3 +103,11 @@ def test_compile_prints_each_compiled_formulation_and_refuses_others(capsys):
     assert main(["compile", "--formulations", "reference"]) == 2
     err = capsys.readouterr().err.strip()
     assert "'reference' has no compiled kernels" in err and len(err.splitlines()) == 1
+
+
+@pytest.mark.parametrize("command", ["fencing", "arm"])
+def test_turn_steps_must_be_a_non_negative_integer(command, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main([command, "--turn-steps", "-1"])
+    assert exc.value.code == 2
+    assert "--turn-steps: invalid non-negative integer value: '-1'" in capsys.readouterr().err

@@ -168,6 +168,9 @@ def test_fencing_command_times_the_headline_pair_side_by_side(tmp_path):
     assert side["ratio"] == pytest.approx(best["extended_jacobian"]
                                           / best["placo_kinematics_solver"])
     assert "**Side by side.**" in doc.read_text()
+    # the table's runs advanced in turns (the default), which the page says
+    assert json.loads((out / "run_info.json").read_text())["turn_steps"] == 100
+    assert "advanced in turns of 100 steps each" in doc.read_text()
 
 
 def test_fencing_command_rejects_unknown_runs_and_skips_unavailable(tmp_path, monkeypatch,

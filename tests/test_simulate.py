@@ -233,3 +233,20 @@ def test_rows_written_in_place_keep_each_steps_algorithmic_error(chain):
     errors = [r.algorithmic_error for r in runs]
     assert np.all(errors[0][10:] > 1e-7) and np.ptp(errors[0]) > 1e-3
     np.testing.assert_array_equal(errors[1], errors[0])
+
+
+def test_simulation_steps_yields_each_step_and_returns_simulates_result(chain):
+    """The step generator (what run_scenario advances in turns) checks its arguments
+    before the first step, yields once per step and returns what simulate returns."""
+    from prioik.robots import run_to_end, simulation_steps
+    solve = lambda s, **kw: formulations.solve(s, "extended_jacobian")   # noqa: E731
+    with pytest.raises(SimulationError, match="level must be"):
+        simulation_steps(chain, _build(chain), solve, duration=0.1, dt=0.002, level="torque")
+    steps = simulation_steps(chain, _build(chain), solve, duration=0.1, dt=0.002)
+    assert [next(steps) for _ in range(3)] == [0, 1, 2]
+    rest = run_to_end(steps)
+    whole = simulate(chain, _build(chain), solve, duration=0.1, dt=0.002)
+    assert rest.steps == whole.steps == 50
+    np.testing.assert_array_equal(rest.q, whole.q)
+    np.testing.assert_array_equal(rest.a, whole.a)
+    np.testing.assert_array_equal(rest.errors["tip_error"], whole.errors["tip_error"])
