@@ -41,10 +41,10 @@ __all__ = ["VELOCITY_GAIN", "TURN_STEPS", "run_table", "run_one", "run_steps", "
 
 #: ``K`` (1/s) of the velocity-level runs
 VELOCITY_GAIN = 20.0
-#: steps each run of :func:`run_scenario` takes per turn (:func:`in_turns`): at the G1's
-#: 50-100 µs per step a turn lasts milliseconds, so the runs meet the same machine speed;
-#: a run's first step in a turn (caches warmed by the others) moves its median by
-#: less than one step in a hundred
+#: steps each run of :func:`run_scenario` takes per turn (:func:`in_turns`): a turn lasts
+#: milliseconds (the G1's 50-100 µs steps) to half a second (the slowest QP runs), so the
+#: runs meet the same machine speed, and one step in a hundred starts with the caches the
+#: other runs left
 TURN_STEPS = 100
 
 
@@ -199,7 +199,8 @@ def in_turns(runs: dict[str, Generator], block: int,
 
     Runs that follow one another are minutes apart, and a shared machine's speed drifts
     over minutes (the same run's median step varied by 1.5x between runs); runs advanced
-    in turns of a few hundred milliseconds meet the same drift, so their medians compare.
+    in turns of milliseconds to a fraction of a second meet the same drift, so their
+    medians compare.
 
     Args:
         runs: Label → step generator.
