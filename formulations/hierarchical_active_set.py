@@ -87,7 +87,11 @@ may not be the optimum: the answer is then checked by
 ends with a held soft row inside its bound beyond ``x``'s precision but within its
 release tolerance (``info["near_release_levels"]``): a row of norm 739 held beside one
 of norm 0.0021 stayed held 4.4e-11 inside its bound, under a tolerance of 7.4e-11, and
-left its level at 2.6x the optimum.
+left its level at 2.6x the optimum. When the certificate rejects such an answer, the
+stack is solved again, cold, at :data:`REFINE` times ``primal_tol`` (the release
+tolerance scales with it), and that answer is returned when it is ``optimal`` and passes
+the certificate (``info["refined_primal_tol"]``); otherwise the first answer says
+``approximate``.
 
 *Warm start.* :class:`Prepared` keeps each level's working set at its optimum; the
 next solve first tries, per level, the step of last time's working set: when the
@@ -137,6 +141,9 @@ except ImportError as exc:  # pragma: no cover - numba is a declared dependency
 _SOLVED_CLEAN, _SOLVED_INFEASIBLE, _NOT_TRIED = (
     (_kernel.SOLVED_CLEAN, _kernel.SOLVED_INFEASIBLE, _kernel.NOT_TRIED)
     if _kernel is not None else (-1, -1, -2))
+
+#: ``primal_tol`` of the refining solve over the solver's (:meth:`Prepared._refined`)
+REFINE = 1e-2
 
 #: the kernels' one signature (prioik._jit.compile_once): the stack's five row arrays,
 #: then the float, int and int8 workspaces
@@ -225,6 +232,9 @@ class Prepared:
         self.dual_tol = float(options["dual_tol"])
         self.max_iter = int(options["max_iter"])
         self.warm_start = bool(options["warm_start"])
+        #: whether a rejected near-release answer is re-solved (:meth:`_refined`; not
+        #: by the refining solve itself)
+        self._refine = True
         _compile_kernels(self.warm_start)
         # the equality-first try needs the equality rows' solve (an inequality-only stack
         # has none to try)
@@ -357,7 +367,12 @@ class Prepared:
         near = (np.flatnonzero(flags == _kernel.FLAG_NEAR_RELEASE).tolist()
                 if ambiguous else [])
         if (path or near) and not levels and flag == 0.0:
-            reasons.extend(self._certify_path(data, x, path, near, info))
+            rejected = self._certify_path(data, x, path, near, info)
+            if rejected and near and self._refine:
+                refined = self._refined(data, info, rejected[0])
+                if refined is not None:
+                    return refined
+            reasons.extend(rejected)
         if unresolved:
             reasons.append(f"‖x‖ = {xn:.3g}: x's coordinates are known to about "
                            f"{X_PRECISION * xn:.2g}, coarser than the primal tolerance of "
@@ -369,6 +384,26 @@ class Prepared:
         if large:
             status = precision_status(status, info, data, x)
         return Outcome(x, status, info, residuals=residuals, checked=True)
+
+    def _refined(self, data: StackData, info: dict, rejected: str) -> Outcome | None:
+        """The stack re-solved cold at :data:`REFINE` times ``primal_tol``, after the
+        certificate rejected an answer with a near-release level: the release tolerance
+        scales with ``primal_tol``, so the row it kept held inside its bound is released.
+        The refined answer is returned only when it is ``optimal`` and passes
+        :func:`~prioik.hierarchy.check_lexicographic` (``info["refined_primal_tol"]``, and
+        the first answer's reason in ``info["refined_from"]``); ``None`` otherwise."""
+        tol = self.primal_tol * REFINE
+        again = Prepared(self.layout, {"rcond": self.rcond, "primal_tol": tol,
+                                       "dual_tol": self.dual_tol, "max_iter": self.max_iter,
+                                       "warm_start": False})
+        again._refine = False
+        out = again.solve(data)
+        if out.status != "optimal" or not check_lexicographic(data.as_stack(), out.x).ok:
+            return None
+        out.info.update(refined_primal_tol=tol, refined_from=rejected,
+                        near_release_levels=info["near_release_levels"], path_certified=True,
+                        warm_start=self.warm_start)
+        return out
 
     def _certify_path(self, data: StackData, x: np.ndarray, path: list[int],
                       near: list[int], info: dict) -> list[str]:

@@ -986,7 +986,7 @@ def test_independent_12_407_level_1_reaches_its_optimum():
     assert sol.status != "optimal" or sol.residuals[1] ** 2 <= 149.888905
 
 
-def test_bounds_31_1103_held_row_within_its_release_tolerance_is_certified():
+def test_bounds_31_1103_held_row_within_its_release_tolerance_is_refined():
     """prioik fuzz --seed 31 --kind bounds, case 1103 (n 7, found at stop 29). Level 0
     holds four box rows on x_0 of norms 739, 24.5, 0.0036 and 0.0021 whose intervals
     do not meet: the optimum (cascaded_qp[quadprog], certified) leaves 9.16e-11 at
@@ -995,20 +995,44 @@ def test_bounds_31_1103_held_row_within_its_release_tolerance_is_certified():
     its bound by 4.4e-11, under the release tolerance primal_tol·_RELEASE·(|a|(|x_0| +
     1) + |bound|) = 7.4e-11 (the row's value is 0.24, its size 739), so the row stays
     held and level 0 ends at 2.34e-10 (2.6x). The kernel flags such a level
-    (FLAG_NEAR_RELEASE: a held row inside its bound beyond x's precision, within its
-    release tolerance) and the solver certifies the answer: rejected (a gradient of
-    1.5e-5 at level 0), it says 'approximate' and names the level."""
+    (FLAG_NEAR_RELEASE), the certificate rejects the answer (a gradient of 1.5e-5 at
+    level 0), and the solver re-solves at REFINE·primal_tol, where the row is released:
+    that answer is certified and every level equals quadprog's."""
     from prioik.benchmarks.fuzz import draw
     from prioik.hierarchy import check_lexicographic
+    stack = draw("bounds", 31, 1103).stack
+    sol = prioik.solve(stack, NAME)
+    assert sol.status == "optimal" and check_lexicographic(stack, sol.x).ok
+    assert sol.info["near_release_levels"] == [0] and sol.info["path_certified"] is True
+    assert sol.info["refined_primal_tol"] == pytest.approx(1e-12)
+    assert "level 0 ended with a held row inside its bound" in sol.info["refined_from"]
+    ref = prioik.solve(stack, "cascaded_qp", solver="quadprog")
+    assert ref.status == "optimal" and check_lexicographic(stack, ref.x).ok
+    w, wq = sol.residuals ** 2, ref.residuals ** 2
+    assert np.all(np.abs(w - wq) <= 1e-9 * np.maximum(1.0, wq))
+    assert w[0] == pytest.approx(9.16227e-11, rel=1e-5)
+    # the same from a prepared, warm solver (the refining solve is cold and separate)
+    warm = prioik.prepare(stack.layout, NAME)
+    again = warm.solve(stack)
+    assert again.status == "optimal" and np.array_equal(again.x, sol.x)
+
+
+def test_a_refined_answer_the_certificate_rejects_stays_approximate(monkeypatch):
+    """With the refining solve at the same tolerance (REFINE = 1) it finds the same
+    answer, which the certificate rejects: the first answer is returned, 'approximate',
+    naming the level (the refinement is taken only when certified)."""
+    from prioik.benchmarks.fuzz import draw
+    from prioik.formulations import hierarchical_active_set as H
+    from prioik.hierarchy import check_lexicographic
+    monkeypatch.setattr(H, "REFINE", 1.0)
     stack = draw("bounds", 31, 1103).stack
     sol = prioik.solve(stack, NAME)
     assert not check_lexicographic(stack, sol.x).ok
     assert sol.status == "approximate" and sol.info["path_certified"] is False
     assert sol.info["near_release_levels"] == [0] and sol.info["ambiguous_levels"] == [0]
+    assert "refined_primal_tol" not in sol.info
     assert "level 0 ended with a held row inside its bound" in sol.info["reason"]
-    # the optimum it misses: quadprog's cascade, certified, 2.6x lower at level 0
     ref = prioik.solve(stack, "cascaded_qp", solver="quadprog")
-    assert ref.status == "optimal" and check_lexicographic(stack, ref.x).ok
     assert sol.residuals[0] ** 2 > 2.5 * ref.residuals[0] ** 2
 
 
