@@ -333,3 +333,25 @@ def test_a_level_left_violated_by_a_solvers_slack_is_not_read_as_its_optimum(ind
     assert not report.ok and report.fault_level == {167: 1, 472: 2}[index]
     assert sol.status != "optimal"
     assert check_lexicographic(stack, best.x, minimum_norm=True).ok and best.status == "optimal"
+
+
+def test_small_equality_residuals_beside_large_ones_are_judged_by_the_kkt_test():
+    """Fuzz inequality-101-836 (n 28): level 1 (16 equality rows of norm up to 7e4) ends
+    at ‖w‖² 1.5135e8 in every solver (the active set, quadprog, clarabel, DAQP agree to
+    3e-13 relative); its projected rows have singular values 3e-8 and below, under the
+    rank rule. Some of its rows end with residuals under 1e-6 of their size. The LP of
+    the slack check met them along those directions and rejected every answer at 1.8e-8;
+    beside the level's large residuals they are its least-squares spread, judged by the
+    KKT test (its residual: 9e-12). A perturbed answer is still rejected."""
+    from pathlib import Path
+
+    from prioik.hierarchy import load_stack
+    stack = load_stack(Path(__file__).parent / "data" / "fuzz" / "inequality-101-836.json")
+    sol = formulations.solve(stack, "hierarchical_active_set")
+    report = check_lexicographic(stack, sol.x)
+    assert report.ok and report.levels[1].relative < 1e-12
+    q = formulations.solve(stack, "cascaded_qp", solver="quadprog")
+    assert q.status == "optimal" and check_lexicographic(stack, q.x).ok
+    assert abs(q.residuals[1] ** 2 - sol.residuals[1] ** 2) <= 1e-12 * q.residuals[1] ** 2
+    rng = np.random.default_rng(0)
+    assert not check_lexicographic(stack, sol.x + 1e-6 * rng.standard_normal(stack.n)).ok
