@@ -249,3 +249,18 @@ def test_prioik_fuzz_command(tmp_path, capsys):
 def test_prioik_fuzz_refuses_an_unknown_path(capsys):
     assert main(["fuzz", "--n", "1", "--paths", "magic"]) == 2
     assert "unknown fuzz path 'magic'" in capsys.readouterr().err
+
+
+def test_rounding_error_counts_the_higher_levels_turned_null_spaces():
+    """Fuzz equality-101-579 (n 55): level 0 keeps a singular value 1.05e-6 of its norm
+    (κ 1e6), level 3 one of 6.6e-6 below it. A 40-digit nested SVD (mpmath, same rank
+    decisions) puts reference, nullspace and sns 2.4e-5 from it, the extended Jacobian
+    1.7e-5, the active set 4.3e-6 and the fuzz's own float64 truth 8.7e-6: rounding
+    turns level 0's null space by ~ε κ_0 and level 3 amplifies that by κ_3. Wedin's
+    bound per level alone read 2e-9 and judged the stack well-conditioned, so three
+    paths were 'wrong'; with the higher levels' turn it reads 3e-5 and the stack is not
+    judged on x."""
+    from prioik.hierarchy.fuzz import CONDITIONED_ERROR, judged
+    case = judged(load_stack(Path(__file__).parent / "data" / "fuzz" / "equality-101-579.json"))
+    assert case.rounding_error > 1e-5 and not case.well_conditioned
+    assert CONDITIONED_ERROR == 1e-8
