@@ -18,7 +18,11 @@ the formulations. It also returns the gap of every rank decision, from which
 :attr:`FuzzCase.well_conditioned` is decided: a stack is well-conditioned when no
 singular value of a projected level ``A_i Z_i`` lies in the band
 ``[1e-13, 1e-4]·‖A_i‖_F`` around the rank threshold (so every sound solver makes the
-same rank decisions) and the exact answer is finite in float64.
+same rank decisions), the exact answer is finite in float64 and rounding moves it by at
+most ``CONDITIONED_ERROR``: the larger of Wedin's bound per level
+(:func:`rounding_error`) and the spread of the truth under a rotation of the unknowns
+(:func:`rotation_spread`, which sees what the bound per level does not: a level of
+``κ`` 1e5 below one of ``κ`` 1e6 amplifies how rounding turns the higher null space).
 """
 
 from __future__ import annotations
@@ -33,7 +37,7 @@ from .task import Task
 
 __all__ = ["FuzzCase", "bounds_case", "equality_case", "inequality_case", "judged",
            "nested_truth",
-           "rounding_error", "AMBIGUOUS_BAND", "CONDITIONED_ERROR", "ROW_FEATURES"]
+           "rounding_error", "rotation_spread", "AMBIGUOUS_BAND", "CONDITIONED_ERROR", "ROW_FEATURES"]
 
 #: Singular values ``σ / ‖A_i‖_F`` in this band make a rank decision ambiguous (the
 #: solvers' threshold is 1e-9).
@@ -65,8 +69,8 @@ class FuzzCase:
             the band ends (negative: inside the band).
         min_sigma: Smallest kept ``σ / ‖A_i‖_F`` of any level (1 when none is kept):
             how much a level amplifies rounding.
-        rounding_error: The Wedin bound on the relative error rounding causes in ``x``
-            (see the module docstring).
+        rounding_error: How far rounding may move ``x`` (relative): the larger of the
+            Wedin bound per level and the rotation spread (see the module docstring).
     """
 
     stack: TaskStack
@@ -169,15 +173,33 @@ def judged(stack: TaskStack, seed: int = -1, features: list[list[str]] | None = 
     verdict (what :func:`equality_case` returns; for stacks saved by ``prioik fuzz``)."""
     case = FuzzCase(stack, seed, "equality", features or [])
     case.truth, case.min_gap, case.min_sigma = nested_truth(case.stack)
-    case.rounding_error = rounding_error(case.stack, case.truth)
+    case.rounding_error = max(rounding_error(case.stack, case.truth),
+                              rotation_spread(case.stack, case.truth))
     case.well_conditioned = bool(case.min_gap > 0 and np.isfinite(case.truth).all()
                                  and case.rounding_error <= CONDITIONED_ERROR)
     return case
 
 
-def nested_truth(stack: TaskStack, rcond: float = 1e-9
+def rotation_spread(stack: TaskStack, truth: np.ndarray, seed: int = 0) -> float:
+    """``‖x − Q x'‖ / max(1, ‖x‖)`` with ``x'`` the :func:`nested_truth` of the stack in
+    the unknowns ``x = Q x'`` (``Q`` a seeded random rotation): the same problem
+    rounded differently, so the spread measures what rounding does to this stack's
+    answer (fuzz equality-101-579: 1.7e-5, where a 40-digit solve put every float64
+    answer 4e-6 to 2.4e-5 away and Wedin's bound per level read 2e-9)."""
+    if not np.isfinite(truth).all():
+        return np.inf
+    q, r = np.linalg.qr(np.random.default_rng(seed).standard_normal((stack.n, stack.n)))
+    rotation = q * np.sign(np.diag(r))
+    rotated, _, _ = nested_truth(stack, rotation=rotation)
+    return float(np.linalg.norm(truth - rotation @ rotated)
+                 / max(1.0, float(np.linalg.norm(truth))))
+
+
+def nested_truth(stack: TaskStack, rcond: float = 1e-9, rotation: np.ndarray | None = None
                  ) -> tuple[np.ndarray, float, float]:
-    """Minimum-norm lexicographic least squares by nested SVD on equilibrated levels.
+    """Minimum-norm lexicographic least squares by nested SVD on equilibrated levels
+    (with ``rotation`` ``Q``: of the stack in the unknowns ``x = Q x'``, returning
+    ``x'``).
 
     Returns:
         ``(x, min_gap, min_sigma)``: the answer, the smallest distance, in decades,
@@ -191,6 +213,8 @@ def nested_truth(stack: TaskStack, rcond: float = 1e-9
     gap, sigma = np.inf, 1.0
     for level in stack.levels:
         A, b = level.A, level.b
+        if rotation is not None:
+            A = A @ rotation
         norm = float(np.linalg.norm(A))
         if norm == 0 or not np.isfinite(norm) or Z.shape[1] == 0:
             continue
@@ -213,19 +237,14 @@ def nested_truth(stack: TaskStack, rcond: float = 1e-9
 
 
 def rounding_error(stack: TaskStack, x: np.ndarray, rcond: float = 1e-9) -> float:
-    """``Σ_i δ_i (κ_i ‖x‖ + κ_i² ‖r_i‖) / max(1, ‖x‖)`` on equilibrated levels: how far
+    """``ε Σ_i (κ_i ‖x‖ + κ_i² ‖r_i‖) / max(1, ‖x‖)`` on equilibrated levels: how far
     rounding may move the lexicographic optimum ``x`` (relative; Wedin's bound per
-    level, ``κ_i = 1/σ_min(A_i Z_i)``, ``r_i = A_i x − b_i``, ``‖A_i‖_F = 1``), where
-    ``δ_i = ε (1 + Σ_{j<i} κ_j)`` is the relative perturbation of ``A_i Z_i``: rounding
-    turns each higher level's null space by about ``ε κ_j``. Without that term the
-    bound read 2e-9 on fuzz equality-101-579, whose level 3 (``κ`` 1.5e5) below a
-    level 0 of ``κ`` 1e6 moves every float64 answer by 1e-5 (a 40-digit solve)."""
+    level, ``κ_i = 1/σ_min(A_i Z_i)``, ``r_i = A_i x − b_i``, ``‖A_i‖_F = 1``)."""
     eps = np.finfo(float).eps
     xn = float(np.linalg.norm(x))
     if not np.isfinite(xn):
         return np.inf
     total = 0.0
-    turned = 0.0                 # Σ κ_j of the levels above
     Z = np.eye(stack.n)
     for level in stack.levels:
         norm = float(np.linalg.norm(level.A))
@@ -236,9 +255,7 @@ def rounding_error(stack: TaskStack, x: np.ndarray, rcond: float = 1e-9) -> floa
         r = int(np.count_nonzero(s > rcond))
         if r:
             kappa = 1.0 / float(s[r - 1])
-            total += (1.0 + turned) * (kappa * xn
-                                       + kappa ** 2 * float(np.linalg.norm(A @ x - b)))
-            turned += kappa
+            total += kappa * xn + kappa ** 2 * float(np.linalg.norm(A @ x - b))
         Z = Z @ vt[r:].T
     return eps * total / max(1.0, xn)
 

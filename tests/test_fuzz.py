@@ -251,16 +251,21 @@ def test_prioik_fuzz_refuses_an_unknown_path(capsys):
     assert "unknown fuzz path 'magic'" in capsys.readouterr().err
 
 
-def test_rounding_error_counts_the_higher_levels_turned_null_spaces():
+def test_rotation_spread_sees_rounding_the_per_level_bound_misses():
     """Fuzz equality-101-579 (n 55): level 0 keeps a singular value 1.05e-6 of its norm
     (κ 1e6), level 3 one of 6.6e-6 below it. A 40-digit nested SVD (mpmath, same rank
     decisions) puts reference, nullspace and sns 2.4e-5 from it, the extended Jacobian
     1.7e-5, the active set 4.3e-6 and the fuzz's own float64 truth 8.7e-6: rounding
-    turns level 0's null space by ~ε κ_0 and level 3 amplifies that by κ_3. Wedin's
-    bound per level alone read 2e-9 and judged the stack well-conditioned, so three
-    paths were 'wrong'; with the higher levels' turn it reads 3e-5 and the stack is not
-    judged on x."""
-    from prioik.hierarchy.fuzz import CONDITIONED_ERROR, judged
+    turns level 0's null space by ~ε κ_0 and level 3 amplifies that. Wedin's bound per
+    level read 2e-9 and judged the stack well-conditioned, so three paths were
+    'wrong'; the truth of the rotated problem is 2.4e-5 from the truth, and the stack is
+    not judged on x. The saved svd-path stacks 972 and 1071 (right to 3e-10 and 5e-10)
+    stay judged."""
+    from prioik.hierarchy.fuzz import CONDITIONED_ERROR, judged, rotation_spread, rounding_error
     case = judged(load_stack(Path(__file__).parent / "data" / "fuzz" / "equality-101-579.json"))
+    assert rounding_error(case.stack, case.truth) < CONDITIONED_ERROR
+    assert rotation_spread(case.stack, case.truth) > 1e-5
     assert case.rounding_error > 1e-5 and not case.well_conditioned
-    assert CONDITIONED_ERROR == 1e-8
+    for name in ("equality-2026-972", "equality-2026-1071"):
+        kept = judged(load_stack(Path(__file__).parent / "data" / "fuzz" / f"{name}.json"))
+        assert kept.well_conditioned and kept.rounding_error < CONDITIONED_ERROR
