@@ -25,7 +25,8 @@ every fuzzed path that takes the kind on each. A path fails a case when:
   kept ``σ / ‖A_i‖_F``, by which a level amplifies rounding), or on
   another stack two answers both called ``optimal`` differ by more than
   :data:`WRONG_TOL` or ten times the stack's rounding bound
-  (:attr:`~hierarchy.fuzz.FuzzCase.rounding_error`, Wedin's least-squares bound: on
+  (:attr:`~hierarchy.fuzz.FuzzCase.rounding_error`, Wedin's least-squares bound and
+  the truth's spread under a rotation of the unknowns; a same-shape variant's own: on
   such a stack float64 does not determine ``x`` any closer, and both answers may pass
   the certificate);
 * ``threads`` — the same solve run from several threads differs from the serial
@@ -61,7 +62,7 @@ from prioik.hierarchy import (TaskStack, TaskStackError, check_lexicographic,
                               relative_distance, save_stack)
 from prioik.hierarchy.families import same_shape_batch
 from prioik.hierarchy.fuzz import (FuzzCase, bounds_case, equality_case, inequality_case,
-                                   nested_truth, rounding_error)
+                                   nested_truth, rotation_spread, rounding_error)
 
 #: Relative distance from the ground truth above which an ``optimal`` answer is wrong.
 WRONG_TOL = 1e-6
@@ -157,6 +158,14 @@ class FuzzReport:
             out.append(f"| {path} | {solves} | " + " | ".join(str(c[k]) for k in KINDS)
                        + f" | {self.refused.get(path, 0)} | {st} |")
         return "\n".join(out)
+
+
+def _own_rounding(stack: TaskStack) -> float:
+    """How far rounding may move the answer of an equality stack (a same-shape variant,
+    which keeps its case's ranks but not its rounding): as
+    :attr:`~hierarchy.fuzz.FuzzCase.rounding_error`."""
+    truth = nested_truth(stack)[0]
+    return max(rounding_error(stack, truth), rotation_spread(stack, truth))
 
 
 def _case(kind: str, seed: int, index: int, sizes: dict | None = None) -> FuzzCase:
@@ -277,9 +286,8 @@ class _Runner:
             why = self._mismatch(batch.X[j], one.x, batch.statuses[j], one.status, well,
                                  case.min_sigma, case.rounding_error if j == 0 else 0.0)
             if why and j > 0 and case.kind == "equality":    # the variant's own bound
-                truth = nested_truth(s)[0]
                 why = self._mismatch(batch.X[j], one.x, batch.statuses[j], one.status,
-                                     False, 1.0, rounding_error(s, truth))
+                                     False, 1.0, _own_rounding(s))
             if why:
                 self.fail(case_id, case, "mismatch", path.name,
                           f"solve_batch row {j} vs solve: {why}")
@@ -300,6 +308,9 @@ class _Runner:
                 why = self._mismatch(got.x, one.x, got.status, one.status, well,
                                      case.min_sigma,
                                      case.rounding_error if s is stack else 0.0)
+                if why and s is not stack and case.kind == "equality":   # its own bound
+                    why = self._mismatch(got.x, one.x, got.status, one.status, False, 1.0,
+                                         _own_rounding(s))
                 if why:
                     self.fail(case_id, case, "mismatch", path.name,
                               f"prepared solve {j} (reused) vs solve: {why}")

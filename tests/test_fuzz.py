@@ -269,3 +269,17 @@ def test_rotation_spread_sees_rounding_the_per_level_bound_misses():
     for name in ("equality-2026-972", "equality-2026-1071"):
         kept = judged(load_stack(Path(__file__).parent / "data" / "fuzz" / f"{name}.json"))
         assert kept.well_conditioned and kept.rounding_error < CONDITIONED_ERROR
+
+
+def test_a_reused_solvers_variant_is_judged_by_its_own_rounding():
+    """Seed 303, case 842 (n 58): a prepared hierarchical_active_set reused over the
+    stack's same-shape variants answered variant 1 (warm: its equality rows alone)
+    1.02e-6 from the one-off solve, both 'optimal' and certified; the variant's own
+    rounding bound is 1.1e-5 (the truth 3e-6 from both), but the prepared comparison
+    judged variants at the fixed 1e-6. It now takes the variant's own bound, as the
+    solve_batch comparison did."""
+    case = fuzz.draw("equality", 303, 842)
+    report = fuzz.FuzzReport()
+    fuzz._Runner(report, threads=2, keep=20).run_case(
+        "equality-303-842", case, [fuzz.PATHS["hierarchical_active_set"]], check_threads=False)
+    _assert_clean(report)
