@@ -37,7 +37,8 @@ from .task import Task
 
 __all__ = ["FuzzCase", "bounds_case", "equality_case", "inequality_case", "judged",
            "nested_truth",
-           "rounding_error", "rotation_spread", "AMBIGUOUS_BAND", "CONDITIONED_ERROR", "ROW_FEATURES"]
+           "rounding_error", "rotation_spread", "AMBIGUOUS_BAND", "CONDITIONED_ERROR",
+           "ROW_FEATURES"]
 
 #: Singular values ``σ / ‖A_i‖_F`` in this band make a rank decision ambiguous (the
 #: solvers' threshold is 1e-9).
@@ -184,7 +185,7 @@ def rotation_spread(stack: TaskStack, truth: np.ndarray, seed: int = 0) -> float
     """``‖x − Q x'‖ / max(1, ‖x‖)`` with ``x'`` the :func:`nested_truth` of the stack in
     the unknowns ``x = Q x'`` (``Q`` a seeded random rotation): the same problem
     rounded differently, so the spread measures what rounding does to this stack's
-    answer (fuzz equality-101-579: 1.7e-5, where a 40-digit solve put every float64
+    answer (fuzz equality-101-579: 2.4e-5, where a 40-digit solve put every float64
     answer 4e-6 to 2.4e-5 away and Wedin's bound per level read 2e-9)."""
     if not np.isfinite(truth).all():
         return np.inf
