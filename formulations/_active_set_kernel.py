@@ -67,6 +67,12 @@ FLAG_AMBIGUOUS_PATH = 2
 #: resolution (a row of norm 739 held beside one of norm 0.0021: 2.6x the level's
 #: optimum, bounds-31-1103); the caller certifies the answer
 FLAG_NEAR_RELEASE = 3
+#: a held hard-for-below row ended off its bound beyond the primal tolerance but within
+#: the dual one, so it was kept held (a hard row at its bound for the levels below), not
+#: fixed at its violation: rows 1e-3 the size of their level's others, held so, blocked
+#: a direction they take only below the rank rule and left a lower level at 180x its
+#: optimum (fuzz inequality-7002-1384); the caller certifies the answer
+FLAG_HELD_OFF_BOUND = 4
 
 #: what :func:`solve_data` returns
 NOT_SOLVED = 0
@@ -932,7 +938,7 @@ def _summary(k, primal_tol, x, res, total, counts, flags, margins, fwork, unreso
     ambiguous = 0
     for lev in range(k + 1):
         if (margins[lev] <= _AMBIGUITY or flags[lev] == FLAG_AMBIGUOUS_PATH
-                or flags[lev] == FLAG_NEAR_RELEASE):
+                or flags[lev] == FLAG_NEAR_RELEASE or flags[lev] == FLAG_HELD_OFF_BOUND):
             ambiguous += 1
     fwork[8] = ambiguous
     fwork[9] = unresolved
@@ -1038,7 +1044,8 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
             iterations, :data:`FLAG_ITERATION_CAP` when the cap was hit or
             :data:`FLAG_AMBIGUOUS_PATH` when a step before the last made an ambiguous
             rank decision, :data:`FLAG_NEAR_RELEASE` when a held soft row ended inside
-            its bound within its release tolerance, rank fixed,
+            its bound within its release tolerance, :data:`FLAG_HELD_OFF_BOUND` when a
+            row off its bound was kept held for the levels below, rank fixed,
             ``1`` where the level's violation exceeds ``primal_tol max(1, ‖x‖)``).
         bwork: int8: the rows' equality flags, workspaces, ``warm_state`` and
             ``warm_valid`` (``(k + 1) × (M + n)`` working sets at each level's end, read
@@ -1418,6 +1425,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
         # took a direction the lower levels need (fuzzing: a level 4x worse, 'optimal')
         dscale = _dual_scale(dual_tol, scale, ynorm, tgt, nh, nw)
         nfix = 0
+        held_off = no
         for j in range(s0, s1):
             st = state[j]
             fix = eqr[j]
@@ -1425,11 +1433,16 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                 tb = blo[j] if st == -1 else bup[j]
                 off = abs(_odot(Bo, ucol, j, xc) - tb)
                 sz = _size(Bo, ucol, j, rnorm[j], ynorm, xc)
-                fix = off > _tol(primal_tol, sz, tb) and off * rnorm[j] > dscale
+                beyond = off > _tol(primal_tol, sz, tb)
+                fix = beyond and off * rnorm[j] > dscale
+                if beyond and not fix:
+                    held_off = yes
             if fix:
                 rows[nfix] = j
                 nfix += 1
                 state[j] = 5            # being fixed: rotated until its pivot is taken
+        if held_off and flags[lev] == FLAG_OK:
+            flags[lev] = FLAG_HELD_OFF_BOUND
         rf = 0
         if settled and full and nfix == nw:
             # the level has full column rank on the free coordinates (the step's

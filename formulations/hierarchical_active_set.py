@@ -71,7 +71,11 @@ A held row is fixed at the end of its level as *violated* only when it is off it
 bound beyond the primal tolerance and its violation (its multiplier) times
 ``‖√w_j a_j‖`` exceeds the second term of the dual tolerance: rows far smaller than
 their level's others end an optimum where they meet their bounds off them by the
-level's rounding, and fixing them would take directions the lower levels need.
+level's rounding, and fixing them would take directions the lower levels need. A
+level that keeps such a row held while it is off its bound beyond the primal tolerance
+is flagged and its answer certified (``info["held_off_bound_levels"]``): held, rows
+1e-3 the size of their level's others blocked a direction they take only below the
+rank rule and left a lower level at 180x its optimum.
 Every pivot norm of the last step's soft rows and of the fixing is checked against
 its threshold with the shared rule of :mod:`hierarchy.linalg`: within
 :data:`~hierarchy.AMBIGUITY` of it the decision is ambiguous (rounding may flip it,
@@ -88,8 +92,8 @@ ends with a held soft row inside its bound beyond ``x``'s precision but within i
 release tolerance (``info["near_release_levels"]``): a row of norm 739 held beside one
 of norm 0.0021 stayed held 4.4e-11 inside its bound, under a tolerance of 7.4e-11, and
 left its level at 2.6x the optimum. When the certificate rejects such an answer, the
-stack is solved again, cold, at :data:`REFINE` times ``primal_tol`` (the release
-tolerance scales with it), and that answer is returned when it is ``optimal`` and passes
+stack is solved again, cold, at :data:`REFINE` times ``primal_tol`` and ``dual_tol``
+(the release tolerance scales with the first), and that answer is returned when it is ``optimal`` and passes
 the certificate (``info["refined_primal_tol"]``); otherwise the first answer says
 ``approximate``.
 
@@ -142,7 +146,8 @@ _SOLVED_CLEAN, _SOLVED_INFEASIBLE, _NOT_TRIED = (
     (_kernel.SOLVED_CLEAN, _kernel.SOLVED_INFEASIBLE, _kernel.NOT_TRIED)
     if _kernel is not None else (-1, -1, -2))
 
-#: ``primal_tol`` of the refining solve over the solver's (:meth:`Prepared._refined`)
+#: ``primal_tol`` and ``dual_tol`` of the refining solve over the solver's
+#: (:meth:`Prepared._refined`)
 REFINE = 1e-2
 
 #: the kernels' one signature (prioik._jit.compile_once): the stack's five row arrays,
@@ -366,9 +371,11 @@ class Prepared:
                 if ambiguous else [])
         near = (np.flatnonzero(flags == _kernel.FLAG_NEAR_RELEASE).tolist()
                 if ambiguous else [])
-        if (path or near) and not levels and flag == 0.0:
-            rejected = self._certify_path(data, x, path, near, info)
-            if rejected and near and self._refine:
+        held = (np.flatnonzero(flags == _kernel.FLAG_HELD_OFF_BOUND).tolist()
+                if ambiguous else [])
+        if (path or near or held) and not levels and flag == 0.0:
+            rejected = self._certify_path(data, x, path, near, info, held)
+            if rejected and (near or held) and self._refine:
                 refined = self._refined(data, info, rejected[0])
                 if refined is not None:
                     return refined
@@ -386,33 +393,40 @@ class Prepared:
         return Outcome(x, status, info, residuals=residuals, checked=True)
 
     def _refined(self, data: StackData, info: dict, rejected: str) -> Outcome | None:
-        """The stack re-solved cold at :data:`REFINE` times ``primal_tol``, after the
-        certificate rejected an answer with a near-release level: the release tolerance
-        scales with ``primal_tol``, so the row it kept held inside its bound is released.
-        The refined answer is returned only when it is ``optimal`` and passes
-        :func:`~prioik.hierarchy.check_lexicographic` (``info["refined_primal_tol"]``, and
-        the first answer's reason in ``info["refined_from"]``); ``None`` otherwise."""
-        tol = self.primal_tol * REFINE
+        """The stack re-solved cold at :data:`REFINE` times ``primal_tol`` and
+        ``dual_tol``, after the certificate rejected an answer with a near-release level
+        or a row held off its bound: the release tolerance scales with ``primal_tol``,
+        so a row kept held inside its bound is released, and the dual one with
+        ``dual_tol``, so a row held off its bound is fixed at its violation. The refined
+        answer is returned only when it is ``optimal`` and passes
+        :func:`~prioik.hierarchy.check_lexicographic` (``info["refined_primal_tol"]``,
+        ``info["refined_dual_tol"]``, and the first answer's reason in
+        ``info["refined_from"]``); ``None`` otherwise."""
+        tol, dual = self.primal_tol * REFINE, self.dual_tol * REFINE
         again = Prepared(self.layout, {"rcond": self.rcond, "primal_tol": tol,
-                                       "dual_tol": self.dual_tol, "max_iter": self.max_iter,
+                                       "dual_tol": dual, "max_iter": self.max_iter,
                                        "warm_start": False})
         again._refine = False
         out = again.solve(data)
         if out.status != "optimal" or not check_lexicographic(data.as_stack(), out.x).ok:
             return None
-        out.info.update(refined_primal_tol=tol, refined_from=rejected,
-                        near_release_levels=info["near_release_levels"], path_certified=True,
-                        warm_start=self.warm_start)
+        out.info.update(refined_primal_tol=tol, refined_dual_tol=dual, refined_from=rejected,
+                        path_certified=True, warm_start=self.warm_start)
+        for key in ("near_release_levels", "held_off_bound_levels"):
+            if key in info:
+                out.info[key] = info[key]
         return out
 
     def _certify_path(self, data: StackData, x: np.ndarray, path: list[int],
-                      near: list[int], info: dict) -> list[str]:
+                      near: list[int], info: dict, held: list[int] = ()) -> list[str]:
         """The reasons against ``x`` when levels ``path`` took an ambiguous rank
         decision before their clear last step (``FLAG_AMBIGUOUS_PATH``: the working set
         such a step led to may not be the level's optimum) or levels ``near`` ended with
         a held soft row inside its bound within its release tolerance
         (``FLAG_NEAR_RELEASE``: releasing it may lower the level by more than the
-        tolerance shows): the answer is checked by
+        tolerance shows) or levels ``held`` kept a row off its bound held for the levels
+        below (``FLAG_HELD_OFF_BOUND``: it may block a direction they need): the answer
+        is checked by
         :func:`~prioik.hierarchy.check_lexicographic` (at its default tolerance, the
         minimum-norm tie-break too when it is among ``path``); ``[]`` when it passes."""
         k = self._k
@@ -421,13 +435,15 @@ class Prepared:
             info["ambiguous_path_levels"] = path
         if near:
             info["near_release_levels"] = near
+        if held:
+            info["held_off_bound_levels"] = list(held)
         info["path_certified"] = report.ok
         if report.ok:
             return []
         bad = report.first_failure
         where = (f"level {bad.level} ({', '.join(bad.tasks)})" if bad.level < k
                  else "the minimum-norm tie-break")
-        info["ambiguous_levels"] = sorted(set(path) | set(near))
+        info["ambiguous_levels"] = sorted(set(path) | set(near) | set(held))
         rejects = (f"the certificate rejects {where} (KKT residual {bad.relative:.2g} "
                    f"relative, tolerance {report.tol:g})")
         reasons = []
@@ -439,6 +455,11 @@ class Prepared:
             named = ", ".join(f"level {i}" for i in near)
             reasons.append(f"{named} ended with a held row inside its bound by less than "
                            f"its release tolerance (releasing it may lower the level)")
+        if held:
+            named = ", ".join(f"level {i}" for i in held)
+            reasons.append(f"{named} kept a row off its bound (within the dual tolerance) "
+                           f"held at the bound for the levels below (it may block a "
+                           f"direction they need)")
         return [f"{'; '.join(reasons)}, and {rejects}"]
 
 

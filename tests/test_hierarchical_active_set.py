@@ -1051,3 +1051,27 @@ def test_independent_13_783_right_answer_is_certified():
     assert report.ok and report.band_rows_fixed == 0
     assert report.levels[1].relative <= 1e-9
     assert sol.status == "optimal" and sol.info["path_certified"] is True
+
+
+def test_a_row_held_off_its_bound_for_the_levels_below_is_certified():
+    """Fuzz inequality-7002-1384 (larger sizes: n 8, 10 levels). Level 1 mixes rows of
+    norm ~1e-3 with rows of norm ~100; the small ones end 1e-4 beyond their bounds,
+    beyond the primal tolerance but within the dual one, so the kernel keeps them held
+    at their bounds for the levels below instead of fixing them at their violation.
+    Held so, they block x_5, a direction they take only 1e-12 of (below the rank rule),
+    and level 3 ends at 12.9 where moving x_5 by 1.04 leaves levels 0-2 as they are and
+    takes it to 0.07 (quadprog and DAQP give the same 12.9). The kernel flags the level
+    (FLAG_HELD_OFF_BOUND), the certificate rejects the answer, and the solver says
+    'approximate', naming level 1."""
+    from prioik.hierarchy import check_lexicographic, lexicographic_residuals, load_stack
+    stack = load_stack(Path(__file__).parent / "data" / "fuzz" / "inequality-7002-1384.json")
+    sol = prioik.solve(stack, NAME)
+    assert not check_lexicographic(stack, sol.x).ok
+    assert sol.status == "approximate" and sol.info["held_off_bound_levels"] == [1]
+    assert "level 1 kept a row off its bound" in sol.info["reason"]
+    w = lexicographic_residuals(stack, sol.x) ** 2
+    better = sol.x.copy()
+    better[5] += 1.04
+    wb = lexicographic_residuals(stack, better) ** 2
+    assert np.all(np.abs(wb[:3] - w[:3]) <= 1e-12 * np.maximum(1.0, w[:3]))
+    assert wb[3] < 0.01 * w[3]
