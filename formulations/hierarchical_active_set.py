@@ -93,9 +93,9 @@ release tolerance (``info["near_release_levels"]``): a row of norm 739 held besi
 of norm 0.0021 stayed held 4.4e-11 inside its bound, under a tolerance of 7.4e-11, and
 left its level at 2.6x the optimum. When the certificate rejects such an answer, the
 stack is solved again, cold, at :data:`REFINE` times ``primal_tol`` and ``dual_tol``
-(the release tolerance scales with the first), and that answer is returned when it is ``optimal`` and passes
-the certificate (``info["refined_primal_tol"]``); otherwise the first answer says
-``approximate``.
+(the release tolerance scales with the first), and that answer is returned when it is
+``optimal`` and passes the certificate (``info["refined_primal_tol"]``); otherwise the
+first answer says ``approximate``.
 
 *Warm start.* :class:`Prepared` keeps each level's working set at its optimum; the
 next solve first tries, per level, the step of last time's working set: when the
@@ -397,7 +397,7 @@ class Prepared:
         ``dual_tol``, after the certificate rejected an answer with a near-release level
         or a row held off its bound: the release tolerance scales with ``primal_tol``,
         so a row kept held inside its bound is released, and the dual one with
-        ``dual_tol``, so a row held off its bound is fixed at its violation. The refined
+        ``dual_tol``, so a row held off its bound may be fixed at its violation. The refined
         answer is returned only when it is ``optimal`` and passes
         :func:`~prioik.hierarchy.check_lexicographic` (``info["refined_primal_tol"]``,
         ``info["refined_dual_tol"]``, and the first answer's reason in
