@@ -23,15 +23,16 @@ StepFn = Callable[[np.ndarray, np.ndarray, float], tuple[np.ndarray, np.ndarray,
 
 
 def record(scenario, step: StepFn, *, duration: float, dt: float, progress=None,
-           status: str = "approximate", label: str = ""):
-    """Run ``step`` for ``duration`` and record a :class:`robots.SimulationResult`."""
+           status: str = "approximate", label: str = "", info: dict | None = None):
+    """Run ``step`` for ``duration`` and record a :class:`robots.SimulationResult`
+    (``info``: added to the result's)."""
     from prioik.robots import run_to_end
     return run_to_end(record_steps(scenario, step, duration=duration, dt=dt,
-                                   progress=progress, status=status, label=label))
+                                   progress=progress, status=status, label=label, info=info))
 
 
 def record_steps(scenario, step: StepFn, *, duration: float, dt: float, progress=None,
-                 status: str = "approximate", label: str = ""):
+                 status: str = "approximate", label: str = "", info: dict | None = None):
     """:func:`record` one step at a time: a generator that yields after each step and
     returns the :class:`robots.SimulationResult` (as
     :func:`robots.simulation_steps`)."""
@@ -82,4 +83,5 @@ def record_steps(scenario, step: StepFn, *, duration: float, dt: float, progress
                             {k: np.array(v_, dtype=float) for k, v_ in errors.items()},
                             np.full(len(rows["t"]), np.nan), np.array(rows["tk"]),
                             np.array(rows["ts"]), np.array(rows["tt"]), statuses, failed,
-                            message, qn, vn, {"label": label, **scenario.info()})
+                            message, qn, vn,
+                            {"label": label, **scenario.info(), **(info or {})})

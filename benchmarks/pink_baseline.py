@@ -149,12 +149,5 @@ def pink_steps(scenario, *, duration: float, dt: float, solver: str = DEFAULT_SO
         t2 = time.perf_counter()
         return pin.integrate(model, q, vel * dt), np.asarray(vel), t1 - t0, t2 - t1
 
-    return _with_info(record_steps(scenario, step, duration=duration, dt=dt,
-                                   progress=progress, label=label), qp_solver=solver)
-
-
-def _with_info(steps, **info):
-    """``steps`` whose result's ``info`` gets ``info``."""
-    res = yield from steps
-    res.info.update(info)
-    return res
+    return record_steps(scenario, step, duration=duration, dt=dt, progress=progress,
+                        label=label, info={"qp_solver": solver})

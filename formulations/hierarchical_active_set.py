@@ -146,6 +146,24 @@ _SOLVED_CLEAN, _SOLVED_INFEASIBLE, _NOT_TRIED = (
     (_kernel.SOLVED_CLEAN, _kernel.SOLVED_INFEASIBLE, _kernel.NOT_TRIED)
     if _kernel is not None else (-1, -1, -2))
 
+#: the kernel's level flags after which the answer is certified
+#: (:meth:`Prepared._certify_flagged`): flag, ``info`` key of the flagged levels, and why
+#: such a level may not be optimal
+_CERTIFIED_FLAGS = (
+    (_kernel.FLAG_AMBIGUOUS_PATH if _kernel is not None else -1, "ambiguous_path_levels",
+     f"passed through an ambiguous rank decision (a pivot within {AMBIGUITY:g}x of its "
+     f"threshold) before settling"),
+    (_kernel.FLAG_NEAR_RELEASE if _kernel is not None else -1, "near_release_levels",
+     "ended with a held row inside its bound by less than its release tolerance "
+     "(releasing it may lower the level)"),
+    (_kernel.FLAG_HELD_OFF_BOUND if _kernel is not None else -1, "held_off_bound_levels",
+     "kept a row off its bound (within the dual tolerance) held at the bound for the "
+     "levels below (it may block a direction they need)"),
+)
+#: the flags whose rejected answer is solved again (:meth:`Prepared._refined`): their
+#: rows' treatment scales with the tolerances
+_REFINED_KEYS = ("near_release_levels", "held_off_bound_levels")
+
 #: ``primal_tol`` and ``dual_tol`` of the refining solve over the solver's
 #: (:meth:`Prepared._refined`)
 REFINE = 1e-2
@@ -367,15 +385,16 @@ class Prepared:
                                f"pivot within {AMBIGUITY:g}x of its threshold)")
             info["ambiguous_levels"] = levels
         flags = self._counts[1]
-        path = (np.flatnonzero(flags == _kernel.FLAG_AMBIGUOUS_PATH).tolist()
-                if ambiguous else [])
-        near = (np.flatnonzero(flags == _kernel.FLAG_NEAR_RELEASE).tolist()
-                if ambiguous else [])
-        held = (np.flatnonzero(flags == _kernel.FLAG_HELD_OFF_BOUND).tolist()
-                if ambiguous else [])
-        if (path or near or held) and not levels and flag == 0.0:
-            rejected = self._certify_path(data, x, path, near, info, held)
-            if rejected and (near or held) and self._refine:
+        flagged = {}
+        if ambiguous:
+            for value, key, _ in _CERTIFIED_FLAGS:
+                at = np.flatnonzero(flags == value).tolist()
+                if at:
+                    flagged[key] = at
+        if flagged and not levels and flag == 0.0:
+            rejected = self._certify_flagged(data, x, flagged, info)
+            if (rejected and self._refine
+                    and any(key in flagged for key in _REFINED_KEYS)):
                 refined = self._refined(data, info, rejected[0])
                 if refined is not None:
                     return refined
@@ -408,60 +427,51 @@ class Prepared:
                                        "warm_start": False})
         again._refine = False
         out = again.solve(data)
-        if out.status != "optimal" or not check_lexicographic(data.as_stack(), out.x).ok:
+        if out.status != "optimal":
+            return None
+        # a refining solve that was flagged itself certified its answer already
+        if (not out.info.get("path_certified")
+                and not check_lexicographic(data.as_stack(), out.x).ok):
             return None
         out.info.update(refined_primal_tol=tol, refined_dual_tol=dual, refined_from=rejected,
                         path_certified=True, warm_start=self.warm_start)
-        for key in ("near_release_levels", "held_off_bound_levels"):
+        for key in _REFINED_KEYS:
             if key in info:
                 out.info[key] = info[key]
         return out
 
-    def _certify_path(self, data: StackData, x: np.ndarray, path: list[int],
-                      near: list[int], info: dict, held: list[int] = ()) -> list[str]:
-        """The reasons against ``x`` when levels ``path`` took an ambiguous rank
-        decision before their clear last step (``FLAG_AMBIGUOUS_PATH``: the working set
-        such a step led to may not be the level's optimum) or levels ``near`` ended with
-        a held soft row inside its bound within its release tolerance
-        (``FLAG_NEAR_RELEASE``: releasing it may lower the level by more than the
-        tolerance shows) or levels ``held`` kept a row off its bound held for the levels
-        below (``FLAG_HELD_OFF_BOUND``: it may block a direction they need): the answer
-        is checked by
-        :func:`~prioik.hierarchy.check_lexicographic` (at its default tolerance, the
-        minimum-norm tie-break too when it is among ``path``); ``[]`` when it passes."""
+    def _certify_flagged(self, data: StackData, x: np.ndarray, flagged: dict[str, list[int]],
+                         info: dict) -> list[str]:
+        """The reasons against ``x`` when the kernel flagged levels (``flagged``: an
+        ``info`` key of :data:`_CERTIFIED_FLAGS` → the levels): an ambiguous rank
+        decision before a level's clear last step (``FLAG_AMBIGUOUS_PATH``: the working
+        set it led to may not be the level's optimum), a held soft row inside its bound
+        within its release tolerance (``FLAG_NEAR_RELEASE``: releasing it may lower the
+        level by more than the tolerance shows), or a row off its bound kept held for the
+        levels below (``FLAG_HELD_OFF_BOUND``: it may block a direction they need). The
+        answer is checked by :func:`~prioik.hierarchy.check_lexicographic` (at its
+        default tolerance, the minimum-norm tie-break too when its path was flagged);
+        ``[]`` when it passes."""
         k = self._k
+        path = flagged.get("ambiguous_path_levels", ())
         report = check_lexicographic(data.as_stack(), x, minimum_norm=k in path)
-        if path:
-            info["ambiguous_path_levels"] = path
-        if near:
-            info["near_release_levels"] = near
-        if held:
-            info["held_off_bound_levels"] = list(held)
+        info.update(flagged)
         info["path_certified"] = report.ok
         if report.ok:
             return []
         bad = report.first_failure
         where = (f"level {bad.level} ({', '.join(bad.tasks)})" if bad.level < k
                  else "the minimum-norm tie-break")
-        info["ambiguous_levels"] = sorted(set(path) | set(near) | set(held))
+        info["ambiguous_levels"] = sorted(set().union(*flagged.values()))
         rejects = (f"the certificate rejects {where} (KKT residual {bad.relative:.2g} "
                    f"relative, tolerance {report.tol:g})")
         reasons = []
-        if path:
-            named = ", ".join(f"level {i}" if i < k else "the tie-break" for i in path)
-            reasons.append(f"{named} passed through an ambiguous rank decision (a pivot "
-                           f"within {AMBIGUITY:g}x of its threshold) before settling")
-        if near:
-            named = ", ".join(f"level {i}" for i in near)
-            reasons.append(f"{named} ended with a held row inside its bound by less than "
-                           f"its release tolerance (releasing it may lower the level)")
-        if held:
-            named = ", ".join(f"level {i}" for i in held)
-            reasons.append(f"{named} kept a row off its bound (within the dual tolerance) "
-                           f"held at the bound for the levels below (it may block a "
-                           f"direction they need)")
+        for _, key, why in _CERTIFIED_FLAGS:
+            if key in flagged:
+                named = ", ".join(f"level {i}" if i < k else "the tie-break"
+                                  for i in flagged[key])
+                reasons.append(f"{named} {why}")
         return [f"{'; '.join(reasons)}, and {rejects}"]
-
 
 # ------------------------------------------------------------------------ reports
 #: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
