@@ -35,9 +35,9 @@ from prioik.hierarchy.linalg import PRECISION_LIMIT_NORM as _PRECISION_LIMIT_NOR
 from prioik.hierarchy.linalg import X_PRECISION
 
 from ._extended_jacobian_kernel import (_UNIT_ROWS_GAP, _apply_q, _cholesky_lower,
-                                        _cholesky_solve, _dot, _free_direction,
+                                        _cholesky_solve, _dot, _free_directions,
                                         _small_lstsq_ws, _swap, _unit_rows_of,
-                                        _unit_rows_solve, _woodbury_apply, solve_kernel)
+                                        _unit_rows_solve, _woodbury_apply, solve_kernel_into)
 
 #: the same fast-math set as the extended-Jacobian kernel (no finite-math assumption)
 _FAST = {"reassoc", "contract", "nsz", "arcp"}
@@ -437,7 +437,9 @@ def _unit_rows_step(Bo, ucol, xc, col, rows, nh, nw, tgt, rcond, soft_tol, reach
     Zh = Zu[nu:nu + nh]
     W = Zu[nu + nh:nu + 2 * nh]
     for i in range(nh):
-        _free_direction(ucol[rows[i]], z, Zh[i], col, nf, Vf, betaf, posf)
+        z[i] = ucol[rows[i]]
+    _free_directions(z, nh, Zh, col, nf, Vf, betaf, posf, z[:0])
+    for i in range(nh):
         for k in range(d):
             W[i, k] = Zh[i, k]
         _woodbury_apply(W[i], Zu, G, nu, d, t)
@@ -781,11 +783,11 @@ def _load_rows(A, b, lower, upper, sw, row_eq, B, Bo, blo, bup, rnorm, eqr, ucol
 
 @njit(cache=True, fastmath=_FAST, inline="always")
 def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol, eB, evec,
-                    eint, x, ranks, margins, w2, res):
+                    eint, x, ranks, margins, w2, res, V, L, fs, pos):
     """The stack's equality rows alone (rows with ``lower = upper`` included), weighed
-    into ``eB`` and solved by the extended Jacobian's nested QR
-    (its compiled :func:`solve_kernel`) with this kernel's rank rule (``rcond`` times each level's
-    whole ``‖√W_i A_i‖_F``); ``True`` when that answer ``x*`` satisfies every other row
+    into ``eB`` and solved by the extended Jacobian's nested QR (its compiled
+    :func:`solve_kernel_into`) with this kernel's rank rule (``rcond`` times each
+    level's whole ``‖√W_i A_i‖_F``); ``True`` when that answer ``x*`` satisfies every other row
     (inside its interval, no tolerance), every rank decision is clear and ``x``'s
     precision resolves every box row, with ``x``, ``ranks[:k]``, ``margins[:k]`` and
     the levels' violations ``w2``, ``res`` written.
@@ -796,6 +798,8 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
     value), and ``x*``, the minimum-norm point of ``X_k^E``, is that of ``X_k``.
     ``False`` (also for a value :func:`_load_rows` refuses): the active set runs.
     Reads the data directly (one pass; the active set's own rows are not built).
+    Scratch of the nested QR (the active set's, unused on this path): ``V`` (``n × n``),
+    ``L`` (``≥ M × n``), ``fs`` (``4 × ≥ max(M, n)``), ``pos`` (``≥ n`` ints).
     """
     M, n = A.shape
     c = evec[:M]
@@ -846,10 +850,12 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
         scales[lev] = np.sqrt(acc)
         step_bound[lev] = 0.0
         estarts[lev + 1] = m
-    # the extended Jacobian's own compiled solve (not its body inlined here: inlined
-    # into a second module it changed that kernel's rounding in the first one)
-    solve_kernel(eB[:m], c[:m], estarts, scales, rcond, 0.0, 0.0, step_bound, x, eranks,
-                 mu2, emargins)
+    # the extended Jacobian's own compiled solve, on this kernel's scratch (not its body
+    # inlined here: inlined into a second module it changed that kernel's rounding in
+    # the first one)
+    solve_kernel_into(eB[:m], c[:m], estarts, scales, rcond, 0.0, 0.0, step_bound, x,
+                      eranks, mu2, emargins, V, fs[0, :n], pos, fs[1, :n], fs[2, :M], L[:M],
+                      fs[3, :M])
     xx = _dot(x, x)
     if not (xx <= _PRECISION_LIMIT_NORM * _PRECISION_LIMIT_NORM):
         return False
@@ -1605,9 +1611,17 @@ def equality_first_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     o += 4 * (k + 1)
     eint = iwork[o:o + 2 * k + 1 + M]
     primal_tol = fwork[1]
+    Rn = R * n
+    o = N_PARAMS + 2 * Rn                                   # Lw (see solve_data)
+    L = fwork[o:o + Rn].reshape((R, n))
+    o = N_PARAMS + 5 * Rn
+    V = fwork[o:o + n * n].reshape((n, n))
+    o += 2 * n * n
+    fs = fwork[o:o + 4 * R].reshape((4, R))                 # fvec's first rows
+    pos = iwork[k + 2:k + 2 + n]                            # ivec's first row
     if not _equality_first(A, b, lower, upper, sw, bwork[:M], starts, k, fwork[0],
                            primal_tol, eB, evec, eint, x, counts[2], margins, w2,
-                           res):
+                           res, V, L, fs, pos):
         fwork[10] = -1.0         # tried and refuted: solve_data then starts cold
         return NOT_TRIED
     total = 0.0
