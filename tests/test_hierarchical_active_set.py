@@ -9,6 +9,7 @@ minimum-norm tie-break, multipliers by bounded least squares) and cross-checked 
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -552,6 +553,44 @@ def test_bad_data_is_named():
     _, lo, up = data.bounds(name)
     lo[0], up[0] = 1.0, 0.0
     with pytest.raises(TaskStackError, match="lower > upper"):
+        solver.solve(data)
+    assert solver.solve(stack).status == "optimal"
+
+
+def _inactive_bounds_stack(rng, n=6):
+    """An equality level over a band whose bounds are far from the answer: every warm
+    solve after the first is the equality-first try's."""
+    return TaskStack([[Task("eq", rng.standard_normal((3, n)), rng.standard_normal(3))],
+                      [Task("band", rng.standard_normal((2, n)), lower=np.full(2, -1e3),
+                            upper=np.full(2, 1e3)),
+                       Task("box", np.eye(n)[:2], lower=np.full(2, -1e3),
+                            upper=np.full(2, 1e3))],
+                      [Task("rest", rng.standard_normal((4, n)), rng.standard_normal(4))]])
+
+
+@pytest.mark.parametrize("task, field, row, value, what", [
+    ("eq", "A", 1, np.nan, "A"), ("box", "A", 0, np.inf, "A"), ("eq", "b", 2, np.inf, "b"),
+    ("band", "lower", 1, np.nan, "lower is NaN"), ("box", "lower", 0, np.inf, "lower"),
+    ("band", "upper", 0, -np.inf, "upper is NaN or -inf"),
+    ("box", "upper", 1, np.nan, "upper is NaN"), ("band", "lower", 0, 2e3, "lower > upper"),
+    ("rest", "sqrt_weight", 3, 0.0, "√w"), ("band", "sqrt_weight", 1, np.inf, "√w"),
+    ("eq", "sqrt_weight", 0, np.nan, "√w")])
+@pytest.mark.parametrize("armed", [False, True], ids=["cold", "equality_first"])
+def test_each_bad_value_is_named_on_both_paths(task, field, row, value, what, armed):
+    """A value written into the data is refused naming its task and row, whether the
+    solve starts with the equality-first try (armed by earlier answers that held no
+    inequality row) or with the active set; the solver then solves the next stack."""
+    stack = _inactive_bounds_stack(np.random.default_rng(7))
+    solver = prioik.prepare(stack.layout, NAME)
+    if armed:
+        solver.solve(stack)
+        assert solver.solve(stack).info["equality_first"]
+    data = stack.data.copy()
+    tasks = [t for level in stack.levels for t in level]
+    at = [t.name for t in tasks].index(task)
+    offset = sum(t.A.shape[0] for t in tasks[:at])
+    getattr(data, field)[offset + row] = value
+    with pytest.raises(TaskStackError, match=f"task '{task}': {re.escape(what)}"):
         solver.solve(data)
     assert solver.solve(stack).status == "optimal"
 
