@@ -811,25 +811,186 @@ def _load_rows(A, b, lower, upper, sw, row_eq, B, Bo, blo, bup, rnorm, eqr, ucol
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
-def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol, eB, evec,
-                    eint, x, ranks, margins, w2, res, V, L, fs, pos, eqr):
-    """The stack's equality rows alone (rows with ``lower = upper`` included), weighed
-    into ``eB`` and solved by the extended Jacobian's nested QR (its compiled
-    :func:`solve_kernel_into`) with this kernel's rank rule (``rcond`` times each
-    level's whole ``‖√W_i A_i‖_F``); ``True`` when that answer ``x*`` satisfies every other row
-    (inside its interval, no tolerance), every rank decision is clear and ``x``'s
-    precision resolves every box row, with ``x``, ``ranks[:k]``, ``margins[:k]`` and
-    the levels' violations ``w2``, ``res`` written.
+def _held_rows_optimal(A, b, lower, row_eq, sw, starts, k, x, y, eB, estarts, eranks, ucol, erow,
+                       rowperm, held, scales, dual_tol, V, beta, pos, Z, g, cn, prow,
+                       pside, pinned, hcol):
+    """Whether the held rows' multipliers prove the equality-first answer ``x*`` (the
+    nested QR's, the held rows solved as equalities at their bounds) lexicographically
+    optimal with those rows as the inequalities they are.
 
-    Then ``x*`` is the stack's answer: by induction over the levels, ``X_i ⊆ X_i^E``
-    (the optimal sets without the inequality rows) and ``x* ∈ X_i`` (its inequality
-    rows are satisfied, so each level's value equals its equality part's least
-    value), and ``x*``, the minimum-norm point of ``X_k^E``, is that of ``X_k``.
+    Level ``ℓ`` below a held row minimises ``f_ℓ`` over ``X_{ℓ−1}``, the polyhedron of
+    the levels above; ``x*`` does iff ``−∇f_ℓ(x*)`` lies in its normal cone, which holds
+    the span of every row of the equality levels above and, for a held row ``h`` on
+    side ``s_h`` (``+1`` upper, ``−1`` lower), the ray ``s_h a_h`` — or the line of
+    ``a_h`` once ``h`` is *pinned*: a level above held it with a multiplier clearly of
+    the right sign, so every point of that level's optimal set has ``h`` on its bound.
+    In the rotated coordinates of the nested QR the pivot rows ``C`` of the levels above
+    are lower triangular on the ``col_ℓ`` coordinates they fix, and the optimality of
+    ``x*`` on the rest makes ``(Qᵀ ∇f_ℓ)[col_ℓ:]`` zero: ``Cᵀ μ = (Qᵀ ∇f_ℓ)[:col_ℓ]``, of
+    which only the held rows' ``μ_h = (C⁻¹ e_h) · (Qᵀ ∇f_ℓ)[:col_ℓ]`` are read, and ``x*``
+    passes when no unpinned held row's ``s_h μ_h ‖c_h‖``
+    exceeds :data:`_DUAL_FLOOR` times the level's gradient scale (that of
+    :func:`_dual_scale`). A multiplier of the right sign beyond ``dual_tol`` times that
+    scale pins its row. The minimum-norm tie-break is read the same way, its gradient
+    being ``y = Qᵀ x*``. The test is sufficient, not necessary: ``False`` sends the stack
+    to the active set, which decides. ``False`` also when a level whose gradient is read
+    lies below one the QR did not leave triangular (a level with at least as many rows
+    as free coordinates: its full-rank or unit-rows step).
+
+    ``held[j]``: the side of data row ``j`` (``0``: not held); ``erow`` maps the rows of
+    ``eB`` (before pivoting) to the data's, ``rowperm`` the pivoting. Scratch: ``Z``
+    (``≥ n × n``: the ``C⁻¹ e_h``), ``g``, ``cn`` (``n``: a gradient, the held pivot rows'
+    norms), ``prow``, ``pside``, ``pinned``, ``hcol`` (``n`` ints).
+    """
+    M, n = A.shape
+    col = 0
+    complete = k            # the first level the QR left in another form
+    ctri = -1               # the coordinates the levels above it fix
+    first_held = k
+    for lev in range(k):
+        e0 = estarts[lev]
+        m = estarts[lev + 1] - e0
+        if m > 0 and col < n and m >= n - col and complete == k:
+            complete = lev
+            ctri = col
+        for i in range(eranks[lev]):
+            p = col + i
+            prow[p] = e0 + i
+            j = erow[rowperm[e0 + i]]
+            pside[p] = held[j] if ucol[j] != -2 else 0
+            if pside[p] != 0 and first_held == k:
+                first_held = lev
+        col += eranks[lev]
+    ncol = col
+    if ctri < 0:
+        ctri = ncol
+    if first_held == k:
+        return True
+    xn = np.sqrt(_dot(x, x))
+    # z_h = C⁻¹ e_h of each held pivot h, by forward substitution over the pivot rows
+    # (lower triangular, rows contiguous) of the levels the QR left triangular, once: a
+    # level's multiplier of h is then μ_h = z_h · (Qᵀ ∇f_ℓ)[:col_ℓ] (C's leading block
+    # is the levels above's)
+    nh = 0
+    for h in range(ncol):
+        if pside[h] == 0:
+            continue
+        z = Z[nh]
+        for p in range(h):
+            z[p] = 0.0
+        row = eB[prow[h]]
+        z[h] = 1.0 / row[h]
+        cn[nh] = np.sqrt(_dot(row[:h + 1], row[:h + 1]))
+        for p in range(h + 1, ctri):
+            row = eB[prow[p]]
+            z[p] = -_dot(row[h:p], z[h:p]) / row[p]
+        hcol[nh] = h
+        pinned[nh] = 0
+        nh += 1
+    # each level below the first held row that has equality rows (its other rows are
+    # satisfied: no gradient), in order, then the tie-break
+    col = 0
+    for lev in range(k + 1):
+        if lev < k:
+            colv = col
+            col += eranks[lev]
+            if lev <= first_held or estarts[lev + 1] == estarts[lev]:
+                continue
+            if ucol[erow[estarts[lev]]] != -2:        # held rows only: no gradient
+                continue
+            if lev > complete:
+                return False
+            for c in range(n):
+                g[c] = 0.0
+            tn = 0.0
+            if lev < k - 1:
+                # its rows, rotated by the levels above's reflectors: (Qᵀ ∇f_ℓ)[:col_ℓ]
+                # = Σ_i r_i (eB_i)[:col_ℓ], r_i the weighted residual of the row's data
+                for i in range(estarts[lev], estarts[lev + 1]):
+                    j = erow[rowperm[i]]
+                    s = sw[j]
+                    t = b[j] if row_eq[j] else lower[j]
+                    r = s * (_dot(A[j], x) - t)
+                    tn += s * s * t * t
+                    if r != 0.0:
+                        Bi = eB[i]
+                        for c in range(colv):
+                            g[c] += r * Bi[c]
+            else:
+                # the last level's rows may be the unit rows the QR left unrotated: its
+                # gradient in x, brought through the reflectors that fix the first col_ℓ
+                for j in range(starts[lev], starts[lev + 1]):
+                    if ucol[j] != -2:
+                        continue
+                    s = sw[j]
+                    t = b[j] if row_eq[j] else lower[j]
+                    e = s * s * (_dot(A[j], x) - t)
+                    tn += s * s * t * t
+                    if e != 0.0:
+                        Aj = A[j]
+                        for c in range(n):
+                            g[c] += e * Aj[c]
+                for t in range(colv):
+                    q = pos[t]
+                    vt = V[t, q:]
+                    gq = g[q:]
+                    f = beta[t] * _dot(vt, gq)
+                    if f != 0.0:
+                        for c in range(n - q):
+                            gq[c] -= f * vt[c]
+            gh = g
+            scale = max(np.sqrt(_dot(g[:colv], g[:colv])),
+                        scales[lev] * (scales[lev] * xn + np.sqrt(tn)))
+        else:                       # the tie-break: ∇ ½‖x‖² = x, Qᵀ x = y
+            unpinned = False
+            for i in range(nh):
+                if pinned[i] == 0:
+                    unpinned = True
+            if not unpinned:
+                break
+            if complete < k:
+                return False
+            colv = ncol
+            gh = y
+            scale = np.sqrt(_dot(y[:ncol], y[:ncol]))
+        for i in range(nh):
+            h = hcol[i]
+            if h >= colv or pinned[i] != 0:
+                continue
+            wrong = pside[h] * _dot(Z[i, h:colv], gh[h:colv]) * cn[i]
+            if wrong > _DUAL_FLOOR * scale:
+                return False
+            if -wrong > dual_tol * scale:
+                pinned[i] = 1
+    return True
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol, dual_tol,
+                    eB, evec, eint, x, ranks, margins, w2, res, V, L, fs, pos, eqr, held):
+    """The stack's equality rows (rows with ``lower = upper`` included) with the rows the
+    last answer held (``held[j]``: ``±1``, at their upper/lower bound; ``0`` for
+    none), as equalities at those bounds, weighed into ``eB`` and solved by the
+    extended Jacobian's nested QR (its compiled :func:`solve_kernel_into`) with this
+    kernel's rank rule (``rcond`` times each level's whole ``‖√W_i A_i‖_F``); ``True``
+    when that answer ``x*`` is the stack's, with ``x``, ``ranks[:k]``, ``margins[:k]``
+    and the levels' violations ``w2``, ``res`` written.
+
+    It is when every other row is inside its interval (no tolerance), every rank
+    decision is clear, ``x``'s precision resolves every box row, and the held rows are
+    met: each on its bound within the primal tolerance (a box row put on it exactly
+    when within ``x``'s precision, as the active set does), in levels of inequality
+    rows alone, independent of everything above them (their level's rank is their
+    count: its violation is then zero, the least there is) and their multipliers say
+    so (:func:`_held_rows_optimal`). With no held row: by induction over the levels,
+    ``X_i ⊆ X_i^E`` (the optimal sets without the inequality rows) and ``x* ∈ X_i`` (its
+    inequality rows are satisfied, so each level's value equals its equality part's
+    least value), and ``x*``, the minimum-norm point of ``X_k^E``, is that of ``X_k``.
     ``False`` (also for a value :func:`_load_rows` refuses): the active set runs.
     Reads the data directly (one pass; the active set's own rows are not built).
-    Scratch of the nested QR (the active set's, unused on this path): ``V`` (``n × n``),
-    ``L`` (``≥ M × n``), ``fs`` (``4 × ≥ max(M, n)``), ``pos`` (``≥ n`` ints), and
-    ``eqr`` (``≥ M`` int8: each row's equality flag).
+    Scratch (the active set's, unused on this path): ``V`` (``n × n``), ``L``
+    (``≥ M × n``), ``fs`` (``4 × ≥ max(M, n)``), ``pos`` (``≥ n`` ints), ``eqr`` (``≥ M``
+    int8: each row's equality flag).
     """
     M, n = A.shape
     c = evec[:M]
@@ -840,49 +1001,81 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
     step_bound = evec[o + 3 * k:o + 4 * k]
     estarts = eint[:k + 1]
     eranks = eint[k + 1:2 * k + 1]
-    ucol = eint[2 * k + 1:2 * k + 1 + M]      # -2: an equality row
+    o = 2 * k + 1
+    ucol = eint[o:o + M]      # -2: an equality row
+    erow = eint[o + M:o + 2 * M]
+    rowperm = eint[o + 2 * M:o + 3 * M]
+    o += 3 * M
+    prow = eint[o:o + n]
+    pside = eint[o + n:o + 2 * n]
+    pinned = eint[o + 2 * n:o + 3 * n]
+    hcol = eint[o + 3 * n:o + 4 * n]
     iseq = eqr[:M]
     if not _rows_valid(row_eq, b, lower, upper, sw, iseq):
         return False
     m = 0
+    nheld = 0
     estarts[0] = 0
     for lev in range(k):
         acc = 0.0
+        level_eq = 0
+        level_held = 0
         for j in range(starts[lev], starts[lev + 1]):
             s = sw[j]
             Aj = A[j]
-            if iseq[j]:
+            if iseq[j] or held[j] != 0:
                 row = eB[m]
                 nn = 0.0
                 for col in range(n):
                     v = s * Aj[col]
                     row[col] = v
                     nn += v * v
-                c[m] = s * (b[j] if row_eq[j] else lower[j])
+                if iseq[j]:
+                    c[m] = s * (b[j] if row_eq[j] else lower[j])
+                    ucol[j] = -2
+                    level_eq += 1
+                else:
+                    c[m] = s * (upper[j] if held[j] > 0 else lower[j])
+                    ucol[j] = _sparsity(Aj)[1]
+                    level_held += 1
+                erow[m] = j
+                rowperm[m] = m
                 m += 1
-                ucol[j] = -2
             else:
                 nn, ucol[j] = _sparsity(Aj)
                 nn *= s * s
             acc += nn
         if not np.isfinite(acc):        # (a sum of squares: finite iff every term is)
             return False
+        if level_held > 0 and level_eq > 0:
+            return False
         scales[lev] = np.sqrt(acc)
         step_bound[lev] = 0.0
         estarts[lev + 1] = m
+        nheld += level_held
     # the extended Jacobian's own compiled solve, on this kernel's scratch (not its body
     # inlined here: inlined into a second module it changed that kernel's rounding in
     # the first one)
     solve_kernel_into(eB[:m], c[:m], estarts, scales, rcond, 0.0, 0.0, step_bound, x,
                       eranks, mu2, emargins, V, fs[0, :n], pos, fs[1, :n], fs[2, :M], L[:M],
-                      fs[3, :M])
+                      fs[3, :M], rowperm[:m] if nheld > 0 else rowperm[:0])
     xx = _dot(x, x)
     if not (xx <= _PRECISION_LIMIT_NORM * _PRECISION_LIMIT_NORM):
         return False
     for lev in range(k):
         if emargins[lev] <= _AMBIGUITY:
             return False
+        if nheld > 0 and ucol[erow[estarts[lev]]] != -2 and estarts[lev + 1] > estarts[lev]:
+            if eranks[lev] != estarts[lev + 1] - estarts[lev]:      # a held row dependent
+                return False
     xn = np.sqrt(xx)
+    if nheld > 0:       # a held box row off its bound by x's precision is put on it
+        for j in range(M):
+            uc = ucol[j]
+            if held[j] != 0 and uc >= 0:
+                bound = upper[j] if held[j] > 0 else lower[j]
+                if abs(A[j, uc] * x[uc] - bound) <= X_PRECISION * xn * abs(A[j, uc]):
+                    x[uc] = bound / A[j, uc]
     for j in range(M):
         uc = ucol[j]
         if uc == -2:
@@ -890,19 +1083,36 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
         lo = lower[j]
         up = upper[j]
         r = A[j, uc] * x[uc] if uc >= 0 else _dot(A[j], x)
-        if r < lo or r > up:
+        if held[j] != 0:
+            bound = up if held[j] > 0 else lo
+            s = sw[j]
+            size = (abs(A[j, uc]) * (abs(x[uc]) + 1.0) if uc >= 0
+                    else np.sqrt(_dot(A[j], A[j])) * xn)
+            if not abs(s * (r - bound)) <= _tol(primal_tol, s * size, s * bound):
+                return False
+        elif r < lo or r > up:
             return False
         if uc >= 0:        # as the active set's box-row pass: x's precision decides
             s = sw[j]
             if _box_row_unresolved(s * A[j, uc], x[uc], s * r, s * lo, s * up, xn,
                                    primal_tol):
                 return False
+    if nheld > 0 and not _held_rows_optimal(
+            A, b, lower, row_eq, sw, starts, k, x, fs[1, :n], eB, estarts, eranks, ucol, erow,
+            rowperm, held, scales, dual_tol, V, fs[0, :n], pos, L, fs[2, :n], fs[3, :n],
+            prow, pside, pinned, hcol):
+        return False
     for lev in range(k):
         acc = 0.0
         for j in range(starts[lev], starts[lev + 1]):
             if ucol[j] == -2:
                 e = sw[j] * (_dot(A[j], x) - (b[j] if row_eq[j] else lower[j]))
-                acc += e * e
+            else:
+                uc = ucol[j]
+                r = A[j, uc] * x[uc] if uc >= 0 else _dot(A[j], x)
+                e = sw[j] * (lower[j] - r if r < lower[j] else
+                             (r - upper[j] if r > upper[j] else 0.0))
+            acc += e * e
         w2[lev] = acc
         res[lev] = np.sqrt(acc)
         ranks[lev] = eranks[lev]
@@ -911,13 +1121,23 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
-def _inequalities_inactive(state, eqr, M):
-    """Whether no inequality row ended the solve held at a bound or fixed at a
-    violation (its state ``0``)."""
+def _keep_held(state, eqr, M, held):
+    """``params[11]`` after a solve: ``0`` when an inequality row ended it fixed at a
+    violation (the next solve runs the active set), else ``1`` when no row was held at a
+    bound at any level's end, ``2`` when some were (``held[j]``: the side, ``±1``, it was
+    last held on, written by :func:`solve_data` level by level; ``0`` for the rest). A
+    row held by one level may leave the working set below it when the rows that level
+    fixed keep it on its bound: it is still the active set's guess."""
+    some = False
     for j in range(M):
-        if state[j] != 0 and not eqr[j]:
-            return False
-    return True
+        st = state[j]
+        if st == 1 or st == -1:
+            held[j] = st
+        elif st != 0 and not eqr[j]:
+            return 0.0
+        if held[j] != 0:
+            some = True
+    return 2.0 if some else 1.0
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
@@ -1014,13 +1234,15 @@ def workspace_offsets(M: int, n: int, k: int) -> dict[str, tuple[int, int]]:
     path was (:data:`FLAG_AMBIGUOUS_PATH`), into
     ``params[9]`` the number of box rows near a bound that ``x``'s precision (``eps ‖x‖``)
     cannot resolve, into ``params[10]`` ``1`` when the answer is the equality-first
-    solve's (``-1`` when that try was refuted: the next :func:`solve_data` call starts
-    cold) and ``params[11]`` ``1`` when the next warm solve should try it (the answer
-    held no inequality row); int64: ``k``, ``starts`` (``k + 1``),
-    ``ivec`` (``5 × R``), ``perm`` (``n``), ``counts`` (``4 × (k + 1)``), ``eint``
-    (``2 k + 1 + M``); int8: ``row_eq``
+    solve's (``-1`` when that try, holding no row, was refuted: the next
+    :func:`solve_data` call starts cold; ``-2`` when it held rows) and ``params[11]``
+    ``1`` when the next warm solve should try it (the answer held no inequality row),
+    ``2`` when it should try it with the rows the answer held (``held``), ``0`` not;
+    int64: ``k``, ``starts`` (``k + 1``), ``ivec`` (``5 × R``), ``perm`` (``n``),
+    ``counts`` (``4 × (k + 1)``), ``eint`` (``2 k + 1 + 3 M + 4 n``); int8: ``row_eq``
     (``M``), ``bvec`` (``2 × R``), ``eqr`` (``R``), ``warm_state`` (``(k + 1) × R``),
-    ``warm_valid`` (``k + 1``).
+    ``warm_valid`` (``k + 1``), ``held`` (``M``: the side, ``±1``, of each row the last
+    answer held, ``0`` for the others).
     """
     R = M + n
     out: dict[str, tuple[int, int]] = {}
@@ -1030,9 +1252,11 @@ def workspace_offsets(M: int, n: int, k: int) -> dict[str, tuple[int, int]]:
                                 ("x", n), ("w2", k), ("res", k), ("margins", k + 1),
                                 ("eB", M * n), ("evec", M + 4 * k))),
                         ("i", (("k", 1), ("starts", k + 1), ("ivec", 5 * R), ("perm", n),
-                               ("counts", 4 * (k + 1)), ("eint", 2 * k + 1 + M))),
+                               ("counts", 4 * (k + 1)),
+                               ("eint", 2 * k + 1 + 3 * M + 4 * n))),
                         ("b", (("row_eq", M), ("bvec", 2 * R), ("eqr", R),
-                               ("warm_state", (k + 1) * R), ("warm_valid", k + 1)))):
+                               ("warm_state", (k + 1) * R), ("warm_valid", k + 1),
+                               ("held", M)))):
         at = 0
         for name, size in parts:
             out[name] = (at, at + size)
@@ -1123,6 +1347,8 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     warm_state = bwork[o:o + (k + 1) * R].reshape((k + 1, R))
     o += (k + 1) * R
     warm_valid = bwork[o:o + k + 1]
+    o += k + 1
+    held = bwork[o:o + M]
     rcond = fwork[0]
     primal_tol = fwork[1]
     dual_tol = fwork[2]
@@ -1160,6 +1386,8 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                       nrot, state):
         return NOT_SOLVED
     fwork[10] = 0.0
+    for j in range(M):
+        held[j] = 0
     for c in range(n):
         y[c] = 0.0
         xc[c] = 0.0
@@ -1440,6 +1668,8 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
         for j in range(s1):
             st = state[j]
             warm_state[lev, j] = st if (st == -1 or st == 1) else 0
+            if (st == -1 or st == 1) and j < M:
+                held[j] = st
         warm_valid[lev] = 1
         if lev == k:
             break
@@ -1589,7 +1819,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                 x[c] = bound / a
         if _box_row_unresolved(a, x[c], a * x[c], blo[j], bup[j], xn, primal_tol):
             unresolved += 1
-    fwork[11] = 1.0 if _inequalities_inactive(state, eqr, M) else 0.0
+    fwork[11] = _keep_held(state, eqr, M, held)
     return _finish(A, b, lower, upper, sw, row_eq, starts, k, primal_tol, x, w2, res,
                    counts, flags, margins, fwork, unresolved)
 
@@ -1603,14 +1833,15 @@ NOT_TRIED = -1
 @njit(cache=True, fastmath=_FAST)
 def equality_first_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     """The warm start's first try, with :func:`solve_data`'s arguments: when the last
-    answer held no inequality row (``params[11]``), the stack's equality rows alone by
-    the extended Jacobian's nested QR (:func:`_equality_first`); if that answer
-    satisfies every inequality row it is the stack's, written as :func:`solve_data`
-    writes its own (zero iterations, ``params[10] = 1``) and its code returned, else
-    :data:`NOT_TRIED` (also when a value is not valid: :func:`solve_data` names it);
-    after a refuted try ``params[10] = -1``, and the :func:`solve_data` call that
+    answer fixed no inequality row at a violation (``params[11]``: ``1``, and it held
+    none; ``2``, it held the rows ``held``), the stack's equality rows and those held
+    rows by the extended Jacobian's nested QR (:func:`_equality_first`); if that answer
+    is proved the stack's it is written as :func:`solve_data` writes its own (zero
+    iterations, ``params[10] = 1``) and its code returned, else :data:`NOT_TRIED` (also
+    when a value is not valid: :func:`solve_data` names it). After a refuted try
+    ``params[10] = -1`` when no row was held, and the :func:`solve_data` call that
     follows starts cold (the kept working sets held no inequality row: the guess the
-    try refuted).
+    try refuted); ``-2`` when rows were, and it starts from the kept working sets.
 
     Compiled with numba's runtime (not :func:`~prioik._jit.kernel`): the extended
     Jacobian's full-rank step allocates its scratch.
@@ -1629,7 +1860,7 @@ def equality_first_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     o = k + 2 + 5 * R + n                                   # after ivec and perm
     counts = iwork[o:o + 4 * (k + 1)].reshape((4, k + 1))
     o += 4 * (k + 1)
-    eint = iwork[o:o + 2 * k + 1 + M]
+    eint = iwork[o:o + 2 * k + 1 + 3 * M + 4 * n]
     primal_tol = fwork[1]
     Rn = R * n
     o = N_PARAMS + 2 * Rn                                   # Lw (see solve_data)
@@ -1639,10 +1870,13 @@ def equality_first_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     o += 2 * n * n
     fs = fwork[o:o + 4 * R].reshape((4, R))                 # fvec's first rows
     pos = iwork[k + 2:k + 2 + n]                            # ivec's first row
+    o = M + 3 * R + (k + 1) * R + k + 1                    # held (workspace_offsets)
     if not _equality_first(A, b, lower, upper, sw, bwork[:M], starts, k, fwork[0],
-                           primal_tol, eB, evec, eint, x, counts[2], margins, w2,
-                           res, V, L, fs, pos, bwork[M + 2 * R:M + 3 * R]):
-        fwork[10] = -1.0         # tried and refuted: solve_data then starts cold
+                           primal_tol, fwork[2], eB, evec, eint, x, counts[2], margins,
+                           w2, res, V, L, fs, pos, bwork[M + 2 * R:M + 3 * R],
+                           bwork[o:o + M]):
+        # tried and refuted: with no row held, solve_data then starts cold
+        fwork[10] = -1.0 if fwork[11] == 1.0 else -2.0
         return NOT_TRIED
     total = 0.0
     for lev in range(k):

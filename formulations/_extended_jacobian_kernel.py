@@ -480,29 +480,32 @@ def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
     solve_kernel_ws(B, c, starts, scales, rcond, level_damping, singular_threshold,
                     step_bound, x, ranks, level_mu2, margins, np.empty((n, n)), np.empty(n),
                     np.empty(n, dtype=np.int64), np.empty(n), np.empty(M),
-                    np.empty((M, n)), np.empty(M))
+                    np.empty((M, n)), np.empty(M), np.empty(0, dtype=np.int64))
 
 
 @njit(cache=True, fastmath=_FAST)
 def solve_kernel_into(B, c, starts, scales, rcond, level_damping, singular_threshold,
                       step_bound, x, ranks, level_mu2, margins, V, beta, pos, y, norms, L,
-                      rhs):
-    """:func:`solve_kernel` on scratch the caller owns (:func:`solve_kernel_ws`'s): for
-    compiled callers in other modules that keep workspaces (no allocation per call;
-    a call, not inlined there, so that this module's compiled code stays its own)."""
+                      rhs, rowperm):
+    """:func:`solve_kernel` on scratch the caller owns (:func:`solve_kernel_ws`'s, with
+    ``rowperm``): for compiled callers in other modules that keep workspaces (no
+    allocation per call; a call, not inlined there, so that this module's compiled code
+    stays its own)."""
     solve_kernel_ws(B, c, starts, scales, rcond, level_damping, singular_threshold,
                     step_bound, x, ranks, level_mu2, margins, V, beta, pos, y, norms, L,
-                    rhs)
+                    rhs, rowperm)
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
 def solve_kernel_ws(B, c, starts, scales, rcond, level_damping, singular_threshold,
                     step_bound, x, ranks, level_mu2, margins, V, beta, pos, y, norms, L,
-                    rhs):
+                    rhs, rowperm):
     """:func:`solve_kernel` with its scratch arrays given (a prepared solver owns them:
     no allocation per solve). ``V`` (``n × n``: reflector ``j`` in ``V[j, pos_j:]``),
     ``beta``, ``pos`` (int), ``y`` (``n``), ``norms``, ``rhs`` (``M``), ``L``
-    (``M × n``); their contents on entry do not matter. Inlined into its callers (the
+    (``M × n``); their contents on entry do not matter. ``rowperm`` (int): empty, or
+    ``M`` entries permuted as the rows of ``B`` are (row pivoting within each level),
+    for a caller that reads the rotated pivot rows back. Inlined into its callers (the
     call of a function of 19 arguments cost the G1 solve ~0.3 µs, the Panda's ~0.1)."""
     M, n = B.shape
     k = starts.shape[0] - 1
@@ -605,6 +608,8 @@ def solve_kernel_ws(B, c, starts, scales, rcond, level_damping, singular_thresho
                 _swap_rows(B, s0 + r, s0 + p)
                 _swap(rhs, r, p)
                 _swap(norms, r, p)
+                if rowperm.shape[0] > 0:
+                    _swap(rowperm, s0 + r, s0 + p)
             q = col + r
             norm = np.sqrt(exact)
             alpha = -norm if B[s0 + r, q] >= 0.0 else norm
@@ -810,7 +815,8 @@ def solve_data(A, b, w, work, out, iwork):
     if not level_scales(B, c, starts, scales):
         return 0
     solve_kernel_ws(B, c, starts, scales, params[0], params[1], params[2], params[3:], x,
-                    ranks[:k], mu2, margins, V, beta, ranks[k:], y, norms, L, rhs)
+                    ranks[:k], mu2, margins, V, beta, ranks[k:], y, norms, L, rhs,
+                    ranks[:0])
     level_residuals(A, b, w, starts, x, residuals)
     acc = 0.0
     ambiguous = False

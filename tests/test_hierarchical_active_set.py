@@ -469,9 +469,10 @@ def test_equality_first_answers_while_no_inequality_row_is_held(level_of_box, eq
 
 def test_equality_first_gives_way_to_the_active_set_when_a_bound_is_crossed():
     """The target walks out of the box and back: where the equality rows' answer
-    leaves the box the active set runs (the bound held), the next solve runs it too
-    (the last answer held a row), and once an answer holds none again the equality
-    rows are tried first again. Every answer equals the cold one."""
+    leaves the box the active set runs (the bound, a level below the reach, is fixed
+    at its violation), the next solve runs it too (the last answer fixed an inequality
+    row), and once an answer holds none again the equality rows are tried first again.
+    Every answer equals the cold one."""
     n = 6
     targets = [0.2, 0.5, 0.8, 1.3, 1.6, 1.2, 0.7, 0.4, 0.3]
     warm = prioik.prepare(_limits_stack(n, [targets[0], 0.0]), NAME)
@@ -490,6 +491,44 @@ def test_equality_first_gives_way_to_the_active_set_when_a_bound_is_crossed():
             assert list(a.info["iterations"]) == list(b.info["iterations"])
     assert held == [False, False, False, True, True, True, False, False, False]
     assert firsts == [False, True, True, False, False, False, False, True, True]
+
+
+def _reach_beyond_limits(n, target):
+    """Joint-limit-like bounds ``|x| ≤ 1`` on top, a reach of ``x₀`` alone below them and
+    a posture (``x → 0``) last: a target beyond 1 holds ``x₀`` at its bound."""
+    return TaskStack([[Task("limits", np.eye(n), lower=-np.ones(n), upper=np.ones(n))],
+                      [Task("reach", np.eye(n)[:1], [target])],
+                      [Task("posture", np.eye(n), np.zeros(n), weight=0.1)]])
+
+
+def test_held_rows_are_tried_as_equalities_and_proved_by_their_multipliers():
+    """The reach holds x₀ at its bound 1 with a multiplier of the right sign (it wants
+    x₀ beyond it); the posture below pulls x₀ back inside, a wrong-signed multiplier,
+    but the row is pinned by then (every point of the reach's optimal set has it on its
+    bound). So the next warm solve takes the held row as an equality at its bound and
+    its multipliers prove that answer: zero iterations, info['equality_first']. When
+    the target comes back inside, the reach's multiplier turns wrong-signed, the try
+    gives way to the active set, which releases the row, and the solve after that is
+    the equality rows' alone. Every answer is the cold one to 1e-12 and passes the KKT
+    check."""
+    n = 4
+    targets = [0.5, 1.3, 1.4, 1.6, 0.7, 0.6]
+    warm = prioik.prepare(_reach_beyond_limits(n, targets[0]), NAME)
+    cold = prioik.prepare(warm.layout, NAME, warm_start=False)
+    firsts, held = [], []
+    for t in targets:
+        stack = _reach_beyond_limits(n, t)
+        a, b = warm.solve(stack), cold.solve(stack)
+        assert a.status == b.status == "optimal"
+        assert_exact(stack, a)
+        assert np.linalg.norm(a.x - b.x) <= 1e-12 * max(1.0, np.linalg.norm(b.x))
+        assert np.allclose(a.residuals, b.residuals, rtol=1e-12, atol=1e-14)
+        firsts.append(bool(a.info["equality_first"]))
+        held.append(bool(a.x[0] == 1.0))
+        if a.info["equality_first"]:
+            assert not a.info["iterations"].any()
+    assert held == [False, True, True, True, False, False]
+    assert firsts == [False, False, True, True, False, True]
 
 
 def test_equality_first_is_off_without_warm_start_and_after_reset():
