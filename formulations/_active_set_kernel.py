@@ -816,7 +816,9 @@ def _held_rows_optimal(A, b, lower, row_eq, sw, starts, k, x, y, eB, estarts, er
                        pside, pinned, hcol):
     """Whether the held rows' multipliers prove the equality-first answer ``x*`` (the
     nested QR's, the held rows solved as equalities at their bounds) lexicographically
-    optimal with those rows as the inequalities they are.
+    optimal with those rows as the inequalities they are: ``-1`` when they do, else the
+    data row of the most wrong-signed multiplier at the first level that has one (the
+    row to release), ``-2`` when the test cannot be read.
 
     Level ``ℓ`` below a held row minimises ``f_ℓ`` over ``X_{ℓ−1}``, the polyhedron of
     the levels above; ``x*`` does iff ``−∇f_ℓ(x*)`` lies in its normal cone, which holds
@@ -832,10 +834,10 @@ def _held_rows_optimal(A, b, lower, row_eq, sw, starts, k, x, y, eB, estarts, er
     exceeds :data:`_DUAL_FLOOR` times the level's gradient scale (that of
     :func:`_dual_scale`). A multiplier of the right sign beyond ``dual_tol`` times that
     scale pins its row. The minimum-norm tie-break is read the same way, its gradient
-    being ``y = Qᵀ x*``. The test is sufficient, not necessary: ``False`` sends the stack
-    to the active set, which decides. ``False`` also when a level whose gradient is read
-    lies below one the QR did not leave triangular (a level with at least as many rows
-    as free coordinates: its full-rank or unit-rows step).
+    being ``y = Qᵀ x*``. The test is sufficient, not necessary: a refusal sends the
+    stack on (another guess, then the active set, which decides). ``-2`` when a level
+    whose gradient is read lies below one the QR did not leave triangular (a level with
+    at least as many rows as free coordinates: its full-rank or unit-rows step).
 
     ``held[j]``: the side of data row ``j`` (``0``: not held); ``erow`` maps the rows of
     ``eB`` (before pivoting) to the data's, ``rowperm`` the pivoting. Scratch: ``Z``
@@ -865,7 +867,7 @@ def _held_rows_optimal(A, b, lower, row_eq, sw, starts, k, x, y, eB, estarts, er
     if ctri < 0:
         ctri = ncol
     if first_held == k:
-        return True
+        return -1
     xn = np.sqrt(_dot(x, x))
     # z_h = C⁻¹ e_h of each held pivot h, by forward substitution over the pivot rows
     # (lower triangular, rows contiguous) of the levels the QR left triangular, once: a
@@ -899,7 +901,7 @@ def _held_rows_optimal(A, b, lower, row_eq, sw, starts, k, x, y, eB, estarts, er
             if ucol[erow[estarts[lev]]] != -2:        # held rows only: no gradient
                 continue
             if lev > complete:
-                return False
+                return -2
             for c in range(n):
                 g[c] = 0.0
             tn = 0.0
@@ -949,20 +951,25 @@ def _held_rows_optimal(A, b, lower, row_eq, sw, starts, k, x, y, eB, estarts, er
             if not unpinned:
                 break
             if complete < k:
-                return False
+                return -2
             colv = ncol
             gh = y
             scale = np.sqrt(_dot(y[:ncol], y[:ncol]))
+        worst = _DUAL_FLOOR * scale
+        release = -1
         for i in range(nh):
             h = hcol[i]
             if h >= colv or pinned[i] != 0:
                 continue
             wrong = pside[h] * _dot(Z[i, h:colv], gh[h:colv]) * cn[i]
-            if wrong > _DUAL_FLOOR * scale:
-                return False
-            if -wrong > dual_tol * scale:
+            if wrong > worst:
+                worst = wrong
+                release = h
+            elif -wrong > dual_tol * scale:
                 pinned[i] = 1
-    return True
+        if release >= 0:
+            return erow[rowperm[prow[release]]]
+    return -1
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
@@ -972,9 +979,14 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
     last answer held (``held[j]``: ``±1``, at their upper/lower bound; ``0`` for
     none), as equalities at those bounds, weighed into ``eB`` and solved by the
     extended Jacobian's nested QR (its compiled :func:`solve_kernel_into`) with this
-    kernel's rank rule (``rcond`` times each level's whole ``‖√W_i A_i‖_F``); ``True``
-    when that answer ``x*`` is the stack's, with ``x``, ``ranks[:k]``, ``margins[:k]``
-    and the levels' violations ``w2``, ``res`` written.
+    kernel's rank rule (``rcond`` times each level's whole ``‖√W_i A_i‖_F``); when that
+    answer ``x*`` is the stack's, ``x``, ``ranks[:k]``, ``margins[:k]`` and the levels'
+    violations ``w2``, ``res`` are written.
+
+    Returns ``(verdict, row, side)``: ``verdict = -1`` when ``x*`` is the answer; ``-3``
+    with a next guess when it is not because a row is violated (the most violated, with
+    the side to hold it on) or a held row's multiplier is wrong-signed (the row to
+    release, ``side = 0``); ``-2`` when it is not for another reason.
 
     It is when every other row is inside its interval (no tolerance), every rank
     decision is clear, ``x``'s precision resolves every box row, and the held rows are
@@ -986,7 +998,7 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
     ``X_i ⊆ X_i^E`` (the optimal sets without the inequality rows) and ``x* ∈ X_i`` (its
     inequality rows are satisfied, so each level's value equals its equality part's
     least value), and ``x*``, the minimum-norm point of ``X_k^E``, is that of ``X_k``.
-    ``False`` (also for a value :func:`_load_rows` refuses): the active set runs.
+    A value :func:`_load_rows` refuses gives ``-2`` (:func:`solve_data` names it).
     Reads the data directly (one pass; the active set's own rows are not built).
     Scratch (the active set's, unused on this path): ``V`` (``n × n``), ``L``
     (``≥ M × n``), ``fs`` (``4 × ≥ max(M, n)``), ``pos`` (``≥ n`` ints), ``eqr`` (``≥ M``
@@ -1012,7 +1024,7 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
     hcol = eint[o + 3 * n:o + 4 * n]
     iseq = eqr[:M]
     if not _rows_valid(row_eq, b, lower, upper, sw, iseq):
-        return False
+        return -2, -1, 0
     m = 0
     nheld = 0
     estarts[0] = 0
@@ -1046,9 +1058,9 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
                 nn *= s * s
             acc += nn
         if not np.isfinite(acc):        # (a sum of squares: finite iff every term is)
-            return False
+            return -2, -1, 0
         if level_held > 0 and level_eq > 0:
-            return False
+            return -2, -1, 0
         scales[lev] = np.sqrt(acc)
         step_bound[lev] = 0.0
         estarts[lev + 1] = m
@@ -1061,13 +1073,13 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
                       fs[3, :M], rowperm[:m] if nheld > 0 else rowperm[:0])
     xx = _dot(x, x)
     if not (xx <= _PRECISION_LIMIT_NORM * _PRECISION_LIMIT_NORM):
-        return False
+        return -2, -1, 0
     for lev in range(k):
         if emargins[lev] <= _AMBIGUITY:
-            return False
+            return -2, -1, 0
         if nheld > 0 and ucol[erow[estarts[lev]]] != -2 and estarts[lev + 1] > estarts[lev]:
             if eranks[lev] != estarts[lev + 1] - estarts[lev]:      # a held row dependent
-                return False
+                return -2, -1, 0
     xn = np.sqrt(xx)
     if nheld > 0:       # a held box row off its bound by x's precision is put on it
         for j in range(M):
@@ -1076,6 +1088,9 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
                 bound = upper[j] if held[j] > 0 else lower[j]
                 if abs(A[j, uc] * x[uc] - bound) <= X_PRECISION * xn * abs(A[j, uc]):
                     x[uc] = bound / A[j, uc]
+    worst = 0.0
+    add = -1
+    side = 0
     for j in range(M):
         uc = ucol[j]
         if uc == -2:
@@ -1089,19 +1104,31 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
             size = (abs(A[j, uc]) * (abs(x[uc]) + 1.0) if uc >= 0
                     else np.sqrt(_dot(A[j], A[j])) * xn)
             if not abs(s * (r - bound)) <= _tol(primal_tol, s * size, s * bound):
-                return False
+                return -2, -1, 0
         elif r < lo or r > up:
-            return False
+            # the most violated row (relative to its size) is the guess to hold next
+            size = (abs(A[j, uc]) * (abs(x[uc]) + 1.0) if uc >= 0
+                    else np.sqrt(_dot(A[j], A[j])) * xn)
+            v = (lo - r if r < lo else r - up) / max(size, 1e-300)
+            if v > worst:
+                worst = v
+                add = j
+                side = -1 if r < lo else 1
+            continue
         if uc >= 0:        # as the active set's box-row pass: x's precision decides
             s = sw[j]
             if _box_row_unresolved(s * A[j, uc], x[uc], s * r, s * lo, s * up, xn,
                                    primal_tol):
-                return False
-    if nheld > 0 and not _held_rows_optimal(
-            A, b, lower, row_eq, sw, starts, k, x, fs[1, :n], eB, estarts, eranks, ucol, erow,
-            rowperm, held, scales, dual_tol, V, fs[0, :n], pos, L, fs[2, :n], fs[3, :n],
-            prow, pside, pinned, hcol):
-        return False
+                return -2, -1, 0
+    if add >= 0:
+        return -3, add, side
+    if nheld > 0:
+        release = _held_rows_optimal(
+            A, b, lower, row_eq, sw, starts, k, x, fs[1, :n], eB, estarts, eranks, ucol,
+            erow, rowperm, held, scales, dual_tol, V, fs[0, :n], pos, L, fs[2, :n],
+            fs[3, :n], prow, pside, pinned, hcol)
+        if release != -1:
+            return -3 if release >= 0 else -2, release, 0
     for lev in range(k):
         acc = 0.0
         for j in range(starts[lev], starts[lev + 1]):
@@ -1117,7 +1144,7 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
         res[lev] = np.sqrt(acc)
         ranks[lev] = eranks[lev]
         margins[lev] = emargins[lev]
-    return True
+    return -1, -1, 0
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
@@ -1828,6 +1855,10 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
 #: what :func:`equality_first_data` returns when its answer is not the stack's (the
 #: caller then runs :func:`solve_data`)
 NOT_TRIED = -1
+#: the guesses :func:`equality_first_data` tries: the kept held rows, then each
+#: refutation's next (hold the most violated row, or release the held row of the most
+#: wrong-signed multiplier), one nested QR each
+GUESSES = 2
 
 
 @njit(cache=True, fastmath=_FAST)
@@ -1837,11 +1868,13 @@ def equality_first_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     none; ``2``, it held the rows ``held``), the stack's equality rows and those held
     rows by the extended Jacobian's nested QR (:func:`_equality_first`); if that answer
     is proved the stack's it is written as :func:`solve_data` writes its own (zero
-    iterations, ``params[10] = 1``) and its code returned, else :data:`NOT_TRIED` (also
-    when a value is not valid: :func:`solve_data` names it). After a refuted try
-    ``params[10] = -1`` when no row was held, and the :func:`solve_data` call that
-    follows starts cold (the kept working sets held no inequality row: the guess the
-    try refuted); ``-2`` when rows were, and it starts from the kept working sets.
+    iterations, ``params[10] = 1``) and its code returned. A refuted try that names a
+    next guess (:func:`_equality_first`) is followed by that guess, up to
+    :data:`GUESSES` tries, the last refuted one returning :data:`NOT_TRIED` (also when a
+    value is not valid: :func:`solve_data` names it). After it ``params[10] = -1`` when
+    no row was held, and the :func:`solve_data` call that follows starts cold (the kept
+    working sets held no inequality row: the guess the try refuted); ``-2`` when rows
+    were, and it starts from the kept working sets.
 
     Compiled with numba's runtime (not :func:`~prioik._jit.kernel`): the extended
     Jacobian's full-rank step allocates its scratch.
@@ -1871,13 +1904,28 @@ def equality_first_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     fs = fwork[o:o + 4 * R].reshape((4, R))                 # fvec's first rows
     pos = iwork[k + 2:k + 2 + n]                            # ivec's first row
     o = M + 3 * R + (k + 1) * R + k + 1                    # held (workspace_offsets)
-    if not _equality_first(A, b, lower, upper, sw, bwork[:M], starts, k, fwork[0],
-                           primal_tol, fwork[2], eB, evec, eint, x, counts[2], margins,
-                           w2, res, V, L, fs, pos, bwork[M + 2 * R:M + 3 * R],
-                           bwork[o:o + M]):
-        # tried and refuted: with no row held, solve_data then starts cold
-        fwork[10] = -1.0 if fwork[11] == 1.0 else -2.0
-        return NOT_TRIED
+    held = bwork[o:o + M]
+    kept = fwork[11] == 2.0         # the kept working sets held rows
+    guessed = False
+    for attempt in range(GUESSES):
+        verdict, row, side = _equality_first(
+            A, b, lower, upper, sw, bwork[:M], starts, k, fwork[0], primal_tol, fwork[2],
+            eB, evec, eint, x, counts[2], margins, w2, res, V, L, fs, pos,
+            bwork[M + 2 * R:M + 3 * R], held)
+        if verdict == -1:
+            break
+        if verdict == -2 or attempt == GUESSES - 1:
+            # refuted: with no row held, solve_data then starts cold
+            fwork[10] = -2.0 if kept else -1.0
+            return NOT_TRIED
+        held[row] = side            # the next guess: hold the row, or release it
+        guessed = True
+    if guessed:
+        fwork[11] = 1.0
+        for j in range(M):
+            if held[j] != 0:
+                fwork[11] = 2.0
+                break
     total = 0.0
     for lev in range(k):
         total += w2[lev]

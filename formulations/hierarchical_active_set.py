@@ -102,18 +102,28 @@ next solve first tries, per level, the step of last time's working set: when the
 point it reaches keeps every hard row feasible, the level continues from there
 (usually: one factorization and one multiplier check), else from the cold start.
 Both paths end at the same optimum (within the tolerances above; tested at 1e-9).
-When the last answer held no inequality row (none at a bound, none violated), the
-next solve first tries the **equality rows alone** (rows with ``lower = upper``
-included), solved by the extended Jacobian's nested QR with this solver's rank rule
-(``_active_set_kernel.equality_first_data``): if that point ``x*`` satisfies every
-inequality row it is the answer (``info["equality_first"]``, zero iterations), else
-the active set runs from the cold start (the kept working sets held no inequality row:
-the guess the try refuted). Why it is exact: with ``X_i^E`` the optimal sets of the stack
-without its inequality rows, by induction ``X_i ⊆ X_i^E`` and ``x* ∈ X_i`` (its
-inequality rows add no violation, so each level's value at ``x*`` is its equality
-part's least value over ``X_{i−1}^E ⊇ X_{i−1}``), and ``x*``, the minimum-norm point
-of ``X_k^E``, is that of ``X_k``. A control loop whose limits are inactive pays the
-extended Jacobian's solve plus one pass over the inequality rows.
+When no inequality row of the last answer was fixed at a violation, the next solve
+first tries the **equality rows with the rows the last answer held**, each as an
+equality at its bound (rows with ``lower = upper`` are equalities), solved by the
+extended Jacobian's nested QR with this solver's rank rule
+(``_active_set_kernel.equality_first_data``). Its point ``x*`` is the answer
+(``info["equality_first"]``, zero iterations) when it is proved so: every other
+inequality row satisfied, every held row on its bound in a level of inequality rows
+only and independent of the levels above, and the held rows' multipliers of the
+right sign at every level below them (``μ_h = (C⁻¹e_h)·(Qᵀ∇f_ℓ)[:col_ℓ]`` over the QR's
+triangular pivot rows ``C``; a row held with a clear right-signed multiplier is
+*pinned* for the levels below, whose gradients may then push it either way). A refuted
+try names its next guess (hold the most violated row, or release the most wrong-signed
+held row), tried once more; then the active set runs, from the kept working sets, or
+from the cold start when they held no row. Why it is exact: with no held row, with
+``X_i^E`` the optimal sets of the stack without its inequality rows, by induction
+``X_i ⊆ X_i^E`` and ``x* ∈ X_i`` (its inequality rows add no violation, so each level's
+value at ``x*`` is its equality part's least value over ``X_{i−1}^E ⊇ X_{i−1}``), and
+``x*``, the minimum-norm point of ``X_k^E``, is that of ``X_k``; with held rows, each
+level's KKT conditions over the levels above hold at ``x*`` (docs/active-set.md). A
+control loop whose limits are inactive pays the extended Jacobian's solve plus one pass
+over the inequality rows; one whose active limits stay the same, that solve with the
+held rows among its rows plus the multiplier test.
 
 *Complexity.* Per iteration ``O((h + w) d²)`` for ``h`` working hard rows, ``w``
 working soft rows and ``d`` free coordinates, plus ``O(M n)`` for the step test;
