@@ -304,6 +304,9 @@ class Prepared:
         self._counts = part(self._iwork, "counts", (4, k + 1))
         self._iterations = self._counts[0]
         self._ranks = self._counts[2, :k]
+        #: views of the parts an answer copies (a view per solve costs as much as a copy)
+        self._x, self._w2 = self._out[:n], self._out[n:n + k]
+        self._res, self._over = self._out[n + k:], self._counts[3, :k]
 
     def reset(self) -> None:
         """Forget the kept working sets (the next solve starts cold)."""
@@ -331,7 +334,7 @@ class Prepared:
             TaskStackError: as :meth:`solve`.
         """
         code = _NOT_TRIED
-        if self._try_first and self._fwork[11] != 0.0:    # the module doc's warm start
+        if self._try_first and self._fwork.item(11) != 0.0:   # the module doc's warm start
             code = _kernel.equality_first_data(data.A, data.b, data.lower, data.upper,
                                                data.sqrt_weight, self._fwork, self._iwork,
                                                self._bwork)
@@ -340,16 +343,14 @@ class Prepared:
                                       data.sqrt_weight, self._fwork, self._iwork,
                                       self._bwork)
         if code == _SOLVED_CLEAN or code == _SOLVED_INFEASIBLE:
-            out = self._out.copy()
-            n, k = self._n, self._k
-            counts = self._counts.copy()
-            return (out[:n], "optimal",
-                    {"iterations": counts[0], "rank_profile": counts[2, :k],
-                     "level_violation": out[n:n + k],
+            return (self._x.copy(), "optimal",
+                    {"iterations": self._iterations.copy(),
+                     "rank_profile": self._ranks.copy(),
+                     "level_violation": self._w2.copy(),
                      "infeasible_levels": [] if code == _SOLVED_CLEAN else
-                     [i for i, over in enumerate(counts[3, :k].tolist()) if over],
+                     [i for i, over in enumerate(self._over.tolist()) if over],
                      "warm_start": self.warm_start,
-                     "equality_first": self._fwork[10] == 1.0}, out[n + k:])
+                     "equality_first": self._fwork.item(10) == 1.0}, self._res.copy())
         if code == _kernel.NOT_SOLVED:
             self.reset()
             data.check()     # names the task, level and row at fault
