@@ -24,6 +24,7 @@ way the rows were written.
 
 from __future__ import annotations
 
+import weakref
 from typing import Sequence
 
 import numpy as np
@@ -36,6 +37,11 @@ __all__ = ["KINDS", "StackData", "StackLayout", "level_residuals", "precision_li
 
 #: Task kinds of a layout.
 KINDS = ("equality", "inequality")
+
+
+#: the layouts :meth:`StackLayout.shared` hands out, by ``(n, levels)``; an entry lives as
+#: long as its layout does
+_SHARED: "weakref.WeakValueDictionary[tuple, StackLayout]" = weakref.WeakValueDictionary()
 
 
 class StackLayout:
@@ -55,7 +61,7 @@ class StackLayout:
     """
 
     __slots__ = ("_n", "_levels", "_starts", "_slices", "_level_of", "_kind_of",
-                 "_row_is_equality", "_hash", "_names")
+                 "_row_is_equality", "_hash", "_names", "__weakref__")
 
     def __init__(self, n: int, levels: Sequence[Sequence[tuple]]) -> None:
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
@@ -113,6 +119,25 @@ class StackLayout:
         self._row_is_equality = np.array(flags, dtype=np.bool_)
         self._row_is_equality.setflags(write=False)
         self._hash = hash((self._n, self._levels))
+
+    @classmethod
+    def shared(cls, n: int, levels: Sequence[Sequence[tuple]]) -> "StackLayout":
+        """The layout of ``n`` and ``levels`` (as for the constructor), one object per
+        distinct shape while something holds it: the stacks of one shape share it, and a
+        prepared solver recognises their data by identity instead of comparing layouts
+        (~0.25 µs a call, against a ~10 µs G1 solve). :class:`TaskStack` takes its
+        layout here.
+
+        Raises:
+            TaskStackError: as the constructor.
+        """
+        try:
+            key = (n, tuple(tuple(tuple(entry) for entry in level) for level in levels))
+            return _SHARED[key]
+        except (KeyError, TypeError):      # (unhashable entries: the constructor says)
+            layout = cls(n, levels)
+            _SHARED[(layout._n, layout._levels)] = layout
+            return layout
 
     # ------------------------------------------------------------------ access
     @property

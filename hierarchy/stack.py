@@ -136,8 +136,9 @@ class TaskStack:
     def layout(self) -> StackLayout:
         """The stack's shape: ``n`` and per level ``(task name, rows, kind)``."""
         if self._layout is None:
-            self._layout = StackLayout(self._n, [[(t.name, t.m, t.kind) for t in level]
-                                                 for level in self._levels])
+            self._layout = StackLayout.shared(
+                self._n, tuple(tuple((t.name, t.m, t.kind) for t in level)
+                               for level in self._levels))
         return self._layout
 
     @property

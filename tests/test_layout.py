@@ -176,3 +176,30 @@ def test_precision_limited_levels_reads_inequality_targets_and_weights():
     stack = TaskStack([far, near])
     assert precision_limited_levels(stack.data, np.array([1e12, 1.0])) == [1]
     assert precision_limited_levels(stack.data, np.array([1e5, 1.0])) == []
+
+
+def test_stacks_of_one_shape_share_their_layout():
+    """TaskStack takes its layout from StackLayout.shared: one object per shape (so a
+    prepared solver knows their data by identity), another for another shape, equal to
+    a layout built directly, not kept alive by the sharing, and picklable."""
+    import gc
+    import pickle
+    import weakref
+
+    def stack(m):
+        return TaskStack([[Task("a", np.ones((m, 3)), np.zeros(m))],
+                          [Task("b", np.eye(3), lower=-np.ones(3), upper=np.ones(3))]])
+
+    one, two, other = stack(2), stack(2), stack(1)
+    assert one.layout is two.layout and one.layout is not other.layout
+    direct = StackLayout(3, [[("a", 2)], [("b", 3, "inequality")]])
+    assert direct == one.layout and direct is not one.layout
+    assert StackLayout.shared(3, [[("a", 2, "equality")], [("b", 3, "inequality")]]) \
+        is one.layout
+    assert pickle.loads(pickle.dumps(one.layout)) == one.layout
+    ref = weakref.ref(other.layout)
+    del other
+    gc.collect()
+    assert ref() is None
+    with pytest.raises(TaskStackError, match="at least one row"):
+        StackLayout.shared(3, [[("a", 0)]])
