@@ -425,7 +425,7 @@ def _unit_rows_step(Bo, ucol, xc, col, rows, nh, nw, tgt, rcond, soft_tol, reach
         if i >= 0:
             a = Bo[s0 + i, c]
             g[c] = a * (tgt[nh + i] - a * xc[c]) / (s * s)
-    nu = _unit_rows_solve(colrow, g, col, p, nf, Vf, betaf, posf, Zu, G)
+    nu = _unit_rows_solve(colrow, g, col, p, nf, Vf, betaf, posf, Zu, G, g[:0])
     if nu < 0:
         return -1.0, -1.0
     margin = s * np.sqrt(_UNIT_ROWS_GAP) if nu > 0 else s
@@ -438,7 +438,7 @@ def _unit_rows_step(Bo, ucol, xc, col, rows, nh, nw, tgt, rcond, soft_tol, reach
     W = Zu[nu + nh:nu + 2 * nh]
     for i in range(nh):
         z[i] = ucol[rows[i]]
-    _free_directions(z, nh, Zh, col, nf, Vf, betaf, posf, z[:0])
+    _free_directions(z, nh, Zh, col, nf, Vf, betaf, posf, z[:0], z[:0])
     for i in range(nh):
         for k in range(d):
             W[i, k] = Zh[i, k]

@@ -201,11 +201,13 @@ def _cholesky_lower(G, m):
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
-def _free_directions(cols, m, Z, col, nf, Vf, betaf, posf, g):
+def _free_directions(cols, m, Z, col, nf, Vf, betaf, posf, g, yfix):
     """``Z[i, :n − col] = (Qᵀ e_{cols[i]})[col:]`` for ``i < m`` (``cols``: column indices,
     any numeric dtype): the rows ``cols`` of the
     free directions ``Z = Q[:, col:]`` (``Q = H_0 … H_{nf-1}``; ``Z``'s rows hold ``n``),
-    and ``g = Qᵀ g`` in place when ``g`` has ``n`` entries (else it is left alone).
+    and ``g = Qᵀ g`` in place when ``g`` has ``n`` entries (else it is left alone). When
+    ``yfix`` has entries, ``cols[i]`` is then overwritten by ``(Qᵀ e_{cols[i]})[:col] ·
+    yfix[:col]`` (the coordinate ``cols[i]`` of ``Q [yfix[:col]; 0]``).
 
     Each vector gets the operations of :func:`_apply_qt`, in its order; the loop runs
     over the reflectors outside and the vectors inside, because one vector's sweep is a
@@ -235,6 +237,9 @@ def _free_directions(cols, m, Z, col, nf, Vf, betaf, posf, g):
             if f != 0.0:
                 for c in range(w):
                     gq[c] -= f * vt[c]
+    if yfix.shape[0] > 0:
+        for i in range(m):
+            cols[i] = _dot(Z[i, :col], yfix[:col])
     if col > 0:
         for i in range(m):
             Zi = Z[i]
@@ -243,7 +248,7 @@ def _free_directions(cols, m, Z, col, nf, Vf, betaf, posf, g):
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
-def _unit_rows_solve(cover, g, col, p, nf, Vf, betaf, posf, Zu, G):
+def _unit_rows_solve(cover, g, col, p, nf, Vf, betaf, posf, Zu, G, yfix):
     """The least-squares step of a level of *unit rows* on the free coordinates.
 
     The level's rows ``S`` are ``±s e_cᵀ`` in ``x`` (one non-zero each, one magnitude
@@ -255,7 +260,12 @@ def _unit_rows_solve(cover, g, col, p, nf, Vf, betaf, posf, Zu, G):
     the rows ``U`` of ``Z``: a rank-``|U|`` update of the identity, solved by Woodbury,
     ``p = h + Z_Uᵀ (I − Z_U Z_Uᵀ)⁻¹ Z_U h``. The reflectors are applied to ``|U| + 1``
     vectors (``Qᵀ e_u``, ``Qᵀ g``) instead of the level's rows, and nothing of size
-    ``rows × d`` is factorized.
+    ``rows × d`` is factorized. With ``yfix`` (the fixed coordinates ``y[:col]`` of the
+    levels above, ``x_p = Q [y[:col]; 0]``), ``g`` is given as ``Sᵀ c / s²`` (the targets
+    alone) and ``h`` is taken as ``(Qᵀ g)[col:] + Σ_u (x_p)_u (Qᵀ e_u)[col:]``, which is
+    ``Zᵀ Sᵀ (c − S x_p) / s²`` (``Zᵀ x_p = 0``, ``SᵀS = s² (I − P_U)``) without bringing
+    ``x_p`` through the reflectors: ``(x_p)_u = (Qᵀ e_u)[:col] · y[:col]``, read from the
+    same pass.
 
     Taken only when ``I − Z_U Z_Uᵀ − g I`` is positive definite (its Cholesky
     factorization exists), ``g`` = :data:`_UNIT_ROWS_GAP`: then ``σ_min(S Z) ≥ s √g`` and
@@ -270,9 +280,15 @@ def _unit_rows_solve(cover, g, col, p, nf, Vf, betaf, posf, Zu, G):
         if cover[u] < 0:
             ucols[nu] = u
             nu += 1
-    _free_directions(ucols, nu, Zu, col, nf, Vf, betaf, posf, g[:n])
+    _free_directions(ucols, nu, Zu, col, nf, Vf, betaf, posf, g[:n], yfix)
     for c in range(d):
         p[c] = g[col + c]
+    if yfix.shape[0] > 0:
+        for i in range(nu):
+            xu = ucols[i]
+            Zi = Zu[i]
+            for c in range(d):
+                p[c] += xu * Zi[c]
     if nu == 0:
         return 0
     # G = I − Z_U Z_Uᵀ (lower triangle), and below it G − gap·I
@@ -540,19 +556,15 @@ def solve_kernel_ws(B, c, starts, scales, rcond, level_damping, singular_thresho
             d = n - col
             nu = n - m
             if m >= d and nu + max(1, 2 * nu) <= M:
-                xp = rhs[:n]                      # x of the levels above: Q [y[:col]; 0]
-                for j in range(n):
-                    xp[j] = y[j]
-                _apply_q(xp, nref, V, beta, pos)
-                g = norms[:n]                     # Sᵀ (c − S x) / s²
+                g = norms[:n]                     # Sᵀ c / s² (x_p's part: yfix)
                 for j in range(n):
                     g[j] = 0.0
                     i = int(x[j])
                     if i >= 0:
                         a = B[s0 + i, j]
-                        g[j] = a * (c[s0 + i] - a * xp[j]) / (unit_s * unit_s)
+                        g[j] = a * c[s0 + i] / (unit_s * unit_s)
                 got = _unit_rows_solve(x, g, col, y[col:], nref, V, beta, pos, L[:nu],
-                                       L[nu:nu + max(1, 2 * nu)])
+                                       L[nu:nu + max(1, 2 * nu)], y[:col])
                 margin = unit_s * np.sqrt(_UNIT_ROWS_GAP) if got > 0 else unit_s
                 if got >= 0 and margin > _AMBIGUITY * tol:
                     ranks[lev] = d
