@@ -751,18 +751,26 @@ def _sparsity(a, hint):
     ``hint`` (the row's column at the last solve: a joint limit keeps its joint)."""
     nn = 0.0
     nz = 0
-    n = a.shape[0]
-    for c in range(n):
+    for c in range(a.shape[0]):
         v = a[c]
         nn += v * v
         nz += 1 if v != 0.0 else 0
-    if nz == 1:
-        if hint >= 0 and hint < n and a[hint] != 0.0:
-            return nn, hint
-        for c in range(n):
-            if a[c] != 0.0:
-                return nn, c
-    return nn, -1
+    return nn, _one_column(a, nz, hint)
+
+
+@njit(cache=True, inline="always")
+def _one_column(a, nz, hint):
+    """The column of the row ``a``'s one non-zero when it has ``nz = 1`` of them (``hint``
+    first: the row's column at the last solve), else ``-1``."""
+    n = a.shape[0]
+    if nz != 1:
+        return -1
+    if hint >= 0 and hint < n and a[hint] != 0.0:
+        return hint
+    for c in range(n):
+        if a[c] != 0.0:
+            return c
+    return -1
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
@@ -806,9 +814,9 @@ def _load_rows(A, b, lower, upper, sw, row_eq, B, Bo, blo, bup, rnorm, eqr, ucol
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
-def _held_rows_optimal(A, b, lower, row_eq, sw, starts, k, x, y, eB, estarts, eranks, ucol, erow,
-                       rowperm, held, scales, dual_tol, V, beta, pos, Z, g, cn, prow,
-                       pside, pinned, hcol):
+def _held_rows_optimal(A, b, lower, row_eq, sw, starts, k, x, y, eB, estarts, eranks, ucol,
+                       ecol, erow, rowperm, held, scales, dual_tol, V, beta, pos, Z, g, cn,
+                       prow, pside, pinned, hcol):
     """Whether the held rows' multipliers prove the equality-first answer ``x*`` (the
     nested QR's, the held rows solved as equalities at their bounds) lexicographically
     optimal with those rows as the inequalities they are: ``-1`` when they do, else the
@@ -834,7 +842,8 @@ def _held_rows_optimal(A, b, lower, row_eq, sw, starts, k, x, y, eB, estarts, er
     whose gradient is read lies below one the QR did not leave triangular (a level with
     at least as many rows as free coordinates: its full-rank or unit-rows step).
 
-    ``held[j]``: the side of data row ``j`` (``0``: not held); ``erow`` maps the rows of
+    ``held[j]``: the side of data row ``j`` (``0``: not held); ``ecol[j]``: an equality
+    row's one non-zero column (``-1``: more than one); ``erow`` maps the rows of
     ``eB`` (before pivoting) to the data's, ``rowperm`` the pivoting. Scratch: ``Z``
     (``≥ n × n``: the ``C⁻¹ e_h``), ``g``, ``cn`` (``n``: a gradient, the held pivot rows'
     norms), ``prow``, ``pside``, ``pinned``, ``hcol`` (``n`` ints).
@@ -907,7 +916,8 @@ def _held_rows_optimal(A, b, lower, row_eq, sw, starts, k, x, y, eB, estarts, er
                     j = erow[rowperm[i]]
                     s = sw[j]
                     t = b[j] if row_eq[j] else lower[j]
-                    r = s * (_dot(A[j], x) - t)
+                    ec = ecol[j]
+                    r = s * ((A[j, ec] * x[ec] if ec >= 0 else _dot(A[j], x)) - t)
                     tn += s * s * t * t
                     if r != 0.0:
                         Bi = eB[i]
@@ -921,12 +931,17 @@ def _held_rows_optimal(A, b, lower, row_eq, sw, starts, k, x, y, eB, estarts, er
                         continue
                     s = sw[j]
                     t = b[j] if row_eq[j] else lower[j]
-                    e = s * s * (_dot(A[j], x) - t)
+                    ec = ecol[j]
+                    if ec >= 0:             # a unit row (a posture's): one product
+                        e = s * s * (A[j, ec] * x[ec] - t)
+                        g[ec] += e * A[j, ec]
+                    else:
+                        e = s * s * (_dot(A[j], x) - t)
+                        if e != 0.0:
+                            Aj = A[j]
+                            for c in range(n):
+                                g[c] += e * Aj[c]
                     tn += s * s * t * t
-                    if e != 0.0:
-                        Aj = A[j]
-                        for c in range(n):
-                            g[c] += e * Aj[c]
                 for t in range(colv):
                     q = pos[t]
                     vt = V[t, q:]
@@ -1017,6 +1032,7 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
     pside = eint[o + n:o + 2 * n]
     pinned = eint[o + 2 * n:o + 3 * n]
     hcol = eint[o + 3 * n:o + 4 * n]
+    ecol = eint[o + 4 * n:o + 4 * n + M]      # an equality row's one column, or -1
     iseq = eqr[:M]
     if not _rows_valid(row_eq, b, lower, upper, sw, iseq):
         return -2, -1, 0
@@ -1033,13 +1049,17 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
             if iseq[j] or held[j] != 0:
                 row = eB[m]
                 nn = 0.0
+                nz = 0
                 for col in range(n):
-                    v = s * Aj[col]
+                    a = Aj[col]
+                    v = s * a
                     row[col] = v
                     nn += v * v
+                    nz += 1 if a != 0.0 else 0
                 if iseq[j]:
                     c[m] = s * (b[j] if row_eq[j] else lower[j])
                     ucol[j] = -2
+                    ecol[j] = _one_column(Aj, nz, ecol[j])
                     level_eq += 1
                 else:
                     c[m] = s * (upper[j] if held[j] > 0 else lower[j])
@@ -1120,7 +1140,7 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
     if nheld > 0:
         release = _held_rows_optimal(
             A, b, lower, row_eq, sw, starts, k, x, fs[1, :n], eB, estarts, eranks, ucol,
-            erow, rowperm, held, scales, dual_tol, V, fs[0, :n], pos, L, fs[2, :n],
+            ecol, erow, rowperm, held, scales, dual_tol, V, fs[0, :n], pos, L, fs[2, :n],
             fs[3, :n], prow, pside, pinned, hcol)
         if release != -1:
             return -3 if release >= 0 else -2, release, 0
@@ -1128,7 +1148,9 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
         acc = 0.0
         for j in range(starts[lev], starts[lev + 1]):
             if ucol[j] == -2:
-                e = sw[j] * (_dot(A[j], x) - (b[j] if row_eq[j] else lower[j]))
+                ec = ecol[j]
+                ax = A[j, ec] * x[ec] if ec >= 0 else _dot(A[j], x)
+                e = sw[j] * (ax - (b[j] if row_eq[j] else lower[j]))
             else:
                 uc = ucol[j]
                 r = A[j, uc] * x[uc] if uc >= 0 else _dot(A[j], x)
@@ -1261,7 +1283,7 @@ def workspace_offsets(M: int, n: int, k: int) -> dict[str, tuple[int, int]]:
     ``1`` when the next warm solve should try it (the answer held no inequality row),
     ``2`` when it should try it with the rows the answer held (``held``), ``0`` not;
     int64: ``k``, ``starts`` (``k + 1``), ``ivec`` (``5 × R``), ``perm`` (``n``),
-    ``counts`` (``4 × (k + 1)``), ``eint`` (``2 k + 1 + 3 M + 4 n``); int8: ``row_eq``
+    ``counts`` (``4 × (k + 1)``), ``eint`` (``2 k + 1 + 4 M + 4 n``); int8: ``row_eq``
     (``M``), ``bvec`` (``2 × R``), ``eqr`` (``R``), ``warm_state`` (``(k + 1) × R``),
     ``warm_valid`` (``k + 1``), ``held`` (``M``: the side, ``±1``, of each row the last
     answer held, ``0`` for the others).
@@ -1275,7 +1297,7 @@ def workspace_offsets(M: int, n: int, k: int) -> dict[str, tuple[int, int]]:
                                 ("eB", M * n), ("evec", M + 4 * k))),
                         ("i", (("k", 1), ("starts", k + 1), ("ivec", 5 * R), ("perm", n),
                                ("counts", 4 * (k + 1)),
-                               ("eint", 2 * k + 1 + 3 * M + 4 * n))),
+                               ("eint", 2 * k + 1 + 4 * M + 4 * n))),
                         ("b", (("row_eq", M), ("bvec", 2 * R), ("eqr", R),
                                ("warm_state", (k + 1) * R), ("warm_valid", k + 1),
                                ("held", M)))):
@@ -1888,7 +1910,7 @@ def equality_first_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     o = k + 2 + 5 * R + n                                   # after ivec and perm
     counts = iwork[o:o + 4 * (k + 1)].reshape((4, k + 1))
     o += 4 * (k + 1)
-    eint = iwork[o:o + 2 * k + 1 + 3 * M + 4 * n]
+    eint = iwork[o:o + 2 * k + 1 + 4 * M + 4 * n]
     primal_tol = fwork[1]
     Rn = R * n
     o = N_PARAMS + 2 * Rn                                   # Lw (see solve_data)
