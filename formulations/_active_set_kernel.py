@@ -34,10 +34,11 @@ from prioik.hierarchy.linalg import AMBIGUITY as _AMBIGUITY
 from prioik.hierarchy.linalg import PRECISION_LIMIT_NORM as _PRECISION_LIMIT_NORM
 from prioik.hierarchy.linalg import X_PRECISION
 
-from ._extended_jacobian_kernel import (_UNIT_ROWS_GAP, _apply_q, _cholesky_lower,
-                                        _cholesky_solve, _dot, _free_directions,
-                                        _small_lstsq_ws, _swap, _unit_rows_of,
-                                        _unit_rows_solve, _woodbury_apply, solve_kernel_into)
+from ._extended_jacobian_kernel import (_UNIT_ROWS_GAP, _apply_q, _apply_qt,
+                                        _cholesky_lower, _cholesky_solve, _dot,
+                                        _free_directions, _small_lstsq_ws, _swap,
+                                        _unit_rows_of, _unit_rows_solve, _woodbury_apply,
+                                        solve_kernel_into)
 
 #: the same fast-math set as the extended-Jacobian kernel (no finite-math assumption)
 _FAST = {"reassoc", "contract", "nsz", "arcp"}
@@ -942,14 +943,7 @@ def _held_rows_optimal(A, b, lower, row_eq, sw, starts, k, x, y, eB, estarts, er
                             for c in range(n):
                                 g[c] += e * Aj[c]
                     tn += s * s * t * t
-                for t in range(colv):
-                    q = pos[t]
-                    vt = V[t, q:]
-                    gq = g[q:]
-                    f = beta[t] * _dot(vt, gq)
-                    if f != 0.0:
-                        for c in range(n - q):
-                            gq[c] -= f * vt[c]
+                _apply_qt(g, colv, V, beta, pos)      # the reflectors t < col_ℓ fix [:col_ℓ]
             gh = g
             scale = max(np.sqrt(_dot(g[:colv], g[:colv])),
                         scales[lev] * (scales[lev] * xn + np.sqrt(tn)))

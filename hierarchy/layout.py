@@ -131,13 +131,14 @@ class StackLayout:
         Raises:
             TaskStackError: as the constructor.
         """
-        try:
-            key = (n, tuple(tuple(tuple(entry) for entry in level) for level in levels))
-            return _SHARED[key]
-        except (KeyError, TypeError):      # (unhashable entries: the constructor says)
-            layout = cls(n, levels)
-            _SHARED[(layout._n, layout._levels)] = layout
-            return layout
+        if type(n) is int:        # (a bool or a float goes to the constructor, which says)
+            try:
+                key = (n, tuple(tuple(tuple(entry) for entry in level) for level in levels))
+                return _SHARED[key]
+            except (KeyError, TypeError):  # (unhashable entries: the constructor says)
+                pass
+        layout = cls(n, levels)
+        return _SHARED.setdefault((layout._n, layout._levels), layout)
 
     # ------------------------------------------------------------------ access
     @property

@@ -203,3 +203,7 @@ def test_stacks_of_one_shape_share_their_layout():
     assert ref() is None
     with pytest.raises(TaskStackError, match="at least one row"):
         StackLayout.shared(3, [[("a", 0)]])
+    StackLayout.shared(1, [[("a", 1, "equality")]])
+    with pytest.raises(TaskStackError, match="n ≥ 1"):
+        StackLayout.shared(True, [[("a", 1, "equality")]])
+    assert StackLayout.shared(3, [[("a", 2)], [("b", 3, "inequality")]]) is one.layout
