@@ -36,7 +36,7 @@ from prioik.hierarchy.linalg import X_PRECISION
 
 from ._extended_jacobian_kernel import (_UNIT_ROWS_GAP, _apply_q, _apply_qt,
                                         _cholesky_lower, _cholesky_solve, _dot,
-                                        _free_directions, _small_lstsq_ws, _swap,
+                                        _drop_fixed, _free_directions, _small_lstsq_ws, _swap,
                                         _unit_rows_of, _unit_rows_solve, _woodbury_apply,
                                         solve_kernel_into)
 
@@ -439,7 +439,8 @@ def _unit_rows_step(Bo, ucol, xc, col, rows, nh, nw, tgt, rcond, soft_tol, reach
     W = Zu[nu + nh:nu + 2 * nh]
     for i in range(nh):
         z[i] = ucol[rows[i]]
-    _free_directions(z, nh, Zh, col, nf, Vf, betaf, posf, z[:0], z[:0])
+    _free_directions(z, nh, Zh, nf, Vf, betaf, posf, z[:0])
+    _drop_fixed(Zh, nh, col)
     for i in range(nh):
         for k in range(d):
             W[i, k] = Zh[i, k]
@@ -1107,17 +1108,17 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
         lo = lower[j]
         up = upper[j]
         r = A[j, uc] * x[uc] if uc >= 0 else _dot(A[j], x)
-        if held[j] != 0:
+        held_row = held[j] != 0
+        size = 0.0
+        if held_row or r < lo or r > up:
+            size = _size(A, ucol, j, np.sqrt(_dot(A[j], A[j])) if uc < 0 else 0.0, xn, x)
+        if held_row:
             bound = up if held[j] > 0 else lo
             s = sw[j]
-            size = (abs(A[j, uc]) * (abs(x[uc]) + 1.0) if uc >= 0
-                    else np.sqrt(_dot(A[j], A[j])) * xn)
             if not abs(s * (r - bound)) <= _tol(primal_tol, s * size, s * bound):
                 return -2, -1, 0
         elif r < lo or r > up:
             # the most violated row (relative to its size) is the guess to hold next
-            size = (abs(A[j, uc]) * (abs(x[uc]) + 1.0) if uc >= 0
-                    else np.sqrt(_dot(A[j], A[j])) * xn)
             v = (lo - r if r < lo else r - up) / max(size, 1e-300)
             if v > worst:
                 worst = v
@@ -1163,15 +1164,14 @@ def _keep_held(state, eqr, M, held):
     """``params[11]`` after a solve: ``0`` when an inequality row ended it fixed at a
     violation (the next solve runs the active set), else ``1`` when no row was held at a
     bound at any level's end, ``2`` when some were (``held[j]``: the side, ``±1``, it was
-    last held on, written by :func:`solve_data` level by level; ``0`` for the rest). A
-    row held by one level may leave the working set below it when the rows that level
-    fixed keep it on its bound: it is still the active set's guess."""
+    last held on, written by :func:`solve_data` at each level's end, the last one's
+    included; ``0`` for the rest). A row held by one level may leave the working set
+    below it when the rows that level fixed keep it on its bound: it is still the
+    active set's guess."""
     some = False
     for j in range(M):
         st = state[j]
-        if st == 1 or st == -1:
-            held[j] = st
-        elif st != 0 and not eqr[j]:
+        if st != 0 and st != 1 and st != -1 and not eqr[j]:
             return 0.0
         if held[j] != 0:
             some = True
@@ -1221,8 +1221,9 @@ def _summary(k, primal_tol, x, res, total, counts, flags, margins, fwork, unreso
     fwork[6] = capped if (np.isfinite(xn) and np.isfinite(total)) else -1.0
     ambiguous = 0
     for lev in range(k + 1):
-        if (margins[lev] <= _AMBIGUITY or flags[lev] == FLAG_AMBIGUOUS_PATH
-                or flags[lev] == FLAG_NEAR_RELEASE or flags[lev] == FLAG_HELD_OFF_BOUND):
+        # every flag but OK and the cap asks for the certificate (_CERTIFIED_FLAGS)
+        if (margins[lev] <= _AMBIGUITY
+                or (flags[lev] != FLAG_OK and flags[lev] != FLAG_ITERATION_CAP)):
             ambiguous += 1
     fwork[8] = ambiguous
     fwork[9] = unresolved

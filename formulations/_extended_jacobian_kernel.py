@@ -201,13 +201,12 @@ def _cholesky_lower(G, m):
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
-def _free_directions(cols, m, Z, col, nf, Vf, betaf, posf, g, yfix):
-    """``Z[i, :n − col] = (Qᵀ e_{cols[i]})[col:]`` for ``i < m`` (``cols``: column indices,
-    any numeric dtype): the rows ``cols`` of the
-    free directions ``Z = Q[:, col:]`` (``Q = H_0 … H_{nf-1}``; ``Z``'s rows hold ``n``),
-    and ``g = Qᵀ g`` in place when ``g`` has ``n`` entries (else it is left alone). When
-    ``yfix`` has entries, ``cols[i]`` is then overwritten by ``(Qᵀ e_{cols[i]})[:col] ·
-    yfix[:col]`` (the coordinate ``cols[i]`` of ``Q [yfix[:col]; 0]``).
+def _free_directions(cols, m, Z, nf, Vf, betaf, posf, g):
+    """``Z[i] = Qᵀ e_{cols[i]}`` for ``i < m`` (``cols``: column indices, any numeric
+    dtype; ``Q = H_0 … H_{nf-1}``; ``Z``'s rows hold ``n``), whose entries from ``col``
+    on are the rows ``cols`` of the free directions ``Z = Q[:, col:]``
+    (:func:`_drop_fixed` moves them to the front), and ``g = Qᵀ g`` in place when ``g``
+    has ``n`` entries (else it is left alone).
 
     Each vector gets the operations of :func:`_apply_qt`, in its order; the loop runs
     over the reflectors outside and the vectors inside, because one vector's sweep is a
@@ -237,9 +236,13 @@ def _free_directions(cols, m, Z, col, nf, Vf, betaf, posf, g, yfix):
             if f != 0.0:
                 for c in range(w):
                     gq[c] -= f * vt[c]
-    if yfix.shape[0] > 0:
-        for i in range(m):
-            cols[i] = _dot(Z[i, :col], yfix[:col])
+
+
+@njit(cache=True, inline="always")
+def _drop_fixed(Z, m, col):
+    """``Z[i, :n − col] = Z[i, col:]`` for ``i < m``: the free part of each rotated vector
+    moved to the front."""
+    n = Z.shape[1]
     if col > 0:
         for i in range(m):
             Zi = Z[i]
@@ -280,15 +283,16 @@ def _unit_rows_solve(cover, g, col, p, nf, Vf, betaf, posf, Zu, G, yfix):
         if cover[u] < 0:
             ucols[nu] = u
             nu += 1
-    _free_directions(ucols, nu, Zu, col, nf, Vf, betaf, posf, g[:n], yfix)
+    _free_directions(ucols, nu, Zu, nf, Vf, betaf, posf, g[:n])
     for c in range(d):
         p[c] = g[col + c]
-    if yfix.shape[0] > 0:
+    if yfix.shape[0] > 0:   # h += Σ_u (x_p)_u (Qᵀ e_u)[col:], (x_p)_u = (Qᵀ e_u)[:col]·y
         for i in range(nu):
-            xu = ucols[i]
-            Zi = Zu[i]
+            xu = _dot(Zu[i, :col], yfix[:col])
+            Zi = Zu[i, col:]
             for c in range(d):
                 p[c] += xu * Zi[c]
+    _drop_fixed(Zu, nu, col)
     if nu == 0:
         return 0
     # G = I − Z_U Z_Uᵀ (lower triangle), and below it G − gap·I
