@@ -839,10 +839,14 @@ def _held_rows_optimal(A, b, lower, row_eq, sw, starts, k, x, y, eB, estarts, er
     exceeds :data:`_DUAL_FLOOR` times the level's gradient scale (that of
     :func:`_dual_scale`). A multiplier of the right sign beyond ``dual_tol`` times that
     scale pins its row. The minimum-norm tie-break is read the same way, its gradient
-    being ``y = Qᵀ x*``. The test is sufficient, not necessary: a refusal sends the
-    stack on (another guess, then the active set, which decides). ``-2`` when a level
-    whose gradient is read lies below one the QR did not leave triangular (a level with
-    at least as many rows as free coordinates: its full-rank or unit-rows step).
+    being ``y = Qᵀ x*``. Once every held row is pinned the levels below (and the
+    tie-break) need no reading: the optimal set above then has each held row on its
+    bound, so it lies in the QR's (the held rows as equalities), over which ``x*`` is
+    optimal level by level and of minimum norm. The test is sufficient, not necessary:
+    a refusal sends the stack on (another guess, then the active set, which decides).
+    ``-2`` when a held row or a level whose gradient is read lies in or below a level
+    the QR did not leave triangular (a level with at least as many rows as free
+    coordinates: its full-rank or unit-rows step), with a held row still unpinned.
 
     ``held[j]``: the side of data row ``j`` (``0``: not held); ``ecol[j]``: an equality
     row's one non-zero column (``-1``: more than one); ``erow`` maps the rows of
@@ -883,6 +887,8 @@ def _held_rows_optimal(A, b, lower, row_eq, sw, starts, k, x, y, eB, estarts, er
     for h in range(ncol):
         if pside[h] == 0:
             continue
+        if h >= ctri:           # a held row the QR left in another form: not read
+            return -2
         z = Z[nh]
         for p in range(h):
             z[p] = 0.0
@@ -899,6 +905,15 @@ def _held_rows_optimal(A, b, lower, row_eq, sw, starts, k, x, y, eB, estarts, er
     # satisfied: no gradient), in order, then the tie-break
     col = 0
     for lev in range(k + 1):
+        if lev > first_held:
+            # every held row pinned: the optimal set above has each on its bound, so it
+            # lies in the QR's (the held rows as equalities), where x* is optimal
+            unpinned = False
+            for i in range(nh):
+                if pinned[i] == 0:
+                    unpinned = True
+            if not unpinned:
+                break
         if lev < k:
             colv = col
             col += eranks[lev]
@@ -949,12 +964,6 @@ def _held_rows_optimal(A, b, lower, row_eq, sw, starts, k, x, y, eB, estarts, er
             scale = max(np.sqrt(_dot(g[:colv], g[:colv])),
                         scales[lev] * (scales[lev] * xn + np.sqrt(tn)))
         else:                       # the tie-break: ∇ ½‖x‖² = x, Qᵀ x = y
-            unpinned = False
-            for i in range(nh):
-                if pinned[i] == 0:
-                    unpinned = True
-            if not unpinned:
-                break
             if complete < k:
                 return -2
             colv = ncol

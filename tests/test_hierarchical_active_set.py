@@ -533,6 +533,60 @@ def test_held_rows_are_tried_as_equalities_and_proved_by_their_multipliers():
     assert firsts == [False, True, True, True, True, True]
 
 
+def test_held_rows_pinned_above_a_level_that_takes_the_rest_are_proved():
+    """A level with as many rows as free coordinates (here four rows on the three left
+    once x₀ is held) is solved by the QR's full-rank step, which leaves no triangular
+    pivot rows to read the multipliers of the levels below it (the posture). The reach
+    above it pins the held row (its multiplier is clearly of the right sign), so every
+    point of its optimal set has x₀ on its bound, and the try's answer is proved
+    without reading the posture's: each warm answer after the first is the try's, the
+    cold one to 1e-12. Without that rule every such step ran the active set (the G1
+    incompatible stacks' last steps, 19 joint limits held)."""
+    n = 4
+    rest = np.array([[0.0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1], [0, 1, 1, 0]])
+
+    def stack(target):
+        return TaskStack([[Task("limits", np.eye(n), lower=-np.ones(n), upper=np.ones(n))],
+                          [Task("reach", np.eye(n)[:1], [target])],
+                          [Task("rest", rest, [0.2, -0.1, 0.3, 0.4])],
+                          [Task("posture", np.eye(n), np.zeros(n), weight=0.1)]])
+    warm = prioik.prepare(stack(1.5), NAME)
+    cold = prioik.prepare(warm.layout, NAME, warm_start=False)
+    firsts = []
+    for t in (1.5, 1.6, 1.7, 1.8):
+        s = stack(t)
+        a, b = warm.solve(s), cold.solve(s)
+        assert a.status == b.status == "optimal"
+        assert_exact(s, a)
+        assert a.x[0] == 1.0
+        assert np.linalg.norm(a.x - b.x) <= 1e-12 * max(1.0, np.linalg.norm(b.x))
+        firsts.append(bool(a.info["equality_first"]))
+    assert firsts == [False, True, True, True]
+
+
+def test_held_rows_that_take_every_coordinate_are_not_read_as_triangular():
+    """Level 0's three rows (box rows on x₀ and x₂, a sum) all held by the reach below:
+    as many held rows as coordinates, so the QR solves the level by its full-rank step
+    and leaves no triangular pivot rows (the box row of x₂ sits where x₁'s pivot would
+    be). The held rows' multipliers cannot be read there; the try gives way to the
+    active set. Reading them anyway divided by that zero pivot: the warm solve said
+    'failed' (ZeroDivisionError) where the cold one is optimal (a drifting random stack
+    found it)."""
+    def stack(t):
+        return TaskStack([[Task("box", np.eye(3)[[0, 2]], lower=[-1.0, -1.0], upper=[1.0, 1.0]),
+                           Task("sum", np.ones((1, 3)), lower=[-1.0], upper=[1.0])],
+                          [Task("reach", np.eye(3), [t, 0.0, t])]])
+    warm = prioik.prepare(stack(5.0), NAME)
+    cold = prioik.prepare(warm.layout, NAME, warm_start=False)
+    for t in (5.0, 5.1, 5.2):
+        s = stack(t)
+        a, b = warm.solve(s), cold.solve(s)
+        assert a.status == b.status == "optimal", a.info.get("message")
+        assert_exact(s, a)
+        np.testing.assert_allclose(a.x, [1.0, -1.0, 1.0], atol=1e-14)
+        assert np.linalg.norm(a.x - b.x) <= 1e-12
+
+
 def test_equality_first_is_off_without_warm_start_and_after_reset():
     n = 5
     stack = _limits_stack(n, [0.1, 0.1])
