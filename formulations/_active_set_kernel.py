@@ -38,7 +38,7 @@ from ._extended_jacobian_kernel import (_UNIT_ROWS_GAP, _apply_q, _apply_qt,
                                         _cholesky_lower, _cholesky_solve, _dot,
                                         _drop_fixed, _free_directions, _small_lstsq_ws, _swap,
                                         _unit_rows_of, _unit_rows_solve, _woodbury_apply,
-                                        solve_kernel_into)
+                                        solve_kernel_into, spare_size)
 
 #: the same fast-math set as the extended-Jacobian kernel (no finite-math assumption)
 _FAST = {"reassoc", "contract", "nsz", "arcp"}
@@ -988,7 +988,8 @@ def _held_rows_optimal(A, b, lower, row_eq, sw, starts, k, x, y, eB, estarts, er
 
 @njit(cache=True, fastmath=_FAST, inline="always")
 def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol, dual_tol,
-                    eB, evec, eint, x, ranks, margins, w2, res, V, L, fs, pos, eqr, held):
+                    eB, evec, eint, x, ranks, margins, w2, res, V, L, fs, pos, eqr, held,
+                    spare, ispare):
     """The stack's equality rows (rows with ``lower = upper`` included) with the rows the
     last answer held (``held[j]``: ``±1``, at their upper/lower bound; ``0`` for
     none), as equalities at those bounds, weighed into ``eB`` and solved by the
@@ -1016,7 +1017,7 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
     Reads the data directly (one pass; the active set's own rows are not built).
     Scratch (the active set's, unused on this path): ``V`` (``n × n``), ``L``
     (``≥ M × n``), ``fs`` (``4 × ≥ max(M, n)``), ``pos`` (``≥ n`` ints), ``eqr`` (``≥ M``
-    int8: each row's equality flag).
+    int8: each row's equality flag); the nested QR's own ``spare`` and ``ispare``.
     """
     M, n = A.shape
     c = evec[:M]
@@ -1089,7 +1090,7 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
     # the first one)
     solve_kernel_into(eB[:m], c[:m], estarts, scales, rcond, 0.0, 0.0, step_bound, x,
                       eranks, mu2, emargins, V, fs[0, :n], pos, fs[1, :n], fs[2, :M], L[:M],
-                      fs[3, :M], rowperm[:m] if nheld > 0 else rowperm[:0])
+                      fs[3, :M], rowperm[:m] if nheld > 0 else rowperm[:0], spare, ispare)
     xx = _dot(x, x)
     if not (xx <= _PRECISION_LIMIT_NORM * _PRECISION_LIMIT_NORM):
         return -2, -1, 0
@@ -1252,12 +1253,12 @@ def _outputs(fwork, M, n, k):
     """The float workspace's outputs (:func:`workspace_offsets`): ``x``, ``w2``, ``res``,
     ``margins``, and the offset after them.
 
-    Inlined, never called: it returns views, and it serves both :func:`solve_data`
-    (compiled without numba's runtime) and :func:`equality_first_data` (with it). As a
-    call, numba compiled it once, with the flags of the caller that came first: compiled
-    without the runtime, it returned views without a reference the other caller then
-    released (heap corruption, "malloc(): unaligned tcache chunk", on the second
-    equality-first answer)."""
+    Inlined, never called: it returns views. When :func:`equality_first_data` was
+    compiled with numba's runtime and :func:`solve_data` without, numba compiled such a
+    call once, with the flags of the caller that came first: compiled without the
+    runtime, it returned views without a reference the other caller then released (heap
+    corruption, "malloc(): unaligned tcache chunk", on the second equality-first
+    answer); both now run without it, and a helper that returns views stays inlined."""
     R = M + n
     o = N_PARAMS + 5 * R * n + 2 * n * n + N_FVEC * R      # after B … fvec
     return (fwork[o:o + n], fwork[o + n:o + n + k], fwork[o + n + k:o + n + 2 * k],
@@ -1272,7 +1273,8 @@ def workspace_offsets(M: int, n: int, k: int) -> dict[str, tuple[int, int]]:
     ``T``, ``Lw``, ``Bo``, ``flat`` (``R × n`` each), ``V``, ``Vf`` (``n × n``), ``fvec``
     (``16 × R``), ``x`` (``n``), ``w2`` and ``res = √w2`` (``k``), ``margins`` (``k + 1``:
     each level's and the tie-break's rank-decision margin), and the equality-first
-    solve's ``eB`` (``M × n``) and ``evec`` (``M + 4 k``);
+    solve's ``eB`` (``M × n``), ``evec`` (``M + 4 k``) and its nested QR's ``espare``
+    (:func:`~._extended_jacobian_kernel.spare_size`);
     the kernel writes
     ``‖x‖`` into ``params[5]``, into ``params[6]`` ``1`` when an iteration cap was
     hit, ``-1`` when ``x`` or a residual is not finite, into ``params[7]`` ``1`` when
@@ -1287,7 +1289,8 @@ def workspace_offsets(M: int, n: int, k: int) -> dict[str, tuple[int, int]]:
     ``1`` when the next warm solve should try it (the answer held no inequality row),
     ``2`` when it should try it with the rows the answer held (``held``), ``0`` not;
     int64: ``k``, ``starts`` (``k + 1``), ``ivec`` (``5 × R``), ``perm`` (``n``),
-    ``counts`` (``4 × (k + 1)``), ``eint`` (``2 k + 1 + 4 M + 4 n``); int8: ``row_eq``
+    ``counts`` (``4 × (k + 1)``), ``eint`` (``2 k + 1 + 4 M + 4 n``), ``eispare``
+    (``n``); int8: ``row_eq``
     (``M``), ``bvec`` (``2 × R``), ``eqr`` (``R``), ``warm_state`` (``(k + 1) × R``),
     ``warm_valid`` (``k + 1``), ``held`` (``M``: the side, ``±1``, of each row the last
     answer held, ``0`` for the others).
@@ -1298,10 +1301,11 @@ def workspace_offsets(M: int, n: int, k: int) -> dict[str, tuple[int, int]]:
                                 ("Lw", R * n), ("Bo", R * n), ("flat", R * n),
                                 ("V", n * n), ("Vf", n * n), ("fvec", N_FVEC * R),
                                 ("x", n), ("w2", k), ("res", k), ("margins", k + 1),
-                                ("eB", M * n), ("evec", M + 4 * k))),
+                                ("eB", M * n), ("evec", M + 4 * k),
+                                ("espare", spare_size(M, n)))),
                         ("i", (("k", 1), ("starts", k + 1), ("ivec", 5 * R), ("perm", n),
                                ("counts", 4 * (k + 1)),
-                               ("eint", 2 * k + 1 + 4 * M + 4 * n))),
+                               ("eint", 2 * k + 1 + 4 * M + 4 * n), ("eispare", n))),
                         ("b", (("row_eq", M), ("bvec", 2 * R), ("eqr", R),
                                ("warm_state", (k + 1) * R), ("warm_valid", k + 1),
                                ("held", M)))):
@@ -1882,7 +1886,7 @@ NOT_TRIED = -1
 GUESSES = 2
 
 
-@njit(cache=True, fastmath=_FAST)
+@kernel(fastmath=_FAST)
 def equality_first_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     """The warm start's first try, with :func:`solve_data`'s arguments: when the last
     answer fixed no inequality row at a violation (``params[11]``: ``1``, and it held
@@ -1897,8 +1901,8 @@ def equality_first_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     working sets held no inequality row: the guess the try refuted); ``-2`` when rows
     were, and it starts from the kept working sets.
 
-    Compiled with numba's runtime (not :func:`~prioik._jit.kernel`): the extended
-    Jacobian's full-rank step allocates its scratch.
+    Compiled without numba's runtime (:func:`~prioik._jit.kernel`), as
+    :func:`solve_data`: the nested QR it calls allocates nothing.
     """
     M, n = A.shape
     k = iwork[0]
@@ -1910,11 +1914,13 @@ def equality_first_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     eB = fwork[o:o + M * n].reshape((M, n))
     o += M * n
     evec = fwork[o:o + M + 4 * k]
+    spare = fwork[o + M + 4 * k:]
     starts = iwork[1:k + 2]
     o = k + 2 + 5 * R + n                                   # after ivec and perm
     counts = iwork[o:o + 4 * (k + 1)].reshape((4, k + 1))
     o += 4 * (k + 1)
     eint = iwork[o:o + 2 * k + 1 + 4 * M + 4 * n]
+    ispare = iwork[o + 2 * k + 1 + 4 * M + 4 * n:]
     primal_tol = fwork[1]
     Rn = R * n
     o = N_PARAMS + 2 * Rn                                   # Lw (see solve_data)
@@ -1932,7 +1938,7 @@ def equality_first_data(A, b, lower, upper, sw, fwork, iwork, bwork):
         verdict, row, side = _equality_first(
             A, b, lower, upper, sw, bwork[:M], starts, k, fwork[0], primal_tol, fwork[2],
             eB, evec, eint, x, counts[2], margins, w2, res, V, L, fs, pos,
-            bwork[M + 2 * R:M + 3 * R], held)
+            bwork[M + 2 * R:M + 3 * R], held, spare, ispare)
         if verdict == -1:
             break
         if verdict == -2 or attempt == GUESSES - 1:

@@ -141,13 +141,6 @@ def _small_lstsq_ws(L, rhs, m, r, mu2, out, col, flat, tbuf):
     _back_substitute(Tt, t, r, out, col)
 
 
-@njit(cache=True, fastmath=_FAST)
-def _small_lstsq(L, rhs, m, r, mu2, out, col):
-    """:func:`_small_lstsq_ws` on scratch it allocates."""
-    rows = m + r if mu2 > 0.0 else m
-    _small_lstsq_ws(L, rhs, m, r, mu2, out, col, np.empty(r * rows), np.empty(rows))
-
-
 @njit(cache=True, fastmath=_FAST, inline="always")
 def _apply_reflectors(v, nf, V, beta, pos, transposed):
     """``v = Qᵀ v`` (``transposed``: ``H_0`` first) or ``v = Q v`` (``H_{nf-1}`` first) in
@@ -367,7 +360,7 @@ def _unit_rows_of(B, s0, s1, cover):
 
 
 @njit(cache=True, fastmath=_FAST)
-def _pivoted_lstsq_if_full_rank(B, s0, m, col, rhs, tol, out, margin):
+def _pivoted_lstsq_if_full_rank(B, s0, m, col, rhs, tol, out, margin, spare, ispare):
     """One level with ``m ≥ d`` rows on its ``d = n − col`` free coordinates.
 
     Householder QR with column pivoting of ``A_i Z_i = B[s0:s0+m, col:]`` (held
@@ -378,18 +371,22 @@ def _pivoted_lstsq_if_full_rank(B, s0, m, col, rhs, tol, out, margin):
     ``out[col:]`` and ``True`` returned; the level leaves no null space. Otherwise
     nothing is written and ``False`` returned (``B`` is never modified).
     ``margin[0]`` receives the smallest pivot norm (the rank decision's margin).
+    Scratch: ``spare`` (``≥ d m + m + 2 d`` floats), ``ispare`` (``≥ d`` ints); it
+    allocates nothing (a kernel without numba's runtime calls it).
     """
     n = B.shape[1]
     d = n - col
     margin[0] = np.inf
-    Tt = np.empty((d, m))
+    Tt = spare[:d * m].reshape((d, m))
+    t = spare[d * m:d * m + m]
+    norms = spare[d * m + m:d * m + m + d]
+    z = spare[d * m + m + d:d * m + m + 2 * d]
+    perm = ispare[:d]
     for i in range(m):
         row = B[s0 + i]
         for j in range(d):
             Tt[j, i] = row[col + j]
-    t = rhs[:m].copy()
-    norms = np.empty(d)
-    perm = np.empty(d, dtype=np.int64)
+        t[i] = rhs[i]
     for j in range(d):
         norms[j] = _dot(Tt[j], Tt[j])
         perm[j] = j
@@ -424,7 +421,6 @@ def _pivoted_lstsq_if_full_rank(B, s0, m, col, rhs, tol, out, margin):
         for i in range(w):
             tj[i] -= f * cj[i]
         cj[0] = alpha
-    z = np.empty(d)
     _back_substitute(Tt, t, d, z, 0)
     for j in range(d):
         out[col + perm[j]] = z[j]
@@ -500,198 +496,223 @@ def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
     solve_kernel_ws(B, c, starts, scales, rcond, level_damping, singular_threshold,
                     step_bound, x, ranks, level_mu2, margins, np.empty((n, n)), np.empty(n),
                     np.empty(n, dtype=np.int64), np.empty(n), np.empty(M),
-                    np.empty((M, n)), np.empty(M), np.empty(0, dtype=np.int64))
+                    np.empty((M, n)), np.empty(M), np.empty(0, dtype=np.int64),
+                    np.empty(n * (M + n) + M + 2 * n), np.empty(n, dtype=np.int64))  # spare_size
 
 
-@njit(cache=True, fastmath=_FAST)
+@kernel(fastmath=_FAST)
 def solve_kernel_into(B, c, starts, scales, rcond, level_damping, singular_threshold,
                       step_bound, x, ranks, level_mu2, margins, V, beta, pos, y, norms, L,
-                      rhs, rowperm):
-    """:func:`solve_kernel` on scratch the caller owns (:func:`solve_kernel_ws`'s, with
-    ``rowperm``): for compiled callers in other modules that keep workspaces (no
-    allocation per call; a call, not inlined there, so that this module's compiled code
-    stays its own)."""
-    solve_kernel_ws(B, c, starts, scales, rcond, level_damping, singular_threshold,
-                    step_bound, x, ranks, level_mu2, margins, V, beta, pos, y, norms, L,
-                    rhs, rowperm)
+                      rhs, rowperm, spare, ispare):
+    """:func:`solve_kernel` without the trust-region step
+    (:func:`solve_kernel_ws_unbounded`: ``step_bound`` must be zeros) on scratch the
+    caller owns (:func:`solve_kernel_ws`'s, with ``rowperm``, ``spare`` and ``ispare``):
+    for compiled callers in other modules that keep workspaces. It allocates nothing
+    and runs without numba's runtime (no reference count kept for its views); a call,
+    not inlined there, so that this module's compiled code stays its own."""
+    solve_kernel_ws_unbounded(B, c, starts, scales, rcond, level_damping,
+                              singular_threshold, step_bound, x, ranks, level_mu2, margins,
+                              V, beta, pos, y, norms, L, rhs, rowperm, spare, ispare)
 
 
-@njit(cache=True, fastmath=_FAST, inline="always")
-def solve_kernel_ws(B, c, starts, scales, rcond, level_damping, singular_threshold,
-                    step_bound, x, ranks, level_mu2, margins, V, beta, pos, y, norms, L,
-                    rhs, rowperm):
-    """:func:`solve_kernel` with its scratch arrays given (a prepared solver owns them:
-    no allocation per solve). ``V`` (``n × n``: reflector ``j`` in ``V[j, pos_j:]``),
-    ``beta``, ``pos`` (int), ``y`` (``n``), ``norms``, ``rhs`` (``M``), ``L``
-    (``M × n``); their contents on entry do not matter. ``rowperm`` (int): empty, or
-    ``M`` entries permuted as the rows of ``B`` are (row pivoting within each level),
-    for a caller that reads the rotated pivot rows back. Inlined into its callers (the
-    call of a function of 19 arguments cost the G1 solve ~0.3 µs, the Panda's ~0.1)."""
-    M, n = B.shape
-    k = starts.shape[0] - 1
-    nref = 0
-    y[:] = 0.0            # coordinates no level claims stay 0 (the minimum norm)
-    # int64 from the start: a literal 0 carried through the loop made numba compile each
-    # called helper twice (once for Literal[int](0), before inference settles on int64)
-    col = np.int64(0)
-    # A last level of unit rows (a posture of uniform weight, x marking its columns
-    # until x is written) is not rotated with the others: at its turn it is solved by
-    # _unit_rows_solve on its rows as given, or else brought through the reflectors then
-    # (the same operations, in the same order, as rotating it level by level)
-    rot_end = M
-    unit_s = -1.0
-    if (k > 0 and rcond > 0.0 and step_bound[k - 1] <= 0.0
-            and not (level_damping > 0.0 and singular_threshold > 0.0)
-            and starts[k - 1] < M):
-        unit_s = _unit_rows_of(B, starts[k - 1], M, x)
-        if unit_s > 0.0:
-            rot_end = starts[k - 1]
-    for lev in range(k):
-        s0 = starts[lev]
-        s1 = starts[lev + 1]
-        m = s1 - s0
-        ranks[lev] = 0
-        level_mu2[lev] = 0.0
-        margins[lev] = np.inf
-        if m == 0 or col >= n:
-            continue
-        tol = rcond * scales[lev]
-        if lev == k - 1 and rot_end < M:          # the deferred unit-row level's turn
-            d = n - col
-            nu = n - m
-            if m >= d and nu + max(1, 2 * nu) <= M:
-                g = norms[:n]                     # Sᵀ c / s² (x_p's part: yfix)
-                for j in range(n):
-                    g[j] = 0.0
-                    i = int(x[j])
-                    if i >= 0:
-                        a = B[s0 + i, j]
-                        g[j] = a * c[s0 + i] / (unit_s * unit_s)
-                got = _unit_rows_solve(x, g, col, y[col:], nref, V, beta, pos, L[:nu],
-                                       L[nu:nu + max(1, 2 * nu)], y[:col])
-                margin = unit_s * np.sqrt(_UNIT_ROWS_GAP) if got > 0 else unit_s
-                if got >= 0 and margin > _AMBIGUITY * tol:
-                    ranks[lev] = d
-                    margins[lev] = margin / tol
-                    col = n
-                    continue
-                for j in range(col, n):
-                    y[j] = 0.0
-            for i in range(rot_end, M):
-                _apply_qt(B[i], nref, V, beta, pos)
-            rot_end = M
-        # right-hand side in rotated coordinates: c_i - B_i[:, :col] y[:col]
-        # (1-D views throughout: they let LLVM vectorise the loops; measured 2x on G1)
-        yc = y[:col]
-        for i in range(m):
-            rhs[i] = c[s0 + i] - _dot(B[s0 + i, :col], yc)
-            free = B[s0 + i, col:]
-            norms[i] = _dot(free, free)
-        d = n - col
-        if (m >= d and step_bound[lev] <= 0.0
+def _nested_qr(trust_region: bool):
+    """:func:`solve_kernel_ws`, compiled with the trust-region step of
+    :func:`_bounded_step` (``trust_region``) or without it (``step_bound`` then never
+    bounds a step; numba prunes the branch, and with it the only part that allocates:
+    the SVD, so that a kernel without numba's runtime can inline it)."""
+
+    @njit(fastmath=_FAST, inline="always")
+    def solve_kernel_ws(B, c, starts, scales, rcond, level_damping, singular_threshold,
+                        step_bound, x, ranks, level_mu2, margins, V, beta, pos, y, norms, L,
+                        rhs, rowperm, spare, ispare):
+        """:func:`solve_kernel` with its scratch arrays given (a prepared solver owns them:
+        no allocation per solve). ``V`` (``n × n``: reflector ``j`` in ``V[j, pos_j:]``),
+        ``beta``, ``pos`` (int), ``y`` (``n``), ``norms``, ``rhs`` (``M``), ``L``
+        (``M × n``); their contents on entry do not matter. ``rowperm`` (int): empty, or
+        ``M`` entries permuted as the rows of ``B`` are (row pivoting within each level),
+        for a caller that reads the rotated pivot rows back. ``spare`` (:func:`spare_size`
+        floats) and ``ispare`` (``n`` ints): the full-rank and least-squares steps' scratch.
+        Inlined into its callers (the call of a function of 19 arguments cost the G1 solve
+        ~0.3 µs, the Panda's ~0.1)."""
+        M, n = B.shape
+        k = starts.shape[0] - 1
+        nref = 0
+        y[:] = 0.0            # coordinates no level claims stay 0 (the minimum norm)
+        # int64 from the start: a literal 0 carried through the loop made numba compile each
+        # called helper twice (once for Literal[int](0), before inference settles on int64)
+        col = np.int64(0)
+        # A last level of unit rows (a posture of uniform weight, x marking its columns
+        # until x is written) is not rotated with the others: at its turn it is solved by
+        # _unit_rows_solve on its rows as given, or else brought through the reflectors then
+        # (the same operations, in the same order, as rotating it level by level)
+        rot_end = M
+        unit_s = -1.0
+        if (k > 0 and rcond > 0.0 and step_bound[k - 1] <= 0.0
                 and not (level_damping > 0.0 and singular_threshold > 0.0)
-                and _pivoted_lstsq_if_full_rank(B, s0, m, col, rhs, tol, y,
-                                                margins[lev:lev + 1])):
-            ranks[lev] = d
-            margins[lev] = margins[lev] / tol
-            col = n
-            continue
-        margins[lev] = np.inf        # (a full-rank attempt that failed wrote its pivots)
-        r = 0
-        kept_min = np.inf
-        while r < m and r < d:
-            # pivot: the remaining row of largest norm on the free columns
-            p = _argmax_from(norms, r, m)
-            # recompute exactly (downdating loses accuracy)
-            tail = B[s0 + p, col + r:]
-            exact = _dot(tail, tail)
-            if not (np.sqrt(exact) > tol) and tol > 0.0:
-                # the downdated norms may have lost the largest remaining row (their
-                # cancellation error is ~ε·‖row‖², above the rows a heavy first pivot
-                # leaves; fuzzing found ranks 1 for 3): recompute them before stopping
-                for i in range(r, m):
-                    rest = B[s0 + i, col + r:]
-                    norms[i] = _dot(rest, rest)
+                and starts[k - 1] < M):
+            unit_s = _unit_rows_of(B, starts[k - 1], M, x)
+            if unit_s > 0.0:
+                rot_end = starts[k - 1]
+        for lev in range(k):
+            s0 = starts[lev]
+            s1 = starts[lev + 1]
+            m = s1 - s0
+            ranks[lev] = 0
+            level_mu2[lev] = 0.0
+            margins[lev] = np.inf
+            if m == 0 or col >= n:
+                continue
+            tol = rcond * scales[lev]
+            if lev == k - 1 and rot_end < M:          # the deferred unit-row level's turn
+                d = n - col
+                nu = n - m
+                if m >= d and nu + max(1, 2 * nu) <= M:
+                    g = norms[:n]                     # Sᵀ c / s² (x_p's part: yfix)
+                    for j in range(n):
+                        g[j] = 0.0
+                        i = int(x[j])
+                        if i >= 0:
+                            a = B[s0 + i, j]
+                            g[j] = a * c[s0 + i] / (unit_s * unit_s)
+                    got = _unit_rows_solve(x, g, col, y[col:], nref, V, beta, pos, L[:nu],
+                                           L[nu:nu + max(1, 2 * nu)], y[:col])
+                    margin = unit_s * np.sqrt(_UNIT_ROWS_GAP) if got > 0 else unit_s
+                    if got >= 0 and margin > _AMBIGUITY * tol:
+                        ranks[lev] = d
+                        margins[lev] = margin / tol
+                        col = n
+                        continue
+                    for j in range(col, n):
+                        y[j] = 0.0
+                for i in range(rot_end, M):
+                    _apply_qt(B[i], nref, V, beta, pos)
+                rot_end = M
+            # right-hand side in rotated coordinates: c_i - B_i[:, :col] y[:col]
+            # (1-D views throughout: they let LLVM vectorise the loops; measured 2x on G1)
+            yc = y[:col]
+            for i in range(m):
+                rhs[i] = c[s0 + i] - _dot(B[s0 + i, :col], yc)
+                free = B[s0 + i, col:]
+                norms[i] = _dot(free, free)
+            d = n - col
+            if (m >= d and step_bound[lev] <= 0.0
+                    and not (level_damping > 0.0 and singular_threshold > 0.0)
+                    and _pivoted_lstsq_if_full_rank(B, s0, m, col, rhs, tol, y,
+                                                    margins[lev:lev + 1], spare, ispare)):
+                ranks[lev] = d
+                margins[lev] = margins[lev] / tol
+                col = n
+                continue
+            margins[lev] = np.inf        # (a full-rank attempt that failed wrote its pivots)
+            r = 0
+            kept_min = np.inf
+            while r < m and r < d:
+                # pivot: the remaining row of largest norm on the free columns
                 p = _argmax_from(norms, r, m)
+                # recompute exactly (downdating loses accuracy)
                 tail = B[s0 + p, col + r:]
                 exact = _dot(tail, tail)
-            if not (np.sqrt(exact) > tol) or tol <= 0.0:
-                if tol > 0.0 and exact > 0.0:
-                    margins[lev] = min(kept_min / tol, tol / np.sqrt(exact))
-                break
-            kept_min = min(kept_min, np.sqrt(exact))
-            if p != r:
-                _swap_rows(B, s0 + r, s0 + p)
-                _swap(rhs, r, p)
-                _swap(norms, r, p)
-                if rowperm.shape[0] > 0:
-                    _swap(rowperm, s0 + r, s0 + p)
-            q = col + r
-            norm = np.sqrt(exact)
-            alpha = -norm if B[s0 + r, q] >= 0.0 else norm
-            # v = row[q:] - alpha e_1 ; H = I - beta v vᵀ
-            V[nref, q] = B[s0 + r, q] - alpha
-            vtv = V[nref, q] * V[nref, q]
-            for j in range(q + 1, n):
-                V[nref, j] = B[s0 + r, j]
-                vtv += V[nref, j] * V[nref, j]
-            bt = 2.0 / vtv if vtv > 0.0 else 0.0
-            beta[nref] = bt
-            pos[nref] = q
-            B[s0 + r, q] = alpha
-            for j in range(q + 1, n):
-                B[s0 + r, j] = 0.0
-            # apply to the level's other rows and to every lower level's rows
-            vq = V[nref, q:]
-            w = n - q
-            for i in range(s0 + r + 1, rot_end):
-                row = B[i, q:]
-                dot = _dot(row, vq)
-                if dot != 0.0:
-                    f = bt * dot
-                    for j in range(w):
-                        row[j] -= f * vq[j]
-            for i in range(r + 1, m):
-                norms[i] -= B[s0 + i, q] * B[s0 + i, q]
-            nref += 1
-            r += 1
-        ranks[lev] = r
-        if tol > 0.0:
-            margins[lev] = min(margins[lev], kept_min / tol)
-        if r == 0:
-            continue
-        # L = B_i[:, col:col+r] (lower trapezoidal, rows in pivot order)
-        mu2 = 0.0
-        if level_damping > 0.0 and singular_threshold > 0.0:
-            sig = abs(B[s0 + r - 1, col + r - 1])   # RRQR estimate of σ_min
-            eps_abs = singular_threshold * scales[lev]
-            if sig < eps_abs:
-                mu2 = level_damping * (1.0 - (sig / eps_abs) ** 2)
-        if r == m and mu2 == 0.0:
-            for i in range(r):
-                acc = rhs[i]
-                for j in range(i):
-                    acc -= B[s0 + i, col + j] * y[col + j]
-                y[col + i] = acc / B[s0 + i, col + i]
-        else:
-            for i in range(m):
-                for j in range(r):
-                    L[i, j] = B[s0 + i, col + j] if j <= i else 0.0
-            _small_lstsq(L, rhs, m, r, mu2, y, col)
-        if step_bound[lev] > 0.0:
-            znorm = 0.0
-            for j in range(r):
-                znorm += y[col + j] * y[col + j]
-            if np.sqrt(znorm) > step_bound[lev]:
+                if not (np.sqrt(exact) > tol) and tol > 0.0:
+                    # the downdated norms may have lost the largest remaining row (their
+                    # cancellation error is ~ε·‖row‖², above the rows a heavy first pivot
+                    # leaves; fuzzing found ranks 1 for 3): recompute them before stopping
+                    for i in range(r, m):
+                        rest = B[s0 + i, col + r:]
+                        norms[i] = _dot(rest, rest)
+                    p = _argmax_from(norms, r, m)
+                    tail = B[s0 + p, col + r:]
+                    exact = _dot(tail, tail)
+                if not (np.sqrt(exact) > tol) or tol <= 0.0:
+                    if tol > 0.0 and exact > 0.0:
+                        margins[lev] = min(kept_min / tol, tol / np.sqrt(exact))
+                    break
+                kept_min = min(kept_min, np.sqrt(exact))
+                if p != r:
+                    _swap_rows(B, s0 + r, s0 + p)
+                    _swap(rhs, r, p)
+                    _swap(norms, r, p)
+                    if rowperm.shape[0] > 0:
+                        _swap(rowperm, s0 + r, s0 + p)
+                q = col + r
+                norm = np.sqrt(exact)
+                alpha = -norm if B[s0 + r, q] >= 0.0 else norm
+                # v = row[q:] - alpha e_1 ; H = I - beta v vᵀ
+                V[nref, q] = B[s0 + r, q] - alpha
+                vtv = V[nref, q] * V[nref, q]
+                for j in range(q + 1, n):
+                    V[nref, j] = B[s0 + r, j]
+                    vtv += V[nref, j] * V[nref, j]
+                bt = 2.0 / vtv if vtv > 0.0 else 0.0
+                beta[nref] = bt
+                pos[nref] = q
+                B[s0 + r, q] = alpha
+                for j in range(q + 1, n):
+                    B[s0 + r, j] = 0.0
+                # apply to the level's other rows and to every lower level's rows
+                vq = V[nref, q:]
+                w = n - q
+                for i in range(s0 + r + 1, rot_end):
+                    row = B[i, q:]
+                    dot = _dot(row, vq)
+                    if dot != 0.0:
+                        f = bt * dot
+                        for j in range(w):
+                            row[j] -= f * vq[j]
+                for i in range(r + 1, m):
+                    norms[i] -= B[s0 + i, q] * B[s0 + i, q]
+                nref += 1
+                r += 1
+            ranks[lev] = r
+            if tol > 0.0:
+                margins[lev] = min(margins[lev], kept_min / tol)
+            if r == 0:
+                continue
+            # L = B_i[:, col:col+r] (lower trapezoidal, rows in pivot order)
+            mu2 = 0.0
+            if level_damping > 0.0 and singular_threshold > 0.0:
+                sig = abs(B[s0 + r - 1, col + r - 1])   # RRQR estimate of σ_min
+                eps_abs = singular_threshold * scales[lev]
+                if sig < eps_abs:
+                    mu2 = level_damping * (1.0 - (sig / eps_abs) ** 2)
+            if r == m and mu2 == 0.0:
+                for i in range(r):
+                    acc = rhs[i]
+                    for j in range(i):
+                        acc -= B[s0 + i, col + j] * y[col + j]
+                    y[col + i] = acc / B[s0 + i, col + i]
+            else:
                 for i in range(m):
                     for j in range(r):
                         L[i, j] = B[s0 + i, col + j] if j <= i else 0.0
-                mu2 = _bounded_step(L, rhs, m, r, mu2, step_bound[lev], y, col)
-        level_mu2[lev] = mu2
-        col += r
-    for j in range(n):
-        x[j] = y[j]
-    _apply_q(x, nref, V, beta, pos)
+                _small_lstsq_ws(L, rhs, m, r, mu2, y, col, spare, spare[r * (m + r):])
+            if trust_region and step_bound[lev] > 0.0:
+                znorm = 0.0
+                for j in range(r):
+                    znorm += y[col + j] * y[col + j]
+                if np.sqrt(znorm) > step_bound[lev]:
+                    for i in range(m):
+                        for j in range(r):
+                            L[i, j] = B[s0 + i, col + j] if j <= i else 0.0
+                    mu2 = _bounded_step(L, rhs, m, r, mu2, step_bound[lev], y, col)
+            level_mu2[lev] = mu2
+            col += r
+        for j in range(n):
+            x[j] = y[j]
+        _apply_q(x, nref, V, beta, pos)
+    return solve_kernel_ws
+
+
+solve_kernel_ws = _nested_qr(True)
+#: :func:`solve_kernel_ws` without the trust-region step (``step_bound`` must be ``≤ 0``):
+#: it allocates nothing
+solve_kernel_ws_unbounded = _nested_qr(False)
+
+
+def spare_size(M: int, n: int) -> int:
+    """Floats of :func:`solve_kernel_ws`'s ``spare`` for ``M`` rows and ``n`` columns: the
+    full-rank step's ``d m + m + 2 d`` and the least-squares step's ``r (m + r) + m + r``
+    at their largest (``d, r ≤ n``, ``m ≤ M``)."""
+    return n * (M + n) + M + 2 * n
 
 
 @kernel(fastmath=_FAST)
@@ -755,13 +776,13 @@ def level_residuals(A, b, w, starts, x, out):
 def work_size(M: int, n: int, k: int) -> int:
     """Floats of :func:`solve_data`'s workspace for ``M`` rows, ``n`` columns, ``k``
     levels (its parameters included)."""
-    return 3 + k + 2 * M * n + 3 * M + k + n * n + 2 * n
+    return 3 + k + 2 * M * n + 3 * M + k + n * n + 2 * n + spare_size(M, n)
 
 
 def iwork_size(n: int, k: int) -> int:
     """Ints of :func:`solve_data`'s integer workspace: ``k``, the ``k + 1`` level
-    offsets, the ``k`` ranks, ``n`` of scratch."""
-    return 1 + (k + 1) + k + n
+    offsets, the ``k`` ranks, ``2 n`` of scratch."""
+    return 1 + (k + 1) + k + 2 * n
 
 
 def prepare_workspaces(starts: np.ndarray, n: int, params: np.ndarray
@@ -779,7 +800,67 @@ def prepare_workspaces(starts: np.ndarray, n: int, params: np.ndarray
     return work, iwork
 
 
-@njit(cache=True, fastmath=_FAST)
+def _prepared_solve(trust_region: bool):
+    """The body of :func:`solve_data` (``trust_region``: of :func:`solve_data_bounded`),
+    on the nested QR of the same flag."""
+    qr = solve_kernel_ws if trust_region else solve_kernel_ws_unbounded
+
+    @njit(fastmath=_FAST, inline="always")
+    def solve(A, b, w, work, out, iwork):
+        k = iwork[0]
+        starts = iwork[1:k + 2]
+        ranks = iwork[k + 2:]
+        params = work[:3 + k]
+        ws = work[3 + k:]                     # the scratch (see work_size)
+        M, n = A.shape
+        B = ws[:M * n].reshape((M, n))
+        c = ws[M * n:M * n + M]
+        scales = ws[M * n + M:M * n + M + k]
+        o = M * n + M + k                     # scratch of the kernel
+        V = ws[o:o + n * n].reshape((n, n))
+        o += n * n
+        beta = ws[o:o + n]
+        y = ws[o + n:o + 2 * n]
+        norms = ws[o + 2 * n:o + 2 * n + M]
+        rhs = ws[o + 2 * n + M:o + 2 * n + 2 * M]
+        o += 2 * n + 2 * M
+        L = ws[o:o + M * n].reshape((M, n))
+        spare = ws[o + M * n:]
+        x = out[:n]
+        residuals = out[n:n + k]
+        mu2 = out[n + k:n + 2 * k]
+        margins = out[n + 2 * k:n + 3 * k]
+        if not weigh_rows(A, b, w, B, c):
+            return 0
+        if not level_scales(B, c, starts, scales):
+            return 0
+        qr(B, c, starts, scales, params[0], params[1], params[2], params[3:], x, ranks[:k],
+           mu2, margins, V, beta, ranks[k:k + n], y, norms, L, rhs, ranks[:0], spare,
+           ranks[k + n:])
+        level_residuals(A, b, w, starts, x, residuals)
+        acc = 0.0
+        ambiguous = False
+        for lev in range(k):
+            acc += residuals[lev]
+            if margins[lev] <= _AMBIGUITY:
+                ambiguous = True
+        code = 1 if np.isfinite(acc) else 2
+        if ambiguous:
+            code += 4
+        xx = 0.0
+        for c in range(n):
+            xx += x[c] * x[c]
+        if xx > _PRECISION_LIMIT_NORM * _PRECISION_LIMIT_NORM:
+            code += 8
+        return code
+    return solve
+
+
+_solve_unbounded = _prepared_solve(False)
+_solve_bounded = _prepared_solve(True)
+
+
+@kernel(fastmath=_FAST)
 def solve_data(A, b, w, work, out, iwork):
     """The prepared solve of a stack's data, in one call with few arguments (the call's
     cost on small stacks is mostly numba unboxing its arguments).
@@ -803,52 +884,20 @@ def solve_data(A, b, w, work, out, iwork):
     when some level's rank decision margin is within :data:`AMBIGUITY` of its threshold;
     plus 8 when ``‖x‖`` exceeds :data:`~prioik.hierarchy.linalg.PRECISION_LIMIT_NORM`
     (the caller asks :func:`~prioik.hierarchy.precision_limited_levels`).
+
+    Without the trust-region step (the step bounds ``params[3:]`` must be zeros;
+    :func:`solve_data_bounded` takes them) and without numba's runtime: it allocates
+    nothing, and no reference count is kept for its views (on G1 the runtime's counts
+    cost ~0.5 µs of a ~8 µs solve).
     """
-    k = iwork[0]
-    starts = iwork[1:k + 2]
-    ranks = iwork[k + 2:]
-    params = work[:3 + k]
-    ws = work[3 + k:]                     # the scratch (see work_size)
-    M, n = A.shape
-    B = ws[:M * n].reshape((M, n))
-    c = ws[M * n:M * n + M]
-    scales = ws[M * n + M:M * n + M + k]
-    o = M * n + M + k                     # scratch of the kernel
-    V = ws[o:o + n * n].reshape((n, n))
-    o += n * n
-    beta = ws[o:o + n]
-    y = ws[o + n:o + 2 * n]
-    norms = ws[o + 2 * n:o + 2 * n + M]
-    rhs = ws[o + 2 * n + M:o + 2 * n + 2 * M]
-    o += 2 * n + 2 * M
-    L = ws[o:o + M * n].reshape((M, n))
-    x = out[:n]
-    residuals = out[n:n + k]
-    mu2 = out[n + k:n + 2 * k]
-    margins = out[n + 2 * k:n + 3 * k]
-    if not weigh_rows(A, b, w, B, c):
-        return 0
-    if not level_scales(B, c, starts, scales):
-        return 0
-    solve_kernel_ws(B, c, starts, scales, params[0], params[1], params[2], params[3:], x,
-                    ranks[:k], mu2, margins, V, beta, ranks[k:], y, norms, L, rhs,
-                    ranks[:0])
-    level_residuals(A, b, w, starts, x, residuals)
-    acc = 0.0
-    ambiguous = False
-    for lev in range(k):
-        acc += residuals[lev]
-        if margins[lev] <= _AMBIGUITY:
-            ambiguous = True
-    code = 1 if np.isfinite(acc) else 2
-    if ambiguous:
-        code += 4
-    xx = 0.0
-    for c in range(n):
-        xx += x[c] * x[c]
-    if xx > _PRECISION_LIMIT_NORM * _PRECISION_LIMIT_NORM:
-        code += 8
-    return code
+    return _solve_unbounded(A, b, w, work, out, iwork)
+
+
+@njit(cache=True, fastmath=_FAST)
+def solve_data_bounded(A, b, w, work, out, iwork):
+    """:func:`solve_data` with the levels' step bounds ``params[3:]`` (the trust-region
+    step of :func:`_bounded_step`, whose SVD allocates: compiled with numba's runtime)."""
+    return _solve_bounded(A, b, w, work, out, iwork)
 
 
 @njit(cache=True, parallel=True)

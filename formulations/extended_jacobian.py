@@ -127,7 +127,8 @@ try:  # the compiled kernel is optional: the lapack path is the readable referen
     from prioik._jit import ROWS_1D, ROWS_2D, WORK_F, WORK_I, compile_once
 
     from . import _extended_jacobian_kernel as _kernel
-    _solve_data = _kernel.solve_data        # one global lookup per prepared solve
+    _solve_data = _kernel.solve_data
+    _solve_data_bounded = _kernel.solve_data_bounded
     _kernel_error = ""
     #: the prepared kernel's one signature (:func:`prioik._jit.compile_once`): the rows,
     #: targets and √w (a frozen stack's read-only arrays and a writable StackData's run
@@ -135,7 +136,7 @@ try:  # the compiled kernel is optional: the lapack path is the readable referen
     #: ~18 s apiece on a fresh cache), then the workspace, the output, the int workspace
     _SIGNATURE = (ROWS_2D, ROWS_1D, ROWS_1D, WORK_F, WORK_F, WORK_I)
 except ImportError as exc:  # pragma: no cover - numba is a declared dependency
-    _kernel = _solve_data = None
+    _kernel = _solve_data = _solve_data_bounded = None
     _kernel_error = f"{type(exc).__name__}: {exc}"
 
 def step_bound_value(value):
@@ -293,7 +294,10 @@ class Prepared:
         self._starts = layout.starts
         self._n, self._k = layout.n, layout.k
         if self.compiled:
-            compile_once(_solve_data, _SIGNATURE)
+            # step bounds need the trust-region step (its SVD allocates): the kernel
+            # with numba's runtime; every other layout runs the one without it
+            self._solve_data = _solve_data_bounded if self._bounded else _solve_data
+            compile_once(self._solve_data, _SIGNATURE)
             n, k = layout.n, layout.k
             params = np.concatenate([[self.rcond, self.level_damping,
                                       self.singular_threshold], self.step_bound])
@@ -304,7 +308,7 @@ class Prepared:
             self._out_size = n + 3 * k     # x, residuals, μ², decision margins
             # what the common case of solve reads, in one attribute
             self._hot = (self._out_size, self._work, self._iwork, n, n + k, self._ranks,
-                         self._damped)
+                         self._damped, self._solve_data)
 
     def solve(self, data: StackData) -> Outcome:
         """Solve one stack of the layout (its data; the registry checked the layout).
@@ -328,9 +332,9 @@ class Prepared:
         """
         if not self.compiled:
             return self._solve_stack(data.as_stack())
-        size, work, iwork, n, nk, ranks, damped = self._hot
+        size, work, iwork, n, nk, ranks, damped, solve_data = self._hot
         out = np.empty(size)      # x, residuals, μ², margins (one array)
-        code = _solve_data(data.A, data.b, data.sqrt_weight, work, out, iwork)
+        code = solve_data(data.A, data.b, data.sqrt_weight, work, out, iwork)
         if code == 1 and not damped:      # the common case: finite, unambiguous
             return (out[:n], "optimal", {"rank_profile": ranks.copy(), "nullspace": "qr",
                                          "kernel": "numba"}, out[n:nk])
