@@ -74,6 +74,15 @@ FLAG_NEAR_RELEASE = 3
 #: a direction they take only below the rank rule and left a lower level at 180x its
 #: optimum (fuzz inequality-7002-1384); the caller certifies the answer
 FLAG_HELD_OFF_BOUND = 4
+#: the level settled on rank decisions all clear of the ambiguity band, one of them by
+#: less than NEAR_AMBIGUITY times it: a drifting fuzz stack (n 24, level 1's 17 rows of
+#: norm 1e-3 beside two of norm 8, margins 1.6e3 and 2.0e3) ended 1.4e-8 (relative)
+#: above its level-1 optimum, called optimal; the caller certifies the answer
+FLAG_NEAR_AMBIGUOUS = 5
+#: the factor over :data:`~prioik.hierarchy.linalg.AMBIGUITY` within which a clear rank
+#: decision still has its answer certified (``FLAG_NEAR_AMBIGUOUS``; the G1 bounds
+#: stacks' smallest margin is 3e6)
+NEAR_AMBIGUITY = 10.0
 
 #: what :func:`solve_data` returns
 NOT_SOLVED = 0
@@ -1231,6 +1240,8 @@ def _summary(k, primal_tol, x, res, total, counts, flags, margins, fwork, unreso
     fwork[6] = capped if (np.isfinite(xn) and np.isfinite(total)) else -1.0
     ambiguous = 0
     for lev in range(k + 1):
+        if flags[lev] == FLAG_OK and _AMBIGUITY < margins[lev] <= NEAR_AMBIGUITY * _AMBIGUITY:
+            flags[lev] = FLAG_NEAR_AMBIGUOUS
         # every flag but OK and the cap asks for the certificate (_CERTIFIED_FLAGS)
         if (margins[lev] <= _AMBIGUITY
                 or (flags[lev] != FLAG_OK and flags[lev] != FLAG_ITERATION_CAP)):

@@ -169,6 +169,10 @@ _CERTIFIED_FLAGS = (
     (_kernel.FLAG_HELD_OFF_BOUND if _kernel is not None else -1, "held_off_bound_levels",
      "kept a row off its bound (within the dual tolerance) held at the bound for the "
      "levels below (it may block a direction they need)"),
+    (_kernel.FLAG_NEAR_AMBIGUOUS if _kernel is not None else -1, "near_ambiguous_levels",
+     f"settled on a rank decision within {_kernel.NEAR_AMBIGUITY if _kernel else 0:g}x of "
+     f"the ambiguity band (a pivot within "
+     f"{(_kernel.NEAR_AMBIGUITY if _kernel else 0) * AMBIGUITY:g}x of its threshold)"),
 )
 #: the flags whose rejected answer is solved again (:meth:`Prepared._refined`): their
 #: rows' treatment scales with the tolerances
@@ -368,7 +372,7 @@ class Prepared:
         infeasible = np.flatnonzero(self._counts[3, :k]).tolist()
         info = {"iterations": self._iterations.copy(), "rank_profile": self._ranks.copy(),
                 "level_violation": w2, "infeasible_levels": infeasible,
-                "warm_start": self.warm_start, "equality_first": self._fwork[10] == 1.0}
+                "warm_start": self.warm_start, "equality_first": self._fwork.item(10) == 1.0}
         if flag < 0.0:
             self.reset()
             info["message"] = "the active-set iterations produced non-finite values"
@@ -458,14 +462,15 @@ class Prepared:
         decision before a level's clear last step (``FLAG_AMBIGUOUS_PATH``: the working
         set it led to may not be the level's optimum), a held soft row inside its bound
         within its release tolerance (``FLAG_NEAR_RELEASE``: releasing it may lower the
-        level by more than the tolerance shows), or a row off its bound kept held for the
-        levels below (``FLAG_HELD_OFF_BOUND``: it may block a direction they need). The
-        answer is checked by :func:`~prioik.hierarchy.check_lexicographic` (at its
-        default tolerance, the minimum-norm tie-break too when its path was flagged);
-        ``[]`` when it passes."""
+        level by more than the tolerance shows), a row off its bound kept held for the
+        levels below (``FLAG_HELD_OFF_BOUND``: it may block a direction they need), or a
+        clear rank decision within ``NEAR_AMBIGUITY`` times the ambiguity band
+        (``FLAG_NEAR_AMBIGUOUS``). The answer is checked by
+        :func:`~prioik.hierarchy.check_lexicographic` (at its default tolerance, the
+        minimum-norm tie-break too when it was flagged); ``[]`` when it passes."""
         k = self._k
-        path = flagged.get("ambiguous_path_levels", ())
-        report = check_lexicographic(data.as_stack(), x, minimum_norm=k in path)
+        tie_break = any(k in levels for levels in flagged.values())
+        report = check_lexicographic(data.as_stack(), x, minimum_norm=tie_break)
         info.update(flagged)
         info["path_certified"] = report.ok
         if report.ok:

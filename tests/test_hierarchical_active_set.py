@@ -1187,6 +1187,32 @@ def test_independent_13_783_right_answer_is_certified():
     assert sol.status == "optimal" and sol.info["path_certified"] is True
 
 
+def test_a_rank_decision_near_the_ambiguity_band_is_certified():
+    """A drifting fuzz stack (n 24, six levels; level 1: 17 rows of norm ~1e-3 beside two
+    of norm 8). Levels 0 and 1 settle on rank decisions clear of the ambiguity band
+    (margins 1.6e3 and 2.0e3 against AMBIGUITY 1e3) and level 1 ends 1.3e-8 (relative)
+    above the optimum cascaded_qp[clarabel] reaches (certified). Within NEAR_AMBIGUITY
+    times the band the kernel flags the level (FLAG_NEAR_AMBIGUOUS), the certificate
+    rejects level 1, and the answer says 'approximate', naming the levels; without the
+    flag it said 'optimal'."""
+    from prioik.formulations import _active_set_kernel as K
+    from prioik.hierarchy import AMBIGUITY, check_lexicographic, load_stack
+    stack = load_stack(Path(__file__).parent / "data" / "fuzz" / "inequality-drift-1478.json")
+    sol = prioik.solve(stack, NAME)
+    assert sol.status == "approximate" and sol.info["near_ambiguous_levels"] == [0, 1]
+    assert sol.info["path_certified"] is False
+    assert "the certificate rejects level 1" in sol.info["reason"]
+    assert not check_lexicographic(stack, sol.x).ok
+    ref = prioik.solve(stack, "cascaded_qp", solver="clarabel")
+    assert ref.status == "optimal" and check_lexicographic(stack, ref.x).ok
+    w1, r1 = sol.residuals[1] ** 2, ref.residuals[1] ** 2
+    assert 1e-8 < (w1 - r1) / r1 < 2e-8
+    solver = prioik.prepare(stack.layout, NAME, warm_start=False)
+    solver.solve(stack)
+    margins = solver._impl._margins[:2]
+    assert np.all((margins > AMBIGUITY) & (margins <= K.NEAR_AMBIGUITY * AMBIGUITY))
+
+
 def test_a_row_held_off_its_bound_for_the_levels_below_is_certified():
     """Fuzz inequality-7002-1384 (larger sizes: n 8, 10 levels). Level 1 mixes rows of
     norm ~1e-3 with rows of norm ~100; the small ones end 1e-4 beyond their bounds,
