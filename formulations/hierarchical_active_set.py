@@ -152,9 +152,9 @@ except ImportError as exc:  # pragma: no cover - numba is a declared dependency
     _kernel = None
     _kernel_error = f"{type(exc).__name__}: {exc}"
 #: the kernel's codes of a clean solve (module constants: read once, not per call)
-_SOLVED_CLEAN, _SOLVED_INFEASIBLE, _NOT_TRIED = (
-    (_kernel.SOLVED_CLEAN, _kernel.SOLVED_INFEASIBLE, _kernel.NOT_TRIED)
-    if _kernel is not None else (-1, -1, -2))
+_SOLVED_CLEAN, _SOLVED_INFEASIBLE, _SOLVED_OTHER, _NOT_TRIED = (
+    (_kernel.SOLVED_CLEAN, _kernel.SOLVED_INFEASIBLE, _kernel.SOLVED_OTHER, _kernel.NOT_TRIED)
+    if _kernel is not None else (-1, -1, -1, -2))
 
 #: the kernel's level flags after which the answer is certified
 #: (:meth:`Prepared._certify_flagged`): flag, ``info`` key of the flagged levels, and why
@@ -343,6 +343,14 @@ class Prepared:
                                                data.sqrt_weight, self._fwork, self._iwork,
                                                self._bwork)
         if code == _NOT_TRIED:
+            code = _kernel.solve_data(data.A, data.b, data.lower, data.upper,
+                                      data.sqrt_weight, self._fwork, self._iwork,
+                                      self._bwork)
+        if code == _SOLVED_OTHER and self.warm_start and self._fwork.item(8) > 0.0:
+            # rank decisions ambiguous or flagged: the answer may depend on the path
+            # (fuzz: two certified answers 2.8e-9 apart at margins of 1.07e3), so the
+            # warm solver gives the cold one (the working sets kept are then its own)
+            self.reset()
             code = _kernel.solve_data(data.A, data.b, data.lower, data.upper,
                                       data.sqrt_weight, self._fwork, self._iwork,
                                       self._bwork)

@@ -1213,6 +1213,35 @@ def test_a_rank_decision_near_the_ambiguity_band_is_certified():
     assert np.all((margins > AMBIGUITY) & (margins <= K.NEAR_AMBIGUITY * AMBIGUITY))
 
 
+def test_a_warm_solve_near_the_ambiguity_band_gives_the_cold_answer():
+    """Fuzz draw('inequality', 5004, 2678) (n 24, six levels), every target and bound
+    drifting by 0.02 (1 + |b|) N(0, 1) per step: level 2's rank decision sits at a margin
+    of 1.03e3-1.07e3, within NEAR_AMBIGUITY of the band. Started from the kept working
+    sets the active set settled 2.7e-9 (relative) from the cold answer, both certified
+    (levels 3-5 apart by 5e-9). A warm solver now solves such a flagged stack again
+    cold: its answers are the cold solver's, bit for bit."""
+    from prioik.benchmarks.fuzz import draw
+    from prioik.formulations import _active_set_kernel as K
+    from prioik.hierarchy import AMBIGUITY
+    rng = np.random.default_rng([77, 2678])
+    base = draw("inequality", 5004, 2678).stack
+    warm = prioik.prepare(base, NAME)
+    cold = prioik.prepare(base, NAME, warm_start=False)
+    data, d0 = base.layout.data(), base.data
+    drift = rng.standard_normal(d0.m) * 0.02 * (1 + np.abs(d0.b))
+    near = 0
+    for step in range(4):
+        data.A[:], data.sqrt_weight[:] = d0.A, d0.sqrt_weight
+        data.b[:] = d0.b + drift * step
+        data.lower[:] = d0.lower + drift * step
+        data.upper[:] = np.maximum(d0.upper + drift * step, data.lower)
+        a, b = warm.solve(data), cold.solve(data)
+        assert a.status == b.status == "optimal"
+        assert np.array_equal(a.x, b.x) and np.array_equal(a.residuals, b.residuals)
+        near += bool(cold._impl._margins.min() <= K.NEAR_AMBIGUITY * AMBIGUITY)
+    assert near == 4
+
+
 def test_a_row_held_off_its_bound_for_the_levels_below_is_certified():
     """Fuzz inequality-7002-1384 (larger sizes: n 8, 10 levels). Level 1 mixes rows of
     norm ~1e-3 with rows of norm ~100; the small ones end 1e-4 beyond their bounds,
