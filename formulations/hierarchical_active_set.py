@@ -134,6 +134,7 @@ row that becomes active; warm along a trajectory: usually none).
 from __future__ import annotations
 
 import math
+from itertools import compress
 
 import numpy as np
 
@@ -311,6 +312,7 @@ class Prepared:
         #: views of the parts an answer copies (a view per solve costs as much as a copy)
         self._x, self._w2 = self._out[:n], self._out[n:n + k]
         self._res, self._over = self._out[n + k:], self._counts[3, :k]
+        self._levels = range(k)
 
     def reset(self) -> None:
         """Forget the kept working sets (the next solve starts cold)."""
@@ -337,32 +339,31 @@ class Prepared:
         Raises:
             TaskStackError: as :meth:`solve`.
         """
-        code = _NOT_TRIED
-        if self._try_first and self._fwork.item(11) != 0.0:   # the module doc's warm start
-            code = _kernel.equality_first_data(data.A, data.b, data.lower, data.upper,
-                                               data.sqrt_weight, self._fwork, self._iwork,
-                                               self._bwork)
-        if code == _NOT_TRIED:
-            code = _kernel.solve_data(data.A, data.b, data.lower, data.upper,
-                                      data.sqrt_weight, self._fwork, self._iwork,
-                                      self._bwork)
-        if code == _SOLVED_OTHER and self.warm_start and self._fwork.item(8) > 0.0:
+        A, b, lower, upper, sw = data.A, data.b, data.lower, data.upper, data.sqrt_weight
+        fwork, iwork, bwork = self._fwork, self._iwork, self._bwork
+        # the module doc's warm start; the kernel declines it (NOT_TRIED) when the last
+        # answer fixed a row at a violation (params[11])
+        code = (_kernel.equality_first_data(A, b, lower, upper, sw, fwork, iwork, bwork)
+                if self._try_first else _NOT_TRIED)
+        first = code != _NOT_TRIED
+        if not first:
+            code = _kernel.solve_data(A, b, lower, upper, sw, fwork, iwork, bwork)
+        if code == _SOLVED_OTHER and self.warm_start and fwork.item(8) > 0.0:
             # rank decisions ambiguous or flagged: the answer may depend on the path
             # (fuzz: two certified answers 2.8e-9 apart at margins of 1.07e3), so the
             # warm solver gives the cold one (the working sets kept are then its own)
             self.reset()
-            code = _kernel.solve_data(data.A, data.b, data.lower, data.upper,
-                                      data.sqrt_weight, self._fwork, self._iwork,
-                                      self._bwork)
+            first = False
+            code = _kernel.solve_data(A, b, lower, upper, sw, fwork, iwork, bwork)
         if code == _SOLVED_CLEAN or code == _SOLVED_INFEASIBLE:
             return (self._x.copy(), "optimal",
                     {"iterations": self._iterations.copy(),
                      "rank_profile": self._ranks.copy(),
                      "level_violation": self._w2.copy(),
                      "infeasible_levels": [] if code == _SOLVED_CLEAN else
-                     [i for i, over in enumerate(self._over.tolist()) if over],
-                     "warm_start": self.warm_start,
-                     "equality_first": self._fwork.item(10) == 1.0}, self._res.copy())
+                     list(compress(self._levels, self._over.tolist())),
+                     "warm_start": self.warm_start, "equality_first": first},
+                    self._res.copy())
         if code == _kernel.NOT_SOLVED:
             self.reset()
             data.check()     # names the task, level and row at fault
