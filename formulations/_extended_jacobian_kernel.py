@@ -497,7 +497,8 @@ def solve_kernel(B, c, starts, scales, rcond, level_damping, singular_threshold,
                     step_bound, x, ranks, level_mu2, margins, np.empty((n, n)), np.empty(n),
                     np.empty(n, dtype=np.int64), np.empty(n), np.empty(M),
                     np.empty((M, n)), np.empty(M), np.empty(0, dtype=np.int64),
-                    np.empty(n * (M + n) + M + 2 * n), np.empty(n, dtype=np.int64))  # spare_size
+                    # spare_size(M, n) written out: compiled code cannot call it
+                    np.empty(n * (M + n) + M + 2 * n), np.empty(n, dtype=np.int64))
 
 
 @kernel(fastmath=_FAST)

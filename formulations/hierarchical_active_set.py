@@ -157,6 +157,7 @@ _SOLVED_CLEAN, _SOLVED_INFEASIBLE, _SOLVED_OTHER, _NOT_TRIED = (
     (_kernel.SOLVED_CLEAN, _kernel.SOLVED_INFEASIBLE, _kernel.SOLVED_OTHER, _kernel.NOT_TRIED)
     if _kernel is not None else (-1, -1, -1, -2))
 
+_NEAR_AMBIGUITY = _kernel.NEAR_AMBIGUITY if _kernel is not None else 0.0
 #: the kernel's level flags after which the answer is certified
 #: (:meth:`Prepared._certify_flagged`): flag, ``info`` key of the flagged levels, and why
 #: such a level may not be optimal
@@ -171,9 +172,8 @@ _CERTIFIED_FLAGS = (
      "kept a row off its bound (within the dual tolerance) held at the bound for the "
      "levels below (it may block a direction they need)"),
     (_kernel.FLAG_NEAR_AMBIGUOUS if _kernel is not None else -1, "near_ambiguous_levels",
-     f"settled on a rank decision within {_kernel.NEAR_AMBIGUITY if _kernel else 0:g}x of "
-     f"the ambiguity band (a pivot within "
-     f"{(_kernel.NEAR_AMBIGUITY if _kernel else 0) * AMBIGUITY:g}x of its threshold)"),
+     f"settled on a rank decision within {_NEAR_AMBIGUITY:g}x of the ambiguity band (a "
+     f"pivot within {_NEAR_AMBIGUITY * AMBIGUITY:g}x of its threshold)"),
 )
 #: the flags whose rejected answer is solved again (:meth:`Prepared._refined`): their
 #: rows' treatment scales with the tolerances
