@@ -910,19 +910,15 @@ def _held_rows_optimal(A, b, lower, row_eq, sw, starts, k, x, y, eB, estarts, er
         hcol[nh] = h
         pinned[nh] = 0
         nh += 1
+    npinned = 0
     # each level below the first held row that has equality rows (its other rows are
     # satisfied: no gradient), in order, then the tie-break
     col = 0
     for lev in range(k + 1):
-        if lev > first_held:
+        if lev > first_held and npinned == nh:
             # every held row pinned: the optimal set above has each on its bound, so it
             # lies in the QR's (the held rows as equalities), where x* is optimal
-            unpinned = False
-            for i in range(nh):
-                if pinned[i] == 0:
-                    unpinned = True
-            if not unpinned:
-                break
+            break
         if lev < k:
             colv = col
             col += eranks[lev]
@@ -990,6 +986,7 @@ def _held_rows_optimal(A, b, lower, row_eq, sw, starts, k, x, y, eB, estarts, er
                 release = h
             elif -wrong > dual_tol * scale:
                 pinned[i] = 1
+                npinned += 1
         if release >= 0:
             return erow[rowperm[prow[release]]]
     return -1
@@ -1022,7 +1019,7 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
     ``X_i ⊆ X_i^E`` (the optimal sets without the inequality rows) and ``x* ∈ X_i`` (its
     inequality rows are satisfied, so each level's value equals its equality part's
     least value), and ``x*``, the minimum-norm point of ``X_k^E``, is that of ``X_k``.
-    A value :func:`_load_rows` refuses gives ``-2`` (:func:`solve_data` names it).
+    A value :func:`_rows_valid` refuses gives ``-2`` (:func:`solve_data` names it).
     Reads the data directly (one pass; the active set's own rows are not built).
     Scratch (the active set's, unused on this path): ``V`` (``n × n``), ``L``
     (``≥ M × n``), ``fs`` (``4 × ≥ max(M, n)``), ``pos`` (``≥ n`` ints), ``eqr`` (``≥ M``
@@ -1077,7 +1074,7 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
                     level_eq += 1
                 else:
                     c[m] = s * (upper[j] if held[j] > 0 else lower[j])
-                    ucol[j] = _sparsity(Aj, ucol[j])[1]
+                    ucol[j] = _one_column(Aj, nz, ucol[j])
                     level_held += 1
                 erow[m] = j
                 rowperm[m] = m
