@@ -993,9 +993,196 @@ def _held_rows_optimal(A, b, lower, row_eq, sw, starts, k, x, y, eB, estarts, er
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
+def _fixed_columns_optimal(A, b, lower, row_eq, sw, starts, k, x, eR, estarts, eranks,
+                           ucol, ecol, erow, rowperm, held, fixedc, last_held, scales,
+                           dual_tol, V, fs, pos, work, prow, prowj, pinned, hrow):
+    """:func:`_held_rows_optimal` for held rows that are box rows eliminated as fixed
+    coordinates (:func:`_equality_first`'s reduced solve): ``-1`` when their
+    multipliers prove ``x*`` lexicographically optimal, else the data row to release
+    (the most wrong-signed multiplier at the first level that has one), ``-2`` when the
+    test cannot be read.
+
+    The reduced nested QR solved the equality levels on the free coordinates (``fixedc[c]
+    = 0``) with every held row's coordinate ``x_c`` at its bound, its pivot rows ``C``
+    lower triangular in the rotated free coordinates. Every level down to ``last_held``
+    (the lowest level with a held row) is met exactly (the caller checked its rank), and
+    so is a level below whose equality rows ``x*`` meets to its precision
+    (``‖r_ℓ‖ ≤ X_PRECISION (‖√W_ℓ A_ℓ‖_F ‖x*‖ + ‖√W_ℓ t_ℓ‖)``): their value is the least
+    there is, and they have no gradient to read. For another level ``ℓ`` below, ``x*``
+    minimises ``f_ℓ`` over ``X_{ℓ−1}`` iff ``−∇f_ℓ(x*)`` lies in the normal cone: the span
+    of the pivot rows above plus, for each held row ``h`` on side ``s_h`` on column
+    ``c``, the ray ``s_h a_hc e_c`` (the line once ``h`` is pinned, as in
+    :func:`_held_rows_optimal`). The free part fixes the rows' multipliers: ``Cᵀ μ =
+    (Qᵀ ∇f_ℓ)_free[:col_ℓ]`` (the rest is zero where the reduced QR is optimal), by back
+    substitution; each held column's multiplier is then what they leave of the
+    gradient there, ``ν_c = (∇f_ℓ)_c − Σ_p μ_p a_pc``, and ``x*`` passes when no unpinned
+    held row's ``s_h sign(a_hc) ν_c`` exceeds :data:`_DUAL_FLOOR` times the level's
+    gradient scale. ``(Qᵀ ∇f_ℓ)_free[:col_ℓ]`` is ``Σ_i r_i (eR_i)[:col_ℓ]`` over the
+    level's rows as the QR rotated them; the last level's may be the unit rows it left
+    unrotated, whose gradient is brought through the reflectors instead. The
+    minimum-norm tie-break is read the same way, with ``∇ = x*`` (``Qᵀ x*_free``: the
+    QR's ``y``). Sufficient, not necessary: a refusal sends the stack on. ``-2`` when a
+    gradient must be read in or below a level the QR did not leave triangular (its
+    full-rank or unit-rows step).
+
+    ``fs``: the reduced QR's ``beta`` and ``y`` in its rows 0 and 1; rows 2 and 3 (``≥ n``)
+    scratch for a gradient in ``x`` and its free part. Scratch: ``work`` (``≥ 2n + M``
+    floats: the multipliers, the rows' residuals, the held columns' gradient),
+    ``prow``, ``prowj`` (the pivot rows' rows in ``eR`` and in the data), ``pinned``,
+    ``hrow`` (``n`` ints).
+    """
+    M, n = A.shape
+    n2 = eR.shape[1]
+    beta = fs[0, :n2]
+    y = fs[1, :n2]
+    g = fs[2, :n]
+    gf = fs[3, :n2]
+    mu = work[:n]
+    rs = work[n:n + M]
+    gc = work[n + M:n + M + n]
+    col = 0
+    complete = k            # the first level the QR left in another form
+    for lev in range(k):
+        e0 = estarts[lev]
+        m = estarts[lev + 1] - e0
+        if m > 0 and col < n2 and m >= n2 - col and complete == k:
+            complete = lev
+        for i in range(eranks[lev]):
+            prow[col + i] = e0 + i
+            prowj[col + i] = erow[rowperm[e0 + i]]
+        col += eranks[lev]
+    ncol = col
+    nh = 0
+    for j in range(M):
+        if held[j] != 0:
+            hrow[nh] = j
+            pinned[nh] = 0
+            nh += 1
+    npinned = 0
+    xn = np.sqrt(_dot(x, x))
+    col = 0
+    for lev in range(k + 1):
+        if lev > last_held and npinned == nh:
+            # every held row pinned: the optimal set above has each on its bound, so it
+            # lies in the reduced QR's, where x* is optimal
+            break
+        if lev < k:
+            colv = col
+            col += eranks[lev]
+            if lev <= last_held:
+                continue
+            tn = 0.0
+            rr = 0.0
+            some = False
+            for j in range(starts[lev], starts[lev + 1]):
+                if ucol[j] != -2:
+                    continue
+                some = True
+                s = sw[j]
+                t = b[j] if row_eq[j] else lower[j]
+                ec = ecol[j]
+                r = s * ((A[j, ec] * x[ec] if ec >= 0 else _dot(A[j], x)) - t)
+                rs[j] = r
+                rr += r * r
+                tn += s * s * t * t
+            if not some:            # inequality rows alone, all inside: no gradient
+                continue
+            if np.sqrt(rr) <= X_PRECISION * (scales[lev] * xn + np.sqrt(tn)):
+                continue            # met to x's precision
+            if lev > complete:
+                return -2
+            if lev < k - 1:
+                # its rows as the QR rotated them: (Qᵀ ∇f_ℓ)[:col_ℓ] = Σ_i r_i (eR_i)[:col_ℓ]
+                for q in range(colv):
+                    gf[q] = 0.0
+                for i in range(estarts[lev], estarts[lev + 1]):
+                    r = rs[erow[rowperm[i]]]
+                    if r != 0.0:
+                        Ri = eR[i]
+                        for q in range(colv):
+                            gf[q] += r * Ri[q]
+                gn = _dot(gf[:colv], gf[:colv])
+                for i in range(nh):
+                    c = ucol[hrow[i]]
+                    acc = 0.0
+                    for j in range(starts[lev], starts[lev + 1]):
+                        if ucol[j] == -2:
+                            acc += rs[j] * sw[j] * A[j, c]
+                    gc[i] = acc
+                    gn += acc * acc
+            else:
+                # the last level's rows may be the unit rows the QR left unrotated: its
+                # gradient in x, its free part brought through the reflectors t < col_ℓ
+                for c in range(n):
+                    g[c] = 0.0
+                for j in range(starts[lev], starts[lev + 1]):
+                    if ucol[j] != -2:
+                        continue
+                    e = rs[j] * sw[j]
+                    ec = ecol[j]
+                    if ec >= 0:             # a unit row (a posture's): one product
+                        g[ec] += e * A[j, ec]
+                    elif e != 0.0:
+                        Aj = A[j]
+                        for c in range(n):
+                            g[c] += e * Aj[c]
+                q = 0
+                for c in range(n):
+                    if fixedc[c] == 0:
+                        gf[q] = g[c]
+                        q += 1
+                gn = _dot(g, g)
+                _apply_qt(gf, colv, V, beta, pos)
+                for i in range(nh):
+                    gc[i] = g[ucol[hrow[i]]]
+            gh = gf
+            scale = max(np.sqrt(gn), scales[lev] * (scales[lev] * xn + np.sqrt(tn)))
+        else:                       # the tie-break: ∇ ½‖x‖² = x, Qᵀ x_free = y
+            if complete < k:
+                return -2
+            colv = ncol
+            gh = y
+            for i in range(nh):
+                gc[i] = x[ucol[hrow[i]]]
+            scale = xn
+        # the pivot rows' multipliers: Cᵀ μ = gh[:colv], C lower triangular, by columns
+        # of Cᵀ (C's rows: contiguous)
+        for q in range(colv):
+            mu[q] = gh[q]
+        for pp in range(colv):
+            p = colv - 1 - pp
+            Cp = eR[prow[p]]
+            mp = mu[p] / Cp[p]
+            mu[p] = mp
+            for q in range(p):
+                mu[q] -= Cp[q] * mp
+        worst = _DUAL_FLOOR * scale
+        release = -1
+        for i in range(nh):
+            if pinned[i] != 0:
+                continue
+            j = hrow[i]
+            c = ucol[j]
+            nu = gc[i]
+            for p in range(colv):
+                jp = prowj[p]
+                nu -= mu[p] * sw[jp] * A[jp, c]
+            wrong = held[j] * (nu if A[j, c] > 0.0 else -nu)
+            if wrong > worst:
+                worst = wrong
+                release = j
+            elif -wrong > dual_tol * scale:
+                pinned[i] = 1
+                npinned += 1
+        if release >= 0:
+            return release
+    return -1
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
 def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol, dual_tol,
-                    eB, evec, eint, x, ranks, margins, w2, res, V, L, fs, pos, eqr, held,
-                    spare, ispare):
+                    eflat, evec, eint, x, ranks, margins, w2, res, Vflat, Lflat, fs, pos, eqr,
+                    held, spare, ispare, allow_fixed):
     """The stack's equality rows (rows with ``lower = upper`` included) with the rows the
     last answer held (``held[j]``: ``±1``, at their upper/lower bound; ``0`` for
     none), as equalities at those bounds, weighed into ``eB`` and solved by the
@@ -1004,10 +1191,22 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
     answer ``x*`` is the stack's, ``x``, ``ranks[:k]``, ``margins[:k]`` and the levels'
     violations ``w2``, ``res`` are written.
 
+    When every held row is a box row (one non-zero ``a_c``, distinct columns) and
+    ``allow_fixed``, the held rows are not rows of the QR: each fixes its coordinate,
+    ``x_c = bound / a_c``, and the equality rows are solved on the other coordinates
+    with ``a_ic x_c`` moved to their right-hand side (an equality row on fixed
+    coordinates alone leaves the QR: a constant residual). This is the same problem when
+    every level down to the lowest held one is met exactly on the free coordinates (its
+    rank is its count): the held rows are then independent of those levels, and fixing
+    them before or after is the same point set. Otherwise the verdict is
+    :data:`FIXED_REFUSED` and the caller tries the same guess again with the rows held
+    as equalities. Its multipliers are read by :func:`_fixed_columns_optimal`.
+
     Returns ``(verdict, row, side)``: ``verdict = -1`` when ``x*`` is the answer; ``-3``
     with a next guess when it is not because a row is violated (the most violated, with
     the side to hold it on) or a held row's multiplier is wrong-signed (the row to
-    release, ``side = 0``); ``-2`` when it is not for another reason.
+    release, ``side = 0``); :data:`FIXED_REFUSED` as above; ``-2`` when it is not for
+    another reason.
 
     It is when every other row is inside its interval (no tolerance), every rank
     decision is clear, ``x``'s precision resolves every box row, and the held rows are
@@ -1015,17 +1214,22 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
     when within ``x``'s precision, as the active set does), in levels of inequality
     rows alone, independent of everything above them (their level's rank is their
     count: its violation is then zero, the least there is) and their multipliers say
-    so (:func:`_held_rows_optimal`). With no held row: by induction over the levels,
+    so (:func:`_held_rows_optimal`, :func:`_fixed_columns_optimal`). With no held row: by induction over the levels,
     ``X_i ⊆ X_i^E`` (the optimal sets without the inequality rows) and ``x* ∈ X_i`` (its
     inequality rows are satisfied, so each level's value equals its equality part's
     least value), and ``x*``, the minimum-norm point of ``X_k^E``, is that of ``X_k``.
     A value :func:`_rows_valid` refuses gives ``-2`` (:func:`solve_data` names it).
     Reads the data directly (one pass; the active set's own rows are not built).
-    Scratch (the active set's, unused on this path): ``V`` (``n × n``), ``L``
-    (``≥ M × n``), ``fs`` (``4 × ≥ max(M, n)``), ``pos`` (``≥ n`` ints), ``eqr`` (``≥ M``
-    int8: each row's equality flag); the nested QR's own ``spare`` and ``ispare``.
+    Scratch (the active set's, unused on this path), flat where the fixed coordinates'
+    solve reshapes it to its own size: ``eflat`` (``≥ M n``: the weighed rows),
+    ``Vflat`` (``n²``), ``Lflat`` (``≥ M n``), ``fs`` (``4 × ≥ max(M, n)``), ``pos``
+    (``≥ n`` ints), ``eqr`` (``≥ M`` int8: each row's equality flag); the nested QR's
+    own ``spare`` and ``ispare``.
     """
     M, n = A.shape
+    eB = eflat[:M * n].reshape((M, n))
+    V = Vflat[:n * n].reshape((n, n))
+    L = Lflat[:M * n].reshape((M, n))
     c = evec[:M]
     o = M
     scales = evec[o:o + k]
@@ -1047,67 +1251,187 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
     iseq = eqr[:M]
     if not _rows_valid(row_eq, b, lower, upper, sw, iseq):
         return -2, -1, 0
-    m = 0
+    # the held rows: box rows (one non-zero, on distinct columns) fix their coordinates,
+    # x_c = bound / a_c, and the equality rows are solved on the free coordinates with
+    # a_ic x_c on the right-hand side: fewer rows and columns for the QR than holding the
+    # rows as equalities (G1 with 5 held limits: they added ~60% of the work). Every
+    # level down to the lowest held one must then be met exactly on the rest (checked
+    # after the solve: its rank is its count), where fixing x_c before or after those
+    # levels is the same. Other held rows are held as equalities in the QR.
+    fixedc = pside          # (the other path's _held_rows_optimal uses it otherwise)
+    fcol = prow             # the free columns (prow, hcol, pinned are rewritten after)
+    hlist = hcol
+    colmap = pinned         # each free column's place among them
     nheld = 0
+    last_held = -1
+    fixed = allow_fixed
+    for lev in range(k):
+        for j in range(starts[lev], starts[lev + 1]):
+            if held[j] != 0:
+                if iseq[j] or nheld >= n - 1:
+                    fixed = False
+                else:
+                    hlist[nheld] = j
+                nheld += 1
+                last_held = lev
+    n2 = n
+    if nheld == 0:
+        fixed = False
+    if fixed:
+        for cc in range(n):
+            fixedc[cc] = 0
+        for i in range(nheld):
+            j = hlist[i]
+            _, uc = _sparsity(A[j], ucol[j])
+            ucol[j] = uc
+            if uc < 0 or sw[j] == 0.0 or fixedc[uc] != 0:
+                fixed = False
+                break
+            fixedc[uc] = 1
+            x[uc] = (upper[j] if held[j] > 0 else lower[j]) / A[j, uc]
+    if fixed:
+        n2 = 0
+        for cc in range(n):
+            if fixedc[cc] == 0:
+                fcol[n2] = cc
+                colmap[cc] = n2
+                n2 += 1
+    m = 0
     estarts[0] = 0
     for lev in range(k):
         acc = 0.0
         level_eq = 0
         level_held = 0
-        for j in range(starts[lev], starts[lev + 1]):
-            s = sw[j]
-            Aj = A[j]
-            if iseq[j] or held[j] != 0:
-                row = eB[m]
-                nn = 0.0
-                nz = 0
-                for col in range(n):
-                    a = Aj[col]
-                    v = s * a
-                    row[col] = v
-                    nn += v * v
-                    nz += 1 if a != 0.0 else 0
+        if fixed:
+            for j in range(starts[lev], starts[lev + 1]):
+                s = sw[j]
+                Aj = A[j]
                 if iseq[j]:
-                    c[m] = s * (b[j] if row_eq[j] else lower[j])
+                    nn = 0.0
+                    nz = 0
+                    for col in range(n):
+                        a = Aj[col]
+                        nn += a * a
+                        nz += 1 if a != 0.0 else 0
+                    nn *= s * s
                     ucol[j] = -2
                     ecol[j] = _one_column(Aj, nz, ecol[j])
                     level_eq += 1
-                else:
-                    c[m] = s * (upper[j] if held[j] > 0 else lower[j])
-                    ucol[j] = _one_column(Aj, nz, ucol[j])
+                    t = b[j] if row_eq[j] else lower[j]
+                    ec = ecol[j]
+                    if ec >= 0:                 # a unit row (a posture's)
+                        if fixedc[ec] != 0:
+                            t -= Aj[ec] * x[ec]
+                            nz = 0
+                    else:
+                        for i in range(nheld):
+                            cc = ucol[hlist[i]]
+                            a = Aj[cc]
+                            if a != 0.0:
+                                t -= a * x[cc]
+                                nz -= 1
+                    if nz == 0:         # on fixed coordinates alone: a constant residual
+                        if lev <= last_held:
+                            return FIXED_REFUSED, -1, 0
+                    else:
+                        row = eflat[m * n2:(m + 1) * n2]
+                        if ec >= 0:
+                            row[:] = 0.0
+                            row[colmap[ec]] = s * Aj[ec]
+                        else:
+                            for q in range(n2):
+                                row[q] = s * Aj[fcol[q]]
+                        c[m] = s * t
+                        erow[m] = j
+                        rowperm[m] = m
+                        m += 1
+                elif held[j] != 0:
+                    nn = s * A[j, ucol[j]]
+                    nn *= nn
                     level_held += 1
-                erow[m] = j
-                rowperm[m] = m
-                m += 1
-            else:
-                nn, ucol[j] = _sparsity(Aj, ucol[j])
-                nn *= s * s
-            acc += nn
-        if not np.isfinite(acc):        # (a sum of squares: finite iff every term is)
+                else:
+                    nn, ucol[j] = _sparsity(Aj, ucol[j])
+                    nn *= s * s
+                acc += nn
+        else:
+            for j in range(starts[lev], starts[lev + 1]):
+                s = sw[j]
+                Aj = A[j]
+                if iseq[j] or held[j] != 0:
+                    row = eB[m]
+                    nn = 0.0
+                    nz = 0
+                    for col in range(n):
+                        a = Aj[col]
+                        v = s * a
+                        row[col] = v
+                        nn += v * v
+                        nz += 1 if a != 0.0 else 0
+                    if iseq[j]:
+                        c[m] = s * (b[j] if row_eq[j] else lower[j])
+                        ucol[j] = -2
+                        ecol[j] = _one_column(Aj, nz, ecol[j])
+                        level_eq += 1
+                    else:
+                        c[m] = s * (upper[j] if held[j] > 0 else lower[j])
+                        ucol[j] = _one_column(Aj, nz, ucol[j])
+                        level_held += 1
+                    erow[m] = j
+                    rowperm[m] = m
+                    m += 1
+                else:
+                    nn, ucol[j] = _sparsity(Aj, ucol[j])
+                    nn *= s * s
+                acc += nn
+        # (a sum of squares: finite iff every term is; an ordered comparison, which LLVM
+        # keeps: np.isfinite here was folded to true once this loop took its fixed branch)
+        if not (acc < np.inf):
             return -2, -1, 0
         if level_held > 0 and level_eq > 0:
             return -2, -1, 0
         scales[lev] = np.sqrt(acc)
         step_bound[lev] = 0.0
         estarts[lev + 1] = m
-        nheld += level_held
-    # the extended Jacobian's own compiled solve, on this kernel's scratch (not its body
-    # inlined here: inlined into a second module it changed that kernel's rounding in
-    # the first one)
-    solve_kernel_into(eB[:m], c[:m], estarts, scales, rcond, 0.0, 0.0, step_bound, x,
-                      eranks, mu2, emargins, V, fs[0, :n], pos, fs[1, :n], fs[2, :M], L[:M],
-                      fs[3, :M], rowperm[:m] if nheld > 0 else rowperm[:0], spare, ispare)
+    eR = eflat[:0].reshape((0, 1))      # the reduced rows (typed here for both paths)
+    if fixed:
+        eR = eflat[:m * n2].reshape((m, n2))
+        solve_kernel_into(eR, c[:m], estarts, scales, rcond, 0.0, 0.0, step_bound, x[:n2],
+                          eranks, mu2, emargins, Vflat[:n2 * n2].reshape((n2, n2)),
+                          fs[0, :n2], pos, fs[1, :n2], fs[2, :m],
+                          Lflat[:m * n2].reshape((m, n2)), fs[3, :m], rowperm[:m], spare,
+                          ispare)
+        q = n2
+        for cc in range(n - 1, -1, -1):     # the free coordinates to their columns
+            if fixedc[cc] == 0:
+                q -= 1
+                x[cc] = x[q]
+        for j in range(M):
+            if held[j] != 0:
+                uc = ucol[j]
+                x[uc] = (upper[j] if held[j] > 0 else lower[j]) / A[j, uc]
+    else:
+        # the extended Jacobian's own compiled solve, on this kernel's scratch (not its
+        # body inlined here: inlined into a second module it changed that kernel's
+        # rounding in the first one)
+        solve_kernel_into(eB[:m], c[:m], estarts, scales, rcond, 0.0, 0.0, step_bound, x,
+                          eranks, mu2, emargins, V, fs[0, :n], pos, fs[1, :n], fs[2, :M],
+                          L[:M], fs[3, :M], rowperm[:m] if nheld > 0 else rowperm[:0],
+                          spare, ispare)
     xx = _dot(x, x)
     if not (xx <= _PRECISION_LIMIT_NORM * _PRECISION_LIMIT_NORM):
         return -2, -1, 0
     for lev in range(k):
         if emargins[lev] <= _AMBIGUITY:
             return -2, -1, 0
-        if nheld > 0 and ucol[erow[estarts[lev]]] != -2 and estarts[lev + 1] > estarts[lev]:
+        if fixed:
+            if lev <= last_held and eranks[lev] != estarts[lev + 1] - estarts[lev]:
+                return FIXED_REFUSED, -1, 0     # not met exactly above a held row
+        elif (nheld > 0 and ucol[erow[estarts[lev]]] != -2
+              and estarts[lev + 1] > estarts[lev]):
             if eranks[lev] != estarts[lev + 1] - estarts[lev]:      # a held row dependent
                 return -2, -1, 0
     xn = np.sqrt(xx)
-    if nheld > 0:       # a held box row off its bound by x's precision is put on it
+    if nheld > 0 and not fixed:     # a held box row off its bound by x's precision is put on it
         for j in range(M):
             uc = ucol[j]
             if held[j] != 0 and uc >= 0:
@@ -1148,7 +1472,15 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
                 return -2, -1, 0
     if add >= 0:
         return -3, add, side
-    if nheld > 0:
+    if fixed:
+        release = _fixed_columns_optimal(
+            A, b, lower, row_eq, sw, starts, k, x, eR, estarts, eranks, ucol, ecol, erow,
+            rowperm, held, fixedc, last_held, scales, dual_tol,
+            Vflat[:n2 * n2].reshape((n2, n2)), fs, pos, Lflat, prow, hcol, pinned,
+            ispare)
+        if release != -1:
+            return -3 if release >= 0 else -2, release, 0
+    elif nheld > 0:
         release = _held_rows_optimal(
             A, b, lower, row_eq, sw, starts, k, x, fs[1, :n], eB, estarts, eranks, ucol,
             ecol, erow, rowperm, held, scales, dual_tol, V, fs[0, :n], pos, L, fs[2, :n],
@@ -1172,6 +1504,10 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
         res[lev] = np.sqrt(acc)
         ranks[lev] = eranks[lev]
         margins[lev] = emargins[lev]
+        if fixed:           # the held rows, independent (their level met exactly above)
+            for j in range(starts[lev], starts[lev + 1]):
+                if held[j] != 0:
+                    ranks[lev] += 1
     return -1, -1, 0
 
 
@@ -1888,9 +2224,14 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
 #: what :func:`equality_first_data` returns when its answer is not the stack's (the
 #: caller then runs :func:`solve_data`)
 NOT_TRIED = -1
+#: :func:`_equality_first`'s verdict when its held box rows cannot be taken as fixed
+#: coordinates (a level above the lowest held one is not met exactly on the free ones):
+#: the same guess is then tried with them held as equalities
+FIXED_REFUSED = -4
 #: the guesses :func:`equality_first_data` tries: the kept held rows, then each
 #: refutation's next (hold the most violated row, or release the held row of the most
-#: wrong-signed multiplier), one nested QR each
+#: wrong-signed multiplier), one nested QR each (two for a guess whose box rows
+#: :data:`FIXED_REFUSED` refused as fixed coordinates)
 GUESSES = 2
 
 
@@ -1919,7 +2260,7 @@ def equality_first_data(A, b, lower, upper, sw, fwork, iwork, bwork):
         return NOT_TRIED
     R = M + n
     x, w2, res, margins, o = _outputs(fwork, M, n, k)
-    eB = fwork[o:o + M * n].reshape((M, n))
+    eflat = fwork[o:o + M * n]
     o += M * n
     evec = fwork[o:o + M + 4 * k]
     spare = fwork[o + M + 4 * k:]
@@ -1932,9 +2273,9 @@ def equality_first_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     primal_tol = fwork[1]
     Rn = R * n
     o = N_PARAMS + 2 * Rn                                   # Lw (see solve_data)
-    L = fwork[o:o + Rn].reshape((R, n))
+    Lflat = fwork[o:o + Rn]
     o = N_PARAMS + 5 * Rn
-    V = fwork[o:o + n * n].reshape((n, n))
+    Vflat = fwork[o:o + n * n]
     o += 2 * n * n
     fs = fwork[o:o + 4 * R].reshape((4, R))                 # fvec's first rows
     pos = iwork[k + 2:k + 2 + n]                            # ivec's first row
@@ -1942,14 +2283,20 @@ def equality_first_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     held = bwork[o:o + M]
     kept = fwork[11] == 2.0         # the kept working sets held rows
     guessed = False
-    for attempt in range(GUESSES):
+    allow_fixed = True
+    attempt = 0
+    while attempt < GUESSES:
         verdict, row, side = _equality_first(
             A, b, lower, upper, sw, bwork[:M], starts, k, fwork[0], primal_tol, fwork[2],
-            eB, evec, eint, x, counts[2], margins, w2, res, V, L, fs, pos,
-            bwork[M + 2 * R:M + 3 * R], held, spare, ispare)
+            eflat, evec, eint, x, counts[2], margins, w2, res, Vflat, Lflat, fs, pos,
+            bwork[M + 2 * R:M + 3 * R], held, spare, ispare, allow_fixed)
+        if verdict == FIXED_REFUSED:    # the same guess, its rows held as equalities
+            allow_fixed = False
+            continue
+        attempt += 1
         if verdict == -1:
             break
-        if verdict == -2 or attempt == GUESSES - 1:
+        if verdict == -2 or attempt == GUESSES:
             # refuted: with no row held, solve_data then starts cold
             fwork[10] = -2.0 if kept else -1.0
             return NOT_TRIED

@@ -533,6 +533,56 @@ def test_held_rows_are_tried_as_equalities_and_proved_by_their_multipliers():
     assert firsts == [False, True, True, True, True, True]
 
 
+def _warm_answers_are_proved(make, targets):
+    """Each target's stack solved warm and cold: both optimal, the warm one exact and the
+    cold one to 1e-12; returns which warm answers were the equality-first try's."""
+    warm = prioik.prepare(make(targets[0]), NAME)
+    cold = prioik.prepare(warm.layout, NAME, warm_start=False)
+    firsts = []
+    for t in targets:
+        stack = make(t)
+        a, b = warm.solve(stack), cold.solve(stack)
+        assert a.status == b.status == "optimal"
+        assert_exact(stack, a)
+        assert np.linalg.norm(a.x - b.x) <= 1e-12 * max(1.0, np.linalg.norm(b.x))
+        firsts.append(bool(a.info["equality_first"]))
+    return firsts
+
+
+def test_held_box_rows_below_a_redundant_level_are_held_as_equalities():
+    """The held joint limit fixes x₀ (a box row: the try takes it as a fixed coordinate)
+    only when every level above it is met exactly on the other coordinates; here level 0
+    repeats one row (rank 1 of 2), so the try refuses the fixed coordinates
+    (FIXED_REFUSED) and takes the same guess with the row held as an equality, which
+    its multipliers prove: every warm answer after the first is the try's. Without
+    that second form each of them ran the active set."""
+    n = 4
+
+    def make(target):
+        return TaskStack([[Task("twice", np.eye(n)[[3, 3]], [0.2, 0.2])],
+                          [Task("limits", np.eye(n), lower=-np.ones(n), upper=np.ones(n))],
+                          [Task("reach", np.eye(n)[:1], [target])],
+                          [Task("posture", np.eye(n), np.zeros(n), weight=0.1)]])
+    assert _warm_answers_are_proved(make, [1.3, 1.4, 1.5, 1.6]) == [False, True, True, True]
+
+
+def test_held_rows_of_several_columns_are_proved_by_their_multipliers():
+    """Joint-limit-like bounds on rotated coordinates (each row dense): held rows that
+    are not box rows stay rows of the QR, held as equalities, and their multipliers are
+    read from its triangular pivot rows (_held_rows_optimal). The reach beyond the
+    first row's bound holds it; at 0.7 its multiplier is wrong-signed and the second
+    guess releases it."""
+    n = 4
+    rot, _ = np.linalg.qr(np.random.default_rng(11).standard_normal((n, n)))
+
+    def make(target):
+        return TaskStack([[Task("limits", rot, lower=-np.ones(n), upper=np.ones(n))],
+                          [Task("reach", rot[:1], [target])],
+                          [Task("posture", np.eye(n), np.zeros(n), weight=0.1)]])
+    firsts = _warm_answers_are_proved(make, [0.5, 1.3, 1.4, 1.6, 0.7, 0.6])
+    assert firsts == [False, True, True, True, True, True]
+
+
 def test_held_rows_pinned_above_a_level_that_takes_the_rest_are_proved():
     """A level with as many rows as free coordinates (here four rows on the three left
     once x₀ is held) is solved by the QR's full-rank step, which leaves no triangular
