@@ -112,7 +112,11 @@ inequality row satisfied, every held row on its bound in a level of inequality r
 only and independent of the levels above, and the held rows' multipliers of the
 right sign at every level below them (``μ_h = (C⁻¹e_h)·(Qᵀ∇f_ℓ)[:col_ℓ]`` over the QR's
 triangular pivot rows ``C``; a row held with a clear right-signed multiplier is
-*pinned* for the levels below, whose gradients may then push it either way). A refuted
+*pinned* for the levels below, whose gradients may then push it either way). Held box
+rows (joint limits) are not rows of that QR: each fixes its coordinate at its bound and
+the equality rows are solved on the others, when every level above them is met exactly
+there (else they are held as equalities); their multipliers are then what the pivot
+rows' multipliers leave of each level's gradient on the fixed columns. A refuted
 try names its next guess (hold the most violated row, or release the most wrong-signed
 held row), tried once more; then the active set runs, from the kept working sets, or
 from the cold start when they held no row. Why it is exact: with no held row, with
@@ -122,8 +126,8 @@ value at ``x*`` is its equality part's least value over ``X_{i−1}^E ⊇ X_{i�
 ``x*``, the minimum-norm point of ``X_k^E``, is that of ``X_k``; with held rows, each
 level's KKT conditions over the levels above hold at ``x*`` (docs/active-set.md). A
 control loop whose limits are inactive pays the extended Jacobian's solve plus one pass
-over the inequality rows; one whose active limits stay the same, that solve with the
-held rows among its rows plus the multiplier test.
+over the inequality rows; one whose active limits stay the same, that solve on the
+coordinates the limits leave free plus the multiplier test.
 
 *Complexity.* Per iteration ``O((h + w) d²)`` for ``h`` working hard rows, ``w``
 working soft rows and ``d`` free coordinates, plus ``O(M n)`` for the step test;
