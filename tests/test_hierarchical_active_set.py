@@ -583,6 +583,62 @@ def test_held_rows_of_several_columns_are_proved_by_their_multipliers():
     assert firsts == [False, True, True, True, True, True]
 
 
+def _limits_trajectory(seed: int, steps: int = 10) -> list[TaskStack]:
+    """G1-shaped stacks along a drift: a top equality level (redundant in a fifth of the
+    seeds), joint-limit box rows of scaled and signed ``a_c``, a second limit level on
+    half the joints in a third of them, 1-3 random tasks whose targets drift, a posture.
+    The drifts drive joints to their limits and keep them there for several steps."""
+    rng = np.random.default_rng([91, seed])
+    n = int(rng.integers(3, 16))
+    top = rng.standard_normal((int(rng.integers(1, max(2, n // 3))), n))
+    if rng.random() < 0.2:
+        top = np.vstack([top, top[:1]])
+    top_b = rng.standard_normal(top.shape[0]) * 0.3
+    a = np.where(rng.random(n) < 0.3, -1.0, 1.0) * rng.uniform(0.5, 2.0, n)
+    lo, up = -rng.uniform(0.2, 1.5, n) * np.abs(a), rng.uniform(0.2, 1.5, n) * np.abs(a)
+    sub = rng.permutation(n)[:max(1, n // 2)] if rng.random() < 0.3 else None
+    vel = rng.uniform(0.3, 2.0, n)
+    tasks = [rng.standard_normal((int(rng.integers(1, max(2, n // 2))), n))
+             for _ in range(int(rng.integers(1, 4)))]
+    targets = [rng.standard_normal(t.shape[0]) * 2.0 for t in tasks]
+    drifts = [rng.standard_normal(t.shape[0]) * 0.05 for t in tasks]
+    posture = rng.standard_normal(n) * 0.5
+    out = []
+    for step in range(steps):
+        levels = [[Task("top", top, top_b)],
+                  [Task("limits", np.diag(a), lower=lo, upper=up)]]
+        if sub is not None:
+            levels.append([Task("vlimits", np.eye(n)[sub], lower=-vel[sub], upper=vel[sub])])
+        levels += [[Task(f"t{i}", A, t + d * step)]
+                   for i, (A, t, d) in enumerate(zip(tasks, targets, drifts))]
+        levels.append([Task("posture", np.eye(n), posture, weight=0.1)])
+        out.append(TaskStack(levels))
+    return out
+
+
+def test_warm_answers_with_held_limits_equal_cold_ones():
+    """Along drifting G1-shaped trajectories (:func:`_limits_trajectory`, 40 seeds) the
+    warm solver's answers equal the cold one's to 1e-9 and pass the certificate, and
+    many of them are the equality-first try's with limits held (190 of the 400: the
+    fixed-coordinate path, or the held-as-equalities one after a refusal). Reading the
+    held columns' multipliers with the wrong sign fails it (seed 23, 0.16 apart)."""
+    held_tries = 0
+    for seed in range(40):
+        stacks = _limits_trajectory(seed)
+        warm = prioik.prepare(stacks[0].layout, NAME)
+        cold = prioik.prepare(warm.layout, NAME, warm_start=False)
+        for stack in stacks:
+            a, b = warm.solve(stack), cold.solve(stack)
+            assert a.status == b.status == "optimal", (seed, a.info.get("message"))
+            assert np.linalg.norm(a.x - b.x) <= 1e-9 * max(1.0, np.linalg.norm(b.x)), seed
+            assert prioik.check_lexicographic(stack, a.x, minimum_norm=True).ok, seed
+            limits = stack.levels[1][0]
+            on_bound = np.isclose(limits.A @ a.x, limits.lower, rtol=0, atol=1e-12) | \
+                np.isclose(limits.A @ a.x, limits.upper, rtol=0, atol=1e-12)
+            held_tries += bool(a.info["equality_first"] and on_bound.any())
+    assert held_tries >= 100
+
+
 def test_held_rows_pinned_above_a_level_that_takes_the_rest_are_proved():
     """A level with as many rows as free coordinates (here four rows on the three left
     once x₀ is held) is solved by the QR's full-rank step, which leaves no triangular
