@@ -825,6 +825,32 @@ def _load_rows(A, b, lower, upper, sw, row_eq, B, Bo, blo, bup, rnorm, eqr, ucol
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
+def _add_level_gradient(A, b, lower, row_eq, sw, ucol, ecol, s0, s1, x, g):
+    """``g += Σ_j s_j² (a_j·x − t_j) a_j`` over the equality rows (``ucol[j] = -2``) of
+    ``s0:s1`` (a level's gradient of ``½ f_ℓ`` in ``x``; a unit row, ``ecol[j] ≥ 0``, one
+    product); returns ``Σ_j s_j² t_j²`` (the targets' scale)."""
+    n = A.shape[1]
+    tn = 0.0
+    for j in range(s0, s1):
+        if ucol[j] != -2:
+            continue
+        s = sw[j]
+        t = b[j] if row_eq[j] else lower[j]
+        ec = ecol[j]
+        if ec >= 0:             # a unit row (a posture's): one product
+            e = s * s * (A[j, ec] * x[ec] - t)
+            g[ec] += e * A[j, ec]
+        else:
+            e = s * s * (_dot(A[j], x) - t)
+            if e != 0.0:
+                Aj = A[j]
+                for c in range(n):
+                    g[c] += e * Aj[c]
+        tn += s * s * t * t
+    return tn
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
 def _held_rows_optimal(A, b, lower, row_eq, sw, starts, k, x, y, eB, estarts, eranks, ucol,
                        ecol, erow, rowperm, held, scales, dual_tol, V, beta, pos, Z, g, cn,
                        prow, pside, pinned, hcol):
@@ -948,22 +974,8 @@ def _held_rows_optimal(A, b, lower, row_eq, sw, starts, k, x, y, eB, estarts, er
             else:
                 # the last level's rows may be the unit rows the QR left unrotated: its
                 # gradient in x, brought through the reflectors that fix the first col_ℓ
-                for j in range(starts[lev], starts[lev + 1]):
-                    if ucol[j] != -2:
-                        continue
-                    s = sw[j]
-                    t = b[j] if row_eq[j] else lower[j]
-                    ec = ecol[j]
-                    if ec >= 0:             # a unit row (a posture's): one product
-                        e = s * s * (A[j, ec] * x[ec] - t)
-                        g[ec] += e * A[j, ec]
-                    else:
-                        e = s * s * (_dot(A[j], x) - t)
-                        if e != 0.0:
-                            Aj = A[j]
-                            for c in range(n):
-                                g[c] += e * Aj[c]
-                    tn += s * s * t * t
+                tn = _add_level_gradient(A, b, lower, row_eq, sw, ucol, ecol, starts[lev],
+                                         starts[lev + 1], x, g)
                 _apply_qt(g, colv, V, beta, pos)      # the reflectors t < col_ℓ fix [:col_ℓ]
             gh = g
             scale = max(np.sqrt(_dot(g[:colv], g[:colv])),
@@ -995,7 +1007,7 @@ def _held_rows_optimal(A, b, lower, row_eq, sw, starts, k, x, y, eB, estarts, er
 @njit(cache=True, fastmath=_FAST, inline="always")
 def _fixed_columns_optimal(A, b, lower, row_eq, sw, starts, k, x, eR, estarts, eranks,
                            ucol, ecol, erow, rowperm, held, fixedc, last_held, scales,
-                           dual_tol, V, fs, pos, work, prow, prowj, pinned, hrow):
+                           dual_tol, V, fs, pos, work, prow, prowj, pinned, hrow, nh):
     """:func:`_held_rows_optimal` for held rows that are box rows eliminated as fixed
     coordinates (:func:`_equality_first`'s reduced solve): ``-1`` when their
     multipliers prove ``x*`` lexicographically optimal, else the data row to release
@@ -1028,8 +1040,8 @@ def _fixed_columns_optimal(A, b, lower, row_eq, sw, starts, k, x, eR, estarts, e
     ``fs``: the reduced QR's ``beta`` and ``y`` in its rows 0 and 1; rows 2 and 3 (``≥ n``)
     scratch for a gradient in ``x`` and its free part. Scratch: ``work`` (``≥ 2n + M``
     floats: the multipliers, the rows' residuals, the held columns' gradient),
-    ``prow``, ``prowj`` (the pivot rows' rows in ``eR`` and in the data), ``pinned``,
-    ``hrow`` (``n`` ints).
+    ``prow``, ``prowj`` (the pivot rows' rows in ``eR`` and in the data), ``pinned``
+    (``n`` ints). ``hrow[:nh]``: the held rows (the caller's list).
     """
     M, n = A.shape
     n2 = eR.shape[1]
@@ -1052,12 +1064,8 @@ def _fixed_columns_optimal(A, b, lower, row_eq, sw, starts, k, x, eR, estarts, e
             prowj[col + i] = erow[rowperm[e0 + i]]
         col += eranks[lev]
     ncol = col
-    nh = 0
-    for j in range(M):
-        if held[j] != 0:
-            hrow[nh] = j
-            pinned[nh] = 0
-            nh += 1
+    for i in range(nh):
+        pinned[i] = 0
     npinned = 0
     xn = np.sqrt(_dot(x, x))
     col = 0
@@ -1115,17 +1123,8 @@ def _fixed_columns_optimal(A, b, lower, row_eq, sw, starts, k, x, eR, estarts, e
                 # gradient in x, its free part brought through the reflectors t < col_ℓ
                 for c in range(n):
                     g[c] = 0.0
-                for j in range(starts[lev], starts[lev + 1]):
-                    if ucol[j] != -2:
-                        continue
-                    e = rs[j] * sw[j]
-                    ec = ecol[j]
-                    if ec >= 0:             # a unit row (a posture's): one product
-                        g[ec] += e * A[j, ec]
-                    elif e != 0.0:
-                        Aj = A[j]
-                        for c in range(n):
-                            g[c] += e * Aj[c]
+                _add_level_gradient(A, b, lower, row_eq, sw, ucol, ecol, starts[lev],
+                                    starts[lev + 1], x, g)
                 q = 0
                 for c in range(n):
                     if fixedc[c] == 0:
@@ -1259,8 +1258,8 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
     # after the solve: its rank is its count), where fixing x_c before or after those
     # levels is the same. Other held rows are held as equalities in the QR.
     fixedc = pside          # (the other path's _held_rows_optimal uses it otherwise)
-    fcol = prow             # the free columns (prow, hcol, pinned are rewritten after)
-    hlist = hcol
+    fcol = prow             # the free columns (prow and pinned are rewritten after)
+    hlist = hcol            # the held rows, read again by _fixed_columns_optimal
     colmap = pinned         # each free column's place among them
     nheld = 0
     last_held = -1
@@ -1405,10 +1404,10 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
             if fixedc[cc] == 0:
                 q -= 1
                 x[cc] = x[q]
-        for j in range(M):
-            if held[j] != 0:
-                uc = ucol[j]
-                x[uc] = (upper[j] if held[j] > 0 else lower[j]) / A[j, uc]
+        for i in range(nheld):
+            j = hlist[i]
+            uc = ucol[j]
+            x[uc] = (upper[j] if held[j] > 0 else lower[j]) / A[j, uc]
     else:
         # the extended Jacobian's own compiled solve, on this kernel's scratch (not its
         # body inlined here: inlined into a second module it changed that kernel's
@@ -1476,8 +1475,8 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
         release = _fixed_columns_optimal(
             A, b, lower, row_eq, sw, starts, k, x, eR, estarts, eranks, ucol, ecol, erow,
             rowperm, held, fixedc, last_held, scales, dual_tol,
-            Vflat[:n2 * n2].reshape((n2, n2)), fs, pos, Lflat, prow, hcol, pinned,
-            ispare)
+            Vflat[:n2 * n2].reshape((n2, n2)), fs, pos, Lflat, prow, ispare, pinned,
+            hlist, nheld)
         if release != -1:
             return -3 if release >= 0 else -2, release, 0
     elif nheld > 0:
