@@ -678,7 +678,12 @@ def _box_row_unresolved(a, xc, ax, lo, up, xn, primal_tol):
     """Whether ``x``'s precision cannot resolve a box row ``a x_c`` (weighted, ``ax``
     its value, ``[lo, up]`` its weighted interval): a finite bound within that
     precision (``X_PRECISION ‖x‖ |a|``) plus the row's tolerance (:func:`_tol` at
-    :func:`_size`'s ``|a| (|x_c| + 1)``) while the precision is the coarser."""
+    :func:`_size`'s ``|a| (|x_c| + 1)``) while the precision is the coarser.
+
+    Never at ``X_PRECISION ‖x‖ < primal_tol / 2`` (the common case, decided first):
+    the precision is then below ``primal_tol |a| / 2``, under every row's tolerance."""
+    if X_PRECISION * xn < 0.5 * primal_tol:
+        return False
     precision = X_PRECISION * xn * abs(a)
     size = abs(a) * (abs(xc) + 1.0)
     for bound in (lo, up):
@@ -1493,6 +1498,8 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
                 ec = ecol[j]
                 ax = A[j, ec] * x[ec] if ec >= 0 else _dot(A[j], x)
                 e = sw[j] * (ax - (b[j] if row_eq[j] else lower[j]))
+            elif held[j] == 0:
+                continue        # inside its interval: the pass above tested it so
             else:
                 uc = ucol[j]
                 r = A[j, uc] * x[uc] if uc >= 0 else _dot(A[j], x)

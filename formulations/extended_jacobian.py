@@ -296,8 +296,10 @@ class Prepared:
         if self.compiled:
             # step bounds need the trust-region step (its SVD allocates): the kernel
             # with numba's runtime; every other layout runs the one without it
-            self._solve_data = _solve_data_bounded if self._bounded else _solve_data
-            compile_once(self._solve_data, _SIGNATURE)
+            # its entry point: called with the data's arrays and these workspaces only,
+            # the types of _SIGNATURE by construction
+            self._solve_data = compile_once(
+                _solve_data_bounded if self._bounded else _solve_data, _SIGNATURE)
             n, k = layout.n, layout.k
             params = np.concatenate([[self.rcond, self.level_damping,
                                       self.singular_threshold], self.step_bound])

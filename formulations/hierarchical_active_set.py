@@ -193,12 +193,13 @@ _SIGNATURE = ((ROWS_2D, ROWS_1D, ROWS_1D, ROWS_1D, ROWS_1D, WORK_F, WORK_I, WORK
               if _kernel is not None else ())
 
 
-def _compile_kernels(warm_start: bool) -> None:
+def _compile_kernels(warm_start: bool) -> tuple:
     """Compile (or load) ``solve_data`` and, for a warm-starting solver, the
-    equality-first try, for :data:`_SIGNATURE` alone."""
-    compile_once(_kernel.solve_data, _SIGNATURE)
-    if warm_start:
-        compile_once(_kernel.equality_first_data, _SIGNATURE)
+    equality-first try, for :data:`_SIGNATURE` alone: their entry points
+    (:func:`prioik._jit.compile_once`; the try's is ``None`` without ``warm_start``)."""
+    solve = compile_once(_kernel.solve_data, _SIGNATURE)
+    first = compile_once(_kernel.equality_first_data, _SIGNATURE) if warm_start else None
+    return solve, first
 
 
 NAME = "hierarchical_active_set"
@@ -277,7 +278,9 @@ class Prepared:
         #: whether a rejected near-release answer is re-solved (:meth:`_refined`; not
         #: by the refining solve itself)
         self._refine = True
-        _compile_kernels(self.warm_start)
+        # the kernels' entry points: called with the data's arrays and these workspaces
+        # only, the types of _SIGNATURE by construction
+        self._solve_data, self._equality_first_data = _compile_kernels(self.warm_start)
         # the equality-first try needs the equality rows' solve (an inequality-only stack
         # has none to try)
         self._try_first = self.warm_start and bool(layout.row_is_equality.any())
@@ -347,18 +350,18 @@ class Prepared:
         fwork, iwork, bwork = self._fwork, self._iwork, self._bwork
         # the module doc's warm start; the kernel declines it (NOT_TRIED) when the last
         # answer fixed a row at a violation (params[11])
-        code = (_kernel.equality_first_data(A, b, lower, upper, sw, fwork, iwork, bwork)
+        code = (self._equality_first_data(A, b, lower, upper, sw, fwork, iwork, bwork)
                 if self._try_first else _NOT_TRIED)
         first = code != _NOT_TRIED
         if not first:
-            code = _kernel.solve_data(A, b, lower, upper, sw, fwork, iwork, bwork)
+            code = self._solve_data(A, b, lower, upper, sw, fwork, iwork, bwork)
         if code == _SOLVED_OTHER and self.warm_start and fwork.item(8) > 0.0:
             # rank decisions ambiguous or flagged: the answer may depend on the path
             # (fuzz: two certified answers 2.8e-9 apart at margins of 1.07e3), so the
             # warm solver gives the cold one (the working sets kept are then its own)
             self.reset()
             first = False
-            code = _kernel.solve_data(A, b, lower, upper, sw, fwork, iwork, bwork)
+            code = self._solve_data(A, b, lower, upper, sw, fwork, iwork, bwork)
         if code == _SOLVED_CLEAN or code == _SOLVED_INFEASIBLE:
             return (self._x.copy(), "optimal",
                     {"iterations": self._iterations.copy(),

@@ -25,6 +25,8 @@ skip).
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from numba import njit, types
 
 __all__ = ["kernel", "compile_once", "ROWS_2D", "ROWS_1D", "WORK_F", "WORK_I", "WORK_B"]
@@ -46,9 +48,9 @@ def kernel(**options):
     return njit(cache=True, _nrt=False, **options)
 
 
-def compile_once(dispatcher, signature: tuple) -> None:
+def compile_once(dispatcher, signature: tuple) -> Callable:
     """Compile ``dispatcher`` for ``signature`` alone (loaded from numba's disk cache when
-    there) and stop it compiling any other: later calls convert their arguments to it.
+    there), stop it compiling any other, and return that compilation's entry point.
 
     A kernel that reads a stack's rows is called with a
     :class:`~prioik.hierarchy.TaskStack`'s frozen (read-only) arrays and with a
@@ -57,8 +59,22 @@ def compile_once(dispatcher, signature: tuple) -> None:
     the two may round differently. With the rows typed read-only (:data:`ROWS_2D`,
     :data:`ROWS_1D`) both calls run the same machine code; the conversion costs nothing
     at the call. Idempotent; call it where the solver is prepared, not at import.
+
+    The entry point is the compiled function's own wrapper: it unboxes its arguments as
+    ``signature`` types them, without the dispatcher's resolution of each call (the
+    type of every argument, then the overload lookup): on the active-set kernel's eight
+    arrays the call cost 0.38 µs through the dispatcher and 0.11 µs through its entry
+    point (numba 0.68). It checks only each array's item size, so its callers pass what
+    ``signature`` says by construction: a :class:`~prioik.hierarchy.StackData`'s arrays
+    (C-contiguous float64 of the layout's shapes, never replaced) and the solver's own
+    workspaces.
+
+    Returns:
+        The compiled entry point of ``signature``: call it with the same arguments as
+        ``dispatcher``.
     """
     signature = tuple(signature)
     if signature not in {tuple(s) for s in dispatcher.signatures}:
         dispatcher.compile(signature)
     dispatcher.disable_compile()
+    return dispatcher.overloads[signature].entry_point

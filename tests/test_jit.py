@@ -43,3 +43,27 @@ def test_kernel_compiles_without_numbas_runtime():
     with pytest.raises(Exception, match="NRT required but not enabled|Only accept returning "
                                         "of array passed into the function"):
         allocates(3)
+
+
+def test_compile_once_returns_the_signatures_entry_point():
+    """The entry point compile_once returns is the compiled function itself (no
+    dispatch): it gives the dispatcher's answer on writable and read-only rows, and
+    is the overload of the signature, not the dispatcher."""
+    f = njit(_row_sums)
+    signature = (ROWS_2D, ROWS_1D, WORK_F)
+    entry = compile_once(f, signature)
+    assert entry is f.overloads[signature].entry_point and entry is not f
+    assert compile_once(f, signature) is entry
+    rng = np.random.default_rng(1)
+    A, b = rng.standard_normal((5, 2)), rng.standard_normal(5)
+    frozen_A = A.copy()
+    frozen_A.setflags(write=False)
+    by_dispatch, by_entry, by_entry_frozen = np.empty(5), np.empty(5), np.empty(5)
+    f(A, b, by_dispatch)
+    entry(A, b, by_entry)
+    entry(frozen_A, b, by_entry_frozen)
+    np.testing.assert_array_equal(by_entry, by_dispatch)
+    np.testing.assert_array_equal(by_entry_frozen, by_dispatch)
+    np.testing.assert_allclose(by_entry, A.sum(axis=1) + b, rtol=0, atol=1e-14)
+    with pytest.raises(TypeError):      # its unboxing checks the item size
+        entry(A.astype(np.float32), b, by_entry)
