@@ -1226,6 +1226,38 @@ def test_independent_12_407_level_1_reaches_its_optimum():
     assert sol.status != "optimal" or sol.residuals[1] ** 2 <= 149.888905
 
 
+@pytest.mark.parametrize("warm_start", [False, True])
+def test_a_box_row_at_a_bound_finer_than_xs_precision_is_approximate(warm_start):
+    """A level drives ‖x‖ to 1e8, so x's coordinates are known to X_PRECISION ‖x‖ =
+    3.6e-7, coarser than the primal tolerance of a box row x_1 ≤ 1e-8 that a lower level
+    pulls against: whether the row is held is rounding, and the answer says
+    'approximate' naming it (cold, and warm on the second solve, where the
+    equality-first try declines it). At ‖x‖ = 1e3 the same stack is resolved: x_1 sits
+    on its bound and the answer is optimal."""
+    eye = np.eye(2)
+
+    def stack(far):
+        return TaskStack([[Task("far", eye[:1], np.array([far]))],
+                          [Task("box", eye[1:], lower=np.array([-np.inf]),
+                                upper=np.array([1e-8]))],
+                          [Task("pull", eye[1:], np.array([2e-8]))]])
+
+    for far, status in ((1e8, "approximate"), (1e3, "optimal")):
+        s = stack(far)
+        solver = prioik.prepare(s.layout, NAME, warm_start=warm_start)
+        for _ in range(2):
+            sol = solver.solve(s)
+        assert sol.status == status
+        assert sol.x[0] == far
+        if status == "approximate":
+            assert "known to about 3.6e-07" in sol.info["reason"]
+            assert "1 box row(s) near a bound" in sol.info["reason"]
+            assert sol.info["equality_first"] is False
+            assert abs(sol.x[1] - 1e-8) <= 3.6e-7
+        else:
+            assert "reason" not in sol.info and sol.x[1] == pytest.approx(1e-8, rel=1e-12)
+
+
 def test_bounds_31_1103_held_row_within_its_release_tolerance_is_refined():
     """prioik fuzz --seed 31 --kind bounds, case 1103 (n 7, found at stop 29). Level 0
     holds four box rows on x_0 of norms 739, 24.5, 0.0036 and 0.0021 whose intervals
