@@ -5,7 +5,8 @@ A prepared ``extended_jacobian`` solve is one call of the compiled kernel
 it: the layout check, the one-thread-at-a-time guard, the timing and the
 :class:`~prioik.formulations.Solution` (the plugin's ``Outcome``, ``info``, residuals).
 Both are timed here on the same rows, alternating call by call: ``solver.solve(data)``
-(the public call) and the kernel called directly on the solver's own workspaces (the
+(the public call) and the kernel called directly, through the same compiled entry point
+the solver calls (:func:`prioik._jit.compile_once`), on the solver's own workspaces (the
 floor; a measurement only, nothing else calls the kernel this way). The overhead is
 the median of the paired differences (each public call minus the kernel call beside
 it, the two taking turns to go first), the lowest over the rounds: the kernel's own time varies by more than the
@@ -46,16 +47,15 @@ def solve_overhead(solver, datas: Sequence, rounds: int = 7, calls: int = 2000
         RuntimeError: the solver is not on the compiled path, or the two calls give
             different answers.
     """
-    from prioik.formulations import _extended_jacobian_kernel as kernel
-
     impl = solver._impl
     if solver.formulation != "extended_jacobian" or not getattr(impl, "compiled", False):
         raise RuntimeError(f"{solver!r} is not on the compiled extended_jacobian path")
     work, iwork, size = impl._work, impl._iwork, impl._out_size
+    solve_data = impl._solve_data           # the kernel's entry point, as the solver calls it
     out = np.empty(size)
     n = solver.layout.n
     for d in datas:                         # the same answers, bit for bit
-        code = kernel.solve_data(d.A, d.b, d.sqrt_weight, work, out, iwork)
+        code = solve_data(d.A, d.b, d.sqrt_weight, work, out, iwork)
         x = solver.solve(d).x
         if code & 3 != 1 or not np.array_equal(out[:n], x):
             raise RuntimeError("the kernel and solver.solve disagree")
@@ -67,7 +67,7 @@ def solve_overhead(solver, datas: Sequence, rounds: int = 7, calls: int = 2000
 
     def floor(i: int) -> None:
         d = datas[i % N]
-        kernel.solve_data(d.A, d.b, d.sqrt_weight, work, np.empty(size), iwork)
+        solve_data(d.A, d.b, d.sqrt_weight, work, np.empty(size), iwork)
 
     best = {"solve": np.inf, "kernel": np.inf, "overhead": np.inf}
     for _ in range(rounds):

@@ -138,6 +138,7 @@ row that becomes active; warm along a trajectory: usually none).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from itertools import compress
 
 import numpy as np
@@ -193,7 +194,7 @@ _SIGNATURE = ((ROWS_2D, ROWS_1D, ROWS_1D, ROWS_1D, ROWS_1D, WORK_F, WORK_I, WORK
               if _kernel is not None else ())
 
 
-def _compile_kernels(warm_start: bool) -> tuple:
+def _compile_kernels(warm_start: bool) -> tuple[Callable, Callable | None]:
     """Compile (or load) ``solve_data`` and, for a warm-starting solver, the
     equality-first try, for :data:`_SIGNATURE` alone: their entry points
     (:func:`prioik._jit.compile_once`; the try's is ``None`` without ``warm_start``)."""
