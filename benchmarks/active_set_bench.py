@@ -140,7 +140,7 @@ def measure(stacks: list, repeats: int = 3, cascade_every: int = 1) -> dict[str,
     sub = same[::cascade_every]
     t_cas = [_time(lambda s=s: prioik.solve(s, "cascaded_qp", solver="daqp"), 1) for s in sub]
     worst, statuses, statuses_reference, cold_warm = 0.0, set(), set(), 0.0
-    for s in same:
+    for s in same:            # in order: the warm solver follows the trajectory
         a = cold.solve(s)
         statuses.add(a.status)
         q = prioik.solve(s, "cascaded_qp", **STRICT_REFERENCE)
@@ -148,9 +148,7 @@ def measure(stacks: list, repeats: int = 3, cascade_every: int = 1) -> dict[str,
         wa = lexicographic_residuals(s, a.x) ** 2
         wq = lexicographic_residuals(s, q.x) ** 2
         worst = max(worst, float(np.max(np.abs(wa - wq) / np.maximum(1.0, wq))))
-    for s in same:            # warm vs cold answers along the trajectory
         b = warm.solve(s)
-        a = cold.solve(s)
         cold_warm = max(cold_warm, float(np.linalg.norm(a.x - b.x)
                                          / max(1.0, np.linalg.norm(a.x))))
     med = {k: float(np.median(v)) for k, v in (("active_set cold", t_cold),
