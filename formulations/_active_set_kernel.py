@@ -79,6 +79,12 @@ FLAG_HELD_OFF_BOUND = 4
 #: norm 1e-3 beside two of norm 8, margins 1.6e3 and 2.0e3) ended 1.4e-8 (relative)
 #: above its level-1 optimum, called optimal; the caller certifies the answer
 FLAG_NEAR_AMBIGUOUS = 5
+#: the level's working set kept changing without a step that moved (more than
+#: :func:`_stall_limit` iterations): its multipliers and steps disagree (rank decisions
+#: at the threshold; fuzz bounds-1205-1331 cycled so to the iteration cap, releasing a
+#: row whose next step it blocked at once), so the level settles at the point they all
+#: share and the caller certifies the answer
+FLAG_STALLED = 6
 #: the factor over :data:`~prioik.hierarchy.linalg.AMBIGUITY` within which a clear rank
 #: decision still has its answer certified (``FLAG_NEAR_AMBIGUOUS``; the G1 bounds
 #: stacks' smallest margin is 3e6)
@@ -566,6 +572,15 @@ def _hard_multipliers(B, y, col, rows, nh, hr, nw, tgt, T, V, beta, vpos, g, nu)
             acc -= T[c, i] * nu[c]
         nu[i] = acc / T[i, i]
     return gn
+
+
+@njit(cache=True, inline="always")
+def _stall_limit(rows):
+    """Iterations without a step that moves after which a level of ``rows`` rows (its
+    own and those above) settles (:data:`FLAG_STALLED`): Bland's rule ends a degenerate
+    run of exact arithmetic in far fewer; one that lasts longer is a cycle of
+    rounding."""
+    return 2 * rows + 10
 
 
 @njit(cache=True, inline="always")
@@ -1923,6 +1938,8 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                     state[j] = saved[j]
         # ---- primal active-set iterations
         bland = False
+        stall = 0               # iterations since a step last moved
+        stalled = False
         settled = False
         near_release = False
         while True:
@@ -1972,6 +1989,11 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                             alpha = a
                             blk = j
                             bside = side
+                if pn > 0.0 and alpha > _DEGENERATE:
+                    stall = 0
+                    bland = False
+                else:
+                    stall += 1
                 if pn > 0.0:
                     for c in range(d):
                         y[col + c] += alpha * p[c]
@@ -1979,9 +2001,9 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                         xc[c] += alpha * px[c]
                 if blk >= 0:
                     state[blk] = bside
-                    bland = alpha <= _DEGENERATE
+                    # Bland's rule from a step of length 0 until one moves
+                    bland = bland or alpha <= _DEGENERATE
                     continue
-            bland = False
             ynorm = np.sqrt(_dot(y, y))
             # soft rows on the wrong side of their bound: release or switch sides; a
             # held row left inside its bound beyond x's precision but within the
@@ -2054,6 +2076,11 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
             if drop < 0:
                 settled = True
                 break
+            if stall > _stall_limit(s1):
+                # a cycle of rounding: every working set of it shares this point
+                settled = True
+                stalled = True
+                break
             state[drop] = 0
         # ---- level done: remember its working set, fix its non-zero slacks. The margin:
         # the last step's rank decisions (they made the level's point) and the fixing's.
@@ -2067,6 +2094,8 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
             flags[lev] = FLAG_AMBIGUOUS_PATH
         if settled and near_release and flags[lev] == FLAG_OK:
             flags[lev] = FLAG_NEAR_RELEASE
+        if stalled and flags[lev] == FLAG_OK:
+            flags[lev] = FLAG_STALLED
         for j in range(s1):
             st = state[j]
             warm_state[lev, j] = st if (st == -1 or st == 1) else 0

@@ -49,9 +49,13 @@ violation (``info["infeasible_levels"]`` names the levels with ``f_i* > 0``). A 
 row with unreachable bounds (``0·x ∈ [2, 5]``) is a constant violation: it never
 enters a factorization (zero pivot) and never blocks a step. Two-sided rows switch
 sides through the wrong-side rule. Degenerate steps (length 0) switch the choices
-to the smallest row index (Bland's rule) until a step makes progress, and every
-level has an iteration cap (``max_iter``): when it is hit the status is
-``approximate`` and ``info["message"]`` names the level.
+to the smallest row index (Bland's rule) until a step makes progress. A level whose
+working set keeps changing without a step that moves (a cycle of rounding: released,
+a row blocks the next step at once when rank decisions sit at the threshold) settles
+where it stands after ``2 × (its rows and those above) + 10`` such iterations, and its
+answer is certified (``info["stalled_levels"]``). Every level has an iteration cap
+(``max_iter``): when it is hit the status is ``approximate`` and ``info["message"]``
+names the level.
 
 *Tolerances.* A row counts as violated when it is outside its interval by more than
 ``primal_tol (s_j + |bound|)``, ``s_j = ‖√w_j a_j‖ ‖x‖`` (a box row on one column ``c``:
@@ -93,9 +97,10 @@ release tolerance (``info["near_release_levels"]``): a row of norm 739 held besi
 of norm 0.0021 stayed held 4.4e-11 inside its bound, under a tolerance of 7.4e-11, and
 left its level at 2.6x the optimum. When the certificate rejects such an answer, the
 stack is solved again, cold, at :data:`REFINE` times ``primal_tol`` and ``dual_tol``
-(the release tolerance scales with the first), and that answer is returned when it is
-``optimal`` and passes the certificate (``info["refined_primal_tol"]``); otherwise the
-first answer says ``approximate``.
+(the release tolerance scales with the first), and, rejected again, at ``REFINE²``
+(:data:`REFINE_ROUNDS`); the first answer that is ``optimal`` and passes the
+certificate is returned (``info["refined_primal_tol"]``); otherwise the first answer
+says ``approximate``.
 
 *Warm start.* :class:`Prepared` keeps each level's working set at its optimum; the
 next solve first tries, per level, the step of last time's working set: when the
@@ -179,6 +184,9 @@ _CERTIFIED_FLAGS = (
     (_kernel.FLAG_NEAR_AMBIGUOUS if _kernel is not None else -1, "near_ambiguous_levels",
      f"settled on a rank decision within {_NEAR_AMBIGUITY:g}x of the ambiguity band (a "
      f"pivot within {_NEAR_AMBIGUITY * AMBIGUITY:g}x of its threshold)"),
+    (_kernel.FLAG_STALLED if _kernel is not None else -1, "stalled_levels",
+     "kept changing its working set without a step that moved (a cycle of rounding: "
+     "its multipliers and steps disagree) and settled where it stood"),
 )
 #: the flags whose rejected answer is solved again (:meth:`Prepared._refined`): their
 #: rows' treatment scales with the tolerances
@@ -187,6 +195,11 @@ _REFINED_KEYS = ("near_release_levels", "held_off_bound_levels")
 #: ``primal_tol`` and ``dual_tol`` of the refining solve over the solver's
 #: (:meth:`Prepared._refined`)
 REFINE = 1e-2
+
+#: how many times a rejected answer is refined (:meth:`Prepared._refined`), each at
+#: :data:`REFINE` times the last tolerances: a row off its bound by less than the dual
+#: tolerance stays held until that tolerance is below its distance
+REFINE_ROUNDS = 2
 
 #: the kernels' one signature (prioik._jit.compile_once): the stack's five row arrays,
 #: then the float, int and int8 workspaces
@@ -276,9 +289,9 @@ class Prepared:
         self.dual_tol = float(options["dual_tol"])
         self.max_iter = int(options["max_iter"])
         self.warm_start = bool(options["warm_start"])
-        #: whether a rejected near-release answer is re-solved (:meth:`_refined`; not
-        #: by the refining solve itself)
-        self._refine = True
+        #: how many more times a rejected near-release answer is re-solved
+        #: (:meth:`_refined`; one fewer in each refining solve)
+        self._refine = REFINE_ROUNDS
         # the kernels' entry points: called with the data's arrays and these workspaces
         # only, the types of _SIGNATURE by construction
         self._solve_data, self._equality_first_data = _compile_kernels(self.warm_start)
@@ -425,7 +438,7 @@ class Prepared:
                     flagged[key] = at
         if flagged and not levels and flag == 0.0:
             rejected = self._certify_flagged(data, x, flagged, info)
-            if (rejected and self._refine
+            if (rejected and self._refine > 0
                     and any(key in flagged for key in _REFINED_KEYS)):
                 refined = self._refined(data, info, rejected[0])
                 if refined is not None:
@@ -448,16 +461,18 @@ class Prepared:
         ``dual_tol``, after the certificate rejected an answer with a near-release level
         or a row held off its bound: the release tolerance scales with ``primal_tol``,
         so a row kept held inside its bound is released, and the dual one with
-        ``dual_tol``, so a row held off its bound may be fixed at its violation. The refined
-        answer is returned only when it is ``optimal`` and passes
-        :func:`~prioik.hierarchy.check_lexicographic` (``info["refined_primal_tol"]``,
-        ``info["refined_dual_tol"]``, and the first answer's reason in
-        ``info["refined_from"]``); ``None`` otherwise."""
+        ``dual_tol``, so a row held off its bound may be fixed at its violation. The
+        refining solver refines its own rejected answer once more while rounds are left
+        (:data:`REFINE_ROUNDS`). The refined answer is returned only when it is
+        ``optimal`` and passes :func:`~prioik.hierarchy.check_lexicographic`
+        (``info["refined_primal_tol"]`` and ``info["refined_dual_tol"]``: the tolerances
+        that found it; the first answer's reason in ``info["refined_from"]``); ``None``
+        otherwise."""
         tol, dual = self.primal_tol * REFINE, self.dual_tol * REFINE
         again = Prepared(self.layout, {"rcond": self.rcond, "primal_tol": tol,
                                        "dual_tol": dual, "max_iter": self.max_iter,
                                        "warm_start": False})
-        again._refine = False
+        again._refine = self._refine - 1
         out = again.solve(data)
         if out.status != "optimal":
             return None
@@ -465,8 +480,11 @@ class Prepared:
         if (not out.info.get("path_certified")
                 and not check_lexicographic(data.as_stack(), out.x).ok):
             return None
-        out.info.update(refined_primal_tol=tol, refined_dual_tol=dual, refined_from=rejected,
-                        path_certified=True, warm_start=self.warm_start)
+        # a refining solve refined once more reports its own (finer) tolerances
+        out.info.setdefault("refined_primal_tol", tol)
+        out.info.setdefault("refined_dual_tol", dual)
+        out.info.update(refined_from=rejected, path_certified=True,
+                        warm_start=self.warm_start)
         for key in _REFINED_KEYS:
             if key in info:
                 out.info[key] = info[key]
@@ -482,7 +500,8 @@ class Prepared:
         level by more than the tolerance shows), a row off its bound kept held for the
         levels below (``FLAG_HELD_OFF_BOUND``: it may block a direction they need), or a
         clear rank decision within ``NEAR_AMBIGUITY`` times the ambiguity band
-        (``FLAG_NEAR_AMBIGUOUS``). The answer is checked by
+        (``FLAG_NEAR_AMBIGUOUS``), or a level that stopped a cycle of working sets
+        without a step that moved (``FLAG_STALLED``). The answer is checked by
         :func:`~prioik.hierarchy.check_lexicographic` (at its default tolerance, the
         minimum-norm tie-break too when it was flagged); ``[]`` when it passes."""
         k = self._k
