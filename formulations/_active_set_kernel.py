@@ -804,6 +804,57 @@ def _one_column(a, nz, hint):
     return -1
 
 
+#: a level's ``‖A_i‖_F`` beyond which (or below which, with a non-zero entry) its squares
+#: overflow, lose precision or underflow; the extended Jacobian's kernel's bounds
+#: (``level_scales``)
+_SCALE_HIGH = 1e100
+_SCALE_LOW = 1e-100
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _level_extreme(A, lev_sq, s0, s1):
+    """Whether a level (rows ``s0:s1``) with ``‖A_i‖_F² = lev_sq`` is of extreme scale:
+    beyond :data:`_SCALE_HIGH` (or not finite), or below :data:`_SCALE_LOW` with a
+    non-zero entry (a zero level is fine). Squares of entries below ~1e-154 underflow:
+    a ``1e-200·I`` level was read as zero rows and gave ``x = 0``, 'optimal'."""
+    if not lev_sq <= _SCALE_HIGH * _SCALE_HIGH:
+        return True
+    if lev_sq < _SCALE_LOW * _SCALE_LOW:
+        for i in range(s0, s1):
+            for c in range(A.shape[1]):
+                if A[i, c] != 0.0:
+                    return True
+    return False
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _extreme_scale(A, starts, k):
+    """Whether a level of ``A`` is of extreme scale (:func:`_level_extreme`): the
+    caller solves the equilibrated stack (``TaskStack.equilibrated``, the same
+    optimum)."""
+    for lev in range(k):
+        acc = 0.0
+        for i in range(starts[lev], starts[lev + 1]):
+            acc += _dot(A[i], A[i])
+        if _level_extreme(A, acc, starts[lev], starts[lev + 1]):
+            return True
+    return False
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _extreme_scale_rows(A, rnorm, sw, starts, k):
+    """:func:`_extreme_scale` from the weighed rows' norms ``rnorm`` (``‖√w_j a_j‖``):
+    no second pass over ``A`` unless a level is tiny."""
+    for lev in range(k):
+        acc = 0.0
+        for i in range(starts[lev], starts[lev + 1]):
+            r = rnorm[i] / sw[i]
+            acc += r * r
+        if _level_extreme(A, acc, starts[lev], starts[lev + 1]):
+            return True
+    return False
+
+
 @njit(cache=True, fastmath=_FAST, inline="always")
 def _load_rows(A, b, lower, upper, sw, row_eq, B, Bo, blo, bup, rnorm, eqr, ucol, nrot,
                state):
@@ -1579,6 +1630,17 @@ def _summary(k, primal_tol, x, res, total, counts, flags, margins, fwork, unreso
     violations ``res`` (``total``: the sum of their squares); returns
     :func:`solve_data`'s code."""
     xn = np.sqrt(_dot(x, x))
+    if not xn <= 1e150:
+        # ‖x‖² overflows beyond ~1e154, where an equilibrated level's exact answer
+        # may lie (1e-200·I x = 1): the norm in units of max|x|
+        top = 0.0
+        for c in range(x.shape[0]):
+            top = max(top, abs(x[c]))
+        if top <= 1e308:
+            acc = 0.0
+            for c in range(x.shape[0]):
+                acc += (x[c] / top) * (x[c] / top)
+            xn = top * np.sqrt(acc)
     fwork[5] = xn
     infeasible = 0
     for lev in range(k):
@@ -1721,7 +1783,8 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     Returns:
         :data:`NOT_SOLVED` when a value is not valid (a non-finite entry of ``A``, of
         an equality target or of ``√w``, ``√w ≤ 0``, a NaN bound, ``lower = +inf``,
-        ``upper = −inf`` or ``lower > upper``; the caller names it); else
+        ``upper = −inf`` or ``lower > upper``; the caller names it) or a level is of
+        extreme scale (:func:`_level_extreme`; the caller equilibrates it); else
         :data:`SOLVED_CLEAN` (finite, every level settled, every rank decision clear,
         every box row resolved, every level's violation within ``primal_tol``),
         :data:`SOLVED_INFEASIBLE` (the same with some levels' violation above it) or
@@ -1802,6 +1865,8 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     if not _load_rows(A, b, lower, upper, sw, row_eq, B, Bo, blo, bup, rnorm, eqr, ucol,
                       nrot, state):
         return NOT_SOLVED
+    if _extreme_scale_rows(A, rnorm, sw, starts, k):
+        return NOT_SOLVED           # the caller solves the equilibrated stack
     fwork[10] = 0.0
     for j in range(M):
         held[j] = 0
@@ -2317,6 +2382,8 @@ def equality_first_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     o = M + 3 * R + (k + 1) * R + k + 1                    # held (workspace_offsets)
     held = bwork[o:o + M]
     kept = fwork[11] == 2.0         # the kept working sets held rows
+    if _extreme_scale(A, starts, k):
+        return NOT_TRIED            # solve_data refuses it too: the caller equilibrates
     guessed = False
     allow_fixed = True
     attempt = 0

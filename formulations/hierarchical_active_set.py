@@ -47,7 +47,10 @@ row), dependent rows are left out of the factorization (hard ones leave the work
 set and are watched by the step test). An infeasible level keeps its least
 violation (``info["infeasible_levels"]`` names the levels with ``f_i* > 0``). A zero
 row with unreachable bounds (``0·x ∈ [2, 5]``) is a constant violation: it never
-enters a factorization (zero pivot) and never blocks a step. Two-sided rows switch
+enters a factorization (zero pivot) and never blocks a step. A level of extreme scale
+(``‖A_i‖_F`` beyond 1e100, or below 1e-100 with a non-zero entry, where squares overflow
+or underflow) is solved rescaled by a power of two (``info["equilibrated_levels"]``; the
+same optimum). Two-sided rows switch
 sides through the wrong-side rule. Degenerate steps (length 0) switch the choices
 to the smallest row index (Bland's rule) until a step makes progress. A level whose
 working set keeps changing without a step that moves (a cycle of rounding: released,
@@ -388,8 +391,28 @@ class Prepared:
         if code == _kernel.NOT_SOLVED:
             self.reset()
             data.check()     # names the task, level and row at fault
-            raise TaskStackError("the rows' values overflow float64: scale the tasks down")
+            return self._equilibrated(data)
         return self._outcome(data)
+
+    def _equilibrated(self, data: StackData) -> Outcome:
+        """The answer of a stack with a level of extreme scale (``‖A_i‖_F`` beyond
+        1e100, or below 1e-100 with a non-zero entry: squares that overflow or
+        underflow), solved with those levels rescaled by a power of two
+        (:meth:`~prioik.hierarchy.TaskStack.equilibrated`: the same lexicographic
+        optimum and tie-break), ``info["equilibrated_levels"]`` naming them.
+
+        Raises:
+            TaskStackError: no level's entries are extreme, so rescaling cannot help
+                (the weights or targets are).
+        """
+        stack, levels = data.as_stack().equilibrated()
+        if not levels:
+            raise TaskStackError("the rows' values overflow float64 (‖√W_i A_i‖_F² is "
+                                 "not finite or underflows): scale the tasks or their "
+                                 "weights")
+        out = self.solve(stack.data)
+        out.info["equilibrated_levels"] = levels
+        return out
 
     def _outcome(self, data: StackData) -> Outcome:
         """The answer of a solve that is not clean (capped, non-finite, ambiguous,

@@ -23,7 +23,7 @@ import numpy as np
 from .layout import level_residuals
 from .errors import TaskStackError, UnsupportedTaskError
 from .linalg import (CERTIFICATE_SIGMA_FLOOR, DEFAULT_CERTIFICATE_TOL, DEFAULT_RCOND, matrix_rank,
-                     nonnegative_least_squares, range_basis, row_activity)
+                     nonnegative_least_squares, range_basis, row_activity, vector_norm)
 from .stack import TaskStack
 
 
@@ -372,6 +372,10 @@ def check_lexicographic(stack: TaskStack, x: np.ndarray, tol: float = DEFAULT_CE
         TaskStackError: ``x`` is not a vector of ``n`` numbers.
     """
     x = _candidate(x, stack.n)
+    # levels of extreme scale rescaled by a power of two (the same optimal set and
+    # tie-break): squares of entries below ~1e-154 underflow, and a 1e-200·I level
+    # read as zero rows passed x = 0
+    stack, _ = stack.equilibrated()
     report = _check_lexicographic(stack, x, tol, rcond, minimum_norm, metric, False)
     if not report.ok and report.band_rows_fixed:
         retry = _check_lexicographic(stack, x, tol, rcond, minimum_norm, metric, True)
@@ -432,7 +436,7 @@ def _check_lexicographic(stack: TaskStack, x: np.ndarray, tol: float, rcond: flo
     """:func:`check_lexicographic` with the band rows read as held (``fix_band=False``;
     the report's ``band_rows_fixed`` then counts the band rows found) or as fixed."""
     n = stack.n
-    xn = float(np.linalg.norm(x))
+    xn = vector_norm(x)
     Z = np.eye(n)                      # null space of the fixed rows of the levels above
     signed: list[np.ndarray] = []      # unit rows at one bound, oriented: multiplier ≥ 0
     fixed_count = 0
@@ -481,7 +485,7 @@ def _check_lexicographic(stack: TaskStack, x: np.ndarray, tol: float, rcond: flo
             y[null] = 0.0
             y = D * y
         if not signed:
-            return float(np.linalg.norm(y))
+            return vector_norm(y)
         M = D[:, None] * (V.T @ (Z.T @ np.vstack(signed).T))
         norms = np.linalg.norm(M, axis=0)
         keep = norms > 0
@@ -521,10 +525,10 @@ def _check_lexicographic(stack: TaskStack, x: np.ndarray, tol: float, rcond: flo
         g = WA.T @ (sw * v)
         target = rows.A @ x - v
         an = float(np.linalg.norm(WA))
-        scale = float(np.linalg.norm(sw * (np.abs(rows.A) @ ax + np.abs(target)))) + an
+        scale = vector_norm(sw * (np.abs(rows.A) @ ax + np.abs(target))) + an
         res = kkt(g, WA[(side == 2) | (v != 0)], an) if finite else np.nan
         ok = bool(np.isfinite(res) and res <= tol * max(scale, 1e-300))
-        violation = float(np.linalg.norm(sw * v))
+        violation = vector_norm(sw * v)
         slack = None
         if finite:
             norms = np.linalg.norm(rows.A, axis=1)

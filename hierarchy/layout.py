@@ -427,22 +427,28 @@ def precision_limited_levels(data: StackData, x: np.ndarray,
         The indices of the levels whose precision bound exceeds ``tol`` times their
         scale (empty when ``X_PRECISION ‖x‖ ≤ tol``: no level can be).
     """
-    xn = float(np.linalg.norm(x))
-    if not X_PRECISION * xn > tol:
+    x = np.asarray(x, dtype=np.float64)
+    top = float(np.max(np.abs(x))) if x.size else 0.0
+    if not (top > 0.0 and np.isfinite(top)):
+        return []
+    # in units of max|x|: the same test, and no overflow at ‖x‖ ~ 1e200
+    xs = x / top
+    xsn = float(np.linalg.norm(xs))
+    if not X_PRECISION * top * xsn > tol:
         return []
     layout = data.layout
     WA = data.sqrt_weight[:, None] * data.A
-    ax = data.A @ x
+    ax = data.A @ xs
     if layout.is_equality:
-        target = data.b
+        target = data.b / top
     else:
-        target = np.where(layout.row_is_equality, data.b,
-                          np.clip(ax, data.lower, data.upper))
-    size = data.sqrt_weight * (np.abs(data.A) @ np.abs(x) + np.abs(target))
+        target = np.where(layout.row_is_equality, data.b / top,
+                          np.clip(ax, data.lower / top, data.upper / top))
+    size = data.sqrt_weight * (np.abs(data.A) @ np.abs(xs) + np.abs(target))
     starts = layout.starts[:-1]
     fro = np.sqrt(np.add.reduceat((WA * WA).sum(axis=1), starts))
-    scale = np.sqrt(np.add.reduceat(size * size, starts)) + fro
-    return np.flatnonzero(X_PRECISION * xn * fro > tol * scale).tolist()
+    scale = np.sqrt(np.add.reduceat(size * size, starts)) + fro / top
+    return np.flatnonzero(X_PRECISION * xsn * fro > tol * scale).tolist()
 
 
 def precision_reason(levels: list[int], x_norm: float) -> str:

@@ -36,7 +36,8 @@ api("API", "svd path on [[0]]", lambda: F.solve(S([[0.0]], [1.0]), "extended_jac
     check=lambda x: np.allclose(x, 0))
 for scale in (1e-200, 1e-160):
     for f, o in (("reference", {}), ("extended_jacobian", {}), ("extended_jacobian", {"kernel": "lapack"}),
-                 ("extended_jacobian", {"nullspace": "svd"}), ("nullspace", {})):
+                 ("extended_jacobian", {"nullspace": "svd"}), ("nullspace", {}),
+                 ("hierarchical_active_set", {})):
         api("API", f"{scale:g}·I, {f} {o}", lambda: F.solve(S(scale * np.eye(2), [1.0, 2.0]), f, **o),
             word="scale", check=lambda s: s.status != "failed" and np.allclose(s.x * scale, [1, 2], rtol=1e-10)
             or s.status != "optimal")

@@ -355,3 +355,29 @@ def test_small_equality_residuals_beside_large_ones_are_judged_by_the_kkt_test()
     assert abs(q.residuals[1] ** 2 - sol.residuals[1] ** 2) <= 1e-12 * q.residuals[1] ** 2
     rng = np.random.default_rng(0)
     assert not check_lexicographic(stack, sol.x + 1e-6 * rng.standard_normal(stack.n)).ok
+
+
+@pytest.mark.parametrize("scale", [1e-200, 1e-160, 1e160])
+def test_levels_of_extreme_scale_are_certified_as_rescaled(scale):
+    """``scale·I x = [1, 2]``: squares of entries below ~1e-154 underflow, and the level
+    read as zero rows had passed ``x = 0``. The certificate checks the equilibrated
+    stack (the same optimal set): the exact answer passes, ``x = 0`` and a perturbed
+    answer fail, with no overflow warning at ``‖x‖ ~ 1e200``. (At 1e160, ``x ~ 1e-160``:
+    the tolerance's floor ``‖A_i‖_F`` reads x in units of 1, as everywhere.)"""
+    stack = TaskStack([[Task("a", scale * np.eye(2), np.array([1.0, 2.0]))]])
+    x = np.array([1.0, 2.0]) / scale
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert check_lexicographic(stack, x).ok
+        if scale < 1:
+            assert not check_lexicographic(stack, x * (1 + 1e-6)).ok
+            assert not check_lexicographic(stack, np.zeros(2)).ok
+
+
+def test_vector_norm_neither_overflows_nor_underflows():
+    from prioik.hierarchy import vector_norm
+    for s in (1e-300, 1e-200, 1.0, 1e200, 1e300):
+        assert vector_norm(np.array([3.0, 4.0]) * s) == pytest.approx(5.0 * s, rel=1e-15)
+    assert vector_norm(np.zeros(3)) == 0.0 and vector_norm(np.zeros(0)) == 0.0
+    assert np.isnan(vector_norm(np.array([1.0, np.nan])))
+    assert vector_norm(np.array([1.0, np.inf])) == np.inf

@@ -395,6 +395,33 @@ def test_a_cycle_of_rounding_stops_at_the_stall_limit_not_the_cap(warm_start):
     assert np.allclose(w[:2], wr[:2], rtol=1e-9, atol=1e-9)
     assert abs(w[2] - wr[2]) <= 3e-7 * wr[2]
 
+
+@pytest.mark.parametrize("scale", [1e-200, 1e-120, 1e120])
+def test_a_level_of_extreme_scale_is_solved_equilibrated(scale):
+    """``scale·I x = [1, 2]`` above a box it meets: squares of entries below ~1e-154
+    underflow (the level was read as zero rows: x = 0, 'optimal'). The kernel refuses a
+    level whose ‖A_i‖_F is outside [1e-100, 1e100] (the equality-first try too) and the
+    stack is solved with those levels rescaled by a power of two (the same optimum):
+    cold, and warm on later solves. At 1e-200 the answer is right but its level values
+    are beyond float64 squares: the status says so."""
+    from prioik.hierarchy import check_lexicographic
+    eye = np.eye(2)
+    stack = TaskStack([[Task("a", scale * eye, np.array([1.0, 2.0]))],
+                       [Task("box", scale * eye, lower=np.array([-3.0, -3.0]),
+                             upper=np.array([3.0, 3.0]))]])
+    solver = prioik.prepare(stack.layout, NAME)
+    for _ in range(3):
+        sol = solver.solve(stack)
+        assert sol.info["equilibrated_levels"] == [0, 1]
+        assert sol.x * scale == pytest.approx([1.0, 2.0], rel=1e-14)
+        assert check_lexicographic(stack, sol.x).ok
+        if scale > 1e-150:
+            assert sol.status == "optimal"
+        else:
+            # x ~ 1e200: the squares of the level's rounding (~1e184) overflow, so its
+            # weighted squared violation is not a float64: 'failed', naming it
+            assert sol.status == "failed" and "non-finite" in sol.info["message"]
+
 # -------------------------------------------------------------- warm start
 def _trajectory(rng, n, steps):
     """A stack whose targets and bounds drift step by step (a control loop)."""
