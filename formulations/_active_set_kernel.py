@@ -813,7 +813,8 @@ _SCALE_LOW = 1e-100
 
 @njit(cache=True, fastmath=_FAST, inline="always")
 def _level_extreme(A, lev_sq, s0, s1):
-    """Whether a level (rows ``s0:s1``) with ``‖A_i‖_F² = lev_sq`` is of extreme scale:
+    """Whether a level (rows ``s0:s1``) with ``‖A_i‖_F² = lev_sq`` (the equality-first
+    try's: ``‖√W_i A_i‖_F²``, which it computes anyway) is of extreme scale:
     beyond :data:`_SCALE_HIGH` (or not finite), or below :data:`_SCALE_LOW` with a
     non-zero entry (a zero level is fine). Squares of entries below ~1e-154 underflow:
     a ``1e-200·I`` level was read as zero rows and gave ``x = 0``, 'optimal'."""
@@ -828,23 +829,11 @@ def _level_extreme(A, lev_sq, s0, s1):
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
-def _extreme_scale(A, starts, k):
-    """Whether a level of ``A`` is of extreme scale (:func:`_level_extreme`): the
-    caller solves the equilibrated stack (``TaskStack.equilibrated``, the same
-    optimum)."""
-    for lev in range(k):
-        acc = 0.0
-        for i in range(starts[lev], starts[lev + 1]):
-            acc += _dot(A[i], A[i])
-        if _level_extreme(A, acc, starts[lev], starts[lev + 1]):
-            return True
-    return False
-
-
-@njit(cache=True, fastmath=_FAST, inline="always")
 def _extreme_scale_rows(A, rnorm, sw, starts, k):
-    """:func:`_extreme_scale` from the weighed rows' norms ``rnorm`` (``‖√w_j a_j‖``):
-    no second pass over ``A`` unless a level is tiny."""
+    """Whether a level of ``A`` is of extreme scale (:func:`_level_extreme`), from the
+    weighed rows' norms ``rnorm`` (``‖√w_j a_j‖``; no second pass over ``A`` unless a
+    level is tiny): the caller solves the equilibrated stack
+    (``TaskStack.equilibrated``, the same optimum)."""
     for lev in range(k):
         acc = 0.0
         for i in range(starts[lev], starts[lev + 1]):
@@ -1453,9 +1442,11 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
                     nn, ucol[j] = _sparsity(Aj, ucol[j])
                     nn *= s * s
                 acc += nn
-        # (a sum of squares: finite iff every term is; an ordered comparison, which LLVM
-        # keeps: np.isfinite here was folded to true once this loop took its fixed branch)
-        if not (acc < np.inf):
+        # (a sum of squares: finite iff every term is; ordered comparisons, which LLVM
+        # keeps: np.isfinite here was folded to true once this loop took its fixed branch).
+        # A level of extreme scale is refused here, and by solve_data: the caller
+        # equilibrates it
+        if _level_extreme(A, acc, starts[lev], starts[lev + 1]):
             return -2, -1, 0
         if level_held > 0 and level_eq > 0:
             return -2, -1, 0
@@ -2382,8 +2373,6 @@ def equality_first_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     o = M + 3 * R + (k + 1) * R + k + 1                    # held (workspace_offsets)
     held = bwork[o:o + M]
     kept = fwork[11] == 2.0         # the kept working sets held rows
-    if _extreme_scale(A, starts, k):
-        return NOT_TRIED            # solve_data refuses it too: the caller equilibrates
     guessed = False
     allow_fixed = True
     attempt = 0
