@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from prioik.hierarchy import (DEFAULT_CERTIFICATE_TOL, check_lexicographic,
+from prioik.hierarchy import (DEFAULT_CERTIFICATE_TOL, check_lexicographic, level_residuals,
                               precision_limited_levels, precision_reason, vector_norm)
 
 #: Values of :attr:`Solution.status`.
@@ -153,6 +153,22 @@ class Solution:
         body = "".join(f"<tr><th style='text-align:left'>{escape(k)}</th>"
                        f"<td>{escape(v)}</td></tr>" for k, v in rows)
         return f"<table><caption>Solution</caption>{body}</table>"
+
+def in_original_units(out: "Outcome", data, levels: list[int]) -> "Outcome":
+    """``out``, solved on the stack ``data`` with ``levels`` equilibrated
+    (:meth:`~prioik.hierarchy.TaskStack.equilibrated`: each of those levels' values
+    multiplied by a power of two), with its residuals (and ``info["level_violation"]``,
+    their squares) read on ``data`` itself, the user's units, and
+    ``info["equilibrated_levels"]`` naming the levels."""
+    if out.residuals is not None and np.isfinite(out.x).all():
+        with np.errstate(over="ignore", invalid="ignore"):
+            res = level_residuals(data, out.x)
+        out.residuals = res
+        if "level_violation" in out.info:
+            out.info["level_violation"] = res * res
+    out.info["equilibrated_levels"] = levels
+    return out
+
 
 def precision_status(status: str, info: dict, data, x: np.ndarray) -> str:
     """``status``, or ``"approximate"`` when float64 cannot give some level's values at

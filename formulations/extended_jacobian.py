@@ -120,7 +120,8 @@ from prioik.hierarchy import (AMBIGUITY, StackData, StackLayout, Task, TaskStack
                               UnsupportedTaskError, ambiguity_reason, ambiguous_decision,
                               level_scale, rank_threshold)
 
-from .base import Capabilities, FormulationError, Outcome, ReportVariant, precision_status
+from .base import (Capabilities, FormulationError, Outcome, ReportVariant, in_original_units,
+                   precision_status)
 from .options import Option, rcond_option, validate_options
 
 try:  # the compiled kernel is optional: the lapack path is the readable reference
@@ -347,9 +348,7 @@ class Prepared:
             if not levels:
                 raise TaskStackError("the rows' scale overflows float64 (‖A_i‖_F² is not "
                                      "finite): scale the tasks down")
-            out = self.solve(stack.data)
-            out.info["equilibrated_levels"] = levels
-            return out
+            return in_original_units(self.solve(stack.data), data, levels)
         k = self._k
         info = {"rank_profile": self._ranks.copy(), "nullspace": "qr", "kernel": "numba"}
         status = "optimal"

@@ -154,7 +154,8 @@ import numpy as np
 from prioik.hierarchy import (AMBIGUITY, X_PRECISION, StackData, StackLayout, TaskStack,
                               TaskStackError, ambiguity_reason, check_lexicographic)
 
-from .base import Capabilities, FormulationError, Outcome, ReportVariant, precision_status
+from .base import (Capabilities, FormulationError, Outcome, ReportVariant, in_original_units,
+                   precision_status)
 from .options import Option, rcond_option, validate_options
 
 try:
@@ -399,7 +400,8 @@ class Prepared:
         1e100, or below 1e-100 with a non-zero entry: squares that overflow or
         underflow), solved with those levels rescaled by a power of two
         (:meth:`~prioik.hierarchy.TaskStack.equilibrated`: the same lexicographic
-        optimum and tie-break), ``info["equilibrated_levels"]`` naming them.
+        optimum and tie-break), ``info["equilibrated_levels"]`` naming them, its
+        residuals read on ``data`` (:func:`~.base.in_original_units`).
 
         Raises:
             TaskStackError: no level's entries are extreme, so rescaling cannot help
@@ -410,9 +412,7 @@ class Prepared:
             raise TaskStackError("the rows' values overflow float64 (‖√W_i A_i‖_F² is "
                                  "not finite or underflows): scale the tasks or their "
                                  "weights")
-        out = self.solve(stack.data)
-        out.info["equilibrated_levels"] = levels
-        return out
+        return in_original_units(self.solve(stack.data), data, levels)
 
     def _outcome(self, data: StackData) -> Outcome:
         """The answer of a solve that is not clean (capped, non-finite, ambiguous,

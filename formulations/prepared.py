@@ -29,7 +29,7 @@ from prioik.hierarchy import (StackData, StackLayout, TaskStack, TaskStackError,
 from prioik.hierarchy.linalg import PRECISION_LIMIT_NORM
 
 from .base import (STATUSES, Capabilities, ConcurrentUseError, FormulationError, Outcome,
-                   Solution, precision_status)
+                   Solution, in_original_units, precision_status)
 
 __all__ = ["BatchSolution", "PreparedSolver", "check_layout_support", "check_support"]
 
@@ -90,7 +90,8 @@ class _StackAdapter:
             stack, levels = stack.equilibrated()
         out = self._module.solve(stack, **(options or self._options))
         if levels:
-            out.info = {**out.info, "equilibrated_levels": levels}
+            out.info = dict(out.info)
+            out = in_original_units(out, data, levels)
         return out
 
 

@@ -198,3 +198,24 @@ def test_compiled_says_whether_a_kernel_reads_the_datas_arrays(name, options, co
     solver = prioik.prepare(stack.layout, name, **options)
     assert solver.compiled is compiled
     assert np.array_equal(prioik.solve(stack, name, **options).x, solver.solve(stack.data.copy()).x)
+
+
+@pytest.mark.parametrize("name", ["extended_jacobian", "hierarchical_active_set", "reference",
+                                  "nullspace"])
+@pytest.mark.parametrize("scale", [1e-120, 1e120])
+def test_an_equilibrated_solve_reports_residuals_in_the_users_units(name, scale):
+    """Levels of extreme scale are solved rescaled by powers of two; the residuals (and
+    the active set's level violations) are read on the user's stack: 1.58 for the
+    second level here, not 1.58 times the power of two (1e120 before)."""
+    from prioik.hierarchy import lexicographic_residuals
+    eye = np.eye(2)
+    stack = TaskStack([[Task("a", scale * eye, np.array([1.0, 2.0]))],
+                       [Task("p", scale * eye, np.array([0.5, 0.5]))]])
+    sol = prioik.solve(stack, name)
+    assert sol.status == "optimal" and sol.info["equilibrated_levels"] == [0, 1]
+    assert sol.x * scale == pytest.approx([1.0, 2.0], rel=1e-14)
+    assert sol.residuals == pytest.approx(lexicographic_residuals(stack, sol.x), rel=1e-12,
+                                          abs=1e-12)
+    assert sol.residuals[1] == pytest.approx(np.sqrt(2.5), rel=1e-12)
+    if "level_violation" in sol.info:
+        assert sol.info["level_violation"] == pytest.approx(sol.residuals ** 2, rel=1e-12)
