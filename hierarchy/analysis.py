@@ -368,6 +368,10 @@ def check_lexicographic(stack: TaskStack, x: np.ndarray, tol: float = DEFAULT_CE
     exceeds ``tol · scale_i`` — and, when they are all of its violation (zero rows
     aside), its optimum is zero and they are read as held for the levels below.
 
+    Levels of extreme scale (an entry beyond ``1e100`` or all below ``1e-100``) are
+    checked as :meth:`TaskStack.equilibrated` rescales them (a power of two: the same
+    optimal set and verdict); their :class:`LevelCheck` values are the rescaled level's.
+
     Raises:
         TaskStackError: ``x`` is not a vector of ``n`` numbers.
     """
