@@ -34,6 +34,8 @@ from prioik.hierarchy.linalg import AMBIGUITY as _AMBIGUITY
 from prioik.hierarchy.linalg import PRECISION_LIMIT_NORM as _PRECISION_LIMIT_NORM
 from prioik.hierarchy.linalg import X_PRECISION
 
+from ._extended_jacobian_kernel import SCALE_HIGH as _SCALE_HIGH
+from ._extended_jacobian_kernel import SCALE_LOW as _SCALE_LOW
 from ._extended_jacobian_kernel import (_UNIT_ROWS_GAP, _apply_q, _apply_qt,
                                         _cholesky_lower, _cholesky_solve, _dot,
                                         _drop_fixed, _free_directions, _small_lstsq_ws, _swap,
@@ -802,13 +804,6 @@ def _one_column(a, nz, hint):
         if a[c] != 0.0:
             return c
     return -1
-
-
-#: a level's ``‖A_i‖_F`` beyond which (or below which, with a non-zero entry) its squares
-#: overflow, lose precision or underflow; the extended Jacobian's kernel's bounds
-#: (``level_scales``)
-_SCALE_HIGH = 1e100
-_SCALE_LOW = 1e-100
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")

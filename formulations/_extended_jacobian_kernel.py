@@ -720,6 +720,13 @@ def spare_size(M: int, n: int) -> int:
     return n * (M + n) + M + 2 * n
 
 
+#: a level's ``‖A_i‖_F`` beyond which (or below which, with a non-zero entry) its squares
+#: overflow, lose precision or underflow: the caller equilibrates it
+#: (``TaskStack.equilibrated``); the active-set kernel's bounds too
+SCALE_HIGH = 1e100
+SCALE_LOW = 1e-100
+
+
 @kernel(fastmath=_FAST)
 def level_scales(A, b, starts, scales):
     """``scales[i] = ‖A_i‖_F`` of every level (rows ``starts[i]:starts[i+1]``).
@@ -738,9 +745,9 @@ def level_scales(A, b, starts, scales):
         for i in range(starts[lev], starts[lev + 1]):
             acc += _dot(A[i], A[i])
         scales[lev] = np.sqrt(acc)
-        if not np.isfinite(scales[lev]) or scales[lev] > 1e100:
+        if not np.isfinite(scales[lev]) or scales[lev] > SCALE_HIGH:
             finite = False
-        elif scales[lev] < 1e-100:
+        elif scales[lev] < SCALE_LOW:
             for i in range(starts[lev], starts[lev + 1]):   # a zero level is fine
                 for j in range(n):
                     if A[i, j] != 0.0:

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from prioik.hierarchy import (DEFAULT_CERTIFICATE_TOL, check_lexicographic, level_residuals,
-                              precision_limited_levels, precision_reason, vector_norm)
+                              precision_limited_levels, precision_reason, level_scale)
 
 #: Values of :attr:`Solution.status`.
 STATUSES = ("optimal", "approximate", "failed")
@@ -183,7 +183,7 @@ def precision_status(status: str, info: dict, data, x: np.ndarray) -> str:
     if not levels:
         return status
     info["precision_limited_levels"] = levels
-    reason = precision_reason(levels, vector_norm(x))
+    reason = precision_reason(levels, level_scale(x))
     info["reason"] = f"{info['reason']}; {reason}" if info.get("reason") else reason
     return "approximate"
 

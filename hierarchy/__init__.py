@@ -13,7 +13,7 @@ from .io import (PeerProblem, load_lexls, load_peer, load_peer_json, load_soth, 
 from .linalg import (AMBIGUITY, DEFAULT_CERTIFICATE_TOL, DEFAULT_RCOND, ambiguity_reason,
                      ambiguous_decision, level_scale, matrix_rank, nonnegative_least_squares,
                      null_space_basis, range_basis, rank_threshold, row_activity,
-                     vector_norm, X_PRECISION)
+                     X_PRECISION)
 from .layout import (StackData, StackLayout, level_residuals, precision_limited_levels,
                      precision_reason)
 from .stack import TaskStack
@@ -22,7 +22,7 @@ from .task import Level, Task
 __all__ = [
     "AMBIGUITY", "DEFAULT_CERTIFICATE_TOL", "DEFAULT_RCOND", "FeasibleSplit", "Level",
     "LevelCheck", "LexicographicReport", "Task", "ambiguity_reason", "ambiguous_decision",
-    "level_scale", "rank_threshold", "vector_norm",
+    "level_scale", "rank_threshold",
     "StackData", "StackLayout", "TaskStack", "level_residuals", "TaskStackError", "UnsupportedTaskError", "algorithmic_error",
     "algorithmic_error_norms", "check_lexicographic", "conflicting_levels",
     "feasible_split", "lexicographic_residuals", "matrix_rank", "nested_null_spaces",

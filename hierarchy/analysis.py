@@ -23,7 +23,7 @@ import numpy as np
 from .layout import level_residuals
 from .errors import TaskStackError, UnsupportedTaskError
 from .linalg import (CERTIFICATE_SIGMA_FLOOR, DEFAULT_CERTIFICATE_TOL, DEFAULT_RCOND, matrix_rank,
-                     nonnegative_least_squares, range_basis, row_activity, vector_norm)
+                     nonnegative_least_squares, range_basis, row_activity, level_scale)
 from .stack import TaskStack
 
 
@@ -440,7 +440,7 @@ def _check_lexicographic(stack: TaskStack, x: np.ndarray, tol: float, rcond: flo
     """:func:`check_lexicographic` with the band rows read as held (``fix_band=False``;
     the report's ``band_rows_fixed`` then counts the band rows found) or as fixed."""
     n = stack.n
-    xn = vector_norm(x)
+    xn = level_scale(x)
     Z = np.eye(n)                      # null space of the fixed rows of the levels above
     signed: list[np.ndarray] = []      # unit rows at one bound, oriented: multiplier ≥ 0
     fixed_count = 0
@@ -489,7 +489,7 @@ def _check_lexicographic(stack: TaskStack, x: np.ndarray, tol: float, rcond: flo
             y[null] = 0.0
             y = D * y
         if not signed:
-            return vector_norm(y)
+            return level_scale(y)
         M = D[:, None] * (V.T @ (Z.T @ np.vstack(signed).T))
         norms = np.linalg.norm(M, axis=0)
         keep = norms > 0
@@ -529,10 +529,10 @@ def _check_lexicographic(stack: TaskStack, x: np.ndarray, tol: float, rcond: flo
         g = WA.T @ (sw * v)
         target = rows.A @ x - v
         an = float(np.linalg.norm(WA))
-        scale = vector_norm(sw * (np.abs(rows.A) @ ax + np.abs(target))) + an
+        scale = level_scale(sw * (np.abs(rows.A) @ ax + np.abs(target))) + an
         res = kkt(g, WA[(side == 2) | (v != 0)], an) if finite else np.nan
         ok = bool(np.isfinite(res) and res <= tol * max(scale, 1e-300))
-        violation = vector_norm(sw * v)
+        violation = level_scale(sw * v)
         slack = None
         if finite:
             norms = np.linalg.norm(rows.A, axis=1)

@@ -30,22 +30,16 @@ DEFAULT_RCOND = 1e-9
 AMBIGUITY = 1e3
 
 
-def vector_norm(x: np.ndarray) -> float:
-    """``‖x‖₂`` of a finite vector without overflow: ``np.linalg.norm`` squares the
-    entries and returns ``inf`` (with a warning) beyond ~1e154, where an answer such as
-    ``x = 1e200`` (the exact solution of ``1e-200 x = 1``) is still valid."""
-    top = float(np.max(np.abs(x))) if np.size(x) else 0.0
-    if not (top > 0.0 and np.isfinite(top)):
-        return top
-    return top * float(np.linalg.norm(np.asarray(x) / top))
-
-
 def level_scale(A: np.ndarray) -> float:
-    """``‖A‖_F``, without the overflow or underflow of the squares (entries beyond
-    1e154 or below 1e-154 would give ``inf`` or 0 from ``np.linalg.norm``)."""
+    """``‖A‖_F`` (``‖x‖₂`` of a vector), without the overflow or underflow of the
+    squares (entries beyond 1e154 or below 1e-154 would give ``inf``, with a warning, or
+    0 from ``np.linalg.norm``; an answer ``x = 1e200``, the exact solution of
+    ``1e-200 x = 1``, is valid). ``inf`` or NaN when an entry is."""
+    A = np.asarray(A)
     if A.size == 0:
         return 0.0
-    norm = float(np.linalg.norm(A))
+    with np.errstate(over="ignore"):    # the squares' overflow: handled below
+        norm = float(np.linalg.norm(A))
     if 1e-150 < norm < 1e150:
         return norm
     peak = float(np.max(np.abs(A)))

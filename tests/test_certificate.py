@@ -374,10 +374,10 @@ def test_levels_of_extreme_scale_are_certified_as_rescaled(scale):
             assert not check_lexicographic(stack, np.zeros(2)).ok
 
 
-def test_vector_norm_neither_overflows_nor_underflows():
-    from prioik.hierarchy import vector_norm
+def test_level_scale_of_a_vector_neither_overflows_nor_underflows():
+    from prioik.hierarchy import level_scale
     for s in (1e-300, 1e-200, 1.0, 1e200, 1e300):
-        assert vector_norm(np.array([3.0, 4.0]) * s) == pytest.approx(5.0 * s, rel=1e-15)
-    assert vector_norm(np.zeros(3)) == 0.0 and vector_norm(np.zeros(0)) == 0.0
-    assert np.isnan(vector_norm(np.array([1.0, np.nan])))
-    assert vector_norm(np.array([1.0, np.inf])) == np.inf
+        assert level_scale(np.array([3.0, 4.0]) * s) == pytest.approx(5.0 * s, rel=1e-15)
+    assert level_scale(np.zeros(3)) == 0.0 and level_scale(np.zeros(0)) == 0.0
+    assert np.isnan(level_scale(np.array([1.0, np.nan])))
+    assert level_scale(np.array([1.0, np.inf])) == np.inf
