@@ -1,0 +1,123 @@
+"""Inverse kinematics with joint limits on real robots through the public path
+(:class:`prioik.robots.TaskWriter` → :func:`prioik.prepare` → ``hierarchical_active_set``),
+on every example-robot-data model prioik names and on URDFs loaded by path.
+
+The stack a user writes for a limb reach: joint position and velocity limits as bounds
+at level 0, support contacts at level 1 (floating-base robots), a far target for one limb
+below them and the posture last. Closed loop, velocity and acceleration level, ``dt = 10
+ms``: every answer ``optimal``; the warm-started solver gives the cold one (relative
+``1e-9``); every 10th answer passes :func:`prioik.hierarchy.check_lexicographic`; ``q``
+never leaves its limits (beyond rounding, ``1e-10``); the contacts' rows are met exactly (the limits leave room
+for them; relative ``1e-10``); and the limits
+are met with equality at some steps (the test is not vacuous: the reach drives joints
+to them). ``sample_humanoid`` (pinocchio's sample model) is left out: no reach drives its
+joints to its limits.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+import prioik
+from prioik.hierarchy import check_lexicographic
+from prioik.robots import KinematicState, TaskWriter, example_robot_data_dir, from_urdf, load
+
+DT = 0.01
+STEPS = 60
+#: relative distance of the warm answer from the cold one
+WARM_TOL = 1e-9
+#: a limit row counts as met with equality within this (relative to 1 + |bound|)
+AT_BOUND = 1e-9
+#: how far q may pass a limit (rad or m): the bound rows' primal tolerance (relative
+#: 1e-10) times dt, and the rounding of q + q̇ dt (a1: 5.6e-16 at a held limit)
+Q_TOL = 1e-10
+#: a contact's rows met to this, relative to ``‖A_c‖ ‖x‖ + ‖b_c‖``
+CONTACT_TOL = 1e-10
+
+
+def _xarm7():
+    return from_urdf(example_robot_data_dir() / "xarm_description/urdf/xarm7.urdf",
+                     frames={"tool": "link_eef"})
+
+
+def _a1():
+    d = example_robot_data_dir() / "a1_description"
+    return from_urdf(d / "urdf/a1.urdf", srdf=d / "srdf/a1.srdf",
+                     frames={"front_left_foot": "FL_foot", "front_right_foot": "FR_foot",
+                             "rear_left_foot": "RL_foot", "rear_right_foot": "RR_foot"})
+
+
+_QUADRUPED = (["front_right_foot", "rear_left_foot", "rear_right_foot"], "front_left_foot")
+_HUMANOID = (["left_foot", "right_foot"], "right_hand")
+#: robot → (loader, support contacts, the limb that reaches)
+ROBOTS = {
+    "panda": (lambda: load("panda"), [], "tcp"),
+    "ur5": (lambda: load("ur5"), [], "tool"),
+    "talos": (lambda: load("talos"), *_HUMANOID),
+    "g1": (lambda: load("g1"), *_HUMANOID),
+    "go2": (lambda: load("go2"), *_QUADRUPED),
+    "solo12": (lambda: load("solo12"), *_QUADRUPED),
+    "xarm7 (URDF path)": (_xarm7, [], "tool"),
+    "a1 (URDF path)": (_a1, *_QUADRUPED),
+}
+
+
+@pytest.mark.parametrize("mode", ["velocity", "acceleration"])
+@pytest.mark.parametrize("name", list(ROBOTS))
+def test_a_limb_reach_with_joint_limits_is_exact_on_every_robot(name, mode):
+    loader, contacts, limb = ROBOTS[name]
+    robot = loader()
+    accel = mode == "acceleration"
+    gain = (100.0, 20.0) if accel else 10.0
+    w = TaskWriter(robot, mode)
+    w.add_joint_limits("limits", form="bounds", dt=DT, level=0,
+                       **({"horizon": 0.1} if accel else {}))
+    for c in contacts:
+        w.add_contact(c, c, gain=gain, level=1)
+    w.add_frame_position("reach", limb, gain=gain)
+    w.add_posture("posture", gain=(10.0, 6.0) if accel else 1.0)
+    warm = prioik.prepare(w.layout, "hierarchical_active_set")
+    cold = prioik.prepare(w.layout, "hierarchical_active_set", warm_start=False)
+
+    q, v = robot.q0.copy(), np.zeros(robot.nv)
+    start = KinematicState(robot, q, v)
+    places = {c: start.placement(c).copy() for c in contacts}
+    target = start.placement(limb).translation + np.array([0.4, -0.3, 0.5])
+    lo, hi = robot.model.lowerPositionLimit, robot.model.upperPositionLimit
+    bounded = np.isfinite(lo) & np.isfinite(hi)
+    bounded[:7 if robot.n_base else 0] = False       # the free flyer's entries
+    data = robot.data()
+    at_bound = 0
+    for step in range(STEPS):
+        state = KinematicState(robot, q, v, data, drift=accel)
+        for c in contacts:
+            w.contact(state, c, places[c])
+        w.frame_position(state, "reach", target)
+        w.joint_limits(state, "limits")
+        w.posture(state, "posture", robot.q0)
+        stack = w.targets(state)
+        answer = warm.solve(stack)
+        assert answer.status == "optimal", (step, answer.info)
+        reference = cold.solve(stack)
+        assert reference.status == "optimal", (step, reference.info)
+        gap = np.linalg.norm(answer.x - reference.x)
+        assert gap <= WARM_TOL * max(1.0, np.linalg.norm(reference.x)), (step, gap)
+        if step % 10 == 9:
+            check = check_lexicographic(stack.as_stack(), answer.x)
+            assert check.ok, (step, check)
+        A, lower, upper = stack.bounds("limits")
+        ax = A @ answer.x
+        at_bound += int(np.any((np.abs(ax - lower) <= AT_BOUND * (1 + np.abs(lower)))
+                               | (np.abs(ax - upper) <= AT_BOUND * (1 + np.abs(upper)))))
+        v = v + answer.x * DT if accel else answer.x
+        q = pin.integrate(robot.model, q, v * DT)
+        beyond = np.maximum(lo[bounded] - q[bounded], q[bounded] - hi[bounded]).max()
+        assert beyond <= Q_TOL, (step, beyond)
+        for c in contacts:       # met exactly: the limits leave room for them
+            Ac, bc = stack.rows(c)
+            miss = np.linalg.norm(Ac @ answer.x - bc)
+            assert miss <= CONTACT_TOL * (np.linalg.norm(Ac) * np.linalg.norm(answer.x)
+                                          + np.linalg.norm(bc)), (step, c, miss)
+    assert at_bound >= 5, at_bound         # the limits shaped the answers
