@@ -634,6 +634,131 @@ def _freed_gain(T, nh, hr, nw, rs, i, w, v, p, flat, tq):
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
+def _rows_at_bounds(state, eqr, hard_end, Bo, ucol, xc, blo, bup, rnorm, ynorm, primal_tol,
+                    B, nrot, nf, Vf, betaf, posf, col, E, cand, side, inP):
+    """The hard rows (``j < hard_end``, not fixed) at a bound at the point ``xc``: the
+    working ones (state ±1) and those at a bound within the primal tolerance outside
+    the working set. Row ``i`` of ``E`` is the row's free part ``σ B_j[col:]`` (``σ =
+    +1`` at its lower bound, ``−1`` at its upper: the directions it allows have ``E_i p
+    ≥ 0``), ``cand[i] = j``, ``side[i]`` its state at that bound, ``inP[i] = 1`` when it
+    is in the working set. Returns ``(m, extra)``: rows found, of them outside the
+    working set."""
+    d = B.shape[1] - col
+    m = 0
+    extra = 0
+    for j in range(hard_end):
+        st = state[j]
+        if eqr[j] or st == 2:
+            continue
+        working = st == -1 or st == 1
+        if not working:
+            r = _odot(Bo, ucol, j, xc)
+            sz = _size(Bo, ucol, j, rnorm[j], ynorm, xc)
+            if np.isfinite(blo[j]) and abs(r - blo[j]) <= _tol(primal_tol, sz, blo[j]):
+                st = -1
+            elif np.isfinite(bup[j]) and abs(r - bup[j]) <= _tol(primal_tol, sz, bup[j]):
+                st = 1
+            else:
+                continue
+            extra += 1
+        _bring(B, j, nrot, nf, Vf, betaf, posf)
+        sg = 1.0 if st == -1 else -1.0
+        for c in range(d):
+            E[m, c] = sg * B[j, col + c]
+        cand[m] = j
+        side[m] = st
+        inP[m] = 1.0 if working else 0.0
+        m += 1
+    return m, extra
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _nnls_working_set(E, m, d, g, cand, inP, rnorm, rcond, gscale, T, V, beta, z, h, r,
+                      order):
+    """The working set of a degenerate point (hard rows at their bounds beyond the
+    working ones) by the multipliers it needs: the non-negative least-squares problem
+    ``min ‖E_Pᵀ μ − g‖, μ ≥ 0`` over the rows ``E`` at their bounds (Lawson-Hanson,
+    started from the working set ``inP``): a row whose multiplier is wrong-signed beyond
+    ``gscale`` (the release test's, relative to ``rnorm``) leaves ``P``, the row the
+    residual most wants enters. ``x*`` is the level's optimum over these rows iff the
+    residual is zero (its KKT conditions); a primal active-set method walks there one
+    exchange at a time, each a step of length zero (G1 with 18 limits at their bounds on
+    18 free coordinates: 12 iterations of the posture level). Each pass is one LQ of the
+    rows of ``P`` (``T``, ``V``, ``beta``). Returns whether it settled (``inP`` the set)
+    within ``2m + 2`` passes with ``P`` clearly independent (the hard-row rule,
+    ``rcond``); the caller's iterations verify the set either way."""
+    for it in range(2 * m + 2):
+        p = 0
+        for i in range(m):
+            if inP[i] != 0.0:
+                if p >= d:
+                    return False
+                for c in range(d):
+                    T[p, c] = E[i, c]
+                order[p] = i
+                p += 1
+        for t in range(p):
+            tail = T[t, t:d]
+            s = rnorm[cand[order[t]]]
+            if not (_dot(tail, tail) > (rcond * s) * (rcond * s)):
+                return False
+            _reflect_row(T, t, t, d, V, beta, t, t + 1, p)
+        for c in range(d):
+            h[c] = g[c]
+        for t in range(p):
+            v = V[t, t:d]
+            hq = h[t:d]
+            f = beta[t] * _dot(v, hq)
+            if f != 0.0:
+                for c in range(d - t):
+                    hq[c] -= f * v[c]
+        for i in range(p - 1, -1, -1):
+            acc = h[i]
+            for c in range(i + 1, p):
+                acc -= T[c, i] * z[c]
+            z[i] = acc / T[i, i]
+        worst = gscale
+        out = -1
+        for i in range(p):
+            wrong = -z[i] * rnorm[cand[order[i]]]
+            if wrong > worst:
+                worst = wrong
+                out = order[i]
+        if out >= 0:
+            inP[out] = 0.0
+            continue
+        # the residual g − E_Pᵀ μ = Q_Pᵀ [0; h[p:]]
+        for c in range(p):
+            r[c] = 0.0
+        for c in range(p, d):
+            r[c] = h[c]
+        for t in range(p - 1, -1, -1):
+            v = V[t, t:d]
+            rq = r[t:d]
+            f = beta[t] * _dot(v, rq)
+            if f != 0.0:
+                for c in range(d - t):
+                    rq[c] -= f * v[c]
+        best = gscale
+        enter = -1
+        if p < d:
+            for i in range(m):
+                if inP[i] != 0.0:
+                    continue
+                ee = _dot(E[i, :d], E[i, :d])
+                if not ee > 0.0:
+                    continue
+                want = _dot(E[i, :d], r[:d]) * rnorm[cand[i]] / ee
+                if want > best:
+                    best = want
+                    enter = i
+        if enter < 0:
+            return True
+        inP[enter] = 1.0
+    return False
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
 def _bring(B, j, nrot, nf, Vf, betaf, posf):
     """Apply the fixing reflectors ``nrot[j] … nf − 1`` to row ``B[j]`` (rows are
     rotated lazily: only when they enter a factorization)."""
@@ -1841,6 +1966,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     nu = fvec[11]
     nrot = ivec[3]
     ucol = ivec[4]
+    cand = ivec[1]          # (vpos's row: _step's scratch, rewritten by every step)
     px = fvec[12, :n]
     xc = fvec[13, :n]
     xs = fvec[14, :n]
@@ -1989,6 +2115,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                     state[j] = saved[j]
         # ---- primal active-set iterations
         bland = False
+        proposed = False        # the degenerate point's working set tried (once a level)
         stall = 0               # iterations since a step last moved
         stalled = False
         settled = False
@@ -2132,6 +2259,35 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                 settled = True
                 stalled = True
                 break
+            if not proposed:
+                # a release at a degenerate point (hard rows at their bounds outside the
+                # working set): the working set its multipliers need, in one small
+                # non-negative least squares instead of one exchange per iteration
+                proposed = True
+                m_at, extra = _rows_at_bounds(state, eqr, hard_end, Bo, ucol, xc, blo, bup,
+                                              rnorm, ynorm, primal_tol, B, nrot, nf, Vf,
+                                              betaf, posf, col, Lw, cand, tq, rhs)
+                if extra > 0:
+                    for c in range(d):
+                        g[c] = 0.0
+                    for i in range(nh, nh + nw):
+                        j = rows[i]
+                        _bring(B, j, nrot, nf, Vf, betaf, posf)
+                        res_j = _dot(B[j], y) - tgt[i]
+                        if res_j != 0.0:
+                            for c in range(d):
+                                g[c] += res_j * B[j, col + c]
+                    if _nnls_working_set(Lw, m_at, d, g, cand, rhs, rnorm, rcond, gscale, T,
+                                         V, beta, nu, px, p, perm):
+                        moved_set = False
+                        for i in range(m_at):
+                            j = cand[i]
+                            want = (-1 if tq[i] < 0.0 else 1) if rhs[i] != 0.0 else 0
+                            if state[j] != want:
+                                state[j] = want
+                                moved_set = True
+                        if moved_set:
+                            continue
             state[drop] = 0
         # ---- level done: remember its working set, fix its non-zero slacks. The margin:
         # the last step's rank decisions (they made the level's point) and the fixing's.

@@ -28,6 +28,7 @@ from prioik.hierarchy.io import load_peer, load_soth
 
 NAME = "hierarchical_active_set"
 PEER_DIR = Path(__file__).parent / "data" / "peer"
+_ADVERSARIAL_DIR = Path(__file__).parent / "data" / "adversarial"
 
 #: per-level ‖w_i‖² agreement, relative to max(1, target) (issue 13's target)
 LEVEL_TOL = 1e-9
@@ -394,6 +395,28 @@ def test_a_cycle_of_rounding_stops_at_the_stall_limit_not_the_cap(warm_start):
     wr = lexicographic_residuals(stack, ref.x) ** 2
     assert np.allclose(w[:2], wr[:2], rtol=1e-9, atol=1e-9)
     assert abs(w[2] - wr[2]) <= 3e-7 * wr[2]
+
+
+@pytest.mark.parametrize("warm_start", [False, True])
+def test_a_degenerate_point_takes_the_working_set_its_multipliers_need(warm_start):
+    """G1 incompatible fencing, acceleration level, limits as bounds (a bench stack): at
+    the posture level 19 limits are at their bounds on 18 free coordinates, 18 of them in
+    the working set, one multiplier wrong-signed. Released one at a time, each release
+    was blocked at once by a row at its bound (a step of length zero) and the level took
+    13 iterations; the working set the multipliers need, by one non-negative least
+    squares over the rows at their bounds, takes 2. The answer passes the independent
+    KKT check and meets the strict reference (ProxQP, 1e-12) at every level."""
+    from prioik.hierarchy import load_stack
+    stack = load_stack(_ADVERSARIAL_DIR / "g1-limits-degenerate-posture.json")
+    solver = prioik.prepare(stack.layout, NAME, warm_start=warm_start)
+    sol = solver.solve(stack)
+    posture = stack.layout.k - 1
+    assert sol.info["iterations"][posture] <= 3, sol.info["iterations"]
+    assert_exact(stack, sol)
+    ref = prioik.solve(stack, "cascaded_qp", solver="proxqp", tolerance=1e-12)
+    assert ref.status == "optimal"
+    w, wr = level_w2(stack, sol.x), level_w2(stack, ref.x)
+    assert np.all(np.abs(w - wr) <= LEVEL_TOL * np.maximum(1.0, wr)), (w, wr)
 
 
 @pytest.mark.parametrize("scale", [1e-200, 1e-120, 1e120])
@@ -1225,7 +1248,6 @@ def test_an_equality_stack_at_float64s_limit_is_approximate_for_every_exact_meth
     assert prioik.solve_batch([stack, stack], name).statuses == ["approximate"] * 2
 
 
-_ADVERSARIAL = Path(__file__).parent / "data" / "adversarial"
 
 
 def test_independent_14_976_wrong_working_set_is_not_called_optimal():
@@ -1237,7 +1259,7 @@ def test_independent_14_976_wrong_working_set_is_not_called_optimal():
     and settles, by a clear last step, at 4.6166e-4: the certificate rejects it at
     4.6e-5, and the solver says so (it had said 'optimal')."""
     from prioik.hierarchy import check_lexicographic, load_stack
-    stack = load_stack(_ADVERSARIAL / "independent-14-976.json")
+    stack = load_stack(_ADVERSARIAL_DIR / "independent-14-976.json")
     sol = prioik.solve(stack, NAME)
     assert not check_lexicographic(stack, sol.x).ok
     assert sol.status == "approximate"
@@ -1276,7 +1298,7 @@ def test_independent_12_407_level_1_reaches_its_optimum():
     Its level passes through ambiguous rank decisions, so the solver runs the
     certificate, which passes it; the test asks for the ε = 1e-10 point's value."""
     from prioik.hierarchy import load_stack
-    stack = load_stack(_ADVERSARIAL / "independent-12-407.json")
+    stack = load_stack(_ADVERSARIAL_DIR / "independent-12-407.json")
     sol = prioik.solve(stack, NAME)
     assert sol.status != "optimal" or sol.residuals[1] ** 2 <= 149.888905
 
@@ -1372,7 +1394,7 @@ def test_independent_13_783_right_answer_is_certified():
     first reading; the solver, whose level 0 passed through an ambiguous rank decision,
     certifies its answer and stays 'optimal'."""
     from prioik.hierarchy import check_lexicographic, load_stack
-    stack = load_stack(_ADVERSARIAL / "independent-13-783.json")
+    stack = load_stack(_ADVERSARIAL_DIR / "independent-13-783.json")
     sol = prioik.solve(stack, NAME)
     report = check_lexicographic(stack, sol.x)
     assert report.ok and report.band_rows_fixed == 0
