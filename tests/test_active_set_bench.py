@@ -25,7 +25,13 @@ def test_run_returns_rows_and_ratios_for_the_g1_bounds_stacks():
         # ProxQP at 1e-12), per level ‖w_i‖² relative to max(1, value)
         assert r["reference_statuses"] == ["optimal"]
         assert r["max_level_rel_diff_vs_reference"] <= 1e-9
+        # the whole trajectory's ratio is a weighted mean of the per-stack ones: at most the worst
+        for path in ("cold", "warm"):
+            worst, total = r[f"worst {path}/daqp_raw"], r[f"total {path}/daqp_raw"]
+            assert math.isfinite(worst) and worst > 0 and math.isfinite(total) and total > 0
+            assert worst >= total * (1 - 1e-12)
     names = [x["name"] for x in out["ratios"]]
     assert len(names) == 12 and len(set(names)) == 12
     assert all(math.isfinite(x["value"]) and x["value"] > 0 for x in out["ratios"])
-    assert "cold/raw" in format_table(out)
+    table = format_table(out)
+    assert "cold/raw" in table and "worst warm/raw" in table
