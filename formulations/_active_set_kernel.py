@@ -136,7 +136,7 @@ def _reflect_row(T, i, q, w, V, beta, nref, first, last):
 
 @njit(cache=True, fastmath=_FAST, inline="always")
 def _eqp(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T, rhs, norms, V, beta,
-         vpos, Lw, p, reach, flat, tq):
+         vpos, Lw, p, reach, flat, tq, Ts, ts_rows):
     """One equality-constrained least-squares step from ``y``.
 
     Finds the minimum-norm step ``p`` (free coordinates ``col:``) that keeps the
@@ -161,6 +161,11 @@ def _eqp(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T, rhs, norms, V,
         was made). The hard rows' dependency test is not a margin: held hard rows are
         at their bounds together, so a nearly dependent one left out does not move the
         step's answer (the step test watches it).
+
+    When every hard row is kept, the soft rows as the hard reflectors left them (and
+    their rows and targets) are kept in ``Ts``/``ts_rows`` (``ts_rows[:nw]`` the rows,
+    ``ts_rows[R:R + nw]`` the targets): :func:`_eqp_append` adds a hard row to this
+    factorization from them.
     """
     n = B.shape[1]
     d = n - col
@@ -210,6 +215,26 @@ def _eqp(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T, rhs, norms, V,
         for c in range(i):
             acc -= T[i, c] * p[c]
         p[i] = acc / T[i, i]
+    if hr == nh:
+        R = Ts.shape[0]
+        for i in range(nw):
+            for c in range(d):
+                Ts[i, c] = T[nh + i, c]
+            ts_rows[i] = rows[nh + i]
+            ts_rows[R + i] = tgt[nh + i]
+    rs, nref, margin = _eqp_soft(T, rhs, norms, rows, tgt, nh, nw, hr, d, soft_tol, V, beta,
+                                 vpos, nref, margin, Lw, p, flat, tq)
+    return hr, rs, nref, margin
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _eqp_soft(T, rhs, norms, rows, tgt, nh, nw, hr, d, soft_tol, V, beta, vpos, nref, margin,
+              Lw, p, flat, tq):
+    """:func:`_eqp`'s second half: the soft rows ``T[nh:nh + nw]`` (as the ``hr`` hard
+    reflectors left them; ``p[:hr]`` the hard part of the step) by a row-pivoted LQ on
+    the directions the hard rows leave, then ``p`` in the free coordinates. Returns
+    ``(rs, nref, margin)``."""
+    nr = nh + nw
     # --- soft rows on the directions the hard rows leave
     for i in range(nh, nr):
         acc = rhs[i]
@@ -277,6 +302,69 @@ def _eqp(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T, rhs, norms, V,
         if f != 0.0:
             for c in range(d - q):
                 pq[c] -= f * v[c]
+    return rs, nref, margin
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _eqp_append(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T, rhs, norms, V, beta,
+                vpos, Lw, p, flat, tq, Ts, ts_rows, jb, tb):
+    """:func:`_eqp` after the hard row ``jb`` (brought up to date; its bound ``tb``) joined
+    the working set of the last step, which kept all its ``nh`` hard rows and whose soft
+    rows :func:`_eqp` kept in ``Ts``: the new row is reduced by the hard reflectors and
+    takes one of its own (applied to ``Ts``), then the soft rows are factorized again —
+    ``O(nh d + nw d²)`` instead of ``O((nh + nw) nh d)``, the primal iteration's common
+    case (a step cut by a row that then joins: on G1's sword-tip level, 13 joint limits in
+    a row). As inside any iteration, the hard rows are held where they are (``C_H p =
+    0``). The hard rows keep their order (the new one last: a fresh factorization would
+    pivot them by their residuals; the same factorization in exact arithmetic).
+
+    Returns ``(hr, rs, nref, margin)`` as :func:`_eqp` with ``hr = nh + 1``, or ``hr = -1``
+    when the new row is not clearly independent of the others (the hard-row rule) or
+    leaves no free direction: the caller takes :func:`_eqp`."""
+    n = B.shape[1]
+    d = n - col
+    if nh + 1 >= d:
+        return -1, 0, 0, np.inf
+    u = T[nh]
+    for c in range(d):
+        u[c] = B[jb, col + c]
+    for t in range(nh):
+        v = V[t, t:d]
+        uq = u[t:d]
+        f = beta[t] * _dot(v, uq)
+        if f != 0.0:
+            for c in range(d - t):
+                uq[c] -= f * v[c]
+    tail = u[nh:d]
+    s = rnorm[jb]
+    if not (_dot(tail, tail) > (rcond * s) * (rcond * s)) or s <= 0.0:
+        return -1, 0, 0, np.inf
+    vpos[nh] = nh
+    _reflect_row(T, nh, nh, d, V, beta, nh, nh, nh)
+    hr = nh + 1
+    rows[nh] = jb
+    tgt[nh] = tb
+    rhs[nh] = 0.0
+    R = Ts.shape[0]
+    v = V[nh, nh:d]
+    bt = beta[nh]
+    for i in range(nw):
+        ti = Ts[i]
+        f = bt * _dot(v, ti[nh:d])
+        if f != 0.0:
+            for c in range(d - nh):
+                ti[nh + c] -= f * v[c]
+        j = int(ts_rows[i])
+        rows[hr + i] = j
+        tgt[hr + i] = ts_rows[R + i]
+        rhs[hr + i] = ts_rows[R + i] - _dot(B[j], y)
+        Ti = T[hr + i]
+        for c in range(d):
+            Ti[c] = ti[c]
+    for c in range(d):
+        p[c] = 0.0
+    rs, nref, margin = _eqp_soft(T, rhs, norms, rows, tgt, hr, nw, hr, d, soft_tol, V, beta,
+                                 vpos, hr, np.inf, Lw, p, flat, tq)
     return hr, rs, nref, margin
 
 
@@ -505,7 +593,7 @@ def _unit_rows_step(Bo, ucol, xc, col, rows, nh, nw, tgt, rcond, soft_tol, reach
 # G1 bounds stacks: cold 0.99-1.07, warm 0.99-1.02, the same answers bit for bit)
 @njit(cache=True, fastmath=_FAST)
 def _step(B, y, col, rows, nh, nw, fvec, rcond, soft_tol, T, V, beta, vpos, Lw, p, reach,
-          flat, perm, nrot, nf, Vf, betaf, posf, Bo, xc, ucol, held_rows_step):
+          flat, perm, nrot, nf, Vf, betaf, posf, Bo, xc, ucol, held_rows_step, Ts, ts_rows):
     """:func:`_unit_rows_step` or :func:`_full_rank_step` when one applies, else
     :func:`_eqp`; returns ``(hr, rs, nref, full, margin, gn)`` (``margin``: of the soft
     rows' rank decisions; ``gn ≥ 0``: the hard rows' multipliers are in ``nu`` already
@@ -536,7 +624,7 @@ def _step(B, y, col, rows, nh, nw, fvec, rcond, soft_tol, T, V, beta, vpos, Lw, 
     for i in range(nh + nw):
         _bring(B, rows[i], nrot, nf, Vf, betaf, posf)
     hr, rs, nref, margin = _eqp(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T, rhs,
-                                norms, V, beta, vpos, Lw, p, reach, flat, tq)
+                                norms, V, beta, vpos, Lw, p, reach, flat, tq, Ts, ts_rows)
     return hr, rs, nref, False, margin, -1.0
 
 
@@ -1812,7 +1900,8 @@ def workspace_offsets(M: int, n: int, k: int) -> dict[str, tuple[int, int]]:
     (``16 × R``), ``x`` (``n``), ``w2`` and ``res = √w2`` (``k``), ``margins`` (``k + 1``:
     each level's and the tie-break's rank-decision margin), and the equality-first
     solve's ``eB`` (``M × n``), ``evec`` (``M + 4 k``) and its nested QR's ``espare``
-    (:func:`~._extended_jacobian_kernel.spare_size`);
+    (:func:`~._extended_jacobian_kernel.spare_size`), then ``Ts`` (``R × n``) and
+    ``ts_rows`` (``2 R``): the last step's soft rows for :func:`_eqp_append`;
     the kernel writes
     ``‖x‖`` into ``params[5]``, into ``params[6]`` ``1`` when an iteration cap was
     hit, ``-1`` when ``x`` or a residual is not finite, into ``params[7]`` ``1`` when
@@ -1840,7 +1929,8 @@ def workspace_offsets(M: int, n: int, k: int) -> dict[str, tuple[int, int]]:
                                 ("V", n * n), ("Vf", n * n), ("fvec", N_FVEC * R),
                                 ("x", n), ("w2", k), ("res", k), ("margins", k + 1),
                                 ("eB", M * n), ("evec", M + 4 * k),
-                                ("espare", spare_size(M, n)))),
+                                ("espare", spare_size(M, n)), ("Ts", R * n),
+                                ("ts_rows", 2 * R))),
                         ("i", (("k", 1), ("starts", k + 1), ("ivec", 5 * R), ("perm", n),
                                ("counts", 4 * (k + 1)),
                                ("eint", 2 * k + 1 + 4 * M + 4 * n), ("eispare", n))),
@@ -1967,6 +2057,9 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
     nrot = ivec[3]
     ucol = ivec[4]
     cand = ivec[1]          # (vpos's row: _step's scratch, rewritten by every step)
+    tail_at = fwork.shape[0] - Rn - 2 * R           # Ts, ts_rows: the workspace's end
+    Ts = fwork[tail_at:tail_at + Rn].reshape((R, n))
+    ts_rows = fwork[tail_at + Rn:]
     px = fvec[12, :n]
     xc = fvec[13, :n]
     xs = fvec[14, :n]
@@ -2069,7 +2162,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                                  Vf, betaf, posf)
             hr, rs, nref, full, step_margin, gn_step = _step(
                 B, y, col, rows, nh, nw, fvec, rcond, soft_tol, T, V, beta, vpos, Lw, p,
-                yes, flat, perm, nrot, nf, Vf, betaf, posf, Bo, xc, ucol, yes)
+                yes, flat, perm, nrot, nf, Vf, betaf, posf, Bo, xc, ucol, yes, Ts, ts_rows)
             iters[lev] += 1
             for i in range(hr, nh):
                 state[rows[i]] = 0
@@ -2115,6 +2208,7 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                     state[j] = saved[j]
         # ---- primal active-set iterations
         bland = False
+        joined = -1             # a hard row that cut the last step and joins its factorization
         proposed = False        # the degenerate point's working set tried (once a level)
         stall = 0               # iterations since a step last moved
         stalled = False
@@ -2128,12 +2222,26 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                     flags[lev] = FLAG_ITERATION_CAP
                     break
                 iters[lev] += 1
-                nh, nw = _gather(state, hard_end, s0, s1, blo, bup, rows, tgt, B, nrot, nf,
-                                 Vf, betaf, posf)
-                hr, rs, nref, full, step_margin, gn_step = _step(
-                    B, y, col, rows, nh, nw, fvec, rcond, soft_tol, T, V, beta, vpos, Lw, p,
-                    no, flat, perm, nrot, nf, Vf, betaf, posf, Bo, xc, ucol,
-                    iters[lev] == 1 or (refuted and iters[lev] == 2))
+                appended = False
+                if joined >= 0:
+                    # the last step's factorization with the row that cut it added
+                    _bring(B, joined, nrot, nf, Vf, betaf, posf)
+                    ha, ra, na, ma = _eqp_append(
+                        B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T, rhs, norms,
+                        V, beta, vpos, Lw, p, flat, tq, Ts, ts_rows, joined,
+                        blo[joined] if state[joined] == -1 else bup[joined])
+                    joined = -1
+                    if ha >= 0:
+                        nh += 1
+                        hr, rs, nref, full, step_margin, gn_step = ha, ra, na, no, ma, -1.0
+                        appended = True
+                if not appended:
+                    nh, nw = _gather(state, hard_end, s0, s1, blo, bup, rows, tgt, B, nrot,
+                                     nf, Vf, betaf, posf)
+                    hr, rs, nref, full, step_margin, gn_step = _step(
+                        B, y, col, rows, nh, nw, fvec, rcond, soft_tol, T, V, beta, vpos, Lw,
+                        p, no, flat, perm, nrot, nf, Vf, betaf, posf, Bo, xc, ucol,
+                        iters[lev] == 1 or (refuted and iters[lev] == 2), Ts, ts_rows)
                 path_margin = min(path_margin, step_margin)
                 for i in range(hr, nh):
                     state[rows[i]] = 0          # dependent on the kept hard rows
@@ -2181,6 +2289,8 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                     state[blk] = bside
                     # Bland's rule from a step of length 0 until one moves
                     bland = bland or alpha <= _DEGENERATE
+                    if blk < hard_end and not full and gn_step < 0.0 and hr == nh:
+                        joined = blk        # the next step adds it to this factorization
                     continue
             ynorm = np.sqrt(_dot(y, y))
             # soft rows on the wrong side of their bound: release or switch sides; a
