@@ -293,15 +293,7 @@ def _eqp_soft(T, rhs, norms, rows, tgt, nh, nw, hr, d, soft_tol, V, beta, vpos, 
                 for c in range(rs):
                     Lw[i, c] = T[nh + i, hr + c] if c <= i else 0.0
             _small_lstsq_ws(Lw, rhs[nh:], nw, rs, 0.0, p, hr, flat, tq)
-    # p = H_1 … H_R [u; 0]
-    for t in range(nref - 1, -1, -1):
-        q = vpos[t]
-        v = V[t, q:d]
-        pq = p[q:d]
-        f = beta[t] * _dot(v, pq)
-        if f != 0.0:
-            for c in range(d - q):
-                pq[c] -= f * v[c]
+    _reflect_vector(p, d, nref, V, beta, vpos, False)       # p = H_1 … H_R [u; 0]
     return rs, nref, margin
 
 
@@ -316,25 +308,20 @@ def _eqp_append(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T, rhs, no
     case (a step cut by a row that then joins: on G1's sword-tip level, 13 joint limits in
     a row). As inside any iteration, the hard rows are held where they are (``C_H p =
     0``). The hard rows keep their order (the new one last: a fresh factorization would
-    pivot them by their residuals; the same factorization in exact arithmetic).
+    pivot them by their residuals; another factorization of the same rows, the same step
+    in exact arithmetic).
 
     Returns ``(hr, rs, nref, margin)`` as :func:`_eqp` with ``hr = nh + 1``, or ``hr = -1``
     when the new row is not clearly independent of the others (the hard-row rule) or
     leaves no free direction: the caller takes :func:`_eqp`."""
     n = B.shape[1]
     d = n - col
-    if nh + 1 >= d:
+    if nh + 1 >= d:         # (the new row would take the last free direction)
         return -1, 0, 0, np.inf
     u = T[nh]
     for c in range(d):
         u[c] = B[jb, col + c]
-    for t in range(nh):
-        v = V[t, t:d]
-        uq = u[t:d]
-        f = beta[t] * _dot(v, uq)
-        if f != 0.0:
-            for c in range(d - t):
-                uq[c] -= f * v[c]
+    _reflect_vector(u, d, nh, V, beta, vpos, True)        # (the hard ones: vpos[t] = t)
     tail = u[nh:d]
     s = rnorm[jb]
     if not (_dot(tail, tail) > (rcond * s) * (rcond * s)) or s <= 0.0:
@@ -636,8 +623,19 @@ def _hard_multipliers(B, y, col, rows, nh, hr, nw, tgt, T, V, beta, vpos, g, nu)
     the free coordinates; ``C_Hᵀ ν = g`` is solved through the LQ of the hard rows
     (``Qᵀ g`` by their reflectors, then ``Lᵀ ν = (Qᵀ g)[:hr]``). Returns ``‖g‖``.
     """
-    n = B.shape[1]
-    d = n - col
+    d = B.shape[1] - col
+    _soft_gradient(B, y, col, rows, nh, nw, tgt, g)
+    gn = np.sqrt(_dot(g[:d], g[:d]))
+    _lq_multipliers(g, d, hr, T, V, beta, vpos, nu)
+    return gn
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _soft_gradient(B, y, col, rows, nh, nw, tgt, g):
+    """``g = Σ_soft (B_j y − tgt_j) B_j[col:]`` over the working soft rows
+    ``rows[nh:nh + nw]`` (brought up to date): the level objective's half gradient on the
+    free coordinates."""
+    d = B.shape[1] - col
     for c in range(d):
         g[c] = 0.0
     for i in range(nh, nh + nw):
@@ -647,21 +645,38 @@ def _hard_multipliers(B, y, col, rows, nh, hr, nw, tgt, T, V, beta, vpos, g, nu)
             Bj = B[j, col:]
             for c in range(d):
                 g[c] += res * Bj[c]
-    gn = np.sqrt(_dot(g[:d], g[:d]))
-    for t in range(hr):
-        q = vpos[t]
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _reflect_vector(x, d, r, V, beta, vpos, transposed):
+    """``x[:d] = Qᵀ x`` (``transposed``: ``H_0`` first) or ``Q x`` (``H_{r−1}`` first) in
+    place, ``Q = H_0 … H_{r−1}``, reflector ``t`` in ``V[t, q:d]`` from ``q = vpos[t]``
+    (``t`` when ``vpos`` is empty): the extended Jacobian's ``_apply_reflectors`` on
+    the first ``d`` coordinates (this kernel's reflectors end there; ``V``'s rows are
+    longer)."""
+    for i in range(r):
+        t = i if transposed else r - 1 - i
+        q = vpos[t] if vpos.shape[0] > 0 else t
         v = V[t, q:d]
-        gq = g[q:d]
-        f = beta[t] * _dot(v, gq)
+        xq = x[q:d]
+        f = beta[t] * _dot(v, xq)
         if f != 0.0:
             for c in range(d - q):
-                gq[c] -= f * v[c]
-    for i in range(hr - 1, -1, -1):
+                xq[c] -= f * v[c]
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _lq_multipliers(g, d, r, T, V, beta, vpos, out):
+    """The multipliers of the ``r`` rows of an LQ factorization (``L = T[:r, :r]``,
+    reflector ``t`` in ``V[t]`` from column ``vpos[t]``, or from ``t`` when ``vpos`` is
+    empty) for the gradient ``g``: ``Qᵀ g`` by the reflectors (in place), then
+    ``Lᵀ out = (Qᵀ g)[:r]``."""
+    _reflect_vector(g, d, r, V, beta, vpos, True)
+    for i in range(r - 1, -1, -1):
         acc = g[i]
-        for c in range(i + 1, hr):
-            acc -= T[c, i] * nu[c]
-        nu[i] = acc / T[i, i]
-    return gn
+        for c in range(i + 1, r):
+            acc -= T[c, i] * out[c]
+        out[i] = acc / T[i, i]
 
 
 @njit(cache=True, inline="always")
@@ -793,18 +808,7 @@ def _nnls_working_set(E, m, d, g, cand, inP, rnorm, rcond, gscale, T, V, beta, z
             _reflect_row(T, t, t, d, V, beta, t, t + 1, p)
         for c in range(d):
             h[c] = g[c]
-        for t in range(p):
-            v = V[t, t:d]
-            hq = h[t:d]
-            f = beta[t] * _dot(v, hq)
-            if f != 0.0:
-                for c in range(d - t):
-                    hq[c] -= f * v[c]
-        for i in range(p - 1, -1, -1):
-            acc = h[i]
-            for c in range(i + 1, p):
-                acc -= T[c, i] * z[c]
-            z[i] = acc / T[i, i]
+        _lq_multipliers(h, d, p, T, V, beta, order[:0], z)
         worst = gscale
         out = -1
         for i in range(p):
@@ -815,18 +819,12 @@ def _nnls_working_set(E, m, d, g, cand, inP, rnorm, rcond, gscale, T, V, beta, z
         if out >= 0:
             inP[out] = 0.0
             continue
-        # the residual g − E_Pᵀ μ = Q_Pᵀ [0; h[p:]]
+        # the residual g − E_Pᵀ μ = Q_P [0; h[p:]]
         for c in range(p):
             r[c] = 0.0
         for c in range(p, d):
             r[c] = h[c]
-        for t in range(p - 1, -1, -1):
-            v = V[t, t:d]
-            rq = r[t:d]
-            f = beta[t] * _dot(v, rq)
-            if f != 0.0:
-                for c in range(d - t):
-                    rq[c] -= f * v[c]
+        _reflect_vector(r, d, p, V, beta, order[:0], False)
         best = gscale
         enter = -1
         if p < d:
@@ -2378,15 +2376,9 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                                               rnorm, ynorm, primal_tol, B, nrot, nf, Vf,
                                               betaf, posf, col, Lw, cand, tq, rhs)
                 if extra > 0:
-                    for c in range(d):
-                        g[c] = 0.0
-                    for i in range(nh, nh + nw):
-                        j = rows[i]
-                        _bring(B, j, nrot, nf, Vf, betaf, posf)
-                        res_j = _dot(B[j], y) - tgt[i]
-                        if res_j != 0.0:
-                            for c in range(d):
-                                g[c] += res_j * B[j, col + c]
+                    for i in range(nh, nh + nw):    # (the unit-row step does not bring them)
+                        _bring(B, rows[i], nrot, nf, Vf, betaf, posf)
+                    _soft_gradient(B, y, col, rows, nh, nw, tgt, g)
                     if _nnls_working_set(Lw, m_at, d, g, cand, rhs, rnorm, rcond, gscale, T,
                                          V, beta, nu, px, p, perm):
                         moved_set = False
