@@ -28,7 +28,8 @@ active-set method on its piecewise-quadratic objective (equivalent to
   the working set (row-pivoted Householder LQ of the working hard rows, then of the
   working soft rows on the directions left; a small QR where they conflict; no
   SVD), cut at the first non-working row that would leave its interval (that row
-  joins the working set at that bound);
+  joins the working set at that bound; a hard row joins the step's factorization
+  rather than a new one: ``_eqp_append``);
 * at a full step: a soft row on the wrong side of its bound leaves the set (or
   switches to its other bound when it overshoots it); otherwise the hard rows'
   multipliers ``ν`` (``C_Hᵀ ν = ∇f`` through the LQ of the hard rows) are checked and
@@ -51,7 +52,10 @@ enters a factorization (zero pivot) and never blocks a step. A level of extreme 
 (``‖A_i‖_F`` beyond 1e100, or below 1e-100 with a non-zero entry, where squares overflow
 or underflow) is solved rescaled by a power of two (``info["equilibrated_levels"]``; the
 same optimum). Two-sided rows switch
-sides through the wrong-side rule. Degenerate steps (length 0) switch the choices
+sides through the wrong-side rule. At a degenerate point (hard rows at their bounds
+outside the working set) a level's first release re-chooses the working set among all
+the rows at their bounds by a non-negative least squares on their multipliers (a
+proposal the iterations verify). Degenerate steps (length 0) switch the choices
 to the smallest row index (Bland's rule) until a step makes progress. A level whose
 working set keeps changing without a step that moves (a cycle of rounding: released,
 a row blocks the next step at once when rank decisions sit at the threshold) settles
