@@ -21,6 +21,9 @@ from scipy.optimize import lsq_linear
 
 import prioik
 from prioik import formulations
+from prioik.formulations._active_set_kernel import _eqp as _eqp_kernel
+from prioik.formulations._active_set_kernel import _eqp_append as _eqp_append_kernel
+from prioik.formulations._active_set_kernel import _hard_multipliers as _hard_multipliers_kernel
 from prioik.formulations._active_set_kernel import _unit_rows_step as _unit_rows_step_kernel
 from prioik.hierarchy import Task, TaskStack, TaskStackError, lexicographic_residuals
 from prioik.hierarchy.families import FAMILIES, INEQUALITY_FAMILIES
@@ -1198,6 +1201,85 @@ def _posture_stack(rng: np.random.Generator, n: int, base: int, limits: bool) ->
     tasks.append([Task("posture", np.eye(n)[base:], 0.3 * rng.standard_normal(n - base),
                        weight=0.25)])
     return TaskStack(tasks)
+
+
+@njit(cache=True)
+def _eqp_call(B, y, rows, nh, nw, tgt, rcond, soft_tol, reach, T, V, beta, vpos, Ts, ts_rows,
+              appended_row, appended_tgt):
+    """The kernel's ``_eqp`` (or, with ``appended_row ≥ 0``, ``_eqp_append`` on the
+    factorization ``T``, ``V``, ``beta``, ``vpos``, ``Ts`` of the last ``_eqp`` call) with
+    ``col = 0``, then ``_hard_multipliers``; returns ``(hr, rs, p, ν)`` (``hr = -1``:
+    declined)."""
+    R, n = B.shape
+    rnorm = np.sqrt((B * B).sum(axis=1))
+    p = np.zeros(n)
+    rhs, norms, tq = np.zeros(R), np.zeros(R), np.zeros(R)
+    Lw, flat = np.zeros((R, n)), np.zeros(R * n)
+    if appended_row >= 0:
+        hr, rs, _, _ = _eqp_append_kernel(B, y, 0, rows, nh, nw, tgt, rnorm, rcond, soft_tol,
+                                          T, rhs, norms, V, beta, vpos, Lw, p, flat, tq, Ts,
+                                          ts_rows, appended_row, appended_tgt)
+        if hr < 0:
+            return hr, rs, p, np.zeros(R)
+        nh += 1
+    else:
+        hr, rs, _, _ = _eqp_kernel(B, y, 0, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T, rhs,
+                                   norms, V, beta, vpos, Lw, p, reach, flat, tq, Ts, ts_rows)
+    nu = np.zeros(R)
+    _hard_multipliers_kernel(B, y, 0, rows, nh, hr, nw, tgt, T, V, beta, vpos, np.zeros(n),
+                             nu)
+    out = np.zeros(R)
+    for i in range(hr):
+        out[rows[i]] = nu[i]
+    return hr, rs, p, out
+
+
+def _eqp_workspace(R, n):
+    return (np.zeros((R, n)), np.zeros((n, n)), np.zeros(n), np.zeros(n, np.int64),
+            np.zeros((R, n)), np.zeros(2 * R))
+
+
+@pytest.mark.parametrize("nw", [2, 5])
+@pytest.mark.parametrize("seed", range(4))
+def test_a_hard_row_joining_the_last_factorization_gives_the_fresh_step(seed, nw):
+    """``_eqp_append`` — the hard row that cut a step added to that step's factorization
+    — gives the step, the soft rows' rank and the hard rows' multipliers of a fresh
+    ``_eqp`` on the same working set (to 1e-12), on random rows (n 10, 3 hard rows then a
+    4th; soft rows fewer and more than the free directions); a row dependent on the held
+    ones is declined (the caller then factorizes afresh)."""
+    rng = np.random.default_rng(seed)
+    n, nh = 10, 3
+    R = nh + 1 + nw
+    B = rng.standard_normal((R, n))
+    y = rng.standard_normal(n)
+    # rows 0..nh-1 held, row nh the one that joins, the rest the level's
+    tgt_all = B @ y
+    tgt_all[nh + 1:] = rng.standard_normal(nw)
+    soft_tol = 1e-10 * np.linalg.norm(B[nh + 1:])
+    # (room for the joining row: the kernel's row lists are as long as all rows)
+    rows = np.r_[np.arange(nh), np.arange(nh + 1, R), -1].astype(np.int64)
+    tgt = np.r_[tgt_all[:nh], tgt_all[nh + 1:], 0.0]
+    # the rows and targets as the last factorization permuted them (the kernel keeps them)
+    held_rows, held_tgt, ws = rows.copy(), tgt.copy(), _eqp_workspace(R, n)
+    _eqp_call(B, y, held_rows, nh, nw, held_tgt, 1e-10, soft_tol, False, *ws, -1, 0.0)
+    hr, rs, p, nu = _eqp_call(B, y, held_rows, nh, nw, held_tgt, 1e-10, soft_tol, False,
+                              *ws, nh, tgt_all[nh])
+    fresh_rows = np.arange(R).astype(np.int64)
+    hr_f, rs_f, p_f, nu_f = _eqp_call(B, y, fresh_rows, nh + 1, nw, tgt_all.copy(), 1e-10,
+                                      soft_tol, False, *_eqp_workspace(R, n), -1, 0.0)
+    assert (hr, rs) == (hr_f, rs_f) == (nh + 1, min(nw, n - nh - 1))
+    assert np.linalg.norm(p - p_f) <= 1e-12 * max(1.0, np.linalg.norm(p_f))
+    assert np.linalg.norm(p) > 1e-3                   # a step, not zero on both sides
+    assert np.abs(B[:nh + 1] @ p).max() <= 1e-12 * np.linalg.norm(p)   # the held rows hold
+    assert np.linalg.norm(nu - nu_f) <= 1e-10 * max(1.0, np.linalg.norm(nu_f))
+    assert np.linalg.norm(nu_f) > 1e-3
+    # a joining row in the span of the held ones: declined
+    B[nh] = B[0] - 2.0 * B[1]
+    held_rows, held_tgt, ws = rows.copy(), tgt.copy(), _eqp_workspace(R, n)
+    _eqp_call(B, y, held_rows, nh, nw, held_tgt, 1e-10, soft_tol, False, *ws, -1, 0.0)
+    declined = _eqp_call(B, y, held_rows, nh, nw, held_tgt, 1e-10, soft_tol, False, *ws, nh,
+                         float(B[nh] @ y))
+    assert declined[0] == -1
 
 
 @pytest.mark.parametrize("limits", [False, True])
