@@ -1282,6 +1282,34 @@ def test_a_hard_row_joining_the_last_factorization_gives_the_fresh_step(seed, nw
     assert declined[0] == -1
 
 
+def test_rows_at_bounds_reads_each_rows_own_bounds():
+    """``_rows_at_bounds`` (the degenerate point's candidates): a non-working row at a
+    finite bound is found on that side, the working ones are kept in the working set, and
+    a row with an infinite bound on the side ``x`` is far from, or none, is not at it
+    (``|r − (−∞)| ≤ tol(−∞) = ∞`` would say it is if the finiteness test were lost)."""
+    from prioik.formulations._active_set_kernel import _rows_at_bounds
+    n, R = 4, 7
+    state = np.array([0, 0, 0, 0, 1, 0, 0], np.int8)
+    eqr = np.zeros(R, np.int8)
+    Bo = np.eye(R, n)                      # rows 0-3: x_0 … x_3
+    Bo[4, 2] = 2.0                         # row 4: 2 x_2, working, at its upper bound
+    ucol = np.array([0, 1, 2, 3, 2, -1, -1], np.int64)
+    xc = np.array([0.5, -0.3, 1.0, 2.0])
+    blo = np.array([-np.inf, -0.3, -np.inf, -5.0, -np.inf, 0.0, 0.0])
+    bup = np.array([1.0, np.inf, np.inf, 2.0, 2.0, 0.0, 0.0])
+    B = Bo.copy()
+    E, cand, side, inP = np.zeros((R, n)), np.zeros(R, np.int64), np.zeros(R), np.zeros(R)
+    m, extra = _rows_at_bounds(state, eqr, 5, Bo, ucol, xc, blo, bup, np.ones(R),
+                               float(np.linalg.norm(xc)), 1e-10, B, np.zeros(R, np.int64), 0,
+                               np.zeros((n, n)), np.zeros(n), np.zeros(n, np.int64), 0, E,
+                               cand, side, inP)
+    assert (m, extra) == (3, 2)
+    assert cand[:m].tolist() == [1, 3, 4] and side[:m].tolist() == [-1, 1, 1]
+    assert inP[:m].tolist() == [0, 0, 1]
+    # E: each row's free part, signed so that the directions it allows have E p ≥ 0
+    assert np.array_equal(E[:m], np.array([[0, 1, 0, 0], [0, 0, 0, -1], [0, 0, -2, 0]]))
+
+
 @pytest.mark.parametrize("limits", [False, True])
 @pytest.mark.parametrize("base", [0, 6])
 @pytest.mark.parametrize("seed", range(5))
