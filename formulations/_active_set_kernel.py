@@ -34,12 +34,11 @@ from prioik.hierarchy.linalg import AMBIGUITY as _AMBIGUITY
 from prioik.hierarchy.linalg import PRECISION_LIMIT_NORM as _PRECISION_LIMIT_NORM
 from prioik.hierarchy.linalg import X_PRECISION
 
-from ._extended_jacobian_kernel import SCALE_HIGH as _SCALE_HIGH
-from ._extended_jacobian_kernel import SCALE_LOW as _SCALE_LOW
 from ._extended_jacobian_kernel import (_UNIT_ROWS_GAP, _apply_q, _apply_qt,
                                         _cholesky_lower, _cholesky_solve, _dot,
-                                        _drop_fixed, _free_directions, _small_lstsq_ws, _swap,
-                                        _unit_rows_of, _unit_rows_solve, _woodbury_apply,
+                                        _drop_fixed, _free_directions, _level_extreme,
+                                        _small_lstsq_ws, _swap, _unit_rows_of,
+                                        _unit_rows_solve, _woodbury_apply,
                                         solve_kernel_into, spare_size)
 
 #: the same fast-math set as the extended-Jacobian kernel (no finite-math assumption)
@@ -1018,23 +1017,6 @@ def _one_column(a, nz, hint):
         if a[c] != 0.0:
             return c
     return -1
-
-
-@njit(cache=True, fastmath=_FAST, inline="always")
-def _level_extreme(A, lev_sq, s0, s1):
-    """Whether a level (rows ``s0:s1``) with ``‖A_i‖_F² = lev_sq`` (the equality-first
-    try's: ``‖√W_i A_i‖_F²``, which it computes anyway) is of extreme scale:
-    beyond :data:`_SCALE_HIGH` (or not finite), or below :data:`_SCALE_LOW` with a
-    non-zero entry (a zero level is fine). Squares of entries below ~1e-154 underflow:
-    a ``1e-200·I`` level was read as zero rows and gave ``x = 0``, 'optimal'."""
-    if not lev_sq <= _SCALE_HIGH * _SCALE_HIGH:
-        return True
-    if lev_sq < _SCALE_LOW * _SCALE_LOW:
-        for i in range(s0, s1):
-            for c in range(A.shape[1]):
-                if A[i, c] != 0.0:
-                    return True
-    return False
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")

@@ -727,6 +727,23 @@ SCALE_HIGH = 1e100
 SCALE_LOW = 1e-100
 
 
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _level_extreme(A, lev_sq, s0, s1):
+    """Whether a level (rows ``s0:s1``) with ``‖A_i‖_F² = lev_sq`` is of extreme scale:
+    beyond :data:`SCALE_HIGH` (or not finite), or below :data:`SCALE_LOW` with a
+    non-zero entry (a zero level is fine). Squares of entries below ~1e-154 underflow:
+    a ``1e-200·I`` level was read as zero rows and gave ``x = 0``. Ordered comparisons
+    (LLVM keeps them; ``np.isfinite`` was once folded to true under fast math)."""
+    if not lev_sq <= SCALE_HIGH * SCALE_HIGH:
+        return True
+    if lev_sq < SCALE_LOW * SCALE_LOW:
+        for i in range(s0, s1):
+            for c in range(A.shape[1]):
+                if A[i, c] != 0.0:
+                    return True
+    return False
+
+
 @kernel(fastmath=_FAST)
 def level_scales(A, b, starts, scales):
     """``scales[i] = ‖A_i‖_F`` of every level (rows ``starts[i]:starts[i+1]``).
@@ -745,13 +762,8 @@ def level_scales(A, b, starts, scales):
         for i in range(starts[lev], starts[lev + 1]):
             acc += _dot(A[i], A[i])
         scales[lev] = np.sqrt(acc)
-        if not np.isfinite(scales[lev]) or scales[lev] > SCALE_HIGH:
+        if _level_extreme(A, acc, starts[lev], starts[lev + 1]):
             finite = False
-        elif scales[lev] < SCALE_LOW:
-            for i in range(starts[lev], starts[lev + 1]):   # a zero level is fine
-                for j in range(n):
-                    if A[i, j] != 0.0:
-                        finite = False
     for i in range(b.shape[0]):      # entry by entry: b may be large (x is then large)
         if not np.isfinite(b[i]):
             finite = False

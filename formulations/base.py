@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
-from prioik.hierarchy import (DEFAULT_CERTIFICATE_TOL, check_lexicographic, level_residuals,
-                              precision_limited_levels, precision_reason, level_scale)
+from prioik.hierarchy import (DEFAULT_CERTIFICATE_TOL, TaskStackError, check_lexicographic,
+                              level_residuals, level_scale, precision_limited_levels,
+                              precision_reason)
 
 #: Values of :attr:`Solution.status`.
 STATUSES = ("optimal", "approximate", "failed")
@@ -154,6 +155,7 @@ class Solution:
                        f"<td>{escape(v)}</td></tr>" for k, v in rows)
         return f"<table><caption>Solution</caption>{body}</table>"
 
+
 def in_original_units(out: "Outcome", data, levels: list[int]) -> "Outcome":
     """``out``, solved on the stack ``data`` with ``levels`` equilibrated
     (:meth:`~prioik.hierarchy.TaskStack.equilibrated`: each of those levels' values
@@ -168,6 +170,22 @@ def in_original_units(out: "Outcome", data, levels: list[int]) -> "Outcome":
             out.info["level_violation"] = res * res
     out.info["equilibrated_levels"] = levels
     return out
+
+
+def solve_equilibrated(solve: Callable[[Any], Outcome], data, message: str) -> Outcome:
+    """A prepared solver's answer for ``data`` whose kernel refused a level of extreme
+    scale: ``solve`` on :meth:`~prioik.hierarchy.TaskStack.equilibrated` (those levels
+    rescaled by a power of two: the same optimum and tie-break), read in the user's units
+    (:func:`in_original_units`).
+
+    Raises:
+        TaskStackError: ``message``, when no level's entries are extreme (rescaling
+            cannot help: the weights or targets are at fault).
+    """
+    stack, levels = data.as_stack().equilibrated()
+    if not levels:
+        raise TaskStackError(message)
+    return in_original_units(solve(stack.data), data, levels)
 
 
 def precision_status(status: str, info: dict, data, x: np.ndarray) -> str:

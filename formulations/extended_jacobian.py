@@ -116,12 +116,12 @@ import math
 import numpy as np
 from scipy.linalg import lapack
 
-from prioik.hierarchy import (AMBIGUITY, StackData, StackLayout, Task, TaskStack, TaskStackError,
+from prioik.hierarchy import (AMBIGUITY, StackData, StackLayout, Task, TaskStack,
                               UnsupportedTaskError, ambiguity_reason, ambiguous_decision,
                               level_scale, rank_threshold)
 
-from .base import (Capabilities, FormulationError, Outcome, ReportVariant, in_original_units,
-                   precision_status)
+from .base import (Capabilities, FormulationError, Outcome, ReportVariant, precision_status,
+                   solve_equilibrated)
 from .options import Option, rcond_option, validate_options
 
 try:  # the compiled kernel is optional: the lapack path is the readable reference
@@ -344,11 +344,8 @@ class Prepared:
         if code == 0:
             data.check()     # names the task, level and row of a NaN, inf or bad √w
             # finite rows of extreme scale: solve the equilibrated stack (same optimum)
-            stack, levels = data.as_stack().equilibrated()
-            if not levels:
-                raise TaskStackError("the rows' scale overflows float64 (‖A_i‖_F² is not "
-                                     "finite): scale the tasks down")
-            return in_original_units(self.solve(stack.data), data, levels)
+            return solve_equilibrated(self.solve, data, "the rows' scale overflows float64 "
+                                      "(‖A_i‖_F² is not finite): scale the tasks down")
         k = self._k
         info = {"rank_profile": self._ranks.copy(), "nullspace": "qr", "kernel": "numba"}
         status = "optimal"

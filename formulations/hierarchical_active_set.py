@@ -156,10 +156,10 @@ from itertools import compress
 import numpy as np
 
 from prioik.hierarchy import (AMBIGUITY, X_PRECISION, StackData, StackLayout, TaskStack,
-                              TaskStackError, ambiguity_reason, check_lexicographic)
+                              ambiguity_reason, check_lexicographic)
 
-from .base import (Capabilities, FormulationError, Outcome, ReportVariant, in_original_units,
-                   precision_status)
+from .base import (Capabilities, FormulationError, Outcome, ReportVariant, precision_status,
+                   solve_equilibrated)
 from .options import Option, rcond_option, validate_options
 
 try:
@@ -396,27 +396,12 @@ class Prepared:
         if code == _kernel.NOT_SOLVED:
             self.reset()
             data.check()     # names the task, level and row at fault
-            return self._equilibrated(data)
+            # a level of extreme scale (‖A_i‖_F beyond 1e100, or below 1e-100 with a
+            # non-zero entry): solved rescaled, info["equilibrated_levels"] names it
+            return solve_equilibrated(self.solve, data, "the rows' values overflow float64 "
+                                      "(‖√W_i A_i‖_F² is not finite or underflows): scale "
+                                      "the tasks or their weights")
         return self._outcome(data)
-
-    def _equilibrated(self, data: StackData) -> Outcome:
-        """The answer of a stack with a level of extreme scale (``‖A_i‖_F`` beyond
-        1e100, or below 1e-100 with a non-zero entry: squares that overflow or
-        underflow), solved with those levels rescaled by a power of two
-        (:meth:`~prioik.hierarchy.TaskStack.equilibrated`: the same lexicographic
-        optimum and tie-break), ``info["equilibrated_levels"]`` naming them, its
-        residuals read on ``data`` (:func:`~.base.in_original_units`).
-
-        Raises:
-            TaskStackError: no level's entries are extreme, so rescaling cannot help
-                (the weights or targets are).
-        """
-        stack, levels = data.as_stack().equilibrated()
-        if not levels:
-            raise TaskStackError("the rows' values overflow float64 (‖√W_i A_i‖_F² is "
-                                 "not finite or underflows): scale the tasks or their "
-                                 "weights")
-        return in_original_units(self.solve(stack.data), data, levels)
 
     def _outcome(self, data: StackData) -> Outcome:
         """The answer of a solve that is not clean (capped, non-finite, ambiguous,

@@ -22,8 +22,8 @@ import numpy as np
 
 from .layout import level_residuals
 from .errors import TaskStackError, UnsupportedTaskError
-from .linalg import (CERTIFICATE_SIGMA_FLOOR, DEFAULT_CERTIFICATE_TOL, DEFAULT_RCOND, matrix_rank,
-                     nonnegative_least_squares, range_basis, row_activity, level_scale)
+from .linalg import (CERTIFICATE_SIGMA_FLOOR, DEFAULT_CERTIFICATE_TOL, DEFAULT_RCOND, level_scale,
+                     matrix_rank, nonnegative_least_squares, range_basis, row_activity)
 from .stack import TaskStack
 
 
