@@ -650,6 +650,32 @@ def _soft_gradient(B, y, col, rows, nh, nw, tgt, g):
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
+def _soft_gradient_x(Bo, ucol, xc, rows, nh, nw, tgt, col, nf, Vf, betaf, posf, gx, g):
+    """:func:`_soft_gradient` read in ``x``: ``g = (Qᵀ Σ_soft (Bo_j xc − tgt_j) Bo_j)[col:]``
+    (``B_j y = Bo_j xc`` and ``Σ r_j B_j = Qᵀ Σ r_j Bo_j``): one rotation of the sum by the
+    fixing reflectors instead of one per soft row, which the unit-rows step leaves
+    unrotated (the G1 posture's 27 rows: ~8 µs brought one by one). ``gx``: scratch
+    (``n``)."""
+    n = gx.shape[0]
+    for c in range(n):
+        gx[c] = 0.0
+    for i in range(nh, nh + nw):
+        j = rows[i]
+        res = _odot(Bo, ucol, j, xc) - tgt[i]
+        if res != 0.0:
+            uc = ucol[j]
+            if uc >= 0:
+                gx[uc] += res * Bo[j, uc]
+            else:
+                Bj = Bo[j]
+                for c in range(n):
+                    gx[c] += res * Bj[c]
+    _apply_qt(gx, nf, Vf, betaf, posf)
+    for c in range(n - col):
+        g[c] = gx[col + c]
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
 def _reflect_vector(x, d, r, V, beta, vpos, transposed):
     """``x[:d] = Qᵀ x`` (``transposed``: ``H_0`` first) or ``Q x`` (``H_{r−1}`` first) in
     place, ``Q = H_0 … H_{r−1}``, reflector ``t`` in ``V[t, q:d]`` from ``q = vpos[t]``
@@ -782,32 +808,43 @@ def _nnls_working_set(E, m, d, g, cand, inP, rnorm, rcond, gscale, T, V, beta, z
                       order):
     """The working set of a degenerate point (hard rows at their bounds beyond the
     working ones) by the multipliers it needs: the non-negative least-squares problem
-    ``min ‖E_Pᵀ μ − g‖, μ ≥ 0`` over the rows ``E`` at their bounds (Lawson-Hanson,
-    started from the working set ``inP``): a row whose multiplier is wrong-signed beyond
-    ``gscale`` (the release test's, relative to ``rnorm``) leaves ``P``, the row the
-    residual most wants enters. ``x*`` is the level's optimum over these rows iff the
-    residual is zero (its KKT conditions); a primal active-set method walks there one
-    exchange at a time, each a step of length zero (G1 with 18 limits at their bounds on
-    18 free coordinates: 12 iterations of the posture level). Each pass is one LQ of the
-    rows of ``P`` (``T``, ``V``, ``beta``). Returns whether it settled (``inP`` the set)
-    within ``2m + 2`` passes with ``P`` clearly independent (the hard-row rule,
-    ``rcond``); the caller's iterations verify the set either way."""
+    ``min ‖E_Pᵀ μ − g‖, μ ≥ 0`` over the rows ``E`` at their bounds (Lawson-Hanson): a
+    row whose multiplier is wrong-signed beyond ``gscale`` (the release test's, relative
+    to ``rnorm``) leaves ``P``, the row the residual most wants enters. ``x*`` is the
+    level's optimum over these rows iff the residual is zero (its KKT conditions); a
+    primal active-set method walks there one exchange at a time, each a step of length
+    zero (G1 with 18 limits at their bounds on 18 free coordinates: 12 iterations of the
+    posture level).
+
+    ``P`` starts as the working set ``inP``; the rows of its wrong-signed multipliers
+    there leave it together, then one row leaves per pass: one at a time from the start,
+    releases undid 13-15 of the 18 rows one pass each and entries brought them back (31
+    passes on the G1 stacks whose sword tip holds 19 limits). ``P`` is one LQ (``T``,
+    ``V``, ``beta``): an entering row is appended (the reflectors applied to it, one
+    more of its own), a leaving one refactorizes it. Returns whether it settled (``inP`` the set) within ``2m + 2``
+    passes with ``P`` clearly independent (the hard-row rule, ``rcond``); the caller's
+    iterations verify the set either way."""
+    refactor = True
+    restarted = False
+    p = 0
     for it in range(2 * m + 2):
-        p = 0
-        for i in range(m):
-            if inP[i] != 0.0:
-                if p >= d:
+        if refactor:
+            refactor = False
+            p = 0
+            for i in range(m):
+                if inP[i] != 0.0:
+                    if p >= d:
+                        return False
+                    for c in range(d):
+                        T[p, c] = E[i, c]
+                    order[p] = i
+                    p += 1
+            for t in range(p):
+                tail = T[t, t:d]
+                s = rnorm[cand[order[t]]]
+                if not (_dot(tail, tail) > (rcond * s) * (rcond * s)):
                     return False
-                for c in range(d):
-                    T[p, c] = E[i, c]
-                order[p] = i
-                p += 1
-        for t in range(p):
-            tail = T[t, t:d]
-            s = rnorm[cand[order[t]]]
-            if not (_dot(tail, tail) > (rcond * s) * (rcond * s)):
-                return False
-            _reflect_row(T, t, t, d, V, beta, t, t + 1, p)
+                _reflect_row(T, t, t, d, V, beta, t, t + 1, p)
         for c in range(d):
             h[c] = g[c]
         _lq_multipliers(h, d, p, T, V, beta, order[:0], z)
@@ -819,7 +856,15 @@ def _nnls_working_set(E, m, d, g, cand, inP, rnorm, rcond, gscale, T, V, beta, z
                 worst = wrong
                 out = order[i]
         if out >= 0:
-            inP[out] = 0.0
+            if not restarted:
+                # the working set's own multipliers: every wrong-signed row leaves at once
+                restarted = True
+                for i in range(p):
+                    if -z[i] * rnorm[cand[order[i]]] > gscale:
+                        inP[order[i]] = 0.0
+            else:
+                inP[out] = 0.0
+            refactor = True
             continue
         # the residual g − E_Pᵀ μ = Q_P [0; h[p:]]
         for c in range(p):
@@ -843,6 +888,18 @@ def _nnls_working_set(E, m, d, g, cand, inP, rnorm, rcond, gscale, T, V, beta, z
         if enter < 0:
             return True
         inP[enter] = 1.0
+        restarted = True        # (a set with an entry is not the working set)
+        row = T[p, :d]
+        for c in range(d):
+            row[c] = E[enter, c]
+        _reflect_vector(row, d, p, V, beta, order[:0], True)
+        tail = T[p, p:d]
+        s = rnorm[cand[enter]]
+        if not (_dot(tail, tail) > (rcond * s) * (rcond * s)):
+            return False
+        _reflect_row(T, p, p, d, V, beta, p, p + 1, p + 1)
+        order[p] = enter
+        p += 1
     return False
 
 
@@ -2361,9 +2418,11 @@ def solve_data(A, b, lower, upper, sw, fwork, iwork, bwork):
                                               rnorm, ynorm, primal_tol, B, nrot, nf, Vf,
                                               betaf, posf, col, Lw, cand, tq, rhs)
                 if extra > 0:
-                    for i in range(nh, nh + nw):    # (the unit-row step does not bring them)
-                        _bring(B, rows[i], nrot, nf, Vf, betaf, posf)
-                    _soft_gradient(B, y, col, rows, nh, nw, tgt, g)
+                    if lev < k:
+                        _soft_gradient_x(Bo, ucol, xc, rows, nh, nw, tgt, col, nf, Vf,
+                                         betaf, posf, px, g)
+                    else:       # the tie-break's rows are made rotated (B), not in Bo
+                        _soft_gradient(B, y, col, rows, nh, nw, tgt, g)
                     if _nnls_working_set(Lw, m_at, d, g, cand, rhs, rnorm, rcond, gscale, T,
                                          V, beta, nu, px, p, perm):
                         moved_set = False

@@ -422,6 +422,21 @@ def test_a_degenerate_point_takes_the_working_set_its_multipliers_need(warm_star
     assert np.all(np.abs(w - wr) <= LEVEL_TOL * np.maximum(1.0, wr)), (w, wr)
 
 
+def test_a_degenerate_point_of_the_tie_break_takes_the_working_set_its_multipliers_need():
+    """Fuzz bounds stack (seed 7, case 1268; n 13 free at the minimum-norm tie-break, 21
+    rows at their bounds, 13 in the working set): the tie-break's degenerate point takes
+    2 iterations with the working set the multipliers need. Its gradient is read from
+    the tie-break's own rows, made in the rotated coordinates: read in ``x`` like a
+    level's, it was zero there, the proposal kept the working set and the tie-break
+    took 19 iterations (exchanges of steps of length zero). The answer passes the
+    independent KKT check."""
+    from prioik.benchmarks.fuzz import draw
+    stack = draw("bounds", 7, 1268).stack
+    sol = prioik.solve(stack, NAME)
+    assert sol.info["iterations"][-1] <= 3, sol.info["iterations"]
+    assert sol.status == "optimal"
+    assert_exact(stack, sol)
+
 @pytest.mark.parametrize("scale", [1e-200, 1e-120, 1e120])
 def test_a_level_of_extreme_scale_is_solved_equilibrated(scale):
     """``scale·I x = [1, 2]`` above a box it meets: squares of entries below ~1e-154
@@ -1309,6 +1324,86 @@ def test_rows_at_bounds_reads_each_rows_own_bounds():
     # E: each row's free part, signed so that the directions it allows have E p ≥ 0
     assert np.array_equal(E[:m], np.array([[0, 1, 0, 0], [0, 0, 0, -1], [0, 0, -2, 0]]))
 
+
+def test_nnls_working_set_reaches_the_non_negative_least_squares_optimum():
+    """``_nnls_working_set`` (the degenerate point's working set by its multipliers)
+    returns a set ``P`` whose least-squares multipliers are non-negative and whose
+    residual ``‖E_Pᵀ μ − g‖`` is scipy's NNLS optimum (1e-10 relative), on random rows:
+    started from the right set (one pass), from a set whose multipliers are wrong-signed
+    (it starts again from the empty set) and from the empty set; as many rows as free
+    directions and more."""
+    from scipy.optimize import nnls
+
+    from prioik.formulations._active_set_kernel import _nnls_working_set
+    for seed in range(12):
+        rng = np.random.default_rng(seed)
+        d = int(rng.integers(4, 12))
+        m = d + int(rng.integers(0, 3))
+        E = rng.standard_normal((m, d))
+        g = rng.standard_normal(d)
+        mu_opt, res_opt = nnls(E.T, g)
+        right = (mu_opt > 0).astype(float)
+        for start in (right, 1.0 - right, np.zeros(m)):
+            if start.sum() > d:          # (a working set has at most d independent rows)
+                continue
+            inP = start.copy()
+            T, V = np.zeros((m + 1, d)), np.zeros((m + 1, d))
+            beta, z, h, r = np.zeros(m + 1), np.zeros(m + 1), np.zeros(d), np.zeros(d)
+            order = np.zeros(m + 1, np.int64)
+            settled = _nnls_working_set(E, m, d, g, np.arange(m), inP, np.ones(m), 1e-10,
+                                        1e-12 * np.linalg.norm(g), T, V, beta, z, h, r, order)
+            assert settled
+            P = np.flatnonzero(inP)
+            mu = np.linalg.lstsq(E[P].T, g, rcond=None)[0] if P.size else np.zeros(0)
+            assert np.all(mu >= -1e-12)
+            res = np.linalg.norm(E[P].T @ mu - g)
+            assert abs(res - res_opt) <= 1e-10 * max(1.0, np.linalg.norm(g))
+            if start is right and right.sum() < d:
+                assert np.array_equal(inP, right)
+
+
+def test_the_soft_gradient_read_in_x_is_the_rotated_rows_gradient():
+    """``_soft_gradient_x`` (the level's gradient summed in ``x`` and rotated once by the
+    fixing reflectors) equals ``_soft_gradient`` on the same soft rows brought into the
+    rotated coordinates one by one (1e-12), with unit rows (``ucol``) and dense rows, at
+    several numbers of fixed coordinates."""
+    from prioik.formulations._active_set_kernel import (_bring, _soft_gradient,
+                                                        _soft_gradient_x)
+    rng = np.random.default_rng(3)
+    n, R = 9, 8
+    for nf in (0, 2, 5):
+        Vf, betaf, posf = np.zeros((n, n)), np.zeros(n), np.arange(n, dtype=np.int64)
+        for t in range(nf):
+            v = rng.standard_normal(n - t)
+            Vf[t, t:] = v
+            betaf[t] = 2.0 / (v @ v)
+        Q = np.eye(n)
+        for t in range(nf):          # Q = H_0 … H_{nf-1}
+            H = np.eye(n)
+            H[t:, t:] -= betaf[t] * np.outer(Vf[t, t:], Vf[t, t:])
+            Q = Q @ H
+        Bo = rng.standard_normal((R, n))
+        ucol = np.full(R, -1, np.int64)
+        for j in (1, 4, 6):          # unit rows: one non-zero column
+            c = int(rng.integers(n))
+            Bo[j] = 0.0
+            Bo[j, c] = rng.standard_normal()
+            ucol[j] = c
+        y = rng.standard_normal(n)
+        xc = Q @ y
+        B = Bo.copy()
+        nrot = np.zeros(R, np.int64)
+        for j in range(R):
+            _bring(B, j, nrot, nf, Vf, betaf, posf)
+        assert np.allclose(B, Bo @ Q, atol=1e-12)
+        rows = np.array([0, 2, 1, 4, 5, 6, 7, 3], np.int64)     # 2 hard rows, then 5 soft
+        nh, nw = 2, 5
+        tgt = rng.standard_normal(R)
+        g, g_x, gx = np.zeros(n), np.zeros(n), np.zeros(n)
+        _soft_gradient(B, y, nf, rows, nh, nw, tgt, g)
+        _soft_gradient_x(Bo, ucol, xc, rows, nh, nw, tgt, nf, nf, Vf, betaf, posf, gx, g_x)
+        assert np.linalg.norm(g[:n - nf]) > 1e-3
+        assert np.allclose(g_x[:n - nf], g[:n - nf], rtol=0, atol=1e-12 * np.linalg.norm(g))
 
 @pytest.mark.parametrize("limits", [False, True])
 @pytest.mark.parametrize("base", [0, 6])
