@@ -23,7 +23,10 @@ velocity-level stack with bounds on ``q̇``. Every solver gets the same stacks:
 Times: each solver runs ``repeats`` passes over the trajectory in order (as a control
 loop runs it), the passes of the four interleaved; per stack the fastest pass's
 ``perf_counter`` wall time, then the median over the stacks (numba compiled beforehand,
-BLAS limited to one thread). Beside the medians
+BLAS limited to one thread). Ten passes by default (a pass of the four over the 24
+stacks takes ~3 ms): with three, the fastest pass of a 10-µs solve still carried this
+shared machine's noise, and the incompatible q̈ variant's warm/raw moved 0.29-0.31
+between runs of the same code; with ten, 0.281-0.289 in three runs. Beside the medians
 (issue 13's targets), per stack against DAQP raw: the slowest stack's ratio, and the
 ratio of the whole trajectory's times (where limits are active the active set iterates:
 those steps weigh on both). Exactness: every level's ``‖w_i‖²`` of the active-set
@@ -38,7 +41,7 @@ Also the whole G1 velocity IK step and the Panda reach with joint position and v
 limits against PlaCo (:func:`g1_limits_step`, :func:`panda_limits_step`); :func:`run`
 returns every row and the ratios against issue 13's targets.
 
-Run: ``python -m prioik.benchmarks.active_set_bench [--windows 4 --steps 6 --repeats 3
+Run: ``python -m prioik.benchmarks.active_set_bench [--windows 4 --steps 6 --repeats 10
 --ik-steps 300 --no-ik --no-stacks]``.
 """
 
@@ -98,7 +101,7 @@ def _time(fn, repeats: int) -> float:
     return best
 
 
-def measure(stacks: list, repeats: int = 3, cascade_every: int = 1) -> dict[str, Any]:
+def measure(stacks: list, repeats: int = 10, cascade_every: int = 1) -> dict[str, Any]:
     """Median per-solve times (s) of each solver on ``stacks`` and the active set's
     agreement with the strict reference (:data:`STRICT_REFERENCE`)."""
     import daqp
@@ -287,7 +290,7 @@ def panda_limits_step(steps: int = 300, rounds: int = 7) -> dict[str, Any]:
             "statuses": sorted(statuses)}
 
 
-def run(windows: int = 4, steps: int = 6, repeats: int = 3, ik_steps: int = 300,
+def run(windows: int = 4, steps: int = 6, repeats: int = 10, ik_steps: int = 300,
         stacks: bool = True, ik: bool = True) -> dict[str, Any]:
     """Every timing of this module in one run: :func:`measure` on both fencing variants
     at acceleration and velocity level (``stacks``), :func:`g1_limits_step` and
@@ -374,7 +377,8 @@ def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--windows", type=int, default=4, help="stretches of the run")
     p.add_argument("--steps", type=int, default=6, help="consecutive steps per stretch")
-    p.add_argument("--repeats", type=int, default=3, help="timing repeats (best of)")
+    p.add_argument("--repeats", type=int, default=10, help="timing passes (per stack the "
+                   "fastest)")
     p.add_argument("--ik-steps", type=int, default=300, help="IK steps (G1, Panda)")
     p.add_argument("--no-ik", action="store_true", help="skip the IK-step timings")
     p.add_argument("--no-stacks", action="store_true", help="skip the G1 bounds stacks")
