@@ -816,16 +816,16 @@ def _nnls_working_set(E, m, d, g, cand, inP, rnorm, rcond, gscale, T, V, beta, z
     zero (G1 with 18 limits at their bounds on 18 free coordinates: 12 iterations of the
     posture level).
 
-    ``P`` starts as the working set ``inP``; the rows of its wrong-signed multipliers
-    there leave it together, then one row leaves per pass: one at a time from the start,
-    releases undid 13-15 of the 18 rows one pass each and entries brought them back (31
-    passes on the G1 stacks whose sword tip holds 19 limits). ``P`` is one LQ (``T``,
-    ``V``, ``beta``): an entering row is appended (the reflectors applied to it, one
-    more of its own), a leaving one refactorizes it. Returns whether it settled (``inP`` the set) within ``2m + 2``
-    passes with ``P`` clearly independent (the hard-row rule, ``rcond``); the caller's
-    iterations verify the set either way."""
+    ``P`` starts as the working set ``inP``. Every row whose multiplier is wrong-signed
+    there leaves at once; after that one row leaves or enters per pass (released one
+    per pass from the working set, 13-15 of its 18 rows left and entries brought them
+    back: 31 passes on the G1 stacks whose sword tip holds 19 limits). ``P`` is one LQ
+    (``T``, ``V``, ``beta``): an entering row is appended to it (the reflectors applied
+    to the row, one more of its own), a leaving one refactorizes it. Returns whether it
+    settled (``inP`` the set) within ``2m + 2`` passes with ``P`` clearly independent
+    (the hard-row rule, ``rcond``); the caller's iterations verify the set either way."""
     refactor = True
-    restarted = False
+    working = True          # P is the working set as given
     p = 0
     for it in range(2 * m + 2):
         if refactor:
@@ -856,9 +856,9 @@ def _nnls_working_set(E, m, d, g, cand, inP, rnorm, rcond, gscale, T, V, beta, z
                 worst = wrong
                 out = order[i]
         if out >= 0:
-            if not restarted:
+            if working:
                 # the working set's own multipliers: every wrong-signed row leaves at once
-                restarted = True
+                working = False
                 for i in range(p):
                     if -z[i] * rnorm[cand[order[i]]] > gscale:
                         inP[order[i]] = 0.0
@@ -888,7 +888,7 @@ def _nnls_working_set(E, m, d, g, cand, inP, rnorm, rcond, gscale, T, V, beta, z
         if enter < 0:
             return True
         inP[enter] = 1.0
-        restarted = True        # (a set with an entry is not the working set)
+        working = False
         row = T[p, :d]
         for c in range(d):
             row[c] = E[enter, c]
