@@ -24,9 +24,8 @@ Times: each solver runs ``repeats`` passes over the trajectory in order (as a co
 loop runs it), the passes of the four interleaved; per stack the fastest pass's
 ``perf_counter`` wall time, then the median over the stacks (numba compiled beforehand,
 BLAS limited to one thread). Ten passes by default (a pass of the four over the 24
-stacks takes ~3 ms): with three, the fastest pass of a 10-µs solve still carried this
-shared machine's noise, and the incompatible q̈ variant's warm/raw moved 0.29-0.31
-between runs of the same code; with ten, 0.281-0.289 in three runs. Beside the medians
+stacks takes ~3 ms): with fewer, the fastest pass of a ~10 µs solve still carries the
+noise of a shared machine. Beside the medians
 (issue 13's targets), per stack against DAQP raw: the slowest stack's ratio, and the
 ratio of the whole trajectory's times (where limits are active the active set iterates:
 those steps weigh on both). Exactness: every level's ``‖w_i‖²`` of the active-set

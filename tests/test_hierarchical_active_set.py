@@ -437,6 +437,7 @@ def test_a_degenerate_point_of_the_tie_break_takes_the_working_set_its_multiplie
     assert sol.status == "optimal"
     assert_exact(stack, sol)
 
+
 @pytest.mark.parametrize("scale", [1e-200, 1e-120, 1e120])
 def test_a_level_of_extreme_scale_is_solved_equilibrated(scale):
     """``scale·I x = [1, 2]`` above a box it meets: squares of entries below ~1e-154
@@ -1329,9 +1330,9 @@ def test_nnls_working_set_reaches_the_non_negative_least_squares_optimum():
     """``_nnls_working_set`` (the degenerate point's working set by its multipliers)
     returns a set ``P`` whose least-squares multipliers are non-negative and whose
     residual ``‖E_Pᵀ μ − g‖`` is scipy's NNLS optimum (1e-10 relative), on random rows:
-    started from the right set (one pass), from a set whose multipliers are wrong-signed
-    (it starts again from the empty set) and from the empty set; as many rows as free
-    directions and more."""
+    started from the right set (it keeps it), from a set whose multipliers are
+    wrong-signed (those rows leave together) and from the empty set; as many rows as
+    free directions and more."""
     from scipy.optimize import nnls
 
     from prioik.formulations._active_set_kernel import _nnls_working_set
@@ -1404,6 +1405,7 @@ def test_the_soft_gradient_read_in_x_is_the_rotated_rows_gradient():
         _soft_gradient_x(Bo, ucol, xc, rows, nh, nw, tgt, nf, nf, Vf, betaf, posf, gx, g_x)
         assert np.linalg.norm(g[:n - nf]) > 1e-3
         assert np.allclose(g_x[:n - nf], g[:n - nf], rtol=0, atol=1e-12 * np.linalg.norm(g))
+
 
 @pytest.mark.parametrize("limits", [False, True])
 @pytest.mark.parametrize("base", [0, 6])
