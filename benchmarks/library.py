@@ -108,8 +108,8 @@ def add_parser(sub) -> None:
         description="Compile, or load from numba's disk cache, every compiled kernel of "
                     "the formulations that have them (extended_jacobian, "
                     "hierarchical_active_set), printing the seconds each took. numba "
-                    "compiles a kernel on its first use after an install (about 80 s for "
-                    "hierarchical_active_set on a 2-core machine) and caches it; run this "
+                    "compiles a kernel on its first use after an install (one to two minutes "
+                    "for hierarchical_active_set on a 2-core machine) and caches it; run this "
                     "once after installing so that a control loop's first solve does not "
                     "wait for it.")
     p.add_argument("--formulations", default="", metavar="A,B",

@@ -134,9 +134,10 @@ def compile_kernels(names: list[str] | None = None,
     ``names``; returns ``(formulation, seconds)`` for each.
 
     numba compiles a kernel on its first use after an install and caches it on disk;
-    the first solve of ``hierarchical_active_set`` then takes about 80 s on a 2-core
-    machine. Running this once (``prioik compile``) moves that wait out of a control
-    loop's first step; later processes load the kernels in under a second.
+    the first solve of ``hierarchical_active_set`` then takes one to two minutes on a
+    2-core machine (its two entry points: 61 s and 42 s on this one, one day). Running
+    this once (``prioik compile``) moves that wait out of a control loop's first step;
+    later processes load the kernels in under a second.
 
     Args:
         names: The formulations (default: every available one with compiled kernels).
