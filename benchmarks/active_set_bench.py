@@ -54,6 +54,8 @@ from typing import Any
 import numpy as np
 
 NAME = "hierarchical_active_set"
+#: timing passes over each trajectory (per stack the fastest; see the module docstring)
+REPEATS = 10
 
 
 def bounds_stacks(variant: str, windows: int, steps: int, level: str) -> list:
@@ -100,7 +102,7 @@ def _time(fn, repeats: int) -> float:
     return best
 
 
-def measure(stacks: list, repeats: int = 10, cascade_every: int = 1) -> dict[str, Any]:
+def measure(stacks: list, repeats: int = REPEATS, cascade_every: int = 1) -> dict[str, Any]:
     """Median per-solve times (s) of each solver on ``stacks`` and the active set's
     agreement with the strict reference (:data:`STRICT_REFERENCE`)."""
     import daqp
@@ -289,7 +291,7 @@ def panda_limits_step(steps: int = 300, rounds: int = 7) -> dict[str, Any]:
             "statuses": sorted(statuses)}
 
 
-def run(windows: int = 4, steps: int = 6, repeats: int = 10, ik_steps: int = 300,
+def run(windows: int = 4, steps: int = 6, repeats: int = REPEATS, ik_steps: int = 300,
         stacks: bool = True, ik: bool = True) -> dict[str, Any]:
     """Every timing of this module in one run: :func:`measure` on both fencing variants
     at acceleration and velocity level (``stacks``), :func:`g1_limits_step` and
@@ -376,7 +378,7 @@ def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--windows", type=int, default=4, help="stretches of the run")
     p.add_argument("--steps", type=int, default=6, help="consecutive steps per stretch")
-    p.add_argument("--repeats", type=int, default=10, help="timing passes (per stack the "
+    p.add_argument("--repeats", type=int, default=REPEATS, help="timing passes (per stack the "
                    "fastest)")
     p.add_argument("--ik-steps", type=int, default=300, help="IK steps (G1, Panda)")
     p.add_argument("--no-ik", action="store_true", help="skip the IK-step timings")

@@ -820,8 +820,8 @@ def _nnls_working_set(E, m, d, g, cand, inP, rnorm, rcond, gscale, T, V, beta, z
     there leaves at once; after that one row leaves or enters per pass (released one
     per pass from the working set, 13-15 of its 18 rows left and entries brought them
     back: 31 passes on the G1 stacks whose sword tip holds 19 limits). ``P`` is one LQ
-    (``T``, ``V``, ``beta``): an entering row is appended to it (the reflectors applied
-    to the row, one more of its own), a leaving one refactorizes it. Returns whether it
+    (``T``, ``V``, ``beta``), built row by row (:func:`_lq_append`): an entering row is
+    appended to it, a leaving one has it built again. Returns whether it
     settled (``inP`` the set) within ``2m + 2`` passes with ``P`` clearly independent
     (the hard-row rule, ``rcond``); the caller's iterations verify the set either way."""
     refactor = True
@@ -833,18 +833,11 @@ def _nnls_working_set(E, m, d, g, cand, inP, rnorm, rcond, gscale, T, V, beta, z
             p = 0
             for i in range(m):
                 if inP[i] != 0.0:
-                    if p >= d:
+                    if p >= d or not _lq_append(T, p, E[i], d, V, beta,
+                                                rcond * rnorm[cand[i]], order[:0]):
                         return False
-                    for c in range(d):
-                        T[p, c] = E[i, c]
                     order[p] = i
                     p += 1
-            for t in range(p):
-                tail = T[t, t:d]
-                s = rnorm[cand[order[t]]]
-                if not (_dot(tail, tail) > (rcond * s) * (rcond * s)):
-                    return False
-                _reflect_row(T, t, t, d, V, beta, t, t + 1, p)
         for c in range(d):
             h[c] = g[c]
         _lq_multipliers(h, d, p, T, V, beta, order[:0], z)
@@ -889,18 +882,31 @@ def _nnls_working_set(E, m, d, g, cand, inP, rnorm, rcond, gscale, T, V, beta, z
             return True
         inP[enter] = 1.0
         working = False
-        row = T[p, :d]
-        for c in range(d):
-            row[c] = E[enter, c]
-        _reflect_vector(row, d, p, V, beta, order[:0], True)
-        tail = T[p, p:d]
-        s = rnorm[cand[enter]]
-        if not (_dot(tail, tail) > (rcond * s) * (rcond * s)):
+        if not _lq_append(T, p, E[enter], d, V, beta, rcond * rnorm[cand[enter]],
+                          order[:0]):
             return False
-        _reflect_row(T, p, p, d, V, beta, p, p + 1, p + 1)
         order[p] = enter
         p += 1
     return False
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _lq_append(T, p, row, d, V, beta, floor, no_pos):
+    """Row ``p`` of the LQ factorization ``T[:p]`` (reflector ``t`` in ``V[t, t:d]``,
+    ``beta[t]``): ``row[:d]`` copied to ``T[p]``, the ``p`` reflectors applied to it
+    (``H_0`` first, as a factorization of all the rows at once applies them to it), and
+    a reflector of its own made when what they leave of it, ``‖T[p, p:d]‖``, exceeds
+    ``floor`` (the hard-row rule); ``False`` (and no reflector) otherwise. ``no_pos``:
+    an empty int array (:func:`_reflect_vector`'s reflector ``t`` starts at ``t``)."""
+    u = T[p, :d]
+    for c in range(d):
+        u[c] = row[c]
+    _reflect_vector(u, d, p, V, beta, no_pos, True)
+    tail = T[p, p:d]
+    if not _dot(tail, tail) > floor * floor:
+        return False
+    _reflect_row(T, p, p, d, V, beta, p, p + 1, p + 1)
+    return True
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
