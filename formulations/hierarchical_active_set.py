@@ -490,7 +490,7 @@ class Prepared:
             return None
         # a refining solve that was flagged itself certified its answer already
         if (not out.info.get("path_certified")
-                and not check_lexicographic(data.as_stack(), out.x).ok):
+                and not check_lexicographic(data, out.x).ok):
             return None
         # a refining solve refined once more reports its own (finer) tolerances
         out.info.setdefault("refined_primal_tol", tol)
@@ -518,7 +518,7 @@ class Prepared:
         minimum-norm tie-break too when it was flagged); ``[]`` when it passes."""
         k = self._k
         tie_break = any(k in levels for levels in flagged.values())
-        report = check_lexicographic(data.as_stack(), x, minimum_norm=tie_break)
+        report = check_lexicographic(data, x, minimum_norm=tie_break)
         info.update(flagged)
         info["path_certified"] = report.ok
         if report.ok:

@@ -20,11 +20,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .layout import level_residuals
+from .layout import StackData, level_residuals
 from .errors import TaskStackError, UnsupportedTaskError
 from .linalg import (CERTIFICATE_SIGMA_FLOOR, DEFAULT_CERTIFICATE_TOL, DEFAULT_RCOND, level_scale,
-                     matrix_rank, nonnegative_least_squares, range_basis, row_activity)
-from .stack import TaskStack
+                     matrix_rank, nonnegative_least_squares, range_basis,
+                     row_activity_from_values)
+from .stack import EQUILIBRATE_ABOVE, EQUILIBRATE_BELOW, TaskStack
 
 
 def _require_equality(stack: TaskStack, what: str) -> None:
@@ -295,7 +296,8 @@ class _LevelRows:
         return cls(np.vstack(A), np.concatenate(lo), np.concatenate(up), np.concatenate(sw))
 
 
-def check_lexicographic(stack: TaskStack, x: np.ndarray, tol: float = DEFAULT_CERTIFICATE_TOL,
+def check_lexicographic(stack: TaskStack | StackData, x: np.ndarray,
+                        tol: float = DEFAULT_CERTIFICATE_TOL,
                         rcond: float = DEFAULT_RCOND, minimum_norm: bool = False,
                         metric: np.ndarray | None = None) -> LexicographicReport:
     """Certificate that ``x`` is a lexicographic optimum of a stack of equality and
@@ -340,7 +342,8 @@ def check_lexicographic(stack: TaskStack, x: np.ndarray, tol: float = DEFAULT_CE
     lexicographic optimal set.
 
     Args:
-        stack: The stack.
+        stack: The stack, or its rows (:class:`StackData`, e.g. the data a prepared
+            solver read: checked as they are, without building the stack's tasks).
         x: Candidate answer (``n``).
         tol: Relative tolerance of the KKT residuals and of the activity rule.
         rcond: Relative rank threshold of the nested null spaces.
@@ -373,16 +376,25 @@ def check_lexicographic(stack: TaskStack, x: np.ndarray, tol: float = DEFAULT_CE
     optimal set and verdict); their :class:`LevelCheck` values are the rescaled level's.
 
     Raises:
-        TaskStackError: ``x`` is not a vector of ``n`` numbers.
+        TaskStackError: ``x`` is not a vector of ``n`` numbers, or a value of writable
+            ``StackData`` is not valid (:meth:`StackData.check`).
     """
-    x = _candidate(x, stack.n)
     # levels of extreme scale rescaled by a power of two (the same optimal set and
     # tie-break): squares of entries below ~1e-154 underflow, and a 1e-200·I level
     # read as zero rows passed x = 0
-    stack, _ = stack.equilibrated()
-    report = _check_lexicographic(stack, x, tol, rcond, minimum_norm, metric, False)
+    if isinstance(stack, StackData):
+        if stack.writeable:         # (a stack's frozen data was checked with its tasks)
+            stack.check()
+        x = _candidate(x, stack.n)
+        data = stack
+        if _extreme_levels(data):
+            data = data.as_stack().equilibrated()[0].data
+    else:
+        x = _candidate(x, stack.n)
+        data = stack.equilibrated()[0].data
+    report = _check_lexicographic(data, x, tol, rcond, minimum_norm, metric, False)
     if not report.ok and report.band_rows_fixed:
-        retry = _check_lexicographic(stack, x, tol, rcond, minimum_norm, metric, True)
+        retry = _check_lexicographic(data, x, tol, rcond, minimum_norm, metric, True)
         if retry.ok:
             return retry
     return dataclasses.replace(report, band_rows_fixed=0)
@@ -434,19 +446,45 @@ def _feasible(above: list, rows: "_LevelRows", small: np.ndarray, x: np.ndarray)
 _BAND_FLOOR = 1e-12
 
 
-def _check_lexicographic(stack: TaskStack, x: np.ndarray, tol: float, rcond: float,
+def _extreme_levels(data: StackData) -> bool:
+    """Whether a level of ``data`` needs :meth:`TaskStack.equilibrated` (its largest
+    entry outside ``[EQUILIBRATE_BELOW, EQUILIBRATE_ABOVE]``, zero levels aside)."""
+    peaks = np.maximum.reduceat(np.abs(data.A).max(axis=1), data.layout.starts[:-1]) \
+        if data.m and data.n else np.zeros(0)
+    return bool(((peaks > 0) & ((peaks < EQUILIBRATE_BELOW)
+                                | (peaks > EQUILIBRATE_ABOVE))).any())
+
+
+def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: float,
                          minimum_norm: bool, metric: np.ndarray | None,
                          fix_band: bool) -> "LexicographicReport":
     """:func:`check_lexicographic` with the band rows read as held (``fix_band=False``;
     the report's ``band_rows_fixed`` then counts the band rows found) or as fixed."""
-    n = stack.n
+    n = data.n
     xn = level_scale(x)
     Z = np.eye(n)                      # null space of the fixed rows of the levels above
-    signed: list[np.ndarray] = []      # unit rows at one bound, oriented: multiplier ≥ 0
+    # the whole stack's rows at once, each level a slice: the activity rule is row by row
+    layout = data.layout
+    starts = layout.starts
+    eq = layout.row_is_equality
+    A_all, sw_all = data.A, data.sqrt_weight
+    lo_all = np.where(eq, data.b, data.lower)
+    up_all = np.where(eq, data.b, data.upper)
+    WA_all = sw_all[:, None] * A_all
+    norms_all = np.linalg.norm(A_all, axis=1)
+    finite = bool(np.isfinite(x).all())
+    ax = np.abs(x)
+    if finite:
+        a_all = A_all @ x
+        terms_all = np.abs(A_all) @ ax                  # |a_r| |x|
+        size_all = terms_all + norms_all                # the activity rule's row sizes
+        side_all, v_all = row_activity_from_values(a_all, lo_all, up_all, size_all, tol)
+    # unit rows at one bound, oriented (multiplier ≥ 0): the first `n_signed` rows
+    signed = np.empty((A_all.shape[0], n))
+    n_signed = 0
     fixed_count = 0
     above: list[tuple[_LevelRows, np.ndarray]] = []   # higher levels' rows, fixed masks
     checks = []
-    finite = bool(np.isfinite(x).all())
 
     def kkt(g: np.ndarray, B: np.ndarray | None, floor_scale: float) -> float:
         """``min_μ≥0 ‖D Vᵀ Zᵀ (g + Cᵀ μ)‖`` with ``B Z = U Σ Vᵀ``, ``D = 1/max(σ, floor)``."""
@@ -455,21 +493,18 @@ def _check_lexicographic(stack: TaskStack, x: np.ndarray, tol: float, rcond: flo
             return 0.0
         y = Z.T @ g
         if B is None:
-            V, D = np.eye(d), np.ones(d)
-            y = D * (V.T @ y)
+            D = None
         else:
-            BZ = B @ Z
-            floor = CERTIFICATE_SIGMA_FLOOR * (float(np.linalg.norm(B)) or floor_scale)
+            bn = float(np.linalg.norm(B))
+            floor = CERTIFICATE_SIGMA_FLOOR * (bn or floor_scale)
             if floor == 0.0:
                 return 0.0            # a level of zero rows: nothing x can change
-            if BZ.shape[0]:
-                _, s, vt = np.linalg.svd(BZ, full_matrices=True)
-                V = vt.T
+            if B.shape[0]:
+                _, s, vt = np.linalg.svd(B @ Z, full_matrices=True)
                 sig = np.zeros(d)
                 sig[:s.shape[0]] = s
             else:
-                V, sig = np.eye(d), np.zeros(d)
-            bn = float(np.linalg.norm(B))
+                vt, sig = None, np.zeros(d)
             # the solvers' rank rule: rcond times the whole level's ‖√W A_i‖_F (its held
             # and inactive rows too), not the active rows' alone: a level whose violated
             # rows are 1e-13 of its satisfied ones cannot move them (fuzz 5-32: rows of
@@ -485,20 +520,23 @@ def _check_lexicographic(stack: TaskStack, x: np.ndarray, tol: float, rcond: flo
             # task-space change up to 1e6 times larger and failed exact answers)
             if bn > 0:
                 D[null] = 1.0 / bn
-            y = V.T @ y
+            if vt is not None:
+                y = vt @ y
             y[null] = 0.0
             y = D * y
-        if not signed:
+        if not n_signed:
             return level_scale(y)
-        M = D[:, None] * (V.T @ (Z.T @ np.vstack(signed).T))
+        M = Z.T @ signed[:n_signed].T
+        if D is not None:
+            M = D[:, None] * (vt @ M if vt is not None else M)
         norms = np.linalg.norm(M, axis=0)
         keep = norms > 0
         # unit columns: the same cone, and a well-scaled NNLS (D spans up to 1e6)
         _, res = nonnegative_least_squares(M[:, keep] / norms[keep], -y)
         return res
 
-    def add_level(rows: _LevelRows, side: np.ndarray) -> None:
-        nonlocal Z, fixed_count
+    def add_level(rows: _LevelRows, side: np.ndarray, norms: np.ndarray) -> None:
+        nonlocal Z, fixed_count, n_signed
         fix = side == 2
         above.append((rows, fix))
         if fix.any():
@@ -509,34 +547,36 @@ def _check_lexicographic(stack: TaskStack, x: np.ndarray, tol: float, rcond: flo
                 r = int(np.count_nonzero(s > tol_r))
                 Z = Z @ vt[r:].T
             fixed_count += int(fix.sum())
-        one = (side == 1) | (side == -1)
-        if one.any():
-            A1 = rows.A[one]
-            norms = np.linalg.norm(A1, axis=1)
-            keep = norms > 0
-            signed.extend(list((side[one][keep, None] * A1[keep]) / norms[keep, None]))
+        one = ((side == 1) | (side == -1)) & (norms > 0)
+        count = int(np.count_nonzero(one))
+        if count:
+            signed[n_signed:n_signed + count] = \
+                (side[one][:, None] * rows.A[one]) / norms[one][:, None]
+            n_signed += count
 
-    ax = np.abs(x)
     band = 0
-    for i, level in enumerate(stack.levels):
-        rows = _LevelRows.of(level)
+    for i, names in enumerate(layout.names):
+        s0, s1 = int(starts[i]), int(starts[i + 1])
+        rows = _LevelRows(A_all[s0:s1], lo_all[s0:s1], up_all[s0:s1], sw_all[s0:s1])
+        norms = norms_all[s0:s1]
         if finite:
-            side, v = row_activity(rows.A, rows.lower, rows.upper, x, tol)
+            side, v = side_all[s0:s1], v_all[s0:s1]
+            size = size_all[s0:s1]
         else:
-            side, v = np.full(rows.A.shape[0], 2), np.full(rows.A.shape[0], np.nan)
+            side, v = np.full(s1 - s0, 2), np.full(s1 - s0, np.nan)
         sw = rows.sqrt_weight
-        WA = sw[:, None] * rows.A
+        WA = WA_all[s0:s1]
         g = WA.T @ (sw * v)
-        target = rows.A @ x - v
         an = float(np.linalg.norm(WA))
-        scale = level_scale(sw * (np.abs(rows.A) @ ax + np.abs(target))) + an
+        if finite:
+            target = a_all[s0:s1] - v
+            scale = level_scale(sw * (terms_all[s0:s1] + np.abs(target))) + an
+        else:
+            scale = np.nan
         res = kkt(g, WA[(side == 2) | (v != 0)], an) if finite else np.nan
         ok = bool(np.isfinite(res) and res <= tol * max(scale, 1e-300))
         violation = level_scale(sw * v)
         slack = None
-        if finite:
-            norms = np.linalg.norm(rows.A, axis=1)
-            size = np.abs(rows.A) @ ax + norms      # the activity rule's row sizes
         if finite and ok:
             # rows left violated by little (beyond rounding, within _NEARLY_FEASIBLE of
             # their size) may be a solver's slack on rows the level's optimum satisfies.
@@ -568,8 +608,8 @@ def _check_lexicographic(stack: TaskStack, x: np.ndarray, tol: float, rcond: flo
                     slack = small & (rows.lower != rows.upper)   # equality rows stay fixed
                     side = side.copy()
                     side[slack] = np.where(v[slack] > 0, 1, -1)
-        checks.append(LevelCheck(i, level.names, violation, float(res), scale, ok,
-                                 fixed_count, len(signed)))
+        checks.append(LevelCheck(i, names, violation, float(res), scale, ok,
+                                 fixed_count, n_signed))
         in_band = None
         if finite and violation > tol * scale:
             # only a level left violated beyond the tolerance can hold a row at a small
@@ -584,14 +624,14 @@ def _check_lexicographic(stack: TaskStack, x: np.ndarray, tol: float, rcond: flo
         if fix_band and in_band is not None and in_band.any():
             side = side.copy()
             side[in_band] = 2
-        add_level(rows, side)
+        add_level(rows, side, norms)
     final = None
     if minimum_norm:
         W = np.eye(n) if metric is None else np.asarray(metric, dtype=np.float64)
         scale = (1.0 if metric is None else float(np.linalg.norm(W, 2))) * max(1.0, xn)
         res = kkt(W @ x, None, 1.0) if finite else np.nan
-        final = LevelCheck(len(stack), ("minimum-norm",), xn, float(res), scale,
+        final = LevelCheck(layout.k, ("minimum-norm",), xn, float(res), scale,
                            bool(np.isfinite(res) and res <= tol * scale),
-                           fixed_count, len(signed))
+                           fixed_count, n_signed)
     ok = all(c.ok for c in checks) and (final is None or final.ok)
     return LexicographicReport(ok, tol, tuple(checks), final, band)

@@ -154,19 +154,30 @@ def row_activity(A: np.ndarray, lower: np.ndarray, upper: np.ndarray, x: np.ndar
         violation.
     """
     a = A @ x
+    size = np.abs(A) @ np.abs(x) + np.linalg.norm(A, axis=1)
+    return row_activity_from_values(a, lower, upper, size, tol)
+
+
+def row_activity_from_values(a: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+                             size: np.ndarray, tol: float = DEFAULT_CERTIFICATE_TOL
+                             ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`row_activity` from the rows' values ``a = A x`` and sizes
+    ``size = |A| |x| + ‖a_r‖`` (for a caller that has them already)."""
     v = a - np.clip(a, lower, upper)
-    rs = np.abs(A) @ np.abs(x) + np.linalg.norm(A, axis=1)
     with np.errstate(invalid="ignore"):
-        eps_u = tol * (rs + np.where(np.isfinite(upper), np.abs(upper), 0.0))
-        eps_l = tol * (rs + np.where(np.isfinite(lower), np.abs(lower), 0.0))
+        eps_u = tol * (size + np.where(np.isfinite(upper), np.abs(upper), 0.0))
+        eps_l = tol * (size + np.where(np.isfinite(lower), np.abs(lower), 0.0))
         at_u = np.isfinite(upper) & (np.abs(a - upper) <= eps_u)
         at_l = np.isfinite(lower) & (np.abs(a - lower) <= eps_l)
         violated = (a > upper + eps_u) | (a < lower - eps_l)
-    side = np.zeros(A.shape[0], dtype=np.int64)
+    side = np.zeros(a.shape[0], dtype=np.int64)
     side[at_u] = 1
     side[at_l] = -1
     side[(at_u & at_l) | violated | (lower == upper)] = 2
     return side, v
+
+
+_EPS = float(np.finfo(np.float64).eps)
 
 
 def _face_solve(M: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -174,7 +185,7 @@ def _face_solve(M: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     ``y − U Uᵀ y``, projected: accurate to ``eps ‖y‖`` where ``y − M s`` carries the
     rounding of ``M s``, ``eps ‖M‖ ‖s‖`` (huge for an ill-conditioned face)."""
     u, sig, vt = np.linalg.svd(M, full_matrices=False)
-    r = int(np.count_nonzero(sig > np.finfo(float).eps * max(M.shape) * sig[0])) \
+    r = int(np.count_nonzero(sig > _EPS * max(M.shape) * sig[0])) \
         if sig.size and sig[0] > 0 else 0
     c = u[:, :r].T @ y
     return vt[:r].T @ (c / sig[:r]), y - u[:, :r] @ c
@@ -205,15 +216,19 @@ def nonnegative_least_squares(M: np.ndarray, y: np.ndarray, max_iter: int | None
     cap = 3 * p + 10 if max_iter is None else max_iter
     # the gradient Mᵀ r scales with ‖M‖ ‖y‖: a tolerance of ‖M‖ alone stopped searches
     # on a small y (1e-4) early, at residuals 1e-9 where the optimum is 1e-20
-    tol = 10.0 * np.finfo(float).eps * max(d, p) * max(float(np.abs(M).sum(axis=0).max()),
-                                                         1e-300) \
+    tol = 10.0 * _EPS * max(d, p) * max(float(np.abs(M).sum(axis=0).max()), 1e-300) \
         * max(float(np.linalg.norm(y)), 1e-300)
     passive = np.zeros(p, dtype=bool)
     res = y.astype(np.float64, copy=True)     # y − M μ (projected at a face's solution)
     w = M.T @ res
     it = 0
-    while (~passive).any() and float(np.max(np.where(passive, -np.inf, w))) > tol and it < cap:
-        passive[int(np.argmax(np.where(passive, -np.inf, w)))] = True
+    while it < cap:
+        # the column of the largest gradient outside the face joins it, if positive
+        outside = np.where(passive, -np.inf, w)
+        j = int(np.argmax(outside))
+        if not outside[j] > tol:      # (every column in the face: -inf)
+            break
+        passive[j] = True
         while it < cap and passive.any():
             it += 1
             s = np.zeros(p)

@@ -381,3 +381,40 @@ def test_level_scale_of_a_vector_neither_overflows_nor_underflows():
     assert level_scale(np.zeros(3)) == 0.0 and level_scale(np.zeros(0)) == 0.0
     assert np.isnan(level_scale(np.array([1.0, np.nan])))
     assert level_scale(np.array([1.0, np.inf])) == np.inf
+
+
+@pytest.mark.parametrize("seed", SEEDS[:6])
+def test_stack_data_is_checked_as_its_stack(seed):
+    """``check_lexicographic(data, x)`` on a stack's rows (as a prepared solver holds
+    them: writable ``StackData``, no tasks built) gives the stack's report, value for
+    value: on the optimum (passes) and on a perturbed answer (fails at the same level)."""
+    from prioik.hierarchy import StackData
+    stack = _draw(seed)
+    data = StackData(stack.layout)
+    for key in ("A", "b", "lower", "upper", "sqrt_weight"):
+        getattr(data, key)[...] = getattr(stack.data, key)
+    x = _optimum(stack)
+    rng = np.random.default_rng(seed)
+    for candidate in (x, x + 1e-4 * max(1.0, np.linalg.norm(x)) * rng.standard_normal(stack.n)):
+        a = check_lexicographic(stack, candidate, minimum_norm=True)
+        b = check_lexicographic(data, candidate, minimum_norm=True)
+        assert a == b
+    assert check_lexicographic(data, x).ok
+    assert not check_lexicographic(data, candidate).ok
+
+
+def test_stack_data_is_validated_and_equilibrated():
+    """Writable ``StackData`` is checked at the boundary (a NaN names its task and row),
+    and a level of extreme scale is certified rescaled, as for its stack."""
+    from prioik.hierarchy import TaskStackError
+    stack = TaskStack([[Task("a", 1e-200 * np.eye(2), np.array([1.0, 2.0]))],
+                       [Task("b", np.ones((1, 2)), np.array([0.0]))]])
+    data = stack.data.copy()
+    x = np.array([1.0, 2.0]) * 1e200
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert check_lexicographic(data, x).ok
+        assert not check_lexicographic(data, np.zeros(2)).ok
+    data.A[2, 1] = np.nan
+    with pytest.raises(TaskStackError, match="task 'b'.*row 0|row 0.*'b'"):
+        check_lexicographic(data, x)
