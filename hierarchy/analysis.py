@@ -24,7 +24,7 @@ from .layout import StackData, level_residuals
 from .errors import TaskStackError, UnsupportedTaskError
 from .linalg import (CERTIFICATE_SIGMA_FLOOR, DEFAULT_CERTIFICATE_TOL, DEFAULT_RCOND, level_scale,
                      matrix_rank, nonnegative_least_squares, range_basis,
-                     row_activity_from_values)
+                     row_activity_from_values, svd)
 from .stack import EQUILIBRATE_ABOVE, EQUILIBRATE_BELOW, TaskStack
 
 
@@ -500,7 +500,7 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
             if floor == 0.0:
                 return 0.0            # a level of zero rows: nothing x can change
             if B.shape[0]:
-                _, s, vt = np.linalg.svd(B @ Z, full_matrices=True)
+                _, s, vt = svd(B @ Z)
                 sig = np.zeros(d)
                 sig[:s.shape[0]] = s
             else:
@@ -543,7 +543,7 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
             F = rows.sqrt_weight[fix, None] * rows.A[fix]
             tol_r = rcond * float(np.linalg.norm(F))
             if Z.shape[1] and tol_r > 0:
-                _, s, vt = np.linalg.svd(F @ Z, full_matrices=True)
+                _, s, vt = svd(F @ Z)
                 r = int(np.count_nonzero(s > tol_r))
                 Z = Z @ vt[r:].T
             fixed_count += int(fix.sum())

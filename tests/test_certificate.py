@@ -193,6 +193,47 @@ def test_nonnegative_least_squares_matches_scipy():
         assert res == pytest.approx(nnls(M, y)[1], abs=1e-10)
 
 
+def test_nonnegative_least_squares_from_a_positive_least_squares_solution():
+    """Tall ``M`` (the certificate's case: more task directions than rows at a bound):
+    where the unconstrained least-squares solution is positive it is the optimum, and
+    where it is not the active-set search finds it; both as scipy's ``nnls``."""
+    from scipy.optimize import nnls
+    rng = np.random.default_rng(1)
+    for sign in (1.0, -1.0):
+        for _ in range(20):
+            M = rng.standard_normal((9, 5))
+            mu_true = rng.uniform(0.5, 2.0, 5)
+            mu_true[0] *= sign              # -1: the unconstrained solution not feasible
+            y = M @ mu_true + 1e-3 * rng.standard_normal(9)
+            mu, res = nonnegative_least_squares(M, y)
+            ref_mu, ref_res = nnls(M, y)
+            assert (mu >= 0).all()
+            assert res == pytest.approx(ref_res, rel=1e-9, abs=1e-12)
+            np.testing.assert_allclose(mu, ref_mu, rtol=0, atol=1e-9)
+            assert (mu[0] == 0.0) == (sign < 0)
+
+
+def test_svd_is_numpys():
+    """``hierarchy.linalg.svd`` (LAPACK's dgesdd called directly) gives numpy's
+    factors, and numpy's error where LAPACK fails."""
+    from prioik.hierarchy.linalg import svd
+    rng = np.random.default_rng(2)
+    for shape in ((3, 7), (7, 3), (6, 35), (1, 4)):
+        A = rng.standard_normal(shape)
+        for full in (True, False):
+            u, s, vt = svd(A, full_matrices=full)
+            u2, s2, vt2 = np.linalg.svd(A, full_matrices=full)
+            assert u.shape == u2.shape and vt.shape == vt2.shape
+            np.testing.assert_allclose(s, s2, rtol=1e-13, atol=0)
+            r = len(s)
+            np.testing.assert_allclose((u[:, :r] * s) @ vt[:r], A, rtol=0, atol=1e-13)
+    assert svd(np.zeros((0, 3)))[2].shape == (3, 3)
+    A = np.ones((3, 4))
+    A[1, 1] = np.nan
+    with pytest.raises(np.linalg.LinAlgError):
+        svd(A)
+
+
 def test_nonnegative_least_squares_on_an_ill_conditioned_face():
     """prioik fuzz inequality seed 3 case 1861: level 3's NNLS (15 x 8, singular values
     2.7 down to 3e-9, the optimal multipliers ~1e10). Its gradient Mᵀ(y − M μ) carried
