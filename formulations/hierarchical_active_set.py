@@ -157,6 +157,7 @@ import numpy as np
 
 from prioik.hierarchy import (AMBIGUITY, X_PRECISION, StackData, StackLayout, TaskStack,
                               ambiguity_reason, check_lexicographic)
+from prioik.hierarchy.analysis import prepare_certificate
 
 from .base import (Capabilities, FormulationError, Outcome, ReportVariant, precision_status,
                    solve_equilibrated)
@@ -303,6 +304,8 @@ class Prepared:
         # the kernels' entry points: called with the data's arrays and these workspaces
         # only, the types of _SIGNATURE by construction
         self._solve_data, self._equality_first_data = _compile_kernels(self.warm_start)
+        # a flagged answer is certified (_certify_flagged): its imports are paid here
+        prepare_certificate()
         # the equality-first try needs the equality rows' solve (an inequality-only stack
         # has none to try)
         self._try_first = self.warm_start and bool(layout.row_is_equality.any())

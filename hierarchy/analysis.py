@@ -405,6 +405,14 @@ def check_lexicographic(stack: TaskStack | StackData, x: np.ndarray,
 _NEARLY_FEASIBLE = 1e-6
 
 
+def prepare_certificate() -> None:
+    """Import what :func:`check_lexicographic` may need beyond numpy (scipy's HiGHS LP
+    of the slack check, ~0.2-0.3 s the first time in a process), so that no later check
+    pays it: a prepared solver that certifies flagged answers calls it when prepared,
+    not at a control loop's first flagged step."""
+    import scipy.optimize  # noqa: F401  (the import is the point)
+
+
 def _feasible(above: list, rows: "_LevelRows", small: np.ndarray, x: np.ndarray) -> bool:
     """Whether some point keeps the rows read above (``above``: each higher level's rows
     and the mask of those read as fixed; fixed rows at their values at ``x``, the others

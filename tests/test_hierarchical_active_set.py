@@ -9,6 +9,7 @@ minimum-norm tie-break, multipliers by bounded least squares) and cross-checked 
 
 from __future__ import annotations
 
+import os
 import re
 from pathlib import Path
 
@@ -1698,3 +1699,21 @@ def test_a_row_held_off_its_bound_for_the_levels_below_is_refined_to_the_optimum
     wo = lexicographic_residuals(stack, once.x) ** 2
     assert wo[3] == pytest.approx(12.9, rel=1e-2)
     assert np.all(np.abs(wo[:3] - w[:3]) <= 1e-9 * np.maximum(1.0, w[:3]))
+
+def test_preparing_imports_what_the_certificate_needs():
+    """A flagged answer is certified, and the certificate's slack LP (scipy's HiGHS)
+    takes ~0.2-0.3 s to import: a prepared solver imports it when prepared, so that a
+    control loop does not pay it at its first flagged step (in a fresh process,
+    ``import prioik`` does not load it; preparing does)."""
+    import subprocess
+    import sys
+    code = ("import sys, numpy as np, prioik\n"
+            "from prioik.hierarchy import Task, TaskStack\n"
+            "s = TaskStack([[Task('a', np.eye(2), lower=-np.ones(2), upper=np.ones(2))]])\n"
+            "before = 'scipy.optimize' in sys.modules\n"
+            "prioik.prepare(s.layout, 'hierarchical_active_set')\n"
+            "print(before, 'scipy.optimize' in sys.modules)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=300, env={**os.environ, "OPENBLAS_NUM_THREADS": "1"})
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["False", "True"]
