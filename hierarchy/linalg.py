@@ -30,6 +30,8 @@ DEFAULT_RCOND = 1e-9
 #: ambiguous (see module docstring): three decades either side.
 AMBIGUITY = 1e3
 
+_EPS = float(np.finfo(np.float64).eps)
+
 
 def level_scale(A: np.ndarray) -> float:
     """``‖A‖_F`` (``‖x‖₂`` of a vector), without the overflow or underflow of the
@@ -176,9 +178,6 @@ def row_activity_from_values(a: np.ndarray, lower: np.ndarray, upper: np.ndarray
     side[at_l] = -1
     side[(at_u & at_l) | violated | (lower == upper)] = 2
     return side, v
-
-
-_EPS = float(np.finfo(np.float64).eps)
 
 
 def svd(A: np.ndarray, full_matrices: bool = True
