@@ -21,7 +21,6 @@ meets an ambiguous decision does not say ``optimal``: its status is
 from __future__ import annotations
 
 import numpy as np
-from scipy.linalg.lapack import dgesdd as _gesdd
 
 #: Default relative rank threshold (see module docstring).
 DEFAULT_RCOND = 1e-9
@@ -180,6 +179,11 @@ def row_activity_from_values(a: np.ndarray, lower: np.ndarray, upper: np.ndarray
     return side, v
 
 
+#: scipy's LAPACK ``dgesdd``, imported at the first :func:`svd` (``import prioik``
+#: loads no scipy)
+_GESDD = None
+
+
 def svd(A: np.ndarray, full_matrices: bool = True
         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``np.linalg.svd(A, full_matrices)`` of a real matrix, through LAPACK's ``dgesdd``
@@ -187,8 +191,12 @@ def svd(A: np.ndarray, full_matrices: bool = True
     the certificate's small matrices, which it factors dozens of times a check).
     numpy's own call (and its ``LinAlgError``) where LAPACK reports a failure or a
     non-finite singular value, and for an empty matrix."""
+    global _GESDD
     if A.shape[0] and A.shape[1]:
-        u, s, vt, info = _gesdd(A, compute_uv=1, full_matrices=int(full_matrices))
+        if _GESDD is None:
+            from scipy.linalg.lapack import dgesdd
+            _GESDD = dgesdd
+        u, s, vt, info = _GESDD(A, compute_uv=1, full_matrices=int(full_matrices))
         if info == 0 and s[0] < np.inf:       # (False for NaN)
             return u, s, vt
     return np.linalg.svd(A, full_matrices=full_matrices)
