@@ -280,21 +280,6 @@ class _LevelRows:
     upper: np.ndarray
     sqrt_weight: np.ndarray
 
-    @classmethod
-    def of(cls, level) -> "_LevelRows":
-        A, lo, up, sw = [], [], [], []
-        for t in level:
-            A.append(t.A)
-            if t.is_equality:
-                lo.append(t.b)
-                up.append(t.b)
-            else:
-                tl, tu = t.bounds()
-                lo.append(tl)
-                up.append(tu)
-            sw.append(np.sqrt(np.broadcast_to(t.weight, (t.m,))))
-        return cls(np.vstack(A), np.concatenate(lo), np.concatenate(up), np.concatenate(sw))
-
 
 def check_lexicographic(stack: TaskStack | StackData, x: np.ndarray,
                         tol: float = DEFAULT_CERTIFICATE_TOL,
@@ -456,9 +441,9 @@ _BAND_FLOOR = 1e-12
 
 def _extreme_levels(data: StackData) -> bool:
     """Whether a level of ``data`` needs :meth:`TaskStack.equilibrated` (its largest
-    entry outside ``[EQUILIBRATE_BELOW, EQUILIBRATE_ABOVE]``, zero levels aside)."""
-    peaks = np.maximum.reduceat(np.abs(data.A).max(axis=1), data.layout.starts[:-1]) \
-        if data.m and data.n else np.zeros(0)
+    entry outside ``[EQUILIBRATE_BELOW, EQUILIBRATE_ABOVE]``, zero levels aside). Every
+    level of a layout has a row, so each segment of the reduction is one level's."""
+    peaks = np.maximum.reduceat(np.abs(data.A).max(axis=1), data.layout.starts[:-1])
     return bool(((peaks > 0) & ((peaks < EQUILIBRATE_BELOW)
                                 | (peaks > EQUILIBRATE_ABOVE))).any())
 
