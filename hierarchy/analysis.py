@@ -25,7 +25,7 @@ from .errors import TaskStackError, UnsupportedTaskError
 from .linalg import (CERTIFICATE_SIGMA_FLOOR, DEFAULT_CERTIFICATE_TOL, DEFAULT_RCOND, level_scale,
                      matrix_rank, nonnegative_least_squares, range_basis,
                      row_activity_from_values, svd)
-from .stack import EQUILIBRATE_ABOVE, EQUILIBRATE_BELOW, TaskStack
+from .stack import TaskStack
 
 
 def _require_equality(stack: TaskStack, what: str) -> None:
@@ -372,7 +372,7 @@ def check_lexicographic(stack: TaskStack | StackData, x: np.ndarray,
             stack.check()
         x = _candidate(x, stack.n)
         data = stack
-        if _extreme_levels(data):
+        if data.extreme_levels():
             data = data.as_stack().equilibrated()[0].data
     else:
         x = _candidate(x, stack.n)
@@ -437,15 +437,6 @@ def _feasible(above: list, rows: "_LevelRows", small: np.ndarray, x: np.ndarray)
 #: rows beyond a bound by more than this (relative to the activity rule's size) and
 #: within the activity tolerance are the band :func:`check_lexicographic` may read as fixed
 _BAND_FLOOR = 1e-12
-
-
-def _extreme_levels(data: StackData) -> bool:
-    """Whether a level of ``data`` needs :meth:`TaskStack.equilibrated` (its largest
-    entry outside ``[EQUILIBRATE_BELOW, EQUILIBRATE_ABOVE]``, zero levels aside). Every
-    level of a layout has a row, so each segment of the reduction is one level's."""
-    peaks = np.maximum.reduceat(np.abs(data.A).max(axis=1), data.layout.starts[:-1])
-    return bool(((peaks > 0) & ((peaks < EQUILIBRATE_BELOW)
-                                | (peaks > EQUILIBRATE_ABOVE))).any())
 
 
 def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: float,

@@ -38,6 +38,11 @@ __all__ = ["KINDS", "StackData", "StackLayout", "level_residuals", "precision_li
 #: Task kinds of a layout.
 KINDS = ("equality", "inequality")
 
+#: Levels whose largest entry lies outside this range are equilibrated
+#: (:meth:`TaskStack.equilibrated`): their squares would lose precision in float64.
+EQUILIBRATE_BELOW = 1e-100
+EQUILIBRATE_ABOVE = 1e100
+
 
 #: the layouts :meth:`StackLayout.shared` hands out, by ``(n, levels)``; an entry lives as
 #: long as its layout does
@@ -308,6 +313,16 @@ class StackData:
     def weights(self, name: str) -> np.ndarray:
         """View of one task's ``√w`` per row."""
         return self.sqrt_weight[self.layout.task_slice(name)]
+
+    def level_peaks(self) -> np.ndarray:
+        """Per level, the largest ``|entry|`` of its rows (every level has a row)."""
+        return np.maximum.reduceat(np.abs(self.A).max(axis=1), self.layout.starts[:-1])
+
+    def extreme_levels(self) -> list[int]:
+        """The levels :meth:`~prioik.hierarchy.TaskStack.equilibrated` rescales: their
+        largest entry non-zero and outside ``[EQUILIBRATE_BELOW, EQUILIBRATE_ABOVE]``."""
+        return [i for i, p in enumerate(self.level_peaks().tolist())
+                if p > 0 and not EQUILIBRATE_BELOW <= p <= EQUILIBRATE_ABOVE]
 
     def copy(self) -> "StackData":
         """A writable copy."""

@@ -236,10 +236,6 @@ def nonnegative_least_squares(M: np.ndarray, y: np.ndarray, max_iter: int | None
     if p == 0 or d == 0:
         return mu, float(np.linalg.norm(y))
     cap = 3 * p + 10 if max_iter is None else max_iter
-    # the gradient Mᵀ r scales with ‖M‖ ‖y‖: a tolerance of ‖M‖ alone stopped searches
-    # on a small y (1e-4) early, at residuals 1e-9 where the optimum is 1e-20
-    tol = 10.0 * _EPS * max(d, p) * max(float(np.abs(M).sum(axis=0).max()), 1e-300) \
-        * max(float(np.linalg.norm(y)), 1e-300)
     if p > 1:
         # the whole matrix's least-squares solution, when it is positive, is the optimum
         # (the unconstrained minimum is feasible): at a certified answer every row at a
@@ -248,6 +244,10 @@ def nonnegative_least_squares(M: np.ndarray, y: np.ndarray, max_iter: int | None
         s, face_res = _face_solve(M, y)
         if float(s.min()) > 0:
             return s, float(np.linalg.norm(face_res))
+    # the gradient Mᵀ r scales with ‖M‖ ‖y‖: a tolerance of ‖M‖ alone stopped searches
+    # on a small y (1e-4) early, at residuals 1e-9 where the optimum is 1e-20
+    tol = 10.0 * _EPS * max(d, p) * max(float(np.abs(M).sum(axis=0).max()), 1e-300) \
+        * max(float(np.linalg.norm(y)), 1e-300)
     passive = np.zeros(p, dtype=bool)
     res = y.astype(np.float64, copy=True)     # y − M μ (projected at a face's solution)
     w = M.T @ res

@@ -12,16 +12,6 @@ from .layout import StackData, StackLayout
 from .task import Level, Task
 
 
-#: Levels whose largest entry lies outside this range are equilibrated
-#: (:meth:`TaskStack.equilibrated`): their squares would lose precision in float64.
-EQUILIBRATE_BELOW = 1e-100
-EQUILIBRATE_ABOVE = 1e100
-
-
-def _peak(level: Level) -> float:
-    return max(float(np.max(np.abs(t.A))) for t in level)
-
-
 class TaskStack:
     """A prioritized stack of tasks over ``n`` unknowns.
 
@@ -172,14 +162,14 @@ class TaskStack:
         ~1e-154 underflow (a ``1e-200·I`` level read as zero gave ``x = 0``,
         "optimal"). Returns ``self`` (and ``[]``) when no level needs it.
         """
-        peaks = [_peak(level) for level in self._levels]
-        levels = [i for i, p in enumerate(peaks)
-                  if p > 0 and not EQUILIBRATE_BELOW <= p <= EQUILIBRATE_ABOVE]
+        levels = self.data.extreme_levels()
         if not levels:
             return self, []
+        peaks = self.data.level_peaks()
         out = list(self._levels)
         for i in levels:
-            factor = math.ldexp(1.0, -math.frexp(peaks[i])[1])    # 2^-e: peak -> [0.5, 1)
+            # 2^-e: the peak into [0.5, 1)
+            factor = math.ldexp(1.0, -math.frexp(float(peaks[i]))[1])
             out[i] = Level(t.scaled(factor) for t in self._levels[i])
         return TaskStack(out), levels
 
