@@ -22,10 +22,11 @@ from .references import Reference, Waypoints, minimum_jerk
 from .rows import MODES, TaskWriter
 from .simulate import (SimulationError, SimulationResult, StepTasks, equality_view, run_to_end,
                        simulate, simulation_steps)
-from .tasks import (JointLimitActivation, KinematicState, TaskTerm, com_position, contact,
-                    frame_orientation, frame_pose, frame_position, joint_limit_bounds,
-                    joint_limit_rows, joint_limit_violation, joint_velocity_bounds,
-                    point_position, posture)
+from .tasks import (JointLimitActivation, KinematicState, TaskTerm, com_position,
+                    com_region, contact, frame_orientation, frame_pose, frame_position,
+                    frame_region, joint_limit_bounds, joint_limit_rows,
+                    joint_limit_violation, joint_velocity_bounds, point_position,
+                    polygon_region, posture)
 
 __all__ = [
     "LOADERS", "PANDA_FINGERS", "ModelNotFoundError", "RobotModel", "StateError",
@@ -37,4 +38,5 @@ __all__ = [
     "KinematicState", "TaskTerm", "com_position", "contact", "frame_orientation",
     "frame_pose", "frame_position", "joint_limit_bounds", "joint_limit_rows",
     "joint_limit_violation", "joint_velocity_bounds", "point_position", "posture",
+    "frame_region", "com_region", "polygon_region",
 ]

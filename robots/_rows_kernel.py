@@ -369,6 +369,37 @@ def velocity_bounds(lower, upper, s, qa, lo, hi, vmax, T, position, velocity):
 
 
 @kernel()
+def region_rows(A, lower, upper, s, C, Jp, p, psign, v, drift, lo, hi, y, yd, vmax, T, dt,
+                accel):
+    """A region task's rows at ``s`` (:meth:`robots.rows.TaskWriter.add_frame_region`):
+    ``A = C J_p``; with ``y = C p`` (``p`` given as ``psign · p``, the frame writer's
+    error ``−p`` for a target 0) the bounds of :func:`velocity_bounds` (``accel`` false)
+    or of :func:`acceleration_bounds` on ``y``, ``ẏ = C J_p q̇`` less the drift
+    ``C J̇_p q̇``, position rules only (no speed limit)."""
+    n = Jp.shape[1]
+    for i in range(C.shape[0]):
+        c0, c1, c2 = C[i, 0], C[i, 1], C[i, 2]
+        row = A[s + i]
+        for c in range(n):
+            row[c] = c0 * Jp[0, c] + c1 * Jp[1, c] + c2 * Jp[2, c]
+        y[i] = psign * (c0 * p[0] + c1 * p[1] + c2 * p[2])
+    if not accel:
+        velocity_bounds(lower, upper, s, y, lo, hi, vmax, T, True, False)
+        return
+    for i in range(C.shape[0]):
+        row = A[s + i]
+        acc = 0.0
+        for c in range(n):
+            acc += row[c] * v[c]
+        yd[i] = acc
+    acceleration_bounds(lower, upper, s, y, yd, lo, hi, vmax, T, dt, True, False)
+    for i in range(C.shape[0]):
+        cd = C[i, 0] * drift[0] + C[i, 1] * drift[1] + C[i, 2] * drift[2]
+        lower[s + i] -= cd
+        upper[s + i] -= cd
+
+
+@kernel()
 def bounds_at(lower, upper, q, v, iq, lim, params, qa):
     """The joint-limit bounds of one task in one call, from the state itself: ``lim``
     holds the task's fixed ``lo``, ``hi``, ``q̇_max`` (``3 × n_a``) and ``q̇`` of the

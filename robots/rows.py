@@ -19,7 +19,9 @@ Task kinds: frame position, a point fixed on a frame, frame orientation (error
 posture, and joint limits in two forms — activation rows (one per actuated joint,
 masked to zero outside the margins: fixed size, for the equality formulations) and
 bounds (an inequality task: ``data.lower``/``data.upper`` on ``q̇`` or ``q̈`` from the
-position limits, the velocity limits or both, for the inequality formulations).
+position limits, the velocity limits or both, for the inequality formulations), and
+regions (inequality tasks keeping a frame's point or the centre of mass inside
+``lower ≤ C p ≤ upper``).
 
 Each writer is one compiled call (:mod:`robots._rows_kernel`) on views of the state's
 ``pin.Data`` — the world-frame joint Jacobians ``data.J`` (a frame's
@@ -86,7 +88,8 @@ class JointLimitActivation:
 class _Task:
     """One declared task: what its writer needs, fixed at declaration."""
 
-    kind: str                 # "position", "orientation", "pose", "com", "posture", "limits"
+    kind: str                 # "position", "orientation", "pose", "contact", "com",
+    #                           "posture", "limits", "frame_region", "com_region"
     name: str
     level: int
     rows: int
@@ -112,6 +115,93 @@ class _Task:
     activation: JointLimitActivation | None = None
     limits: np.ndarray | None = None     # lo, hi, then q̇_max (bounds) or margin widths (3 × n_a)
     bound_params: np.ndarray | None = None   # the kernel's parameters (at _fix)
+    region: _Region | None = None        # region tasks: C, lower, upper and scratch
+
+
+@dataclass
+class _Region:
+    """A region task's ``lower ≤ C p ≤ upper`` (validated copies) and its writer's
+    scratch: ``C p`` and its rate per row, and no speed limit (the bound kernels'
+    ``q̇_max``)."""
+
+    C: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    horizon: float
+    dt: float
+    y: np.ndarray
+    yd: np.ndarray
+    no_speed_limit: np.ndarray
+    #: a frame region's point: its rows ``J_p`` and, per row, ``−p`` and ``J̇_p q̇`` (the
+    #: compiled position writer's output: a target of 0 makes its error ``−p``)
+    point_rows: np.ndarray | None = None
+    point_values: np.ndarray | None = None
+
+    @classmethod
+    def of(cls, name: str, normals, lower, upper, dt, horizon) -> "_Region":
+        if dt is None or isinstance(dt, bool) or not (np.isscalar(dt) and dt > 0
+                                                       and np.isfinite(dt)):
+            raise TaskStackError(f"a region needs dt > 0, got {dt!r}", task=name)
+        T = dt if horizon is None else horizon
+        if isinstance(T, bool) or not (np.isscalar(T) and T > 0 and np.isfinite(T)):
+            raise TaskStackError(f"horizon must be > 0, got {horizon!r}", task=name)
+        C, lo, hi = _region_rows(name, normals, lower, upper, None)
+        k = C.shape[0]
+        return cls(C, lo, hi, float(T), float(dt), np.zeros(k), np.zeros(k),
+                   np.full(k, np.inf))
+
+    def update(self, name: str, normals, lower, upper) -> None:
+        """New normals and/or bounds (``None``: kept; the rows' count stays)."""
+        C, lo, hi = _region_rows(name, self.C if normals is None else normals,
+                                 self.lower if lower is None else lower,
+                                 self.upper if upper is None else upper, self.C.shape[0])
+        self.C, self.lower, self.upper = C, lo, hi
+
+
+def _region_rows(name: str, normals, lower, upper, k: int | None):
+    """``C`` (``k × 3``), ``lower``, ``upper`` (``k``) of a region, validated and copied."""
+    try:
+        C = np.array(normals, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise TaskStackError(f"normals must be numbers, got {normals!r}", task=name) from None
+    if C.ndim == 1:
+        C = C.reshape(1, -1)
+    if C.ndim != 2 or C.shape[1] != 3 or C.shape[0] < 1:
+        raise TaskStackError(f"normals must be k × 3 (world axes), got shape "
+                             f"{np.shape(normals)}", task=name)
+    if k is not None and C.shape[0] != k:
+        raise TaskStackError(f"the region was declared with {k} rows, got "
+                             f"{C.shape[0]} normals", task=name)
+    if not np.isfinite(C).all():
+        raise TaskStackError("normals must be finite", task=name)
+    zero = np.flatnonzero(~np.any(C != 0.0, axis=1))
+    if zero.size:
+        raise TaskStackError(f"normal {int(zero[0])} is zero", task=name)
+    k = C.shape[0]
+    bounds = []
+    for what, value, fill in (("lower", lower, -np.inf), ("upper", upper, np.inf)):
+        try:
+            b = np.full(k, fill) if value is None else np.broadcast_to(
+                np.asarray(value, dtype=np.float64), (k,)).copy()
+        except (TypeError, ValueError):
+            raise TaskStackError(f"{what} must be a number or {k} numbers, got "
+                                 f"{value!r}", task=name) from None
+        if np.isnan(b).any():
+            raise TaskStackError(f"{what} bound {int(np.flatnonzero(np.isnan(b))[0])} "
+                                 "is NaN", task=name)
+        bounds.append(b)
+    lo, hi = bounds
+    if np.any(lo == np.inf) or np.any(hi == -np.inf):
+        raise TaskStackError("a lower bound of +inf or an upper bound of -inf leaves no "
+                             "point", task=name)
+    bad = np.flatnonzero(lo > hi)
+    if bad.size:
+        i = int(bad[0])
+        raise TaskStackError(f"row {i} has lower {lo[i]:g} > upper {hi[i]:g}", task=name)
+    free = np.flatnonzero(~(np.isfinite(lo) | np.isfinite(hi)))
+    if free.size:
+        raise TaskStackError(f"row {int(free[0])} has no finite bound", task=name)
+    return C, lo, hi
 
 
 class TaskWriter:
@@ -266,9 +356,59 @@ class TaskWriter:
         task.limits = np.ascontiguousarray(np.vstack([lo, hi, vmax]), dtype=np.float64)
         task.limits.setflags(write=False)
 
+    def add_frame_region(self, name: str, frame: str, normals, lower=None, upper=None, *,
+                         dt: float, horizon: float | None = None, offset=None,
+                         level: int | None = None, weight: float = 1.0) -> None:
+        """Keep a point of a frame inside a region: ``lower ≤ C p ≤ upper`` (an inequality
+        task, one row per row of ``C``), ``p`` the frame's origin or the point ``offset``
+        (frame coordinates) fixed on it, world coordinates: a hand inside a workspace box,
+        a foot above the floor, a tool on one side of a wall.
+
+        Args:
+            normals: ``C`` (``k × 3``, or one 3-vector): the directions, world axes; rows
+                finite and non-zero.
+            lower, upper: ``k`` bounds on ``C p`` (numbers broadcast; ``None``: none on
+                that side); ``lower ≤ upper``, every row with a finite bound.
+            dt: The control step; horizon: ``T`` (default ``dt``). The rows bound what
+                a step does to ``C p`` as the joint-limit bounds bound ``q``
+                (:meth:`add_joint_limits`): at velocity level ``C (p + J q̇ T)`` within
+                the bounds; at acceleration level ``C J q̈`` such that the
+                constant-acceleration path of ``C p`` is within them at ``T`` and after
+                the next step ``dt``, braking of at least ``ẏ²/2d`` where the path would
+                peak before ``T`` (:func:`robots._rows_kernel.acceleration_bounds` with no
+                speed limit), the drift ``C J̇ q̇`` taken off.
+        """
+        fid = self.robot.frame_id(frame)              # KeyError naming a missing frame
+        off = np.zeros(3) if offset is None else np.array(offset, dtype=float).reshape(-1)
+        if off.shape != (3,) or not np.isfinite(off).all():
+            raise TaskStackError(f"offset must be 3 finite numbers, got {offset!r}", task=name)
+        region = _Region.of(name, normals, lower, upper, dt, horizon)
+        region.point_rows = np.zeros((3, self.robot.nv))
+        region.point_values = np.zeros((6, 3))
+        task = self._add(name, "frame_region", region.C.shape[0], level, None, weight,
+                         inequality=True)
+        task.region = region
+        self._frame_geometry(task, fid, off)
+
+    def add_com_region(self, name: str, normals, lower=None, upper=None, *, dt: float,
+                       horizon: float | None = None, level: int | None = None,
+                       weight: float = 1.0) -> None:
+        """Keep the centre of mass inside a region: ``lower ≤ C c ≤ upper`` (e.g. over
+        the support polygon, :func:`polygon_region`); the arguments and the rows'
+        meaning as in :meth:`add_frame_region`."""
+        region = _Region.of(name, normals, lower, upper, dt, horizon)
+        task = self._add(name, "com_region", region.C.shape[0], level, None, weight,
+                         inequality=True)
+        task.region = region
+
     def _add_frame(self, name, frame, kind, rows, gain, level, weight, offset) -> None:
         fid = self.robot.frame_id(frame)              # KeyError naming a missing frame
         task = self._add(name, kind, rows, level, gain, weight)
+        self._frame_geometry(task, fid, offset)
+
+    def _frame_geometry(self, task: _Task, fid: int, offset: np.ndarray) -> None:
+        """A frame task's columns (the frame's supporting joints) and the compiled
+        writers' constant geometry of its point."""
         model = self.robot.model
         joint = model.frames[fid].parentJoint
         cols = [c for j in model.supports[joint] if j > 0
@@ -300,7 +440,7 @@ class TaskWriter:
             raise TaskStackError(f"weight must be finite and > 0, got {weight!r}", task=name)
         task = _Task(kind, name, int(level), int(rows), inequality, weight=float(weight),
                      shape=(int(rows),))
-        if kind != "limits":
+        if kind not in ("limits", "frame_region", "com_region"):
             task.kp, task.kd = self._gains(name, gain)
         self._last_level = max(self._last_level, int(level))
         self._tasks[name] = task
@@ -359,6 +499,10 @@ class TaskWriter:
             if task.kind in _FRAME_MODES:
                 task.spec = np.array([sl.start, _FRAME_MODES[task.kind], not self._accel,
                                       *task.cols], dtype=np.int64)
+                task.spec.setflags(write=False)
+            elif task.kind == "frame_region":        # the point's rows, in its scratch
+                task.spec = np.array([0, _k.POSITION, not self._accel, *task.cols],
+                                     dtype=np.int64)
                 task.spec.setflags(write=False)
             elif task.kind == "limits" and task.form != "activation":
                 task.bound_params = np.array([sl.start, task.horizon, task.dt,
@@ -537,6 +681,53 @@ class TaskWriter:
             return task.rows
         return _k.activation_at(data.A, self._Q, state.q, self._q_index, task.limits,
                                 task.bound_params, self._qa)
+
+    def frame_region(self, state, name: str, normals=None, lower=None, upper=None) -> None:
+        """A frame point's region rows at ``state`` (:meth:`add_frame_region`): the rows
+        ``C J`` into ``data.A`` and their bounds into ``data.lower``/``upper``.
+        ``normals``, ``lower``, ``upper`` given here replace the declared ones from this
+        step on (a region that moves with the robot's supports); the row count stays."""
+        task = self._tasks.get(name)
+        if task is None or task.kind != "frame_region" or task.spec is None:
+            task = self._task(name, "frame_region")
+        hot = task.hot
+        if hot is None or hot[0] is not state.data:
+            views = self._data_views(state)          # refuses another robot's state
+            t, R = views.frame(task.fid)
+            aj, vj = views.motion(task.joint)
+            reg = task.region
+            hot = task.hot = (state.data, (reg.point_rows, reg.point_values, views.J, t, R,
+                                           task.spec, task.geo, aj, vj))
+        accel = self._drift(state, task)                  # refuses a drift-free state
+        # the point's rows J_p, −p and J̇_p q̇ by the compiled position writer (target 0)
+        _k.position_target_rows(*hot[1], _ZERO3)
+        values = task.region.point_values
+        self._region(task, hot[1][0], values[_k.ERROR], -1.0, state.v, values[_k.DRIFT],
+                     accel, normals, lower, upper)
+
+    def com_region(self, state, name: str, normals=None, lower=None, upper=None) -> None:
+        """The centre of mass's region rows at ``state`` (:meth:`add_com_region`); the
+        arguments as in :meth:`frame_region`."""
+        task = self._task(name, "com_region")
+        if not state._com_ready:
+            state.ensure_com()
+        views = self._data_views(state)          # refuses another robot's state
+        accel = self._drift(state, task)
+        self._region(task, views.Jcom, views.com, 1.0, state.v, views.acom, accel, normals,
+                     lower, upper)
+
+    def _region(self, task: _Task, Jp, p, psign, v, drift, accel, normals, lower,
+                upper) -> None:
+        """``C J_p`` into the task's rows, bounds on ``C J_p q̇`` (velocity level) or
+        ``C J_p q̈`` (acceleration level, ``drift`` = ``J̇_p q̇``) from ``C p`` (``p`` given
+        as ``psign · p``) and its rate: :func:`robots._rows_kernel.region_rows`."""
+        reg = task.region
+        if normals is not None or lower is not None or upper is not None:
+            reg.update(task.name, normals, lower, upper)
+        data = self._data
+        _k.region_rows(data.A, data.lower, data.upper, task.start, reg.C, Jp, p, psign, v,
+                       drift, reg.lower, reg.upper, reg.y, reg.yd, reg.no_speed_limit,
+                       reg.horizon, reg.dt, accel)
 
     # ------------------------------------------------------------------ targets
     def targets(self, state) -> StackData:

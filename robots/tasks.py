@@ -20,7 +20,9 @@ with its Jacobian and its drift (``pin.centerOfMass`` at ``q̈ = 0``).
 
 Joint limits come in two forms (see :func:`joint_limit_rows`, :func:`joint_limit_bounds`
 and :func:`joint_velocity_bounds`): activation rows for the equality formulations and
-bounds on ``q̈`` or ``q̇`` for the QP formulations.
+bounds on ``q̈`` or ``q̇`` for the QP formulations. :func:`frame_region` and
+:func:`com_region` are inequality tasks keeping a point inside ``lower ≤ C p ≤ upper``
+(:func:`polygon_region`: a support polygon's rows).
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from prioik.hierarchy import Task
+from prioik.hierarchy import Task, TaskStackError
 
 from . import _rows_kernel as _rk
 from .models import UNIT_NORM_TOL, RobotModel, check_configuration, check_velocity
@@ -41,7 +43,7 @@ from .rows import JointLimitActivation, TaskWriter
 __all__ = ["KinematicState", "TaskTerm", "frame_position", "point_position",
            "frame_orientation", "frame_pose", "com_position", "contact", "posture",
            "joint_limit_rows", "joint_limit_bounds", "joint_velocity_bounds",
-           "JointLimitActivation"]
+           "frame_region", "com_region", "polygon_region", "JointLimitActivation"]
 
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 
@@ -372,6 +374,105 @@ def posture(state: KinematicState, q_ref, name: str = "posture") -> TaskTerm:
     return term
 
 
+# ---------------------------------------------------------------------- regions
+def frame_region(state: KinematicState, frame: str, normals, lower=None, upper=None, *,
+                 dt: float, horizon: float | None = None, offset=None,
+                 mode: str | None = None, name: str | None = None) -> Task:
+    """Inequality task keeping a point of a frame inside ``lower ≤ C p ≤ upper`` (world
+    coordinates; ``p`` the frame's origin or ``offset`` in its coordinates): rows
+    ``C J`` with bounds on ``q̇`` (velocity level) or ``q̈`` (acceleration level; the
+    default with a drift state), see :meth:`robots.rows.TaskWriter.add_frame_region`."""
+    off = None if offset is None else tuple(float(v) for v in
+                                            np.asarray(offset, dtype=float).reshape(-1))
+    rows = int(np.atleast_2d(np.asarray(normals, dtype=float)).shape[0])
+    key = ("frame_region", frame, off, rows, dt, horizon)
+    w = _writer(state, key, lambda w, g: w.add_frame_region(
+        _T, frame, normals, lower, upper, dt=dt, horizon=horizon, offset=offset), mode)
+    w.frame_region(state, _T, normals, lower, upper)
+    return _bounds_task(w, name or f"{frame}_region")
+
+
+def com_region(state: KinematicState, normals, lower=None, upper=None, *, dt: float,
+               horizon: float | None = None, mode: str | None = None,
+               name: str = "com_region") -> Task:
+    """Inequality task keeping the centre of mass inside ``lower ≤ C c ≤ upper`` (e.g.
+    the support polygon of :func:`polygon_region`); see :func:`frame_region`."""
+    rows = int(np.atleast_2d(np.asarray(normals, dtype=float)).shape[0])
+    key = ("com_region", rows, dt, horizon)
+    w = _writer(state, key, lambda w, g: w.add_com_region(
+        _T, normals, lower, upper, dt=dt, horizon=horizon), mode)
+    w.com_region(state, _T, normals, lower, upper)
+    return _bounds_task(w, name)
+
+
+def _bounds_task(w: TaskWriter, name: str) -> Task:
+    """The writer's one inequality task as a :class:`~prioik.hierarchy.Task` (copied)."""
+    A, lower, upper = w.data.bounds(_T)
+    return Task(name, A, lower=lower, upper=upper)
+
+
+def polygon_region(points, margin: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """The horizontal convex hull of ``points`` as a region ``C p ≤ upper``: one row per
+    edge, ``C``'s rows the edges' outward unit normals in the ``xy`` plane (``z`` = 0),
+    ``upper`` the edges' offsets less ``margin`` (a support polygon shrunk by a safety
+    margin: pass to :func:`com_region` or :meth:`~robots.rows.TaskWriter.add_com_region`
+    with ``lower=None``).
+
+    Args:
+        points: ``k × 2`` or ``k × 3`` world points (``z`` ignored), e.g. the corners
+            of the feet's soles.
+        margin: Distance (m, ≥ 0) the edges are moved inwards.
+
+    Raises:
+        TaskStackError: fewer than three points not on one line, a non-finite point, or a
+            margin that leaves nothing of the polygon.
+    """
+    P = np.asarray(points, dtype=float)
+    if P.ndim != 2 or P.shape[1] not in (2, 3) or not np.isfinite(P).all():
+        raise TaskStackError(f"points must be finite k × 2 or k × 3, got shape {P.shape}")
+    if not (np.isscalar(margin) and np.isfinite(margin) and margin >= 0):
+        raise TaskStackError(f"margin must be a finite number ≥ 0, got {margin!r}")
+    hull = _convex_hull(P[:, :2])
+    if hull.shape[0] < 3:
+        raise TaskStackError("the points' horizontal hull has no area (fewer than three "
+                         "points off one line)")
+    edges = np.roll(hull, -1, axis=0) - hull
+    normals = np.column_stack([edges[:, 1], -edges[:, 0]])      # outward: hull is CCW
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    upper = np.einsum("ij,ij->i", normals, hull) - margin
+    inner = hull.mean(axis=0)
+    if margin > 0 and np.any(normals @ inner > upper):
+        # the centroid is inside every edge of the hull; off one of the moved edges the
+        # margin is (near) the polygon's inradius
+        raise TaskStackError(f"a margin of {margin:g} m leaves (almost) nothing of the "
+                         "polygon")
+    return np.column_stack([normals, np.zeros(len(hull))]), upper
+
+
+def _convex_hull(P: np.ndarray) -> np.ndarray:
+    """Vertices of the convex hull of 2-D points, counter-clockwise (Andrew's monotone
+    chain), collinear points dropped."""
+    P = np.unique(P, axis=0)            # sorted by x, then y
+    if P.shape[0] < 3:
+        return P
+
+    def half(points):
+        chain: list = []
+        for p in points:
+            while len(chain) >= 2 and _turn(chain[-2], chain[-1], p) <= 0.0:
+                chain.pop()
+            chain.append(p)
+        return chain
+
+    lower = half(P)
+    upper = half(P[::-1])
+    return np.array(lower[:-1] + upper[:-1])
+
+
+def _turn(o, a, b) -> float:
+    return float((a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]))
+
+
 # ------------------------------------------------------------------ joint limits
 def joint_limit_rows(state: KinematicState, params: JointLimitActivation = JointLimitActivation(),
                      name: str = "joint_limits", mode: str = "acceleration") -> Task | None:
@@ -416,8 +517,7 @@ def joint_limit_bounds(state: KinematicState, horizon: float, dt: float,
     w = _writer(state, key, lambda w, g: w.add_joint_limits(
         _T, form="bounds", horizon=horizon, dt=dt), "acceleration")
     w.joint_limits(state, _T)
-    A, lower, upper = w.data.bounds(_T)
-    return Task(name, A, lower=lower, upper=upper)
+    return _bounds_task(w, name)
 
 
 def joint_velocity_bounds(state: KinematicState, dt: float, horizon: float | None = None,
@@ -430,8 +530,7 @@ def joint_velocity_bounds(state: KinematicState, dt: float, horizon: float | Non
     w = _writer(state, key, lambda w, g: w.add_joint_limits(
         _T, form="bounds", horizon=horizon, dt=dt), "velocity")
     w.joint_limits(state, _T)
-    A, lower, upper = w.data.bounds(_T)
-    return Task(name, A, lower=lower, upper=upper)
+    return _bounds_task(w, name)
 
 
 def joint_limit_violation(robot: RobotModel, q) -> float:

@@ -118,6 +118,19 @@ api("robots", "simulate duration=inf", lambda: simulate(chain, build, None, dura
 api("robots", "simulate dt > duration", lambda: simulate(chain, build, None, duration=0.01, dt=0.1), "dt",
     check=lambda r: False)
 
+from prioik.robots import com_region, frame_region, polygon_region
+free = KinematicState(chain, chain.q0, np.zeros(3), drift=False)
+for name, fn, word in (
+        ("region: zero normal", lambda: com_region(free, [[0, 0, 0]], upper=1.0, dt=0.01), "normal 0"),
+        ("region: NaN bound", lambda: com_region(free, [[1, 0, 0]], upper=np.nan, dt=0.01), "upper"),
+        ("region: lower > upper", lambda: frame_region(free, "tip", [[1, 0, 0]], 2.0, 1.0, dt=0.01), "lower"),
+        ("region: no finite bound", lambda: frame_region(free, "tip", [[1, 0, 0]], dt=0.01), "no finite bound"),
+        ("region: dt = 0", lambda: com_region(free, [[1, 0, 0]], upper=1.0, dt=0.0), "dt"),
+        ("region: normals 2 wide", lambda: com_region(free, [[1, 0]], upper=1.0, dt=0.01), "normals"),
+        ("polygon of collinear points", lambda: polygon_region([[0, 0], [1, 1], [2, 2]]), "no area"),
+        ("polygon margin past its inradius", lambda: polygon_region([[0, 0], [1, 0], [0, 1]], margin=1.0), "margin")):
+    api("robots", name, fn, word)
+
 # ---------------------------------------------------------------- CLI
 tmp = tempfile.mkdtemp()
 good = {"levels": [[{"name": "t", "A": [[1.0, 2.0]], "b": [1.0]}]]}

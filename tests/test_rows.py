@@ -18,6 +18,7 @@ from prioik.robots import (JointLimitActivation, KinematicState, Reference, Task
                            frame_position, g1, joint_limit_bounds, joint_limit_rows,
                            joint_velocity_bounds, panda, point_position, posture,
                            spatial_chain)
+from prioik.robots import com_region, frame_region
 from prioik.robots import _rows_kernel as _k
 from prioik.robots.fencing import FencingScenario
 
@@ -547,3 +548,78 @@ def test_builders_from_several_threads_give_each_its_own_rows(robot):
     finally:
         sys.setswitchinterval(interval)
     assert not wrong
+
+
+# ------------------------------------------------------------------------- regions
+@pytest.mark.parametrize("mode", ["velocity", "acceleration"])
+def test_region_writers_are_the_builders_rows_and_move_with_new_bounds(robot, mode):
+    """Region tasks inside a writer with other tasks: rows and bounds equal the one-off
+    builders'; only their rows and bounds are written (``b`` stays 0: an inequality);
+    bounds and normals given at a step replace the declared ones from then on."""
+    C = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
+    w = TaskWriter(robot, mode)
+    gain = (4.0, 2.0) if mode == "acceleration" else 4.0
+    w.add_com("com", gain=gain, level=0)
+    w.add_frame_region("hand", "sword_tip", C, lower=[0.2, -np.inf], upper=[np.inf, 0.9],
+                       dt=0.01, horizon=0.05, offset=[0.0, 0.1, 0.0], level=0)
+    w.add_com_region("balance", C[1], lower=-0.1, upper=0.1, dt=0.01, level=1)
+    w.add_posture("posture", gain=gain, level=1)
+    state = _state(robot, 3, drift=mode == "acceleration")
+    for step in range(2):
+        lower = None if step == 0 else [0.3, -np.inf]
+        w.frame_region(state, "hand", lower=lower)
+        w.com_region(state, "balance")
+        w.com(state, "com", np.zeros(2))
+        w.posture(state, "posture", robot.q0)
+        data = w.targets(state)
+        hand = frame_region(state, "sword_tip", C, [0.2 if step == 0 else 0.3, -np.inf],
+                            [np.inf, 0.9], dt=0.01, horizon=0.05, offset=[0.0, 0.1, 0.0],
+                            mode=mode)
+        balance = com_region(state, C[1], -0.1, 0.1, dt=0.01, mode=mode)
+        for name, task in (("hand", hand), ("balance", balance)):
+            A, lo, up = data.bounds(name)
+            assert _close(A, task.A) and _close(lo, task.lower) and _close(up, task.upper)
+            assert np.all(data.b[data.layout.task_slice(name)] == 0.0)
+    w.frame_region(state, "hand")                    # the step-1 bound stays
+    assert _close(data.bounds("hand")[1], hand.lower)
+    assert data.layout.kind_of("hand") == data.layout.kind_of("balance") == "inequality"
+
+
+def test_region_errors_name_the_task(robot):
+    w = TaskWriter(robot, "acceleration")
+    C = np.eye(3)[:2]
+    cases = [
+        (lambda: w.add_com_region("r", np.zeros((1, 3)), upper=1.0, dt=0.01),
+         "task 'r': normal 0 is zero"),
+        (lambda: w.add_com_region("r", np.ones((2, 2)), upper=1.0, dt=0.01),
+         "task 'r': normals must be k × 3"),
+        (lambda: w.add_com_region("r", [[np.nan, 0, 1]], upper=1.0, dt=0.01),
+         "task 'r': normals must be finite"),
+        (lambda: w.add_com_region("r", C, lower=[1.0, 0.0], upper=0.5, dt=0.01),
+         "task 'r': row 0 has lower 1 > upper 0.5"),
+        (lambda: w.add_com_region("r", C, lower=[0.0, np.nan], dt=0.01),
+         "task 'r': lower bound 1 is NaN"),
+        (lambda: w.add_com_region("r", C, lower=[0.0, -np.inf], dt=0.01),
+         "task 'r': row 1 has no finite bound"),
+        (lambda: w.add_com_region("r", C, lower=[0.0, 1.0, 2.0], dt=0.01),
+         "task 'r': lower must be a number or 2 numbers"),
+        (lambda: w.add_com_region("r", C, upper=1.0, dt=0.0), "task 'r': a region needs dt > 0"),
+        (lambda: w.add_com_region("r", C, upper=1.0, dt=0.01, horizon=-1.0),
+         "task 'r': horizon must be > 0"),
+        (lambda: w.add_frame_region("r", "sword_tip", C, upper=1.0, dt=0.01, offset=[1, 2]),
+         "task 'r': offset must be 3 finite numbers"),
+    ]
+    for call, message in cases:
+        with pytest.raises(TaskStackError, match=message):
+            call()
+    with pytest.raises(KeyError, match="no frame 'sword'"):
+        w.add_frame_region("r", "sword", C, upper=1.0, dt=0.01)
+    w.add_com_region("r", C, upper=1.0, dt=0.01)
+    w.add_frame_region("f", "sword_tip", C, upper=1.0, dt=0.01)
+    with pytest.raises(TaskStackError, match="task 'r': the region was declared with 2 rows"):
+        w.com_region(_state(robot, 0), "r", normals=np.eye(3))
+    with pytest.raises(ValueError, match="task 'f': an acceleration-level writer needs"):
+        w.frame_region(_state(robot, 0, drift=False), "f")
+    with pytest.raises(TaskStackError, match="task 'f' was declared as frame_region, not "
+                       "com_region"):
+        w.com_region(_state(robot, 0), "f")

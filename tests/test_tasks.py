@@ -1,5 +1,6 @@
 """robots.tasks and robots.references: finite-difference checks of every Jacobian and
-J̇q̇ term, the task equations (eq. 2-4 and the velocity form) and both joint-limit forms.
+J̇q̇ term, the task equations (eq. 2-4 and the velocity form), both joint-limit forms and
+the region (inequality) tasks.
 
 Derivatives are checked by central differences along ``q(s) = q ⊕ s v`` (constant
 velocity in pinocchio's convention, ``q̈ = 0``) with ``h = 1e-6``: ``ẋ = J v`` against
@@ -15,7 +16,10 @@ from prioik.robots import (JointLimitActivation, KinematicState, Reference, Stat
                            Waypoints, com_position, contact, frame_orientation, frame_pose,
                            frame_position, g1, go2, joint_limit_bounds, joint_limit_rows,
                            joint_limit_violation, joint_velocity_bounds, minimum_jerk, panda,
-                           point_position, posture, sample_humanoid, spatial_chain)
+                           point_position, polygon_region, posture, sample_humanoid,
+                           spatial_chain)
+from prioik.robots import com_region, frame_region
+from prioik.hierarchy import TaskStackError
 
 H = 1e-6
 TOL = 1e-6
@@ -398,3 +402,93 @@ def test_waypoints_scalar_is_the_reference_as_floats():
     assert w.scalar(1.7)[1] < 0 and w.scalar(5.0) == pytest.approx((-0.2, 0.0, 0.0), abs=1e-15)
     with pytest.raises(ValueError, match="scalar points"):
         Waypoints((0.0, 1.0), ((0.0, 1.0), (1.0, 2.0))).scalar(0.5)
+
+
+# ------------------------------------------------------------------------- regions
+@pytest.mark.parametrize("name", ["g1", "panda", "go2"])
+@pytest.mark.parametrize("seed", range(2))
+def test_region_rows_and_bounds_match_finite_differences(robots_under_test, name, seed):
+    """``frame_region`` (a point off the frame) and ``com_region``: the rows are ``C J``
+    (``C J v`` against the rate of ``C p``); the bounds, with every quantity from
+    pinocchio's placements and finite differences: at velocity level ``(bound − C p)/T``;
+    at acceleration level, far from the bounds (the horizon rule binds, no braking),
+    ``2 (bound − C p − C ṗ T)/T² − C J̇ v``."""
+    robot, frames = robots_under_test[name]
+    q, v = _random_state(robot, 40 + seed)
+    s0, sp, sm = _states(robot, q, v)
+    light = KinematicState(robot, q, v, drift=False)
+    rng = np.random.default_rng(seed)
+    C = rng.normal(size=(3, 3))
+    off = np.array([0.05, -0.1, 0.2])
+    T, dt = 0.1, 0.01
+    subjects = [(lambda s, **kw: frame_region(s, frames[0], C, *kw["b"], dt=dt, horizon=T,
+                                              offset=off, mode=kw["mode"]),
+                 lambda s: s.placement(frames[0]).translation
+                 + s.placement(frames[0]).rotation @ off),
+                (lambda s, **kw: com_region(s, C, *kw["b"], dt=dt, horizon=T,
+                                            mode=kw["mode"]),
+                 lambda s: s.com)]
+    for build, point in subjects:
+        y = C @ point(s0)
+        yd = C @ (point(sp) - point(sm)) / (2 * H)
+        lo, hi = y - 1.0, y + np.array([1.0, np.inf, 2.0])
+        vel = build(light, b=(lo, hi), mode="velocity")
+        assert _close(vel.A @ v, yd)
+        assert _close(vel.lower, (lo - y) / T)
+        assert _close(vel.upper[[0, 2]], ((hi - y) / T)[[0, 2]]) and vel.upper[1] == np.inf
+        acc = build(s0, b=(lo, hi), mode="acceleration")
+        assert np.array_equal(acc.A, vel.A)
+        accp, accm = (build(s, b=(lo, hi), mode="acceleration") for s in (sp, sm))
+        cdrift = (accp.A @ v - accm.A @ v) / (2 * H)
+        assert np.abs(cdrift).max() > 1e-3                       # not vacuous
+        assert _close(acc.lower, 2 * (lo - y - yd * T) / T ** 2 - cdrift)
+        assert _close(acc.upper[[0, 2]], (2 * (hi - y - yd * T) / T ** 2 - cdrift)[[0, 2]])
+        assert acc.upper[1] == np.inf
+
+
+def test_velocity_region_bounds_hold_the_step_that_meets_them():
+    """A q̇ on a velocity-level region's bound moves ``C p`` to the bound in ``T`` up to
+    the step's curvature (``O(T²)``: here below 1e-6 m for ``‖q̇‖ T`` ~ 1e-3)."""
+    robot = g1()
+    s = KinematicState(robot, robot.q0, np.zeros(robot.nv), drift=False)
+    p = s.placement("left_hand").translation
+    n = np.array([0.6, 0.0, 0.8])
+    T = 0.01
+    task = frame_region(s, "left_hand", n, upper=n @ p + 1e-3, dt=T)
+    qd = task.A[0] * (task.upper[0] / (task.A[0] @ task.A[0]))
+    after = KinematicState(robot, pin.integrate(robot.model, robot.q0, qd * T), qd,
+                           drift=False)
+    assert abs(n @ after.placement("left_hand").translation - (n @ p + 1e-3)) < 1e-6
+    assert task.lower[0] == -np.inf
+
+
+def test_polygon_region_is_the_hull_shrunk_by_the_margin():
+    """Unit outward normals, one per hull edge (interior and collinear points dropped),
+    counter-clockwise; the margin moves every edge inwards."""
+    square = [[1, 1], [-1, 1], [-1, -1], [1, -1], [0, 0], [1, 0], [0.2, -0.5]]
+    C, upper = polygon_region(square, margin=0.25)
+    assert C.shape == (4, 3) and np.all(C[:, 2] == 0)
+    assert np.allclose(np.linalg.norm(C, axis=1), 1)
+    assert sorted(map(tuple, np.round(C[:, :2], 12) + 0.0)) == [(-1, 0), (0, -1), (0, 1),
+                                                                  (1, 0)]
+    assert np.allclose(upper, 0.75)
+    inside = np.array([0.7, -0.74, 3.0])
+    assert np.all(C @ inside <= upper)
+    assert np.any(C @ np.array([0.8, 0.0, 0.0]) > upper)
+    tri, tu = polygon_region([[0, 0, 5], [2, 0, 5], [0, 2, 5], [1, 1, 5]])
+    rows = sorted(zip(map(tuple, np.round(tri[:, :2], 12) + 0.0), np.round(tu, 12) + 0.0))
+    r = np.round(2 ** -0.5, 12)
+    assert rows == [((-1, 0), 0), ((0, -1), 0), ((r, r), np.round(2 ** 0.5, 12))]
+
+
+@pytest.mark.parametrize("points, margin, message", [
+    ([[0, 0], [1, 1], [2, 2]], 0.0, "no area"),
+    ([[0, 0], [1, 0]], 0.0, "no area"),
+    ([[0, 0], [1, 0], [0, np.nan]], 0.0, "finite"),
+    ([[0, 0, 0, 0]], 0.0, "k × 2 or k × 3"),
+    ([[0, 0], [1, 0], [0, 1]], -0.1, "margin"),
+    ([[0, 0], [1, 0], [0, 1]], 0.5, "leaves"),
+])
+def test_polygon_region_refuses_what_has_no_region(points, margin, message):
+    with pytest.raises(TaskStackError, match=message):
+        polygon_region(points, margin=margin)
