@@ -328,6 +328,34 @@ def test_rows_just_beyond_a_bound_may_be_read_as_fixed():
     assert not worse.ok and worse.band_rows_fixed == 0
 
 
+def _just_inside(gain: float, inside: float) -> tuple[TaskStack, np.ndarray]:
+    """``x_0 ≥ 0`` above a row ``gain·x_0 = −1`` that holds it there (multiplier
+    ``gain``) and ``x_1 = 5``; the optimum ``(0, 5)`` moved ``inside`` into the bound."""
+    stack = TaskStack([[Task("bound", [[1.0, 0.0]], lower=[0.0])],
+                       [Task("pull", [[gain, 0.0]], [-1.0])],
+                       [Task("far", [[0.0, 1.0]], [5.0])]])
+    return stack, np.array([inside, 5.0])
+
+
+def test_rows_just_inside_a_bound_are_moved_onto_it_within_the_tolerance():
+    """A row 2e-8 inside its bound (beyond the activity tolerance, 1e-8 of its size) is
+    read as free, and the level that holds it there fails; moved onto the bound the
+    point passes, 2e-8 from x (within 1e-8·‖x‖) with the same level values to 2e-11:
+    x passes, the report that point's. Refused: 1e-6 inside (the step is longer than
+    the tolerance), and 2e-8 inside a bound held by a 1000x stronger row (the level's
+    value there differs by 2e-5, beyond 1e-8 of its scale)."""
+    stack, x = _just_inside(1e-3, 2e-8)
+    first = check_lexicographic(stack, x)
+    assert first.ok and first.snapped_rows == 1
+    assert "1 row(s) just inside a bound moved onto it" in str(first)
+    assert first.levels[1].residual == 1.0          # the point's: x_0 = 0 exactly
+    assert check_lexicographic(stack, np.array([0.0, 5.0])).snapped_rows == 0
+    far = check_lexicographic(*_just_inside(1e-3, 1e-6))
+    assert not far.ok and far.snapped_rows == 0 and far.fault_level == 1
+    strong = check_lexicographic(*_just_inside(1e3, 2e-8))
+    assert not strong.ok and strong.snapped_rows == 0 and strong.fault_level == 1
+
+
 @pytest.mark.parametrize("index", [27, 44])
 def test_rows_beyond_a_feasible_levels_bounds_are_not_read_as_fixed(index):
     """Validation stacks (random_inequality 27, 44): daqp_hierarchical leaves box rows of
