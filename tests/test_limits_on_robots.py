@@ -200,3 +200,75 @@ def test_a_com_region_keeps_a_reaching_humanoid_over_its_feet(name, mode):
     assert at_bound >= steps // 2, at_bound
     free, _, statuses = _balanced_reach(robot, mode, False, steps)
     assert statuses == {"optimal"} and free > 0.2, free
+
+
+#: robot → (its support contacts, the limb held behind a wall and pulled through it)
+_WALLED = {"g1": (("left_foot", "right_foot"), "left_hand"),
+           "talos": (("left_foot", "right_foot"), "left_hand"),
+           "go2": (("front_right_foot", "rear_left_foot", "rear_right_foot"),
+                   "front_left_foot")}
+
+
+@pytest.mark.parametrize("seed", range(2))
+@pytest.mark.parametrize("mode", ["velocity", "acceleration"])
+@pytest.mark.parametrize("name", list(_WALLED))
+def test_regions_at_two_levels_every_optimal_answer_is_certified(name, mode, seed):
+    """Contacts, joint limits and (seeded) the CoM polygon at level 0 or 1, a wall for a
+    limb (a frame region on a random normal, a random point on the limb) at level 1, a
+    target behind the wall at level 2, the posture last: every answer that says
+    ``optimal``, warm-started or cold, passes :func:`check_lexicographic`, and the wall
+    holds the limb at some steps. (Along such runs the exact answers blow up where the
+    reach meets a singularity: 61 steps stay clear of it on these seeds.) TALOS at
+    acceleration level, seed 1, step 60: the warm answer leaves a joint's ``q̈`` 1.9e-8
+    inside its limit, which the certificate reads moved onto it (``snapped_rows``)."""
+    rng = np.random.default_rng(seed)
+    robot = load(name)
+    support, limb = _WALLED[name]
+    accel = mode == "acceleration"
+    dt = 0.005 if accel else DT
+    gain = (100.0, 20.0) if accel else 10.0
+    horizon = {"horizon": 0.1} if accel else {}
+    w = TaskWriter(robot, mode)
+    start = KinematicState(robot, robot.q0, np.zeros(robot.nv))
+    places = {f: start.placement(f).copy() for f in support}
+    balance_level = int(rng.integers(0, 2))
+    for f in support:
+        w.add_contact(f, f, gain=gain, level=0)
+    w.add_joint_limits("limits", form="bounds", dt=dt, level=0, **horizon)
+    soles = [places[f].act(np.array([dx, dy, 0.0])) for f in support
+             for dx in (-0.05, 0.1) for dy in (-0.03, 0.03)]
+    C, upper = polygon_region(soles, margin=float(rng.uniform(0.0, 0.03)))
+    w.add_com_region("balance", C, upper=upper, dt=dt, level=balance_level, **horizon)
+    normal = rng.normal(size=3)
+    normal /= np.linalg.norm(normal)
+    p0 = start.placement(limb).translation
+    w.add_frame_region("wall", limb, normal, lower=normal @ p0 - 0.05, dt=dt, level=1,
+                       offset=rng.uniform(-0.05, 0.05, 3), **horizon)
+    w.add_frame_position("reach", limb, gain=(50.0, 14.0) if accel else 5.0, level=2)
+    w.add_posture("posture", gain=(10.0, 6.0) if accel else 1.0, level=3)
+    warm = prioik.prepare(w.layout, "hierarchical_active_set")
+    cold = prioik.prepare(w.layout, "hierarchical_active_set", warm_start=False)
+    target = p0 - 0.3 * normal + 0.1 * rng.normal(size=3)
+    q, v = robot.q0.copy(), np.zeros(robot.nv)
+    data = robot.data()
+    held = 0
+    for step in range(61):
+        state = KinematicState(robot, q, v, data, drift=accel)
+        for f in support:
+            w.contact(state, f, places[f])
+        w.joint_limits(state, "limits")
+        w.com_region(state, "balance")
+        w.frame_region(state, "wall")
+        w.frame_position(state, "reach", target)
+        w.posture(state, "posture", robot.q0)
+        stack = w.targets(state)
+        answer = warm.solve(stack)
+        for sol in (answer, cold.solve(stack)):
+            if sol.status == "optimal":
+                check = check_lexicographic(stack, sol.x)
+                assert check.ok, (step, sol.info, str(check))
+        A, lower, _ = stack.bounds("wall")
+        held += int(abs(A[0] @ answer.x - lower[0]) <= AT_BOUND * (1 + abs(lower[0])))
+        v = v + answer.x * dt if accel else answer.x
+        q = pin.integrate(robot.model, q, v * dt)
+    assert held >= 10, held
