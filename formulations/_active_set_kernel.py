@@ -1524,9 +1524,10 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
     It is when every other row is inside its interval (no tolerance), every rank
     decision is clear, ``x``'s precision resolves every box row, and the held rows are
     met: each on its bound within the primal tolerance (a box row put on it exactly
-    when within ``x``'s precision, as the active set does), in levels of inequality
-    rows alone, independent of everything above them (their level's rank is their
-    count: its violation is then zero, the least there is) and their multipliers say
+    when within ``x``'s precision, as the active set does), in levels met exactly
+    (a held row's level, its equality rows included, has rank equal to its row count:
+    it is independent of everything above, and the level's violation is zero, the
+    least there is) and their multipliers say
     so (:func:`_held_rows_optimal`, :func:`_fixed_columns_optimal`). With no held row: by induction over the levels,
     ``X_i ⊆ X_i^E`` (the optimal sets without the inequality rows) and ``x* ∈ X_i`` (its
     inequality rows are satisfied, so each level's value equals its equality part's
@@ -1613,8 +1614,6 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
     estarts[0] = 0
     for lev in range(k):
         acc = 0.0
-        level_eq = 0
-        level_held = 0
         if fixed:
             for j in range(starts[lev], starts[lev + 1]):
                 s = sw[j]
@@ -1629,7 +1628,6 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
                     nn *= s * s
                     ucol[j] = -2
                     ecol[j] = _one_column(Aj, nz, ecol[j])
-                    level_eq += 1
                     t = b[j] if row_eq[j] else lower[j]
                     ec = ecol[j]
                     if ec >= 0:                 # a unit row (a posture's)
@@ -1661,7 +1659,6 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
                 elif held[j] != 0:
                     nn = s * A[j, ucol[j]]
                     nn *= nn
-                    level_held += 1
                 else:
                     nn, ucol[j] = _sparsity(Aj, ucol[j])
                     nn *= s * s
@@ -1684,11 +1681,9 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
                         c[m] = s * (b[j] if row_eq[j] else lower[j])
                         ucol[j] = -2
                         ecol[j] = _one_column(Aj, nz, ecol[j])
-                        level_eq += 1
                     else:
                         c[m] = s * (upper[j] if held[j] > 0 else lower[j])
                         ucol[j] = _one_column(Aj, nz, ucol[j])
-                        level_held += 1
                     erow[m] = j
                     rowperm[m] = m
                     m += 1
@@ -1701,8 +1696,6 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
         # A level of extreme scale is refused here, and by solve_data: the caller
         # equilibrates it
         if _level_extreme(A, acc, starts[lev], starts[lev + 1]):
-            return -2, -1, 0
-        if level_held > 0 and level_eq > 0:
             return -2, -1, 0
         scales[lev] = np.sqrt(acc)
         step_bound[lev] = 0.0
@@ -1741,10 +1734,14 @@ def _equality_first(A, b, lower, upper, sw, row_eq, starts, k, rcond, primal_tol
         if fixed:
             if lev <= last_held and eranks[lev] != estarts[lev + 1] - estarts[lev]:
                 return FIXED_REFUSED, -1, 0     # not met exactly above a held row
-        elif (nheld > 0 and ucol[erow[estarts[lev]]] != -2
-              and estarts[lev + 1] > estarts[lev]):
-            if eranks[lev] != estarts[lev + 1] - estarts[lev]:      # a held row dependent
-                return -2, -1, 0
+        elif nheld > 0 and estarts[lev + 1] > estarts[lev]:
+            # a level with a held row (its equality rows beside it or not) is met exactly
+            # (its rank is its count): its violation is then zero, the least there is
+            for e in range(estarts[lev], estarts[lev + 1]):
+                if ucol[erow[e]] != -2:
+                    if eranks[lev] != estarts[lev + 1] - estarts[lev]:
+                        return -2, -1, 0
+                    break
     xn = np.sqrt(xx)
     if nheld > 0 and not fixed:     # a held box row off its bound by x's precision is put on it
         for j in range(M):

@@ -35,3 +35,20 @@ def test_run_returns_rows_and_ratios_for_the_g1_bounds_stacks():
     assert all(math.isfinite(x["value"]) and x["value"] > 0 for x in out["ratios"])
     table = format_table(out)
     assert "cold/raw" in table and "worst warm/raw" in table
+
+
+def test_balance_step_runs_both_loops_and_holds_the_com():
+    """benchmarks/balance_step.py: prioik's own loop and PlaCo's, the same task; the
+    answers optimal, prioik's CoM over its polygon (to the velocity level's
+    linearization, 1e-3 m), its equality-first try answering most steps of its own loop
+    (the kept working set right), and the reach met where PlaCo's soft task trades it
+    against the posture. Timings are reported, not asserted."""
+    pytest.importorskip("placo")
+    from prioik.benchmarks.balance_step import balance_step_times
+    out = balance_step_times(steps=120, rounds=1)
+    assert out["statuses"] == ["optimal"]
+    assert out["prioik_com_excursion_m"] <= 1e-3
+    assert out["equality_first_share"] >= 0.9
+    assert out["prioik_hand_error_m"] <= 1e-3 < out["placo_hand_error_m"]
+    for key in ("prioik_step_us", "prioik_at_placo_states_us", "placo_step_us"):
+        assert math.isfinite(out[key]) and out[key] > 0

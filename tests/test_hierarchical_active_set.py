@@ -26,7 +26,8 @@ from prioik.formulations._active_set_kernel import _eqp as _eqp_kernel
 from prioik.formulations._active_set_kernel import _eqp_append as _eqp_append_kernel
 from prioik.formulations._active_set_kernel import _hard_multipliers as _hard_multipliers_kernel
 from prioik.formulations._active_set_kernel import _unit_rows_step as _unit_rows_step_kernel
-from prioik.hierarchy import Task, TaskStack, TaskStackError, lexicographic_residuals
+from prioik.hierarchy import (Task, TaskStack, TaskStackError, check_lexicographic,
+                              lexicographic_residuals)
 from prioik.hierarchy.families import FAMILIES, INEQUALITY_FAMILIES
 from prioik.hierarchy.io import load_peer, load_soth
 
@@ -801,6 +802,39 @@ def test_equality_first_is_off_without_warm_start_and_after_reset():
     on._impl.reset()
     assert not on.solve(stack).info["equality_first"]
     assert prioik.solve_batch([stack] * 3, NAME).statuses == ["optimal"] * 3
+
+
+def _mixed_stack(pull: float, conflict: bool) -> TaskStack:
+    """Level 0 mixes an equality row (``x_0 + x_1 = 1``, or with ``conflict`` also
+    ``x_0 + x_1 = 3``: rank 1 of 2 rows) with a dense inequality row ``x_1 − x_2 ≤ 0.2``;
+    level 1 pulls ``x_1`` to ``pull``; the posture ``x = 0`` last."""
+    eye = np.eye(4)
+    top = [Task("contact", (eye[0] + eye[1])[None], [1.0])]
+    if conflict:
+        top.append(Task("other", (eye[0] + eye[1])[None], [3.0]))
+    top.append(Task("region", (eye[1] - eye[2])[None], upper=[0.2]))
+    return TaskStack([top, [Task("pull", eye[1:2], [pull])],
+                      [Task("posture", eye, np.zeros(4))]])
+
+
+@pytest.mark.parametrize("conflict", [False, True])
+def test_equality_first_answers_a_level_of_equality_and_held_rows(conflict):
+    """A level of equality rows beside an inequality row held at its bound (contacts
+    beside a region): the try answers from the second solve on when the level is met
+    exactly (its rank is its count), the cold answer to 1e-12 and certified; and it
+    gives way to the active set (the same answer) when the level's equality rows
+    conflict, where holding the row as an equality would trade it against them."""
+    warm = prioik.prepare(_mixed_stack(1.0, conflict).layout, NAME)
+    for step in range(4):
+        stack = _mixed_stack(1.0 + 0.1 * step, conflict)
+        sol = warm.solve(stack)
+        cold = prioik.solve(stack, NAME, warm_start=False)
+        assert sol.status == cold.status == "optimal"
+        assert np.abs(sol.x - cold.x).max() <= 1e-12
+        assert check_lexicographic(stack, sol.x, minimum_norm=True).ok
+        a = stack.levels[0][-1].A @ sol.x
+        assert abs(a[0] - 0.2) <= 1e-12            # the region's row is held
+        assert sol.info["equality_first"] is (step > 0 and not conflict)
 
 
 @settings(max_examples=60, deadline=None)
