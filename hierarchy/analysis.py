@@ -461,7 +461,10 @@ def _snapped(data: StackData, x: np.ndarray, tol: float
     keep = (np.abs(side) == 1) | ((side == 2) & met)
     M = np.vstack([A[snap], A[keep]])
     rhs = np.concatenate([(target - a)[snap], np.zeros(int(keep.sum()))])
-    step = np.linalg.lstsq(M, rhs, rcond=None)[0]
+    try:
+        step = np.linalg.lstsq(M, rhs, rcond=None)[0]
+    except np.linalg.LinAlgError:        # (an SVD that did not converge: no such point)
+        return None
     if not np.linalg.norm(step) <= tol * max(1.0, float(np.linalg.norm(x))):
         return None
     return x + step, count
