@@ -139,11 +139,10 @@ class _Region:
 
     @classmethod
     def of(cls, name: str, normals, lower, upper, dt, horizon) -> "_Region":
-        if dt is None or isinstance(dt, bool) or not (np.isscalar(dt) and dt > 0
-                                                       and np.isfinite(dt)):
+        if not _positive(dt):
             raise TaskStackError(f"a region needs dt > 0, got {dt!r}", task=name)
         T = dt if horizon is None else horizon
-        if isinstance(T, bool) or not (np.isscalar(T) and T > 0 and np.isfinite(T)):
+        if not _positive(T):
             raise TaskStackError(f"horizon must be > 0, got {horizon!r}", task=name)
         C, lo, hi = _region_rows(name, normals, lower, upper, None)
         k = C.shape[0]
@@ -156,6 +155,12 @@ class _Region:
                                  self.lower if lower is None else lower,
                                  self.upper if upper is None else upper, self.C.shape[0])
         self.C, self.lower, self.upper = C, lo, hi
+
+
+def _positive(value) -> bool:
+    """Whether ``value`` is a finite number > 0 (not a bool)."""
+    return (isinstance(value, (int, float, np.integer, np.floating))
+            and not isinstance(value, bool) and bool(np.isfinite(value)) and value > 0)
 
 
 def _region_rows(name: str, normals, lower, upper, k: int | None):
@@ -379,7 +384,10 @@ class TaskWriter:
                 speed limit), the drift ``C J̇ q̇`` taken off.
         """
         fid = self.robot.frame_id(frame)              # KeyError naming a missing frame
-        off = np.zeros(3) if offset is None else np.array(offset, dtype=float).reshape(-1)
+        try:
+            off = np.zeros(3) if offset is None else np.array(offset, dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            off = np.zeros(0)
         if off.shape != (3,) or not np.isfinite(off).all():
             raise TaskStackError(f"offset must be 3 finite numbers, got {offset!r}", task=name)
         region = _Region.of(name, normals, lower, upper, dt, horizon)

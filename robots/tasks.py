@@ -382,14 +382,12 @@ def frame_region(state: KinematicState, frame: str, normals, lower=None, upper=N
     coordinates; ``p`` the frame's origin or ``offset`` in its coordinates): rows
     ``C J`` with bounds on ``q̇`` (velocity level) or ``q̈`` (acceleration level; the
     default with a drift state), see :meth:`robots.rows.TaskWriter.add_frame_region`."""
-    off = None if offset is None else tuple(float(v) for v in
-                                            np.asarray(offset, dtype=float).reshape(-1))
-    rows = int(np.atleast_2d(np.asarray(normals, dtype=float)).shape[0])
-    key = ("frame_region", frame, off, rows, dt, horizon)
+    name = name or f"{frame}_region"
+    key = ("frame_region", name, frame, _key_of(offset), _row_count(normals), dt, horizon)
     w = _writer(state, key, lambda w, g: w.add_frame_region(
-        _T, frame, normals, lower, upper, dt=dt, horizon=horizon, offset=offset), mode)
-    w.frame_region(state, _T, normals, lower, upper)
-    return _bounds_task(w, name or f"{frame}_region")
+        name, frame, normals, lower, upper, dt=dt, horizon=horizon, offset=offset), mode)
+    w.frame_region(state, name, normals, lower, upper)
+    return _bounds_task(w, name, name)
 
 
 def com_region(state: KinematicState, normals, lower=None, upper=None, *, dt: float,
@@ -397,17 +395,35 @@ def com_region(state: KinematicState, normals, lower=None, upper=None, *, dt: fl
                name: str = "com_region") -> Task:
     """Inequality task keeping the centre of mass inside ``lower ≤ C c ≤ upper`` (e.g.
     the support polygon of :func:`polygon_region`); see :func:`frame_region`."""
-    rows = int(np.atleast_2d(np.asarray(normals, dtype=float)).shape[0])
-    key = ("com_region", rows, dt, horizon)
+    key = ("com_region", name, _row_count(normals), dt, horizon)
     w = _writer(state, key, lambda w, g: w.add_com_region(
-        _T, normals, lower, upper, dt=dt, horizon=horizon), mode)
-    w.com_region(state, _T, normals, lower, upper)
-    return _bounds_task(w, name)
+        name, normals, lower, upper, dt=dt, horizon=horizon), mode)
+    w.com_region(state, name, normals, lower, upper)
+    return _bounds_task(w, name, name)
 
 
-def _bounds_task(w: TaskWriter, name: str) -> Task:
-    """The writer's one inequality task as a :class:`~prioik.hierarchy.Task` (copied)."""
-    A, lower, upper = w.data.bounds(_T)
+def _row_count(normals) -> int:
+    """The rows of a region's normals (``-1`` for what is not an array of numbers: the
+    writer's declaration then names the fault)."""
+    try:
+        return int(np.atleast_2d(np.asarray(normals, dtype=float)).shape[0])
+    except (TypeError, ValueError):
+        return -1
+
+
+def _key_of(offset):
+    """An offset as a hashable key (``repr`` of what is not an array of numbers)."""
+    try:
+        return None if offset is None else tuple(
+            float(v) for v in np.asarray(offset, dtype=float).reshape(-1))
+    except (TypeError, ValueError):
+        return repr(offset)
+
+
+def _bounds_task(w: TaskWriter, name: str, task: str = _T) -> Task:
+    """The writer's inequality task ``task`` as a :class:`~prioik.hierarchy.Task`
+    ``name`` (copied)."""
+    A, lower, upper = w.data.bounds(task)
     return Task(name, A, lower=lower, upper=upper)
 
 
@@ -427,7 +443,10 @@ def polygon_region(points, margin: float = 0.0) -> tuple[np.ndarray, np.ndarray]
         TaskStackError: fewer than three points not on one line, a non-finite point, or a
             margin that leaves nothing of the polygon.
     """
-    P = np.asarray(points, dtype=float)
+    try:
+        P = np.asarray(points, dtype=float)
+    except (TypeError, ValueError):
+        raise TaskStackError(f"points must be numbers, got {points!r}") from None
     if P.ndim != 2 or P.shape[1] not in (2, 3) or not np.isfinite(P).all():
         raise TaskStackError(f"points must be finite k × 2 or k × 3, got shape {P.shape}")
     if not (np.isscalar(margin) and np.isfinite(margin) and margin >= 0):
@@ -435,7 +454,7 @@ def polygon_region(points, margin: float = 0.0) -> tuple[np.ndarray, np.ndarray]
     hull = _convex_hull(P[:, :2])
     if hull.shape[0] < 3:
         raise TaskStackError("the points' horizontal hull has no area (fewer than three "
-                         "points off one line)")
+                             "points off one line)")
     edges = np.roll(hull, -1, axis=0) - hull
     normals = np.column_stack([edges[:, 1], -edges[:, 0]])      # outward: hull is CCW
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
@@ -445,7 +464,7 @@ def polygon_region(points, margin: float = 0.0) -> tuple[np.ndarray, np.ndarray]
         # the centroid is inside every edge of the hull; off one of the moved edges the
         # margin is (near) the polygon's inradius
         raise TaskStackError(f"a margin of {margin:g} m leaves (almost) nothing of the "
-                         "polygon")
+                             "polygon")
     return np.column_stack([normals, np.zeros(len(hull))]), upper
 
 

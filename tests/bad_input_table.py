@@ -127,6 +127,9 @@ for name, fn, word in (
         ("region: no finite bound", lambda: frame_region(free, "tip", [[1, 0, 0]], dt=0.01), "no finite bound"),
         ("region: dt = 0", lambda: com_region(free, [[1, 0, 0]], upper=1.0, dt=0.0), "dt"),
         ("region: normals 2 wide", lambda: com_region(free, [[1, 0]], upper=1.0, dt=0.01), "normals"),
+        ("region: normals a string", lambda: com_region(free, "abc", upper=1.0, dt=0.01), "normals"),
+        ("region: dt a string", lambda: com_region(free, [[1, 0, 0]], upper=1.0, dt="x"), "dt"),
+        ("region: offset a string", lambda: frame_region(free, "tip", [[1, 0, 0]], upper=1.0, dt=0.01, offset="x"), "offset"),
         ("polygon of collinear points", lambda: polygon_region([[0, 0], [1, 1], [2, 2]]), "no area"),
         ("polygon margin past its inradius", lambda: polygon_region([[0, 0], [1, 0], [0, 1]], margin=1.0), "margin")):
     api("robots", name, fn, word)

@@ -608,6 +608,12 @@ def test_region_errors_name_the_task(robot):
          "task 'r': horizon must be > 0"),
         (lambda: w.add_frame_region("r", "sword_tip", C, upper=1.0, dt=0.01, offset=[1, 2]),
          "task 'r': offset must be 3 finite numbers"),
+        (lambda: w.add_frame_region("r", "sword_tip", C, upper=1.0, dt=0.01, offset="x"),
+         "task 'r': offset must be 3 finite numbers"),
+        (lambda: w.add_com_region("r", "abc", upper=1.0, dt=0.01),
+         "task 'r': normals must be numbers"),
+        (lambda: w.add_com_region("r", C, upper=1.0, dt="x"), "task 'r': a region needs dt"),
+        (lambda: w.add_com_region("r", C, upper=1.0, dt=True), "task 'r': a region needs dt"),
     ]
     for call, message in cases:
         with pytest.raises(TaskStackError, match=message):

@@ -488,7 +488,20 @@ def test_polygon_region_is_the_hull_shrunk_by_the_margin():
     ([[0, 0, 0, 0]], 0.0, "k × 2 or k × 3"),
     ([[0, 0], [1, 0], [0, 1]], -0.1, "margin"),
     ([[0, 0], [1, 0], [0, 1]], 0.5, "leaves"),
+    ("abc", 0.0, "numbers"),
 ])
 def test_polygon_region_refuses_what_has_no_region(points, margin, message):
     with pytest.raises(TaskStackError, match=message):
         polygon_region(points, margin=margin)
+
+
+def test_region_builders_name_their_task_in_errors_and_answers():
+    """The builders' tasks carry the given name (default ``<frame>_region``,
+    ``com_region``), their errors too."""
+    robot = g1()
+    s = KinematicState(robot, robot.q0, np.zeros(robot.nv), drift=False)
+    assert frame_region(s, "left_hand", [0, 0, 1], upper=1.0, dt=0.01).name == \
+        "left_hand_region"
+    assert com_region(s, [1, 0, 0], upper=1.0, dt=0.01, name="over_feet").name == "over_feet"
+    with pytest.raises(TaskStackError, match="task 'wall': normals must be numbers"):
+        frame_region(s, "left_hand", "abc", upper=1.0, dt=0.01, name="wall")
