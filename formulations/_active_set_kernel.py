@@ -1264,7 +1264,9 @@ def _held_rows_optimal(A, b, lower, row_eq, sw, starts, k, x, y, eB, estarts, er
             col += eranks[lev]
             if lev <= first_held or estarts[lev + 1] == estarts[lev]:
                 continue
-            if ucol[erow[estarts[lev]]] != -2:        # held rows only: no gradient
+            if ucol[erow[estarts[lev]]] != -2:
+                # a held row's level (its equality rows beside it or not) is met exactly
+                # (_equality_first's rank check): no gradient
                 continue
             if lev > complete:
                 return -2
