@@ -374,8 +374,8 @@ def region_rows(A, lower, upper, s, C, Jp, p, psign, v, drift, lo, hi, y, yd, vm
     """A region task's rows at ``s`` (:meth:`robots.rows.TaskWriter.add_frame_region`):
     ``A = C J_p``; with ``y = C p`` (``p`` given as ``psign · p``, the frame writer's
     error ``−p`` for a target 0) the bounds of :func:`velocity_bounds` (``accel`` false)
-    or of :func:`acceleration_bounds` on ``y``, ``ẏ = C J_p q̇`` less the drift
-    ``C J̇_p q̇``, position rules only (no speed limit)."""
+    or of :func:`acceleration_bounds` on ``y`` and ``ẏ = C J_p q̇`` (position rules only,
+    no speed limit) less the drift ``C J̇_p q̇`` (they bound ``C J_p q̈``)."""
     n = Jp.shape[1]
     for i in range(C.shape[0]):
         c0, c1, c2 = C[i, 0], C[i, 1], C[i, 2]
