@@ -425,6 +425,37 @@ def _read(data: StackData, x: np.ndarray, tol: float, rcond: float, minimum_norm
     return dataclasses.replace(report, band_rows_fixed=0)
 
 
+@dataclass
+class _Activity:
+    """Every row's activity at ``x`` (:func:`~hierarchy.linalg.row_activity`), with what
+    it is read from: the interval ``[lower, upper]`` (``b`` on equality rows), the norms
+    ``‖a_r‖``, and at a finite ``x`` the values ``a = A x``, ``terms = |A| |x|``, the
+    sizes ``terms + norms``, the side and the violation (``None`` otherwise)."""
+
+    lower: np.ndarray
+    upper: np.ndarray
+    norms: np.ndarray
+    a: np.ndarray | None = None
+    terms: np.ndarray | None = None
+    size: np.ndarray | None = None
+    side: np.ndarray | None = None
+    v: np.ndarray | None = None
+
+    @classmethod
+    def of(cls, data: StackData, x: np.ndarray, tol: float) -> "_Activity":
+        eq = data.layout.row_is_equality
+        A = data.A
+        act = cls(np.where(eq, data.b, data.lower), np.where(eq, data.b, data.upper),
+                  np.linalg.norm(A, axis=1))
+        if np.isfinite(x).all():
+            act.a = A @ x
+            act.terms = np.abs(A) @ np.abs(x)
+            act.size = act.terms + act.norms
+            act.side, act.v = row_activity_from_values(act.a, act.lower, act.upper,
+                                                       act.size, tol)
+        return act
+
+
 #: rows inside their interval, off a bound by more than the activity tolerance and at
 #: most this (relative to the activity rule's size plus ``|bound|``): the near-active rows
 #: a failed check moves onto their bounds (:func:`_snapped`)
@@ -438,13 +469,9 @@ def _snapped(data: StackData, x: np.ndarray, tol: float
     is (rows left violated, the levels' objectives, may move) — and their count; ``None``
     when there are none or the step is longer than ``tol · max(1, ‖x‖)`` (not within the
     check's precision of ``x``)."""
-    eq = data.layout.row_is_equality
     A = data.A
-    lo = np.where(eq, data.b, data.lower)
-    up = np.where(eq, data.b, data.upper)
-    a = A @ x
-    size = np.abs(A) @ np.abs(x) + np.linalg.norm(A, axis=1)
-    side, v = row_activity_from_values(a, lo, up, size, tol)
+    act = _Activity.of(data, x, tol)
+    lo, up, a, size, side, v = act.lower, act.upper, act.a, act.size, act.side, act.v
     inside = (side == 0) & (v == 0)
     with np.errstate(invalid="ignore"):
         near_up = inside & np.isfinite(up) & (up - a <= _NEAR_ACTIVE * (size + np.abs(up)))
@@ -535,19 +562,14 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
     # the whole stack's rows at once, each level a slice: the activity rule is row by row
     layout = data.layout
     starts = layout.starts
-    eq = layout.row_is_equality
     A_all, sw_all = data.A, data.sqrt_weight
-    lo_all = np.where(eq, data.b, data.lower)
-    up_all = np.where(eq, data.b, data.upper)
     WA_all = sw_all[:, None] * A_all
-    norms_all = np.linalg.norm(A_all, axis=1)
     finite = bool(np.isfinite(x).all())
-    ax = np.abs(x)
+    act = _Activity.of(data, x, tol)
+    lo_all, up_all, norms_all = act.lower, act.upper, act.norms
     if finite:
-        a_all = A_all @ x
-        terms_all = np.abs(A_all) @ ax                  # |a_r| |x|
-        size_all = terms_all + norms_all                # the activity rule's row sizes
-        side_all, v_all = row_activity_from_values(a_all, lo_all, up_all, size_all, tol)
+        a_all, terms_all, size_all = act.a, act.terms, act.size
+        side_all, v_all = act.side, act.v
     # unit rows at one bound, oriented (multiplier ≥ 0): the first `n_signed` rows
     signed = np.empty((A_all.shape[0], n))
     n_signed = 0

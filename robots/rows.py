@@ -346,12 +346,12 @@ class TaskWriter:
             return
         if not (position or velocity):
             raise ValueError(f"task {name!r}: bounds need position or velocity limits")
-        if dt is None or not (dt > 0 and np.isfinite(dt)):
+        if not _positive(dt):
             raise ValueError(f"task {name!r}: joint-limit bounds need dt > 0, got {dt!r}")
         if horizon is None and self._accel and position:
             raise ValueError(f"task {name!r}: acceleration-level bounds need a horizon")
         T = dt if horizon is None else horizon
-        if not (T > 0 and np.isfinite(T)):
+        if not _positive(T):
             raise ValueError(f"task {name!r}: horizon must be > 0, got {horizon!r}")
         task = self._add(name, "limits", lo.size, level, None, weight, inequality=True)
         task.form = form
@@ -700,12 +700,8 @@ class TaskWriter:
             task = self._task(name, "frame_region")
         hot = task.hot
         if hot is None or hot[0] is not state.data:
-            views = self._data_views(state)          # refuses another robot's state
-            t, R = views.frame(task.fid)
-            aj, vj = views.motion(task.joint)
-            reg = task.region
-            hot = task.hot = (state.data, (reg.point_rows, reg.point_values, views.J, t, R,
-                                           task.spec, task.geo, aj, vj))
+            hot = self._frame_args(task, state, task.region.point_rows,
+                                   task.region.point_values)
         accel = self._drift(state, task)                  # refuses a drift-free state
         # the point's rows J_p, −p and J̇_p q̇ by the compiled position writer (target 0)
         _k.position_target_rows(*hot[1], _ZERO3)
@@ -781,14 +777,17 @@ class TaskWriter:
             self._drift(state, task)                          # refuses a drift-free state
         _k.frame_rows(*hot[1], x, xd, xdd, rot, w, wd)
 
-    def _frame_args(self, task: _Task, state) -> tuple:
+    def _frame_args(self, task: _Task, state, A=None, Q=None) -> tuple:
         """``(state.data, (A, Q, J, t, R, spec, geo, a_j, v_j))``: the frame kernels'
         arguments that stay the same while the states share one ``pin.Data`` (its storage
-        is fixed, so the views follow every later kinematics call), kept on the task."""
+        is fixed, so the views follow every later kinematics call), kept on the task.
+        ``A``, ``Q``: where the kernels write (default the data's rows and the per-row
+        quantities; a frame region's point writes into its own scratch)."""
         views = self._data_views(state)          # refuses another robot's state
         t, R = views.frame(task.fid)
         aj, vj = views.motion(task.joint)
-        task.hot = (state.data, (self._data.A, self._Q, views.J, t, R, task.spec,
+        task.hot = (state.data, (self._data.A if A is None else A,
+                                 self._Q if Q is None else Q, views.J, t, R, task.spec,
                                  task.geo, aj, vj))
         return task.hot
 

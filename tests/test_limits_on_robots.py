@@ -134,6 +134,17 @@ def test_a_limb_reach_with_joint_limits_is_exact_on_every_robot(name, mode):
 COM_TOL = {"velocity": 1e-3, "acceleration": 2e-4}
 
 
+def _supports(start: KinematicState, feet, margin: float):
+    """The feet's placements at ``start`` and the rows ``C, upper`` of their soles'
+    polygon (corners 5 cm behind and 10 cm ahead of each foot frame, 3 cm to each side),
+    shrunk by ``margin``."""
+    places = {f: start.placement(f).copy() for f in feet}
+    soles = [places[f].act(np.array([dx, dy, 0.0])) for f in feet
+             for dx in (-0.05, 0.1) for dy in (-0.03, 0.03)]
+    C, upper = polygon_region(soles, margin=margin)
+    return places, C, upper
+
+
 def _balanced_reach(robot, mode: str, region: bool, steps: int):
     """Closed loop of the balance stack (see the module docstring); returns how far the
     CoM went past its polygon (m, the worst step), at how many steps a polygon row was
@@ -145,13 +156,10 @@ def _balanced_reach(robot, mode: str, region: bool, steps: int):
     w = TaskWriter(robot, mode)
     feet = ("left_foot", "right_foot")
     start = KinematicState(robot, robot.q0, np.zeros(robot.nv))
-    places = {f: start.placement(f).copy() for f in feet}
+    places, C, upper = _supports(start, feet, 0.02)
     for f in feet:
         w.add_contact(f, f, gain=gain, level=0)
     w.add_joint_limits("limits", form="bounds", dt=dt, level=0, **horizon)
-    soles = [places[f].act(np.array([dx, dy, 0.0])) for f in feet
-             for dx in (-0.05, 0.1) for dy in (-0.03, 0.03)]
-    C, upper = polygon_region(soles, margin=0.02)
     if region:
         w.add_com_region("balance", C, upper=upper, dt=dt, level=0, **horizon)
     w.add_frame_position("reach", "left_hand", gain=(50.0, 14.0) if accel else 5.0, level=1)
@@ -230,14 +238,11 @@ def test_regions_at_two_levels_every_optimal_answer_is_certified(name, mode, see
     horizon = {"horizon": 0.1} if accel else {}
     w = TaskWriter(robot, mode)
     start = KinematicState(robot, robot.q0, np.zeros(robot.nv))
-    places = {f: start.placement(f).copy() for f in support}
     balance_level = int(rng.integers(0, 2))
+    places, C, upper = _supports(start, support, float(rng.uniform(0.0, 0.03)))
     for f in support:
         w.add_contact(f, f, gain=gain, level=0)
     w.add_joint_limits("limits", form="bounds", dt=dt, level=0, **horizon)
-    soles = [places[f].act(np.array([dx, dy, 0.0])) for f in support
-             for dx in (-0.05, 0.1) for dy in (-0.03, 0.03)]
-    C, upper = polygon_region(soles, margin=float(rng.uniform(0.0, 0.03)))
     w.add_com_region("balance", C, upper=upper, dt=dt, level=balance_level, **horizon)
     normal = rng.normal(size=3)
     normal /= np.linalg.norm(normal)
