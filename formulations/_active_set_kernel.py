@@ -461,7 +461,7 @@ def _full_rank_step(B, y, col, rows, nw, tgt, soft_tol, flat, t, norms, perm, p,
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
-def _unit_rows_step(Bo, ucol, xc, col, rows, nh, nw, tgt, rcond, soft_tol, reach, colrow, p,
+def _unit_rows_step(Bo, ucol, xc, col, rows, nh, nw, tgt, soft_tol, reach, colrow, p,
                     nf, Vf, betaf, posf, Zu, G, flat, nu_out):
     """The step of a level of *unit rows* — ``nw`` working rows, each ``±s e_cᵀ`` in ``x``
     (one non-zero, the same magnitude ``s``, distinct columns: a posture task of uniform
@@ -483,10 +483,10 @@ def _unit_rows_step(Bo, ucol, xc, col, rows, nh, nw, tgt, rcond, soft_tol, reach
     a lower bound of the pivots' margin, ``g`` = ``_UNIT_ROWS_GAP``; ``s / soft_tol`` with
     no uncovered column), or ``(-1.0, -1.0)`` — the rows are not such unit rows, ``S Z``
     is not far from rank deficient, the bound is within :data:`~hierarchy.AMBIGUITY` of
-    ``soft_tol``, a hard row is not a box row or the hard rows are not clearly
-    independent (a Cholesky pivot of ``Z_H Z_Hᵀ`` within ``AMBIGUITY`` of ``rcond``: the
-    general path's hard-row rule decides then) — and the caller takes the general
-    path (``p`` may be written). Scratch: ``colrow`` (``n`` ints), ``Zu``, ``G``
+    ``soft_tol``, a hard row is not a box row or the hard rows' free directions are
+    not well conditioned (``Z_H Z_Hᵀ − g I`` not positive definite, ``g`` =
+    ``_UNIT_ROWS_GAP``: the general path's LQ and its hard-row rule decide then) — and
+    the caller takes the general path (``p`` may be written). Scratch: ``colrow`` (``n`` ints), ``Zu``, ``G``
     (``≥ 2n × n``), ``flat`` (``≥ 3n``)."""
     n = Bo.shape[1]
     d = n - col
@@ -539,18 +539,19 @@ def _unit_rows_step(Bo, ucol, xc, col, rows, nh, nw, tgt, rcond, soft_tol, reach
         for k in range(d):
             W[i, k] = Zh[i, k]
         _woodbury_apply(W[i], Zu, G, nu, d, t)
-    # independence: Cholesky of K = Z_H Z_Hᵀ, every pivot clearly above rcond
+    # conditioning: K = Z_H Z_Hᵀ − g I positive definite (Cholesky), g = _UNIT_ROWS_GAP,
+    # so that λ_min(S) ≥ λ_min(Z_H Z_Hᵀ) > g (N⁻¹ ⪰ I) and the Schur complement's
+    # rounding stays ≲ eps / g² relative, as N's: near-dependent hard rows (an xArm7's
+    # aligned joints, λ_min ~ 1e-7) put a step's rounding of 2e-5 on q̈ (its sign set by
+    # the compiled kernel's reassociation) where the general path's LQ is exact
     K = G[2 * nu:2 * nu + nh]
     S = G[2 * nu + nh:2 * nu + 2 * nh]
     for a in range(nh):
         for b in range(a + 1):
-            K[a, b] = _dot(Zh[a, :d], Zh[b, :d])
+            K[a, b] = _dot(Zh[a, :d], Zh[b, :d]) - (_UNIT_ROWS_GAP if a == b else 0.0)
             S[a, b] = _dot(Zh[a, :d], W[b, :d])
     if not _cholesky_lower(K, nh):
         return -1.0, -1.0
-    for a in range(nh):
-        if not K[a, a] > _AMBIGUITY * rcond:
-            return -1.0, -1.0
     if not _cholesky_lower(S, nh):
         return -1.0, -1.0
     # λ = S⁻¹ (Z_H p0 − ρ), in t
@@ -601,7 +602,7 @@ def _step(B, y, col, rows, nh, nw, fvec, rcond, soft_tol, T, V, beta, vpos, Lw, 
     tq = fvec[15]
     d = B.shape[1] - col
     if nw >= d and (nh == 0 or held_rows_step):
-        margin, gn = _unit_rows_step(Bo, ucol, xc, col, rows, nh, nw, tgt, rcond, soft_tol,
+        margin, gn = _unit_rows_step(Bo, ucol, xc, col, rows, nh, nw, tgt, soft_tol,
                                      reach, perm, p, nf, Vf, betaf, posf, T, Lw, flat, nu)
         if margin >= 0.0:
             return nh, d - nh, 0, True, margin, gn
@@ -2625,7 +2626,7 @@ FIXED_REFUSED = -4
 #: refutation's next (hold the most violated row, or release the held row of the most
 #: wrong-signed multiplier), one nested QR each (two for a guess whose box rows
 #: :data:`FIXED_REFUSED` refused as fixed coordinates)
-GUESSES = 2
+GUESSES = 3
 
 
 @kernel(fastmath=_FAST)

@@ -130,8 +130,8 @@ the equality rows are solved on the others, when every level above them is met e
 there (else they are held as equalities); their multipliers are then what the pivot
 rows' multipliers leave of each level's gradient on the fixed columns. A refuted
 try names its next guess (hold the most violated row, or release the most wrong-signed
-held row), tried once more; then the active set runs, from the kept working sets, or
-from the cold start when they held no row. Why it is exact: with no held row, with
+held row), tried in turn, up to three guesses; then the active set runs, from the kept
+working sets, or from the cold start when they held no row. Why it is exact: with no held row, with
 ``X_i^E`` the optimal sets of the stack without its inequality rows, by induction
 ``X_i ⊆ X_i^E`` and ``x* ∈ X_i`` (its inequality rows add no violation, so each level's
 value at ``x*`` is its equality part's least value over ``X_{i−1}^E ⊇ X_{i−1}``), and
