@@ -10,7 +10,9 @@ velocity-level stack with bounds on ``q̇``. Every solver gets the same stacks:
 * ``active_set cold``: ``prioik.prepare(layout, "hierarchical_active_set",
   warm_start=False).solve(stack)`` (the registry's prepared path);
 * ``active_set warm``: the same with ``warm_start=True``, the steps solved in order
-  (each solve starts from the previous step's working sets);
+  (each solve starts from the previous step's working sets; before a window's first
+  step the warm solver solves, untimed, the step before it, so that no timed solve
+  starts from another window's state);
 * ``daqp raw``: ``daqp.solve(None, None, A, bu, bl, sense, break_points=…)`` alone, on
   arrays built beforehand (:func:`prioik.formulations.daqp_hierarchical.build` without
   level compression, as ``daqp_hierarchical[raw]``);
@@ -63,25 +65,32 @@ NAME = "hierarchical_active_set"
 REPEATS = 10
 
 
-def bounds_stacks(variant: str, windows: int, steps: int, level: str) -> list:
+def bounds_stacks(variant: str, windows: int, steps: int, level: str
+                  ) -> tuple[list, dict[int, Any]]:
     """Stacks with joint limits as bounds at ``windows × steps`` consecutive steps of
-    the fencing run (``level``: ``"acceleration"`` or ``"velocity"``), in time order."""
+    the fencing run (``level``: ``"acceleration"`` or ``"velocity"``), in time order, and
+    for each window the stack of the step before it, keyed by the window's first index
+    in that list (:func:`measure`'s warm solver solves it, untimed, before the window:
+    every timed warm solve then follows its own previous step, as in a control loop)."""
     from prioik.benchmarks.stacks import g1_fencing_samples
     from prioik.robots.tasks import KinematicState
     run_samples = g1_fencing_samples(variant, 2)
     run, scenario = run_samples.run, run_samples.scenario
     data = scenario.robot.model.createData()
-    firsts = np.linspace(0, run.steps - steps, windows).round().astype(int)
-    out = []
+    firsts = np.linspace(1, run.steps - steps, windows).round().astype(int)
+
+    def stack(i: int):
+        state = KinematicState(scenario.robot, run.q[i], run.v[i], data)
+        t = float(run.t[i])
+        if level == "acceleration":
+            return scenario.acceleration_stack(state, t, limits="bounds").stack
+        return scenario.velocity_stack(state, t, limits="bounds").stack
+
+    out, before = [], {}
     for f in firsts:
-        for i in range(f, f + steps):
-            state = KinematicState(scenario.robot, run.q[i], run.v[i], data)
-            t = float(run.t[i])
-            if level == "acceleration":
-                out.append(scenario.acceleration_stack(state, t, limits="bounds").stack)
-            else:
-                out.append(scenario.velocity_stack(state, t, limits="bounds").stack)
-    return out
+        before[len(out)] = stack(f - 1)
+        out += [stack(i) for i in range(f, f + steps)]
+    return out, before
 
 
 def equality_part(stack):
@@ -107,9 +116,12 @@ def _time(fn, repeats: int) -> float:
     return best
 
 
-def measure(stacks: list, repeats: int = REPEATS, cascade_every: int = 1) -> dict[str, Any]:
+def measure(stacks: list, repeats: int = REPEATS, cascade_every: int = 1,
+            before: dict[int, Any] | None = None) -> dict[str, Any]:
     """Median per-solve times (s) of each solver on ``stacks`` and the active set's
-    agreement with the strict reference (:data:`STRICT_REFERENCE`)."""
+    agreement with the strict reference (:data:`STRICT_REFERENCE`). ``before``: stacks
+    the warm solver solves, untimed, before the stack of their index (the step before a
+    window of :func:`bounds_stacks`)."""
     import daqp
 
     import prioik
@@ -117,7 +129,9 @@ def measure(stacks: list, repeats: int = REPEATS, cascade_every: int = 1) -> dic
     from prioik.hierarchy import lexicographic_residuals
 
     layout = stacks[0].layout
-    same = [s for s in stacks if s.layout == layout]
+    keep = [i for i, s in enumerate(stacks) if s.layout == layout]
+    same = [stacks[i] for i in keep]
+    before = {j: before[i] for j, i in enumerate(keep) if before and i in before}
     cold = prioik.prepare(layout, NAME, warm_start=False)
     warm = prioik.prepare(layout, NAME)
     cold.solve(same[0])                       # numba compiled (cached) before timing
@@ -145,6 +159,8 @@ def measure(stacks: list, repeats: int = REPEATS, cascade_every: int = 1) -> dic
         for name, fn in paths.items():
             t = times[name]
             for i in range(len(same)):
+                if name == "warm" and i in before:
+                    warm.solve(before[i])   # the window's previous step (untimed)
                 t0 = time.perf_counter()
                 fn(i)
                 t[i] = min(t[i], time.perf_counter() - t0)
@@ -152,7 +168,9 @@ def measure(stacks: list, repeats: int = REPEATS, cascade_every: int = 1) -> dic
     sub = same[::cascade_every]
     t_cas = [_time(lambda s=s: prioik.solve(s, "cascaded_qp", solver="daqp"), 1) for s in sub]
     worst, statuses, statuses_reference, cold_warm = 0.0, set(), set(), 0.0
-    for s in same:            # in order: the warm solver follows the trajectory
+    for i, s in enumerate(same):    # in order: the warm solver follows the trajectory
+        if i in before:
+            warm.solve(before[i])
         a = cold.solve(s)
         statuses.add(a.status)
         q = prioik.solve(s, "cascaded_qp", **STRICT_REFERENCE)
@@ -312,7 +330,8 @@ def run(windows: int = 4, steps: int = 6, repeats: int = REPEATS, ik_steps: int 
         if stacks:
             for variant in ("compatible", "incompatible"):
                 for level in ("acceleration", "velocity"):
-                    res = measure(bounds_stacks(variant, windows, steps, level), repeats)
+                    stacks_, before = bounds_stacks(variant, windows, steps, level)
+                    res = measure(stacks_, repeats, before=before)
                     res.update(variant=variant, level=level)
                     out["rows"].append(res)
         if ik:

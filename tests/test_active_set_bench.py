@@ -37,6 +37,23 @@ def test_run_returns_rows_and_ratios_for_the_g1_bounds_stacks():
     assert "cold/raw" in table and "worst warm/raw" in table
 
 
+def test_each_window_comes_with_the_step_before_it():
+    """The warm solver solves the step before each window, untimed, so that no timed
+    warm solve starts from another window's state: it is the neighbour of the window's
+    first step (their rows differ by one 5 ms step, far less than across windows)."""
+    import numpy as np
+
+    from prioik.benchmarks.active_set_bench import bounds_stacks
+    stacks, before = bounds_stacks("incompatible", 3, 2, "velocity")
+    assert len(stacks) == 6 and sorted(before) == [0, 2, 4]
+    for i, prev in before.items():
+        assert prev.layout == stacks[i].layout
+        step = np.linalg.norm(prev.data.A - stacks[i].data.A)
+        assert step > 0
+        if i:       # across windows the rows differ by far more
+            assert step < 0.1 * np.linalg.norm(stacks[i - 1].data.A - stacks[i].data.A)
+
+
 def test_balance_step_runs_both_loops_and_holds_the_com():
     """benchmarks/balance_step.py: prioik's own loop and PlaCo's, the same task; the
     answers optimal, prioik's CoM over its polygon (to the velocity level's
