@@ -330,8 +330,8 @@ def run(windows: int = 4, steps: int = 6, repeats: int = REPEATS, ik_steps: int 
         if stacks:
             for variant in ("compatible", "incompatible"):
                 for level in ("acceleration", "velocity"):
-                    stacks_, before = bounds_stacks(variant, windows, steps, level)
-                    res = measure(stacks_, repeats, before=before)
+                    trajectory, before = bounds_stacks(variant, windows, steps, level)
+                    res = measure(trajectory, repeats, before=before)
                     res.update(variant=variant, level=level)
                     out["rows"].append(res)
         if ik:

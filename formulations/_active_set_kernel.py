@@ -486,8 +486,8 @@ def _unit_rows_step(Bo, ucol, xc, col, rows, nh, nw, tgt, soft_tol, reach, colro
     ``soft_tol``, a hard row is not a box row or the hard rows' free directions are
     not well conditioned (``Z_H Z_Hᵀ − g I`` not positive definite, ``g`` =
     ``_UNIT_ROWS_GAP``: the general path's LQ and its hard-row rule decide then) — and
-    the caller takes the general path (``p`` may be written). Scratch: ``colrow`` (``n`` ints), ``Zu``, ``G``
-    (``≥ 2n × n``), ``flat`` (``≥ 3n``)."""
+    the caller takes the general path (``p`` may be written). Scratch: ``colrow``
+    (``n`` ints), ``Zu``, ``G`` (``≥ 2n × n``), ``flat`` (``≥ 3n``)."""
     n = Bo.shape[1]
     d = n - col
     R = Zu.shape[0]
@@ -541,9 +541,9 @@ def _unit_rows_step(Bo, ucol, xc, col, rows, nh, nw, tgt, soft_tol, reach, colro
         _woodbury_apply(W[i], Zu, G, nu, d, t)
     # conditioning: K = Z_H Z_Hᵀ − g I positive definite (Cholesky), g = _UNIT_ROWS_GAP,
     # so that λ_min(S) ≥ λ_min(Z_H Z_Hᵀ) > g (N⁻¹ ⪰ I) and the Schur complement's
-    # rounding stays ≲ eps / g² relative, as N's: near-dependent hard rows (an xArm7's
-    # aligned joints, λ_min ~ 1e-7) put a step's rounding of 2e-5 on q̈ (its sign set by
-    # the compiled kernel's reassociation) where the general path's LQ is exact
+    # rounding stays ≲ eps / g² relative (N's: eps / g): near-dependent hard rows (an
+    # xArm7's aligned joints, λ_min ~ 1e-7) put a step's rounding of 2e-5 on q̈ (its sign
+    # set by the compiled kernel's reassociation) where the general path's LQ is accurate
     K = G[2 * nu:2 * nu + nh]
     S = G[2 * nu + nh:2 * nu + 2 * nh]
     for a in range(nh):

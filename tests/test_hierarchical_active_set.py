@@ -1108,29 +1108,28 @@ def _householder_lq(C: np.ndarray):
 
 
 @njit(cache=True)
-def _unit_rows_call(Bo, ucol, xc, col, rows, nh, nw, tgt, rcond, soft_tol, reach, nf, Vf,
-                    betaf, posf):
+def _unit_rows_call(Bo, ucol, xc, col, rows, nh, nw, tgt, soft_tol, reach, nf, Vf, betaf,
+                    posf):
     """The kernel's inlined ``_unit_rows_step`` in a compiled function of its own (cached
     on disk like the kernels: compiled anew each run, it took 17 s of the suite)."""
     n = Bo.shape[1]
     p = np.zeros(n)
     nu = np.zeros(Bo.shape[0])
     margin, gn = _unit_rows_step_kernel(
-        Bo, ucol, xc, col, rows, nh, nw, tgt.copy(), rcond, soft_tol, reach,
+        Bo, ucol, xc, col, rows, nh, nw, tgt.copy(), soft_tol, reach,
         np.empty(n, np.int64), p, nf, Vf, betaf, posf, np.zeros((3 * n, n)),
         np.zeros((4 * n, n)), np.zeros(3 * n), nu)
     return margin, p, gn, nu
 
 
-def _unit_rows_step(Bo, x, col, tgt, soft_tol, V, beta, pos, nh=0, reach=True,
-                    rcond=1e-10):
+def _unit_rows_step(Bo, x, col, tgt, soft_tol, V, beta, pos, nh=0, reach=True):
     """The kernel's inlined ``_unit_rows_step`` on these arrays: rows ``Bo[:nh]`` are the
     working hard rows, the rest the level's; returns ``(margin, p, ‖g‖, ν)``."""
     m = Bo.shape[0]
     ucol = np.array([np.flatnonzero(r)[0] if np.count_nonzero(r) == 1 else -1 for r in Bo],
                     dtype=np.int64)
-    return _unit_rows_call(Bo, ucol, x, col, np.arange(m), nh, m - nh, tgt, rcond,
-                           soft_tol, reach, col, V, beta, pos)
+    return _unit_rows_call(Bo, ucol, x, col, np.arange(m), nh, m - nh, tgt, soft_tol,
+                           reach, col, V, beta, pos)
 
 
 @pytest.mark.parametrize("base", [0, 6])
@@ -1217,14 +1216,24 @@ def test_unit_rows_step_with_held_box_rows_solves_the_kkt_system(seed, base, rea
     assert abs(gn - np.linalg.norm(g)) <= 1e-10 * max(1.0, np.linalg.norm(g))
 
 
-@pytest.mark.parametrize("fault", ["not_a_box_row", "same_column", "as_many_as_free"])
+@pytest.mark.parametrize("fault", ["not_a_box_row", "same_column", "as_many_as_free",
+                                   "ill_conditioned"])
 def test_unit_rows_step_declines_held_rows_it_cannot_take(fault):
     """-1 (the general path decides) for a held row of two non-zeros, two held rows on one
-    column (dependent) and as many held rows as free coordinates (a vertex: degenerate
-    active sets are left to the general path's rules)."""
+    column (dependent), as many held rows as free coordinates (a vertex: degenerate
+    active sets are left to the general path's rules), and held rows whose free
+    directions are near dependent: a fixed row 1e-3 from ``e_0 + e_1`` leaves
+    ``λ_min(Z_H Z_Hᵀ) ~ 2e-6`` for rows held on columns 0 and 1, where the Schur
+    complement's rounding grows as its square (an xArm7 step: 2e-5 on q̈)."""
     rng = np.random.default_rng(1)
     n, col = 12, 4
-    V, beta, pos, _ = _householder_lq(rng.standard_normal((col, n)))
+    C = rng.standard_normal((col, n))
+    if fault == "ill_conditioned":
+        C[0] = np.eye(n)[0] + np.eye(n)[1] + 1e-3 * rng.standard_normal(n)
+    V, beta, pos, Z = _householder_lq(C)
+    if fault == "ill_conditioned":
+        eig = np.linalg.eigvalsh(Z[:2] @ Z[:2].T)
+        assert 1e-9 < eig[0] < 1e-5 and eig[-1] > 0.1    # dependent beyond the gap only
     S = 2.0 * np.eye(n)
     nh = n - col if fault == "as_many_as_free" else 2
     H = np.zeros((nh, n))
