@@ -1060,12 +1060,15 @@ def test_a_wrong_signed_multiplier_is_read_at_the_levels_gain():
     threshold 1.6e-10, on directions of gain ~1e-4 ‖A_1‖_F: its values 4.7e-7 from the
     optimum, 'optimal', the certificate at 1.24e-8 > 1e-8. Now read at that gain, as the
     certificate reads them, they are released: level 1 equals an independent
-    bounded-variable least squares (scipy's BVLS) in task space."""
+    bounded-variable least squares (scipy's BVLS) in task space. Its path passes an
+    ambiguous rank decision on a level whose rows span more than CERTIFIABLE_SPREAD in
+    scale, so the solver does not vouch for it ('approximate', stop 40): the cost of that
+    rule, the answer right as shown here."""
     from prioik.hierarchy import check_lexicographic
     from prioik.hierarchy.fuzz import bounds_case
     stack = bounds_case(np.random.default_rng([2026, 434]), 434).stack
     sol = prioik.solve(stack, NAME)
-    assert sol.status == "optimal"
+    assert sol.status == "approximate" and "span more than" in sol.info["reason"]
     report = check_lexicographic(stack, sol.x, minimum_norm=True)
     assert report.ok and report.worst_relative <= 1e-10, str(report)   # measured 1.2e-12
     assert max(kkt_report(stack, sol.x)) <= KKT_TOL
@@ -1524,14 +1527,20 @@ def test_independent_14_976_wrong_working_set_is_not_called_optimal():
 def test_an_ambiguous_path_to_a_certified_answer_stays_optimal(case):
     """Fuzz inequality stacks (seed 1) whose level passes through an ambiguous rank
     decision before a clear last step: the certificate passes the answer, and it stays
-    'optimal' (the path alone is no reason to doubt it), with the check on record."""
+    'optimal' (the path alone is no reason to doubt it), with the check on record —
+    unless the level's rows span more than CERTIFIABLE_SPREAD in scale (448: 3.4e4),
+    where the certificate cannot vouch for it and the answer says 'approximate'."""
     from prioik.hierarchy import check_lexicographic
     from prioik.hierarchy.fuzz import inequality_case
     stack = inequality_case(np.random.default_rng([1, case]), case).stack
     sol = prioik.solve(stack, NAME)
-    assert sol.info["path_certified"] is True and sol.info["ambiguous_path_levels"]
-    assert sol.status == "optimal" and "reason" not in sol.info
-    assert check_lexicographic(stack, sol.x).ok
+    assert sol.info["ambiguous_path_levels"] and check_lexicographic(stack, sol.x).ok
+    if case == 448:
+        assert sol.status == "approximate" and sol.info["path_certified"] is False
+        assert "level 1 (3.4e+04)" in sol.info["reason"]
+    else:
+        assert sol.info["path_certified"] is True
+        assert sol.status == "optimal" and "reason" not in sol.info
 
 
 @pytest.mark.xfail(strict=True, reason="open: at moderate ‖x‖ a point of smaller norm and a "
@@ -1552,6 +1561,27 @@ def test_independent_12_407_level_1_reaches_its_optimum():
     stack = load_stack(_ADVERSARIAL_DIR / "independent-12-407.json")
     sol = prioik.solve(stack, NAME)
     assert sol.status != "optimal" or sol.residuals[1] ** 2 <= 149.888905
+
+
+@pytest.mark.parametrize("case, level, exact", [
+    ("scales-4-302", 1, 1.93902), ("scales-4-8", 1, 0.0), ("mixed-6-103", 4, 8.0605e-4)])
+def test_a_level_of_wide_row_scales_on_an_ambiguous_path_is_not_vouched_for(case, level,
+                                                                            exact):
+    """A second independent generator (stop 40; exact rational arithmetic for the
+    reference values): levels whose weighted row norms span 2e5-7e8 pass through an
+    ambiguous rank decision and settle above their optimum (here 18%, 1.1e-2 against 0,
+    4.8%); the certificate, relative to the level's largest rows, passed them, and the
+    answers said 'optimal'. Beyond CERTIFIABLE_SPREAD the solver does not take the
+    certificate's word: 'approximate', the reason naming the level and its spread."""
+    from prioik.formulations.hierarchical_active_set import CERTIFIABLE_SPREAD
+    from prioik.hierarchy import load_stack
+    stack = load_stack(_ADVERSARIAL_DIR / f"independent2-{case}.json")
+    sol = prioik.solve(stack, NAME)
+    assert sol.residuals[level] ** 2 > exact + 1e-6 * max(1.0, exact)   # still above it
+    assert sol.status == "approximate" and sol.info["path_certified"] is False
+    assert level in sol.info["ambiguous_path_levels"]
+    assert f"at level {level} (" in sol.info["reason"]
+    assert f"span more than {CERTIFIABLE_SPREAD:g}x" in sol.info["reason"]
 
 
 @pytest.mark.parametrize("warm_start", [False, True])
