@@ -100,7 +100,8 @@ may not be the optimum: the answer is then checked by
 :func:`~prioik.hierarchy.check_lexicographic` and is ``optimal`` only if it passes
 and the level's weighted row norms span at most :data:`CERTIFIABLE_SPREAD` (the
 certificate's tolerance is relative to the level's largest rows: an independent check
-found levels spanning 2e5-7e8 certified 2e-2 to 18% above their optimum)
+found levels spanning 2e5-7e8 certified above their optimum by 1.4e-6 to 0.18 of
+``max(1, value)``)
 (``info["path_certified"]``, ``info["ambiguous_path_levels"]``). So is a level that
 ends with a held soft row inside its bound beyond ``x``'s precision but within its
 release tolerance (``info["near_release_levels"]``): a row of norm 739 held beside one
@@ -534,7 +535,7 @@ class Prepared:
             # the certificate's tolerance is relative to the level's largest rows: where
             # they dwarf the rows that carry its violation it passes answers it cannot
             # resolve (an independent check, exact arithmetic: ten levels of spreads
-            # 2e5-7e8 certified 2e-2 to 18% above their optimum)
+            # 2e5-7e8 certified above their optimum by 1.4e-6 to 0.18 of max(1, value))
             levels = ", ".join(f"level {i} ({ratio:.1e})" for i, ratio in spread)
             return [f"passed through an ambiguous rank decision at {levels}, whose rows' "
                     f"weighted norms span more than {CERTIFIABLE_SPREAD:g}x: the "
@@ -553,6 +554,7 @@ class Prepared:
                                   for i in flagged[key])
                 reasons.append(f"{named} {why}")
         return [f"{'; '.join(reasons)}, and {rejects}"]
+
 
 #: the largest spread of a level's weighted row norms ``max/min √w_j ‖a_j‖`` (non-zero
 #: rows) over which :meth:`Prepared._certify_flagged` takes the certificate's word for a
