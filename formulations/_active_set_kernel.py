@@ -542,8 +542,9 @@ def _unit_rows_step(Bo, ucol, xc, col, rows, nh, nw, tgt, soft_tol, reach, colro
     # conditioning: K = Z_H Z_Hᵀ − g I positive definite (Cholesky), g = _UNIT_ROWS_GAP,
     # so that λ_min(S) ≥ λ_min(Z_H Z_Hᵀ) > g (N⁻¹ ⪰ I) and the Schur complement's
     # rounding stays ≲ eps / g² relative (N's: eps / g): near-dependent hard rows (an
-    # xArm7's aligned joints, λ_min ~ 1e-7) put a step's rounding of 2e-5 on q̈ (its sign
-    # set by the compiled kernel's reassociation) where the general path's LQ is accurate
+    # xArm7's aligned joints, λ_min 6e-12, which the test this replaced — the Cholesky
+    # factor's diagonal, ~σ, above 1e3 rcond — passed at 2.5e-6) put a step's rounding
+    # of 2e-5 on q̈ (its sign set by the compiled kernel's reassociation)
     K = G[2 * nu:2 * nu + nh]
     S = G[2 * nu + nh:2 * nu + 2 * nh]
     for a in range(nh):
