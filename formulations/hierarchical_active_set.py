@@ -522,7 +522,9 @@ class Prepared:
         (``FLAG_NEAR_AMBIGUOUS``), or a level that stopped a cycle of working sets
         without a step that moved (``FLAG_STALLED``). The answer is checked by
         :func:`~prioik.hierarchy.check_lexicographic` (at its default tolerance, the
-        minimum-norm tie-break too when it was flagged); ``[]`` when it passes."""
+        minimum-norm tie-break too when it was flagged); ``[]`` when it passes, unless a
+        level on an ambiguous path has rows spanning more than :data:`CERTIFIABLE_SPREAD`
+        in scale (the certificate cannot vouch for it: the reason names the level)."""
         k = self._k
         tie_break = any(k in levels for levels in flagged.values())
         report = check_lexicographic(data, x, minimum_norm=tie_break)
