@@ -234,6 +234,5 @@ def certify(stack, outcome: Outcome, metric=None, tol: float | None = None) -> O
         what = ("the minimum-norm tie-break" if bad.tasks == ("minimum-norm",)
                 else f"level {bad.level} ({', '.join(bad.tasks)})")
         outcome.info["message"] = (f"the answer fails the lexicographic certificate at "
-                                   f"{what}: KKT residual {bad.relative:.1e} relative > "
-                                   f"tol {tol:g}")
+                                   f"{what}: {bad.failure(tol)}")
     return outcome

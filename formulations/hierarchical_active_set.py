@@ -99,9 +99,9 @@ step of a level decided ambiguously (its last step clear), the working set it le
 may not be the optimum: the answer is then checked by
 :func:`~prioik.hierarchy.check_lexicographic` and is ``optimal`` only if it passes
 and the level's weighted row norms span at most :data:`CERTIFIABLE_SPREAD` (the
-certificate's tolerance is relative to the level's largest rows: an independent check
-found levels spanning 2e5-7e8 certified above their optimum by 1.4e-6 to 0.18 of
-``max(1, value)``)
+certificate's tolerances are relative to the terms of a level's rows: an independent
+check found levels spanning 2e5-7e8 certified above their optimum by 1.4e-6 to 1.1e-2
+of ``max(1, value)``)
 (``info["path_certified"]``, ``info["ambiguous_path_levels"]``). So is a level that
 ends with a held soft row inside its bound beyond ``x``'s precision but within its
 release tolerance (``info["near_release_levels"]``): a row of norm 739 held beside one
@@ -534,21 +534,21 @@ class Prepared:
         if report.ok and not spread:
             return []
         if report.ok:
-            # the certificate's tolerance is relative to the level's largest rows: where
-            # they dwarf the rows that carry its violation it passes answers it cannot
-            # resolve (an independent check, exact arithmetic: ten levels of spreads
-            # 2e5-7e8 certified above their optimum by 1.4e-6 to 0.18 of max(1, value))
+            # the certificate's tolerances are relative to the terms of a level's rows:
+            # where the largest dwarf the rows that carry its violation it passes answers
+            # it cannot resolve (an independent check, exact arithmetic: of ten levels of
+            # spreads 2e5-7e8 that said 'optimal' 1.4e-6 to 0.18 of max(1, value) above
+            # their optimum, it rejects two and passes eight, up to 1.1e-2 above)
             levels = ", ".join(f"level {i} ({ratio:.1e})" for i, ratio in spread)
             return [f"passed through an ambiguous rank decision at {levels}, whose rows' "
                     f"weighted norms span more than {CERTIFIABLE_SPREAD:g}x: the "
-                    f"certificate, relative to a level's largest rows, cannot vouch for "
-                    f"its smallest"]
+                    f"certificate, relative to the terms of a level's rows, cannot vouch "
+                    f"for its smallest"]
         bad = report.first_failure
         where = (f"level {bad.level} ({', '.join(bad.tasks)})" if bad.level < k
                  else "the minimum-norm tie-break")
         info["ambiguous_levels"] = sorted(set().union(*flagged.values()))
-        rejects = (f"the certificate rejects {where} (KKT residual {bad.relative:.2g} "
-                   f"relative, tolerance {report.tol:g})")
+        rejects = f"the certificate rejects {where} ({bad.failure(report.tol)})"
         reasons = []
         for _, key, why in _CERTIFIED_FLAGS:
             if key in flagged:

@@ -22,8 +22,8 @@ import numpy as np
 
 from .layout import StackData, level_residuals
 from .errors import TaskStackError, UnsupportedTaskError
-from .linalg import (CERTIFICATE_SIGMA_FLOOR, DEFAULT_CERTIFICATE_TOL, DEFAULT_RCOND, level_scale,
-                     matrix_rank, nonnegative_least_squares, range_basis,
+from .linalg import (CERTIFICATE_SIGMA_FLOOR, DEFAULT_CERTIFICATE_TOL, DEFAULT_RCOND, X_PRECISION,
+                     level_scale, matrix_rank, nonnegative_least_squares, range_basis,
                      row_activity_from_values, svd)
 from .stack import TaskStack
 
@@ -185,7 +185,15 @@ class LevelCheck:
             (``b`` on equality rows, the nearest point of ``[lower, upper]`` on inequality
             rows): the size of the terms that make ``A_i x − t_i``, absolute for
             ``|x| ≲ 1``; ``max(1, ‖x‖)`` for the minimum-norm step.
-        ok: ``projected_gradient ≤ tol · scale``.
+        ok: ``projected_gradient ≤ tol · scale``, and for a level also
+            ``value_gap ≤ tol · max(1, residual²)`` unless ``projected_gradient`` is at the
+            rounding of the level's terms (``≤ X_PRECISION · scale``).
+        value_gap: ``projected_gradient²``: how much the level's value ``‖w_i‖²`` could
+            still drop along the directions the KKT residual reads (for a least-squares
+            level, the square of the reachable part of its weighted violation; with rows
+            held at a bound, the projection on their cone) — or, when larger, the drop of
+            a point along its descent direction that refuted ``x``. ``0`` for the
+            minimum-norm step.
         fixed_rows: Higher rows kept at their value at ``x`` (equality rows, violated rows,
             rows at both bounds): free multipliers.
         active_rows: Higher rows at one bound: sign-constrained multipliers.
@@ -199,11 +207,21 @@ class LevelCheck:
     ok: bool
     fixed_rows: int = 0
     active_rows: int = 0
+    value_gap: float = 0.0
 
     @property
     def relative(self) -> float:
         """``projected_gradient / scale``, what ``tol`` is compared with."""
         return self.projected_gradient / max(self.scale, 1e-300)
+
+    def failure(self, tol: float) -> str:
+        """Why the check fails at ``tol`` (the KKT residual, or the value it could still
+        gain), for a status message."""
+        if not self.relative <= tol:
+            return f"KKT residual {self.relative:.2g} relative > tol {tol:g}"
+        value = self.residual * self.residual
+        return (f"its value {value:.6g} could drop by {self.value_gap:.2g} > tol {tol:g} x "
+                f"max(1, value)")
 
 
 @dataclass(frozen=True)
@@ -260,10 +278,11 @@ class LexicographicReport:
         rows = [f"lexicographic check: {'ok' if self.ok else 'FAILED'} (tol {self.tol:g}{band})"]
         checks = self.levels + ((self.minimum_norm,) if self.minimum_norm is not None else ())
         for c in checks:
+            gap = f", value gap {c.value_gap:.1e}" if c.level < len(self.levels) else ""
             rows.append(f"  level {c.level} {','.join(c.tasks)}: residual {c.residual:.3e}, "
                         f"KKT residual {c.projected_gradient:.3e} "
-                        f"(relative {c.relative:.1e}; {c.fixed_rows} fixed, {c.active_rows} "
-                        f"active rows above) {'ok' if c.ok else 'FAIL'}")
+                        f"(relative {c.relative:.1e}{gap}; {c.fixed_rows} fixed, "
+                        f"{c.active_rows} active rows above) {'ok' if c.ok else 'FAIL'}")
         return "\n".join(rows)
 
 
@@ -323,9 +342,12 @@ def check_lexicographic(stack: TaskStack | StackData, x: np.ndarray,
     conditioned the level is; on equality stacks it is the algorithmic error
     ``‖U_fᵀ (A_i x − b_i)‖`` (eq. 29). The sign-constrained multipliers minimise it
     (a non-negative least-squares problem). A level passes when the residual is
-    ``≤ tol · scale_i`` (see :class:`LevelCheck`); rows counted at a bound may lie
-    outside it by the activity tolerance, which is the primal tolerance of the rows
-    fixed for the lower levels.
+    ``≤ tol · scale_i`` and its square — what the level's value could still gain along
+    the directions it reads — ``≤ tol · max(1, ‖w_i(x)‖²)``, unless the residual is at the
+    rounding of the level's terms (see :class:`LevelCheck`); rows counted at a bound may
+    lie outside it by the activity tolerance, which is the primal tolerance of the rows
+    fixed for the lower levels. Rows at a bound that lie in the span of the fixed rows
+    above (no direction left in ``Z_i``) take no multiplier.
 
     With ``minimum_norm=True`` the final tie-break is checked too: ``x`` must minimise
     ``‖x‖²`` (``xᵀ W x`` with ``metric``) over the optimal set, the KKT test with
@@ -546,6 +568,94 @@ def _feasible(above: list, rows: "_LevelRows", small: np.ndarray, x: np.ndarray)
     return out.status == 0
 
 
+def _level_passes(res: float, scale: float, violation: float, tol: float) -> bool:
+    """A level's verdict from its KKT residual ``res`` (task space), scale and violation.
+
+    ``res ≤ tol · scale`` reads the residual against the size of the level's terms; on
+    its own it lets the value ``‖w_i‖²`` sit ``res²`` above its optimum, up to
+    ``(tol · scale)²``, which is large where the level's satisfied rows dwarf the ones
+    that carry its violation (rows of 1e4 beside rows of 1e-3: a point whose small rows
+    were 0.1 off, the level 3e-4 above its optimum of 0, passed at 2.6e-11). So the
+    value the level could still gain, ``res²``, must also be ``≤ tol · max(1, value)``,
+    the accuracy the value is asked to — except where ``res`` is at the rounding of the
+    level's terms (``≤ X_PRECISION · scale``), below which no float64 answer can go.
+    """
+    if not (np.isfinite(res) and res <= tol * max(scale, 1e-300)):
+        return False
+    return bool(res * res <= tol * max(1.0, violation * violation)
+                or res <= X_PRECISION * scale)
+
+
+def _descent_drop(data: StackData, s0: int, s1: int, above: list, act: "_Activity",
+                  x: np.ndarray, d: np.ndarray) -> float:
+    """How much level ``rows[s0:s1]``'s value drops at the best point of ``x + α d``
+    (``α ≥ 0``) that keeps the rows above where the check reads them: fixed rows
+    (``above``'s masks) at their values and rows at a bound on it or inside, both to
+    the rounding of their values (``X_PRECISION`` of their size), the other rows inside
+    their intervals. Only a point that gives nothing up above counts: a held row
+    allowed beyond its bound by the activity tolerance let a robot reach gain 2e-7 at
+    its exact optimum, first order in that tolerance. The point is checked from its
+    own ``A x`` (``0.0`` when it does not hold): a verified drop, whatever the KKT
+    residual read."""
+    A = data.A
+    ad = A[:s1] @ d
+    if not np.isfinite(ad).all() or not ad[s0:].any():
+        return 0.0
+    lo_h, up_h, a_h = act.lower[:s0], act.upper[:s0], act.a[:s0]
+    if s0:
+        fix = np.concatenate([f for _, f in above]) | (act.side[:s0] == 2)
+        at_u, at_l = fix | (act.side[:s0] == 1), fix | (act.side[:s0] == -1)
+        h = ad[:s0]
+        rounding = X_PRECISION * (act.size[:s0] + np.abs(a_h))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            room_u = np.where(at_u, rounding, np.maximum(up_h - a_h, 0.0))
+            room_l = np.where(at_l, rounding, np.maximum(a_h - lo_h, 0.0))
+            ratio = np.where(h > 0, room_u / h, np.where(h < 0, room_l / -h, np.inf))
+        cap = float(np.min(ratio)) if ratio.size else np.inf
+    else:
+        cap = np.inf
+    # no further than ‖x‖ (or 1): beyond, the point's own rounding (eps |A| |x'|) is
+    # coarser than x's, and a drop of 3.5e-4 read at ‖x'‖ = 1e14 was rounding
+    cap = min(cap, max(1.0, level_scale(x)) / level_scale(d))
+    if not cap > 0:
+        return 0.0
+    lo, up, sw = act.lower[s0:s1], act.upper[s0:s1], data.sqrt_weight[s0:s1]
+    a, h = act.a[s0:s1], ad[s0:]
+
+    def value(vals: np.ndarray) -> np.ndarray:
+        viol = vals - np.clip(vals, lo[:, None], up[:, None])
+        return np.sum((sw[:, None] * viol) ** 2, axis=0)
+
+    v0 = act.v[s0:s1]
+    with np.errstate(over="ignore", invalid="ignore"):
+        slope = float(np.sum(sw * sw * v0 * h))       # half the derivative at α = 0
+        curve = float(np.sum((sw * h)[v0 != 0] ** 2))
+    model = -slope / curve if slope < 0 and curve > 0 else cap
+    top = min(cap, model)
+    if not (np.isfinite(top) and top > 0):
+        return 0.0
+    alphas = top * 0.5 ** np.arange(0, 24)
+    if np.isfinite(cap) and cap > top:
+        alphas = np.concatenate([[cap], alphas])
+    with np.errstate(over="ignore", invalid="ignore"):
+        along = value(a[:, None] + h[:, None] * alphas[None, :])
+    if not np.isfinite(along).any():
+        return 0.0
+    base = float(np.sum((sw * v0) ** 2))
+    # the best point, from its own rows' values
+    xp = x + float(alphas[int(np.nanargmin(along))]) * d
+    ap = A[:s1] @ xp
+    if s0:
+        moved = ap[:s0] - a_h
+        with np.errstate(invalid="ignore"):
+            kept = np.where(fix, np.abs(moved) <= rounding,
+                            (ap[:s0] <= np.maximum(up_h, a_h) + np.where(at_u, rounding, 0.0))
+                            & (ap[:s0] >= np.minimum(lo_h, a_h) - np.where(at_l, rounding, 0.0)))
+        if not kept.all():
+            return 0.0
+    return max(base - float(value(ap[s0:, None])[0]), 0.0)
+
+
 #: rows beyond a bound by more than this (relative to the activity rule's size) and
 #: within the activity tolerance are the band :func:`check_lexicographic` may read as fixed
 _BAND_FLOOR = 1e-12
@@ -577,11 +687,15 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
     above: list[tuple[_LevelRows, np.ndarray]] = []   # higher levels' rows, fixed masks
     checks = []
 
-    def kkt(g: np.ndarray, B: np.ndarray | None, floor_scale: float) -> float:
-        """``min_μ≥0 ‖D Vᵀ Zᵀ (g + Cᵀ μ)‖`` with ``B Z = U Σ Vᵀ``, ``D = 1/max(σ, floor)``."""
+    def kkt(g: np.ndarray, B: np.ndarray | None, floor_scale: float
+            ) -> tuple[float, np.ndarray | None]:
+        """``min_μ≥0 ‖D Vᵀ Zᵀ (g + Cᵀ μ)‖`` with ``B Z = U Σ Vᵀ``, ``D = 1/max(σ, floor)``,
+        and the steepest descent direction it stands for, ``−Z V D ρ`` with ``ρ`` the
+        minimising residual (``None`` where nothing moves): feasible for the rows held
+        above (``c_jᵀ d = −‖·‖ m_jᵀ ρ ≤ 0`` at the NNLS optimum) and kept in ``Z``."""
         d = Z.shape[1]
         if d == 0:
-            return 0.0
+            return 0.0, None
         y = Z.T @ g
         if B is None:
             D = None
@@ -589,7 +703,7 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
             bn = float(np.linalg.norm(B))
             floor = CERTIFICATE_SIGMA_FLOOR * (bn or floor_scale)
             if floor == 0.0:
-                return 0.0            # a level of zero rows: nothing x can change
+                return 0.0, None      # a level of zero rows: nothing x can change
             if B.shape[0]:
                 _, s, vt = svd(B @ Z)
                 sig = np.zeros(d)
@@ -615,16 +729,27 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
                 y = vt @ y
             y[null] = 0.0
             y = D * y
+
+        def back(rho: np.ndarray) -> np.ndarray:
+            step = rho if D is None else D * rho
+            return -(Z @ (vt.T @ step if D is not None and vt is not None else step))
+
         if not n_signed:
-            return level_scale(y)
+            return level_scale(y), back(y)
         M = Z.T @ signed[:n_signed].T
+        # a unit row at a bound in the span of the fixed rows (by the rank rule) has no
+        # direction left in Z: made a unit column, its rounding cancelled any
+        # gradient (a level 0 of a·x = 1 and a·x ≤ 1 passed a level 1 at 0.45 against
+        # its optimum 0.20)
+        keep = np.linalg.norm(M, axis=0) > rcond
         if D is not None:
             M = D[:, None] * (vt @ M if vt is not None else M)
         norms = np.linalg.norm(M, axis=0)
-        keep = norms > 0
+        keep &= norms > 0
         # unit columns: the same cone, and a well-scaled NNLS (D spans up to 1e6)
-        _, res = nonnegative_least_squares(M[:, keep] / norms[keep], -y)
-        return res
+        unit = M[:, keep] / norms[keep]
+        mu, res = nonnegative_least_squares(unit, -y)
+        return res, back(y + unit @ mu)
 
     def add_level(rows: _LevelRows, side: np.ndarray, norms: np.ndarray) -> None:
         nonlocal Z, fixed_count, n_signed
@@ -664,9 +789,22 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
             scale = level_scale(sw * (terms_all[s0:s1] + np.abs(target))) + an
         else:
             scale = np.nan
-        res = kkt(g, WA[(side == 2) | (v != 0)], an) if finite else np.nan
-        ok = bool(np.isfinite(res) and res <= tol * max(scale, 1e-300))
+        res, descent = kkt(g, WA[(side == 2) | (v != 0)], an) if finite else (np.nan, None)
         violation = level_scale(sw * v)
+        ok = _level_passes(res, scale, violation, tol)
+        gap = float(res) * float(res)
+        if ok and descent is not None and res > 0:
+            # the KKT residual reads directions of small gain at 1/‖B‖ or 1/floor, where
+            # a step may still lower the value a lot (two of a level's rows multiples of
+            # a fixed row, 1e3-1e4 times its third: 2.4e2 above its optimum of 2.49e7,
+            # read at 9e-9 and a value gap of 3.9e-5): walk the direction, and reject x
+            # when a point that keeps the rows above lowers the value
+            drop = _descent_drop(data, s0, s1, above, act, x, descent)
+            # beyond the tolerance and the rounding of both points' values (x' within
+            # ‖x‖ of x: its terms at most twice x's)
+            if drop > tol * max(1.0, violation * violation) + 8 * X_PRECISION * scale * (
+                    2 * violation + 2 * X_PRECISION * scale):
+                ok, gap = False, max(gap, drop)
         slack = None
         if finite and ok:
             # rows left violated by little (beyond rounding, within _NEARLY_FEASIBLE of
@@ -700,7 +838,7 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
                     side = side.copy()
                     side[slack] = np.where(v[slack] > 0, 1, -1)
         checks.append(LevelCheck(i, names, violation, float(res), scale, ok,
-                                 fixed_count, n_signed))
+                                 fixed_count, n_signed, gap))
         in_band = None
         if finite and violation > tol * scale:
             # only a level left violated beyond the tolerance can hold a row at a small
@@ -720,7 +858,7 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
     if minimum_norm:
         W = np.eye(n) if metric is None else np.asarray(metric, dtype=np.float64)
         scale = (1.0 if metric is None else float(np.linalg.norm(W, 2))) * max(1.0, xn)
-        res = kkt(W @ x, None, 1.0) if finite else np.nan
+        res = kkt(W @ x, None, 1.0)[0] if finite else np.nan
         final = LevelCheck(layout.k, ("minimum-norm",), xn, float(res), scale,
                            bool(np.isfinite(res) and res <= tol * scale),
                            fixed_count, n_signed)

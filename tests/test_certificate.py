@@ -487,3 +487,89 @@ def test_stack_data_is_validated_and_equilibrated():
     data.A[2, 1] = np.nan
     with pytest.raises(TaskStackError, match="task 'b'.*row 0|row 0.*'b'"):
         check_lexicographic(data, x)
+
+
+# ------------------------------------------- readings an independent generator refuted
+_ADVERSARIAL = Path(__file__).parent / "data" / "adversarial"
+
+
+@pytest.mark.parametrize("held", ["upper", "lower", "scaled"])
+def test_a_row_held_in_the_span_of_fixed_rows_takes_no_multiplier(held):
+    """Level 0 holds a·x = 1 and the same row as an inequality at its bound; level 1 pulls
+    x to (3, -4). Its optimum on the line is x* = (2.6, -4.2), value 0.2; x* − 0.5 d
+    (d the line's unit direction) keeps level 0 and leaves level 1 at 0.45. The held
+    row has no direction left once the equality is fixed: made a unit column, its
+    rounding cancelled level 1's gradient and the check passed that point."""
+    a = np.array([[2.0, 1.0]])
+    row = {"upper": Task("lim", a, upper=[1.0]), "lower": Task("lim", a, lower=[1.0]),
+           "scaled": Task("lim", 3.0 * a, upper=[3.0])}[held]
+    stack = TaskStack([[Task("e", a, [1.0]), row], Task("pull", np.eye(2), [3.0, -4.0])])
+    best = np.array([2.6, -4.2])
+    worse = best - 0.5 * np.array([1.0, -2.0]) / np.sqrt(5.0)
+    np.testing.assert_allclose(_w2(stack, best), [0.0, 0.2], atol=1e-12)
+    np.testing.assert_allclose(_w2(stack, worse), [0.0, 0.45], atol=1e-12)
+    assert check_lexicographic(stack, best, minimum_norm=True).ok
+    report = check_lexicographic(stack, worse)
+    assert not report.ok and report.fault_level == 1, str(report)
+    assert report.levels[1].projected_gradient == pytest.approx(0.5, rel=1e-9)
+
+
+def test_small_rows_beside_large_ones_are_read_by_the_value_they_could_gain():
+    """A feasible equality level whose rows are 1e4 and 0.1: a point 0.05 off on the small
+    row's coordinate is 2.5e-5 above the level's optimum of 0, yet its KKT residual
+    (5e-3) is 3.5e-9 of the level's terms (the large row's 7e5): below the tolerance.
+    The check also reads the value the residual stands for (its square, 2.5e-5 > 1e-8;
+    the point a step along it reaches is as much lower): the level fails, the message
+    saying by how much its value could drop."""
+    big = Task("big", [[1e4, 0.0, 0.0]], [7e5])
+    small = Task("small", [[0.0, 0.1, 0.0]], [0.2])
+    stack = TaskStack([[big, small], Task("rest", np.eye(3), np.zeros(3))])
+    best = np.array([70.0, 2.0, 0.0])
+    off = np.array([70.0, 2.05, 0.0])
+    assert check_lexicographic(stack, best, minimum_norm=True).ok
+    report = check_lexicographic(stack, off)
+    level = report.levels[0]
+    assert level.relative < DEFAULT_CERTIFICATE_TOL          # the KKT reading alone passes
+    assert not report.ok and report.fault_level == 0, str(report)
+    assert level.value_gap == pytest.approx(2.5e-5, rel=1e-9)
+    assert level.value_gap == pytest.approx(_w2(stack, off)[0] - _w2(stack, best)[0], rel=1e-6)
+    assert "could drop by 2.5e-05" in level.failure(report.tol)
+
+
+@pytest.mark.parametrize("case, level, probe, reading", [
+    ("edge-7-494", 2, (38.684833757316476, 3.6748463622035565, 5.744610690563899,
+                       -1.4986056360770688, -31.26258797670317), "descent"),
+    ("nearpar-1-721", 0, (623033.8344872508, 634072.9652274235, -343864.39441266644),
+     "value")])
+def test_points_an_independent_generator_found_worse_are_rejected(case, level, probe,
+                                                                 reading):
+    """Points from an independent generator with an exact rational reference (the case
+    files' descriptions) that keep the levels above ``level`` at their optima and leave
+    it above its own: edge-7-494's level 2 by 2.4e2 of 2.49e7 (9.6e-6 relative),
+    nearpar-1-721's level 0 by 2.4e-3 of 0.253. Both KKT residuals are below the
+    tolerance relative to the levels' terms (9.0e-9, 9.8e-9). nearpar's residual squared
+    (5.2e-3) is the value it could gain: more than the tolerance. edge's (3.9e-5, read
+    through rows 1e3-1e4 times the one that moves) is less; walking the direction it
+    stands for finds a point that keeps the rows above and is lower by more than the
+    tolerance. The solver's answers (at the exact optima to 1e-9) pass."""
+    from prioik.hierarchy import load_stack
+    stack = load_stack(_ADVERSARIAL / f"independent2-{case}.json")
+    probe = np.array(probe)
+    sol = formulations.solve(stack, "hierarchical_active_set")
+    assert check_lexicographic(stack, sol.x, minimum_norm=True).ok
+    best, worse = _w2(stack, sol.x), _w2(stack, probe)
+    exact = {"edge-7-494": 24897180.56198346, "nearpar-1-721": 0.25280607721738396}[case]
+    assert best[level] == pytest.approx(exact, rel=1e-9)
+    np.testing.assert_allclose(worse[:level], best[:level], rtol=1e-12, atol=1e-12)
+    assert worse[level] - best[level] > 5e-6 * max(1.0, best[level])
+    report = check_lexicographic(stack, probe)
+    check = report.levels[level]
+    assert not report.ok and report.fault_level == level, str(report)
+    assert check.relative < DEFAULT_CERTIFICATE_TOL          # the KKT reading alone passes
+    tol_value = DEFAULT_CERTIFICATE_TOL * max(1.0, check.residual ** 2)
+    if reading == "value":
+        assert check.projected_gradient ** 2 > tol_value
+    else:
+        assert check.projected_gradient ** 2 <= tol_value
+        # the verified drop: beyond the tolerance, at most what the optimum gains
+        assert tol_value < check.value_gap <= worse[level] - best[level] + 1e-6
