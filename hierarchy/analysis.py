@@ -586,74 +586,63 @@ def _level_passes(res: float, scale: float, violation: float, tol: float) -> boo
                 or res <= X_PRECISION * scale)
 
 
-def _descent_drop(data: StackData, s0: int, s1: int, above: list, act: "_Activity",
-                  x: np.ndarray, d: np.ndarray) -> float:
+def _descent_drop(A: np.ndarray, s0: int, s1: int, fixed: np.ndarray, act: "_Activity",
+                  sqrt_weight: np.ndarray, x: np.ndarray, x_norm: float, d: np.ndarray,
+                  limit: float) -> float:
     """How much level ``rows[s0:s1]``'s value drops at the best point of ``x + α d``
-    (``α ≥ 0``) that keeps the rows above where the check reads them: fixed rows
-    (``above``'s masks) at their values and rows at a bound on it or inside, both to
-    the rounding of their values (``X_PRECISION`` of their size), the other rows inside
-    their intervals. Only a point that gives nothing up above counts: a held row
-    allowed beyond its bound by the activity tolerance let a robot reach gain 2e-7 at
-    its exact optimum, first order in that tolerance. The point is checked from its
-    own ``A x`` (``0.0`` when it does not hold): a verified drop, whatever the KKT
-    residual read."""
-    A = data.A
-    ad = A[:s1] @ d
-    if not np.isfinite(ad).all() or not ad[s0:].any():
-        return 0.0
-    lo_h, up_h, a_h = act.lower[:s0], act.upper[:s0], act.a[:s0]
-    if s0:
-        fix = np.concatenate([f for _, f in above]) | (act.side[:s0] == 2)
-        at_u, at_l = fix | (act.side[:s0] == 1), fix | (act.side[:s0] == -1)
-        h = ad[:s0]
-        rounding = X_PRECISION * (act.size[:s0] + np.abs(a_h))
-        with np.errstate(invalid="ignore", divide="ignore"):
+    (``α ≥ 0``, at most ``max(1, ‖x‖)`` from ``x``) that keeps the rows above where the
+    check reads them: fixed rows (``fixed``, the rows above) at their values and rows at
+    a bound on it or inside, both to the rounding of their values (``X_PRECISION`` of
+    their size), the other rows inside their intervals. Only a point that gives nothing
+    up above counts: a held row allowed beyond its bound by the activity tolerance let a
+    robot reach gain 2e-7 at its exact optimum, first order in that tolerance. The point
+    is checked from its own ``A x`` (``0.0`` when it does not hold): a verified drop,
+    whatever the KKT residual read. ``0.0`` also when the drop cannot exceed ``limit``:
+    the value is convex along ``d``, so above its tangent, and drops by at most
+    ``2 |slope| α`` within the step allowed."""
+    with np.errstate(all="ignore"):
+        lo, up, sw = act.lower[s0:s1], act.upper[s0:s1], sqrt_weight[s0:s1]
+        a, h, v0 = act.a[s0:s1], A[s0:s1] @ d, act.v[s0:s1]
+        slope = float(np.sum(sw * sw * v0 * h))       # half the derivative at α = 0+
+        if not slope < 0:
+            return 0.0                                # the value does not drop along d
+        # no further than ‖x‖ (or 1): beyond, the point's own rounding (eps |A| |x'|) is
+        # coarser than x's, and a drop of 3.5e-4 read at ‖x'‖ = 1e14 was rounding
+        # (‖d‖ overflowing to inf: no step, underflowing to 0: the ratios cap it)
+        d_norm = float(np.sqrt(d @ d))
+        cap = max(1.0, x_norm) / d_norm if d_norm > 0 else np.inf
+        if s0:
+            side = act.side[:s0]
+            at_u, at_l = fixed | (side == 1), fixed | (side == -1)
+            lo_h, up_h, a_h, hh = act.lower[:s0], act.upper[:s0], act.a[:s0], A[:s0] @ d
+            rounding = X_PRECISION * (act.size[:s0] + np.abs(a_h))
             room_u = np.where(at_u, rounding, np.maximum(up_h - a_h, 0.0))
             room_l = np.where(at_l, rounding, np.maximum(a_h - lo_h, 0.0))
-            ratio = np.where(h > 0, room_u / h, np.where(h < 0, room_l / -h, np.inf))
-        cap = float(np.min(ratio)) if ratio.size else np.inf
-    else:
-        cap = np.inf
-    # no further than ‖x‖ (or 1): beyond, the point's own rounding (eps |A| |x'|) is
-    # coarser than x's, and a drop of 3.5e-4 read at ‖x'‖ = 1e14 was rounding
-    cap = min(cap, max(1.0, level_scale(x)) / level_scale(d))
-    if not cap > 0:
-        return 0.0
-    lo, up, sw = act.lower[s0:s1], act.upper[s0:s1], data.sqrt_weight[s0:s1]
-    a, h = act.a[s0:s1], ad[s0:]
-
-    def value(vals: np.ndarray) -> np.ndarray:
-        viol = vals - np.clip(vals, lo[:, None], up[:, None])
-        return np.sum((sw[:, None] * viol) ** 2, axis=0)
-
-    v0 = act.v[s0:s1]
-    with np.errstate(over="ignore", invalid="ignore"):
-        slope = float(np.sum(sw * sw * v0 * h))       # half the derivative at α = 0
+            ratio = np.where(hh > 0, room_u / hh, np.where(hh < 0, room_l / -hh, np.inf))
+            cap = min(cap, float(np.min(ratio)))
+        if not (cap > 0 and -2.0 * slope * cap > limit):
+            return 0.0
         curve = float(np.sum((sw * h)[v0 != 0] ** 2))
-    model = -slope / curve if slope < 0 and curve > 0 else cap
-    top = min(cap, model)
-    if not (np.isfinite(top) and top > 0):
-        return 0.0
-    alphas = top * 0.5 ** np.arange(0, 24)
-    if np.isfinite(cap) and cap > top:
-        alphas = np.concatenate([[cap], alphas])
-    with np.errstate(over="ignore", invalid="ignore"):
-        along = value(a[:, None] + h[:, None] * alphas[None, :])
-    if not np.isfinite(along).any():
-        return 0.0
-    base = float(np.sum((sw * v0) ** 2))
-    # the best point, from its own rows' values
-    xp = x + float(alphas[int(np.nanargmin(along))]) * d
-    ap = A[:s1] @ xp
-    if s0:
-        moved = ap[:s0] - a_h
-        with np.errstate(invalid="ignore"):
-            kept = np.where(fix, np.abs(moved) <= rounding,
+        top = min(cap, -slope / curve) if curve > 0 else cap
+        alphas = top * 0.5 ** np.arange(0, 24)
+        if cap > top:
+            alphas = np.concatenate([[cap], alphas])
+        vals = a[:, None] + h[:, None] * alphas[None, :]
+        along = np.sum((sw[:, None] * (vals - np.clip(vals, lo[:, None], up[:, None]))) ** 2,
+                       axis=0)
+        if not np.isfinite(along).any():
+            return 0.0
+        # the best point, from its own rows' values
+        ap = A[:s1] @ (x + float(alphas[int(np.nanargmin(along))]) * d)
+        if s0:
+            kept = np.where(fixed, np.abs(ap[:s0] - a_h) <= rounding,
                             (ap[:s0] <= np.maximum(up_h, a_h) + np.where(at_u, rounding, 0.0))
                             & (ap[:s0] >= np.minimum(lo_h, a_h) - np.where(at_l, rounding, 0.0)))
-        if not kept.all():
-            return 0.0
-    return max(base - float(value(ap[s0:, None])[0]), 0.0)
+            if not kept.all():
+                return 0.0
+        vp = ap[s0:]
+        value = float(np.sum((sw * (vp - np.clip(vp, lo, up))) ** 2))
+        return max(float(np.sum((sw * v0) ** 2)) - value, 0.0)
 
 
 #: rows beyond a bound by more than this (relative to the activity rule's size) and
@@ -682,20 +671,24 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
         side_all, v_all = act.side, act.v
     # unit rows at one bound, oriented (multiplier ≥ 0): the first `n_signed` rows
     signed = np.empty((A_all.shape[0], n))
+    fixed_all = np.zeros(A_all.shape[0], dtype=bool)   # rows read fixed, level by level
     n_signed = 0
     fixed_count = 0
     above: list[tuple[_LevelRows, np.ndarray]] = []   # higher levels' rows, fixed masks
     checks = []
 
     def kkt(g: np.ndarray, B: np.ndarray | None, floor_scale: float
-            ) -> tuple[float, np.ndarray | None]:
+            ) -> tuple[float, list]:
         """``min_μ≥0 ‖D Vᵀ Zᵀ (g + Cᵀ μ)‖`` with ``B Z = U Σ Vᵀ``, ``D = 1/max(σ, floor)``,
-        and the steepest descent direction it stands for, ``−Z V D ρ`` with ``ρ`` the
-        minimising residual (``None`` where nothing moves): feasible for the rows held
-        above (``c_jᵀ d = −‖·‖ m_jᵀ ρ ≤ 0`` at the NNLS optimum) and kept in ``Z``."""
+        and the descent directions it stands for, each computed when called: the
+        steepest in its metric, ``−Z V D ρ`` with ``ρ`` the minimising residual (feasible
+        for the rows held above: ``c_jᵀ d = −‖·‖ m_jᵀ ρ ≤ 0`` at the NNLS optimum), and
+        the gradient projected off the rows of positive multipliers (``−Z P Zᵀ g``),
+        which a residual at rounding level (an improving direction of gain 2e-8
+        between near-parallel held rows) does not resolve; none where nothing moves."""
         d = Z.shape[1]
         if d == 0:
-            return 0.0, None
+            return 0.0, []
         y = Z.T @ g
         if B is None:
             D = None
@@ -703,7 +696,7 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
             bn = float(np.linalg.norm(B))
             floor = CERTIFICATE_SIGMA_FLOOR * (bn or floor_scale)
             if floor == 0.0:
-                return 0.0, None      # a level of zero rows: nothing x can change
+                return 0.0, []        # a level of zero rows: nothing x can change
             if B.shape[0]:
                 _, s, vt = svd(B @ Z)
                 sig = np.zeros(d)
@@ -735,8 +728,9 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
             return -(Z @ (vt.T @ step if D is not None and vt is not None else step))
 
         if not n_signed:
-            return level_scale(y), back(y)
+            return level_scale(y), [lambda: back(y)]
         M = Z.T @ signed[:n_signed].T
+        held = M
         # a unit row at a bound in the span of the fixed rows (by the rank rule) has no
         # direction left in Z: made a unit column, its rounding cancelled any
         # gradient (a level 0 of a·x = 1 and a·x ≤ 1 passed a level 1 at 0.45 against
@@ -749,12 +743,23 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
         # unit columns: the same cone, and a well-scaled NNLS (D spans up to 1e6)
         unit = M[:, keep] / norms[keep]
         mu, res = nonnegative_least_squares(unit, -y)
-        return res, back(y + unit @ mu)
 
-    def add_level(rows: _LevelRows, side: np.ndarray, norms: np.ndarray) -> None:
+        def projected() -> np.ndarray:
+            face = held[:, keep][:, mu > 0]
+            w = Z.T @ g
+            if face.shape[1]:
+                u, sv, _ = svd(face, full_matrices=False)
+                u = u[:, sv > sv[0] * 1e-15]     # (the face's range; dependent columns out)
+                w = w - u @ (u.T @ w)
+            return -(Z @ w)
+
+        return res, [lambda: back(y + unit @ mu), projected]
+
+    def add_level(rows: _LevelRows, side: np.ndarray, norms: np.ndarray, start: int) -> None:
         nonlocal Z, fixed_count, n_signed
         fix = side == 2
         above.append((rows, fix))
+        fixed_all[start:start + fix.shape[0]] = fix
         if fix.any():
             F = rows.sqrt_weight[fix, None] * rows.A[fix]
             tol_r = rcond * float(np.linalg.norm(F))
@@ -789,22 +794,27 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
             scale = level_scale(sw * (terms_all[s0:s1] + np.abs(target))) + an
         else:
             scale = np.nan
-        res, descent = kkt(g, WA[(side == 2) | (v != 0)], an) if finite else (np.nan, None)
+        res, descents = kkt(g, WA[(side == 2) | (v != 0)], an) if finite else (np.nan, [])
         violation = level_scale(sw * v)
         ok = _level_passes(res, scale, violation, tol)
         gap = float(res) * float(res)
-        if ok and descent is not None and res > 0:
+        if ok and res > 0:
             # the KKT residual reads directions of small gain at 1/‖B‖ or 1/floor, where
             # a step may still lower the value a lot (two of a level's rows multiples of
             # a fixed row, 1e3-1e4 times its third: 2.4e2 above its optimum of 2.49e7,
             # read at 9e-9 and a value gap of 3.9e-5): walk the direction, and reject x
             # when a point that keeps the rows above lowers the value
-            drop = _descent_drop(data, s0, s1, above, act, x, descent)
-            # beyond the tolerance and the rounding of both points' values (x' within
+            # — beyond the tolerance and the rounding of both points' values (x' within
             # ‖x‖ of x: its terms at most twice x's)
-            if drop > tol * max(1.0, violation * violation) + 8 * X_PRECISION * scale * (
-                    2 * violation + 2 * X_PRECISION * scale):
-                ok, gap = False, max(gap, drop)
+            limit = tol * max(1.0, violation * violation) + 8 * X_PRECISION * scale * (
+                2 * violation + 2 * X_PRECISION * scale)
+            # (the value cannot drop by more than itself)
+            for direction in descents if violation * violation > limit else ():
+                drop = _descent_drop(A_all, s0, s1, fixed_all[:s0], act, sw_all, x, xn,
+                                     direction(), limit)
+                if drop > limit:
+                    ok, gap = False, max(gap, drop)
+                    break
         slack = None
         if finite and ok:
             # rows left violated by little (beyond rounding, within _NEARLY_FEASIBLE of
@@ -853,7 +863,7 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
         if fix_band and in_band is not None and in_band.any():
             side = side.copy()
             side[in_band] = 2
-        add_level(rows, side, norms)
+        add_level(rows, side, norms, s0)
     final = None
     if minimum_norm:
         W = np.eye(n) if metric is None else np.asarray(metric, dtype=np.float64)
