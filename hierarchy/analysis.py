@@ -683,9 +683,12 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
         and the descent directions it stands for, each computed when called: the
         steepest in its metric, ``−Z V D ρ`` with ``ρ`` the minimising residual (feasible
         for the rows held above: ``c_jᵀ d = −‖·‖ m_jᵀ ρ ≤ 0`` at the NNLS optimum), and
-        the gradient projected off the rows of positive multipliers (``−Z P Zᵀ g``),
-        which a residual at rounding level (an improving direction of gain 2e-8
-        between near-parallel held rows) does not resolve; none where nothing moves."""
+        the gradient projected off the rows held above (``−Z P Zᵀ g``), which stays on
+        them where the residual does not resolve a direction: at rounding level (an
+        improving direction of gain 2e-8 between near-parallel held rows), or read at
+        ``1/‖B‖`` (a level's row of norm 1e3 a multiple of a held row); none where
+        nothing moves. (Off the rows of positive multipliers only, the second left
+        the held rows of zero multiplier, and was blocked by them.)"""
         d = Z.shape[1]
         if d == 0:
             return 0.0, []
@@ -745,7 +748,7 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
         mu, res = nonnegative_least_squares(unit, -y)
 
         def projected() -> np.ndarray:
-            face = held[:, keep][:, mu > 0]
+            face = held[:, keep]            # (the span rule's columns out)
             w = Z.T @ g
             if face.shape[1]:
                 u, sv, _ = svd(face, full_matrices=False)

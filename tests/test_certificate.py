@@ -543,22 +543,25 @@ def test_small_rows_beside_large_ones_are_read_by_the_value_they_could_gain():
      "value"),
     ("nearpar-1-150", 1, (1.6256597465215716, 1.7970435256450976, -371202462.9819473,
                           -1.0764530202918536, 1.712518444093395, -1.2290927918195331,
-                          -2.0927664341663643), "descent")])
+                          -2.0927664341663643), "descent"),
+    ("edge-7-989", 1, (-1.2001149856271178, 0.7001149856271183, 1.4002299712542363),
+     "descent")])
 def test_points_an_independent_generator_found_worse_are_rejected(case, level, probe,
                                                                  reading):
     """Points from an independent generator with an exact rational reference (the case
     files' descriptions) that keep the levels above ``level`` at their optima and leave
     it above its own: edge-7-494's level 2 by 2.4e2 of 2.49e7 (9.6e-6 relative),
-    nearpar-1-721's level 0 by 2.4e-3 of 0.253, nearpar-1-150's level 1 by 2.3e-6 of 0.
-    Their KKT residuals are below the tolerance relative to the levels' terms (9.0e-9,
-    9.8e-9, 8e-20). nearpar-1-721's residual squared (5.2e-3) is the value it could
-    gain: more than the tolerance. The others' are less (3.9e-5 read through rows 1e3-1e4
-    times the one that moves; 7.9e-22 where removing the violation takes a step of 8e4
-    along a direction of gain 2e-8 between near-parallel held rows): walking the
-    residual's own descent direction (edge), or the gradient projected off the held rows
-    of positive multipliers (nearpar-1-150), finds a point that keeps the rows above and
-    is lower by more than the tolerance. The solver's answers (at the exact optima to
-    1e-9) pass."""
+    nearpar-1-721's level 0 by 2.4e-3 of 0.253, nearpar-1-150's level 1 by 2.3e-6 of 0,
+    edge-7-989's level 1 by 2.1e-5 of 0. Their KKT residuals are below the tolerance
+    relative to the levels' terms (9.0e-9, 9.8e-9, 8e-20, 8.9e-10). nearpar-1-721's
+    residual squared (5.2e-3) is the value it could gain: more than the tolerance. The
+    others' are less (3.9e-5 read through rows 1e3-1e4 times the one that moves; 7.9e-22
+    where removing the violation takes a step of 8e4 along a direction of gain 2e-8
+    between near-parallel held rows; 6.6e-10 read through a row of norm 1145 that is a
+    multiple of a held one): walking the residual's own descent direction (edge-7-494),
+    or the gradient projected off the rows held above (the other two), finds a point
+    that keeps the rows above and is lower by more than the tolerance. The solver's
+    answers (at the exact optima to 1e-9) pass."""
     from prioik.hierarchy import load_stack
     stack = load_stack(_ADVERSARIAL / f"independent2-{case}.json")
     probe = np.array(probe)
@@ -566,7 +569,7 @@ def test_points_an_independent_generator_found_worse_are_rejected(case, level, p
     assert check_lexicographic(stack, sol.x, minimum_norm=True).ok
     best, worse = _w2(stack, sol.x), _w2(stack, probe)
     exact = {"edge-7-494": 24897180.56198346, "nearpar-1-721": 0.25280607721738396,
-             "nearpar-1-150": 0.0}[case]
+             "nearpar-1-150": 0.0, "edge-7-989": 0.0}[case]
     assert best[level] == pytest.approx(exact, rel=1e-9, abs=1e-12)
     np.testing.assert_allclose(worse[:level], best[:level], rtol=1e-12, atol=1e-12)
     assert worse[level] - best[level] > 2e-6 * max(1.0, best[level])
