@@ -100,7 +100,7 @@ may not be the optimum: the answer is then checked by
 :func:`~prioik.hierarchy.check_lexicographic` and is ``optimal`` only if it passes
 and the level's weighted row norms span at most :data:`CERTIFIABLE_SPREAD` (the
 certificate's tolerances are relative to the terms of a level's rows: an independent
-check found levels spanning 2e5-7e8 certified above their optimum by 1.4e-6 to 1.1e-2
+check found levels spanning 2e5-7e8 certified above their optimum by 1.4e-6 to 3.9e-5
 of ``max(1, value)``)
 (``info["path_certified"]``, ``info["ambiguous_path_levels"]``). So is a level that
 ends with a held soft row inside its bound beyond ``x``'s precision but within its
@@ -538,7 +538,7 @@ class Prepared:
             # where the largest dwarf the rows that carry its violation it passes answers
             # it cannot resolve (an independent check, exact arithmetic: of ten levels of
             # spreads 2e5-7e8 that said 'optimal' 1.4e-6 to 0.18 of max(1, value) above
-            # their optimum, it rejects two and passes eight, up to 1.1e-2 above)
+            # their optimum, it rejects seven and passes three, up to 3.9e-5 above)
             levels = ", ".join(f"level {i} ({ratio:.1e})" for i, ratio in spread)
             return [f"passed through an ambiguous rank decision at {levels}, whose rows' "
                     f"weighted norms span more than {CERTIFIABLE_SPREAD:g}x: the "

@@ -688,7 +688,9 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
         improving direction of gain 2e-8 between near-parallel held rows), or read at
         ``1/‖B‖`` (a level's row of norm 1e3 a multiple of a held row); none where
         nothing moves. (Off the rows of positive multipliers only, the second left
-        the held rows of zero multiplier, and was blocked by them.)"""
+        the held rows of zero multiplier, and was blocked by them.) Where the rank rule
+        reads coordinates as null, a third: the first's with the multipliers made to
+        cancel there as in the floored ones."""
         d = Z.shape[1]
         if d == 0:
             return 0.0, []
@@ -756,7 +758,27 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
                 w = w - u @ (u.T @ w)
             return -(Z @ w)
 
-        return res, [lambda: back(y + unit @ mu), projected]
+        def pinned() -> np.ndarray:
+            # the null coordinates weighted as the floored ones (1/floor), not 1/‖B‖: the
+            # multipliers must cancel the gradient there alone, and a residual left there
+            # stands for free moves that let the level's rows move elsewhere (a level at
+            # 1.08e-2 over a box, its optimum 0 at 240 away, read at 5.5e-13: along this
+            # direction a point 5.6e-4 lower)
+            weight = D.copy()
+            weight[null] = 1.0 / floor
+            w = Z.T @ g
+            w = weight * (vt @ w if vt is not None else w)
+            w[null] = 0.0
+            cols = weight[:, None] * (vt @ held if vt is not None else held)
+            lengths = np.linalg.norm(cols, axis=0)
+            use = keep & (lengths > 0)
+            cols = cols[:, use] / lengths[use]
+            rho = w + cols @ nonnegative_least_squares(cols, -w)[0]
+            step = weight * rho
+            return -(Z @ (vt.T @ step if vt is not None else step))
+
+        return res, [lambda: back(y + unit @ mu), projected] + (
+            [pinned] if D is not None and null.any() else [])
 
     def add_level(rows: _LevelRows, side: np.ndarray, norms: np.ndarray, start: int) -> None:
         nonlocal Z, fixed_count, n_signed

@@ -1564,7 +1564,7 @@ def test_independent_12_407_level_1_reaches_its_optimum():
 
 
 @pytest.mark.parametrize("case, level, exact, by", [
-    ("scales-4-302", 1, 1.93902, "value"), ("scales-4-8", 1, 0.0, "spread"),
+    ("scales-4-302", 1, 1.93902, "certificate"), ("scales-4-8", 1, 0.0, "certificate"),
     ("mixed-6-103", 4, 8.0605e-4, "spread")])
 def test_a_level_of_wide_row_scales_on_an_ambiguous_path_is_not_vouched_for(case, level,
                                                                             exact, by):
@@ -1573,10 +1573,12 @@ def test_a_level_of_wide_row_scales_on_an_ambiguous_path_is_not_vouched_for(case
     ambiguous rank decision and settle above their optimum (here 18%, 1.1e-2 against 0,
     4.8%); the certificate, its KKT residual read relative to the level's largest rows,
     passed them, and the answers said 'optimal'. It now also reads the value a residual
-    stands for, which rejects scales-4-302 (its level could drop by 5.1e-5); the others'
-    residuals stand for less than the tolerance at x (scales-4-8: 5.5e-13, the exact
-    optimum 240 away across a change of the active set), and beyond CERTIFIABLE_SPREAD
-    the solver does not take the certificate's word: 'approximate', naming the level."""
+    stands for, which rejects scales-4-302 (its level could drop by 5.1e-5), and walks
+    descent directions, one with the multipliers pinned where the level's rows cannot
+    move, which rejects scales-4-8 (read at 5.5e-13, its optimum 240 away across a
+    change of the active set: a point 5.6e-4 lower along it). mixed-6-103 passes it, and
+    beyond CERTIFIABLE_SPREAD the solver does not take the certificate's word:
+    'approximate', naming the level."""
     from prioik.formulations.hierarchical_active_set import CERTIFIABLE_SPREAD
     from prioik.hierarchy import load_stack
     stack = load_stack(_ADVERSARIAL_DIR / f"independent2-{case}.json")
@@ -1584,9 +1586,12 @@ def test_a_level_of_wide_row_scales_on_an_ambiguous_path_is_not_vouched_for(case
     assert sol.residuals[level] ** 2 > exact + 1e-6 * max(1.0, exact)   # still above it
     assert sol.status == "approximate" and sol.info["path_certified"] is False
     assert level in sol.info["ambiguous_path_levels"]
-    if by == "value":
+    if by == "certificate":
         assert f"the certificate rejects level {level} (" in sol.info["reason"]
         assert "could drop by" in sol.info["reason"]
+        report = check_lexicographic(stack, sol.x)
+        assert report.fault_level == level
+        assert report.levels[level].value_gap > 1e-6 * max(1.0, exact)
     else:
         assert check_lexicographic(stack, sol.x).ok
         assert f"at level {level} (" in sol.info["reason"]
