@@ -560,8 +560,9 @@ class Prepared:
 
 #: the largest spread of a level's weighted row norms ``max/min √w_j ‖a_j‖`` (non-zero
 #: rows) over which :meth:`Prepared._certify_flagged` takes the certificate's word for a
-#: level that passed through an ambiguous rank decision
-CERTIFIABLE_SPREAD = 1e4
+#: level that passed through an ambiguous rank decision (an independent generator's
+#: answers that the certificate passes above their optimum: levels spanning 6.8e6-4.1e8)
+CERTIFIABLE_SPREAD = 1e5
 
 
 def _row_scale_spread(data: StackData, levels) -> list[tuple[int, float]]:
