@@ -100,8 +100,8 @@ may not be the optimum: the answer is then checked by
 :func:`~prioik.hierarchy.check_lexicographic` and is ``optimal`` only if it passes
 and the level's weighted row norms span at most :data:`CERTIFIABLE_SPREAD` (the
 certificate's tolerances are relative to the terms of a level's rows: an independent
-check found levels spanning 2e5-7e8 certified above their optimum by 1.4e-6 to 3.9e-5
-of ``max(1, value)``)
+check found levels spanning 6.8e6-4.1e8 certified above their optimum by 1.4e-6 to
+3.9e-5 of ``max(1, value)``)
 (``info["path_certified"]``, ``info["ambiguous_path_levels"]``). So is a level that
 ends with a held soft row inside its bound beyond ``x``'s precision but within its
 release tolerance (``info["near_release_levels"]``): a row of norm 739 held beside one
