@@ -622,14 +622,17 @@ def _descent_drop(A: np.ndarray, s0: int, s1: int, fixed: np.ndarray, act: "_Act
             cap = min(cap, float(np.min(ratio)))
         if not (cap > 0 and -2.0 * slope * cap > limit):
             return 0.0
+        def value(vals: np.ndarray) -> np.ndarray:
+            """The level's value at rows' values ``vals`` (one column per point)."""
+            viol = vals - np.clip(vals, lo[:, None], up[:, None])
+            return np.sum((sw[:, None] * viol) ** 2, axis=0)
+
         curve = float(np.sum((sw * h)[v0 != 0] ** 2))
         top = min(cap, -slope / curve) if curve > 0 else cap
         alphas = top * 0.5 ** np.arange(0, 24)
         if cap > top:
             alphas = np.concatenate([[cap], alphas])
-        vals = a[:, None] + h[:, None] * alphas[None, :]
-        along = np.sum((sw[:, None] * (vals - np.clip(vals, lo[:, None], up[:, None]))) ** 2,
-                       axis=0)
+        along = value(a[:, None] + h[:, None] * alphas[None, :])
         if not np.isfinite(along).any():
             return 0.0
         # the best point, from its own rows' values
@@ -640,9 +643,7 @@ def _descent_drop(A: np.ndarray, s0: int, s1: int, fixed: np.ndarray, act: "_Act
                             & (ap[:s0] >= np.minimum(lo_h, a_h) - np.where(at_l, rounding, 0.0)))
             if not kept.all():
                 return 0.0
-        vp = ap[s0:]
-        value = float(np.sum((sw * (vp - np.clip(vp, lo, up))) ** 2))
-        return max(float(np.sum((sw * v0) ** 2)) - value, 0.0)
+        return max(float(np.sum((sw * v0) ** 2)) - float(value(ap[s0:, None])[0]), 0.0)
 
 
 #: rows beyond a bound by more than this (relative to the activity rule's size) and
@@ -694,7 +695,8 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
         d = Z.shape[1]
         if d == 0:
             return 0.0, []
-        y = Z.T @ g
+        zg = Z.T @ g
+        y = zg.copy()                  # (zeroed below where null; zg serves the descents)
         if B is None:
             D = None
         else:
@@ -751,12 +753,8 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
 
         def projected() -> np.ndarray:
             face = held[:, keep]            # (the span rule's columns out)
-            w = Z.T @ g
-            if face.shape[1]:
-                u, sv, _ = svd(face, full_matrices=False)
-                u = u[:, sv > sv[0] * 1e-15]     # (the face's range; dependent columns out)
-                w = w - u @ (u.T @ w)
-            return -(Z @ w)
+            u = range_basis(face, 1e-15)[0]  # (dependent columns out)
+            return -(Z @ (zg - u @ (u.T @ zg)))
 
         def pinned() -> np.ndarray:
             # the null coordinates weighted as the floored ones (1/floor), not 1/‖B‖: the
@@ -766,8 +764,7 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
             # direction a point 5.6e-4 lower)
             weight = D.copy()
             weight[null] = 1.0 / floor
-            w = Z.T @ g
-            w = weight * (vt @ w if vt is not None else w)
+            w = weight * (vt @ zg if vt is not None else zg)
             w[null] = 0.0
             cols = weight[:, None] * (vt @ held if vt is not None else held)
             lengths = np.linalg.norm(cols, axis=0)

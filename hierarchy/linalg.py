@@ -111,7 +111,7 @@ def range_basis(A: np.ndarray, rcond: float = DEFAULT_RCOND,
     m = A.shape[0]
     if A.size == 0:
         return np.zeros((m, 0)), np.eye(m), np.zeros(0)
-    u, s, _ = np.linalg.svd(A, full_matrices=True)
+    u, s, _ = svd(A, full_matrices=True)
     tol = rcond * (float(np.linalg.norm(A)) if scale is None else scale)
     r = int(np.count_nonzero(s > tol)) if tol > 0 else 0
     return u[:, :r], u[:, r:], s[:r]
