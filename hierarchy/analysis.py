@@ -568,6 +568,15 @@ def _feasible(above: list, rows: "_LevelRows", small: np.ndarray, x: np.ndarray)
     return out.status == 0
 
 
+def _precision(tol: float) -> float:
+    """The relative precision an answer checked at ``tol`` is taken to have:
+    :data:`X_PRECISION` (float64 rounding through orthogonal transformations), times how
+    much ``tol`` is looser than :data:`DEFAULT_CERTIFICATE_TOL` (a caller checking the
+    SVD extended Jacobian at ``1e3 eps κ`` declares its answers that much less precise:
+    a "huge" level's rows of 1e11 left at 0.11 by an answer 6e-12 from the reference)."""
+    return X_PRECISION * max(1.0, tol / DEFAULT_CERTIFICATE_TOL)
+
+
 def _level_passes(res: float, scale: float, violation: float, tol: float) -> bool:
     """A level's verdict from its KKT residual ``res`` (task space), scale and violation.
 
@@ -578,12 +587,13 @@ def _level_passes(res: float, scale: float, violation: float, tol: float) -> boo
     were 0.1 off, the level 3e-4 above its optimum of 0, passed at 2.6e-11). So the
     value the level could still gain, ``res²``, must also be ``≤ tol · max(1, value)``,
     the accuracy the value is asked to — except where ``res`` is at the rounding of the
-    level's terms (``≤ X_PRECISION · scale``), below which no float64 answer can go.
+    level's terms (``≤ precision · scale``, :func:`_precision`), below which the answer
+    is not asked to go.
     """
     if not (np.isfinite(res) and res <= tol * max(scale, 1e-300)):
         return False
     return bool(res * res <= tol * max(1.0, violation * violation)
-                or res <= X_PRECISION * scale)
+                or res <= _precision(tol) * scale)
 
 
 def _descent_drop(A: np.ndarray, s0: int, s1: int, fixed: np.ndarray, act: "_Activity",
@@ -828,8 +838,9 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
             # when a point that keeps the rows above lowers the value
             # — beyond the tolerance and the rounding of both points' values (x' within
             # ‖x‖ of x: its terms at most twice x's)
-            limit = tol * max(1.0, violation * violation) + 8 * X_PRECISION * scale * (
-                2 * violation + 2 * X_PRECISION * scale)
+            rounding = _precision(tol) * scale
+            limit = tol * max(1.0, violation * violation) + 8 * rounding * (
+                2 * violation + 2 * rounding)
             # (the value cannot drop by more than itself)
             for direction in descents if violation * violation > limit else ():
                 drop = _descent_drop(A_all, s0, s1, fixed_all[:s0], act, sw_all, x, xn,

@@ -584,3 +584,23 @@ def test_points_an_independent_generator_found_worse_are_rejected(case, level, p
         assert check.projected_gradient ** 2 <= tol_value
         # the verified drop: beyond the tolerance, at most what the optimum gains
         assert tol_value < check.value_gap <= worse[level] - best[level] + 1e-6
+
+
+def test_a_looser_tolerance_declares_a_coarser_precision():
+    """The SVD extended Jacobian is checked at 1e3 eps κ (tests/test_extended_jacobian):
+    on a degenerate stack (hypothesis: seed 0, n 39, k 6) its answer is 6e-12 from the
+    reference, which leaves a "huge" level's rows of 1e11 at 0.11 (value 1.2e-2 against
+    ~0): 8e-13 of the level's terms. At that tolerance the answer is declared that
+    precise, and the value reading's rounding floor moves with it; at the default
+    tolerance the level fails."""
+    from prioik.hierarchy.families import FAMILIES
+    stack = FAMILIES["degenerate"](np.random.default_rng(0), 39, 6)
+    ref = formulations.solve(stack, "reference").x
+    sol = formulations.solve(stack, "extended_jacobian", nullspace="svd")
+    tol = 1e3 * np.finfo(float).eps * sol.info["condition_number"]
+    assert np.linalg.norm(sol.x - ref) <= 1e-10 * np.linalg.norm(ref)
+    assert tol > 100 * DEFAULT_CERTIFICATE_TOL
+    assert check_lexicographic(stack, sol.x, tol=tol).ok
+    strict = check_lexicographic(stack, sol.x)
+    assert not strict.ok and strict.fault_level == 3, str(strict)
+    assert check_lexicographic(stack, ref).ok
