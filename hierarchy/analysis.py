@@ -532,23 +532,21 @@ def prepare_certificate() -> None:
     import scipy.optimize  # noqa: F401  (the import is the point)
 
 
-def _feasible(above: list, rows: "_LevelRows", small: np.ndarray, x: np.ndarray) -> bool:
-    """Whether some point keeps the rows read above (``above``: each higher level's rows
-    and the mask of those read as fixed; fixed rows at their values at ``x``, the others
-    inside their intervals), meets the level's ``small`` rows and keeps its other rows
-    at their values at ``x`` (violated) or inside their intervals (an LP, HiGHS,
-    tolerance 1e-10 on unit rows): then the level's value can drop by what the
-    ``small`` rows add (and is zero when they are all of its violation)."""
+def _feasible(A: np.ndarray, act: "_Activity", fixed: np.ndarray, s1: int,
+              small: np.ndarray) -> bool:
+    """Whether some point keeps the rows above level ``rows[s0:s1]`` as read (``fixed``,
+    their mask of rows read as fixed: at their values at ``x``, the others inside their
+    intervals), meets the level's ``small`` rows and keeps its other rows at their
+    values at ``x`` (violated) or inside their intervals (an LP, HiGHS, tolerance 1e-10
+    on unit rows): then the level's value can drop by what the ``small`` rows add (and
+    is zero when they are all of its violation). ``act`` holds every row's ``A x``."""
     from scipy.optimize import linprog
-    parts = []
-    for higher, fix in above + [(rows, None)]:
-        a = higher.A @ x
-        if fix is None:             # the level: violated rows kept unless small
-            fix = ~small & ~((a >= rows.lower) & (a <= rows.upper))
-        parts.append((higher.A, np.where(fix, a, higher.lower), np.where(fix, a, higher.upper)))
-    A = np.vstack([p[0] for p in parts])
-    lo = np.concatenate([p[1] for p in parts])
-    up = np.concatenate([p[2] for p in parts])
+    s0 = fixed.shape[0]
+    a, lo, up = act.a[:s1], act.lower[:s1], act.upper[:s1]
+    own = ~small & ~((a[s0:] >= lo[s0:]) & (a[s0:] <= up[s0:]))   # violated rows kept
+    fix = np.concatenate([fixed, own])
+    A = A[:s1]
+    lo, up = np.where(fix, a, lo), np.where(fix, a, up)
     norm = np.linalg.norm(A, axis=1)
     norm[norm == 0] = 1.0
     A, lo, up = A / norm[:, None], lo / norm, up / norm
@@ -685,7 +683,6 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
     fixed_all = np.zeros(A_all.shape[0], dtype=bool)   # rows read fixed, level by level
     n_signed = 0
     fixed_count = 0
-    above: list[tuple[_LevelRows, np.ndarray]] = []   # higher levels' rows, fixed masks
     checks = []
 
     def kkt(g: np.ndarray, B: np.ndarray | None, floor_scale: float
@@ -790,7 +787,6 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
     def add_level(rows: _LevelRows, side: np.ndarray, norms: np.ndarray, start: int) -> None:
         nonlocal Z, fixed_count, n_signed
         fix = side == 2
-        above.append((rows, fix))
         fixed_all[start:start + fix.shape[0]] = fix
         if fix.any():
             F = rows.sqrt_weight[fix, None] * rows.A[fix]
@@ -873,7 +869,7 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
             # or rows beyond the activity tolerance would be fixed (equality rows stay
             # fixed; rows inside it are read as held already)
             reread = alone and (small & (side == 2) & (rows.lower != rows.upper)).any()
-            if (extra > tol * scale or reread) and _feasible(above, rows, small, x):
+            if (extra > tol * scale or reread) and _feasible(A_all, act, fixed_all[:s0], s1, small):
                 if extra > tol * scale:
                     res, ok = extra, False
                 if alone:
