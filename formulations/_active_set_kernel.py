@@ -31,6 +31,9 @@ from numba import njit
 from prioik._jit import kernel
 
 from prioik.hierarchy.linalg import AMBIGUITY as _AMBIGUITY
+# the factor over AMBIGUITY within which a clear rank decision still has its answer
+# certified (FLAG_NEAR_AMBIGUOUS; the G1 bounds stacks' smallest margin is 3e6)
+from prioik.hierarchy.linalg import NEAR_AMBIGUITY
 from prioik.hierarchy.linalg import PRECISION_LIMIT_NORM as _PRECISION_LIMIT_NORM
 from prioik.hierarchy.linalg import X_PRECISION
 
@@ -86,10 +89,6 @@ FLAG_NEAR_AMBIGUOUS = 5
 #: row whose next step it blocked at once), so the level settles at the point they all
 #: share and the caller certifies the answer
 FLAG_STALLED = 6
-#: the factor over :data:`~prioik.hierarchy.linalg.AMBIGUITY` within which a clear rank
-#: decision still has its answer certified (``FLAG_NEAR_AMBIGUOUS``; the G1 bounds
-#: stacks' smallest margin is 3e6)
-NEAR_AMBIGUITY = 10.0
 
 #: what :func:`solve_data` returns
 NOT_SOLVED = 0

@@ -26,6 +26,7 @@ from numba import njit, prange
 from prioik._jit import kernel
 
 from prioik.hierarchy.linalg import AMBIGUITY as _AMBIGUITY
+from prioik.hierarchy.linalg import NEAR_AMBIGUITY as _NEAR_AMBIGUITY
 from prioik.hierarchy.linalg import PRECISION_LIMIT_NORM as _PRECISION_LIMIT_NORM
 
 #: LLVM may reassociate and contract (vectorised reductions, FMA) but not assume
@@ -864,13 +865,18 @@ def _prepared_solve(trust_region: bool):
         level_residuals(A, b, w, starts, x, residuals)
         acc = 0.0
         ambiguous = False
+        near = False
         for lev in range(k):
             acc += residuals[lev]
             if margins[lev] <= _AMBIGUITY:
                 ambiguous = True
+            elif margins[lev] <= _NEAR_AMBIGUITY * _AMBIGUITY:
+                near = True
         code = 1 if np.isfinite(acc) else 2
         if ambiguous:
             code += 4
+        if near:
+            code += 16
         xx = 0.0
         for c in range(n):
             xx += x[c] * x[c]
@@ -906,7 +912,8 @@ def solve_data(A, b, w, work, out, iwork):
     Returns 0 when an input is not finite (nothing solved), 1 when ``x`` and the
     residuals are finite, 2 when they are not (the caller reports a failure); plus 4
     when some level's rank decision margin is within :data:`AMBIGUITY` of its threshold;
-    plus 8 when ``‖x‖`` exceeds :data:`~prioik.hierarchy.linalg.PRECISION_LIMIT_NORM`
+    plus 16 when another's is within ``NEAR_AMBIGUITY · AMBIGUITY`` (near-ambiguous: the
+    caller certifies the answer); plus 8 when ``‖x‖`` exceeds :data:`~prioik.hierarchy.linalg.PRECISION_LIMIT_NORM`
     (the caller asks :func:`~prioik.hierarchy.precision_limited_levels`).
 
     Without the trust-region step (the step bounds ``params[3:]`` must be zeros;

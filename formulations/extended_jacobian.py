@@ -116,12 +116,13 @@ import math
 import numpy as np
 from scipy.linalg import lapack
 
-from prioik.hierarchy import (AMBIGUITY, StackData, StackLayout, Task, TaskStack,
-                              UnsupportedTaskError, ambiguity_reason, ambiguous_decision,
-                              level_scale, rank_threshold)
+from prioik.hierarchy import (AMBIGUITY, NEAR_AMBIGUITY, StackData, StackLayout, Task,
+                              TaskStack, UnsupportedTaskError, ambiguity_reason,
+                              ambiguous_decision, decision_margin, level_scale,
+                              near_ambiguity_reason, rank_threshold)
 
-from .base import (Capabilities, FormulationError, Outcome, ReportVariant, precision_status,
-                   solve_equilibrated)
+from .base import (Capabilities, FormulationError, Outcome, ReportVariant, certify,
+                   precision_status, solve_equilibrated)
 from .options import Option, rcond_option, validate_options
 
 try:  # the compiled kernel is optional: the lapack path is the readable reference
@@ -352,12 +353,15 @@ class Prepared:
         if self._damped:
             status = _damping_info(info, out[n + k:n + 2 * k], self._selective,
                                    self._bounded)
+        margins = out[n + 2 * k:]
         if code & 4:          # a rank decision within AMBIGUITY of its threshold
-            margins = out[n + 2 * k:]
             status = _ambiguity_status(info, status, np.flatnonzero(margins <= AMBIGUITY))
+        outcome = Outcome(out[:n], status, info, out[n:n + k], (code & 3) == 1)
+        if code & 16 and status == "optimal" and (code & 3) == 1:
+            _certify_near_ambiguous(data, outcome, margins)
         if code & 8 and (code & 3) == 1:    # ‖x‖ at which float64 may limit a level
-            status = precision_status(status, info, data, out[:n])
-        return Outcome(out[:n], status, info, out[n:n + k], (code & 3) == 1)
+            outcome.status = precision_status(outcome.status, info, data, out[:n])
+        return outcome
 
     def _solve_stack(self, stack: TaskStack) -> Outcome:
         if self.damping > 0:
@@ -425,8 +429,8 @@ def _damping_info(info: dict, mu2: np.ndarray, selective: bool, bound: bool) -> 
 def _pivoted_lstsq_if_full_rank(K: np.ndarray, p: np.ndarray, tol: float
                                 ) -> tuple[np.ndarray, bool] | None:
     """``argmin ‖K z − p‖`` for ``K`` (``m × d``, ``m ≥ d``) of full column rank, by one
-    QR with column pivoting (``dgeqp3``), and whether a pivot was ambiguous
-    (:func:`hierarchy.ambiguous_decision`); ``None`` when a pivot is ``≤ tol``
+    QR with column pivoting (``dgeqp3``), and the rank decision's margin
+    (:func:`hierarchy.decision_margin`); ``None`` when a pivot is ``≤ tol``
     (rank-deficient: the caller takes the row-pivoted path)."""
     d = K.shape[1]
     qr, jpvt, tau, _, _ = _dgeqp3(np.array(K, order="F"), overwrite_a=1)
@@ -435,7 +439,7 @@ def _pivoted_lstsq_if_full_rank(K: np.ndarray, p: np.ndarray, tol: float
         return None
     z = np.empty(d)
     z[jpvt - 1] = _qr_least_squares(qr, tau, p)
-    return z, ambiguous_decision(pivots, tol)
+    return z, decision_margin(pivots, tol)
 
 
 def _lstsq_full_column_rank(K: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -499,7 +503,8 @@ def _solve_qr(stack: TaskStack, rcond: float, level_damping: float = 0.0,
     c = np.concatenate([b for _, b in mats])
     y = np.zeros(n)                               # solution in rotated coordinates
     reflectors = []                               # (col, qr[:, :r], tau[:r]) per level
-    ranks, ambiguous = [], []
+    ranks = []
+    margins = np.full(len(mats), np.inf)         # each level's rank decision's margin
     level_mu2 = np.zeros(len(mats))
     bounds = np.zeros(len(mats)) if step_bound is None else step_bound
     col = 0
@@ -519,8 +524,7 @@ def _solve_qr(stack: TaskStack, rcond: float, level_damping: float = 0.0,
             if full is not None:              # full column rank: no null space left
                 ranks.append(d)
                 y[col:] = full[0]
-                if full[1]:
-                    ambiguous.append(index)
+                margins[index] = full[1]
                 col = n
                 start = stop
                 continue
@@ -530,8 +534,7 @@ def _solve_qr(stack: TaskStack, rcond: float, level_damping: float = 0.0,
         tol = rank_threshold(A, rcond)
         r = int(np.count_nonzero(diag > tol)) if tol > 0 else 0
         ranks.append(r)
-        if ambiguous_decision(diag, tol):
-            ambiguous.append(index)
+        margins[index] = decision_margin(diag, tol)
         if r == 0:
             start = stop
             continue
@@ -568,7 +571,37 @@ def _solve_qr(stack: TaskStack, rcond: float, level_damping: float = 0.0,
         x[col_i:] = out.ravel()
     info = {"rank_profile": np.array(ranks), "nullspace": "qr", "kernel": "lapack"}
     status = _damping_info(info, level_mu2, level_damping > 0, bool(bounds.any()))
-    return Outcome(x, _ambiguity_status(info, status, ambiguous), info)
+    status = _ambiguity_status(info, status, np.flatnonzero(margins <= AMBIGUITY))
+    outcome = Outcome(x, status, info)
+    if status == "optimal" and np.isfinite(x).all():
+        _certify_near_ambiguous(stack, outcome, margins)
+    return outcome
+
+
+def _near_ambiguous_levels(margins: np.ndarray) -> list[int]:
+    """The levels whose rank decision's margin is clear of the ambiguity band by less
+    than :data:`~prioik.hierarchy.NEAR_AMBIGUITY` times it."""
+    return np.flatnonzero((margins > AMBIGUITY)
+                          & (margins <= NEAR_AMBIGUITY * AMBIGUITY)).tolist()
+
+
+def _certify_near_ambiguous(data, outcome: Outcome, margins: np.ndarray) -> None:
+    """Certify an ``optimal`` answer when a level's rank decision was near-ambiguous
+    (``margins``: each level's): the null space such a decision leaves is accurate to
+    ε over its smallest kept pivot, which rows of a lower level may turn into an error
+    beyond what the certificate accepts (:data:`~prioik.hierarchy.NEAR_AMBIGUITY`). The
+    answer stays ``optimal`` (``info["path_certified"]``) only when
+    :func:`~prioik.hierarchy.check_lexicographic` passes it (minimum-norm tie-break
+    included); otherwise ``approximate``, the level at fault in ``info``."""
+    near = _near_ambiguous_levels(margins)
+    if not near:
+        return
+    outcome.info["near_ambiguous_levels"] = near
+    certify(data, outcome)
+    outcome.info["path_certified"] = outcome.status == "optimal"
+    if outcome.status != "optimal":
+        outcome.info["reason"] = (f"{near_ambiguity_reason(near)}, and "
+                                  f"{outcome.info['message']}")
 
 
 def _ambiguity_status(info: dict, status: str, ambiguous) -> str:
@@ -883,6 +916,12 @@ def _solve_batch(prepared: "Prepared", datas: list[StackData]) -> tuple[np.ndarr
     _kernel.solve_batch_kernel(B, c, starts, scales, prepared.rcond, prepared.level_damping,
                                prepared.singular_threshold, bounds, X, ranks, mu2, margins)
     approximate = (mu2 > 0).any(axis=1) | (margins <= AMBIGUITY).any(axis=1)
+    near = (margins <= NEAR_AMBIGUITY * AMBIGUITY).any(axis=1) & ~approximate
+    for i in np.flatnonzero(near & np.isfinite(X).all(axis=1)).tolist():
+        # as solve: a near-ambiguous answer is optimal only when certified
+        outcome = Outcome(X[i], "optimal", {})
+        _certify_near_ambiguous(datas[i], outcome, margins[i])
+        approximate[i] = outcome.status != "optimal"
     statuses = ["approximate" if a else "optimal" for a in approximate.tolist()]
     return X, statuses
 

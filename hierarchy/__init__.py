@@ -10,10 +10,10 @@ from .analysis import (FeasibleSplit, LevelCheck, LexicographicReport, algorithm
 from .errors import TaskStackError, UnsupportedTaskError
 from .io import (PeerProblem, load_lexls, load_peer, load_peer_json, load_soth, load_stack,
                  save_stack, stack_from_dict, stack_to_dict)
-from .linalg import (AMBIGUITY, DEFAULT_CERTIFICATE_TOL, DEFAULT_RCOND, ambiguity_reason,
-                     ambiguous_decision, level_scale, matrix_rank, nonnegative_least_squares,
-                     null_space_basis, range_basis, rank_threshold, row_activity,
-                     X_PRECISION)
+from .linalg import (AMBIGUITY, DEFAULT_CERTIFICATE_TOL, DEFAULT_RCOND, NEAR_AMBIGUITY,
+                     ambiguity_reason, ambiguous_decision, decision_margin, level_scale, matrix_rank, nonnegative_least_squares,
+                     near_ambiguity_reason, null_space_basis, range_basis, rank_threshold,
+                     row_activity, X_PRECISION)
 from .layout import (StackData, StackLayout, level_residuals, precision_limited_levels,
                      precision_reason)
 from .stack import TaskStack
@@ -21,7 +21,8 @@ from .task import Level, Task
 
 __all__ = [
     "AMBIGUITY", "DEFAULT_CERTIFICATE_TOL", "DEFAULT_RCOND", "FeasibleSplit", "Level",
-    "LevelCheck", "LexicographicReport", "Task", "ambiguity_reason", "ambiguous_decision",
+    "LevelCheck", "LexicographicReport", "NEAR_AMBIGUITY", "Task", "ambiguity_reason",
+    "ambiguous_decision", "decision_margin", "near_ambiguity_reason",
     "level_scale", "rank_threshold",
     "StackData", "StackLayout", "TaskStack", "level_residuals", "TaskStackError", "UnsupportedTaskError", "algorithmic_error",
     "algorithmic_error_norms", "check_lexicographic", "conflicting_levels",
