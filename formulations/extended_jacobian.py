@@ -427,7 +427,7 @@ def _damping_info(info: dict, mu2: np.ndarray, selective: bool, bound: bool) -> 
 
 # --------------------------------------------------------------------------- qr
 def _pivoted_lstsq_if_full_rank(K: np.ndarray, p: np.ndarray, tol: float
-                                ) -> tuple[np.ndarray, bool] | None:
+                                ) -> tuple[np.ndarray, float] | None:
     """``argmin ‖K z − p‖`` for ``K`` (``m × d``, ``m ≥ d``) of full column rank, by one
     QR with column pivoting (``dgeqp3``), and the rank decision's margin
     (:func:`hierarchy.decision_margin`); ``None`` when a pivot is ``≤ tol``
