@@ -126,6 +126,7 @@ from prioik.hierarchy import (AMBIGUITY, NEAR_AMBIGUITY, StackData, StackLayout,
                               TaskStack, UnsupportedTaskError, ambiguity_reason,
                               ambiguous_decision, decision_margin, level_scale,
                               near_ambiguity_reason, rank_threshold)
+from prioik.hierarchy.linalg import svd
 
 from .base import (Capabilities, FormulationError, Outcome, ReportVariant, certify,
                    precision_status, solve_equilibrated)
@@ -754,7 +755,12 @@ def _solve_svd(stack: TaskStack, rcond: float, z_basis: str = "task_range") -> O
         return Outcome(np.zeros(stack.n), "optimal",
                        {"rank": rank, "nullspace": "svd", "z_basis": z_basis,
                         "extended_rows": 0, "condition_number": 1.0})
-    u, s, vt = np.linalg.svd(JE, full_matrices=False)
+    try:
+        u, s, vt = np.linalg.svd(JE, full_matrices=False)
+    except np.linalg.LinAlgError:
+        # dgesdd's divide and conquer did not converge (fuzz: a J_E of κ 1e14):
+        # hierarchy.linalg.svd factors it by dgesvd
+        u, s, vt = svd(JE, full_matrices=False)
     r = min(rank, int(np.count_nonzero(s > 0)))
     x = vt[:r].T @ ((u[:, :r].T @ hE) / s[:r])
     cond = float(s[0] / s[r - 1]) if r else 1.0

@@ -219,22 +219,26 @@ def row_activity_from_values(a: np.ndarray, lower: np.ndarray, upper: np.ndarray
 
 #: scipy's LAPACK ``dgesdd``, imported at the first :func:`svd` (``import prioik``
 #: loads no scipy)
-_GESDD = None
+_GESDD = _GESVD = None
 
 
 def svd(A: np.ndarray, full_matrices: bool = True
         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``np.linalg.svd(A, full_matrices)`` of a real matrix, through LAPACK's ``dgesdd``
     directly: the routine numpy calls, without its per-call wrapping (~4-7 µs less on
-    the certificate's small matrices, which it factors dozens of times a check).
-    numpy's own call (and its ``LinAlgError``) where LAPACK reports a failure or a
-    non-finite singular value, and for an empty matrix."""
-    global _GESDD
+    the certificate's small matrices, which it factors dozens of times a check). Where
+    ``dgesdd``'s divide and conquer does not converge (``prioik fuzz --seed 1245``: the
+    extended Jacobian ``J_E`` of a 54-unknown stack), ``dgesvd`` (QR iteration, slower
+    and more robust) factors it. numpy's own call (and its ``LinAlgError``) where both
+    report a failure or a non-finite singular value, and for an empty matrix."""
+    global _GESDD, _GESVD
     if A.shape[0] and A.shape[1]:
         if _GESDD is None:
-            from scipy.linalg.lapack import dgesdd
-            _GESDD = dgesdd
+            from scipy.linalg.lapack import dgesdd, dgesvd
+            _GESDD, _GESVD = dgesdd, dgesvd
         u, s, vt, info = _GESDD(A, compute_uv=1, full_matrices=int(full_matrices))
+        if info > 0 and np.isfinite(A).all():    # no convergence (not a bad argument)
+            u, s, vt, info = _GESVD(A, compute_uv=1, full_matrices=int(full_matrices))
         if info == 0 and s[0] < np.inf:       # (False for NaN)
             return u, s, vt
     return np.linalg.svd(A, full_matrices=full_matrices)

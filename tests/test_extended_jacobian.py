@@ -153,6 +153,19 @@ def test_a_certified_near_ambiguous_answer_stays_optimal(case):
         assert relative_distance(sol.x, case.truth) <= 1e-9
 
 
+def test_the_svd_path_answers_where_divide_and_conquer_does_not_converge():
+    """``prioik fuzz --seed 1245``, equality case 1245 (n 54, 5 levels, a zero level and
+    levels of norm 4.5e4 and 5.8e-4): LAPACK's ``dgesdd`` does not converge on its
+    ``J_E`` (κ 1e14) and the svd path said ``failed``; ``hierarchy.linalg.svd`` falls
+    back to ``dgesvd``, and the path answers (``approximate``: κ beyond its rule) within
+    1e-9 of the ground truth."""
+    from prioik.hierarchy.fuzz import equality_case
+    case = judged(equality_case(np.random.default_rng([1245, 1245]), 1245).stack)
+    sol = formulations.solve(case.stack, "extended_jacobian", nullspace="svd")
+    assert sol.status == "approximate" and sol.info["condition_number"] > 1e13
+    assert relative_distance(sol.x, case.truth) <= 1e-9
+
+
 def test_decision_margin_reads_the_nearest_value_to_the_threshold():
     from prioik.hierarchy import decision_margin
     assert decision_margin(np.array([5.0, 2e-9, 1e-15, 0.0]), 1e-9) == 2.0
