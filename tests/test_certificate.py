@@ -536,6 +536,36 @@ def test_small_rows_beside_large_ones_are_read_by_the_value_they_could_gain():
     assert "could drop by 2.5e-05" in level.failure(report.tol)
 
 
+def test_a_descent_stopped_at_the_edge_of_a_held_rows_rounding_still_refutes():
+    """A third run of the independent generator ('mixed' family, case 5048: n 10, six
+    levels; exact rational reference): a point that keeps levels 0-1 at their optima and
+    leaves level 2 12.8 above its optimum of 1.18e6 (1.1e-5 relative) passed. Its KKT
+    residual reads 3.4e-13: two of the level-0 rows held at their bounds, nearly opposite
+    in the null space of level 1, cancel the gradient with multipliers of 1.5e15 (their
+    columns' rounding times those multipliers). The gradient projected off them descends,
+    1e-14 off their bounds, so the ratio test stops the step where they reach the edge
+    of their rounding room, and there the point's own product put one beyond it: the
+    walk refused the point and, without a shorter one, found no drop. It now takes the
+    best of the next shorter steps that holds (a drop of 3.4), and rejects the point;
+    the solver's answer, 1.7e-12 from the exact one, passes."""
+    from prioik.hierarchy import load_stack
+    stack = load_stack(_ADVERSARIAL / "independent3-mixed-6-5048.json")
+    probe = np.array((-1.8311107542953058, 0.5609174447366078, -1.5952186638605577,
+                      -1.5829542249265192, 17.318654971011586, 11.692688002736702,
+                      17.671352653426403, 21.107277939880415, -23.971052730683116,
+                      24.391915076697174))
+    sol = formulations.solve(stack, "hierarchical_active_set")
+    assert sol.status == "optimal" and check_lexicographic(stack, sol.x, minimum_norm=True).ok
+    best, worse = _w2(stack, sol.x), _w2(stack, probe)
+    assert best[2] == pytest.approx(1181630.9534648529, rel=1e-12)   # the exact value
+    np.testing.assert_allclose(worse[:2], best[:2], rtol=1e-12, atol=1e-12)
+    assert worse[2] - best[2] > 1e-5 * best[2]
+    report = check_lexicographic(stack, probe)
+    assert not report.ok and report.fault_level == 2, str(report)
+    assert report.levels[2].relative < 1e-12        # the KKT reading alone passes it
+    assert report.levels[2].value_gap > 1.0
+
+
 @pytest.mark.parametrize("case, level, probe, reading", [
     ("edge-7-494", 2, (38.684833757316476, 3.6748463622035565, 5.744610690563899,
                        -1.4986056360770688, -31.26258797670317), "descent"),
