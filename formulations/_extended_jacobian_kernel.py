@@ -913,8 +913,9 @@ def solve_data(A, b, w, work, out, iwork):
     residuals are finite, 2 when they are not (the caller reports a failure); plus 4
     when some level's rank decision margin is within :data:`AMBIGUITY` of its threshold;
     plus 16 when another's is within ``NEAR_AMBIGUITY · AMBIGUITY`` (near-ambiguous: the
-    caller certifies the answer); plus 8 when ``‖x‖`` exceeds :data:`~prioik.hierarchy.linalg.PRECISION_LIMIT_NORM`
-    (the caller asks :func:`~prioik.hierarchy.precision_limited_levels`).
+    caller certifies the answer); plus 8 when ``‖x‖`` exceeds
+    :data:`~prioik.hierarchy.linalg.PRECISION_LIMIT_NORM` (the caller asks
+    :func:`~prioik.hierarchy.precision_limited_levels`).
 
     Without the trust-region step (the step bounds ``params[3:]`` must be zeros;
     :func:`solve_data_bounded` takes them) and without numba's runtime: it allocates

@@ -608,8 +608,9 @@ def _descent_drop(A: np.ndarray, s0: int, s1: int, fixed: np.ndarray, act: "_Act
     their size), the other rows inside their intervals. Only a point that gives nothing
     up above counts: a held row allowed beyond its bound by the activity tolerance let a
     robot reach gain 2e-7 at its exact optimum, first order in that tolerance. The point
-    is checked from its own ``A x`` (``0.0`` when it does not hold): a verified drop,
-    whatever the KKT residual read. ``0.0`` also when the drop cannot exceed ``limit``:
+    is checked from its own ``A x``: a verified drop, whatever the KKT residual read (of
+    the :data:`_DESCENT_TRIES` best points of the walk, the best that holds; ``0.0``
+    when none does). ``0.0`` also when the drop cannot exceed ``limit``:
     the value is convex along ``d``, so above its tangent, and drops by at most
     ``2 |slope| α`` within the step allowed."""
     with np.errstate(all="ignore"):

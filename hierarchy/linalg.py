@@ -217,8 +217,8 @@ def row_activity_from_values(a: np.ndarray, lower: np.ndarray, upper: np.ndarray
     return side, v
 
 
-#: scipy's LAPACK ``dgesdd``, imported at the first :func:`svd` (``import prioik``
-#: loads no scipy)
+#: scipy's LAPACK ``dgesdd`` and ``dgesvd``, imported at the first :func:`svd`
+#: (``import prioik`` loads no scipy)
 _GESDD = _GESVD = None
 
 
