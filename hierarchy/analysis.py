@@ -654,17 +654,16 @@ def _descent_drop(A: np.ndarray, s0: int, s1: int, fixed: np.ndarray, act: "_Act
         # between near-opposite multipliers of 1.5e15, was refused at the cap and its
         # level, 12.8 above its optimum, passed): the next shorter steps are tried
         best = float(np.sum((sw * v0) ** 2))
+        if s0:      # where the rows above may end (fixed ones: within rounding of a_h)
+            top_h = np.maximum(up_h, a_h) + np.where(at_u, rounding, 0.0)
+            bottom_h = np.minimum(lo_h, a_h) - np.where(at_l, rounding, 0.0)
         for j in np.argsort(np.where(np.isfinite(along), along, np.inf))[:_DESCENT_TRIES]:
             if not along[j] < best:
                 break
             ap = A[:s1] @ (x + float(alphas[j]) * d)
-            if s0:
-                kept = np.where(fixed, np.abs(ap[:s0] - a_h) <= rounding,
-                                (ap[:s0] <= np.maximum(up_h, a_h) + np.where(at_u, rounding, 0.0))
-                                & (ap[:s0] >= np.minimum(lo_h, a_h)
-                                   - np.where(at_l, rounding, 0.0)))
-                if not kept.all():
-                    continue
+            if s0 and not np.where(fixed, np.abs(ap[:s0] - a_h) <= rounding,
+                                   (ap[:s0] <= top_h) & (ap[:s0] >= bottom_h)).all():
+                continue
             return max(best - float(value(ap[s0:, None])[0]), 0.0)
         return 0.0
 
@@ -884,7 +883,8 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
             # or rows beyond the activity tolerance would be fixed (equality rows stay
             # fixed; rows inside it are read as held already)
             reread = alone and (small & (side == 2) & (rows.lower != rows.upper)).any()
-            if (extra > tol * scale or reread) and _feasible(A_all, act, fixed_all[:s0], s1, small):
+            if (extra > tol * scale or reread) and _feasible(A_all, act, fixed_all[:s0], s1,
+                                                             small):
                 if extra > tol * scale:
                     res, ok = extra, False
                 if alone:
