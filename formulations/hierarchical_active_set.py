@@ -133,8 +133,10 @@ rows (joint limits) are not rows of that QR: each fixes its coordinate at its bo
 the equality rows are solved on the others, when every level above them is met exactly
 there (else they are held as equalities); their multipliers are then what the pivot
 rows' multipliers leave of each level's gradient on the fixed columns. A refuted
-try names its next guess (hold the most violated row, or release the most wrong-signed
-held row), tried in turn, up to three guesses; then the active set runs, from the kept
+try names its next guess (hold the row that first leaves its interval on the way from
+the last feasible guess's point, the primal active-set ratio test, else the most
+violated; or release the most wrong-signed held row), tried in turn, up to six guesses;
+then the active set runs, from the kept
 working sets, or from the cold start when they held no row. Why it is exact: with no held row, with
 ``X_i^E`` the optimal sets of the stack without its inequality rows, by induction
 ``X_i ⊆ X_i^E`` and ``x* ∈ X_i`` (its inequality rows add no violation, so each level's

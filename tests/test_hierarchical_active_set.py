@@ -682,6 +682,35 @@ def test_held_rows_of_several_columns_are_proved_by_their_multipliers():
     assert firsts == [False, True, True, True, True, True]
 
 
+def test_a_released_row_that_overshoots_holds_the_row_that_blocks_first():
+    """The kept guess holds x₀ at its lower bound 0; the posture now pulls x₀ to 10, a
+    wrong-signed multiplier, so the next guess releases it. That guess's answer, (10, −1,
+    0), leaves both limits: x₀ beyond 2 by 8 and x₁ below −0.1 by 0.9. On the way there
+    from the last feasible guess's answer, (0, 0, 0), x₁ leaves first (at 1/10 of the way,
+    x₀ at 1/5): the guess after holds x₁ (the primal active-set ratio test), whose answer
+    (1, −0.1, 0) is proved: zero iterations, info['equality_first'], the cold answer.
+    Holding the most violated row (x₀ at 2) instead took four guesses, and the step ran
+    the active set (three per level)."""
+    def stack(p):
+        return TaskStack([[Task("limits", np.eye(3), lower=[0.0, -0.1, -10.0],
+                                upper=[2.0, 1.0, 10.0])],
+                          [Task("couple", np.array([[0.1, 1.0, 0.0]]), [0.0])],
+                          [Task("posture", np.eye(3)[[0, 2]], [p, 0.0])]])
+    warm = prioik.prepare(stack(-5.0), NAME)
+    cold = prioik.prepare(warm.layout, NAME, warm_start=False)
+    firsts = []
+    for p in (-5.0, 10.0):
+        s = stack(p)
+        a, b = warm.solve(s), cold.solve(s)
+        assert a.status == b.status == "optimal"
+        assert_exact(s, a)
+        assert np.linalg.norm(a.x - b.x) <= 1e-12 * max(1.0, np.linalg.norm(b.x))
+        firsts.append(bool(a.info["equality_first"]))
+    np.testing.assert_allclose(a.x, [1.0, -0.1, 0.0], atol=1e-14)
+    assert firsts == [False, True]
+    assert not a.info["iterations"].any()
+
+
 def _limits_trajectory(seed: int, steps: int = 10) -> list[TaskStack]:
     """G1-shaped stacks along a drift: a top equality level (redundant in a fifth of the
     seeds), joint-limit box rows of scaled and signed ``a_c``, a second limit level on
