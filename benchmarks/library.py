@@ -53,27 +53,115 @@ def _parse_value(text: str):
     return text
 
 
+#: ``prioik solve --format`` values and the reader each names (``auto``: by the file)
+FORMATS = ("auto", "stack", "lexls", "soth", "peer-json")
+
+
+def _file_format(path: str) -> str:
+    """``--format auto``: ``.dat`` lexls, ``.txt`` soth, and a ``.json`` file whose
+    first level is an object with ``lb`` or ``ub`` (the peer JSON of
+    ``load_peer_json``); anything else is a task-stack file."""
+    import json
+    from pathlib import Path
+    suffix = Path(path).suffix
+    if suffix == ".dat":
+        return "lexls"
+    if suffix == ".txt":
+        return "soth"
+    if suffix == ".json":
+        try:
+            levels = json.loads(Path(path).read_text(encoding="utf-8")).get("levels")
+        except (OSError, ValueError, AttributeError, RecursionError):
+            return "stack"        # load_stack names what is wrong with it
+        if isinstance(levels, list) and levels and isinstance(levels[0], dict) \
+                and ("lb" in levels[0] or "ub" in levels[0]):
+            return "peer-json"
+    return "stack"
+
+
+def _problems(path: str, fmt: str, which: str | None) -> list:
+    """``(name, stack, peer)`` of each problem of the file (``peer``: the
+    :class:`~prioik.hierarchy.PeerProblem` of another project's file, else ``None``);
+    ``which``: the ``--problems`` of a soth file."""
+    from prioik.hierarchy import load_lexls, load_peer_json, load_soth, load_stack
+    fmt = _file_format(path) if fmt == "auto" else fmt
+    indices = None
+    if which is not None:
+        if fmt != "soth":
+            raise ValueError(f"--problems picks problems of a soth file; {path} is read as "
+                             f"{fmt}")
+        try:
+            indices = [int(v) for v in which.split(",")]
+        except ValueError:
+            raise ValueError(f"--problems takes comma-separated indices, got {which!r}") \
+                from None
+    if fmt == "stack":
+        return [(path, load_stack(path), None)]
+    peers = {"lexls": lambda: [load_lexls(path)],
+             "soth": lambda: load_soth(path, problems=indices),
+             "peer-json": lambda: [load_peer_json(path)]}[fmt]()
+    return [(p.name, p.stack, p) for p in peers]
+
+
+def _peer_levels(peer) -> tuple[np.ndarray | None, str]:
+    """The per-level ``‖w_i‖²`` another project's file states (its stored solution's,
+    else its hand-derived values) and where they come from."""
+    from prioik.hierarchy import lexicographic_residuals
+    if peer is None:
+        return None, ""
+    if peer.x_stored is not None:
+        return lexicographic_residuals(peer.stack, peer.x_stored) ** 2, "stored solution"
+    if peer.level_targets is not None:
+        return np.asarray(peer.level_targets, dtype=float), "stated values"
+    return None, ""
+
+
 def cmd_solve(args: argparse.Namespace) -> int:
     from prioik import formulations
-    from prioik.hierarchy import load_stack
-    stack = load_stack(args.file)
+    from prioik.hierarchy import check_lexicographic, lexicographic_residuals
     options = {}
     for item in args.option:
         if "=" not in item:
             raise ValueError(f"--option takes key=value, got {item!r}")
         k, v = item.split("=", 1)
         options[k] = _parse_value(v)
-    sol = formulations.solve(stack, args.formulation, **options)
+    problems = _problems(args.file, args.format, args.problems)
     np.set_printoptions(precision=6, suppress=False, linewidth=100)
-    print(f"formulation: {sol.formulation}  status: {sol.status}  "
-          f"time: {sol.time_s * 1e6:.1f} µs")
-    print(f"x = {sol.x}")
-    for i, (level, r) in enumerate(zip(stack.levels, sol.residuals)):
-        print(f"level {i} ({', '.join(level.names)}): residual {r:.3e}")
-    if sol.status == "failed":
-        print(f"failed: {sol.info.get('message', '')}")
-        return 1
-    return 0
+    code = 0
+    for name, stack, peer in problems:
+        sol = formulations.solve(stack, args.formulation, **options)
+        if len(problems) > 1 or peer is not None:
+            print(f"problem: {name}  ({stack.n} unknowns, {len(stack.levels)} levels)")
+        print(f"formulation: {sol.formulation}  status: {sol.status}  "
+              f"time: {sol.time_s * 1e6:.1f} µs")
+        print(f"x = {sol.x}")
+        finite = bool(np.isfinite(sol.x).all())
+        w2 = lexicographic_residuals(stack, sol.x) ** 2 if finite else None
+        target, source = _peer_levels(peer)
+        for i, (level, r) in enumerate(zip(stack.levels, sol.residuals)):
+            line = f"level {i} ({', '.join(level.names)}): residual {r:.3e}"
+            if w2 is not None:
+                line += f"  ‖w‖² {w2[i]:.6e}"
+            if target is not None and w2 is not None:
+                rel = abs(w2[i] - target[i]) / max(1.0, abs(target[i]))
+                line += f"  peer {target[i]:.6e} (Δ {rel:.1e} of max(1, peer))"
+            print(line)
+        if source:
+            print(f"peer: the file's {source}")
+        if sol.status == "failed":
+            print(f"failed: {sol.info.get('message', '')}")
+            code = 1
+        elif args.check and finite:
+            report = check_lexicographic(stack, sol.x, minimum_norm=True)
+            bad = report.first_failure
+            if bad is None:
+                print(f"certificate: passes (tol {report.tol:g}; largest relative KKT "
+                      f"residual {report.worst_relative:.1e})")
+            else:
+                print(f"certificate: fails at level {bad.level} ({', '.join(bad.tasks)}): "
+                      f"{bad.failure(report.tol)}")
+                code = 1
+    return code
 
 
 def cmd_compile(args: argparse.Namespace) -> int:
@@ -96,8 +184,23 @@ def add_parser(sub) -> None:
     p.add_argument("--options", action="store_true",
                    help="also print every option: meaning, default and range")
     p.set_defaults(func=cmd_list)
-    p = sub.add_parser("solve", help="solve a task-stack JSON file and print x and residuals")
-    p.add_argument("file", help="task-stack JSON file (docs/task-stack-format.md)")
+    p = sub.add_parser(
+        "solve", help="solve a task-stack JSON file and print x and residuals",
+        description="Solve a task-stack JSON file (docs/task-stack-format.md), or another "
+                    "project's hierarchy file (lexls .dat, soth .txt, the peer JSON of "
+                    "load_peer_json), and print x, each level's residual and ‖w‖² (and a "
+                    "peer file's own per-level ‖w‖² beside them). Exit status: 2 on a bad "
+                    "file, name or option; 1 when the formulation reports failed, or with "
+                    "--check when the answer fails the certificate; 0 otherwise.")
+    p.add_argument("file", help="task-stack JSON file, or a lexls / soth / peer JSON file")
+    p.add_argument("--format", choices=FORMATS, default="auto",
+                   help="file format (default auto: .dat lexls, .txt soth, .json a task "
+                        "stack, or peer JSON when its levels hold lb/ub)")
+    p.add_argument("--problems", metavar="I,J", default=None,
+                   help="of a soth file holding several problems, these (0-based; default "
+                        "all)")
+    p.add_argument("--check", action="store_true",
+                   help="also run check_lexicographic (minimum-norm tie-break) on the answer")
     p.add_argument("--formulation", "-f", default="extended_jacobian",
                    help="formulation name (see `prioik list`)")
     p.add_argument("--option", "-o", action="append", default=[], metavar="KEY=VALUE",

@@ -1,8 +1,10 @@
 """The ``prioik`` command line: list, solve, compare and clean errors (exit 2)."""
 
 import json
+import re
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -23,6 +25,78 @@ def test_solve_prints_x_and_residuals(capsys):
     out = capsys.readouterr().out
     assert "status: optimal" in out and "x = [" in out
     assert "level 2 (posture): residual" in out
+
+
+PEER = Path(__file__).parent / "data" / "peer"
+
+
+def _level_lines(out: str) -> list[str]:
+    return [line for line in out.splitlines() if line.startswith("level ")]
+
+
+def test_solve_reads_a_lexls_file_and_compares_each_level_with_its_solution(capsys):
+    """lexls's test_01 (n 88, 5 levels, its #Solution): each level's ‖w‖² printed beside
+    the stored solution's, within 1e-9 of max(1, it) (level 4: 1.588896), the
+    certificate passes."""
+    assert main(["solve", str(PEER / "lexls_test_01.dat"), "-f", "hierarchical_active_set",
+                 "--check"]) == 0
+    out = capsys.readouterr().out
+    assert "problem: lexls_test_01  (88 unknowns, 5 levels)" in out
+    lines = _level_lines(out)
+    assert len(lines) == 5
+    deltas = [float(re.search(r"\(Δ (\S+) of max\(1, peer\)\)", line).group(1))
+              for line in lines]
+    assert max(deltas) <= 1e-9, deltas
+    assert "peer 1.588896e+00" in lines[4]
+    assert "peer: the file's stored solution" in out
+    assert "certificate: passes (tol 1e-08;" in out
+
+
+@pytest.mark.parametrize("name, fmt", [("daqp_hqp4.json", "peer-json"),
+                                       ("nipm_t5.json", "peer-json")])
+def test_solve_tells_peer_json_from_a_task_stack_file(name, fmt, capsys):
+    """A .json file whose levels hold lb/ub is another project's (auto), as --format says
+    it; its stated values (DAQP's stored x, NIPM-HLSP's hand-worked f) printed beside."""
+    for argv in (["solve", str(PEER / name)], ["solve", str(PEER / name), "--format", fmt]):
+        assert main(argv + ["-f", "hierarchical_active_set"]) == 0
+        out = capsys.readouterr().out
+        deltas = [float(re.search(r"\(Δ (\S+) of", line).group(1))
+                  for line in _level_lines(out)]
+        assert deltas and max(deltas) <= 1e-9
+    assert main(["solve", str(PEER / name), "--format", "stack"]) == 2
+    assert "unknown" in capsys.readouterr().err
+
+
+def test_solve_picks_problems_of_a_soth_file(capsys):
+    """soth's new.txt holds three problems; its third is malformed ('equalities 1' with two
+    rows): the whole file is refused naming it, --problems 0,1 solves the first two."""
+    path = str(PEER / "soth_new.txt")
+    assert main(["solve", path]) == 2
+    assert "problem 2, level 2: 'equalities 1' but 2 rows follow" in capsys.readouterr().err
+    assert main(["solve", path, "--problems", "0,1", "-f", "hierarchical_active_set",
+                 "--check"]) == 0
+    out = capsys.readouterr().out
+    assert "problem: soth_new#0  (1 unknowns, 3 levels)" in out
+    assert "problem: soth_new#1  (3 unknowns, 3 levels)" in out
+    assert out.count("certificate: passes") == 2
+    for argv, message in (([path, "--problems", "0,7"], "problem 7 requested, the file holds 3"),
+                          ([path, "--problems", "a"], "--problems takes comma-separated"),
+                          ([str(PEER / "nipm_t5.json"), "--problems", "0"],
+                           "--problems picks problems of a soth file")):
+        assert main(["solve"] + argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert message in err and len(err.splitlines()) == 1
+
+
+def test_solve_check_exits_1_when_the_answer_fails_the_certificate(capsys):
+    """The damped extended Jacobian (eq. 27, λ 0.1) on a conflicting stack is not
+    lexicographically optimal: --check names the level and exits 1; the exact one 0."""
+    path = str(examples_dir() / "small_4x3.json")
+    assert main(["solve", path, "-o", "damping=0.1", "--check"]) == 1
+    out = capsys.readouterr().out
+    assert "certificate: fails at level 1 (reach): KKT residual" in out
+    assert main(["solve", path, "--check"]) == 0
+    assert "certificate: passes" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize("argv, message", [
