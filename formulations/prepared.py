@@ -195,6 +195,27 @@ class PreparedSolver:
                             info)
         return self._solution(out, data, elapsed)
 
+    def reset(self) -> None:
+        """Forget what the formulation kept from the last solve (``hierarchical_active_set``:
+        the working sets its warm start begins from): the next solve starts cold, as after
+        :func:`prioik.prepare`. For a control loop whose state jumps (a new task, a reset
+        robot), where the last answer says nothing of the next. A formulation that keeps
+        nothing between solves is unchanged by it.
+
+        Raises:
+            ConcurrentUseError: another thread is using this solver.
+        """
+        reset = getattr(self._impl, "reset", None)
+        if reset is None:
+            return
+        if not self._acquire(False):
+            raise ConcurrentUseError(f"this prepared {self.formulation!r} solver is busy in "
+                                     f"another thread; prepare one solver per thread")
+        try:
+            reset()
+        finally:
+            self._release()
+
     def _step_options(self, step_options: dict) -> dict | None:
         """The options of one call: the prepared ones with ``step_options`` over them
         (validated), or ``None`` when there are none; a formulation that needs

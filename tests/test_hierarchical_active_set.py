@@ -822,8 +822,10 @@ def test_equality_first_is_off_without_warm_start_and_after_reset():
     assert not any(off.solve(stack).info["equality_first"] for _ in range(3))
     on = prioik.prepare(stack, NAME)
     assert [on.solve(stack).info["equality_first"] for _ in range(2)] == [False, True]
-    on._impl.reset()
-    assert not on.solve(stack).info["equality_first"]
+    on.reset()
+    after = on.solve(stack)
+    assert not after.info["equality_first"] and after.info["iterations"].any()
+    assert np.array_equal(after.x, off.solve(stack).x)
     assert prioik.solve_batch([stack] * 3, NAME).statuses == ["optimal"] * 3
 
 

@@ -45,6 +45,33 @@ def _stacks_for(info, count: int = 3, seed: int = 0) -> list[TaskStack]:
 
 
 @pytest.mark.parametrize("info", AVAILABLE, ids=lambda f: f.name)
+def test_reset_makes_the_next_solve_a_fresh_solvers(info):
+    """After ``reset()`` a prepared solver answers as one just prepared: the same x (bit
+    for bit where the computation is deterministic) and status; it refuses a call while
+    another thread holds it."""
+    stacks = _stacks_for(info)
+    opts = _options_for(info, stacks[0].n)
+    used = prioik.prepare(stacks[0].layout, info.name, **opts)
+    for stack in stacks:
+        used.solve(stack)
+    used.reset()
+    got = used.solve(stacks[0])
+    fresh = prioik.prepare(stacks[0].layout, info.name, **opts).solve(stacks[0])
+    assert got.status == fresh.status
+    if info.name == "extended_jacobian" or not info.capabilities.inequalities:
+        assert np.array_equal(got.x, fresh.x), info.name
+    else:
+        np.testing.assert_allclose(got.x, fresh.x, rtol=1e-8, atol=1e-10)
+    if hasattr(used._impl, "reset"):
+        used._acquire(False)        # as if another thread were inside solve()
+        try:
+            with pytest.raises(ConcurrentUseError, match="busy in another thread"):
+                used.reset()
+        finally:
+            used._release()
+
+
+@pytest.mark.parametrize("info", AVAILABLE, ids=lambda f: f.name)
 def test_prepared_solver_equals_one_off_solves_over_many_stacks(info):
     stacks = _stacks_for(info)
     opts = _options_for(info, stacks[0].n)
