@@ -2626,9 +2626,9 @@ FIXED_REFUSED = -4
 #: refutation's next (hold the row that first leaves its interval on the way from the
 #: last feasible guess, else the most violated; or release the held row of the most
 #: wrong-signed multiplier), one nested QR each (two for a guess whose box rows
-#: :data:`FIXED_REFUSED` refused as fixed coordinates). Along the 600 steps of each G1
-#: fencing run with limits as bounds, 6 guesses leave 0-3 steps per run to the
-#: active set (3 left 4-8, and 7-18 when the most violated row was held)
+#: :data:`FIXED_REFUSED` refused as fixed coordinates). Of the 600 steps of each G1
+#: fencing run with limits as bounds (warm, in order), six guesses leave 1-5 to the
+#: active set; three guesses of the most violated row left 1-22
 GUESSES = 6
 
 
@@ -2639,8 +2639,9 @@ def _first_blocking(A, lower, upper, iseq, held, x, xref, row, side):
     later guess's, some row outside): the primal active-set method's ratio test, the row
     a guess should hold next (holding the most violated one instead can skip the row
     that blocks first and wander: a G1 step released one limit, which then overshot
-    its other bound). ``xref`` moves to the blocking point. Returns ``(row, side)``,
-    ``(row, side)`` as given when no row is outside at ``x``."""
+    its other bound). ``xref`` moves to the blocking point. Returns the row and the side
+    it leaves by (``-1`` lower, ``1`` upper); the ``row, side`` given when no row is
+    outside its interval at ``x``."""
     M = A.shape[0]
     best = 2.0
     for j in range(M):

@@ -606,9 +606,9 @@ def _certify_near_ambiguous(data, outcome: Outcome, margins: np.ndarray) -> None
     outcome.info["near_ambiguous_levels"] = near
     certify(data, outcome)
     outcome.info["path_certified"] = outcome.status == "optimal"
-    if outcome.status != "optimal":
-        outcome.info["reason"] = (f"{near_ambiguity_reason(near)}, and "
-                                  f"{outcome.info['message']}")
+    if outcome.status != "optimal":     # failed, or passed at an ambiguous decision
+        why = outcome.info.get("message") or outcome.info.get("reason", "")
+        outcome.info["reason"] = f"{near_ambiguity_reason(near)}, and {why}"
 
 
 def _ambiguity_status(info: dict, status: str, ambiguous) -> str:

@@ -23,8 +23,8 @@ import numpy as np
 from .layout import StackData, level_residuals
 from .errors import TaskStackError, UnsupportedTaskError
 from .linalg import (CERTIFICATE_SIGMA_FLOOR, DEFAULT_CERTIFICATE_TOL, DEFAULT_RCOND, X_PRECISION,
-                     level_scale, matrix_rank, nonnegative_least_squares, range_basis,
-                     row_activity_from_values, svd)
+                     ambiguous_decision, level_scale, matrix_rank, nonnegative_least_squares,
+                     range_basis, row_activity_from_values, svd)
 from .stack import TaskStack
 
 
@@ -240,6 +240,13 @@ class LexicographicReport:
             the point it checked instead (within ``tol · max(1, ‖x‖)`` of ``x``, every
             level's value within ``tol · scale_i`` of ``x``'s) passed, and the report is
             that point's (``0``: ``x``'s own; see :func:`check_lexicographic`).
+        ambiguous_levels: Levels where a rank decision the check took at ``x`` (the
+            rows fixed there, or the level's own rows) was ambiguous: a singular value
+            within :data:`~hierarchy.linalg.AMBIGUITY` of its threshold. The check reads
+            them by the rank rule, as the exact solvers do; at such a decision another
+            threshold gives another optimum, so a passing answer is the rank rule's
+            optimum, not necessarily the exact-arithmetic one (the exact solvers then say
+            ``approximate``, and so does :func:`formulations.base.certify`).
     """
 
     ok: bool
@@ -248,6 +255,7 @@ class LexicographicReport:
     minimum_norm: LevelCheck | None = None
     band_rows_fixed: int = 0
     snapped_rows: int = 0
+    ambiguous_levels: tuple[int, ...] = ()
 
     @property
     def first_failure(self) -> LevelCheck | None:
@@ -698,6 +706,8 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
     n_signed = 0
     fixed_count = 0
     checks = []
+    ambiguous: list[int] = []       # levels of an ambiguous rank decision (in order)
+    level = 0
 
     def kkt(g: np.ndarray, B: np.ndarray | None, floor_scale: float
             ) -> tuple[float, list]:
@@ -736,6 +746,9 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
             # rows are 1e-13 of its satisfied ones cannot move them (fuzz 5-32: rows of
             # 5e-17 beside rows of 7e-4, read as movable, failed the exact answer x = 0)
             null = sig <= rcond * max(bn, floor_scale)
+            if ambiguous_decision(sig, rcond * max(bn, floor_scale)) and \
+                    level not in ambiguous:
+                ambiguous.append(level)
             D = 1.0 / np.maximum(sig, floor)
             # the gradient lies in the row space of B: its part along directions that B Z
             # cannot move by the rank rule is round-off (amplified by 1/floor it would
@@ -809,6 +822,8 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
                 _, s, vt = svd(F @ Z)
                 r = int(np.count_nonzero(s > tol_r))
                 Z = Z @ vt[r:].T
+                if ambiguous_decision(s, tol_r) and level not in ambiguous:
+                    ambiguous.append(level)
             fixed_count += int(fix.sum())
         one = ((side == 1) | (side == -1)) & (norms > 0)
         count = int(np.count_nonzero(one))
@@ -819,6 +834,7 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
 
     band = 0
     for i, names in enumerate(layout.names):
+        level = i
         s0, s1 = int(starts[i]), int(starts[i + 1])
         rows = _LevelRows(A_all[s0:s1], lo_all[s0:s1], up_all[s0:s1], sw_all[s0:s1])
         norms = norms_all[s0:s1]
@@ -917,4 +933,5 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
                            bool(np.isfinite(res) and res <= tol * scale),
                            fixed_count, n_signed)
     ok = all(c.ok for c in checks) and (final is None or final.ok)
-    return LexicographicReport(ok, tol, tuple(checks), final, band)
+    return LexicographicReport(ok, tol, tuple(checks), final, band,
+                               ambiguous_levels=tuple(sorted(ambiguous)))
