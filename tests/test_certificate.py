@@ -683,3 +683,61 @@ def test_no_formulation_says_optimal_at_an_ambiguous_rank_decision(name):
                 assert not check_lexicographic(_near_pair(eps), sol.x).ok
             else:
                 np.testing.assert_allclose(sol.x, [1.0, 5.0, 1.0], atol=1e-6)
+
+
+FUZZ = Path(__file__).parent / "data" / "fuzz"
+
+
+def test_a_lower_point_refutes_an_answer_the_check_passes():
+    """Fuzz bounds-1248-41 (n 21, 4 levels): cascaded_qp[quadprog] leaves a level-0 row
+    violated by 5.7e-7 (level 0 at 3.3e-13, within the tolerance) and stops level 1 at
+    17.19; the check reads that row as level 0's optimal violation, fixed for level 1,
+    and passes the answer. The active set's answer meets level 0 (1.8e-37) and reaches
+    10.58 at level 1: a lower point, so certify says 'approximate' naming level 1. Neither
+    the active set's own answer nor Clarabel's (10.58 too) is refuted."""
+    from prioik.formulations.base import lower_point
+    from prioik.hierarchy import load_stack
+    stack = load_stack(FUZZ / "bounds-1248-41.json")
+    raw = formulations.solve(stack, "cascaded_qp", solver="quadprog", certify=False)
+    assert check_lexicographic(stack, raw.x, minimum_norm=True).ok     # the check's gap
+    level, value, reached = lower_point(stack, raw.x)
+    assert level == 1 and 17.19 < value < 17.20 and 10.58 < reached < 10.59
+    sol = formulations.solve(stack, "cascaded_qp", solver="quadprog")
+    assert sol.status == "approximate" and sol.info["fault_level"] == 1
+    assert sol.info["lower_point"] == {"level": 1, "value": value, "reached": reached}
+    assert "hierarchical_active_set reaches 10.58" in sol.info["message"]
+    exact = formulations.solve(stack, "hierarchical_active_set")
+    assert exact.status == "optimal" and lower_point(stack, exact.x) is None
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        clarabel = formulations.solve(stack, "cascaded_qp", solver="clarabel")
+    assert clarabel.status == "optimal" and lower_point(stack, clarabel.x) is None
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_a_lower_point_is_found_against_worse_answers_and_not_against_the_optimum(seed):
+    """On the seeded random inequality stacks: the optimum (tight Clarabel, cross-checked
+    by cvxpy) is not refuted; the optimum moved at random (0.05 per coordinate), worse at
+    the first level where its values differ from the optimum's (by more than 1e-8), is
+    refuted at that level."""
+    from prioik.formulations.base import lower_point
+    stack = _draw(seed)
+    x = _optimum(stack)
+    assert lower_point(stack, x) is None
+    w = _w2(stack, x)
+    rng = np.random.default_rng(seed)
+    refuted = 0
+    for _ in range(20):
+        y = x + 0.05 * rng.standard_normal(x.shape)
+        wy = _w2(stack, y)
+        if np.allclose(wy, w, rtol=1e-8, atol=1e-8):
+            # every level as low as the optimum's (seed 30: all zero, the inequality rows
+            # slack): nothing to refute
+            assert lower_point(stack, y) is None
+            continue
+        first = int(np.flatnonzero(~np.isclose(wy, w, rtol=1e-8, atol=1e-8))[0])
+        assert wy[first] > w[first]          # (the optimum is lowest there)
+        got = lower_point(stack, y)
+        assert got is not None and got[0] == first, (got, first)
+        refuted += 1
+    assert refuted > 0 or not w.any()
