@@ -7,9 +7,10 @@ from typing import Any, Callable
 
 import numpy as np
 
-from prioik.hierarchy import (DEFAULT_CERTIFICATE_TOL, X_PRECISION, StackData, TaskStackError,
-                              ambiguity_reason, check_lexicographic, level_residuals,
-                              level_scale, precision_limited_levels, precision_reason)
+from prioik.hierarchy import (DEFAULT_CERTIFICATE_TOL, X_PRECISION, StackData, TaskStack,
+                              TaskStackError, ambiguity_reason, check_lexicographic,
+                              level_residuals, level_scale, precision_limited_levels,
+                              precision_reason)
 
 #: Values of :attr:`Solution.status`.
 STATUSES = ("optimal", "approximate", "failed")
@@ -214,28 +215,27 @@ def certify(stack, outcome: Outcome, metric=None, tol: float | None = None) -> O
     :data:`hierarchy.DEFAULT_CERTIFICATE_TOL`). An answer that fails becomes
     ``"approximate"``, with ``info["fault_level"]`` (``k`` for the tie-break),
     ``info["fault_tasks"]`` and ``info["message"]``; ``info["certificate"]`` records the
-    check either way. An answer that passes is then compared with the exact active-set
-    solver's answer on the same stack (:func:`lower_point`): when that point is no higher
-    at every level above some level and lower there by more than ``tol · max(1, value)``
-    (and the values' rounding), the answer is not the lexicographic optimum whatever the
-    check read, and it becomes ``"approximate"`` with ``info["fault_level"]``,
-    ``info["fault_tasks"]``, ``info["message"]`` and ``info["lower_point"]`` (the two
-    values). The check reads rows a solver left violated within its tolerance at a level
-    above as that level's optimal violation, fixed for the levels below, which can pin
-    them far from their optimum: on 600 stacks (``prioik fuzz`` seed 1248's first 200
-    inequality and 200 bounds stacks, 200 ``random_inequality``) it passed 46 answers of
-    ``cascaded_qp`` (quadprog, daqp, clarabel), ``cvxpy`` and ``daqp_hierarchical`` that
-    the comparison refutes, by 1.1e-8 to 0.44 of ``max(1, value)``
-    (``cascaded_qp[quadprog]`` on ``bounds-1248-41``: level 1 at 17.19 where 10.58 is
-    reached, a level-0 row left violated by 5.7e-7). An answer that passes but where
-    the check took an ambiguous rank
+    check either way. An answer that passes but where the check took an ambiguous rank
     decision (``report.ambiguous_levels``: a singular value within
     :data:`hierarchy.AMBIGUITY` of the rank rule's threshold) becomes ``"approximate"``
     too, with ``info["ambiguous_levels"]`` and ``info["reason"]``: it is the rank rule's
     optimum, and the exact solvers say ``approximate`` at such a decision (on 600 fuzz
     stacks with inequalities, ``cascaded_qp[quadprog]`` said ``optimal`` on 34 where the
-    active set found its decisions ambiguous, 30 of which the check finds so too). Other
-    statuses are returned unchanged.
+    active set found its decisions ambiguous, 30 of which the check finds so too). Any
+    other answer that passes is compared with the exact active-set solver's answer on the
+    same stack (:func:`lower_point`): when that point is no higher at every level above
+    some level and lower there by more than ``tol · max(1, value)`` (and the values'
+    rounding), the answer is not the lexicographic optimum whatever the check read, and
+    it becomes ``"approximate"`` with ``info["fault_level"]``, ``info["fault_tasks"]``,
+    ``info["message"]`` and ``info["lower_point"]`` (the two values). The check reads
+    rows a solver left violated within its tolerance at a level above as that level's
+    optimal violation, fixed for the levels below, which can pin them far from their
+    optimum: on 600 stacks (``prioik fuzz`` seed 1248's first 200 inequality and 200
+    bounds stacks, 200 ``random_inequality``) it passed 46 answers of ``cascaded_qp``
+    (quadprog, daqp, clarabel), ``cvxpy`` and ``daqp_hierarchical`` that the comparison
+    refutes, by 1.1e-8 to 0.44 of ``max(1, value)`` (``cascaded_qp[quadprog]`` on
+    ``bounds-1248-41``: level 1 at 17.19 where 10.58 is reached, a level-0 row left
+    violated by 5.7e-7). Other statuses are returned unchanged.
     """
     if outcome.status != "optimal":
         return outcome
@@ -279,8 +279,8 @@ def certify(stack, outcome: Outcome, metric=None, tol: float | None = None) -> O
     return outcome
 
 
-def lower_point(stack, x: np.ndarray, tol: float = DEFAULT_CERTIFICATE_TOL
-                ) -> tuple[int, float, float] | None:
+def lower_point(stack: TaskStack | StackData, x: np.ndarray,
+                tol: float = DEFAULT_CERTIFICATE_TOL) -> tuple[int, float, float] | None:
     """A witness against ``x``: the exact active-set solver's answer ``x_a`` on the same
     stack, when it is lexicographically lower — at the first level ``i`` where the two
     differ beyond rounding, ``‖w_i(x_a)‖² < ‖w_i(x)‖² − tol · max(1, ‖w_i(x)‖²)``, and
