@@ -166,6 +166,26 @@ def test_the_svd_path_answers_where_divide_and_conquer_does_not_converge():
     assert relative_distance(sol.x, case.truth) <= 1e-9
 
 
+@pytest.mark.parametrize("index, n", [(467, 58), (1466, 55)])
+def test_the_svd_path_answers_where_the_stacked_triangle_does_not_converge(index, n):
+    """``prioik fuzz --seed 1250``, equality cases 467 and 1466 (11 levels): numpy's SVD
+    of the stacked triangle ``R_i`` (``n × n``) does not converge, and the svd path said
+    ``failed`` (``LinAlgError``). Every SVD of the path falls back to ``dgesvd`` now: the
+    path answers ``approximate`` with its reason (case 467: an ambiguous rank decision,
+    as the reference says; case 1466: κ(J_E) 4e5 beyond its rule), case 1466 within 1e-9
+    of the reference's answer."""
+    from prioik.hierarchy.fuzz import equality_case
+    stack = equality_case(np.random.default_rng([1250, index]), index).stack
+    assert stack.n == n
+    sol = formulations.solve(stack, "extended_jacobian", nullspace="svd")
+    assert sol.status == "approximate" and sol.info["reason"]
+    ref = formulations.solve(stack, "reference")
+    if ref.status == "optimal":
+        assert relative_distance(sol.x, ref.x) <= 1e-9
+    else:
+        assert "ambiguous" in sol.info["reason"] and "ambiguous" in ref.info["reason"]
+
+
 def test_decision_margin_reads_the_nearest_value_to_the_threshold():
     from prioik.hierarchy import decision_margin
     assert decision_margin(np.array([5.0, 2e-9, 1e-15, 0.0]), 1e-9) == 2.0
