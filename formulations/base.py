@@ -218,7 +218,8 @@ def certify(stack, outcome: Outcome, metric=None, tol: float | None = None) -> O
     check either way. An answer that passes but where the check took an ambiguous rank
     decision (``report.ambiguous_levels``: a singular value within
     :data:`hierarchy.AMBIGUITY` of the rank rule's threshold) becomes ``"approximate"``
-    too, with ``info["ambiguous_levels"]`` and ``info["reason"]``: it is the rank rule's
+    too, with ``info["ambiguous_levels"]`` and ``info["reason"]`` (``info["message"]``
+    too: every answer it demotes says why there): it is the rank rule's
     optimum, and the exact solvers say ``approximate`` at such a decision (on 600 fuzz
     stacks with inequalities, ``cascaded_qp[quadprog]`` said ``optimal`` on 34 where the
     active set found its decisions ambiguous, 30 of which the check finds so too). Any
@@ -261,7 +262,7 @@ def certify(stack, outcome: Outcome, metric=None, tol: float | None = None) -> O
         levels = list(report.ambiguous_levels)
         outcome.status = "approximate"
         outcome.info["ambiguous_levels"] = levels
-        outcome.info["reason"] = ambiguity_reason(levels)
+        outcome.info["reason"] = outcome.info["message"] = ambiguity_reason(levels)
     else:
         lower = lower_point(stack, x, tol)
         if lower is not None:

@@ -191,10 +191,8 @@ def solve(stack: TaskStack, *, primal_tol: float, dual_tol: float, compress_leve
         info["conflicting_levels"] = conflicts
         out = certify(stack, out)
         if out.status != "optimal" and conflicts:
-            # (a failed certificate says why in "message", an ambiguous decision in "reason")
-            key = "message" if "message" in info else "reason"
-            info[key] += (f"; levels {conflicts} conflict with the levels above "
-                          f"(eq. 35), where DAQP's count of free directions goes wrong")
+            info["message"] += (f"; levels {conflicts} conflict with the levels above "
+                                f"(eq. 35), where DAQP's count of free directions goes wrong")
     return out
 
 

@@ -126,7 +126,7 @@ from prioik.hierarchy import (AMBIGUITY, NEAR_AMBIGUITY, StackData, StackLayout,
                               TaskStack, UnsupportedTaskError, ambiguity_reason,
                               ambiguous_decision, decision_margin, level_scale,
                               near_ambiguity_reason, rank_threshold)
-from prioik.hierarchy.linalg import svd
+from prioik.hierarchy.linalg import numpy_svd
 
 from .base import (Capabilities, FormulationError, Outcome, ReportVariant, certify,
                    precision_status, solve_equilibrated)
@@ -606,9 +606,9 @@ def _certify_near_ambiguous(data, outcome: Outcome, margins: np.ndarray) -> None
     outcome.info["near_ambiguous_levels"] = near
     certify(data, outcome)
     outcome.info["path_certified"] = outcome.status == "optimal"
-    if outcome.status != "optimal":     # failed, or passed at an ambiguous decision
-        why = outcome.info.get("message") or outcome.info.get("reason", "")
-        outcome.info["reason"] = f"{near_ambiguity_reason(near)}, and {why}"
+    if outcome.status != "optimal":
+        outcome.info["reason"] = (f"{near_ambiguity_reason(near)}, and "
+                                  f"{outcome.info['message']}")
 
 
 def _ambiguity_status(info: dict, status: str, ambiguous) -> str:
@@ -714,7 +714,7 @@ def _augmented_decomposition(stack: TaskStack, rcond: float
         R = np.linalg.qr(np.vstack([R, A / norm if norm > 0 else A]), mode="r")
         if R.shape[0] > n:
             R = R[:n]
-        _, sv, vt = _svd(R, full_matrices=True)
+        _, sv, vt = numpy_svd(R, full_matrices=True)
         r = int(np.count_nonzero(sv > rcond)) if rcond > 0 else 0
         if ambiguous_decision(sv, rcond):
             ambiguous.append(i)
@@ -738,20 +738,9 @@ def _svd_task_ranges(stack: TaskStack, zs: list[np.ndarray]) -> list[np.ndarray]
         if r <= 0:
             out.append(np.zeros((stack.n, 0)))
             continue
-        _, _, vt = _svd(level.A @ Z, full_matrices=False)
+        _, _, vt = numpy_svd(level.A @ Z, full_matrices=False)
         out.append(Z @ vt[:r].T)
     return out
-
-
-def _svd(M: np.ndarray, full_matrices: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """numpy's SVD of ``M``, or where its ``dgesdd`` does not converge
-    :func:`hierarchy.linalg.svd`'s ``dgesvd`` (fuzz: a ``J_E`` of κ 1e14 at seed 1245,
-    the stacked ``R_i`` of two 55- and 58-unknown stacks at seed 1250, all ``failed``
-    before). numpy first: every answer it factors stays the same to the bit."""
-    try:
-        return np.linalg.svd(M, full_matrices=full_matrices)
-    except np.linalg.LinAlgError:
-        return svd(M, full_matrices=full_matrices)
 
 
 def _solve_svd(stack: TaskStack, rcond: float, z_basis: str = "task_range") -> Outcome:
@@ -766,7 +755,7 @@ def _solve_svd(stack: TaskStack, rcond: float, z_basis: str = "task_range") -> O
         return Outcome(np.zeros(stack.n), "optimal",
                        {"rank": rank, "nullspace": "svd", "z_basis": z_basis,
                         "extended_rows": 0, "condition_number": 1.0})
-    u, s, vt = _svd(JE, full_matrices=False)
+    u, s, vt = numpy_svd(JE, full_matrices=False)
     r = min(rank, int(np.count_nonzero(s > 0)))
     x = vt[:r].T @ ((u[:, :r].T @ hE) / s[:r])
     cond = float(s[0] / s[r - 1]) if r else 1.0

@@ -745,9 +745,9 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
             # and inactive rows too), not the active rows' alone: a level whose violated
             # rows are 1e-13 of its satisfied ones cannot move them (fuzz 5-32: rows of
             # 5e-17 beside rows of 7e-4, read as movable, failed the exact answer x = 0)
-            null = sig <= rcond * max(bn, floor_scale)
-            if ambiguous_decision(sig, rcond * max(bn, floor_scale)) and \
-                    level not in ambiguous:
+            threshold = rcond * max(bn, floor_scale)
+            null = sig <= threshold
+            if ambiguous_decision(sig, threshold) and level not in ambiguous:
                 ambiguous.append(level)
             D = 1.0 / np.maximum(sig, floor)
             # the gradient lies in the row space of B: its part along directions that B Z

@@ -244,6 +244,20 @@ def svd(A: np.ndarray, full_matrices: bool = True
     return np.linalg.svd(A, full_matrices=full_matrices)
 
 
+def numpy_svd(A: np.ndarray, full_matrices: bool = True
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``np.linalg.svd(A, full_matrices)``, or :func:`svd` where numpy's ``dgesdd`` does
+    not converge (its ``dgesvd`` fallback; the extended Jacobian's svd path: a ``J_E``
+    of κ 1e14 at ``prioik fuzz --seed 1245``, the stacked triangle ``R_i`` of two 55- and
+    58-unknown stacks at seed 1250, all ``failed`` before). For callers whose answers
+    must stay numpy's to the bit where numpy converges (:func:`svd` calls LAPACK
+    directly and rounds differently)."""
+    try:
+        return np.linalg.svd(A, full_matrices=full_matrices)
+    except np.linalg.LinAlgError:
+        return svd(A, full_matrices=full_matrices)
+
+
 def _face_solve(M: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Least-squares ``min ‖M s − y‖`` (``lstsq``'s rank rule) and its residual
     ``y − U Uᵀ y``, projected: accurate to ``eps ‖y‖`` where ``y − M s`` carries the
