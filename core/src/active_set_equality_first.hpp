@@ -1,0 +1,36 @@
+// The equality-first try's views (private).
+#pragma once
+
+#include "active_set_internal.hpp"
+
+namespace prioik::detail {
+
+/// The equality-first try's parts: the weighed equality (and held) rows eB and their
+/// targets ec, the nested QR's per-level vectors, the row maps, and the scratch it
+/// shares with the active set (V, L, fs: 4 rows of R, pos).
+struct EqFirst {
+    Mat eB, V, Lmat;
+    double* eflat;
+    double *ec, *scales, *mu2, *emargins, *step_bound;
+    index *estarts, *eranks, *ucol, *erow, *rowperm, *prow, *pside, *pinned, *hcol, *ecol;
+    double* fs;
+    double* work;      // the fixed columns' test's scratch (≥ 2 n + M)
+    index* pos;
+    double* spare;
+    index* ispare;
+    double* Lflat;
+    double* Vflat;
+    // the held rows: as fixed coordinates (fixed) or as equalities; their count and the
+    // lowest level holding one; the free coordinates' count n2 and the QR's rows m
+    bool fixed = false;
+    index nheld = 0, last_held = -1, n2 = 0, m = 0;
+
+    EqFirst(Ctx& c, ActiveSetWorkspace& ws);
+};
+
+double add_level_gradient(const Ctx& c, const EqFirst& e, index s0, index s1, const double* x,
+                          double* g);
+index held_rows_optimal(const Ctx& c, EqFirst& e, const double* x);
+index fixed_columns_optimal(const Ctx& c, EqFirst& e, const double* x);
+
+}  // namespace prioik::detail
