@@ -3,6 +3,9 @@
 # .venv holds every extra (`pip install -e ".[all,test]"`); `make test` also builds
 # .venv-core, the core alone (`pip install -e .` and pytest), and runs tests/core there,
 # beside the full suite.
+# The compiled core (core/, prioik._core) is built by pip through scikit-build-core and
+# CMake: .venv holds the build requirements and builds without isolation into build/, so
+# that an edit to core/ rebuilds only what changed (`make venv` after the edit does it).
 
 PYTHON ?= python3
 VENV   := .venv
@@ -13,24 +16,38 @@ CORE_PY    := $(CORE_VENV)/bin/python
 CORE_STAMP := $(CORE_VENV)/.installed
 OUT    ?= results
 
+CORE_STAMP_BUILT := $(VENV)/.core-built
+CORE_SOURCES := $(shell find core -type f -not -name '*~' 2>/dev/null)
+# pyproject.toml's [build-system] requires, and CMake and Ninja (kept in the venv: their
+# paths stay the same from one build to the next)
+BUILD_REQUIRES = $$($(PY) -c "import tomllib; print(*tomllib.load(open('pyproject.toml', 'rb'))['build-system']['requires'])") "cmake>=3.18" "ninja>=1.10"
+
 .PHONY: test test-core demo venv venv-core clean
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e ".[all,test]"
-	touch $(STAMP)
+	$(PY) -m pip install --quiet $(BUILD_REQUIRES)
+	$(PY) -m pip install --quiet --no-build-isolation -e ".[all,test]"
+	touch $(STAMP) $(CORE_STAMP_BUILT)
+
+# an edit to core/: the extension rebuilt (only what changed) and re-installed
+$(CORE_STAMP_BUILT): $(STAMP) $(CORE_SOURCES)
+	@start=$$(date +%s); \
+	$(PY) -m pip install --quiet --no-build-isolation --no-deps -e . && \
+	echo "prioik._core rebuilt in $$(( $$(date +%s) - start )) s"
+	touch $(CORE_STAMP_BUILT)
 
 # Built anew whenever pyproject.toml changes, so that nothing an older core pulled in
 # stays behind; prints its build time and size.
 $(CORE_STAMP): pyproject.toml
 	@start=$$(date +%s); \
 	rm -rf $(CORE_VENV) && $(PYTHON) -m venv $(CORE_VENV) && \
-	$(CORE_PY) -m pip install --quiet -e . "pytest>=7" && \
+	$(CORE_PY) -m pip install --quiet -C build-dir=build/venv-core-{wheel_tag} -e . "pytest>=7" && \
 	echo "$(CORE_VENV) (core + pytest) built in $$(( $$(date +%s) - start )) s; $$(du -sh $(CORE_VENV) | cut -f1)"
 	touch $(CORE_STAMP)
 
-venv: $(STAMP)
+venv: $(STAMP) $(CORE_STAMP_BUILT)
 
 venv-core: $(CORE_STAMP)
 
@@ -45,15 +62,15 @@ test-core: $(CORE_STAMP)
 # The core's tests run beside the full suite (each compiles its numba kernels on a fresh
 # clone, single-threaded, into its own cache: side by side on two cores the wall time is
 # the full suite's); the core's output follows the suite's.
-test: $(STAMP) $(CORE_STAMP)
+test: $(STAMP) $(CORE_STAMP_BUILT) $(CORE_STAMP)
 	@$(CORE_TEST) > $(CORE_VENV)/test-core.log 2>&1 & core=$$!; \
 	$(PY) -m pytest -q -p no:cacheprovider; full=$$?; \
 	wait $$core; status=$$?; \
 	echo "--- tests/core in $(CORE_VENV) (the core alone):"; cat $(CORE_VENV)/test-core.log; \
 	test $$full -eq 0 && test $$status -eq 0
 
-demo: $(STAMP)
+demo: $(STAMP) $(CORE_STAMP_BUILT)
 	$(VENV)/bin/prioik fencing --variant both --out $(OUT)
 
 clean:
-	rm -rf $(VENV) $(CORE_VENV) $(OUT) *.egg-info
+	rm -rf $(VENV) $(CORE_VENV) $(OUT) *.egg-info build
