@@ -162,7 +162,7 @@ from itertools import compress
 import numpy as np
 
 from prioik.hierarchy import (AMBIGUITY, X_PRECISION, StackData, StackLayout, TaskStack,
-                              ambiguity_reason, check_lexicographic)
+                              TaskStackError, ambiguity_reason, check_lexicographic)
 from prioik.hierarchy.analysis import prepare_certificate
 
 from .base import (Capabilities, FormulationError, Outcome, ReportVariant, precision_status,
@@ -250,7 +250,22 @@ OPTIONS = {
                          "solve's working set, and when it held no inequality row try "
                          "the equality rows' own solution first (False: every solve "
                          "cold)"),
+    "kernel": Option("numba", "str", "the compiled kernel: 'numba' (formulations/"
+                     "_active_set_kernel.py) or 'cpp' (prioik._core.ActiveSetSolver, "
+                     "core/src/active_set*.cpp: the same algorithm, IEEE rounding)",
+                     choices=("numba", "cpp")),
 }
+
+
+def _core_module():
+    """``prioik._core`` (the compiled C++ core), or a FormulationError saying why not."""
+    try:
+        import prioik._core as core
+    except ImportError as exc:  # pragma: no cover - built by pip install
+        raise FormulationError(f"{NAME} kernel='cpp' needs prioik's compiled core "
+                               f"(prioik._core): {type(exc).__name__}: {exc}; reinstall "
+                               f"prioik with `pip install -e .`") from exc
+    return core
 
 
 def compile_kernels() -> None:
@@ -304,18 +319,26 @@ class Prepared:
         self.dual_tol = float(options["dual_tol"])
         self.max_iter = int(options["max_iter"])
         self.warm_start = bool(options["warm_start"])
+        #: the compiled kernel: "numba" or "cpp"
+        self.kernel = str(options.get("kernel", "numba"))
         #: how many more times a rejected near-release answer is re-solved
         #: (:meth:`_refined`; one fewer in each refining solve)
         self._refine = REFINE_ROUNDS
-        # the kernels' entry points: called with the data's arrays and these workspaces
-        # only, the types of _SIGNATURE by construction
-        self._solve_data, self._equality_first_data = _compile_kernels(self.warm_start)
         # a flagged answer is certified (_certify_flagged): its imports are paid here
         prepare_certificate()
         # the equality-first try needs the equality rows' solve (an inequality-only stack
         # has none to try)
         self._try_first = self.warm_start and bool(layout.row_is_equality.any())
         m, n, k = layout.m, layout.n, layout.k
+        self._n, self._k = n, k
+        self._levels = range(k)
+        if self.kernel == "cpp":
+            self._prepare_cpp(layout)
+            return
+        self._cpp = None
+        # the kernels' entry points: called with the data's arrays and these workspaces
+        # only, the types of _SIGNATURE by construction
+        self._solve_data, self._equality_first_data = _compile_kernels(self.warm_start)
         rows = m + n
         off = _kernel.workspace_offsets(m, n, k)
         self._fwork = np.zeros(off["size_f"][1])
@@ -343,17 +366,53 @@ class Prepared:
         self._summary = self._fwork[5:10]
         #: each level's (and the tie-break's) rank-decision margin (hierarchy.linalg)
         self._margins = part(self._fwork, "margins")
-        self._n, self._k = n, k
         self._counts = part(self._iwork, "counts", (4, k + 1))
         self._iterations = self._counts[0]
+        self._flags = self._counts[1]
         self._ranks = self._counts[2, :k]
         #: views of the parts an answer copies (a view per solve costs as much as a copy)
         self._x, self._w2 = self._out[:n], self._out[n:n + k]
         self._res, self._over = self._out[n + k:], self._counts[3, :k]
-        self._levels = range(k)
+        self._work = (self._fwork, self._iwork, self._bwork)
+
+    def _prepare_cpp(self, layout: StackLayout) -> None:
+        """The C++ kernel's solver (``prioik._core.ActiveSetSolver``): its workspace is
+        allocated here; the answer's parts are views of its result, read by name."""
+        core = _core_module()
+        k = layout.k
+        self._cpp = cpp = core.ActiveSetSolver(
+            layout.n, np.ascontiguousarray(layout.starts, dtype=np.int64),
+            np.ascontiguousarray(layout.row_is_equality, dtype=np.int8), self.rcond,
+            self.primal_tol, self.dual_tol, self.max_iter, self.warm_start)
+        self._solve_data, self._equality_first_data = cpp.solve, cpp.equality_first
+        self._work = ()
+        self.warm_state, self.warm_valid = cpp.warm_state, cpp.warm_valid
+        self._x, self._w2, self._res = cpp.x, cpp.w2, cpp.res
+        self._margins, self._iterations, self._flags = cpp.margins, cpp.iterations, cpp.flags
+        self._ranks, self._over = cpp.ranks[:k], cpp.over[:k]
+
+    def _summary_values(self) -> tuple[float, float, float, float, float]:
+        """The kernel's summary: ``‖x‖``, cap (``1``) or non-finite (``-1``) flag,
+        whether ``‖x‖`` exceeds the precision limit, the count of ambiguous or flagged
+        levels, of unresolved box rows."""
+        cpp = self._cpp
+        if cpp is None:
+            return tuple(self._summary.tolist())
+        return (cpp.x_norm, cpp.cap_or_nonfinite, float(cpp.large), float(cpp.ambiguous),
+                float(cpp.unresolved))
+
+    def _ambiguous_count(self) -> float:
+        return self._fwork.item(8) if self._cpp is None else float(self._cpp.ambiguous)
+
+    def _equality_first_answered(self) -> bool:
+        return (self._fwork.item(10) if self._cpp is None
+                else self._cpp.equality_first_state) == 1.0
 
     def reset(self) -> None:
         """Forget the kept working sets (the next solve starts cold)."""
+        if self._cpp is not None:
+            self._cpp.reset()
+            return
         self.warm_valid[:] = 0
         self._fwork[10:12] = 0.0         # nor is the equality-first solve tried
 
@@ -378,21 +437,28 @@ class Prepared:
             TaskStackError: as :meth:`solve`.
         """
         A, b, lower, upper, sw = data.A, data.b, data.lower, data.upper, data.sqrt_weight
-        fwork, iwork, bwork = self._fwork, self._iwork, self._bwork
-        # the module doc's warm start; the kernel declines it (NOT_TRIED) when the last
-        # answer fixed a row at a violation (params[11])
-        code = (self._equality_first_data(A, b, lower, upper, sw, fwork, iwork, bwork)
-                if self._try_first else _NOT_TRIED)
-        first = code != _NOT_TRIED
-        if not first:
-            code = self._solve_data(A, b, lower, upper, sw, fwork, iwork, bwork)
-        if code == _SOLVED_OTHER and self.warm_start and fwork.item(8) > 0.0:
-            # rank decisions ambiguous or flagged: the answer may depend on the path
-            # (fuzz: two certified answers 2.8e-9 apart at margins of 1.07e3), so the
-            # warm solver gives the cold one (the working sets kept are then its own)
+        work = self._work
+        try:
+            # the module doc's warm start; the kernel declines it (NOT_TRIED) when the
+            # last answer fixed a row at a violation (params[11])
+            code = (self._equality_first_data(A, b, lower, upper, sw, *work)
+                    if self._try_first else _NOT_TRIED)
+            first = code != _NOT_TRIED
+            if not first:
+                code = self._solve_data(A, b, lower, upper, sw, *work)
+            if code == _SOLVED_OTHER and self.warm_start and self._ambiguous_count() > 0.0:
+                # rank decisions ambiguous or flagged: the answer may depend on the path
+                # (fuzz: two certified answers 2.8e-9 apart at margins of 1.07e3), so the
+                # warm solver gives the cold one (the working sets kept are then its own)
+                self.reset()
+                first = False
+                code = self._solve_data(A, b, lower, upper, sw, *work)
+        except TaskStackError:
+            # the C++ kernel's binding refused a value: the data's own check names the
+            # task, level and row at fault (else the binding's error, naming the array)
             self.reset()
-            first = False
-            code = self._solve_data(A, b, lower, upper, sw, fwork, iwork, bwork)
+            data.check()
+            raise
         if code == _SOLVED_CLEAN or code == _SOLVED_INFEASIBLE:
             return (self._x.copy(), "optimal",
                     {"iterations": self._iterations.copy(),
@@ -416,21 +482,21 @@ class Prepared:
         """The answer of a solve that is not clean (capped, non-finite, ambiguous,
         unresolved, or of an ``‖x‖`` at which float64 may limit a level), read from the
         kernel's summary: ``optimal`` only when none of these holds."""
-        n, k = self._n, self._k
-        out = self._out.copy()
-        x, w2, residuals = out[:n], out[n:n + k], out[n + k:]
-        xn, flag, large, ambiguous, unresolved = self._summary.tolist()
-        infeasible = np.flatnonzero(self._counts[3, :k]).tolist()
+        k = self._k
+        x, w2, residuals = self._x.copy(), self._w2.copy(), self._res.copy()
+        xn, flag, large, ambiguous, unresolved = self._summary_values()
+        infeasible = np.flatnonzero(self._over).tolist()
         info = {"iterations": self._iterations.copy(), "rank_profile": self._ranks.copy(),
                 "level_violation": w2, "infeasible_levels": infeasible,
-                "warm_start": self.warm_start, "equality_first": self._fwork.item(10) == 1.0}
+                "warm_start": self.warm_start,
+                "equality_first": self._equality_first_answered()}
         if flag < 0.0:
             self.reset()
             info["message"] = "the active-set iterations produced non-finite values"
             return Outcome(x, "failed", info, residuals=residuals)
         reasons = []
         if flag > 0.0:
-            flags = self._counts[1]
+            flags = self._flags
             capped = np.flatnonzero(flags == _kernel.FLAG_ITERATION_CAP).tolist()
             lv = capped[0]
             what = (f"level {lv} ({', '.join(self.layout.names[lv])})" if lv < k
@@ -450,7 +516,7 @@ class Prepared:
                 reasons.append(f"rank decision ambiguous at the minimum-norm tie-break (a "
                                f"pivot within {AMBIGUITY:g}x of its threshold)")
             info["ambiguous_levels"] = levels
-        flags = self._counts[1]
+        flags = self._flags
         flagged = {}
         if ambiguous:
             for value, key, _ in _CERTIFIED_FLAGS:
@@ -492,7 +558,7 @@ class Prepared:
         tol, dual = self.primal_tol * REFINE, self.dual_tol * REFINE
         again = Prepared(self.layout, {"rcond": self.rcond, "primal_tol": tol,
                                        "dual_tol": dual, "max_iter": self.max_iter,
-                                       "warm_start": False})
+                                       "warm_start": False, "kernel": self.kernel})
         again._refine = self._refine - 1
         out = again.solve(data)
         if out.status != "optimal":

@@ -6,6 +6,8 @@
 
 namespace nb = nanobind;
 
+void bind_active_set(nb::module_& m);
+
 NB_MODULE(_core, m) {
   m.doc() = "prioik's compiled core (C++17): the extended Jacobian's nested pivoted QR.";
 
@@ -19,4 +21,5 @@ NB_MODULE(_core, m) {
       .def_ro("fp_contract", &prioik::BuildInfo::fp_contract,
               "a * b + c contracted into a fused multiply-add");
   m.def("build_info", &prioik::build_info, "The flags the core was compiled with.");
+  bind_active_set(m);
 }

@@ -1,0 +1,177 @@
+// prioik._core.ActiveSetSolver: the hierarchical active set's bindings. Every entry
+// point checks its arrays (dtype float64, shape, C-contiguous, not empty, the values the
+// solver cannot read) and raises prioik's TaskStackError naming the array.
+#include <nanobind/nanobind.h>
+#include <nanobind/ndarray.h>
+
+#include <cmath>
+#include <cstdint>
+#include <string>
+#include <utility>
+
+#include "prioik/active_set.hpp"
+
+namespace nb = nanobind;
+
+namespace {
+
+using prioik::ActiveSetSolver;
+using I64 = std::int64_t;
+
+[[noreturn]] void raise_stack_error(const std::string& message, const char* array) {
+    nb::object cls = nb::module_::import_("prioik.hierarchy.errors").attr("TaskStackError");
+    nb::dict detail;
+    detail["array"] = array;
+    nb::object err = cls(*nb::make_tuple(nb::str(message.c_str())), **detail);
+    PyErr_SetObject(cls.ptr(), err.ptr());
+    throw nb::python_error();
+}
+
+using AnyArray = nb::ndarray<nb::ro, nb::device::cpu>;
+
+/// The array `name` as float64, C-contiguous, of `rows` (and `cols` when 2-D) entries.
+const double* checked(const AnyArray& a, const char* name, I64 rows, I64 cols) {
+    std::string what = std::string("the active set's ") + name;
+    if (a.dtype() != nb::dtype<double>())
+        raise_stack_error(what + " must be float64", name);
+    I64 ndim = cols < 0 ? 1 : 2;
+    if (static_cast<I64>(a.ndim()) != ndim)
+        raise_stack_error(what + " must be " + std::to_string(ndim) + "-D, not " +
+                              std::to_string(a.ndim()) + "-D",
+                          name);
+    if (static_cast<I64>(a.shape(0)) != rows || (ndim == 2 && static_cast<I64>(a.shape(1)) != cols))
+        raise_stack_error(what + " has the wrong shape for the prepared layout (" +
+                              std::to_string(rows) + (ndim == 2 ? " x " + std::to_string(cols) : "") +
+                              " expected)",
+                          name);
+    if (rows == 0 || (ndim == 2 && cols == 0)) raise_stack_error(what + " is empty", name);
+    I64 expect = 1;
+    for (I64 d = ndim - 1; d >= 0; --d) {
+        if (a.shape(d) > 1 && a.stride(d) != expect)
+            raise_stack_error(what + " must be C-contiguous", name);
+        expect *= static_cast<I64>(a.shape(d));
+    }
+    return static_cast<const double*>(a.data());
+}
+
+struct Inputs {
+    const double *A, *b, *lower, *upper, *sw;
+};
+
+/// The five arrays checked: shapes, dtypes, contiguity; no NaN/inf in A or √w, no NaN
+/// bound or equality target.
+Inputs check_inputs(const ActiveSetSolver& s, const AnyArray& A, const AnyArray& b,
+                    const AnyArray& lower, const AnyArray& upper, const AnyArray& sw) {
+    I64 M = s.layout().M, n = s.layout().n;
+    Inputs in{checked(A, "A", M, n), checked(b, "b", M, -1), checked(lower, "lower", M, -1),
+              checked(upper, "upper", M, -1), checked(sw, "sqrt_weight", M, -1)};
+    for (I64 j = 0; j < M; ++j) {
+        for (I64 c = 0; c < n; ++c)
+            if (!std::isfinite(in.A[j * n + c]))
+                raise_stack_error("the active set's A has a non-finite entry at row " +
+                                      std::to_string(j) + ", column " + std::to_string(c),
+                                  "A");
+        if (!(in.sw[j] > 0.0 && std::isfinite(in.sw[j])))
+            raise_stack_error("the active set's sqrt_weight must be finite and > 0 (row " +
+                                  std::to_string(j) + ")",
+                              "sqrt_weight");
+        if (std::isnan(in.lower[j]))
+            raise_stack_error("the active set's lower is NaN at row " + std::to_string(j), "lower");
+        if (std::isnan(in.upper[j]))
+            raise_stack_error("the active set's upper is NaN at row " + std::to_string(j), "upper");
+        if (s.layout().row_eq[j] && !std::isfinite(in.b[j]))
+            raise_stack_error("the active set's b is not finite at equality row " +
+                                  std::to_string(j),
+                              "b");
+    }
+    return in;
+}
+
+template <class T>
+nb::ndarray<nb::numpy, T> view(std::vector<T>& v, nb::handle owner) {
+    size_t shape[1] = {v.size()};
+    return nb::ndarray<nb::numpy, T>(v.data(), 1, shape, owner);
+}
+
+}  // namespace
+
+void bind_active_set(nb::module_& m) {
+    using Int8In = nb::ndarray<const std::int8_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
+    using IndexIn = nb::ndarray<const std::int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
+    nb::class_<ActiveSetSolver>(m, "ActiveSetSolver",
+                                "The hierarchical active set prepared for one layout "
+                                "(core/include/prioik/active_set.hpp); one thread at a time.")
+        .def(
+            "__init__",
+            [](ActiveSetSolver* self, I64 n, IndexIn starts, Int8In row_eq, double rcond,
+               double primal_tol, double dual_tol, I64 max_iter, bool warm_start) {
+                prioik::ActiveSetLayout layout;
+                layout.n = n;
+                layout.k = static_cast<I64>(starts.shape(0)) - 1;
+                layout.M = static_cast<I64>(row_eq.shape(0));
+                layout.starts.assign(starts.data(), starts.data() + starts.shape(0));
+                layout.row_eq.assign(row_eq.data(), row_eq.data() + row_eq.shape(0));
+                prioik::ActiveSetOptions options{rcond, primal_tol, dual_tol, max_iter,
+                                                 warm_start};
+                try {
+                    new (self) ActiveSetSolver(std::move(layout), options);
+                } catch (const std::invalid_argument& e) {
+                    raise_stack_error(e.what(), "starts");
+                }
+            },
+            nb::arg("n"), nb::arg("starts"), nb::arg("row_eq"), nb::arg("rcond"),
+            nb::arg("primal_tol"), nb::arg("dual_tol"), nb::arg("max_iter"),
+            nb::arg("warm_start"))
+        .def(
+            "solve",
+            [](ActiveSetSolver& s, const AnyArray& A, const AnyArray& b, const AnyArray& lower,
+               const AnyArray& upper, const AnyArray& sw) {
+                Inputs in = check_inputs(s, A, b, lower, upper, sw);
+                nb::gil_scoped_release release;
+                return static_cast<int>(s.solve(in.A, in.b, in.lower, in.upper, in.sw));
+            },
+            nb::arg("A"), nb::arg("b"), nb::arg("lower"), nb::arg("upper"),
+            nb::arg("sqrt_weight"),
+            "The level-by-level active set; the code (1 clean, 2 infeasible levels, 3 read "
+            "the summary, 0 not solved).")
+        .def(
+            "equality_first",
+            [](ActiveSetSolver& s, const AnyArray& A, const AnyArray& b, const AnyArray& lower,
+               const AnyArray& upper, const AnyArray& sw) {
+                Inputs in = check_inputs(s, A, b, lower, upper, sw);
+                nb::gil_scoped_release release;
+                return static_cast<int>(
+                    s.equality_first(in.A, in.b, in.lower, in.upper, in.sw));
+            },
+            nb::arg("A"), nb::arg("b"), nb::arg("lower"), nb::arg("upper"),
+            nb::arg("sqrt_weight"),
+            "The warm start's equality-first try; -1 when it is not the answer.")
+        .def("reset", &ActiveSetSolver::reset, "Forget the kept working sets.")
+        .def_prop_ro("x", [](nb::handle h) { return view(nb::cast<ActiveSetSolver&>(h).result().x, h); })
+        .def_prop_ro("w2", [](nb::handle h) { return view(nb::cast<ActiveSetSolver&>(h).result().w2, h); })
+        .def_prop_ro("res", [](nb::handle h) { return view(nb::cast<ActiveSetSolver&>(h).result().res, h); })
+        .def_prop_ro("margins", [](nb::handle h) { return view(nb::cast<ActiveSetSolver&>(h).result().margins, h); })
+        .def_prop_ro("iterations", [](nb::handle h) { return view(nb::cast<ActiveSetSolver&>(h).result().iterations, h); })
+        .def_prop_ro("flags", [](nb::handle h) { return view(nb::cast<ActiveSetSolver&>(h).result().flags, h); })
+        .def_prop_ro("ranks", [](nb::handle h) { return view(nb::cast<ActiveSetSolver&>(h).result().ranks, h); })
+        .def_prop_ro("over", [](nb::handle h) { return view(nb::cast<ActiveSetSolver&>(h).result().over, h); })
+        .def_prop_ro("warm_valid", [](nb::handle h) { return view(nb::cast<ActiveSetSolver&>(h).workspace().warm_valid, h); })
+        .def_prop_ro("warm_state", [](nb::handle h) {
+            auto& s = nb::cast<ActiveSetSolver&>(h);
+            auto& v = s.workspace().warm_state;
+            size_t shape[2] = {static_cast<size_t>(s.layout().k + 1),
+                               static_cast<size_t>(s.layout().M + s.layout().n)};
+            return nb::ndarray<nb::numpy, std::int8_t>(v.data(), 2, shape, h);
+        })
+        .def_prop_ro("x_norm", [](const ActiveSetSolver& s) { return s.result().x_norm; })
+        .def_prop_ro("cap_or_nonfinite", [](const ActiveSetSolver& s) { return s.result().cap_or_nonfinite; })
+        .def_prop_ro("large", [](const ActiveSetSolver& s) { return s.result().large; })
+        .def_prop_ro("ambiguous", [](const ActiveSetSolver& s) { return s.result().ambiguous; })
+        .def_prop_ro("unresolved", [](const ActiveSetSolver& s) { return s.result().unresolved; })
+        .def_prop_ro("equality_first_state", [](const ActiveSetSolver& s) { return s.result().equality_first; },
+                     "1: the answer is the equality-first try's; -1/-2: that try was refuted "
+                     "(no row / rows held); 0: not tried")
+        .def_prop_ro("next_try", [](const ActiveSetSolver& s) { return s.result().next_try; },
+                     "0: the next warm solve runs the active set; 1: it tries the equality rows "
+                     "first; 2: with the rows this answer held");
+}
