@@ -1,0 +1,289 @@
+"""The C++ active set (``prioik._core.ActiveSetSolver``, ``kernel="cpp"``) against the
+numba kernel, the oracle while both exist: the same statuses, each level's ``‖w_i‖²``
+within :data:`W2_REL` relative (plus :func:`w2_floor` where it is ~0), ``x`` within
+:data:`X_REL` where the answer is certified optimal by both, the same flags of the
+answer's ``info``, over the shared families, the saved fuzz and adversarial stacks,
+seeded random inequality hierarchies and warm sequences of drifting stacks.
+
+The numba kernel rounds with fast math, the C++ one with IEEE arithmetic: the answers
+agree to rounding, not to the bit."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from prioik.formulations import hierarchical_active_set as has
+from prioik.hierarchy import TaskStack, TaskStackError
+from prioik.hierarchy.families import (FAMILIES, INEQUALITY_FAMILIES, box_bounded,
+                                       random_inequality_hierarchy)
+from prioik.hierarchy.io import load_stack
+
+core = pytest.importorskip("prioik._core", reason="prioik's compiled core is not built")
+
+DATA = Path(__file__).parent / "data"
+SAVED = sorted((DATA / "fuzz").glob("*.json")) + sorted((DATA / "adversarial").glob("*.json"))
+
+#: per-level ‖w_i‖², relative
+W2_REL = 1e-12
+#: x, relative to max(1, ‖x‖), where both answers are optimal
+X_REL = 1e-10
+#: the absolute floor of a level's ‖w_i‖ where it is ~0, relative to the level's scale
+#: ‖√W_i A_i‖_F ‖x‖ + ‖√W_i t_i‖ (t_i: the level's finite bounds and targets)
+W_FLOOR = 1e-12
+
+#: the factor over numba's own rounding spread (:func:`rounding_spread`) within which the
+#: answers on the saved ill-conditioned stacks must agree
+SPREAD_FACTOR = 4.0
+
+_OPTIONS = {"rcond": 1e-9, "primal_tol": 1e-10, "dual_tol": 1e-12, "max_iter": 500}
+
+
+def prepared(stack: TaskStack, kernel: str, warm: bool = False) -> has.Prepared:
+    return has.Prepared(stack.layout, dict(_OPTIONS, warm_start=warm, kernel=kernel))
+
+
+def w2_floor(stack: TaskStack, x: np.ndarray) -> np.ndarray:
+    """Each level's absolute floor on ``‖w_i‖²``: ``(W_FLOOR scale_i)² + 2 ‖w_i‖ W_FLOOR
+    scale_i`` is the change of ``‖w_i‖²`` when ``w_i`` moves by ``W_FLOOR scale_i``."""
+    data = stack.data
+    out = []
+    xn = float(np.linalg.norm(x))
+    for i in range(stack.layout.k):
+        a, b = int(data.layout.starts[i]), int(data.layout.starts[i + 1])
+        sw = data.sqrt_weight[a:b]
+        rows = sw[:, None] * data.A[a:b]
+        t = np.concatenate([sw * data.b[a:b], sw * data.lower[a:b], sw * data.upper[a:b]])
+        t = t[np.isfinite(t)]
+        out.append(W_FLOOR * (np.linalg.norm(rows) * xn + np.linalg.norm(t)))
+    return np.asarray(out)
+
+
+def differences(stack: TaskStack, cpp, ref) -> dict:
+    """How far the C++ answer is from the numba one: each level's ``‖w_i‖²`` difference,
+    the allowance of :data:`W2_REL` and :func:`w2_floor`, ``x``'s relative distance, and
+    the statuses and the answer's ``info`` flags side by side."""
+    floor = w2_floor(stack, ref.x)
+    w_ref = np.sqrt(np.maximum(ref.info["level_violation"], 0.0))
+    allowed = W2_REL * np.maximum(ref.info["level_violation"], cpp.info["level_violation"]) \
+        + floor * (floor + 2.0 * w_ref)
+    dw = np.abs(cpp.info["level_violation"] - ref.info["level_violation"])
+    dx = float(np.linalg.norm(cpp.x - ref.x)) / max(1.0, float(np.linalg.norm(ref.x)))
+    keys = ("infeasible_levels", "capped_levels", "ambiguous_levels", "path_certified",
+            "equality_first")
+    return {"status": (cpp.status, ref.status), "dw": dw, "allowed": allowed, "dx": dx,
+            "w2_ratio": float(np.max(dw / np.maximum(allowed, 1e-300), initial=0.0)),
+            "info": {k: (cpp.info.get(k), ref.info.get(k)) for k in keys}}
+
+
+def rounding_spread(stack: TaskStack, ref, draws: int = 2) -> tuple[np.ndarray, float]:
+    """How far the numba kernel's own answer moves when ``A`` moves by one ulp (each
+    entry times ``1 ± eps``, ``draws`` seeded draws): each level's largest ``‖w_i‖²``
+    change and ``x``'s largest relative change. Two kernels that round differently
+    cannot agree closer than this on an ill-conditioned stack."""
+    data = stack.data
+    dw = np.zeros(stack.layout.k)
+    dx = 0.0
+    for seed in range(draws):
+        rng = np.random.default_rng(seed)
+        moved = type(data)(data.layout)
+        for name in ("A", "b", "lower", "upper", "sqrt_weight"):
+            getattr(moved, name)[...] = getattr(data, name)
+        moved.A[...] *= 1.0 + np.finfo(float).eps * rng.choice([-1.0, 1.0], data.A.shape)
+        out = prepared(stack, "numba").solve(moved)
+        dw = np.maximum(dw, np.abs(out.info["level_violation"] - ref.info["level_violation"]))
+        dx = max(dx, float(np.linalg.norm(out.x - ref.x)) / max(1.0, float(np.linalg.norm(ref.x))))
+    return dw, dx
+
+
+def assert_same(stack: TaskStack, cpp, ref, what: str, spread=None) -> None:
+    """The C++ answer ``cpp`` equals the numba answer ``ref``: the same status, rank
+    profile and ``info`` flags; each level's ``‖w_i‖²`` within its allowance and, where
+    ``ref`` is optimal, ``x`` within :data:`X_REL`. ``spread`` (:func:`rounding_spread`)
+    widens both to ``SPREAD_FACTOR`` times numba's own change under a one-ulp change of
+    ``A``. An approximate answer with an ambiguous rank decision (a pivot within
+    ``AMBIGUITY`` of its threshold: rounding may flip it, and ``x`` with it by ``O(1)``)
+    is compared by its status and its ambiguous levels only."""
+    d = differences(stack, cpp, ref)
+    assert cpp.status == ref.status, (what, d)
+    if ref.status != "optimal" and ref.info.get("ambiguous_levels"):
+        assert cpp.info.get("ambiguous_levels") == ref.info.get("ambiguous_levels"), (what, d)
+        return
+    allowed, dx_allowed = d["allowed"], X_REL
+    if spread is not None:
+        allowed = np.maximum(allowed, SPREAD_FACTOR * spread[0])
+        dx_allowed = max(dx_allowed, SPREAD_FACTOR * spread[1])
+    assert np.all(d["dw"] <= allowed), (what, d, cpp.info["level_violation"],
+                                         ref.info["level_violation"])
+    if ref.status == "optimal":
+        assert d["dx"] <= dx_allowed, (what, d)
+    for key, (a, b) in d["info"].items():
+        assert (a == b) if not isinstance(a, list) else list(a) == list(b), (what, key, a, b)
+    np.testing.assert_array_equal(cpp.info["rank_profile"], ref.info["rank_profile"],
+                                  err_msg=what)
+
+
+def compare_cold(stack: TaskStack, what: str) -> None:
+    assert_same(stack, prepared(stack, "cpp").solve(stack.data),
+                prepared(stack, "numba").solve(stack.data), what)
+
+
+# ------------------------------------------------------------------ the path exists
+def test_cpp_kernel_is_the_compiled_core():
+    stack = random_inequality_hierarchy(np.random.default_rng(3), 8, 3)
+    solver = prepared(stack, "cpp")
+    assert isinstance(solver._cpp, core.ActiveSetSolver)
+    out = solver.solve(stack.data)
+    np.testing.assert_array_equal(out.x, solver._cpp.x)
+    assert out.info["iterations"].sum() > 0
+
+
+def test_unknown_kernel_is_refused():
+    from prioik.formulations.options import validate_options
+    with pytest.raises(ValueError, match="kernel"):
+        validate_options(has.NAME, has.OPTIONS, {"kernel": "fortran"}, 4)
+
+
+# ------------------------------------------------------------------ the oracle
+@pytest.mark.parametrize("family", sorted(FAMILIES))
+def test_equality_families_match_numba(family):
+    rng = np.random.default_rng(460)
+    for trial in range(12):
+        n = int(rng.integers(4, 16))
+        k = int(rng.integers(1, 5))
+        compare_cold(FAMILIES[family](rng, n, k), f"{family} trial {trial} n={n} k={k}")
+
+
+@pytest.mark.parametrize("family", sorted(INEQUALITY_FAMILIES))
+def test_inequality_families_match_numba(family):
+    rng = np.random.default_rng(461)
+    for trial in range(25):
+        n = int(rng.integers(3, 20))
+        k = int(rng.integers(2, 6))
+        compare_cold(INEQUALITY_FAMILIES[family](rng, n, k),
+                     f"{family} trial {trial} n={n} k={k}")
+
+
+def test_box_bounded_stacks_match_numba():
+    rng = np.random.default_rng(462)
+    for trial in range(25):
+        n = int(rng.integers(3, 24))
+        k = int(rng.integers(2, 5))
+        compare_cold(box_bounded(rng, n, k, float(rng.choice([0.5, 2.0, 10.0]))),
+                     f"box_bounded trial {trial}")
+
+
+@pytest.mark.parametrize("path", SAVED, ids=[p.name for p in SAVED])
+def test_saved_stacks_match_numba(path):
+    """The saved fuzz and adversarial stacks (scales spread up to 1e19): within numba's
+    own rounding spread where it exceeds the default allowance."""
+    stack = load_stack(path)
+    ref = prepared(stack, "numba").solve(stack.data)
+    spread = rounding_spread(stack, ref)
+    assert_same(stack, prepared(stack, "cpp").solve(stack.data), ref, path.name, spread)
+    # and solved twice warm (the second solve warm-started from the first's answer)
+    warm_cpp, warm_ref = prepared(stack, "cpp", warm=True), prepared(stack, "numba", warm=True)
+    for round_ in range(2):
+        assert_same(stack, warm_cpp.solve(stack.data), warm_ref.solve(stack.data),
+                    f"{path.name} warm round {round_}", spread)
+
+
+def test_seeded_random_inequality_stacks_match_numba():
+    rng = np.random.default_rng(463)
+    for trial in range(200):
+        n = int(rng.integers(2, 30))
+        k = int(rng.integers(2, 7))
+        compare_cold(random_inequality_hierarchy(rng, n, k), f"random trial {trial} n={n} k={k}")
+
+
+def drift(stack: TaskStack, rng: np.random.Generator, scale: float) -> TaskStack:
+    """``stack`` with its rows, targets and bounds moved by ``scale`` (the same layout:
+    a control loop's next step)."""
+    levels = []
+    for level in stack.levels:
+        tasks = []
+        for t in level:
+            A = t.A + scale * rng.standard_normal(t.A.shape)
+            if t.is_equality:
+                tasks.append(type(t)(t.name, A, t.b + scale * rng.standard_normal(t.m),
+                                     weight=t.weight))
+            else:
+                lo, up = t.bounds()
+                shift = scale * rng.standard_normal(t.m)
+                tasks.append(type(t)(t.name, A, lower=lo + shift, upper=up + shift,
+                                     weight=t.weight))
+        levels.append(tasks)
+    return TaskStack(levels)
+
+
+@pytest.mark.parametrize("family", ["with_inequalities", "random_inequality",
+                                    "box_bounded"])
+def test_warm_sequences_match_numba(family):
+    """A drifting stack solved warm along 30 steps by each kernel: the same answer,
+    status, and equality-first and iteration counts at every step."""
+    rng = np.random.default_rng(464)
+    make = box_bounded if family == "box_bounded" else INEQUALITY_FAMILIES[family]
+    for seq in range(6):
+        stack = make(rng, int(rng.integers(6, 20)), int(rng.integers(3, 5)))
+        cpp, ref = prepared(stack, "cpp", warm=True), prepared(stack, "numba", warm=True)
+        for step in range(30):
+            stack = drift(stack, rng, 0.01)
+            a, b = cpp.solve(stack.data), ref.solve(stack.data)
+            assert_same(stack, a, b, f"{family} sequence {seq} step {step}")
+            assert a.info["equality_first"] == b.info["equality_first"]
+
+
+# ------------------------------------------------------------------ the boundary
+def _solver_and_data():
+    stack = random_inequality_hierarchy(np.random.default_rng(5), 6, 3)
+    return prepared(stack, "cpp")._cpp, stack.data
+
+
+@pytest.mark.parametrize("name", ["A", "b", "lower", "upper", "sqrt_weight"])
+def test_binding_refuses_wrong_dtype_shape_and_layout(name):
+    solver, data = _solver_and_data()
+    arrays = {"A": data.A, "b": data.b, "lower": data.lower, "upper": data.upper,
+              "sqrt_weight": data.sqrt_weight}
+    bad = {"dtype": arrays[name].astype(np.float32),
+           "shape": arrays[name][:-1],
+           "empty": arrays[name][:0]}
+    if arrays[name].ndim == 2:
+        bad["layout"] = np.asfortranarray(arrays[name])
+    else:
+        bad["layout"] = np.repeat(arrays[name], 2)[::2]
+    for why, value in bad.items():
+        args = dict(arrays, **{name: value})
+        for entry in (solver.solve, solver.equality_first):
+            with pytest.raises(TaskStackError, match=name) as info:
+                entry(args["A"], args["b"], args["lower"], args["upper"], args["sqrt_weight"])
+            assert info.value.detail["array"] == name, why
+
+
+@pytest.mark.parametrize("name, value", [("A", np.nan), ("A", np.inf), ("sqrt_weight", 0.0),
+                                         ("sqrt_weight", np.inf), ("lower", np.nan),
+                                         ("upper", np.nan)])
+def test_binding_refuses_values_it_cannot_read(name, value):
+    solver, data = _solver_and_data()
+    arrays = {"A": data.A.copy(), "b": data.b.copy(), "lower": data.lower.copy(),
+              "upper": data.upper.copy(), "sqrt_weight": data.sqrt_weight.copy()}
+    arrays[name].flat[0] = value
+    with pytest.raises(TaskStackError, match=name):
+        solver.solve(arrays["A"], arrays["b"], arrays["lower"], arrays["upper"],
+                     arrays["sqrt_weight"])
+
+
+def test_invalid_data_is_named_by_the_stack_check():
+    stack = random_inequality_hierarchy(np.random.default_rng(6), 6, 3)
+    data = stack.data
+    bad = type(data)(data.layout)
+    for name in ("A", "b", "lower", "upper", "sqrt_weight"):
+        getattr(bad, name)[...] = getattr(data, name)
+    bad.A[1, 0] = np.nan
+    errors = []
+    for kernel in ("numba", "cpp"):
+        with pytest.raises(TaskStackError) as info:
+            prepared(stack, kernel).solve(bad)
+        errors.append(str(info.value))
+    assert errors[0] == errors[1]
