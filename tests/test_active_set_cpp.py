@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from prioik.formulations import hierarchical_active_set as has
-from prioik.hierarchy import TaskStack, TaskStackError
+from prioik.hierarchy import Task, TaskStack, TaskStackError
 from prioik.hierarchy.families import (FAMILIES, INEQUALITY_FAMILIES, box_bounded,
                                        random_inequality_hierarchy)
 from prioik.hierarchy.io import load_stack
@@ -287,3 +287,42 @@ def test_invalid_data_is_named_by_the_stack_check():
             prepared(stack, kernel).solve(bad)
         errors.append(str(info.value))
     assert errors[0] == errors[1]
+
+
+def limits_stack(rng: np.random.Generator, n: int, target: np.ndarray, redundant: bool,
+                 level_of_box: int) -> TaskStack:
+    """A reach of the first coordinates (``target``), joint-limit-like bounds ``|x| ≤
+    u`` at ``level_of_box``, a posture below; ``redundant`` puts a level above that
+    repeats one row (rank 1 of 2: held box rows below it are not fixed coordinates)."""
+    m = target.shape[0]
+    A = np.hstack([np.eye(m), 0.3 * rng.standard_normal((m, n - m))])
+    u = np.ones(n)
+    levels = [[Task("reach", A, target)],
+              [Task("posture", np.eye(n), np.zeros(n), weight=0.1)]]
+    levels.insert(level_of_box, [Task("limits", np.eye(n), lower=-u, upper=u)])
+    if redundant:
+        levels.insert(0, [Task("twice", np.eye(n)[[n - 1, n - 1]], [0.2, 0.2])])
+    return TaskStack(levels)
+
+
+@pytest.mark.parametrize("redundant", [False, True])
+@pytest.mark.parametrize("level_of_box", [0, 1])
+def test_warm_limit_sequences_match_numba(redundant, level_of_box):
+    """Targets walking in and out of joint limits, solved warm: rows held and released
+    from one step to the next (the equality-first try's held rows, fixed columns or,
+    below a redundant level, equalities), the same answers and the same path as numba."""
+    rng = np.random.default_rng(465)
+    for seq in range(4):
+        n = int(rng.integers(4, 10))
+        m = int(rng.integers(1, 3))
+        walk = np.cumsum(0.25 * rng.standard_normal((40, m)), axis=0)
+        first = limits_stack(np.random.default_rng(seq), n, walk[0], redundant, level_of_box)
+        cpp, ref = prepared(first, "cpp", warm=True), prepared(first, "numba", warm=True)
+        tried = 0
+        for step, target in enumerate(walk):
+            stack = limits_stack(np.random.default_rng(seq), n, target, redundant,
+                                 level_of_box)
+            a, b = cpp.solve(stack.data), ref.solve(stack.data)
+            assert_same(stack, a, b, f"limits sequence {seq} step {step}")
+            tried += a.info["equality_first"]
+        assert tried > 0

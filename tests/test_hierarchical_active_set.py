@@ -966,7 +966,8 @@ def test_bad_options_are_named(bad):
 def test_registered_with_its_capabilities():
     info = {f.name: f for f in formulations.available()}[NAME]
     assert info.available and info.capabilities.inequalities and info.capabilities.exact
-    assert set(info.options) == {"rcond", "primal_tol", "dual_tol", "max_iter", "warm_start"}
+    assert set(info.options) == {"rcond", "primal_tol", "dual_tol", "max_iter", "warm_start",
+                                 "kernel"}
 
 
 # --------------------------------------------------- many random stacks, certified

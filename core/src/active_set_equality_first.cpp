@@ -113,6 +113,10 @@ void held_setup(Ctx& c, EqFirst& e, bool allow_fixed) {
                 ++e.n2;
             }
     }
+    // the rows, reflectors and scratch of the QR: on the n2 free coordinates when fixed
+    e.eB = Mat{e.eflat, e.n2};
+    e.V = Mat{e.Vflat, e.n2};
+    e.Lmat = Mat{e.Lflat, e.n2};
 }
 
 /// One equality row of the reduced QR (held columns moved to its target): false when
@@ -248,9 +252,6 @@ void solve_rows(Ctx& c, EqFirst& e) {
     q.spare = e.spare;
     q.ispare = e.ispare;
     if (e.fixed) {
-        e.eB = Mat{e.eflat, n2};
-        e.V = Mat{e.Vflat, n2};
-        e.Lmat = Mat{e.Lflat, n2};
         q.B = e.eB;
         q.n = n2;
         q.V = e.V;
@@ -266,9 +267,6 @@ void solve_rows(Ctx& c, EqFirst& e) {
             c.x[uc] = (c.held[j] > 0 ? c.upper[j] : c.lower[j]) / c.A(j, uc);
         }
     } else {
-        e.eB = Mat{e.eflat, n};
-        e.V = Mat{e.Vflat, n};
-        e.Lmat = Mat{e.Lflat, n};
         q.B = e.eB;
         q.n = n;
         q.V = e.V;
