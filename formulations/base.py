@@ -21,6 +21,12 @@ class FormulationError(ValueError):
     an unknown option, or a required option (e.g. ``mass_matrix``) missing."""
 
 
+class CoreInputError(FormulationError):
+    """An array given to the compiled core (``prioik._core``) that it cannot take: not a
+    C-contiguous float64 array of the layout's shape, empty, or holding a value that is
+    not finite (or a ``√w ≤ 0``); the message names the array and the entry."""
+
+
 class ConcurrentUseError(RuntimeError):
     """A prepared solver was called from a second thread while a solve was running
     (a prepared solver owns its workspaces: use one per thread)."""

@@ -128,8 +128,8 @@ from prioik.hierarchy import (AMBIGUITY, NEAR_AMBIGUITY, StackData, StackLayout,
                               near_ambiguity_reason, rank_threshold)
 from prioik.hierarchy.linalg import numpy_svd
 
-from .base import (Capabilities, FormulationError, Outcome, ReportVariant, certify,
-                   precision_status, solve_equilibrated)
+from .base import (Capabilities, CoreInputError, FormulationError, Outcome, ReportVariant,
+                   certify, precision_status, solve_equilibrated)
 from .options import Option, rcond_option, validate_options
 
 try:  # the compiled kernel is optional: the lapack path is the readable reference
@@ -147,6 +147,14 @@ try:  # the compiled kernel is optional: the lapack path is the readable referen
 except ImportError as exc:  # pragma: no cover - numba is a declared dependency
     _kernel = _solve_data = _solve_data_bounded = None
     _kernel_error = f"{type(exc).__name__}: {exc}"
+
+try:  # the compiled C++ core (core/, built by pip install)
+    from prioik import _core
+    _core_error = ""
+except ImportError as exc:  # pragma: no cover - built with the package
+    _core = None
+    _core_error = f"{type(exc).__name__}: {exc}"
+
 
 def step_bound_value(value):
     """The ``step_bound`` option's type check (its per-level values are checked against
@@ -192,9 +200,10 @@ OPTIONS = {
     "rcond": rcond_option(),
     "level_damping": Option(0.0, "float", "λ_max of the selective damping (qr path; 0: off)",
                             minimum=0.0),
-    "kernel": Option("auto", "str", "qr path: 'numba' (compiled), 'lapack' (readable "
-                     "scipy.linalg.lapack), 'auto' (numba when importable and n ≤ 160, else "
-                     "lapack)", choices=("auto", "numba", "lapack")),
+    "kernel": Option("auto", "str", "qr path: 'numba' (compiled), 'cpp' (the compiled C++ "
+                     "core, prioik._core), 'lapack' (readable scipy.linalg.lapack), 'auto' "
+                     "(numba when importable and n ≤ 160, else lapack)",
+                     choices=("auto", "numba", "cpp", "lapack")),
     "singular_threshold": Option(0.0, "float", "ε: damp a level whose projected "
                                  "σ_min < ε·‖A_i‖_F", minimum=0.0),
     "step_bound": Option(0.0, "any", "Δ > 0: every level's step ‖x_i − x_{i−1}‖ ≤ Δ by "
@@ -218,6 +227,11 @@ AUTO_NUMBA_MAX_N = 160
 
 
 def _resolve_kernel(kernel: str, n: int = 0) -> str:
+    if kernel == "cpp":
+        if _core is None:
+            raise FormulationError(f"kernel='cpp' is not available here: {_core_error}; "
+                                   f"reinstall prioik (`pip install -e .`) to build it")
+        return "cpp"
     if kernel == "lapack" or (kernel == "auto" and (_kernel is None or n > AUTO_NUMBA_MAX_N)):
         return "lapack"
     if _kernel is None:
@@ -296,13 +310,19 @@ class Prepared:
         if (selective or self._bounded) and (self.damping > 0 or self.nullspace != "qr"):
             raise FormulationError("level_damping and step_bound work on the qr path without "
                                    "eq. 27 damping; use one or the other")
-        self.compiled = (self.kernel == "numba" and self.nullspace == "qr"
+        self.compiled = (self.kernel in ("numba", "cpp") and self.nullspace == "qr"
                          and self.damping == 0)
         self._selective = self.level_damping > 0
         self._damped = self._selective or self._bounded
         self._starts = layout.starts
         self._n, self._k = layout.n, layout.k
-        if self.compiled:
+        if self.compiled and self.kernel == "cpp":
+            # the C++ core owns the parameters, the level offsets and every workspace
+            self._core = _core.ExtendedJacobian(
+                [int(s) for s in layout.starts], layout.n, rcond=self.rcond,
+                level_damping=self.level_damping, singular_threshold=self.singular_threshold,
+                step_bound=self.step_bound.tolist())
+        elif self.compiled:
             # step bounds need the trust-region step (its SVD allocates): the kernel
             # with numba's runtime; every other layout runs the one without it
             # its entry point: called with the data's arrays and these workspaces only,
@@ -343,6 +363,8 @@ class Prepared:
         """
         if not self.compiled:
             return self._solve_stack(data.as_stack())
+        if self.kernel == "cpp":
+            return self._solve_core(data)
         size, work, iwork, n, nk, ranks, damped, solve_data = self._hot
         out = np.empty(size)      # x, residuals, μ², margins (one array)
         code = solve_data(data.A, data.b, data.sqrt_weight, work, out, iwork)
@@ -368,6 +390,36 @@ class Prepared:
             _certify_near_ambiguous(data, outcome, margins)
         if code & 8 and (code & 3) == 1:    # ‖x‖ at which float64 may limit a level
             outcome.status = precision_status(outcome.status, info, data, out[:n])
+        return outcome
+
+    def _solve_core(self, data: StackData) -> tuple | Outcome:
+        """:meth:`solve_checked` on the C++ core (``kernel="cpp"``): the same answer, read
+        from the core's result by name."""
+        try:
+            res = self._core.solve(data.A, data.b, data.sqrt_weight)
+        except CoreInputError:
+            data.check()     # names the task, level and row of a NaN, inf or bad √w
+            raise
+        if not res.solved:
+            # finite rows of extreme scale: solve the equilibrated stack (same optimum)
+            return solve_equilibrated(self.solve, data, "the rows' scale overflows float64 "
+                                      "(‖A_i‖_F² is not finite): scale the tasks down")
+        x, residuals = res.x.copy(), res.residuals.copy()
+        info = {"rank_profile": res.ranks.copy(), "nullspace": "qr", "kernel": "cpp"}
+        if (res.finite and not self._damped and not res.ambiguous and not res.near_ambiguous
+                and not res.precision_limited):
+            return (x, "optimal", info, residuals)     # the common case
+        status = "optimal"
+        if self._damped:
+            status = _damping_info(info, res.level_mu2, self._selective, self._bounded)
+        margins = res.margins.copy()
+        if res.ambiguous:
+            status = _ambiguity_status(info, status, np.flatnonzero(margins <= AMBIGUITY))
+        outcome = Outcome(x, status, info, residuals, res.finite)
+        if res.near_ambiguous and status == "optimal" and res.finite:
+            _certify_near_ambiguous(data, outcome, margins)
+        if res.precision_limited and res.finite:
+            outcome.status = precision_status(outcome.status, info, data, x)
         return outcome
 
     def _solve_stack(self, stack: TaskStack) -> Outcome:
@@ -897,6 +949,8 @@ def _solve_batch(prepared: "Prepared", datas: list[StackData]) -> tuple[np.ndarr
     if not prepared.compiled:
         outs = [prepared.solve(d) for d in datas]
         return np.array([o.x for o in outs]), [o.status for o in outs]
+    if prepared.kernel == "cpp":
+        return _solve_batch_core(prepared, datas)
     N, k, n = len(datas), prepared.layout.k, prepared.layout.n
     # a writable copy of the (read-only) offsets: the kernels' other callers pass
     # writable ones, and numba compiles solve_kernel and level_scales once for both
@@ -922,6 +976,34 @@ def _solve_batch(prepared: "Prepared", datas: list[StackData]) -> tuple[np.ndarr
     bounds = np.broadcast_to(prepared.step_bound, (N, k)).copy()
     _kernel.solve_batch_kernel(B, c, starts, scales, prepared.rcond, prepared.level_damping,
                                prepared.singular_threshold, bounds, X, ranks, mu2, margins)
+    return X, _batch_statuses(datas, X, mu2, margins)
+
+
+def _solve_batch_core(prepared: "Prepared", datas: list[StackData]
+                      ) -> tuple[np.ndarray, list[str]]:
+    """:func:`_solve_batch` on the C++ core: the stacks' rows copied into one array each,
+    solved one after the other by the prepared core."""
+    A = np.stack([d.A for d in datas])
+    b = np.stack([d.b for d in datas])
+    W = np.stack([d.sqrt_weight for d in datas])
+    try:
+        res = prepared._core.solve_batch(A, b, W)
+    except CoreInputError:
+        for d in datas:
+            d.check()
+        raise
+    if not res.solved.all():
+        # finite rows of extreme scale: one by one, equilibrated as in solve
+        outs = [prepared.solve(one) for one in datas]
+        return np.array([o.x for o in outs]), [o.status for o in outs]
+    X = res.x.copy()
+    return X, _batch_statuses(datas, X, res.level_mu2, res.margins)
+
+
+def _batch_statuses(datas: list[StackData], X: np.ndarray, mu2: np.ndarray,
+                    margins: np.ndarray) -> list[str]:
+    """Each stack's status from its damping and rank decisions' margins (as
+    :meth:`Prepared.solve` reads them)."""
     approximate = (mu2 > 0).any(axis=1) | (margins <= AMBIGUITY).any(axis=1)
     near = (margins <= NEAR_AMBIGUITY * AMBIGUITY).any(axis=1) & ~approximate
     for i in np.flatnonzero(near & np.isfinite(X).all(axis=1)).tolist():
@@ -929,8 +1011,7 @@ def _solve_batch(prepared: "Prepared", datas: list[StackData]) -> tuple[np.ndarr
         outcome = Outcome(X[i], "optimal", {})
         _certify_near_ambiguous(datas[i], outcome, margins[i])
         approximate[i] = outcome.status != "optimal"
-    statuses = ["approximate" if a else "optimal" for a in approximate.tolist()]
-    return X, statuses
+    return ["approximate" if a else "optimal" for a in approximate.tolist()]
 
 # ------------------------------------------------------------------------ reports
 #: rows of prioik's reports beside the default one (prioik.benchmarks.variants)

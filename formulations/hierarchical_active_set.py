@@ -162,11 +162,11 @@ from itertools import compress
 import numpy as np
 
 from prioik.hierarchy import (AMBIGUITY, X_PRECISION, StackData, StackLayout, TaskStack,
-                              TaskStackError, ambiguity_reason, check_lexicographic)
+                              ambiguity_reason, check_lexicographic)
 from prioik.hierarchy.analysis import prepare_certificate
 
-from .base import (Capabilities, FormulationError, Outcome, ReportVariant, precision_status,
-                   solve_equilibrated)
+from .base import (Capabilities, CoreInputError, FormulationError, Outcome, ReportVariant,
+                   precision_status, solve_equilibrated)
 from .options import Option, rcond_option, validate_options
 
 try:
@@ -453,7 +453,7 @@ class Prepared:
                 self.reset()
                 first = False
                 code = self._solve_data(A, b, lower, upper, sw, *work)
-        except TaskStackError:
+        except CoreInputError:
             # the C++ kernel's binding refused a value: the data's own check names the
             # task, level and row at fault (else the binding's error, naming the array)
             self.reset()

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from prioik.formulations import hierarchical_active_set as has
+from prioik.formulations.base import CoreInputError
 from prioik.hierarchy import Task, TaskStack, TaskStackError
 from prioik.hierarchy.families import (FAMILIES, INEQUALITY_FAMILIES, box_bounded,
                                        random_inequality_hierarchy)
@@ -120,7 +121,7 @@ def assert_same(stack: TaskStack, cpp, ref, what: str, spread=None) -> None:
     if ref.status == "optimal":
         assert d["dx"] <= dx_allowed, (what, d)
     for key, (a, b) in d["info"].items():
-        assert (a == b) if not isinstance(a, list) else list(a) == list(b), (what, key, a, b)
+        assert a == b, (what, key, a, b)
     np.testing.assert_array_equal(cpp.info["rank_profile"], ref.info["rank_profile"],
                                   err_msg=what)
 
@@ -256,9 +257,12 @@ def test_binding_refuses_wrong_dtype_shape_and_layout(name):
     for why, value in bad.items():
         args = dict(arrays, **{name: value})
         for entry in (solver.solve, solver.equality_first):
-            with pytest.raises(TaskStackError, match=name) as info:
+            with pytest.raises(CoreInputError, match=f"active set's {name} "):
                 entry(args["A"], args["b"], args["lower"], args["upper"], args["sqrt_weight"])
-            assert info.value.detail["array"] == name, why
+            assert why
+        with pytest.raises(CoreInputError, match=f"active set's {name} "):
+            solver.solve(*[list(args[k]) if k == name else args[k]
+                           for k in ("A", "b", "lower", "upper", "sqrt_weight")])
 
 
 @pytest.mark.parametrize("name, value", [("A", np.nan), ("A", np.inf), ("sqrt_weight", 0.0),
@@ -269,7 +273,7 @@ def test_binding_refuses_values_it_cannot_read(name, value):
     arrays = {"A": data.A.copy(), "b": data.b.copy(), "lower": data.lower.copy(),
               "upper": data.upper.copy(), "sqrt_weight": data.sqrt_weight.copy()}
     arrays[name].flat[0] = value
-    with pytest.raises(TaskStackError, match=name):
+    with pytest.raises(CoreInputError, match=f"active set's {name} "):
         solver.solve(arrays["A"], arrays["b"], arrays["lower"], arrays["upper"],
                      arrays["sqrt_weight"])
 

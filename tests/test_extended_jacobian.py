@@ -12,8 +12,9 @@ from prioik.hierarchy import (Task, TaskStack, check_lexicographic, load_stack,
 from prioik.hierarchy.fuzz import judged, nested_truth
 from prioik.hierarchy.families import FAMILIES, compatible, near_singular, same_shape_batch
 
-#: the three ways to compute eq. 18: compiled nested QR, LAPACK nested QR, the paper's SVD
+#: the ways to compute eq. 18: compiled nested QR (numba, C++), LAPACK nested QR, the paper's SVD
 PATHS = {"qr-numba": {"nullspace": "qr", "kernel": "numba"},
+         "qr-cpp": {"nullspace": "qr", "kernel": "cpp"},
          "qr-lapack": {"nullspace": "qr", "kernel": "lapack"},
          "svd": {"nullspace": "svd"}}
 
@@ -110,7 +111,7 @@ def test_svd_path_says_optimal_only_where_it_is_right_on_the_fuzz_stacks(name):
     assert relative_distance(sol.x, case.truth) <= 1e-8
 
 
-@pytest.mark.parametrize("path", ["numba", "lapack", "batch"])
+@pytest.mark.parametrize("path", ["numba", "cpp", "lapack", "batch"])
 def test_a_near_ambiguous_rank_decision_has_its_answer_certified(path):
     """Fuzz equality-1243-387 (n 36, 10 levels): levels 1, 3 and 4 decide their rank
     clear of the ambiguity band by less than NEAR_AMBIGUITY times it. The null space
@@ -127,7 +128,7 @@ def test_a_near_ambiguous_rank_decision_has_its_answer_certified(path):
         assert list(batch.statuses) == ["approximate", "approximate"]
         return
     sol = formulations.solve(stack, "extended_jacobian",
-                             **({"kernel": "lapack"} if path == "lapack" else {}))
+                             **({"kernel": path} if path in ("lapack", "cpp") else {}))
     assert relative_distance(sol.x, ref.x) > 1e-3          # the answer is off...
     assert not check_lexicographic(stack, sol.x).ok         # ...and the certificate sees it
     assert sol.status == "approximate"
@@ -226,7 +227,7 @@ def test_svd_path_error_is_within_its_estimate_on_near_dependent_levels(scale, w
     assert optimal >= 1
 
 
-@pytest.mark.parametrize("kernel", ["numba", "lapack"])
+@pytest.mark.parametrize("kernel", ["numba", "cpp", "lapack"])
 @pytest.mark.parametrize("sigma", [1e-2, 1e-4, 1e-8, 0.0])
 def test_selective_damping_keeps_higher_level_exact_and_bounds_x(sigma, kernel):
     stack = near_singular(sigma)
@@ -266,7 +267,7 @@ def test_compiled_and_lapack_kernels_agree_on_ranks_and_x(seed):
     assert np.linalg.norm(a.x - b.x) <= 1e-9 * max(1.0, np.linalg.norm(b.x))
 
 
-@pytest.mark.parametrize("path", ["qr-numba", "qr-lapack"])
+@pytest.mark.parametrize("path", ["qr-numba", "qr-cpp", "qr-lapack"])
 @pytest.mark.parametrize("rank", [None, 2])
 @pytest.mark.parametrize("seed", range(6))
 def test_tall_level_on_few_free_directions_is_its_least_squares_optimum(path, rank, seed):
@@ -316,7 +317,7 @@ LEVEL_DAMPINGS = {"step_bound": lambda exact: {"step_bound": 0.3 * np.linalg.nor
                   "selective": lambda exact: {"level_damping": 0.5, "singular_threshold": 0.3}}
 
 
-@pytest.mark.parametrize("kernel", ["numba", "lapack"])
+@pytest.mark.parametrize("kernel", ["numba", "cpp", "lapack"])
 @pytest.mark.parametrize("how", sorted(LEVEL_DAMPINGS))
 @pytest.mark.parametrize("family", ["conflicting", "rank_deficient", "coupled", "compatible"])
 @pytest.mark.parametrize("seed", range(3))
@@ -335,7 +336,7 @@ def test_level_damping_solves_the_damped_hierarchy_exactly(kernel, how, family, 
     assert relative_distance(sol.x, oracle) <= 1e-9
 
 
-@pytest.mark.parametrize("kernel", ["numba", "lapack"])
+@pytest.mark.parametrize("kernel", ["numba", "cpp", "lapack"])
 @pytest.mark.parametrize("seed", range(6))
 def test_step_bound_is_the_trust_region_step_of_every_level(kernel, seed):
     """Each level's step ‖x_i − x_{i−1}‖ is ≤ Δ, and = Δ (1e-9) exactly where it was damped;
@@ -358,7 +359,7 @@ def test_step_bound_is_the_trust_region_step_of_every_level(kernel, seed):
         prev = xi
 
 
-@pytest.mark.parametrize("kernel", ["numba", "lapack"])
+@pytest.mark.parametrize("kernel", ["numba", "cpp", "lapack"])
 @pytest.mark.parametrize("sigma", [1e-2, 1e-4, 1e-8])
 def test_step_bound_keeps_higher_level_exact_and_bounds_x(sigma, kernel):
     stack = near_singular(sigma)

@@ -1,6 +1,7 @@
 // prioik._core.ActiveSetSolver: the hierarchical active set's bindings. Every entry
 // point checks its arrays (dtype float64, shape, C-contiguous, not empty, the values the
-// solver cannot read) and raises prioik's TaskStackError naming the array.
+// solver cannot read) and raises prioik's CoreInputError naming the array (module.cpp
+// translates prioik::InputError); a second thread in a solve raises ConcurrentUseError.
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
 
@@ -10,6 +11,7 @@
 #include <utility>
 
 #include "prioik/active_set.hpp"
+#include "prioik/extended_jacobian.hpp"
 
 namespace nb = nanobind;
 
@@ -18,37 +20,32 @@ namespace {
 using prioik::ActiveSetSolver;
 using I64 = std::int64_t;
 
-[[noreturn]] void raise_stack_error(const std::string& message, const char* array) {
-    nb::object cls = nb::module_::import_("prioik.hierarchy.errors").attr("TaskStackError");
-    nb::dict detail;
-    detail["array"] = array;
-    nb::object err = cls(*nb::make_tuple(nb::str(message.c_str())), **detail);
-    PyErr_SetObject(cls.ptr(), err.ptr());
-    throw nb::python_error();
+[[noreturn]] void raise_input_error(const std::string& message) {
+    throw prioik::InputError(message);
 }
 
 using AnyArray = nb::ndarray<nb::ro, nb::device::cpu>;
 
 /// The array `name` as float64, C-contiguous, of `rows` (and `cols` when 2-D) entries.
-const double* checked(const AnyArray& a, const char* name, I64 rows, I64 cols) {
+const double* checked(nb::handle h, const char* name, I64 rows, I64 cols) {
     std::string what = std::string("the active set's ") + name;
+    AnyArray a;
+    if (!nb::try_cast(h, a, false)) raise_input_error(what + " must be a float64 numpy array");
     if (a.dtype() != nb::dtype<double>())
-        raise_stack_error(what + " must be float64", name);
+        raise_input_error(what + " must be float64");
     I64 ndim = cols < 0 ? 1 : 2;
     if (static_cast<I64>(a.ndim()) != ndim)
-        raise_stack_error(what + " must be " + std::to_string(ndim) + "-D, not " +
-                              std::to_string(a.ndim()) + "-D",
-                          name);
+        raise_input_error(what + " must be " + std::to_string(ndim) + "-D, not " +
+                              std::to_string(a.ndim()) + "-D");
     if (static_cast<I64>(a.shape(0)) != rows || (ndim == 2 && static_cast<I64>(a.shape(1)) != cols))
-        raise_stack_error(what + " has the wrong shape for the prepared layout (" +
+        raise_input_error(what + " has the wrong shape for the prepared layout (" +
                               std::to_string(rows) + (ndim == 2 ? " x " + std::to_string(cols) : "") +
-                              " expected)",
-                          name);
-    if (rows == 0 || (ndim == 2 && cols == 0)) raise_stack_error(what + " is empty", name);
+                              " expected)");
+    if (rows == 0 || (ndim == 2 && cols == 0)) raise_input_error(what + " is empty");
     I64 expect = 1;
     for (I64 d = ndim - 1; d >= 0; --d) {
         if (a.shape(d) > 1 && a.stride(d) != expect)
-            raise_stack_error(what + " must be C-contiguous", name);
+            raise_input_error(what + " must be C-contiguous");
         expect *= static_cast<I64>(a.shape(d));
     }
     return static_cast<const double*>(a.data());
@@ -60,29 +57,26 @@ struct Inputs {
 
 /// The five arrays checked: shapes, dtypes, contiguity; no NaN/inf in A or √w, no NaN
 /// bound or equality target.
-Inputs check_inputs(const ActiveSetSolver& s, const AnyArray& A, const AnyArray& b,
-                    const AnyArray& lower, const AnyArray& upper, const AnyArray& sw) {
+Inputs check_inputs(const ActiveSetSolver& s, nb::handle A, nb::handle b, nb::handle lower,
+                    nb::handle upper, nb::handle sw) {
     I64 M = s.layout().M, n = s.layout().n;
     Inputs in{checked(A, "A", M, n), checked(b, "b", M, -1), checked(lower, "lower", M, -1),
               checked(upper, "upper", M, -1), checked(sw, "sqrt_weight", M, -1)};
     for (I64 j = 0; j < M; ++j) {
         for (I64 c = 0; c < n; ++c)
             if (!std::isfinite(in.A[j * n + c]))
-                raise_stack_error("the active set's A has a non-finite entry at row " +
-                                      std::to_string(j) + ", column " + std::to_string(c),
-                                  "A");
+                raise_input_error("the active set's A has a non-finite entry at row " +
+                                      std::to_string(j) + ", column " + std::to_string(c));
         if (!(in.sw[j] > 0.0 && std::isfinite(in.sw[j])))
-            raise_stack_error("the active set's sqrt_weight must be finite and > 0 (row " +
-                                  std::to_string(j) + ")",
-                              "sqrt_weight");
+            raise_input_error("the active set's sqrt_weight must be finite and > 0 (row " +
+                                  std::to_string(j) + ")");
         if (std::isnan(in.lower[j]))
-            raise_stack_error("the active set's lower is NaN at row " + std::to_string(j), "lower");
+            raise_input_error("the active set's lower is NaN at row " + std::to_string(j));
         if (std::isnan(in.upper[j]))
-            raise_stack_error("the active set's upper is NaN at row " + std::to_string(j), "upper");
+            raise_input_error("the active set's upper is NaN at row " + std::to_string(j));
         if (s.layout().row_eq[j] && !std::isfinite(in.b[j]))
-            raise_stack_error("the active set's b is not finite at equality row " +
-                                  std::to_string(j),
-                              "b");
+            raise_input_error("the active set's b is not finite at equality row " +
+                                  std::to_string(j));
     }
     return in;
 }
@@ -116,7 +110,7 @@ void bind_active_set(nb::module_& m) {
                 try {
                     new (self) ActiveSetSolver(std::move(layout), options);
                 } catch (const std::invalid_argument& e) {
-                    raise_stack_error(e.what(), "starts");
+                    raise_input_error(e.what());
                 }
             },
             nb::arg("n"), nb::arg("starts"), nb::arg("row_eq"), nb::arg("rcond"),
@@ -124,8 +118,8 @@ void bind_active_set(nb::module_& m) {
             nb::arg("warm_start"))
         .def(
             "solve",
-            [](ActiveSetSolver& s, const AnyArray& A, const AnyArray& b, const AnyArray& lower,
-               const AnyArray& upper, const AnyArray& sw) {
+            [](ActiveSetSolver& s, nb::handle A, nb::handle b, nb::handle lower, nb::handle upper,
+               nb::handle sw) {
                 Inputs in = check_inputs(s, A, b, lower, upper, sw);
                 nb::gil_scoped_release release;
                 return static_cast<int>(s.solve(in.A, in.b, in.lower, in.upper, in.sw));
@@ -136,8 +130,8 @@ void bind_active_set(nb::module_& m) {
             "the summary, 0 not solved).")
         .def(
             "equality_first",
-            [](ActiveSetSolver& s, const AnyArray& A, const AnyArray& b, const AnyArray& lower,
-               const AnyArray& upper, const AnyArray& sw) {
+            [](ActiveSetSolver& s, nb::handle A, nb::handle b, nb::handle lower, nb::handle upper,
+               nb::handle sw) {
                 Inputs in = check_inputs(s, A, b, lower, upper, sw);
                 nb::gil_scoped_release release;
                 return static_cast<int>(

@@ -1,15 +1,143 @@
 // prioik._core: the Python bindings of the compiled core (nanobind).
+//
+// Every entry point checks its arrays before C++ reads them: a float64 numpy-compatible
+// array on the CPU, C-contiguous, of the layout's shape and not empty; anything else
+// raises prioik.formulations.base.CoreInputError naming the array (never a copy, never a
+// crash). Non-finite entries and √w ≤ 0 are found by the solve's own pass and raise the
+// same error naming the entry. A solve releases the GIL.
 #include <nanobind/nanobind.h>
+#include <nanobind/ndarray.h>
 #include <nanobind/stl/string.h>
+#include <nanobind/stl/vector.h>
+
+#include <string>
+#include <vector>
 
 #include "prioik/build_info.hpp"
+#include "prioik/extended_jacobian.hpp"
 
 namespace nb = nanobind;
+using prioik::Index;
 
 void bind_active_set(nb::module_& m);
 
+namespace {
+
+using AnyArray = nb::ndarray<nb::ro>;
+
+std::string python_type_name(nb::handle h) {
+  return nb::cast<std::string>(nb::handle(reinterpret_cast<PyObject*>(Py_TYPE(h.ptr()))).attr("__name__"));
+}
+
+std::string shape_text(const AnyArray& a) {
+  std::string s = "(";
+  for (size_t i = 0; i < a.ndim(); ++i) s += (i ? ", " : "") + std::to_string(a.shape(i));
+  return s + (a.ndim() == 1 ? ",)" : ")");
+}
+
+std::string expected_text(const std::vector<Index>& shape) {
+  std::string s = "(";
+  for (size_t i = 0; i < shape.size(); ++i) s += (i ? ", " : "") + std::to_string(shape[i]);
+  return s + (shape.size() == 1 ? ",)" : ")");
+}
+
+// The data of `h` as C-contiguous float64 of `shape` (-1: any extent > 0), or
+// InputError naming `name`.
+const double* checked_array(nb::handle h, const char* name, std::vector<Index> shape,
+                            std::vector<Index>* got = nullptr) {
+  AnyArray a;
+  if (!nb::try_cast(h, a, false))
+    throw prioik::InputError(std::string(name) + " must be a float64 numpy array, got " +
+                             python_type_name(h));
+  if (a.dtype() != nb::dtype<double>())
+    throw prioik::InputError(std::string(name) + " must be float64, got another dtype (" +
+                             nb::cast<std::string>(nb::str(h.attr("dtype"))) + ")");
+  if (a.device_type() != nb::device::cpu::value)
+    throw prioik::InputError(std::string(name) + " must be on the CPU");
+  if (a.ndim() != shape.size())
+    throw prioik::InputError(std::string(name) + " must have " + std::to_string(shape.size()) +
+                             " dimensions, got shape " + shape_text(a));
+  for (size_t i = 0; i < shape.size(); ++i) {
+    if (a.shape(i) == 0)
+      throw prioik::InputError(std::string(name) + " is empty (shape " + shape_text(a) + ")");
+    if (shape[i] >= 0 && static_cast<Index>(a.shape(i)) != shape[i]) {
+      std::vector<Index> want = shape;
+      throw prioik::InputError(std::string(name) + " must have shape " + expected_text(want) +
+                               ", got " + shape_text(a));
+    }
+  }
+  int64_t expect = 1;
+  for (size_t i = shape.size(); i-- > 0;) {
+    if (a.shape(i) > 1 && a.stride(i) != expect)
+      throw prioik::InputError(std::string(name) + " must be C-contiguous (a view with strides "
+                               "is not taken: pass np.ascontiguousarray of it)");
+    expect *= static_cast<int64_t>(a.shape(i));
+  }
+  if (got != nullptr) {
+    got->clear();
+    for (size_t i = 0; i < a.ndim(); ++i) got->push_back(static_cast<Index>(a.shape(i)));
+  }
+  return static_cast<const double*>(a.data());
+}
+
+template <class T>
+nb::ndarray<nb::numpy, const T, nb::ndim<1>> view1(const std::vector<T>& v, nb::handle owner) {
+  return nb::ndarray<nb::numpy, const T, nb::ndim<1>>(v.data(), {v.size()}, owner);
+}
+
+template <class T>
+nb::ndarray<nb::numpy, const T, nb::ndim<2>> view2(const std::vector<T>& v, Index rows,
+                                                   Index cols, nb::handle owner) {
+  return nb::ndarray<nb::numpy, const T, nb::ndim<2>>(
+      v.data(), {static_cast<size_t>(rows), static_cast<size_t>(cols)}, owner);
+}
+
+// the Python class of prioik's errors, looked up when one is raised (prioik.formulations
+// imports this module)
+void raise_prioik(const char* cls, const char* message) {
+  nb::object base = nb::module_::import_("prioik.formulations.base");
+  PyErr_SetString(base.attr(cls).ptr(), message);
+}
+
+using prioik::ExtendedJacobian;
+using prioik::ExtendedJacobianBatch;
+using prioik::ExtendedJacobianResult;
+
+const ExtendedJacobianResult& solve_one(ExtendedJacobian& self, nb::handle A, nb::handle b,
+                                        nb::handle w) {
+  const Index M = self.rows(), n = self.cols();
+  const prioik::StackArrays data{checked_array(A, "A", {M, n}), checked_array(b, "b", {M}),
+                                 checked_array(w, "sqrt_weight", {M})};
+  nb::gil_scoped_release release;
+  return self.solve(data);
+}
+
+ExtendedJacobianBatch solve_many(ExtendedJacobian& self, nb::handle A, nb::handle b,
+                                 nb::handle w) {
+  const Index M = self.rows(), n = self.cols();
+  std::vector<Index> shape;
+  const double* a = checked_array(A, "A", {-1, M, n}, &shape);
+  const Index N = shape[0];
+  const double* bb = checked_array(b, "b", {N, M});
+  const double* ww = checked_array(w, "sqrt_weight", {N, M});
+  nb::gil_scoped_release release;
+  return self.solve_batch(a, bb, ww, N);
+}
+
+}  // namespace
+
 NB_MODULE(_core, m) {
   m.doc() = "prioik's compiled core (C++17): the extended Jacobian's nested pivoted QR.";
+
+  nb::register_exception_translator([](const std::exception_ptr& p, void*) {
+    try {
+      std::rethrow_exception(p);
+    } catch (const prioik::InputError& e) {
+      raise_prioik("CoreInputError", e.what());
+    } catch (const prioik::ConcurrentUse& e) {
+      raise_prioik("ConcurrentUseError", e.what());
+    }
+  });
 
   nb::class_<prioik::BuildInfo>(m, "BuildInfo",
                                 "What the core was compiled with (core/CMakeLists.txt).")
@@ -22,4 +150,89 @@ NB_MODULE(_core, m) {
               "a * b + c contracted into a fused multiply-add");
   m.def("build_info", &prioik::build_info, "The flags the core was compiled with.");
   bind_active_set(m);
+
+  m.attr("AMBIGUITY") = prioik::kAmbiguity;
+  m.attr("NEAR_AMBIGUITY") = prioik::kNearAmbiguity;
+  m.attr("PRECISION_LIMIT_NORM") = prioik::kPrecisionLimitNorm;
+  m.attr("SCALE_HIGH") = prioik::kScaleHigh;
+  m.attr("SCALE_LOW") = prioik::kScaleLow;
+
+  nb::class_<ExtendedJacobianResult>(
+      m, "ExtendedJacobianResult",
+      "One solve's answer, the solver's own: its arrays are read-only views that the "
+      "solver's next solve overwrites (copy what you keep).")
+      .def_prop_ro("x", [](nb::handle s) { return view1(nb::cast<ExtendedJacobianResult&>(s).x, s); })
+      .def_prop_ro("residuals",
+                   [](nb::handle s) { return view1(nb::cast<ExtendedJacobianResult&>(s).residuals, s); })
+      .def_prop_ro("level_mu2",
+                   [](nb::handle s) { return view1(nb::cast<ExtendedJacobianResult&>(s).level_mu2, s); })
+      .def_prop_ro("margins",
+                   [](nb::handle s) { return view1(nb::cast<ExtendedJacobianResult&>(s).margins, s); })
+      .def_prop_ro("ranks",
+                   [](nb::handle s) { return view1(nb::cast<ExtendedJacobianResult&>(s).ranks, s); })
+      .def_ro("solved", &ExtendedJacobianResult::solved,
+              "False: a level's scale is outside [SCALE_LOW, SCALE_HIGH], nothing solved")
+      .def_ro("finite", &ExtendedJacobianResult::finite)
+      .def_ro("ambiguous", &ExtendedJacobianResult::ambiguous)
+      .def_ro("near_ambiguous", &ExtendedJacobianResult::near_ambiguous)
+      .def_ro("precision_limited", &ExtendedJacobianResult::precision_limited);
+
+  nb::class_<ExtendedJacobianBatch>(m, "ExtendedJacobianBatch",
+                                    "Many stacks' answers, stack s in row s of each array.")
+      .def_prop_ro("x", [](nb::handle s) {
+        auto& r = nb::cast<ExtendedJacobianBatch&>(s);
+        return view2(r.x, r.N, r.n, s);
+      })
+      .def_prop_ro("residuals", [](nb::handle s) {
+        auto& r = nb::cast<ExtendedJacobianBatch&>(s);
+        return view2(r.residuals, r.N, r.k, s);
+      })
+      .def_prop_ro("level_mu2", [](nb::handle s) {
+        auto& r = nb::cast<ExtendedJacobianBatch&>(s);
+        return view2(r.level_mu2, r.N, r.k, s);
+      })
+      .def_prop_ro("margins", [](nb::handle s) {
+        auto& r = nb::cast<ExtendedJacobianBatch&>(s);
+        return view2(r.margins, r.N, r.k, s);
+      })
+      .def_prop_ro("ranks", [](nb::handle s) {
+        auto& r = nb::cast<ExtendedJacobianBatch&>(s);
+        return view2(r.ranks, r.N, r.k, s);
+      })
+      .def_prop_ro("solved", [](nb::handle s) { return view1(nb::cast<ExtendedJacobianBatch&>(s).solved, s); })
+      .def_prop_ro("finite", [](nb::handle s) { return view1(nb::cast<ExtendedJacobianBatch&>(s).finite, s); })
+      .def_prop_ro("ambiguous",
+                   [](nb::handle s) { return view1(nb::cast<ExtendedJacobianBatch&>(s).ambiguous, s); })
+      .def_prop_ro("near_ambiguous", [](nb::handle s) {
+        return view1(nb::cast<ExtendedJacobianBatch&>(s).near_ambiguous, s);
+      });
+
+  nb::class_<ExtendedJacobian>(
+      m, "ExtendedJacobian",
+      "The extended Jacobian's nested pivoted QR prepared for one layout (eq. 15-18, "
+      "selective damping, per-level step bounds): workspaces allocated here, none per "
+      "solve. One thread at a time (another's call during a solve raises "
+      "ConcurrentUseError).")
+      .def("__init__",
+           [](ExtendedJacobian* self, std::vector<Index> starts, Index n, double rcond,
+              double level_damping, double singular_threshold, std::vector<double> step_bound) {
+             prioik::ExtendedJacobianOptions o;
+             o.rcond = rcond;
+             o.level_damping = level_damping;
+             o.singular_threshold = singular_threshold;
+             o.step_bound = std::move(step_bound);
+             new (self) ExtendedJacobian(std::move(starts), n, std::move(o));
+           },
+           nb::arg("starts"), nb::arg("n"), nb::kw_only(), nb::arg("rcond"),
+           nb::arg("level_damping") = 0.0, nb::arg("singular_threshold") = 0.0,
+           nb::arg("step_bound") = std::vector<double>())
+      .def("solve", &solve_one, nb::arg("A"), nb::arg("b"), nb::arg("sqrt_weight"),
+           nb::rv_policy::reference_internal,
+           "Solve one stack (A: M × n, b and sqrt_weight: M; C-contiguous float64).")
+      .def("solve_batch", &solve_many, nb::arg("A"), nb::arg("b"), nb::arg("sqrt_weight"),
+           "Solve N stacks (A: N × M × n, b and sqrt_weight: N × M), each on its own.")
+      .def_prop_ro("rows", &ExtendedJacobian::rows)
+      .def_prop_ro("cols", &ExtendedJacobian::cols)
+      .def_prop_ro("levels", &ExtendedJacobian::levels)
+      .def_prop_ro("trust_region", &ExtendedJacobian::trust_region);
 }

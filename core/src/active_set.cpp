@@ -6,12 +6,33 @@
 #include <utility>
 
 #include "active_set_internal.hpp"
+#include "prioik/extended_jacobian.hpp"
 
 namespace prioik {
 
 namespace detail {
 SolveCode equality_first_data(Ctx& c, ActiveSetWorkspace& ws);
 }
+
+namespace {
+
+/// Holds a solver's busy flag for one call (ConcurrentUse when another call holds it).
+class Exclusive {
+public:
+    explicit Exclusive(std::atomic<bool>& busy) : busy_(busy) {
+        if (busy_.exchange(true))
+            throw ConcurrentUse("a prepared active set was called from a second thread during "
+                                "a solve (use one solver per thread)");
+    }
+    ~Exclusive() { busy_.store(false); }
+    Exclusive(const Exclusive&) = delete;
+    Exclusive& operator=(const Exclusive&) = delete;
+
+private:
+    std::atomic<bool>& busy_;
+};
+
+}  // namespace
 
 void ActiveSetWorkspace::allocate(index M, index n, index k) {
     index R = M + n;
@@ -68,6 +89,7 @@ void ActiveSetSolver::reset() {
 
 SolveCode ActiveSetSolver::solve(const double* A, const double* b, const double* lower,
                                  const double* upper, const double* sw) {
+    Exclusive hold(busy_);
     detail::Ctx c(*this, A, b, lower, upper, sw);
     c.use_warm = options_.warm_start && result_.equality_first != -1.0;
     if (!detail::load_and_scale(c)) return SolveCode::not_solved;
@@ -83,6 +105,7 @@ SolveCode ActiveSetSolver::solve(const double* A, const double* b, const double*
 
 SolveCode ActiveSetSolver::equality_first(const double* A, const double* b, const double* lower,
                                           const double* upper, const double* sw) {
+    Exclusive hold(busy_);
     detail::Ctx c(*this, A, b, lower, upper, sw);
     c.use_warm = options_.warm_start;
     return detail::equality_first_data(c, ws_);

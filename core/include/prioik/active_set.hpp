@@ -8,6 +8,7 @@
 // One thread at a time per solver.
 #pragma once
 
+#include <atomic>
 #include <cstdint>
 #include <vector>
 
@@ -111,7 +112,8 @@ public:
     ActiveSetSolver(ActiveSetLayout layout, ActiveSetOptions options);
 
     /// The level-by-level active set on the stack's rows (A: M × n row-major, b, lower,
-    /// upper, sw: M), from the kept working sets when warm.
+    /// upper, sw: M), from the kept working sets when warm. Throws ConcurrentUse when
+    /// another thread is in a solve of this solver.
     SolveCode solve(const double* A, const double* b, const double* lower,
                     const double* upper, const double* sw);
     /// The warm start's equality-first try (not_tried when it is not the answer).
@@ -131,6 +133,7 @@ private:
     ActiveSetOptions options_;
     ActiveSetWorkspace ws_;
     ActiveSetResult result_;
+    std::atomic<bool> busy_{false};
 };
 
 }  // namespace prioik
