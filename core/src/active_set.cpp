@@ -41,18 +41,20 @@ void ActiveSetWorkspace::allocate(index M, index n, index k) {
     V.assign(n * n, 0.0);
     Vf.assign(n * n, 0.0);
     ts_rows.assign(2 * R, 0.0);
+    lsq.assign(small_least_squares_scratch(R, n), 0.0);
     for (auto* v : {&blo, &bup, &rnorm, &rhs, &norms, &tgt, &nu, &tq, &beta, &betaf, &y, &p,
                     &g, &px, &xc, &xs})
         v->assign(R, 0.0);
     for (auto* v : {&rows, &vpos, &nrot, &ucol}) v->assign(R, 0);
     posf.assign(n, 0);
     perm.assign(n, 0);
+    iscratch.assign(n, 0);
     for (auto* v : {&state, &saved, &eqr}) v->assign(R, 0);
     held.assign(M, 0);
     eflat.assign(M * n, 0.0);
     evec.assign(M + 4 * k, 0.0);
     efs.assign(4 * R, 0.0);
-    espare.assign(dense::nested_qr_spare_size(M, n), 0.0);
+    equality_qr = NestedQRWorkspace(M, n);
     eint.assign(2 * k + 1 + 4 * M + 4 * n, 0);
     eispare.assign(n, 0);
     warm_state.assign((k + 1) * R, 0);
@@ -142,6 +144,7 @@ Ctx::Ctx(ActiveSetSolver& s, const double* A_, const double* b_, const double* l
     Vf = Mat{w.Vf.data(), n};
     Ts = Mat{w.Ts.data(), n};
     flat = w.flat.data();
+    lsq = w.lsq.data();
     ts_rows = w.ts_rows.data();
     blo = w.blo.data();
     bup = w.bup.data();
@@ -165,6 +168,7 @@ Ctx::Ctx(ActiveSetSolver& s, const double* A_, const double* b_, const double* l
     nrot = w.nrot.data();
     ucol = w.ucol.data();
     perm = w.perm.data();
+    iscratch = w.iscratch.data();
     state = w.state.data();
     saved = w.saved.data();
     eqr = w.eqr.data();

@@ -6,7 +6,6 @@
 
 namespace prioik::detail {
 
-using dense::dot;
 
 void rows_at_bounds(Ctx& c, index hard_end, double ynorm, index& m, index& extra) {
     index d = c.n - c.col;

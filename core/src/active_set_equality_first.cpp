@@ -8,14 +8,16 @@
 
 namespace prioik::detail {
 
-using dense::dot;
 
 EqFirst::EqFirst(Ctx& c, ActiveSetWorkspace& ws) {
     index M = c.M, n = c.n, k = c.k;
     eflat = ws.eflat.data();
     eB = Mat{eflat, n};
-    Vflat = ws.V.data();
-    V = Mat{Vflat, n};
+    qr = &ws.equality_qr;
+    V = Mat{qr->V.data(), n};
+    beta = qr->beta.data();
+    y = qr->y.data();
+    pos = qr->pos.data();
     Lflat = ws.Lw.data();
     Lmat = Mat{Lflat, n};
     ec = ws.evec.data();
@@ -38,8 +40,6 @@ EqFirst::EqFirst(Ctx& c, ActiveSetWorkspace& ws) {
     ecol = ei + o + 4 * n;
     fs = ws.efs.data();
     work = Lflat;
-    pos = ws.rows.data();
-    spare = ws.espare.data();
     ispare = ws.eispare.data();
 }
 
@@ -115,7 +115,7 @@ void held_setup(Ctx& c, EqFirst& e, bool allow_fixed) {
     }
     // the rows, reflectors and scratch of the QR: on the n2 free coordinates when fixed
     e.eB = Mat{e.eflat, e.n2};
-    e.V = Mat{e.Vflat, e.n2};
+    e.V = Mat{e.qr->V.data(), e.n2};
     e.Lmat = Mat{e.Lflat, e.n2};
 }
 
@@ -232,48 +232,23 @@ index build_rows(Ctx& c, EqFirst& e) {
 
 /// The nested QR of the rows built (on the free coordinates when fixed), x written.
 void solve_rows(Ctx& c, EqFirst& e) {
-    index n = c.n, M = c.M, n2 = e.n2, m = e.m;
-    dense::NestedQr q;
-    q.m = m;
-    q.k = c.k;
-    q.c = e.ec;
-    q.starts = e.estarts;
-    q.scales = e.scales;
-    q.rcond = c.rcond;
-    q.x = c.x;
-    q.ranks = e.eranks;
-    q.level_mu2 = e.mu2;
-    q.margins = e.emargins;
-    q.beta = e.fs;
-    q.pos = e.pos;
-    q.y = e.fs + c.R;
-    q.norms = e.fs + 2 * c.R;
-    q.rhs = e.fs + 3 * c.R;
-    q.spare = e.spare;
-    q.ispare = e.ispare;
-    if (e.fixed) {
-        q.B = e.eB;
-        q.n = n2;
-        q.V = e.V;
-        q.L = e.Lmat;
-        q.rowperm = e.rowperm;
-        dense::nested_qr_solve(q);
-        index at = n2;
-        for (index cc = n - 1; cc >= 0; --cc)
-            if (e.pside[cc] == 0) c.x[cc] = c.x[--at];
-        for (index i = 0; i < e.nheld; ++i) {
-            index j = e.hcol[i];
-            index uc = e.ucol[j];
-            c.x[uc] = (c.held[j] > 0 ? c.upper[j] : c.lower[j]) / c.A(j, uc);
-        }
-    } else {
-        q.B = e.eB;
-        q.n = n;
-        q.V = e.V;
-        q.L = e.Lmat;
-        q.rowperm = e.nheld > 0 ? e.rowperm : nullptr;
-        (void)M;
-        dense::nested_qr_solve(q);
+    index n = c.n, n2 = e.n2;
+    NestedQRWorkspace& ws = *e.qr;
+    ws.n = n2;      // sized for n columns, used at the free coordinates' count
+    ws.M = e.m;
+    NestedQRParameters params;
+    params.rcond = c.rcond;
+    NestedQROutput out{c.x, e.eranks, e.mu2, e.emargins,
+                       (e.fixed || e.nheld > 0) ? e.rowperm : nullptr};
+    nested_qr(e.eB.ref(e.m, n2), e.ec, e.estarts, c.k, e.scales, params, false, ws, out);
+    if (!e.fixed) return;
+    index at = n2;
+    for (index cc = n - 1; cc >= 0; --cc)
+        if (e.pside[cc] == 0) c.x[cc] = c.x[--at];
+    for (index i = 0; i < e.nheld; ++i) {
+        index j = e.hcol[i];
+        index uc = e.ucol[j];
+        c.x[uc] = (c.held[j] > 0 ? c.upper[j] : c.lower[j]) / c.A(j, uc);
     }
 }
 

@@ -6,8 +6,9 @@
 namespace prioik::detail {
 
 /// The equality-first try's parts: the weighed equality (and held) rows eB and their
-/// targets ec, the nested QR's per-level vectors, the row maps, and the scratch it
-/// shares with the active set (V, L, fs: 4 rows of R, pos).
+/// targets ec, the nested QR's per-level vectors and its workspace (qr: its reflectors
+/// V, beta, pos and rotated unknowns y are read after it), the row maps, and the scratch
+/// it shares with the active set (L, fs: 4 rows of R).
 struct EqFirst {
     Mat eB, V, Lmat;
     double* eflat;
@@ -15,11 +16,11 @@ struct EqFirst {
     index *estarts, *eranks, *ucol, *erow, *rowperm, *prow, *pside, *pinned, *hcol, *ecol;
     double* fs;
     double* work;      // the fixed columns' test's scratch (≥ 2 n + M)
+    NestedQRWorkspace* qr;
+    double *beta, *y;
     index* pos;
-    double* spare;
     index* ispare;
     double* Lflat;
-    double* Vflat;
     // the held rows: as fixed coordinates (fixed) or as equalities; their count and the
     // lowest level holding one; the free coordinates' count n2 and the QR's rows m
     bool fixed = false;

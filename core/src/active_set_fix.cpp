@@ -7,7 +7,6 @@
 
 namespace prioik::detail {
 
-using dense::dot;
 
 namespace {
 
@@ -73,8 +72,8 @@ index fixing_lq(Ctx& c, index lev, index rf, index nfix, double soft_tol) {
         c.margins[lev] = std::min(c.margins[lev], std::sqrt(exact) / soft_tol);
         index jp = c.rows[piv];
         if (piv != rf) {
-            dense::swap_at(c.rows, rf, piv);
-            dense::swap_at(c.norms, rf, piv);
+            swap_entries(c.rows, rf, piv);
+            swap_entries(c.norms, rf, piv);
         }
         double norm = std::sqrt(exact);
         double alpha = tail[0] >= 0.0 ? -norm : norm;
@@ -232,7 +231,7 @@ double keep_held(const Ctx& c) {
 SolveCode finish_solve(Ctx& c) {
     index n = c.n;
     for (index j = 0; j < n; ++j) c.x[j] = c.y[j];
-    dense::apply_q(c.x, n, c.nf, c.Vf, c.betaf, c.posf);
+    apply_q(c.x, n, dense::reflectors(c.Vf, n, c.betaf, c.posf, c.nf));
     index unresolved = box_row_pass(c);
     c.out->next_try = keep_held(c);
     double total = 0.0;

@@ -9,6 +9,9 @@ namespace prioik::detail {
 using dense::Mat;
 using dense::inf;
 
+/// Exchange M[i, :w] and M[j, :w].
+inline void swap_rows_upto(Mat M, index i, index j, index w) { swap_rows(M.ref(0, w), i, j); }
+
 /// a non-working row blocks the step only if it moves by more than max(this, rcond)
 /// ‖a_j‖ ‖p‖
 constexpr double BLOCK_EPS = 1e-13;
@@ -35,10 +38,10 @@ struct Ctx {
     double rcond, primal_tol, dual_tol;
     index max_iter;
     Mat B, Bo, T, Lw, V, Vf, Ts;
-    double *flat, *ts_rows;
+    double *flat, *ts_rows, *lsq;
     double *blo, *bup, *rnorm, *rhs, *norms, *tgt, *nu, *tq;
     double *beta, *betaf, *y, *p, *g, *px, *xc, *xs;
-    index *rows, *vpos, *posf, *nrot, *ucol, *perm;
+    index *rows, *vpos, *posf, *nrot, *ucol, *perm, *iscratch;
     std::int8_t *state, *saved, *eqr, *held, *warm_state, *warm_valid;
     double *x, *w2, *res, *margins;
     index *iters, *flags, *ranks, *over;

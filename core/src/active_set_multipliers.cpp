@@ -7,7 +7,6 @@
 
 namespace prioik::detail {
 
-using dense::dot;
 
 double add_level_gradient(const Ctx& c, const EqFirst& e, index s0, index s1, const double* x,
                           double* g) {
@@ -101,8 +100,8 @@ index held_inverse_columns(const Ctx& c, EqFirst& e, Mat Z, double* cn, index ct
 index held_rows_optimal(const Ctx& c, EqFirst& e, const double* x) {
     index n = c.n, k = c.k;
     Mat Z = e.Lmat;
-    double* y = e.fs + c.R;
-    double* beta = e.fs;
+    const double* y = e.y;
+    double* beta = e.beta;
     double* g = e.fs + 2 * c.R;
     double* cn = e.fs + 3 * c.R;
     index complete, ctri, first_held, ncol;
@@ -139,7 +138,7 @@ index held_rows_optimal(const Ctx& c, EqFirst& e, const double* x) {
                 }
             } else {
                 tn = add_level_gradient(c, e, c.starts[lev], c.starts[lev + 1], x, g);
-                dense::apply_qt(g, n, colv, e.V, beta, e.pos);
+                apply_qt(g, n, dense::reflectors(e.V, n, beta, e.pos, colv));
             }
             gh = g;
             scale = std::max(std::sqrt(dot(g, g, colv)),
@@ -179,7 +178,7 @@ bool fixed_level_gradient(const Ctx& c, EqFirst& e, index lev, index colv, const
     index n = c.n, n2 = e.n2, M = c.M, k = c.k;
     double* gf = e.fs + 3 * c.R;
     double* g = e.fs + 2 * c.R;
-    double* beta = e.fs;
+    double* beta = e.beta;
     double* rs = e.work + n;
     double* gc = e.work + n + M;
     double tn = 0.0, rr = 0.0;
@@ -225,7 +224,7 @@ bool fixed_level_gradient(const Ctx& c, EqFirst& e, index lev, index colv, const
         for (index cc = 0; cc < n; ++cc)
             if (e.pside[cc] == 0) gf[q++] = g[cc];
         gn = dot(g, g, n);
-        dense::apply_qt(gf, n2, colv, e.V, beta, e.pos);
+        apply_qt(gf, n2, dense::reflectors(e.V, n2, beta, e.pos, colv));
         for (index i = 0; i < e.nheld; ++i) gc[i] = g[e.ucol[e.hcol[i]]];
     }
     scale = std::max(std::sqrt(gn), e.scales[lev] * (e.scales[lev] * xn + std::sqrt(tn)));
@@ -236,7 +235,7 @@ bool fixed_level_gradient(const Ctx& c, EqFirst& e, index lev, index colv, const
 
 index fixed_columns_optimal(const Ctx& c, EqFirst& e, const double* x) {
     index n = c.n, n2 = e.n2, M = c.M, k = c.k;
-    double* y = e.fs + c.R;
+    const double* y = e.y;
     double* gf = e.fs + 3 * c.R;
     double* mu = e.work;
     double* gc = e.work + n + M;

@@ -8,8 +8,6 @@
 
 namespace prioik::detail {
 
-using dense::dot;
-using dense::swap_at;
 
 namespace {
 
@@ -72,9 +70,9 @@ double full_rank_step(Ctx& c, index nw, double soft_tol) {
                 piv = k;
             }
         if (piv != j) {
-            dense::swap_rows(Tt, j, piv, nw);
-            swap_at(norms, j, piv);
-            swap_at(c.perm, j, piv);
+            swap_rows_upto(Tt, j, piv, nw);
+            swap_entries(norms, j, piv);
+            swap_entries(c.perm, j, piv);
         }
         double* cj = Tt.row(j) + j;
         index wn = nw - j;
@@ -116,22 +114,24 @@ bool unit_rows_hard(Ctx& c, index nh, index nu_cols, double s, bool reach, doubl
     double* t = c.flat + 2 * n;
     Mat Zh = Zu.at(nu_cols, 0);
     Mat W = Zu.at(nu_cols + nh, 0);
-    for (index i = 0; i < nh; ++i) z[i] = static_cast<double>(c.ucol[c.rows[i]]);
-    dense::free_directions(z, nh, Zh, n, c.nf, c.Vf, c.betaf, c.posf, nullptr);
-    dense::drop_fixed(Zh, nh, n, col);
+    index* cols = c.iscratch;
+    for (index i = 0; i < nh; ++i) cols[i] = c.ucol[c.rows[i]];
+    free_directions(cols, nh, Zh.ref(nh, n), dense::reflectors(c.Vf, n, c.betaf, c.posf, c.nf),
+                    nullptr);
+    drop_fixed(Zh.ref(nh, n), nh, col);
     for (index i = 0; i < nh; ++i) {
         for (index k = 0; k < d; ++k) W(i, k) = Zh(i, k);
-        dense::woodbury_apply(W.row(i), Zu, G, nu_cols, d, t);
+        woodbury_apply(W.row(i), Zu.ref(c.R, n), G.ref(c.R, n), nu_cols, d, t);
     }
     Mat K = G.at(2 * nu_cols, 0);
     Mat S = G.at(2 * nu_cols + nh, 0);
     for (index a = 0; a < nh; ++a)
         for (index b = 0; b <= a; ++b) {
-            K(a, b) = dot(Zh.row(a), Zh.row(b), d) - (a == b ? dense::UNIT_ROWS_GAP : 0.0);
+            K(a, b) = dot(Zh.row(a), Zh.row(b), d) - (a == b ? kUnitRowsGap : 0.0);
             S(a, b) = dot(Zh.row(a), W.row(b), d);
         }
-    if (!dense::cholesky_lower(K, nh)) return false;
-    if (!dense::cholesky_lower(S, nh)) return false;
+    if (!cholesky_lower(K.ref(nh, n), nh)) return false;
+    if (!cholesky_lower(S.ref(nh, n), nh)) return false;
     for (index i = 0; i < nh; ++i) {
         index j = c.rows[i];
         index uc = c.ucol[j];
@@ -139,7 +139,7 @@ bool unit_rows_hard(Ctx& c, index nh, index nu_cols, double s, bool reach, doubl
         double rho = reach ? (c.tgt[i] - a * c.xc[uc]) / a : 0.0;
         t[i] = dot(Zh.row(i), c.p, d) - rho;
     }
-    dense::cholesky_solve(S, t, nh);
+    cholesky_solve(S.ref(nh, n), t, nh);
     for (index k = 0; k < d; ++k) z[k] = 0.0;
     for (index i = 0; i < nh; ++i) {
         double li = t[i];
@@ -168,7 +168,7 @@ double unit_rows_step(Ctx& c, index nh, index nw, double soft_tol, bool reach, d
     for (index i = 0; i < nh; ++i)
         if (c.ucol[c.rows[i]] < 0) return -1.0;
     index* colrow = c.perm;
-    double s = dense::unit_rows_of(c.Bo, n, s0, s0 + nw, colrow);
+    double s = unit_rows_of(c.Bo.ref(R, n), s0, s0 + nw, colrow);
     if (s < 0.0) return -1.0;
     index nun = 0;
     for (index k = 0; k < n; ++k)
@@ -183,10 +183,11 @@ double unit_rows_step(Ctx& c, index nh, index nw, double soft_tol, bool reach, d
             g[k] = a * (c.tgt[nh + i] - a * c.xc[k]) / (s * s);
         }
     }
-    index nu_cols = dense::unit_rows_solve(colrow, g, n, col, c.p, c.nf, c.Vf, c.betaf, c.posf,
-                                           c.T, c.Lw, nullptr);
+    index nu_cols = unit_rows_solve(colrow, g, col, c.p,
+                                    dense::reflectors(c.Vf, n, c.betaf, c.posf, c.nf),
+                                    c.T.ref(R, n), c.Lw.ref(R, n), nullptr, c.iscratch);
     if (nu_cols < 0) return -1.0;
-    double margin = nu_cols > 0 ? s * std::sqrt(dense::UNIT_ROWS_GAP) : s;
+    double margin = nu_cols > 0 ? s * std::sqrt(kUnitRowsGap) : s;
     if (!(margin > dense::AMBIGUITY * soft_tol)) return -1.0;
     if (nh == 0) {
         gn = 0.0;

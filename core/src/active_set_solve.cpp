@@ -7,7 +7,6 @@
 
 namespace prioik::detail {
 
-using dense::dot;
 
 namespace {
 

@@ -8,9 +8,6 @@
 
 namespace prioik::detail {
 
-using dense::dot;
-using dense::swap_at;
-using dense::swap_rows;
 
 double odot(const Ctx& c, index j, const double* v) {
     index col = c.ucol[j];
@@ -47,7 +44,7 @@ void bring(Ctx& c, index j) {
 void lift(Ctx& c, const double* p, double* px) {
     for (index k = 0; k < c.col; ++k) px[k] = 0.0;
     for (index k = 0; k < c.n - c.col; ++k) px[c.col + k] = p[k];
-    dense::apply_q(px, c.n, c.nf, c.Vf, c.betaf, c.posf);
+    apply_q(px, c.n, dense::reflectors(c.Vf, c.n, c.betaf, c.posf, c.nf));
 }
 
 void reflect_vector(double* x, index d, index r, Mat V, const double* beta, const index* vpos,
@@ -113,11 +110,11 @@ namespace {
 
 /// Swap entries i and j of the step's per-row arrays (T's rows, rhs, norms, rows, tgt).
 void swap_step_rows(Ctx& c, index i, index j, index d) {
-    swap_rows(c.T, i, j, d);
-    swap_at(c.rhs, i, j);
-    swap_at(c.norms, i, j);
-    swap_at(c.rows, i, j);
-    swap_at(c.tgt, i, j);
+    swap_rows_upto(c.T, i, j, d);
+    swap_entries(c.rhs, i, j);
+    swap_entries(c.norms, i, j);
+    swap_entries(c.rows, i, j);
+    swap_entries(c.tgt, i, j);
 }
 
 /// _eqp_soft: the soft rows T[nh:nh + nw] on the directions the hr hard reflectors
@@ -173,7 +170,7 @@ void eqp_soft(Ctx& c, index nh, index nw, index hr, index d, double soft_tol, St
         } else {
             for (index i = 0; i < nw; ++i)
                 for (index k = 0; k < rs; ++k) c.Lw(i, k) = k <= i ? c.T(nh + i, hr + k) : 0.0;
-            dense::small_lstsq(c.Lw, c.rhs + nh, nw, rs, 0.0, c.p, hr, c.flat, c.tq);
+            small_least_squares(c.Lw.ref(nw, rs), c.rhs + nh, nw, rs, 0.0, c.p + hr, c.lsq);
         }
     }
     reflect_vector(c.p, d, o.nref, c.V, c.beta, c.vpos, false);
@@ -316,7 +313,7 @@ void soft_gradient_x(Ctx& c, index nh, index nw, double* gx, double* g) {
             }
         }
     }
-    dense::apply_qt(gx, n, c.nf, c.Vf, c.betaf, c.posf);
+    apply_qt(gx, n, dense::reflectors(c.Vf, n, c.betaf, c.posf, c.nf));
     for (index k = 0; k < n - c.col; ++k) g[k] = gx[c.col + k];
 }
 
@@ -334,8 +331,11 @@ void freed_gain(Ctx& c, index nh, index hr, index nw, index rs, index i, double&
     }
     un = std::sqrt(dot(w, w, hr));
     for (index r = 0; r < nw; ++r) v[r] = dot(T.row(nh + r), w, hr) / un;
-    dense::small_lstsq(T.at(nh, hr), v, nw, rs, 0.0, c.p, hr, c.flat, c.tq);
-    gain = std::sqrt(dot(c.tq + rs, c.tq + rs, nw - rs));
+    // Qᵀ v by the QR of the soft rows' factor (held transposed: Qᵀ v follows its rs
+    // columns of nw in the scratch); its entries beyond rs are v's part outside its range
+    small_least_squares(T.at(nh, hr).ref(nw, rs), v, nw, rs, 0.0, c.p + hr, c.lsq);
+    const double* qtv = c.lsq + rs * nw;
+    gain = std::sqrt(dot(qtv + rs, qtv + rs, nw - rs));
 }
 
 }  // namespace prioik::detail

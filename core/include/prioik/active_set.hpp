@@ -12,6 +12,8 @@
 #include <cstdint>
 #include <vector>
 
+#include "prioik/nested_qr.hpp"
+
 namespace prioik {
 
 using index = std::int64_t;
@@ -91,15 +93,16 @@ struct ActiveSetResult {
 struct ActiveSetWorkspace {
     // rows in rotated coordinates (B), as weighed in x (Bo), the step's factorization (T)
     // and its reflectors (V, beta, vpos), the fixing reflectors (Vf, betaf, posf)
-    std::vector<double> B, Bo, T, Lw, flat, V, Vf, Ts, ts_rows;
+    std::vector<double> B, Bo, T, Lw, flat, V, Vf, Ts, ts_rows, lsq;
     std::vector<double> blo, bup, rnorm, rhs, norms, tgt, nu, tq;
     std::vector<double> beta, betaf, y, p, g, px, xc, xs;
-    std::vector<index> rows, vpos, posf, nrot, ucol, perm;
+    std::vector<index> rows, vpos, posf, nrot, ucol, perm, iscratch;
     std::vector<std::int8_t> state, saved, eqr, held;
-    // the equality-first try: weighed rows, per-row and per-level vectors, the nested
-    // QR's scratch
-    std::vector<double> eflat, evec, efs, espare;
+    // the equality-first try: weighed rows, per-row and per-level vectors, its scratch
+    // and the nested QR's workspace (nested_qr.hpp)
+    std::vector<double> eflat, evec, efs;
     std::vector<index> eint, eispare;
+    NestedQRWorkspace equality_qr;
     /// per level (k + 1), the working set at its optimum: −1/+1 held at lower/upper
     std::vector<std::int8_t> warm_state, warm_valid;
 

@@ -365,7 +365,8 @@ inline double unit_rows_of(MatrixRef B, Index s0, Index s1, Index* cover) {
 // (x_p)_u = (Qᵀ e_u)[:col] · yfix, which is Zᵀ Sᵀ (c - S x_p) / s².
 // Taken only when I - Z_U Z_Uᵀ - kUnitRowsGap I is positive definite (then
 // σ_min(S Z) ≥ s √gap). Writes p[:n - col]; returns |U|, or -1 when the test fails (p may
-// be written). Scratch: Zu (≥ |U| × n), G (≥ max(1, 2|U|) × n), ucols (n Index).
+// be written). yfix null: the targets are taken as given (no fixed part). Scratch: Zu
+// (≥ |U| × n), G (≥ max(1, 2|U|) × n), ucols (n Index).
 inline Index unit_rows_solve(const Index* cover, double* g, Index col, double* p,
                              const Reflectors& H, MatrixRef Zu, MatrixRef G,
                              const double* yfix, Index* ucols) {
@@ -377,7 +378,7 @@ inline Index unit_rows_solve(const Index* cover, double* g, Index col, double* p
   }
   free_directions(ucols, nu, Zu, H, g);
   for (Index c = 0; c < d; ++c) p[c] = g[col + c];
-  if (col > 0) {
+  if (col > 0 && yfix != nullptr) {
     for (Index i = 0; i < nu; ++i) {
       const double xu = dot(Zu.row(i), yfix, col);
       const double* Zi = Zu.row(i) + col;
