@@ -15,6 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import prioik._core as core
+
 from prioik.formulations import hierarchical_active_set as has
 from prioik.formulations.base import CoreInputError
 from prioik.hierarchy import Task, TaskStack, TaskStackError
@@ -22,7 +24,6 @@ from prioik.hierarchy.families import (FAMILIES, INEQUALITY_FAMILIES, box_bounde
                                        random_inequality_hierarchy)
 from prioik.hierarchy.io import load_stack
 
-core = pytest.importorskip("prioik._core", reason="prioik's compiled core is not built")
 
 DATA = Path(__file__).parent / "data"
 SAVED = sorted((DATA / "fuzz").glob("*.json")) + sorted((DATA / "adversarial").glob("*.json"))
