@@ -158,11 +158,12 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from itertools import compress
+from types import SimpleNamespace
 
 import numpy as np
 
-from prioik.hierarchy import (AMBIGUITY, X_PRECISION, StackData, StackLayout, TaskStack,
-                              ambiguity_reason, check_lexicographic)
+from prioik.hierarchy import (AMBIGUITY, NEAR_AMBIGUITY, X_PRECISION, StackData, StackLayout,
+                              TaskStack, ambiguity_reason, check_lexicographic)
 from prioik.hierarchy.analysis import prepare_certificate
 
 from .base import (Capabilities, CoreInputError, FormulationError, Outcome, ReportVariant,
@@ -177,29 +178,36 @@ try:
 except ImportError as exc:  # pragma: no cover - numba is a declared dependency
     _kernel = None
     _kernel_error = f"{type(exc).__name__}: {exc}"
+try:
+    from prioik._core import ACTIVE_SET_CODES as _CORE_CODES
+except ImportError:  # pragma: no cover - built by pip install
+    _CORE_CODES = None
+#: the kernels' return codes and level flags (the same in both: tests/test_active_set_cpp.py)
+_codes = (_kernel if _kernel is not None else
+          SimpleNamespace(**_CORE_CODES) if _CORE_CODES is not None else None)
 #: the kernel's codes of a clean solve (module constants: read once, not per call)
 _SOLVED_CLEAN, _SOLVED_INFEASIBLE, _SOLVED_OTHER, _NOT_TRIED = (
-    (_kernel.SOLVED_CLEAN, _kernel.SOLVED_INFEASIBLE, _kernel.SOLVED_OTHER, _kernel.NOT_TRIED)
-    if _kernel is not None else (-1, -1, -1, -2))
+    (_codes.SOLVED_CLEAN, _codes.SOLVED_INFEASIBLE, _codes.SOLVED_OTHER, _codes.NOT_TRIED)
+    if _codes is not None else (-1, -1, -1, -2))
 
-_NEAR_AMBIGUITY = _kernel.NEAR_AMBIGUITY if _kernel is not None else 0.0
+_NEAR_AMBIGUITY = NEAR_AMBIGUITY
 #: the kernel's level flags after which the answer is certified
 #: (:meth:`Prepared._certify_flagged`): flag, ``info`` key of the flagged levels, and why
 #: such a level may not be optimal
 _CERTIFIED_FLAGS = (
-    (_kernel.FLAG_AMBIGUOUS_PATH if _kernel is not None else -1, "ambiguous_path_levels",
+    (_codes.FLAG_AMBIGUOUS_PATH if _codes is not None else -1, "ambiguous_path_levels",
      f"passed through an ambiguous rank decision (a pivot within {AMBIGUITY:g}x of its "
      f"threshold) before settling"),
-    (_kernel.FLAG_NEAR_RELEASE if _kernel is not None else -1, "near_release_levels",
+    (_codes.FLAG_NEAR_RELEASE if _codes is not None else -1, "near_release_levels",
      "ended with a held row inside its bound by less than its release tolerance "
      "(releasing it may lower the level)"),
-    (_kernel.FLAG_HELD_OFF_BOUND if _kernel is not None else -1, "held_off_bound_levels",
+    (_codes.FLAG_HELD_OFF_BOUND if _codes is not None else -1, "held_off_bound_levels",
      "kept a row off its bound (within the dual tolerance) held at the bound for the "
      "levels below (it may block a direction they need)"),
-    (_kernel.FLAG_NEAR_AMBIGUOUS if _kernel is not None else -1, "near_ambiguous_levels",
+    (_codes.FLAG_NEAR_AMBIGUOUS if _codes is not None else -1, "near_ambiguous_levels",
      f"settled on a rank decision within {_NEAR_AMBIGUITY:g}x of the ambiguity band (a "
      f"pivot within {_NEAR_AMBIGUITY * AMBIGUITY:g}x of its threshold)"),
-    (_kernel.FLAG_STALLED if _kernel is not None else -1, "stalled_levels",
+    (_codes.FLAG_STALLED if _codes is not None else -1, "stalled_levels",
      "kept changing its working set without a step that moved (a cycle of rounding: "
      "its multipliers and steps disagree) and settled where it stood"),
 )
@@ -310,9 +318,9 @@ class Prepared:
     """
 
     def __init__(self, layout: StackLayout, options: dict) -> None:
-        if _kernel is None:
+        if _kernel is None and options.get("kernel", "numba") == "numba":
             raise FormulationError(f"{NAME} needs numba: {_kernel_error}; install it with "
-                                   f"`pip install numba`")
+                                   f"`pip install numba`, or take kernel='cpp'")
         self.layout = layout
         self.rcond = float(options["rcond"])
         self.primal_tol = float(options["primal_tol"])
@@ -468,7 +476,7 @@ class Prepared:
                      list(compress(self._levels, self._over.tolist())),
                      "warm_start": self.warm_start, "equality_first": first},
                     self._res.copy())
-        if code == _kernel.NOT_SOLVED:
+        if code == _codes.NOT_SOLVED:
             self.reset()
             data.check()     # names the task, level and row at fault
             # a level of extreme scale (‖A_i‖_F beyond 1e100, or below 1e-100 with a
@@ -497,7 +505,7 @@ class Prepared:
         reasons = []
         if flag > 0.0:
             flags = self._flags
-            capped = np.flatnonzero(flags == _kernel.FLAG_ITERATION_CAP).tolist()
+            capped = np.flatnonzero(flags == _codes.FLAG_ITERATION_CAP).tolist()
             lv = capped[0]
             what = (f"level {lv} ({', '.join(self.layout.names[lv])})" if lv < k
                     else "the minimum-norm tie-break")

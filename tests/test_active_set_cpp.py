@@ -331,3 +331,10 @@ def test_warm_limit_sequences_match_numba(redundant, level_of_box):
             assert_same(stack, a, b, f"limits sequence {seq} step {step}")
             tried += a.info["equality_first"]
         assert tried > 0
+
+
+def test_codes_and_flags_are_the_numba_kernels():
+    from prioik.formulations import _active_set_kernel as numba_kernel
+    assert core.ACTIVE_SET_CODES
+    for name, value in core.ACTIVE_SET_CODES.items():
+        assert getattr(numba_kernel, name) == value, name

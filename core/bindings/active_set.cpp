@@ -106,6 +106,20 @@ nb::ndarray<nb::numpy, T> view(std::vector<T>& v, nb::handle owner) {
 void bind_active_set(nb::module_& m) {
     using Int8In = nb::ndarray<const std::int8_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
     using IndexIn = nb::ndarray<const std::int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
+    nb::dict codes;
+    codes["NOT_SOLVED"] = static_cast<int>(prioik::SolveCode::not_solved);
+    codes["SOLVED_CLEAN"] = static_cast<int>(prioik::SolveCode::clean);
+    codes["SOLVED_INFEASIBLE"] = static_cast<int>(prioik::SolveCode::infeasible);
+    codes["SOLVED_OTHER"] = static_cast<int>(prioik::SolveCode::other);
+    codes["NOT_TRIED"] = static_cast<int>(prioik::SolveCode::not_tried);
+    codes["FLAG_OK"] = static_cast<int>(prioik::FLAG_OK);
+    codes["FLAG_ITERATION_CAP"] = static_cast<int>(prioik::FLAG_ITERATION_CAP);
+    codes["FLAG_AMBIGUOUS_PATH"] = static_cast<int>(prioik::FLAG_AMBIGUOUS_PATH);
+    codes["FLAG_NEAR_RELEASE"] = static_cast<int>(prioik::FLAG_NEAR_RELEASE);
+    codes["FLAG_HELD_OFF_BOUND"] = static_cast<int>(prioik::FLAG_HELD_OFF_BOUND);
+    codes["FLAG_NEAR_AMBIGUOUS"] = static_cast<int>(prioik::FLAG_NEAR_AMBIGUOUS);
+    codes["FLAG_STALLED"] = static_cast<int>(prioik::FLAG_STALLED);
+    m.attr("ACTIVE_SET_CODES") = codes;
     nb::class_<ActiveSetSolver>(m, "ActiveSetSolver",
                                 "The hierarchical active set prepared for one layout "
                                 "(core/include/prioik/active_set.hpp); one thread at a time.")
