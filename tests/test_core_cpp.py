@@ -378,3 +378,46 @@ def test_kernel_cpp_is_an_option_value_and_numba_stays_the_default():
     stack = FAMILIES["compatible"](np.random.default_rng(4), 8, 2)
     assert formulations.solve(stack, "extended_jacobian").info["kernel"] == "numba"
     assert formulations.solve(stack, "extended_jacobian", kernel="cpp").info["kernel"] == "cpp"
+
+
+# -------------------------------------------------------------- C++ without Python
+def _tool(name: str) -> str:
+    """The build tool of this environment (the venv's CMake and Ninja first)."""
+    import shutil
+    import sys
+    here = Path(sys.executable).parent / name
+    found = str(here) if here.exists() else shutil.which(name)
+    if found is None:
+        pytest.fail(f"{name} is not installed here: the C++ core cannot be built")
+    return found
+
+
+@pytest.mark.slow
+def test_the_core_builds_alone_and_a_cpp_project_links_prioik_core(tmp_path):
+    """core/ configured and built without Python (its C++ tests and the example program
+    run by ctest), installed, and core/examples built as another project would build it:
+    find_package(prioik), target prioik::core; the example solves a stack and checks it."""
+    import subprocess
+    import sys
+    root = Path(__file__).parent.parent
+    cmake, ninja = _tool("cmake"), _tool("ninja")
+    build, prefix, example = tmp_path / "core", tmp_path / "prefix", tmp_path / "example"
+
+    def run(*args):
+        done = subprocess.run(args, capture_output=True, text=True)
+        assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+        return done.stdout
+    run(cmake, "-S", str(root / "core"), "-B", str(build), "-G", "Ninja",
+        f"-DCMAKE_MAKE_PROGRAM={ninja}", "-DPRIOIK_BUILD_TESTS=ON",
+        f"-DPython_EXECUTABLE={sys.executable}", f"-DCMAKE_INSTALL_PREFIX={prefix}")
+    run(cmake, "--build", str(build))
+    tested = run(_tool("ctest"), "--test-dir", str(build), "--output-on-failure")
+    assert "100% tests passed" in tested
+    run(cmake, "--install", str(build))
+    assert (prefix / "include" / "prioik" / "householder.hpp").exists()
+    eigen = run(sys.executable, "-m", "cmeel", "cmake").strip().replace(":", ";")
+    run(cmake, "-S", str(root / "core" / "examples"), "-B", str(example), "-G", "Ninja",
+        f"-DCMAKE_MAKE_PROGRAM={ninja}", f"-DCMAKE_PREFIX_PATH={prefix};{eigen}")
+    run(cmake, "--build", str(example))
+    out = run(str(example / "solve_stack"))
+    assert out.strip().endswith("ok") and "ranks 6 3 3" in out
