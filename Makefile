@@ -22,7 +22,7 @@ CORE_SOURCES := $(shell find core -type f -not -name '*~' 2>/dev/null)
 # paths stay the same from one build to the next)
 BUILD_REQUIRES = $$($(PY) -c "import tomllib; print(*tomllib.load(open('pyproject.toml', 'rb'))['build-system']['requires'])") "cmake>=3.18" "ninja>=1.10"
 
-.PHONY: test test-core demo venv venv-core clean
+.PHONY: test test-core demo venv venv-core clean asan
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -68,6 +68,17 @@ test: $(STAMP) $(CORE_STAMP_BUILT) $(CORE_STAMP)
 	wait $$core; status=$$?; \
 	echo "--- tests/core in $(CORE_VENV) (the core alone):"; cat $(CORE_VENV)/test-core.log; \
 	test $$full -eq 0 && test $$status -eq 0
+
+# The C++ core alone (core/, no Python), built with -fsanitize=address,undefined, and its
+# tests run under the sanitizers (ctest: the core's tests and the example program)
+ASAN_DIR := build/asan
+asan: $(STAMP)
+	$(VENV)/bin/cmake -S core -B $(ASAN_DIR) -G Ninja -DCMAKE_MAKE_PROGRAM=$(abspath $(VENV)/bin/ninja) \
+		-DCMAKE_BUILD_TYPE=RelWithDebInfo -DPRIOIK_SANITIZE=ON -DPRIOIK_BUILD_TESTS=ON \
+		-DPython_EXECUTABLE=$(abspath $(PY))
+	$(VENV)/bin/cmake --build $(ASAN_DIR)
+	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+		$(VENV)/bin/ctest --test-dir $(ASAN_DIR) --output-on-failure
 
 demo: $(STAMP) $(CORE_STAMP_BUILT)
 	$(VENV)/bin/prioik fencing --variant both --out $(OUT)

@@ -1,9 +1,31 @@
-"""The compiled core (``prioik._core``, core/): how it was built, and that its answers
-equal the numba kernels' (the oracle while both exist)."""
+"""The compiled core (``prioik._core``, core/): how it was built, that its answers equal
+the numba kernel's (the oracle while both exist), and that every array it is handed is
+checked at the boundary."""
 
 from __future__ import annotations
 
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
 import prioik._core as core
+from prioik import formulations
+from prioik.formulations.base import ConcurrentUseError, CoreInputError
+from prioik.hierarchy import Task, TaskStack, TaskStackError, load_stack
+from prioik.hierarchy import linalg
+from prioik.hierarchy.families import FAMILIES, near_singular, same_shape_batch
+
+DATA = Path(__file__).parent / "data"
+SAVED = sorted((DATA / "fuzz").glob("*.json")) + sorted((DATA / "adversarial").glob("*.json"))
+
+#: the option sets of the prepared solve: plain eq. 18, selective damping, step bounds
+OPTION_SETS = {"plain": {}, "selective": {"level_damping": 0.1, "singular_threshold": 0.05},
+               "step_bound": {"step_bound": 0.5}}
 
 
 def test_core_is_built_with_the_stated_rounding_rule():
@@ -12,3 +34,390 @@ def test_core_is_built_with_the_stated_rounding_rule():
     assert info.fp_contract is False      # a * b + c is rounded twice, as written
     assert info.eigen.startswith("3.4.")
     assert info.compiler
+
+
+def test_core_constants_are_the_hierarchy_s():
+    assert core.AMBIGUITY == linalg.AMBIGUITY
+    assert core.NEAR_AMBIGUITY == linalg.NEAR_AMBIGUITY
+    assert core.PRECISION_LIMIT_NORM == linalg.PRECISION_LIMIT_NORM
+    from prioik.formulations import _extended_jacobian_kernel as kernel
+    assert (core.SCALE_HIGH, core.SCALE_LOW) == (kernel.SCALE_HIGH, kernel.SCALE_LOW)
+
+
+# ------------------------------------------------------------- the numba oracle
+def assert_same_answer(stack: TaskStack, **options) -> None:
+    """The C++ core's answer equals the numba kernel's on ``stack``: the same status,
+    rank profile and flagged levels; per level ‖w_i‖² within 1e-12 relative; and ``x``
+    within 1e-10 where no rank decision is near its threshold (the optimum is then well
+    determined).
+
+    The two round differently (numba reassociates sums under fast math, the core
+    rounds as written, and the trust-region step's SVD is LAPACK's in one and a
+    one-sided Jacobi in the other), and an ill-conditioned level turns that into
+    differences beyond those bounds. So the bounds also hold when the core is within
+    32 times the distance from numba of the LAPACK path, a third rounding of the same
+    algorithm (that distance measures how far rounding alone moves the stack's
+    answer); a residual at rounding level (1e-12 of the level's scale) is not compared
+    further; and where a step bound damped a level, whose step the Newton iteration
+    finds to 1e-12 of the bound, ``x`` and the residuals are compared to 1e-10 of their
+    scale.
+    """
+    prepare = formulations.prepare
+    ref = prepare(stack.layout, "extended_jacobian", kernel="numba", **options).solve(stack)
+    got = prepare(stack.layout, "extended_jacobian", kernel="cpp", **options).solve(stack)
+    third = prepare(stack.layout, "extended_jacobian", kernel="lapack", **options).solve(stack)
+    assert got.info["kernel"] == "cpp" and ref.info["kernel"] == "numba"
+    assert got.status == ref.status, (got.info, ref.info)
+    np.testing.assert_array_equal(got.info["rank_profile"], ref.info["rank_profile"])
+    for key in ("damped_levels", "ambiguous_levels", "near_ambiguous_levels"):
+        assert got.info.get(key) == ref.info.get(key), key
+    bounded = "step_bound" in options and bool(ref.info.get("damped_levels"))
+    for i, level in enumerate(stack.levels):
+        w_got, w_ref, w_third = got.residuals[i], ref.residuals[i], third.residuals[i]
+        scale = np.linalg.norm(level.A) * np.linalg.norm(ref.x) + np.linalg.norm(level.b)
+        allowed = max(1e-12 * w_ref ** 2, (1e-12 * scale) ** 2,
+                      32 * abs(w_third ** 2 - w_ref ** 2),
+                      2 * w_ref * 1e-10 * scale if bounded else 0.0)
+        assert abs(w_got ** 2 - w_ref ** 2) <= allowed, (i, w_got, w_ref, w_third, scale)
+    if "ambiguous_levels" not in ref.info and "near_ambiguous_levels" not in ref.info:
+        size = max(1.0, np.linalg.norm(ref.x))
+        allowed = max(1e-10 * size, 32 * np.linalg.norm(third.x - ref.x),
+                      1e-10 * size if bounded else 0.0)
+        assert np.linalg.norm(got.x - ref.x) <= allowed
+
+
+def _equality_part(stack: TaskStack, bounds_as_targets: bool) -> TaskStack | None:
+    """The stack's equality tasks (``bounds_as_targets``: and its inequality rows as
+    equalities aiming at their bounds' midpoint, or the finite bound)."""
+    levels = []
+    for level in stack.levels:
+        tasks = []
+        for t in level:
+            if t.is_equality:
+                tasks.append(Task(t.name, t.A, t.b, weight=t.weight))
+            elif bounds_as_targets:
+                lo = np.asarray(t.lower, dtype=float) if t.lower is not None else np.full(t.m, -np.inf)
+                up = np.asarray(t.upper, dtype=float) if t.upper is not None else np.full(t.m, np.inf)
+                target = np.where(np.isfinite(lo) & np.isfinite(up), 0.5 * (lo + up),
+                                  np.where(np.isfinite(lo), lo, np.where(np.isfinite(up),
+                                                                         up, 0.0)))
+                tasks.append(Task(t.name, t.A, target, weight=t.weight))
+        if tasks:
+            levels.append(tasks)
+    return TaskStack(levels) if levels else None
+
+
+@pytest.mark.parametrize("options", sorted(OPTION_SETS))
+@pytest.mark.parametrize("family", sorted(FAMILIES))
+@pytest.mark.parametrize("seed", range(8))
+def test_core_equals_numba_on_the_shared_families(family, seed, options):
+    rng = np.random.default_rng(4000 + seed)
+    stack = FAMILIES[family](rng, int(rng.integers(3, 45)), int(rng.integers(1, 8)))
+    assert_same_answer(stack, **OPTION_SETS[options])
+
+
+@pytest.mark.parametrize("bounds_as_targets", [False, True])
+@pytest.mark.parametrize("path", SAVED, ids=[p.stem for p in SAVED])
+def test_core_equals_numba_on_the_saved_fuzz_and_adversarial_stacks(path, bounds_as_targets):
+    stack = _equality_part(load_stack(path), bounds_as_targets)
+    if stack is None:
+        pytest.skip("no equality rows")
+    for options in OPTION_SETS.values():
+        assert_same_answer(stack, **options)
+
+
+def test_the_saved_stacks_cover_every_rank_decision_kind():
+    """The saved stacks reach the ambiguous and near-ambiguous branches (so the equality
+    test above compares them), not only clear decisions."""
+    seen = set()
+    for path in SAVED:
+        stack = _equality_part(load_stack(path), True)
+        if stack is None:
+            continue
+        info = formulations.solve(stack, "extended_jacobian", kernel="cpp").info
+        seen.update(key for key in ("ambiguous_levels", "near_ambiguous_levels") if key in info)
+    assert seen == {"ambiguous_levels", "near_ambiguous_levels"}
+
+
+@settings(max_examples=60, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(family=st.sampled_from(sorted(FAMILIES)), seed=st.integers(0, 2 ** 31),
+       n=st.integers(1, 60), k=st.integers(1, 9), options=st.sampled_from(sorted(OPTION_SETS)))
+def test_core_equals_numba_on_seeded_stacks(family, seed, n, k, options):
+    try:
+        stack = FAMILIES[family](np.random.default_rng(seed), n, k)
+    except (ValueError, TaskStackError):
+        return                          # a family that does not take this n, k
+    assert_same_answer(stack, **OPTION_SETS[options])
+
+
+@pytest.mark.parametrize("sigma", [1e-1, 1e-4, 1e-8, 0.0])
+@pytest.mark.parametrize("options", sorted(OPTION_SETS))
+def test_core_equals_numba_near_a_singularity(sigma, options):
+    assert_same_answer(near_singular(sigma), **OPTION_SETS[options])
+
+
+def test_core_equals_numba_on_a_unit_row_posture_below_a_floating_base():
+    """The deferred unit-row level (a posture of uniform weight on all but a floating
+    base's six columns) solved by the Woodbury step, after tasks that fix coordinates."""
+    rng = np.random.default_rng(3)
+    n = 30
+    posture = np.zeros((n - 6, n))
+    posture[np.arange(n - 6), np.arange(6, n)] = 2.0
+    for top in (3, 8, 14):
+        stack = TaskStack([[Task("contact", rng.standard_normal((top, n)), rng.standard_normal(top))],
+                           [Task("posture", posture, rng.standard_normal(n - 6))]])
+        assert_same_answer(stack)
+        sol = formulations.solve(stack, "extended_jacobian", kernel="cpp")
+        assert sol.status == "optimal"
+        assert sol.info["rank_profile"][1] == min(n - 6, n - top)   # Woodbury when top ≥ 6
+
+
+@pytest.mark.parametrize("options", sorted(OPTION_SETS))
+def test_core_batch_equals_numba_batch(options):
+    rng = np.random.default_rng(21)
+    stacks = same_shape_batch(FAMILIES["conflicting"](rng, 18, 4), rng, 9, reduce=0.3)
+    ref = formulations.solve_batch(stacks, "extended_jacobian", kernel="numba",
+                                   **OPTION_SETS[options])
+    got = formulations.solve_batch(stacks, "extended_jacobian", kernel="cpp",
+                                   **OPTION_SETS[options])
+    assert list(got.statuses) == list(ref.statuses)
+    for x, y in zip(got.X, ref.X):
+        assert np.linalg.norm(x - y) <= 1e-10 * max(1.0, np.linalg.norm(y))
+    for s, x in zip(stacks, got.X):       # each row is that stack's own solve
+        one = formulations.solve(s, "extended_jacobian", kernel="cpp", **OPTION_SETS[options])
+        np.testing.assert_array_equal(x, one.x)
+
+
+def test_core_solves_rows_of_extreme_scale_by_equilibrating():
+    stack = TaskStack([[Task("a", 1e-200 * np.eye(2), np.array([1.0, 2.0]))]])
+    sol = formulations.solve(stack, "extended_jacobian", kernel="cpp")
+    np.testing.assert_allclose(sol.x * 1e-200, [1.0, 2.0], rtol=1e-10)
+
+
+# ------------------------------------------------------------------- boundary
+def _solver(M=4, n=3, k=2):
+    starts = [0, M // 2, M][:k + 1]
+    return core.ExtendedJacobian(starts, n, rcond=1e-10)
+
+
+def _good(M=4, n=3):
+    rng = np.random.default_rng(0)
+    return rng.standard_normal((M, n)), rng.standard_normal(M), np.ones(M)
+
+
+def _with(index, value, arrays):
+    out = list(arrays)
+    out[index] = value
+    return out
+
+
+def _nan_at(array, where):
+    bad = array.copy()
+    bad[where] = np.nan
+    return bad
+
+
+A, B, W = _good()
+BAD_ARRAYS = {
+    "A float32": (_with(0, A.astype(np.float32), (A, B, W)), "A"),
+    "A int64": (_with(0, A.astype(np.int64), (A, B, W)), "A"),
+    "A complex": (_with(0, A.astype(complex), (A, B, W)), "A"),
+    "A list": (_with(0, A.tolist(), (A, B, W)), "A"),
+    "A None": (_with(0, None, (A, B, W)), "A"),
+    "A 1-D": (_with(0, A.ravel(), (A, B, W)), "A"),
+    "A transposed": (_with(0, np.ascontiguousarray(A.T), (A, B, W)), "A"),
+    "A too many rows": (_with(0, np.vstack([A, A]), (A, B, W)), "A"),
+    "A Fortran order": (_with(0, np.asfortranarray(A), (A, B, W)), "A"),
+    "A strided view": (_with(0, np.hstack([A, A])[:, ::2], (A, B, W)), "A"),
+    "A empty": (_with(0, np.empty((0, 3)), (A, B, W)), "A"),
+    "A NaN": (_with(0, _nan_at(A, (1, 2)), (A, B, W)), "A[1, 2]"),
+    "A inf": (_with(0, np.where(np.arange(3) == 0, np.inf, A), (A, B, W)), "A[0, 0]"),
+    "b float32": (_with(1, B.astype(np.float32), (A, B, W)), "b"),
+    "b 2-D": (_with(1, B[:, None], (A, B, W)), "b"),
+    "b short": (_with(1, B[:2].copy(), (A, B, W)), "b"),
+    "b strided": (_with(1, np.repeat(B, 2)[::2], (A, B, W)), "b"),
+    "b empty": (_with(1, np.empty(0), (A, B, W)), "b"),
+    "b NaN": (_with(1, _nan_at(B, 3), (A, B, W)), "b[3]"),
+    "b -inf": (_with(1, np.where(np.arange(4) == 2, -np.inf, B), (A, B, W)), "b[2]"),
+    "sqrt_weight int": (_with(2, np.ones(4, dtype=np.int32), (A, B, W)), "sqrt_weight"),
+    "sqrt_weight zero": (_with(2, np.array([1.0, 0.0, 1.0, 1.0]), (A, B, W)), "sqrt_weight[1]"),
+    "sqrt_weight negative": (_with(2, np.array([1.0, 1.0, -2.0, 1.0]), (A, B, W)),
+                             "sqrt_weight[2]"),
+    "sqrt_weight NaN": (_with(2, _nan_at(W, 0), (A, B, W)), "sqrt_weight[0]"),
+    "sqrt_weight inf": (_with(2, np.array([1.0, np.inf, 1.0, 1.0]), (A, B, W)),
+                        "sqrt_weight[1]"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_ARRAYS))
+def test_every_bad_array_gives_prioik_s_error_naming_it(case):
+    arrays, name = BAD_ARRAYS[case]
+    solver = _solver()
+    with pytest.raises(CoreInputError) as err:
+        solver.solve(*arrays)
+    assert name in str(err.value)
+    assert isinstance(err.value, formulations.FormulationError)
+    # the solver still works after refusing an input
+    x = solver.solve(A, B, W).x
+    assert np.all(np.isfinite(x))
+
+
+@pytest.mark.parametrize("case", sorted(BAD_ARRAYS))
+def test_every_bad_array_of_a_batch_gives_prioik_s_error_naming_it(case):
+    """A bad value in the second stack names the stack and the entry; an array that is
+    not a batch of the layout's arrays names the array."""
+    arrays, name = BAD_ARRAYS[case]
+    solver = _solver()
+    batch = []
+    for good, bad in zip((A, B, W), arrays):
+        if (isinstance(bad, np.ndarray) and bad.shape == good.shape
+                and bad.dtype == np.float64 and bad.flags.c_contiguous):
+            batch.append(np.stack([good, bad]))   # a bad value (or the good array)
+        else:
+            batch.append(bad)                     # not a batch of the layout's arrays
+    base = name.split("[")[0]
+    pattern = (rf"^stack 1: {base}\[" if name.endswith("]") else rf"^{base} ")
+    with pytest.raises(CoreInputError, match=pattern):
+        solver.solve_batch(*batch)
+
+
+def test_a_batch_of_non_contiguous_stacks_is_refused_by_name():
+    solver = _solver()
+    As = np.stack([A, A, A])[::2]
+    bs, ws = np.stack([B, B]), np.stack([W, W])
+    with pytest.raises(CoreInputError, match="A must be C-contiguous"):
+        solver.solve_batch(As, bs, ws)
+    with pytest.raises(CoreInputError, match="b must have shape"):
+        solver.solve_batch(np.stack([A, A]), np.stack([B, B, B]), ws)
+
+
+@pytest.mark.parametrize("starts, n, opts, word", [
+    ([], 3, {}, "starts"), ([1, 2], 3, {}, "starts"), ([0, 3, 2], 3, {}, "non-decreasing"),
+    ([0, 2], 0, {}, "n must be positive"), ([0, 0], 3, {}, "no rows"),
+    ([0, 2], 3, {"rcond": 0.0}, "rcond"), ([0, 2], 3, {"rcond": float("nan")}, "rcond"),
+    ([0, 2], 3, {"level_damping": -1.0}, "level_damping"),
+    ([0, 2], 3, {"singular_threshold": float("inf")}, "singular_threshold"),
+    ([0, 2], 3, {"step_bound": [1.0, 2.0]}, "step_bound"),
+    ([0, 2], 3, {"step_bound": [float("nan")]}, "step_bound")])
+def test_a_malformed_layout_or_option_is_refused_by_name(starts, n, opts, word):
+    options = {"rcond": 1e-10, **opts}
+    with pytest.raises(CoreInputError, match=word):
+        core.ExtendedJacobian(starts, n, **options)
+
+
+def test_prepared_cpp_solver_names_the_task_of_a_nan():
+    rng = np.random.default_rng(1)
+    stack = FAMILIES["compatible"](rng, 10, 3)
+    solver = formulations.prepare(stack.layout, "extended_jacobian", kernel="cpp")
+    data = stack.data.copy()
+    task = stack.levels[1][0].name
+    data.rows(task)[0][0, 0] = np.nan
+    with pytest.raises(TaskStackError, match=task):
+        solver.solve(data)
+
+
+def test_the_result_is_read_by_name_and_copied_by_the_prepared_solver():
+    stack = FAMILIES["conflicting"](np.random.default_rng(2), 12, 3)
+    solver = formulations.prepare(stack.layout, "extended_jacobian", kernel="cpp")
+    first = solver.solve(stack)
+    x = first.x.copy()
+    other = FAMILIES["conflicting"](np.random.default_rng(3), 12, 3)
+    if other.layout == stack.layout:
+        solver.solve(other)
+    np.testing.assert_array_equal(first.x, x)     # a later solve leaves the answer alone
+    res = core.ExtendedJacobian(list(stack.layout.starts), stack.n, rcond=1e-10).solve(
+        stack.data.A, stack.data.b, stack.data.sqrt_weight)
+    assert res.solved and res.finite and not res.ambiguous
+    assert res.x.shape == (stack.n,) and res.ranks.dtype == np.int64
+    assert not res.x.flags.writeable
+    np.testing.assert_array_equal(res.ranks, first.info["rank_profile"])
+
+
+def test_a_solve_releases_the_gil_and_one_solver_serves_one_thread():
+    """While one thread solves (the GIL released), another thread's call on the same
+    solver raises ConcurrentUseError; on their own solvers both run, with the right
+    answers."""
+    rng = np.random.default_rng(8)
+    stack = FAMILIES["conflicting"](rng, 150, 6)
+    d = stack.data
+    shared = core.ExtendedJacobian(list(stack.layout.starts), stack.n, rcond=1e-10)
+    expected = shared.solve(d.A, d.b, d.sqrt_weight).x.copy()
+    stop = threading.Event()
+    wrong = []
+    refused = [0, 0]            # the worker's, the main thread's
+
+    def solve_until_stopped(who):
+        while not stop.is_set():
+            try:
+                x = shared.solve(d.A, d.b, d.sqrt_weight).x
+            except ConcurrentUseError:
+                refused[who] += 1
+                continue
+            if not np.array_equal(x, expected):
+                wrong.append(x)
+    worker = threading.Thread(target=solve_until_stopped, args=(0,))
+    worker.start()
+    deadline = time.monotonic() + 20.0
+    try:
+        while sum(refused) < 10 and time.monotonic() < deadline:
+            try:
+                shared.solve(d.A, d.b, d.sqrt_weight)
+            except ConcurrentUseError:
+                refused[1] += 1
+    finally:
+        stop.set()
+        worker.join()
+    assert sum(refused) >= 10          # the two calls overlapped: the GIL was released
+    assert not wrong
+    own = core.ExtendedJacobian(list(stack.layout.starts), stack.n, rcond=1e-10)
+    np.testing.assert_array_equal(own.solve(d.A, d.b, d.sqrt_weight).x, expected)
+
+
+def test_kernel_cpp_is_an_option_value_and_numba_stays_the_default():
+    stack = FAMILIES["compatible"](np.random.default_rng(4), 8, 2)
+    assert formulations.solve(stack, "extended_jacobian").info["kernel"] == "numba"
+    assert formulations.solve(stack, "extended_jacobian", kernel="cpp").info["kernel"] == "cpp"
+
+
+# -------------------------------------------------------------- C++ without Python
+def _tool(name: str) -> str:
+    """The build tool of this environment (the venv's CMake and Ninja first)."""
+    import shutil
+    import sys
+    here = Path(sys.executable).parent / name
+    found = str(here) if here.exists() else shutil.which(name)
+    if found is None:
+        pytest.fail(f"{name} is not installed here: the C++ core cannot be built")
+    return found
+
+
+@pytest.mark.slow
+def test_the_core_builds_alone_and_a_cpp_project_links_prioik_core(tmp_path):
+    """core/ configured and built without Python (its C++ tests and the example program
+    run by ctest), installed, and core/examples built as another project would build it:
+    find_package(prioik), target prioik::core; the example solves a stack and checks it."""
+    import subprocess
+    import sys
+    root = Path(__file__).parent.parent
+    cmake, ninja = _tool("cmake"), _tool("ninja")
+    build, prefix, example = tmp_path / "core", tmp_path / "prefix", tmp_path / "example"
+
+    def run(*args):
+        done = subprocess.run(args, capture_output=True, text=True)
+        assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+        return done.stdout
+    run(cmake, "-S", str(root / "core"), "-B", str(build), "-G", "Ninja",
+        f"-DCMAKE_MAKE_PROGRAM={ninja}", "-DPRIOIK_BUILD_TESTS=ON",
+        f"-DPython_EXECUTABLE={sys.executable}", f"-DCMAKE_INSTALL_PREFIX={prefix}")
+    run(cmake, "--build", str(build))
+    tested = run(_tool("ctest"), "--test-dir", str(build), "--output-on-failure")
+    assert "100% tests passed" in tested
+    run(cmake, "--install", str(build))
+    assert (prefix / "include" / "prioik" / "householder.hpp").exists()
+    eigen = run(sys.executable, "-m", "cmeel", "cmake").strip().replace(":", ";")
+    run(cmake, "-S", str(root / "core" / "examples"), "-B", str(example), "-G", "Ninja",
+        f"-DCMAKE_MAKE_PROGRAM={ninja}", f"-DCMAKE_PREFIX_PATH={prefix};{eigen}")
+    run(cmake, "--build", str(example))
+    out = run(str(example / "solve_stack"))
+    assert out.strip().endswith("ok") and "ranks 6 3 3" in out

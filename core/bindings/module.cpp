@@ -25,8 +25,20 @@ namespace {
 
 using AnyArray = nb::ndarray<nb::ro>;
 
-std::string python_type_name(nb::handle h) {
-  return nb::cast<std::string>(nb::handle(reinterpret_cast<PyObject*>(Py_TYPE(h.ptr()))).attr("__name__"));
+std::string python_type_name(nb::handle h) { return Py_TYPE(h.ptr())->tp_name; }
+
+std::string dtype_text(const AnyArray& a) {
+  const nb::dlpack::dtype t = a.dtype();
+  const char* kind = "an unknown type";
+  switch (static_cast<nb::dlpack::dtype_code>(t.code)) {
+    case nb::dlpack::dtype_code::Int: kind = "int"; break;
+    case nb::dlpack::dtype_code::UInt: kind = "uint"; break;
+    case nb::dlpack::dtype_code::Float: kind = "float"; break;
+    case nb::dlpack::dtype_code::Complex: kind = "complex"; break;
+    case nb::dlpack::dtype_code::Bool: kind = "bool"; break;
+    default: break;
+  }
+  return std::string(kind) + std::to_string(t.bits);
 }
 
 std::string shape_text(const AnyArray& a) {
@@ -50,8 +62,7 @@ const double* checked_array(nb::handle h, const char* name, std::vector<Index> s
     throw prioik::InputError(std::string(name) + " must be a float64 numpy array, got " +
                              python_type_name(h));
   if (a.dtype() != nb::dtype<double>())
-    throw prioik::InputError(std::string(name) + " must be float64, got another dtype (" +
-                             nb::cast<std::string>(nb::str(h.attr("dtype"))) + ")");
+    throw prioik::InputError(std::string(name) + " must be float64, got " + dtype_text(a));
   if (a.device_type() != nb::device::cpu::value)
     throw prioik::InputError(std::string(name) + " must be on the CPU");
   if (a.ndim() != shape.size())
@@ -226,10 +237,12 @@ NB_MODULE(_core, m) {
            nb::arg("starts"), nb::arg("n"), nb::kw_only(), nb::arg("rcond"),
            nb::arg("level_damping") = 0.0, nb::arg("singular_threshold") = 0.0,
            nb::arg("step_bound") = std::vector<double>())
-      .def("solve", &solve_one, nb::arg("A"), nb::arg("b"), nb::arg("sqrt_weight"),
+      .def("solve", &solve_one, nb::arg("A").none(), nb::arg("b").none(),
+           nb::arg("sqrt_weight").none(),
            nb::rv_policy::reference_internal,
            "Solve one stack (A: M × n, b and sqrt_weight: M; C-contiguous float64).")
-      .def("solve_batch", &solve_many, nb::arg("A"), nb::arg("b"), nb::arg("sqrt_weight"),
+      .def("solve_batch", &solve_many, nb::arg("A").none(), nb::arg("b").none(),
+           nb::arg("sqrt_weight").none(),
            "Solve N stacks (A: N × M × n, b and sqrt_weight: N × M), each on its own.")
       .def_prop_ro("rows", &ExtendedJacobian::rows)
       .def_prop_ro("cols", &ExtendedJacobian::cols)

@@ -47,10 +47,19 @@ struct Reflectors {
 
 // --------------------------------------------------------------------------- vectors
 
-// a · b over n entries
+// a · b over n entries, summed in eight interleaved partial sums (s_r: the entries
+// j ≡ r mod 8) added pairwise, ((s0 + s1) + (s2 + s3)) + ((s4 + s5) + (s6 + s7)), then the
+// tail in order: an order written out, so that the compiler may vectorise it without
+// reassociating (the rounding rule), and eight chains of dependent additions hide each
+// other's latency.
 inline double dot(const double* a, const double* b, Index n) {
-  double acc = 0.0;
-  for (Index j = 0; j < n; ++j) acc += a[j] * b[j];
+  double s[8] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
+  Index j = 0;
+  for (; j + 8 <= n; j += 8) {
+    for (int r = 0; r < 8; ++r) s[r] += a[j + r] * b[j + r];
+  }
+  double acc = ((s[0] + s[1]) + (s[2] + s[3])) + ((s[4] + s[5]) + (s[6] + s[7]));
+  for (; j < n; ++j) acc += a[j] * b[j];
   return acc;
 }
 
