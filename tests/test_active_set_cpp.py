@@ -80,14 +80,16 @@ def differences(stack: TaskStack, cpp, ref) -> dict:
             "info": {k: (cpp.info.get(k), ref.info.get(k)) for k in keys}}
 
 
-def rounding_spread(stack: TaskStack, ref, draws: int = 2) -> tuple[np.ndarray, float]:
+def rounding_spread(stack: TaskStack, ref, draws: int = 2) -> tuple[np.ndarray, float, set]:
     """How far the numba kernel's own answer moves when ``A`` moves by one ulp (each
     entry times ``1 ± eps``, ``draws`` seeded draws): each level's largest ``‖w_i‖²``
-    change and ``x``'s largest relative change. Two kernels that round differently
-    cannot agree closer than this on an ill-conditioned stack."""
+    change, ``x``'s largest relative change, and the statuses it gives (a stack at the
+    edge of the certificate's tolerance is certified or not by rounding). Two kernels
+    that round differently cannot agree closer than this on an ill-conditioned stack."""
     data = stack.data
     dw = np.zeros(stack.layout.k)
     dx = 0.0
+    statuses = {ref.status}
     for seed in range(draws):
         rng = np.random.default_rng(seed)
         moved = type(data)(data.layout)
@@ -95,9 +97,10 @@ def rounding_spread(stack: TaskStack, ref, draws: int = 2) -> tuple[np.ndarray, 
             getattr(moved, name)[...] = getattr(data, name)
         moved.A[...] *= 1.0 + np.finfo(float).eps * rng.choice([-1.0, 1.0], data.A.shape)
         out = prepared(stack, "numba").solve(moved)
+        statuses.add(out.status)
         dw = np.maximum(dw, np.abs(out.info["level_violation"] - ref.info["level_violation"]))
         dx = max(dx, float(np.linalg.norm(out.x - ref.x)) / max(1.0, float(np.linalg.norm(ref.x))))
-    return dw, dx
+    return dw, dx, statuses
 
 
 def assert_same(stack: TaskStack, cpp, ref, what: str, spread=None) -> None:
@@ -105,11 +108,14 @@ def assert_same(stack: TaskStack, cpp, ref, what: str, spread=None) -> None:
     profile and ``info`` flags; each level's ``‖w_i‖²`` within its allowance and, where
     ``ref`` is optimal, ``x`` within :data:`X_REL`. ``spread`` (:func:`rounding_spread`)
     widens both to ``SPREAD_FACTOR`` times numba's own change under a one-ulp change of
-    ``A``. An approximate answer with an ambiguous rank decision (a pivot within
+    ``A``, and takes a status it gives there (the certificate's verdict on a stack at
+    the edge of its tolerance), comparing the values alone then. An approximate answer
+    with an ambiguous rank decision (a pivot within
     ``AMBIGUITY`` of its threshold: rounding may flip it, and ``x`` with it by ``O(1)``)
     is compared by its status and its ambiguous levels only."""
     d = differences(stack, cpp, ref)
-    assert cpp.status == ref.status, (what, d)
+    flipped = spread is not None and cpp.status != ref.status and cpp.status in spread[2]
+    assert cpp.status == ref.status or flipped, (what, d)
     if ref.status != "optimal" and ref.info.get("ambiguous_levels"):
         assert cpp.info.get("ambiguous_levels") == ref.info.get("ambiguous_levels"), (what, d)
         return
@@ -119,6 +125,8 @@ def assert_same(stack: TaskStack, cpp, ref, what: str, spread=None) -> None:
         dx_allowed = max(dx_allowed, SPREAD_FACTOR * spread[1])
     assert np.all(d["dw"] <= allowed), (what, d, cpp.info["level_violation"],
                                          ref.info["level_violation"])
+    if flipped:
+        return          # certified or not by rounding: the values are what can agree
     if ref.status == "optimal":
         assert d["dx"] <= dx_allowed, (what, d)
     for key, (a, b) in d["info"].items():
