@@ -282,6 +282,9 @@ def test_binding_refuses_values_it_cannot_read(name, value):
     arrays = {"A": data.A.copy(), "b": data.b.copy(), "lower": data.lower.copy(),
               "upper": data.upper.copy(), "sqrt_weight": data.sqrt_weight.copy()}
     arrays[name].flat[0] = value
+    # the equality-first try declines what it cannot read; the solve names it
+    assert solver.equality_first(arrays["A"], arrays["b"], arrays["lower"], arrays["upper"],
+                                 arrays["sqrt_weight"]) == core.ACTIVE_SET_CODES["NOT_TRIED"]
     with pytest.raises(CoreInputError, match=f"active set's {name} "):
         solver.solve(arrays["A"], arrays["b"], arrays["lower"], arrays["upper"],
                      arrays["sqrt_weight"])

@@ -1,13 +1,13 @@
 // prioik._core.ActiveSetSolver: the hierarchical active set's bindings. Every entry
-// point checks its arrays (dtype float64, shape, C-contiguous, not empty, the values the
-// solver cannot read) and raises prioik's CoreInputError naming the array (module.cpp
-// translates prioik::InputError); a second thread in a solve raises ConcurrentUseError.
+// point checks its arrays (dtype float64, shape, C-contiguous, not empty) and a solve that
+// refused the values names the one it cannot read (non-finite A or √w, √w ≤ 0, a NaN
+// bound): prioik's CoreInputError naming the array and the entry (module.cpp translates
+// prioik::InputError). A second thread in a solve raises ConcurrentUseError.
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
 
 #include <cmath>
 #include <cstdint>
-#include <cstring>
 #include <string>
 #include <utility>
 
@@ -52,35 +52,30 @@ const double* checked(nb::handle h, const char* name, I64 rows, I64 cols) {
     return static_cast<const double*>(a.data());
 }
 
-/// Whether none of the `count` doubles is an inf or a NaN (their exponent bits all set).
-bool all_finite(const double* v, I64 count) {
-    std::uint64_t bad = 0;
-    for (I64 j = 0; j < count; ++j) {
-        std::uint64_t bits;
-        std::memcpy(&bits, v + j, sizeof bits);
-        bad |= static_cast<std::uint64_t>((bits & 0x7ff0000000000000ULL) == 0x7ff0000000000000ULL);
-    }
-    return bad == 0;
-}
-
 struct Inputs {
     const double *A, *b, *lower, *upper, *sw;
 };
 
-/// The five arrays checked: shapes, dtypes, contiguity; no NaN/inf in A or √w, no NaN
-/// bound or equality target.
+/// The five arrays checked: dtypes, shapes, contiguity, not empty.
 Inputs check_inputs(const ActiveSetSolver& s, nb::handle A, nb::handle b, nb::handle lower,
                     nb::handle upper, nb::handle sw) {
     I64 M = s.layout().M, n = s.layout().n;
-    Inputs in{checked(A, "A", M, n), checked(b, "b", M, -1), checked(lower, "lower", M, -1),
-              checked(upper, "upper", M, -1), checked(sw, "sqrt_weight", M, -1)};
-    // A: one pass of integer tests on the exponent bits (vectorised), then the entry named
-    if (!all_finite(in.A, M * n))
-        for (I64 j = 0; j < M * n; ++j)
-            if (!std::isfinite(in.A[j]))
-                raise_input_error("the active set's A has a non-finite entry at row " +
-                                  std::to_string(j / n) + ", column " + std::to_string(j % n));
+    return Inputs{checked(A, "A", M, n), checked(b, "b", M, -1), checked(lower, "lower", M, -1),
+                  checked(upper, "upper", M, -1), checked(sw, "sqrt_weight", M, -1)};
+}
+
+/// After a solve that refused the values (SolveCode::not_solved): the first value the
+/// solver cannot read, named (a non-finite entry of A, a √w not finite and > 0, a NaN
+/// bound, a non-finite equality target). Returns when none is (an interval the layer
+/// above names, or a level of extreme scale it equilibrates). The solve's own pass finds
+/// them: a valid stack pays no second pass.
+void name_refused_value(const ActiveSetSolver& s, const Inputs& in) {
+    I64 M = s.layout().M, n = s.layout().n;
     for (I64 j = 0; j < M; ++j) {
+        for (I64 c = 0; c < n; ++c)
+            if (!std::isfinite(in.A[j * n + c]))
+                raise_input_error("the active set's A has a non-finite entry at row " +
+                                  std::to_string(j) + ", column " + std::to_string(c));
         if (!(in.sw[j] > 0.0 && std::isfinite(in.sw[j])))
             raise_input_error("the active set's sqrt_weight must be finite and > 0 (row " +
                               std::to_string(j) + ")");
@@ -92,7 +87,6 @@ Inputs check_inputs(const ActiveSetSolver& s, nb::handle A, nb::handle b, nb::ha
             raise_input_error("the active set's b is not finite at equality row " +
                               std::to_string(j));
     }
-    return in;
 }
 
 template <class T>
@@ -149,13 +143,19 @@ void bind_active_set(nb::module_& m) {
             [](ActiveSetSolver& s, nb::handle A, nb::handle b, nb::handle lower, nb::handle upper,
                nb::handle sw) {
                 Inputs in = check_inputs(s, A, b, lower, upper, sw);
-                nb::gil_scoped_release release;
-                return static_cast<int>(s.solve(in.A, in.b, in.lower, in.upper, in.sw));
+                prioik::SolveCode code;
+                {
+                    nb::gil_scoped_release release;
+                    code = s.solve(in.A, in.b, in.lower, in.upper, in.sw);
+                }
+                if (code == prioik::SolveCode::not_solved) name_refused_value(s, in);
+                return static_cast<int>(code);
             },
             nb::arg("A"), nb::arg("b"), nb::arg("lower"), nb::arg("upper"),
             nb::arg("sqrt_weight"),
             "The level-by-level active set; the code (1 clean, 2 infeasible levels, 3 read "
-            "the summary, 0 not solved).")
+            "the summary, 0 not solved: an interval not valid or a level of extreme scale; "
+            "a value it cannot read raises CoreInputError naming it).")
         .def(
             "equality_first",
             [](ActiveSetSolver& s, nb::handle A, nb::handle b, nb::handle lower, nb::handle upper,
@@ -167,7 +167,8 @@ void bind_active_set(nb::module_& m) {
             },
             nb::arg("A"), nb::arg("b"), nb::arg("lower"), nb::arg("upper"),
             nb::arg("sqrt_weight"),
-            "The warm start's equality-first try; -1 when it is not the answer.")
+            "The warm start's equality-first try; -1 when it is not the answer (a value it "
+            "cannot read included: solve() names it).")
         .def("reset", &ActiveSetSolver::reset, "Forget the kept working sets.")
         .def_prop_ro("x", [](nb::handle h) { return view(nb::cast<ActiveSetSolver&>(h).result().x, h); })
         .def_prop_ro("w2", [](nb::handle h) { return view(nb::cast<ActiveSetSolver&>(h).result().w2, h); })

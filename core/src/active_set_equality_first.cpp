@@ -45,25 +45,10 @@ EqFirst::EqFirst(Ctx& c, ActiveSetWorkspace& ws) {
 
 namespace {
 
-index one_column_hint(const double* a, index n, index nz, index hint) {
-    if (nz != 1) return -1;
-    if (hint >= 0 && hint < n && a[hint] != 0.0) return hint;
-    for (index k = 0; k < n; ++k)
-        if (a[k] != 0.0) return k;
-    return -1;
-}
-
 /// (‖a‖², its one non-zero column or −1) (_sparsity).
 double sparsity(const double* a, index n, index hint, index& column) {
-    double nn = 0.0;
-    index nz = 0;
-    for (index k = 0; k < n; ++k) {
-        double v = a[k];
-        nn += v * v;
-        nz += v != 0.0 ? 1 : 0;
-    }
-    column = one_column_hint(a, n, nz, hint);
-    return nn;
+    column = one_column_hint(a, n, count_nonzero(a, n), hint);
+    return dot(a, a, n);
 }
 
 /// The held rows, and whether they are taken as fixed coordinates (box rows on
@@ -125,14 +110,8 @@ bool fixed_equality_row(Ctx& c, EqFirst& e, index lev, index j, double& nn) {
     index n = c.n, n2 = e.n2;
     double s = c.sw[j];
     const double* Aj = c.A.row(j);
-    nn = 0.0;
-    index nz = 0;
-    for (index q = 0; q < n; ++q) {
-        double a = Aj[q];
-        nn += a * a;
-        nz += a != 0.0 ? 1 : 0;
-    }
-    nn *= s * s;
+    nn = dot(Aj, Aj, n) * (s * s);
+    index nz = count_nonzero(Aj, n);
     e.ucol[j] = -2;
     e.ecol[j] = one_column_hint(Aj, n, nz, e.ecol[j]);
     double t = c.row_eq[j] ? c.b[j] : c.lower[j];
@@ -174,15 +153,9 @@ double equality_row(Ctx& c, EqFirst& e, index j) {
     double s = c.sw[j];
     const double* Aj = c.A.row(j);
     double* row = e.eB.row(e.m);
-    double nn = 0.0;
-    index nz = 0;
-    for (index q = 0; q < n; ++q) {
-        double a = Aj[q];
-        double v = s * a;
-        row[q] = v;
-        nn += v * v;
-        nz += a != 0.0 ? 1 : 0;
-    }
+    for (index q = 0; q < n; ++q) row[q] = s * Aj[q];
+    double nn = dot(row, row, n);
+    index nz = count_nonzero(Aj, n);
     if (c.eqr[j]) {
         e.ec[e.m] = s * (c.row_eq[j] ? c.b[j] : c.lower[j]);
         e.ucol[j] = -2;

@@ -1,6 +1,8 @@
 // The active set's phases over one prepared solver's workspace (private).
 #pragma once
 
+#include <cstring>
+
 #include "prioik/active_set.hpp"
 #include "active_set_linalg.hpp"
 
@@ -8,6 +10,28 @@ namespace prioik::detail {
 
 using dense::Mat;
 using dense::inf;
+
+/// The number of non-zero entries of a[:n] (±0 count as zero), by integer tests of
+/// their bits (a pass the compiler vectorises: a row scan of every solve).
+inline index count_nonzero(const double* a, index n) {
+    index nz = 0;
+    for (index k = 0; k < n; ++k) {
+        std::uint64_t bits;
+        std::memcpy(&bits, a + k, sizeof bits);
+        nz += (bits << 1) != 0 ? 1 : 0;
+    }
+    return nz;
+}
+
+/// The column of the only non-zero entry of a[:n] when it has nz = 1 of them (hint
+/// first: the row's column at the last solve), else −1.
+inline index one_column_hint(const double* a, index n, index nz, index hint) {
+    if (nz != 1) return -1;
+    if (hint >= 0 && hint < n && a[hint] != 0.0) return hint;
+    for (index k = 0; k < n; ++k)
+        if (a[k] != 0.0) return k;
+    return -1;
+}
 
 /// Exchange M[i, :w] and M[j, :w].
 inline void swap_rows_upto(Mat M, index i, index j, index w) { swap_rows(M.ref(0, w), i, j); }

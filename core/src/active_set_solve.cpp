@@ -37,17 +37,6 @@ bool rows_valid(const Ctx& c, std::int8_t* flags) {
     return bad == 0;
 }
 
-/// The column of a row's one non-zero, else −1 (_sparsity's column).
-index one_column(const double* a, index n) {
-    index nz = 0, at = -1;
-    for (index k = 0; k < n; ++k)
-        if (a[k] != 0.0) {
-            ++nz;
-            at = k;
-        }
-    return nz == 1 ? at : -1;
-}
-
 /// The rows weighed into B and Bo, bounds, norms, equality flags, single columns
 /// (_load_rows); false at the first value that is not valid.
 bool load_rows(Ctx& c) {
@@ -58,14 +47,13 @@ bool load_rows(Ctx& c) {
         double* Bj = c.B.row(j);
         double* Boj = c.Bo.row(j);
         const double* Aj = c.A.row(j);
-        double nn = 0.0;
         for (index k = 0; k < n; ++k) {
             double v = s * Aj[k];
             Bj[k] = v;
             Boj[k] = v;
-            nn += v * v;
         }
-        c.ucol[j] = c.row_eq[j] ? -1 : one_column(Aj, n);
+        double nn = dot(Bj, Bj, n);
+        c.ucol[j] = c.row_eq[j] ? -1 : one_column_hint(Aj, n, count_nonzero(Aj, n), c.ucol[j]);
         c.nrot[j] = 0;
         bool e = c.row_eq[j] != 0;
         c.blo[j] = s * (e ? c.b[j] : c.lower[j]);
