@@ -103,7 +103,12 @@ def rounding_spread(stack: TaskStack, ref, draws: int = 2) -> tuple[np.ndarray, 
     return dw, dx, statuses
 
 
-def assert_same(stack: TaskStack, cpp, ref, what: str, spread=None) -> None:
+#: the ``info`` keys that tell the path an answer took (the equality-first try's guesses
+#: and whether the certificate ran), not the answer
+PATH_KEYS = ("equality_first", "path_certified")
+
+
+def assert_same(stack: TaskStack, cpp, ref, what: str, spread=None, path: bool = True) -> None:
     """The C++ answer ``cpp`` equals the numba answer ``ref``: the same status, rank
     profile and ``info`` flags; each level's ``‖w_i‖²`` within its allowance and, where
     ``ref`` is optimal, ``x`` within :data:`X_REL`. ``spread`` (:func:`rounding_spread`)
@@ -112,7 +117,11 @@ def assert_same(stack: TaskStack, cpp, ref, what: str, spread=None) -> None:
     the edge of its tolerance), comparing the values alone then. An approximate answer
     with an ambiguous rank decision (a pivot within
     ``AMBIGUITY`` of its threshold: rounding may flip it, and ``x`` with it by ``O(1)``)
-    is compared by its status and its ambiguous levels only."""
+    is compared by its status and its ambiguous levels only. ``path=False``: the
+    :data:`PATH_KEYS` and the rank profile may differ (a heuristic's rounding-level
+    decision, e.g. the equality-first try releasing a row whose multiplier is
+    wrong-signed at the 1e-14 floor, takes another sequence of guesses to the same
+    answer)."""
     d = differences(stack, cpp, ref)
     flipped = spread is not None and cpp.status != ref.status and cpp.status in spread[2]
     assert cpp.status == ref.status or flipped, (what, d)
@@ -130,9 +139,10 @@ def assert_same(stack: TaskStack, cpp, ref, what: str, spread=None) -> None:
     if ref.status == "optimal":
         assert d["dx"] <= dx_allowed, (what, d)
     for key, (a, b) in d["info"].items():
-        assert a == b, (what, key, a, b)
-    np.testing.assert_array_equal(cpp.info["rank_profile"], ref.info["rank_profile"],
-                                  err_msg=what)
+        assert a == b or (not path and key in PATH_KEYS), (what, key, a, b)
+    if path:        # the rows each level fixed: the equality-first try counts its own
+        np.testing.assert_array_equal(cpp.info["rank_profile"], ref.info["rank_profile"],
+                                      err_msg=what)
 
 
 def compare_cold(stack: TaskStack, what: str) -> None:
@@ -349,3 +359,59 @@ def test_codes_and_flags_are_the_numba_kernels():
     assert core.ACTIVE_SET_CODES
     for name, value in core.ACTIVE_SET_CODES.items():
         assert getattr(numba_kernel, name) == value, name
+
+
+@pytest.mark.parametrize("mode", ["velocity", "acceleration"])
+@pytest.mark.parametrize("name", ["panda", "talos", "g1", "go2"])
+def test_closed_loop_robot_runs_match_numba(name, mode):
+    """A limb reaching beyond its workspace with joint limits as bounds at level 0 and
+    contacts at level 1 (tests/test_limits_on_robots.py's stack), closed loop for 40
+    steps driven by the numba kernel's answers: the C++ kernel's warm and cold answers
+    equal numba's at every step (by the paths of :data:`PATH_KEYS` at most a few
+    steps apart: TALOS at velocity level, step 1, is the equality-first try's fifth guess
+    in C++, numba's runs out of guesses on the rounding of a multiplier at the 1e-14
+    floor and takes the active set to the same answer)."""
+    pin = pytest.importorskip("pinocchio")
+    from prioik.robots import KinematicState, TaskWriter, load
+    contacts, limb = {"panda": ([], "tcp"), "talos": (["left_foot", "right_foot"], "right_hand"),
+                      "g1": (["left_foot", "right_foot"], "right_hand"),
+                      "go2": (["front_right_foot", "rear_left_foot", "rear_right_foot"],
+                              "front_left_foot")}[name]
+    robot = load(name)
+    accel = mode == "acceleration"
+    gain = (100.0, 20.0) if accel else 10.0
+    w = TaskWriter(robot, mode)
+    w.add_joint_limits("limits", form="bounds", dt=0.01, level=0,
+                       **({"horizon": 0.1} if accel else {}))
+    for c in contacts:
+        w.add_contact(c, c, gain=gain, level=1)
+    w.add_frame_position("reach", limb, gain=gain)
+    w.add_posture("posture", gain=(10.0, 6.0) if accel else 1.0)
+    solvers = {(kernel, warm): has.Prepared(w.layout, dict(_OPTIONS, warm_start=warm,
+                                                           kernel=kernel))
+               for kernel in ("cpp", "numba") for warm in (True, False)}
+    q, v = robot.q0.copy(), np.zeros(robot.nv)
+    start = KinematicState(robot, q, v)
+    places = {c: start.placement(c).copy() for c in contacts}
+    target = start.placement(limb).translation + np.array([0.4, -0.3, 0.5])
+    data = robot.data()
+    paths = 0
+    for step in range(40):
+        state = KinematicState(robot, q, v, data, drift=accel)
+        for c in contacts:
+            w.contact(state, c, places[c])
+        w.frame_position(state, "reach", target)
+        w.joint_limits(state, "limits")
+        w.posture(state, "posture", robot.q0)
+        rows = w.targets(state)
+        stack = rows.as_stack()
+        out = {key: s.solve(rows) for key, s in solvers.items()}
+        for warm in (True, False):
+            assert_same(stack, out["cpp", warm], out["numba", warm],
+                        f"{name} {mode} step {step} warm={warm}", path=False)
+            paths += any(out["cpp", warm].info.get(k) != out["numba", warm].info.get(k)
+                         for k in PATH_KEYS)
+        x = out["numba", True].x
+        v = v + x * 0.01 if accel else x
+        q = pin.integrate(robot.model, q, v * 0.01)
+    assert paths <= 4, paths

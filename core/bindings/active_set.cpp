@@ -38,10 +38,11 @@ const double* checked(nb::handle h, const char* name, I64 rows, I64 cols) {
     if (static_cast<I64>(a.ndim()) != ndim)
         raise_input_error(what + " must be " + std::to_string(ndim) + "-D, not " +
                               std::to_string(a.ndim()) + "-D");
-    if (static_cast<I64>(a.shape(0)) != rows || (ndim == 2 && static_cast<I64>(a.shape(1)) != cols))
+    const bool rows_differ = static_cast<I64>(a.shape(0)) != rows;
+    if (rows_differ || (ndim == 2 && static_cast<I64>(a.shape(1)) != cols))
         raise_input_error(what + " has the wrong shape for the prepared layout (" +
-                              std::to_string(rows) + (ndim == 2 ? " x " + std::to_string(cols) : "") +
-                              " expected)");
+                          std::to_string(rows) +
+                          (ndim == 2 ? " x " + std::to_string(cols) : "") + " expected)");
     if (rows == 0 || (ndim == 2 && cols == 0)) raise_input_error(what + " is empty");
     I64 expect = 1;
     for (I64 d = ndim - 1; d >= 0; --d) {
@@ -93,6 +94,12 @@ template <class T>
 nb::ndarray<nb::numpy, T> view(std::vector<T>& v, nb::handle owner) {
     size_t shape[1] = {v.size()};
     return nb::ndarray<nb::numpy, T>(v.data(), 1, shape, owner);
+}
+
+/// A property reading one of the result's arrays as a numpy view (owned by the solver).
+template <class T>
+auto result_view(std::vector<T> prioik::ActiveSetResult::*part) {
+    return [part](nb::handle h) { return view(nb::cast<ActiveSetSolver&>(h).result().*part, h); };
 }
 
 }  // namespace
@@ -170,15 +177,22 @@ void bind_active_set(nb::module_& m) {
             "The warm start's equality-first try; -1 when it is not the answer (a value it "
             "cannot read included: solve() names it).")
         .def("reset", &ActiveSetSolver::reset, "Forget the kept working sets.")
-        .def_prop_ro("x", [](nb::handle h) { return view(nb::cast<ActiveSetSolver&>(h).result().x, h); })
-        .def_prop_ro("w2", [](nb::handle h) { return view(nb::cast<ActiveSetSolver&>(h).result().w2, h); })
-        .def_prop_ro("res", [](nb::handle h) { return view(nb::cast<ActiveSetSolver&>(h).result().res, h); })
-        .def_prop_ro("margins", [](nb::handle h) { return view(nb::cast<ActiveSetSolver&>(h).result().margins, h); })
-        .def_prop_ro("iterations", [](nb::handle h) { return view(nb::cast<ActiveSetSolver&>(h).result().iterations, h); })
-        .def_prop_ro("flags", [](nb::handle h) { return view(nb::cast<ActiveSetSolver&>(h).result().flags, h); })
-        .def_prop_ro("ranks", [](nb::handle h) { return view(nb::cast<ActiveSetSolver&>(h).result().ranks, h); })
-        .def_prop_ro("over", [](nb::handle h) { return view(nb::cast<ActiveSetSolver&>(h).result().over, h); })
-        .def_prop_ro("warm_valid", [](nb::handle h) { return view(nb::cast<ActiveSetSolver&>(h).workspace().warm_valid, h); })
+        .def_prop_ro("x", result_view(&prioik::ActiveSetResult::x), "n")
+        .def_prop_ro("w2", result_view(&prioik::ActiveSetResult::w2),
+                     "k: each level's weighted squared violation")
+        .def_prop_ro("res", result_view(&prioik::ActiveSetResult::res), "k: their roots")
+        .def_prop_ro("margins", result_view(&prioik::ActiveSetResult::margins),
+                     "k + 1: the rank decisions' margins (the tie-break last)")
+        .def_prop_ro("iterations", result_view(&prioik::ActiveSetResult::iterations), "k + 1")
+        .def_prop_ro("flags", result_view(&prioik::ActiveSetResult::flags),
+                     "k + 1: ACTIVE_SET_CODES' FLAG_*")
+        .def_prop_ro("ranks", result_view(&prioik::ActiveSetResult::ranks),
+                     "k + 1: the rows each level fixed")
+        .def_prop_ro("over", result_view(&prioik::ActiveSetResult::over),
+                     "k + 1: 1 where a level's violation exceeds primal_tol max(1, ‖x‖)")
+        .def_prop_ro("warm_valid", [](nb::handle h) {
+            return view(nb::cast<ActiveSetSolver&>(h).workspace().warm_valid, h);
+        })
         .def_prop_ro("warm_state", [](nb::handle h) {
             auto& s = nb::cast<ActiveSetSolver&>(h);
             auto& v = s.workspace().warm_state;
@@ -187,11 +201,14 @@ void bind_active_set(nb::module_& m) {
             return nb::ndarray<nb::numpy, std::int8_t>(v.data(), 2, shape, h);
         })
         .def_prop_ro("x_norm", [](const ActiveSetSolver& s) { return s.result().x_norm; })
-        .def_prop_ro("cap_or_nonfinite", [](const ActiveSetSolver& s) { return s.result().cap_or_nonfinite; })
+        .def_prop_ro("cap_or_nonfinite",
+                     [](const ActiveSetSolver& s) { return s.result().cap_or_nonfinite; },
+                     "1: an iteration cap was hit; -1: x or a violation is not finite")
         .def_prop_ro("large", [](const ActiveSetSolver& s) { return s.result().large; })
         .def_prop_ro("ambiguous", [](const ActiveSetSolver& s) { return s.result().ambiguous; })
         .def_prop_ro("unresolved", [](const ActiveSetSolver& s) { return s.result().unresolved; })
-        .def_prop_ro("equality_first_state", [](const ActiveSetSolver& s) { return s.result().equality_first; },
+        .def_prop_ro("equality_first_state",
+                     [](const ActiveSetSolver& s) { return s.result().equality_first; },
                      "1: the answer is the equality-first try's; -1/-2: that try was refuted "
                      "(no row / rows held); 0: not tried")
         .def_prop_ro("next_try", [](const ActiveSetSolver& s) { return s.result().next_try; },
