@@ -22,6 +22,13 @@ CORE_SOURCES := $(shell find core -type f -not -name '*~' 2>/dev/null)
 # paths stay the same from one build to the next)
 BUILD_REQUIRES = $$($(PY) -c "import tomllib; print(*tomllib.load(open('pyproject.toml', 'rb'))['build-system']['requires'])") "cmake>=3.18" "ninja>=1.10"
 
+# scikit-build-core's editable install also writes the package sources' parent
+# directories into its .pth (for Cython's cimports), which would expose hierarchy/,
+# formulations/, ... (and the repository's parent) as top-level modules; its import
+# finder alone serves `prioik`, so only the .pth's `import` line is kept
+# (tests/test_namespace.py: no top-level packages)
+EDITABLE_PATHS_OFF = -c "import pathlib, sysconfig; p = pathlib.Path(sysconfig.get_paths()['purelib'], '_editable_skbc_prioik.pth'); p.write_text(''.join(l for l in p.read_text().splitlines(True) if l.startswith('import ')))"
+
 .PHONY: test test-core demo venv venv-core clean asan
 
 $(STAMP): pyproject.toml
@@ -29,12 +36,14 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet $(BUILD_REQUIRES)
 	$(PY) -m pip install --quiet --no-build-isolation -e ".[all,test]"
+	$(PY) $(EDITABLE_PATHS_OFF)
 	touch $(STAMP) $(CORE_STAMP_BUILT)
 
 # an edit to core/: the extension rebuilt (only what changed) and re-installed
 $(CORE_STAMP_BUILT): $(STAMP) $(CORE_SOURCES)
 	@start=$$(date +%s); \
 	$(PY) -m pip install --quiet --no-build-isolation --no-deps -e . && \
+	$(PY) $(EDITABLE_PATHS_OFF) && \
 	echo "prioik._core rebuilt in $$(( $$(date +%s) - start )) s"
 	touch $(CORE_STAMP_BUILT)
 
@@ -44,6 +53,7 @@ $(CORE_STAMP): pyproject.toml
 	@start=$$(date +%s); \
 	rm -rf $(CORE_VENV) && $(PYTHON) -m venv $(CORE_VENV) && \
 	$(CORE_PY) -m pip install --quiet -C build-dir=build/venv-core-{wheel_tag} -e . "pytest>=7" && \
+	$(CORE_PY) $(EDITABLE_PATHS_OFF) && \
 	echo "$(CORE_VENV) (core + pytest) built in $$(( $$(date +%s) - start )) s; $$(du -sh $(CORE_VENV) | cut -f1)"
 	touch $(CORE_STAMP)
 
