@@ -189,6 +189,22 @@ def test_core_batch_equals_numba_batch(options):
         np.testing.assert_array_equal(x, one.x)
 
 
+def test_core_batch_on_threads_equals_one_thread_and_names_the_first_bad_stack():
+    rng = np.random.default_rng(22)
+    stacks = same_shape_batch(FAMILIES["rank_deficient"](rng, 16, 4), rng, 11, reduce=0.3)
+    A = np.stack([s.data.A for s in stacks])
+    b = np.stack([s.data.b for s in stacks])
+    w = np.stack([s.data.sqrt_weight for s in stacks])
+    solver = core.ExtendedJacobian(list(stacks[0].layout.starts), stacks[0].n, rcond=1e-10)
+    one = solver.solve_batch(A, b, w, threads=1).x.copy()
+    for threads in (2, 4, 0):
+        np.testing.assert_array_equal(solver.solve_batch(A, b, w, threads=threads).x, one)
+    A[7, 2, 3] = np.inf
+    A[9, 0, 0] = np.nan
+    with pytest.raises(CoreInputError, match=r"^stack 7: A\[2, 3\]"):
+        solver.solve_batch(A, b, w, threads=4)
+
+
 def test_core_solves_rows_of_extreme_scale_by_equilibrating():
     stack = TaskStack([[Task("a", 1e-200 * np.eye(2), np.array([1.0, 2.0]))]])
     sol = formulations.solve(stack, "extended_jacobian", kernel="cpp")

@@ -122,7 +122,7 @@ const ExtendedJacobianResult& solve_one(ExtendedJacobian& self, nb::handle A, nb
 }
 
 ExtendedJacobianBatch solve_many(ExtendedJacobian& self, nb::handle A, nb::handle b,
-                                 nb::handle w) {
+                                 nb::handle w, unsigned threads) {
   const Index M = self.rows(), n = self.cols();
   std::vector<Index> shape;
   const double* a = checked_array(A, "A", {-1, M, n}, &shape);
@@ -130,7 +130,7 @@ ExtendedJacobianBatch solve_many(ExtendedJacobian& self, nb::handle A, nb::handl
   const double* bb = checked_array(b, "b", {N, M});
   const double* ww = checked_array(w, "sqrt_weight", {N, M});
   nb::gil_scoped_release release;
-  return self.solve_batch(a, bb, ww, N);
+  return self.solve_batch(a, bb, ww, N, threads);
 }
 
 }  // namespace
@@ -239,8 +239,9 @@ NB_MODULE(_core, m) {
            nb::rv_policy::reference_internal,
            "Solve one stack (A: M × n, b and sqrt_weight: M; C-contiguous float64).")
       .def("solve_batch", &solve_many, nb::arg("A").none(), nb::arg("b").none(),
-           nb::arg("sqrt_weight").none(),
-           "Solve N stacks (A: N × M × n, b and sqrt_weight: N × M), each on its own.")
+           nb::arg("sqrt_weight").none(), nb::kw_only(), nb::arg("threads") = 0,
+           "Solve N stacks (A: N × M × n, b and sqrt_weight: N × M), each on its own, on "
+           "up to `threads` threads (0: one per hardware thread).")
       .def_prop_ro("rows", &ExtendedJacobian::rows)
       .def_prop_ro("cols", &ExtendedJacobian::cols)
       .def_prop_ro("levels", &ExtendedJacobian::levels)
