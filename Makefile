@@ -13,7 +13,7 @@ CORE_PY    := $(CORE_VENV)/bin/python
 CORE_STAMP := $(CORE_VENV)/.installed
 OUT    ?= results
 
-.PHONY: test test-core demo venv venv-core clean
+.PHONY: test test-core test-forced-cpu demo venv venv-core clean
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -51,6 +51,17 @@ test: $(STAMP) $(CORE_STAMP)
 	wait $$core; status=$$?; \
 	echo "--- tests/core in $(CORE_VENV) (the core alone):"; cat $(CORE_VENV)/test-core.log; \
 	test $$full -eq 0 && test $$status -eq 0
+
+# The modules marked `rounding_edge` again, on another machine's arithmetic: numba's
+# kernels compiled for a generic x86-64 CPU (SSE2, no FMA, no AVX; the host's own
+# target is the default) into a cache of their own, and OpenBLAS on its Sandybridge
+# kernels (AVX, no FMA). A test there asserts what holds whichever way a rounding edge
+# goes. CI runs it after `make test`.
+FORCED_CPU := NUMBA_CPU_NAME=generic NUMBA_CACHE_DIR=$(VENV)/numba-cache-generic \
+              OPENBLAS_CORETYPE=Sandybridge
+
+test-forced-cpu: $(STAMP)
+	$(FORCED_CPU) $(PY) -m pytest -p no:cacheprovider -m "rounding_edge and not slow"
 
 demo: $(STAMP)
 	$(VENV)/bin/prioik fencing --variant both --out $(OUT)
