@@ -29,7 +29,7 @@ BUILD_REQUIRES = $$($(PY) -c "import tomllib; print(*tomllib.load(open('pyprojec
 # (tests/test_namespace.py: no top-level packages)
 EDITABLE_PATHS_OFF = -c "import pathlib, sysconfig; p = pathlib.Path(sysconfig.get_paths()['purelib'], '_editable_skbc_prioik.pth'); p.write_text(''.join(l for l in p.read_text().splitlines(True) if l.startswith('import ')))"
 
-.PHONY: test test-core demo venv venv-core clean asan
+.PHONY: test test-core test-forced-cpu demo venv venv-core clean asan
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -89,6 +89,17 @@ asan: $(STAMP)
 	$(VENV)/bin/cmake --build $(ASAN_DIR)
 	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
 		$(VENV)/bin/ctest --test-dir $(ASAN_DIR) --output-on-failure
+
+# The modules marked `rounding_edge` again, on another machine's arithmetic: numba's
+# kernels compiled for a generic x86-64 CPU (SSE2, no FMA, no AVX; the host's own
+# target is the default) into a cache of their own, and OpenBLAS on its Sandybridge
+# kernels (AVX, no FMA). A test there asserts what holds whichever way a rounding edge
+# goes. CI runs it after `make test`.
+FORCED_CPU := NUMBA_CPU_NAME=generic NUMBA_CACHE_DIR=$(VENV)/numba-cache-generic \
+              OPENBLAS_CORETYPE=Sandybridge
+
+test-forced-cpu: $(STAMP) $(CORE_STAMP_BUILT)
+	$(FORCED_CPU) $(PY) -m pytest -p no:cacheprovider -m "rounding_edge and not slow"
 
 demo: $(STAMP) $(CORE_STAMP_BUILT)
 	$(VENV)/bin/prioik fencing --variant both --out $(OUT)
