@@ -22,19 +22,28 @@ CORE_SOURCES := $(shell find core -type f -not -name '*~' 2>/dev/null)
 # paths stay the same from one build to the next)
 BUILD_REQUIRES = $$($(PY) -c "import tomllib; print(*tomllib.load(open('pyproject.toml', 'rb'))['build-system']['requires'])") "cmake>=3.18" "ninja>=1.10"
 
-.PHONY: test test-core demo venv venv-core clean asan
+# scikit-build-core's editable install also writes the package sources' parent
+# directories into its .pth (for Cython's cimports), which would expose hierarchy/,
+# formulations/, ... (and the repository's parent) as top-level modules; its import
+# finder alone serves `prioik`, so only the .pth's `import` line is kept
+# (tests/test_namespace.py: no top-level packages)
+EDITABLE_PATHS_OFF = -c "import pathlib, sysconfig; p = pathlib.Path(sysconfig.get_paths()['purelib'], '_editable_skbc_prioik.pth'); p.write_text(''.join(l for l in p.read_text().splitlines(True) if l.startswith('import ')))"
+
+.PHONY: test test-core test-forced-cpu demo venv venv-core clean asan
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet $(BUILD_REQUIRES)
 	$(PY) -m pip install --quiet --no-build-isolation -e ".[all,test]"
+	$(PY) $(EDITABLE_PATHS_OFF)
 	touch $(STAMP) $(CORE_STAMP_BUILT)
 
 # an edit to core/: the extension rebuilt (only what changed) and re-installed
 $(CORE_STAMP_BUILT): $(STAMP) $(CORE_SOURCES)
 	@start=$$(date +%s); \
 	$(PY) -m pip install --quiet --no-build-isolation --no-deps -e . && \
+	$(PY) $(EDITABLE_PATHS_OFF) && \
 	echo "prioik._core rebuilt in $$(( $$(date +%s) - start )) s"
 	touch $(CORE_STAMP_BUILT)
 
@@ -44,6 +53,7 @@ $(CORE_STAMP): pyproject.toml
 	@start=$$(date +%s); \
 	rm -rf $(CORE_VENV) && $(PYTHON) -m venv $(CORE_VENV) && \
 	$(CORE_PY) -m pip install --quiet -C build-dir=build/venv-core-{wheel_tag} -e . "pytest>=7" && \
+	$(CORE_PY) $(EDITABLE_PATHS_OFF) && \
 	echo "$(CORE_VENV) (core + pytest) built in $$(( $$(date +%s) - start )) s; $$(du -sh $(CORE_VENV) | cut -f1)"
 	touch $(CORE_STAMP)
 
@@ -79,6 +89,17 @@ asan: $(STAMP)
 	$(VENV)/bin/cmake --build $(ASAN_DIR)
 	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
 		$(VENV)/bin/ctest --test-dir $(ASAN_DIR) --output-on-failure
+
+# The modules marked `rounding_edge` again, on another machine's arithmetic: numba's
+# kernels compiled for a generic x86-64 CPU (SSE2, no FMA, no AVX; the host's own
+# target is the default) into a cache of their own, and OpenBLAS on its Sandybridge
+# kernels (AVX, no FMA). A test there asserts what holds whichever way a rounding edge
+# goes. CI runs it after `make test`.
+FORCED_CPU := NUMBA_CPU_NAME=generic NUMBA_CACHE_DIR=$(VENV)/numba-cache-generic \
+              OPENBLAS_CORETYPE=Sandybridge
+
+test-forced-cpu: $(STAMP) $(CORE_STAMP_BUILT)
+	$(FORCED_CPU) $(PY) -m pytest -p no:cacheprovider -m "rounding_edge and not slow"
 
 demo: $(STAMP) $(CORE_STAMP_BUILT)
 	$(VENV)/bin/prioik fencing --variant both --out $(OUT)

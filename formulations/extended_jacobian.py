@@ -395,8 +395,10 @@ class Prepared:
     def _solve_core(self, data: StackData) -> tuple | Outcome:
         """:meth:`solve_checked` on the C++ core (``kernel="cpp"``): the same answer, read
         from the core's result by name."""
+        x, residuals = np.empty(self._n), np.empty(self._k)    # the answer's own
+        ranks = np.empty(self._k, dtype=np.int64)
         try:
-            res = self._core.solve(data.A, data.b, data.sqrt_weight)
+            res = self._core.solve(data.A, data.b, data.sqrt_weight, x, residuals, ranks)
         except CoreInputError:
             data.check()     # names the task, level and row of a NaN, inf or bad √w
             raise
@@ -404,15 +406,13 @@ class Prepared:
             # finite rows of extreme scale: solve the equilibrated stack (same optimum)
             return solve_equilibrated(self.solve, data, "the rows' scale overflows float64 "
                                       "(‖A_i‖_F² is not finite): scale the tasks down")
-        x, residuals = res.x.copy(), res.residuals.copy()
-        info = {"rank_profile": res.ranks.copy(), "nullspace": "qr", "kernel": "cpp"}
-        if (res.finite and not self._damped and not res.ambiguous and not res.near_ambiguous
-                and not res.precision_limited):
+        info = {"rank_profile": ranks, "nullspace": "qr", "kernel": "cpp"}
+        if res.clear and not self._damped:
             return (x, "optimal", info, residuals)     # the common case
         status = "optimal"
         if self._damped:
             status = _damping_info(info, res.level_mu2, self._selective, self._bounded)
-        margins = res.margins.copy()
+        margins = res.margins
         if res.ambiguous:
             status = _ambiguity_status(info, status, np.flatnonzero(margins <= AMBIGUITY))
         outcome = Outcome(x, status, info, residuals, res.finite)

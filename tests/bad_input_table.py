@@ -134,6 +134,36 @@ for name, fn, word in (
         ("polygon margin past its inradius", lambda: polygon_region([[0, 0], [1, 0], [0, 1]], margin=1.0), "margin")):
     api("robots", name, fn, word)
 
+# ---------------------------------------------------------------- the compiled core
+import prioik._core as core
+good_A, good_b, good_w = np.ones((4, 3)), np.ones(4), np.ones(4)
+ej = core.ExtendedJacobian([0, 2, 4], 3, rcond=1e-10)
+def nan_at(a, i):
+    a = a.copy(); a[i] = np.nan; return a
+for name, args, word in (
+        ("A float32", (good_A.astype(np.float32), good_b, good_w), "A must be float64"),
+        ("A int", (good_A.astype(int), good_b, good_w), "A must be float64"),
+        ("A list", (good_A.tolist(), good_b, good_w), "A must be a float64"),
+        ("A None", (None, good_b, good_w), "A must be a float64"),
+        ("A wrong shape", (np.ones((3, 4)), good_b, good_w), "A must have shape"),
+        ("A Fortran order", (np.asfortranarray(np.arange(12.0).reshape(4, 3)), good_b, good_w), "C-contiguous"),
+        ("A strided view", (np.ones((4, 6))[:, ::2], good_b, good_w), "C-contiguous"),
+        ("A empty", (np.ones((0, 3)), good_b, good_w), "A is empty"),
+        ("A NaN", (nan_at(good_A, (1, 2)), good_b, good_w), "A[1, 2]"),
+        ("b inf", (good_A, np.array([1.0, np.inf, 1.0, 1.0]), good_w), "b[1]"),
+        ("sqrt_weight 0", (good_A, good_b, np.array([1.0, 1.0, 0.0, 1.0])), "sqrt_weight[2]"),
+        ("x float32", (good_A, good_b, good_w, np.ones(3, dtype=np.float32)), "x must be float64"),
+        ("ranks float", (good_A, good_b, good_w, None, None, np.ones(2)), "ranks must be int64")):
+    api("core", f"ExtendedJacobian.solve {name}", lambda args=args: ej.solve(*args), word)
+api("core", "ExtendedJacobian.solve_batch A 2-D", lambda: ej.solve_batch(good_A, good_b, good_w), "A must have 3")
+api("core", "ExtendedJacobian starts decreasing", lambda: core.ExtendedJacobian([0, 3, 2], 3, rcond=1e-10), "non-decreasing")
+def nan_in_task():
+    stack = S(np.eye(2), [1.0, 2.0])
+    data = stack.data.copy()
+    data.A[0, 0] = np.nan
+    return F.prepare(stack.layout, "extended_jacobian", kernel="cpp").solve(data)
+api("core", "prepare(kernel='cpp') on NaN data", nan_in_task, "task 'a'")
+
 # ---------------------------------------------------------------- CLI
 tmp = tempfile.mkdtemp()
 good = {"levels": [[{"name": "t", "A": [[1.0, 2.0]], "b": [1.0]}]]}
@@ -173,6 +203,6 @@ code = proc.wait(timeout=600)
 rows.append(("CLI", "closed pipe (| head -0)", code == 0 and not err.strip(), f"exit {code}, stderr {err.strip()[-90:]!r}"))
 
 json.dump(rows, open(sys.argv[1], "w"), indent=0)
-for g in ("API", "API options (lead)", "robots", "CLI"):
+for g in ("API", "API options (lead)", "robots", "core", "CLI"):
     sel = [r for r in rows if r[0] == g]
     print(f"{g}: {sum(r[2] for r in sel)} / {len(sel)}")

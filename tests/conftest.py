@@ -62,3 +62,18 @@ def toy_plugin(monkeypatch):
     monkeypatch.setitem(registry.PLUGINS, TOY, ("tests.toy_flat_lstsq", ""))
     monkeypatch.setitem(registry._loaded, TOY, toy)
     return toy
+
+
+def pytest_report_header(config):
+    """The arithmetic the run computes with: the CPU target numba compiles the kernels
+    for and OpenBLAS's kernels (``make test-forced-cpu`` changes both)."""
+    from threadpoolctl import threadpool_info
+    try:
+        import llvmlite.binding as ll
+        from numba.core import config as numba_config
+        cpu = numba_config.CPU_NAME or ll.get_host_cpu_name()
+    except ImportError:
+        cpu = "none (numba not installed)"
+    blas = ", ".join(f"{i['internal_api']} {i.get('version')} {i.get('architecture')}"
+                     for i in threadpool_info() if i["user_api"] == "blas")
+    return f"arithmetic: numba kernels for CPU '{cpu}'; BLAS {blas or 'unknown'}"

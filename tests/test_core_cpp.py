@@ -189,6 +189,22 @@ def test_core_batch_equals_numba_batch(options):
         np.testing.assert_array_equal(x, one.x)
 
 
+def test_core_batch_on_threads_equals_one_thread_and_names_the_first_bad_stack():
+    rng = np.random.default_rng(22)
+    stacks = same_shape_batch(FAMILIES["rank_deficient"](rng, 16, 4), rng, 11, reduce=0.3)
+    A = np.stack([s.data.A for s in stacks])
+    b = np.stack([s.data.b for s in stacks])
+    w = np.stack([s.data.sqrt_weight for s in stacks])
+    solver = core.ExtendedJacobian(list(stacks[0].layout.starts), stacks[0].n, rcond=1e-10)
+    one = solver.solve_batch(A, b, w, threads=1).x.copy()
+    for threads in (2, 4, 0):
+        np.testing.assert_array_equal(solver.solve_batch(A, b, w, threads=threads).x, one)
+    A[7, 2, 3] = np.inf
+    A[9, 0, 0] = np.nan
+    with pytest.raises(CoreInputError, match=r"^stack 7: A\[2, 3\]"):
+        solver.solve_batch(A, b, w, threads=4)
+
+
 def test_core_solves_rows_of_extreme_scale_by_equilibrating():
     stack = TaskStack([[Task("a", 1e-200 * np.eye(2), np.array([1.0, 2.0]))]])
     sol = formulations.solve(stack, "extended_jacobian", kernel="cpp")
@@ -317,21 +333,52 @@ def test_prepared_cpp_solver_names_the_task_of_a_nan():
         solver.solve(data)
 
 
-def test_the_result_is_read_by_name_and_copied_by_the_prepared_solver():
+def test_the_result_is_read_by_name_and_each_answer_is_its_own():
     stack = FAMILIES["conflicting"](np.random.default_rng(2), 12, 3)
     solver = formulations.prepare(stack.layout, "extended_jacobian", kernel="cpp")
     first = solver.solve(stack)
     x = first.x.copy()
-    other = FAMILIES["conflicting"](np.random.default_rng(3), 12, 3)
-    if other.layout == stack.layout:
-        solver.solve(other)
+    other = stack.data.copy()
+    other.A[:] = np.random.default_rng(3).standard_normal(other.A.shape)
+    second = solver.solve(other)
+    assert not np.array_equal(second.x, x)
     np.testing.assert_array_equal(first.x, x)     # a later solve leaves the answer alone
-    res = core.ExtendedJacobian(list(stack.layout.starts), stack.n, rcond=1e-10).solve(
-        stack.data.A, stack.data.b, stack.data.sqrt_weight)
-    assert res.solved and res.finite and not res.ambiguous
-    assert res.x.shape == (stack.n,) and res.ranks.dtype == np.int64
-    assert not res.x.flags.writeable
+    core_solver = core.ExtendedJacobian(list(stack.layout.starts), stack.n, rcond=1e-10)
+    d = stack.data
+    res = core_solver.solve(d.A, d.b, d.sqrt_weight)
+    assert res.solved and res.finite and res.clear and not res.ambiguous
+    a, b = res.x, res.x                           # each read is a new array
+    assert a is not b and np.array_equal(a, b) and a.shape == (stack.n,)
     np.testing.assert_array_equal(res.ranks, first.info["rank_profile"])
+    assert res.ranks.dtype == np.int64
+    # the answer written into the caller's arrays
+    out, w, r = np.full(stack.n, np.nan), np.full(len(stack), np.nan), np.zeros(len(stack), np.int64)
+    core_solver.solve(d.A, d.b, d.sqrt_weight, out, w, r)
+    np.testing.assert_array_equal(out, first.x)
+    np.testing.assert_array_equal(w, first.residuals)
+    np.testing.assert_array_equal(r, first.info["rank_profile"])
+
+
+@pytest.mark.parametrize("which, bad, word", [
+    ("x", np.empty(12, dtype=np.float32), "x must be float64"),
+    ("x", np.empty(11), "x must have shape (12,)"),
+    ("x", np.empty(24)[::2], "x must be C-contiguous"),
+    ("residuals", [0.0, 0.0, 0.0], "residuals must be a float64 numpy array"),
+    ("ranks", np.empty(3), "ranks must be int64"),
+    ("x", "read-only", "x must be a float64 numpy array (writable)")])
+def test_a_bad_output_array_is_refused_by_name(which, bad, word):
+    stack = FAMILIES["conflicting"](np.random.default_rng(2), 12, 3)
+    d = stack.data
+    solver = core.ExtendedJacobian(list(stack.layout.starts), stack.n, rcond=1e-10)
+    outputs = {"x": np.empty(12), "residuals": np.empty(3), "ranks": np.empty(3, np.int64)}
+    if isinstance(bad, str):
+        bad = np.empty(12)
+        bad.setflags(write=False)
+    outputs[which] = bad
+    with pytest.raises(CoreInputError) as err:
+        solver.solve(d.A, d.b, d.sqrt_weight, outputs["x"], outputs["residuals"],
+                     outputs["ranks"])
+    assert word in str(err.value)
 
 
 def test_a_solve_releases_the_gil_and_one_solver_serves_one_thread():

@@ -13,6 +13,10 @@ from prioik.hierarchy.fuzz import judged, nested_truth
 from prioik.hierarchy.families import FAMILIES, compatible, near_singular, same_shape_batch
 
 #: the ways to compute eq. 18: compiled nested QR (numba, C++), LAPACK nested QR, the paper's SVD
+#: rounding edges: `make test-forced-cpu` (and CI) runs this module again with the
+#: numba kernels compiled for another CPU target and OpenBLAS on another core type
+pytestmark = pytest.mark.rounding_edge
+
 PATHS = {"qr-numba": {"nullspace": "qr", "kernel": "numba"},
          "qr-cpp": {"nullspace": "qr", "kernel": "cpp"},
          "qr-lapack": {"nullspace": "qr", "kernel": "lapack"},
@@ -143,7 +147,9 @@ def test_a_certified_near_ambiguous_answer_stays_optimal(case):
     """Well-conditioned fuzz stacks of the same seed whose rank decisions are
     near-ambiguous (case 5: level 1 of 3, n 53; case 20: its one level, n 40): the
     certificate passes their answers, which stay ``optimal`` on the compiled and LAPACK
-    paths alike, within 1e-9 of the fuzz's ground truth (nested SVD, its own rule)."""
+    paths alike, within 1e-9 of the fuzz's ground truth (nested SVD, its own rule), or
+    within the stack's rounding bound where that is larger (case 5: 2.1e-9; its answers
+    measured 3e-10 to 1.2e-9 from the truth with different BLAS and CPU targets)."""
     from prioik.hierarchy.fuzz import equality_case
     case = judged(equality_case(np.random.default_rng([1243, case]), case).stack)
     assert case.well_conditioned
@@ -151,7 +157,7 @@ def test_a_certified_near_ambiguous_answer_stays_optimal(case):
         sol = formulations.solve(case.stack, "extended_jacobian", **options)
         assert sol.info["near_ambiguous_levels"] and sol.info["path_certified"] is True
         assert sol.status == "optimal" and "reason" not in sol.info
-        assert relative_distance(sol.x, case.truth) <= 1e-9
+        assert relative_distance(sol.x, case.truth) <= max(1e-9, case.rounding_error)
 
 
 def test_the_svd_path_answers_where_divide_and_conquer_does_not_converge():
@@ -669,6 +675,7 @@ def test_posture_level_last_equals_reference(seed, base, weights):
 @settings(max_examples=100, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(3, 40), uncovered=st.integers(0, 8),
        levels=st.integers(1, 4), deficient=st.booleans())
+
 def test_random_posture_stacks_equal_reference(seed, n, uncovered, levels, deficient):
     """Random dense equality levels (rank-deficient ones too) above a uniform posture
     that leaves up to 8 columns uncovered: the extended Jacobian and the active set

@@ -10,7 +10,9 @@
 #include <nanobind/stl/string.h>
 #include <nanobind/stl/vector.h>
 
+#include <initializer_list>
 #include <string>
+#include <type_traits>
 #include <vector>
 
 #include "prioik/build_info.hpp"
@@ -27,7 +29,8 @@ using AnyArray = nb::ndarray<nb::ro>;
 
 std::string python_type_name(nb::handle h) { return Py_TYPE(h.ptr())->tp_name; }
 
-std::string dtype_text(const AnyArray& a) {
+template <class Array>
+std::string dtype_text(const Array& a) {
   const nb::dlpack::dtype t = a.dtype();
   const char* kind = "an unknown type";
   switch (static_cast<nb::dlpack::dtype_code>(t.code)) {
@@ -41,7 +44,8 @@ std::string dtype_text(const AnyArray& a) {
   return std::string(kind) + std::to_string(t.bits);
 }
 
-std::string shape_text(const AnyArray& a) {
+template <class Array>
+std::string shape_text(const Array& a) {
   std::string s = "(";
   for (size_t i = 0; i < a.ndim(); ++i) s += (i ? ", " : "") + std::to_string(a.shape(i));
   return s + (a.ndim() == 1 ? ",)" : ")");
@@ -53,42 +57,64 @@ std::string expected_text(const std::vector<Index>& shape) {
   return s + (shape.size() == 1 ? ",)" : ")");
 }
 
-// The data of `h` as C-contiguous float64 of `shape` (-1: any extent > 0), or
-// InputError naming `name`.
-const double* checked_array(nb::handle h, const char* name, std::vector<Index> shape,
-                            std::vector<Index>* got = nullptr) {
-  AnyArray a;
+// The data of `h` as a C-contiguous array of T of `shape` (-1: any extent > 0; an
+// output is writable), or InputError naming `name`. `got` receives the shape.
+template <class T, class Array>
+T* checked(nb::handle h, const char* name, std::initializer_list<Index> shape,
+           Index* got = nullptr) {
+  Array a;
   if (!nb::try_cast(h, a, false))
-    throw prioik::InputError(std::string(name) + " must be a float64 numpy array, got " +
+    throw prioik::InputError(std::string(name) + " must be a " +
+                             (std::is_same_v<std::remove_const_t<T>, double> ? "float64" : "int64") +
+                             " numpy array" +
+                             (std::is_const_v<T> ? "" : " (writable)") + ", got " +
                              python_type_name(h));
-  if (a.dtype() != nb::dtype<double>())
-    throw prioik::InputError(std::string(name) + " must be float64, got " + dtype_text(a));
+  if (a.dtype() != nb::dtype<std::remove_const_t<T>>())
+    throw prioik::InputError(std::string(name) + " must be " +
+                             (std::is_same_v<std::remove_const_t<T>, double> ? "float64" : "int64") +
+                             ", got " + dtype_text(a));
   if (a.device_type() != nb::device::cpu::value)
     throw prioik::InputError(std::string(name) + " must be on the CPU");
   if (a.ndim() != shape.size())
     throw prioik::InputError(std::string(name) + " must have " + std::to_string(shape.size()) +
                              " dimensions, got shape " + shape_text(a));
-  for (size_t i = 0; i < shape.size(); ++i) {
+  size_t i = 0;
+  for (Index want : shape) {
     if (a.shape(i) == 0)
       throw prioik::InputError(std::string(name) + " is empty (shape " + shape_text(a) + ")");
-    if (shape[i] >= 0 && static_cast<Index>(a.shape(i)) != shape[i]) {
-      std::vector<Index> want = shape;
-      throw prioik::InputError(std::string(name) + " must have shape " + expected_text(want) +
-                               ", got " + shape_text(a));
-    }
+    if (want >= 0 && static_cast<Index>(a.shape(i)) != want)
+      throw prioik::InputError(std::string(name) + " must have shape " +
+                               expected_text(std::vector<Index>(shape)) + ", got " + shape_text(a));
+    if (got != nullptr) got[i] = static_cast<Index>(a.shape(i));
+    ++i;
   }
   int64_t expect = 1;
-  for (size_t i = shape.size(); i-- > 0;) {
-    if (a.shape(i) > 1 && a.stride(i) != expect)
+  for (size_t d = shape.size(); d-- > 0;) {
+    if (a.shape(d) > 1 && a.stride(d) != expect)
       throw prioik::InputError(std::string(name) + " must be C-contiguous (a view with strides "
                                "is not taken: pass np.ascontiguousarray of it)");
-    expect *= static_cast<int64_t>(a.shape(i));
+    expect *= static_cast<int64_t>(a.shape(d));
   }
-  if (got != nullptr) {
-    got->clear();
-    for (size_t i = 0; i < a.ndim(); ++i) got->push_back(static_cast<Index>(a.shape(i)));
-  }
-  return static_cast<const double*>(a.data());
+  return static_cast<T*>(a.data());
+}
+
+const double* input(nb::handle h, const char* name, std::initializer_list<Index> shape,
+                    Index* got = nullptr) {
+  return checked<const double, nb::ndarray<nb::ro>>(h, name, shape, got);
+}
+
+template <class T>
+T* output(nb::handle h, const char* name, std::initializer_list<Index> shape) {
+  return checked<T, nb::ndarray<>>(h, name, shape);
+}
+
+// a new numpy array holding a copy of v (the caller keeps it; the next solve leaves it)
+template <class T>
+nb::ndarray<nb::numpy, T, nb::ndim<1>> copy1(const std::vector<T>& v) {
+  T* data = new T[v.size()];
+  std::copy(v.begin(), v.end(), data);
+  nb::capsule owner(data, [](void* p) noexcept { delete[] static_cast<T*>(p); });
+  return nb::ndarray<nb::numpy, T, nb::ndim<1>>(data, {v.size()}, owner);
 }
 
 template <class T>
@@ -115,24 +141,33 @@ using prioik::ExtendedJacobianBatch;
 using prioik::ExtendedJacobianResult;
 
 const ExtendedJacobianResult& solve_one(ExtendedJacobian& self, nb::handle A, nb::handle b,
-                                        nb::handle w) {
-  const Index M = self.rows(), n = self.cols();
-  const prioik::StackArrays data{checked_array(A, "A", {M, n}), checked_array(b, "b", {M}),
-                                 checked_array(w, "sqrt_weight", {M})};
+                                        nb::handle w, nb::handle x, nb::handle residuals,
+                                        nb::handle ranks) {
+  const Index M = self.rows(), n = self.cols(), k = self.levels();
+  const prioik::StackArrays data{input(A, "A", {M, n}), input(b, "b", {M}),
+                                 input(w, "sqrt_weight", {M})};
+  // the answer's outputs, when given: written after the solve
+  double* x_out = x.is_none() ? nullptr : output<double>(x, "x", {n});
+  double* residuals_out = residuals.is_none() ? nullptr : output<double>(residuals, "residuals", {k});
+  Index* ranks_out = ranks.is_none() ? nullptr : output<Index>(ranks, "ranks", {k});
   nb::gil_scoped_release release;
-  return self.solve(data);
+  const ExtendedJacobianResult& res = self.solve(data);
+  if (x_out != nullptr) std::copy(res.x.begin(), res.x.end(), x_out);
+  if (residuals_out != nullptr) std::copy(res.residuals.begin(), res.residuals.end(), residuals_out);
+  if (ranks_out != nullptr) std::copy(res.ranks.begin(), res.ranks.end(), ranks_out);
+  return res;
 }
 
 ExtendedJacobianBatch solve_many(ExtendedJacobian& self, nb::handle A, nb::handle b,
-                                 nb::handle w) {
+                                 nb::handle w, unsigned threads) {
   const Index M = self.rows(), n = self.cols();
-  std::vector<Index> shape;
-  const double* a = checked_array(A, "A", {-1, M, n}, &shape);
+  Index shape[3] = {0, 0, 0};
+  const double* a = input(A, "A", {-1, M, n}, shape);
   const Index N = shape[0];
-  const double* bb = checked_array(b, "b", {N, M});
-  const double* ww = checked_array(w, "sqrt_weight", {N, M});
+  const double* bb = input(b, "b", {N, M});
+  const double* ww = input(w, "sqrt_weight", {N, M});
   nb::gil_scoped_release release;
-  return self.solve_batch(a, bb, ww, N);
+  return self.solve_batch(a, bb, ww, N, threads);
 }
 
 }  // namespace
@@ -170,20 +205,24 @@ NB_MODULE(_core, m) {
 
   nb::class_<ExtendedJacobianResult>(
       m, "ExtendedJacobianResult",
-      "One solve's answer, the solver's own: its arrays are read-only views that the "
-      "solver's next solve overwrites (copy what you keep).")
-      .def_prop_ro("x", [](nb::handle s) { return view1(nb::cast<ExtendedJacobianResult&>(s).x, s); })
+      "One solve's answer, the solver's own (the next solve overwrites it): each read "
+      "of an array field returns a new array, which the caller keeps.")
+      .def_prop_ro("x", [](nb::handle s) { return copy1(nb::cast<ExtendedJacobianResult&>(s).x); }, nb::rv_policy::move)
       .def_prop_ro("residuals",
-                   [](nb::handle s) { return view1(nb::cast<ExtendedJacobianResult&>(s).residuals, s); })
+                   [](nb::handle s) { return copy1(nb::cast<ExtendedJacobianResult&>(s).residuals); }, nb::rv_policy::move)
       .def_prop_ro("level_mu2",
-                   [](nb::handle s) { return view1(nb::cast<ExtendedJacobianResult&>(s).level_mu2, s); })
+                   [](nb::handle s) { return copy1(nb::cast<ExtendedJacobianResult&>(s).level_mu2); }, nb::rv_policy::move)
       .def_prop_ro("margins",
-                   [](nb::handle s) { return view1(nb::cast<ExtendedJacobianResult&>(s).margins, s); })
+                   [](nb::handle s) { return copy1(nb::cast<ExtendedJacobianResult&>(s).margins); }, nb::rv_policy::move)
       .def_prop_ro("ranks",
-                   [](nb::handle s) { return view1(nb::cast<ExtendedJacobianResult&>(s).ranks, s); })
+                   [](nb::handle s) { return copy1(nb::cast<ExtendedJacobianResult&>(s).ranks); }, nb::rv_policy::move)
       .def_ro("solved", &ExtendedJacobianResult::solved,
               "False: a level's scale is outside [SCALE_LOW, SCALE_HIGH], nothing solved")
       .def_ro("finite", &ExtendedJacobianResult::finite)
+      .def_prop_ro("clear", [](const ExtendedJacobianResult& r) {
+        return r.solved && r.finite && !r.ambiguous && !r.near_ambiguous && !r.precision_limited;
+      }, "solved, finite, every rank decision clear of the (near-)ambiguity band and |x| "
+         "below PRECISION_LIMIT_NORM: the answer needs no further check")
       .def_ro("ambiguous", &ExtendedJacobianResult::ambiguous)
       .def_ro("near_ambiguous", &ExtendedJacobianResult::near_ambiguous)
       .def_ro("precision_limited", &ExtendedJacobianResult::precision_limited);
@@ -238,12 +277,15 @@ NB_MODULE(_core, m) {
            nb::arg("level_damping") = 0.0, nb::arg("singular_threshold") = 0.0,
            nb::arg("step_bound") = std::vector<double>())
       .def("solve", &solve_one, nb::arg("A").none(), nb::arg("b").none(),
-           nb::arg("sqrt_weight").none(),
+           nb::arg("sqrt_weight").none(), nb::arg("x") = nb::none(),
+           nb::arg("residuals") = nb::none(), nb::arg("ranks") = nb::none(),
            nb::rv_policy::reference_internal,
-           "Solve one stack (A: M × n, b and sqrt_weight: M; C-contiguous float64).")
+           "Solve one stack (A: M × n, b and sqrt_weight: M; C-contiguous float64). x (n), "
+           "residuals (k) and ranks (k, int64), when given, receive the answer's.")
       .def("solve_batch", &solve_many, nb::arg("A").none(), nb::arg("b").none(),
-           nb::arg("sqrt_weight").none(),
-           "Solve N stacks (A: N × M × n, b and sqrt_weight: N × M), each on its own.")
+           nb::arg("sqrt_weight").none(), nb::kw_only(), nb::arg("threads") = 0,
+           "Solve N stacks (A: N × M × n, b and sqrt_weight: N × M), each on its own, on "
+           "up to `threads` threads (0: one per hardware thread).")
       .def_prop_ro("rows", &ExtendedJacobian::rows)
       .def_prop_ro("cols", &ExtendedJacobian::cols)
       .def_prop_ro("levels", &ExtendedJacobian::levels)

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <sstream>
+#include <thread>
 #include <utility>
 
 namespace prioik {
@@ -44,6 +45,15 @@ std::string fmt(double v) {
 }
 
 }  // namespace
+
+ExtendedJacobianWorkspace::ExtendedJacobianWorkspace(Index M, Index n, Index k)
+    : B(M * n, 0.0), c(M, 0.0), scales(k, 0.0), qr(M, n) {
+  result.x.assign(n, 0.0);
+  result.residuals.assign(k, 0.0);
+  result.level_mu2.assign(k, 0.0);
+  result.margins.assign(k, kInf);
+  result.ranks.assign(k, 0);
+}
 
 bool weigh_rows(const double* A, const double* b, const double* w, Index M, Index n, double* B,
                 double* c) {
@@ -110,28 +120,12 @@ ExtendedJacobian::ExtendedJacobian(std::vector<Index> starts, Index n,
     if (!(v >= 0.0 && v < kInf)) throw InputError("step_bound must be finite and >= 0");
     if (v > 0.0) trust_region_ = true;
   }
-  // selective damping needs both values (the Python layer passes 0 for λ otherwise)
+  // selective damping needs both values
   params_.rcond = options_.rcond;
   params_.level_damping = options_.singular_threshold > 0.0 ? options_.level_damping : 0.0;
   params_.singular_threshold = options_.singular_threshold;
   params_.step_bound = options_.step_bound.data();
-  B_.assign(M_ * n_, 0.0);
-  c_.assign(M_, 0.0);
-  scales_.assign(k_, 0.0);
-  qr_ = NestedQRWorkspace(M_, n_);
-  result_.x.assign(n_, 0.0);
-  result_.residuals.assign(k_, 0.0);
-  result_.level_mu2.assign(k_, 0.0);
-  result_.margins.assign(k_, kInf);
-  result_.ranks.assign(k_, 0);
-}
-
-bool ExtendedJacobian::weigh_and_scale(const StackArrays& data) {
-  const bool weights_ok = weigh_rows(data.A, data.b, data.sqrt_weight, M_, n_, B_.data(),
-                                     c_.data());
-  const bool scales_ok = level_scales(B_.data(), c_.data(), M_, n_, starts_.data(), k_,
-                                      scales_.data());
-  return weights_ok && scales_ok;
+  work_ = ExtendedJacobianWorkspace(M_, n_, k_);
 }
 
 void ExtendedJacobian::check_entries(const StackArrays& data) const {
@@ -151,8 +145,7 @@ void ExtendedJacobian::check_entries(const StackArrays& data) const {
   }
 }
 
-void ExtendedJacobian::summarize(const StackArrays& data) {
-  ExtendedJacobianResult& res = result_;
+void ExtendedJacobian::summarize(const StackArrays& data, ExtendedJacobianResult& res) const {
   level_residuals(data.A, data.b, data.sqrt_weight, n_, starts_.data(), k_, res.x.data(),
                   res.residuals.data());
   double acc = 0.0;
@@ -171,26 +164,53 @@ void ExtendedJacobian::summarize(const StackArrays& data) {
                           kPrecisionLimitNorm * kPrecisionLimitNorm;
 }
 
-const ExtendedJacobianResult& ExtendedJacobian::solve(const StackArrays& data) {
-  BusyGuard guard(busy_);
-  ExtendedJacobianResult& res = result_;
-  res.solved = weigh_and_scale(data);
+void ExtendedJacobian::solve_on(const StackArrays& data, ExtendedJacobianWorkspace& work) const {
+  ExtendedJacobianResult& res = work.result;
+  const bool weights_ok = weigh_rows(data.A, data.b, data.sqrt_weight, M_, n_, work.B.data(),
+                                     work.c.data());
+  const bool scales_ok = level_scales(work.B.data(), work.c.data(), M_, n_, starts_.data(), k_,
+                                      work.scales.data());
+  res.solved = weights_ok && scales_ok;
   if (!res.solved) {
     // a NaN, an inf or a √w ≤ 0 is an input error; finite rows of extreme scale are not
     check_entries(data);
     res.finite = res.ambiguous = res.near_ambiguous = res.precision_limited = false;
-    return res;
+    return;
   }
-  MatrixRef B{B_.data(), M_, n_, n_};
   const NestedQROutput out{res.x.data(), res.ranks.data(), res.level_mu2.data(),
                            res.margins.data(), nullptr};
-  nested_qr(B, c_.data(), starts_.data(), k_, scales_.data(), params_, trust_region_, qr_, out);
-  summarize(data);
-  return res;
+  nested_qr(MatrixRef{work.B.data(), M_, n_, n_}, work.c.data(), starts_.data(), k_,
+            work.scales.data(), params_, trust_region_, work.qr, out);
+  summarize(data, res);
 }
 
+const ExtendedJacobianResult& ExtendedJacobian::solve(const StackArrays& data) {
+  BusyGuard guard(busy_);
+  solve_on(data, work_);
+  return work_.result;
+}
+
+namespace {
+
+// stack s's answer into row s of the batch's parts
+void store(const ExtendedJacobianResult& res, Index s, ExtendedJacobianBatch& out) {
+  std::copy(res.x.begin(), res.x.end(), out.x.begin() + s * out.n);
+  std::copy(res.residuals.begin(), res.residuals.end(), out.residuals.begin() + s * out.k);
+  std::copy(res.level_mu2.begin(), res.level_mu2.end(), out.level_mu2.begin() + s * out.k);
+  std::copy(res.margins.begin(), res.margins.end(), out.margins.begin() + s * out.k);
+  std::copy(res.ranks.begin(), res.ranks.end(), out.ranks.begin() + s * out.k);
+  out.solved[s] = res.solved;
+  out.finite[s] = res.finite;
+  out.ambiguous[s] = res.ambiguous;
+  out.near_ambiguous[s] = res.near_ambiguous;
+}
+
+}  // namespace
+
 ExtendedJacobianBatch ExtendedJacobian::solve_batch(const double* A, const double* b,
-                                                    const double* sqrt_weight, Index N) {
+                                                    const double* sqrt_weight, Index N,
+                                                    unsigned threads) {
+  BusyGuard guard(busy_);
   ExtendedJacobianBatch out;
   out.N = N;
   out.n = n_;
@@ -204,24 +224,37 @@ ExtendedJacobianBatch ExtendedJacobian::solve_batch(const double* A, const doubl
   out.finite.assign(N, 0);
   out.ambiguous.assign(N, 0);
   out.near_ambiguous.assign(N, 0);
-  for (Index s = 0; s < N; ++s) {
-    const StackArrays one{A + s * M_ * n_, b + s * M_, sqrt_weight + s * M_};
-    try {
-      solve(one);
-    } catch (const InputError& e) {
-      throw InputError("stack " + std::to_string(s) + ": " + e.what());
+  if (threads == 0) threads = std::max(1u, std::thread::hardware_concurrency());
+  const Index T = std::max<Index>(1, std::min<Index>(threads, N));
+  // thread t solves stacks t, t + T, …; the first stack that fails is reported
+  std::vector<std::string> errors(T);
+  std::vector<Index> failed(T, N);
+  auto work = [&](Index t, ExtendedJacobianWorkspace& ws) {
+    for (Index s = t; s < N; s += T) {
+      try {
+        solve_on(StackArrays{A + s * M_ * n_, b + s * M_, sqrt_weight + s * M_}, ws);
+      } catch (const InputError& e) {
+        failed[t] = s;
+        errors[t] = e.what();
+        return;
+      }
+      store(ws.result, s, out);
     }
-    const ExtendedJacobianResult& res = result_;
-    std::copy(res.x.begin(), res.x.end(), out.x.begin() + s * n_);
-    std::copy(res.residuals.begin(), res.residuals.end(), out.residuals.begin() + s * k_);
-    std::copy(res.level_mu2.begin(), res.level_mu2.end(), out.level_mu2.begin() + s * k_);
-    std::copy(res.margins.begin(), res.margins.end(), out.margins.begin() + s * k_);
-    std::copy(res.ranks.begin(), res.ranks.end(), out.ranks.begin() + s * k_);
-    out.solved[s] = res.solved;
-    out.finite[s] = res.finite;
-    out.ambiguous[s] = res.ambiguous;
-    out.near_ambiguous[s] = res.near_ambiguous;
+  };
+  if (T == 1) {
+    work(0, work_);
+  } else {
+    std::vector<ExtendedJacobianWorkspace> spaces;
+    spaces.reserve(T - 1);
+    for (Index t = 1; t < T; ++t) spaces.emplace_back(M_, n_, k_);
+    std::vector<std::thread> pool;
+    for (Index t = 1; t < T; ++t) pool.emplace_back(work, t, std::ref(spaces[t - 1]));
+    work(0, work_);
+    for (std::thread& th : pool) th.join();
   }
+  const Index first = std::min_element(failed.begin(), failed.end()) - failed.begin();
+  if (failed[first] < N)
+    throw InputError("stack " + std::to_string(failed[first]) + ": " + errors[first]);
   return out;
 }
 

@@ -189,11 +189,24 @@ void test_batch_equals_single_solves() {
     w.insert(w.end(), s.w.data(), s.w.data() + M);
   }
   prioik::ExtendedJacobian solver(starts, n, {});
-  const prioik::ExtendedJacobianBatch batch = solver.solve_batch(A.data(), b.data(), w.data(), N);
-  for (Index i = 0; i < N; ++i) {
-    const auto& one = solve(solver, stacks[i]);
-    for (Index j = 0; j < n; ++j) CHECK(batch.x[i * n + j] == one.x[j]);
+  for (unsigned threads : {1u, 3u, 8u}) {
+    const prioik::ExtendedJacobianBatch batch =
+        solver.solve_batch(A.data(), b.data(), w.data(), N, threads);
+    for (Index i = 0; i < N; ++i) {
+      const auto& one = solve(solver, stacks[i]);
+      for (Index j = 0; j < n; ++j) CHECK(batch.x[i * n + j] == one.x[j]);
+    }
   }
+  // the first stack with a bad value is named, whichever thread met it
+  A[2 * starts.back() * n + 5] = std::numeric_limits<double>::quiet_NaN();
+  A[3 * starts.back() * n + 1] = std::numeric_limits<double>::quiet_NaN();
+  bool named = false;
+  try {
+    solver.solve_batch(A.data(), b.data(), w.data(), N, 3);
+  } catch (const prioik::InputError& e) {
+    named = std::string(e.what()).rfind("stack 2: A[0, 5]", 0) == 0;
+  }
+  CHECK(named);
 }
 
 void test_bad_input_throws_input_error() {

@@ -74,6 +74,19 @@ struct ExtendedJacobianBatch {
   std::vector<unsigned char> solved, finite, ambiguous, near_ambiguous;   // N
 };
 
+// What one solve works in, allocated at prepare: the weighted rows and targets, the
+// level scales, the nested QR's scratch, and the answer.
+struct ExtendedJacobianWorkspace {
+  ExtendedJacobianWorkspace() = default;
+  ExtendedJacobianWorkspace(Index M, Index n, Index k);
+
+  std::vector<double> B;        // M × n: diag(√w) A, then the nested QR's rotated rows
+  std::vector<double> c;        // M: √w ∘ b
+  std::vector<double> scales;   // k: ‖A_i‖_F of the weighted rows
+  NestedQRWorkspace qr;
+  ExtendedJacobianResult result;
+};
+
 class ExtendedJacobian {
  public:
   // starts: the k + 1 row offsets of the levels (starts[0] = 0, non-decreasing);
@@ -85,11 +98,13 @@ class ExtendedJacobian {
   const ExtendedJacobianResult& solve(const StackArrays& data);
 
   // Solve N stacks of the layout (A: N × M × n, b and √w: N × M), each on its own, as
-  // solve does. Throws InputError naming the stack of a non-finite entry or a √w ≤ 0.
+  // solve does, on up to `threads` threads (0: one per hardware thread; each its own
+  // workspace, allocated here). Throws InputError naming the first stack of a non-finite
+  // entry or a √w ≤ 0.
   ExtendedJacobianBatch solve_batch(const double* A, const double* b, const double* sqrt_weight,
-                                    Index N);
+                                    Index N, unsigned threads = 0);
 
-  const ExtendedJacobianResult& result() const { return result_; }
+  const ExtendedJacobianResult& result() const { return work_.result; }
   Index rows() const { return M_; }
   Index cols() const { return n_; }
   Index levels() const { return k_; }
@@ -98,8 +113,9 @@ class ExtendedJacobian {
   bool trust_region() const { return trust_region_; }
 
  private:
-  bool weigh_and_scale(const StackArrays& data);
-  void summarize(const StackArrays& data);
+  // one solve on `work` (this solver's or a batch thread's)
+  void solve_on(const StackArrays& data, ExtendedJacobianWorkspace& work) const;
+  void summarize(const StackArrays& data, ExtendedJacobianResult& res) const;
   // throws InputError naming the first non-finite entry or √w ≤ 0, if any
   void check_entries(const StackArrays& data) const;
 
@@ -108,12 +124,7 @@ class ExtendedJacobian {
   ExtendedJacobianOptions options_;
   bool trust_region_;
   NestedQRParameters params_;
-  // the workspace: weighted rows and targets, level scales, the nested QR's scratch
-  std::vector<double> B_;
-  std::vector<double> c_;
-  std::vector<double> scales_;
-  NestedQRWorkspace qr_;
-  ExtendedJacobianResult result_;
+  ExtendedJacobianWorkspace work_;
   std::atomic<bool> busy_{false};
 };
 
