@@ -163,6 +163,29 @@ def nan_in_task():
     data.A[0, 0] = np.nan
     return F.prepare(stack.layout, "extended_jacobian", kernel="cpp").solve(data)
 api("core", "prepare(kernel='cpp') on NaN data", nan_in_task, "task 'a'")
+active = core.ActiveSetSolver(3, np.array([0, 2, 4]), np.array([1, 1, 0, 0], dtype=np.int8),
+                              1e-9, 1e-10, 1e-12, 500, True)
+lo, up = -np.ones(4), np.ones(4)
+for name, args, word in (
+        ("A float32", (good_A.astype(np.float32), good_b, lo, up, good_w), "A must be float64"),
+        ("A list", (good_A.tolist(), good_b, lo, up, good_w), "A must be a float64"),
+        ("A wrong shape", (np.ones((3, 4)), good_b, lo, up, good_w), "A must have shape"),
+        ("A Fortran order", (np.asfortranarray(np.arange(12.0).reshape(4, 3)), good_b, lo, up, good_w), "C-contiguous"),
+        ("lower empty", (good_A, good_b, lo[:0], up, good_w), "lower is empty"),
+        ("upper strided", (good_A, good_b, lo, np.ones(8)[::2], good_w), "upper must be C-contiguous"),
+        ("A NaN", (nan_at(good_A, (1, 2)), good_b, lo, up, good_w), "A[1, 2]"),
+        ("lower NaN", (good_A, good_b, nan_at(lo, 3), up, good_w), "lower[3]"),
+        ("sqrt_weight 0", (good_A, good_b, lo, up, np.array([1.0, 1.0, 0.0, 1.0])), "sqrt_weight[2]")):
+    api("core", f"ActiveSetSolver.solve {name}", lambda args=args: active.solve(*args), word)
+api("core", "ActiveSetSolver starts decreasing",
+    lambda: core.ActiveSetSolver(3, np.array([0, 3, 2]), np.ones(2, dtype=np.int8), 1e-9, 1e-10, 1e-12, 500, True),
+    "starts")
+def nan_in_active_set_task():
+    stack = TaskStack([[Task("a", np.eye(2), [1.0, 2.0])], [Task("box", np.eye(2), lower=-np.ones(2), upper=np.ones(2))]])
+    data = stack.data.copy()
+    data.A[0, 0] = np.nan
+    return F.prepare(stack.layout, "hierarchical_active_set", kernel="cpp").solve(data)
+api("core", "prepare(hierarchical_active_set, kernel='cpp') on NaN data", nan_in_active_set_task, "task 'a'")
 
 # ---------------------------------------------------------------- CLI
 tmp = tempfile.mkdtemp()

@@ -5,6 +5,7 @@
 // prioik::InputError). A second thread in a solve raises ConcurrentUseError.
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
+#include <nanobind/stl/string.h>
 
 #include <cmath>
 #include <cstdint>
@@ -27,27 +28,37 @@ using I64 = std::int64_t;
 
 using AnyArray = nb::ndarray<nb::ro, nb::device::cpu>;
 
-/// The array `name` as float64, C-contiguous, of `rows` (and `cols` when 2-D) entries.
+std::string shape_of(const AnyArray& a) {
+    std::string out = "(";
+    for (size_t i = 0; i < a.ndim(); ++i) out += (i ? ", " : "") + std::to_string(a.shape(i));
+    return out + (a.ndim() == 1 ? ",)" : ")");
+}
+
+/// The array `name` as float64, C-contiguous, of shape (rows,) or (rows, cols) when
+/// cols ≥ 0, not empty; else InputError naming it (the extended Jacobian's wording).
 const double* checked(nb::handle h, const char* name, I64 rows, I64 cols) {
-    std::string what = std::string("the active set's ") + name;
+    const std::string what(name);
     AnyArray a;
-    if (!nb::try_cast(h, a, false)) raise_input_error(what + " must be a float64 numpy array");
-    if (a.dtype() != nb::dtype<double>())
-        raise_input_error(what + " must be float64");
-    I64 ndim = cols < 0 ? 1 : 2;
-    if (static_cast<I64>(a.ndim()) != ndim)
-        raise_input_error(what + " must be " + std::to_string(ndim) + "-D, not " +
-                              std::to_string(a.ndim()) + "-D");
-    const bool rows_differ = static_cast<I64>(a.shape(0)) != rows;
-    if (rows_differ || (ndim == 2 && static_cast<I64>(a.shape(1)) != cols))
-        raise_input_error(what + " has the wrong shape for the prepared layout (" +
-                          std::to_string(rows) +
-                          (ndim == 2 ? " x " + std::to_string(cols) : "") + " expected)");
-    if (rows == 0 || (ndim == 2 && cols == 0)) raise_input_error(what + " is empty");
+    if (!nb::try_cast(h, a, false))
+        raise_input_error(what + " must be a float64 numpy array, got " +
+                          nb::cast<std::string>(nb::handle(reinterpret_cast<PyObject*>(
+                              Py_TYPE(h.ptr()))).attr("__name__")));
+    if (a.dtype() != nb::dtype<double>()) raise_input_error(what + " must be float64");
+    const I64 ndim = cols < 0 ? 1 : 2;
+    for (size_t d = 0; d < a.ndim(); ++d)
+        if (a.shape(d) == 0) raise_input_error(what + " is empty (shape " + shape_of(a) + ")");
+    const bool wrong = static_cast<I64>(a.ndim()) != ndim ||
+                       static_cast<I64>(a.shape(0)) != rows ||
+                       (ndim == 2 && static_cast<I64>(a.shape(1)) != cols);
+    if (wrong)
+        raise_input_error(what + " must have shape (" + std::to_string(rows) +
+                          (ndim == 2 ? ", " + std::to_string(cols) + ")" : ",)") + ", got " +
+                          shape_of(a));
     I64 expect = 1;
     for (I64 d = ndim - 1; d >= 0; --d) {
         if (a.shape(d) > 1 && a.stride(d) != expect)
-            raise_input_error(what + " must be C-contiguous");
+            raise_input_error(what + " must be C-contiguous (a view with strides is not "
+                              "taken: pass np.ascontiguousarray of it)");
         expect *= static_cast<I64>(a.shape(d));
     }
     return static_cast<const double*>(a.data());
@@ -72,21 +83,18 @@ Inputs check_inputs(const ActiveSetSolver& s, nb::handle A, nb::handle b, nb::ha
 /// them: a valid stack pays no second pass.
 void name_refused_value(const ActiveSetSolver& s, const Inputs& in) {
     I64 M = s.layout().M, n = s.layout().n;
+    auto at = [](I64 j) { return "[" + std::to_string(j) + "]"; };
     for (I64 j = 0; j < M; ++j) {
         for (I64 c = 0; c < n; ++c)
             if (!std::isfinite(in.A[j * n + c]))
-                raise_input_error("the active set's A has a non-finite entry at row " +
-                                  std::to_string(j) + ", column " + std::to_string(c));
+                raise_input_error("A[" + std::to_string(j) + ", " + std::to_string(c) +
+                                  "] is not finite");
         if (!(in.sw[j] > 0.0 && std::isfinite(in.sw[j])))
-            raise_input_error("the active set's sqrt_weight must be finite and > 0 (row " +
-                              std::to_string(j) + ")");
-        if (std::isnan(in.lower[j]))
-            raise_input_error("the active set's lower is NaN at row " + std::to_string(j));
-        if (std::isnan(in.upper[j]))
-            raise_input_error("the active set's upper is NaN at row " + std::to_string(j));
+            raise_input_error("sqrt_weight" + at(j) + " must be finite and > 0");
+        if (std::isnan(in.lower[j])) raise_input_error("lower" + at(j) + " is NaN");
+        if (std::isnan(in.upper[j])) raise_input_error("upper" + at(j) + " is NaN");
         if (s.layout().row_eq[j] && !std::isfinite(in.b[j]))
-            raise_input_error("the active set's b is not finite at equality row " +
-                              std::to_string(j));
+            raise_input_error("b" + at(j) + " is not finite (an equality row's target)");
     }
 }
 

@@ -64,11 +64,11 @@ void ActiveSetWorkspace::allocate(index M, index n, index k) {
 ActiveSetSolver::ActiveSetSolver(ActiveSetLayout layout, ActiveSetOptions options)
     : layout_(std::move(layout)), options_(options) {
     index M = layout_.M, n = layout_.n, k = layout_.k;
-    if (n <= 0 || k <= 0 || M < 0 || static_cast<index>(layout_.starts.size()) != k + 1 ||
+    if (n <= 0 || k <= 0 || M <= 0 || static_cast<index>(layout_.starts.size()) != k + 1 ||
         static_cast<index>(layout_.row_eq.size()) != M || layout_.starts[0] != 0 ||
         layout_.starts[k] != M)
         throw std::invalid_argument("active set layout: starts must be k + 1 offsets from 0 "
-                                    "to M, row_eq M flags, n > 0");
+                                    "to M > 0, row_eq M flags, n > 0");
     for (index i = 0; i < k; ++i)
         if (layout_.starts[i] > layout_.starts[i + 1])
             throw std::invalid_argument("active set layout: starts must not decrease");
