@@ -414,3 +414,17 @@ def test_closed_loop_robot_runs_match_numba(name, mode):
         v = v + x * 0.01 if accel else x
         q = pin.integrate(robot.model, q, v * 0.01)
     assert paths <= 4, paths
+
+
+def test_the_kernels_benchmark_times_both_kernels_on_the_same_stacks():
+    """benchmarks/active_set_kernels.py: per stack a time of each kernel (interleaved
+    blocks), the row giving both means and their ratio."""
+    from prioik.benchmarks.active_set_kernels import interleaved, random_row
+    calls = []
+    t = interleaved([(lambda: calls.append("cpp"), lambda: calls.append("numba"))], 3)
+    assert t.shape == (1, 2) and np.all(t > 0)
+    assert calls.count("cpp") == calls.count("numba") == 15
+    assert calls[:5] == ["cpp"] * 5 and calls[10:15] == ["numba"] * 5   # order alternates
+    cells = random_row(2, 2).strip("| ").split(" | ")
+    cpp_us, numba_us, ratio = float(cells[1]), float(cells[2]), float(cells[3])
+    assert cpp_us > 0 and numba_us > 0 and ratio == pytest.approx(cpp_us / numba_us, rel=0.05)
