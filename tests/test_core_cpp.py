@@ -20,6 +20,10 @@ from prioik.hierarchy import Task, TaskStack, TaskStackError, load_stack
 from prioik.hierarchy import linalg
 from prioik.hierarchy.families import FAMILIES, near_singular, same_shape_batch
 
+#: rounding edges: `make test-forced-cpu` runs this module again with numba (the oracle)
+#: compiled for another CPU target
+pytestmark = pytest.mark.rounding_edge
+
 DATA = Path(__file__).parent / "data"
 SAVED = sorted((DATA / "fuzz").glob("*.json")) + sorted((DATA / "adversarial").glob("*.json"))
 
