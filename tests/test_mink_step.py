@@ -21,3 +21,18 @@ def test_every_path_is_timed_and_keeps_its_limits(measure):
         assert all(0.0 <= d < 0.5 for d in out["feet_drift_m"].values())
     table = mink_step.format_table({"case": out})
     assert table.splitlines()[2].startswith("| case | ")
+
+
+def test_the_bench_page_shows_the_mink_table_or_why_not():
+    from prioik.benchmarks.bench import page
+    from prioik.benchmarks.bench.settings import Settings
+    ik = {f"{path}_{q}_us": 1.0 for path in ("prioik_prepared", "prioik_oneoff", "placo")
+          for q in ("step", "p10", "p90")}
+    md = page.results_markdown([], [], {}, ik | {"mink_table": "| the table |"}, [], [],
+                               Settings(), [])
+    assert "## mink beside prioik and PlaCo" in md and "| the table |" in md
+    why = "the mink IK step needs the `mink` extra"
+    md = page.results_markdown([], [], {}, ik | {"mink_error": why}, [], [], Settings(), [])
+    assert f"Not measured: {why}" in md
+    assert "## mink beside" not in page.results_markdown([], [], {}, ik, [], [],
+                                                           Settings(), [])
