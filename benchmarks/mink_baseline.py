@@ -1,7 +1,7 @@
 """A scenario with mink — differential IK on MuJoCo, weighted tasks in one QP.
 
-mink solves, each control step, one QP for the displacement ``Δq = v dt``: every task a
-weighted cost ``‖cost ∘ (J Δq + gain·e)‖²`` (dead-beat at ``gain = 1``, mink's default),
+mink solves, each control step, one QP for the displacement ``Δq = v dt``: every task
+a weighted cost ``‖cost ∘ (J Δq + gain·e)‖²`` (dead-beat at ``gain = 1``, mink's default),
 tasks given as ``constraints`` as equalities ``J Δq = −gain·e``, and its
 :class:`~mink.ConfigurationLimit` (joint position limits over the step, gain 0.95) and
 :class:`~mink.VelocityLimit` (``|v| ≤ v_max``) as inequalities. There are no

@@ -77,6 +77,6 @@ def test_centre_of_mass_matches_pinocchio():
 def test_a_joint_only_one_model_has_is_named():
     from prioik.robots.arm import ArmScenario
     text = ArmScenario().urdf_text()       # the fingers fixed; joints in load("panda")
-    with pytest.raises(MujocoModelError, match=r"only in pinocchio \['panda_finger_joint1', "
-                                               r"'panda_finger_joint2'\], only in MuJoCo none"):
+    only = r"only in pinocchio \['panda_finger_joint1', 'panda_finger_joint2'\], only in MuJoCo"
+    with pytest.raises(MujocoModelError, match=only + " none"):
         to_mujoco(load("panda"), text)
