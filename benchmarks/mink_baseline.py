@@ -46,12 +46,25 @@ DEFAULT_SOLVER = "daqp"
 #: mink's task gain (dead-beat: the error is driven to zero within one step)
 GAIN = 1.0
 
+
+
+def _version(distribution: str) -> str:
+    import importlib.metadata
+    try:
+        return importlib.metadata.version(distribution)
+    except importlib.metadata.PackageNotFoundError:
+        return "(not installed)"
+
+
 #: the baseline's name in the scenario reports (:data:`prioik.benchmarks.variants.BASELINES`)
 NAME = "mink"
-DESCRIPTION = ("mink's solve_ik at velocity level on the URDF converted to MuJoCo: every "
-               "task a weighted cost (one decade per level), held feet as equality "
-               "constraints, its ConfigurationLimit and VelocityLimit; QP back-end "
-               f"{DEFAULT_SOLVER} (mink's documentation's choice)")
+#: what the scenario pages say of the run: version, level, priority model, what it is given
+DESCRIPTION = (f"mink {_version('mink')} (mujoco {_version('mujoco')}), solve_ik at "
+               "velocity level on the URDF converted to MuJoCo: weighted tasks in one QP "
+               "(one decade of cost per level), held feet as equality constraints, its "
+               "ConfigurationLimit and VelocityLimit as inequalities; task gains "
+               f"{GAIN:g} (dead-beat); QP back-end {DEFAULT_SOLVER} (mink's "
+               "documentation's choice)")
 #: rows beside the default one (``options["solver"]``: the QP back-end)
 REPORT_VARIANTS = (
     ReportVariant("quadprog", {"solver": "quadprog"}, reports=("scenario",),

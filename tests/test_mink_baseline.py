@@ -78,3 +78,13 @@ def test_the_held_foot_is_an_equality_constraint_on_the_g1():
     assert not res.failed and res.steps == 10
     assert res.errors["support_foot_error_m"].max() < 1e-6
     assert res.errors["joint_limit_violation_rad"].max() == 0.0
+
+
+def test_the_description_says_version_level_priorities_back_end_and_gains():
+    import importlib.metadata
+    text = mink_baseline.DESCRIPTION
+    assert text.startswith(f"mink {importlib.metadata.version('mink')} (mujoco "
+                           f"{importlib.metadata.version('mujoco')})")
+    for part in ("velocity level", "weighted tasks", "equality constraints",
+                 "task gains 1", "QP back-end daqp"):
+        assert part in text
