@@ -258,17 +258,20 @@ def _times(best: dict[str, np.ndarray]) -> dict[str, Any]:
     return out
 
 
-def run(steps: int = 300, solvers: tuple[str, ...] | None = None) -> dict[str, Any]:
+def run(steps: int = 300, solvers: tuple[str, ...] | None = None,
+        rounds: int | None = None) -> dict[str, Any]:
     """:func:`panda_mink_step` and :func:`g1_feet_mink_step` with each of ``solvers``
-    (default: mink's documented back-end) as mink's back-end, one BLAS thread."""
+    (default: mink's documented back-end) as mink's back-end, one BLAS thread;
+    ``rounds``: each function's default unless given."""
     from prioik.benchmarks.threads import blas_threads
 
     from .mink_baseline import DEFAULT_SOLVER
     out: dict[str, Any] = {}
     with blas_threads(1):
         for solver in solvers or (DEFAULT_SOLVER,):
-            out[f"panda[{solver}]"] = panda_mink_step(steps, solver=solver)
-            out[f"g1_feet[{solver}]"] = g1_feet_mink_step(steps, solver=solver)
+            kw = {"solver": solver} | ({"rounds": rounds} if rounds else {})
+            out[f"panda[{solver}]"] = panda_mink_step(steps, **kw)
+            out[f"g1_feet[{solver}]"] = g1_feet_mink_step(steps, **kw)
     return out
 
 

@@ -36,3 +36,10 @@ def test_the_bench_page_shows_the_mink_table_or_why_not():
     assert f"Not measured: {why}" in md
     assert "## mink beside" not in page.results_markdown([], [], {}, ik, [], [],
                                                            Settings(), [])
+
+
+def test_run_gives_one_row_per_problem_and_back_end():
+    out = mink_step.run(steps=5, solvers=("daqp", "quadprog"), rounds=1)
+    assert list(out) == ["panda[daqp]", "g1_feet[daqp]", "panda[quadprog]",
+                         "g1_feet[quadprog]"]
+    assert out["g1_feet[quadprog]"]["solver"] == "quadprog"

@@ -71,7 +71,8 @@ def measure_ik_step(settings: Settings, progress: Progress | None = None
     try:
         require("mink", what="the mink IK step")
         from prioik.benchmarks import mink_step
-        out["mink"] = mink_step.run(steps=settings.ik_steps)
+        out["mink"] = mink_step.run(steps=settings.ik_steps,
+                                    rounds=2 if settings.quick else None)
         out["mink_table"] = mink_step.format_table(out["mink"])
     except MissingExtraError as exc:
         out["mink_error"] = str(exc)
