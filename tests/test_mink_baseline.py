@@ -61,7 +61,6 @@ def test_mink_steps_reduce_the_tip_error_within_the_limits(arm):
 def test_mink_and_pink_take_the_same_steps(arm):
     """The same weighted QP (costs, gains, limits) on the converted model: the same
     trajectory as pink's on pinocchio's, which checks the conversion end to end."""
-    pytest.importorskip("pink")
     from prioik.benchmarks.pink_baseline import run_pink
     a = mink_baseline.run_mink(arm, duration=0.05, dt=0.002)
     b = run_pink(arm, duration=0.05, dt=0.002, solver="daqp")

@@ -4,8 +4,6 @@ import pytest
 
 from prioik.benchmarks import mink_step
 
-pytest.importorskip("placo")
-
 
 @pytest.mark.parametrize("measure", [mink_step.panda_mink_step, mink_step.g1_feet_mink_step])
 def test_every_path_is_timed_and_keeps_its_limits(measure):

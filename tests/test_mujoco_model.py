@@ -1,6 +1,7 @@
 """robots.mujoco_model: the URDF as MuJoCo reads it, and q <-> qpos giving the same frame
 positions as pinocchio at random configurations (fixed and floating base)."""
 
+import mujoco
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -8,8 +9,6 @@ import pytest
 from prioik.robots import load
 from prioik.robots.mujoco_model import (COMPILER, MujocoModelError, body_positions,
                                         frame_positions, mujoco_urdf, to_mujoco)
-
-mujoco = pytest.importorskip("mujoco")
 
 
 def test_the_urdf_loses_its_geometry_and_mimics_and_gains_the_compiler():
