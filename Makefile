@@ -61,16 +61,12 @@ venv: $(STAMP) $(CORE_STAMP_BUILT)
 
 venv-core: $(CORE_STAMP)
 
-# Its own numba cache: the two environments resolve different numpy versions, and with
-# one shared cache (formulations/__pycache__) BufferSolver and solve differed in the last
-# bits in .venv on a fresh clone (test_buffer_solver_equals_solve_bit_for_bit).
-CORE_TEST := NUMBA_CACHE_DIR=$(CORE_VENV)/numba-cache $(CORE_PY) -m pytest -q -p no:cacheprovider tests/core
+CORE_TEST := $(CORE_PY) -m pytest -q -p no:cacheprovider tests/core
 
 test-core: $(CORE_STAMP)
 	$(CORE_TEST)
 
-# The core's tests run beside the full suite (each compiles its numba kernels on a fresh
-# clone, single-threaded, into its own cache: side by side on two cores the wall time is
+# The core's tests run beside the full suite (side by side on two cores the wall time is
 # the full suite's); the core's output follows the suite's.
 test: $(STAMP) $(CORE_STAMP_BUILT) $(CORE_STAMP)
 	@$(CORE_TEST) > $(CORE_VENV)/test-core.log 2>&1 & core=$$!; \
@@ -90,13 +86,11 @@ asan: $(STAMP)
 	ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
 		$(VENV)/bin/ctest --test-dir $(ASAN_DIR) --output-on-failure
 
-# The modules marked `rounding_edge` again, on another machine's arithmetic: numba's
-# kernels compiled for a generic x86-64 CPU (SSE2, no FMA, no AVX; the host's own
-# target is the default) into a cache of their own, and OpenBLAS on its Sandybridge
-# kernels (AVX, no FMA). A test there asserts what holds whichever way a rounding edge
-# goes. CI runs it after `make test`.
-FORCED_CPU := NUMBA_CPU_NAME=generic NUMBA_CACHE_DIR=$(VENV)/numba-cache-generic \
-              OPENBLAS_CORETYPE=Sandybridge
+# The modules marked `rounding_edge` again, on another machine's arithmetic: OpenBLAS on
+# its Sandybridge kernels (AVX, no FMA). The C++ core has one rounding rule (IEEE, no
+# contraction, a portable build): nothing of it to force. A test there asserts what holds
+# whichever way a rounding edge goes. CI runs it after `make test`.
+FORCED_CPU := OPENBLAS_CORETYPE=Sandybridge
 
 test-forced-cpu: $(STAMP) $(CORE_STAMP_BUILT)
 	$(FORCED_CPU) $(PY) -m pytest -p no:cacheprovider -m "rounding_edge and not slow"

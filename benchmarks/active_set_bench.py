@@ -24,8 +24,8 @@ velocity-level stack with bounds on ``q̇``. Every solver gets the same stacks:
 
 Times: each solver runs ``repeats`` passes over the trajectory in order (as a control
 loop runs it), the passes of the four interleaved; per stack the fastest pass's
-``perf_counter`` wall time, then the median over the stacks (numba compiled beforehand,
-BLAS limited to one thread). Ten passes by default (a pass of the four over the 24
+``perf_counter`` wall time, then the median over the stacks (each solver's first solve
+before timing, BLAS limited to one thread). Ten passes by default (a pass of the four over the 24
 stacks takes ~3 ms): with fewer, the fastest pass of a ~10 µs solve still carries the
 noise of a shared machine. Beside the medians
 (issue 13's targets), per stack against DAQP raw: the slowest stack's ratio, and the
@@ -134,7 +134,7 @@ def measure(stacks: list, repeats: int = REPEATS, cascade_every: int = 1,
     before = {j: before[i] for j, i in enumerate(keep) if before and i in before}
     cold = prioik.prepare(layout, NAME, warm_start=False)
     warm = prioik.prepare(layout, NAME)
-    cold.solve(same[0])                       # numba compiled (cached) before timing
+    cold.solve(same[0])                       # the first solve before timing
     daqp_args = []
     for s in same:
         A, bu, bl, bps, _ = build(s, False, 1e-9)

@@ -88,7 +88,7 @@ class Path_:
 #: The paths ``prioik fuzz`` runs by default.
 PATHS: dict[str, Path_] = {p.name: p for p in (
     Path_("reference", "reference", {}),
-    Path_("ej_qr_numba", "extended_jacobian", {"kernel": "numba"}),
+    Path_("ej_qr_cpp", "extended_jacobian", {"kernel": "cpp"}),
     Path_("ej_qr_lapack", "extended_jacobian", {"kernel": "lapack"}),
     Path_("ej_svd", "extended_jacobian", {"nullspace": "svd"}),
     Path_("nullspace", "nullspace", {}),

@@ -1,6 +1,6 @@
 """``prioik list``, ``prioik solve`` and ``prioik compile``: the library itself from the
 command line (the formulations, their options and back-ends; one task-stack file solved;
-the compiled kernels built for this machine)."""
+``compile``, which says there is nothing to compile)."""
 
 from __future__ import annotations
 
@@ -166,15 +166,10 @@ def cmd_solve(args: argparse.Namespace) -> int:
 
 def cmd_compile(args: argparse.Namespace) -> int:
     from prioik import formulations
+    from prioik.formulations.registry import NOTHING_TO_COMPILE
     names = args.formulations.split(",") if args.formulations else None
-
-    def progress(name: str, seconds: float | None) -> None:
-        if seconds is None:
-            print(f"{name}: compiling or loading its kernels ...", flush=True)
-        else:
-            print(f"{name}: done in {seconds:.1f} s", flush=True)
-
-    formulations.compile_kernels(names, progress)
+    formulations.compile_kernels(names)       # checks the names
+    print(NOTHING_TO_COMPILE)
     return 0
 
 
@@ -207,14 +202,12 @@ def add_parser(sub) -> None:
                    help="formulation option, repeatable (e.g. -o damping=0.01)")
     p.set_defaults(func=cmd_solve)
     p = sub.add_parser(
-        "compile", help="compile the formulations' numba kernels for this machine now",
-        description="Compile, or load from numba's disk cache, every compiled kernel of "
-                    "the formulations that have them (extended_jacobian, "
-                    "hierarchical_active_set), printing the seconds each took. numba "
-                    "compiles a kernel on its first use after an install (one to two minutes "
-                    "for hierarchical_active_set on a 2-core machine) and caches it; run this "
-                    "once after installing so that a control loop's first solve does not "
-                    "wait for it.")
+        "compile", help="nothing to compile (kept for scripts): the C++ core is built at install",
+        description="Does nothing but say so: prioik's compiled solvers are C++ "
+                    "(prioik._core), built when prioik is installed, so a first solve does "
+                    "not wait for a compiler. Kept so that scripts running it do not break; "
+                    "exit status 2 when --formulations names an unknown or unavailable "
+                    "formulation.")
     p.add_argument("--formulations", default="", metavar="A,B",
-                   help="only these formulations (default: every one with compiled kernels)")
+                   help="formulation names, checked to be known and available here")
     p.set_defaults(func=cmd_compile)

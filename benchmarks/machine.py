@@ -11,7 +11,7 @@ import numpy as np
 __all__ = ["machine", "versions", "LIBRARIES"]
 
 #: the distributions whose versions the pages report
-LIBRARIES = ("numpy", "scipy", "numba", "pin", "placo", "qpsolvers", "daqp", "cvxpy",
+LIBRARIES = ("numpy", "scipy", "pin", "placo", "qpsolvers", "daqp", "cvxpy",
              "clarabel", "osqp", "proxsuite", "quadprog", "scs", "highspy", "matplotlib")
 
 

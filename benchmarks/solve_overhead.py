@@ -1,13 +1,12 @@
 """What :meth:`PreparedSolver.solve` costs on top of the compiled kernel it calls.
 
-A prepared ``extended_jacobian`` solve is one call of the compiled kernel
-(``formulations/_extended_jacobian_kernel.py`` ``solve_data``) plus the Python around
-it: the layout check, the one-thread-at-a-time guard, the timing and the
+A prepared ``extended_jacobian`` solve is one call of the compiled C++ core
+(``prioik._core.ExtendedJacobian.solve``, ``core/src/extended_jacobian.cpp``) plus the
+Python around it: the layout check, the one-thread-at-a-time guard, the timing and the
 :class:`~prioik.formulations.Solution` (the plugin's ``Outcome``, ``info``, residuals).
 Both are timed here on the same rows, alternating call by call: ``solver.solve(data)``
-(the public call) and the kernel called directly, through the same compiled entry point
-the solver calls (:func:`prioik._jit.compile_once`), on the solver's own workspaces (the
-floor; a measurement only, nothing else calls the kernel this way). The overhead is
+(the public call) and the core called directly, the solver's own prepared
+``ExtendedJacobian`` writing into arrays allocated once (the floor; a measurement only). The overhead is
 the median of the paired differences (each public call minus the kernel call beside
 it, the two taking turns to go first), the lowest over the rounds: the kernel's own time varies by more than the
 overhead between rounds on a shared machine, and a difference of two separately timed
@@ -50,14 +49,12 @@ def solve_overhead(solver, datas: Sequence, rounds: int = 7, calls: int = 2000
     impl = solver._impl
     if solver.formulation != "extended_jacobian" or not getattr(impl, "compiled", False):
         raise RuntimeError(f"{solver!r} is not on the compiled extended_jacobian path")
-    work, iwork, size = impl._work, impl._iwork, impl._out_size
-    solve_data = impl._solve_data           # the kernel's entry point, as the solver calls it
-    out = np.empty(size)
-    n = solver.layout.n
+    core = impl._core                       # the prepared C++ solver the plugin calls
+    n, k = solver.layout.n, solver.layout.k
+    x, res, ranks = np.empty(n), np.empty(k), np.empty(k, dtype=np.int64)
     for d in datas:                         # the same answers, bit for bit
-        code = solve_data(d.A, d.b, d.sqrt_weight, work, out, iwork)
-        x = solver.solve(d).x
-        if code & 3 != 1 or not np.array_equal(out[:n], x):
+        result = core.solve(d.A, d.b, d.sqrt_weight, x, res, ranks)
+        if not result.clear or not np.array_equal(x, solver.solve(d).x):
             raise RuntimeError("the kernel and solver.solve disagree")
     N = len(datas)
     clock = time.perf_counter
@@ -67,7 +64,7 @@ def solve_overhead(solver, datas: Sequence, rounds: int = 7, calls: int = 2000
 
     def floor(i: int) -> None:
         d = datas[i % N]
-        solve_data(d.A, d.b, d.sqrt_weight, work, np.empty(size), iwork)
+        core.solve(d.A, d.b, d.sqrt_weight, x, res, ranks)
 
     best = {"solve": np.inf, "kernel": np.inf, "overhead": np.inf}
     for _ in range(rounds):

@@ -122,7 +122,7 @@ import math
 import numpy as np
 from scipy.linalg import lapack
 
-from prioik.hierarchy import (AMBIGUITY, NEAR_AMBIGUITY, StackData, StackLayout, Task,
+from prioik.hierarchy import (AMBIGUITY, NEAR_AMBIGUITY, StackData, StackLayout,
                               TaskStack, UnsupportedTaskError, ambiguity_reason,
                               ambiguous_decision, decision_margin, level_scale,
                               near_ambiguity_reason, rank_threshold)
@@ -131,22 +131,6 @@ from prioik.hierarchy.linalg import numpy_svd
 from .base import (Capabilities, CoreInputError, FormulationError, Outcome, ReportVariant,
                    certify, precision_status, solve_equilibrated)
 from .options import Option, rcond_option, validate_options
-
-try:  # the compiled kernel is optional: the lapack path is the readable reference
-    from prioik._jit import ROWS_1D, ROWS_2D, WORK_F, WORK_I, compile_once
-
-    from . import _extended_jacobian_kernel as _kernel
-    _solve_data = _kernel.solve_data
-    _solve_data_bounded = _kernel.solve_data_bounded
-    _kernel_error = ""
-    #: the prepared kernel's one signature (:func:`prioik._jit.compile_once`): the rows,
-    #: targets and √w (a frozen stack's read-only arrays and a writable StackData's run
-    #: the same machine code; left to itself numba compiled one specialization for each,
-    #: ~18 s apiece on a fresh cache), then the workspace, the output, the int workspace
-    _SIGNATURE = (ROWS_2D, ROWS_1D, ROWS_1D, WORK_F, WORK_F, WORK_I)
-except ImportError as exc:  # pragma: no cover - numba is a declared dependency
-    _kernel = _solve_data = _solve_data_bounded = None
-    _kernel_error = f"{type(exc).__name__}: {exc}"
 
 try:  # the compiled C++ core (core/, built by pip install)
     from prioik import _core
@@ -200,10 +184,9 @@ OPTIONS = {
     "rcond": rcond_option(),
     "level_damping": Option(0.0, "float", "λ_max of the selective damping (qr path; 0: off)",
                             minimum=0.0),
-    "kernel": Option("auto", "str", "qr path: 'numba' (compiled), 'cpp' (the compiled C++ "
-                     "core, prioik._core), 'lapack' (readable scipy.linalg.lapack), 'auto' "
-                     "(numba when importable and n ≤ 160, else lapack)",
-                     choices=("auto", "numba", "cpp", "lapack")),
+    "kernel": Option("auto", "str", "qr path: 'cpp' (the compiled C++ core, prioik._core), "
+                     "'lapack' (readable scipy.linalg.lapack), 'auto' (cpp up to n = 160, "
+                     "else lapack)", choices=("auto", "cpp", "lapack")),
     "singular_threshold": Option(0.0, "float", "ε: damp a level whose projected "
                                  "σ_min < ε·‖A_i‖_F", minimum=0.0),
     "step_bound": Option(0.0, "any", "Δ > 0: every level's step ‖x_i − x_{i−1}‖ ≤ Δ by "
@@ -218,45 +201,28 @@ _dormqr = lapack.dormqr
 _dtrtrs = lapack.dtrtrs
 
 
-#: ``kernel="auto"`` uses the compiled kernel up to this many unknowns. Its loops win
+#: ``kernel="auto"`` uses the compiled C++ core up to this many unknowns. Its loops win
 #: where call overhead dominates; LAPACK's blocked Householder code wins on larger
-#: problems. Measured median µs numba/lapack (one thread, k = 2/16 levels): compatible
-#: n=100 76/122 and 72/304, n=150 200/263 and 191/469, n=200 719/512 and 686/727;
-#: conflicting n=150 396/507 and 363/697, n=200 2924/1679 and 1004/1532.
-AUTO_NUMBA_MAX_N = 160
+#: problems. Measured median µs cpp/lapack (one thread, k = 2/16 levels): compatible
+#: n=100 78/191 and 77/580, n=200 598/582 and 593/1079, n=300 7596/1655 and 9983/14156;
+#: conflicting n=200 1193/979 and 1093/1691.
+AUTO_CPP_MAX_N = 160
 
 
 def _resolve_kernel(kernel: str, n: int = 0) -> str:
-    if kernel == "cpp":
-        if _core is None:
-            raise FormulationError(f"kernel='cpp' is not available here: {_core_error}; "
-                                   f"reinstall prioik (`pip install -e .`) to build it")
-        return "cpp"
-    if kernel == "lapack" or (kernel == "auto" and (_kernel is None or n > AUTO_NUMBA_MAX_N)):
-        return "lapack"
-    if _kernel is None:
-        raise FormulationError(f"kernel='numba' is not available here: {_kernel_error}; "
-                               f"install it with `pip install numba`")
-    return "numba"
-
-
-def compile_kernels() -> None:
-    """Compile (or load from numba's disk cache) the prepared solve's kernel and the
-    batch kernels (:func:`prioik.formulations.compile_kernels`).
+    """``"cpp"`` or ``"lapack"`` for the ``kernel`` option on ``n`` unknowns
+    (``"auto"``: the C++ core up to :data:`AUTO_CPP_MAX_N`, LAPACK above).
 
     Raises:
-        FormulationError: numba is not importable here.
+        FormulationError: the compiled core is not importable here.
     """
-    if _kernel is None:
-        raise FormulationError(f"{NAME}'s compiled kernel needs numba: {_kernel_error}; "
-                               f"install it with `pip install numba`")
-    # Prepared compiles the prepared kernel; the batch kernels' argument types do not
-    # depend on the stack: a tiny one compiles them for every stack
-    stack = TaskStack([[Task("a", np.array([[1.0, 0.0]]), np.array([1.0]))],
-                       [Task("b", np.array([[0.0, 1.0]]), np.array([2.0]))]])
-    prepared = Prepared(stack.layout, validate_options(NAME, OPTIONS, {"kernel": "numba"},
-                                                       stack.n))
-    _solve_batch(prepared, [stack.data, stack.data])
+    if kernel == "lapack" or (kernel == "auto" and n > AUTO_CPP_MAX_N):
+        return "lapack"
+    if _core is None:
+        raise FormulationError(f"kernel={kernel!r} needs prioik's compiled core "
+                               f"(prioik._core): {_core_error}; reinstall prioik "
+                               f"(`pip install -e .`) to build it")
+    return "cpp"
 
 
 def solve(stack: TaskStack, **options) -> Outcome:
@@ -310,36 +276,18 @@ class Prepared:
         if (selective or self._bounded) and (self.damping > 0 or self.nullspace != "qr"):
             raise FormulationError("level_damping and step_bound work on the qr path without "
                                    "eq. 27 damping; use one or the other")
-        self.compiled = (self.kernel in ("numba", "cpp") and self.nullspace == "qr"
+        self.compiled = (self.kernel == "cpp" and self.nullspace == "qr"
                          and self.damping == 0)
         self._selective = self.level_damping > 0
         self._damped = self._selective or self._bounded
         self._starts = layout.starts
         self._n, self._k = layout.n, layout.k
-        if self.compiled and self.kernel == "cpp":
+        if self.compiled:
             # the C++ core owns the parameters, the level offsets and every workspace
             self._core = _core.ExtendedJacobian(
                 [int(s) for s in layout.starts], layout.n, rcond=self.rcond,
                 level_damping=self.level_damping, singular_threshold=self.singular_threshold,
                 step_bound=self.step_bound.tolist())
-        elif self.compiled:
-            # step bounds need the trust-region step (its SVD allocates): the kernel
-            # with numba's runtime; every other layout runs the one without it
-            # its entry point: called with the data's arrays and these workspaces only,
-            # the types of _SIGNATURE by construction
-            self._solve_data = compile_once(
-                _solve_data_bounded if self._bounded else _solve_data, _SIGNATURE)
-            n, k = layout.n, layout.k
-            params = np.concatenate([[self.rcond, self.level_damping,
-                                      self.singular_threshold], self.step_bound])
-            # the parameters and the level offsets live in the workspaces: the kernel
-            # call's cost is mostly numba unboxing its arguments
-            self._work, self._iwork = _kernel.prepare_workspaces(layout.starts, n, params)
-            self._ranks = self._iwork[k + 2:2 * k + 2]
-            self._out_size = n + 3 * k     # x, residuals, μ², decision margins
-            # what the common case of solve reads, in one attribute
-            self._hot = (self._out_size, self._work, self._iwork, n, n + k, self._ranks,
-                         self._damped, self._solve_data)
 
     def solve(self, data: StackData) -> Outcome:
         """Solve one stack of the layout (its data; the registry checked the layout).
@@ -363,38 +311,11 @@ class Prepared:
         """
         if not self.compiled:
             return self._solve_stack(data.as_stack())
-        if self.kernel == "cpp":
-            return self._solve_core(data)
-        size, work, iwork, n, nk, ranks, damped, solve_data = self._hot
-        out = np.empty(size)      # x, residuals, μ², margins (one array)
-        code = solve_data(data.A, data.b, data.sqrt_weight, work, out, iwork)
-        if code == 1 and not damped:      # the common case: finite, unambiguous
-            return (out[:n], "optimal", {"rank_profile": ranks.copy(), "nullspace": "qr",
-                                         "kernel": "numba"}, out[n:nk])
-        if code == 0:
-            data.check()     # names the task, level and row of a NaN, inf or bad √w
-            # finite rows of extreme scale: solve the equilibrated stack (same optimum)
-            return solve_equilibrated(self.solve, data, "the rows' scale overflows float64 "
-                                      "(‖A_i‖_F² is not finite): scale the tasks down")
-        k = self._k
-        info = {"rank_profile": self._ranks.copy(), "nullspace": "qr", "kernel": "numba"}
-        status = "optimal"
-        if self._damped:
-            status = _damping_info(info, out[n + k:n + 2 * k], self._selective,
-                                   self._bounded)
-        margins = out[n + 2 * k:]
-        if code & 4:          # a rank decision within AMBIGUITY of its threshold
-            status = _ambiguity_status(info, status, np.flatnonzero(margins <= AMBIGUITY))
-        outcome = Outcome(out[:n], status, info, out[n:n + k], (code & 3) == 1)
-        if code & 16 and status == "optimal" and (code & 3) == 1:
-            _certify_near_ambiguous(data, outcome, margins)
-        if code & 8 and (code & 3) == 1:    # ‖x‖ at which float64 may limit a level
-            outcome.status = precision_status(outcome.status, info, data, out[:n])
-        return outcome
+        return self._solve_core(data)
 
     def _solve_core(self, data: StackData) -> tuple | Outcome:
-        """:meth:`solve_checked` on the C++ core (``kernel="cpp"``): the same answer, read
-        from the core's result by name."""
+        """:meth:`solve_checked` on the C++ core (``kernel="cpp"``), its answer read from
+        the core's result by name."""
         x, residuals = np.empty(self._n), np.empty(self._k)    # the answer's own
         ranks = np.empty(self._k, dtype=np.int64)
         try:
@@ -949,34 +870,7 @@ def _solve_batch(prepared: "Prepared", datas: list[StackData]) -> tuple[np.ndarr
     if not prepared.compiled:
         outs = [prepared.solve(d) for d in datas]
         return np.array([o.x for o in outs]), [o.status for o in outs]
-    if prepared.kernel == "cpp":
-        return _solve_batch_core(prepared, datas)
-    N, k, n = len(datas), prepared.layout.k, prepared.layout.n
-    # a writable copy of the (read-only) offsets: the kernels' other callers pass
-    # writable ones, and numba compiles solve_kernel and level_scales once for both
-    starts = np.array(prepared.layout.starts)
-    # the rows copied in one C call each, weighed and measured in parallel in place
-    # (a compiled call per stack cost ~4 µs of dispatch per stack)
-    B = np.stack([d.A for d in datas])
-    c = np.stack([d.b for d in datas])
-    W = np.stack([d.sqrt_weight for d in datas])
-    scales = np.zeros((N, k))
-    ok = np.zeros(N, dtype=np.bool_)
-    _kernel.weigh_batch(B, c, W, starts, scales, ok)
-    if not ok.all():
-        for i in np.flatnonzero(~ok).tolist():
-            datas[i].check()
-        # finite rows of extreme scale: one by one, equilibrated as in solve
-        outs = [prepared.solve(one) for one in datas]
-        return np.array([o.x for o in outs]), [o.status for o in outs]
-    X = np.empty((N, n))
-    ranks = np.zeros((N, k), dtype=np.int64)
-    mu2 = np.zeros((N, k))
-    margins = np.empty((N, k))
-    bounds = np.broadcast_to(prepared.step_bound, (N, k)).copy()
-    _kernel.solve_batch_kernel(B, c, starts, scales, prepared.rcond, prepared.level_damping,
-                               prepared.singular_threshold, bounds, X, ranks, mu2, margins)
-    return X, _batch_statuses(datas, X, mu2, margins)
+    return _solve_batch_core(prepared, datas)
 
 
 def _solve_batch_core(prepared: "Prepared", datas: list[StackData]
@@ -1020,7 +914,7 @@ REPORT_VARIANTS = (
                   note="the paper's SVD path (J_{i-1}^A by SVD)"),
     ReportVariant("lapack", {"kernel": "lapack"}, reports=("bench",),
                   note="the readable LAPACK nested-QR path (the default, kernel='auto', is "
-                       f"the compiled kernel up to n = {AUTO_NUMBA_MAX_N}, LAPACK above)"),
+                       f"the compiled C++ core up to n = {AUTO_CPP_MAX_N}, LAPACK above)"),
     ReportVariant("eq27", {"damping": 1e-2}, reports=("scenario", "properties"),
                   note="the paper's eq. 27, λ = 0.01, with Z_i of r_i rows spanning "
                        "range(N_{i-1} J_iᵀ) (z_basis='task_range', eq. 12-13 and Theorem 1)"),

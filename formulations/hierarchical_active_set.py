@@ -16,7 +16,7 @@ hard constraints ``lower ≤ A x ≤ upper`` for every level below.
 *Algorithm* (a cascade in the lexicographic-least-squares family of lexls, Dimitrov,
 Sherikov & Wieber 2015, and HCOD, Escande, Mansard & Wieber 2014, written for
 prioik's kernel): the rows live in the rotated coordinates of the extended
-Jacobian's nested pivoted QR (``formulations/_extended_jacobian_kernel.py``): the
+Jacobian's nested pivoted QR (``core/src/nested_qr.cpp``): the
 fixed rows own leading coordinates, the rest are free. Each level runs a primal
 active-set method on its piecewise-quadratic objective (equivalent to
 ``min ‖w‖²  s.t.  lower ≤ A x − w ≤ upper`` with the slack ``w`` eliminated):
@@ -122,7 +122,7 @@ When no inequality row of the last answer was fixed at a violation, the next sol
 first tries the **equality rows with the rows the last answer held**, each as an
 equality at its bound (rows with ``lower = upper`` are equalities), solved by the
 extended Jacobian's nested QR with this solver's rank rule
-(``_active_set_kernel.equality_first_data``). Its point ``x*`` is the answer
+(``core/src/active_set_equality_first.cpp``). Its point ``x*`` is the answer
 (``info["equality_first"]``, zero iterations) when it is proved so: every other
 inequality row satisfied, every held row on its bound in a level of inequality rows
 only and independent of the levels above, and the held rows' multipliers of the
@@ -156,7 +156,6 @@ row that becomes active; warm along a trajectory: usually none).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from itertools import compress
 from types import SimpleNamespace
 
@@ -171,20 +170,13 @@ from .base import (Capabilities, CoreInputError, FormulationError, Outcome, Repo
 from .options import Option, rcond_option, validate_options
 
 try:
-    from prioik._jit import (ROWS_1D, ROWS_2D, WORK_B, WORK_F, WORK_I, compile_once)
-
-    from . import _active_set_kernel as _kernel
-    _kernel_error = ""
-except ImportError as exc:  # pragma: no cover - numba is a declared dependency
-    _kernel = None
-    _kernel_error = f"{type(exc).__name__}: {exc}"
-try:
     from prioik._core import ACTIVE_SET_CODES as _CORE_CODES
-except ImportError:  # pragma: no cover - built by pip install
+    _core_error = ""
+except ImportError as exc:  # pragma: no cover - built by pip install
     _CORE_CODES = None
-#: the kernels' return codes and level flags (the same in both: tests/test_active_set_cpp.py)
-_codes = (_kernel if _kernel is not None else
-          SimpleNamespace(**_CORE_CODES) if _CORE_CODES is not None else None)
+    _core_error = f"{type(exc).__name__}: {exc}"
+#: the C++ kernel's return codes and level flags (prioik._core.ACTIVE_SET_CODES)
+_codes = SimpleNamespace(**_CORE_CODES) if _CORE_CODES is not None else None
 #: the kernel's codes of a clean solve (module constants: read once, not per call)
 _SOLVED_CLEAN, _SOLVED_INFEASIBLE, _SOLVED_OTHER, _NOT_TRIED = (
     (_codes.SOLVED_CLEAN, _codes.SOLVED_INFEASIBLE, _codes.SOLVED_OTHER, _codes.NOT_TRIED)
@@ -224,21 +216,6 @@ REFINE = 1e-2
 #: tolerance stays held until that tolerance is below its distance
 REFINE_ROUNDS = 2
 
-#: the kernels' one signature (prioik._jit.compile_once): the stack's five row arrays,
-#: then the float, int and int8 workspaces
-_SIGNATURE = ((ROWS_2D, ROWS_1D, ROWS_1D, ROWS_1D, ROWS_1D, WORK_F, WORK_I, WORK_B)
-              if _kernel is not None else ())
-
-
-def _compile_kernels(warm_start: bool) -> tuple[Callable, Callable | None]:
-    """Compile (or load) ``solve_data`` and, for a warm-starting solver, the
-    equality-first try, for :data:`_SIGNATURE` alone: their entry points
-    (:func:`prioik._jit.compile_once`; the try's is ``None`` without ``warm_start``)."""
-    solve = compile_once(_kernel.solve_data, _SIGNATURE)
-    first = compile_once(_kernel.equality_first_data, _SIGNATURE) if warm_start else None
-    return solve, first
-
-
 NAME = "hierarchical_active_set"
 DESCRIPTION = ("exact lexicographic optimum of equality and inequality stacks: compiled "
                "active set per level on the nested pivoted QR (warm-startable)")
@@ -258,35 +235,19 @@ OPTIONS = {
                          "solve's working set, and when it held no inequality row try "
                          "the equality rows' own solution first (False: every solve "
                          "cold)"),
-    "kernel": Option("numba", "str", "the compiled kernel: 'numba' (formulations/"
-                     "_active_set_kernel.py) or 'cpp' (prioik._core.ActiveSetSolver, "
-                     "core/src/active_set*.cpp: the same algorithm, IEEE rounding)",
-                     choices=("numba", "cpp")),
+    "kernel": Option("auto", "str", "the compiled kernel: 'cpp' (prioik._core."
+                     "ActiveSetSolver, core/src/active_set*.cpp); 'auto' (cpp)",
+                     choices=("auto", "cpp")),
 }
 
 
 def _core_module():
     """``prioik._core`` (the compiled C++ core), or a FormulationError saying why not."""
-    try:
-        import prioik._core as core
-    except ImportError as exc:  # pragma: no cover - built by pip install
-        raise FormulationError(f"{NAME} kernel='cpp' needs prioik's compiled core "
-                               f"(prioik._core): {type(exc).__name__}: {exc}; reinstall "
-                               f"prioik with `pip install -e .`") from exc
+    if _CORE_CODES is None:  # pragma: no cover - built by pip install
+        raise FormulationError(f"{NAME} needs prioik's compiled core (prioik._core): "
+                               f"{_core_error}; reinstall prioik with `pip install -e .`")
+    import prioik._core as core
     return core
-
-
-def compile_kernels() -> None:
-    """Compile (or load from numba's disk cache) the solve's kernel and the warm start's
-    equality-first kernel (:func:`prioik.formulations.compile_kernels`).
-
-    Raises:
-        FormulationError: numba is not importable here.
-    """
-    if _kernel is None:
-        raise FormulationError(f"{NAME} needs numba: {_kernel_error}; install it with "
-                               f"`pip install numba`")
-    _compile_kernels(True)
 
 
 def solve(stack: TaskStack, **options) -> Outcome:
@@ -314,21 +275,18 @@ class Prepared:
         options: Every option of :data:`OPTIONS`, validated.
 
     Raises:
-        FormulationError: numba is not importable here.
+        FormulationError: the compiled core is not importable here.
     """
 
     def __init__(self, layout: StackLayout, options: dict) -> None:
-        if _kernel is None and options.get("kernel", "numba") == "numba":
-            raise FormulationError(f"{NAME} needs numba: {_kernel_error}; install it with "
-                                   f"`pip install numba`, or take kernel='cpp'")
         self.layout = layout
         self.rcond = float(options["rcond"])
         self.primal_tol = float(options["primal_tol"])
         self.dual_tol = float(options["dual_tol"])
         self.max_iter = int(options["max_iter"])
         self.warm_start = bool(options["warm_start"])
-        #: the compiled kernel: "numba" or "cpp"
-        self.kernel = str(options.get("kernel", "numba"))
+        #: the compiled kernel: "cpp"
+        self.kernel = "cpp"
         #: how many more times a rejected near-release answer is re-solved
         #: (:meth:`_refined`; one fewer in each refining solve)
         self._refine = REFINE_ROUNDS
@@ -337,51 +295,9 @@ class Prepared:
         # the equality-first try needs the equality rows' solve (an inequality-only stack
         # has none to try)
         self._try_first = self.warm_start and bool(layout.row_is_equality.any())
-        m, n, k = layout.m, layout.n, layout.k
-        self._n, self._k = n, k
-        self._levels = range(k)
-        if self.kernel == "cpp":
-            self._prepare_cpp(layout)
-            return
-        self._cpp = None
-        # the kernels' entry points: called with the data's arrays and these workspaces
-        # only, the types of _SIGNATURE by construction
-        self._solve_data, self._equality_first_data = _compile_kernels(self.warm_start)
-        rows = m + n
-        off = _kernel.workspace_offsets(m, n, k)
-        self._fwork = np.zeros(off["size_f"][1])
-        self._iwork = np.zeros(off["size_i"][1], dtype=np.int64)
-        self._bwork = np.zeros(off["size_b"][1], dtype=np.int8)
-
-        def part(work, name, shape=None):
-            v = work[slice(*off[name])]
-            return v if shape is None else v.reshape(shape)
-
-        part(self._fwork, "params")[:5] = (self.rcond, self.primal_tol, self.dual_tol,
-                                           self.max_iter, float(self.warm_start))
-        self._iwork[0] = k
-        part(self._iwork, "starts")[:] = layout.starts
-        part(self._bwork, "row_eq")[:] = layout.row_is_equality
-        #: per level (and the minimum-norm level last), the working set at its optimum:
-        #: ``-1``/``+1`` a row held at its lower/upper bound, ``0`` not held
-        self.warm_state = part(self._bwork, "warm_state", (k + 1, rows))
-        #: per level: whether :attr:`warm_state` holds a working set (``1``) or not
-        self.warm_valid = part(self._bwork, "warm_valid")
-        #: the kernel's outputs: ``x``, each level's ``‖w_i‖²``, its root (one copy)
-        self._out = self._fwork[off["x"][0]:off["res"][1]]
-        #: ‖x‖, cap/non-finite flag, number of levels with a violation above tolerance,
-        #: of ambiguous rank decisions, of box rows x's precision cannot resolve
-        self._summary = self._fwork[5:10]
-        #: each level's (and the tie-break's) rank-decision margin (hierarchy.linalg)
-        self._margins = part(self._fwork, "margins")
-        self._counts = part(self._iwork, "counts", (4, k + 1))
-        self._iterations = self._counts[0]
-        self._flags = self._counts[1]
-        self._ranks = self._counts[2, :k]
-        #: views of the parts an answer copies (a view per solve costs as much as a copy)
-        self._x, self._w2 = self._out[:n], self._out[n:n + k]
-        self._res, self._over = self._out[n + k:], self._counts[3, :k]
-        self._work = (self._fwork, self._iwork, self._bwork)
+        self._n, self._k = layout.n, layout.k
+        self._levels = range(layout.k)
+        self._prepare_cpp(layout)
 
     def _prepare_cpp(self, layout: StackLayout) -> None:
         """The C++ kernel's solver (``prioik._core.ActiveSetSolver``): its workspace is
@@ -393,7 +309,6 @@ class Prepared:
             np.ascontiguousarray(layout.row_is_equality, dtype=np.int8), self.rcond,
             self.primal_tol, self.dual_tol, self.max_iter, self.warm_start)
         self._solve_data, self._equality_first_data = cpp.solve, cpp.equality_first
-        self._work = ()
         self.warm_state, self.warm_valid = cpp.warm_state, cpp.warm_valid
         self._x, self._w2, self._res = cpp.x, cpp.w2, cpp.res
         self._margins, self._iterations, self._flags = cpp.margins, cpp.iterations, cpp.flags
@@ -404,25 +319,18 @@ class Prepared:
         whether ``‖x‖`` exceeds the precision limit, the count of ambiguous or flagged
         levels, of unresolved box rows."""
         cpp = self._cpp
-        if cpp is None:
-            return tuple(self._summary.tolist())
         return (cpp.x_norm, cpp.cap_or_nonfinite, float(cpp.large), float(cpp.ambiguous),
                 float(cpp.unresolved))
 
     def _ambiguous_count(self) -> float:
-        return self._fwork.item(8) if self._cpp is None else float(self._cpp.ambiguous)
+        return float(self._cpp.ambiguous)
 
     def _equality_first_answered(self) -> bool:
-        return (self._fwork.item(10) if self._cpp is None
-                else self._cpp.equality_first_state) == 1.0
+        return self._cpp.equality_first_state == 1.0
 
     def reset(self) -> None:
         """Forget the kept working sets (the next solve starts cold)."""
-        if self._cpp is not None:
-            self._cpp.reset()
-            return
-        self.warm_valid[:] = 0
-        self._fwork[10:12] = 0.0         # nor is the equality-first solve tried
+        self._cpp.reset()
 
     def solve(self, data: StackData) -> Outcome:
         """Solve one stack of the layout (its data; the registry checked the layout).
@@ -445,22 +353,21 @@ class Prepared:
             TaskStackError: as :meth:`solve`.
         """
         A, b, lower, upper, sw = data.A, data.b, data.lower, data.upper, data.sqrt_weight
-        work = self._work
         try:
             # the module doc's warm start; the kernel declines it (NOT_TRIED) when the
             # last answer fixed a row at a violation (params[11])
-            code = (self._equality_first_data(A, b, lower, upper, sw, *work)
+            code = (self._equality_first_data(A, b, lower, upper, sw)
                     if self._try_first else _NOT_TRIED)
             first = code != _NOT_TRIED
             if not first:
-                code = self._solve_data(A, b, lower, upper, sw, *work)
+                code = self._solve_data(A, b, lower, upper, sw)
             if code == _SOLVED_OTHER and self.warm_start and self._ambiguous_count() > 0.0:
                 # rank decisions ambiguous or flagged: the answer may depend on the path
                 # (fuzz: two certified answers 2.8e-9 apart at margins of 1.07e3), so the
                 # warm solver gives the cold one (the working sets kept are then its own)
                 self.reset()
                 first = False
-                code = self._solve_data(A, b, lower, upper, sw, *work)
+                code = self._solve_data(A, b, lower, upper, sw)
         except CoreInputError:
             # the C++ kernel's binding refused a value: the data's own check names the
             # task, level and row at fault (else the binding's error, naming the array)
@@ -566,7 +473,7 @@ class Prepared:
         tol, dual = self.primal_tol * REFINE, self.dual_tol * REFINE
         again = Prepared(self.layout, {"rcond": self.rcond, "primal_tol": tol,
                                        "dual_tol": dual, "max_iter": self.max_iter,
-                                       "warm_start": False, "kernel": self.kernel})
+                                       "warm_start": False})
         again._refine = self._refine - 1
         out = again.solve(data)
         if out.status != "optimal":

@@ -128,8 +128,7 @@ class PreparedSolver:
         checked = getattr(self._impl, "solve_checked", None)
         self._impl_solve = checked or self._impl.solve
         #: whether the plugin's own prepared solver reads the data's arrays in a compiled
-        #: kernel (``solve_checked``): numba specializes on the arrays' flags, so read-only
-        #: and writable data run different machine code (see :func:`prioik.solve`)
+        #: kernel (``solve_checked``)
         self.compiled = checked is not None and bool(getattr(self._impl, "compiled", True))
         self._acquire, self._release = self._lock.acquire, self._lock.release
 

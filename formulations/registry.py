@@ -12,8 +12,6 @@ A plugin is a module that defines
 * optionally ``backends() -> list[str]``, the back-ends it can use here,
 * optionally ``solve_batch(stacks, **options) -> (X, statuses)`` for many stacks of one
   shape (stacked linear algebra); :func:`solve_batch` loops over ``solve`` otherwise,
-* optionally ``compile_kernels()``: compile (or load from numba's disk cache) every
-  compiled kernel its solves use (:func:`compile_kernels`, ``prioik compile``),
 * optionally, for prioik's reports (:mod:`prioik.benchmarks.variants`; the reports read
   nothing else, so a new plugin appears in every one of them by itself):
   ``REPORT_VARIANTS``, a tuple of :class:`~.base.ReportVariant` (settings worth a row of
@@ -126,47 +124,30 @@ def available() -> list[FormulationInfo]:
     return out
 
 
+#: what :func:`compile_kernels` and ``prioik compile`` say
+NOTHING_TO_COMPILE = ("nothing to compile: prioik's compiled solvers are C++ (prioik._core), "
+                      "built when prioik is installed; a first solve does not wait for a "
+                      "compiler")
+
+
 def compile_kernels(names: list[str] | None = None,
                     progress: Callable[[str, float | None], None] | None = None
                     ) -> list[tuple[str, float]]:
-    """Compile, or load from numba's disk cache, the kernels of every available
-    formulation that has compiled ones (its module's ``compile_kernels()``), or of
-    ``names``; returns ``(formulation, seconds)`` for each.
-
-    numba compiles a kernel on its first use after an install and caches it on disk;
-    the first solve of ``hierarchical_active_set`` then takes one to two minutes on a
-    2-core machine (its two entry points: 61 s and 42 s on this one, one day). Running
-    this once (``prioik compile``) moves that wait out of a control loop's first step;
-    later processes load the kernels in under a second.
+    """Nothing: prioik's compiled solvers (``extended_jacobian``'s nested QR,
+    ``hierarchical_active_set``) are the C++ core ``prioik._core``, compiled when prioik
+    is installed (:data:`NOTHING_TO_COMPILE`). Kept so that scripts calling it run;
+    returns ``[]`` and never calls ``progress``.
 
     Args:
-        names: The formulations (default: every available one with compiled kernels).
-        progress: Called with ``(name, None)`` before each formulation's kernels and
-            ``(name, seconds)`` after.
+        names: Formulations; each must be known and available here.
+        progress: Not called (accepted for the scripts that pass it).
 
     Raises:
-        FormulationError: a name is unknown, not available here, or has no compiled
-            kernels (checked before anything is compiled).
+        FormulationError: a name is unknown or not available here.
     """
-    import time
-    if names is None:
-        chosen = [(n, _loaded[n]) for n in PLUGINS
-                  if _load(n) is not None and hasattr(_loaded[n], "compile_kernels")]
-    else:
-        chosen = [(n, get(n)) for n in names]
-        for name, mod in chosen:
-            if not hasattr(mod, "compile_kernels"):
-                raise FormulationError(f"formulation {name!r} has no compiled kernels")
-    out = []
-    for name, mod in chosen:
-        if progress is not None:
-            progress(name, None)
-        t0 = time.perf_counter()
-        mod.compile_kernels()
-        out.append((name, time.perf_counter() - t0))
-        if progress is not None:
-            progress(name, out[-1][1])
-    return out
+    for name in names or ():
+        get(name)
+    return []
 
 
 def get(name: str) -> ModuleType:
@@ -235,13 +216,7 @@ def solve(stack, formulation: str = "extended_jacobian", **options: Any) -> Solu
     """
     if not isinstance(stack, (TaskStack, StackData)):
         stack = TaskStack(stack)
-    solver = prepare(stack.layout, formulation, **options)
-    if isinstance(stack, TaskStack) and solver.compiled:
-        # a compiled kernel reads the arrays alone; on the stack's read-only arrays numba
-        # would run another specialization than on the writable data of a control loop,
-        # whose code (and rounding) need not match it bit for bit
-        return solver.solve(stack.data.copy())
-    return solver.solve(stack)
+    return prepare(stack.layout, formulation, **options).solve(stack)
 
 
 @dataclass

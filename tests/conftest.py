@@ -65,15 +65,17 @@ def toy_plugin(monkeypatch):
 
 
 def pytest_report_header(config):
-    """The arithmetic the run computes with: the CPU target numba compiles the kernels
-    for and OpenBLAS's kernels (``make test-forced-cpu`` changes both)."""
+    """The arithmetic the run computes with: how the C++ core was built (its one rounding
+    rule) and OpenBLAS's kernels (``make test-forced-cpu`` changes them)."""
     from threadpoolctl import threadpool_info
     try:
-        import llvmlite.binding as ll
-        from numba.core import config as numba_config
-        cpu = numba_config.CPU_NAME or ll.get_host_cpu_name()
+        import prioik._core as core
+        info = core.build_info()
+        built = (f"C++ core {'native' if info.native else 'portable'}, "
+                 f"{'fast math' if info.fast_math else 'IEEE'}, "
+                 f"{'contraction' if info.fp_contract else 'no contraction'}")
     except ImportError:
-        cpu = "none (numba not installed)"
+        built = "C++ core not built"
     blas = ", ".join(f"{i['internal_api']} {i.get('version')} {i.get('architecture')}"
                      for i in threadpool_info() if i["user_api"] == "blas")
-    return f"arithmetic: numba kernels for CPU '{cpu}'; BLAS {blas or 'unknown'}"
+    return f"arithmetic: {built}; BLAS {blas or 'unknown'}"

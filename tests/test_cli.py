@@ -167,16 +167,22 @@ def test_closed_pipe_exits_quietly():
     assert "Broken pipe" not in err and "Error" not in err, err
 
 
-def test_compile_prints_each_compiled_formulation_and_refuses_others(capsys):
+def test_compile_says_there_is_nothing_to_compile_and_checks_names(capsys):
+    from prioik.formulations.registry import NOTHING_TO_COMPILE
     assert main(["compile"]) == 0
-    lines = capsys.readouterr().out.splitlines()
-    for name in ("extended_jacobian", "hierarchical_active_set"):
-        assert f"{name}: compiling or loading its kernels ..." in lines
-        assert any(line.startswith(f"{name}: done in ") for line in lines)
-    assert len(lines) == 4
-    assert main(["compile", "--formulations", "reference"]) == 2
+    assert capsys.readouterr().out.splitlines() == [NOTHING_TO_COMPILE]
+    assert main(["compile", "--formulations", "extended_jacobian,reference"]) == 0
+    assert capsys.readouterr().out.splitlines() == [NOTHING_TO_COMPILE]
+    assert main(["compile", "--formulations", "nope"]) == 2
     err = capsys.readouterr().err.strip()
-    assert "'reference' has no compiled kernels" in err and len(err.splitlines()) == 1
+    assert "nope" in err and len(err.splitlines()) == 1
+
+
+def test_compile_help_says_the_core_is_built_at_install(capsys):
+    with pytest.raises(SystemExit):
+        main(["compile", "--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    assert "built when prioik is installed" in out and "numba" not in out
 
 
 @pytest.mark.parametrize("command", ["fencing", "arm"])

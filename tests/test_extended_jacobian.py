@@ -12,13 +12,12 @@ from prioik.hierarchy import (Task, TaskStack, check_lexicographic, load_stack,
 from prioik.hierarchy.fuzz import judged, nested_truth
 from prioik.hierarchy.families import FAMILIES, compatible, near_singular, same_shape_batch
 
-#: the ways to compute eq. 18: compiled nested QR (numba, C++), LAPACK nested QR, the paper's SVD
-#: rounding edges: `make test-forced-cpu` (and CI) runs this module again with the
-#: numba kernels compiled for another CPU target and OpenBLAS on another core type
+#: the ways to compute eq. 18: compiled nested QR (C++), LAPACK nested QR, the paper's SVD
+#: rounding edges: `make test-forced-cpu` (and CI) runs this module again with OpenBLAS on
+#: another core type
 pytestmark = pytest.mark.rounding_edge
 
-PATHS = {"qr-numba": {"nullspace": "qr", "kernel": "numba"},
-         "qr-cpp": {"nullspace": "qr", "kernel": "cpp"},
+PATHS = {"qr-cpp": {"nullspace": "qr", "kernel": "cpp"},
          "qr-lapack": {"nullspace": "qr", "kernel": "lapack"},
          "svd": {"nullspace": "svd"}}
 
@@ -115,7 +114,7 @@ def test_svd_path_says_optimal_only_where_it_is_right_on_the_fuzz_stacks(name):
     assert relative_distance(sol.x, case.truth) <= 1e-8
 
 
-@pytest.mark.parametrize("path", ["numba", "cpp", "lapack", "batch"])
+@pytest.mark.parametrize("path", ["cpp", "lapack", "batch"])
 def test_a_near_ambiguous_rank_decision_has_its_answer_certified(path):
     """Fuzz equality-1243-387 (n 36, 10 levels): levels 1, 3 and 4 decide their rank
     clear of the ambiguity band by less than NEAR_AMBIGUITY times it. The null space
@@ -233,7 +232,7 @@ def test_svd_path_error_is_within_its_estimate_on_near_dependent_levels(scale, w
     assert optimal >= 1
 
 
-@pytest.mark.parametrize("kernel", ["numba", "cpp", "lapack"])
+@pytest.mark.parametrize("kernel", ["cpp", "lapack"])
 @pytest.mark.parametrize("sigma", [1e-2, 1e-4, 1e-8, 0.0])
 def test_selective_damping_keeps_higher_level_exact_and_bounds_x(sigma, kernel):
     stack = near_singular(sigma)
@@ -267,13 +266,13 @@ def test_compiled_and_lapack_kernels_agree_on_ranks_and_x(seed):
     rng = np.random.default_rng(5000 + seed)
     family = sorted(FAMILIES)[seed % len(FAMILIES)]
     stack = FAMILIES[family](rng, int(rng.integers(2, 50)), int(rng.integers(1, 8)))
-    a = formulations.solve(stack, "extended_jacobian", kernel="numba")
+    a = formulations.solve(stack, "extended_jacobian", kernel="cpp")
     b = formulations.solve(stack, "extended_jacobian", kernel="lapack")
     np.testing.assert_array_equal(a.info["rank_profile"], b.info["rank_profile"])
     assert np.linalg.norm(a.x - b.x) <= 1e-9 * max(1.0, np.linalg.norm(b.x))
 
 
-@pytest.mark.parametrize("path", ["qr-numba", "qr-cpp", "qr-lapack"])
+@pytest.mark.parametrize("path", ["qr-cpp", "qr-lapack"])
 @pytest.mark.parametrize("rank", [None, 2])
 @pytest.mark.parametrize("seed", range(6))
 def test_tall_level_on_few_free_directions_is_its_least_squares_optimum(path, rank, seed):
@@ -323,7 +322,7 @@ LEVEL_DAMPINGS = {"step_bound": lambda exact: {"step_bound": 0.3 * np.linalg.nor
                   "selective": lambda exact: {"level_damping": 0.5, "singular_threshold": 0.3}}
 
 
-@pytest.mark.parametrize("kernel", ["numba", "cpp", "lapack"])
+@pytest.mark.parametrize("kernel", ["cpp", "lapack"])
 @pytest.mark.parametrize("how", sorted(LEVEL_DAMPINGS))
 @pytest.mark.parametrize("family", ["conflicting", "rank_deficient", "coupled", "compatible"])
 @pytest.mark.parametrize("seed", range(3))
@@ -342,7 +341,7 @@ def test_level_damping_solves_the_damped_hierarchy_exactly(kernel, how, family, 
     assert relative_distance(sol.x, oracle) <= 1e-9
 
 
-@pytest.mark.parametrize("kernel", ["numba", "cpp", "lapack"])
+@pytest.mark.parametrize("kernel", ["cpp", "lapack"])
 @pytest.mark.parametrize("seed", range(6))
 def test_step_bound_is_the_trust_region_step_of_every_level(kernel, seed):
     """Each level's step ‖x_i − x_{i−1}‖ is ≤ Δ, and = Δ (1e-9) exactly where it was damped;
@@ -365,7 +364,7 @@ def test_step_bound_is_the_trust_region_step_of_every_level(kernel, seed):
         prev = xi
 
 
-@pytest.mark.parametrize("kernel", ["numba", "cpp", "lapack"])
+@pytest.mark.parametrize("kernel", ["cpp", "lapack"])
 @pytest.mark.parametrize("sigma", [1e-2, 1e-4, 1e-8])
 def test_step_bound_keeps_higher_level_exact_and_bounds_x(sigma, kernel):
     stack = near_singular(sigma)
@@ -427,10 +426,9 @@ def test_prepared_solver_on_written_data_equals_solve_bit_for_bit(family, option
         stack = FAMILIES[family](np.random.default_rng(900 + seed), 14, 4)
         data = _data_of(stack)
         before = data.copy()
-        solver = formulations.prepare(stack.layout, "extended_jacobian", kernel="numba",
-                                      **options)
+        solver = formulations.prepare(stack.layout, "extended_jacobian", **options)
         out = solver.solve(data)
-        ref = formulations.solve(stack, "extended_jacobian", kernel="numba", **options)
+        ref = formulations.solve(stack, "extended_jacobian", **options)
         assert np.array_equal(out.x, ref.x)
         assert np.array_equal(out.residuals, ref.residuals)
         assert out.status == ref.status
@@ -439,19 +437,17 @@ def test_prepared_solver_on_written_data_equals_solve_bit_for_bit(family, option
             assert np.array_equal(getattr(data, key), getattr(before, key))
 
 
-def test_frozen_and_writable_rows_run_the_kernels_one_signature():
-    """A TaskStack's frozen arrays and a writable StackData run the one compiled
-    signature of the prepared kernel (prioik._jit.compile_once: numba would otherwise
-    compile a second specialization for the writable arrays), with the same bits."""
-    from prioik.formulations import _extended_jacobian_kernel
+def test_frozen_and_writable_rows_give_the_same_bits():
+    """A TaskStack's frozen arrays and a writable StackData are read by the same compiled
+    code: the same bits."""
     stack = FAMILIES["conflicting"](np.random.default_rng(5), 14, 4)
     writable = stack.data.copy()
     assert not stack.data.writeable and writable.writeable
-    solver = formulations.prepare(stack.layout, "extended_jacobian", kernel="numba")
+    solver = formulations.prepare(stack.layout, "extended_jacobian")
     a, b = solver.solve(stack), solver.solve(writable)
+    assert a.info["kernel"] == "cpp"
     assert np.array_equal(a.x, b.x) and a.status == b.status == "optimal"
-    signatures = _extended_jacobian_kernel.solve_data.signatures
-    assert len(signatures) == 1 and signatures[0][0].mutable is False
+    assert np.array_equal(a.residuals, b.residuals)
 
 
 def test_prepared_solver_refills_and_refuses_other_layouts_and_nan():
@@ -628,9 +624,9 @@ def test_bad_z_basis_is_named():
 def test_theory_page_states_the_kernel_crossover_the_code_uses():
     """docs/theory.md names the n up to which kernel='auto' compiles: the code's."""
     from pathlib import Path
-    from prioik.formulations.extended_jacobian import AUTO_NUMBA_MAX_N
+    from prioik.formulations.extended_jacobian import AUTO_CPP_MAX_N
     text = (Path(__file__).parents[1] / "docs" / "theory.md").read_text(encoding="utf-8")
-    assert f"compiled kernel up to n = {AUTO_NUMBA_MAX_N}" in text.replace("\n  ", " ")
+    assert f"compiled core up to n = {AUTO_CPP_MAX_N}" in text.replace("\n  ", " ")
 
 
 @pytest.mark.parametrize("weights", ["uniform", "mixed"])
@@ -658,17 +654,17 @@ def test_posture_level_last_equals_reference(seed, base, weights):
     # which path solved the posture: the unit-row step reports its margin bound
     # s √(gap) / tol (s / tol with every column covered), the column-pivoted QR its
     # smallest pivot over tol
-    from prioik.formulations import _extended_jacobian_kernel as ejk
+    import prioik._core as core
     data = stack.data
-    B, c = data.sqrt_weight[:, None] * data.A, data.sqrt_weight * data.b
-    starts = np.asarray(stack.layout.starts, dtype=np.int64)
+    B = data.sqrt_weight[:, None] * data.A
+    starts = [int(s) for s in stack.layout.starts]
     k = len(starts) - 1
     scales = np.array([np.linalg.norm(B[starts[i]:starts[i + 1]]) for i in range(k)])
-    x, ranks, mu2, margins = np.empty(n), np.empty(k, np.int64), np.empty(k), np.empty(k)
-    ejk.solve_kernel(B.copy(), c.copy(), starts, scales, 1e-9, 0.0, 0.0, np.zeros(k), x,
-                     ranks, mu2, margins)
+    x = np.empty(n)
+    margins = core.ExtendedJacobian(starts, n, rcond=1e-9).solve(
+        data.A, data.b, data.sqrt_weight, x).margins
     assert np.linalg.norm(x - ref) <= 1e-10 * max(1.0, np.linalg.norm(ref))
-    unit_bound = 0.5 * (np.sqrt(ejk._UNIT_ROWS_GAP) if base else 1.0) / (1e-9 * scales[-1])
+    unit_bound = 0.5 * (np.sqrt(core.UNIT_ROWS_GAP) if base else 1.0) / (1e-9 * scales[-1])
     assert (margins[-1] == pytest.approx(unit_bound, rel=1e-12)) == (weights == "uniform")
 
 

@@ -127,7 +127,7 @@ def test_equality_stacks_hold_every_property(chunk):
     report = fuzz.run(400, 1000 + chunk, sizes=SMALL, batch_every=4, thread_every=100)
     _assert_clean(report)
     assert report.well_conditioned > 100
-    for path in ("ej_qr_numba", "nullspace", "hierarchical_active_set", "sns"):
+    for path in ("ej_qr_cpp", "nullspace", "hierarchical_active_set", "sns"):
         assert report.solves[path] == 400
 
 
@@ -241,7 +241,7 @@ def test_prioik_fuzz_command(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "5 equality stacks" in out and "5 inequality stacks" in out
     assert "5 bounds stacks" in out
-    assert "| ej_qr_numba | 5 |" in out and "| cascaded_qp | 10 |" in out
+    assert "| ej_qr_cpp | 5 |" in out and "| cascaded_qp | 10 |" in out
     assert "| hierarchical_active_set | 15 |" in out and "| sns | 15 |" in out
     assert code == (1 if "failing stacks saved" in out else 0)
 

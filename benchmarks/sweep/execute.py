@@ -82,15 +82,14 @@ def _progress(total: int, done: int, enabled: bool):
 
 def warm_up() -> None:
     """What every worker process does once before its first run (part of the cluster
-    start, not of the runs' wall time): import the scenario and solver modules and load
-    the compiled kernels from numba's cache (seconds in a fresh process, the same for
-    each worker however many there are)."""
+    start, not of the runs' wall time): import the scenario and solver modules."""
     from prioik import formulations
 
     from . import task  # noqa: F401 - the worker's entry point and its imports
     from prioik.benchmarks import fencing  # noqa: F401
 
-    formulations.compile_kernels()
+    formulations.get("extended_jacobian")
+    formulations.get("hierarchical_active_set")
 
 
 def run_sweep(plan: Plan, out, *, workers: int | None = None, scheduler: str | None = None,

@@ -202,6 +202,7 @@ NB_MODULE(_core, m) {
   m.attr("PRECISION_LIMIT_NORM") = prioik::kPrecisionLimitNorm;
   m.attr("SCALE_HIGH") = prioik::kScaleHigh;
   m.attr("SCALE_LOW") = prioik::kScaleLow;
+  m.attr("UNIT_ROWS_GAP") = prioik::kUnitRowsGap;
 
   nb::class_<ExtendedJacobianResult>(
       m, "ExtendedJacobianResult",
