@@ -16,8 +16,8 @@ from prioik.hierarchy import (DEFAULT_CERTIFICATE_TOL, Task, TaskStack, algorith
 from prioik.hierarchy.families import FAMILIES, random_inequality_hierarchy
 from prioik.hierarchy.linalg import X_PRECISION
 
-#: rounding edges: `make test-forced-cpu` (and CI) runs this module again with the
-#: numba kernels compiled for another CPU target and OpenBLAS on another core type
+#: rounding edges: `make test-forced-cpu` (and CI) runs this module again with OpenBLAS on
+#: another core type
 pytestmark = pytest.mark.rounding_edge
 
 PEER = Path(__file__).parent / "data" / "peer"

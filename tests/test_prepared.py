@@ -219,8 +219,7 @@ def test_solve_batch_is_one_prepared_solver_over_many_stacks():
     ("hierarchical_active_set", {}, True), ("reference", {}, False),
     ("nullspace", {}, False)])
 def test_compiled_says_whether_a_kernel_reads_the_datas_arrays(name, options, compiled):
-    # prioik.solve gives such a solver a writable copy of a TaskStack's read-only data
-    # (numba specializes on the arrays' flags: the control loop's machine code)
+    # a compiled solver reads a TaskStack's read-only data and a writable copy alike
     stack = FAMILIES["compatible"](np.random.default_rng(3), 8, 3)
     solver = prioik.prepare(stack.layout, name, **options)
     assert solver.compiled is compiled

@@ -8,8 +8,8 @@ from prioik import formulations
 from prioik.hierarchy import Task, TaskStack, check_lexicographic, nested_null_spaces
 from prioik.hierarchy.families import FAMILIES, compatible, near_singular
 
-#: rounding edges: `make test-forced-cpu` (and CI) runs this module again with the
-#: numba kernels compiled for another CPU target and OpenBLAS on another core type
+#: rounding edges: `make test-forced-cpu` (and CI) runs this module again with OpenBLAS on
+#: another core type
 pytestmark = pytest.mark.rounding_edge
 
 

@@ -115,10 +115,9 @@ def test_local_cluster_rows_equal_in_process_rows(tmp_path):
     from prioik.benchmarks.sweep.execute import rows_by_id
     b = rows_by_id(tmp_path / "cluster" / "rows.csv")
     assert len(a.rows) == len(plan.runs) == 6 and set(b) == set(a.rows)
-    # Floats to 1e-9 relative, everything else exactly: extended_jacobian's rows once
-    # differed in the last bits between a worker and the test process (make test, right
-    # after the numba cache was rebuilt); its kernel is compiled with fastmath
-    # reassociation, whose vectorised sums may depend on the arrays' alignment.
+    # Floats to 1e-9 relative, everything else exactly: a worker and the test process
+    # run the same code on the same rows, but the BLAS calls around it (the references,
+    # the scenario's kinematics) may take other kernels on other threads.
     da, db = deterministic(a.rows), deterministic(b)
 
     def same(x, y):
