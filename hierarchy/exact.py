@@ -19,12 +19,15 @@ values lie above them, evaluated exactly (the answer's float64 coordinates read 
 An answer is *above the optimum* at level ``i`` when
 
     v_i(x) − v_i* > max(VALUE_TOL · v_i*, δ_i),   δ_i = 2 ρ_i √v_i* + ρ_i²,
-    ρ_i = X_PRECISION · ‖x*‖ · ‖√W_i A_i‖_F
+    ρ_i = p · max(1, ‖x*‖) · ‖√W_i A_i‖_F
 
 — ``δ_i`` is what float64 can tell apart: ``x``'s coordinates are known to about
-``X_PRECISION ‖x‖`` (:data:`~hierarchy.linalg.X_PRECISION`), which moves the level's
-weighted residual by up to ``ρ_i`` and its value by up to ``δ_i``. In the form
-``VALUE_TOL · max(v_i*, floor_i)`` the floor is ``δ_i / VALUE_TOL``.
+``p max(1, ‖x‖)``, which moves the level's weighted residual by up to ``ρ_i`` and its
+value by up to ``δ_i``. ``p`` is at least :data:`~hierarchy.linalg.X_PRECISION` (16 ε:
+rounding through orthogonal transformations); a caller that knows how far rounding may
+move this stack's answer (:attr:`hierarchy.fuzz.FuzzCase.rounding_error`) passes the
+larger value. In the form ``VALUE_TOL · max(v_i*, floor_i)`` the floor is
+``δ_i / VALUE_TOL``.
 
 It is a truth, not a solver: pure-Python extended precision, seconds for ``n`` 40;
 :func:`exact_optimum` refuses larger stacks (``None``).
@@ -79,10 +82,10 @@ class ExactOptimum:
         """Whether some rank decision is within the ambiguity band."""
         return bool(self.ambiguous_levels)
 
-    def floors(self) -> np.ndarray:
-        """``δ_i``: how much a level's value may move by float64's rounding of ``x``
-        (see the module docstring)."""
-        rho = X_PRECISION * self.x_norm * self.level_norms
+    def floors(self, precision: float = X_PRECISION) -> np.ndarray:
+        """``δ_i``: how much a level's value may move by float64's rounding of ``x``, to
+        ``precision`` (relative, at least ``X_PRECISION``; see the module docstring)."""
+        rho = max(precision, X_PRECISION) * max(1.0, self.x_norm) * self.level_norms
         return 2.0 * rho * np.sqrt(self.values) + rho * rho
 
     def values_at(self, x: np.ndarray) -> np.ndarray:
@@ -96,15 +99,15 @@ class ExactOptimum:
             out[i] = float(ctx.fsum(v * v for v in r))
         return out
 
-    def excess(self, x: np.ndarray) -> np.ndarray:
-        """Per level, ``(v_i(x) − v_i*) / max(VALUE_TOL · v_i*, δ_i)`` (see the module
-        docstring): above 1 where ``x`` is above the optimum beyond what float64 can
-        tell apart (``inf`` when ``x`` is not finite)."""
+    def excess(self, x: np.ndarray, precision: float = X_PRECISION) -> np.ndarray:
+        """Per level, ``(v_i(x) − v_i*) / max(VALUE_TOL · v_i*, δ_i)`` (``δ_i`` to
+        ``precision``, see the module docstring): above 1 where ``x`` is above the
+        optimum beyond what float64 can tell apart (``inf`` when ``x`` is not finite)."""
         x = np.asarray(x, dtype=np.float64)
         if not np.isfinite(x).all():
             return np.full(self.values.shape, np.inf)
         v = self.values_at(x)
-        allowed = np.maximum(VALUE_TOL * self.values, self.floors())
+        allowed = np.maximum(VALUE_TOL * self.values, self.floors(precision))
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.where(allowed > 0, (v - self.values) / np.where(allowed > 0, allowed,
                                                                         1.0),
