@@ -276,12 +276,7 @@ def nested_truth(stack: TaskStack, rcond: float = 1e-9, rotation: np.ndarray | N
         r = int(np.count_nonzero(s > rcond))
         if r:
             sigma = min(sigma, float(s[r - 1]))
-            M, c = A @ Z, b - A @ x
-            y = vt[:r].T @ ((u[:, :r].T @ c) / s[:r])
-            # one step of refinement, the residual formed row by row: the SVD reads rows
-            # far smaller than the level's norm to ε of it, and their large targets
-            # leaked into y (tasks decades apart in one level, zero rows with targets)
-            y = y + vt[:r].T @ ((vt[:r] @ (M.T @ (c - M @ y))) / s[:r] ** 2)
+            y = vt[:r].T @ ((u[:, :r].T @ (b - A @ x)) / s[:r])
             x = x + Z @ y
         Z = Z @ vt[r:].T
     return x, gap, sigma
