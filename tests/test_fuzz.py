@@ -189,16 +189,21 @@ def test_saved_fuzz_failures_now_hold_every_property(path):
     file's description says which and how), through every path that takes their kind."""
     stack = load_stack(path)
     kind = path.stem.split("-")[0]
-    if kind == "equality":
+    exact = None
+    if kind in fuzz.EQUALITY_KINDS:
         from prioik.hierarchy.fuzz import judged
         case = judged(stack)
+        case.kind = kind
+        if kind == "mixed_scale":
+            from prioik.hierarchy.exact import exact_optimum
+            exact = exact_optimum(stack)
     else:
         from prioik.hierarchy.fuzz import FuzzCase
         case = FuzzCase(stack, 0, kind)
     report = fuzz.FuzzReport()
     fuzz._Runner(report, threads=2, keep=20).run_case(
-        path.stem, case, [p for p in fuzz.PATHS.values() if kind in p.kinds],
-        check_threads=True)
+        path.stem, case, [p for p in fuzz.PATHS.values() if fuzz.takes(p, kind)],
+        check_threads=True, exact=exact)
     _assert_clean(report)
 
 
@@ -240,9 +245,10 @@ def test_prioik_fuzz_command(tmp_path, capsys):
                  "--out", str(tmp_path)])
     out = capsys.readouterr().out
     assert "5 equality stacks" in out and "5 inequality stacks" in out
-    assert "5 bounds stacks" in out
-    assert "| ej_qr_numba | 5 |" in out and "| cascaded_qp | 10 |" in out
-    assert "| hierarchical_active_set | 15 |" in out and "| sns | 15 |" in out
+    assert "5 bounds stacks" in out and "5 mixed_scale stacks" in out
+    assert "| ej_qr_numba | 10 |" in out and "| cascaded_qp | 10 |" in out
+    assert "| hierarchical_active_set | 20 |" in out and "| sns | 20 |" in out
+    assert "| above |" in out
     assert code == (1 if "failing stacks saved" in out else 0)
 
 
