@@ -145,7 +145,8 @@ class FuzzReport:
         stacks: Stacks tried, per stack kind.
         well_conditioned: How many equality stacks were well-conditioned.
         exact: Per kind, ``[stacks with an extended-precision truth, stacks whose truth
-            is ambiguous]`` (see ``above`` in the module docstring).
+            is ambiguous, stacks judged by it]`` (judged: unambiguous and
+            well-conditioned; see ``above`` in the module docstring).
         above_ill: Per path, ``optimal`` answers above the truth (as ``above``) on
             stacks with a truth that are not well-conditioned.
         solves: Solves per path.
@@ -447,9 +448,10 @@ def run(n: int, seed: int, *, kinds=("equality",), paths: list[str] | None = Non
                 report.well_conditioned += int(case.well_conditioned)
             truth = exact_optimum(case.stack) if judge else None
             if truth is not None:
-                counts = report.exact.setdefault(kind, [0, 0])
+                counts = report.exact.setdefault(kind, [0, 0, 0])
                 counts[0] += 1
                 counts[1] += int(truth.ambiguous)
+                counts[2] += int(case.well_conditioned and not truth.ambiguous)
             runner.run_case(f"{kind}-{seed}-{i}", case, chosen,
                             thread_every > 0 and i % thread_every == 0,
                             batch_every > 0 and i % batch_every == 0, truth)
@@ -508,7 +510,7 @@ def _cmd(args: argparse.Namespace) -> int:
           + ", ".join(f"{v} {k} stacks" for k, v in report.stacks.items())
           + f" ({report.well_conditioned} equality well-conditioned"
           + "".join(f"; {kind}: {c[0]} with an extended-precision truth, {c[1]} of them "
-                    f"ambiguous" for kind, c in report.exact.items())
+                    f"ambiguous, {c[2]} judged by it" for kind, c in report.exact.items())
           + f"), {report.time_s:.0f} s")
     print(report.table())
     if report.above_ill:
