@@ -445,14 +445,31 @@ def _pivoted_lstsq_if_full_rank(K: np.ndarray, p: np.ndarray, tol: float
     if tol <= 0 or not np.all(pivots > tol):
         return None
     z = np.empty(d)
-    z[jpvt - 1] = _qr_least_squares(qr, tau, p)
+    Kp = K[:, jpvt - 1]
+    z[jpvt - 1] = _refined(Kp, qr, _qr_least_squares(qr, tau, p), p)
     return z, decision_margin(pivots, tol)
 
 
 def _lstsq_full_column_rank(K: np.ndarray, p: np.ndarray) -> np.ndarray:
     """min ‖K z − p‖ for ``K`` (m × r, m > r) of full column rank, by Householder QR."""
     qr, tau, _, _ = _dgeqrf(K)
-    return _qr_least_squares(qr, tau, p)
+    return _refined(K, qr, _qr_least_squares(qr, tau, p), p)
+
+
+def _refined(K: np.ndarray, qr: np.ndarray, z: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """``z ≈ argmin ‖K z − p‖`` (``K`` of full column rank, ``qr`` its compact QR) after
+    one step of refinement by the corrected semi-normal equations, ``z + R⁻¹ R⁻ᵀ Kᵀ
+    (p − K z)``. Householder QR is backward stable in norm only: rows of ``K`` far
+    smaller than its norm (zero rows with targets, tasks decades apart in one level)
+    are read with errors of ``ε ‖K‖``, and their large targets leak into ``Qᵀ p``;
+    ``Kᵀ (p − K z)`` is formed row by row (a zero row adds exactly nothing)."""
+    r = z.shape[0]
+    if r == 0 or not np.isfinite(z).all():
+        return z
+    g = K.T @ (p - K @ z)
+    w, _ = _dtrtrs(qr[:r, :r], g, trans=1)
+    dz, _ = _dtrtrs(qr[:r, :r], w)
+    return z + dz.ravel()
 
 
 def _qr_least_squares(qr: np.ndarray, tau: np.ndarray, p: np.ndarray) -> np.ndarray:
