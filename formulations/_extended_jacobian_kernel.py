@@ -110,6 +110,29 @@ def _back_substitute(Tt, t, r, out, col):
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
+def _refine_step(Tt, g, r, out, col):
+    """``out[col:col + r] += R⁻¹ R⁻ᵀ g`` for the upper-triangular ``R`` held transposed
+    (``R[j, k] = Tt[k, j]``), ``g`` overwritten: with ``g = Kᵀ (p − K z)`` the step of
+    the corrected semi-normal equations that refines a least-squares solution ``z`` of
+    ``K = Q R``. Householder QR is backward stable in norm only: rows of ``K`` far
+    smaller than its norm (zero rows with targets, tasks decades apart in one level)
+    are read with errors of ``ε ‖K‖`` and their large targets leak into ``Qᵀ p``;
+    ``Kᵀ (p − K z)``, formed row by row, has no such term."""
+    for j in range(r):                        # Rᵀ w = g (forward)
+        acc = g[j]
+        for k in range(j):
+            acc -= Tt[j, k] * g[k]
+        g[j] = acc / Tt[j, j]
+    for j in range(r - 1, -1, -1):            # R δ = w (backward)
+        acc = g[j]
+        for k in range(j + 1, r):
+            acc -= Tt[k, j] * g[k]
+        g[j] = acc / Tt[j, j]
+    for j in range(r):
+        out[col + j] += g[j]
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
 def _small_lstsq_ws(L, rhs, m, r, mu2, out, col, flat, tbuf):
     """min ‖L[:m, :r] z − rhs‖² + mu2 ‖z‖², by Householder QR of [L; √mu2 I], into
     ``out[col:col + r]``, on the scratch ``flat`` (``≥ r (m + r)``) and ``tbuf`` (``≥ m + r``):
@@ -140,6 +163,22 @@ def _small_lstsq_ws(L, rhs, m, r, mu2, out, col, flat, tbuf):
         if exact > 0.0:
             _reflect_column(Tt, j, t, exact)
     _back_substitute(Tt, t, r, out, col)
+    if mu2 == 0.0:
+        # one step of refinement by the corrected semi-normal equations (the residual
+        # row by row; tbuf's first m entries hold it, the next r the correction)
+        res = tbuf[:m]
+        g = tbuf[m:m + r]
+        for i in range(m):
+            acc = rhs[i]
+            for j in range(r):
+                acc -= L[i, j] * out[col + j]
+            res[i] = acc
+        for j in range(r):
+            acc = 0.0
+            for i in range(m):
+                acc += L[i, j] * res[i]
+            g[j] = acc
+        _refine_step(Tt, g, r, out, col)
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
@@ -427,6 +466,20 @@ def _pivoted_lstsq_if_full_rank(B, s0, m, col, rhs, tol, out, margin, spare, isp
             tj[i] -= f * cj[i]
         cj[0] = alpha
     _back_substitute(Tt, t, d, z, 0)
+    # one step of refinement by the corrected semi-normal equations (the residual row by
+    # row, in t; the correction in norms): see _refine_step
+    for i in range(m):
+        row = B[s0 + i]
+        acc = rhs[i]
+        for j in range(d):
+            acc -= row[col + perm[j]] * z[j]
+        t[i] = acc
+    for j in range(d):
+        acc = 0.0
+        for i in range(m):
+            acc += B[s0 + i, col + perm[j]] * t[i]
+        norms[j] = acc
+    _refine_step(Tt, norms, d, z, 0)
     for j in range(d):
         out[col + perm[j]] = z[j]
     return True
