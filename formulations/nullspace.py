@@ -111,6 +111,11 @@ def generalized_inverse(M: np.ndarray, tol: float, damping: float = 0.0
     return (V * gain) @ U.T, V, U
 
 
+#: Steps of :func:`refinement` a level's least-squares step gets: one left a level of a
+#: task at 6e-10 beside rows of 0.5 and zero rows with targets 6e-6 off, two reach ε.
+REFINEMENT_STEPS = 2
+
+
 def refinement(M: np.ndarray, c: np.ndarray, y: np.ndarray, Vt: np.ndarray,
                keep: np.ndarray, sv: np.ndarray) -> np.ndarray:
     """The correction of a least-squares step ``y ≈ M_r⁺ c`` computed from an SVD
@@ -173,7 +178,8 @@ def project_levels(A: np.ndarray, b: np.ndarray, X: np.ndarray, N: np.ndarray,
     residual = b[:, :, None] - A @ X[:, :, None]                       # B × m × 1
     step = np.swapaxes(Vt, 1, 2) @ (gain[:, :, None] * (np.swapaxes(U, 1, 2) @ residual))
     if damping == 0:
-        step = step + refinement(J, residual, step, Vt, keep, sv)
+        for _ in range(REFINEMENT_STEPS):
+            step = step + refinement(J, residual, step, Vt, keep, sv)
     if reproject:
         step = N @ step                                            # N_{i-1} Ĵ_i^# = Ĵ_i^#
     X = X + step[:, :, 0]

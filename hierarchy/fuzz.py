@@ -276,7 +276,13 @@ def nested_truth(stack: TaskStack, rcond: float = 1e-9, rotation: np.ndarray | N
         r = int(np.count_nonzero(s > rcond))
         if r:
             sigma = min(sigma, float(s[r - 1]))
-            y = vt[:r].T @ ((u[:, :r].T @ (b - A @ x)) / s[:r])
+            M, c = A @ Z, b - A @ x
+            y = vt[:r].T @ ((u[:, :r].T @ c) / s[:r])
+            # two steps of refinement, the residual formed row by row: the SVD reads rows
+            # far smaller than the level's norm to ε of it, and their large targets
+            # leak into y (tasks decades apart in one level, zero rows with targets)
+            for _ in range(2):
+                y = y + vt[:r].T @ ((vt[:r] @ (M.T @ (c - M @ y))) / s[:r] ** 2)
             x = x + Z @ y
         Z = Z @ vt[r:].T
     return x, gap, sigma
