@@ -40,7 +40,8 @@ from prioik.hierarchy.linalg import X_PRECISION
 from ._extended_jacobian_kernel import (_UNIT_ROWS_GAP, _apply_q, _apply_qt,
                                         _cholesky_lower, _cholesky_solve, _dot,
                                         _drop_fixed, _free_directions, _level_extreme,
-                                        _small_lstsq_ws, _swap, _unit_rows_of,
+                                        _csne_correction, _small_lstsq_ws, _swap,
+                                        _unit_rows_of,
                                         _unit_rows_solve, _woodbury_apply,
                                         solve_kernel_into, spare_size)
 
@@ -358,7 +359,7 @@ def _eqp_append(B, y, col, rows, nh, nw, tgt, rnorm, rcond, soft_tol, T, rhs, no
 
 @njit(cache=True, fastmath=_FAST, inline="always")
 def _full_rank_step(B, y, col, rows, nw, tgt, soft_tol, flat, t, norms, perm, p, nrot, nf,
-                    Vf, betaf, posf):
+                    Vf, betaf, posf, T):
     """The step of ``nw ≥ d`` working soft rows and no hard row, when they have full
     column rank on the ``d`` free coordinates: ``p = R⁻¹ Qᵀ (tgt − B y)`` by one
     column-pivoted Householder QR (the extended Jacobian's
@@ -412,6 +413,9 @@ def _full_rank_step(B, y, col, rows, nw, tgt, soft_tol, flat, t, norms, perm, p,
         for i in range(nw):
             t[i] -= yc * Wc[i]
     Tt = W[col:]
+    for i in range(nw):            # the rows on the free coordinates, kept for the
+        for c in range(d):         # refinement below (T: R × n scratch, _eqp refills it)
+            T[i, c] = Tt[c, i]
     for c in range(d):
         norms[c] = _dot(Tt[c], Tt[c])
         perm[c] = c
@@ -456,6 +460,25 @@ def _full_rank_step(B, y, col, rows, nw, tgt, soft_tol, flat, t, norms, perm, p,
         norms[c] = acc / Tt[c, c]          # norms: z in pivot order
     for c in range(d):
         p[perm[c]] = norms[c]
+    # one step of refinement by the corrected semi-normal equations (the extended
+    # Jacobian's _refine_step): the residual of the rows, formed row by row, in t
+    for i in range(nw):
+        acc = tgt[i]
+        for c in range(col):
+            acc -= y[c] * W[c, i]
+        Ti = T[i]
+        for c in range(d):
+            acc -= Ti[c] * (y[col + c] + p[c])
+        t[i] = acc
+    for j in range(d):
+        acc = 0.0
+        pj = perm[j]
+        for i in range(nw):
+            acc += T[i, pj] * t[i]
+        norms[j] = acc
+    _csne_correction(Tt, norms, d)
+    for c in range(d):
+        p[perm[c]] += norms[c]
     return margin
 
 
@@ -608,7 +631,7 @@ def _step(B, y, col, rows, nh, nw, fvec, rcond, soft_tol, T, V, beta, vpos, Lw, 
             return nh, d - nh, 0, True, margin, gn
         if nh == 0:
             margin = _full_rank_step(B, y, col, rows, nw, tgt, soft_tol, flat, rhs, norms,
-                                     perm, p, nrot, nf, Vf, betaf, posf)
+                                     perm, p, nrot, nf, Vf, betaf, posf, T)
             if margin >= 0.0:
                 return 0, d, 0, True, margin, -1.0
     for i in range(nh + nw):

@@ -118,6 +118,14 @@ def _refine_step(Tt, g, r, out, col):
     smaller than its norm (zero rows with targets, tasks decades apart in one level)
     are read with errors of ``ε ‖K‖`` and their large targets leak into ``Qᵀ p``;
     ``Kᵀ (p − K z)``, formed row by row, has no such term."""
+    _csne_correction(Tt, g, r)
+    for j in range(r):
+        out[col + j] += g[j]
+
+
+@njit(cache=True, fastmath=_FAST, inline="always")
+def _csne_correction(Tt, g, r):
+    """``g ← R⁻¹ R⁻ᵀ g`` in place, ``R`` held transposed as in :func:`_refine_step`."""
     for j in range(r):                        # Rᵀ w = g (forward)
         acc = g[j]
         for k in range(j):
@@ -128,8 +136,6 @@ def _refine_step(Tt, g, r, out, col):
         for k in range(j + 1, r):
             acc -= Tt[k, j] * g[k]
         g[j] = acc / Tt[j, j]
-    for j in range(r):
-        out[col + j] += g[j]
 
 
 @njit(cache=True, fastmath=_FAST, inline="always")
