@@ -10,6 +10,16 @@ every fuzzed path that takes the kind on each. A path fails a case when:
   (a :class:`~hierarchy.TaskStackError` / ``FormulationError`` refusal is counted
   as ``refused``, not as a crash);
 * ``nan`` — ``x`` is not finite while the status is not ``failed``;
+* ``above`` — the status is ``optimal`` on a well-conditioned equality stack that has
+  an extended-precision truth (:func:`hierarchy.exact.exact_optimum`: ``n ≤``
+  :data:`~hierarchy.exact.EXACT_MAX_N`, no rank decision within the ambiguity band;
+  the ``mixed_scale`` kind always, ``equality`` with ``exact=True``) but some level's
+  value lies above the truth's by more than :data:`~hierarchy.exact.VALUE_TOL`
+  relative, beyond what float64 can tell apart (:meth:`~hierarchy.exact.ExactOptimum.
+  excess` at the stack's precision, the larger of ``X_PRECISION`` and its
+  :attr:`~hierarchy.fuzz.FuzzCase.rounding_error`); on the other stacks with a truth
+  such answers are counted (:attr:`FuzzReport.above_ill`), not failed: rounding may
+  move their answer further than the value tolerance;
 * ``wrong`` — the status is ``optimal`` on a well-conditioned equality stack
   (:attr:`~hierarchy.fuzz.FuzzCase.well_conditioned`) but ``x`` is more than
   :data:`WRONG_TOL` (relative, :func:`hierarchy.relative_distance`) from the
@@ -61,15 +71,21 @@ from prioik.formulations import ConcurrentUseError
 from prioik.hierarchy import (TaskStack, TaskStackError, check_lexicographic,
                               relative_distance, save_stack)
 from prioik.hierarchy.families import same_shape_batch
+from prioik.hierarchy.exact import ExactOptimum, exact_optimum
 from prioik.hierarchy.fuzz import (FuzzCase, bounds_case, equality_case, inequality_case,
-                                   nested_truth, rotation_spread, rounding_error)
+                                   mixed_scale_case, nested_truth, rotation_spread,
+                                   rounding_error)
 
 #: Relative distance from the ground truth above which an ``optimal`` answer is wrong.
 WRONG_TOL = 1e-6
 #: Relative distance between two paths' answers to one stack above which they differ.
 MATCH_TOL = 1e-9
 #: Failure kinds, in report order.
-KINDS = ("crash", "nan", "wrong", "uncertified", "mismatch", "threads")
+KINDS = ("crash", "nan", "above", "wrong", "uncertified", "mismatch", "threads")
+
+#: Stack kinds of equality stacks (judged against the truths; the paths that take
+#: ``"equality"`` take them all).
+EQUALITY_KINDS = ("equality", "mixed_scale")
 
 DOCUMENTED_ERRORS = (TaskStackError, FormulationError)
 
@@ -103,7 +119,12 @@ PATHS: dict[str, Path_] = {p.name: p for p in (
 
 #: The generator of each stack kind.
 GENERATORS = {"equality": equality_case, "inequality": inequality_case,
-              "bounds": bounds_case}
+              "bounds": bounds_case, "mixed_scale": mixed_scale_case}
+
+
+def takes(path: Path_, kind: str) -> bool:
+    """Whether ``path`` runs on stacks of ``kind`` (the equality kinds alike)."""
+    return kind in path.kinds or (kind in EQUALITY_KINDS and "equality" in path.kinds)
 
 
 @dataclass
@@ -123,6 +144,11 @@ class FuzzReport:
     Attributes:
         stacks: Stacks tried, per stack kind.
         well_conditioned: How many equality stacks were well-conditioned.
+        exact: Per kind, ``[stacks with an extended-precision truth, stacks whose truth
+            is ambiguous, stacks judged by it]`` (judged: unambiguous and
+            well-conditioned; see ``above`` in the module docstring).
+        above_ill: Per path, ``optimal`` answers above the truth (as ``above``) on
+            stacks with a truth that are not well-conditioned.
         solves: Solves per path.
         counts: ``counts[path][kind]`` failures.
         statuses: ``statuses[path][status]``.
@@ -133,6 +159,8 @@ class FuzzReport:
 
     stacks: dict[str, int] = field(default_factory=dict)
     well_conditioned: int = 0
+    exact: dict[str, list[int]] = field(default_factory=dict)
+    above_ill: dict[str, int] = field(default_factory=dict)
     solves: dict[str, int] = field(default_factory=dict)
     counts: dict[str, dict[str, int]] = field(default_factory=dict)
     statuses: dict[str, dict[str, int]] = field(default_factory=dict)
@@ -199,11 +227,17 @@ class _Runner:
         self.failing.setdefault(case_id, (case, []))[1].append(f)
 
     def run_case(self, case_id: str, case: FuzzCase, paths: list[Path_],
-                 check_threads: bool, check_batch: bool = True) -> None:
+                 check_threads: bool, check_batch: bool = True,
+                 exact: ExactOptimum | None = None) -> None:
+        """Every path that takes the case's kind, every check (``exact``: the stack's
+        extended-precision truth, for the ``above`` check; ``None``: none)."""
         stack = case.stack
         rep = self.report
+        equality = case.kind in EQUALITY_KINDS
+        if exact is not None and exact.ambiguous:
+            exact = None
         for path in paths:
-            if case.kind not in path.kinds:
+            if not takes(path, case.kind):
                 continue
             rep.solves[path.name] = rep.solves.get(path.name, 0) + 1
             try:
@@ -223,7 +257,19 @@ class _Runner:
                 self.fail(case_id, case, "nan", path.name, f"status {sol.status} with "
                           f"non-finite x")
                 continue
-            if case.kind == "equality" and sol.status == "optimal":
+            if exact is not None and sol.status == "optimal":
+                excess = exact.excess(sol.x, case.rounding_error)
+                if float(np.max(excess)) > 1.0 and not case.well_conditioned:
+                    rep.above_ill[path.name] = rep.above_ill.get(path.name, 0) + 1
+                elif float(np.max(excess)) > 1.0:
+                    j = int(np.argmax(excess))
+                    rel = float(exact.relative_excess(sol.x)[j])
+                    self.fail(case_id, case, "above", path.name,
+                              f"optimal but level {j}'s value is {rel:.2e} (relative) "
+                              f"above the extended-precision optimum "
+                              f"{exact.values[j]:.6g}, {excess[j]:.2g} times what "
+                              f"float64 can tell apart")
+            if equality and sol.status == "optimal":
                 cert = check_lexicographic(stack, sol.x)
                 if case.well_conditioned:
                     dist = relative_distance(sol.x, case.truth)
@@ -269,7 +315,7 @@ class _Runner:
         rng = np.random.default_rng(case.seed + 7)
         try:
             variants = [stack] + (same_shape_batch(stack, rng, 2, reduce=0.3)
-                                  if case.kind == "equality" else [stack])
+                                  if case.kind in EQUALITY_KINDS else [stack])
             batch = formulations.solve_batch(variants, path.formulation, **path.options)
         except DOCUMENTED_ERRORS as exc:
             self.fail(case_id, case, "mismatch", path.name,
@@ -285,7 +331,7 @@ class _Runner:
             well = case.well_conditioned and j == 0
             why = self._mismatch(batch.X[j], one.x, batch.statuses[j], one.status, well,
                                  case.min_sigma, case.rounding_error if j == 0 else 0.0)
-            if why and j > 0 and case.kind == "equality":    # the variant's own bound
+            if why and j > 0 and case.kind in EQUALITY_KINDS:   # the variant's own bound
                 why = self._mismatch(batch.X[j], one.x, batch.statuses[j], one.status,
                                      False, 1.0, _own_rounding(s))
             if why:
@@ -298,7 +344,7 @@ class _Runner:
         stack = case.stack
         rng = np.random.default_rng(case.seed + 11)
         variants = (same_shape_batch(stack, rng, 2, reduce=0.3)
-                    if case.kind == "equality" else []) + [stack]
+                    if case.kind in EQUALITY_KINDS else []) + [stack]
         try:
             solver = formulations.prepare(stack.layout, path.formulation, **path.options)
             for j, s in enumerate(variants):
@@ -308,7 +354,7 @@ class _Runner:
                 why = self._mismatch(got.x, one.x, got.status, one.status, well,
                                      case.min_sigma,
                                      case.rounding_error if s is stack else 0.0)
-                if why and s is not stack and case.kind == "equality":   # its own bound
+                if why and s is not stack and case.kind in EQUALITY_KINDS:  # its own
                     why = self._mismatch(got.x, one.x, got.status, one.status, False, 1.0,
                                          _own_rounding(s))
                 if why:
@@ -362,13 +408,15 @@ class _Runner:
 def run(n: int, seed: int, *, kinds=("equality",), paths: list[str] | None = None,
         threads: int = 4, thread_every: int = 10, batch_every: int = 1,
         sizes: dict | None = None, out: Path | None = None, keep: int = 1000,
-        progress: Callable[[str], None] | None = None) -> FuzzReport:
+        progress: Callable[[str], None] | None = None, exact: bool | None = None,
+        start: int = 0) -> FuzzReport:
     """Fuzz ``n`` stacks of each kind; see the module docstring.
 
     Args:
         n: Stacks per kind.
         seed: Run seed.
-        kinds: Of :data:`GENERATORS`: ``"equality"``, ``"inequality"``, ``"bounds"``.
+        kinds: Of :data:`GENERATORS`: ``"equality"``, ``"inequality"``, ``"bounds"``,
+            ``"mixed_scale"``.
         paths: Names in :data:`PATHS` (default: all whose formulation is available).
         threads: Threads of the concurrency check.
         thread_every: Run the concurrency check on every ``thread_every``-th case.
@@ -378,6 +426,11 @@ def run(n: int, seed: int, *, kinds=("equality",), paths: list[str] | None = Non
         out: Folder for the failing stacks (not written when ``None``).
         keep: Failures kept with details in the report.
         progress: Called with a line every 1000 cases.
+        exact: Judge ``optimal`` answers against the extended-precision truth
+            (:func:`hierarchy.exact.exact_optimum`, stacks of ``n ≤ 40``): ``None``
+            (default) on the ``mixed_scale`` kind only, ``True`` on every equality kind.
+        start: Index of the first case (cases ``start … start + n − 1``: a long run in
+            chunks).
     """
     avail = {f.name for f in formulations.available() if f.available}
     chosen = [PATHS[p] for p in (paths or PATHS)] if paths else \
@@ -387,15 +440,23 @@ def run(n: int, seed: int, *, kinds=("equality",), paths: list[str] | None = Non
     t0 = time.perf_counter()
     for kind in kinds:
         report.stacks[kind] = n
-        for i in range(n):
+        judge = kind in EQUALITY_KINDS and (exact or (exact is None
+                                                      and kind == "mixed_scale"))
+        for i in range(start, start + n):
             case = _case(kind, seed, i, sizes)
-            if kind == "equality":
+            if kind in EQUALITY_KINDS:
                 report.well_conditioned += int(case.well_conditioned)
+            truth = exact_optimum(case.stack) if judge else None
+            if truth is not None:
+                counts = report.exact.setdefault(kind, [0, 0, 0])
+                counts[0] += 1
+                counts[1] += int(truth.ambiguous)
+                counts[2] += int(case.well_conditioned and not truth.ambiguous)
             runner.run_case(f"{kind}-{seed}-{i}", case, chosen,
                             thread_every > 0 and i % thread_every == 0,
-                            batch_every > 0 and i % batch_every == 0)
-            if progress is not None and (i + 1) % 1000 == 0:
-                progress(f"{kind}: {i + 1}/{n} stacks, {report.total_failures} failures, "
+                            batch_every > 0 and i % batch_every == 0, truth)
+            if progress is not None and (i + 1 - start) % 1000 == 0:
+                progress(f"{kind}: {i + 1 - start}/{n} stacks, {report.total_failures} failures, "
                          f"{time.perf_counter() - t0:.0f} s")
     report.time_s = time.perf_counter() - t0
     if out is not None:
@@ -414,9 +475,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        description=__doc__.split("\n\n")[0])
     p.add_argument("--n", type=int, default=1000, help="stacks per kind (default 1000)")
     p.add_argument("--seed", type=int, default=0, help="run seed (default 0)")
-    p.add_argument("--kind", choices=("equality", "inequality", "bounds", "both", "all"),
+    p.add_argument("--kind", choices=("equality", "inequality", "bounds", "mixed_scale",
+                                      "both", "all"),
                    default="both", help="stack kind (both: equality and inequality; all: "
-                                        "the three; default both)")
+                                        "the four; default both)")
+    p.add_argument("--start", type=int, default=0,
+                   help="index of the first case (a long run in chunks; default 0)")
+    p.add_argument("--exact", action="store_true",
+                   help="judge equality stacks of n <= 40 against the extended-precision "
+                        "truth too (mixed_scale stacks always are)")
     p.add_argument("--paths", default="", help=f"comma-separated paths (default: all of "
                                                f"{', '.join(PATHS)})")
     p.add_argument("--threads", type=int, default=4, help="threads of the concurrency check")
@@ -437,12 +504,19 @@ def _cmd(args: argparse.Namespace) -> int:
     kinds = {"both": ("equality", "inequality"), "all": tuple(GENERATORS)}.get(
         args.kind, (args.kind,))
     report = run(args.n, args.seed, kinds=kinds, paths=paths, threads=args.threads,
-                 thread_every=args.thread_every, out=args.out,
-                 progress=lambda line: print(line, file=sys.stderr, flush=True))
+                 thread_every=args.thread_every, out=args.out, exact=args.exact or None,
+                 start=args.start, progress=lambda line: print(line, file=sys.stderr, flush=True))
     print(f"prioik fuzz --n {args.n} --seed {args.seed}: "
           + ", ".join(f"{v} {k} stacks" for k, v in report.stacks.items())
-          + f" ({report.well_conditioned} equality well-conditioned), {report.time_s:.0f} s")
+          + f" ({report.well_conditioned} equality well-conditioned"
+          + "".join(f"; {kind}: {c[0]} with an extended-precision truth, {c[1]} of them "
+                    f"ambiguous, {c[2]} judged by it" for kind, c in report.exact.items())
+          + f"), {report.time_s:.0f} s")
     print(report.table())
+    if report.above_ill:
+        print("optimal answers above the extended-precision optimum on stacks that are "
+              "not well-conditioned (not failures): "
+              + ", ".join(f"{p} {c}" for p, c in report.above_ill.items()))
     for f in report.failures[:20]:
         print(f"  {f.case} {f.path}: {f.kind}: {f.message}")
     if args.out is not None and report.failures:

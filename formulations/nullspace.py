@@ -111,6 +111,31 @@ def generalized_inverse(M: np.ndarray, tol: float, damping: float = 0.0
     return (V * gain) @ U.T, V, U
 
 
+#: Steps of :func:`refinement` a level's least-squares step gets: one left a level of a
+#: task at 6e-10 beside rows of 0.5 and zero rows with targets 6e-6 off, two reach ε.
+REFINEMENT_STEPS = 2
+
+
+def refinement(M: np.ndarray, c: np.ndarray, y: np.ndarray, Vt: np.ndarray,
+               keep: np.ndarray, sv: np.ndarray) -> np.ndarray:
+    """The correction of a least-squares step ``y ≈ M_r⁺ c`` computed from an SVD
+    ``M = U Σ Vᵀ`` (rank rule ``keep``): ``V_r Σ_r⁻² V_rᵀ Mᵀ (c − M y)``, one step of
+    iterative refinement, for ``B`` stacks at once (``B × m × d`` ``M``, ``B × m × 1``
+    ``c``, ``B × d × 1`` ``y``, ``B × p × d`` ``Vt``, ``B × p`` ``keep`` and ``sv``).
+
+    An SVD is backward stable in norm only: a level's rows far smaller than its norm
+    (zero or tiny rows beside large ones, tasks decades apart) are read with errors of
+    ``ε ‖M‖``, and where their targets are large their residuals leak into ``U_rᵀ c``
+    and the step by ``ε ‖M‖ ‖c‖ / σ²``. ``Mᵀ (c − M y)`` is formed row by row, each
+    row's term on its own scale (a zero row adds exactly nothing), so the correction
+    removes that error; on a level whose rows share one scale it is at rounding level.
+    """
+    r = c - M @ y                                                      # B × m × 1
+    g = Vt @ (np.swapaxes(M, 1, 2) @ r)                                # B × p × 1
+    safe = np.where(keep, sv, 1.0)
+    return np.swapaxes(Vt, 1, 2) @ (np.where(keep, 1.0 / (safe * safe), 0.0)[:, :, None] * g)
+
+
 def project_levels(A: np.ndarray, b: np.ndarray, X: np.ndarray, N: np.ndarray,
                    tol: np.ndarray, damping: float = 0.0, reproject: bool = True
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -143,7 +168,8 @@ def project_levels(A: np.ndarray, b: np.ndarray, X: np.ndarray, N: np.ndarray,
     if m == 0:
         return (X, N, np.zeros((count, 0), dtype=bool), np.zeros((count, 0)),
                 np.zeros(count, dtype=bool))
-    U, sv, Vt = np.linalg.svd(A @ N, full_matrices=False)
+    J = A @ N
+    U, sv, Vt = np.linalg.svd(J, full_matrices=False)
     t = tol[:, None]
     keep = (sv > t) & (t > 0)
     near = ((sv > t / AMBIGUITY) & (sv <= t * AMBIGUITY) & (t > 0)).any(axis=1)
@@ -151,6 +177,9 @@ def project_levels(A: np.ndarray, b: np.ndarray, X: np.ndarray, N: np.ndarray,
     gain = np.where(keep, safe / (safe * safe + damping) if damping > 0 else 1.0 / safe, 0.0)
     residual = b[:, :, None] - A @ X[:, :, None]                       # B × m × 1
     step = np.swapaxes(Vt, 1, 2) @ (gain[:, :, None] * (np.swapaxes(U, 1, 2) @ residual))
+    if damping == 0:
+        for _ in range(REFINEMENT_STEPS):
+            step = step + refinement(J, residual, step, Vt, keep, sv)
     if reproject:
         step = N @ step                                            # N_{i-1} Ĵ_i^# = Ĵ_i^#
     X = X + step[:, :, 0]

@@ -849,7 +849,14 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
         an = float(np.linalg.norm(WA))
         if finite:
             target = a_all[s0:s1] - v
-            scale = level_scale(sw * (terms_all[s0:s1] + np.abs(target))) + an
+            # a row's target counts as its rounding reaches the gradient: in proportion
+            # to the row's norm against the level's largest (zero rows with targets of
+            # 1e15 beside rows of 0.24 made the scale 7.5e14 and passed a step 2e-5 off
+            # along the small rows' directions, at a relative residual of 2.5e-17)
+            reach = sw * norms
+            top = float(reach.max()) if reach.size else 0.0
+            share = reach / top if top > 0 else reach
+            scale = level_scale(sw * (terms_all[s0:s1] + np.abs(target) * share)) + an
         else:
             scale = np.nan
         res, descents = kkt(g, WA[(side == 2) | (v != 0)], an) if finite else (np.nan, [])

@@ -36,7 +36,7 @@ from .stack import TaskStack
 from .task import Task
 
 __all__ = ["FuzzCase", "bounds_case", "equality_case", "inequality_case", "judged",
-           "nested_truth",
+           "mixed_scale_case", "nested_truth",
            "rounding_error", "rotation_spread", "AMBIGUOUS_BAND", "CONDITIONED_ERROR",
            "ROW_FEATURES"]
 
@@ -61,7 +61,8 @@ class FuzzCase:
         stack: The stack.
         seed: Seed of the generator that drew it (``equality_case(default_rng(seed))``
             draws it again).
-        kind: ``"equality"``, ``"inequality"`` or ``"bounds"``.
+        kind: ``"equality"``, ``"mixed_scale"`` (an equality stack of
+            :func:`mixed_scale_case`), ``"inequality"`` or ``"bounds"``.
         features: Row feature of every task, level by level.
         well_conditioned: Every rank decision is unambiguous and the exact answer is
             finite (equality stacks; see the module docstring).
@@ -142,6 +143,50 @@ def equality_case(rng: np.random.Generator, seed: int = -1, *, max_n: int = 60,
     levels, features = _equality_levels(rng, n, range(k), max_rows, task)
     return judged(TaskStack(levels), seed, features) if truth else \
         FuzzCase(TaskStack(levels), seed, "equality", features)
+
+
+def mixed_scale_case(rng: np.random.Generator, seed: int = -1, *, max_n: int = 60,
+                     max_levels: int = 12, max_rows: int = 20, truth: bool = True
+                     ) -> FuzzCase:
+    """Draw one equality stack whose levels' scales span ``1e-12`` to ``1e18``.
+
+    Each level gets a scale log-uniform in ``[1e-12, 1e18]``, so that levels of tiny
+    rows lie above and below levels of huge ones in one stack; a level of several tasks
+    spreads its tasks' scales below its own by up to 20 decades (log-uniform spread,
+    drawn per level), so one level may hold a task 1e9 beside one 1e-11. Rows are drawn
+    with the row features of :func:`equality_case` (relative to the rows above, before
+    scaling), targets on the rows' scale or of unit size, weights log-uniform in
+    ``[1e-6, 1e6]`` with probability 0.3. The case's kind is ``"mixed_scale"``.
+
+    Args:
+        rng: The generator (consumed).
+        seed: Recorded in the case.
+        max_n, max_levels, max_rows: Upper ends of the size draws.
+        truth: Compute :func:`nested_truth` and the conditioning verdict.
+    """
+    n = int(rng.integers(1, max_n + 1))
+    k = int(rng.integers(1, max_levels + 1))
+    level_scale = {}
+
+    def task(name: str, A: np.ndarray, feature: str) -> Task:
+        i = int(name[1:name.index("t")])
+        if i not in level_scale:        # the level's scale and its tasks' spread
+            level_scale[i] = (_log_uniform(rng, 1e-12, 1e18),
+                              float(rng.uniform(0.0, 20.0)) if rng.random() < 0.5 else 0.0)
+        top, spread = level_scale[i]
+        scale = top * 10.0 ** -float(rng.uniform(0.0, spread))
+        m = A.shape[0]
+        b = rng.standard_normal(m)
+        if feature == "conflict" or rng.random() < 0.5:
+            b = b * scale           # targets on the rows' scale (else unit targets)
+        weight = _log_uniform(rng, 1e-6, 1e6) if rng.random() < 0.3 else 1.0
+        return Task(name, scale * A, b, weight=weight)
+
+    levels, features = _equality_levels(rng, n, range(k), max_rows, task)
+    case = judged(TaskStack(levels), seed, features) if truth else \
+        FuzzCase(TaskStack(levels), seed, "equality", features)
+    case.kind = "mixed_scale"
+    return case
 
 
 def _equality_levels(rng: np.random.Generator, n: int, indices: range, max_rows: int,
@@ -231,7 +276,13 @@ def nested_truth(stack: TaskStack, rcond: float = 1e-9, rotation: np.ndarray | N
         r = int(np.count_nonzero(s > rcond))
         if r:
             sigma = min(sigma, float(s[r - 1]))
-            y = vt[:r].T @ ((u[:, :r].T @ (b - A @ x)) / s[:r])
+            M, c = A @ Z, b - A @ x
+            y = vt[:r].T @ ((u[:, :r].T @ c) / s[:r])
+            # two steps of refinement, the residual formed row by row: the SVD reads rows
+            # far smaller than the level's norm to ε of it, and their large targets
+            # leak into y (tasks decades apart in one level, zero rows with targets)
+            for _ in range(2):
+                y = y + vt[:r].T @ ((vt[:r] @ (M.T @ (c - M @ y))) / s[:r] ** 2)
             x = x + Z @ y
         Z = Z @ vt[r:].T
     return x, gap, sigma

@@ -56,6 +56,9 @@ double full_rank_step(Ctx& c, index nw, double soft_tol) {
         for (index i = 0; i < nw; ++i) t[i] -= yk * Wk[i];
     }
     Mat Tt = W.at(col, 0);
+    for (index i = 0; i < nw; ++i)      // the rows on the free coordinates, kept for the
+        for (index k = 0; k < d; ++k)   // refinement below (T: R × n scratch)
+            c.T(i, k) = Tt(k, i);
     for (index k = 0; k < d; ++k) {
         norms[k] = dot(Tt.row(k), Tt.row(k), nw);
         c.perm[k] = k;
@@ -101,6 +104,23 @@ double full_rank_step(Ctx& c, index nw, double soft_tol) {
         norms[j] = acc / Tt(j, j);
     }
     for (index j = 0; j < d; ++j) c.p[c.perm[j]] = norms[j];
+    // one step of refinement by the corrected semi-normal equations (householder.hpp's
+    // refine_step): the residual of the rows, formed row by row, in t
+    for (index i = 0; i < nw; ++i) {
+        double acc = c.tgt[i];
+        for (index k = 0; k < col; ++k) acc -= c.y[k] * W(k, i);
+        const double* Ti = c.T.row(i);
+        for (index k = 0; k < d; ++k) acc -= Ti[k] * (c.y[col + k] + c.p[k]);
+        t[i] = acc;
+    }
+    for (index j = 0; j < d; ++j) {
+        double acc = 0.0;
+        index pj = c.perm[j];
+        for (index i = 0; i < nw; ++i) acc += c.T(i, pj) * t[i];
+        norms[j] = acc;
+    }
+    csne_correction(Tt.ref(d, nw), norms, d);
+    for (index j = 0; j < d; ++j) c.p[c.perm[j]] += norms[j];
     return margin;
 }
 

@@ -127,6 +127,31 @@ inline void back_substitute(MatrixRef Tt, const double* t, Index r, double* z) {
   }
 }
 
+// g ← R⁻¹ R⁻ᵀ g in place for the upper-triangular R held transposed (R(j, k) = Tt(k, j)):
+// with g = Kᵀ (p − K z) the correction of the corrected semi-normal equations that
+// refines a least-squares solution z of K = Q R. Householder QR is backward stable in
+// norm only: rows of K far smaller than its norm (zero rows with targets, tasks decades
+// apart in one level) are read with errors of ε ‖K‖ and their large targets leak into
+// Qᵀ p; Kᵀ (p − K z), formed row by row, has no such term.
+inline void csne_correction(MatrixRef Tt, double* g, Index r) {
+  for (Index j = 0; j < r; ++j) {           // Rᵀ w = g (forward)
+    double acc = g[j];
+    for (Index k = 0; k < j; ++k) acc -= Tt(j, k) * g[k];
+    g[j] = acc / Tt(j, j);
+  }
+  for (Index j = r - 1; j >= 0; --j) {      // R δ = w (backward)
+    double acc = g[j];
+    for (Index k = j + 1; k < r; ++k) acc -= Tt(k, j) * g[k];
+    g[j] = acc / Tt(j, j);
+  }
+}
+
+// z[:r] += R⁻¹ R⁻ᵀ g (csne_correction), g overwritten
+inline void refine_step(MatrixRef Tt, double* g, Index r, double* z) {
+  csne_correction(Tt, g, r);
+  for (Index j = 0; j < r; ++j) z[j] += g[j];
+}
+
 // v = Qᵀ v (transposed: H_0 first) or v = Q v (H_{count-1} first) in place, v of n entries
 inline void apply_reflectors(double* v, Index n, const Reflectors& H, bool transposed) {
   for (Index i = 0; i < H.count; ++i) {
@@ -151,7 +176,9 @@ inline void apply_q(double* v, Index n, const Reflectors& H) { apply_reflectors(
 inline Index small_least_squares_scratch(Index m, Index r) { return r * (m + r) + m + r; }
 
 // min ‖L[:m, :r] z - rhs‖² + mu2 ‖z‖², by Householder QR of [L; √mu2 I] held transposed,
-// into z[:r]. L: lower trapezoidal or any m × r; scratch of small_least_squares_scratch.
+// into z[:r]; undamped (mu2 = 0), one step of refinement by the corrected semi-normal
+// equations (refine_step). L: lower trapezoidal or any m × r; scratch of
+// small_least_squares_scratch.
 inline void small_least_squares(MatrixRef L, const double* rhs, Index m, Index r, double mu2,
                                 double* z, double* scratch) {
   const Index rows = mu2 > 0.0 ? m + r : m;
@@ -174,6 +201,22 @@ inline void small_least_squares(MatrixRef L, const double* rhs, Index m, Index r
     if (exact > 0.0) reflect_column(Tt, j, t, exact);
   }
   back_substitute(Tt, t, r, z);
+  if (mu2 == 0.0) {
+    // the residual row by row (in t's m entries), the correction in the r after them
+    double* res = t;
+    double* g = t + m;
+    for (Index i = 0; i < m; ++i) {
+      double acc = rhs[i];
+      for (Index j = 0; j < r; ++j) acc -= L(i, j) * z[j];
+      res[i] = acc;
+    }
+    for (Index j = 0; j < r; ++j) {
+      double acc = 0.0;
+      for (Index i = 0; i < m; ++i) acc += L(i, j) * res[i];
+      g[j] = acc;
+    }
+    refine_step(Tt, g, r, z);
+  }
 }
 
 // Floats of full_rank_least_squares' scratch for m rows on d free columns.
@@ -182,7 +225,8 @@ inline Index full_rank_scratch(Index m, Index d) { return d * m + m + 2 * d; }
 // One level with m ≥ d rows B[s0:s0+m, col:] on its d = n - col free coordinates:
 // Householder QR with column pivoting (held transposed), with the rank test of the
 // row-pivoted path (pivot norm > tol). When all d pivots pass, the level has full
-// column rank: its least-squares solution R⁻¹ Qᵀ rhs is written into y[col:] and true
+// column rank: its least-squares solution R⁻¹ Qᵀ rhs, refined by one step of the
+// corrected semi-normal equations (refine_step), is written into y[col:] and true
 // returned. Otherwise nothing is written and false returned (B is never modified).
 // *margin receives the smallest pivot norm. Scratch: full_rank_scratch(m, d) floats,
 // d Index.
@@ -236,6 +280,19 @@ inline bool full_rank_least_squares(MatrixRef B, Index s0, Index m, Index col, c
     cj[0] = alpha;
   }
   back_substitute(Tt, t, d, z);
+  // one step of refinement: the residual row by row (in t), the correction in norms
+  for (Index i = 0; i < m; ++i) {
+    const double* row = B.row(s0 + i);
+    double acc = rhs[i];
+    for (Index j = 0; j < d; ++j) acc -= row[col + perm[j]] * z[j];
+    t[i] = acc;
+  }
+  for (Index j = 0; j < d; ++j) {
+    double acc = 0.0;
+    for (Index i = 0; i < m; ++i) acc += B(s0 + i, col + perm[j]) * t[i];
+    norms[j] = acc;
+  }
+  refine_step(Tt, norms, d, z);
   for (Index j = 0; j < d; ++j) y[col + perm[j]] = z[j];
   return true;
 }
