@@ -1,0 +1,494 @@
+// prioik._core.rows: the robot row writers' bindings (rows.hpp).
+//
+// Every array is taken through the buffer protocol as it is (no copy; any strides, as
+// pinocchio's column-major matrices come): float64 or int64 as the argument says,
+// writable where the writer writes, of the shapes the other arguments imply, and every
+// index a writer follows (a row start, the columns of a frame's spec, the entries of
+// iq, axes and unit) within the arrays it indexes. Anything else raises
+// prioik.formulations.base.CoreInputError naming the array before C++ reads it.
+// Non-finite values are the writers' to propagate (IEEE arithmetic, as numba's): the
+// solvers' own checks name them. The GIL is released while a writer runs.
+#include "rows_bindings.hpp"
+
+#include <nanobind/nanobind.h>
+
+#include <string>
+#include <type_traits>
+#include <utility>
+
+#include "prioik/extended_jacobian.hpp"
+#include "prioik/rows.hpp"
+
+namespace nb = nanobind;
+
+namespace {
+
+using prioik::InputError;
+using namespace prioik::rows;
+
+enum class Kind { Float, Int };
+
+// The buffers a call holds (released when it returns, after the GIL is taken back).
+class Buffers {
+ public:
+  Buffers() = default;
+  Buffers(const Buffers&) = delete;
+  Buffers& operator=(const Buffers&) = delete;
+  ~Buffers() {
+    for (int i = 0; i < count_; ++i) PyBuffer_Release(&views_[i]);
+  }
+
+  // the buffer of `h` (ndim dimensions, 8-byte items of `kind`), or InputError naming it
+  const Py_buffer& take(nb::handle h, const char* name, int ndim, Kind kind, bool writable) {
+    if (count_ == kMax) throw InputError("internal: too many arrays in one call");
+    Py_buffer& view = views_[count_];
+    const int flags = PyBUF_RECORDS_RO | (writable ? PyBUF_WRITABLE : 0);
+    if (!PyObject_CheckBuffer(h.ptr()) || PyObject_GetBuffer(h.ptr(), &view, flags) != 0) {
+      PyErr_Clear();
+      const bool buffer = PyObject_CheckBuffer(h.ptr());
+      throw InputError(std::string(name) + " must be a" + (writable ? " writable " : " ") +
+                       type_name(kind) + " numpy array, got " +
+                       (buffer && writable ? "a read-only array" : Py_TYPE(h.ptr())->tp_name));
+    }
+    ++count_;
+    if (view.itemsize != 8 || !format_is(view.format, kind))
+      throw InputError(std::string(name) + " must be " + type_name(kind) + ", got format '" +
+                       (view.format ? view.format : "B") + "' of " +
+                       std::to_string(view.itemsize) + "-byte items");
+    if (view.ndim != ndim)
+      throw InputError(std::string(name) + " must have " + std::to_string(ndim) +
+                       " dimension" + (ndim == 1 ? "" : "s") + ", got " +
+                       std::to_string(view.ndim));
+    for (int d = 0; d < ndim; ++d)
+      if (view.strides[d] % 8 != 0)
+        throw InputError(std::string(name) + " has strides that are not whole items");
+    return view;
+  }
+
+ private:
+  static constexpr int kMax = 20;
+  Py_buffer views_[kMax];
+  int count_ = 0;
+
+  static const char* type_name(Kind kind) { return kind == Kind::Float ? "float64" : "int64"; }
+
+  static bool format_is(const char* format, Kind kind) {
+    if (format == nullptr) return false;
+    if (*format == '@' || *format == '=' || *format == '<') ++format;
+    if (format[0] == '\0' || format[1] != '\0') return false;
+    return kind == Kind::Float ? format[0] == 'd'
+                               : (format[0] == 'l' || format[0] == 'q');
+  }
+};
+
+std::string shape_error(const char* name, const std::string& want, const Py_buffer& v) {
+  std::string got = "(";
+  for (int d = 0; d < v.ndim; ++d) got += (d ? ", " : "") + std::to_string(v.shape[d]);
+  return std::string(name) + " must have " + want + ", got shape " + got +
+         (v.ndim == 1 ? ",)" : ")");
+}
+
+// a vector of `size` entries (-1: any)
+template <class T>
+VectorView<T> vector(Buffers& bufs, nb::handle h, const char* name, Index size) {
+  constexpr bool writable = !std::is_const_v<T>;
+  constexpr Kind kind = std::is_same_v<std::remove_const_t<T>, double> ? Kind::Float : Kind::Int;
+  const Py_buffer& v = bufs.take(h, name, 1, kind, writable);
+  if (size >= 0 && v.shape[0] != size)
+    throw InputError(shape_error(name, std::to_string(size) + " entries", v));
+  return VectorView<T>{static_cast<T*>(v.buf), static_cast<Index>(v.shape[0]),
+                       static_cast<Index>(v.strides[0] / 8)};
+}
+
+// a matrix of rows x cols (-1: any)
+template <class T>
+MatrixView<T> matrix(Buffers& bufs, nb::handle h, const char* name, Index rows, Index cols) {
+  constexpr bool writable = !std::is_const_v<T>;
+  const Py_buffer& v = bufs.take(h, name, 2, Kind::Float, writable);
+  if ((rows >= 0 && v.shape[0] != rows) || (cols >= 0 && v.shape[1] != cols))
+    throw InputError(shape_error(
+        name, "shape (" + (rows >= 0 ? std::to_string(rows) : std::string("·")) + ", " +
+                  (cols >= 0 ? std::to_string(cols) : std::string("·")) + ")", v));
+  return MatrixView<T>{static_cast<T*>(v.buf), static_cast<Index>(v.shape[0]),
+                       static_cast<Index>(v.shape[1]), static_cast<Index>(v.strides[0] / 8),
+                       static_cast<Index>(v.strides[1] / 8)};
+}
+
+void require(bool ok, const std::string& message) {
+  if (!ok) throw InputError(message);
+}
+
+// rows s .. s + count of an array of `rows` rows, named
+void rows_within(Index s, Index count, Index rows, const char* what, const char* array) {
+  require(s >= 0 && s + count <= rows,
+          std::string(what) + " " + std::to_string(s) + " .. " + std::to_string(s + count) +
+              " is outside " + array + "'s " + std::to_string(rows) + " rows");
+}
+
+// every entry of `idx` from `first` on in [lo, hi)
+void indices_within(const ConstIndices& idx, Index first, Index lo, Index hi,
+                    const char* name, const char* of) {
+  for (Index k = first; k < idx.size; ++k)
+    require(idx[k] >= lo && idx[k] < hi,
+            std::string(name) + "[" + std::to_string(k) + "] = " + std::to_string(idx[k]) +
+                " is not an index of " + of + " (" + std::to_string(lo) + " .. " +
+                std::to_string(hi - 1) + ")");
+}
+
+template <class T>
+VectorView<const T> as_const(const VectorView<T>& v) {
+  return VectorView<const T>{v.data, v.size, v.stride};
+}
+
+// the frame writers' shared arguments, checked against each other
+FrameArgs frame_args(Buffers& bufs, nb::handle A, nb::handle Q, nb::handle J, nb::handle t,
+                     nb::handle R, nb::handle spec, nb::handle geo, nb::handle aj,
+                     nb::handle vj, bool position_only) {
+  FrameArgs f;
+  f.A = matrix<double>(bufs, A, "A", -1, -1);
+  f.Q = matrix<double>(bufs, Q, "Q", 6, f.A.rows);
+  f.J = matrix<const double>(bufs, J, "J", 6, f.A.cols);
+  f.t = vector<const double>(bufs, t, "t", 3);
+  f.R = matrix<const double>(bufs, R, "R", 3, 3);
+  f.spec = vector<const std::int64_t>(bufs, spec, "spec", -1);
+  f.geo = matrix<const double>(bufs, geo, "geo", 5, 3);
+  f.aj = vector<const double>(bufs, aj, "aj", 6);
+  f.vj = vector<const double>(bufs, vj, "vj", 6);
+  require(f.spec.size >= SPEC_COLS, "spec must hold at least 3 entries (start, mode, "
+                                    "zero drift)");
+  const Index mode = f.spec[SPEC_MODE];
+  require(mode == POSITION || (!position_only && (mode == ORIENTATION || mode == POSE)),
+          "spec[1] = " + std::to_string(mode) + " is not a row set (" +
+              (position_only ? "0: position" : "0: position, 1: orientation, 2: pose") + ")");
+  rows_within(f.spec[SPEC_START], mode == POSE ? 6 : 3, f.A.rows, "spec's rows", "A");
+  indices_within(f.spec, SPEC_COLS, 0, f.A.cols, "spec", "A's columns");
+  return f;
+}
+
+void position_rows(nb::handle A, nb::handle Q, nb::handle J, nb::handle t, nb::handle R,
+                   nb::handle spec, nb::handle geo, nb::handle aj, nb::handle vj, nb::handle x,
+                   nb::handle xd, nb::handle xdd) {
+  Buffers bufs;
+  const FrameArgs f = frame_args(bufs, A, Q, J, t, R, spec, geo, aj, vj, true);
+  const ConstVector xv = vector<const double>(bufs, x, "x", 3);
+  const ConstVector xdv = vector<const double>(bufs, xd, "xd", 3);
+  const ConstVector xddv = vector<const double>(bufs, xdd, "xdd", 3);
+  nb::gil_scoped_release release;
+  point_rows(f, xv, xdv, xddv, true);
+}
+
+void position_target_rows(nb::handle A, nb::handle Q, nb::handle J, nb::handle t,
+                          nb::handle R, nb::handle spec, nb::handle geo, nb::handle aj,
+                          nb::handle vj, nb::handle x) {
+  Buffers bufs;
+  const FrameArgs f = frame_args(bufs, A, Q, J, t, R, spec, geo, aj, vj, true);
+  const ConstVector xv = vector<const double>(bufs, x, "x", 3);
+  nb::gil_scoped_release release;
+  point_rows(f, xv, xv, xv, false);
+}
+
+void frame_rows_binding(nb::handle A, nb::handle Q, nb::handle J, nb::handle t, nb::handle R,
+                        nb::handle spec, nb::handle geo, nb::handle aj, nb::handle vj,
+                        nb::handle x, nb::handle xd, nb::handle xdd, nb::handle Rstar,
+                        nb::handle w, nb::handle wd) {
+  Buffers bufs;
+  const FrameArgs f = frame_args(bufs, A, Q, J, t, R, spec, geo, aj, vj, false);
+  const ConstVector xv = vector<const double>(bufs, x, "x", 3);
+  const ConstVector xdv = vector<const double>(bufs, xd, "xd", 3);
+  const ConstVector xddv = vector<const double>(bufs, xdd, "xdd", 3);
+  const ConstMatrix Rs = matrix<const double>(bufs, Rstar, "Rstar", 3, 3);
+  const ConstVector wv = vector<const double>(bufs, w, "w", 3);
+  const ConstVector wdv = vector<const double>(bufs, wd, "wd", 3);
+  nb::gil_scoped_release release;
+  frame_rows(f, xv, xdv, xddv, Rs, wv, wdv);
+}
+
+void com_rows_binding(nb::handle A, nb::handle Q, Index s, nb::handle Jcom, nb::handle com,
+                      nb::handle acom, nb::handle axes, nb::handle x, nb::handle xd,
+                      nb::handle xdd, bool zero_drift) {
+  Buffers bufs;
+  const Matrix Am = matrix<double>(bufs, A, "A", -1, -1);
+  const Matrix Qm = matrix<double>(bufs, Q, "Q", 6, Am.rows);
+  const ConstMatrix Jc = matrix<const double>(bufs, Jcom, "Jcom", 3, Am.cols);
+  const ConstVector c = vector<const double>(bufs, com, "com", 3);
+  const ConstVector ac = vector<const double>(bufs, acom, "acom", 3);
+  const ConstIndices ax = vector<const std::int64_t>(bufs, axes, "axes", -1);
+  indices_within(ax, 0, 0, 3, "axes", "the world axes");
+  rows_within(s, ax.size, Am.rows, "the task's rows", "A");
+  const ConstVector xv = vector<const double>(bufs, x, "x", ax.size);
+  const ConstVector xdv = vector<const double>(bufs, xd, "xd", ax.size);
+  const ConstVector xddv = vector<const double>(bufs, xdd, "xdd", ax.size);
+  nb::gil_scoped_release release;
+  com_rows(Am, Qm, s, Jc, c, ac, ax, xv, xdv, xddv, zero_drift);
+}
+
+void posture_error_binding(nb::handle Q, Index s, nb::handle q, nb::handle q_ref,
+                           nb::handle iq) {
+  Buffers bufs;
+  const Matrix Qm = matrix<double>(bufs, Q, "Q", 6, -1);
+  const ConstVector qv = vector<const double>(bufs, q, "q", -1);
+  const ConstVector qr = vector<const double>(bufs, q_ref, "q_ref", qv.size);
+  const ConstIndices idx = vector<const std::int64_t>(bufs, iq, "iq", -1);
+  indices_within(idx, 0, 0, qv.size, "iq", "q");
+  rows_within(s, idx.size, Qm.cols, "the task's rows", "Q");
+  nb::gil_scoped_release release;
+  posture_error(Qm, s, qv, qr, idx);
+}
+
+void actuated_positions_binding(nb::handle q, nb::handle iq, nb::handle out) {
+  Buffers bufs;
+  const ConstVector qv = vector<const double>(bufs, q, "q", -1);
+  const ConstIndices idx = vector<const std::int64_t>(bufs, iq, "iq", -1);
+  indices_within(idx, 0, -(std::int64_t{1} << 62), qv.size, "iq", "q");
+  const Vector o = vector<double>(bufs, out, "out", idx.size);
+  nb::gil_scoped_release release;
+  actuated_positions(qv, idx, o);
+}
+
+// lo, hi and a third per-joint array of na entries each
+struct JointArrays {
+  ConstVector lo, hi, third;
+};
+
+JointArrays joint_arrays(Buffers& bufs, nb::handle lo, nb::handle hi, nb::handle third,
+                         const char* third_name, Index na) {
+  return JointArrays{vector<const double>(bufs, lo, "lo", na),
+                     vector<const double>(bufs, hi, "hi", na),
+                     vector<const double>(bufs, third, third_name, na)};
+}
+
+Index limit_activation_rows_binding(nb::handle A, nb::handle Q, Index s, Index nb_,
+                                    nb::handle qa, nb::handle lo, nb::handle hi,
+                                    nb::handle width, double kp, double kd) {
+  Buffers bufs;
+  const Matrix Am = matrix<double>(bufs, A, "A", -1, -1);
+  const Matrix Qm = matrix<double>(bufs, Q, "Q", 6, Am.rows);
+  const ConstVector q = vector<const double>(bufs, qa, "qa", -1);
+  const JointArrays j = joint_arrays(bufs, lo, hi, width, "width", q.size);
+  rows_within(s, q.size, Am.rows, "the task's rows", "A");
+  rows_within(nb_, q.size, Am.cols, "the joints' columns", "A^T");
+  nb::gil_scoped_release release;
+  return limit_activation_rows(Am, Qm, s, nb_, q, j.lo, j.hi, j.third, kp, kd);
+}
+
+// lower and upper of equal sizes, with rows s .. s + count
+std::pair<Vector, Vector> bound_arrays(Buffers& bufs, nb::handle lower, nb::handle upper,
+                                       Index s, Index count) {
+  const Vector lo = vector<double>(bufs, lower, "lower", -1);
+  const Vector hi = vector<double>(bufs, upper, "upper", lo.size);
+  rows_within(s, count, lo.size, "the task's rows", "lower");
+  return {lo, hi};
+}
+
+void acceleration_bounds_binding(nb::handle lower, nb::handle upper, Index s, nb::handle qa,
+                                 nb::handle va, nb::handle lo, nb::handle hi, nb::handle vmax,
+                                 double T, double dt, bool position, bool velocity) {
+  Buffers bufs;
+  const ConstVector q = vector<const double>(bufs, qa, "qa", -1);
+  const ConstVector v = vector<const double>(bufs, va, "va", q.size);
+  const JointArrays j = joint_arrays(bufs, lo, hi, vmax, "vmax", q.size);
+  const auto [l, u] = bound_arrays(bufs, lower, upper, s, q.size);
+  nb::gil_scoped_release release;
+  acceleration_bounds(l, u, s, q, v, j.lo, j.hi, j.third, T, dt, position, velocity);
+}
+
+void velocity_bounds_binding(nb::handle lower, nb::handle upper, Index s, nb::handle qa,
+                             nb::handle lo, nb::handle hi, nb::handle vmax, double T,
+                             bool position, bool velocity) {
+  Buffers bufs;
+  const ConstVector q = vector<const double>(bufs, qa, "qa", -1);
+  const JointArrays j = joint_arrays(bufs, lo, hi, vmax, "vmax", q.size);
+  const auto [l, u] = bound_arrays(bufs, lower, upper, s, q.size);
+  nb::gil_scoped_release release;
+  velocity_bounds(l, u, s, q, j.lo, j.hi, j.third, T, position, velocity);
+}
+
+void region_rows_binding(nb::handle A, nb::handle lower, nb::handle upper, Index s,
+                         nb::handle C, nb::handle Jp, nb::handle p, double psign, nb::handle v,
+                         nb::handle drift, nb::handle lo, nb::handle hi, nb::handle y,
+                         nb::handle yd, nb::handle vmax, double T, double dt, bool accel) {
+  Buffers bufs;
+  const Matrix Am = matrix<double>(bufs, A, "A", -1, -1);
+  const ConstMatrix Cm = matrix<const double>(bufs, C, "C", -1, 3);
+  const Index k = Cm.rows;
+  const auto [l, u] = bound_arrays(bufs, lower, upper, s, k);
+  rows_within(s, k, Am.rows, "the task's rows", "A");
+  const ConstMatrix J = matrix<const double>(bufs, Jp, "Jp", 3, Am.cols);
+  const ConstVector pv = vector<const double>(bufs, p, "p", 3);
+  const ConstVector vv = vector<const double>(bufs, v, "v", Am.cols);
+  const ConstVector dv = vector<const double>(bufs, drift, "drift", 3);
+  const JointArrays j = joint_arrays(bufs, lo, hi, vmax, "vmax", k);
+  const Vector yv = vector<double>(bufs, y, "y", k);
+  const Vector ydv = vector<double>(bufs, yd, "yd", k);
+  nb::gil_scoped_release release;
+  region_rows(Am, l, u, s, Cm, J, pv, psign, vv, dv, j.lo, j.hi, yv, ydv, j.third, T, dt,
+              accel);
+}
+
+// params[0] (a row start given as a float) as an index
+Index row_start(const ConstVector& params, const char* name) {
+  const double s = params[0];
+  require(s >= 0.0 && s < 9.0e15 && s == static_cast<double>(static_cast<Index>(s)),
+          std::string(name) + "[0] (the first row) must be a whole number >= 0");
+  return static_cast<Index>(s);
+}
+
+void bounds_at_binding(nb::handle lower, nb::handle upper, nb::handle q, nb::handle v,
+                       nb::handle iq, nb::handle lim, nb::handle params, nb::handle qa) {
+  Buffers bufs;
+  const ConstVector qv = vector<const double>(bufs, q, "q", -1);
+  const ConstIndices idx = vector<const std::int64_t>(bufs, iq, "iq", -1);
+  const Index na = idx.size;
+  indices_within(idx, 0, -(std::int64_t{1} << 62), qv.size, "iq", "q");
+  const ConstVector vv = vector<const double>(bufs, v, "v", -1);
+  require(vv.size >= na, "v has " + std::to_string(vv.size) + " entries, fewer than the " +
+                             std::to_string(na) + " actuated joints");
+  const ConstMatrix L = matrix<const double>(bufs, lim, "lim", 3, na);
+  const ConstVector P = vector<const double>(bufs, params, "params", 6);
+  const Vector scratch = vector<double>(bufs, qa, "qa", na);
+  const auto [l, u] = bound_arrays(bufs, lower, upper, row_start(P, "params"), na);
+  nb::gil_scoped_release release;
+  bounds_at(l, u, qv, vv, idx, L, P, scratch);
+}
+
+Index activation_at_binding(nb::handle A, nb::handle Q, nb::handle q, nb::handle iq,
+                            nb::handle lim, nb::handle params, nb::handle qa) {
+  Buffers bufs;
+  const Matrix Am = matrix<double>(bufs, A, "A", -1, -1);
+  const Matrix Qm = matrix<double>(bufs, Q, "Q", 6, Am.rows);
+  const ConstVector qv = vector<const double>(bufs, q, "q", -1);
+  const ConstIndices idx = vector<const std::int64_t>(bufs, iq, "iq", -1);
+  const Index na = idx.size;
+  indices_within(idx, 0, -(std::int64_t{1} << 62), qv.size, "iq", "q");
+  const ConstMatrix L = matrix<const double>(bufs, lim, "lim", 3, na);
+  const ConstVector P = vector<const double>(bufs, params, "params", 4);
+  const Vector scratch = vector<double>(bufs, qa, "qa", na);
+  rows_within(row_start(P, "params"), na, Am.rows, "the task's rows", "A");
+  const double nb_ = P[1];
+  require(nb_ >= 0.0 && nb_ == static_cast<double>(static_cast<Index>(nb_)) &&
+              static_cast<Index>(nb_) + na <= Am.cols,
+          "params[1] (n_base) must be a whole number with n_base + " + std::to_string(na) +
+              " <= A's " + std::to_string(Am.cols) + " columns");
+  nb::gil_scoped_release release;
+  return activation_at(Am, Qm, qv, idx, L, P, scratch);
+}
+
+void velocity_targets_binding(nb::handle b, nb::handle Q) {
+  Buffers bufs;
+  const Vector bv = vector<double>(bufs, b, "b", -1);
+  const ConstMatrix Qm = matrix<const double>(bufs, Q, "Q", 6, bv.size);
+  nb::gil_scoped_release release;
+  velocity_targets(bv, Qm);
+}
+
+void acceleration_targets_binding(nb::handle A, nb::handle b, nb::handle Q, nb::handle v) {
+  Buffers bufs;
+  const ConstMatrix Am = matrix<const double>(bufs, A, "A", -1, -1);
+  const Vector bv = vector<double>(bufs, b, "b", Am.rows);
+  const ConstMatrix Qm = matrix<const double>(bufs, Q, "Q", 6, Am.rows);
+  const ConstVector vv = vector<const double>(bufs, v, "v", Am.cols);
+  nb::gil_scoped_release release;
+  acceleration_targets(Am, bv, Qm, vv);
+}
+
+bool state_is_valid_binding(nb::handle q, nb::handle v, nb::handle unit, double tol) {
+  Buffers bufs;
+  const ConstVector qv = vector<const double>(bufs, q, "q", -1);
+  const ConstVector vv = vector<const double>(bufs, v, "v", -1);
+  const ConstIndices u = vector<const std::int64_t>(bufs, unit, "unit", -1);
+  require(u.size % 2 == 0, "unit must hold (start, size) pairs, got " +
+                               std::to_string(u.size) + " entries");
+  for (Index p = 0; p < u.size; p += 2)
+    require(u[p] >= 0 && u[p + 1] >= 0 && u[p] + u[p + 1] <= qv.size,
+            "unit's part " + std::to_string(p / 2) + " (" + std::to_string(u[p]) + ", " +
+                std::to_string(u[p + 1]) + ") is not within q's " + std::to_string(qv.size) +
+                " entries");
+  nb::gil_scoped_release release;
+  return state_is_valid(qv, vv, u, tol);
+}
+
+void log3_binding(nb::handle R, nb::handle out, Index o) {
+  Buffers bufs;
+  const ConstMatrix Rm = matrix<const double>(bufs, R, "R", 3, 3);
+  const Vector ov = vector<double>(bufs, out, "out", -1);
+  rows_within(o, 3, ov.size, "entries", "out");
+  nb::gil_scoped_release release;
+  log3(Rm, ov, o);
+}
+
+}  // namespace
+
+void register_rows(nb::module_& parent) {
+  nb::module_ m = parent.def_submodule(
+      "rows", "The robot row writers (prioik.robots.rows): one task's rows of a stack "
+              "from views of a pinocchio Data, written into the caller's arrays.");
+  m.attr("ERROR") = Index{ERROR};
+  m.attr("VELOCITY_REF") = Index{VELOCITY_REF};
+  m.attr("FEEDFORWARD") = Index{FEEDFORWARD};
+  m.attr("DRIFT") = Index{DRIFT};
+  m.attr("KP") = Index{KP};
+  m.attr("KD") = Index{KD};
+  m.attr("POSITION") = Index{POSITION};
+  m.attr("ORIENTATION") = Index{ORIENTATION};
+  m.attr("POSE") = Index{POSE};
+
+  m.def("log3", &log3_binding, nb::arg("R"), nb::arg("out"), nb::arg("o"),
+        "out[o:o+3] = log(R), the rotation vector (theta in [0, pi]) of a 3 x 3 rotation.");
+  m.def("position_rows", &position_rows, nb::arg("A"), nb::arg("Q"), nb::arg("J"),
+        nb::arg("t"), nb::arg("R"), nb::arg("spec"), nb::arg("geo"), nb::arg("aj"),
+        nb::arg("vj"), nb::arg("x"), nb::arg("xd"), nb::arg("xdd"),
+        "A point's position rows (3 at spec[0]; spec[1] must be POSITION): p = t + R off, "
+        "error x - p, xd, xdd; the drift computed from aj, vj or zeroed (spec[2]).");
+  m.def("position_target_rows", &position_target_rows, nb::arg("A"), nb::arg("Q"),
+        nb::arg("J"), nb::arg("t"), nb::arg("R"), nb::arg("spec"), nb::arg("geo"),
+        nb::arg("aj"), nb::arg("vj"), nb::arg("x"),
+        "position_rows with zero reference velocity and feed-forward.");
+  m.def("frame_rows", &frame_rows_binding, nb::arg("A"), nb::arg("Q"), nb::arg("J"),
+        nb::arg("t"), nb::arg("R"), nb::arg("spec"), nb::arg("geo"), nb::arg("aj"),
+        nb::arg("vj"), nb::arg("x"), nb::arg("xd"), nb::arg("xdd"), nb::arg("Rstar"),
+        nb::arg("w"), nb::arg("wd"),
+        "One frame's rows at spec[0]: position (3), orientation (3, error log(R* R^T)) or "
+        "both (6) as spec[1] says, on the columns spec[3:]; drift computed or zeroed.");
+  m.def("com_rows", &com_rows_binding, nb::arg("A"), nb::arg("Q"), nb::arg("s"),
+        nb::arg("Jcom"), nb::arg("com"), nb::arg("acom"), nb::arg("axes"), nb::arg("x"),
+        nb::arg("xd"), nb::arg("xdd"), nb::arg("zero_drift"),
+        "Centre-of-mass rows at s on axes: Jcom[axes], error x - com[axes], xd, xdd, "
+        "drift acom[axes] (or 0).");
+  m.def("posture_error", &posture_error_binding, nb::arg("Q"), nb::arg("s"), nb::arg("q"),
+        nb::arg("q_ref"), nb::arg("iq"),
+        "Posture targets at s: error q_ref[iq] - q[iq]; zero xd, xdd and drift.");
+  m.def("actuated_positions", &actuated_positions_binding, nb::arg("q"), nb::arg("iq"),
+        nb::arg("out"), "out[k] = q[iq[k]] (0 where iq[k] < 0).");
+  m.def("limit_activation_rows", &limit_activation_rows_binding, nb::arg("A"), nb::arg("Q"),
+        nb::arg("s"), nb::arg("nb"), nb::arg("qa"), nb::arg("lo"), nb::arg("hi"),
+        nb::arg("width"), nb::arg("kp"), nb::arg("kd"),
+        "Joint-limit activation rows at s (columns nb + k); returns the active rows' count.");
+  m.def("acceleration_bounds", &acceleration_bounds_binding, nb::arg("lower"),
+        nb::arg("upper"), nb::arg("s"), nb::arg("qa"), nb::arg("va"), nb::arg("lo"),
+        nb::arg("hi"), nb::arg("vmax"), nb::arg("T"), nb::arg("dt"), nb::arg("position"),
+        nb::arg("velocity"), "Bounds on the actuated joints' accelerations at s.");
+  m.def("velocity_bounds", &velocity_bounds_binding, nb::arg("lower"), nb::arg("upper"),
+        nb::arg("s"), nb::arg("qa"), nb::arg("lo"), nb::arg("hi"), nb::arg("vmax"),
+        nb::arg("T"), nb::arg("position"), nb::arg("velocity"),
+        "Bounds on the actuated joints' velocities at s.");
+  m.def("region_rows", &region_rows_binding, nb::arg("A"), nb::arg("lower"), nb::arg("upper"),
+        nb::arg("s"), nb::arg("C"), nb::arg("Jp"), nb::arg("p"), nb::arg("psign"),
+        nb::arg("v"), nb::arg("drift"), nb::arg("lo"), nb::arg("hi"), nb::arg("y"),
+        nb::arg("yd"), nb::arg("vmax"), nb::arg("T"), nb::arg("dt"), nb::arg("accel"),
+        "A region task's rows at s: A = C Jp and the bounds on C Jp qd or C Jp qdd.");
+  m.def("bounds_at", &bounds_at_binding, nb::arg("lower"), nb::arg("upper"), nb::arg("q"),
+        nb::arg("v"), nb::arg("iq"), nb::arg("lim"), nb::arg("params"), nb::arg("qa"),
+        "A joint-limit bounds task from the state (lim: lo, hi, vmax; params: start, T, "
+        "dt, position, velocity, acceleration level).");
+  m.def("activation_at", &activation_at_binding, nb::arg("A"), nb::arg("Q"), nb::arg("q"),
+        nb::arg("iq"), nb::arg("lim"), nb::arg("params"), nb::arg("qa"),
+        "A joint-limit activation task from the state (lim: lo, hi, widths; params: "
+        "start, n_base, K_p, K_d); returns the active rows' count.");
+  m.def("velocity_targets", &velocity_targets_binding, nb::arg("b"), nb::arg("Q"),
+        "b = xd* + K e per row.");
+  m.def("acceleration_targets", &acceleration_targets_binding, nb::arg("A"), nb::arg("b"),
+        nb::arg("Q"), nb::arg("v"), "b = xdd* + K_d (xd* - A v) + K_p e - drift per row.");
+  m.def("state_is_valid", &state_is_valid_binding, nb::arg("q"), nb::arg("v"),
+        nb::arg("unit"), nb::arg("tol"),
+        "Every entry of q and v finite and every unit-norm part of q of norm 1 within tol.");
+}
