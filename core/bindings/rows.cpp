@@ -5,9 +5,10 @@
 // writable where the writer writes, of the shapes the other arguments imply, and every
 // index a writer follows (a row start, the columns of a frame's spec, the entries of
 // iq, axes and unit) within the arrays it indexes. Anything else raises
-// prioik.formulations.base.CoreInputError naming the array before C++ reads it.
-// Non-finite values are the writers' to propagate (IEEE arithmetic, as numba's): the
-// solvers' own checks name them. The GIL is released while a writer runs.
+// prioik.formulations.base.CoreInputError naming the array before C++ reads it (None
+// in place of an array too). Non-finite values are the writers' to propagate (IEEE
+// arithmetic, as numba's): the solvers' own checks name them. The GIL is released
+// while a writer runs.
 #include "rows_bindings.hpp"
 
 #include <nanobind/nanobind.h>
@@ -118,11 +119,12 @@ void require(bool ok, const std::string& message) {
   if (!ok) throw InputError(message);
 }
 
-// rows s .. s + count of an array of `rows` rows, named
-void rows_within(Index s, Index count, Index rows, const char* what, const char* array) {
+// rows (or columns, entries) s .. s + count of an array with `rows` of them, named
+void rows_within(Index s, Index count, Index rows, const char* what, const char* array,
+                 const char* unit = "rows") {
   require(s >= 0 && s + count <= rows,
           std::string(what) + " " + std::to_string(s) + " .. " + std::to_string(s + count) +
-              " is outside " + array + "'s " + std::to_string(rows) + " rows");
+              " is outside " + array + "'s " + std::to_string(rows) + " " + unit);
 }
 
 // every entry of `idx` from `first` on in [lo, hi)
@@ -266,7 +268,7 @@ Index limit_activation_rows_binding(nb::handle A, nb::handle Q, Index s, Index n
   const ConstVector q = vector<const double>(bufs, qa, "qa", -1);
   const JointArrays j = joint_arrays(bufs, lo, hi, width, "width", q.size);
   rows_within(s, q.size, Am.rows, "the task's rows", "A");
-  rows_within(nb_, q.size, Am.cols, "the joints' columns", "A^T");
+  rows_within(nb_, q.size, Am.cols, "the joints' columns", "A", "columns");
   nb::gil_scoped_release release;
   return limit_activation_rows(Am, Qm, s, nb_, q, j.lo, j.hi, j.third, kp, kd);
 }
@@ -411,7 +413,7 @@ void log3_binding(nb::handle R, nb::handle out, Index o) {
   Buffers bufs;
   const ConstMatrix Rm = matrix<const double>(bufs, R, "R", 3, 3);
   const Vector ov = vector<double>(bufs, out, "out", -1);
-  rows_within(o, 3, ov.size, "entries", "out");
+  rows_within(o, 3, ov.size, "entries", "out", "entries");
   nb::gil_scoped_release release;
   log3(Rm, ov, o);
 }
@@ -432,63 +434,63 @@ void register_rows(nb::module_& parent) {
   m.attr("ORIENTATION") = Index{ORIENTATION};
   m.attr("POSE") = Index{POSE};
 
-  m.def("log3", &log3_binding, nb::arg("R"), nb::arg("out"), nb::arg("o"),
+  m.def("log3", &log3_binding, nb::arg("R").none(), nb::arg("out").none(), nb::arg("o"),
         "out[o:o+3] = log(R), the rotation vector (theta in [0, pi]) of a 3 x 3 rotation.");
-  m.def("position_rows", &position_rows, nb::arg("A"), nb::arg("Q"), nb::arg("J"),
-        nb::arg("t"), nb::arg("R"), nb::arg("spec"), nb::arg("geo"), nb::arg("aj"),
-        nb::arg("vj"), nb::arg("x"), nb::arg("xd"), nb::arg("xdd"),
+  m.def("position_rows", &position_rows, nb::arg("A").none(), nb::arg("Q").none(), nb::arg("J").none(),
+        nb::arg("t").none(), nb::arg("R").none(), nb::arg("spec").none(), nb::arg("geo").none(), nb::arg("aj").none(),
+        nb::arg("vj").none(), nb::arg("x").none(), nb::arg("xd").none(), nb::arg("xdd").none(),
         "A point's position rows (3 at spec[0]; spec[1] must be POSITION): p = t + R off, "
         "error x - p, xd, xdd; the drift computed from aj, vj or zeroed (spec[2]).");
-  m.def("position_target_rows", &position_target_rows, nb::arg("A"), nb::arg("Q"),
-        nb::arg("J"), nb::arg("t"), nb::arg("R"), nb::arg("spec"), nb::arg("geo"),
-        nb::arg("aj"), nb::arg("vj"), nb::arg("x"),
+  m.def("position_target_rows", &position_target_rows, nb::arg("A").none(), nb::arg("Q").none(),
+        nb::arg("J").none(), nb::arg("t").none(), nb::arg("R").none(), nb::arg("spec").none(), nb::arg("geo").none(),
+        nb::arg("aj").none(), nb::arg("vj").none(), nb::arg("x").none(),
         "position_rows with zero reference velocity and feed-forward.");
-  m.def("frame_rows", &frame_rows_binding, nb::arg("A"), nb::arg("Q"), nb::arg("J"),
-        nb::arg("t"), nb::arg("R"), nb::arg("spec"), nb::arg("geo"), nb::arg("aj"),
-        nb::arg("vj"), nb::arg("x"), nb::arg("xd"), nb::arg("xdd"), nb::arg("Rstar"),
-        nb::arg("w"), nb::arg("wd"),
+  m.def("frame_rows", &frame_rows_binding, nb::arg("A").none(), nb::arg("Q").none(), nb::arg("J").none(),
+        nb::arg("t").none(), nb::arg("R").none(), nb::arg("spec").none(), nb::arg("geo").none(), nb::arg("aj").none(),
+        nb::arg("vj").none(), nb::arg("x").none(), nb::arg("xd").none(), nb::arg("xdd").none(), nb::arg("Rstar").none(),
+        nb::arg("w").none(), nb::arg("wd").none(),
         "One frame's rows at spec[0]: position (3), orientation (3, error log(R* R^T)) or "
         "both (6) as spec[1] says, on the columns spec[3:]; drift computed or zeroed.");
-  m.def("com_rows", &com_rows_binding, nb::arg("A"), nb::arg("Q"), nb::arg("s"),
-        nb::arg("Jcom"), nb::arg("com"), nb::arg("acom"), nb::arg("axes"), nb::arg("x"),
-        nb::arg("xd"), nb::arg("xdd"), nb::arg("zero_drift"),
+  m.def("com_rows", &com_rows_binding, nb::arg("A").none(), nb::arg("Q").none(), nb::arg("s"),
+        nb::arg("Jcom").none(), nb::arg("com").none(), nb::arg("acom").none(), nb::arg("axes").none(), nb::arg("x").none(),
+        nb::arg("xd").none(), nb::arg("xdd").none(), nb::arg("zero_drift"),
         "Centre-of-mass rows at s on axes: Jcom[axes], error x - com[axes], xd, xdd, "
         "drift acom[axes] (or 0).");
-  m.def("posture_error", &posture_error_binding, nb::arg("Q"), nb::arg("s"), nb::arg("q"),
-        nb::arg("q_ref"), nb::arg("iq"),
+  m.def("posture_error", &posture_error_binding, nb::arg("Q").none(), nb::arg("s"), nb::arg("q").none(),
+        nb::arg("q_ref").none(), nb::arg("iq").none(),
         "Posture targets at s: error q_ref[iq] - q[iq]; zero xd, xdd and drift.");
-  m.def("actuated_positions", &actuated_positions_binding, nb::arg("q"), nb::arg("iq"),
-        nb::arg("out"), "out[k] = q[iq[k]] (0 where iq[k] < 0).");
-  m.def("limit_activation_rows", &limit_activation_rows_binding, nb::arg("A"), nb::arg("Q"),
-        nb::arg("s"), nb::arg("nb"), nb::arg("qa"), nb::arg("lo"), nb::arg("hi"),
-        nb::arg("width"), nb::arg("kp"), nb::arg("kd"),
+  m.def("actuated_positions", &actuated_positions_binding, nb::arg("q").none(), nb::arg("iq").none(),
+        nb::arg("out").none(), "out[k] = q[iq[k]] (0 where iq[k] < 0).");
+  m.def("limit_activation_rows", &limit_activation_rows_binding, nb::arg("A").none(), nb::arg("Q").none(),
+        nb::arg("s"), nb::arg("nb"), nb::arg("qa").none(), nb::arg("lo").none(), nb::arg("hi").none(),
+        nb::arg("width").none(), nb::arg("kp"), nb::arg("kd"),
         "Joint-limit activation rows at s (columns nb + k); returns the active rows' count.");
-  m.def("acceleration_bounds", &acceleration_bounds_binding, nb::arg("lower"),
-        nb::arg("upper"), nb::arg("s"), nb::arg("qa"), nb::arg("va"), nb::arg("lo"),
-        nb::arg("hi"), nb::arg("vmax"), nb::arg("T"), nb::arg("dt"), nb::arg("position"),
+  m.def("acceleration_bounds", &acceleration_bounds_binding, nb::arg("lower").none(),
+        nb::arg("upper").none(), nb::arg("s"), nb::arg("qa").none(), nb::arg("va").none(), nb::arg("lo").none(),
+        nb::arg("hi").none(), nb::arg("vmax").none(), nb::arg("T"), nb::arg("dt"), nb::arg("position"),
         nb::arg("velocity"), "Bounds on the actuated joints' accelerations at s.");
-  m.def("velocity_bounds", &velocity_bounds_binding, nb::arg("lower"), nb::arg("upper"),
-        nb::arg("s"), nb::arg("qa"), nb::arg("lo"), nb::arg("hi"), nb::arg("vmax"),
+  m.def("velocity_bounds", &velocity_bounds_binding, nb::arg("lower").none(), nb::arg("upper").none(),
+        nb::arg("s"), nb::arg("qa").none(), nb::arg("lo").none(), nb::arg("hi").none(), nb::arg("vmax").none(),
         nb::arg("T"), nb::arg("position"), nb::arg("velocity"),
         "Bounds on the actuated joints' velocities at s.");
-  m.def("region_rows", &region_rows_binding, nb::arg("A"), nb::arg("lower"), nb::arg("upper"),
-        nb::arg("s"), nb::arg("C"), nb::arg("Jp"), nb::arg("p"), nb::arg("psign"),
-        nb::arg("v"), nb::arg("drift"), nb::arg("lo"), nb::arg("hi"), nb::arg("y"),
-        nb::arg("yd"), nb::arg("vmax"), nb::arg("T"), nb::arg("dt"), nb::arg("accel"),
+  m.def("region_rows", &region_rows_binding, nb::arg("A").none(), nb::arg("lower").none(), nb::arg("upper").none(),
+        nb::arg("s"), nb::arg("C").none(), nb::arg("Jp").none(), nb::arg("p").none(), nb::arg("psign"),
+        nb::arg("v").none(), nb::arg("drift").none(), nb::arg("lo").none(), nb::arg("hi").none(), nb::arg("y").none(),
+        nb::arg("yd").none(), nb::arg("vmax").none(), nb::arg("T"), nb::arg("dt"), nb::arg("accel"),
         "A region task's rows at s: A = C Jp and the bounds on C Jp qd or C Jp qdd.");
-  m.def("bounds_at", &bounds_at_binding, nb::arg("lower"), nb::arg("upper"), nb::arg("q"),
-        nb::arg("v"), nb::arg("iq"), nb::arg("lim"), nb::arg("params"), nb::arg("qa"),
+  m.def("bounds_at", &bounds_at_binding, nb::arg("lower").none(), nb::arg("upper").none(), nb::arg("q").none(),
+        nb::arg("v").none(), nb::arg("iq").none(), nb::arg("lim").none(), nb::arg("params").none(), nb::arg("qa").none(),
         "A joint-limit bounds task from the state (lim: lo, hi, vmax; params: start, T, "
         "dt, position, velocity, acceleration level).");
-  m.def("activation_at", &activation_at_binding, nb::arg("A"), nb::arg("Q"), nb::arg("q"),
-        nb::arg("iq"), nb::arg("lim"), nb::arg("params"), nb::arg("qa"),
+  m.def("activation_at", &activation_at_binding, nb::arg("A").none(), nb::arg("Q").none(), nb::arg("q").none(),
+        nb::arg("iq").none(), nb::arg("lim").none(), nb::arg("params").none(), nb::arg("qa").none(),
         "A joint-limit activation task from the state (lim: lo, hi, widths; params: "
         "start, n_base, K_p, K_d); returns the active rows' count.");
-  m.def("velocity_targets", &velocity_targets_binding, nb::arg("b"), nb::arg("Q"),
+  m.def("velocity_targets", &velocity_targets_binding, nb::arg("b").none(), nb::arg("Q").none(),
         "b = xd* + K e per row.");
-  m.def("acceleration_targets", &acceleration_targets_binding, nb::arg("A"), nb::arg("b"),
-        nb::arg("Q"), nb::arg("v"), "b = xdd* + K_d (xd* - A v) + K_p e - drift per row.");
-  m.def("state_is_valid", &state_is_valid_binding, nb::arg("q"), nb::arg("v"),
-        nb::arg("unit"), nb::arg("tol"),
+  m.def("acceleration_targets", &acceleration_targets_binding, nb::arg("A").none(), nb::arg("b").none(),
+        nb::arg("Q").none(), nb::arg("v").none(), "b = xdd* + K_d (xd* - A v) + K_p e - drift per row.");
+  m.def("state_is_valid", &state_is_valid_binding, nb::arg("q").none(), nb::arg("v").none(),
+        nb::arg("unit").none(), nb::arg("tol"),
         "Every entry of q and v finite and every unit-norm part of q of norm 1 within tol.");
 }
