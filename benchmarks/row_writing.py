@@ -5,7 +5,11 @@ sword-tip position, posture; optionally the joint-limit bounds on ``q̇``) are w
 from a ``KinematicState(drift=False)`` computed once, with the references computed
 beforehand: what is timed is the writer calls and :meth:`TaskWriter.targets` alone
 (the references cost the same in every path). Reported as the minimum over ``repeats``
-of the median over ``n_steps`` steps (compile time excluded by a warm-up).
+of the median over ``n_steps`` steps (compile time excluded by a warm-up). ``writers`` picks the compiled row writers the
+:class:`~prioik.robots.TaskWriter` calls: the C++ core's (``prioik._core.rows``, what
+:mod:`prioik.robots.rows` uses) or numba's kernels (``robots/_rows_kernel.py``, the
+oracle they were ported from); :func:`compare_writers` times both interleaved in one
+process.
 
 Run: ``python -m prioik.benchmarks.row_writing``.
 """
@@ -17,11 +21,13 @@ import time
 
 import numpy as np
 
-__all__ = ["time_fencing_rows"]
+__all__ = ["time_fencing_rows", "compare_writers"]
+
+WRITERS = ("cpp", "numba")
 
 
 def time_fencing_rows(n_steps: int = 300, repeats: int = 7, limits: str = "none",
-                      seed: int = 0) -> dict[str, float]:
+                      seed: int = 0, writers: str = "cpp") -> dict[str, float]:
     """Median per-step time (µs) of writing the G1 fencing rows.
 
     Args:
@@ -30,10 +36,27 @@ def time_fencing_rows(n_steps: int = 300, repeats: int = 7, limits: str = "none"
         limits: ``"none"`` (the five fencing tasks) or ``"bounds"`` (plus the joint-limit
             bounds on ``q̇``).
         seed: Seed of the perturbed standing state.
+        writers: ``"cpp"`` or ``"numba"`` (see the module docstring).
 
     Returns:
         ``{"write_us": ..., "medians_us": [...], "rows": m}``.
     """
+    from prioik.robots import rows as rows_module
+
+    if writers not in WRITERS:
+        raise ValueError(f"writers must be one of {WRITERS}, got {writers!r}")
+    if writers == "numba":
+        from prioik.robots import _rows_kernel as kernels
+    else:
+        from prioik._core import rows as kernels
+    chosen, rows_module._k = rows_module._k, kernels
+    try:
+        return _time_fencing_rows(n_steps, repeats, limits, seed)
+    finally:
+        rows_module._k = chosen
+
+
+def _time_fencing_rows(n_steps, repeats, limits, seed) -> dict[str, float]:
     from prioik.robots import KinematicState
     from prioik.robots.fencing import FencingScenario
 
@@ -73,16 +96,30 @@ def time_fencing_rows(n_steps: int = 300, repeats: int = 7, limits: str = "none"
     return {"write_us": min(medians), "medians_us": medians, "rows": writer.layout.m}
 
 
+def compare_writers(n_steps: int = 300, repeats: int = 7, limits: str = "none",
+                    seed: int = 0) -> dict[str, float]:
+    """:func:`time_fencing_rows` of both row writers, one median of each in turn
+    (``repeats`` times): ``{"cpp_us": ..., "numba_us": ..., "ratio": cpp / numba}``,
+    each the smallest of its medians."""
+    medians = {w: [] for w in WRITERS}
+    for _ in range(repeats):
+        for w in WRITERS:
+            medians[w].append(time_fencing_rows(n_steps, 1, limits, seed, w)["write_us"])
+    cpp, numba = min(medians["cpp"]), min(medians["numba"])
+    return {"cpp_us": cpp, "numba_us": numba, "ratio": cpp / numba,
+            "medians_us": medians}
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=300)
     parser.add_argument("--repeats", type=int, default=7)
     args = parser.parse_args(argv)
     for limits in ("none", "bounds"):
-        r = time_fencing_rows(args.steps, args.repeats, limits)
-        print(f"G1 fencing rows, limits={limits} ({r['rows']} rows): "
-              f"{r['write_us']:.2f} µs per step (min of {args.repeats} medians over "
-              f"{args.steps} steps)")
+        r = compare_writers(args.steps, args.repeats, limits)
+        print(f"G1 fencing rows, limits={limits}: C++ {r['cpp_us']:.2f} µs, numba "
+              f"{r['numba_us']:.2f} µs per step, C++/numba {r['ratio']:.2f} (min of "
+              f"{args.repeats} interleaved medians over {args.steps} steps)")
 
 
 if __name__ == "__main__":
