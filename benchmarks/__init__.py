@@ -13,7 +13,8 @@ One concern per module:
   :mod:`.plots` — every figure;
 * :mod:`.scenario_runs` — running a scenario's report (fencing, arm, sweeps) through the
   scenario interface of :mod:`prioik.robots.scenario`; :mod:`.placo_baseline`,
-  :mod:`.pink_baseline`, :mod:`.external` — the external IK libraries;
+  :mod:`.pink_baseline`, :mod:`.mink_baseline`, :mod:`.external` — the external IK
+  libraries (:mod:`.mink_step`: mink's IK step beside prioik's and PlaCo's);
 * one module per experiment: :mod:`.bench` (a package), :mod:`.validation`,
   :mod:`.properties`, :mod:`.fencing` (with :mod:`.reproduction`, its page),
   :mod:`.arm`, :mod:`.sweep`, :mod:`.fuzz`, :mod:`.compare`, :mod:`.saved_runs`;

@@ -1,4 +1,5 @@
-"""``prioik arm``: the arm-reach scenario (Panda) with every formulation, PlaCo, pink and SNS.
+"""``prioik arm``: the arm-reach scenario (Panda) with every formulation, PlaCo, pink, mink
+and SNS.
 
 Runs :class:`robots.arm.ArmScenario` through the same machinery as ``prioik fencing``
 (:func:`benchmarks.scenario_runs.run_scenario`: the shared scenario interface, the same
@@ -86,10 +87,10 @@ def add_parser(subparsers) -> None:
     from .scenario_runs import add_turn_steps_argument
     p = subparsers.add_parser(
         "arm", help="the arm-reach scenario (Panda, one target out of reach), every "
-                    "formulation, PlaCo, pink and SNS",
+                    "formulation, PlaCo, pink, mink and SNS",
         description="Simulate the Panda reaching four targets (one out of reach) under "
-                    "joint limits with each formulation and the PlaCo and pink baselines; "
-                    "print a table, write summary.json, CSVs, saved runs, plots and a "
+                    "joint limits with each formulation and the PlaCo, pink and mink "
+                    "baselines; print a table, write summary.json, CSVs, saved runs, plots and a "
                     "replay page into --out.")
     p.add_argument("--formulations", default=None, metavar="A,B,...",
                    help="run labels, e.g. extended_jacobian,cascaded_qp[quadprog] (default: "

@@ -54,7 +54,8 @@ BACKEND_REPORTS = ("bench", "validate")
 #: ``steps(scenario, variant, duration=, dt=, progress=)``: the run as a step generator
 #: that returns its result, as :func:`prioik.robots.simulation_steps`)
 BASELINES = {"placo_kinematics_solver": "prioik.benchmarks.placo_baseline",
-             "pink": "prioik.benchmarks.pink_baseline"}
+             "pink": "prioik.benchmarks.pink_baseline",
+             "mink": "prioik.benchmarks.mink_baseline"}
 #: scenario → the experiment module whose ``STUDIES`` (a tuple of :class:`Variant`) add
 #: that scenario's own runs
 STUDY_MODULES = {"fencing": "prioik.benchmarks.fencing", "arm": "prioik.benchmarks.arm"}

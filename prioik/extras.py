@@ -21,6 +21,7 @@ EXTRAS: dict[str, tuple[tuple[str, ...], str]] = {
     "cvxpy": (("cvxpy", "qpsolvers"), "the cvxpy formulation (reference for inequality stacks)"),
     "placo": (("placo",), "the placo formulation and the PlaCo baseline"),
     "pink": (("pin-pink",), "the pink baseline"),
+    "mink": (("mink", "mujoco"), "the mink baseline (the robot converted to MuJoCo)"),
     "plots": (("matplotlib",), "plots of `prioik fencing` and `prioik bench`"),
     "view": (("meshcat",), "3-D view of robot motions"),
     "sweep": (("dask", "distributed"), "parameter sweeps on a Dask cluster"),

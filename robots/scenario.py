@@ -2,7 +2,7 @@
 
 A scenario builds its robot and references once and, at each step, the task stack and
 the errors to record. Everything that runs a scenario — :func:`robots.simulate` with
-any formulation, the PlaCo and pink baselines, the replay — goes through these
+any formulation, the PlaCo, pink and mink baselines, the replay — goes through these
 members only:
 
 * ``name``, ``variants``, ``variant``, ``robot``, ``default_duration``;
@@ -19,7 +19,7 @@ members only:
   the two above, or the scenario's own faster path (the fencing scenario writes its
   rows in place);
 * :meth:`Scenario.baseline_tasks` and :meth:`Scenario.baseline_target` — the same
-  tasks as declarative records for the external IK libraries (PlaCo, pink), which
+  tasks as declarative records for the external IK libraries (PlaCo, pink, mink), which
   build their own task objects from them;
 * :meth:`Scenario.markers` — world points to draw in the replay (targets, references),
   and ``tip_frame``, the frame whose path the replay traces;

@@ -99,8 +99,8 @@ _LOADED = ("import json, sys; {setup}; print(json.dumps(sorted(m for m in sys.mo
            "if m.split('.')[0] in {heavy})))")
 #: the modules of every extra, and the heavy parts of the core (loaded on first solve)
 _HEAVY = ("pinocchio", "example_robot_data", "qpsolvers", "osqp", "proxsuite", "quadprog",
-          "daqp", "clarabel", "highspy", "cvxpy", "placo", "pink", "matplotlib", "meshcat",
-          "dask", "distributed", "numba", "llvmlite", "scipy")
+          "daqp", "clarabel", "highspy", "cvxpy", "placo", "pink", "mink", "mujoco",
+          "matplotlib", "meshcat", "dask", "distributed", "numba", "llvmlite", "scipy")
 
 
 @pytest.mark.parametrize("setup, allowed", [

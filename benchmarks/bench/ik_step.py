@@ -4,7 +4,9 @@ and hierarchical_active_set with joint limits as bounds (the lead's modules
 :mod:`~prioik.benchmarks.active_set_bench` measure; this module runs them), with two
 parts of the step on their own: ``prepared.solve``'s cost on top of its compiled kernel
 (:mod:`~prioik.benchmarks.solve_overhead`) and writing the G1 fencing rows without the
-references (:mod:`~prioik.benchmarks.row_writing`)."""
+references (:mod:`~prioik.benchmarks.row_writing`); and mink beside prioik and PlaCo with
+limits (:mod:`~prioik.benchmarks.mink_step`; without the ``mink`` extra, ``mink_error``
+says which extra to install)."""
 
 from __future__ import annotations
 
@@ -65,6 +67,17 @@ def measure_ik_step(settings: Settings, progress: Progress | None = None
         out["active_set_table"] = active_set_bench.format_table(out["active_set"])
     except (ImportError, FileNotFoundError, RuntimeError) as exc:
         out["active_set_error"] = f"{type(exc).__name__}: {exc}"
+    # mink beside prioik and PlaCo on the same two problems with limits (the mink extra)
+    try:
+        require("mink", what="the mink IK step")
+        from prioik.benchmarks import mink_step
+        out["mink"] = mink_step.run(steps=settings.ik_steps,
+                                    rounds=2 if settings.quick else None)
+        out["mink_table"] = mink_step.format_table(out["mink"])
+    except MissingExtraError as exc:
+        out["mink_error"] = str(exc)
+    except (ImportError, FileNotFoundError, RuntimeError) as exc:
+        out["mink_error"] = f"{type(exc).__name__}: {exc}"
     if progress:
         progress.step("IK step: PlaCo vs extended_jacobian")
     return out, ""

@@ -141,6 +141,9 @@ def results_markdown(rows: list[TimingRow], rats: list[Ratio], batch: dict, ik: 
                                                           ("placo", "ik_placo")))))
     if ik and ik.get("active_set_table"):
         md.append(page.block("active_set", table=ik["active_set_table"]))
+    if ik and (ik.get("mink_table") or ik.get("mink_error")):
+        md.append(page.block("mink", table=ik.get("mink_table")
+                             or f"Not measured: {ik['mink_error']}"))
     if ik and ik.get("panda"):
         panda = ik["panda"]
         md.append(page.block("panda", description=panda.get("description", ""),

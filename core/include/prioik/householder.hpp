@@ -7,8 +7,9 @@
 // allocates nothing. Matrices are row-major views (MatrixRef); a matrix "held
 // transposed" keeps its column j in row j, so that the inner loops run over contiguous
 // memory. Each loop does its operations in the order the numba kernels do (the oracle:
-// formulations/_extended_jacobian_kernel.py); the arithmetic is IEEE double as written
-// (no fast math, no fused multiply-add: core/CMakeLists.txt).
+// formulations/_extended_jacobian_kernel.py), but for the sums of dot(), whose order is
+// written out; the arithmetic is IEEE double as written (no fast math, no fused
+// multiply-add: core/CMakeLists.txt).
 #pragma once
 
 #include <cmath>

@@ -1,0 +1,194 @@
+"""A scenario with mink — differential IK on MuJoCo, weighted tasks in one QP.
+
+mink solves, each control step, one QP for the displacement ``Δq = v dt``: every task
+a weighted cost ``‖cost ∘ (J Δq + gain·e)‖²`` (dead-beat at ``gain = 1``, mink's default),
+tasks given as ``constraints`` as equalities ``J Δq = −gain·e``, and its
+:class:`~mink.ConfigurationLimit` (joint position limits over the step, gain 0.95) and
+:class:`~mink.VelocityLimit` (``|v| ≤ v_max``) as inequalities. There are no
+priorities: the scenario's hierarchy becomes cost weights, one decade per level, as in
+the pink baseline (:data:`~prioik.benchmarks.pink_baseline.LEVEL_COSTS`), from
+:meth:`robots.scenario.Scenario.baseline_tasks`:
+
+* ``frame`` held by the scenario (``hard``: a foot in contact) → ``FrameTask`` as an
+  equality constraint (``solve_ik(..., constraints=[...])``);
+* ``frame`` → ``FrameTask(body, position_cost=c, orientation_cost=c)``;
+* ``position`` → ``FrameTask(body, position_cost=c, orientation_cost=0)`` (a position
+  target is never a constraint: the arm's tool target can be out of reach);
+* ``orientation`` → ``FrameTask(body, position_cost=0, orientation_cost=c)``;
+* ``com_xy`` → ``ComTask(cost=[c, c, 0])``;
+* ``posture`` → ``PostureTask(cost=POSTURE_COST)`` (the free joint excluded, as mink does).
+
+The robot is the scenario's URDF (:meth:`~robots.scenario.Scenario.urdf_text`) converted
+by :func:`prioik.robots.mujoco_model.to_mujoco`; every frame is a MuJoCo body. The
+velocity limits are pinocchio's (the URDF's). Targets are the scenario's references at
+``t + dt``. The QP back-end is a qpsolvers name: :data:`DEFAULT_SOLVER`, the one mink's
+documentation uses (``solve_ik(configuration, tasks, dt, "daqp")``, and mink requires
+``qpsolvers[daqp]``), or any in ``qpsolvers.available_solvers``.
+
+The step's kinematics time is ``Configuration.update`` and the target updates; its
+solve time is ``solve_ik`` (building the QP in Python and solving it). The next
+configuration is MuJoCo's integration of ``v`` (``Configuration.integrate``), mapped
+back to pinocchio's ``q``.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from prioik.formulations.base import ReportVariant
+
+from .pink_baseline import LEVEL_COSTS, POSTURE_COST
+
+#: the back-end of mink's documentation (its quickstart's ``solve_ik(..., "daqp")``)
+DEFAULT_SOLVER = "daqp"
+#: mink's task gain (dead-beat: the error is driven to zero within one step)
+GAIN = 1.0
+
+
+
+def _version(distribution: str) -> str:
+    import importlib.metadata
+    try:
+        return importlib.metadata.version(distribution)
+    except importlib.metadata.PackageNotFoundError:
+        return "(not installed)"
+
+
+#: the baseline's name in the scenario reports (:data:`prioik.benchmarks.variants.BASELINES`)
+NAME = "mink"
+#: what the scenario pages say of the run: version, level, priority model, what it is given
+DESCRIPTION = (f"mink {_version('mink')} (mujoco {_version('mujoco')}), solve_ik at "
+               "velocity level on the URDF converted to MuJoCo: weighted tasks in one QP "
+               "(one decade of cost per level), held feet as equality constraints, its "
+               "ConfigurationLimit and VelocityLimit as inequalities; task gains "
+               f"{GAIN:g} (dead-beat); QP back-end {DEFAULT_SOLVER} (mink's "
+               "documentation's choice)")
+#: rows beside the default one (``options["solver"]``: the QP back-end)
+REPORT_VARIANTS = (
+    ReportVariant("quadprog", {"solver": "quadprog"}, reports=("scenario",),
+                  note="the same with quadprog, the pink row's back-end"),
+)
+
+
+def unavailable_reason(options: dict | None = None) -> str | None:
+    """Why mink cannot run here with ``options`` (its ``solver``), or ``None``."""
+    from prioik.extras import install_hint, missing_distributions
+    missing = missing_distributions("mink")
+    if missing:
+        return f"{', '.join(missing)} not installed; {install_hint('mink')}"
+    solver = (options or {}).get("solver", DEFAULT_SOLVER)
+    import qpsolvers
+    if solver not in qpsolvers.available_solvers:
+        return f"QP back-end {solver} is not available here"
+    return None
+
+
+def steps(scenario, variant, *, duration: float, dt: float, progress=None):
+    """A scenario run of ``variant`` (:class:`prioik.benchmarks.variants.Variant`), one
+    step at a time (:func:`mink_steps`)."""
+    return mink_steps(scenario, duration=duration, dt=dt, progress=progress,
+                      solver=variant.options.get("solver", DEFAULT_SOLVER),
+                      label=variant.label)
+
+
+def run_mink(scenario, *, duration: float, dt: float, solver: str = DEFAULT_SOLVER,
+             progress=None, label: str = "mink"):
+    """Run ``scenario`` with mink's ``solve_ik``; returns a :class:`robots.SimulationResult`
+    (:func:`mink_steps` to its end)."""
+    from prioik.robots import run_to_end
+    return run_to_end(mink_steps(scenario, duration=duration, dt=dt, solver=solver,
+                                 progress=progress, label=label))
+
+
+def mink_problem(scenario, dt: float):
+    """mink's objects for ``scenario``: ``(mj, configuration, tasks, constraints, limits,
+    set_targets)`` — the converted model (:class:`prioik.robots.mujoco_model.MujocoModel`),
+    a ``mink.Configuration`` at ``q0``, the cost tasks, the equality-constraint tasks,
+    the limits, and ``set_targets(t)`` giving every task its target at ``t``."""
+    import mink
+
+    from prioik.robots.mujoco_model import to_mujoco
+
+    robot = scenario.robot
+    mj = to_mujoco(robot, scenario.urdf_text())
+    config = mink.Configuration(mj.model, mj.to_qpos(robot.q0))
+    tasks, constraints, setters = [], [], []
+    for spec in scenario.baseline_tasks():
+        c = LEVEL_COSTS[min(spec.priority, len(LEVEL_COSTS) - 1)] * spec.weight
+        if spec.kind in ("frame", "position", "orientation"):
+            task = mink.FrameTask(spec.frame, "body",
+                                  position_cost=0.0 if spec.kind == "orientation" else c,
+                                  orientation_cost=0.0 if spec.kind == "position" else c,
+                                  gain=GAIN)
+        elif spec.kind == "com_xy":
+            task = mink.ComTask(cost=[c, c, 0.0], gain=GAIN)
+        elif spec.kind == "posture":
+            task = mink.PostureTask(mj.model, cost=POSTURE_COST, gain=GAIN)
+        else:  # pragma: no cover - a scenario declaring a kind this module lacks
+            raise ValueError(f"mink baseline: no mapping for task kind {spec.kind!r}")
+        (constraints if spec.kind == "frame" and spec.hard else tasks).append(task)
+        setters.append((spec, task))
+    limits = [mink.ConfigurationLimit(mj.model),
+              mink.VelocityLimit(mj.model, mj.velocity_limits())]
+    z_com = float(config.data.subtree_com[1][2])
+
+    def set_targets(t: float) -> None:
+        for spec, task in setters:
+            target = scenario.baseline_target(spec.name, t)
+            if spec.kind == "frame":
+                task.set_target(mink.SE3.from_matrix(np.asarray(target)))
+            elif spec.kind == "position":
+                task.set_target(mink.SE3.from_translation(np.asarray(target)))
+            elif spec.kind == "orientation":
+                task.set_target(mink.SE3.from_rotation(
+                    mink.SO3.from_matrix(np.asarray(target))))
+            elif spec.kind == "com_xy":
+                task.set_target(np.array([target[0], target[1], z_com]))
+            else:
+                task.set_target(mj.to_qpos(target))
+
+    return mj, config, tasks, constraints, limits, set_targets
+
+
+def mink_steps(scenario, *, duration: float, dt: float, solver: str = DEFAULT_SOLVER,
+               progress=None, label: str = "mink"):
+    """``scenario`` with mink's ``solve_ik``, set up now and run one step at a time: a
+    generator that yields after each step and returns the
+    :class:`robots.SimulationResult` (:func:`prioik.benchmarks.external.record_steps`).
+
+    Raises:
+        ValueError: ``solver`` is not a QP back-end qpsolvers has here.
+        prioik.robots.mujoco_model.MujocoModelError: MuJoCo cannot load the scenario's
+            URDF as the robot's model.
+    """
+    import pinocchio as pin
+    import qpsolvers
+    from mink import solve_ik
+    from mink.exceptions import MinkError
+
+    from prioik.benchmarks.external import record_steps
+
+    if solver not in qpsolvers.available_solvers:
+        raise ValueError(f"mink: QP back-end {solver!r} is not available here; available: "
+                         f"{', '.join(qpsolvers.available_solvers)}")
+    model = scenario.robot.model
+    mj, config, tasks, constraints, limits, set_targets = mink_problem(scenario, dt)
+
+    def step(q, v, t):
+        t0 = time.perf_counter()
+        config.update(mj.to_qpos(q))
+        set_targets(t + dt)
+        t1 = time.perf_counter()
+        try:
+            vel = solve_ik(config, tasks, dt, solver, limits=limits,
+                           constraints=constraints or None, safety_break=False)
+        except MinkError as exc:
+            raise RuntimeError(f"{type(exc).__name__}: {exc}") from None
+        t2 = time.perf_counter()
+        q_next = mj.to_q(config.integrate(vel, dt))
+        return q_next, pin.difference(model, q, q_next) / dt, t1 - t0, t2 - t1
+
+    return record_steps(scenario, step, duration=duration, dt=dt, progress=progress,
+                        label=label, info={"qp_solver": solver})
