@@ -477,3 +477,15 @@ def test_other_buffers_give_the_same_rows(frame_call):
     with pytest.raises(CoreInputError, match="b must be a writable float64 numpy array, "
                                              "got a read-only array"):
         cpp_rows.velocity_targets(memoryview(b).toreadonly(), Q)
+
+
+def test_robots_import_no_numba():
+    """prioik.robots writes its rows without numba: importing it (and its writers and
+    builders) leaves numba unimported."""
+    import subprocess
+    import sys
+    code = ("import sys, prioik.robots, prioik.robots.rows, prioik.robots.tasks; "
+            "print('numba' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True)
+    assert out.stdout.strip() == "False"
