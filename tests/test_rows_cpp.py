@@ -489,3 +489,76 @@ def test_robots_import_no_numba():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True)
     assert out.stdout.strip() == "False"
+
+
+def _mutations(value, rng):
+    """Arrays the bindings must refuse or take without harm in place of ``value``:
+    other shapes, dtypes, strides, read-only copies, huge or negative indices,
+    non-finite entries, empty arrays, None."""
+    a = np.asarray(value)
+    shape = tuple(int(s) for s in rng.integers(0, 5, size=rng.integers(0, 4)))
+    kinds = [
+        lambda: np.zeros(shape),
+        lambda: a.astype(rng.choice([np.float32, np.int32, np.int64, np.float64, bool])),
+        lambda: np.repeat(a, 2, axis=-1)[..., ::2] if a.ndim else a,
+        lambda: _read_only(a),
+        lambda: np.full(a.shape, rng.choice([np.nan, np.inf, -np.inf, 1e300])),
+        lambda: np.full(a.shape, rng.choice([-1, 2**62, -2**62, 7]), dtype=np.int64),
+        lambda: a.reshape(-1)[:0],
+        lambda: a.T,
+        lambda: None,
+        lambda: a[::-1] if a.ndim else a,
+    ]
+    return kinds[rng.integers(len(kinds))]()
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_bindings_refuse_or_take_any_array_without_harm(frame_call, seed):
+    """A short fuzz at the boundary: each entry point's valid call with one or two of
+    its arrays replaced at random; every call returns or raises CoreInputError (a crash
+    ends the test run)."""
+    rng = np.random.default_rng(seed)
+    m, n = frame_call["A"].shape
+    valid = {
+        cpp_rows.frame_rows: dict(frame_call),
+        cpp_rows.position_target_rows: {k: frame_call[k] for k in (
+            "A", "Q", "J", "t", "R", "geo", "aj", "vj", "x")} | {
+            "spec": np.array([0, 0, 1, 0, 3], dtype=np.int64)},
+        cpp_rows.com_rows: dict(A=np.zeros((5, n)), Q=np.zeros((6, 5)), s=1,
+                                Jcom=np.ones((3, n)), com=np.ones(3), acom=np.ones(3),
+                                axes=np.array([0, 2]), x=np.ones(2), xd=np.ones(2),
+                                xdd=np.ones(2), zero_drift=False),
+        cpp_rows.posture_error: dict(Q=np.zeros((6, 5)), s=1, q=np.ones(6), q_ref=np.ones(6),
+                                     iq=np.array([0, 3, 5])),
+        cpp_rows.bounds_at: dict(lower=np.zeros(5), upper=np.zeros(5), q=np.ones(6),
+                                 v=np.ones(6), iq=np.array([0, -1, 5]),
+                                 lim=np.ones((3, 3)), params=np.array([1.0, .1, .01, 1, 1, 1]),
+                                 qa=np.zeros(3)),
+        cpp_rows.activation_at: dict(A=np.zeros((5, 6)), Q=np.zeros((6, 5)), q=np.ones(6),
+                                     iq=np.array([0, 2, 5]), lim=np.ones((3, 3)),
+                                     params=np.array([1.0, 2.0, 1.0, 1.0]), qa=np.zeros(3)),
+        cpp_rows.region_rows: dict(A=np.zeros((4, n)), lower=np.zeros(4), upper=np.ones(4),
+                                   s=1, C=np.ones((2, 3)), Jp=np.ones((3, n)), p=np.ones(3),
+                                   psign=1.0, v=np.ones(n), drift=np.ones(3), lo=np.zeros(2),
+                                   hi=np.ones(2), y=np.zeros(2), yd=np.zeros(2),
+                                   vmax=np.full(2, np.inf), T=0.1, dt=0.01, accel=True),
+        cpp_rows.acceleration_targets: dict(A=np.ones((4, 3)), b=np.zeros(4),
+                                            Q=np.ones((6, 4)), v=np.ones(3)),
+        cpp_rows.state_is_valid: dict(q=np.ones(7), v=np.ones(6), unit=np.array([3, 4]),
+                                      tol=1e-6),
+    }
+    refused = 0
+    for fn, kwargs in valid.items():
+        fn(**kwargs)                                        # valid as given
+        arrays = [k for k, v in kwargs.items() if isinstance(v, np.ndarray)]
+        for _ in range(60):
+            call = dict(kwargs)
+            for name in rng.choice(arrays, size=rng.integers(1, 3), replace=False):
+                with np.errstate(invalid="ignore"):     # NaN cast to an integer type
+                    call[name] = _mutations(call[name], rng)
+            try:
+                fn(**{k: (v.copy() if isinstance(v, np.ndarray) and v.flags.writeable
+                          else v) for k, v in call.items()})
+            except CoreInputError:
+                refused += 1
+    assert refused > 0

@@ -140,6 +140,8 @@ class Buffers {
       throw InputError(std::string(name) + " must be " + type_name(kind) + ", got format '" +
                        (view.format ? view.format : "B") + "' of " +
                        std::to_string(view.itemsize) + "-byte items");
+    if (reinterpret_cast<std::uintptr_t>(view.buf) % alignof(double) != 0)
+      throw InputError(std::string(name) + " is not aligned (a view of packed bytes)");
     return ArrayInfo{view.buf, view.ndim, view.shape, view.strides};
   }
 
@@ -190,12 +192,12 @@ void require(bool ok, const Message& message) {
   if (!ok) throw InputError(message());
 }
 
-// rows (or columns, entries) s .. s + count of an array with `rows` of them, named
+// `count` rows (or columns, entries) from s within an array's `rows`, named
 void rows_within(Index s, Index count, Index rows, const char* what, const char* array,
                  const char* unit = "rows") {
-  require(s >= 0 && s + count <= rows, [&] {
-    return std::string(what) + " " + std::to_string(s) + " .. " + std::to_string(s + count) +
-           " is outside " + array + "'s " + std::to_string(rows) + " " + unit;
+  require(s >= 0 && count <= rows && s <= rows - count, [&] {
+    return std::string(what) + " (" + std::to_string(count) + " from " + std::to_string(s) +
+           ") are outside " + array + "'s " + std::to_string(rows) + " " + unit;
   });
 }
 
@@ -441,7 +443,8 @@ Index activation_at_binding(nb::handle A, nb::handle Q, nb::handle q, nb::handle
   const Vector scratch = vector<double>(bufs, qa, "qa", na);
   rows_within(row_start(P, "params"), na, Am.rows, "the task's rows", "A");
   const double nb_ = P[1];
-  const bool whole = nb_ >= 0.0 && nb_ == static_cast<double>(static_cast<Index>(nb_));
+  const bool whole =
+      nb_ >= 0.0 && nb_ < 9.0e15 && nb_ == static_cast<double>(static_cast<Index>(nb_));
   require(whole && static_cast<Index>(nb_) + na <= Am.cols, [&] {
     return "params[1] (n_base) must be a whole number with n_base + " + std::to_string(na) +
            " <= A's " + std::to_string(Am.cols) + " columns";
@@ -477,7 +480,7 @@ bool state_is_valid_binding(nb::handle q, nb::handle v, nb::handle unit, double 
     return "unit must hold (start, size) pairs, got " + std::to_string(u.size) + " entries";
   });
   for (Index p = 0; p < u.size; p += 2)
-    require(u[p] >= 0 && u[p + 1] >= 0 && u[p] + u[p + 1] <= qv.size, [&] {
+    require(u[p] >= 0 && u[p + 1] >= 0 && u[p] <= qv.size && u[p + 1] <= qv.size - u[p], [&] {
       return "unit's part " + std::to_string(p / 2) + " (" + std::to_string(u[p]) + ", " +
              std::to_string(u[p + 1]) + ") is not within q's " + std::to_string(qv.size) +
              " entries";
