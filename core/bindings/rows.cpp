@@ -115,13 +115,20 @@ class Buffers {
                      (read_only ? "a read-only array" : Py_TYPE(h.ptr())->tp_name));
   }
 
+  // the dtype's name (numpy's dtype.name) of an array
+  static std::string dtype_name(nb::handle h) {
+    nb::object name = h.attr("dtype").attr("name");
+    return nb::isinstance<nb::str>(name) ? std::string(nb::borrow<nb::str>(name).c_str())
+                                         : std::string("another dtype");
+  }
+
   static ArrayInfo numpy_fields(nb::handle h, const char* name, Kind kind, bool writable) {
     const auto* a = reinterpret_cast<const NumpyArrayFields*>(h.ptr());
     const auto* d = reinterpret_cast<const NumpyDescrFields*>(a->descr);
     if (writable && !(a->flags & kNumpyWriteable)) not_an_array(h, name, kind, true, true);
     if (!type_char_is(d->type, kind) || d->byteorder == '>')
-      throw InputError(std::string(name) + " must be " + type_name(kind) + ", got dtype '" +
-                       std::string(1, d->kind) + std::string(1, d->type) + "'");
+      throw InputError(std::string(name) + " must be " + type_name(kind) + ", got " +
+                       dtype_name(h) + (d->byteorder == '>' ? " (big-endian)" : ""));
     if (!(a->flags & kNumpyAligned))
       throw InputError(std::string(name) + " is not aligned (a view of packed bytes)");
     return ArrayInfo{a->data, a->nd, a->dimensions, a->strides};
