@@ -102,7 +102,7 @@ clean:
 	rm -rf $(VENV) $(CORE_VENV) $(OUT) *.egg-info build
 
 # The Python extension built with -fsanitize=address,undefined and the row writers'
-# Python tests (the numba oracle, the bad inputs, a short boundary fuzz) run on it,
+# Python tests (the plain-Python reference, the bad inputs, a short boundary fuzz) run on it,
 # the sanitizer runtimes preloaded (core/tests/sanitized_rows.py)
 ASAN_PY_DIR := build/asan-bindings
 asan-bindings: $(STAMP)

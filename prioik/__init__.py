@@ -19,7 +19,8 @@ Sub-packages (data flows one way, top to bottom):
   use: it needs the ``robots`` extra);
 * :mod:`prioik.benchmarks` — comparisons, reports and the ``prioik`` command line;
 * :mod:`prioik.extras` — which ``pip install prioik[EXTRA]`` brings which part
-  (``pip install prioik`` is the core: numpy, scipy, numba, threadpoolctl).
+  (``pip install prioik`` is the core: numpy, scipy, threadpoolctl, tqdm and the
+  compiled C++ core ``prioik._core``).
 
 Importing prioik changes nothing in the process (no environment variable, no BLAS
 thread setting).

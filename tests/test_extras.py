@@ -25,8 +25,8 @@ def _name(req: str) -> str:
     return re.split(r"[\s<>=!~;\[]", req, maxsplit=1)[0].lower()
 
 
-def test_the_core_is_numpy_scipy_numba_threadpoolctl_tqdm():
-    assert {_name(r) for r in PYPROJECT["dependencies"]} == {"numpy", "scipy", "numba",
+def test_the_core_is_numpy_scipy_threadpoolctl_tqdm():
+    assert {_name(r) for r in PYPROJECT["dependencies"]} == {"numpy", "scipy",
                                                              "threadpoolctl", "tqdm"}
 
 
@@ -100,7 +100,7 @@ _LOADED = ("import json, sys; {setup}; print(json.dumps(sorted(m for m in sys.mo
 #: the modules of every extra, and the heavy parts of the core (loaded on first solve)
 _HEAVY = ("pinocchio", "example_robot_data", "qpsolvers", "osqp", "proxsuite", "quadprog",
           "daqp", "clarabel", "highspy", "cvxpy", "placo", "pink", "mink", "mujoco",
-          "matplotlib", "meshcat", "dask", "distributed", "numba", "llvmlite", "scipy")
+          "matplotlib", "meshcat", "dask", "distributed", "scipy")
 
 
 @pytest.mark.parametrize("setup, allowed", [

@@ -1,6 +1,6 @@
 """The C++ row writers (``prioik._core.rows``, what :mod:`robots.rows` and
-:mod:`robots.tasks` call) against the numba kernels of ``robots/_rows_kernel.py`` (the
-oracle while numba stays): every writer's rows equal within 1e-13 relative, row for
+:mod:`robots.tasks` call) against the same formulas in plain Python (``tests/rows_reference.py``, the readable
+reference): every writer's rows equal within 1e-13 relative, row for
 row, on random states of the Panda, G1 and TALOS at velocity and acceleration level;
 ``log3`` near θ = 0 and θ = π; the bound and activation formulas on joints inside,
 at and past their limits; a closed loop (the README's Panda reach with limits) gives
@@ -15,13 +15,14 @@ import prioik
 from prioik import _core
 from prioik.formulations.base import CoreInputError
 from prioik.robots import KinematicState, TaskWriter, g1, panda, talos
-from prioik.robots import _rows_kernel as numba_rows
 from prioik.robots import rows as rows_module
 from prioik.robots import tasks as tasks_module
 
+from tests import rows_reference as reference_rows
+
 cpp_rows = _core.rows
 
-#: row for row: |C++ − numba| ≤ RTOL · the row's largest magnitude
+#: row for row: |C++ − reference| ≤ RTOL · the row's largest magnitude
 RTOL = 1e-13
 
 ROBOTS = {"panda": panda, "g1": g1, "talos": talos}
@@ -33,11 +34,11 @@ def robots():
 
 
 @pytest.fixture
-def with_numba(monkeypatch):
-    """Run :mod:`robots.rows` and :mod:`robots.tasks` on the numba kernels."""
+def with_reference(monkeypatch):
+    """Run :mod:`robots.rows` and :mod:`robots.tasks` on the plain-Python reference."""
     def switch():
-        monkeypatch.setattr(rows_module, "_k", numba_rows)
-        monkeypatch.setattr(tasks_module, "_state_is_valid", numba_rows.state_is_valid)
+        monkeypatch.setattr(rows_module, "_k", reference_rows)
+        monkeypatch.setattr(tasks_module, "_state_is_valid", reference_rows.state_is_valid)
     return switch
 
 
@@ -60,7 +61,7 @@ def worst_row_difference(a, b) -> float:
 
 
 def test_the_writers_call_the_cpp_core():
-    """robots/ runs on prioik._core.rows, not on numba."""
+    """robots/ runs on prioik._core.rows, not on the reference."""
     assert rows_module._k is cpp_rows
     assert tasks_module._state_is_valid is cpp_rows.state_is_valid
 
@@ -144,8 +145,9 @@ def _write(w, state, refs):
 
 @pytest.mark.parametrize("mode", ["velocity", "acceleration"])
 @pytest.mark.parametrize("name", list(ROBOTS))
-def test_every_writer_equals_numba(robots, with_numba, name, mode):
-    """Both kernels on the same states and references, each task's rows compared."""
+def test_every_writer_equals_the_reference(robots, with_reference, name, mode):
+    """The C++ writers and the reference on the same states and references, each task's
+    rows compared."""
     robot = robots[name]
     cases = []
     for seed in range(12):
@@ -154,15 +156,15 @@ def test_every_writer_equals_numba(robots, with_numba, name, mode):
         cases.append((state, _references(robot, srng)))
     cpp = _declare(robot, mode, np.random.default_rng(1))
     cpp_out = [(_write(cpp, s, r), _snapshot(cpp)) for s, r in cases]
-    with_numba()
+    with_reference()
     oracle = _declare(robot, mode, np.random.default_rng(1))
-    numba_out = [(_write(oracle, s, r), _snapshot(oracle)) for s, r in cases]
+    reference_out = [(_write(oracle, s, r), _snapshot(oracle)) for s, r in cases]
     for kernel in ("frame_rows", "position_rows", "position_target_rows", "com_rows",
                    "posture_error", "bounds_at", "activation_at", "region_rows"):
-        assert getattr(numba_rows, kernel).signatures, f"the oracle never ran {kernel}"
+        assert kernel in reference_rows.CALLED, f"the reference never ran {kernel}"
     worst = 0.0
     layout = cpp.layout
-    for (active_c, c), (active_n, n) in zip(cpp_out, numba_out):
+    for (active_c, c), (active_n, n) in zip(cpp_out, reference_out):
         assert active_c == active_n
         for task in cpp.tasks():
             sl = layout.task_slice(task)
@@ -203,13 +205,13 @@ THETAS = [0.0, 1e-14, 1e-9, 1e-6, 5e-5, 9.99999e-5, 1e-4, 1.000001e-4, 0.3, 1.0,
 
 
 @pytest.mark.parametrize("theta", THETAS)
-def test_log3_equals_numba_near_zero_and_pi(theta):
+def test_log3_equals_the_reference_near_zero_and_pi(theta):
     rng = np.random.default_rng(int(theta * 1e6) % 2**32)
     worst = 0.0
     for R in _rotations_near(theta, rng, 20):
         a, b = np.full(5, 7.0), np.full(5, 7.0)
         cpp_rows.log3(R, a, 1)
-        numba_rows.log3(R, b, 1)
+        reference_rows.log3(R, b, 1)
         assert a[0] == 7.0 and a[4] == 7.0
         worst = max(worst, worst_row_difference(a[None, 1:4], b[None, 1:4]))
         # and what it is: pinocchio's log up to the sign ambiguity at π
@@ -237,7 +239,7 @@ def _joint_cases(rng, na=40):
 
 
 @pytest.mark.parametrize("seed", range(20))
-def test_bound_formulas_equal_numba(seed):
+def test_bound_formulas_equal_the_reference(seed):
     rng = np.random.default_rng(seed)
     qa, va, lo, hi, vmax = _joint_cases(rng)
     na, s = qa.size, 3
@@ -245,7 +247,7 @@ def test_bound_formulas_equal_numba(seed):
         for position in (True, False):
             for velocity in (True, False):
                 out = []
-                for mod in (cpp_rows, numba_rows):
+                for mod in (cpp_rows, reference_rows):
                     lower, upper = np.full(na + 5, 9.0), np.full(na + 5, 9.0)
                     mod.acceleration_bounds(lower, upper, s, qa, va, lo, hi, vmax, T, dt,
                                             position, velocity)
@@ -256,13 +258,13 @@ def test_bound_formulas_equal_numba(seed):
 
 
 @pytest.mark.parametrize("seed", range(10))
-def test_activation_rows_equal_numba(seed):
+def test_activation_rows_equal_the_reference(seed):
     rng = np.random.default_rng(seed)
     qa, _, lo, hi, _ = _joint_cases(rng)
     width = np.where(np.isfinite(lo) & np.isfinite(hi), np.minimum(0.1, 0.25 * (hi - lo)), 1.0)
     na, m, nb = qa.size, qa.size + 4, 6
     out = []
-    for mod in (cpp_rows, numba_rows):
+    for mod in (cpp_rows, reference_rows):
         A, Q = np.full((m, nb + na), 5.0), np.full((6, m), 5.0)
         active = mod.limit_activation_rows(A, Q, 2, nb, qa, lo, hi, width, 2500.0, 100.0)
         out.append((active, A, Q))
@@ -271,7 +273,7 @@ def test_activation_rows_equal_numba(seed):
     assert worst_row_difference(out[0][2], out[1][2]) <= RTOL
 
 
-def test_state_is_valid_equals_numba(robots):
+def test_state_is_valid_equals_the_reference(robots):
     robot = robots["g1"]
     unit = robot.state_sizes()[3]
     assert unit.size == 2
@@ -283,7 +285,7 @@ def test_state_is_valid_equals_numba(robots):
         cases.append((bad, v))
     cases.append((q, np.full(robot.nv, -np.inf)))
     verdicts = [(cpp_rows.state_is_valid(a, b, unit, 1e-6),
-                 numba_rows.state_is_valid(a, b, unit, 1e-6)) for a, b in cases]
+                 reference_rows.state_is_valid(a, b, unit, 1e-6)) for a, b in cases]
     assert [c for c, _ in verdicts] == [n for _, n in verdicts]
     assert [c for c, _ in verdicts] == [True, False, False, False, True, False]
 
@@ -315,11 +317,11 @@ def _readme_loop(robot, steps):
     return np.array(trajectory), at_bound
 
 
-def test_closed_loop_trajectory_equals_numba(robots, with_numba):
+def test_closed_loop_trajectory_equals_the_reference(robots, with_reference):
     """The README's Panda reach with limits, 300 steps, on each path."""
     robot = robots["panda"]
     cpp, at_bound = _readme_loop(robot, 300)
-    with_numba()
+    with_reference()
     oracle, _ = _readme_loop(robot, 300)
     assert at_bound > 0, "no step held an arm joint at a limit bound"
     worst = float(np.abs(cpp - oracle).max())
@@ -477,18 +479,6 @@ def test_other_buffers_give_the_same_rows(frame_call):
     with pytest.raises(CoreInputError, match="b must be a writable float64 numpy array, "
                                              "got a read-only array"):
         cpp_rows.velocity_targets(memoryview(b).toreadonly(), Q)
-
-
-def test_robots_import_no_numba():
-    """prioik.robots writes its rows without numba: importing it (and its writers and
-    builders) leaves numba unimported."""
-    import subprocess
-    import sys
-    code = ("import sys, prioik.robots, prioik.robots.rows, prioik.robots.tasks; "
-            "print('numba' in sys.modules)")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         check=True)
-    assert out.stdout.strip() == "False"
 
 
 def _mutations(value, rng):

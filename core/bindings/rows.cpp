@@ -7,7 +7,7 @@
 // iq, axes and unit) within the arrays it indexes. Anything else raises
 // prioik.formulations.base.CoreInputError naming the array before C++ reads it (None
 // in place of an array too). Non-finite values are the writers' to propagate (IEEE
-// arithmetic, as numba's): the solvers' own checks name them. The GIL is released
+// arithmetic): the solvers' own checks name them. The GIL is released
 // while a writer runs.
 #include "rows_bindings.hpp"
 

@@ -1,5 +1,5 @@
-// The robot row writers (rows.hpp): each operation in the order of
-// robots/_rows_kernel.py, so that the roundings are the same.
+// The robot row writers (rows.hpp): each operation in the order of the readable
+// reference, tests/rows_reference.py.
 #include "prioik/rows.hpp"
 
 #include <algorithm>

@@ -4,7 +4,7 @@ Run by ``make asan-bindings``: ``python core/tests/sanitized_rows.py PATH`` with
 ``PATH`` the extension built with ``-fsanitize=address,undefined``
 (``PRIOIK_SANITIZE=ON``, ``PRIOIK_PYTHON=ON``) and the sanitizer runtimes preloaded. It
 loads that build as ``prioik._core`` and runs, from ``tests/test_rows_cpp.py``, every
-writer against numba's on the Panda, G1 and TALOS at both levels, log3, the bound and
+writer against the plain-Python reference on the Panda, G1 and TALOS at both levels, log3, the bound and
 activation formulas, the bad inputs and 40 seeds of the boundary fuzz; a sanitizer
 report aborts the process.
 """
@@ -44,14 +44,15 @@ def main(path: str) -> None:
     for name in robots:
         for mode in ("velocity", "acceleration"):
             use(core.rows)
-            t.test_every_writer_equals_numba(robots, lambda: use(t.numba_rows), name, mode)
+            t.test_every_writer_equals_the_reference(robots, lambda: use(t.reference_rows), name,
+                                                    mode)
     use(core.rows)
     for theta in t.THETAS:
-        t.test_log3_equals_numba_near_zero_and_pi(theta)
+        t.test_log3_equals_the_reference_near_zero_and_pi(theta)
     for seed in range(20):
-        t.test_bound_formulas_equal_numba(seed)
+        t.test_bound_formulas_equal_the_reference(seed)
     for seed in range(10):
-        t.test_activation_rows_equal_numba(seed)
+        t.test_activation_rows_equal_the_reference(seed)
     robot = robots["g1"]
     writer = TaskWriter(robot, "acceleration")
     writer.add_frame_pose("pose", "left_foot", gain=(1.0, 1.0))
@@ -66,7 +67,7 @@ def main(path: str) -> None:
     t.test_other_buffers_give_the_same_rows(call)
     for seed in range(40):
         t.test_the_bindings_refuse_or_take_any_array_without_harm(call, seed)
-    print("sanitized prioik._core.rows: the oracle, the bad inputs and 40 fuzz seeds passed")
+    print("sanitized prioik._core.rows: the reference, the bad inputs and 40 fuzz seeds passed")
 
 
 if __name__ == "__main__":

@@ -35,7 +35,7 @@ def _requirement_name(req: str) -> str:
 def test_this_environment_holds_the_core_and_no_extra():
     reqs = importlib.metadata.requires("prioik") or []
     core = {_requirement_name(r) for r in reqs if "extra ==" not in r}
-    assert core == {"numpy", "scipy", "numba", "threadpoolctl", "tqdm"}
+    assert core == {"numpy", "scipy", "threadpoolctl", "tqdm"}
     assert extras.installed() == []
     for extra, (distributions, _) in extras.EXTRAS.items():
         assert extras.missing_distributions(extra) == distributions, extra

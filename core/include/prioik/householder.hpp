@@ -6,10 +6,9 @@
 // Every function works on memory its caller owns (a prepared solver's workspace) and
 // allocates nothing. Matrices are row-major views (MatrixRef); a matrix "held
 // transposed" keeps its column j in row j, so that the inner loops run over contiguous
-// memory. Each loop does its operations in the order the numba kernels do (the oracle:
-// formulations/_extended_jacobian_kernel.py), but for the sums of dot(), whose order is
-// written out; the arithmetic is IEEE double as written (no fast math, no fused
-// multiply-add: core/CMakeLists.txt).
+// memory. Each loop does its operations in the order it is written (the sums of dot() in
+// eight written-out partial sums); the arithmetic is IEEE double as written (no fast
+// math, no fused multiply-add: core/CMakeLists.txt).
 #pragma once
 
 #include <cmath>

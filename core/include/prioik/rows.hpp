@@ -10,8 +10,8 @@
 // follows (a row start, a column of spec, an entry of iq or unit) is the caller's to
 // keep in range: the Python bindings check them before a writer runs.
 //
-// Arithmetic: the operations of robots/_rows_kernel.py in its order, IEEE double,
-// no contraction (core/CMakeLists.txt), so that the answers equal the numba kernels'.
+// Arithmetic: the operations of tests/rows_reference.py (the readable reference) in its
+// order, IEEE double, no contraction (core/CMakeLists.txt).
 #pragma once
 
 #include <cstdint>

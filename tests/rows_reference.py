@@ -1,22 +1,34 @@
-"""The row writers of :class:`robots.rows.TaskWriter` in numba: the oracle of the C++
-writers it calls (``prioik._core.rows``, ``core/src/rows.cpp``, the same operations in the
-same order), which ``tests/test_rows_cpp.py`` compares with these.
+"""The row formulas of :class:`robots.rows.TaskWriter` in plain Python: the readable
+reference of the C++ writers it calls (``prioik._core.rows``, ``core/src/rows.cpp``,
+the same operations in the same order), which ``tests/test_rows_cpp.py`` compares with
+these (within rounding, row for row).
 
 Each function writes one task's rows of a :class:`~prioik.hierarchy.StackData` and its
 per-row error, reference velocity and feed-forward from views of a ``pin.Data``
 (joint Jacobians ``data.J``, frame placements ``data.oMf``, ``data.Jcom``,
-``data.com[0]``), so that one task costs one call.
+``data.com[0]``), so that one task costs one call. :data:`CALLED` names the entry
+points a test ran.
 """
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
-from numba import njit
 
-from prioik._jit import kernel
+#: the entry points called so far (a test checks that it compared each one)
+CALLED: set[str] = set()
 
 
-@njit(cache=True, inline="always")
+def _counted(f):
+    """An entry point: its name recorded in :data:`CALLED` when called."""
+    @functools.wraps(f)
+    def entry(*args):
+        CALLED.add(f.__name__)
+        return f(*args)
+    return entry
+
+
 def _log3(r00, r01, r02, r10, r11, r12, r20, r21, r22, out, o):
     """``out[o:o+3] = log(R)``, the rotation vector ``θ u`` of ``R`` (``θ ∈ [0, π]``),
     from its nine entries (no array: the kernels that call it allocate nothing).
@@ -61,7 +73,7 @@ def _log3(r00, r01, r02, r10, r11, r12, r20, r21, r22, out, o):
         out[o + 2] = sign * theta * u2 / norm
 
 
-@kernel()
+@_counted
 def log3(R, out, o):
     """``out[o:o+3] = log(R)`` of a ``3 × 3`` rotation matrix (see :func:`_log3`)."""
     _log3(R[0, 0], R[0, 1], R[0, 2], R[1, 0], R[1, 1], R[1, 2], R[2, 0], R[2, 1], R[2, 2],
@@ -87,7 +99,6 @@ SPEC_START, SPEC_MODE, SPEC_ZERO_DRIFT, SPEC_COLS = 0, 1, 2, 3
 GEO_OFFSET, GEO_POINT, GEO_ROTATION = 0, 1, 2
 
 
-@njit(cache=True, inline="always")
 def _frame_drift(Q, s, mode, R, geo, aj, vj):
     """The drift ``J̇ q̇`` of a frame task's rows at ``s`` (LOCAL_WORLD_ALIGNED, as
     ``pin.getFrameClassicalAcceleration``), from the parent joint's spatial velocity
@@ -126,7 +137,6 @@ def _frame_drift(Q, s, mode, R, geo, aj, vj):
             Q[DRIFT, o + i] = R[i, 0] * f0 + R[i, 1] * f1 + R[i, 2] * f2
 
 
-@njit(cache=True, inline="always")
 def _position_rows(A, Q, J, t, R, spec, geo, x, xd, xdd, rates):
     """Position rows of a frame task (see :func:`frame_rows`); ``ẋ* = ẍ* = 0`` unless
     ``rates``."""
@@ -151,7 +161,6 @@ def _position_rows(A, Q, J, t, R, spec, geo, x, xd, xdd, rates):
         Q[FEEDFORWARD, s + i] = xdd[i] if rates else 0.0
 
 
-@njit(cache=True, inline="always")
 def _zero_rows(A, Q, s, nrows, zero_drift):
     for i in range(nrows):
         row = A[s + i]
@@ -161,7 +170,6 @@ def _zero_rows(A, Q, s, nrows, zero_drift):
             Q[DRIFT, s + i] = 0.0
 
 
-@njit(cache=True, inline="always")
 def _point_rows(A, Q, J, t, R, spec, geo, aj, vj, x, xd, xdd, rates):
     """:func:`position_rows` (``ẋ* = ẍ* = 0`` unless ``rates``)."""
     s = spec[SPEC_START]
@@ -172,7 +180,7 @@ def _point_rows(A, Q, J, t, R, spec, geo, aj, vj, x, xd, xdd, rates):
         _frame_drift(Q, s, POSITION, R, geo, aj, vj)
 
 
-@kernel()
+@_counted
 def position_rows(A, Q, J, t, R, spec, geo, aj, vj, x, xd, xdd):
     """A point's position rows (3, ``spec``: see :data:`SPEC_COLS`): the point
     ``p = t + R off`` of the frame at ``(t, R)``; :func:`frame_rows` with
@@ -180,19 +188,18 @@ def position_rows(A, Q, J, t, R, spec, geo, aj, vj, x, xd, xdd):
     _point_rows(A, Q, J, t, R, spec, geo, aj, vj, x, xd, xdd, True)
 
 
-@kernel()
+@_counted
 def position_target_rows(A, Q, J, t, R, spec, geo, aj, vj, x):
     """:func:`position_rows` with ``ẋ* = ẍ* = 0`` (a fixed target: two arguments fewer)."""
     _point_rows(A, Q, J, t, R, spec, geo, aj, vj, x, x, x, False)
 
 
-@njit(cache=True, inline="always")
 def _rrt(A, B, i, j):
     """``(A Bᵀ)[i, j]`` of two ``3 × 3`` matrices."""
     return A[i, 0] * B[j, 0] + A[i, 1] * B[j, 1] + A[i, 2] * B[j, 2]
 
 
-@kernel()
+@_counted
 def frame_rows(A, Q, J, t, R, spec, geo, aj, vj, x, xd, xdd, Rstar, w, wd):
     """One frame's rows at ``s = spec[0]``: position of the point ``p = t + R off``
     (3 rows, ``spec[1] = POSITION``), orientation (3 rows, ``ORIENTATION``) or both (6,
@@ -229,7 +236,7 @@ def frame_rows(A, Q, J, t, R, spec, geo, aj, vj, x, xd, xdd, Rstar, w, wd):
             Q[FEEDFORWARD, o + i] = wd[i]
 
 
-@kernel()
+@_counted
 def com_rows(A, Q, s, Jcom, com, acom, axes, x, xd, xdd, zero_drift):
     """Centre-of-mass rows at ``s`` on ``axes``: ``A = J_com[axes]``, error
     ``x − c[axes]``, ``ẋ* = xd``, ``ẍ* = xdd``, drift ``acom[axes]`` (the centre of
@@ -245,7 +252,7 @@ def com_rows(A, Q, s, Jcom, com, acom, axes, x, xd, xdd, zero_drift):
         Q[DRIFT, s + i] = 0.0 if zero_drift else acom[a]
 
 
-@kernel()
+@_counted
 def posture_error(Q, s, q, q_ref, iq):
     """Posture rows' targets at ``s`` for joints whose configuration is their
     coordinate (``n_q = n_v``, where ``q_ref ⊖ q = q_ref − q``): error
@@ -257,14 +264,14 @@ def posture_error(Q, s, q, q_ref, iq):
         Q[DRIFT, s + i] = 0.0
 
 
-@kernel()
+@_counted
 def actuated_positions(q, iq, out):
     """``out[k] = q[iq[k]]`` (0 where ``iq[k] < 0``: a row without one coordinate)."""
     for k in range(iq.shape[0]):
         out[k] = q[iq[k]] if iq[k] >= 0 else 0.0
 
 
-@kernel()
+@_counted
 def limit_activation_rows(A, Q, s, nb, qa, lo, hi, width, kp, kd):
     """Joint-limit activation rows at ``s``, one per actuated joint (fixed size): row
     ``k`` is the unit row of column ``nb + k`` while the joint is inside its margin
@@ -308,7 +315,7 @@ def limit_activation_rows(A, Q, s, nb, qa, lo, hi, width, kp, kd):
     return active
 
 
-@kernel()
+@_counted
 def acceleration_bounds(lower, upper, s, qa, va, lo, hi, vmax, T, dt, position, velocity):
     """Bounds on ``q̈`` of the actuated joints at ``s`` (see
     :func:`robots.tasks.joint_limit_bounds`): position at the horizon ``T`` and after the
@@ -350,7 +357,7 @@ def acceleration_bounds(lower, upper, s, qa, va, lo, hi, vmax, T, dt, position, 
         upper[s + k] = b
 
 
-@kernel()
+@_counted
 def velocity_bounds(lower, upper, s, qa, lo, hi, vmax, T, position, velocity):
     """Bounds on ``q̇`` of the actuated joints at ``s``: ``q + q̇ T`` within the position
     limits and ``|q̇| ≤ q̇_max``; where they do not intersect (a joint already past a limit
@@ -369,7 +376,7 @@ def velocity_bounds(lower, upper, s, qa, lo, hi, vmax, T, position, velocity):
         upper[s + k] = b
 
 
-@kernel()
+@_counted
 def region_rows(A, lower, upper, s, C, Jp, p, psign, v, drift, lo, hi, y, yd, vmax, T, dt,
                 accel):
     """A region task's rows at ``s`` (:meth:`robots.rows.TaskWriter.add_frame_region`):
@@ -400,7 +407,7 @@ def region_rows(A, lower, upper, s, C, Jp, p, psign, v, drift, lo, hi, y, yd, vm
         upper[s + i] -= cd
 
 
-@kernel()
+@_counted
 def bounds_at(lower, upper, q, v, iq, lim, params, qa):
     """The joint-limit bounds of one task in one call, from the state itself: ``lim``
     holds the task's fixed ``lo``, ``hi``, ``q̇_max`` (``3 × n_a``) and ``q̇`` of the
@@ -421,7 +428,7 @@ def bounds_at(lower, upper, q, v, iq, lim, params, qa):
                         params[3] != 0.0, params[4] != 0.0)
 
 
-@kernel()
+@_counted
 def activation_at(A, Q, q, iq, lim, params, qa):
     """The activation rows of one joint-limit task in one call, from the state itself:
     ``lim`` holds the task's fixed ``lo``, ``hi`` and margin widths (``3 × n_a``);
@@ -433,14 +440,14 @@ def activation_at(A, Q, q, iq, lim, params, qa):
                                  lim[1], lim[2], params[2], params[3])
 
 
-@kernel()
+@_counted
 def velocity_targets(b, Q):
     """``b = ẋ* + K e`` (per row)."""
     for i in range(b.shape[0]):
         b[i] = Q[VELOCITY_REF, i] + Q[KP, i] * Q[ERROR, i]
 
 
-@kernel()
+@_counted
 def acceleration_targets(A, b, Q, v):
     """``b = ẍ* + K_d (ẋ* − J q̇) + K_p e − J̇ q̇`` (eq. 2-4, per row)."""
     n = A.shape[1]
@@ -452,7 +459,7 @@ def acceleration_targets(A, b, Q, v):
                 + Q[FEEDFORWARD, i] - Q[DRIFT, i])
 
 
-@kernel()
+@_counted
 def state_is_valid(q, v, unit, tol):
     """Every entry of ``q`` and ``v`` finite and every unit-norm part of ``q``
     (quaternions, unit complexes: ``unit = [start_0, size_0, start_1, size_1, …]``) of
