@@ -32,7 +32,8 @@ def main(path: str) -> None:
     from prioik.robots import rows as rows_module
     from prioik.robots import tasks as tasks_module
 
-    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[2] / "tests"))
+    root = pathlib.Path(__file__).resolve().parents[2]
+    sys.path[:0] = [str(root / "tests"), str(root)]      # the tests and their package
     import test_rows_cpp as t
     assert t.cpp_rows is core.rows and rows_module._k is core.rows
 
