@@ -1,5 +1,5 @@
-// A degenerate point's working set: the hard rows at their bounds (_rows_at_bounds)
-// and the non-negative least squares on their multipliers (_nnls_working_set).
+// A degenerate point's working set: the hard rows at their bounds
+// and the non-negative least squares on their multipliers.
 #include <cmath>
 
 #include "active_set_internal.hpp"
@@ -45,7 +45,7 @@ void rows_at_bounds(Ctx& c, index hard_end, double ynorm, index& m, index& extra
 namespace {
 
 /// Row p of the LQ T[:p] (reflector t in V[t, t:d]): row copied, the p reflectors
-/// applied, its own reflector made when what is left exceeds floor (_lq_append).
+/// applied, its own reflector made when what is left exceeds floor.
 bool lq_append(Ctx& c, index p, const double* row, index d, double floor) {
     double* u = c.T.row(p);
     for (index k = 0; k < d; ++k) u[k] = row[k];

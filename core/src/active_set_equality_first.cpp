@@ -1,4 +1,4 @@
-// The warm start's equality-first try (_equality_first, equality_first_data): the
+// The warm start's equality-first try: the
 // equality rows with the rows the last answer held, by the nested QR; its answer kept
 // when proved the stack's, else the next guess.
 #include <algorithm>
@@ -45,7 +45,7 @@ EqFirst::EqFirst(Ctx& c, ActiveSetWorkspace& ws) {
 
 namespace {
 
-/// (‖a‖², its one non-zero column or −1) (_sparsity).
+/// (‖a‖², its one non-zero column or −1).
 double sparsity(const double* a, index n, index hint, index& column) {
     column = one_column_hint(a, n, count_nonzero(a, n), hint);
     return dot(a, a, n);
@@ -344,7 +344,7 @@ bool rows_valid_eq(const Ctx& c) {
 
 }  // namespace
 
-/// _equality_first: verdict −1 (x* is the answer, written), −3 with a next guess
+/// Verdict −1 (x* is the answer, written), −3 with a next guess
 /// (row, side; side 0 a release), FIXED_REFUSED, or −2.
 index equality_first_try(Ctx& c, EqFirst& e, bool allow_fixed, index& row, int& side) {
     row = -1;
@@ -381,8 +381,8 @@ index equality_first_try(Ctx& c, EqFirst& e, bool allow_fixed, index& row, int& 
 
 namespace {
 
-/// The row, not held, that first leaves its interval on the segment from xref to x
-/// (_first_blocking); xref moves to the blocking point.
+/// The row, not held, that first leaves its interval on the segment from xref to x;
+/// xref moves to the blocking point.
 void first_blocking(Ctx& c, double* xref, index& row, int& side) {
     index n = c.n;
     double best = 2.0;

@@ -214,7 +214,7 @@ index box_row_pass(Ctx& c) {
     return unresolved;
 }
 
-/// The next warm solve's try (_keep_held): 0 when a row ended fixed at a violation,
+/// The next warm solve's try: 0 when a row ended fixed at a violation,
 /// 1 when no row was held, 2 when some were.
 double keep_held(const Ctx& c) {
     bool some = false;

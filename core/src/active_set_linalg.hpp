@@ -42,7 +42,7 @@ inline Reflectors reflectors(Mat V, index n, double* beta, index* pos, index nf)
 }
 
 /// ‖A_i‖_F² beyond kScaleHigh², or below kScaleLow² with a non-zero entry: the caller
-/// equilibrates the level (_level_extreme).
+/// equilibrates the level.
 inline bool level_extreme(Mat A, index n, double lev_sq, index s0, index s1) {
     constexpr double high = 1e100, low = 1e-100;
     if (!(lev_sq <= high * high)) return true;

@@ -1,5 +1,5 @@
 // The equality-first try's optimality test: the held rows' multipliers at every level
-// below them (_held_rows_optimal; _fixed_columns_optimal when they are fixed columns).
+// below them (held as rows, or as fixed columns).
 #include <algorithm>
 #include <cmath>
 

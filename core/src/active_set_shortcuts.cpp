@@ -1,6 +1,5 @@
-// The step's shortcuts: a level of full column rank by one column-pivoted QR
-// (_full_rank_step), a level of unit rows by Woodbury (_unit_rows_step), and the
-// choice among them and the general step (_step).
+// The step's shortcuts: a level of full column rank by one column-pivoted QR, a level
+// of unit rows by Woodbury, and the choice among them and the general step.
 #include <algorithm>
 #include <cmath>
 
@@ -33,7 +32,7 @@ void rotate_transposed(Ctx& c, index nw, Mat W, index r0, double* w) {
     }
 }
 
-/// _full_rank_step: nw ≥ d working soft rows, no hard row, of full column rank on the d
+/// The step of nw ≥ d working soft rows and no hard row, of full column rank on the d
 /// free coordinates: p by one column-pivoted QR; its margin, or −1.
 double full_rank_step(Ctx& c, index nw, double soft_tol) {
     index n = c.n, col = c.col, d = n - col;
@@ -125,7 +124,7 @@ double full_rank_step(Ctx& c, index nw, double soft_tol) {
 }
 
 /// The unit-rows step's hard rows (box rows) by the Schur complement of the normal
-/// equations (the second half of _unit_rows_step); false when their free directions
+/// equations (the second half of unit_rows_step); false when their free directions
 /// are not well conditioned. Writes p, nu; gn = ‖g‖.
 bool unit_rows_hard(Ctx& c, index nh, index nu_cols, double s, bool reach, double& gn) {
     index n = c.n, col = c.col, d = n - col;
@@ -176,7 +175,7 @@ bool unit_rows_hard(Ctx& c, index nh, index nu_cols, double s, bool reach, doubl
     return true;
 }
 
-/// _unit_rows_step: the step of nw working unit rows under nh working box rows; its
+/// The step of nw working unit rows under nh working box rows; its
 /// margin (and ‖g‖ in gn), or −1.
 double unit_rows_step(Ctx& c, index nh, index nw, double soft_tol, bool reach, double& gn) {
     index n = c.n, col = c.col, d = n - col, R = c.R;

@@ -22,7 +22,7 @@ struct Level {
     index joined = -1, stall = 0;
 };
 
-/// Whether every row's interval and √w are valid; eqr[j] = 1 where lo = up (_rows_valid).
+/// Whether every row's interval and √w are valid; eqr[j] = 1 where lo = up.
 bool rows_valid(const Ctx& c, std::int8_t* flags) {
     index bad = 0;
     for (index j = 0; j < c.M; ++j) {
@@ -37,8 +37,8 @@ bool rows_valid(const Ctx& c, std::int8_t* flags) {
     return bad == 0;
 }
 
-/// The rows weighed into B and Bo, bounds, norms, equality flags, single columns
-/// (_load_rows); false at the first value that is not valid.
+/// The rows weighed into B and Bo, bounds, norms, equality flags, single columns;
+/// false at the first value that is not valid.
 bool load_rows(Ctx& c) {
     index M = c.M, n = c.n;
     if (!rows_valid(c, c.eqr)) return false;
@@ -72,7 +72,7 @@ bool load_rows(Ctx& c) {
     return true;
 }
 
-/// Whether a level is of extreme scale (_extreme_scale_rows).
+/// Whether a level is of extreme scale.
 bool extreme_scale_rows(const Ctx& c) {
     for (index lev = 0; lev < c.k; ++lev) {
         double acc = 0.0;
@@ -85,7 +85,7 @@ bool extreme_scale_rows(const Ctx& c) {
     return false;
 }
 
-/// The working rows: hard ones first, then the level's (_gather).
+/// The working rows: hard ones first, then the level's.
 void gather(Ctx& c, Level& L) {
     index nh = 0;
     for (index j = 0; j < L.hard_end; ++j) {
@@ -330,7 +330,7 @@ bool release_wrong_side(Ctx& c, Level& L, double ynorm) {
     return changed;
 }
 
-/// The row to release among the wrong-signed ones so far (_pick_release).
+/// The row to release among the wrong-signed ones so far.
 void pick_release(bool bland, index j, double value, index& drop, double& worst) {
     if (bland) {
         if (drop < 0 || j < drop) drop = j;

@@ -1,6 +1,5 @@
-// The active set's step: the equality-constrained least squares of a working set
-// (_eqp, _eqp_soft, _eqp_append), its full-rank and unit-rows shortcuts
-// (_full_rank_step, _unit_rows_step), and the hard rows' multipliers.
+// The active set's step: the equality-constrained least squares of a working set, its
+// full-rank and unit-rows shortcuts, and the hard rows' multipliers.
 #include <algorithm>
 #include <cmath>
 
@@ -117,7 +116,7 @@ void swap_step_rows(Ctx& c, index i, index j, index d) {
     swap_entries(c.tgt, i, j);
 }
 
-/// _eqp_soft: the soft rows T[nh:nh + nw] on the directions the hr hard reflectors
+/// The soft rows T[nh:nh + nw] on the directions the hr hard reflectors
 /// leave (p[:hr] the hard part of the step), then p in the free coordinates.
 void eqp_soft(Ctx& c, index nh, index nw, index hr, index d, double soft_tol, StepOut& o) {
     index nr = nh + nw;
@@ -177,7 +176,7 @@ void eqp_soft(Ctx& c, index nh, index nw, index hr, index d, double soft_tol, St
     o.rs = rs;
 }
 
-/// _eqp: the minimum-norm step keeping the nh working hard rows at their bounds (reach:
+/// The minimum-norm step keeping the nh working hard rows at their bounds (reach:
 /// moving them onto them) and least squares over the nw working soft rows.
 StepOut eqp_impl(Ctx& c, index nh, index nw, double soft_tol, bool reach) {
     index n = c.n, col = c.col, d = n - col, nr = nh + nw;
