@@ -29,7 +29,7 @@ BUILD_REQUIRES = $$($(PY) -c "import tomllib; print(*tomllib.load(open('pyprojec
 # (tests/test_namespace.py: no top-level packages)
 EDITABLE_PATHS_OFF = -c "import pathlib, sysconfig; p = pathlib.Path(sysconfig.get_paths()['purelib'], '_editable_skbc_prioik.pth'); p.write_text(''.join(l for l in p.read_text().splitlines(True) if l.startswith('import ')))"
 
-.PHONY: test test-core test-forced-cpu demo venv venv-core clean asan
+.PHONY: test test-core test-forced-cpu demo venv venv-core clean asan asan-bindings
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -106,3 +106,16 @@ demo: $(STAMP) $(CORE_STAMP_BUILT)
 
 clean:
 	rm -rf $(VENV) $(CORE_VENV) $(OUT) *.egg-info build
+
+# The Python extension built with -fsanitize=address,undefined and the row writers'
+# Python tests (the numba oracle, the bad inputs, a short boundary fuzz) run on it,
+# the sanitizer runtimes preloaded (core/tests/sanitized_rows.py)
+ASAN_PY_DIR := build/asan-bindings
+asan-bindings: $(STAMP)
+	$(VENV)/bin/cmake -S core -B $(ASAN_PY_DIR) -G Ninja -DCMAKE_MAKE_PROGRAM=$(abspath $(VENV)/bin/ninja) \
+		-DCMAKE_BUILD_TYPE=RelWithDebInfo -DPRIOIK_SANITIZE=ON -DPRIOIK_PYTHON=ON \
+		-DPython_EXECUTABLE=$(abspath $(PY)) -Dnanobind_DIR=$$($(PY) -m nanobind --cmake_dir)
+	$(VENV)/bin/cmake --build $(ASAN_PY_DIR) --target _core
+	LD_PRELOAD=$$($(CXX) -print-file-name=libasan.so):$$($(CXX) -print-file-name=libubsan.so) \
+		ASAN_OPTIONS=detect_leaks=0:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+		$(PY) core/tests/sanitized_rows.py $$(ls $(ASAN_PY_DIR)/_core*.so)

@@ -5,7 +5,11 @@ sword-tip position, posture; optionally the joint-limit bounds on ``q̇``) are w
 from a ``KinematicState(drift=False)`` computed once, with the references computed
 beforehand: what is timed is the writer calls and :meth:`TaskWriter.targets` alone
 (the references cost the same in every path). Reported as the minimum over ``repeats``
-of the median over ``n_steps`` steps (compile time excluded by a warm-up).
+of the median over ``n_steps`` steps (compile time excluded by a warm-up). ``writers`` picks the compiled row writers the
+:class:`~prioik.robots.TaskWriter` calls: the C++ core's (``prioik._core.rows``, what
+:mod:`prioik.robots.rows` uses) or numba's kernels (``robots/_rows_kernel.py``, the
+oracle they were ported from); :func:`compare_writers` times both interleaved in one
+process.
 
 Run: ``python -m prioik.benchmarks.row_writing``.
 """
@@ -17,11 +21,13 @@ import time
 
 import numpy as np
 
-__all__ = ["time_fencing_rows"]
+__all__ = ["time_fencing_rows", "compare_writers", "compare_writer_calls"]
+
+WRITERS = ("cpp", "numba")
 
 
 def time_fencing_rows(n_steps: int = 300, repeats: int = 7, limits: str = "none",
-                      seed: int = 0) -> dict[str, float]:
+                      seed: int = 0, writers: str = "cpp") -> dict[str, float]:
     """Median per-step time (µs) of writing the G1 fencing rows.
 
     Args:
@@ -30,10 +36,23 @@ def time_fencing_rows(n_steps: int = 300, repeats: int = 7, limits: str = "none"
         limits: ``"none"`` (the five fencing tasks) or ``"bounds"`` (plus the joint-limit
             bounds on ``q̇``).
         seed: Seed of the perturbed standing state.
+        writers: ``"cpp"`` or ``"numba"`` (see the module docstring).
 
     Returns:
         ``{"write_us": ..., "medians_us": [...], "rows": m}``.
     """
+    from prioik.robots import rows as rows_module
+
+    if writers not in WRITERS:
+        raise ValueError(f"writers must be one of {WRITERS}, got {writers!r}")
+    chosen, rows_module._k = rows_module._k, _kernels(writers)
+    try:
+        return _time_fencing_rows(n_steps, repeats, limits, seed)
+    finally:
+        rows_module._k = chosen
+
+
+def _time_fencing_rows(n_steps, repeats, limits, seed) -> dict[str, float]:
     from prioik.robots import KinematicState
     from prioik.robots.fencing import FencingScenario
 
@@ -73,16 +92,106 @@ def time_fencing_rows(n_steps: int = 300, repeats: int = 7, limits: str = "none"
     return {"write_us": min(medians), "medians_us": medians, "rows": writer.layout.m}
 
 
+def compare_writers(n_steps: int = 300, repeats: int = 7, limits: str = "none",
+                    seed: int = 0) -> dict[str, float]:
+    """:func:`time_fencing_rows` of both row writers, one median of each in turn
+    (``repeats`` times): ``{"cpp_us": ..., "numba_us": ..., "ratio": cpp / numba}``,
+    each the smallest of its medians."""
+    medians = {w: [] for w in WRITERS}
+    for _ in range(repeats):
+        for w in WRITERS:
+            medians[w].append(time_fencing_rows(n_steps, 1, limits, seed, w)["write_us"])
+    cpp, numba = min(medians["cpp"]), min(medians["numba"])
+    return {"cpp_us": cpp, "numba_us": numba, "ratio": cpp / numba,
+            "medians_us": medians}
+
+
+def _kernels(writers: str):
+    if writers == "numba":
+        from prioik.robots import _rows_kernel as kernels
+    else:
+        from prioik._core import rows as kernels
+    return kernels
+
+
+def compare_writer_calls(number: int = 5000, repeats: int = 3) -> dict[str, dict]:
+    """Each row writer's own call on the G1 (an acceleration-level writer with a pose, a
+    position, the CoM, posture, both joint-limit forms and a CoM region: ``m = 100``,
+    ``n_v = 35``), C++ and numba in turn on the same arguments: ``{writer: {"cpp_ns",
+    "numba_ns", "ratio"}}``, each the smallest of ``repeats`` means over ``number``
+    calls."""
+    import timeit
+
+    from prioik.robots import KinematicState, TaskWriter, g1
+
+    robot = g1()
+    w = TaskWriter(robot, "acceleration")
+    w.add_frame_pose("pose", "left_foot", gain=(1.0, 1.0))
+    w.add_frame_position("position", "right_foot", gain=(1.0, 1.0))
+    w.add_com("com", gain=(1.0, 1.0))
+    w.add_posture("posture", gain=(1.0, 1.0))
+    w.add_joint_limits("bounds", form="bounds", dt=0.002, horizon=0.05)
+    w.add_joint_limits("activation", form="activation")
+    w.add_com_region("com_region", np.eye(3)[:2], lower=-0.1, upper=0.1, dt=0.002)
+    state = KinematicState(robot, robot.q0, np.random.default_rng(0).normal(size=robot.nv))
+    tasks = {name: w._task(name, None) for name in w.tasks()}
+    _, pose = w._frame_args(tasks["pose"], state)
+    _, position = w._frame_args(tasks["position"], state)
+    views = w._data_views(state)
+    d, Q, z, eye = w.data, w._Q, np.zeros(3), np.eye(3)
+    com, lb, la, cr = tasks["com"], tasks["bounds"], tasks["activation"], tasks["com_region"]
+    reg = cr.region
+    unit = robot.state_sizes()[3]
+    calls = {
+        "frame_rows (pose)": lambda k: k.frame_rows(*pose, z, z, z, eye, z, z),
+        "position_target_rows": lambda k: k.position_target_rows(*position, z),
+        "com_rows": lambda k: k.com_rows(d.A, Q, com.start, views.Jcom, views.com,
+                                         views.acom, com.axes, z[:2], z[:2], z[:2], False),
+        "posture_error": lambda k: k.posture_error(Q, tasks["posture"].start, state.q,
+                                                   robot.q0, w._posture_q),
+        "bounds_at": lambda k: k.bounds_at(d.lower, d.upper, state.q, state.v, w._q_index,
+                                           lb.limits, lb.bound_params, w._qa),
+        "activation_at": lambda k: k.activation_at(d.A, Q, state.q, w._q_index, la.limits,
+                                                   la.bound_params, w._qa),
+        "region_rows (CoM)": lambda k: k.region_rows(
+            d.A, d.lower, d.upper, cr.start, reg.C, views.Jcom, views.com, 1.0, state.v,
+            views.acom, reg.lower, reg.upper, reg.y, reg.yd, reg.no_speed_limit,
+            reg.horizon, reg.dt, True),
+        "acceleration_targets": lambda k: k.acceleration_targets(d.A, d.b, Q, state.v),
+        "velocity_targets": lambda k: k.velocity_targets(d.b, Q),
+        "state_is_valid": lambda k: k.state_is_valid(state.q, state.v, unit, 1e-6),
+    }
+    out = {}
+    for name, call in calls.items():
+        best = {}
+        for writers in WRITERS:
+            call(_kernels(writers))                      # compiled (numba) and warm
+        for _ in range(repeats):
+            for writers in WRITERS:
+                k = _kernels(writers)
+                t = timeit.timeit(lambda: call(k), number=number) / number * 1e9
+                best[writers] = min(best.get(writers, t), t)
+        out[name] = {"cpp_ns": best["cpp"], "numba_ns": best["numba"],
+                     "ratio": best["cpp"] / best["numba"]}
+    return out
+
+
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=300)
     parser.add_argument("--repeats", type=int, default=7)
+    parser.add_argument("--calls", action="store_true",
+                        help="also each writer's own call, C++ against numba")
     args = parser.parse_args(argv)
     for limits in ("none", "bounds"):
-        r = time_fencing_rows(args.steps, args.repeats, limits)
-        print(f"G1 fencing rows, limits={limits} ({r['rows']} rows): "
-              f"{r['write_us']:.2f} µs per step (min of {args.repeats} medians over "
-              f"{args.steps} steps)")
+        r = compare_writers(args.steps, args.repeats, limits)
+        print(f"G1 fencing rows, limits={limits}: C++ {r['cpp_us']:.2f} µs, numba "
+              f"{r['numba_us']:.2f} µs per step, C++/numba {r['ratio']:.2f} (min of "
+              f"{args.repeats} interleaved medians over {args.steps} steps)")
+    if args.calls:
+        for name, r in compare_writer_calls().items():
+            print(f"  {name:22s} C++ {r['cpp_ns']:6.0f} ns, numba {r['numba_ns']:6.0f} ns, "
+                  f"C++/numba {r['ratio']:.2f}")
 
 
 if __name__ == "__main__":

@@ -1,10 +1,11 @@
-"""Compiled row writers of :class:`robots.rows.TaskWriter` (numba).
+"""The row writers of :class:`robots.rows.TaskWriter` in numba: the oracle of the C++
+writers it calls (``prioik._core.rows``, ``core/src/rows.cpp``, the same operations in the
+same order), which ``tests/test_rows_cpp.py`` compares with these.
 
 Each function writes one task's rows of a :class:`~prioik.hierarchy.StackData` and its
 per-row error, reference velocity and feed-forward from views of a ``pin.Data``
 (joint Jacobians ``data.J``, frame placements ``data.oMf``, ``data.Jcom``,
-``data.com[0]``), so that one task costs one call. The readable versions are the
-builders of :mod:`robots.tasks`; ``tests/test_rows.py`` compares both.
+``data.com[0]``), so that one task costs one call.
 """
 
 from __future__ import annotations

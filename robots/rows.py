@@ -23,8 +23,8 @@ position limits, the velocity limits or both, for the inequality formulations), 
 regions (inequality tasks keeping a frame's point or the centre of mass inside
 ``lower ≤ C p ≤ upper``).
 
-Each writer is one compiled call (:mod:`robots._rows_kernel`) on views of the state's
-``pin.Data`` — the world-frame joint Jacobians ``data.J`` (a frame's
+Each writer is one compiled call (``prioik._core.rows``, C++: ``core/src/rows.cpp``) on
+views of the state's ``pin.Data`` — the world-frame joint Jacobians ``data.J`` (a frame's
 LOCAL_WORLD_ALIGNED Jacobian is formed from them), ``data.oMf``, ``data.Jcom``,
 ``data.com[0]``, and for the drifts the joints' spatial velocities and accelerations at
 ``q̈ = 0`` ``data.v``, ``data.a`` and ``data.acom[0]`` — taken once per ``Data``.
@@ -44,7 +44,7 @@ import pinocchio as pin
 
 from prioik.hierarchy import StackData, StackLayout, TaskStackError
 
-from . import _rows_kernel as _k
+from prioik._core import rows as _k
 from .models import RobotModel
 
 __all__ = ["MODES", "TaskWriter", "JointLimitActivation"]
@@ -380,7 +380,7 @@ class TaskWriter:
                 the bounds; at acceleration level ``C J q̈`` such that the
                 constant-acceleration path of ``C p`` is within them at ``T`` and after
                 the next step ``dt``, braking of at least ``ẏ²/2d`` where the path would
-                peak before ``T`` (:func:`robots._rows_kernel.acceleration_bounds` with no
+                peak before ``T`` (``prioik._core.rows.acceleration_bounds`` with no
                 speed limit), the drift ``C J̇ q̇`` taken off.
         """
         fid = self.robot.frame_id(frame)              # KeyError naming a missing frame
@@ -724,7 +724,7 @@ class TaskWriter:
                 upper) -> None:
         """``C J_p`` into the task's rows, bounds on ``C J_p q̇`` (velocity level) or
         ``C J_p q̈`` (acceleration level, ``drift`` = ``J̇_p q̇``) from ``C p`` (``p`` given
-        as ``psign · p``) and its rate: :func:`robots._rows_kernel.region_rows`."""
+        as ``psign · p``) and its rate: ``prioik._core.rows.region_rows``."""
         reg = task.region
         if normals is not None or lower is not None or upper is not None:
             reg.update(task.name, normals, lower, upper)

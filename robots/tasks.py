@@ -33,9 +33,9 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from prioik._core import rows as _core_rows
 from prioik.hierarchy import Task, TaskStackError
 
-from . import _rows_kernel as _rk
 from .models import UNIT_NORM_TOL, RobotModel, check_configuration, check_velocity
 from .references import Reference
 from .rows import JointLimitActivation, TaskWriter
@@ -50,7 +50,7 @@ _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
 
 _F64 = np.dtype(np.float64)
 _NDARRAY = np.ndarray
-_state_is_valid = _rk.state_is_valid
+_state_is_valid = _core_rows.state_is_valid
 _joint_jacobians = pin.computeJointJacobians
 _frame_placements = pin.updateFramePlacements
 _center_of_mass = pin.centerOfMass

@@ -186,6 +186,33 @@ def nan_in_active_set_task():
     data.A[0, 0] = np.nan
     return F.prepare(stack.layout, "hierarchical_active_set", kernel="cpp").solve(data)
 api("core", "prepare(hierarchical_active_set, kernel='cpp') on NaN data", nan_in_active_set_task, "task 'a'")
+# the row writers (prioik._core.rows): a valid frame_rows call, one argument spoilt
+R = core.rows
+frame = dict(A=np.zeros((6, 4)), Q=np.zeros((6, 6)), J=np.ones((6, 4)), t=np.zeros(3),
+             R=np.eye(3), spec=np.array([0, 2, 1, 0, 3]), geo=np.zeros((5, 3)),
+             aj=np.zeros(6), vj=np.zeros(6), x=np.zeros(3), xd=np.zeros(3), xdd=np.zeros(3),
+             Rstar=np.eye(3), w=np.zeros(3), wd=np.zeros(3))
+for name, key, value, word in (
+        ("A list", "A", np.zeros((6, 4)).tolist(), "A must be a writable float64"),
+        ("A read-only", "A", np.zeros((6, 4)).view(), "A must be a writable"),
+        ("J float32", "J", np.ones((6, 4), dtype=np.float32), "J must be float64"),
+        ("J wrong columns", "J", np.ones((6, 5)), "J must have shape"),
+        ("spec float", "spec", np.array([0.0, 2, 1, 0, 3]), "spec must be int64"),
+        ("spec column 9", "spec", np.array([0, 2, 1, 0, 9]), "spec[4] = 9"),
+        ("spec rows past A", "spec", np.array([3, 2, 1, 0]), "outside A's 6 rows"),
+        ("x None", "x", None, "x must be a float64"),
+        ("Rstar 2-D of 2", "Rstar", np.eye(2), "Rstar must have shape")):
+    bad = dict(frame, **{key: value})
+    if name == "A read-only":
+        bad["A"].setflags(write=False)
+    api("core", f"rows.frame_rows {name}", lambda bad=bad: R.frame_rows(**bad), word)
+api("core", "rows.posture_error iq past q", lambda: R.posture_error(
+    np.zeros((6, 3)), 0, np.zeros(4), np.zeros(4), np.array([0, 4])), "iq[1] = 4")
+api("core", "rows.state_is_valid unit odd", lambda: R.state_is_valid(
+    np.ones(4), np.ones(3), np.array([0, 4, 1]), 1e-6), "unit must hold")
+api("core", "rows.bounds_at row start 0.5", lambda: R.bounds_at(
+    np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3), np.array([0, 1, 2]),
+    np.zeros((3, 3)), np.array([0.5, 0.1, 0.1, 1, 1, 0]), np.zeros(3)), "params[0]")
 
 # ---------------------------------------------------------------- CLI
 tmp = tempfile.mkdtemp()

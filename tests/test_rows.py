@@ -19,7 +19,7 @@ from prioik.robots import (JointLimitActivation, KinematicState, Reference, Task
                            joint_velocity_bounds, panda, point_position, posture,
                            spatial_chain)
 from prioik.robots import com_region, frame_region
-from prioik.robots import _rows_kernel as _k
+from prioik._core import rows as _k          # the row writers robots.rows calls
 from prioik.robots.fencing import FencingScenario
 
 #: the two paths do the same arithmetic in another order: rows agree to rounding

@@ -17,6 +17,7 @@
 
 #include "prioik/build_info.hpp"
 #include "prioik/extended_jacobian.hpp"
+#include "rows_bindings.hpp"
 
 namespace nb = nanobind;
 using prioik::Index;
@@ -290,4 +291,6 @@ NB_MODULE(_core, m) {
       .def_prop_ro("cols", &ExtendedJacobian::cols)
       .def_prop_ro("levels", &ExtendedJacobian::levels)
       .def_prop_ro("trust_region", &ExtendedJacobian::trust_region);
+
+  register_rows(m);
 }

@@ -1,0 +1,73 @@
+"""The row writers' Python tests on a sanitized build of ``prioik._core``.
+
+Run by ``make asan-bindings``: ``python core/tests/sanitized_rows.py PATH`` with
+``PATH`` the extension built with ``-fsanitize=address,undefined``
+(``PRIOIK_SANITIZE=ON``, ``PRIOIK_PYTHON=ON``) and the sanitizer runtimes preloaded. It
+loads that build as ``prioik._core`` and runs, from ``tests/test_rows_cpp.py``, every
+writer against numba's on the Panda, G1 and TALOS at both levels, log3, the bound and
+activation formulas, the bad inputs and 40 seeds of the boundary fuzz; a sanitizer
+report aborts the process.
+"""
+
+import importlib.util
+import pathlib
+import sys
+
+
+def load_core(path: str):
+    """The extension at ``path`` as ``prioik._core`` (before anything imports it)."""
+    import prioik
+    spec = importlib.util.spec_from_file_location("prioik._core", path)
+    core = importlib.util.module_from_spec(spec)
+    sys.modules["prioik._core"] = core
+    spec.loader.exec_module(core)
+    prioik._core = core
+    return core
+
+
+def main(path: str) -> None:
+    core = load_core(path)
+    import numpy as np
+    from prioik.robots import KinematicState, TaskWriter, g1, panda, talos
+    from prioik.robots import rows as rows_module
+    from prioik.robots import tasks as tasks_module
+
+    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[2] / "tests"))
+    import test_rows_cpp as t
+    assert t.cpp_rows is core.rows and rows_module._k is core.rows
+
+    def use(kernels):
+        rows_module._k = kernels
+        tasks_module._state_is_valid = kernels.state_is_valid
+
+    robots = {"panda": panda(), "g1": g1(), "talos": talos()}
+    for name in robots:
+        for mode in ("velocity", "acceleration"):
+            use(core.rows)
+            t.test_every_writer_equals_numba(robots, lambda: use(t.numba_rows), name, mode)
+    use(core.rows)
+    for theta in t.THETAS:
+        t.test_log3_equals_numba_near_zero_and_pi(theta)
+    for seed in range(20):
+        t.test_bound_formulas_equal_numba(seed)
+    for seed in range(10):
+        t.test_activation_rows_equal_numba(seed)
+    robot = robots["g1"]
+    writer = TaskWriter(robot, "acceleration")
+    writer.add_frame_pose("pose", "left_foot", gain=(1.0, 1.0))
+    state = KinematicState(robot, robot.q0, np.zeros(robot.nv))
+    _, args = writer._frame_args(writer._task("pose", "pose"), state)
+    call = dict(zip(("A", "Q", "J", "t", "R", "spec", "geo", "aj", "vj"), args))
+    call.update(x=np.zeros(3), xd=np.zeros(3), xdd=np.zeros(3), Rstar=np.eye(3),
+                w=np.zeros(3), wd=np.zeros(3))
+    for case in t.test_bad_input_raises_prioiks_error.pytestmark[0].args[1]:
+        t.test_bad_input_raises_prioiks_error(*case)
+    t.test_strided_views_are_read_as_they_are(call)
+    t.test_other_buffers_give_the_same_rows(call)
+    for seed in range(40):
+        t.test_the_bindings_refuse_or_take_any_array_without_harm(call, seed)
+    print("sanitized prioik._core.rows: the oracle, the bad inputs and 40 fuzz seeds passed")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1])
