@@ -92,6 +92,15 @@ def placo_balance(robot, setup: dict[str, Any], steps: int):
     """PlaCo's solver for the same task; returns ``(step, states, reset)`` as
     :func:`prioik.benchmarks.panda_step.placo_panda`: one PlaCo step, PlaCo's own
     ``steps`` configurations from ``q0``, and a reset to ``q0`` (done once here)."""
+    return placo_feet(robot, setup, steps, DT, balance=True)
+
+
+def placo_feet(robot, setup: dict[str, Any], steps: int, dt: float, *, balance: bool):
+    """PlaCo's ``KinematicsSolver`` on the G1 with both feet held (hard), the CoM in the
+    feet's support polygon when ``balance`` (hard, :data:`MARGIN` inside), the left hand
+    reaching ``setup["target"]`` (soft, 1), the joints at ``q0`` (soft, 1e-4), its joint
+    and velocity limits, step ``dt``; returns ``(step, states, reset)`` as
+    :func:`placo_balance`."""
     import placo
     from scipy.spatial import ConvexHull
 
@@ -106,14 +115,15 @@ def placo_balance(robot, setup: dict[str, Any], steps: int):
     solver = placo.KinematicsSolver(pw)
     solver.enable_joint_limits(True)
     solver.enable_velocity_limits(True)
-    solver.dt = DT
+    solver.dt = dt
     for f in FEET:
         solver.add_frame_task(frames[f], setup["places"][f].homogeneous).configure(
             f, "hard", 1.0, 1.0)
-    soles = setup["soles"][:, :2]
-    hull = soles[ConvexHull(soles).vertices][::-1]           # PlaCo's order: clockwise
-    solver.add_com_polygon_constraint([np.array(v) for v in hull], MARGIN).configure(
-        "balance", "hard", 1.0)
+    if balance:
+        soles = setup["soles"][:, :2]
+        hull = soles[ConvexHull(soles).vertices][::-1]           # PlaCo's order: clockwise
+        solver.add_com_polygon_constraint([np.array(v) for v in hull], MARGIN).configure(
+            "balance", "hard", 1.0)
     solver.add_position_task(frames["left_hand"], setup["target"]).configure(
         "reach", "soft", 1.0)
     joints = solver.add_joints_task()

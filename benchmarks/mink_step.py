@@ -30,7 +30,6 @@ own kinematics. mink's QP back-end is ``solver`` (default
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -131,50 +130,6 @@ def panda_mink_step(steps: int = 300, rounds: int = 7, solver: str | None = None
                            "joint_limit_violation_rad": violation}
 
 
-def _placo_feet(robot, setup: dict[str, Any], steps: int, dt: float):
-    """PlaCo on the G1 with both feet held (hard), the hand soft (1), the joints soft
-    (1e-4), its joint and velocity limits; ``(step, states, reset)`` as
-    :func:`prioik.benchmarks.panda_step.placo_panda`."""
-    import placo
-
-    from prioik.robots.models import example_robot_data_dir
-
-    from .balance_step import FEET
-    share = example_robot_data_dir().parent.parent
-    pw = placo.RobotWrapper(str(share), placo.Flags.ignore_collisions,
-                            Path(robot.source).read_text())
-    pw.state.q = robot.q0.copy()
-    pw.update_kinematics()
-    solver = placo.KinematicsSolver(pw)
-    solver.enable_joint_limits(True)
-    solver.enable_velocity_limits(True)
-    solver.dt = dt
-    for f in FEET:
-        solver.add_frame_task(robot.frames[f], setup["places"][f].homogeneous).configure(
-            f, "hard", 1.0, 1.0)
-    solver.add_position_task(robot.frames["left_hand"], setup["target"]).configure(
-        "reach", "soft", 1.0)
-    joints = solver.add_joints_task()
-    model = robot.model
-    joints.set_joints({n: float(robot.q0[model.joints[model.getJointId(n)].idx_q])
-                       for n in list(model.names)[2:]})
-    joints.configure("posture", "soft", 1e-4)
-    states = []
-    for _ in range(steps):
-        states.append(np.array(pw.state.q))
-        pw.update_kinematics()
-        solver.solve(True)
-
-    def reset() -> None:
-        pw.state.q = robot.q0.copy()
-
-    def step(_i: int = 0) -> None:
-        pw.update_kinematics()
-        solver.solve(True)
-    reset()
-    return step, states, reset
-
-
 def g1_feet_mink_step(steps: int = 300, rounds: int = 5, solver: str | None = None
                       ) -> dict[str, Any]:
     """Median step times (µs) of mink, prioik and PlaCo on the G1 with both feet held
@@ -185,7 +140,7 @@ def g1_feet_mink_step(steps: int = 300, rounds: int = 5, solver: str | None = No
     import prioik
     from prioik.robots import KinematicState, TaskWriter, load
 
-    from .balance_step import DT, FEET, balance_setup
+    from .balance_step import DT, FEET, balance_setup, placo_feet
     from .mink_baseline import DEFAULT_SOLVER
     from .panda_step import _rounds
 
@@ -193,7 +148,7 @@ def g1_feet_mink_step(steps: int = 300, rounds: int = 5, solver: str | None = No
     robot = load("g1")
     setup = balance_setup(robot)
     places, target, q0 = setup["places"], setup["target"], robot.q0
-    placo_step, states, placo_reset = _placo_feet(robot, setup, steps, DT)
+    placo_step, states, placo_reset = placo_feet(robot, setup, steps, DT, balance=False)
     mink_solve, mink_advance = _mink(robot, None, robot.frames["left_hand"], target,
                           {robot.frames[f]: places[f] for f in FEET}, solver)
 
