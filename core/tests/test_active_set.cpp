@@ -11,6 +11,7 @@
 
 #include "prioik/active_set.hpp"
 #include "prioik/extended_jacobian.hpp"
+#include "check.hpp"
 
 using prioik::ActiveSetLayout;
 using prioik::ActiveSetOptions;
@@ -19,16 +20,6 @@ using prioik::SolveCode;
 using I = std::int64_t;
 
 namespace {
-
-int failures = 0;
-
-#define CHECK(cond)                                                          \
-  do {                                                                       \
-    if (!(cond)) {                                                           \
-      std::printf("FAILED %s:%d: %s\n", __FILE__, __LINE__, #cond);          \
-      ++failures;                                                            \
-    }                                                                        \
-  } while (0)
 
 /// A stack's rows: A (M × n), targets, bounds, √w, and its layout.
 struct Stack {
@@ -174,8 +165,8 @@ int main() {
   inequality_stacks_solve_the_same_cold_and_warm();
   invalid_values_are_not_solved();
   a_malformed_layout_is_refused();
-  if (failures) {
-    std::printf("%d failure(s)\n", failures);
+  if (prioik_test::failures) {
+    std::printf("%d failure(s)\n", prioik_test::failures);
     return 1;
   }
   std::printf("active set: all passed\n");

@@ -11,22 +11,13 @@
 
 #include "prioik/extended_jacobian.hpp"
 #include "prioik/householder.hpp"
+#include "check.hpp"
 
 using prioik::Index;
 using Mat = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 using Vec = Eigen::VectorXd;
 
 namespace {
-
-int failures = 0;
-
-#define CHECK(cond)                                                          \
-  do {                                                                       \
-    if (!(cond)) {                                                           \
-      std::printf("FAILED %s:%d: %s\n", __FILE__, __LINE__, #cond);          \
-      ++failures;                                                            \
-    }                                                                        \
-  } while (0)
 
 Mat random_matrix(std::mt19937& rng, Index rows, Index cols) {
   std::normal_distribution<double> g;
@@ -266,6 +257,6 @@ int main() {
   test_batch_equals_single_solves();
   test_bad_input_throws_input_error();
   test_extreme_scale_is_reported_not_solved();
-  std::printf(failures == 0 ? "core tests: all passed\n" : "core tests: %d failed\n", failures);
-  return failures == 0 ? 0 : 1;
+  std::printf(prioik_test::failures == 0 ? "core tests: all passed\n" : "core tests: %d failed\n", prioik_test::failures);
+  return prioik_test::failures == 0 ? 0 : 1;
 }

@@ -10,22 +10,13 @@
 #include <vector>
 
 #include "prioik/rows.hpp"
+#include "check.hpp"
 
 using namespace prioik::rows;
 using RowMat = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 using ColMat = Eigen::MatrixXd;
 
 namespace {
-
-int failures = 0;
-
-#define CHECK(cond)                                                          \
-  do {                                                                       \
-    if (!(cond)) {                                                           \
-      std::printf("FAILED %s:%d: %s\n", __FILE__, __LINE__, #cond);          \
-      ++failures;                                                            \
-    }                                                                        \
-  } while (0)
 
 template <class M>
 Matrix view(M& m) {
@@ -163,6 +154,6 @@ int main() {
   test_frame_rows_equal_eigens_cross_products();
   test_bounds_and_activation_formulas();
   test_state_is_valid();
-  std::printf(failures == 0 ? "row tests: all passed\n" : "row tests: %d failed\n", failures);
-  return failures == 0 ? 0 : 1;
+  std::printf(prioik_test::failures == 0 ? "row tests: all passed\n" : "row tests: %d failed\n", prioik_test::failures);
+  return prioik_test::failures == 0 ? 0 : 1;
 }
