@@ -491,7 +491,11 @@ def build_level_qp(rows: LevelRows | None, fixed: Fixed, fixing: str, eps: float
         q = np.zeros(ny + me + mi)
         q[:ny] = damp * (Z.T @ x0)                        # μ²‖x0 + Z y‖² up to a constant
     nz = ny + me + mi
-    E, e, G, h, G_x = [], [], [], [], []
+    E: list[np.ndarray] = []
+    e: list[np.ndarray] = []
+    G: list[np.ndarray] = []
+    h: list[np.ndarray] = []
+    G_x: list[np.ndarray] = []
     if rows is not None and me:
         # √W A (x0 + Z y) − r = √W b
         blk = np.zeros((me, nz))
@@ -633,6 +637,8 @@ ACTIVE_TOL = 1e-7
 
 def strongly_active(qp: LevelQP, z: np.ndarray, lam: np.ndarray) -> np.ndarray:
     """Unit ``x``-space rows of the inequality constraints strongly active at ``z``."""
+    if qp.G is None or qp.h is None or qp.G_x is None:      # (no inequality constraint)
+        return np.zeros((0, qp.x0.shape[0]))
     slack = qp.h - qp.G @ z
     lam_tol = MULTIPLIER_TOL * max(1.0, float(np.max(np.abs(lam), initial=0.0)))
     act = (lam > lam_tol) & (slack <= ACTIVE_TOL * np.maximum(1.0, np.abs(qp.h)))

@@ -297,7 +297,10 @@ class Prepared:
                 the rows' squares overflow.
         """
         out = self.solve_checked(data)
-        return Outcome(*out, True) if type(out) is tuple else out
+        if isinstance(out, tuple):
+            x, status, info, residuals = out
+            return Outcome(x, status, info, residuals=residuals, checked=True)
+        return out
 
     def solve_checked(self, data: StackData) -> tuple | Outcome:
         """:meth:`solve`, its common case (the compiled kernel's answer, finite, every

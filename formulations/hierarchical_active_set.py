@@ -339,7 +339,7 @@ class Prepared:
             TaskStackError: a value is not valid (naming the task, level and row).
         """
         out = self.solve_checked(data)
-        if type(out) is tuple:
+        if isinstance(out, tuple):
             x, status, info, residuals = out
             return Outcome(x, status, info, residuals=residuals, checked=True)
         return out

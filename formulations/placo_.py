@@ -163,14 +163,14 @@ def solve(stack: TaskStack, *, weight_ratio: float | None, regularization: float
     try:
         problem.solve()
     except RuntimeError as exc:
-        j = _hard_infeasible_level(stack, float(regularization))
-        if j is None:
+        bad = _hard_infeasible_level(stack, float(regularization))
+        if bad is None:
             info.update(message=f"PlaCo failed: {exc}", failed_level=None, failed_tasks=[])
         else:
-            names = [t.name for lvl in stack.levels[:j + 1] for t in lvl if not t.is_equality]
-            info.update(message=f"PlaCo failed: {exc}; the hard inequalities of levels 0..{j} "
+            names = [t.name for lvl in stack.levels[:bad + 1] for t in lvl if not t.is_equality]
+            info.update(message=f"PlaCo failed: {exc}; the hard inequalities of levels 0..{bad} "
                                 f"({', '.join(names)}) cannot hold together",
-                        failed_level=j, failed_tasks=[t.name for t in stack.levels[j]
+                        failed_level=bad, failed_tasks=[t.name for t in stack.levels[bad]
                                                       if not t.is_equality])
         return Outcome(np.full(n, np.nan), "failed", info)
     exact = len(stack) <= 2 and first.is_equality and not low_inequality

@@ -20,7 +20,7 @@ from __future__ import annotations
 import threading
 import time
 from types import ModuleType
-from typing import Any, Sequence
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 
@@ -31,7 +31,10 @@ from prioik.hierarchy.linalg import PRECISION_LIMIT_NORM
 from .base import (STATUSES, Capabilities, ConcurrentUseError, FormulationError, Outcome,
                    Solution, in_original_units, precision_status)
 
-__all__ = ["BatchSolution", "PreparedSolver", "check_layout_support", "check_support"]
+if TYPE_CHECKING:
+    from .registry import BatchSolution
+
+__all__ = ["PreparedSolver", "check_layout_support", "check_support"]
 
 _clock = time.perf_counter
 

@@ -31,6 +31,8 @@ from dataclasses import dataclass, field
 from types import ModuleType
 from typing import Any, Callable
 
+import numpy as np
+
 from prioik.extras import install_hint
 from prioik.hierarchy import StackData, StackLayout, TaskStack
 

@@ -212,7 +212,8 @@ def solve(stack: TaskStack, *, rcond: float = DEFAULT_RCOND, bound_tolerance: fl
             ambiguous.append(li + first)
         rank_avail = int(sv.size)
         res_free = float(np.linalg.norm(J @ x_free - b))
-        s_level, sat, rounds = 1.0, [], 0
+        s_level, rounds = 1.0, 0
+        sat: list[int] = []
         if rank_avail == 0:
             x_new = x
         elif feasible(x_free):

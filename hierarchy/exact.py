@@ -36,6 +36,7 @@ It is a truth, not a solver: pure-Python extended precision, seconds for ``n`` 4
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -75,7 +76,7 @@ class ExactOptimum:
     ambiguous_levels: list[int] = field(default_factory=list)
     sigma_ratio: np.ndarray | None = None
     _rows: list = field(default_factory=list, repr=False)
-    _ctx: object = field(default=None, repr=False)
+    _ctx: Any = field(default=None, repr=False)
 
     @property
     def ambiguous(self) -> bool:

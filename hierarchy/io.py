@@ -80,9 +80,9 @@ def stack_from_dict(data: dict[str, Any]) -> TaskStack:
                                      level=i)
             if "A" not in t:
                 raise TaskStackError("missing 'A'", task=name, level=i)
-            unknown = set(t) - set(TASK_KEYS)
-            if unknown:
-                raise TaskStackError(f"unknown keys {sorted(unknown)}", task=name, level=i)
+            extra = set(t) - set(TASK_KEYS)
+            if extra:
+                raise TaskStackError(f"unknown keys {sorted(extra)}", task=name, level=i)
             try:
                 tasks.append(Task(name, t["A"], t.get("b"),
                                   lower=_bound(t.get("lower"), name, "lower", -1.0),
@@ -331,7 +331,7 @@ def load_lexls(path: str | Path) -> PeerProblem:
         key = lines[i].strip()
         i += 1
         if key in ("#SolGuess", "#Solution"):
-            tok: list[str] = []
+            tok = []
             while i < len(lines) and len(tok) < n:
                 tok += lines[i].split()
                 i += 1
@@ -404,7 +404,7 @@ def _soth_problem(block: list[list[str]], where: str, name: str) -> PeerProblem:
         n = int(block[0][2])
     except (IndexError, ValueError):
         raise TaskStackError(f"{where}: 'variable size N' needs an integer N") from None
-    levels = []
+    levels: list = []
     i = 1
     while i < len(block):
         if block[i] != ["level"]:

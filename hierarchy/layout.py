@@ -25,12 +25,15 @@ way the rows were written.
 from __future__ import annotations
 
 import weakref
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
 from .errors import TaskStackError
 from .linalg import DEFAULT_CERTIFICATE_TOL, X_PRECISION
+
+if TYPE_CHECKING:
+    from .stack import TaskStack
 
 __all__ = ["KINDS", "StackData", "StackLayout", "level_residuals", "precision_limited_levels",
            "precision_reason"]
@@ -283,7 +286,7 @@ class StackData:
         self.lower = np.full(m, -np.inf)
         self.upper = np.full(m, np.inf)
         self.sqrt_weight = np.ones(m)
-        self._source = None      # the TaskStack whose frozen data this is
+        self._source: TaskStack | None = None   # the TaskStack whose frozen data this is
 
     @property
     def n(self) -> int:

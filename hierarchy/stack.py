@@ -47,7 +47,7 @@ class TaskStack:
             raise TaskStackError("the stack is empty: give at least one level")
         parsed: list[Level] = []
         seen: dict[str, int] = {}
-        n = None
+        n: int | None = None
         for i, item in enumerate(raw):
             try:
                 level = Level.of(item)
@@ -65,9 +65,10 @@ class TaskStack:
                 seen[task.name] = i
             parsed.append(level)
         self._levels = tuple(parsed)
+        assert n is not None            # (a non-empty level has a task)
         self._n = int(n)
-        self._layout = None
-        self._data = None
+        self._layout: StackLayout | None = None
+        self._data: StackData | None = None
 
     # ------------------------------------------------------------------ access
     @property
