@@ -111,7 +111,7 @@ def panda_mink_step(steps: int = 300, rounds: int = 7, solver: str | None = None
     paths = {"prioik": lambda i: prioik_solve(states[i]),
              "mink": lambda i: mink_solve(states[i], DT),
              "placo": placo_step}
-    for name, path in paths.items():          # warm-up: JIT, caches
+    for path in paths.values():               # warm-up: caches
         for i in range(min(50, steps)):
             path(i)
     placo_reset()
@@ -177,7 +177,7 @@ def g1_feet_mink_step(steps: int = 300, rounds: int = 5, solver: str | None = No
     paths = {"prioik": lambda i: prioik_solve(states[i]),
              "mink": lambda i: mink_solve(states[i], DT),
              "placo": placo_step}
-    for name, path in paths.items():
+    for path in paths.values():
         for i in range(min(50, steps)):
             path(i)
     placo_reset()

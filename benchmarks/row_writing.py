@@ -80,6 +80,7 @@ def writer_calls(number: int = 5000, repeats: int = 3) -> dict[str, float]:
     position, the CoM, posture, both joint-limit forms and a CoM region: ``m = 100``,
     ``n_v = 35``): ``{writer: ns}``, the smallest of ``repeats`` means over ``number``
     calls."""
+    import functools
     import timeit
 
     from prioik._core import rows as k
@@ -125,8 +126,8 @@ def writer_calls(number: int = 5000, repeats: int = 3) -> dict[str, float]:
     out = {}
     for name, call in calls.items():
         call(k)                                          # warm
-        out[name] = min(timeit.timeit(lambda: call(k), number=number) / number * 1e9
-                        for _ in range(repeats))
+        out[name] = min(timeit.timeit(functools.partial(call, k), number=number)
+                        / number * 1e9 for _ in range(repeats))
     return out
 
 

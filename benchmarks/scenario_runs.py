@@ -369,7 +369,7 @@ def run_scenario(scenario: str, variants: list[str], out, labels: str | None = N
                                        duration * len(started), progress)
         simulated = [0.0]
 
-        def on_turn(steps: int) -> None:
+        def on_turn(steps: int, simulated=simulated, tick=tick) -> None:
             simulated[0] += steps * dt
             tick(simulated[0])
 

@@ -88,7 +88,7 @@ def weighted(rng: np.random.Generator, n: int, k: int) -> TaskStack:
     """Like :func:`conflicting`, with two weighted tasks sharing each level."""
     base = conflicting(rng, n, k)
     levels = []
-    for i, level in enumerate(base.levels):
+    for level in base.levels:
         t = level[0]
         if t.m >= 2:
             h = t.m // 2

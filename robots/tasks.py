@@ -279,7 +279,7 @@ def _writer(state: KinematicState, key: tuple, declare, mode: str | None = None
             cache.clear()
         w = TaskWriter(robot, mode)
         declare(w, (0.0, 0.0) if mode == "acceleration" else 0.0)
-        w.layout
+        _ = w.layout                       # (the layout built once, here)
         entry = cache[full] = (robot, w)
     return entry[1]
 
@@ -493,15 +493,17 @@ def _turn(o, a, b) -> float:
 
 
 # ------------------------------------------------------------------ joint limits
-def joint_limit_rows(state: KinematicState, params: JointLimitActivation = JointLimitActivation(),
+def joint_limit_rows(state: KinematicState, params: JointLimitActivation | None = None,
                      name: str = "joint_limits", mode: str = "acceleration") -> Task | None:
     """Equality form of joint limits: one row per joint inside its margin (see
     :class:`JointLimitActivation`), or ``None`` when no joint is. ``mode``
     ``"acceleration"``: ``q̈_j = ± s (K_p y − K_d ẏ)``; ``"velocity"``: ``q̇_j = ± s k y``.
 
     The task's rows are unit rows on the actuated joints' columns (the active rows of
-    the writer's fixed-size, masked task).
+    the writer's fixed-size, masked task). ``params`` defaults to
+    ``JointLimitActivation()``.
     """
+    params = JointLimitActivation() if params is None else params
     w = _writer(state, ("limits", "activation", params), lambda w, g: w.add_joint_limits(
         _T, form="activation", activation=params), mode)
     if w.joint_limits(state, _T) == 0:

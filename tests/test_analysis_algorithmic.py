@@ -34,7 +34,10 @@ def test_split_matches_eq_19_20_and_rank_profile(family, seed):
         np.testing.assert_allclose(sp.J_feasible, sp.feasible.T @ A, atol=1e-12)
         np.testing.assert_allclose(sp.h_feasible, sp.feasible.T @ level.b, atol=1e-12)
         scale = max(np.linalg.norm(above), np.linalg.norm(A))
-        rank = lambda X: matrix_rank(X, 1e-9 * scale / max(np.linalg.norm(X), 1e-300))
+
+        def rank(X, scale=scale):
+            return matrix_rank(X, 1e-9 * scale / max(np.linalg.norm(X), 1e-300))
+
         base = rank(above) if above.size else 0
         # eq. 19: the feasible rows add as much rank as the whole level ...
         assert rank(np.vstack([above, sp.J_feasible])) == rank(np.vstack([above, A]))
@@ -137,11 +140,11 @@ def test_property_error_is_a_projection_of_the_residual(seed, n, k, family):
     rng = np.random.default_rng(seed)
     stack = FAMILIES[family](rng, n, k)
     x = rng.standard_normal(n)
-    residual = np.array([np.linalg.norm(l.A @ x - l.b) for l in stack.levels])
+    residual = np.array([np.linalg.norm(lv.A @ x - lv.b) for lv in stack.levels])
     err = algorithmic_error_norms(stack, x)
     assert err.shape == (len(stack),) and np.isfinite(err).all()
     assert (err <= residual * (1 + 1e-12) + 1e-300).all()
     ref = formulations.solve(stack, "reference").x
-    scale = np.array([np.linalg.norm(l.A) * np.linalg.norm(ref) + np.linalg.norm(l.b)
-                      for l in stack.levels])
+    scale = np.array([np.linalg.norm(lv.A) * np.linalg.norm(ref) + np.linalg.norm(lv.b)
+                      for lv in stack.levels])
     assert (algorithmic_error_norms(stack, ref) <= 1e-9 * np.maximum(scale, 1e-300)).all()

@@ -62,9 +62,9 @@ def test_damped_is_bounded_near_singularity_and_tends_to_reference(path):
     assert max(norms) <= 1.0 / (2 * np.sqrt(lam)) + 1.0
     stack = near_singular(0.3)
     ref = formulations.solve(stack, "reference").x
-    errs = [np.linalg.norm(formulations.solve(stack, "extended_jacobian", damping=l,
+    errs = [np.linalg.norm(formulations.solve(stack, "extended_jacobian", damping=mu,
                                               nullspace=nullspace).x - ref)
-            for l in (1e-2, 1e-4, 1e-6, 1e-8)]
+            for mu in (1e-2, 1e-4, 1e-6, 1e-8)]
     assert all(b < a for a, b in zip(errs, errs[1:]))
     assert errs[-1] < 1e-6
 

@@ -97,7 +97,7 @@ def kkt_report(stack: TaskStack, x: np.ndarray, active_tol: float = 1e-8) -> lis
     for i in range(len(stack)):
         g = np.zeros(stack.n)
         fro2, t2 = 0.0, 0.0
-        for a, lo, up, eq, lev in rows:
+        for a, lo, up, _eq, lev in rows:
             if lev != i:
                 continue
             r = float(a @ x)
@@ -336,11 +336,11 @@ def test_redundant_and_degenerate_constraints():
     """Every row of a box repeated, plus rows through the same vertex, with targets
     pushing onto it: a degenerate vertex with more active rows than unknowns."""
     n = 3
-    I = np.eye(n)
-    box = Task("box", np.vstack([I, I, np.ones((1, n))]), lower=-np.ones(2 * n + 1),
+    eye = np.eye(n)
+    box = Task("box", np.vstack([eye, eye, np.ones((1, n))]), lower=-np.ones(2 * n + 1),
                upper=np.concatenate([np.ones(2 * n), [3.0]]))
     push = Task("push", np.ones((1, n)), [10.0])
-    post = Task("post", I, np.array([2.0, -5.0, 0.5]))
+    post = Task("post", eye, np.array([2.0, -5.0, 0.5]))
     stack = TaskStack([[box], [push], [post]])
     sol = prioik.solve(stack, NAME)
     assert_exact(stack, sol)

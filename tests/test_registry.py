@@ -53,7 +53,8 @@ def test_inequality_task_in_closed_form_method_names_the_task():
     assert info.value.formulation == "extended_jacobian"
 
 
-def _fake(monkeypatch, name, solve, caps=Capabilities()):
+def _fake(monkeypatch, name, solve, caps=None):
+    caps = Capabilities() if caps is None else caps
     mod = types.ModuleType(name)
     mod.NAME, mod.DESCRIPTION, mod.CAPABILITIES = name, "test double", caps
     mod.OPTIONS = {"mass_matrix": Option(None, "matrix", "M", optional=True),

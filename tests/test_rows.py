@@ -45,9 +45,10 @@ def _close(a, b, tol=TOL):
 
 
 # ------------------------------------------------- the oracle: the previous math
-def _ref_frame(state, frame, offset=np.zeros(3)):
+def _ref_frame(state, frame, offset=None):
     """(J, p, drift) of a point ``offset`` on ``frame`` (6 rows: the point's linear,
     the frame's angular), from pinocchio's frame Jacobian and classical acceleration."""
+    offset = np.zeros(3) if offset is None else offset
     m, d = state.model, state.data
     fid = m.getFrameId(state.robot.frames.get(frame, frame))
     J = pin.computeFrameJacobian(m, m.createData(), state.q, fid, LWA)
@@ -379,7 +380,7 @@ def test_declaration_errors_are_named(robot):
     v.add_com("c", gain=1.0, level=0)
     v.add_posture("p", gain=1.0, level=2)
     with pytest.raises(TaskStackError, match=r"levels \[1\] have no task"):
-        v.layout
+        _ = v.layout
     with pytest.raises(TaskStackError, match="duplicate task name"):
         v.add_com("c", gain=1.0)
 

@@ -97,15 +97,16 @@ def test_every_writer_jacobian_and_drift_match_finite_differences(robots_under_t
 
     for f in frames:
         for build, value in (
-                (lambda s: frame_position(s, f, ref), lambda s: s.placement(f).translation),
-                (lambda s: point_position(s, f, off, ref), lambda s: point(s, f))):
+                (lambda s, f=f: frame_position(s, f, ref),
+                 lambda s, f=f: s.placement(f).translation),
+                (lambda s, f=f: point_position(s, f, off, ref), lambda s, f=f: point(s, f))):
             t0, tp, tm = build(s0), build(sp), build(sm)
             assert _close(t0.J @ v, (value(sp) - value(sm)) / (2 * H)), f
             assert _close(t0.drift, (tp.J @ v - tm.J @ v) / (2 * H)), f
             assert np.array_equal(build(light).J, t0.J) and build(light).drift is None
         R = s0.placement(f).rotation
-        for build in (lambda s: frame_orientation(s, f, R),
-                      lambda s: frame_pose(s, f, ref, R)):
+        for build in (lambda s, f=f, R=R: frame_orientation(s, f, R),
+                      lambda s, f=f, R=R: frame_pose(s, f, ref, R)):
             t0, tp, tm = build(s0), build(sp), build(sm)
             dR = pin.log3(sp.placement(f).rotation @ sm.placement(f).rotation.T) / (2 * H)
             assert _close((t0.J @ v)[-3:], dR), f
