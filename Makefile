@@ -29,7 +29,7 @@ BUILD_REQUIRES = $$($(PY) -c "import tomllib; print(*tomllib.load(open('pyprojec
 # (tests/test_namespace.py: no top-level packages)
 EDITABLE_PATHS_OFF = -c "import pathlib, sysconfig; p = pathlib.Path(sysconfig.get_paths()['purelib'], '_editable_skbc_prioik.pth'); p.write_text(''.join(l for l in p.read_text().splitlines(True) if l.startswith('import ')))"
 
-.PHONY: test test-core test-forced-cpu demo venv venv-core clean asan asan-bindings
+.PHONY: test test-core test-forced-cpu demo venv venv-core clean asan asan-bindings lint
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -94,6 +94,19 @@ FORCED_CPU := OPENBLAS_CORETYPE=Sandybridge
 
 test-forced-cpu: $(STAMP) $(CORE_STAMP_BUILT)
 	$(FORCED_CPU) $(PY) -m pytest -p no:cacheprovider -m "rounding_edge and not slow"
+
+# ruff (E, F, I, B, UP) over the whole tree, and mypy over the public API
+# (prioik.__all__ comes from prioik, prioik.hierarchy and prioik.formulations), read
+# through build/typecheck: symlinks laid out as the installed package, whose top-level
+# source folders are sub-packages of prioik
+TYPECHECK := build/typecheck
+lint: $(STAMP)
+	$(VENV)/bin/ruff check --quiet .
+	rm -rf $(TYPECHECK) && mkdir -p $(TYPECHECK)/prioik
+	for f in prioik/*.py; do ln -s $(abspath .)/$$f $(TYPECHECK)/prioik/; done
+	for d in hierarchy formulations robots benchmarks; do ln -s $(abspath .)/$$d $(TYPECHECK)/prioik/$$d; done
+	cd $(TYPECHECK) && $(abspath $(VENV))/bin/mypy --config-file $(abspath pyproject.toml) \
+		-m prioik -m prioik.extras -p prioik.hierarchy -p prioik.formulations
 
 demo: $(STAMP) $(CORE_STAMP_BUILT)
 	$(VENV)/bin/prioik fencing --variant both --out $(OUT)

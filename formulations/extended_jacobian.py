@@ -707,7 +707,7 @@ def _augmented_decomposition(stack: TaskStack, rcond: float
     for i, level in enumerate(stack.levels):
         A = level.A
         norm = level_scale(A)
-        R = np.linalg.qr(np.vstack([R, A / norm if norm > 0 else A]), mode="r")
+        R = np.asarray(np.linalg.qr(np.vstack([R, A / norm if norm > 0 else A]), mode="r"))
         if R.shape[0] > n:
             R = R[:n]
         _, sv, vt = numpy_svd(R, full_matrices=True)
@@ -929,7 +929,7 @@ def _batch_statuses(datas: list[StackData], X: np.ndarray, mu2: np.ndarray,
                     margins: np.ndarray) -> list[str]:
     """Each stack's status from its damping and rank decisions' margins (as
     :meth:`Prepared.solve` reads them)."""
-    approximate = (mu2 > 0).any(axis=1) | (margins <= AMBIGUITY).any(axis=1)
+    approximate = np.asarray((mu2 > 0).any(axis=1) | (margins <= AMBIGUITY).any(axis=1))
     near = (margins <= NEAR_AMBIGUITY * AMBIGUITY).any(axis=1) & ~approximate
     for i in np.flatnonzero(near & np.isfinite(X).all(axis=1)).tolist():
         # as solve: a near-ambiguous answer is optimal only when certified

@@ -238,7 +238,7 @@ class PreparedSolver:
         return merged
 
     def _solution(self, out: Outcome, data: StackData, elapsed: float) -> Solution:
-        if out.checked:     # the plugin verified x and the residuals (compiled paths)
+        if out.checked and out.residuals is not None:   # verified by the plugin (compiled)
             if out.status in STATUSES:
                 return Solution(out.x, self.formulation, self._given, out.status,
                                 out.residuals, elapsed, out.info)

@@ -18,7 +18,8 @@ from .task import Task
 def _split(rng: np.random.Generator, total: int, k: int, low: int = 1) -> list[int]:
     """``k`` positive row counts summing to about ``total``."""
     total = max(total, k * low)
-    cuts = np.sort(rng.choice(np.arange(1, total), size=k - 1, replace=False)) if k > 1 else []
+    cuts = (np.sort(rng.choice(np.arange(1, total), size=k - 1, replace=False)) if k > 1
+            else np.zeros(0, dtype=int))
     sizes = np.diff(np.concatenate([[0], cuts, [total]])).astype(int)
     return [max(low, int(s)) for s in sizes]
 
