@@ -11,12 +11,14 @@ the drift ``J̇ q̇``; :meth:`TaskWriter.targets` then forms every equality targ
 pass:
 
 * ``mode="velocity"``: ``b = ẋ* + K e`` (``J q̇ = ẋ* + K e``; no drift is computed, so a
-  ``KinematicState(drift=False)`` suffices);
+  ``KinematicState(drift=False)`` suffices), scaled down to ``‖b‖ = max_rate`` for a
+  task declared with a ``max_rate`` that it exceeds;
 * ``mode="acceleration"``: ``b = ẍ* + K_d (ẋ* − J q̇) + K_p e − J̇ q̇`` (eq. 2-4).
 
 Task kinds: frame position, a point fixed on a frame, frame orientation (error
 ``log(R* Rᵀ)``), frame pose, contact (a pose held at a placement), centre of mass,
-posture, and joint limits in two forms — activation rows (one per actuated joint,
+posture, damping (``q̇ = 0`` or ``q̈ = 0`` on every coordinate, weighted within its level:
+that level's damped least squares), and joint limits in two forms — activation rows (one per actuated joint,
 masked to zero outside the margins: fixed size, for the equality formulations) and
 bounds (an inequality task: ``data.lower``/``data.upper`` on ``q̇`` or ``q̈`` from the
 position limits, the velocity limits or both, for the inequality formulations), and
@@ -36,6 +38,7 @@ against finite differences.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -89,7 +92,7 @@ class _Task:
     """One declared task: what its writer needs, fixed at declaration."""
 
     kind: str                 # "position", "orientation", "pose", "contact", "com",
-    #                           "posture", "limits", "frame_region", "com_region"
+    #                           "posture", "damping", "limits", "frame_region", "com_region"
     name: str
     level: int
     rows: int
@@ -97,6 +100,7 @@ class _Task:
     kp: float = 0.0
     kd: float = 0.0
     weight: float = 1.0
+    max_rate: float = 0.0                # velocity level: ‖b‖ ≤ max_rate (0: no cap)
     start: int = -1
     fid: int = -1
     cols: np.ndarray | None = None
@@ -220,7 +224,10 @@ class TaskWriter:
     highest; ``None`` puts the task on a new level below every level so far; tasks of one
     level keep their declaration order). Gains: ``gain=K`` at velocity level,
     ``gain=(K_p, K_d)`` at acceleration level; ``weight`` is the task's weight within its
-    level (its rows of ``data.sqrt_weight`` hold ``√weight``). The first read of :attr:`layout` or
+    level (its rows of ``data.sqrt_weight`` hold ``√weight``). At velocity level the
+    frame-position, point, orientation and CoM tasks take ``max_rate``: their target
+    ``b = ẋ* + K e`` is scaled down to ``‖b‖ = max_rate`` (m/s, rad/s) where it is
+    larger — a bounded task-space speed towards a far target. The first read of :attr:`layout` or
     :attr:`data` (or the first write) fixes the layout; no task can be added after.
 
     Per step: one writer call per task (named like the ``add_`` method without its
@@ -251,6 +258,7 @@ class TaskWriter:
         self._Q = np.zeros((6, 0))
         self._views: _DataViews | None = None
         self._last_level = -1
+        self._capped: tuple = ()                # (start, stop, max_rate) per capped task
         q_index = robot.actuated_q_index()
         self._q_index = q_index
         #: q entries of the actuated joints when q_ref ⊖ q is q_ref − q for all of them
@@ -262,23 +270,33 @@ class TaskWriter:
 
     # ----------------------------------------------------------------- declaring
     def add_frame_position(self, name: str, frame: str, *, gain, level: int | None = None,
-                           weight: float = 1.0) -> None:
-        """A frame origin's world position (3 rows)."""
+                           weight: float = 1.0, max_rate: float | None = None) -> None:
+        """A frame origin's world position (3 rows); ``max_rate`` (velocity level, m/s):
+        the target's speed ``‖ẋ* + K e‖`` capped at it."""
+        cap = self._max_rate(name, max_rate)
         self._add_frame(name, frame, "position", 3, gain, level, weight, np.zeros(3))
+        self._tasks[name].max_rate = cap
 
     def add_point(self, name: str, frame: str, offset, *, gain, level: int | None = None,
-                  weight: float = 1.0) -> None:
+                  weight: float = 1.0, max_rate: float | None = None) -> None:
         """The world position of a point fixed on a frame (3 rows), ``offset`` in the
-        frame's coordinates (e.g. a tool tip; no extra frame is added to the model)."""
+        frame's coordinates (e.g. a tool tip; no extra frame is added to the model);
+        ``max_rate`` as in :meth:`add_frame_position`."""
         off = np.array(offset, dtype=float).reshape(-1)
         if off.shape != (3,) or not np.isfinite(off).all():
             raise ValueError(f"task {name!r}: offset must be 3 finite numbers, got {offset!r}")
+        cap = self._max_rate(name, max_rate)
         self._add_frame(name, frame, "position", 3, gain, level, weight, off)
+        self._tasks[name].max_rate = cap
 
     def add_frame_orientation(self, name: str, frame: str, *, gain,
-                              level: int | None = None, weight: float = 1.0) -> None:
-        """A frame's orientation (3 rows, world axes; error ``log(R* Rᵀ)``)."""
+                              level: int | None = None, weight: float = 1.0,
+                              max_rate: float | None = None) -> None:
+        """A frame's orientation (3 rows, world axes; error ``log(R* Rᵀ)``);
+        ``max_rate`` (velocity level, rad/s): the target's angular speed capped at it."""
+        cap = self._max_rate(name, max_rate)
         self._add_frame(name, frame, "orientation", 3, gain, level, weight, np.zeros(3))
+        self._tasks[name].max_rate = cap
 
     def add_frame_pose(self, name: str, frame: str, *, gain, level: int | None = None,
                        weight: float = 1.0) -> None:
@@ -293,20 +311,54 @@ class TaskWriter:
         self._tasks[name].kind = "contact"
 
     def add_com(self, name: str = "com", *, gain, axes: Sequence[int] = (0, 1),
-                level: int | None = None, weight: float = 1.0) -> None:
-        """The centre of mass on world ``axes`` (default horizontal; eq. 32-33)."""
+                level: int | None = None, weight: float = 1.0,
+                max_rate: float | None = None) -> None:
+        """The centre of mass on world ``axes`` (default horizontal; eq. 32-33);
+        ``max_rate`` as in :meth:`add_frame_position`."""
         idx = np.array(axes, dtype=np.int64).reshape(-1)
         if idx.size < 1 or idx.size > 3 or not np.all((idx >= 0) & (idx < 3)) \
                 or np.unique(idx).size != idx.size:
             raise ValueError(f"task {name!r}: com axes must be distinct among 0, 1, 2, got "
                              f"{list(axes)}")
+        cap = self._max_rate(name, max_rate)
         task = self._add(name, "com", idx.size, level, gain, weight)
         task.axes = idx
+        task.max_rate = cap
 
     def add_posture(self, name: str = "posture", *, gain, level: int | None = None,
                     weight: float = 1.0) -> None:
         """The actuated joints (velocity rows ``n_base:``) to a reference configuration."""
         self._add(name, "posture", self.robot.nv - self.robot.n_base, level, gain, weight)
+
+    def add_damping(self, name: str = "damping", *, weight: float,
+                    level: int | None = None) -> None:
+        """Damping of a level: one row per velocity coordinate (floating base included),
+        ``q̇ = 0`` at velocity level, ``q̈ = 0`` at acceleration level, of weight
+        ``weight = λ²`` within its level.
+
+        With the level's other tasks (rows ``J``, target ``b``) the level then solves the
+        damped least squares ``min ‖J q̇ − b‖² + λ² ‖q̇‖²`` (Levenberg-Marquardt; Wampler
+        1986, Nakamura & Hanafusa 1986) under the higher levels: where ``J`` is well
+        conditioned (singular values ``σ ≫ λ``) nothing visible changes, and along a
+        direction of singular value ``σ`` the step is ``σ b / (σ² + λ²)``, at most
+        ``‖b‖ / 2λ``, instead of the least-squares ``b / σ``. Its rows have full rank,
+        so the damped level leaves no freedom to the levels below it. Use it on the
+        level of a task whose target may leave the robot's reach: at the edge of the
+        workspace the exact least-squares step along the lost direction grows as
+        ``1/σ`` and flips sign as a step crosses the singularity (a joint flipping
+        between its velocity bounds every step); damped, the loop settles.
+
+        Args:
+            weight: ``λ²`` (``(m/rad)²`` against a position task: ``λ`` is the singular
+                value below which the level is damped), finite and > 0.
+
+        The rows are constant (written once): no writer call per step.
+        """
+        if not (np.isscalar(weight) and not isinstance(weight, (str, bool))
+                and np.isfinite(weight) and weight > 0):
+            raise TaskStackError(f"damping weight must be finite and > 0, got {weight!r}",
+                                 task=name if isinstance(name, str) else None)
+        self._add(name, "damping", self.robot.nv, level, None, weight)
 
     def add_joint_limits(self, name: str = "joint_limits", *, form: str,
                          level: int | None = None, position: bool = True,
@@ -448,11 +500,24 @@ class TaskWriter:
             raise TaskStackError(f"weight must be finite and > 0, got {weight!r}", task=name)
         task = _Task(kind, name, int(level), int(rows), inequality, weight=float(weight),
                      shape=(int(rows),))
-        if kind not in ("limits", "frame_region", "com_region"):
+        if kind not in ("limits", "frame_region", "com_region", "damping"):
             task.kp, task.kd = self._gains(name, gain)
         self._last_level = max(self._last_level, int(level))
         self._tasks[name] = task
         return task
+
+    def _max_rate(self, name: str, max_rate) -> float:
+        """A task's validated ``max_rate`` (velocity level; ``None``: 0, no cap)."""
+        if max_rate is None:
+            return 0.0
+        if self._accel:
+            raise ValueError(f"task {name!r}: max_rate caps a velocity-level target; at "
+                             "acceleration level bound the reference instead")
+        if not (np.isscalar(max_rate) and not isinstance(max_rate, (str, bool))
+                and np.isfinite(max_rate) and max_rate > 0):
+            raise ValueError(f"task {name!r}: max_rate must be finite and > 0, got "
+                             f"{max_rate!r}")
+        return float(max_rate)
 
     def _gains(self, name: str, gain) -> tuple[float, float]:
         if self._accel:
@@ -529,6 +594,10 @@ class TaskWriter:
                     task.kind == "limits" and task.form == "activation"):
                 A = data.A[sl]
                 A[:, nb:] = np.eye(task.rows)      # constant unit rows, written once
+            elif task.kind == "damping":
+                data.A[sl] = np.eye(task.rows)      # every coordinate, the base's too
+        self._capped = tuple((t.start, t.start + t.rows, t.max_rate)
+                             for t in self._tasks.values() if t.max_rate > 0)
 
     error = property(lambda self: self._Q[_k.ERROR],
                      doc="Per-row error ``e = x* − x`` (a view).")
@@ -547,6 +616,9 @@ class TaskWriter:
         if task.kind == "limits":
             raise ValueError(f"task {name!r}: joint-limit gains are set by its "
                              "JointLimitActivation")
+        if task.kind == "damping":
+            raise ValueError(f"task {name!r}: a damping task has no gain (its weight is "
+                             "λ²)")
         task.kp, task.kd = self._gains(name, gain)
         if self._layout is not None:
             sl = slice(task.start, task.start + task.rows)
@@ -743,11 +815,18 @@ class TaskWriter:
         return self.velocity_targets()
 
     def velocity_targets(self) -> StackData:
-        """``b = ẋ* + K e`` into the data; returns it."""
+        """``b = ẋ* + K e`` into the data, each ``max_rate`` task's part scaled down to
+        ``‖b‖ = max_rate`` where it is larger; returns the data."""
         data = self._data
         if data is None:
             data = self.data
-        _k.velocity_targets(data.b, self._Q)
+        b = data.b
+        _k.velocity_targets(b, self._Q)
+        for start, stop, cap in self._capped:
+            part = b[start:stop]
+            norm = math.sqrt(float(part @ part))
+            if norm > cap:
+                part *= cap / norm
         return data
 
     def acceleration_targets(self, v: np.ndarray) -> StackData:

@@ -629,3 +629,76 @@ def test_region_errors_name_the_task(robot):
     with pytest.raises(TaskStackError, match="task 'f' was declared as frame_region, not "
                        "com_region"):
         w.com_region(_state(robot, 0), "f")
+
+
+# ------------------------------------------------- damping and capped target rates
+@pytest.mark.parametrize("mode", ["velocity", "acceleration"])
+def test_damping_rows_are_the_identity_on_every_coordinate_with_zero_target(robot, mode):
+    w = TaskWriter(robot, mode)
+    gain = 5.0 if mode == "velocity" else (25.0, 10.0)
+    w.add_frame_position("tip", "sword_tip", gain=gain, level=0)
+    w.add_damping("damping", weight=0.04, level=0)
+    state = _state(robot, 1)
+    w.frame_position(state, "tip", np.array([0.3, 0.2, 0.9]))
+    A, b = w.targets(state).rows("damping")
+    assert np.array_equal(A, np.eye(robot.nv))          # the floating base's columns too
+    assert np.array_equal(b, np.zeros(robot.nv))
+    assert np.all(w.data.weights("damping") == 0.2)
+    assert w.layout.names == (("tip", "damping"),)
+
+
+def test_a_damped_level_is_the_damped_least_squares_step(robot):
+    """One level, a frame task and the damping task of weight λ²: the exact solvers
+    give ``Jᵀ (J Jᵀ + λ² I)⁻¹ b`` (relative 1e-10)."""
+    lam2 = 0.01
+    w = TaskWriter(robot, "velocity")
+    w.add_frame_position("tip", "sword_tip", gain=5.0, level=0)
+    w.add_damping("damping", weight=lam2, level=0)
+    state = _state(robot, 2, drift=False)
+    w.frame_position(state, "tip", np.array([1.5, 0.2, 0.9]))
+    data = w.targets(state)
+    J, b = data.rows("tip")
+    expected = J.T @ np.linalg.solve(J @ J.T + lam2 * np.eye(3), b)
+    for name in ("hierarchical_active_set", "extended_jacobian", "reference"):
+        x = formulations.solve(data.as_stack(), name).x
+        assert np.linalg.norm(x - expected) <= 1e-10 * np.linalg.norm(expected), name
+
+
+def test_max_rate_caps_the_velocity_target_and_leaves_a_smaller_one(robot):
+    w = TaskWriter(robot, "velocity")
+    w.add_frame_position("tip", "sword_tip", gain=10.0, level=0, max_rate=0.5)
+    w.add_com("com", gain=10.0, level=0, max_rate=0.05)
+    w.add_frame_orientation("turn", "left_foot", gain=10.0, level=1, max_rate=100.0)
+    w.add_frame_position("free", "right_hand", gain=10.0, level=1)
+    state = _state(robot, 3, drift=False)
+    far = np.array([1.5, 0.2, 0.9])
+    w.frame_position(state, "tip", far)
+    w.com(state, "com", state.com[:2] + 0.004)             # K e = 0.0566 > 0.05
+    w.frame_orientation(state, "turn", np.eye(3))
+    w.frame_position(state, "free", far)
+    data = w.targets(state)
+    sl = w.layout.task_slice
+    for name, cap in (("tip", 0.5), ("com", 0.05)):
+        uncapped = 10.0 * w.error[sl(name)]
+        b = data.rows(name)[1]
+        assert np.linalg.norm(uncapped) > cap
+        assert abs(np.linalg.norm(b) - cap) <= 1e-12 * cap
+        assert _close(b / np.linalg.norm(b), uncapped / np.linalg.norm(uncapped))
+    assert _close(data.rows("turn")[1], 10.0 * w.error[sl("turn")])     # under its cap
+    assert _close(data.rows("free")[1], 10.0 * w.error[sl("free")])     # no cap
+
+
+def test_damping_and_max_rate_errors_are_named(robot):
+    w = TaskWriter(robot, "velocity")
+    for bad in (0.0, -1.0, np.inf, "1", True):
+        with pytest.raises(TaskStackError, match="damping weight must be finite and > 0"):
+            w.add_damping("d", weight=bad)
+        with pytest.raises(ValueError, match="task 'tip': max_rate must be finite and > 0"):
+            w.add_frame_position("tip", "sword_tip", gain=1.0, max_rate=bad)
+    assert w.tasks() == ()                          # nothing half-declared
+    w.add_damping("d", weight=1e-2)
+    with pytest.raises(ValueError, match="task 'd': a damping task has no gain"):
+        w.set_gains("d", 1.0)
+    a = TaskWriter(robot, "acceleration")
+    with pytest.raises(ValueError, match="task 'tip': max_rate caps a velocity-level"):
+        a.add_frame_position("tip", "sword_tip", gain=(1.0, 1.0), max_rate=1.0)

@@ -1,0 +1,209 @@
+"""Velocity-level loops with a target out of reach: the chatter of an undamped level and
+the feet that slide under large steps, and their remedies.
+
+* **Panda** — README's joint-limits loop: the Panda (9 DoF), joint position and velocity
+  limits as bounds at level 0, the hand (``panda_hand``, ``K = 10``) at level 1 with a
+  target 0.9 m away (:data:`PANDA_TARGET`, out of reach), ``dt`` = 2 ms,
+  ``hierarchical_active_set``. With the remedy the hand's level also holds a damping task
+  (:meth:`~prioik.robots.TaskWriter.add_damping`, ``weight = λ²``
+  :data:`DAMPING`). Reported: the most sign changes of any joint's ``q̇`` in a window of
+  100 steps, over the windows after the hand stopped moving (:func:`settled_step`).
+* **Humanoid** (G1, TALOS) — the balance loop of ``docs/robots.md``: both feet
+  (contacts, ``K = 10``), the joint-limit bounds and the CoM over the feet's polygon
+  (2 cm margin) at level 0, the left hand (``K = 10``) at level 1 with a target 1.5 m
+  ahead of it (:data:`HAND_OFFSET`), the posture (``K = 1``) at level 2, ``dt`` = 10 ms,
+  300 steps. With the remedy the hand's target speed is capped (``max_rate``
+  :data:`HAND_MAX_RATE`) and its level damped (:data:`DAMPING`). Reported: how far the
+  integrated feet leave their start (m, the worst step), the largest joint speed, every
+  status.
+
+``python -m prioik.benchmarks.out_of_reach`` prints both, the remedy off and on.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+__all__ = ["PANDA_TARGET", "HAND_OFFSET", "HAND_MAX_RATE", "DAMPING", "ZERO_SPEED",
+           "sign_changes", "settled_step", "panda_run", "humanoid_run", "run",
+           "format_table"]
+
+#: the Panda's hand target of README's joint-limits loop (m), ~0.95 m from the shoulder
+PANDA_TARGET = (0.9, 0.3, 0.4)
+#: the humanoid's hand target, from the hand's start (m)
+HAND_OFFSET = (1.5, 0.0, 0.0)
+#: the humanoid's hand target speed cap (m/s)
+HAND_MAX_RATE = 0.5
+#: the damping task's weight λ² ((m/rad)²: λ = 0.1 m)
+DAMPING = 1e-2
+#: a joint speed below this (rad/s) counts as zero when sign changes are counted: the
+#: rounding of a q̇ = 0 answer (2e-9 rad per 2 ms step)
+ZERO_SPEED = 1e-6
+#: the hand has stopped moving once it stays within this (m) of its last position
+SETTLED = 1e-4
+
+
+def sign_changes(qdot, start: int = 0, window: int = 100,
+                 zero: float = ZERO_SPEED) -> np.ndarray:
+    """Sign changes of each joint's speed per window of ``window`` steps from ``start``
+    (``windows × n_v``): a change is a step whose speed has the opposite sign of the
+    previous step's, both beyond ``zero`` in magnitude."""
+    v = np.asarray(qdot, dtype=float)[start:]
+    sign = np.sign(np.where(np.abs(v) < zero, 0.0, v))
+    flips = (sign[1:] * sign[:-1]) < 0
+    return np.array([flips[k:k + window].sum(axis=0)
+                     for k in range(0, flips.shape[0] - window + 1, window)], dtype=int)
+
+
+def settled_step(positions, tol: float = SETTLED) -> int:
+    """The first step from which a point stays within ``tol`` of its last position."""
+    p = np.asarray(positions, dtype=float)
+    far = np.flatnonzero(np.linalg.norm(p - p[-1], axis=1) > tol)
+    return int(far[-1]) + 1 if far.size else 0
+
+
+def panda_run(damping: float | None = DAMPING, steps: int = 2500) -> dict[str, Any]:
+    """README's joint-limits loop (the hand's level damped by ``damping``; ``None``: not
+    damped) for ``steps`` steps; returns ``qdot`` (steps × n_v), the hand's position after
+    every step ``hand``, the statuses and the wall time."""
+    import pinocchio as pin
+
+    import prioik
+    from prioik.robots import KinematicState, TaskWriter, load
+
+    robot = load("panda")
+    rows = TaskWriter(robot, "velocity")
+    rows.add_joint_limits("limits", form="bounds", dt=0.002, level=0)
+    rows.add_frame_position("hand", "panda_hand", gain=10.0, level=1)
+    if damping is not None:
+        rows.add_damping("damping", weight=damping, level=1)
+    solver = prioik.prepare(rows.layout, "hierarchical_active_set")
+    q, dt = robot.q0.copy(), 0.002
+    target = np.array(PANDA_TARGET)
+    data = robot.model.createData()
+    qdot, hand, statuses = np.zeros((steps, robot.nv)), np.zeros((steps, 3)), set()
+    fid = robot.frame_id("panda_hand")
+    start = time.perf_counter()
+    for step in range(steps):
+        state = KinematicState(robot, q, np.zeros(robot.nv), data, drift=False)
+        rows.joint_limits(state, "limits")
+        rows.frame_position(state, "hand", target)
+        sol = solver.solve(rows.targets(state))
+        statuses.add(sol.status)
+        qdot[step] = sol.x
+        q = pin.integrate(robot.model, q, sol.x * dt)
+        pin.framesForwardKinematics(robot.model, data, q)
+        hand[step] = data.oMf[fid].translation
+    return {"qdot": qdot, "hand": hand, "statuses": statuses,
+            "wall_s": time.perf_counter() - start}
+
+
+def humanoid_run(name: str, remedy: bool = True, steps: int = 300) -> dict[str, Any]:
+    """The humanoid balance loop with the hand :data:`HAND_OFFSET` away (the remedy: the
+    hand's ``max_rate`` and the damping task; off: neither) for ``steps`` steps; returns
+    the feet's worst distance from their start ``feet_drift_m`` (after each step's
+    integration), ``max_joint_speed``, the statuses, the hand's last distance from its
+    target and the wall time."""
+    import pinocchio as pin
+
+    import prioik
+    from prioik.robots import KinematicState, TaskWriter, load, polygon_region
+
+    robot = load(name)
+    dt, feet = 0.01, ("left_foot", "right_foot")
+    start_state = KinematicState(robot, robot.q0, np.zeros(robot.nv), drift=False)
+    places = {f: start_state.placement(f).copy() for f in feet}
+    soles = [places[f].act(np.array([dx, dy, 0.0])) for f in feet
+             for dx in (-0.05, 0.1) for dy in (-0.03, 0.03)]
+    C, upper = polygon_region(soles, margin=0.02)
+    target = start_state.placement("left_hand").translation + np.array(HAND_OFFSET)
+
+    w = TaskWriter(robot, "velocity")
+    for f in feet:
+        w.add_contact(f, f, gain=10.0, level=0)
+    w.add_joint_limits("limits", form="bounds", dt=dt, level=0)
+    w.add_com_region("balance", C, upper=upper, dt=dt, level=0)
+    w.add_frame_position("reach", "left_hand", gain=10.0, level=1,
+                         max_rate=HAND_MAX_RATE if remedy else None)
+    if remedy:
+        w.add_damping("damping", weight=DAMPING, level=1)
+    w.add_posture("posture", gain=1.0, level=2)
+    solver = prioik.prepare(w.layout, "hierarchical_active_set")
+
+    q, v = robot.q0.copy(), np.zeros(robot.nv)
+    data = robot.data()
+    ids = [robot.frame_id(f) for f in feet]
+    drift, speed, statuses = 0.0, 0.0, set()
+    start = time.perf_counter()
+    for _ in range(steps):
+        state = KinematicState(robot, q, v, data, drift=False)
+        for f in feet:
+            w.contact(state, f, places[f])
+        w.joint_limits(state, "limits")
+        w.com_region(state, "balance")
+        w.frame_position(state, "reach", target)
+        w.posture(state, "posture", robot.q0)
+        sol = solver.solve(w.targets(state))
+        statuses.add(sol.status)
+        v = sol.x
+        speed = max(speed, float(np.abs(v[robot.n_base:]).max()))
+        q = pin.integrate(robot.model, q, v * dt)
+        pin.framesForwardKinematics(robot.model, data, q)
+        drift = max(drift, max(float(np.linalg.norm(data.oMf[i].translation
+                                                    - places[f].translation))
+                               for i, f in zip(ids, feet)))
+    hand = data.oMf[robot.frame_id("left_hand")].translation
+    return {"robot": name, "remedy": remedy, "feet_drift_m": drift,
+            "max_joint_speed": speed, "statuses": statuses,
+            "hand_error_m": float(np.linalg.norm(target - hand)),
+            "wall_s": time.perf_counter() - start}
+
+
+def run(panda_steps: int = 2500, humanoid_steps: int = 300) -> dict[str, Any]:
+    """Both loops, the remedy off and on."""
+    out: dict[str, Any] = {"panda": [], "humanoid": []}
+    for damping in (None, DAMPING):
+        res = panda_run(damping, panda_steps)
+        settled = settled_step(res["hand"])
+        counts = sign_changes(res["qdot"], settled)
+        out["panda"].append({
+            "damping": damping, "settled_step": settled,
+            "max_sign_changes_per_100": int(counts.max()) if counts.size else None,
+            "windows": int(counts.shape[0]),
+            "hand_error_m": float(np.linalg.norm(np.array(PANDA_TARGET) - res["hand"][-1])),
+            "statuses": sorted(res["statuses"]), "wall_s": res["wall_s"]})
+    for name in ("g1", "talos"):
+        for remedy in (False, True):
+            res = humanoid_run(name, remedy, humanoid_steps)
+            res["statuses"] = sorted(res["statuses"])
+            out["humanoid"].append(res)
+    return out
+
+
+def format_table(res: dict[str, Any]) -> str:
+    """The two tables of :func:`run` in markdown."""
+    lines = ["| Panda, README's loop | hand stopped at step | windows of 100 after | "
+             "most sign changes of a joint's q̇ per 100 steps | hand error (m) | statuses |",
+             "|---|---:|---:|---:|---:|---|"]
+    for r in res["panda"]:
+        label = "undamped" if r["damping"] is None else f"damping λ² = {r['damping']:g}"
+        lines.append(f"| {label} | {r['settled_step']} | {r['windows']} | "
+                     f"{r['max_sign_changes_per_100']} | {r['hand_error_m']:.4f} | "
+                     f"{', '.join(r['statuses'])} |")
+    lines += ["", "| humanoid, hand 1.5 m out of reach | remedy | feet drift (mm) | "
+              "largest joint speed (rad/s) | hand error (m) | statuses |",
+              "|---|---|---:|---:|---:|---|"]
+    for r in res["humanoid"]:
+        remedy = (f"max_rate {HAND_MAX_RATE:g} m/s, damping λ² = {DAMPING:g}"
+                  if r["remedy"] else "off")
+        lines.append(f"| {r['robot']} | {remedy} | {1e3 * r['feet_drift_m']:.3f} | "
+                     f"{r['max_joint_speed']:.2f} | {r['hand_error_m']:.3f} | "
+                     f"{', '.join(r['statuses'])} |")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":   # pragma: no cover - the measurement's command
+    print(format_table(run()))
