@@ -7,7 +7,8 @@ the feet that slide under large steps, and their remedies.
   ``hierarchical_active_set``. With the remedy the hand's level also holds a damping task
   (:meth:`~prioik.robots.TaskWriter.add_damping`, ``weight = λ²``
   :data:`DAMPING`). Reported: the most sign changes of any joint's ``q̇`` in a window of
-  100 steps, over the windows after the hand stopped moving (:func:`settled_step`).
+  100 steps, over the windows after the hand stopped making progress
+  (:func:`settled_step`).
 * **Humanoid** (G1, TALOS) — the balance loop of ``docs/robots.md``: both feet
   (contacts, ``K = 10``), the joint-limit bounds and the CoM over the feet's polygon
   (2 cm margin) at level 0, the left hand (``K = 10``) at level 1 with a target 1.5 m
@@ -17,7 +18,15 @@ the feet that slide under large steps, and their remedies.
   integrated feet leave their start (m, the worst step), the largest joint speed, every
   status.
 
-``python -m prioik.benchmarks.out_of_reach`` prints both, the remedy off and on.
+The velocity-level baselines on the Panda's loop, where installed (:func:`baseline_runs`):
+PlaCo's ``KinematicsSolver`` (:func:`prioik.benchmarks.panda_step.placo_panda`: hand soft
+1, joints soft 1e-4, its joint and velocity limits) and mink's ``solve_ik``
+(:mod:`prioik.benchmarks.mink_step`: ``FrameTask`` position cost 1, ``PostureTask``
+1e-2, ``ConfigurationLimit``, ``VelocityLimit``, DAQP), with the same target, ``dt`` and
+count.
+
+``python -m prioik.benchmarks.out_of_reach`` prints both, the remedy off and on, and the
+baselines.
 """
 
 from __future__ import annotations
@@ -28,7 +37,7 @@ from typing import Any
 import numpy as np
 
 __all__ = ["PANDA_TARGET", "HAND_OFFSET", "HAND_MAX_RATE", "DAMPING", "ZERO_SPEED",
-           "sign_changes", "settled_step", "panda_run", "humanoid_run", "run",
+           "sign_changes", "settled_step", "panda_run", "humanoid_run", "baseline_runs", "run",
            "format_table"]
 
 #: the Panda's hand target of README's joint-limits loop (m), ~0.95 m from the shoulder
@@ -42,7 +51,8 @@ DAMPING = 1e-2
 #: a joint speed below this (rad/s) counts as zero when sign changes are counted: the
 #: rounding of a q̇ = 0 answer (2e-9 rad per 2 ms step)
 ZERO_SPEED = 1e-6
-#: the hand has stopped moving once it stays within this (m) of its last position
+#: the hand has stopped making progress once its error never improves by more than
+#: this (m) again
 SETTLED = 1e-4
 
 
@@ -58,11 +68,15 @@ def sign_changes(qdot, start: int = 0, window: int = 100,
                      for k in range(0, flips.shape[0] - window + 1, window)], dtype=int)
 
 
-def settled_step(positions, tol: float = SETTLED) -> int:
-    """The first step from which a point stays within ``tol`` of its last position."""
-    p = np.asarray(positions, dtype=float)
-    far = np.flatnonzero(np.linalg.norm(p - p[-1], axis=1) > tol)
-    return int(far[-1]) + 1 if far.size else 0
+def settled_step(errors, tol: float = SETTLED) -> int:
+    """The first step from which a task's error (one value per step) never improves by
+    more than ``tol`` again: every later step's error is within ``tol`` of the smallest
+    error after it. A loop that flips between two states has stopped making progress
+    as much as one at rest."""
+    e = np.asarray(errors, dtype=float)
+    later_best = np.minimum.accumulate(e[::-1])[::-1]
+    improving = np.flatnonzero(e - later_best > tol)
+    return int(improving[-1]) + 1 if improving.size else 0
 
 
 def panda_run(damping: float | None = DAMPING, steps: int = 2500) -> dict[str, Any]:
@@ -162,19 +176,70 @@ def humanoid_run(name: str, remedy: bool = True, steps: int = 300) -> dict[str, 
             "wall_s": time.perf_counter() - start}
 
 
+def _chatter(label: str, qdot, hand, statuses) -> dict[str, Any]:
+    """A Panda run's record: where the hand stopped, the windows after it and their
+    most sign changes of a joint's q̇, the hand's last error."""
+    errors = np.linalg.norm(np.asarray(hand) - np.array(PANDA_TARGET), axis=1)
+    settled = settled_step(errors)
+    counts = sign_changes(qdot, settled)
+    return {"label": label, "settled_step": settled,
+            "max_sign_changes_per_100": int(counts.max()) if counts.size else None,
+            "windows": int(counts.shape[0]), "hand_error_m": float(errors[-1]),
+            "statuses": sorted(statuses)}
+
+
+def baseline_runs(steps: int = 2500) -> list[dict[str, Any]]:
+    """PlaCo and mink on the Panda's loop (see the module docstring), each run for
+    ``steps`` steps; a baseline whose extra is missing gives a record saying so."""
+    import pinocchio as pin
+
+    from prioik.extras import installed
+    from prioik.robots import load
+
+    from .panda_step import DT, placo_panda
+
+    robot = load("panda")
+    data, fid = robot.model.createData(), robot.frame_id("panda_hand")
+
+    def hand_of(q):
+        pin.framesForwardKinematics(robot.model, data, q)
+        return data.oMf[fid].translation.copy()
+
+    out = []
+    if "placo" in installed():
+        _, states, _ = placo_panda(robot, steps + 1, limits=True, target=PANDA_TARGET)
+        q = np.array(states)
+        out.append(_chatter("PlaCo (hand 1, joints 1e-4)", np.diff(q, axis=0) / DT,
+                            np.array([hand_of(x) for x in q[1:]]), ()))
+    else:
+        out.append({"label": "PlaCo", "missing": "the `placo` extra is not installed"})
+    if "mink" in installed():
+        from .mink_baseline import DEFAULT_SOLVER
+        from .mink_step import POSTURE_COST, _mink
+        _, advance = _mink(robot, None, "panda_hand", np.array(PANDA_TARGET), {},
+                           DEFAULT_SOLVER)
+        q, qdot, hand = robot.q0.copy(), [], []
+        for _ in range(steps):                 # mink's step, integrated by MuJoCo
+            after = advance(q, DT)
+            qdot.append(pin.difference(robot.model, q, after) / DT)
+            q = after
+            hand.append(hand_of(q))
+        out.append(_chatter(f"mink (hand 1, posture {POSTURE_COST:g}, {DEFAULT_SOLVER})",
+                            np.array(qdot), np.array(hand), ()))
+    else:
+        out.append({"label": "mink", "missing": "the `mink` extra is not installed"})
+    return out
+
+
 def run(panda_steps: int = 2500, humanoid_steps: int = 300) -> dict[str, Any]:
-    """Both loops, the remedy off and on."""
+    """Both loops, the remedy off and on, and the baselines on the Panda's."""
     out: dict[str, Any] = {"panda": [], "humanoid": []}
     for damping in (None, DAMPING):
         res = panda_run(damping, panda_steps)
-        settled = settled_step(res["hand"])
-        counts = sign_changes(res["qdot"], settled)
-        out["panda"].append({
-            "damping": damping, "settled_step": settled,
-            "max_sign_changes_per_100": int(counts.max()) if counts.size else None,
-            "windows": int(counts.shape[0]),
-            "hand_error_m": float(np.linalg.norm(np.array(PANDA_TARGET) - res["hand"][-1])),
-            "statuses": sorted(res["statuses"]), "wall_s": res["wall_s"]})
+        label = ("prioik, undamped" if damping is None
+                 else f"prioik, damping λ² = {damping:g}")
+        out["panda"].append(_chatter(label, res["qdot"], res["hand"], res["statuses"]))
+    out["panda"] += baseline_runs(panda_steps)
     for name in ("g1", "talos"):
         for remedy in (False, True):
             res = humanoid_run(name, remedy, humanoid_steps)
@@ -185,14 +250,16 @@ def run(panda_steps: int = 2500, humanoid_steps: int = 300) -> dict[str, Any]:
 
 def format_table(res: dict[str, Any]) -> str:
     """The two tables of :func:`run` in markdown."""
-    lines = ["| Panda, README's loop | hand stopped at step | windows of 100 after | "
+    lines = ["| Panda, README's loop | no progress from step | windows of 100 after | "
              "most sign changes of a joint's q̇ per 100 steps | hand error (m) | statuses |",
              "|---|---:|---:|---:|---:|---|"]
     for r in res["panda"]:
-        label = "undamped" if r["damping"] is None else f"damping λ² = {r['damping']:g}"
-        lines.append(f"| {label} | {r['settled_step']} | {r['windows']} | "
+        if "missing" in r:
+            lines.append(f"| {r['label']} | {r['missing']} | | | | |")
+            continue
+        lines.append(f"| {r['label']} | {r['settled_step']} | {r['windows']} | "
                      f"{r['max_sign_changes_per_100']} | {r['hand_error_m']:.4f} | "
-                     f"{', '.join(r['statuses'])} |")
+                     f"{', '.join(r['statuses']) or '—'} |")
     lines += ["", "| humanoid, hand 1.5 m out of reach | remedy | feet drift (mm) | "
               "largest joint speed (rad/s) | hand error (m) | statuses |",
               "|---|---|---:|---:|---:|---|"]
