@@ -342,11 +342,13 @@ class TaskWriter:
         conditioned (singular values ``σ ≫ λ``) nothing visible changes, and along a
         direction of singular value ``σ`` the step is ``σ b / (σ² + λ²)``, at most
         ``‖b‖ / 2λ``, instead of the least-squares ``b / σ``. Its rows have full rank,
-        so the damped level leaves no freedom to the levels below it. Use it on the
-        level of a task whose target may leave the robot's reach: at the edge of the
-        workspace the exact least-squares step along the lost direction grows as
-        ``1/σ`` and flips sign as a step crosses the singularity (a joint flipping
-        between its velocity bounds every step); damped, the loop settles.
+        so the damped level leaves no freedom to the levels below it. Use it at
+        velocity level on the level of a task whose target may leave the robot's
+        reach: at the edge of the workspace the exact least-squares step along the
+        lost direction grows as ``1/σ`` and flips sign as a step crosses the
+        singularity (joints flipping between their velocity bounds every step);
+        damped, the loop settles. At acceleration level the rows damp ``q̈`` (the
+        level's Tikhonov term on the acceleration).
 
         Args:
             weight: ``λ²`` (``(m/rad)²`` against a position task: ``λ`` is the singular
