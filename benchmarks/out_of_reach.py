@@ -18,12 +18,13 @@ the feet that slide under large steps, and their remedies.
   integrated feet leave their start (m, the worst step), the largest joint speed, every
   status.
 
-The velocity-level baselines on the Panda's loop, where installed (:func:`baseline_runs`):
-PlaCo's ``KinematicsSolver`` (:func:`prioik.benchmarks.panda_step.placo_panda`: hand soft
-1, joints soft 1e-4, its joint and velocity limits) and mink's ``solve_ik``
-(:mod:`prioik.benchmarks.mink_step`: ``FrameTask`` position cost 1, ``PostureTask``
-1e-2, ``ConfigurationLimit``, ``VelocityLimit``, DAQP), with the same target, ``dt`` and
-count.
+The baselines, where installed, with the same targets, ``dt`` and counts: on the
+Panda's loop (:func:`baseline_runs`) PlaCo's ``KinematicsSolver``
+(:func:`prioik.benchmarks.panda_step.placo_panda`: hand soft 1, joints soft 1e-4, its
+joint and velocity limits) and mink's ``solve_ik`` (:mod:`prioik.benchmarks.mink_step`:
+``FrameTask`` position cost 1, ``PostureTask`` 1e-2, ``ConfigurationLimit``,
+``VelocityLimit``, DAQP); on the G1's (:func:`placo_humanoid_run`) PlaCo's, feet and
+CoM polygon hard (:func:`prioik.benchmarks.balance_step.placo_feet`).
 
 ``python -m prioik.benchmarks.out_of_reach`` prints both, the remedy off and on, and the
 baselines.
@@ -37,7 +38,8 @@ from typing import Any
 import numpy as np
 
 __all__ = ["PANDA_TARGET", "HAND_OFFSET", "HAND_MAX_RATE", "DAMPING", "ZERO_SPEED",
-           "sign_changes", "settled_step", "panda_run", "humanoid_run", "baseline_runs", "run",
+           "sign_changes", "settled_step", "panda_run", "humanoid_run", "baseline_runs",
+           "placo_humanoid_run", "run",
            "format_table"]
 
 #: the Panda's hand target of README's joint-limits loop (m), ~0.95 m from the shoulder
@@ -231,6 +233,42 @@ def baseline_runs(steps: int = 2500) -> list[dict[str, Any]]:
     return out
 
 
+def placo_humanoid_run(steps: int = 300) -> dict[str, Any]:
+    """PlaCo's ``KinematicsSolver`` on the G1's loop (its feet hard, the CoM polygon hard,
+    the hand soft 1 to the same target, the joints soft 1e-4, its joint and velocity
+    limits: :func:`prioik.benchmarks.balance_step.placo_feet`); the record of
+    :func:`humanoid_run` without statuses (a record saying so without the extra)."""
+    import pinocchio as pin
+
+    from prioik.extras import installed
+    from prioik.robots import load
+
+    from .balance_step import FEET, REACH, balance_setup, placo_feet
+
+    if "placo" not in installed():
+        return {"robot": "g1", "remedy": "PlaCo", "missing": "the `placo` extra is not "
+                "installed"}
+    robot, dt = load("g1"), 0.01
+    setup = balance_setup(robot)
+    setup["target"] = setup["target"] - REACH + np.array(HAND_OFFSET)    # the hand's start
+
+    _, states, _ = placo_feet(robot, setup, steps + 1, dt, balance=True)
+    data = robot.model.createData()
+    ids = [robot.frame_id(f) for f in FEET]
+    drift, speed = 0.0, 0.0
+    for before, after in zip(states[:-1], states[1:]):
+        pin.framesForwardKinematics(robot.model, data, after)
+        drift = max(drift, max(float(np.linalg.norm(data.oMf[i].translation
+                                                    - setup["places"][f].translation))
+                               for i, f in zip(ids, FEET)))
+        v = pin.difference(robot.model, before, after) / dt
+        speed = max(speed, float(np.abs(v[robot.n_base:]).max()))
+    hand = data.oMf[robot.frame_id("left_hand")].translation
+    return {"robot": "g1", "remedy": "PlaCo (hand 1, joints 1e-4)", "feet_drift_m": drift,
+            "max_joint_speed": speed, "statuses": [],
+            "hand_error_m": float(np.linalg.norm(setup["target"] - hand))}
+
+
 def run(panda_steps: int = 2500, humanoid_steps: int = 300) -> dict[str, Any]:
     """Both loops, the remedy off and on, and the baselines on the Panda's."""
     out: dict[str, Any] = {"panda": [], "humanoid": []}
@@ -245,6 +283,8 @@ def run(panda_steps: int = 2500, humanoid_steps: int = 300) -> dict[str, Any]:
             res = humanoid_run(name, remedy, humanoid_steps)
             res["statuses"] = sorted(res["statuses"])
             out["humanoid"].append(res)
+        if name == "g1":
+            out["humanoid"].append(placo_humanoid_run(humanoid_steps))
     return out
 
 
@@ -264,11 +304,15 @@ def format_table(res: dict[str, Any]) -> str:
               "largest joint speed (rad/s) | hand error (m) | statuses |",
               "|---|---|---:|---:|---:|---|"]
     for r in res["humanoid"]:
-        remedy = (f"max_rate {HAND_MAX_RATE:g} m/s, damping λ² = {DAMPING:g}"
-                  if r["remedy"] else "off")
+        if "missing" in r:
+            lines.append(f"| {r['robot']} | {r['remedy']}: {r['missing']} | | | | |")
+            continue
+        remedy = r["remedy"] if isinstance(r["remedy"], str) else (
+            f"max_rate {HAND_MAX_RATE:g} m/s, damping λ² = {DAMPING:g}" if r["remedy"]
+            else "off")
         lines.append(f"| {r['robot']} | {remedy} | {1e3 * r['feet_drift_m']:.3f} | "
                      f"{r['max_joint_speed']:.2f} | {r['hand_error_m']:.3f} | "
-                     f"{', '.join(r['statuses'])} |")
+                     f"{', '.join(r['statuses']) or '—'} |")
     return "\n".join(lines)
 
 

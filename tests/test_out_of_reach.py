@@ -60,3 +60,19 @@ def test_a_humanoid_reaching_out_of_reach_keeps_its_feet_with_the_remedy(name):
     assert on["feet_drift_m"] <= FEET_TOL, on["feet_drift_m"]
     off = humanoid_run(name, False, 300)
     assert off["feet_drift_m"] > 5 * FEET_TOL, off["feet_drift_m"]
+
+
+def test_the_report_has_every_row_and_the_baselines_or_why_not():
+    """:func:`run` on short loops: prioik's rows with and without the remedy, PlaCo's and
+    mink's (or the extra that is missing), formatted as two tables."""
+    from prioik.benchmarks.out_of_reach import format_table, run
+
+    res = run(panda_steps=300, humanoid_steps=20)
+    labels = [r["label"] for r in res["panda"]]
+    assert labels[:2] == ["prioik, undamped", "prioik, damping λ² = 0.01"]
+    assert [label.split(" ")[0] for label in labels[2:]] == ["PlaCo", "mink"]
+    assert [(r["robot"], r["remedy"]) for r in res["humanoid"]
+            if not isinstance(r["remedy"], str)] == [
+        ("g1", False), ("g1", True), ("talos", False), ("talos", True)]
+    table = format_table(res)
+    assert table.count("\n|---") == 2 and "feet drift (mm)" in table
