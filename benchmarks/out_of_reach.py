@@ -291,7 +291,8 @@ def run(panda_steps: int = 2500, humanoid_steps: int = 300) -> dict[str, Any]:
 def format_table(res: dict[str, Any]) -> str:
     """The two tables of :func:`run` in markdown."""
     lines = ["| Panda, README's loop | no progress from step | windows of 100 after | "
-             "most sign changes of a joint's q̇ per 100 steps | hand error (m) | statuses |",
+             "most sign changes of a joint's q̇ per 100 steps | hand error (m) | "
+             "statuses |",
              "|---|---:|---:|---:|---:|---|"]
     for r in res["panda"]:
         if "missing" in r:

@@ -51,10 +51,10 @@ def _rounds(paths: dict[str, Callable[[int], None]], states: int, rounds: int
 def placo_panda(robot, steps: int, limits: bool = False, target=None):
     """PlaCo's ``KinematicsSolver`` on the Panda with the reach's two soft tasks (hand
     position to ``target``, default :data:`HAND_TARGET`, weight 1; joints, 1e-4), base
-    masked, and its joint and velocity limits when ``limits``; returns ``(step, states, reset)``: a function doing one PlaCo step
-    (``update_kinematics`` + ``solve``), the ``steps`` configurations of PlaCo's own
-    trajectory from ``robot.q0``, and a function putting PlaCo back at ``q0`` (done once
-    here)."""
+    masked, and its joint and velocity limits when ``limits``; returns ``(step, states,
+    reset)``: a function doing one PlaCo step (``update_kinematics`` + ``solve``), the
+    ``steps`` configurations of PlaCo's own trajectory from ``robot.q0``, and a function
+    putting PlaCo back at ``q0`` (done once here)."""
     import placo
 
     from prioik.robots.models import example_robot_data_dir

@@ -17,9 +17,10 @@ pass:
 
 Task kinds: frame position, a point fixed on a frame, frame orientation (error
 ``log(R* Rᵀ)``), frame pose, contact (a pose held at a placement), centre of mass,
-posture, damping (``q̇ = 0`` or ``q̈ = 0`` on every coordinate, weighted within its level:
-that level's damped least squares), and joint limits in two forms — activation rows (one per actuated joint,
-masked to zero outside the margins: fixed size, for the equality formulations) and
+posture, damping (``q̇ = 0`` or ``q̈ = 0`` on every coordinate, weighted within its
+level: that level's damped least squares), and joint limits in two forms — activation
+rows (one per actuated joint, masked to zero outside the margins: fixed size, for the
+equality formulations) and
 bounds (an inequality task: ``data.lower``/``data.upper`` on ``q̇`` or ``q̈`` from the
 position limits, the velocity limits or both, for the inequality formulations), and
 regions (inequality tasks keeping a frame's point or the centre of mass inside
@@ -227,8 +228,9 @@ class TaskWriter:
     level (its rows of ``data.sqrt_weight`` hold ``√weight``). At velocity level the
     frame-position, point, orientation and CoM tasks take ``max_rate``: their target
     ``b = ẋ* + K e`` is scaled down to ``‖b‖ = max_rate`` (m/s, rad/s) where it is
-    larger — a bounded task-space speed towards a far target. The first read of :attr:`layout` or
-    :attr:`data` (or the first write) fixes the layout; no task can be added after.
+    larger — a bounded task-space speed towards a far target. The first read of
+    :attr:`layout` or :attr:`data` (or the first write) fixes the layout; no task can be
+    added after.
 
     Per step: one writer call per task (named like the ``add_`` method without its
     prefix), then :meth:`targets`. A writer call with a ``KinematicState(drift=False)``
@@ -336,9 +338,9 @@ class TaskWriter:
         ``q̇ = 0`` at velocity level, ``q̈ = 0`` at acceleration level, of weight
         ``weight = λ²`` within its level.
 
-        With the level's other tasks (rows ``J``, target ``b``) the level then solves the
-        damped least squares ``min ‖J q̇ − b‖² + λ² ‖q̇‖²`` (Levenberg-Marquardt; Wampler
-        1986, Nakamura & Hanafusa 1986) under the higher levels: where ``J`` is well
+        With the level's other tasks (rows ``J``, target ``b``) the level then solves
+        the damped least squares ``min ‖J q̇ − b‖² + λ² ‖q̇‖²`` (Levenberg-Marquardt;
+        Wampler 1986, Nakamura & Hanafusa 1986) under the higher levels: where ``J`` is well
         conditioned (singular values ``σ ≫ λ``) nothing visible changes, and along a
         direction of singular value ``σ`` the step is ``σ b / (σ² + λ²)``, at most
         ``‖b‖ / 2λ``, instead of the least-squares ``b / σ``. Its rows have full rank,
