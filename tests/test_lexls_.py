@@ -12,9 +12,13 @@ from prioik.hierarchy import Task, TaskStack, check_lexicographic
 from prioik.hierarchy.families import FAMILIES, INEQUALITY_FAMILIES
 from prioik.hierarchy.io import load_peer
 
-_lexls = pytest.importorskip(
-    "prioik._lexls", reason="lexls's headers were not found when prioik was built "
-                            "(PRIOIK_LEXLS_DIR)")
+try:
+    from prioik import _lexls
+except ImportError:
+    _lexls = None
+#: the tests that run lexls: skipped where prioik was built without its headers
+needs_lexls = pytest.mark.skipif(_lexls is None, reason="lexls's headers were not found "
+                                 "when prioik was built (PRIOIK_LEXLS_DIR)")
 
 NAME = "lexls"
 PEER_DIR = Path(__file__).parent / "data" / "peer"
@@ -42,6 +46,7 @@ def _violations(stack, x):
     return out
 
 
+@needs_lexls
 @pytest.mark.parametrize("family", sorted(set(FAMILIES) | set(INEQUALITY_FAMILIES)))
 @pytest.mark.parametrize("seed", range(4))
 def test_lexls_reaches_the_active_sets_level_values(family, seed):
@@ -69,6 +74,7 @@ def test_lexls_reaches_the_active_sets_level_values(family, seed):
     assert w_ours[bad] <= w_lexls[bad] * (1 + LEVEL_TOL) + LEVEL_TOL, (w_ours, w_lexls)
 
 
+@needs_lexls
 def test_lexls_solves_its_own_test_hierarchy():
     """lexls's own test file (its #Solution: the last level's value 1.58890)."""
     problem = load_peer(PEER_DIR / "lexls_test_01.dat")[0]
@@ -77,6 +83,7 @@ def test_lexls_solves_its_own_test_hierarchy():
     assert abs(_values(problem.stack, sol.x)[-1] - 1.58890) <= 1e-5
 
 
+@needs_lexls
 def test_a_hot_start_from_the_same_data_reuses_the_working_set():
     rng = np.random.default_rng(5)
     stack = INEQUALITY_FAMILIES["random_inequality"](rng, 20, 4)
@@ -94,6 +101,7 @@ def test_a_hot_start_from_the_same_data_reuses_the_working_set():
     assert not again.solve(stack).info["hot_started"]
 
 
+@needs_lexls
 def test_a_capped_solve_is_not_optimal():
     """At lexls's factorization cap the answer is where it stopped: 'approximate' with
     info['capped'], never 'optimal'."""
@@ -109,6 +117,7 @@ def test_a_capped_solve_is_not_optimal():
     assert "factorization" in capped.info["message"]
 
 
+@needs_lexls
 def test_the_certificate_demotes_a_wrong_answer(monkeypatch):
     """check=True: the status is the certificate's (a corrupted x is 'approximate', with
     the level at fault); check=False: lexls's own word."""
@@ -137,6 +146,7 @@ def test_the_certificate_demotes_a_wrong_answer(monkeypatch):
     assert raw.solve(stack).status == "optimal"
 
 
+@needs_lexls
 @pytest.mark.parametrize("case", ["shape", "dtype", "strided", "nan_A", "nan_bound",
                                   "crossed", "levels"])
 def test_bad_input_to_the_binding_names_it(case):
@@ -161,3 +171,15 @@ def test_bad_input_to_the_binding_names_it(case):
         lo[0], what = 2.0, r"lower\[0\] > upper\[0\]"
     with pytest.raises(CoreInputError, match=what):
         solver.solve(A, lo, up)
+
+
+def test_without_the_binding_the_plugin_says_how_to_build_it(monkeypatch):
+    """Where prioik was built without lexls's headers, importing the plugin raises an
+    ImportError naming PRIOIK_LEXLS_DIR (the registry's reason for 'lexls')."""
+    import importlib
+    import sys
+    monkeypatch.setitem(sys.modules, "prioik._lexls", None)
+    monkeypatch.delattr(prioik, "_lexls", raising=False)
+    monkeypatch.delitem(sys.modules, "prioik.formulations.lexls_", raising=False)
+    with pytest.raises(ImportError, match="PRIOIK_LEXLS_DIR"):
+        importlib.import_module("prioik.formulations.lexls_")
