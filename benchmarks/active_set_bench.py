@@ -154,6 +154,15 @@ def measure(stacks: list, repeats: int = REPEATS, cascade_every: int = 1,
     # passes of the four interleaved (same machine load); per stack the fastest pass
     paths = {"cold": lambda i: cold.solve(same[i]), "warm": lambda i: warm.solve(same[i]),
              "daqp": daqp_raw, "floor": lambda i: floor.solve(equality[i])}
+    # lexls (when built with its headers), its own C++ solve timed (no certificate): cold,
+    # and hot-started from the previous step's x and working set, as its docs say
+    lexls = lexls_available()
+    if lexls:
+        lexls_cold = prioik.prepare(layout, "lexls", hot_start=False, check=False)
+        lexls_hot = prioik.prepare(layout, "lexls", check=False)
+        lexls_cold.solve(same[0])
+        paths.update({"lexls cold": lambda i: lexls_cold.solve(same[i]),
+                      "lexls hot": lambda i: lexls_hot.solve(same[i])})
     times = {name: np.full(len(same), np.inf) for name in paths}
     for _ in range(repeats):
         for name, fn in paths.items():
@@ -161,6 +170,8 @@ def measure(stacks: list, repeats: int = REPEATS, cascade_every: int = 1,
             for i in range(len(same)):
                 if name == "warm" and i in before:
                     warm.solve(before[i])   # the window's previous step (untimed)
+                elif name == "lexls hot" and i in before:
+                    lexls_hot.solve(before[i])
                 t0 = time.perf_counter()
                 fn(i)
                 t[i] = min(t[i], time.perf_counter() - t0)
@@ -189,7 +200,17 @@ def measure(stacks: list, repeats: int = REPEATS, cascade_every: int = 1,
     # beyond the medians (the targets): the stack where each is slowest against DAQP, and
     # the whole trajectory's time (what a control loop spends), on the same passes
     per_cold, per_warm = t_cold / t_daqp, t_warm / t_daqp
-    return {"stacks": len(same), "n": layout.n, "rows": layout.m, "median_s": med,
+    against_lexls = {}
+    if lexls:
+        t_lc, t_lh = times["lexls cold"], times["lexls hot"]
+        capped = sum(lexls_cold.solve(s).info.get("capped", False) for s in same)
+        med.update({"lexls cold": float(np.median(t_lc)), "lexls hot": float(np.median(t_lh))})
+        against_lexls = {"cold/lexls_cold": med["active_set cold"] / med["lexls cold"],
+                         "warm/lexls_hot": med["active_set warm"] / med["lexls hot"],
+                         "worst cold vs lexls": float(t_cold.max() / t_lc.max()),
+                         "worst warm vs lexls": float(t_warm.max() / t_lh.max()),
+                         "lexls_capped": int(capped)}
+    return {**against_lexls,"stacks": len(same), "n": layout.n, "rows": layout.m, "median_s": med,
             "worst cold/daqp_raw": float(per_cold.max()),
             "worst warm/daqp_raw": float(per_warm.max()),
             "total cold/daqp_raw": float(t_cold.sum() / t_daqp.sum()),
@@ -202,6 +223,12 @@ def measure(stacks: list, repeats: int = REPEATS, cascade_every: int = 1,
             "max_level_rel_diff_vs_reference": worst, "statuses": sorted(statuses),
             "reference_statuses": sorted(statuses_reference),
             "max_warm_vs_cold_rel": cold_warm}
+
+
+def lexls_available() -> bool:
+    """Whether the ``lexls`` formulation can run here (prioik built with its headers)."""
+    from prioik.formulations import available
+    return any(f.name == "lexls" and f.available for f in available())
 
 
 def g1_limits_step(steps: int = 300, rounds: int = 5) -> dict[str, Any]:
@@ -347,6 +374,12 @@ def run(windows: int = 4, steps: int = 6, repeats: int = REPEATS, ik_steps: int 
              "target": 0.3},
             {"name": f"active_set warm / cascaded_qp[daqp] ({tag})",
              "value": r["warm/cascaded_qp[daqp]"], "target": 0.03}]
+        if "cold/lexls_cold" in r:
+            out["ratios"] += [
+                {"name": f"active_set cold / lexls cold ({tag})",
+                 "value": r["cold/lexls_cold"], "target": 0.5},
+                {"name": f"active_set warm / lexls hot ({tag})",
+                 "value": r["warm/lexls_hot"], "target": 0.5}]
     for key, what, target in (("g1_step", "G1 velocity IK step with limits", 0.8),
                               ("panda_step", "Panda reach with limits", 3.0)):
         if key in out:
@@ -392,6 +425,22 @@ def format_table(results: dict[str, Any]) -> str:
                          f"{r['worst warm/daqp_raw']:.2f} | "
                          f"{r['total cold/daqp_raw']:.2f} | "
                          f"{r['total warm/daqp_raw']:.2f} |")
+    if any("cold/lexls_cold" in r for r in results["rows"]):
+        lines += ["", "Against lexls (the C++ lexicographic solver, built from its headers, "
+                  "its defaults; its solve timed alone, cold and hot-started from the "
+                  "previous step's x and working set), on the same passes:", "",
+                  "| stacks | lexls cold µs | lexls hot µs | cold / lexls cold | "
+                  "warm / lexls hot | slowest cold / lexls's slowest | "
+                  "slowest warm / lexls's slowest | lexls capped |",
+                  "|---|---|---|---|---|---|---|---|"]
+        for r in results["rows"]:
+            if "cold/lexls_cold" not in r:
+                continue
+            m = r["median_s"]
+            lines.append(f"| {r['variant']} {r['level']} | {m['lexls cold'] * 1e6:.1f} | "
+                         f"{m['lexls hot'] * 1e6:.1f} | {r['cold/lexls_cold']:.2f} | "
+                         f"{r['warm/lexls_hot']:.2f} | {r['worst cold vs lexls']:.2f} | "
+                         f"{r['worst warm vs lexls']:.2f} | {r['lexls_capped']} |")
     for key, what in (("g1_step", "G1 velocity IK step, limits"),
                       ("panda_step", "Panda reach, limits")):
         if key in results:

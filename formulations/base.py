@@ -213,11 +213,13 @@ def precision_status(status: str, info: dict, data, x: np.ndarray) -> str:
     return "approximate"
 
 
-def certify(stack, outcome: Outcome, metric=None, tol: float | None = None) -> Outcome:
+def certify(stack, outcome: Outcome, metric=None, tol: float | None = None,
+            minimum_norm: bool = True) -> Outcome:
     """Keep ``status="optimal"`` only when ``outcome.x`` passes the certificate.
 
     The certificate is :func:`hierarchy.check_lexicographic` with the minimum-norm
-    tie-break (``xᵀ W x`` with ``metric``) at ``tol`` (default
+    tie-break (``xᵀ W x`` with ``metric``; ``minimum_norm=False``: the levels only, for
+    a formulation without that tie-break) at ``tol`` (default
     :data:`hierarchy.DEFAULT_CERTIFICATE_TOL`). An answer that fails becomes
     ``"approximate"``, with ``info["fault_level"]`` (``k`` for the tie-break),
     ``info["fault_tasks"]`` and ``info["message"]``; ``info["certificate"]`` records the
@@ -250,7 +252,7 @@ def certify(stack, outcome: Outcome, metric=None, tol: float | None = None) -> O
     x = np.asarray(outcome.x, dtype=np.float64).reshape(-1)
     if x.shape != (stack.n,) or not np.isfinite(x).all():
         return outcome
-    report = check_lexicographic(stack, x, tol=tol, minimum_norm=True, metric=metric)
+    report = check_lexicographic(stack, x, tol=tol, minimum_norm=minimum_norm, metric=metric)
     bad = report.first_failure
     outcome.info["certificate"] = {"ok": report.ok, "tol": tol,
                                    "worst_relative": report.worst_relative,
