@@ -4,8 +4,10 @@ from __future__ import annotations
 
 from typing import Any
 
+from prioik.errors import PrioikError
 
-class TaskStackError(ValueError):
+
+class TaskStackError(PrioikError, ValueError):
     """A task or task stack is malformed.
 
     Attributes:

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import importlib.metadata
 
+from .errors import PrioikError
+
 #: extra -> (distributions that must be installed for it to count as installed, what it
 #: is for). The requirements themselves, with their versions, are in pyproject.toml.
 EXTRAS: dict[str, tuple[tuple[str, ...], str]] = {
@@ -33,7 +35,7 @@ def install_hint(extra: str) -> str:
     return f"install it with `pip install prioik[{extra}]`"
 
 
-class MissingExtraError(ImportError):
+class MissingExtraError(PrioikError, ImportError):
     """A part of prioik needs an extra that is not installed here.
 
     An :class:`ImportError`, so ``except ImportError`` still catches it; its message

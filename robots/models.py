@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from prioik.errors import PrioikError
 from prioik.extras import install_hint
 
 __all__ = ["ModelNotFoundError", "StateError", "check_configuration", "check_velocity",
@@ -42,11 +43,11 @@ __all__ = ["ModelNotFoundError", "StateError", "check_configuration", "check_vel
            "sample_humanoid", "spatial_chain", "LOADERS", "load"]
 
 
-class ModelNotFoundError(FileNotFoundError):
+class ModelNotFoundError(PrioikError, FileNotFoundError):
     """A robot description (package or file) is not installed here."""
 
 
-class StateError(ValueError):
+class StateError(PrioikError, ValueError):
     """A robot state (``q``, ``v``) is malformed: wrong size, not finite, or a joint's
     quaternion / unit complex number not of unit norm. The message names the argument,
     the entry and the joint."""

@@ -38,6 +38,7 @@ from typing import Any, Callable, Generator
 import numpy as np
 import pinocchio as pin
 
+from prioik.errors import PrioikError
 from prioik.hierarchy import (StackData, StackLayout, Task, TaskStack,
                               algorithmic_error_norms)
 
@@ -350,7 +351,7 @@ def _algorithmic_error(stack: TaskStack | StackData, x: np.ndarray,
     return float(np.sqrt(np.sum(np.square(norms))))
 
 
-class SimulationError(ValueError):
+class SimulationError(PrioikError, ValueError):
     """:func:`simulate` was called with a ``duration``, ``dt`` or ``level`` it cannot run."""
 
 
