@@ -14,6 +14,7 @@ class TaskStackError(PrioikError, ValueError):
         task: Name of the task at fault, or ``None`` when the fault is the stack's.
         level: Zero-based level index of that task, or ``None`` when not known yet.
         detail: Machine-readable data about the fault (shapes, offending values).
+        reason: The message without the level and task it names.
     """
 
     def __init__(self, message: str, *, task: str | None = None,
@@ -28,6 +29,7 @@ class TaskStackError(PrioikError, ValueError):
         self.task = task
         self.level = level
         self.detail = detail
+        self.reason = message
 
 
 class UnsupportedTaskError(TaskStackError):

@@ -8,7 +8,9 @@ also keeps the builtin base it had before (``FormulationError`` is a ``ValueErro
 Subclasses (defined where they are raised):
 
 * :class:`prioik.hierarchy.TaskStackError` (``ValueError``) — a task, a level or a task
-  stack is malformed (shapes, non-finite values); it names the task and level;
+  stack is malformed (shapes, non-finite values, a negative or non-finite gain or a
+  non-finite reference given to a robot task writer, a declared task not written before
+  ``TaskWriter.targets``); it names the task and level;
 
   * :class:`prioik.hierarchy.UnsupportedTaskError` — a formulation cannot take a task
     (e.g. an inequality in a closed-form method);
