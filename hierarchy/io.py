@@ -369,7 +369,9 @@ def load_soth(path: str | Path, problems: Sequence[int] | None = None) -> list[P
     Raises:
         TaskStackError: naming the file, problem, level and row at fault — also when a
             count disagrees with the rows that follow (soth's own reader would then
-            misread the rest of the file).
+            misread the rest of the file); every problem is read first, and the message
+            names the other problems that fail and those that parse, with the
+            ``problems=`` that reads them alone (its ``detail``: ``failed``, ``parsed``).
     """
     path = Path(path)
     text = _read_text(path)
@@ -389,14 +391,35 @@ def load_soth(path: str | Path, problems: Sequence[int] | None = None) -> list[P
     if not blocks:
         raise TaskStackError(f"{path}: no 'variable size N' line")
     wanted = range(len(blocks)) if problems is None else list(problems)
-    out = []
+    out, failed = [], []
     for p in wanted:
         if not 0 <= p < len(blocks):
             raise TaskStackError(f"{path}: problem {p} requested, the file holds "
                                  f"{len(blocks)}")
         name = path.stem if len(blocks) == 1 else f"{path.stem}#{p}"
-        out.append(_soth_problem(blocks[p], f"{path}: problem {p}", name))
+        try:
+            out.append(_soth_problem(blocks[p], f"{path}: problem {p}", name))
+        except TaskStackError as exc:
+            failed.append((p, exc))
+    if failed:
+        raise _soth_failure(failed, [p for p in wanted if p not in dict(failed)]) from None
     return out
+
+
+def _soth_failure(failed: list[tuple[int, TaskStackError]], parsed: list[int]
+                  ) -> TaskStackError:
+    """The first problem's error, naming the others that fail and how to read those
+    that parse (``problems=`` here, ``--problems`` of ``prioik solve``)."""
+    first = failed[0][1]
+    message = first.reason
+    if len(failed) > 1:
+        message += f" (problems {', '.join(str(p) for p, _ in failed[1:])} fail too)"
+    if parsed:
+        which = ", ".join(map(str, parsed))
+        message += (f"; problems {which} parse: read them alone with problems=[{which}] "
+                    f"(prioik solve --problems {which.replace(' ', '')})")
+    return TaskStackError(message, task=first.task, level=first.level, **first.detail,
+                          failed=[p for p, _ in failed], parsed=parsed)
 
 
 def _soth_problem(block: list[list[str]], where: str, name: str) -> PeerProblem:
