@@ -14,12 +14,12 @@ import numpy as np
 
 from .errors import TaskStackError
 from .stack import TaskStack
-from .task import Task
+from .task import Level, Task
 
 FORMAT_VERSION = 1
 
 #: Keys a task-stack file may hold at the top level and in a task object.
-TOP_LEVEL_KEYS = ("description", "format", "n", "levels")
+TOP_LEVEL_KEYS = ("description", "format", "n", "levels", "hard")
 TASK_KEYS = ("name", "A", "b", "lower", "upper", "weight")
 
 #: Longest integer literal read (float64 overflows past 309 digits).
@@ -91,7 +91,12 @@ def stack_from_dict(data: dict[str, Any]) -> TaskStack:
             except TaskStackError as exc:
                 raise TaskStackError(str(exc).split(": ", 1)[-1], task=name, level=i) from None
         out.append(tasks)
-    stack = TaskStack(out)
+    hard = data.get("hard", [])
+    if not isinstance(hard, list) or not all(type(i) is int and 0 <= i < len(out)
+                                             for i in hard):
+        raise TaskStackError(f"'hard' must be a list of level indices 0 … {len(out) - 1}, "
+                             f"got {hard!r}")
+    stack = TaskStack([Level.of(tasks, hard=i in hard) for i, tasks in enumerate(out)])
     if "n" in data and data["n"] != stack.n:
         raise TaskStackError(f"the file says n = {data['n']} but its tasks have "
                              f"{stack.n} columns")
@@ -120,6 +125,8 @@ def stack_to_dict(stack: TaskStack, description: str = "") -> dict[str, Any]:
             items.append(d)
         levels.append(items)
     out: dict[str, Any] = {"format": FORMAT_VERSION, "n": stack.n, "levels": levels}
+    if stack.hard:
+        out["hard"] = list(stack.hard)
     if description:
         out = {"description": description, **out}
     return out

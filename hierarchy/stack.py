@@ -31,7 +31,7 @@ class TaskStack:
     :class:`~prioik.hierarchy.StackData` (:attr:`data`), which is what every solver reads.
     """
 
-    __slots__ = ("_levels", "_n", "_layout", "_data")
+    __slots__ = ("_levels", "_n", "_layout", "_data", "_hard")
 
     def __init__(self, levels: Sequence) -> None:
         if isinstance(levels, (Task, Level)):
@@ -66,6 +66,7 @@ class TaskStack:
             parsed.append(level)
         self._levels = tuple(parsed)
         self._n = int(n)
+        self._hard = tuple(i for i, level in enumerate(parsed) if level.hard)
         self._layout = None
         self._data = None
 
@@ -89,6 +90,11 @@ class TaskStack:
     def is_equality(self) -> bool:
         """``True`` when every task is an equality task."""
         return all(level.is_equality for level in self._levels)
+
+    @property
+    def hard(self) -> tuple[int, ...]:
+        """The indices of the levels declared hard (:func:`~prioik.hierarchy.hard`)."""
+        return self._hard
 
     def __len__(self) -> int:
         return len(self._levels)
@@ -128,7 +134,7 @@ class TaskStack:
         if self._layout is None:
             self._layout = StackLayout.shared(
                 self._n, tuple(tuple((t.name, t.m, t.kind) for t in level)
-                               for level in self._levels))
+                               for level in self._levels), hard=self._hard)
         return self._layout
 
     @property
@@ -170,7 +176,8 @@ class TaskStack:
         for i in levels:
             # 2^-e: the peak into [0.5, 1)
             factor = math.ldexp(1.0, -math.frexp(float(peaks[i]))[1])
-            out[i] = Level(t.scaled(factor) for t in self._levels[i])
+            out[i] = Level.of([t.scaled(factor) for t in self._levels[i]],
+                              hard=self._levels[i].hard)
         return TaskStack(out), levels
 
     def equality_matrices(self) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -197,7 +204,7 @@ class TaskStack:
         :meth:`summary` gives the table with ranks."""
         parts = []
         for level in self._levels[:8]:
-            parts.append(" + ".join(f"{t.name}[{t.m}{'' if t.is_equality else '≤'}]"
+            parts.append(("hard " if level.hard else "") + " + ".join(f"{t.name}[{t.m}{'' if t.is_equality else '≤'}]"
                                     for t in level[:4]) + (" + …" if len(level) > 4 else ""))
         more = f" / … ({len(self) - 8} more)" if len(self) > 8 else ""
         return f"TaskStack(n={self.n}, {len(self)} levels: {' / '.join(parts)}{more})"

@@ -39,8 +39,8 @@ from .formulations import (BatchSolution, Capabilities, ConcurrentUseError, Form
                            Option, PreparedSolver, Solution, available, prepare, solve,
                            solve_batch)
 from .hierarchy import (Level, LexicographicReport, StackData, StackLayout, Task, TaskStack,
-                        TaskStackError, UnsupportedTaskError, check_lexicographic, load_stack,
-                        save_stack)
+                        TaskStackError, UnsupportedTaskError, check_lexicographic, hard,
+                        load_stack, save_stack)
 
 try:
     __version__ = _version("prioik")
@@ -68,6 +68,6 @@ __all__ = [
     "LexicographicReport", "MissingExtraError", "Option", "PreparedSolver", "PrioikError",
     "Solution", "StackData", "StackLayout", "Task", "TaskStack", "TaskStackError",
     "UnsupportedTaskError", "__version__", "available", "benchmarks", "check_lexicographic",
-    "errors", "extras", "formulations", "hierarchy", "load_stack", "prepare", "robots",
-    "save_stack", "solve", "solve_batch",
+    "errors", "extras", "formulations", "hard", "hierarchy", "load_stack", "prepare",
+    "robots", "save_stack", "solve", "solve_batch",
 ]
