@@ -265,14 +265,20 @@ class TaskTerm:
 
 
 def _check_gain(task: str, what: str, gain) -> None:
-    """Refuses a gain that is not a finite number ≥ 0, naming the task and the gain."""
-    try:
-        ok = not isinstance(gain, (bool, str)) and math.isfinite(gain) and gain >= 0
-    except TypeError:
-        ok = False
+    """Refuses a gain (a number, or one per row) that is not finite and ≥ 0, naming the
+    task and the gain."""
+    if isinstance(gain, (int, float)) and not isinstance(gain, bool):
+        ok = math.isfinite(gain) and gain >= 0          # the common case, at once
+    else:
+        try:
+            g = np.asarray(gain, dtype=np.float64)
+            ok = (not isinstance(gain, (bool, str, bytes)) and g.ndim <= 1
+                  and bool(np.isfinite(g).all() and (g >= 0).all()))
+        except (TypeError, ValueError):
+            ok = False
     if not ok:
-        raise TaskStackError(f"gain {what} must be a finite number ≥ 0, got {gain!r}",
-                             task=task)
+        raise TaskStackError(f"gain {what} must be a finite number ≥ 0 (or one per row), "
+                             f"got {gain!r}", task=task)
 
 
 # ------------------------------------------------------- one-task writers, per thread

@@ -503,10 +503,15 @@ def test_builders_name_their_task_in_reference_and_gain_errors(robot):
                           (lambda: term.velocity(np.inf), r"gain k must be .*got inf"),
                           (lambda: term.acceleration(1.0, -2.0), r"gain kd .*got -2.0"),
                           (lambda: term.acceleration(np.nan, 2.0), r"gain kp .*got nan"),
-                          (lambda: term.velocity("1"), r"gain k .*got '1'")):
+                          (lambda: term.velocity("1"), r"gain k .*got '1'"),
+                          (lambda: term.velocity(np.array([1.0, -1.0, 1.0])),
+                           r"gain k .*got array")):
         with pytest.raises(TaskStackError, match=r"task 'hand': " + message):
             call()
     assert np.all(np.isfinite(term.acceleration(0.0, 0.0).b))
+    per_row = term.velocity(np.array([1.0, 2.0, 3.0])).b          # one gain per row
+    np.testing.assert_array_equal(per_row, term.velocity_ref
+                                  + np.array([1.0, 2.0, 3.0]) * term.error)
 
 
 def _declared(robot, keep=()):
