@@ -29,6 +29,8 @@ from typing import Sequence
 
 import numpy as np
 
+from prioik.errors import UnknownNameError
+
 from .errors import TaskStackError
 from .linalg import DEFAULT_CERTIFICATE_TOL, X_PRECISION, level_scale
 
@@ -215,9 +217,13 @@ class StackLayout:
                                  f"{', '.join(self._slices)})") from None
 
     def level_of(self, name: str) -> int:
-        """Level index of a task (:class:`KeyError` if absent, as
-        :meth:`TaskStack.level_of`)."""
-        return self._level_of[name]
+        """Level index of a task (:class:`~prioik.errors.UnknownNameError`, a
+        :class:`KeyError`, listing the tasks if absent, as :meth:`TaskStack.level_of`)."""
+        try:
+            return self._level_of[name]
+        except (KeyError, TypeError):
+            raise UnknownNameError(f"no task {name!r} in the layout (tasks: "
+                                   f"{', '.join(self._slices)})") from None
 
     def kind_of(self, name: str) -> str:
         """``"equality"`` or ``"inequality"``."""

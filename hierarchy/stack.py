@@ -7,6 +7,8 @@ from typing import Iterator, Sequence
 
 import numpy as np
 
+from prioik.errors import UnknownNameError
+
 from .errors import TaskStackError
 from .layout import StackData, StackLayout
 from .task import Level, Task
@@ -106,18 +108,23 @@ class TaskStack:
         return self._levels[i]
 
     def task(self, name: str) -> Task:
-        """The task called ``name``."""
+        """The task called ``name`` (:class:`~prioik.errors.UnknownNameError`, a
+        :class:`KeyError`, listing the tasks if absent)."""
         for t in self.tasks:
             if t.name == name:
                 return t
-        raise KeyError(name)
+        raise self._unknown(name)
 
     def level_of(self, name: str) -> int:
-        """Level index of the task called ``name``."""
+        """Level index of the task called ``name`` (as :meth:`task` if absent)."""
         for i, level in enumerate(self._levels):
             if name in level.names:
                 return i
-        raise KeyError(name)
+        raise self._unknown(name)
+
+    def _unknown(self, name) -> UnknownNameError:
+        return UnknownNameError(f"no task {name!r} in the stack (tasks: "
+                                f"{', '.join(t.name for t in self.tasks)})")
 
     # ------------------------------------------------------------- composition
     def __truediv__(self, other) -> "TaskStack":

@@ -33,7 +33,7 @@ import importlib
 from importlib.metadata import PackageNotFoundError, version as _version
 
 from . import errors, extras, formulations, hierarchy
-from .errors import PrioikError
+from .errors import PrioikError, UnknownNameError
 from .extras import MissingExtraError
 from .formulations import (BatchSolution, Capabilities, ConcurrentUseError, FormulationError,
                            Option, PreparedSolver, Solution, available, prepare, solve,
@@ -67,7 +67,7 @@ __all__ = [
     "BatchSolution", "Capabilities", "ConcurrentUseError", "FormulationError", "Level",
     "LexicographicReport", "MissingExtraError", "Option", "PreparedSolver", "PrioikError",
     "Solution", "StackData", "StackLayout", "Task", "TaskStack", "TaskStackError",
-    "UnsupportedTaskError", "__version__", "available", "benchmarks", "check_lexicographic",
+    "UnknownNameError", "UnsupportedTaskError", "__version__", "available", "benchmarks", "check_lexicographic",
     "errors", "extras", "formulations", "hard", "hierarchy", "load_stack", "prepare",
     "robots", "save_stack", "solve", "solve_batch",
 ]

@@ -15,6 +15,8 @@ Subclasses (defined where they are raised):
   * :class:`prioik.hierarchy.UnsupportedTaskError` — a formulation cannot take a task
     (e.g. an inequality in a closed-form method);
 
+* :class:`UnknownNameError` (``KeyError``) — a name that is not there (a task of a
+  stack or layout, a robot's frame or joint, an extra);
 * :class:`prioik.formulations.FormulationError` (``ValueError``) — a formulation cannot
   be used as asked (unknown name, not installed, an unknown or missing option);
 
@@ -29,8 +31,12 @@ Subclasses (defined where they are raised):
   cannot be used;
 * :class:`prioik.robots.models.ModelNotFoundError` (``FileNotFoundError``) — a robot
   model that cannot be found;
-* :class:`prioik.robots.simulate.SimulationError` (``ValueError``) — a simulation that
-  cannot run as asked;
+* :class:`prioik.robots.models.RobotModelError` (``ValueError``) — a robot model that
+  cannot be built or changed as asked (a URDF or SRDF that does not parse or contradicts
+  itself, a bad ``q0``, an unknown robot name);
+* :class:`prioik.robots.simulate.SimulationError` (``ValueError``) — a simulation or a
+  scenario that cannot run as asked (duration, step, level, variant, limits), or a saved
+  run that cannot be read or written;
 * :class:`prioik.robots.mujoco_model.MujocoModelError` (``ValueError``) — a URDF MuJoCo
   cannot load, or a MuJoCo model that does not match the robot;
 * :class:`prioik.benchmarks.sweep.config.SweepConfigError` (``ValueError``) — a sweep
@@ -39,7 +45,7 @@ Subclasses (defined where they are raised):
 
 from __future__ import annotations
 
-__all__ = ["PrioikError"]
+__all__ = ["PrioikError", "UnknownNameError"]
 
 
 class PrioikError(Exception):
@@ -49,3 +55,12 @@ class PrioikError(Exception):
     subclass is also an instance of its builtin base (``ValueError``, ``RuntimeError``,
     ``ImportError`` or ``FileNotFoundError``) and names what is at fault in its message.
     """
+
+
+class UnknownNameError(PrioikError, KeyError):
+    """A name that is not there: a task of a stack or layout, a robot's frame or joint,
+    an extra, a scenario's baseline task. A :class:`KeyError` (so ``except KeyError``
+    still works); its message names what was asked and where it was looked for, and
+    reads as written (no quotes added, as :class:`KeyError` adds)."""
+
+    __str__ = Exception.__str__

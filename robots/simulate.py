@@ -144,7 +144,7 @@ class SimulationResult:
             try:
                 json.dumps(value)
             except TypeError as exc:
-                raise ValueError(f"SimulationResult.info[{key!r}] cannot be saved as JSON "
+                raise SimulationError(f"SimulationResult.info[{key!r}] cannot be saved as JSON "
                                  f"({exc})") from None
         meta = {"format": "prioik.SimulationResult/1", "failed": bool(self.failed),
                 "message": self.message, "failed_step": self.failed_step,
@@ -173,14 +173,14 @@ class SimulationResult:
                 files = set(z.files)
                 missing = [k for k in (*cls._ARRAYS, "statuses", "meta") if k not in files]
                 if missing:
-                    raise ValueError(f"{path} is not a saved SimulationResult (no "
+                    raise SimulationError(f"{path} is not a saved SimulationResult (no "
                                      f"{', '.join(missing)})")
                 meta = json.loads(str(z["meta"]))
                 arrays = {k: np.array(z[k]) for k in cls._ARRAYS}
                 errors = {k: np.array(z[f"error:{k}"]) for k in meta["error_names"]}
                 statuses = [str(s) for s in z["statuses"]]
         except (KeyError, json.JSONDecodeError) as exc:
-            raise ValueError(f"{path} is not a saved SimulationResult ({exc})") from None
+            raise SimulationError(f"{path} is not a saved SimulationResult ({exc})") from None
         info = dict(meta.get("info", {}))
         info.setdefault("versions", meta.get("versions", {}))
         return cls(arrays["t"], arrays["q"], arrays["v"], arrays["a"], arrays["tau"], errors,
@@ -352,7 +352,9 @@ def _algorithmic_error(stack: TaskStack | StackData, x: np.ndarray,
 
 
 class SimulationError(PrioikError, ValueError):
-    """:func:`simulate` was called with a ``duration``, ``dt`` or ``level`` it cannot run."""
+    """:func:`simulate` was called with a ``duration``, ``dt`` or ``level`` it cannot run,
+    a scenario with a variant or limits it does not have, or a run cannot be saved or
+    read (:meth:`SimulationResult.save`, :meth:`SimulationResult.load`)."""
 
 
 def _check_times(duration: float, dt: float) -> None:

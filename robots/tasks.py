@@ -37,7 +37,8 @@ import pinocchio as pin
 from prioik._core import rows as _core_rows
 from prioik.hierarchy import Task, TaskStackError
 
-from .models import UNIT_NORM_TOL, RobotModel, check_configuration, check_velocity
+from .models import (UNIT_NORM_TOL, RobotModel, StateError, check_configuration,
+                     check_velocity)
 from .references import Reference
 from .rows import JointLimitActivation, TaskWriter
 
@@ -195,10 +196,10 @@ class KinematicState:
         """``J̇ q̇`` (6): classical acceleration of the frame origin at ``q̈ = 0``.
 
         Raises:
-            ValueError: the state was built with ``drift=False``.
+            StateError: the state was built with ``drift=False``.
         """
         if not self.has_drift:
-            raise ValueError("this KinematicState was built with drift=False "
+            raise StateError("this KinematicState was built with drift=False "
                              "(velocity level): it has no J̇q̇ terms")
         key = ("dJv", frame)
         if key not in self._cache:

@@ -42,6 +42,7 @@ def _exception_classes():
 
 #: every exception class the package defines, with the builtin base it keeps
 BUILTIN_BASES = {
+    "prioik.errors.UnknownNameError": KeyError,
     "prioik.hierarchy.errors.TaskStackError": ValueError,
     "prioik.hierarchy.errors.UnsupportedTaskError": ValueError,
     "prioik.formulations.base.FormulationError": ValueError,
@@ -50,6 +51,7 @@ BUILTIN_BASES = {
     "prioik.extras.MissingExtraError": ImportError,
     "prioik.robots.models.StateError": ValueError,
     "prioik.robots.models.ModelNotFoundError": FileNotFoundError,
+    "prioik.robots.models.RobotModelError": ValueError,
     "prioik.robots.simulate.SimulationError": ValueError,
     "prioik.robots.mujoco_model.MujocoModelError": ValueError,
     "prioik.benchmarks.sweep.config.SweepConfigError": ValueError,
@@ -135,6 +137,16 @@ def _state_error():
     KinematicState(robot, q, np.zeros(robot.nv))
 
 
+def _unknown_name_error():
+    stack = prioik.Task("t", np.eye(2), np.ones(2)) / prioik.Task("u", np.eye(2), np.ones(2))
+    stack.level_of("v")
+
+
+def _robot_model_error():
+    from prioik.robots import load
+    load("nosuch_robot")
+
+
 def _model_not_found_error():
     from prioik.robots import load
     load("nowhere/no_such_robot.urdf")
@@ -165,6 +177,8 @@ BAD_CALLS = {
     "MissingExtraError": _missing_extra_error,
     "StateError": _state_error,
     "ModelNotFoundError": _model_not_found_error,
+    "UnknownNameError": _unknown_name_error,
+    "RobotModelError": _robot_model_error,
     "SimulationError": _simulation_error,
     "MujocoModelError": _mujoco_model_error,
     "SweepConfigError": _sweep_config_error,
@@ -182,5 +196,5 @@ def test_a_bad_call_raises_its_class_caught_as_prioik_error(name, monkeypatch):
     with pytest.raises(PrioikError) as info:
         call(*args)
     assert type(info.value).__name__ == name, repr(info.value)
-    assert str(info.value)
+    assert str(info.value) and not str(info.value).startswith("'")   # reads as written
     assert isinstance(info.value, CoreInputError) == (name == "CoreInputError")
