@@ -253,3 +253,17 @@ def test_an_unknown_row_label_of_a_known_formulation_lists_the_labels(tmp_path, 
                               "'extended_jacobian[nosuch]'; known formulations: reference, ")
         assert "; row labels: " in err and len(err.splitlines()) == 1, err
     assert not out.exists()
+
+
+def test_every_library_error_is_one_line_and_exit_2(monkeypatch, capsys):
+    """An UnknownNameError (a KeyError) raised under a command is reported as the
+    others are, not as a traceback."""
+    from prioik.benchmarks import library
+    from prioik.errors import UnknownNameError
+
+    def unknown(*args, **kwargs):
+        raise UnknownNameError("model 'x' has no frame 'tip'")
+    monkeypatch.setattr(library, "_problems", unknown)
+    assert main(["solve", SMALL]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == "prioik solve: error: model 'x' has no frame 'tip'"
