@@ -219,7 +219,10 @@ class TaskWriter:
     Args:
         robot: The robot (its ``n_v`` is the layout's width).
         mode: ``"velocity"`` (``J q̇ = ẋ* + K e``) or ``"acceleration"`` (eq. 2-4).
-
+        hard: The levels declared hard (``layout.hard``; :func:`~prioik.hierarchy.hard`):
+            a solution that leaves one violated is ``"failed"``, naming it and its
+            tasks (e.g. ``hard=(0,)`` for support contacts that must hold). Checked
+            against the declared levels when the layout is fixed.
     Declare tasks with the ``add_*`` methods (each takes ``level``: the priority, 0 the
     highest; ``None`` puts the task on a new level below every level so far; tasks of one
     level keep their declaration order). Gains: ``gain=K`` at velocity level,
@@ -248,11 +251,13 @@ class TaskWriter:
             fixed; ``kp`` is ``K`` at velocity level).
     """
 
-    def __init__(self, robot: RobotModel, mode: str = "velocity") -> None:
+    def __init__(self, robot: RobotModel, mode: str = "velocity", *,
+                 hard: Sequence[int] = ()) -> None:
         if mode not in MODES:
             raise TaskStackError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
         self.robot = robot
         self.mode = mode
+        self._hard = hard                 # checked with the layout, at _fix
         self._accel = mode == "acceleration"
         self._tasks: dict[str, _Task] = {}
         self._layout: StackLayout | None = None
@@ -518,7 +523,7 @@ class TaskWriter:
                                  "without gaps)", level=missing[0])
         self._layout = StackLayout(self.robot.nv, [
             [(t.name, t.rows, "inequality" if t.inequality else "equality")
-             for t in levels[i]] for i in range(len(levels))])
+             for t in levels[i]] for i in range(len(levels))], hard=self._hard)
         self._data = data = self._layout.data()
         self._Q = np.zeros((6, data.m))
         nb = self.robot.n_base

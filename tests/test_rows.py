@@ -784,3 +784,32 @@ def test_region_errors_name_the_task(robot):
     with pytest.raises(TaskStackError, match="task 'f' was declared as frame_region, not "
                        "com_region"):
         w.com_region(_state(robot, 0), "f")
+
+
+def test_a_writer_declares_hard_levels_and_a_violated_one_fails_the_solve(robot):
+    """Two targets for one hand on a hard level 0 cannot both hold: the solve is
+    "failed" naming level 0 and its tasks; the same rows with level 0 not hard give the
+    least-squares compromise as the formulation's own status."""
+    import prioik
+    state = _state(robot, 8, drift=False)
+    answers = {}
+    for hard in ((0,), ()):
+        w = TaskWriter(robot, "velocity", hard=hard)
+        w.add_frame_position("reach", "left_hand", gain=1.0, level=0)
+        w.add_frame_position("away", "left_hand", gain=1.0, level=0)
+        w.add_posture("posture", gain=1.0, level=1)
+        assert w.layout.hard == hard
+        w.frame_position(state, "reach", np.array([0.3, 0.2, 1.0]))
+        w.frame_position(state, "away", np.array([0.3, 0.2, 0.0]))
+        w.posture(state, "posture", robot.q0)
+        solver = prioik.prepare(w.layout, "hierarchical_active_set")
+        answers[hard] = solver.solve(w.targets(state))
+    sol, soft = answers[(0,)], answers[()]
+    assert soft.status == "optimal" and sol.status == "failed"
+    assert sol.info["fault_level"] == 0 and sol.info["fault_tasks"] == ["reach", "away"]
+    np.testing.assert_array_equal(sol.x, soft.x)
+    bad = TaskWriter(robot, "velocity", hard=(1,))
+    bad.add_posture("posture", gain=1.0, level=0)
+    with pytest.raises(TaskStackError, match=r"hard levels must be distinct level indices "
+                                             r"0 … 0, got \(1,\)"):
+        bad.layout
