@@ -77,6 +77,26 @@ def parse_label(label: str) -> tuple[str, str]:
     return m.group(1), m.group(2) or ""
 
 
+def check_formulations(labels, baselines: bool = False) -> None:
+    """Refuses (``ValueError``, listing the registry's names) a label whose formulation
+    is not registered (nor, with ``baselines``, an external baseline): a check by name
+    alone, before any plugin is imported; a report's :meth:`VariantTable.check_names`
+    then checks the tags."""
+    from prioik import formulations
+    known = formulations.names() + (list(BASELINES) if baselines else [])
+    unknown = []
+    for label in labels:
+        try:
+            name, _ = parse_label(label)
+        except ValueError:
+            name = ""
+        if name not in known:
+            unknown.append(label)
+    if unknown:
+        raise ValueError(f"unknown formulation {', '.join(map(repr, unknown))}; known: "
+                         f"{', '.join(known)}")
+
+
 def split_labels(text: str) -> list[str]:
     """The labels of a comma-separated list (commas inside ``[...]`` belong to a tag)."""
     out, depth, cur = [], 0, []
@@ -220,10 +240,29 @@ class VariantTable:
         return self.known[label]
 
     def only(self, names) -> list[Variant]:
-        """The rows whose formulation or label is in ``names`` (every row when empty)."""
+        """The rows whose formulation or label is in ``names`` (every row when empty).
+
+        Raises:
+            ValueError: a name that is neither a formulation of the report (runnable
+                here or not) nor one of its labels; the message lists the known ones.
+        """
         names = tuple(names or ())
+        self.check_names(names)
         return [v for v in self.rows if not names or v.formulation in names
                 or v.label in names]
+
+    def check_names(self, names) -> None:
+        """Refuses (``ValueError``) a name that is neither a formulation of the report
+        (runnable here or not) nor one of its labels, listing the known ones."""
+        formulations = list(dict.fromkeys([v.formulation for v in self.known.values()]
+                                          + list(self.unavailable)))
+        unknown = [n for n in names if n not in formulations and n not in self.known]
+        if unknown:
+            labels = [lb for lb in self.known if lb not in formulations]
+            raise ValueError(
+                f"unknown formulation or row label {', '.join(map(repr, unknown))}; "
+                f"known formulations: {', '.join(formulations)}"
+                + (f"; row labels: {', '.join(labels)}" if labels else ""))
 
     def select(self, labels: str | list[str] | None) -> tuple[list[Variant], list[str]]:
         """The default rows (``labels`` empty) or the named ones, and a message for

@@ -7,6 +7,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from prioik.errors import PrioikError
 from prioik.hierarchy import (DEFAULT_CERTIFICATE_TOL, X_PRECISION, StackData, TaskStack,
                               TaskStackError, ambiguity_reason, check_lexicographic,
                               level_residuals, level_scale, precision_limited_levels,
@@ -16,7 +17,7 @@ from prioik.hierarchy import (DEFAULT_CERTIFICATE_TOL, X_PRECISION, StackData, T
 STATUSES = ("optimal", "approximate", "failed")
 
 
-class FormulationError(ValueError):
+class FormulationError(PrioikError, ValueError):
     """A formulation cannot be used as asked: unknown name, not installed here,
     an unknown option, or a required option (e.g. ``mass_matrix``) missing."""
 
@@ -27,7 +28,7 @@ class CoreInputError(FormulationError):
     not finite (or a ``√w ≤ 0``); the message names the array and the entry."""
 
 
-class ConcurrentUseError(RuntimeError):
+class ConcurrentUseError(PrioikError, RuntimeError):
     """A prepared solver was called from a second thread while a solve was running
     (a prepared solver owns its workspaces: use one per thread)."""
 

@@ -59,7 +59,8 @@ class Option:
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
-            raise ValueError(f"unknown option kind {self.kind!r}")
+            raise FormulationError(f"unknown option kind {self.kind!r}; kinds: "
+                                   f"{', '.join(KINDS)}")
 
     # ---------------------------------------------------------------- validate
     def validate(self, name: str, value: Any, n: int | None = None) -> Any:

@@ -27,7 +27,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "are reduced")
     p.add_argument("--family", default=None, help="random stack family (hierarchy.families)")
     p.add_argument("--formulations", default="",
-                   help="comma-separated formulation names or row labels (default: all)")
+                   help="comma-separated formulation names or row labels (default: all; "
+                        "an unknown one exits 2 listing the known ones)")
     p.add_argument("--sizes", default=None, help="comma-separated n of the random cases "
                                                  f"(default: {','.join(map(str, SIZES))})")
     p.add_argument("--levels", default=None, help="comma-separated k of the random cases "
@@ -74,6 +75,9 @@ def _int_list(text: str, what: str) -> tuple[int, ...]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from prioik.benchmarks.variants import check_formulations, split_labels, table
+    only = tuple(split_labels(args.formulations))
+    check_formulations(only)                      # an unknown name: before anything
     settings = quick_settings() if args.quick else Settings()
     if args.repeats is not None:
         if args.repeats < 1:
@@ -85,9 +89,12 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"--cap must be > 0, got {args.cap}")
         settings.cap_s = args.cap
     if args.family:
+        from prioik.hierarchy.families import FAMILIES
+        if args.family not in FAMILIES:
+            raise ValueError(f"unknown family {args.family!r}; known: {', '.join(FAMILIES)}")
         settings.family = args.family
-    from prioik.benchmarks.variants import split_labels
-    settings.only = tuple(split_labels(args.formulations))
+    settings.only = only
+    table("bench").check_names(only)              # an unknown row label: before anything runs
     if args.sizes:
         settings.sizes = _int_list(args.sizes, "--sizes")
     if args.levels:
