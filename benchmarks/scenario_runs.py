@@ -276,7 +276,8 @@ def _short(key: str) -> str:
 
 #: the console table's fixed columns: header → meaning
 _FIXED_COLUMNS = (("tip final", "the tip's final distance to its target (m)"),
-                  ("alg err", "largest algorithmic error along the run (eq. 29)"),
+                  ("alg err", "largest algorithmic error along the run (eq. 29; — for "
+                              "the external baselines, whose rows are not prioik's)"),
                   ("max|q̈|", "largest ‖q̈‖ (rad/s², m/s² for the base)"),
                   ("kin ms", "median time per step in kinematics (ms)"),
                   ("solve ms", "median time per step in the solver (ms)"),
