@@ -226,9 +226,7 @@ def certify(stack, outcome: Outcome, metric=None, tol: float | None = None) -> O
     :data:`hierarchy.AMBIGUITY` of the rank rule's threshold) becomes ``"approximate"``
     too, with ``info["ambiguous_levels"]`` and ``info["reason"]`` (``info["message"]``
     too: every answer it demotes says why there): it is the rank rule's
-    optimum, and the exact solvers say ``approximate`` at such a decision (on 600 fuzz
-    stacks with inequalities, ``cascaded_qp[quadprog]`` said ``optimal`` on 34 where the
-    active set found its decisions ambiguous, 30 of which the check finds so too). Any
+    optimum, and the exact solvers say ``approximate`` at such a decision. Any
     other answer that passes is compared with the exact active-set solver's answer on the
     same stack (:func:`lower_point`): when that point is no higher at every level above
     some level and lower there by more than ``tol · max(1, value)`` (and the values'
