@@ -72,7 +72,8 @@ def run_command(args: argparse.Namespace) -> int:
     """``prioik arm``."""
     from .scenario_runs import VELOCITY_GAIN, run_scenario
     runs = run_scenario("arm", list(VARIANTS), args.out, args.formulations, args.duration,
-                        args.dt, args.progress, turn_steps=args.turn_steps)
+                        args.dt, args.progress, turn_steps=args.turn_steps,
+                        save_runs=args.save_runs)
     if args.doc:
         command = (f"prioik arm --duration {args.duration:g} --dt {args.dt:g} "
                    f"--out {args.out} --doc {args.doc}")
@@ -84,14 +85,14 @@ def run_command(args: argparse.Namespace) -> int:
 
 def add_parser(subparsers) -> None:
     """Register ``prioik arm``."""
-    from .scenario_runs import add_turn_steps_argument
+    from .scenario_runs import add_save_runs_argument, add_turn_steps_argument
     p = subparsers.add_parser(
         "arm", help="the arm-reach scenario (Panda, one target out of reach), every "
                     "formulation, PlaCo, pink, mink and SNS",
         description="Simulate the Panda reaching four targets (one out of reach) under "
                     "joint limits with each formulation and the PlaCo, pink and mink "
-                    "baselines; print a table, write summary.json, CSVs, saved runs, plots and a "
-                    "replay page into --out.")
+                    "baselines; print a table, write summary.json, plots and a replay page into "
+                    "--out (every run's trajectory too with --save-runs).")
     p.add_argument("--formulations", default=None, metavar="A,B,...",
                    help="run labels, e.g. extended_jacobian,cascaded_qp[quadprog] (default: "
                         "every run of the scenario's table whose formulation is available; "
@@ -103,6 +104,7 @@ def add_parser(subparsers) -> None:
                    help="also write the scenario page here (e.g. docs/arm.md; plots copied "
                         "to img/ beside it)")
     add_turn_steps_argument(p)
+    add_save_runs_argument(p)
     p.add_argument("--quiet", dest="progress", action="store_false",
                    help="no progress bars on stderr")
     p.set_defaults(func=run_command, extras=("robots", "plots"))

@@ -1,7 +1,7 @@
 """Velocity-level loops with a target out of reach: the chatter of an undamped level and
 the feet that slide under large steps, and their remedies.
 
-* **Panda** — README's joint-limits loop: the Panda (9 DoF), joint position and velocity
+* **Panda** — docs/usage.md's joint-limits loop: the Panda (9 DoF), joint position and velocity
   limits as bounds at level 0, the hand (``panda_hand``, ``K = 10``) at level 1 with a
   target 0.9 m away (:data:`PANDA_TARGET`, out of reach), ``dt`` = 2 ms,
   ``hierarchical_active_set``. With the remedy the hand's level also holds a damping task
@@ -42,7 +42,7 @@ __all__ = ["PANDA_TARGET", "HAND_OFFSET", "HAND_MAX_RATE", "DAMPING", "ZERO_SPEE
            "placo_humanoid_run", "run",
            "format_table"]
 
-#: the Panda's hand target of README's joint-limits loop (m), ~0.95 m from the shoulder
+#: the Panda's hand target of docs/usage.md's joint-limits loop (m), ~0.95 m from the shoulder
 PANDA_TARGET = (0.9, 0.3, 0.4)
 #: the humanoid's hand target, from the hand's start (m)
 HAND_OFFSET = (1.5, 0.0, 0.0)
@@ -82,7 +82,7 @@ def settled_step(errors, tol: float = SETTLED) -> int:
 
 
 def panda_run(damping: float | None = DAMPING, steps: int = 2500) -> dict[str, Any]:
-    """README's joint-limits loop (the hand's level damped by ``damping``; ``None``: not
+    """docs/usage.md's joint-limits loop (the hand's level damped by ``damping``; ``None``: not
     damped) for ``steps`` steps; returns ``qdot`` (steps × n_v), the hand's position after
     every step ``hand``, the statuses and the wall time."""
     import pinocchio as pin
@@ -290,7 +290,7 @@ def run(panda_steps: int = 2500, humanoid_steps: int = 300) -> dict[str, Any]:
 
 def format_table(res: dict[str, Any]) -> str:
     """The two tables of :func:`run` in markdown."""
-    lines = ["| Panda, README's loop | no progress from step | windows of 100 after | "
+    lines = ["| Panda, docs/usage.md's loop | no progress from step | windows of 100 after | "
              "most sign changes of a joint's q̇ per 100 steps | hand error (m) | "
              "statuses |",
              "|---|---:|---:|---:|---:|---|"]

@@ -229,9 +229,7 @@ def certify(stack, outcome: Outcome, metric=None, tol: float | None = None,
     :data:`hierarchy.AMBIGUITY` of the rank rule's threshold) becomes ``"approximate"``
     too, with ``info["ambiguous_levels"]`` and ``info["reason"]`` (``info["message"]``
     too: every answer it demotes says why there): it is the rank rule's
-    optimum, and the exact solvers say ``approximate`` at such a decision (on 600 fuzz
-    stacks with inequalities, ``cascaded_qp[quadprog]`` said ``optimal`` on 34 where the
-    active set found its decisions ambiguous, 30 of which the check finds so too). Any
+    optimum, and the exact solvers say ``approximate`` at such a decision. Any
     other answer that passes is compared with the exact active-set solver's answer on the
     same stack (:func:`lower_point`): when that point is no higher at every level above
     some level and lower there by more than ``tol · max(1, value)`` (and the values'
@@ -240,12 +238,8 @@ def certify(stack, outcome: Outcome, metric=None, tol: float | None = None,
     ``info["message"]`` and ``info["lower_point"]`` (the two values). The check reads
     rows a solver left violated within its tolerance at a level above as that level's
     optimal violation, fixed for the levels below, which can pin them far from their
-    optimum: on 600 stacks (``prioik fuzz`` seed 1248's first 200 inequality and 200
-    bounds stacks, 200 ``random_inequality``) it passed 46 answers of ``cascaded_qp``
-    (quadprog, daqp, clarabel), ``cvxpy`` and ``daqp_hierarchical`` that the comparison
-    refutes, by 1.1e-8 to 0.44 of ``max(1, value)`` (``cascaded_qp[quadprog]`` on
-    ``bounds-1248-41``: level 1 at 17.19 where 10.58 is reached, a level-0 row left
-    violated by 5.7e-7). Other statuses are returned unchanged.
+    optimum; the comparison does not depend on that reading. Other statuses are returned
+    unchanged.
     """
     if outcome.status != "optimal":
         return outcome

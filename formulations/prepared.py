@@ -347,8 +347,8 @@ class PreparedSolver:
     def _one_by_one(self, datas: list[StackData]) -> tuple[np.ndarray, list[str]]:
         # the stacks of a batch are independent: a plugin that warm-starts from its last
         # solve (``reset()``) starts each one cold, so row i is prioik.solve(stack_i)
-        # (a warm start decides ranks on another path: another status on a rank near
-        # its threshold, fuzzing found); a sequence of solve() calls stays warm
+        # (a warm start decides ranks on another path, which may give another status
+        # on a rank near its threshold); a sequence of solve() calls stays warm
         reset = getattr(self._impl, "reset", None)
         X = np.empty((len(datas), self._n))
         statuses = []

@@ -2,44 +2,32 @@
 
 ``except prioik.PrioikError`` catches whatever the library refuses or fails at, and
 nothing else (a bug in the caller's own code, a ``KeyboardInterrupt``). Each subclass
-also keeps the builtin base it had before (``FormulationError`` is a ``ValueError``,
+also keeps its builtin base (``FormulationError`` is a ``ValueError``,
 ``MissingExtraError`` an ``ImportError``, ...), so ``except ValueError`` still works.
+The table of docs/usage.md ("Errors") says when each is raised.
 
-Subclasses (defined where they are raised):
+Subclasses (defined where they are raised), with their builtin base:
 
-* :class:`prioik.hierarchy.TaskStackError` (``ValueError``) — a task, a level or a task
-  stack is malformed (shapes, non-finite values, a negative or non-finite gain or a
-  non-finite reference given to a robot task writer, a declared task not written before
-  ``TaskWriter.targets``); it names the task and level;
-
-  * :class:`prioik.hierarchy.UnsupportedTaskError` — a formulation cannot take a task
-    (e.g. an inequality in a closed-form method);
-
-* :class:`UnknownNameError` (``KeyError``) — a name that is not there (a task of a
-  stack or layout, a robot's frame or joint, an extra);
-* :class:`prioik.formulations.FormulationError` (``ValueError``) — a formulation cannot
-  be used as asked (unknown name, not installed, an unknown or missing option);
-
-  * :class:`prioik.formulations.base.CoreInputError` — an array the compiled core
-    cannot take;
-
-* :class:`prioik.formulations.ConcurrentUseError` (``RuntimeError``) — a prepared
-  solver called from a second thread during a solve;
-* :class:`prioik.extras.MissingExtraError` (``ImportError``) — a part needs an extra
-  that is not installed;
-* :class:`prioik.robots.StateError` (``ValueError``) — a robot state (``q``, ``v``) that
-  cannot be used;
-* :class:`prioik.robots.models.ModelNotFoundError` (``FileNotFoundError``) — a robot
-  model that cannot be found;
-* :class:`prioik.robots.models.RobotModelError` (``ValueError``) — a robot model that
-  cannot be built or changed as asked (a URDF or SRDF that does not parse or contradicts
-  itself, a bad ``q0``, an unknown robot name);
-* :class:`prioik.robots.simulate.SimulationError` (``ValueError``) — a simulation or a
-  scenario that cannot run as asked (duration, step, level, variant, limits), or a saved
-  run that cannot be read or written;
-* :class:`prioik.robots.mujoco_model.MujocoModelError` (``ValueError``) — a URDF MuJoCo
-  cannot load, or a MuJoCo model that does not match the robot;
-* :class:`prioik.benchmarks.sweep.config.SweepConfigError` (``ValueError``) — a sweep
+* :class:`prioik.hierarchy.TaskStackError` (``ValueError``): a malformed task, level or
+  stack, a robot task writer's bad gain or reference or unwritten task; names the task
+  and level. Its :class:`prioik.hierarchy.UnsupportedTaskError`: a task a formulation
+  cannot take.
+* :class:`UnknownNameError` (``KeyError``): a task, frame, joint or extra not there.
+* :class:`prioik.formulations.FormulationError` (``ValueError``): a formulation that
+  cannot be used as asked; its :class:`prioik.formulations.base.CoreInputError`: an
+  array the compiled core cannot take.
+* :class:`prioik.formulations.ConcurrentUseError` (``RuntimeError``): a prepared solver
+  called from a second thread during a solve.
+* :class:`prioik.extras.MissingExtraError` (``ImportError``): an extra not installed.
+* :class:`prioik.robots.StateError` (``ValueError``): an unusable ``q`` or ``v``.
+* :class:`prioik.robots.models.ModelNotFoundError` (``FileNotFoundError``) and
+  :class:`prioik.robots.models.RobotModelError` (``ValueError``): a robot model that
+  cannot be found, or built as asked.
+* :class:`prioik.robots.simulate.SimulationError` (``ValueError``): a simulation,
+  scenario or saved run that cannot run or be read as asked.
+* :class:`prioik.robots.mujoco_model.MujocoModelError` (``ValueError``): a URDF MuJoCo
+  cannot load, or a MuJoCo model that does not match the robot.
+* :class:`prioik.benchmarks.sweep.config.SweepConfigError` (``ValueError``): a sweep
   file that cannot run.
 """
 

@@ -560,8 +560,8 @@ def _steps(robot, build, solve, duration, dt, q0, v0, needs_dynamics, torque_fro
             if len(errors[name]) < len(T):
                 errors[name].append(np.nan)
         if algorithmic_error:     # evaluated after the run: an SVD per level between
-            # steps evicts the control loop's working set and inflated its timed phases
-            # (measured on G1: kinematics 43 -> 60 µs, solve 17 -> 22 µs)
+            # steps would evict the control loop's working set and inflate its timed
+            # phases, so the timed steps run without it
             stack = step.stack
             if isinstance(stack, StackData):     # written in place by the next step
                 if record is None:

@@ -101,7 +101,7 @@ def test_arm_command_writes_tables_runs_and_page(tmp_path, capsys):
     doc = tmp_path / "docs" / "arm.md"
     out = tmp_path / "res"
     assert main(["arm", "--duration", "0.1", "--formulations", "extended_jacobian,sns,pink",
-                 "--out", str(out), "--doc", str(doc), "--quiet"]) == 0
+                 "--out", str(out), "--doc", str(doc), "--quiet", "--save-runs"]) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert set(summary["reach"]) == {"extended_jacobian", "sns", "pink"}
     for label in ("extended_jacobian", "sns", "pink"):

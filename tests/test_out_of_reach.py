@@ -35,7 +35,7 @@ def test_settled_step_is_where_the_error_stops_improving():
 
 @pytest.mark.parametrize("damping", [None, 1e-2])
 def test_the_panda_out_of_reach_stops_flipping_its_joints_once_damped(damping):
-    """2,500 steps of README's joint-limits loop, the hand ~0.95 m from the shoulder:
+    """2,500 steps of docs/usage.md's joint-limits loop, the hand ~0.95 m from the shoulder:
     damped, at most 2 sign changes of any joint's q̇ per 100 steps after the hand
     stopped making progress (at least 10 windows); undamped, joints flip every step."""
     res = panda_run(damping, 2500)
