@@ -7,6 +7,7 @@ from __future__ import annotations
 import os
 import re
 import runpy
+import shlex
 import subprocess
 import sys
 from pathlib import Path
@@ -26,6 +27,12 @@ USER_PAGES = sorted([DOCS / "index.md", DOCS / "getting-started.md",
 BLOCKS = [(page, i, block) for page in USER_PAGES
           for i, block in enumerate(re.findall(r"```python\n(.*?)```", page.read_text(),
                                                flags=re.S))]
+
+
+COMMANDS = [(page, line) for page in USER_PAGES
+            for block in re.findall(r"```sh\n(.*?)```", page.read_text(), flags=re.S)
+            for line in block.replace("\\\n", " ").splitlines()
+            if line.startswith("prioik ")]
 
 
 @pytest.fixture(scope="module")
@@ -81,9 +88,24 @@ def test_every_public_name_has_a_docstring(tmp_path):
     assert empty == []
 
 
+@pytest.mark.parametrize("page, line", COMMANDS,
+                         ids=[f"{p.relative_to(DOCS)}:{line[:40]}" for p, line in COMMANDS])
+def test_user_page_commands_parse(page, line):
+    """Every `prioik` command of the user pages is accepted by the command line as written
+    (the sub-command and its options; running them is the commands' own tests), and the
+    repository files it names exist."""
+    from prioik.benchmarks.cli import build_parser
+    argv = shlex.split(line, comments=True)[1:]
+    build_parser().parse_args(argv)                  # SystemExit on an unknown option
+    for arg in argv:
+        if "/" in arg and Path(arg).suffix in (".json", ".dat", ".txt", ".toml") \
+                and not arg.startswith("/"):
+            assert (ROOT / arg).is_file(), arg
+
+
 def test_user_pages_have_examples():
     pages = {page for page, _, _ in BLOCKS}
-    assert DOCS / "getting-started.md" in pages and len(BLOCKS) >= 10
+    assert DOCS / "getting-started.md" in pages and len(BLOCKS) >= 10 and len(COMMANDS) >= 10
 
 
 @pytest.mark.parametrize("page, index, block", BLOCKS,
