@@ -29,7 +29,7 @@ BUILD_REQUIRES = $$($(PY) -c "import tomllib; print(*tomllib.load(open('pyprojec
 # (tests/test_namespace.py: no top-level packages)
 EDITABLE_PATHS_OFF = -c "import pathlib, sysconfig; p = pathlib.Path(sysconfig.get_paths()['purelib'], '_editable_skbc_prioik.pth'); p.write_text(''.join(l for l in p.read_text().splitlines(True) if l.startswith('import ')))"
 
-.PHONY: test test-core test-forced-cpu demo venv venv-core clean asan asan-bindings
+.PHONY: test test-core test-forced-cpu demo docs venv venv-core clean asan asan-bindings
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -98,8 +98,14 @@ test-forced-cpu: $(STAMP) $(CORE_STAMP_BUILT)
 demo: $(STAMP) $(CORE_STAMP_BUILT)
 	$(VENV)/bin/prioik fencing --variant both --out $(OUT)
 
+# The documentation site (mkdocs.yml, the `docs` extra) built into site/: open
+# site/index.html. `make test` builds it too, with warnings as errors (tests/test_docs.py).
+# NO_MKDOCS_2_WARNING: Material for MkDocs' banner about MkDocs 2.0, not about this site
+docs: $(STAMP) $(CORE_STAMP_BUILT)
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --site-dir site
+
 clean:
-	rm -rf $(VENV) $(CORE_VENV) $(OUT) *.egg-info build
+	rm -rf $(VENV) $(CORE_VENV) $(OUT) *.egg-info build site
 
 # The Python extension built with -fsanitize=address,undefined and the row writers'
 # Python tests (the plain-Python reference, the bad inputs, a short boundary fuzz) run on it,

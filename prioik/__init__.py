@@ -42,10 +42,16 @@ from .hierarchy import (Level, LexicographicReport, StackData, StackLayout, Task
                         TaskStackError, UnsupportedTaskError, check_lexicographic, hard,
                         load_stack, save_stack)
 
-try:
-    __version__ = _version("prioik")
-except PackageNotFoundError:  # pragma: no cover - a source tree that was never installed
-    __version__ = "0+unknown"
+
+def _installed_version() -> str:
+    try:
+        return _version("prioik")
+    except PackageNotFoundError:  # pragma: no cover - a source tree that was never installed
+        return "0+unknown"
+
+
+__version__: str = _installed_version()
+"""The installed distribution's version (``"0+unknown"`` for a source tree never installed)."""
 
 _LAZY = ("robots", "benchmarks")
 

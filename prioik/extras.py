@@ -27,6 +27,8 @@ EXTRAS: dict[str, tuple[tuple[str, ...], str]] = {
     "plots": (("matplotlib",), "plots of `prioik fencing` and `prioik bench`"),
     "view": (("meshcat",), "3-D view of robot motions"),
     "sweep": (("dask", "distributed"), "parameter sweeps on a Dask cluster"),
+    "docs": (("mkdocs", "mkdocs-material", "mkdocstrings-python"),
+             "the documentation site (`make docs`, mkdocs.yml)"),
 }
 
 

@@ -676,8 +676,8 @@ def panda() -> RobotModel:
                           frames={"hand": "panda_hand", "tcp": "panda_hand_tcp"})
 
 
-#: the Panda's finger joints (lock them for a 7-joint arm)
 PANDA_FINGERS = ("panda_finger_joint1", "panda_finger_joint2")
+"""The Panda's finger joints (lock them for a 7-joint arm)."""
 
 UR5_URDF = "ur_description/urdf/ur5_robot.urdf"
 UR5_SRDF = "ur_description/srdf/ur5.srdf"
@@ -761,10 +761,10 @@ def spatial_chain(n_links: int, link_length: float = 0.3, seed: int = 0) -> Robo
                       "built in", floating_base=False)
 
 
-#: name -> loader (no arguments)
 LOADERS = {"g1": g1, "talos": talos, "panda": panda, "ur5": ur5, "go2": go2,
            "solo12": solo12, "sample_humanoid": sample_humanoid,
            "chain7": lambda: spatial_chain(7)}
+"""Robot name → loader (no arguments)."""
 
 
 def load(robot: str | os.PathLike, **kwargs) -> RobotModel:

@@ -55,8 +55,8 @@ from .models import RobotModel, StateError
 __all__ = ["MODES", "TaskWriter", "JointLimitActivation"]
 
 
-#: levels of a :class:`TaskWriter`
 MODES = ("velocity", "acceleration")
+"""The levels a :class:`TaskWriter` writes rows at."""
 
 
 @dataclass(frozen=True)
@@ -392,7 +392,8 @@ class TaskWriter:
             form: ``"activation"`` — equality rows pushing a joint out of its margin
                 (:class:`JointLimitActivation`; position limits only), masked to zero
                 rows while outside; ``"bounds"`` — an inequality task.
-            position, velocity: Which limits the bounds hold (position and/or velocity).
+            position: The bounds hold the position limits.
+            velocity: The bounds hold the velocity limits.
             horizon: Bounds: at velocity level ``q + q̇ T`` stays within the position
                 limits for ``T = horizon`` (default ``dt``); at acceleration level the
                 constant-acceleration position at ``T`` does (required).
@@ -446,8 +447,9 @@ class TaskWriter:
         Args:
             normals: ``C`` (``k × 3``, or one 3-vector): the directions, world axes; rows
                 finite and non-zero.
-            lower, upper: ``k`` bounds on ``C p`` (numbers broadcast; ``None``: none on
+            lower: ``k`` lower bounds on ``C p`` (numbers broadcast; ``None``: none on
                 that side); ``lower ≤ upper``, every row with a finite bound.
+            upper: ``k`` upper bounds on ``C p``, as ``lower``.
             dt: The control step; horizon: ``T`` (default ``dt``). The rows bound what
                 a step does to ``C p`` as the joint-limit bounds bound ``q``
                 (:meth:`add_joint_limits`): at velocity level ``C (p + J q̇ T)`` within
