@@ -18,8 +18,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from .report import (Page, copy_figures, ms, replays_line, run_settings, sci,
-                     step_time_figure, stops_and_figures, table)
+from .report import (Page, baselines_block, copy_figures, ms, replays_line, run_settings,
+                     sci, step_time_figure, stops_and_figures, table)
 from .variants import Variant
 
 VARIANTS = ("reach",)
@@ -60,6 +60,7 @@ def write_page(path: Path, summary: dict, meta: dict, pngs: dict, command: str,
     text = page.render(
         command=command, wall_s=f"{meta['wall_time_s']:.0f}", gain=f"{gain:g}",
         runs_table=table(["run", "formulation", "options", "stack", "why"], rows),
+        baselines=baselines_block(page, meta, summary),
         not_run=(page.block("not_run", skipped="; ".join(meta["skipped"]))
                  if meta.get("skipped") else ""),
         measured="\n\n".join(measured), step_time=step_time_figure(shown),
