@@ -1,4 +1,4 @@
-"""The recording loop of the external IK baselines (PlaCo, pink, mink).
+"""The recording loop of the external IK baselines (PlaCo, pink, mink, TSID).
 
 An external library steps the robot itself (its own kinematics, its own QP); this loop
 gives it the scenario's references, records what :func:`robots.simulate` records —

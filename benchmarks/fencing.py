@@ -350,8 +350,10 @@ def add_parser(subparsers) -> None:
     p = subparsers.add_parser(
         "fencing", help="the paper's fencing scenario on the G1, every formulation",
         description="Simulate the fencing scenario (Jeong & Chang 2009, Sec. III) on the "
-                    "Unitree G1 with each formulation; print tables, write summary.json, "
-                    "CSV trajectories and plots.")
+                    "Unitree G1 with each formulation and the PlaCo, pink, mink and TSID "
+                    "baselines (TSID in its own environment, `make tsid`, and process; not "
+                    "installed, it is left out); print tables, write summary.json, CSV "
+                    "trajectories and plots.")
     p.add_argument("--variant", choices=["compatible", "incompatible", "both"],
                    default="both")
     p.add_argument("--formulations", default=None, metavar="A,B,...",

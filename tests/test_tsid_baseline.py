@@ -64,6 +64,10 @@ def test_a_missing_environment_is_reported_as_not_installed(bogus_environment):
     assert skipped == [f"tsid: {why}"]
     profile = baseline_profiles()["tsid"]
     assert profile["here"] == why and profile["level"] == "acceleration"
+    from prioik.benchmarks.report import baselines_table
+    row = next(line for line in baselines_table({"baselines": baseline_profiles()}
+                                                ).splitlines() if line.startswith("| `tsid`"))
+    assert row.endswith(f"| {why} |") and "TSID (tsid==1.7.1: not installed here)" in row
     assert "not installed" in tb.DESCRIPTION
     with pytest.raises(tb.TsidError, match="not installed"):
         tb.run_tsid(ArmScenario(), duration=0.01, dt=0.002)
@@ -278,3 +282,20 @@ def test_tsid_runs_in_the_arm_report(tmp_path):
     text = page.read_text()
     assert "| `tsid` | TSID 1.7.1 (pin 3.4.0, its own environment) | acceleration |" in text
     assert "In the reach run TSID's median step (its own process)" in text
+
+
+@needs_tsid
+def test_the_step_comparison_runs_the_three_loops():
+    from prioik.benchmarks import tsid_step
+    r = tsid_step.panda_tsid_step(steps=60, rounds=1)
+    assert (r["steps"], r["rounds"], r["tsid"], r["tsid_pinocchio"]) == (60, 1, "1.7.1",
+                                                                        "3.4.0")
+    for path in ("tsid", "prioik_acceleration", "prioik_velocity"):
+        assert r[f"{path}_step_us"] > 0 and r[f"{path}_limit_violation_rad"] == 0.0
+    # the same gains at acceleration level: the tool moves alike (TSID's posture weight
+    # 1e-3 against the tool's 1 leaves it within 2 mm of the strict hierarchy's)
+    assert abs(r["tsid_tool_error_m"] - r["prioik_acceleration_tool_error_m"]) < 2e-3
+    assert r["tsid/prioik_acceleration"] == pytest.approx(
+        r["tsid_step_us"] / r["prioik_acceleration_step_us"])
+    table = tsid_step.format_table(r)
+    assert table.count("\n") == 4 and "| TSID 1.7.1 (its own process) |" in table
