@@ -69,8 +69,11 @@ PYTHON_VARIABLE = "PRIOIK_TSID_PYTHON"
 SOLE_HALF_SIDE = 1.0
 #: friction coefficient of a held frame's contact points
 FRICTION = 10.0
-#: weight of the contact forces' regularisation (TSID's examples' ``w_forceRef``)
-FORCE_WEIGHT = 1e-5
+#: weight of the contact forces' regularisation towards zero: small enough never to move
+#: ``q̈`` (TSID's examples' 1e-5 sits beside task weights of order 1; beside these
+#: scenarios' weights, down to 1e-6, and forces of hundreds of newtons it would pull the
+#: robot's accelerations away from the tasks)
+FORCE_WEIGHT = 1e-8
 #: acceleration limit (rad/s²) of every joint when the scenario gives none
 ACCELERATION_LIMIT = 1000.0
 #: step (s) of the central differences giving the references' velocity and acceleration

@@ -263,10 +263,13 @@ def test_the_chunks_do_not_change_the_run(arm):
 
 @needs_tsid
 def test_tsid_holds_the_g1_foot_as_a_contact(fencing):
-    res = tb.run_tsid(fencing, duration=0.2, dt=0.002)
-    assert not res.failed and res.steps == 100
-    assert res.errors["support_foot_error_m"].max() < 1e-3
-    assert res.errors["com_error_m"].max() < 5e-3
+    res = tb.run_tsid(fencing, duration=0.4, dt=0.002)
+    assert not res.failed and res.steps == 200
+    # the contact's forces take whatever the tasks ask: the foot stays (1.5e-5 m over 1 s
+    # here), the CoM follows (1.4e-4 m) and ‖q̈‖ stays that of prioik's runs (≤ 12.4)
+    assert res.errors["support_foot_error_m"].max() < 1e-4
+    assert res.errors["com_error_m"].max() < 1e-3
+    assert np.linalg.norm(res.a, axis=1).max() < 50.0
     assert res.errors["joint_limit_violation_rad"].max() == 0.0
 
 
