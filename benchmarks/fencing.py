@@ -365,8 +365,10 @@ def add_parser(subparsers) -> None:
     p = subparsers.add_parser(
         "fencing", help="the paper's fencing scenario on the G1, every formulation",
         description="Simulate the fencing scenario (Jeong & Chang 2009, Sec. III) on the "
-                    "Unitree G1 with each formulation; print a summary table per variant, "
-                    "write summary.json, run_info.json, plots and replay pages (every run's "
+                    "Unitree G1 with each formulation and the PlaCo, pink, mink and TSID "
+                    "baselines (TSID in its own environment, `make tsid`, and process; not "
+                    "installed, it is left out); print a summary table per variant, write "
+                    "summary.json, run_info.json, plots and replay pages (every run's "
                     "trajectory too with --save-runs).")
     p.add_argument("--variant", choices=["compatible", "incompatible", "both"],
                    default="both")

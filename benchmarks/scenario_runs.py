@@ -33,7 +33,8 @@ from typing import Any, Callable, Generator
 import numpy as np
 
 from .results import RunSummary
-from .variants import BASELINES, Variant, VariantTable, capabilities, table
+from .variants import (BASELINES, Variant, VariantTable, baseline_profiles, capabilities,
+                       table)
 
 __all__ = ["VELOCITY_GAIN", "TURN_STEPS", "run_table", "run_one", "run_steps", "in_turns",
            "add_turn_steps_argument", "add_save_runs_argument", "table_legend",
@@ -460,6 +461,7 @@ def run_scenario(scenario: str, variants: list[str], out, labels: str | None = N
                                "limits": stack_limits(v) if not v.external else None,
                                "armature": v.armature, "only_in": list(v.only_in),
                                "origin": v.origin} for v in chosen},
+            "baselines": baseline_profiles(),
             "skipped": skipped_runs, "phases": phases, "messages": messages,
             "replays": replays, "diagnostics": diagnostics, "turn_steps": turn_steps,
             "saved_runs": save_runs,

@@ -31,6 +31,7 @@ So a formulation added to the registry appears in ``prioik validate``, ``propert
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import re
 from dataclasses import dataclass, field
@@ -39,7 +40,8 @@ from typing import Any
 
 __all__ = ["Variant", "VariantTable", "table", "parse_label", "split_labels", "is_damped",
            "capabilities", "REPORTS",
-           "SCENARIO_REPORTS", "BACKEND_REPORTS", "BASELINES", "STUDY_MODULES",
+           "SCENARIO_REPORTS", "BACKEND_REPORTS", "BASELINES", "baseline_profiles",
+           "STUDY_MODULES",
            "DAMPING_OPTIONS"]
 
 #: every report that lists variants
@@ -50,12 +52,14 @@ SCENARIO_REPORTS = ("fencing", "arm", "sweep")
 #: the reports that give each back-end of a formulation a row of its own
 BACKEND_REPORTS = ("bench", "validate")
 #: external IK libraries run in the scenario reports: name → module (``NAME``,
-#: ``DESCRIPTION``, ``REPORT_VARIANTS``, ``unavailable_reason(options)``,
+#: ``DESCRIPTION``, ``REPORT_VARIANTS``, ``LEVEL``, ``profile()``,
+#: ``unavailable_reason(options)``,
 #: ``steps(scenario, variant, duration=, dt=, progress=)``: the run as a step generator
 #: that returns its result, as :func:`prioik.robots.simulation_steps`)
 BASELINES = {"placo_kinematics_solver": "prioik.benchmarks.placo_baseline",
              "pink": "prioik.benchmarks.pink_baseline",
-             "mink": "prioik.benchmarks.mink_baseline"}
+             "mink": "prioik.benchmarks.mink_baseline",
+             "tsid": "prioik.benchmarks.tsid_baseline"}
 #: scenario → the experiment module whose ``STUDIES`` (a tuple of :class:`Variant`) add
 #: that scenario's own runs
 STUDY_MODULES = {"fencing": "prioik.benchmarks.fencing", "arm": "prioik.benchmarks.arm"}
@@ -362,13 +366,27 @@ def _baseline_rows(report: str) -> tuple[list[Variant], dict[str, str]]:
         if why:
             unavailable[name] = why
             continue
-        rows.append(Variant(name, "", {}, mod.DESCRIPTION, origin="baseline"))
+        rows.append(Variant(name, "", {}, mod.DESCRIPTION, level=mod.LEVEL,
+                            origin="baseline"))
         for rv in _declared(mod):
             if not _names_report(tuple(rv.reports), report):
                 continue
             if mod.unavailable_reason(rv.options) is None:
-                rows.append(_from_declaration(name, rv, "baseline"))
+                rows.append(dataclasses.replace(_from_declaration(name, rv, "baseline"),
+                                                level=mod.LEVEL))
     return rows, unavailable
+
+
+def baseline_profiles() -> dict[str, dict]:
+    """Every baseline of :data:`BASELINES`: its ``profile()`` (library and version,
+    level, priority model, what it is given) and ``here``: ``"runs"`` or why it cannot
+    run here (``"not installed …"``)."""
+    out = {}
+    for name, module in BASELINES.items():
+        mod = importlib.import_module(module)
+        why = mod.unavailable_reason({})
+        out[name] = {**mod.profile(), "here": "runs" if why is None else why}
+    return out
 
 
 def _studies(scenario: str) -> tuple[Variant, ...]:
