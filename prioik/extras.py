@@ -23,7 +23,8 @@ EXTRAS: dict[str, tuple[tuple[str, ...], str]] = {
     "pink": (("pin-pink",), "the pink baseline"),
     "mink": (("mink", "mujoco"), "the mink baseline (the robot converted to MuJoCo)"),
     "plots": (("matplotlib",), "plots of `prioik fencing` and `prioik bench`"),
-    "view": (("meshcat",), "3-D view of robot motions"),
+    "view": (("meshcat", "fast-simplification"),
+             "3-D views of robot motions with their meshes (meshed replay, live view)"),
     "sweep": (("dask", "distributed"), "parameter sweeps on a Dask cluster"),
 }
 
