@@ -5,10 +5,12 @@
 trajectories — arrays, or :class:`~robots.simulate.SimulationResult` runs — and writes
 one HTML file that opens from disk with no server and no network: meshcat's viewer
 (three.js, WebGL; its script is copied into the page) with the robot's visual meshes,
-every run selectable, with play/pause, a time slider and meshcat's mouse camera.
+every run selectable, with play/pause, a time slider and meshcat's mouse camera. The
+address ``page.html#run=LABEL&t=1.5`` opens run ``LABEL`` paused at 1.5 s.
 
 The meshes are the URDF's ``<visual>`` geometry as pinocchio loads it (through coal:
-STL, DAE, OBJ and primitives, ``meshScale`` applied), decimated by quadric edge
+STL, DAE, OBJ and primitives, ``meshScale`` applied; ``package://`` paths resolve
+against the robot's ``package_dirs``, else the folders above its URDF), decimated by quadric edge
 collapse (``fast-simplification``) to a triangle budget for the whole robot, so that a
 page stays a few megabytes. Each body is drawn at the placement of its frame in the
 robot's own model, so a robot with locked joints (``from_urdf(..., locked_joints=)``)
@@ -23,6 +25,7 @@ Needs the ``view`` extra (meshcat and fast-simplification).
 from __future__ import annotations
 
 import base64
+import functools
 import html as html_lib
 import json
 import math
@@ -82,13 +85,13 @@ def _urdf_of(robot: RobotModel) -> Path:
     return source
 
 
-def _visual_model(robot: RobotModel) -> tuple[pin.Model, pin.GeometryModel]:
+def _visual_model(source: Path, package_dirs: tuple[str, ...], floating: bool
+                  ) -> tuple[pin.Model, pin.GeometryModel]:
     """The URDF's kinematic tree (as pinocchio builds it, before any locking) and its
     visual geometry model."""
-    source = _urdf_of(robot)
     import xml.etree.ElementTree as ET
     try:
-        if robot.floating_base and not has_free_flyer_joint(ET.parse(source).getroot()):
+        if floating and not has_free_flyer_joint(ET.parse(source).getroot()):
             model = pin.buildModelFromUrdf(str(source), pin.JointModelFreeFlyer(),
                                            "root_joint")
         else:
@@ -96,7 +99,9 @@ def _visual_model(robot: RobotModel) -> tuple[pin.Model, pin.GeometryModel]:
     except (RuntimeError, ValueError, ET.ParseError) as exc:
         raise MeshReplayError(f"pinocchio could not build a model from {source}: "
                               f"{exc}") from None
-    dirs = list(robot.package_dirs) or [str(source.parent)]
+    # package://NAME/... resolves against a folder holding NAME: the robot's package
+    # dirs, else the folders above the URDF (a description package laid out as usual)
+    dirs = list(package_dirs) or [str(d) for d in source.resolve().parents]
     try:
         visual = pin.buildGeomFromUrdf(model, str(source), pin.GeometryType.VISUAL,
                                         package_dirs=dirs)
@@ -130,18 +135,29 @@ def _decimate(vertices: np.ndarray, faces: np.ndarray, target: int):
 def robot_parts(robot: RobotModel, triangles: int = TRIANGLES) -> list[_Part]:
     """The robot's visual parts, each in the frame of ``robot.model`` it moves with,
     meshes decimated so that the whole robot has about ``triangles`` triangles."""
+    source = _urdf_of(robot)
+    urdf_model, parts = _urdf_parts(str(source), source.stat().st_mtime_ns,
+                                    tuple(robot.package_dirs), bool(robot.floating_base),
+                                    int(triangles))
+    for p in parts:
+        if not robot.model.existFrame(p.frame):
+            raise MeshReplayError(f"robot {robot.name!r}: the visual {p.name!r} hangs on "
+                                  f"frame {p.frame!r}, which its model does not have")
+    return [*parts, *_point_frame_rods(robot, urdf_model)]
+
+
+@functools.lru_cache(maxsize=8)
+def _urdf_parts(source: str, mtime_ns: int, package_dirs: tuple[str, ...], floating: bool,
+                triangles: int) -> tuple[pin.Model, tuple[_Part, ...]]:
+    """The URDF's visual parts in the frames of its own model (read-only, cached: a
+    page per scenario variant decimates once)."""
     import meshcat.geometry as mg
     from pinocchio.visualize.meshcat_visualizer import loadPrimitive
 
-    urdf_model, visual = _visual_model(robot)
-    model = robot.model
+    urdf_model, visual = _visual_model(Path(source), package_dirs, floating)
     meshes, parts = [], []
     for g in visual.geometryObjects:
         frame = urdf_model.frames[g.parentFrame]
-        name = frame.name
-        if not model.existFrame(name):
-            raise MeshReplayError(f"robot {robot.name!r}: the visual {g.name!r} hangs on "
-                                  f"frame {name!r}, which its model does not have")
         # the part in its body frame: both placements are in the same parent joint
         local = (frame.placement.inverse() * g.placement).homogeneous
         rgba = tuple(float(c) for c in np.clip(g.meshColor, 0.0, 1.0))
@@ -149,12 +165,12 @@ def robot_parts(robot: RobotModel, triangles: int = TRIANGLES) -> list[_Part]:
         if mesh is None:
             obj = loadPrimitive(g)
             if obj is None:
-                raise MeshReplayError(f"robot {robot.name!r}: visual {g.name!r} is a "
+                raise MeshReplayError(f"{Path(source).name}: visual {g.name!r} is a "
                                       f"{type(g.geometry).__name__}, which cannot be drawn")
             local = local @ np.diag([*np.asarray(g.meshScale, float), 1.0])
-            parts.append(_Part(name, g.name, local, obj, rgba, 0))
+            parts.append(_Part(frame.name, g.name, local, obj, rgba, 0))
         else:
-            meshes.append((name, g, local, rgba, *mesh))
+            meshes.append((frame.name, g, local, rgba, *mesh))
     total = sum(len(f) for *_, f in meshes)
     share = min(1.0, triangles / total) if total else 1.0
     for name, g, local, rgba, v, f in meshes:
@@ -165,8 +181,7 @@ def robot_parts(robot: RobotModel, triangles: int = TRIANGLES) -> list[_Part]:
             f = f[:, ::-1]
         parts.append(_Part(name, g.name, local, mg.TriangularMeshGeometry(v, f), rgba,
                            len(f)))
-    parts.extend(_point_frame_rods(robot, urdf_model))
-    return parts
+    return urdf_model, tuple(parts)
 
 
 def _point_frame_rods(robot: RobotModel, urdf_model: pin.Model) -> list[_Part]:
@@ -470,8 +485,10 @@ function pick(label) {
     animations.push({path: ['meshcat', 'markers', n], clip: {name: 'default', fps: 1, tracks: [
       {name: '.position', type: 'vector3', times: times, values: v}]}});
   });
-  viewer.set_animation(animations, {play: playing, loopMode: THREE.LoopRepeat,
+  // played, then paused if asked: an action that never played does not pose its node
+  viewer.set_animation(animations, {play: true, loopMode: THREE.LoopRepeat,
                                     repetitions: Infinity, clampWhenFinished: true});
+  if (!playing) viewer.animator.pause();
   aim(all, k);
 }
 function aim(all, k) {
@@ -512,7 +529,12 @@ playBtn.onclick = () => {
 slider.oninput = () => {
   viewer.animator.seek(slider.value / 1000 * (times[times.length - 1] || 0));
 };
+// #run=LABEL&t=SECONDS in the address opens that run paused at that time
+const want = new URLSearchParams(location.hash.slice(1));
+if (want.has('run') && want.get('run') in DATA.runs) sel.value = want.get('run');
+if (want.has('t')) { playing = false; playBtn.textContent = 'play'; }
 pick(sel.value);
+if (want.has('t')) viewer.animator.seek(Math.max(0, parseFloat(want.get('t')) || 0));
 let count = 0;
 viewer.scene_tree.find(['meshcat', 'robot']).object.traverse(o => {
   if (o.isMesh && o.geometry && o.geometry.attributes.position &&

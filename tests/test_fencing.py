@@ -141,6 +141,7 @@ def test_fencing_command_writes_summary_csv_plots_and_doc(tmp_path, capsys):
         assert np.loadtxt(csv, delimiter=",", skiprows=1).shape == (50, len(header))
         assert (out / f"{variant}_extended_jacobian.npz").is_file()
         assert (out / f"{variant}_replay.html").stat().st_size > 1000
+        assert (out / f"{variant}_replay_meshes.html").stat().st_size > 1e6
         for key in ("tip_error", "algorithmic_error", "qdd"):
             assert (out / f"{variant}_{key}.png").stat().st_size > 1000
     text = doc.read_text()

@@ -231,13 +231,15 @@ def _chromium() -> str | None:
 
 
 def _open(browser, page, tmp_path, name):
-    """The page's body attributes (after its scripts ran) and a screenshot."""
+    """The page's count of drawn robot meshes (after its scripts ran) and a screenshot,
+    the run paused at 0.15 s (the address's #t=)."""
     common = [browser, "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
               "--window-size=900,600", "--virtual-time-budget=1500"]
-    dom = subprocess.run([*common, "--dump-dom", page.resolve().as_uri()], check=True,
+    url = page.resolve().as_uri() + "#t=0.15"
+    dom = subprocess.run([*common, "--dump-dom", url], check=True,
                          capture_output=True, text=True, timeout=120).stdout
     shot = tmp_path / f"{name}.png"
-    subprocess.run([*common, f"--screenshot={shot}", page.resolve().as_uri()], check=True,
+    subprocess.run([*common, f"--screenshot={shot}", url], check=True,
                    capture_output=True, timeout=120)
     from PIL import Image
     body = re.search(r"<body([^>]*)>", dom).group(1)
