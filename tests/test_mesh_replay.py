@@ -14,9 +14,6 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-pytest.importorskip("meshcat")
-pytest.importorskip("fast_simplification")
-
 from prioik.robots import (MeshReplayError, StateError, g1, models, panda, sample_humanoid,
                            talos, write_mesh_replay)
 from prioik.robots.mesh_replay import MIN_TRIANGLES_PER_MESH, TRIANGLES, robot_parts
@@ -273,3 +270,12 @@ def test_the_meshed_page_draws_the_robot_in_headless_chromium(tmp_path):
     assert robot.sum() > 8_000                  # a 900 × 600 view: the robot is large
     rows, cols = np.nonzero(robot)
     assert 250 < cols.mean() < 650 and 150 < rows.mean() < 450
+
+
+def test_without_the_view_extra_the_error_says_what_to_install(monkeypatch, tmp_path):
+    import prioik.extras
+    from prioik.extras import MissingExtraError
+    monkeypatch.setattr(prioik.extras, "missing_distributions",
+                        lambda extra: ("fast-simplification",) if extra == "view" else ())
+    with pytest.raises(MissingExtraError, match=r"pip install prioik\[view\]"):
+        write_mesh_replay(tmp_path / "x.html", panda(), [panda().q0], dt=0.01)
