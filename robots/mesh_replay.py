@@ -10,9 +10,9 @@ address ``page.html#run=LABEL&t=1.5`` opens run ``LABEL`` paused at 1.5 s.
 
 The meshes are the URDF's ``<visual>`` geometry as pinocchio loads it (through coal:
 STL, DAE, OBJ and primitives, ``meshScale`` applied; ``package://`` paths resolve
-against the robot's ``package_dirs``, else the folders above its URDF), decimated by quadric edge
-collapse (``fast-simplification``) to a triangle budget for the whole robot, so that a
-page stays a few megabytes. Each body is drawn at the placement of its frame in the
+against the robot's ``package_dirs``, else the folders above its URDF), decimated by
+quadric edge collapse (``fast-simplification``) to a triangle budget for the whole
+robot, so that a page stays a few megabytes. Each body is drawn at the placement of its frame in the
 robot's own model, so a robot with locked joints (``from_urdf(..., locked_joints=)``)
 shows those bodies where they were locked, and frames added with
 :meth:`~robots.models.RobotModel.with_point_frame` (a sword tip) are drawn as a thin
@@ -299,9 +299,8 @@ def _run_payload(robot: RobotModel, run: _Run, frames: list[str], markers, fps: 
             poses[row, col, :3] = M.translation
             poses[row, col, 3:] = pin.Quaternion(M.rotation).coeffs()   # x, y, z, w
         if markers is not None:
-            mk = markers(float(run.t[k]))
-            names = list(mk)
-            points.append([np.asarray(mk[n], dtype=float).reshape(3) for n in names])
+            names, xyz = _marker_points(markers, float(run.t[k]), names)
+            points.append(xyz)
     # per frame node: positions (k × 3) then quaternions (k × 4)
     per_frame = [np.concatenate([poses[:, c, :3].ravel(), poses[:, c, 3:].ravel()])
                  for c in range(len(ids))]
@@ -309,6 +308,26 @@ def _run_payload(robot: RobotModel, run: _Run, frames: list[str], markers, fps: 
            "note": run.note, "marker_names": names or [],
            "markers": _b64(np.transpose(np.array(points), (1, 0, 2))) if points else ""}
     return out
+
+
+def _marker_points(markers, t: float, names: list[str] | None
+                   ) -> tuple[list[str], list[np.ndarray]]:
+    """The marker names and positions at ``t`` (the names those of the first call)."""
+    mk = markers(t)
+    if not isinstance(mk, Mapping) or (names is not None and list(mk) != names):
+        raise MeshReplayError(f"markers({t:g}) must give the same names → xyz mapping at "
+                              f"every time, got {mk!r:.120}")
+    out = []
+    for name, value in mk.items():
+        try:
+            xyz = np.asarray(value, dtype=float).reshape(3)
+        except (TypeError, ValueError):
+            raise MeshReplayError(f"marker {name!r} at t = {t:g} is not 3 numbers: "
+                                  f"{value!r:.80}") from None
+        if not np.isfinite(xyz).all():
+            raise MeshReplayError(f"marker {name!r} at t = {t:g} is not finite: {xyz}")
+        out.append(xyz)
+    return list(mk), out
 
 
 # -------------------------------------------------------------------- the page
@@ -517,8 +536,11 @@ function show() {
   const d = times[times.length - 1] || 0, now = clock();
   if (document.activeElement !== slider) slider.value = d ? Math.round(1000 * now / d) : 0;
   const end = run.note && now >= d - 1e-6;
-  info.innerHTML = 't = ' + now.toFixed(2) + ' s' +
-    (end ? ' <span class="note">— ' + run.note + '</span>' : '');
+  info.textContent = 't = ' + now.toFixed(2) + ' s';
+  if (end) {
+    const note = document.createElement('span');
+    note.className = 'note'; note.textContent = ' — ' + run.note; info.appendChild(note);
+  }
   requestAnimationFrame(show);
 }
 sel.onchange = () => pick(sel.value);

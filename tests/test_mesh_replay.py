@@ -279,3 +279,17 @@ def test_without_the_view_extra_the_error_says_what_to_install(monkeypatch, tmp_
                         lambda extra: ("fast-simplification",) if extra == "view" else ())
     with pytest.raises(MissingExtraError, match=r"pip install prioik\[view\]"):
         write_mesh_replay(tmp_path / "x.html", panda(), [panda().q0], dt=0.01)
+
+
+def test_markers_must_name_the_same_finite_points_at_every_time(tmp_path):
+    robot = panda()
+    q = np.tile(robot.q0, (30, 1))
+    out = tmp_path / "m.html"
+    with pytest.raises(MeshReplayError, match="same names"):
+        write_mesh_replay(out, robot, q, dt=0.01,
+                          markers=lambda t: {"a" if t < 0.1 else "b": np.zeros(3)})
+    with pytest.raises(MeshReplayError, match="marker 'a' at t = 0 is not 3 numbers"):
+        write_mesh_replay(out, robot, q, dt=0.01, markers=lambda t: {"a": [1.0, 2.0]})
+    with pytest.raises(MeshReplayError, match="marker 'a' .* not finite"):
+        write_mesh_replay(out, robot, q, dt=0.01, markers=lambda t: {"a": [np.nan, 0, 0]})
+    assert not out.exists()
