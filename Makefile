@@ -29,7 +29,8 @@ BUILD_REQUIRES = $$($(PY) -c "import tomllib; print(*tomllib.load(open('pyprojec
 # (tests/test_namespace.py: no top-level packages)
 EDITABLE_PATHS_OFF = -c "import pathlib, sysconfig; p = pathlib.Path(sysconfig.get_paths()['purelib'], '_editable_skbc_prioik.pth'); p.write_text(''.join(l for l in p.read_text().splitlines(True) if l.startswith('import ')))"
 
-.PHONY: test test-core test-forced-cpu demo docs venv venv-core tsid clean asan asan-bindings
+.PHONY: test test-core test-forced-cpu demo docs venv venv-core tsid clean asan asan-bindings \
+	replay-screenshot
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -123,6 +124,16 @@ demo: $(STAMP) $(CORE_STAMP_BUILT)
 # NO_MKDOCS_2_WARNING: Material for MkDocs' banner about MkDocs 2.0, not about this site
 docs: $(STAMP) $(CORE_STAMP_BUILT)
 	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --site-dir site
+
+# README's screenshot of the meshed replay: the G1 fencing run (extended_jacobian,
+# compatible) in headless chromium, paused 2.6 s into the run
+SHOT_DIR := build/replay-screenshot
+replay-screenshot: $(STAMP) $(CORE_STAMP_BUILT)
+	$(VENV)/bin/prioik fencing --variant compatible --formulations extended_jacobian \
+		--out $(SHOT_DIR) --quiet
+	chromium --headless --no-sandbox --disable-gpu --hide-scrollbars --window-size=900,560 \
+		--virtual-time-budget=1500 --screenshot=docs/img/replay-g1.png \
+		"file://$(abspath $(SHOT_DIR))/compatible_replay_meshes.html#run=extended_jacobian&t=2.6"
 
 clean:
 	rm -rf $(VENV) $(CORE_VENV) $(TSID_VENV) $(OUT) *.egg-info build site

@@ -156,9 +156,9 @@ def step_time_figure(shown: dict[str, str]) -> str:
 
 def replays_line(meta: dict) -> str:
     """Where the replay pages are (``""`` when none was written)."""
-    pages = meta.get("replays") or {}
-    return Page("scenario.md").inline("replays", pages=", ".join(f"`{p}`" for p in
-                                                                 pages.values())) \
+    pages = [*(meta.get("replays") or {}).values(),
+             *(meta.get("mesh_replays") or {}).values()]
+    return Page("scenario.md").inline("replays", pages=", ".join(f"`{p}`" for p in pages)) \
         if pages else ""
 
 

@@ -14,9 +14,10 @@ their own torques; the others' torques come from RNEA.
 
 :func:`run_scenario` runs a selection of the scenario's table and writes, into its
 output folder, ``summary.json`` (``{variant: {label: RunSummary}}``),
-``run_info.json``, the figures and a replay page per variant, and, when asked
-(``save_runs``, the commands' ``--save-runs``), one trajectory CSV and one saved run
-(``.npz``) per run.
+``run_info.json``, the figures and two replay pages per variant (``<variant>_replay.html``,
+link segments; ``<variant>_replay_meshes.html``, the robot's meshes, with the ``view``
+extra), and, when asked (``save_runs``, the commands' ``--save-runs``), one trajectory
+CSV and one saved run (``.npz``) per run.
 """
 
 from __future__ import annotations
@@ -353,6 +354,20 @@ class ScenarioRuns:
     results: dict[str, dict] = field(default_factory=dict)
 
 
+def _write_mesh_replay(path: Path, scenario: str, variant: str, results: dict):
+    """The variant's page with the robot's meshes (``None`` without the ``view`` extra)."""
+    from prioik.extras import missing_distributions
+    if missing_distributions("view"):
+        print(f"not writing {path.name}: the meshed replay needs the `view` extra",
+              file=sys.stderr)
+        return None
+    from prioik.robots import write_mesh_replay
+    from prioik.robots.scenario import make
+    sc = make(scenario, variant)
+    return write_mesh_replay(path, sc.robot, results, title=f"{scenario}, {variant}",
+                             markers=sc.markers)
+
+
 def run_scenario(scenario: str, variants: list[str], out, labels: str | None = None,
                  duration: float = 3.0, dt: float = 0.002, progress: bool = True,
                  on_run: Callable[[str, Variant, Any], None] | None = None,
@@ -394,6 +409,7 @@ def run_scenario(scenario: str, variants: list[str], out, labels: str | None = N
     skipped_runs: list[str] = list(skipped)
     messages: dict[str, dict[str, str]] = {}
     replays: dict[str, str] = {}
+    mesh_replays: dict[str, str] = {}
     all_results: dict[str, dict] = {}
     diagnostics = {} if diagnostics is None else diagnostics
     wall0 = time.perf_counter()
@@ -449,6 +465,10 @@ def run_scenario(scenario: str, variants: list[str], out, labels: str | None = N
         if results:
             html = write_replay(out / f"{sv}_replay.html", results, title=f"{scenario}, {sv}")
             replays[sv] = html.name
+            meshed = _write_mesh_replay(out / f"{sv}_replay_meshes.html", scenario, sv,
+                                        results)
+            if meshed is not None:
+                mesh_replays[sv] = meshed.name
         print(format_table(scenario, sv, summary[sv], phases[sv], errors))
         print()
         if on_variant is not None:
@@ -463,8 +483,8 @@ def run_scenario(scenario: str, variants: list[str], out, labels: str | None = N
                                "origin": v.origin} for v in chosen},
             "baselines": baseline_profiles(),
             "skipped": skipped_runs, "phases": phases, "messages": messages,
-            "replays": replays, "diagnostics": diagnostics, "turn_steps": turn_steps,
-            "saved_runs": save_runs,
+            "replays": replays, "mesh_replays": mesh_replays, "diagnostics": diagnostics,
+            "turn_steps": turn_steps, "saved_runs": save_runs,
             "wall_time_s": time.perf_counter() - wall0}
     (out / "run_info.json").write_text(json.dumps(meta, indent=2, default=str) + "\n")
     print(table_legend(errors))
@@ -472,7 +492,8 @@ def run_scenario(scenario: str, variants: list[str], out, labels: str | None = N
     saved = (f", {2 * sum(len(r) for r in all_results.values())} trajectory files "
              "(.csv, .npz)" if save_runs else "")
     print(f"wrote {out / 'summary.json'}, run_info.json, "
-          f"{sum(len(v) for v in pngs.values())} plots, {len(replays)} replay page(s)"
+          f"{sum(len(v) for v in pngs.values())} plots, "
+          f"{len(replays) + len(mesh_replays)} replay page(s)"
           f"{saved} in {time.perf_counter() - wall0:.0f} s"
           + ("" if save_runs else " (--save-runs: every run's trajectory too)"),
           file=sys.stderr)

@@ -109,5 +109,7 @@ def test_arm_command_writes_tables_runs_and_page(tmp_path, capsys):
     page = doc.read_text()
     assert "| `sns` |" in page and "| `pink` |" in page and "img/arm_reach_tip_error.png" in page
     assert (out / "reach_replay.html").is_file()
+    assert "MeshCat.Viewer" in (out / "reach_replay_meshes.html").read_text()
+    assert "`reach_replay_meshes.html`" in page
     header = (out / "reach_sns.csv").read_text().splitlines()[0].split(",")
     assert "q:panda_joint1" in header and "tau:panda_joint7" in header

@@ -141,6 +141,7 @@ def test_fencing_command_writes_summary_csv_plots_and_doc(tmp_path, capsys):
         assert np.loadtxt(csv, delimiter=",", skiprows=1).shape == (50, len(header))
         assert (out / f"{variant}_extended_jacobian.npz").is_file()
         assert (out / f"{variant}_replay.html").stat().st_size > 1000
+        assert (out / f"{variant}_replay_meshes.html").stat().st_size > 1e6
         for key in ("tip_error", "algorithmic_error", "qdd"):
             assert (out / f"{variant}_{key}.png").stat().st_size > 1000
     text = doc.read_text()
@@ -164,8 +165,10 @@ def test_fencing_command_writes_what_a_reader_looks_at_by_default(tmp_path, caps
     assert {"summary.json", "run_info.json", "crosscheck.json", "step_time.png",
             "compatible_replay.html", "incompatible_replay.html",
             "compatible_tip_error.png", "incompatible_qdd.png"} <= names
-    # a 0.04 s run: a few hundred kB (the 3 s default run: plots, pages, under 20 MB)
-    assert sum(p.stat().st_size for p in out.iterdir()) < 2_000_000
+    # a 0.04 s run: the two meshed replay pages ~2 MB each (meshcat's script and the
+    # decimated meshes), the rest a few hundred kB (the 3 s default run: under 20 MB)
+    assert {"compatible_replay_meshes.html", "incompatible_replay_meshes.html"} <= names
+    assert sum(p.stat().st_size for p in out.iterdir()) < 6_000_000
     assert "columns:" in printed and "step ms   " in printed
     assert "cross-check:" in printed and "{" not in printed
     assert "σ_min" not in printed

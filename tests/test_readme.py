@@ -27,7 +27,8 @@ def test_pages_have_examples():
 
 
 @pytest.mark.parametrize("page,index,block", BLOCKS, ids=[f"{n}-{i}" for n, i, _ in BLOCKS])
-def test_example_runs(page, index, block, capsys):
+def test_example_runs(page, index, block, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)                 # what an example writes lands here
     namespace: dict = {}
     exec(compile(block, f"{page} python block {index}", "exec"), namespace)
     if "sol" in namespace:
