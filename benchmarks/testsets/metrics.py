@@ -10,9 +10,11 @@ Success of one solve at a profile's tolerance ``tol``:
   exact solvers themselves say ``approximate``) — and
   ``check_lexicographic(stack, x, tol=tol)`` holds (:data:`JUDGED_BY_CERTIFICATE`);
 * a formulation not exact by design (:data:`VALUE_JUDGED`: algorithmic error or soft
-  priorities): it answers (status not ``failed``) and every level's ``‖w_i(x)‖²`` is
-  within ``tol · max(1, v_i*)`` of the exact answer's ``v_i*``
-  (:func:`values_within`; :data:`JUDGED_BY_VALUES`).
+  priorities): it answers (status not ``failed``) and every level's residual
+  ``‖w_i(x)‖`` is within ``tol · max(1, ‖w_i*‖)`` of the exact answer's ``‖w_i*‖``
+  (:func:`value_success`; :data:`JUDGED_BY_VALUES`). The residuals, not their squares
+  ``v_i = ‖w_i‖²``: on a level the exact answer meets (``v_i* = 0``) a residual of
+  ``√tol`` would pass a rule on squares.
 
 Aggregates (:func:`shifted_geometric_mean`): ``exp(mean(log(t + s))) − s`` with the
 shift ``s`` on the scale of the data (:data:`TIME_SHIFT_S`, 10 µs: the solves take
@@ -59,12 +61,12 @@ def shifted_geometric_mean(values: Iterable[float], shift: float = TIME_SHIFT_S)
 
 
 def values_within(values: np.ndarray, exact: np.ndarray, tol: float) -> bool:
-    """Every level's ``|v_i − v_i*| ≤ tol · max(1, v_i*)`` (``False`` on a count
+    """Every entry's ``|v_i − v_i*| ≤ tol · max(1, |v_i*|)`` (``False`` on a count
     mismatch or a value that is not finite)."""
     values, exact = np.asarray(values, float), np.asarray(exact, float)
     if values.shape != exact.shape or not np.all(np.isfinite(values)):
         return False
-    return bool(np.all(np.abs(values - exact) <= tol * np.maximum(1.0, exact)))
+    return bool(np.all(np.abs(values - exact) <= tol * np.maximum(1.0, np.abs(exact))))
 
 
 def certificate_success(status: str, report) -> bool:
@@ -78,8 +80,12 @@ def certificate_success(status: str, report) -> bool:
 
 def value_success(status: str, values: np.ndarray, exact: np.ndarray | None,
                   tol: float) -> bool:
-    """Success of a formulation not exact by design: it answered and its level values
-    are within ``tol`` of the exact answer's (``False`` without an exact answer)."""
+    """Success of a formulation not exact by design: it answered and its level
+    residuals ``√v_i`` are within ``tol`` of the exact answer's (:func:`values_within`
+    on the square roots of the level values ``v_i = ‖w_i‖²``; ``False`` without an
+    exact answer)."""
     if status == "failed" or exact is None:
         return False
-    return values_within(values, exact, tol)
+    with np.errstate(invalid="ignore"):
+        return values_within(np.sqrt(np.asarray(values, float)),
+                             np.sqrt(np.asarray(exact, float)), tol)

@@ -170,7 +170,7 @@ def format_report(records: list[dict[str, Any]], profile: str = "mid", *,
         "`optimal` (or `approximate` where the certificate reads a rank decision as "
         "ambiguous) and `check_lexicographic(stack, x, tol)` holds; for those not exact "
         f"by design ({', '.join(f'`{f}`' for f in VALUE_JUDGED)}, marked ᵛ) every "
-        "level's ‖w_i‖² is within tol·max(1, v_i*) of the exact answer's "
+        "level's residual ‖w_i‖ is within tol·max(1, ‖w_i*‖) of the exact answer's "
         "(`hierarchical_active_set`, cold, cross-checked against the stated answers "
         "where a problem has them). **Time**: the wall time of the prepared solver's "
         "`solve` (`prioik.prepare`, untimed), per problem the fastest of the passes, "
