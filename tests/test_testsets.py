@@ -151,7 +151,8 @@ def test_value_judged_formulations_are_not_exact_by_design():
 
 ROWS = [Row("hierarchical_active_set", "hierarchical_active_set", {"warm_start": False}),
         Row("chiaverini", "chiaverini"),
-        Row("cascaded_qp[quadprog]", "cascaded_qp", {"solver": "quadprog"})]
+        Row("cascaded_qp[quadprog]", "cascaded_qp", {"solver": "quadprog"}),
+        Row("sns", "sns")]
 
 
 def _tiny_run():
@@ -189,6 +190,11 @@ def test_tiny_run_judges_rows_as_their_design_says():
     chia = by_row["chiaverini"]          # equality only: the inequality stacks not taken
     assert all(r["status"] == "unsupported" for r in chia)
     assert all(r["judged_by"] == "certificate" for r in by_row["cascaded_qp[quadprog]"])
+    # sns refuses inequality rows other than box bounds at level 0: counted as not taken,
+    # with its own message (not an error of the run)
+    refused = [r for r in by_row["sns"] if r["status"] == "unsupported"]
+    assert refused and all("formulation 'sns' cannot take it" in r["message"]
+                           for r in refused)
     for r in records:
         for p in PROFILES:                  # low ⊇ mid ⊇ high
             if r["status"] != "unsupported" and r["success_high"] == 1:

@@ -20,6 +20,10 @@ from .metrics import PROFILES, TIME_SHIFT_S, VALUE_JUDGED, shifted_geometric_mea
 
 __all__ = ["summarize", "format_report", "WITHIN"]
 
+#: the runner's message for a stack with inequality tasks given to an equality-only
+#: formulation (the report names those rows once, not each refusal)
+GENERIC_UNSUPPORTED = "inequality tasks are not supported"
+
 #: "within 2× the best": a solve counts when its time ≤ WITHIN × the problem's best
 WITHIN = 2.0
 #: failures named per (row, reason) before "… and N more"
@@ -111,13 +115,22 @@ def _set_section(name: str, recs: list[dict[str, Any]], summaries: list[dict[str
               "|---|---:|---:|---:|---:|---:|---:|---:|"]
     for s in summaries:
         if s["taken"] == 0:
-            lines.append(f"| `{s['row']}` | 0 | — | — | — | — | — | — |")
             continue
         mark = " ᵛ" if s["judged_by"] == "values" else ""
         lines.append(f"| `{s['row']}`{mark} | {s['taken']}/{s['problems']} | "
                      f"{_pct(s['success']['low'])} | {_pct(s['success']['mid'])} | "
                      f"{_pct(s['success']['high'])} | {_num(s['sgm_norm'], '.2f')} | "
                      f"{_num(1e6 * s['worst_s'], '.0f')} | {_pct(s['within_2x'])} |")
+    none_taken = [s["row"] for s in summaries if s["taken"] == 0]
+    if none_taken:
+        lines += ["", "Not taking any problem of this set (inequality tasks they cannot "
+                      "take): " + ", ".join(f"`{r}`" for r in none_taken) + "."]
+    refused: dict[tuple[str, str], list[str]] = defaultdict(list)
+    for r in recs:
+        if r["status"] == "unsupported" and r["message"] != GENERIC_UNSUPPORTED:
+            refused[(r["row"], r["message"])].append(r["problem"])
+    for (row, message), probs in refused.items():
+        lines.append(f"- `{row}` refuses {len(probs)}: {message}")
     failures = [(s["row"], f) for s in summaries for f in s["failures"]]
     lines += ["", f"Failures at the `{profile}` profile ({len(failures)}):", ""]
     if not failures:
@@ -178,8 +191,8 @@ def format_report(records: list[dict[str, Any]], profile: str = "mid", *,
         "and `[cold]` rows do not. **SGM** is the shifted geometric mean "
         f"exp(mean(log(t + s))) − s, s = {1e6 * shift:g} µs, over every solve the row "
         "made (success or not), divided by the best row's; rows taking fewer problems "
-        "(equality-only formulations on sets with inequality tasks) are compared on "
-        "those they take. **Worst**: the slowest solve. **Within 2× best**: the share of "
+        "(formulations refusing the stacks' inequality tasks) are compared on those they "
+        "take. **Worst**: the slowest solve. **Within 2× best**: the share of "
         "the problems taken where the row succeeded in at most twice the fastest "
         "successful solve of any row. Flops are not reported (no flop count yet).", ""]
     for note in notes or []:

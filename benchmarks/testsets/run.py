@@ -36,6 +36,7 @@ from prioik.hierarchy import check_lexicographic, level_residuals
 from .base import Problem, TestSet
 from .metrics import (JUDGED_BY_CERTIFICATE, JUDGED_BY_VALUES, PROFILES, VALUE_JUDGED,
                       certificate_success, value_success)
+from .report import GENERIC_UNSUPPORTED
 
 __all__ = ["Row", "EXACT", "default_rows", "run_test_set", "write_csv", "load_csv",
            "CSV_FIELDS"]
@@ -129,23 +130,28 @@ class _Solvers:
         return solver
 
 
+#: the message of a solve the formulation refused as a kind of stack it cannot take
+UNSUPPORTED = "unsupported: "
+
+
 def _solve(solvers: _Solvers, problem: Problem, sequential: bool, mass: np.ndarray | None
            ) -> tuple[Any, float, str]:
-    """``(solution or None, wall time, message)``."""
+    """``(solution or None, wall time, message)``; the message starts with
+    :data:`UNSUPPORTED` when the formulation refused the stack's kind of task."""
     from prioik.formulations import FormulationError
-    from prioik.hierarchy import TaskStackError
-    try:
-        solver = solvers.get(problem, sequential)
-    except (FormulationError, TaskStackError) as exc:
-        return None, math.nan, f"{type(exc).__name__}: {exc}"
+    from prioik.hierarchy import TaskStackError, UnsupportedTaskError
     data = problem.stack.data
     step = {"mass_matrix": mass} if solvers.caps.needs_mass_matrix else {}
-    t0 = time.perf_counter()
     try:
+        solver = solvers.get(problem, sequential)
+        t0 = time.perf_counter()
         sol = solver.solve(data, **step)
+        elapsed = time.perf_counter() - t0
+    except UnsupportedTaskError as exc:
+        return None, math.nan, f"{UNSUPPORTED}{exc}"
     except (FormulationError, TaskStackError, ValueError, ArithmeticError) as exc:
         return None, math.nan, f"{type(exc).__name__}: {exc}"
-    return sol, time.perf_counter() - t0, ""
+    return sol, elapsed, ""
 
 
 def _supported(caps, problem: Problem) -> bool:
@@ -251,17 +257,21 @@ def run_test_set(test_set: TestSet, rows: list[Row] | None = None, repeats: int 
                 "test_set": test_set.name, "problem": p.name, "sequence": p.sequence,
                 "row": row.label, "formulation": row.formulation, "n": n, "levels": k,
                 "rows": m, "exact_values": exact_values, "exact_status": exact_status,
-                "stated_values": None if stated is None else np.asarray(stated, float), "stated_by": p.stated_by,
-                "exact_vs_stated": gap}
+                "stated_values": None if stated is None else np.asarray(stated, float),
+                "stated_by": p.stated_by, "exact_vs_stated": gap}
             sol = answers[r][j]
             if not _supported(solvers[r].caps, p):
                 rec.update(status="unsupported", time_s="", judged_by="", values=None,
-                           message="inequality tasks are not supported")
+                           message=GENERIC_UNSUPPORTED)
+            elif sol is None and messages[r][j].startswith(UNSUPPORTED):
+                rec.update(status="unsupported", time_s="", judged_by="", values=None,
+                           message=messages[r][j][len(UNSUPPORTED):])
             elif sol is None:
                 rec.update(status="error", time_s="", judged_by="", values=None,
                            message=messages[r][j])
                 for name in PROFILES:
-                    rec[f"success_{name}"], rec[f"reason_{name}"] = 0, "error"
+                    rec[f"success_{name}"] = 0
+                    rec[f"reason_{name}"] = messages[r][j][:160]
             else:
                 judged_by, success, reason = _judge(row, p, sol, exact_values)
                 rec.update(status=sol.status, time_s=float(times[r, j]), judged_by=judged_by,
