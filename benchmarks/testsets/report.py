@@ -129,6 +129,8 @@ def _set_section(name: str, recs: list[dict[str, Any]], summaries: list[dict[str
     for r in recs:
         if r["status"] == "unsupported" and r["message"] != GENERIC_UNSUPPORTED:
             refused[(r["row"], r["message"])].append(r["problem"])
+    if refused:
+        lines += ["", "Refused by the formulation (not taken):", ""]
     for (row, message), probs in refused.items():
         lines.append(f"- `{row}` refuses {len(probs)}: {message}")
     failures = [(s["row"], f) for s in summaries for f in s["failures"]]

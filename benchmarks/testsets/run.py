@@ -185,7 +185,7 @@ def _judge(row: Row, problem: Problem, sol, exact: np.ndarray | None
     message = str(sol.info.get("message", ""))[:160]
     for name, tol in PROFILES.items():
         if sol.status == "failed":
-            success[name], reason[name] = False, f"failed: {message}"
+            success[name], reason[name] = False, message or "no message"
             continue
         if judged_by == JUDGED_BY_VALUES:
             ok = value_success(sol.status, _values(problem, sol.x), exact, tol)
@@ -202,7 +202,7 @@ def _judge(row: Row, problem: Problem, sol, exact: np.ndarray | None
             bad = [i for i, lv in enumerate(report.levels) if not lv.ok]
             reason[name] = f"certificate fails at level {bad[0] if bad else '?'}"
         else:
-            reason[name] = f"says {sol.status} where the certificate holds ({message})"
+            reason[name] = f"says {sol.status} though the certificate holds at this tolerance"
     return judged_by, success, reason
 
 
