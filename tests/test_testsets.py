@@ -245,6 +245,20 @@ def test_cli_lists_and_runs_one_tiny_test_set(tmp_path, capsys):
     assert doc.read_text() == text
     assert "## random_equality" in text and "| `extended_jacobian` | 7/7 |" in text
     assert "--profile high" in text
+    # the report again from the CSV alone, at another profile
+    again = tmp_path / "again"
+    assert main(["bench", "--test-set", "random_equality", "--profile", "low",
+                 "--from-csv", str(out / "testsets.csv"), "--out", str(again)]) == 0
+    text_low = (again / "testsets.md").read_text()
+    assert "Failures at the `low` profile" in text_low
+
+    def table(md):      # row → its taken, success and time cells (profile-independent)
+        return {line.split("|")[1]: line.split("|")[2:7] for line in md.splitlines()
+                if line.startswith("| `")}
+
+    assert table(text_low) == table(text) and len(table(text)) == 2
+    assert main(["bench", "--test-set", "peers", "--from-csv", str(out / "testsets.csv"),
+                 "--out", str(again)]) == 2
 
 
 def test_cli_refuses_unknown_sets_and_bad_options(capsys):

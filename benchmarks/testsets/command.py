@@ -40,6 +40,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--profile", default="mid", choices=tuple(PROFILES),
                    help="the tolerance profile of the report's time columns and failure "
                         "list (success is reported at every profile; default mid)")
+    g.add_argument("--from-csv", type=Path, default=None, metavar="CSV",
+                   help="with --test-set: no run; write the report of the test sets of "
+                        "this testsets.csv (those named, or every one with 'all') to "
+                        "OUT/testsets.md (and --doc)")
     g.add_argument("--set-option", action="append", default=[], metavar="KEY=VALUE",
                    help="a size option of the test sets (integer), e.g. samples=2, n=8, "
                         "steps=6, windows=2; repeatable; a set ignores keys it does "
@@ -101,6 +105,8 @@ def run(args: argparse.Namespace) -> int:
     if unknown or not names:
         raise ValueError(f"unknown test set(s) {', '.join(unknown) or '(none)'}; known: "
                          f"{', '.join(TEST_SETS)} (or 'all', 'list')")
+    if args.from_csv is not None:
+        return _report_from_csv(args, names)
     repeats = 3 if args.repeats is None else args.repeats
     if repeats < 1:
         raise ValueError(f"--repeats must be ≥ 1, got {repeats}")
@@ -127,11 +133,38 @@ def run(args: argparse.Namespace) -> int:
     text = format_report(load_csv(csv_path), args.profile, command=_command(args),
                          machine=machine_line, notes=notes,
                          descriptions={n: TEST_SETS[n].description for n in names})
+    written = [str(csv_path)] + _write_report(args, text)
+    print(f"wrote {', '.join(written)} in {time.perf_counter() - start:.0f} s")
+    return 0
+
+
+def _write_report(args: argparse.Namespace, text: str) -> list[str]:
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
     (out / "testsets.md").write_text(text)
-    written = [str(csv_path), str(out / "testsets.md")]
+    written = [str(out / "testsets.md")]
     if args.doc:
         Path(args.doc).parent.mkdir(parents=True, exist_ok=True)
         Path(args.doc).write_text(text)
         written.append(str(args.doc))
-    print(f"wrote {', '.join(written)} in {time.perf_counter() - start:.0f} s")
+    return written
+
+
+def _report_from_csv(args: argparse.Namespace, names: list[str]) -> int:
+    """The report of ``args.from_csv``'s records of the test sets ``names``."""
+    from . import TEST_SETS
+    from .report import format_report
+    from .run import load_csv
+    records = [r for r in load_csv(args.from_csv)
+               if args.test_set == "all" or r["test_set"] in names]
+    if not records:
+        raise ValueError(f"{args.from_csv} holds no record of {', '.join(names)}")
+    present = list(dict.fromkeys(r["test_set"] for r in records))
+    command = (f"prioik bench --test-set {args.test_set} --profile {args.profile} "
+               f"--from-csv {args.from_csv} --out {args.out}"
+               + (f" --doc {args.doc}" if args.doc else ""))
+    text = format_report(records, args.profile, command=command,
+                         descriptions={n: TEST_SETS[n].description for n in present
+                                       if n in TEST_SETS})
+    print(f"wrote {', '.join(_write_report(args, text))}")
     return 0
