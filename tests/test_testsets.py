@@ -143,6 +143,29 @@ def test_a_status_must_stand_behind_the_answer():
     assert not values_within(np.array([0.0, 0.0]), np.array([0.0]), 1e-3)
 
 
+def test_approximate_is_a_success_at_an_ambiguous_rank_decision():
+    """Level 0: two rows 1e-7 apart in direction (within AMBIGUITY of the rank rule's
+    threshold: either rank is a fair reading); the exact solver says 'approximate' and
+    that counts; 'optimal' there counts too when the certificate holds, 'approximate'
+    on a clear decision (1e-5 apart) does not."""
+    import prioik
+
+    def near_pair(eps):
+        return TaskStack([[Task("pair", np.array([[1.0, 0, 0], [1.0, eps, 0]]), [1.0, 1.0])],
+                          [Task("posture", np.eye(3), [0.0, 5.0, 1.0])]])
+
+    sol = prioik.solve(near_pair(1e-7), "hierarchical_active_set")
+    assert sol.status == "approximate"
+    for tol in PROFILES.values():
+        report = check_lexicographic(near_pair(1e-7), sol.x, tol=tol)
+        assert report.ambiguous_levels == (0,)
+        assert certificate_success("approximate", report)
+    clear = check_lexicographic(near_pair(1e-5), np.array([1.0, 0.0, 1.0]), tol=1e-9)
+    assert clear.ok and not clear.ambiguous_levels
+    assert not certificate_success("approximate", clear)
+    assert certificate_success("optimal", clear)
+
+
 def test_value_judged_formulations_are_not_exact_by_design():
     from prioik import formulations
     for name in VALUE_JUDGED:
