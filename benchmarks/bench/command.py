@@ -15,7 +15,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("bench", help="time every formulation and back-end (G1 and random "
                                      "stacks); CSV, markdown and plots",
                        description="Time every formulation and back-end on G1 fencing "
-                                   "and random stacks.")
+                                   "and random stacks; with --test-set, run test sets "
+                                   "in qpbenchmark's shape instead.")
     p.add_argument("--out", type=Path, default=Path("bench-results"),
                    help="output directory (default: bench-results)")
     p.add_argument("--doc", type=Path, default=None,
@@ -40,6 +41,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "loop; 0: leave BLAS's default)")
     p.add_argument("--no-g1", action="store_true",
                    help="random stacks only (no G1 cases, batch, IK-step or control-step runs)")
+    from prioik.benchmarks.testsets.command import add_arguments
+    add_arguments(p)
     p.set_defaults(func=run, extras=("plots",))
 
 
@@ -75,6 +78,9 @@ def _int_list(text: str, what: str) -> tuple[int, ...]:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.test_set is not None:
+        from prioik.benchmarks.testsets.command import run as run_test_sets
+        return run_test_sets(args)
     from prioik.benchmarks.variants import check_formulations, split_labels, table
     only = tuple(split_labels(args.formulations))
     check_formulations(only)                      # an unknown name: before anything
