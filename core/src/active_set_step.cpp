@@ -8,12 +8,6 @@
 namespace prioik::detail {
 
 
-double odot(const Ctx& c, index j, const double* v) {
-    index col = c.ucol[j];
-    if (col >= 0) return c.Bo(j, col) * v[col];
-    return dot(c.Bo.row(j), v, c.n);
-}
-
 double row_size(const Ctx& c, index j, double ynorm, const double* x) {
     index col = c.ucol[j];
     if (col >= 0) return std::fabs(c.Bo(j, col)) * (std::fabs(x[col]) + 1.0);
