@@ -31,7 +31,7 @@ def test_run_returns_rows_and_ratios_for_the_g1_bounds_stacks():
             assert math.isfinite(worst) and worst > 0 and math.isfinite(total) and total > 0
             assert worst >= total * (1 - 1e-12)
     names = [x["name"] for x in out["ratios"]]
-    assert len(names) == 12 and len(set(names)) == 12
+    assert len(names) == 16 and len(set(names)) == 16
     assert all(math.isfinite(x["value"]) and x["value"] > 0 for x in out["ratios"])
     table = format_table(out)
     assert "cold/raw" in table and "worst warm/raw" in table
