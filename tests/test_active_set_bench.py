@@ -33,7 +33,7 @@ def test_run_returns_rows_and_ratios_for_the_g1_bounds_stacks():
     names = [x["name"] for x in out["ratios"]]
     # with lexls built: its cold and hot-started rows and two ratios per stack set
     with_lexls = lexls_available()
-    expected = 12 + (8 if with_lexls else 0)
+    expected = 16 + (8 if with_lexls else 0)
     assert len(names) == expected and len(set(names)) == expected
     for r in out["rows"]:
         assert ("cold/lexls_cold" in r) == with_lexls
