@@ -29,7 +29,8 @@ BUILD_REQUIRES = $$($(PY) -c "import tomllib; print(*tomllib.load(open('pyprojec
 # (tests/test_namespace.py: no top-level packages)
 EDITABLE_PATHS_OFF = -c "import pathlib, sysconfig; p = pathlib.Path(sysconfig.get_paths()['purelib'], '_editable_skbc_prioik.pth'); p.write_text(''.join(l for l in p.read_text().splitlines(True) if l.startswith('import ')))"
 
-.PHONY: test test-core test-forced-cpu demo venv venv-core clean asan asan-bindings lint
+.PHONY: test test-core test-forced-cpu demo docs venv venv-core tsid clean asan asan-bindings \
+	replay-screenshot lint
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -58,6 +59,26 @@ $(CORE_STAMP): pyproject.toml
 	touch $(CORE_STAMP)
 
 venv: $(STAMP) $(CORE_STAMP_BUILT)
+
+# The TSID baseline's own environment (benchmarks/tsid_baseline.py): tsid 1.7.1 binds
+# pin 3.4.0, which cannot share .venv's pin 3.8.0. Its python runs
+# benchmarks/tsid_runner.py in a subprocess; without it the TSID rows say "not
+# installed". The packages are tsid_baseline.REQUIREMENTS (tests/test_tsid_baseline.py
+# checks that the two lists agree); prints its build time and size.
+TSID_VENV     := .venv-tsid
+TSID_STAMP    := $(TSID_VENV)/.installed
+TSID_REQUIRES := "tsid==1.7.1" "pin==3.4.0" "cmeel-urdfdom>=4,<5" "cmeel-tinyxml2>=10,<11"
+
+# built when missing or when TSID_REQUIRES changed (the stamp holds the list)
+tsid:
+	@if [ "$$(cat $(TSID_STAMP) 2>/dev/null)" != '$(TSID_REQUIRES)' ]; then \
+	start=$$(date +%s); \
+	rm -rf $(TSID_VENV) && $(PYTHON) -m venv $(TSID_VENV) && \
+	$(TSID_VENV)/bin/python -m pip install --quiet $(TSID_REQUIRES) && \
+	$(TSID_VENV)/bin/python -c "from tsid import tsid_pywrap" && \
+	echo '$(TSID_REQUIRES)' > $(TSID_STAMP) && \
+	echo "$(TSID_VENV) (tsid, pin) built in $$(( $$(date +%s) - start )) s; $$(du -sh $(TSID_VENV) | cut -f1)"; \
+	fi
 
 venv-core: $(CORE_STAMP)
 
@@ -111,8 +132,24 @@ lint: $(STAMP)
 demo: $(STAMP) $(CORE_STAMP_BUILT)
 	$(VENV)/bin/prioik fencing --variant both --out $(OUT)
 
+# The documentation site (mkdocs.yml, the `docs` extra) built into site/: open
+# site/index.html. `make test` builds it too, with warnings as errors (tests/test_docs.py).
+# NO_MKDOCS_2_WARNING: Material for MkDocs' banner about MkDocs 2.0, not about this site
+docs: $(STAMP) $(CORE_STAMP_BUILT)
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --site-dir site
+
+# README's screenshot of the meshed replay: the G1 fencing run (extended_jacobian,
+# compatible) in headless chromium, paused 2.6 s into the run
+SHOT_DIR := build/replay-screenshot
+replay-screenshot: $(STAMP) $(CORE_STAMP_BUILT)
+	$(VENV)/bin/prioik fencing --variant compatible --formulations extended_jacobian \
+		--out $(SHOT_DIR) --quiet
+	chromium --headless --no-sandbox --disable-gpu --hide-scrollbars --window-size=900,560 \
+		--virtual-time-budget=1500 --screenshot=docs/img/replay-g1.png \
+		"file://$(abspath $(SHOT_DIR))/compatible_replay_meshes.html#run=extended_jacobian&t=2.6"
+
 clean:
-	rm -rf $(VENV) $(CORE_VENV) $(OUT) *.egg-info build
+	rm -rf $(VENV) $(CORE_VENV) $(TSID_VENV) $(OUT) *.egg-info build site
 
 # The Python extension built with -fsanitize=address,undefined and the row writers'
 # Python tests (the plain-Python reference, the bad inputs, a short boundary fuzz) run on it,

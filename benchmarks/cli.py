@@ -3,7 +3,9 @@
 Every sub-command is declared by the module that runs it (``add_parser(subparsers)``,
 listed in :data:`SUBCOMMAND_MODULES`); this module builds the parser from them, runs the
 chosen command with BLAS limited to its ``--blas-threads`` (one by default,
-:mod:`.threads`) and turns the library's errors into one line on stderr (exit status 2).
+:mod:`.threads`) and turns the library's errors (every :class:`~prioik.PrioikError`, and
+the ``ValueError``/``OSError`` of a bad argument or file) into one line on stderr (exit
+status 2).
 
 Building the parser imports no optional dependency: a sub-command module imports what
 it needs when it runs, and a sub-command that needs extras names them in its defaults
@@ -47,9 +49,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``prioik`` console script."""
-    from prioik.extras import MissingExtraError, require
-    from prioik.formulations import FormulationError
-    from prioik.hierarchy import TaskStackError
+    from prioik.errors import PrioikError
+    from prioik.extras import require
     from .threads import blas_threads
     args = build_parser().parse_args(argv)
     args.command_line = list(sys.argv[1:] if argv is None else argv)
@@ -68,7 +69,7 @@ def main(argv: list[str] | None = None) -> int:
         except (OSError, ValueError):
             pass
         return 0
-    except (TaskStackError, FormulationError, MissingExtraError, ValueError, OSError) as exc:
+    except (PrioikError, ValueError, OSError) as exc:
         print(f"prioik {args.command}: error: {_one_line(exc)}", file=sys.stderr)
         return 2
 

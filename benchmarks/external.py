@@ -1,4 +1,4 @@
-"""The recording loop of the external IK baselines (PlaCo, pink, mink).
+"""The recording loop of the external IK baselines (PlaCo, pink, mink, TSID).
 
 An external library steps the robot itself (its own kinematics, its own QP); this loop
 gives it the scenario's references, records what :func:`robots.simulate` records —
@@ -15,7 +15,15 @@ import time
 from typing import Callable
 
 import numpy as np
-import pinocchio as pin
+
+def distribution_version(distribution: str) -> str:
+    """The installed version of ``distribution``, or ``"(not installed)"``."""
+    import importlib.metadata
+    try:
+        return importlib.metadata.version(distribution)
+    except importlib.metadata.PackageNotFoundError:
+        return "(not installed)"
+
 
 #: ``step(q, v, t) -> (q_next, v_next, t_targets, t_solve)``; raises ``RuntimeError``
 #: when the library finds no solution.
@@ -36,6 +44,8 @@ def record_steps(scenario, step: StepFn, *, duration: float, dt: float, progress
     """:func:`record` one step at a time: a generator that yields after each step and
     returns the :class:`robots.SimulationResult` (as
     :func:`robots.simulation_steps`)."""
+    import pinocchio as pin
+
     from prioik.robots import KinematicState, SimulationResult
     from prioik.robots.simulate import coordinate_names
     robot = scenario.robot

@@ -11,9 +11,10 @@ prints one table per variant and writes into ``--out``:
   max_com_error_m, max_support_foot_error_m, max_left_foot_error_m,
   max_joint_limit_violation_rad, max_qdd_norm, median_step_time_s, p90_step_time_s,
   median_solve_time_s, failed}}}`` (:class:`~prioik.benchmarks.results.RunSummary`);
-* ``<variant>_<run>.csv`` — the trajectory of each run (time, recorded errors,
-  algorithmic error, ``‖q̈‖``, phase times, ``q``, ``q̇``, ``q̈``, ``τ``) and
-  ``<variant>_<run>.npz``, the saved run;
+* with ``--save-runs`` only: ``<variant>_<run>.csv`` — the trajectory of each run
+  (time, recorded errors, algorithmic error, ``‖q̈‖``, phase times, ``q``, ``q̇``,
+  ``q̈``, ``τ``) and ``<variant>_<run>.npz``, the saved run (about 3 MB each);
+* ``<variant>_replay.html`` — every run of the variant animated in one page;
 * ``<variant>_tip_error.png`` (the paper's Fig. 2 / Fig. 4), ``<variant>_algorithmic_error.png``
   (Fig. 3), ``<variant>_qdd.png`` (acceleration spikes) and ``step_time.png``
   (Sec. III-B.3);
@@ -23,6 +24,9 @@ prints one table per variant and writes into ``--out``:
   step of ``extended_jacobian`` and of PlaCo's ``KinematicsSolver`` side by side
   (:func:`headline_timing`: the two simulated in alternation, the fastest round of each),
   also marked on ``step_time.png``;
+* in ``run_info.json`` (``diagnostics``): each level's projected ``σ_min / ‖A_i‖_F`` at
+  the standing posture and along the incompatible ``extended_jacobian`` run, and the
+  largest joint-limit row target of ``extended_jacobian[step_bound]``;
 
 and, with ``--doc PATH``, regenerates the reproduction page (``docs/reproduction.md``,
 :mod:`benchmarks.reproduction`) with the measured numbers, copying the plots it shows
@@ -128,6 +132,29 @@ def crosscheck(variant: str, res, dt: float, every: int = 25,
             "damped_levels": {n: damped_names.count(n) for n in names},
             "max_rel_diff_qdd_undamped_steps": max(exact) if exact else None,
             "max_rel_diff_qdd_damped_steps": max(damped_diff) if damped_diff else None}
+
+
+def crosscheck_table(checks: dict[str, dict[str, dict]]) -> str:
+    """The :func:`crosscheck` results as a labelled table (crosscheck.json holds them):
+    per variant and run, the steps compared and the largest relative ``q̈`` difference
+    on the steps where no level was damped and on those where one was."""
+    if not checks:
+        return ""
+    lines = ["cross-check: the run's q̈ against cascaded_qp (DAQP, same per-level damping) "
+             "on the same stacks, ‖Δq̈‖ / max(1, ‖q̈‖)",
+             f"  {'variant':<13} {'run':<30} {'steps':>5} {'damped':>6} "
+             f"{'undamped steps':>14} {'damped steps':>12}"]
+
+    def f(x):
+        return f"{x:.1e}" if x is not None else "—"
+
+    for variant, by_label in checks.items():
+        for label, c in by_label.items():
+            lines.append(f"  {variant:<13} {label:<30} {c['steps_compared']:>5} "
+                         f"{c['steps_with_damping']:>6} "
+                         f"{f(c['max_rel_diff_qdd_undamped_steps']):>14} "
+                         f"{f(c['max_rel_diff_qdd_damped_steps']):>12}")
+    return "\n".join(lines)
 
 
 def unifying_diagnostic(dt: float = 0.002) -> dict[str, float] | None:
@@ -274,8 +301,6 @@ def run_command(args: argparse.Namespace) -> int:
     variants = ["compatible", "incompatible"] if args.variant == "both" else [args.variant]
     run_table("fencing").select(args.formulations)     # an unknown label: fail before anything
     diagnostics: dict[str, Any] = {"standing_sigmas": standing_sigmas(args.dt)}
-    print("projected σ_min/‖A_i‖_F per level at the standing posture (incompatible): "
-          + ", ".join(f"{k} {v:.3g}" for k, v in diagnostics["standing_sigmas"].items()))
     checks: dict[str, Any] = {}
 
     def on_run(variant: str, run: Variant, res) -> None:
@@ -288,24 +313,15 @@ def run_command(args: argparse.Namespace) -> int:
         if variant != "incompatible":
             return
         if "extended_jacobian" in results:
-            trace = sigma_trace(variant, results["extended_jacobian"], args.dt)
-            diagnostics["sigma_trace"] = trace
-            print("extended_jacobian (eq. 18), incompatible: projected σ_min/‖A_i‖_F "
-                  "along the run")
-            for row in trace:
-                print(f"  t = {row['t']:.3f} s  tip {row['sigma_tip']:.3e}  lowest "
-                      f"{row['lowest_level']} {row['sigma_lowest']:.3e}  "
-                      f"‖q̈‖ = {row['qdd_norm']:.3e}  joint-limit rows {row['limit_rows']} "
-                      f"(max |h| {row['limit_target']:.3g})")
+            diagnostics["sigma_trace"] = sigma_trace(variant, results["extended_jacobian"],
+                                                     args.dt)
         if "extended_jacobian[step_bound]" in results:
-            top = max_limit_target(variant, results["extended_jacobian[step_bound]"], args.dt)
-            diagnostics["max_limit_target"] = top
-            print(f"largest joint-limit row target along extended_jacobian[step_bound]: "
-                  f"{top:.3g} rad/s²")
+            diagnostics["max_limit_target"] = max_limit_target(
+                variant, results["extended_jacobian[step_bound]"], args.dt)
 
     runs = run_scenario("fencing", variants, args.out, args.formulations, args.duration,
                         args.dt, args.progress, on_run, on_variant, diagnostics,
-                        args.turn_steps)
+                        args.turn_steps, args.save_runs)
     meta = runs.meta
     meta["crosscheck"] = checks
     ran = {label for by_label in runs.summary.values() for label in by_label}
@@ -315,9 +331,9 @@ def run_command(args: argparse.Namespace) -> int:
             h = headline_timing(variant, args.duration, args.dt, args.headline_rounds)
             meta["headline_timing"][variant] = h
             b = h["best_median_step_s"]
-            print(f"side by side [{variant}] ({h['rounds']} alternating rounds, the fastest "
-                  f"of each): {HEADLINE[0]} {1e3 * b[HEADLINE[0]]:.3f} ms, {HEADLINE[1]} "
-                  f"{1e3 * b[HEADLINE[1]]:.3f} ms, ratio {h['ratio']:.2f}")
+            print(f"median step time side by side [{variant}] ({h['rounds']} alternating "
+                  f"rounds, the fastest of each): {HEADLINE[0]} {1e3 * b[HEADLINE[0]]:.3f} ms, "
+                  f"{HEADLINE[1]} {1e3 * b[HEADLINE[1]]:.3f} ms, ratio {h['ratio']:.2f}")
         # the chart again, with the side-by-side medians marked on it
         from .plots import step_time_figure
         step_time_figure(args.out, runs.summary, "fencing", meta["headline_timing"])
@@ -329,12 +345,11 @@ def run_command(args: argparse.Namespace) -> int:
     (out / "run_info.json").write_text(json.dumps(meta, indent=2, default=str) + "\n")
     if meta["unifying_diagnostic"]:
         ud = meta["unifying_diagnostic"]
-        print(f"cond(M) at the standing posture: {ud['cond_M']:.3g} (no armature); "
+        print(f"unifying: cond(M) of the G1 at the standing posture {ud['cond_M']:.3g} "
+              "(no rotor inertia); "
               + ", ".join(f"{v:.3g} ({a} kg·m² armature)"
                           for a, v in ud["cond_M_armature"].items()))
-    for variant, by_label in checks.items():
-        for label, c in by_label.items():
-            print(f"cross-check [{variant}] {label} vs cascaded_qp: {c}")
+    print(crosscheck_table(checks))
     if args.doc:
         command = (f"prioik fencing --variant {args.variant} --duration {args.duration:g} "
                    f"--dt {args.dt:g} --doc {Path(args.doc).as_posix()}")
@@ -346,12 +361,15 @@ def run_command(args: argparse.Namespace) -> int:
 
 def add_parser(subparsers) -> None:
     """Register ``prioik fencing``."""
-    from .scenario_runs import add_turn_steps_argument
+    from .scenario_runs import add_save_runs_argument, add_turn_steps_argument
     p = subparsers.add_parser(
         "fencing", help="the paper's fencing scenario on the G1, every formulation",
         description="Simulate the fencing scenario (Jeong & Chang 2009, Sec. III) on the "
-                    "Unitree G1 with each formulation; print tables, write summary.json, "
-                    "CSV trajectories and plots.")
+                    "Unitree G1 with each formulation and the PlaCo, pink, mink and TSID "
+                    "baselines (TSID in its own environment, `make tsid`, and process; not "
+                    "installed, it is left out); print a summary table per variant, write "
+                    "summary.json, run_info.json, plots and replay pages (every run's "
+                    "trajectory too with --save-runs).")
     p.add_argument("--variant", choices=["compatible", "incompatible", "both"],
                    default="both")
     p.add_argument("--formulations", default=None, metavar="A,B,...",
@@ -368,6 +386,7 @@ def add_parser(subparsers) -> None:
                    help="rounds of the side-by-side timing of extended_jacobian and PlaCo's "
                         "KinematicsSolver (alternating, the fastest of each; 0: skip)")
     add_turn_steps_argument(p)
+    add_save_runs_argument(p)
     p.add_argument("--no-crosscheck", action="store_true",
                    help="skip the extended_jacobian vs cascaded_qp q̈ comparison")
     p.add_argument("--quiet", dest="progress", action="store_false",

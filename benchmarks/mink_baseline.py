@@ -39,6 +39,7 @@ import numpy as np
 
 from prioik.formulations.base import ReportVariant
 
+from .external import distribution_version as _version
 from .pink_baseline import LEVEL_COSTS, POSTURE_COST
 
 #: the back-end of mink's documentation (its quickstart's ``solve_ik(..., "daqp")``)
@@ -46,14 +47,6 @@ DEFAULT_SOLVER = "daqp"
 #: mink's task gain (dead-beat: the error is driven to zero within one step)
 GAIN = 1.0
 
-
-
-def _version(distribution: str) -> str:
-    import importlib.metadata
-    try:
-        return importlib.metadata.version(distribution)
-    except importlib.metadata.PackageNotFoundError:
-        return "(not installed)"
 
 
 #: the baseline's name in the scenario reports (:data:`prioik.benchmarks.variants.BASELINES`)
@@ -65,6 +58,22 @@ DESCRIPTION = (f"mink {_version('mink')} (mujoco {_version('mujoco')}), solve_ik
                "ConfigurationLimit and VelocityLimit as inequalities; task gains "
                f"{GAIN:g} (dead-beat); QP back-end {DEFAULT_SOLVER} (mink's "
                "documentation's choice)")
+#: the level the library solves at (the scenario pages' baseline table)
+LEVEL = "velocity"
+
+
+def profile() -> dict:
+    """What the scenario pages say of this baseline (see
+    :func:`prioik.benchmarks.placo_baseline.profile`)."""
+    return {"library": f"mink {_version('mink')} (mujoco {_version('mujoco')})",
+            "level": LEVEL,
+            "priorities": "weights: one QP, one decade of cost per level (as pink); held "
+                          "feet as equality constraints",
+            "given": f"QP back-end {DEFAULT_SOLVER} (mink's documentation's; a quadprog row "
+                     f"beside it), task gains {GAIN:g} (dead-beat), ConfigurationLimit and "
+                     "VelocityLimit, the URDF converted to MuJoCo"}
+
+
 #: rows beside the default one (``options["solver"]``: the QP back-end)
 REPORT_VARIANTS = (
     ReportVariant("quadprog", {"solver": "quadprog"}, reports=("scenario",),

@@ -48,13 +48,13 @@ def _rounds(paths: dict[str, Callable[[int], None]], states: int, rounds: int
     return best
 
 
-def placo_panda(robot, steps: int, limits: bool = False):
+def placo_panda(robot, steps: int, limits: bool = False, target=None):
     """PlaCo's ``KinematicsSolver`` on the Panda with the reach's two soft tasks (hand
-    position, weight 1; joints, 1e-4), base masked, and its joint and velocity limits when
-    ``limits``; returns ``(step, states, reset)``: a function doing one PlaCo step
-    (``update_kinematics`` + ``solve``), the ``steps`` configurations of PlaCo's own
-    trajectory from ``robot.q0``, and a function putting PlaCo back at ``q0`` (done once
-    here)."""
+    position to ``target``, default :data:`HAND_TARGET`, weight 1; joints, 1e-4), base
+    masked, and its joint and velocity limits when ``limits``; returns ``(step, states,
+    reset)``: a function doing one PlaCo step (``update_kinematics`` + ``solve``), the
+    ``steps`` configurations of PlaCo's own trajectory from ``robot.q0``, and a function
+    putting PlaCo back at ``q0`` (done once here)."""
     import placo
 
     from prioik.robots.models import example_robot_data_dir
@@ -72,7 +72,8 @@ def placo_panda(robot, steps: int, limits: bool = False):
         solver.enable_joint_limits(True)
         solver.enable_velocity_limits(True)
     solver.dt = DT
-    solver.add_position_task(hand, HAND_TARGET).configure("hand", "soft", 1.0)
+    solver.add_position_task(hand, HAND_TARGET if target is None else np.asarray(
+        target, dtype=float)).configure("hand", "soft", 1.0)
     joints = solver.add_joints_task()
     joints.set_joints({name: float(q0[model.joints[model.getJointId(name)].idx_q])
                        for name in pw.joint_names()})

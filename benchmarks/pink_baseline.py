@@ -39,6 +39,22 @@ NAME = "pink"
 DESCRIPTION = ("pink's solve_ik at velocity level: every task a weighted cost (one decade "
                "per level), its ConfigurationLimit and VelocityLimit; QP back-end "
                f"{DEFAULT_SOLVER} (pink's examples' choice)")
+#: the level the library solves at (the scenario pages' baseline table)
+LEVEL = "velocity"
+
+
+def profile() -> dict:
+    """What the scenario pages say of this baseline (see
+    :func:`prioik.benchmarks.placo_baseline.profile`)."""
+    from .external import distribution_version
+    return {"library": f"pink {distribution_version('pin-pink')}", "level": LEVEL,
+            "priorities": f"weights: one QP, one decade of cost per level "
+                          f"({', '.join(f'{c:g}' for c in LEVEL_COSTS)}; posture "
+                          f"{POSTURE_COST:g})",
+            "given": f"QP back-end {DEFAULT_SOLVER} (qpsolvers; a daqp row beside it), task "
+                     "gains 1 (dead-beat), ConfigurationLimit and VelocityLimit"}
+
+
 #: rows beside the default one (``options["solver"]``: the QP back-end)
 REPORT_VARIANTS = (
     ReportVariant("daqp", {"solver": "daqp"}, reports=("scenario",),

@@ -34,6 +34,20 @@ NAME = "placo_kinematics_solver"
 DESCRIPTION = ("PlaCo's own KinematicsSolver at velocity level (hard tasks, soft weighted "
                "tasks, its joint and velocity limits): what users run today")
 REPORT_VARIANTS = ()
+#: the level the library solves at (the scenario pages' baseline table)
+LEVEL = "velocity"
+
+
+def profile() -> dict:
+    """What the scenario pages say of this baseline: ``library`` (with its version),
+    ``level``, ``priorities`` (its priority model) and ``given`` (back-end, gains)."""
+    from .external import distribution_version
+    return {"library": f"PlaCo {distribution_version('placo')}", "level": LEVEL,
+            "priorities": "two levels: hard tasks as equality constraints (support foot "
+                          "and CoM; the arm's tool position), the others weighted",
+            "given": "its KinematicsSolver's own QP, joint and velocity limits "
+                     "(enable_joint_limits, enable_velocity_limits); displacement tasks "
+                     "J Δq = x* − x (dead-beat)"}
 
 
 def unavailable_reason(options: dict | None = None) -> str | None:

@@ -8,7 +8,7 @@ Scenario runs (``prioik fencing``, ``arm``, ``plot``):
   tip-error, algorithmic-error, ``‖q̈‖`` and step-time figures of every scenario.
 * **Grouped panels** instead of 25 lines on one axis (:func:`group_of`): exact methods,
   damped methods (a damping or step-bound option), approximate methods (formulations
-  that declare ``exact=False``) and external baselines (PlaCo, pink, mink).
+  that declare ``exact=False``) and external baselines (PlaCo, pink, mink, TSID).
 * **Legends outside the data** (right of each panel), every entry with its line.
 * **Axes clipped to the informative range**: log axes span the 1st–99.9th percentile
   of the positive values of the figure (at most 12 decades); values outside are drawn

@@ -156,9 +156,9 @@ def step_time_figure(shown: dict[str, str]) -> str:
 
 def replays_line(meta: dict) -> str:
     """Where the replay pages are (``""`` when none was written)."""
-    pages = meta.get("replays") or {}
-    return Page("scenario.md").inline("replays", pages=", ".join(f"`{p}`" for p in
-                                                                 pages.values())) \
+    pages = [*(meta.get("replays") or {}).values(),
+             *(meta.get("mesh_replays") or {}).values()]
+    return Page("scenario.md").inline("replays", pages=", ".join(f"`{p}`" for p in pages)) \
         if pages else ""
 
 
@@ -167,7 +167,7 @@ def run_settings(run: dict, variants: Sequence[str]) -> tuple[str, str, str]:
     opts = ", ".join(f"{k}={v}" for k, v in (run.get("options") or {}).items()) or "defaults"
     stack = run.get("level", "acceleration")
     if run.get("origin") == "baseline":
-        stack = "velocity, the library's own QP and limits"
+        stack = f"{stack}, the library's own QP and limits"
     elif run.get("limits"):
         stack += f", limits as {run['limits']}"
     if run.get("armature"):
@@ -175,3 +175,33 @@ def run_settings(run: dict, variants: Sequence[str]) -> tuple[str, str, str]:
     only = run.get("only_in") or []
     where = ", ".join(only) if only else ", ".join(variants)
     return f"`{opts}`", stack, where
+
+
+def baselines_table(meta: dict) -> str:
+    """The baselines of a scenario run (``run_info.json``'s ``baselines``,
+    :func:`prioik.benchmarks.variants.baseline_profiles`) as a markdown table: library
+    and version, level, priority model, what it was given, whether it ran here."""
+    rows = [[f"`{name}`", p["library"], p["level"], p["priorities"], p["given"],
+             "ran" if p["here"] == "runs" else p["here"]]
+            for name, p in (meta.get("baselines") or {}).items()]
+    if not rows:
+        return ""
+    return table(["baseline", "library", "level", "priority model", "given", "here"], rows)
+
+
+def baselines_block(page: "Page", meta: dict, summary: dict,
+                    reference: str = "hierarchical_active_set") -> str:
+    """The page's ``baselines`` block: :func:`baselines_table` and, for each scenario
+    variant where TSID and ``reference`` both ran, their median steps and ratio
+    (``tsid_ratio``); empty when the run has no baselines."""
+    tbl = baselines_table(meta)
+    if not tbl:
+        return ""
+    ratios = []
+    for variant, runs in summary.items():
+        t = (runs.get("tsid") or {}).get("median_step_time_s")
+        p = (runs.get(reference) or {}).get("median_step_time_s")
+        if t and p:
+            ratios.append(page.block("tsid_ratio", variant=variant, tsid=ms(t),
+                                     prioik=reference, prioik_ms=ms(p), ratio=f"{t / p:.2f}"))
+    return page.block("baselines", table=tbl, tsid_ratio="\n\n".join(ratios))

@@ -11,7 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from . import paper
-from .report import (Page, copy_figures, mm, run_settings, sci,
+from .report import (Page, baselines_block, copy_figures, mm, run_settings, sci,
                      step_time_figure, stops_and_figures, table)
 from .variants import is_damped, parse_label
 
@@ -28,8 +28,11 @@ EXACT_QP = ("cascaded_qp", "daqp_hierarchical")
 
 
 def _main_row(settings: dict) -> bool:
-    """A formulation's own run: acceleration level, undamped, the robot's own ``M``."""
+    """A formulation's own run: acceleration level, undamped, the robot's own ``M``; an
+    external library's default row."""
     opts = settings.get("options") or {}
+    if settings.get("origin") == "baseline":
+        return not opts
     return (settings.get("level", "acceleration") == "acceleration"
             and not settings.get("armature") and not is_damped(opts))
 
@@ -326,7 +329,7 @@ def write_page(path: Path, summary: dict, meta: dict, pngs: dict, command: str,
     claim_tip, claim_alg, claim_inc = _claims(page, comp, inc, meta["runs"])
     text = page.render(
         command=command, wall_s=f"{meta['wall_time_s']:.0f}", gain=f"{gain:g}",
-        runs_table=runs_table,
+        runs_table=runs_table, baselines=baselines_block(page, meta, summary),
         not_run=(page.block("not_run", skipped="; ".join(meta["skipped"]))
                  if meta.get("skipped") else ""),
         measured=_measured(page, meta, summary, shown),

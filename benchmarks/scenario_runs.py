@@ -14,8 +14,10 @@ their own torques; the others' torques come from RNEA.
 
 :func:`run_scenario` runs a selection of the scenario's table and writes, into its
 output folder, ``summary.json`` (``{variant: {label: RunSummary}}``),
-``run_info.json``, one trajectory CSV and one saved run (``.npz``) per run, the
-figures and a replay page per variant.
+``run_info.json``, the figures and two replay pages per variant (``<variant>_replay.html``,
+link segments; ``<variant>_replay_meshes.html``, the robot's meshes, with the ``view``
+extra), and, when asked (``save_runs``, the commands' ``--save-runs``), one trajectory
+CSV and one saved run (``.npz``) per run.
 """
 
 from __future__ import annotations
@@ -32,10 +34,11 @@ from typing import Any, Callable, Generator
 import numpy as np
 
 from .results import RunSummary
-from .variants import BASELINES, Variant, VariantTable, capabilities, table
+from .variants import (BASELINES, Variant, VariantTable, baseline_profiles, capabilities,
+                       table)
 
 __all__ = ["VELOCITY_GAIN", "TURN_STEPS", "run_table", "run_one", "run_steps", "in_turns",
-           "add_turn_steps_argument",
+           "add_turn_steps_argument", "add_save_runs_argument", "table_legend",
            "summarize", "write_trajectory", "format_table", "ScenarioRuns", "run_scenario",
            "file_stem"]
 
@@ -191,6 +194,14 @@ def add_turn_steps_argument(parser) -> None:
                              f"one run after another; default {TURN_STEPS})")
 
 
+def add_save_runs_argument(parser) -> None:
+    """The ``--save-runs`` option of the scenario commands (:func:`run_scenario`)."""
+    parser.add_argument("--save-runs", action="store_true",
+                        help="also write every run's full trajectory: <variant>_<run>.csv "
+                             "and the saved run <variant>_<run>.npz (for `prioik replay` "
+                             "and `prioik plot`; about 3 MB each for the G1's 3 s runs)")
+
+
 def in_turns(runs: dict[str, Generator], block: int,
              on_turn: Callable[[int], None] | None = None
              ) -> tuple[dict[str, Any], dict[str, float]]:
@@ -265,10 +276,42 @@ def _short(key: str) -> str:
     return name
 
 
+#: the console table's fixed columns: header → meaning
+_FIXED_COLUMNS = (("tip final", "the tip's final distance to its target (m)"),
+                  ("alg err", "largest algorithmic error along the run (eq. 29; — for "
+                              "the external baselines, whose rows are not prioik's)"),
+                  ("max|q̈|", "largest ‖q̈‖ (rad/s², m/s² for the base)"),
+                  ("kin ms", "median time per step in kinematics (ms)"),
+                  ("solve ms", "median time per step in the solver (ms)"),
+                  ("tau ms", "median time per step computing torques (ms)"),
+                  ("step ms", "median time per control step, everything included (ms)"),
+                  ("status", "ok, or FAILED (the run stopped; run_info.json says why)"))
+
+
+def _unit(key: str) -> str:
+    for suffix, unit in (("_violation_rad_s", "rad/s"), ("_violation_rad", "rad"),
+                         ("_error_rad", "rad"), ("_error_m", "m"), ("_m", "m"),
+                         ("_rad", "rad")):
+        if key.endswith(suffix):
+            return unit
+    return ""
+
+
+def table_legend(errors: tuple[str, ...]) -> str:
+    """What each column of :func:`format_table` means, with its unit."""
+    cols = list(_FIXED_COLUMNS[:2]) + [
+        (_short(f"max_{e}")[:12], f"largest {_short(e).replace('_', ' ')} "
+                                  f"{'violation' if 'violation' in e else 'error'}"
+                                  f" along the run ({_unit(e)})")
+        for e in errors] + list(_FIXED_COLUMNS[2:])
+    width = max(len(h) for h, _ in cols)
+    return "columns:\n" + "\n".join(f"  {h:<{width}}  {m}" for h, m in cols)
+
+
 def format_table(scenario: str, variant: str, runs: dict[str, dict],
                  phases: dict[str, tuple], errors: tuple[str, ...]) -> str:
     """One row per run: the summary numbers (the scenario's summary errors as maxima)
-    and the median phase times."""
+    and the median phase times (the columns: :func:`table_legend`)."""
     keys = [f"max_{e}" for e in errors]
     width = max([26] + [len(lb) + 1 for lb in runs])
     head = (f"{'run':<{width}} {'tip final':>10} {'alg err':>9} "
@@ -311,12 +354,26 @@ class ScenarioRuns:
     results: dict[str, dict] = field(default_factory=dict)
 
 
+def _write_mesh_replay(path: Path, scenario: str, variant: str, results: dict):
+    """The variant's page with the robot's meshes (``None`` without the ``view`` extra)."""
+    from prioik.extras import missing_distributions
+    if missing_distributions("view"):
+        print(f"not writing {path.name}: the meshed replay needs the `view` extra",
+              file=sys.stderr)
+        return None
+    from prioik.robots import write_mesh_replay
+    from prioik.robots.scenario import make
+    sc = make(scenario, variant)
+    return write_mesh_replay(path, sc.robot, results, title=f"{scenario}, {variant}",
+                             markers=sc.markers)
+
+
 def run_scenario(scenario: str, variants: list[str], out, labels: str | None = None,
                  duration: float = 3.0, dt: float = 0.002, progress: bool = True,
                  on_run: Callable[[str, Variant, Any], None] | None = None,
                  on_variant: Callable[[str, dict], None] | None = None,
                  diagnostics: dict[str, Any] | None = None,
-                 turn_steps: int = TURN_STEPS) -> ScenarioRuns:
+                 turn_steps: int = TURN_STEPS, save_runs: bool = False) -> ScenarioRuns:
     """Run the selected runs of ``scenario``'s table on each of its ``variants``: the
     runs of a variant advanced in turns of ``turn_steps`` steps (:func:`in_turns`), so
     the table's step times are measured under the same machine conditions.
@@ -330,6 +387,9 @@ def run_scenario(scenario: str, variants: list[str], out, labels: str | None = N
             (hooks may add to it).
         turn_steps: Steps per run and turn (``0``: each run to its end before the
             next).
+        save_runs: Also write each run's trajectory (``<variant>_<label>.csv``,
+            :func:`write_trajectory`) and the saved run (``.npz``,
+            :meth:`~prioik.robots.SimulationResult.save`).
     """
     from prioik.benchmarks.plots import scenario_figures, step_time_figure
     from prioik.benchmarks.progress import simulated_time_bar
@@ -349,6 +409,7 @@ def run_scenario(scenario: str, variants: list[str], out, labels: str | None = N
     skipped_runs: list[str] = list(skipped)
     messages: dict[str, dict[str, str]] = {}
     replays: dict[str, str] = {}
+    mesh_replays: dict[str, str] = {}
     all_results: dict[str, dict] = {}
     diagnostics = {} if diagnostics is None else diagnostics
     wall0 = time.perf_counter()
@@ -388,8 +449,9 @@ def run_scenario(scenario: str, variants: list[str], out, labels: str | None = N
                 float(np.median(x)) if res.steps else float("nan")
                 for x in (res.kinematics_time_s, res.solve_time_s, res.torque_time_s))
             stem = file_stem(sv, v.label)
-            write_trajectory(out / f"{stem}.csv", res)
-            res.save(out / f"{stem}.npz")
+            if save_runs:
+                write_trajectory(out / f"{stem}.csv", res)
+                res.save(out / f"{stem}.npz")
             if res.failed:
                 messages.setdefault(sv, {})[v.label] = res.message
             print(f"[{sv}] {v.label}: {res.steps} steps in {seconds[v.label]:.1f} s"
@@ -403,6 +465,10 @@ def run_scenario(scenario: str, variants: list[str], out, labels: str | None = N
         if results:
             html = write_replay(out / f"{sv}_replay.html", results, title=f"{scenario}, {sv}")
             replays[sv] = html.name
+            meshed = _write_mesh_replay(out / f"{sv}_replay_meshes.html", scenario, sv,
+                                        results)
+            if meshed is not None:
+                mesh_replays[sv] = meshed.name
         print(format_table(scenario, sv, summary[sv], phases[sv], errors))
         print()
         if on_variant is not None:
@@ -415,11 +481,20 @@ def run_scenario(scenario: str, variants: list[str], out, labels: str | None = N
                                "limits": stack_limits(v) if not v.external else None,
                                "armature": v.armature, "only_in": list(v.only_in),
                                "origin": v.origin} for v in chosen},
+            "baselines": baseline_profiles(),
             "skipped": skipped_runs, "phases": phases, "messages": messages,
-            "replays": replays, "diagnostics": diagnostics, "turn_steps": turn_steps,
+            "replays": replays, "mesh_replays": mesh_replays, "diagnostics": diagnostics,
+            "turn_steps": turn_steps, "saved_runs": save_runs,
             "wall_time_s": time.perf_counter() - wall0}
     (out / "run_info.json").write_text(json.dumps(meta, indent=2, default=str) + "\n")
-    print(f"wrote {out / 'summary.json'}, {sum(len(v) for v in pngs.values())} plots and "
-          f"{len(replays)} replay page(s) in {time.perf_counter() - wall0:.0f} s",
+    print(table_legend(errors))
+    print()
+    saved = (f", {2 * sum(len(r) for r in all_results.values())} trajectory files "
+             "(.csv, .npz)" if save_runs else "")
+    print(f"wrote {out / 'summary.json'}, run_info.json, "
+          f"{sum(len(v) for v in pngs.values())} plots, "
+          f"{len(replays) + len(mesh_replays)} replay page(s)"
+          f"{saved} in {time.perf_counter() - wall0:.0f} s"
+          + ("" if save_runs else " (--save-runs: every run's trajectory too)"),
           file=sys.stderr)
     return ScenarioRuns(summary, meta, pngs, all_results)

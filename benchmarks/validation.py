@@ -241,6 +241,7 @@ def report(n_stacks: int, families: list[str], n_range, k_range, include_cvxpy_b
     vs, variant_notes = variants(include_cvxpy_backends, ablations)
     notes = list(notes) + variant_notes
     if only:
+        variant_table("validate", all_backends=True).check_names(only)
         vs = [v for v in vs if v.formulation in only or v.label in only]
     t0 = time.perf_counter()
     last = [0.0]
@@ -294,7 +295,8 @@ def _arguments(p: argparse.ArgumentParser) -> None:
                         f"{','.join(EQUALITY_FAMILY_NAMES + INEQUALITY_FAMILY_NAMES)}; the "
                         "inequality ones only where the cvxpy extra is installed)")
     p.add_argument("--formulations", default="",
-                   help="comma-separated formulation names or row labels (default: all)")
+                   help="comma-separated formulation names or row labels (default: all; "
+                        "an unknown one exits 2 listing the known ones)")
     p.add_argument("--n-min", type=int, default=4)
     p.add_argument("--n-max", type=int, default=20)
     p.add_argument("--k-min", type=int, default=2)
@@ -308,6 +310,9 @@ def _arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from .variants import check_formulations, split_labels
+    only = split_labels(args.formulations) or None
+    check_formulations(only or ())                # an unknown name: before anything
     named = args.families is not None
     families = ([f for f in args.families.split(",") if f] if named
                 else list(EQUALITY_FAMILY_NAMES + INEQUALITY_FAMILY_NAMES))
@@ -329,8 +334,6 @@ def run(args: argparse.Namespace) -> int:
     if args.n_stacks < 1 or args.n_min < 2 or args.n_max < args.n_min or args.k_min < 1 \
             or args.k_max < args.k_min:
         raise ValueError("need n-stacks ≥ 1, 2 ≤ n-min ≤ n-max, 1 ≤ k-min ≤ k-max")
-    from .variants import split_labels
-    only = split_labels(args.formulations) or None
     text = report(args.n_stacks, families, (args.n_min, args.n_max), (args.k_min, args.k_max),
                   args.cvxpy_backends, only, ablations=not args.no_ablations,
                   notes=tuple(notes))

@@ -31,6 +31,7 @@ So a formulation added to the registry appears in ``prioik validate``, ``propert
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import re
 from dataclasses import dataclass, field
@@ -39,7 +40,8 @@ from typing import Any
 
 __all__ = ["Variant", "VariantTable", "table", "parse_label", "split_labels", "is_damped",
            "capabilities", "REPORTS",
-           "SCENARIO_REPORTS", "BACKEND_REPORTS", "BASELINES", "STUDY_MODULES",
+           "SCENARIO_REPORTS", "BACKEND_REPORTS", "BASELINES", "baseline_profiles",
+           "STUDY_MODULES",
            "DAMPING_OPTIONS"]
 
 #: every report that lists variants
@@ -50,12 +52,14 @@ SCENARIO_REPORTS = ("fencing", "arm", "sweep")
 #: the reports that give each back-end of a formulation a row of its own
 BACKEND_REPORTS = ("bench", "validate")
 #: external IK libraries run in the scenario reports: name → module (``NAME``,
-#: ``DESCRIPTION``, ``REPORT_VARIANTS``, ``unavailable_reason(options)``,
+#: ``DESCRIPTION``, ``REPORT_VARIANTS``, ``LEVEL``, ``profile()``,
+#: ``unavailable_reason(options)``,
 #: ``steps(scenario, variant, duration=, dt=, progress=)``: the run as a step generator
 #: that returns its result, as :func:`prioik.robots.simulation_steps`)
 BASELINES = {"placo_kinematics_solver": "prioik.benchmarks.placo_baseline",
              "pink": "prioik.benchmarks.pink_baseline",
-             "mink": "prioik.benchmarks.mink_baseline"}
+             "mink": "prioik.benchmarks.mink_baseline",
+             "tsid": "prioik.benchmarks.tsid_baseline"}
 #: scenario → the experiment module whose ``STUDIES`` (a tuple of :class:`Variant`) add
 #: that scenario's own runs
 STUDY_MODULES = {"fencing": "prioik.benchmarks.fencing", "arm": "prioik.benchmarks.arm"}
@@ -75,6 +79,26 @@ def parse_label(label: str) -> tuple[str, str]:
     if m is None:
         raise ValueError(f"{label!r} is not a run label (formulation or formulation[tag])")
     return m.group(1), m.group(2) or ""
+
+
+def check_formulations(labels, baselines: bool = False) -> None:
+    """Refuses (``ValueError``, listing the registry's names) a label whose formulation
+    is not registered (nor, with ``baselines``, an external baseline): a check by name
+    alone, before any plugin is imported; a report's :meth:`VariantTable.check_names`
+    then checks the tags."""
+    from prioik import formulations
+    known = formulations.names() + (list(BASELINES) if baselines else [])
+    unknown = []
+    for label in labels:
+        try:
+            name, _ = parse_label(label)
+        except ValueError:
+            name = ""
+        if name not in known:
+            unknown.append(label)
+    if unknown:
+        raise ValueError(f"unknown formulation {', '.join(map(repr, unknown))}; known: "
+                         f"{', '.join(known)}")
 
 
 def split_labels(text: str) -> list[str]:
@@ -220,10 +244,29 @@ class VariantTable:
         return self.known[label]
 
     def only(self, names) -> list[Variant]:
-        """The rows whose formulation or label is in ``names`` (every row when empty)."""
+        """The rows whose formulation or label is in ``names`` (every row when empty).
+
+        Raises:
+            ValueError: a name that is neither a formulation of the report (runnable
+                here or not) nor one of its labels; the message lists the known ones.
+        """
         names = tuple(names or ())
+        self.check_names(names)
         return [v for v in self.rows if not names or v.formulation in names
                 or v.label in names]
+
+    def check_names(self, names) -> None:
+        """Refuses (``ValueError``) a name that is neither a formulation of the report
+        (runnable here or not) nor one of its labels, listing the known ones."""
+        formulations = list(dict.fromkeys([v.formulation for v in self.known.values()]
+                                          + list(self.unavailable)))
+        unknown = [n for n in names if n not in formulations and n not in self.known]
+        if unknown:
+            labels = [lb for lb in self.known if lb not in formulations]
+            raise ValueError(
+                f"unknown formulation or row label {', '.join(map(repr, unknown))}; "
+                f"known formulations: {', '.join(formulations)}"
+                + (f"; row labels: {', '.join(labels)}" if labels else ""))
 
     def select(self, labels: str | list[str] | None) -> tuple[list[Variant], list[str]]:
         """The default rows (``labels`` empty) or the named ones, and a message for
@@ -323,13 +366,27 @@ def _baseline_rows(report: str) -> tuple[list[Variant], dict[str, str]]:
         if why:
             unavailable[name] = why
             continue
-        rows.append(Variant(name, "", {}, mod.DESCRIPTION, origin="baseline"))
+        rows.append(Variant(name, "", {}, mod.DESCRIPTION, level=mod.LEVEL,
+                            origin="baseline"))
         for rv in _declared(mod):
             if not _names_report(tuple(rv.reports), report):
                 continue
             if mod.unavailable_reason(rv.options) is None:
-                rows.append(_from_declaration(name, rv, "baseline"))
+                rows.append(dataclasses.replace(_from_declaration(name, rv, "baseline"),
+                                                level=mod.LEVEL))
     return rows, unavailable
+
+
+def baseline_profiles() -> dict[str, dict]:
+    """Every baseline of :data:`BASELINES`: its ``profile()`` (library and version,
+    level, priority model, what it is given) and ``here``: ``"runs"`` or why it cannot
+    run here (``"not installed …"``)."""
+    out = {}
+    for name, module in BASELINES.items():
+        mod = importlib.import_module(module)
+        why = mod.unavailable_reason({})
+        out[name] = {**mod.profile(), "here": "runs" if why is None else why}
+    return out
 
 
 def _studies(scenario: str) -> tuple[Variant, ...]:

@@ -7,6 +7,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from prioik.errors import PrioikError
 from prioik.hierarchy import (DEFAULT_CERTIFICATE_TOL, X_PRECISION, StackData, TaskStack,
                               TaskStackError, ambiguity_reason, check_lexicographic,
                               level_residuals, level_scale, precision_limited_levels,
@@ -16,7 +17,7 @@ from prioik.hierarchy import (DEFAULT_CERTIFICATE_TOL, X_PRECISION, StackData, T
 STATUSES = ("optimal", "approximate", "failed")
 
 
-class FormulationError(ValueError):
+class FormulationError(PrioikError, ValueError):
     """A formulation cannot be used as asked: unknown name, not installed here,
     an unknown option, or a required option (e.g. ``mass_matrix``) missing."""
 
@@ -27,7 +28,7 @@ class CoreInputError(FormulationError):
     not finite (or a ``√w ≤ 0``); the message names the array and the entry."""
 
 
-class ConcurrentUseError(RuntimeError):
+class ConcurrentUseError(PrioikError, RuntimeError):
     """A prepared solver was called from a second thread while a solve was running
     (a prepared solver owns its workspaces: use one per thread)."""
 
@@ -213,11 +214,13 @@ def precision_status(status: str, info: dict, data, x: np.ndarray) -> str:
     return "approximate"
 
 
-def certify(stack, outcome: Outcome, metric=None, tol: float | None = None) -> Outcome:
+def certify(stack, outcome: Outcome, metric=None, tol: float | None = None,
+            minimum_norm: bool = True) -> Outcome:
     """Keep ``status="optimal"`` only when ``outcome.x`` passes the certificate.
 
     The certificate is :func:`hierarchy.check_lexicographic` with the minimum-norm
-    tie-break (``xᵀ W x`` with ``metric``) at ``tol`` (default
+    tie-break (``xᵀ W x`` with ``metric``; ``minimum_norm=False``: the levels only, for
+    a formulation without that tie-break) at ``tol`` (default
     :data:`hierarchy.DEFAULT_CERTIFICATE_TOL`). An answer that fails becomes
     ``"approximate"``, with ``info["fault_level"]`` (``k`` for the tie-break),
     ``info["fault_tasks"]`` and ``info["message"]``; ``info["certificate"]`` records the
@@ -226,9 +229,7 @@ def certify(stack, outcome: Outcome, metric=None, tol: float | None = None) -> O
     :data:`hierarchy.AMBIGUITY` of the rank rule's threshold) becomes ``"approximate"``
     too, with ``info["ambiguous_levels"]`` and ``info["reason"]`` (``info["message"]``
     too: every answer it demotes says why there): it is the rank rule's
-    optimum, and the exact solvers say ``approximate`` at such a decision (on 600 fuzz
-    stacks with inequalities, ``cascaded_qp[quadprog]`` said ``optimal`` on 34 where the
-    active set found its decisions ambiguous, 30 of which the check finds so too). Any
+    optimum, and the exact solvers say ``approximate`` at such a decision. Any
     other answer that passes is compared with the exact active-set solver's answer on the
     same stack (:func:`lower_point`): when that point is no higher at every level above
     some level and lower there by more than ``tol · max(1, value)`` (and the values'
@@ -237,12 +238,8 @@ def certify(stack, outcome: Outcome, metric=None, tol: float | None = None) -> O
     ``info["message"]`` and ``info["lower_point"]`` (the two values). The check reads
     rows a solver left violated within its tolerance at a level above as that level's
     optimal violation, fixed for the levels below, which can pin them far from their
-    optimum: on 600 stacks (``prioik fuzz`` seed 1248's first 200 inequality and 200
-    bounds stacks, 200 ``random_inequality``) it passed 46 answers of ``cascaded_qp``
-    (quadprog, daqp, clarabel), ``cvxpy`` and ``daqp_hierarchical`` that the comparison
-    refutes, by 1.1e-8 to 0.44 of ``max(1, value)`` (``cascaded_qp[quadprog]`` on
-    ``bounds-1248-41``: level 1 at 17.19 where 10.58 is reached, a level-0 row left
-    violated by 5.7e-7). Other statuses are returned unchanged.
+    optimum; the comparison does not depend on that reading. Other statuses are returned
+    unchanged.
     """
     if outcome.status != "optimal":
         return outcome
@@ -250,7 +247,7 @@ def certify(stack, outcome: Outcome, metric=None, tol: float | None = None) -> O
     x = np.asarray(outcome.x, dtype=np.float64).reshape(-1)
     if x.shape != (stack.n,) or not np.isfinite(x).all():
         return outcome
-    report = check_lexicographic(stack, x, tol=tol, minimum_norm=True, metric=metric)
+    report = check_lexicographic(stack, x, tol=tol, minimum_norm=minimum_norm, metric=metric)
     bad = report.first_failure
     outcome.info["certificate"] = {"ok": report.ok, "tol": tol,
                                    "worst_relative": report.worst_relative,

@@ -6,70 +6,30 @@ Level ``j`` (highest first) solves, over ``x`` and its slacks,
     s.t. lower_t ≤ A_t x − v_t ≤ upper_t            (the level's inequality tasks)
          every higher level's optimum kept fixed
 
-The equality tasks enter through residual variables ``r = √W (A x − b)``
-(``min ‖r‖²`` subject to ``√W A x − r = √W b``), which keeps the QP at the conditioning
-of ``A`` instead of ``AᵀA`` and never leaves a level unconstrained. With ``A = J_i``
-and ``b = h_i`` the level is the paper's task ``J_i θ̈ = h_i`` (eq. 3) solved in the
-least-squares sense inside the optimal set of the levels above, i.e. the
-lexicographic optimum the extended Jacobian (eq. 18) reaches on equality stacks.
+(equality tasks through residual variables ``r = √W (A x − b)``, at the conditioning
+of ``A``), then a last level minimises ``‖x‖²`` (``xᵀWx`` with ``metric``) over the
+lexicographic optimal set; on equality stacks this is the extended Jacobian's eq. 18.
+A level's optimum is kept for the levels below by fixing its equality rows'
+values (``fixing``: ``"basis"``, an orthonormal basis of their row space, default;
+``"rows"``, the literal rows; ``"nullspace"``, ``x = x* + Z y``), relaxing its
+inequality rows by their optimal slacks, and holding its strongly active rows as
+equalities. ``level_damping=(μ_1², …)`` adds ``μ_i² ‖x‖²`` to level ``i`` (the
+hierarchy the extended Jacobian's selective damping and ``step_bound`` solve).
 
-*Fixing a level's optimum.* The weighted least-squares objective is strictly
-convex in ``A x`` and in the slacks, so every optimal point of level ``h`` shares
-``A_h x`` (equality rows) and the slacks ``v_h``. The later levels therefore keep
+Back-ends: ``solver=`` any of ``qpsolvers.available_solvers`` (default Clarabel);
+:func:`backend_settings` maps ``tolerance`` onto each back-end's options
+(:data:`DEFAULT_TOLERANCES`); DAQP is called as ``daqp.solve`` directly.
 
-* the equality rows on their achieved values, ``A_h x = A_h x_h*``, in one of
-  three ways (option ``fixing``):
+Statuses: ``optimal`` only when the answer passes
+:func:`~prioik.formulations.base.certify` (the lexicographic certificate with the
+minimum-norm tie-break, no ambiguous rank decision, no lower point found), else
+``approximate`` with ``info["fault_level"]``. A back-end that raises or finds no
+solution gives ``failed`` with ``info["failed_level"]``, ``info["failed_tasks"]`` and
+``info["fixed_tasks"]``; an infeasible inequality level keeps its least violation
+(``info["infeasible_levels"]``; ``on_infeasible="fail"`` makes it a failure).
 
-  - ``"basis"`` (default): an orthonormal basis ``R`` of the row space of all
-    higher equality rows, built by nested SVDs with the rank rule of
-    :mod:`hierarchy.linalg` (the null spaces ``Z_i`` of eq. 13), and the
-    constraint ``Rᵀ x = Rᵀ x*``: no redundant rows even when a level is
-    rank-deficient or repeats directions of the levels above;
-  - ``"rows"``: the literal rows ``A_h x = A_h x*``; redundant whenever a level is
-    rank-deficient or conflicts, which some back-ends cannot take (measured in
-    ``docs/qp-formulations.md``);
-  - ``"nullspace"``: ``x = x* + Z y`` with ``Z`` the same nested null-space basis,
-    so the QP is over ``y`` and holds no equality constraint from above;
-
-* the inequality rows relaxed by their optimal slacks:
-  ``lower_h + v_h ≤ A_h x ≤ upper_h + v_h`` with ``v_h = A_h x* − clip(A_h x*, lower_h,
-  upper_h)`` computed from the level's answer, so each QP is feasible at the
-  previous answer by construction (``margin`` widens them, default 0);
-* strongly active inequality rows (positive multiplier, zero slack) and rows the
-  level had to violate as equalities (``fix_active=True``): every optimum of the
-  level satisfies them with equality (complementary slackness), and keeping them
-  as inequalities leaves the lower levels a degenerate sliver of a face that
-  active-set back-ends fail on. Inequality rows that fall inside the fixed row
-  space are implied and dropped.
-
-*Damped levels.* ``level_damping=(μ_1², …, μ_k²)`` adds ``μ_i² ‖x‖²`` to level ``i``'s
-objective: with the higher levels' row space fixed, ``‖x‖²`` differs from the squared
-step in the level's free directions by a constant, so the level becomes the damped
-least-squares problem ``min ‖A_i x − b_i‖² + μ_i² ‖Z_iᵀ x‖²`` inside the optimal set of
-the levels above — the hierarchy the extended Jacobian solves with selective damping
-or ``step_bound`` (whose ``info["level_damping"]`` gives these ``μ_i²``).
-
-Each level's rows are divided by their RMS row norm (same minimiser) and fixed
-inequality rows are scaled to unit norm, so tasks of very different scales stay
-solvable. A final regularisation level minimises ``‖x‖²`` (``xᵀWx`` with
-``metric=W``) over the lexicographic optimal set, which makes the answer unique and
-comparable with ``reference``.
-
-*Back-ends.* ``solver=`` is any back-end of ``qpsolvers.available_solvers``
-(default Clarabel, the most accurate measured); :func:`backend_settings` maps
-``tolerance`` onto each back-end's own option names (defaults in
-:data:`DEFAULT_TOLERANCES`), and quadprog and DAQP get a small Hessian
-regularisation of the ``x`` block (:data:`NEEDS_DEFINITE_P`). DAQP is called as
-``daqp.solve`` on the same dense problem, because qpsolvers 4.13 gives it
-``blower = −1e30`` on equality rows. Measurements: ``docs/qp-formulations.md``.
-
-*Failures and diagnostics.* A back-end that raises, or reports no solution, ends
-the cascade with ``status="failed"``, ``info["message"]``, ``info["failed_level"]``
-and ``info["failed_tasks"]`` (and ``info["fixed_tasks"]``: the higher-priority
-tasks whose optima were constraints of that QP). An inequality level that cannot
-be met gives its least-violation answer (slacks); it is listed in
-``info["infeasible_levels"]`` with the violated tasks and their violation, and
-``on_infeasible="fail"`` turns it into a failure naming them.
+In detail: ``docs/formulations.md``; settings and measurements per back-end:
+``docs/qp-formulations.md``.
 """
 
 from __future__ import annotations

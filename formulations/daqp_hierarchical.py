@@ -2,47 +2,26 @@
 
 DAQP (Arnström, Bemporad & Axehill 2022) takes the rows of every level stacked,
 ``blower ≤ A x ≤ bupper``, and ``break_points`` (the end row of each level). With
-no cost (``H = f = None``) it minimises, level by level, the squared violation of
-the level's rows (soft constraints with slacks, ``rho_soft``) inside the optimal
-set of the levels above, and returns the minimum-norm point of the last set —
-the lexicographic optimum the paper's eq. 18 gives on equality stacks. An
-equality task is the row pair ``b ≤ A x ≤ b`` (weighted by ``√w``); an inequality
-task keeps its bounds (``∓inf`` sent as ``∓1e30``).
+no cost it minimises, level by level, the squared violation of the level's rows
+inside the optimal set of the levels above, and returns the minimum-norm point of
+the last set. An equality task is the row pair ``b ≤ A x ≤ b`` (weighted by ``√w``);
+an inequality task keeps its bounds (``∓inf`` sent as ``∓1e30``). Each level is
+divided by its RMS row norm (DAQP's absolute tolerances become relative per level).
 
-*Where it is exact and where not (measured, docs/qp-formulations.md).* DAQP's
-hierarchical loop counts one free direction per active soft row. That count is
-right when, level by level, the active rows add as much rank as their number; it
-goes wrong when
+Where it is exact: DAQP counts one free direction per active soft row, which holds
+when a level's active rows add as much rank as their number. A rank-deficient level
+is made full-rank first (``compress_levels=True``, default: its ``r`` SVD rows, the
+same least-squares optimum). A level whose active rows depend on those above (a
+*conflicting* level) can leave the lower levels far from their optimum; no DAQP
+setting changes this, and the status says so.
 
-* a level's own rows are dependent (rank-deficient level): the first activation
-  is singular (exit flag −6, "overdetermined initial"). Fixed here by
-  ``compress_levels=True`` (default): each equality level is replaced by its
-  ``r`` SVD rows ``Σ_r V_rᵀ x = U_rᵀ b``, which has the same least-squares optimum
-  — after that DAQP is exact on rank-deficient stacks;
-* a level's active rows depend on those of the levels above (a *conflicting*
-  level, eq. 35, including over-determined stacks ``Σ m_i > n`` and equality rows
-  that repeat an active bound): the lower levels are then usually far from their
-  optimum (relative error O(1) measured on random stacks), although not always
-  (the G1 fencing stacks, whose last level conflicts, come out right). No DAQP
-  setting changes this.
+Statuses (``check=True``): ``optimal`` when DAQP exits with flag 1 or 2 and the answer
+passes :func:`~prioik.formulations.base.certify`; ``approximate`` otherwise, with
+``info["fault_level"]`` and ``info["conflicting_levels"]``; ``failed`` on a negative
+exit flag (``info["message"]``, for infeasibility the hard inequality tasks involved).
+``check=False`` skips the certificate. ``primal_tol`` defaults to 1e-10.
 
-Each level is also divided by its RMS row norm (same minimiser; DAQP's absolute
-tolerances become relative to each level: tasks scaled by 1e-6 or 1e4 otherwise
-made DAQP report infeasibility on 42 of 100 ``degenerate`` stacks, 6 after).
-
-``status`` (``check=True``): ``"optimal"`` when DAQP exits with flag 1 or 2 and the
-answer passes the lexicographic certificate (:func:`hierarchy.check_lexicographic`
-with the minimum-norm tie-break at ``DEFAULT_CERTIFICATE_TOL``, see
-:func:`formulations.base.certify`); ``"approximate"`` otherwise, with the level at
-fault in ``info["fault_level"]`` and ``info["conflicting_levels"]`` (levels whose active
-rows depend on those above, where DAQP's count goes wrong: the usual cause);
-``"failed"`` on a negative exit flag (``info["message"]``, and for infeasibility the
-hard inequality tasks involved). ``check=False`` skips the certificate (``"optimal"``
-on flags 1/2). Zero inequality rows (``0·x ∈ [2, 5]``: a fixed violation) are left
-out of DAQP's problem, which would report them infeasible.
-
-``primal_tol`` defaults to 1e-10 (DAQP's default 1e-6 gives ~1e-7…1e-6 relative
-errors on compatible stacks; 1e-10 gives ≤ 4e-10).
+In detail: ``docs/formulations.md``; measurements: ``docs/qp-formulations.md``.
 """
 
 from __future__ import annotations

@@ -6,113 +6,34 @@ of the levels above; stacked under ``J_1`` they form the extended Jacobian ``J_E
 (eq. 15), ``h_E`` (eq. 16), and ``θ̈ = J_E⁺ h_E`` (eq. 18). Theorem 1 shows that the
 system equals the full-row-rank system of the *feasible* rows (eq. 25-26).
 
-Two paths compute the same answer:
+Options (:data:`OPTIONS`):
 
-* ``nullspace="svd"`` — as the paper: each ``Z_i`` from an SVD of the augmented
-  Jacobian ``J_{i-1}^A`` (eq. 7, 13), ``J_E`` built literally, solved with an SVD
-  pseudo-inverse keeping ``ρ(J_k^A)`` singular values (the rank Theorem 1 gives).
-  When ``J_1`` is rank-deficient its block is ``Z_1 J_1ᵀ J_1`` (eq. 14 with ``Z_1``
-  spanning ``J_1``'s row space, or ``Z_1 = I`` with ``z_basis="null_space"``), so that
-  an inconsistent first level is solved in the least-squares sense instead of being
-  mixed with lower levels. Each block is formed as ``(J_i Z_iᵀ)ᵀ J_i`` and
-  ``(J_i Z_iᵀ)ᵀ h_i``, the projection first: formed as ``Z_i (J_iᵀ J_i)`` its part in
-  the level's own directions (``σ²`` for a projected singular value ``σ`` of
-  ``J_i Z_iᵀ``) carried the rounding of ``J_iᵀ J_i``, ``ε ‖J_i‖²``, a relative error
-  ``ε/σ²`` that ``κ(J_E)`` of the equilibrated blocks does not show (fuzzing found
-  ``optimal`` answers 2e-6 off at ``κ(J_E) = 626``). Because the blocks hold
-  ``J_iᵀ J_i`` this path still squares the conditioning: its error relative to the
-  exact optimum is about ``ε κ(J_E)`` (measured ≤ 84 ε κ over 1,500 draws of the shared
-  families; the tests hold it to 20 ε κ on near-dependent levels and to ``1e3 ε κ`` on
-  every family;
-  ``info["condition_number"]`` reports ``κ(J_E)``), while the ``qr`` path works on
-  ``A_i`` itself. The status is therefore ``approximate`` (``info["reason"]`` says
-  why) when ``κ(J_E) > SVD_CERTIFIED_CONDITION`` (1e5) or a rank decision is
-  ambiguous (:mod:`hierarchy.linalg`).
-* ``nullspace="qr"`` (default) — every ``Z_i`` from one nested orthogonal
-  factorization, without SVD: level by level, a Householder QR with column pivoting
-  of ``(A_i Z_i)ᵀ`` splits the free directions into the level's feasible ones (its
-  rank ``r_i``) and the new null space ``Z_{i+1}``; its reflectors are applied to the
-  rows of the lower levels only (``O(m n r_i)``, total independent of the number of
-  levels). In the rotated coordinates the extended system is block lower-triangular
-  and is solved by forward substitution (triangular solves; a small QR where a level
-  conflicts), the feasible rows of eq. 26. A level with at least as many rows as
-  free directions (``m_i ≥ n − Σ_{j<i} r_j``; e.g. a posture level at the bottom),
-  undamped and unbounded, is first tried with one QR with column pivoting of
-  ``A_i Z_i`` itself (same rank threshold): when it has full column rank its
-  least-squares solution follows from that single factorization (instead of the
-  row-pivoted one and then a least-squares QR) and it leaves no null space; when it
-  is rank-deficient the row-pivoted path runs as above. The status is
-  ``approximate`` when a rank decision is ambiguous; when one is only near-ambiguous
-  (clear of the band by less than ``NEAR_AMBIGUITY`` times it, :mod:`hierarchy.linalg`)
-  the answer is certified (:func:`hierarchy.check_lexicographic`) and stays ``optimal``
-  (``info["path_certified"]``) only when it passes: the null space such a decision
-  leaves may be turned by much larger rows of a lower level into an error the
-  certificate rejects (fuzz equality-1243-387, 0.34% from the reference).
+* ``nullspace`` — ``"qr"`` (default): every ``Z_i`` from one nested Householder QR with
+  column pivoting, no SVD, solved by forward substitution in the rotated coordinates
+  (the C++ core up to ``n = 160`` with ``kernel="auto"``); ``"svd"``: as the paper, each
+  ``Z_i`` from an SVD and ``J_E`` built literally (its error grows like ``ε κ(J_E)``:
+  ``approximate`` when ``κ(J_E) > SVD_CERTIFIED_CONDITION``).
+* ``damping=λ`` — eq. 27: the blocks below the first become ``Z_i (J_iᵀ J_i + λ I)``.
+* ``z_basis`` — the reading of the paper's ``Z_i``: ``"task_range"`` (default; the
+  ``r_i`` directions of the higher levels' null space level ``i`` can use, eq. 12) or
+  ``"null_space"`` (a basis of the whole null space). Eq. 18 gives the same answer
+  either way; eq. 27 does not.
+* ``level_damping=λ_max`` with ``singular_threshold=ε`` — selective damping of a level
+  whose projected ``σ_min < ε ‖A_i‖_F`` (``μ² = λ_max (1 − (σ/ε‖A_i‖_F)²)``).
+* ``step_bound=Δ`` — each level's own step bounded, ``‖z_i‖ ≤ Δ`` (trust-region damping;
+  one bound, one per level, or ``{task name: Δ}``).
+* ``rcond`` (the rank rule of :mod:`hierarchy.linalg`), ``kernel``.
 
-``level_damping=λ_max`` with ``singular_threshold=ε`` (``qr`` path) is a selective
-alternative to eq. 27: a level is damped only when the smallest singular value of
-its projected rows ``A_i Z_i`` (estimated by the smallest ``|R_jj|`` of the pivoted QR)
-falls below ``ε‖A_i‖_F``, with the variable damping ``μ² = λ_max (1 − (σ/ε‖A_i‖_F)²)``
-(the form of Chiaverini 1997's singularity-robust inverse; Nakamura & Hanafusa 1986
-schedule the damping on manipulability instead). The damped level
-still owns its ``r_i`` directions, so every higher level stays exact and no lower
-level can use them; θ̈ stays bounded (the level's step is at most
-``‖p‖ / (2√μ²)``). The status is ``"approximate"`` when some level was damped, and
-``info["damped_levels"]`` lists them.
+Statuses: ``optimal`` unless a rank decision is ambiguous, a near-ambiguous one's answer
+fails :func:`~prioik.hierarchy.check_lexicographic` (``info["path_certified"]``), the
+``svd`` path's ``κ(J_E)`` exceeds its bound, or a level was damped
+(``info["damped_levels"]``): then ``approximate`` with ``info["reason"]``.
+``info["level_damping"]`` holds every level's ``μ_i²`` (0 where exact), so
+``cascaded_qp`` with the same Tikhonov terms reproduces θ̈. :func:`extended_system`
+returns ``J_E`` and ``h_E`` as built, for analysis.
 
-``step_bound=Δ`` (``qr`` path) bounds every level's own step: the level's part of θ̈,
-``z_i`` (``‖x_i − x_{i−1}‖``, the coordinates it adds in its feasible directions),
-solves the trust-region least-squares problem ``min ‖A_i Z_i z − p_i‖ s.t. ‖z‖ ≤ Δ``
-(Moré 1983). Where the exact step is shorter than ``Δ`` nothing changes; where it is
-longer — near an algorithmic or kinematic singularity, or when a far target pulls a
-level — the level is solved by damped least squares ``(LᵀL + μ_i² I) z = Lᵀp`` with the
-``μ_i`` that makes ``‖z‖ = Δ`` (Newton on ``1/‖z(μ²)‖ − 1/Δ`` from the SVD of the level's
-small ``m_i × r_i`` block). It damps only the level and only the steps that need it:
-every higher level stays exact, the damped level still owns its ``r_i`` directions,
-and ``‖θ̈‖ ≤ √k Δ`` by construction (the steps are orthogonal). It composes with the
-selective damping (``μ_i² ≥`` the selective value). ``info["level_damping"]`` holds
-every level's ``μ_i²`` (0 where exact), so a cascade of QPs with the same Tikhonov
-terms (``cascaded_qp``'s ``level_damping``) reproduces the whole θ̈.
-
-``damping=λ > 0`` is eq. 27: the lower blocks become ``Z_i (J_iᵀ J_i + λ I)``
-(``J_1``'s block is not damped). What ``Z_i`` is matters here, and the paper is
-ambiguous: it calls ``Z_i`` "the ``r_i`` basis vectors spanning the null space of prior
-tasks" (eq. 13) with ``Z_i ∈ ℜ^{r_i × n}`` and ``r_i = ρ(J_i^A) − ρ(J_{i-1}^A)``
-(eq. 12), and Theorem 1's proof needs ``Z_i J_i_feasibleᵀ`` to be ``r_i × r_i`` and
-invertible (eq. 22-25) — i.e. ``r_i`` rows spanning ``range(N_{i-1} J_iᵀ)``, the
-directions of the higher levels' null space that level ``i`` can use — but a null
-space of prior tasks has ``n − ρ(J_{i-1}^A)`` basis vectors. Eq. 18 gives the same
-answer either way; eq. 27 does not. ``z_basis`` picks the reading:
-
-* ``"task_range"`` (default; the ``r_i`` of eq. 12 and the proof of Theorem 1): the
-  ``r_i`` columns spanning ``range(N_{i-1} J_iᵀ)``, from the same nested pivoted QR
-  (``qr`` path; the first ``r_i`` columns of ``Q`` in ``(J_i Z_i)ᵀ = Q R Pᵀ``) or from
-  the SVD of ``J_i Z_i`` (``svd`` path). ``J_E`` then has ``ρ(J_k^A)`` rows and full
-  row rank; the blocks are scaled to unit norm (which does not change the solutions
-  of a consistent system) and ``x = J_Eᵀ(J_E J_Eᵀ)⁻¹ h_E`` from a QR of ``J_Eᵀ``
-  (``np.linalg.pinv`` on the ``svd`` path). In the rotated coordinates the system is
-  block lower-triangular with diagonal blocks ``M_iᵀM_i + λI`` (``M_i = J_i Z_i``), so
-  eq. 27 *is* the hierarchy whose levels below the first are solved by damped least
-  squares with ``μ² = λ``: every higher level is unaffected by a lower one, the first
-  level stays exact, and ``info["level_damping"]`` (``0, λ, …, λ``) fed to
-  ``reference`` or ``cascaded_qp`` reproduces θ̈ (tests: relative 1e-9 on every shared
-  family).
-* ``"null_space"``: a basis of the whole ``null(J_{i-1}^A)``. Each damped block has
-  ``n − ρ(J_{i-1}^A)`` rows, so ``λ Z_i`` also pulls towards zero on directions that
-  belong to lower levels; the system is over-determined and solved in least squares
-  (SVD pseudo-inverse, or ``dgelsy``), which lets every level — the first included —
-  trade accuracy with the others (measured on seeded conflicting stacks: top-level
-  residual up to 3e-3 of its target where the paper's reading meets it to 1e-15).
-
-The two readings tend to eq. 18 (and to each other) as ``λ → 0``. On the ``svd``
-path of eq. 18 ``z_basis`` chooses which ``J_E`` is built (same answer, measured
-≤ 5e-10 apart); the ``qr`` path of eq. 18 never forms ``Z_i`` and ignores it.
-:func:`extended_system` returns ``J_E`` and ``h_E`` as built, for analysis.
-
-Theorem 1 and its limits: ``J_E⁺`` needs the same rank decision as a recursion (how
-many directions ``r_i`` a level keeps is the rank rule's call), and because the
-blocks hold ``J_iᵀJ_i`` the smallest kept singular value of ``J_E`` goes like ``σ²``
-where the recursion's projected Jacobian has ``σ`` (``near_singular`` family; tests).
+The two paths, the two readings of ``Z_i`` and the damping rules in detail:
+``docs/extended-jacobian.md``.
 """
 
 from __future__ import annotations

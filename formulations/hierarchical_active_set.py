@@ -6,151 +6,36 @@ The problem (levels ``i = 1..k``, highest first; an equality row has
     f_i* = min Σ_rows (√w_j · dist(A_j x, [lower_j, upper_j]))²   over  X_{i−1},
     X_i  = { x ∈ X_{i−1} : the level's violation vector equals its optimal one },
 
-and then the **minimum-norm** point of ``X_k`` (the tie-break; on equality stacks
-``X_k`` is affine and this is the answer of ``reference`` and of the extended Jacobian's
-eq. 18). The optimal violation vector ``w_i*`` of each level is unique (the objective
-is strictly convex in it), so ``X_i`` is ``X_{i−1}`` with the level's violated rows and
-equality rows fixed at their optimal values and its other inequality rows kept as
-hard constraints ``lower ≤ A x ≤ upper`` for every level below.
+and then the **minimum-norm** point of ``X_k`` (on equality stacks: the answer of
+``reference`` and of the extended Jacobian's eq. 18).
 
-*Algorithm* (a cascade in the lexicographic-least-squares family of lexls, Dimitrov,
-Sherikov & Wieber 2015, and HCOD, Escande, Mansard & Wieber 2014, written for
-prioik's kernel): the rows live in the rotated coordinates of the extended
-Jacobian's nested pivoted QR (``core/src/nested_qr.cpp``): the
-fixed rows own leading coordinates, the rest are free. Each level runs a primal
-active-set method on its piecewise-quadratic objective (equivalent to
-``min ‖w‖²  s.t.  lower ≤ A x − w ≤ upper`` with the slack ``w`` eliminated):
+Each level runs a primal active set (lexls, Dimitrov, Sherikov & Wieber 2015; HCOD,
+Escande, Mansard & Wieber 2014) in the rotated coordinates of the extended Jacobian's
+nested pivoted QR: minimum-norm steps of the working set's equality-constrained least
+squares (Householder LQ, no SVD), a ratio test, multiplier tests; the level's violated and
+equality rows are then fixed and rotate every row below. The kernel is the C++ core
+(``prioik._core.ActiveSetSolver``), one call per solve, nothing allocated per solve.
 
-* working set: the hard rows (inequality rows of the levels above with zero
-  optimal violation) held at a bound, and the level's rows held at the bound they
-  violate (an equality row is always in);
-* step: the minimum-norm step of the equality-constrained least-squares problem of
-  the working set (row-pivoted Householder LQ of the working hard rows, then of the
-  working soft rows on the directions left; a small QR where they conflict; no
-  SVD), cut at the first non-working row that would leave its interval (that row
-  joins the working set at that bound; a hard row joins the step's factorization
-  rather than a new one: ``_eqp_append``);
-* at a full step: a soft row on the wrong side of its bound leaves the set (or
-  switches to its other bound when it overshoots it); otherwise the hard rows'
-  multipliers ``ν`` (``C_Hᵀ ν = ∇f`` through the LQ of the hard rows) are checked and
-  the most wrong-signed row released; none wrong-signed: the level is optimal.
+Options: ``rcond`` (rank threshold ``rcond ‖A_i‖_F``, hard rows ``rcond ‖a_j‖``),
+``primal_tol``, ``dual_tol``, ``max_iter``, ``warm_start``, ``kernel`` (:data:`OPTIONS`).
 
-After the level, its rows with non-zero violation and its equality rows are fixed
-by one more row-pivoted LQ, whose reflectors rotate every row below (the extended
-Jacobian's ``Z_{i+1}``), and the minimum-norm tie-break is a last level ``x = 0``
-over the free coordinates (skipped when no inequality row is left, where it is
-``y_free = 0``).
+Statuses: ``optimal`` when every level's multiplier test passed with every rank decision
+clear of the ambiguity band, or, for a level the kernel flags (``info`` keys
+``ambiguous_path_levels``, ``near_ambiguous_levels``, ``near_release_levels``,
+``held_off_bound_levels``, ``stalled_levels``), when the answer passes
+:func:`~prioik.hierarchy.check_lexicographic` (after at most :data:`REFINE_ROUNDS`
+re-solves at :data:`REFINE` times the tolerances); ``approximate`` with
+``info["reason"]`` at an ambiguous rank decision (``info["ambiguous_levels"]``), a
+rejected certificate, a precision-limited level or the iteration cap; ``failed`` on
+non-finite values. ``info["infeasible_levels"]`` names the levels with ``f_i* > 0``,
+``info["equilibrated_levels"]`` those solved rescaled by a power of two.
 
-*Degenerate and hard cases.* Rank-deficient and redundant levels: every rank decision
-is a pivot norm against a threshold (soft and fixed rows: ``rcond ‖A_i‖_F`` of the
-level, as the extended Jacobian and ``reference``; hard rows: ``rcond ‖a_j‖`` of the
-row), dependent rows are left out of the factorization (hard ones leave the working
-set and are watched by the step test). An infeasible level keeps its least
-violation (``info["infeasible_levels"]`` names the levels with ``f_i* > 0``). A zero
-row with unreachable bounds (``0·x ∈ [2, 5]``) is a constant violation: it never
-enters a factorization (zero pivot) and never blocks a step. A level of extreme scale
-(``‖A_i‖_F`` beyond 1e100, or below 1e-100 with a non-zero entry, where squares overflow
-or underflow) is solved rescaled by a power of two (``info["equilibrated_levels"]``; the
-same optimum). Two-sided rows switch
-sides through the wrong-side rule. At a degenerate point (hard rows at their bounds
-outside the working set) a level's first release re-chooses the working set among all
-the rows at their bounds by a non-negative least squares on their multipliers (a
-proposal the iterations verify). Degenerate steps (length 0) switch the choices
-to the smallest row index (Bland's rule) until a step makes progress. A level whose
-working set keeps changing without a step that moves (a cycle of rounding: released,
-a row blocks the next step at once when rank decisions sit at the threshold) settles
-where it stands after ``2 × (its rows and those above) + 10`` such iterations, and its
-answer is certified (``info["stalled_levels"]``). Every level has an iteration cap
-(``max_iter``): when it is hit the status is ``approximate`` and ``info["message"]``
-names the level.
+Warm start (:class:`Prepared`): each level starts from the last solve's working set;
+when the last answer fixed no inequality row at a violation, the equality rows and the
+rows it held are first solved by one nested QR, and that point is returned
+(``info["equality_first"]``) only when its multipliers prove it optimal.
 
-*Tolerances.* A row counts as violated when it is outside its interval by more than
-``primal_tol (s_j + |bound|)``, ``s_j = ‖√w_j a_j‖ ‖x‖`` (a box row on one column ``c``:
-``|√w_j a_jc| (|x_c| + 1)``); a soft row leaves the working set once it is on the
-satisfied side by ``1e-3`` of that (rows 1e-5 the size of their level's others move the
-optimum by what the others' slack at ``primal_tol`` would hide). A box row held at its
-bound and off it by the reflectors' rounding (``16 eps ‖x‖``) is put on it exactly; when
-that rounding exceeds a box row's tolerance near its bound (a level of tiny rows drives
-``‖x‖`` to 1e10), the status is ``approximate`` with the reason. A multiplier is
-wrong-signed when
-``|ν_j| ‖√w_j a_j‖ > dual_tol · max(‖∇f‖, ‖A_i‖_F (‖A_i‖_F ‖x‖ + ‖targets‖))``,
-or, read at the level's gain ``γ_j`` along the direction its release frees (a row of
-multiplier ``ν`` there changes the level's values by ``ν / γ_j``, as the certificate
-reads it), when that change exceeds the threshold's over ``‖A_i‖_F`` (``γ_j`` above the
-rank rule, the multiplier above ``1e-14`` of the threshold's scale: its rounding).
-A held row is fixed at the end of its level as *violated* only when it is off its
-bound beyond the primal tolerance and its violation (its multiplier) times
-``‖√w_j a_j‖`` exceeds the second term of the dual tolerance: rows far smaller than
-their level's others end an optimum where they meet their bounds off them by the
-level's rounding, and fixing them would take directions the lower levels need. A
-level that keeps such a row held while it is off its bound beyond the primal tolerance
-is flagged and its answer certified (``info["held_off_bound_levels"]``): held, rows
-1e-3 the size of their level's others blocked a direction they take only below the
-rank rule and left a lower level at 180x its optimum.
-Every pivot norm of the last step's soft rows and of the fixing is checked against
-its threshold with the shared rule of :mod:`hierarchy.linalg`: within
-:data:`~hierarchy.AMBIGUITY` of it the decision is ambiguous (rounding may flip it,
-and with it ``x`` by ``O(1)``) and the status is ``approximate``,
-``info["ambiguous_levels"]`` and ``info["reason"]`` naming the levels (level ``k``:
-the minimum-norm tie-break); on equality stacks these are the extended Jacobian's
-decisions and statuses. Pivots are re-measured exactly before a rank decision stops
-(downdated norms lose the largest remaining row to cancellation). When only an earlier
-step of a level decided ambiguously (its last step clear), the working set it led to
-may not be the optimum: the answer is then checked by
-:func:`~prioik.hierarchy.check_lexicographic` and is ``optimal`` only if it passes
-and the level's weighted row norms span at most :data:`CERTIFIABLE_SPREAD` (the
-certificate's tolerances are relative to the terms of a level's rows: an independent
-check found levels spanning 6.8e6-4.1e8 certified above their optimum by 1.4e-6 to
-3.9e-5 of ``max(1, value)``)
-(``info["path_certified"]``, ``info["ambiguous_path_levels"]``). So is a level that
-ends with a held soft row inside its bound beyond ``x``'s precision but within its
-release tolerance (``info["near_release_levels"]``): a row of norm 739 held beside one
-of norm 0.0021 stayed held 4.4e-11 inside its bound, under a tolerance of 7.4e-11, and
-left its level at 2.6x the optimum. When the certificate rejects such an answer, the
-stack is solved again, cold, at :data:`REFINE` times ``primal_tol`` and ``dual_tol``
-(the release tolerance scales with the first), and, rejected again, at ``REFINE²``
-(:data:`REFINE_ROUNDS`); the first answer that is ``optimal`` and passes the
-certificate is returned (``info["refined_primal_tol"]``); otherwise the first answer
-says ``approximate``.
-
-*Warm start.* :class:`Prepared` keeps each level's working set at its optimum; the
-next solve first tries, per level, the step of last time's working set: when the
-point it reaches keeps every hard row feasible, the level continues from there
-(usually: one factorization and one multiplier check), else from the cold start.
-Both paths end at the same optimum (within the tolerances above; tested at 1e-9).
-When no inequality row of the last answer was fixed at a violation, the next solve
-first tries the **equality rows with the rows the last answer held**, each as an
-equality at its bound (rows with ``lower = upper`` are equalities), solved by the
-extended Jacobian's nested QR with this solver's rank rule
-(``core/src/active_set_equality_first.cpp``). Its point ``x*`` is the answer
-(``info["equality_first"]``, zero iterations) when it is proved so: every other
-inequality row satisfied, every held row on its bound in a level of inequality rows
-only and independent of the levels above, and the held rows' multipliers of the
-right sign at every level below them (``μ_h = (C⁻¹e_h)·(Qᵀ∇f_ℓ)[:col_ℓ]`` over the QR's
-triangular pivot rows ``C``; a row held with a clear right-signed multiplier is
-*pinned* for the levels below, whose gradients may then push it either way). Held box
-rows (joint limits) are not rows of that QR: each fixes its coordinate at its bound and
-the equality rows are solved on the others, when every level above them is met exactly
-there (else they are held as equalities); their multipliers are then what the pivot
-rows' multipliers leave of each level's gradient on the fixed columns. A refuted
-try names its next guess (hold the row that first leaves its interval on the way from
-the last feasible guess's point, the primal active-set ratio test, else the most
-violated; or release the most wrong-signed held row), tried in turn, up to six guesses;
-then the active set runs, from the kept
-working sets, or from the cold start when they held no row. Why it is exact: with no held row, with
-``X_i^E`` the optimal sets of the stack without its inequality rows, by induction
-``X_i ⊆ X_i^E`` and ``x* ∈ X_i`` (its inequality rows add no violation, so each level's
-value at ``x*`` is its equality part's least value over ``X_{i−1}^E ⊇ X_{i−1}``), and
-``x*``, the minimum-norm point of ``X_k^E``, is that of ``X_k``; with held rows, each
-level's KKT conditions over the levels above hold at ``x*`` (docs/active-set.md). A
-control loop whose limits are inactive pays the extended Jacobian's solve plus one pass
-over the inequality rows; one whose active limits stay the same, that solve on the
-coordinates the limits leave free plus the multiplier test.
-
-*Complexity.* Per iteration ``O((h + w) d²)`` for ``h`` working hard rows, ``w``
-working soft rows and ``d`` free coordinates, plus ``O(M n)`` for the step test;
-the number of iterations is about the number of active-set changes (cold: one per
-row that becomes active; warm along a trajectory: usually none).
+The algorithm, its hard cases, tolerances and complexity: ``docs/active-set.md``.
 """
 
 from __future__ import annotations
@@ -363,8 +248,8 @@ class Prepared:
                 code = self._solve_data(A, b, lower, upper, sw)
             if code == _SOLVED_OTHER and self.warm_start and self._ambiguous_count() > 0.0:
                 # rank decisions ambiguous or flagged: the answer may depend on the path
-                # (fuzz: two certified answers 2.8e-9 apart at margins of 1.07e3), so the
-                # warm solver gives the cold one (the working sets kept are then its own)
+                # (two certified answers may differ within the tolerances), so the warm
+                # solver gives the cold one (the working sets kept are then its own)
                 self.reset()
                 first = False
                 code = self._solve_data(A, b, lower, upper, sw)

@@ -8,41 +8,20 @@ Jeong & Chang 2009). With ``θ̈_0 = 0`` and ``N_0 = I``, for each level ``i = 1
     θ̈_i  = θ̈_{i-1} + Ĵ_i^# (h_i − J_i θ̈_{i-1})
     N_i   = N_{i-1} − Ĵ_i⁺ Ĵ_i
 
-``Ĵ_i^#`` is the plain Moore-Penrose pseudo-inverse ``Ĵ_i⁺`` when ``damping = 0``,
-computed by SVD with the shared rank rule (a singular value counts when
-``σ > rcond·‖J_i‖_F``); with that rule the result equals ``reference`` on compatible
-*and* conflicting stacks (an exactly conflicting direction has ``σ = 0`` and is
-dropped). Near an algorithmic singularity — a row of ``J_i`` tending to the row
-space of the levels above, so that the smallest kept ``σ`` of ``Ĵ_i`` tends to 0 —
-``Ĵ_i⁺`` divides by ``σ`` and ``θ̈`` grows like ``1/σ`` (as does the exact optimum).
+``Ĵ_i^#`` is the Moore-Penrose pseudo-inverse when ``damping = 0`` (SVD, the shared
+rank rule ``σ > rcond·‖J_i‖_F``; the result equals ``reference`` on compatible and
+conflicting stacks). ``damping = λ > 0`` uses the damped least-squares inverse
+``Ĵ_iᵀ (Ĵ_i Ĵ_iᵀ + λ I)⁻¹`` on every level (``λ`` not squared, as the paper's eq. 27);
+the projectors stay exact, so a lower level never disturbs a higher one, and the
+status is ``approximate``.
 
-``damping = λ > 0`` switches ``Ĵ_i^#`` to the damped least-squares /
-singularity-robust inverse (Nakamura & Hanafusa 1986, Wampler 1986)::
+``reproject=True`` (default) multiplies each step by ``N_{i-1}`` once more, which keeps
+the higher levels' residuals at ``ε/σ`` near an algorithmic singularity (``ε/σ²``
+without it; ``docs/properties.md`` measures both). The kept singular vectors are
+re-orthonormalised inside ``range(N_{i-1})`` before each projector update, so ``N_i``
+stays a projector to rounding over any number of levels.
 
-    Ĵ_i^# = Ĵ_iᵀ (Ĵ_i Ĵ_iᵀ + λ I)⁻¹ ,   i.e. σ ↦ σ / (σ² + λ) ≤ 1 / (2√λ)
-
-— ``λ`` multiplies ``I`` (it is *not* squared), the convention of the paper's
-eq. 27 (``J_iᵀ J_i + λ I``) used by ``extended_jacobian``. Every level is damped, the
-first included (so a kinematic singularity of ``J_1`` is damped too; eq. 27 instead
-leaves ``J_1``'s rows undamped). The projectors ``N_i`` stay the exact ones
-(undamped ``Ĵ_i⁺ Ĵ_i``), so a lower level never disturbs a higher one; the damped
-levels lose accuracy instead (status ``"approximate"``).
-
-Round-off: ``N_{i-1} Ĵ_i^# = Ĵ_i^#`` in exact arithmetic, but the computed columns of
-``Ĵ_i^#`` leak ``O(ε/σ)`` out of ``range(N_{i-1})`` (they come from an SVD of rows
-known to ``O(ε)``), and that leak is multiplied by the ``1/σ`` step: the higher
-levels' residuals then grow like ``ε/σ²`` near an algorithmic singularity. With
-``reproject=True`` (default) each step is multiplied by ``N_{i-1}`` once more
-(``x_i = x_{i-1} + N_{i-1} Ĵ_i^# (h_i − J_i x_{i-1})``, ``O(n² m_i)``), which keeps
-them at ``ε/σ`` like ``reference``; ``reproject=False`` is the textbook step
-(``docs/properties.md`` measures both).
-
-The projector update ``N_i = N_{i-1} − V Vᵀ`` subtracts the kept right singular
-vectors ``V`` of ``Ĵ_i``, which lie in ``range(N_{i-1})`` only up to rounding; the
-defect grows with every level (fuzzing found 12-level stacks whose "projector" had
-eigenvalues near −1 and whose rank profile summed to more than ``n``). ``V`` is
-therefore re-orthonormalised inside ``range(N_{i-1})`` first (one QR of
-``N_{i-1} V``, ``O(n² r_i)``), which keeps ``N_i`` a projector to rounding.
+In detail: ``docs/formulations.md``.
 """
 
 from __future__ import annotations

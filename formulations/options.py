@@ -34,7 +34,8 @@ class Option:
             finite, symmetric), ``"vector"`` (length ``n``, finite) or ``"any"`` (checked by
             ``check`` alone).
         description: One line for ``prioik list`` and the docs.
-        minimum, maximum: Inclusive bounds of a number (``None``: unbounded).
+        minimum: Inclusive lower bound of a number (``None``: unbounded).
+        maximum: Inclusive upper bound of a number (``None``: unbounded).
         exclusive_minimum: ``minimum`` itself is not allowed (e.g. ``> 0``).
         exclusive_maximum: ``maximum`` itself is not allowed (e.g. ``< 1``).
         choices: Allowed values of a ``"str"`` option.
@@ -59,7 +60,8 @@ class Option:
 
     def __post_init__(self) -> None:
         if self.kind not in KINDS:
-            raise ValueError(f"unknown option kind {self.kind!r}")
+            raise FormulationError(f"unknown option kind {self.kind!r}; kinds: "
+                                   f"{', '.join(KINDS)}")
 
     # ---------------------------------------------------------------- validate
     def validate(self, name: str, value: Any, n: int | None = None) -> Any:

@@ -6,41 +6,21 @@ One QP (PlaCo eliminates the hard equalities by QR and calls eiquadprog):
     s.t. A_1 x = b_1                         (the first level, hard)
          lower_t ≤ A_t x ≤ upper_t           (every inequality task, hard)
 
-with ``A_j``, ``b_j`` the level's weighted equality rows (``√w`` per task, as in
-:class:`~hierarchy.Level`), ``ρ = weight_ratio`` the geometric ratio between soft
-levels and ``ε = regularization`` PlaCo's own Tikhonov term. By default
-``ρ = SOFT_SPAN^(1/(k−2))`` with ``SOFT_SPAN = 1e-4``: the soft weights run from 1
-down to ``1e-4 = 10⁴ ε``; a smaller ratio pushes the lowest levels under the
-regularisation and a larger one lets lower levels pull higher ones (measured in
-``docs/qp-formulations.md``). ``ε = 1e-8`` (PlaCo's default) was the most accurate
-tie-break measured here: smaller values leave the minimum-norm direction to the
-QP solver's tolerance (error 1e-4 at ``ε = 1e-12``), larger ones bias the answer
-by ``O(ε)``.
+with ``A_j``, ``b_j`` the level's weighted equality rows, ``ρ = weight_ratio`` the
+ratio between soft levels (default ``SOFT_SPAN^(1/(k−2))``, ``SOFT_SPAN = 1e-4``) and
+``ε = regularization`` PlaCo's Tikhonov term (default 1e-8). A rank-deficient first
+level is replaced by its feasible rows ``U_rᵀ A_1 x = U_rᵀ b_1``
+(``info["first_level_rank"]``), which PlaCo's QR elimination needs.
 
-*Exactness.* With two levels whose first level is an equality level, this is the
-lexicographic optimum of the paper's eq. 18 up to ``ε`` (the tie-break is
-``min ‖x‖`` within ``O(ε)``): ``status="optimal"``. Deeper stacks are a weighted
-compromise between the soft levels (a lower level can pull a higher soft level
-off its optimum by ``O(ρ)``): ``status="approximate"``; so is any stack with an
-inequality task below the first level (PlaCo keeps it hard, which can override a
-higher soft level).
+Statuses: ``optimal`` only for two levels with an equality first level (the
+lexicographic optimum up to ``ε``) whose answer passes
+:func:`~prioik.formulations.base.certify`; deeper stacks are a weighted compromise
+and, like any stack with an inequality task below the first level, ``approximate``
+(``info["fault_level"]``). PlaCo raises on infeasible hard inequalities: the status is
+then ``failed`` with ``info["failed_level"]`` and ``info["failed_tasks"]`` (the first
+level whose hard inequalities cannot hold with those above).
 
-*First level.* PlaCo's QR elimination refuses hard equalities that are not of
-full row rank. A rank-deficient (or inconsistent) first level is therefore
-replaced by its feasible rows ``U_rᵀ A_1 x = U_rᵀ b_1`` (``U_r`` the left singular
-vectors of its ``r`` non-zero singular values): the same optimal set as the
-least-squares first level, in full row rank (``info["first_level_rank"]``).
-
-*Status.* ``"optimal"`` needs both: a stack of the exact shape above, and an answer
-that passes the lexicographic certificate (:func:`formulations.base.certify`:
-:func:`hierarchy.check_lexicographic` with the minimum-norm tie-break at
-``DEFAULT_CERTIFICATE_TOL``; the ``O(ε)`` regularisation bias can fail it), otherwise
-``"approximate"`` with the level at fault in ``info["fault_level"]``.
-
-*Failures.* PlaCo raises on infeasible hard inequalities; the Solution is then
-``failed`` and names, in ``info["failed_level"]`` and ``info["failed_tasks"]``,
-the first level whose hard inequalities cannot hold together with those above
-(found by re-solving the hard constraints alone, level by level).
+In detail: ``docs/formulations.md``; measurements: ``docs/qp-formulations.md``.
 """
 
 from __future__ import annotations

@@ -24,8 +24,9 @@ from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 
-from prioik.hierarchy import (StackData, StackLayout, TaskStack, TaskStackError,
-                              UnsupportedTaskError, level_residuals)
+from prioik.hierarchy import (DEFAULT_CERTIFICATE_TOL, StackData, StackLayout, TaskStack,
+                              TaskStackError, UnsupportedTaskError, hard_violations,
+                              level_residuals)
 from prioik.hierarchy.linalg import PRECISION_LIMIT_NORM
 
 from .base import (STATUSES, Capabilities, ConcurrentUseError, FormulationError, Outcome,
@@ -123,6 +124,7 @@ class PreparedSolver:
         self._module = module
         self._lock = threading.Lock()
         self._n = layout.n
+        self._hard = layout.hard
         self._needs_mass_matrix = module.CAPABILITIES.needs_mass_matrix
         prepared = getattr(module, "Prepared", None)
         self._impl = (prepared(layout, options) if prepared is not None
@@ -164,7 +166,10 @@ class PreparedSolver:
 
         Returns:
             The :class:`~prioik.formulations.Solution` (a numerical failure inside the
-            formulation gives ``status == "failed"`` with ``info["message"]``).
+            formulation gives ``status == "failed"`` with ``info["message"]``; so does
+            an answer that leaves a hard level violated, :func:`~prioik.hierarchy.hard`,
+            with ``info["fault_level"]``, ``info["fault_tasks"]`` and
+            ``info["hard_violations"]``).
 
         Raises:
             FormulationError: the stack has another layout.
@@ -193,9 +198,37 @@ class PreparedSolver:
             self._release()
         if type(out) is tuple:      # solve_checked's verified answer (see the module doc)
             x, status, info, residuals = out
-            return Solution(x, self.formulation, self._given, status, residuals, elapsed,
-                            info)
-        return self._solution(out, data, elapsed)
+            sol = Solution(x, self.formulation, self._given, status, residuals, elapsed,
+                           info)
+        else:
+            sol = self._solution(out, data, elapsed)
+        if self._hard and sol.status != "failed":
+            self._check_hard(sol, data)
+        return sol
+
+    def _check_hard(self, sol: Solution, data: StackData) -> None:
+        """``sol`` made ``"failed"`` when it leaves a hard level violated
+        (:func:`~prioik.hierarchy.hard_violations`), its ``info`` naming the first such
+        level and its tasks — the one place every formulation's answer is checked."""
+        violated = hard_violations(data, sol.x, sol.residuals)
+        if not violated:
+            return
+        level, r, scale = violated[0]
+        names = self.layout.names[level]
+        info = dict(sol.info)
+        info["fault_level"] = level
+        info["fault_tasks"] = list(names)
+        info["hard_violations"] = [i for i, _, _ in violated]
+        message = (f"hard level {level} ({', '.join(names)}) is left violated: residual "
+                   f"{r:.3g}, beyond {DEFAULT_CERTIFICATE_TOL:g} of its scale {scale:.3g} "
+                   f"(its tasks cannot all hold{' under the levels above' if level else ''}"
+                   f"; x is the least-squares compromise)")
+        if len(violated) > 1:
+            message += (f"; hard levels {', '.join(str(i) for i, _, _ in violated[1:])} "
+                        "too")
+        info["message"] = message
+        sol.status = "failed"
+        sol.info = info
 
     def reset(self) -> None:
         """Forget what the formulation kept from the last solve (``hierarchical_active_set``:
@@ -309,13 +342,16 @@ class PreparedSolver:
         # statuses do not know it)
         for i in np.flatnonzero(np.linalg.norm(X, axis=1) > PRECISION_LIMIT_NORM).tolist():
             statuses[i] = precision_status(statuses[i], {}, datas[i], X[i])
+        if self._hard:          # as solve: a hard level left violated fails the answer
+            statuses = ["failed" if st != "failed" and hard_violations(d, x) else st
+                        for st, d, x in zip(statuses, datas, X)]
         return BatchSolution(X, statuses, self.formulation, dict(self._given), elapsed, batched)
 
     def _one_by_one(self, datas: list[StackData]) -> tuple[np.ndarray, list[str]]:
         # the stacks of a batch are independent: a plugin that warm-starts from its last
         # solve (``reset()``) starts each one cold, so row i is prioik.solve(stack_i)
-        # (a warm start decides ranks on another path: another status on a rank near
-        # its threshold, fuzzing found); a sequence of solve() calls stays warm
+        # (a warm start decides ranks on another path, which may give another status
+        # on a rank near its threshold); a sequence of solve() calls stays warm
         reset = getattr(self._impl, "reset", None)
         X = np.empty((len(datas), self._n))
         statuses = []

@@ -55,6 +55,7 @@ PLUGINS: dict[str, tuple[str, str]] = {
     "daqp_hierarchical": ("prioik.formulations.daqp_hierarchical", "qp"),
     "hierarchical_active_set": ("prioik.formulations.hierarchical_active_set", ""),
     "sns": ("prioik.formulations.sns", ""),
+    "lexls": ("prioik.formulations.lexls_", ""),
 }
 
 _loaded: dict[str, ModuleType] = {}

@@ -1,75 +1,35 @@
 """Saturation in the Null Space (SNS): strict priorities under hard joint bounds.
 
-Flacco, De Luca & Khatib, "Motion control of redundant robots under joint
-constraints: Saturation in the Null Space" (ICRA 2012, one task, velocity and
-acceleration level) and "Prioritized multi-task motion control of redundant robots
-under hard joint constraints" (IROS 2012) / "Control of redundant robots under hard
-joint constraints: Saturation in the null space" (IEEE T-RO 2015, the multi-task
-algorithm). The method is the same at velocity and at acceleration level: it
-receives box bounds on ``x`` (``q̇`` or ``q̈``) and a priority list of equality tasks
-``J_k x = b_k``; what the bounds mean is the caller's (see *Bounds* below).
+Flacco, De Luca & Khatib (ICRA 2012, IROS 2012; IEEE T-RO 2015, the multi-task
+algorithm), the same at velocity and at acceleration level: box bounds on ``x``
+(``q̇`` or ``q̈``) and a priority list of equality tasks ``J_k x = b_k``.
 
-**How SNS receives its joint bounds.** The stack's *first level* holds one or more
-inequality tasks whose rows are single-column rows ``lower ≤ c·x_j ≤ upper``
-(``c ≠ 0``; :func:`prioik.robots.joint_limit_bounds` and the arm scenario's
-bounds have this form). They are the hard bounds: top priority, never violated.
-Every other level must hold equality tasks. An inequality task anywhere else, or a
-first-level inequality row over more than one column, raises
-:class:`~prioik.hierarchy.UnsupportedTaskError` naming it — SNS has no general
-inequality tasks. A stack without inequality tasks is solved as recursive
-null-space projection (no bounds).
+Bounds: the stack's *first level* holds inequality tasks whose rows are single-column
+rows ``lower ≤ c·x_j ≤ upper`` (``c ≠ 0``; :func:`prioik.robots.joint_limit_bounds`
+writes them): hard, never violated. Every other level holds equality tasks. Any other
+inequality task raises :class:`~prioik.hierarchy.UnsupportedTaskError` naming it. A
+stack without inequality tasks is solved as recursive null-space projection.
 
-**Algorithm** (per task ``k``, with ``x_{k-1}`` the answer of the higher tasks and
-``P_{k-1}`` the orthogonal projector onto the null space of ``J_1 … J_{k-1}``;
-``x_0 = 0``, ``P_0 = I``)::
+Per task, the step of null-space projection is taken; when it leaves the bounds, the
+most critical joint is saturated at its bound and the task is solved again in the
+null space left, keeping the best feasible *task scaling* ``s ∈ [0, 1]`` (T-RO
+Algorithm 2); when the task's rank would drop, the best scaled solution is kept, and
+when no scale is feasible the task is dropped (``s = 0``). The returned ``x`` is always
+within the bounds (to ``bound_tolerance``). The whole target ``b_k`` of a level is
+scaled (the stack does not separate the drift from the command); the projector is
+updated after a dropped task too, so a lower task never disturbs a higher one; a
+stack without bounds gets ``nullspace``'s answer bit for bit.
 
-    W = I (free joints), x_N = 0 (values of the saturated joints), s* = best scale
-    repeat
-        P̄  = (I − ((I−W) P_{k-1})⁺) P_{k-1}      # null space left without the saturated joints
-        P̂  = (I − (J_k P̄)⁺ J_k) ((I−W) P_{k-1})⁺
-        x  = x_{k-1} + (J_k P̄)⁺ (s b_k − J_k x_{k-1}) + P̂ (x_N − x_{k-1})
-        if x within the bounds: done (s = 1: the task is executed exactly)
-        a = (J_k P̄)⁺ b_k,  c = x − a                 # x(s) = c + s a
-        s̃ = largest s ∈ [0, 1] keeping c + s a in the bounds (the task scaling
-             factor, T-RO Algorithm 2); keep (s̃, W, x_N) if s̃ > s*
-        saturate the most critical joint j (the first to hit its bound as s grows):
-             W_jj = 0, x_N,j = its bound
-        if rank(J_k P̄) drops below rank(J_k P_{k-1}): restore the best (s*, W, x_N)
-             and stop — the task is executed scaled, x = c* + s* a* (direction kept:
-             J_k x = s* b_k when the higher tasks leave room)
-    P_k = P_{k-1} − (J_k P_{k-1})⁺ (J_k P_{k-1})
+Statuses: ``optimal`` when every level reached its least-squares residual without
+bounds (then ``x`` is the exact lexicographic optimum with the bounds on top);
+``approximate`` when a task was scaled, dropped or its residual grew (``info
+["scaled_tasks"]``), or at an ambiguous rank decision (``info["reason"]``).
 
-Only the task's own target is scaled (the correction ``−J_k x_{k-1}`` is not, as in
-the T-RO algorithm). When no scale in ``[0, 1]`` is feasible for any saturation set,
-the task is dropped (``s = 0``, ``x = x_{k-1}``): the higher tasks' answer, which is
-within the bounds, is kept (for the first task, whose ``x_0 = 0`` may be outside a box
-that excludes 0, ``x = clip(0, lower, upper)``). Each level's answer is checked against the bounds before
-it is accepted, so the returned ``x`` is always within them (to ``bound_tolerance``).
+``info``: ``task_scaling`` (one ``s`` per equality level), ``scaled_tasks``,
+``saturated`` (per level, the saturated columns), ``iterations`` (saturation rounds
+per level), ``bounds_level`` (``0`` or ``None``).
 
-Differences from the papers, on purpose: a task is a whole level of the stack (its
-weighted equality rows); at acceleration level the paper scales only ``ẍ_k`` and not
-``−J̇_k q̇``, whereas here the whole target ``b_k`` of the level is scaled (the stack
-does not separate the drift from the command); rank decisions use the shared rule
-``σ > rcond·‖J_k‖_F``; the projector is updated after a dropped task too, so a lower
-task never disturbs a higher one. The unbounded step ``x_{k-1} + (J_k P_{k-1})⁺ (b_k −
-J_k x_{k-1})`` and the projector update are null-space projection's own level
-(:func:`~prioik.formulations.nullspace.project_level`: the step reprojected onto
-``P_{k-1}``, the kept singular vectors re-orthonormalised inside it), so that
-``P_k`` stays a projector over many levels (without it fuzzing found 8-level stacks
-whose answer was 1e7 off, called ``optimal``) and a stack without bounds gets
-``nullspace``'s answer bit for bit.
-
-**Status.** ``"optimal"`` when every level reached the least-squares residual it has
-without bounds (then ``x`` is the exact lexicographic optimum of the stack with the
-bounds on top); ``"approximate"`` when a task was scaled, dropped, or its residual
-grew because joints were saturated (``info["scaled_tasks"]`` names the scaled ones),
-or when a rank decision was ambiguous (:mod:`hierarchy.linalg`; ``info["reason"]``
-names the levels).
-
-``info``: ``task_scaling`` (one ``s ∈ [0, 1]`` per equality level, in stack order),
-``scaled_tasks`` (task names of the levels with ``s < 1``), ``saturated`` (per level,
-the saturated columns), ``iterations`` (saturation rounds per level),
-``bounds_level`` (``0`` or ``None``).
+The algorithm step by step: ``docs/formulations.md``.
 """
 
 from __future__ import annotations

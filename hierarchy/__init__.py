@@ -14,10 +14,10 @@ from .linalg import (AMBIGUITY, DEFAULT_CERTIFICATE_TOL, DEFAULT_RCOND, NEAR_AMB
                      ambiguity_reason, ambiguous_decision, decision_margin, level_scale, matrix_rank, nonnegative_least_squares,
                      near_ambiguity_reason, null_space_basis, range_basis, rank_threshold,
                      row_activity, X_PRECISION)
-from .layout import (StackData, StackLayout, level_residuals, precision_limited_levels,
-                     precision_reason)
+from .layout import (StackData, StackLayout, hard_violations, level_residuals,
+                     precision_limited_levels, precision_reason)
 from .stack import TaskStack
-from .task import Level, Task
+from .task import Level, Task, hard
 
 __all__ = [
     "AMBIGUITY", "DEFAULT_CERTIFICATE_TOL", "DEFAULT_RCOND", "FeasibleSplit", "Level",
@@ -31,5 +31,6 @@ __all__ = [
     "relative_distance", "row_activity",
     "singularity_distance",
     "PeerProblem", "load_lexls", "load_peer", "load_peer_json", "load_soth",
-    "load_stack", "save_stack", "stack_from_dict", "stack_to_dict",
+    "load_stack", "save_stack", "stack_from_dict", "stack_to_dict", "hard",
+    "hard_violations",
 ]

@@ -325,44 +325,16 @@ def check_lexicographic(stack: TaskStack | StackData, x: np.ndarray,
 
     Level ``i`` minimises ``‖w_i(x)‖²`` (weighted equality residuals and distances of
     ``A x`` to ``[lower, upper]``) over the set where every higher level keeps its
-    optimal violation. ``x`` is optimal iff, for every level, it solves that level's
-    problem with the higher levels fixed at ``x``'s own violations (valid by
-    induction: when the higher levels pass, their violations at ``x`` are the unique
-    optimal ones). The level problem is convex, so this is its KKT system
-
-        A_iᵀ W_i r_i + Σ_{j<i} A_{S_j}ᵀ μ_j = 0,
-
-    ``r_i`` the level's signed violation at ``x`` and ``S_j`` the higher rows active at
-    ``x`` (:func:`~hierarchy.linalg.row_activity`, tolerance ``tol`` relative to each
-    row's scale): ``μ ≥ 0`` on rows at their upper bound, ``≤ 0`` at their lower bound,
-    free on equality rows, violated rows and rows at both bounds.
-
-    How it is computed: the free multipliers are projected out with ``Z_i``, the
-    nested null spaces of the fixed rows (rank rule of :mod:`hierarchy.linalg`:
-    ``rcond`` times each level's ``‖√W A_fixed‖_F``). The residual is measured in task
-    space — through the pseudo-inverse of ``B = √W A_act Z_i`` (the level's equality and
-    violated rows, any row with a non-zero violation; singular values below
-    ``CERTIFICATE_SIGMA_FLOOR · ‖√W A_act‖_F`` raised to it; directions ``B Z`` cannot
-    move by the rank rule — singular values ``≤ rcond`` times the whole level's
-    ``‖√W A_i‖_F``, its satisfied rows included, as the solvers decide — where the
-    multipliers must cancel alone, read at ``1/‖B‖``)
-    — so that it reads as the change of ``A_i x`` it stands for, however badly
-    conditioned the level is; on equality stacks it is the algorithmic error
-    ``‖U_fᵀ (A_i x − b_i)‖`` (eq. 29). The sign-constrained multipliers minimise it
-    (a non-negative least-squares problem). A level passes when the residual is
-    ``≤ tol · scale_i`` and its square — what the level's value could still gain along
-    the directions it reads — ``≤ tol · max(1, ‖w_i(x)‖²)``, unless the residual is at the
-    rounding of the level's terms (see :class:`LevelCheck`); rows counted at a bound may
-    lie outside it by the activity tolerance, which is the primal tolerance of the rows
-    fixed for the lower levels. Rows at a bound that lie in the span of the fixed rows
-    above (no direction left in ``Z_i``) take no multiplier.
-
-    With ``minimum_norm=True`` the final tie-break is checked too: ``x`` must minimise
-    ``‖x‖²`` (``xᵀ W x`` with ``metric``) over the optimal set, the KKT test with
-    gradient ``W x`` and every level's active rows, relative to ``‖W‖₂ max(1, ‖x‖)``.
-    It is off by default because formulations differ in their tie-break
-    (operational space: ``xᵀ M x``; lexls: none); the levels alone define the
-    lexicographic optimal set.
+    optimal violation. ``x`` passes when, level by level, it solves that problem with
+    the higher levels fixed at ``x``'s own violations: the KKT system
+    ``A_iᵀ W_i r_i + Σ_{j<i} A_{S_j}ᵀ μ_j = 0`` over the higher rows ``S_j`` active at
+    ``x`` (``μ ≥ 0`` at an upper bound, ``≤ 0`` at a lower one, free on equality and
+    violated rows), its residual measured in task space (on equality stacks, the
+    algorithmic error of eq. 29), ``≤ tol · scale_i``, and no feasible descent
+    direction lowering the level's value by more than ``tol · max(1, ‖w_i‖²)``. Rows
+    within the activity tolerance of a bound, rows a little violated and rows just
+    inside a bound are read as ``docs/theory.md`` ("The certificate") states; levels of
+    extreme scale are checked rescaled by a power of two (the same verdict).
 
     Args:
         stack: The stack, or its rows (:class:`StackData`, e.g. the data a prepared
@@ -370,45 +342,14 @@ def check_lexicographic(stack: TaskStack | StackData, x: np.ndarray,
         x: Candidate answer (``n``).
         tol: Relative tolerance of the KKT residuals and of the activity rule.
         rcond: Relative rank threshold of the nested null spaces.
-        minimum_norm: Also check the minimum-norm tie-break (reported as level ``k``).
+        minimum_norm: Also check the minimum-norm tie-break, ``x`` minimising ``‖x‖²``
+            (``xᵀ W x``) over the optimal set (reported as level ``k``; off by default:
+            formulations differ in their tie-break).
         metric: SPD ``n × n`` ``W`` of the tie-break ``min xᵀ W x`` (default identity).
 
-    Rows just beyond a bound: a row outside its interval by less than the activity
-    tolerance is read as held at that bound (lower levels may move it inward: a
-    sign-constrained multiplier). A solver may instead have fixed it at that violation
-    (a level's optimum can leave a row violated by 1e-8 of its size: then the lower
-    levels must not move it), and within the tolerance the two cannot be told apart.
-    When the first reading fails, the check is repeated with such rows read as fixed —
-    those beyond their bound by more than rounding (``> 1e-12`` of their size, the
-    activity rule's size) on a level whose own violation exceeds the tolerance (on a
-    feasible level the optimal violation is zero: a row beyond a bound there is a
-    solver's slack) — and ``x`` passes if that reading passes (:attr:`LexicographicReport.
-    band_rows_fixed` counts them; the band's answers keep the tolerance's meaning).
-
-    Rows a little violated: a level left violated by a solver's slack (rows beyond a
-    bound by more than rounding and at most ``1e-6`` of their size; equality rows only
-    when such rows are all of the level's violation) passes the KKT test,
-    its gradient being as small as the violation. Such rows get an independent check,
-    an LP (HiGHS): if a point keeps the rows above and the level's other violations and
-    meets them, the level's value can drop by what they add — the level fails when that
-    exceeds ``tol · scale_i`` — and, when they are all of its violation (zero rows
-    aside), its optimum is zero and they are read as held for the levels below.
-
-    Rows just inside a bound: a row off its bound by more than the activity tolerance
-    but at most ``1e-6`` of its size is read as not held, so a level whose optimum holds
-    it with a small multiplier fails on a solver's answer that a lower level moved
-    inward by that much (a TALOS reach, ``q̈`` of a joint at its limit 1.9e-8 inside at
-    ``‖x‖ = 149``: level 2's KKT residual 6e-8 relative). When the check fails, such rows
-    are moved onto their bounds — the least-norm step keeping every row read at a bound
-    or met as an equality where it is — and ``x`` passes if that point passes, lies within
-    ``tol · max(1, ‖x‖)`` of ``x`` and every level's value there is within
-    ``tol · scale_i`` of ``x``'s (:attr:`LexicographicReport.snapped_rows` counts them;
-    the report is that point's): ``x`` is then within the check's precision of a
-    certified optimum, in ``x`` and in every level's value.
-
-    Levels of extreme scale (an entry beyond ``1e100`` or all below ``1e-100``) are
-    checked as :meth:`TaskStack.equilibrated` rescales them (a power of two: the same
-    optimal set and verdict); their :class:`LevelCheck` values are the rescaled level's.
+    Returns:
+        A :class:`LexicographicReport`: ``ok``, one :class:`LevelCheck` per level,
+        ``fault_level`` and the rank decisions that were ambiguous.
 
     Raises:
         TaskStackError: ``x`` is not a vector of ``n`` numbers, or a value of writable
@@ -743,8 +684,8 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
                 vt, sig = None, np.zeros(d)
             # the solvers' rank rule: rcond times the whole level's ‖√W A_i‖_F (its held
             # and inactive rows too), not the active rows' alone: a level whose violated
-            # rows are 1e-13 of its satisfied ones cannot move them (fuzz 5-32: rows of
-            # 5e-17 beside rows of 7e-4, read as movable, failed the exact answer x = 0)
+            # rows are 1e-13 of its satisfied ones cannot move them, and reading them as
+            # movable would fail an exact answer
             threshold = rcond * max(bn, floor_scale)
             null = sig <= threshold
             if ambiguous_decision(sig, threshold) and level not in ambiguous:
@@ -898,8 +839,7 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
             # an equality row's small residual beside large ones is the least-squares
             # spread of a level that cannot meet its rows, which the KKT test above
             # judges with the rank rule; the LP, without it, met such rows along
-            # directions of gain 3e-8 of the level's (fuzz inequality-101-836: a level
-            # of residual 1.2e4, right to 3e-13 against quadprog, rejected at 1.8e-8)
+            # directions of gain far below the level's and would reject right answers
             small = nearly & ((rows.lower != rows.upper) | alone)
             extra = float(np.linalg.norm(sw[small] * v[small]))
             # the LP only where its answer changes the check: the level's value could fail,

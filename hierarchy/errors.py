@@ -4,14 +4,17 @@ from __future__ import annotations
 
 from typing import Any
 
+from prioik.errors import PrioikError
 
-class TaskStackError(ValueError):
+
+class TaskStackError(PrioikError, ValueError):
     """A task or task stack is malformed.
 
     Attributes:
         task: Name of the task at fault, or ``None`` when the fault is the stack's.
         level: Zero-based level index of that task, or ``None`` when not known yet.
         detail: Machine-readable data about the fault (shapes, offending values).
+        reason: The message without the level and task it names.
     """
 
     def __init__(self, message: str, *, task: str | None = None,
@@ -26,6 +29,7 @@ class TaskStackError(ValueError):
         self.task = task
         self.level = level
         self.detail = detail
+        self.reason = message
 
 
 class UnsupportedTaskError(TaskStackError):

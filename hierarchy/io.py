@@ -14,12 +14,12 @@ import numpy as np
 
 from .errors import TaskStackError
 from .stack import TaskStack
-from .task import Task
+from .task import Level, Task
 
 FORMAT_VERSION = 1
 
 #: Keys a task-stack file may hold at the top level and in a task object.
-TOP_LEVEL_KEYS = ("description", "format", "n", "levels")
+TOP_LEVEL_KEYS = ("description", "format", "n", "levels", "hard")
 TASK_KEYS = ("name", "A", "b", "lower", "upper", "weight")
 
 #: Longest integer literal read (float64 overflows past 309 digits).
@@ -91,7 +91,12 @@ def stack_from_dict(data: dict[str, Any]) -> TaskStack:
             except TaskStackError as exc:
                 raise TaskStackError(str(exc).split(": ", 1)[-1], task=name, level=i) from None
         out.append(tasks)
-    stack = TaskStack(out)
+    hard = data.get("hard", [])
+    if not isinstance(hard, list) or not all(type(i) is int and 0 <= i < len(out)
+                                             for i in hard):
+        raise TaskStackError(f"'hard' must be a list of level indices 0 … {len(out) - 1}, "
+                             f"got {hard!r}")
+    stack = TaskStack([Level.of(tasks, hard=i in hard) for i, tasks in enumerate(out)])
     if "n" in data and data["n"] != stack.n:
         raise TaskStackError(f"the file says n = {data['n']} but its tasks have "
                              f"{stack.n} columns")
@@ -120,6 +125,8 @@ def stack_to_dict(stack: TaskStack, description: str = "") -> dict[str, Any]:
             items.append(d)
         levels.append(items)
     out: dict[str, Any] = {"format": FORMAT_VERSION, "n": stack.n, "levels": levels}
+    if stack.hard:
+        out["hard"] = list(stack.hard)
     if description:
         out = {"description": description, **out}
     return out
@@ -369,7 +376,9 @@ def load_soth(path: str | Path, problems: Sequence[int] | None = None) -> list[P
     Raises:
         TaskStackError: naming the file, problem, level and row at fault — also when a
             count disagrees with the rows that follow (soth's own reader would then
-            misread the rest of the file).
+            misread the rest of the file); every problem is read first, and the message
+            names the other problems that fail and those that parse, with the
+            ``problems=`` that reads them alone (its ``detail``: ``failed``, ``parsed``).
     """
     path = Path(path)
     text = _read_text(path)
@@ -389,14 +398,35 @@ def load_soth(path: str | Path, problems: Sequence[int] | None = None) -> list[P
     if not blocks:
         raise TaskStackError(f"{path}: no 'variable size N' line")
     wanted = range(len(blocks)) if problems is None else list(problems)
-    out = []
+    out, failed = [], []
     for p in wanted:
         if not 0 <= p < len(blocks):
             raise TaskStackError(f"{path}: problem {p} requested, the file holds "
                                  f"{len(blocks)}")
         name = path.stem if len(blocks) == 1 else f"{path.stem}#{p}"
-        out.append(_soth_problem(blocks[p], f"{path}: problem {p}", name))
+        try:
+            out.append(_soth_problem(blocks[p], f"{path}: problem {p}", name))
+        except TaskStackError as exc:
+            failed.append((p, exc))
+    if failed:
+        raise _soth_failure(failed, [p for p in wanted if p not in dict(failed)]) from None
     return out
+
+
+def _soth_failure(failed: list[tuple[int, TaskStackError]], parsed: list[int]
+                  ) -> TaskStackError:
+    """The first problem's error, naming the others that fail and how to read those
+    that parse (``problems=`` here, ``--problems`` of ``prioik solve``)."""
+    first = failed[0][1]
+    message = first.reason
+    if len(failed) > 1:
+        message += f" (problems {', '.join(str(p) for p, _ in failed[1:])} fail too)"
+    if parsed:
+        which = ", ".join(map(str, parsed))
+        message += (f"; problems {which} parse: read them alone with problems=[{which}] "
+                    f"(prioik solve --problems {which.replace(' ', '')})")
+    return TaskStackError(message, task=first.task, level=first.level, **first.detail,
+                          failed=[p for p, _ in failed], parsed=parsed)
 
 
 def _soth_problem(block: list[list[str]], where: str, name: str) -> PeerProblem:

@@ -29,14 +29,16 @@ from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
+from prioik.errors import UnknownNameError
+
 from .errors import TaskStackError
-from .linalg import DEFAULT_CERTIFICATE_TOL, X_PRECISION
+from .linalg import DEFAULT_CERTIFICATE_TOL, X_PRECISION, level_scale
 
 if TYPE_CHECKING:
     from .stack import TaskStack
 
-__all__ = ["KINDS", "StackData", "StackLayout", "level_residuals", "precision_limited_levels",
-           "precision_reason"]
+__all__ = ["KINDS", "StackData", "StackLayout", "hard_violations", "level_residuals",
+           "precision_limited_levels", "precision_reason"]
 
 #: Task kinds of a layout.
 KINDS = ("equality", "inequality")
@@ -60,18 +62,23 @@ class StackLayout:
         levels: Highest priority first; each level a sequence of ``(name, rows)`` or
             ``(name, rows, kind)`` with ``kind`` ``"equality"`` (default) or
             ``"inequality"``.
+        hard: Indices of the levels declared hard (:func:`~prioik.hierarchy.hard`: an
+            answer that leaves one violated is not ``optimal``).
 
     Raises:
         TaskStackError: naming the level (and task) for an empty stack or level, a row
-            count below 1, a duplicate name, an unknown kind, or ``n < 1``.
+            count below 1, a duplicate name, an unknown kind, ``n < 1``, or a hard
+            index that is not a level.
 
-    Layouts compare equal (and hash alike) when ``n`` and every level's tasks agree.
+    Layouts compare equal (and hash alike) when ``n``, every level's tasks and the hard
+    levels agree.
     """
 
     __slots__ = ("_n", "_levels", "_starts", "_slices", "_level_of", "_kind_of",
-                 "_row_is_equality", "_hash", "_names", "__weakref__")
+                 "_row_is_equality", "_hash", "_names", "_hard", "__weakref__")
 
-    def __init__(self, n: int, levels: Sequence[Sequence[tuple]]) -> None:
+    def __init__(self, n: int, levels: Sequence[Sequence[tuple]],
+                 hard: Sequence[int] = ()) -> None:
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
             raise TaskStackError(f"a layout needs n ≥ 1 columns, got {n!r}")
         try:
@@ -126,10 +133,12 @@ class StackLayout:
         self._starts.setflags(write=False)
         self._row_is_equality = np.array(flags, dtype=np.bool_)
         self._row_is_equality.setflags(write=False)
-        self._hash = hash((self._n, self._levels))
+        self._hard = _hard_levels(hard, len(parsed))
+        self._hash = hash((self._n, self._levels, self._hard))
 
     @classmethod
-    def shared(cls, n: int, levels: Sequence[Sequence[tuple]]) -> "StackLayout":
+    def shared(cls, n: int, levels: Sequence[Sequence[tuple]],
+               hard: Sequence[int] = ()) -> "StackLayout":
         """The layout of ``n`` and ``levels`` (as for the constructor), one object per
         distinct shape while something holds it: the stacks of one shape share it, and a
         prepared solver recognises their data by identity instead of comparing layouts
@@ -141,12 +150,13 @@ class StackLayout:
         """
         if type(n) is int:        # (a bool or a float goes to the constructor, which says)
             try:
-                key = (n, tuple(tuple(tuple(entry) for entry in level) for level in levels))
+                key = (n, tuple(tuple(tuple(entry) for entry in level) for level in levels),
+                       tuple(hard))
                 return _SHARED[key]
             except (KeyError, TypeError):  # (unhashable entries: the constructor says)
                 pass
-        layout = cls(n, levels)
-        return _SHARED.setdefault((layout._n, layout._levels), layout)
+        layout = cls(n, levels, hard)
+        return _SHARED.setdefault((layout._n, layout._levels, layout._hard), layout)
 
     # ------------------------------------------------------------------ access
     @property
@@ -173,6 +183,11 @@ class StackLayout:
     def names(self) -> tuple[tuple[str, ...], ...]:
         """Per level, its tasks' names."""
         return self._names
+
+    @property
+    def hard(self) -> tuple[int, ...]:
+        """The indices of the levels declared hard, increasing."""
+        return self._hard
 
     @property
     def starts(self) -> np.ndarray:
@@ -205,9 +220,13 @@ class StackLayout:
                                  f"{', '.join(self._slices)})") from None
 
     def level_of(self, name: str) -> int:
-        """Level index of a task (:class:`KeyError` if absent, as
-        :meth:`TaskStack.level_of`)."""
-        return self._level_of[name]
+        """Level index of a task (:class:`~prioik.errors.UnknownNameError`, a
+        :class:`KeyError`, listing the tasks if absent, as :meth:`TaskStack.level_of`)."""
+        try:
+            return self._level_of[name]
+        except (KeyError, TypeError):
+            raise UnknownNameError(f"no task {name!r} in the layout (tasks: "
+                                   f"{', '.join(self._slices)})") from None
 
     def kind_of(self, name: str) -> str:
         """``"equality"`` or ``"inequality"``."""
@@ -230,7 +249,7 @@ class StackLayout:
         if not isinstance(other, StackLayout):
             return NotImplemented
         return self._hash == other._hash and self._n == other._n \
-            and self._levels == other._levels
+            and self._levels == other._levels and self._hard == other._hard
 
     def __hash__(self) -> int:
         return self._hash
@@ -239,11 +258,25 @@ class StackLayout:
         """One line: ``n`` and the levels' tasks (``name[rows]``, ``≤`` for inequalities)."""
         def task(e):
             return f"{e[0]}[{e[1]}{'≤' if e[2] == 'inequality' else ''}]"
-        return f"n={self._n}: " + " / ".join(" + ".join(task(e) for e in level)
-                                            for level in self._levels)
+        return f"n={self._n}: " + " / ".join(
+            ("hard " if i in self._hard else "") + " + ".join(task(e) for e in level)
+            for i, level in enumerate(self._levels))
 
     def __repr__(self) -> str:
         return f"StackLayout({self.describe()})"
+
+
+def _hard_levels(hard, k: int) -> tuple[int, ...]:
+    """``hard`` (level indices) as an increasing tuple of distinct levels of ``k``."""
+    try:
+        out = sorted({int(i) for i in hard if not isinstance(i, bool) and i == int(i)})
+        ok = len(out) == len(tuple(hard))
+    except (TypeError, ValueError):
+        ok = False
+    if not ok or (out and not 0 <= out[0] <= out[-1] < k):
+        raise TaskStackError(f"hard levels must be distinct level indices 0 … {k - 1}, got "
+                             f"{hard!r}")
+    return tuple(out)
 
 
 class StackData:
@@ -386,7 +419,7 @@ class StackData:
     def to_stack(self):
         """A validated :class:`~prioik.hierarchy.TaskStack` of the current rows (copied)."""
         from .stack import TaskStack
-        from .task import Task
+        from .task import Level, Task
         levels = []
         for level in self.layout.levels:
             tasks = []
@@ -399,7 +432,7 @@ class StackData:
                 else:
                     tasks.append(Task(name, self.A[sl], lower=self.lower[sl],
                                       upper=self.upper[sl], weight=weight))
-            levels.append(tasks)
+            levels.append(Level.of(tasks, hard=len(levels) in self.layout.hard))
         return TaskStack(levels)
 
     def __repr__(self) -> str:
@@ -467,6 +500,46 @@ def precision_limited_levels(data: StackData, x: np.ndarray,
     fro = np.sqrt(np.add.reduceat((WA * WA).sum(axis=1), starts))
     scale = np.sqrt(np.add.reduceat(size * size, starts)) + fro / top
     return np.flatnonzero(X_PRECISION * xsn * fro > tol * scale).tolist()
+
+
+def hard_violations(data: StackData, x: np.ndarray, residuals: np.ndarray | None = None,
+                    tol: float = DEFAULT_CERTIFICATE_TOL) -> list[tuple[int, float, float]]:
+    """The hard levels of ``data.layout`` (:func:`~prioik.hierarchy.hard`) that ``x``
+    leaves violated.
+
+    A hard level ``i`` is violated when its residual ``r_i = ‖√w ∘ violation‖``
+    (:func:`level_residuals`) exceeds ``tol`` times its scale, the certificate's
+    ``‖√w ∘ (|A_i| |x| + |t_i|)‖ + ‖√W_i A_i‖_F`` (``t_i``: the equality targets and,
+    on inequality rows, ``A_i x`` clipped to its bounds): what rounding alone can leave.
+
+    Args:
+        data: The stack's rows.
+        x: The answer (``n``).
+        residuals: Per level ``r_i`` when already computed (else computed here).
+        tol: The relative tolerance (the certificate's default).
+
+    Returns:
+        ``(level, r_i, scale)`` per violated hard level, increasing (empty when the
+        layout has no hard level).
+    """
+    hard = data.layout.hard
+    if not hard:
+        return []
+    x = np.asarray(x, dtype=np.float64)
+    if residuals is None:
+        residuals = level_residuals(data, x)
+    starts, eq = data.layout.starts, data.layout.row_is_equality
+    out = []
+    for i in hard:
+        sl = slice(int(starts[i]), int(starts[i + 1]))
+        A, w = data.A[sl], data.sqrt_weight[sl]
+        target = np.where(eq[sl], data.b[sl], np.clip(A @ x, data.lower[sl], data.upper[sl]))
+        scale = (level_scale(w * (np.abs(A) @ np.abs(x) + np.abs(target)))
+                 + level_scale(w[:, None] * A))
+        r = float(residuals[i])
+        if not r <= tol * scale:          # (NaN: violated)
+            out.append((i, r, scale))
+    return out
 
 
 def precision_reason(levels: list[int], x_norm: float) -> str:

@@ -36,10 +36,8 @@ AMBIGUITY = 1e3
 #: A clear decision whose margin (:func:`decision_margin`) is at most this factor times
 #: :data:`AMBIGUITY` is near-ambiguous: the null space it leaves, accurate to about ε
 #: over the margin's pivot, is turned by rows of a lower level whose scale may dwarf what
-#: they keep in it (fuzz equality-1243-387: a level's margin of 1e3-1e4, the next level's
-#: rows of 5e5 keeping 5 in the three directions left, a large residual; the nested QR's
-#: answer moved 0.3% along them and failed the certificate at that level, 1.3e-8 against
-#: 1e-8, while saying ``optimal``). An exact solver certifies such an answer first.
+#: they keep in it, into an error the certificate can reject. An exact solver certifies
+#: such an answer first.
 NEAR_AMBIGUITY = 10.0
 
 _EPS = float(np.finfo(np.float64).eps)
@@ -227,9 +225,9 @@ def svd(A: np.ndarray, full_matrices: bool = True
     """``np.linalg.svd(A, full_matrices)`` of a real matrix, through LAPACK's ``dgesdd``
     directly: the routine numpy calls, without its per-call wrapping (~4-7 µs less on
     the certificate's small matrices, which it factors dozens of times a check). Where
-    ``dgesdd``'s divide and conquer does not converge (``prioik fuzz --seed 1245``: the
-    extended Jacobian ``J_E`` of a 54-unknown stack), ``dgesvd`` (QR iteration, slower
-    and more robust) factors it. numpy's own call (and its ``LinAlgError``) where both
+    ``dgesdd``'s divide and conquer does not converge (it can, on ill-conditioned
+    matrices such as an extended Jacobian ``J_E`` of κ 1e14), ``dgesvd`` (QR iteration,
+    slower and more robust) factors it. numpy's own call (and its ``LinAlgError``) where both
     report a failure or a non-finite singular value, and for an empty matrix."""
     global _GESDD, _GESVD
     if A.shape[0] and A.shape[1]:
@@ -247,9 +245,7 @@ def svd(A: np.ndarray, full_matrices: bool = True
 def numpy_svd(A: np.ndarray, full_matrices: bool = True
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``np.linalg.svd(A, full_matrices)``, or :func:`svd` where numpy's ``dgesdd`` does
-    not converge (its ``dgesvd`` fallback; the extended Jacobian's svd path: a ``J_E``
-    of κ 1e14 at ``prioik fuzz --seed 1245``, the stacked triangle ``R_i`` of two 55- and
-    58-unknown stacks at seed 1250, all ``failed`` before). For callers whose answers
+    not converge (its ``dgesvd`` fallback). For callers whose answers
     must stay numpy's to the bit where numpy converges (:func:`svd` calls LAPACK
     directly and rounds differently)."""
     try:

@@ -7,6 +7,8 @@ from typing import Iterator, Sequence
 
 import numpy as np
 
+from prioik.errors import UnknownNameError
+
 from .errors import TaskStackError
 from .layout import StackData, StackLayout
 from .task import Level, Task
@@ -31,7 +33,7 @@ class TaskStack:
     :class:`~prioik.hierarchy.StackData` (:attr:`data`), which is what every solver reads.
     """
 
-    __slots__ = ("_levels", "_n", "_layout", "_data")
+    __slots__ = ("_levels", "_n", "_layout", "_data", "_hard")
 
     def __init__(self, levels: Sequence) -> None:
         if isinstance(levels, (Task, Level)):
@@ -67,6 +69,7 @@ class TaskStack:
         self._levels = tuple(parsed)
         assert n is not None            # (a non-empty level has a task)
         self._n = int(n)
+        self._hard = tuple(i for i, level in enumerate(parsed) if level.hard)
         self._layout: StackLayout | None = None
         self._data: StackData | None = None
 
@@ -91,6 +94,11 @@ class TaskStack:
         """``True`` when every task is an equality task."""
         return all(level.is_equality for level in self._levels)
 
+    @property
+    def hard(self) -> tuple[int, ...]:
+        """The indices of the levels declared hard (:func:`~prioik.hierarchy.hard`)."""
+        return self._hard
+
     def __len__(self) -> int:
         return len(self._levels)
 
@@ -101,18 +109,23 @@ class TaskStack:
         return self._levels[i]
 
     def task(self, name: str) -> Task:
-        """The task called ``name``."""
+        """The task called ``name`` (:class:`~prioik.errors.UnknownNameError`, a
+        :class:`KeyError`, listing the tasks if absent)."""
         for t in self.tasks:
             if t.name == name:
                 return t
-        raise KeyError(name)
+        raise self._unknown(name)
 
     def level_of(self, name: str) -> int:
-        """Level index of the task called ``name``."""
+        """Level index of the task called ``name`` (as :meth:`task` if absent)."""
         for i, level in enumerate(self._levels):
             if name in level.names:
                 return i
-        raise KeyError(name)
+        raise self._unknown(name)
+
+    def _unknown(self, name) -> UnknownNameError:
+        return UnknownNameError(f"no task {name!r} in the stack (tasks: "
+                                f"{', '.join(t.name for t in self.tasks)})")
 
     # ------------------------------------------------------------- composition
     def __truediv__(self, other) -> "TaskStack":
@@ -129,7 +142,7 @@ class TaskStack:
         if self._layout is None:
             self._layout = StackLayout.shared(
                 self._n, tuple(tuple((t.name, t.m, t.kind) for t in level)
-                               for level in self._levels))
+                               for level in self._levels), hard=self._hard)
         return self._layout
 
     @property
@@ -171,7 +184,8 @@ class TaskStack:
         for i in levels:
             # 2^-e: the peak into [0.5, 1)
             factor = math.ldexp(1.0, -math.frexp(float(peaks[i]))[1])
-            out[i] = Level(t.scaled(factor) for t in self._levels[i])
+            out[i] = Level.of([t.scaled(factor) for t in self._levels[i]],
+                              hard=self._levels[i].hard)
         return TaskStack(out), levels
 
     def equality_matrices(self) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -198,7 +212,7 @@ class TaskStack:
         :meth:`summary` gives the table with ranks."""
         parts = []
         for level in self._levels[:8]:
-            parts.append(" + ".join(f"{t.name}[{t.m}{'' if t.is_equality else '≤'}]"
+            parts.append(("hard " if level.hard else "") + " + ".join(f"{t.name}[{t.m}{'' if t.is_equality else '≤'}]"
                                     for t in level[:4]) + (" + …" if len(level) > 4 else ""))
         more = f" / … ({len(self) - 8} more)" if len(self) > 8 else ""
         return f"TaskStack(n={self.n}, {len(self)} levels: {' / '.join(parts)}{more})"

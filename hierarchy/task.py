@@ -253,28 +253,48 @@ class Level(tuple):
 
     Built by ``t1 + t2``; a stack's levels are :class:`Level` instances, which also
     carry the level's weighted equality rows (see :attr:`A` and :attr:`b`).
+
+    A level is *hard* (:attr:`hard`; declared with :func:`hard`) when its tasks are
+    constraints rather than objectives: the lexicographic optimum is solved as for any
+    level, and an answer that leaves a hard level violated beyond the certificate's
+    tolerance is not ``optimal`` (see :func:`hard`).
     """
 
     @classmethod
-    def of(cls, item) -> "Level":
+    def of(cls, item, hard: bool | None = None) -> "Level":
+        """``item`` (a :class:`Level`, a :class:`Task` or a sequence of tasks) as a
+        level; ``hard``: declare it hard or not (``None``: as ``item`` is, else not)."""
         if isinstance(item, Level):
-            return item
-        if isinstance(item, Task):
-            return cls((item,))
-        if isinstance(item, Iterable) and not isinstance(item, (str, bytes, np.ndarray)):
+            level = item
+        elif isinstance(item, Task):
+            level = cls((item,))
+        elif isinstance(item, Iterable) and not isinstance(item, (str, bytes, np.ndarray)):
             items = tuple(item)
             for t in items:
                 if not isinstance(t, Task):
                     raise TaskStackError(f"a level holds Task objects, got {type(t).__name__}")
-            return cls(items)
-        raise TaskStackError(f"a level is a Task or a sequence of Tasks, got "
-                             f"{type(item).__name__}")
+            level = cls(items)
+        else:
+            raise TaskStackError(f"a level is a Task or a sequence of Tasks, got "
+                                 f"{type(item).__name__}")
+        if hard is None or bool(hard) == level.hard:
+            return level
+        out = cls(tuple(level))
+        out.__dict__["_hard"] = bool(hard)
+        return out
+
+    @property
+    def hard(self) -> bool:
+        """Whether the level is declared hard (:func:`hard`)."""
+        return self.__dict__.get("_hard", False)
 
     def __add__(self, other) -> "Level":
-        return Level(tuple(self) + tuple(Level.of(other)))
+        other = Level.of(other)
+        return Level.of(tuple(self) + tuple(other), hard=self.hard or other.hard)
 
     def __radd__(self, other) -> "Level":
-        return Level(tuple(Level.of(other)) + tuple(self))
+        other = Level.of(other)
+        return Level.of(tuple(other) + tuple(self), hard=self.hard or other.hard)
 
     def __truediv__(self, other) -> "TaskStack":
         from .stack import TaskStack
@@ -315,6 +335,9 @@ class Level(tuple):
         """Equality targets scaled by ``√weight``."""
         return self._cached("_b")
 
+    def __repr__(self) -> str:
+        return f"{'hard ' if self.hard else ''}Level({tuple.__repr__(self)})"
+
     def _cached(self, key):
         if key in self.__dict__:
             return self.__dict__[key]
@@ -333,3 +356,24 @@ class Level(tuple):
         b.setflags(write=False)
         self.__dict__["_A"], self.__dict__["_b"] = A, b
         return self.__dict__[key]
+
+
+def hard(item) -> Level:
+    """The level of ``item`` (a :class:`Task`, a sequence of tasks or a :class:`Level`)
+    declared *hard*: ``hard(contact) / reach / posture``, or
+    ``TaskStack([hard([left, right]), reach])``.
+
+    A hard level is solved as any level (the lexicographic optimum is the same), but
+    its tasks are meant as constraints, as PlaCo's hard tasks are: when the answer leaves
+    the level violated — its residual ``‖√w ∘ violation‖`` beyond
+    :data:`~prioik.hierarchy.DEFAULT_CERTIFICATE_TOL` times the level's scale (the
+    certificate's: ``‖√w ∘ (|A| |x| + |t|)‖ + ‖√W A‖_F``) — the solution's status is
+    ``"failed"`` (``x`` stays the least-squares compromise) and its ``info`` names the
+    first such level: ``info["fault_level"]``, ``info["fault_tasks"]``,
+    ``info["message"]``, and ``info["hard_violations"]`` lists every such level. Every
+    formulation is checked the same way, in :class:`~prioik.PreparedSolver`.
+
+    Raises:
+        TaskStackError: ``item`` is not a task, tasks or a level.
+    """
+    return Level.of(item, hard=True)

@@ -18,6 +18,7 @@ Sub-packages (data flows one way, top to bottom):
 * :mod:`prioik.robots` — robot models (pinocchio) and task writers (imported on first
   use: it needs the ``robots`` extra);
 * :mod:`prioik.benchmarks` — comparisons, reports and the ``prioik`` command line;
+* :mod:`prioik.errors` — :class:`PrioikError`, the base of every error prioik raises;
 * :mod:`prioik.extras` — which ``pip install prioik[EXTRA]`` brings which part
   (``pip install prioik`` is the core: numpy, scipy, threadpoolctl, tqdm and the
   compiled C++ core ``prioik._core``).
@@ -31,19 +32,26 @@ from __future__ import annotations
 import importlib
 from importlib.metadata import PackageNotFoundError, version as _version
 
-from . import extras, formulations, hierarchy
+from . import errors, extras, formulations, hierarchy
+from .errors import PrioikError, UnknownNameError
 from .extras import MissingExtraError
 from .formulations import (BatchSolution, Capabilities, ConcurrentUseError, FormulationError,
                            Option, PreparedSolver, Solution, available, prepare, solve,
                            solve_batch)
 from .hierarchy import (Level, LexicographicReport, StackData, StackLayout, Task, TaskStack,
-                        TaskStackError, UnsupportedTaskError, check_lexicographic, load_stack,
-                        save_stack)
+                        TaskStackError, UnsupportedTaskError, check_lexicographic, hard,
+                        load_stack, save_stack)
 
-try:
-    __version__ = _version("prioik")
-except PackageNotFoundError:  # pragma: no cover - a source tree that was never installed
-    __version__ = "0+unknown"
+
+def _installed_version() -> str:
+    try:
+        return _version("prioik")
+    except PackageNotFoundError:  # pragma: no cover - a source tree that was never installed
+        return "0+unknown"
+
+
+__version__: str = _installed_version()
+"""The installed distribution's version (``"0+unknown"`` for a source tree never installed)."""
 
 _LAZY = ("robots", "benchmarks")
 
@@ -63,8 +71,9 @@ def __dir__() -> list[str]:
 
 __all__ = [
     "BatchSolution", "Capabilities", "ConcurrentUseError", "FormulationError", "Level",
-    "LexicographicReport", "MissingExtraError", "Option", "PreparedSolver", "Solution",
-    "StackData", "StackLayout", "Task", "TaskStack", "TaskStackError", "UnsupportedTaskError",
-    "__version__", "available", "benchmarks", "check_lexicographic", "extras", "formulations",
-    "hierarchy", "load_stack", "prepare", "robots", "save_stack", "solve", "solve_batch",
+    "LexicographicReport", "MissingExtraError", "Option", "PreparedSolver", "PrioikError",
+    "Solution", "StackData", "StackLayout", "Task", "TaskStack", "TaskStackError",
+    "UnknownNameError", "UnsupportedTaskError", "__version__", "available", "benchmarks", "check_lexicographic",
+    "errors", "extras", "formulations", "hard", "hierarchy", "load_stack", "prepare",
+    "robots", "save_stack", "solve", "solve_batch",
 ]

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import importlib.metadata
 
+from .errors import PrioikError, UnknownNameError
+
 #: extra -> (distributions that must be installed for it to count as installed, what it
 #: is for). The requirements themselves, with their versions, are in pyproject.toml.
 EXTRAS: dict[str, tuple[tuple[str, ...], str]] = {
@@ -23,8 +25,11 @@ EXTRAS: dict[str, tuple[tuple[str, ...], str]] = {
     "pink": (("pin-pink",), "the pink baseline"),
     "mink": (("mink", "mujoco"), "the mink baseline (the robot converted to MuJoCo)"),
     "plots": (("matplotlib",), "plots of `prioik fencing` and `prioik bench`"),
-    "view": (("meshcat",), "3-D view of robot motions"),
+    "view": (("meshcat", "fast-simplification"),
+             "3-D views of robot motions with their meshes (meshed replay, live view)"),
     "sweep": (("dask", "distributed"), "parameter sweeps on a Dask cluster"),
+    "docs": (("mkdocs", "mkdocs-material", "mkdocstrings-python"),
+             "the documentation site (`make docs`, mkdocs.yml)"),
 }
 
 
@@ -33,7 +38,7 @@ def install_hint(extra: str) -> str:
     return f"install it with `pip install prioik[{extra}]`"
 
 
-class MissingExtraError(ImportError):
+class MissingExtraError(PrioikError, ImportError):
     """A part of prioik needs an extra that is not installed here.
 
     An :class:`ImportError`, so ``except ImportError`` still catches it; its message
@@ -73,7 +78,7 @@ def missing_distributions(extra: str) -> tuple[str, ...]:
         KeyError: ``extra`` is not one of :data:`EXTRAS`.
     """
     if extra not in EXTRAS:
-        raise KeyError(f"unknown extra {extra!r}; known: {', '.join(EXTRAS)}")
+        raise UnknownNameError(f"unknown extra {extra!r}; known: {', '.join(EXTRAS)}")
     return tuple(d for d in EXTRAS[extra][0] if not _installed(d))
 
 

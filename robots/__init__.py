@@ -18,6 +18,7 @@ from .models import (LOADERS, PANDA_FINGERS, ModelNotFoundError, RobotModel, Sta
                      check_configuration, check_velocity, example_robot_data_dir, from_urdf,
                      g1, go2, has_free_flyer, load, panda, sample_humanoid, solo12,
                      spatial_chain, talos, ur5)
+from .mesh_replay import MeshReplayError, write_mesh_replay
 from .references import Reference, Waypoints, minimum_jerk
 from .rows import MODES, TaskWriter
 from .simulate import (SimulationError, SimulationResult, StepTasks, equality_view, run_to_end,
@@ -38,5 +39,5 @@ __all__ = [
     "KinematicState", "TaskTerm", "com_position", "contact", "frame_orientation",
     "frame_pose", "frame_position", "joint_limit_bounds", "joint_limit_rows",
     "joint_limit_violation", "joint_velocity_bounds", "point_position", "posture",
-    "frame_region", "com_region", "polygon_region",
+    "frame_region", "com_region", "polygon_region", "MeshReplayError", "write_mesh_replay",
 ]

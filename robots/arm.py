@@ -26,12 +26,13 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
+from prioik.errors import UnknownNameError
 from prioik.hierarchy import Task, TaskStack
 
 from .models import RobotModel, example_robot_data_dir
 from .references import Reference, minimum_jerk
 from .scenario import BaselineTask, Scenario
-from .simulate import StepTasks
+from .simulate import SimulationError, StepTasks
 from .tasks import (JointLimitActivation, KinematicState, frame_orientation, frame_position,
                     joint_limit_bounds, joint_limit_rows, joint_limit_violation, posture)
 
@@ -94,7 +95,7 @@ class ArmScenario(Scenario):
 
     def __post_init__(self) -> None:
         if self.variant not in self.variants:
-            raise ValueError(f"unknown arm variant {self.variant!r}; known: "
+            raise SimulationError(f"unknown arm variant {self.variant!r}; known: "
                              f"{', '.join(self.variants)}")
         if self.robot is None:
             self.robot = panda()
@@ -190,7 +191,7 @@ class ArmScenario(Scenario):
         elif limits in ("bounds", "hard_bounds"):
             levels.append(self.acceleration_bounds(state, dt))
         else:
-            raise ValueError(f"limits must be 'activation', 'bounds' or 'hard_bounds', "
+            raise SimulationError(f"limits must be 'activation', 'bounds' or 'hard_bounds', "
                              f"got {limits!r}")
         for name in ("tool_position", "tool_orientation"):
             levels.append(terms[name].acceleration(*self.gains[name]))
@@ -208,7 +209,7 @@ class ArmScenario(Scenario):
         if limits in ("bounds", "hard_bounds"):
             levels.append(self.velocity_bounds(state, dt))
         elif limits != "none":
-            raise ValueError(f"limits must be 'bounds', 'hard_bounds' or 'none', got {limits!r}")
+            raise SimulationError(f"limits must be 'bounds', 'hard_bounds' or 'none', got {limits!r}")
         levels.append(terms["tool_position"].velocity(gain))
         levels.append(terms["tool_orientation"].velocity(gain))
         n_tasks = len(levels)
@@ -229,7 +230,7 @@ class ArmScenario(Scenario):
             return self.rotation0
         if name == "posture":
             return self.robot.q0.copy()
-        raise KeyError(f"the arm scenario has no baseline task {name!r}")
+        raise UnknownNameError(f"the arm scenario has no baseline task {name!r}")
 
     def markers(self, t: float) -> dict[str, np.ndarray]:
         """The current target and the tool's reference."""

@@ -34,13 +34,14 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
+from prioik.errors import UnknownNameError
 from prioik.hierarchy import StackData, TaskStack
 
 from .models import RobotModel, g1
 from .references import Reference, Waypoints, minimum_jerk, minimum_jerk_profile
 from .rows import TaskWriter
 from .scenario import BaselineTask, Scenario
-from .simulate import StepTasks
+from .simulate import SimulationError, StepTasks
 from .tasks import (JointLimitActivation, KinematicState, com_position, contact,
                     frame_pose, frame_position, joint_limit_bounds, joint_limit_rows,
                     joint_limit_violation, joint_velocity_bounds, posture)
@@ -99,7 +100,7 @@ class FencingScenario(Scenario):
 
     def __post_init__(self) -> None:
         if self.variant not in VARIANTS:
-            raise ValueError(f"unknown fencing variant {self.variant!r}; "
+            raise SimulationError(f"unknown fencing variant {self.variant!r}; "
                              f"known: {', '.join(VARIANTS)}")
         if self.robot is None:
             self.robot = g1().with_point_frame("sword_tip", "left_hand",
@@ -226,7 +227,7 @@ class FencingScenario(Scenario):
         elif limits == "hard_bounds":
             levels.insert(0, joint_limit_bounds(state, self.bound_horizon, dt))
         else:
-            raise ValueError(f"limits must be 'activation', 'bounds' or 'hard_bounds', "
+            raise SimulationError(f"limits must be 'activation', 'bounds' or 'hard_bounds', "
                              f"got {limits!r}")
         for name in ("com", "left_foot", "sword_tip"):
             levels.append(terms[name].acceleration(*g[name]))
@@ -254,7 +255,7 @@ class FencingScenario(Scenario):
         elif limits == "hard_bounds":
             levels.insert(0, joint_velocity_bounds(state, dt))
         elif limits != "none":
-            raise ValueError(f"limits must be 'bounds', 'hard_bounds' or 'none', "
+            raise SimulationError(f"limits must be 'bounds', 'hard_bounds' or 'none', "
                              f"got {limits!r}")
         for name in ("com", "left_foot", "sword_tip"):
             levels.append(terms[name].velocity(k[name]))
@@ -298,7 +299,7 @@ class FencingScenario(Scenario):
             return self.tip_ref(t).x
         if name == "posture":
             return self.robot.q0.copy()
-        raise KeyError(f"the fencing scenario has no baseline task {name!r}")
+        raise UnknownNameError(f"the fencing scenario has no baseline task {name!r}")
 
     def markers(self, t: float) -> dict[str, np.ndarray]:
         """The sword target and the tip's reference."""
@@ -323,7 +324,7 @@ class FencingScenario(Scenario):
         ``"none"`` or ``"bounds"``: bounds on ``q̇``), for :meth:`write_rows` in a
         control loop."""
         if limits not in ("none", "bounds"):
-            raise ValueError(f"limits must be 'bounds' or 'none', got {limits!r}")
+            raise SimulationError(f"limits must be 'bounds' or 'none', got {limits!r}")
         k = self.velocity_gains(gain)
         w = TaskWriter(self.robot, "velocity")
         w.add_contact("support_foot", "right_foot", gain=k["support_foot"])
@@ -338,7 +339,7 @@ class FencingScenario(Scenario):
         the level is always there, zero rows where :meth:`acceleration_stack` has
         none); ``"bounds"``: bounds on ``q̈`` over ``bound_horizon``."""
         if limits not in ("activation", "bounds"):
-            raise ValueError(f"limits must be 'activation' or 'bounds', got {limits!r}")
+            raise SimulationError(f"limits must be 'activation' or 'bounds', got {limits!r}")
         w = TaskWriter(self.robot, "acceleration")
         w.add_contact("support_foot", "right_foot", gain=self.gains["support_foot"])
         if limits == "activation":

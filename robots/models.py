@@ -34,19 +34,26 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from prioik.errors import PrioikError, UnknownNameError
 from prioik.extras import install_hint
 
-__all__ = ["ModelNotFoundError", "StateError", "check_configuration", "check_velocity",
+__all__ = ["ModelNotFoundError", "RobotModelError", "StateError", "check_configuration", "check_velocity",
            "RobotModel", "example_robot_data_dir", "from_urdf",
            "has_free_flyer", "g1", "talos", "panda", "ur5", "go2", "solo12", "PANDA_FINGERS",
            "sample_humanoid", "spatial_chain", "LOADERS", "load"]
 
 
-class ModelNotFoundError(FileNotFoundError):
+class ModelNotFoundError(PrioikError, FileNotFoundError):
     """A robot description (package or file) is not installed here."""
 
 
-class StateError(ValueError):
+class RobotModelError(PrioikError, ValueError):
+    """A robot model that cannot be built or changed as asked: a URDF or SRDF that does
+    not parse or contradicts itself, a ``q0`` or option that does not fit the model, an
+    unknown robot name (the message names the file, frame or joint)."""
+
+
+class StateError(PrioikError, ValueError):
     """A robot state (``q``, ``v``) is malformed: wrong size, not finite, or a joint's
     quaternion / unit complex number not of unit norm. The message names the argument,
     the entry and the joint."""
@@ -140,13 +147,13 @@ class RobotModel:
             first = (f"joint 1 ({self.model.names[1]!r}) is a "
                      f"{self.model.joints[1].shortname()}" if self.model.njoints > 1
                      else "the model has no joint")
-            raise ValueError(f"robot {self.name!r}: floating_base={self.floating_base!r} "
+            raise RobotModelError(f"robot {self.name!r}: floating_base={self.floating_base!r} "
                              f"contradicts the model ({first}); a floating base is a "
                              "free-flyer joint 1 (leave floating_base=None to detect it)")
         self.floating_base = bool(self.floating_base)
         q0 = np.array(self.q0, dtype=float).reshape(-1)
         if q0.shape != (self.model.nq,) or not np.isfinite(q0).all():
-            raise ValueError(f"robot {self.name!r}: q0 must be {self.model.nq} finite "
+            raise RobotModelError(f"robot {self.name!r}: q0 must be {self.model.nq} finite "
                              f"numbers, got shape {np.shape(self.q0)}")
         self.q0 = q0
         self.package_dirs = tuple(str(d) for d in self.package_dirs)
@@ -210,7 +217,7 @@ class RobotModel:
             return cache[frame]
         name = self.frames.get(frame, frame)
         if not self.model.existFrame(name):
-            raise KeyError(f"model {self.name!r} has no frame {name!r}")
+            raise UnknownNameError(f"model {self.name!r} has no frame {name!r}")
         cache[frame] = int(self.model.getFrameId(name))
         return cache[frame]
 
@@ -286,10 +293,10 @@ class RobotModel:
             whose ``frames`` maps ``name`` to itself.
         """
         if self.model.existFrame(name):
-            raise ValueError(f"model {self.name!r} already has a frame {name!r}")
+            raise RobotModelError(f"model {self.name!r} already has a frame {name!r}")
         off = np.asarray(offset, dtype=float).reshape(-1)
         if off.shape != (3,) or not np.isfinite(off).all():
-            raise ValueError(f"offset must be 3 finite numbers, got {offset!r}")
+            raise RobotModelError(f"offset must be 3 finite numbers, got {offset!r}")
         model = self.model.copy()
         pid = self.frame_id(parent)
         pf = model.frames[pid]
@@ -310,7 +317,7 @@ class RobotModel:
         """
         a = float(armature)
         if not (0.0 <= a < np.inf):
-            raise ValueError(f"armature must be a finite number ≥ 0, got {armature!r}")
+            raise RobotModelError(f"armature must be a finite number ≥ 0, got {armature!r}")
         model = self.model.copy()
         arm = np.array(model.armature, dtype=float)
         arm[self.n_base:] = a
@@ -355,7 +362,7 @@ def _robot_file(relative: str) -> Path:
 def _set_joint(model: pin.Model, q: np.ndarray, joint: str, value: float) -> None:
     jid = model.getJointId(joint)
     if jid >= model.njoints:
-        raise KeyError(f"no joint {joint!r}")
+        raise UnknownNameError(f"no joint {joint!r}")
     q[model.joints[jid].idx_q] = value
 
 
@@ -378,7 +385,7 @@ def _parse_xml(path: Path, what: str) -> ET.Element:
     try:
         return ET.parse(path).getroot()
     except ET.ParseError as exc:
-        raise ValueError(f"{what} {path} is not valid XML: {exc}") from None
+        raise RobotModelError(f"{what} {path} is not valid XML: {exc}") from None
 
 
 def _urdf_base(root: ET.Element, path: Path) -> tuple[bool | None, str]:
@@ -395,7 +402,7 @@ def _urdf_base(root: ET.Element, path: Path) -> tuple[bool | None, str]:
         parent = joint.find("parent")
         parent = parent.get("link") if parent is not None else None
         if parent not in roots:
-            raise ValueError(f"URDF {path}: floating joint {joint.get('name')!r} hangs from "
+            raise RobotModelError(f"URDF {path}: floating joint {joint.get('name')!r} hangs from "
                              f"link {parent!r}, not from the root link; only a floating "
                              "root is supported")
         return True, (f"the URDF's joint {joint.get('name')!r} is of type floating on its "
@@ -413,7 +420,7 @@ def _srdf_base(root: ET.Element, urdf_joints: set[str], path: Path) -> tuple[boo
         if kind in ("floating", "fixed"):
             return kind == "floating", (f"the SRDF's virtual joint {joint.get('name')!r} "
                                         f"is of type {kind}")
-        raise ValueError(f"SRDF {path}: virtual joint {joint.get('name')!r} is of type "
+        raise RobotModelError(f"SRDF {path}: virtual joint {joint.get('name')!r} is of type "
                          f"{kind!r}; only floating and fixed bases are supported")
     for state in root.findall("group_state"):
         for joint in state.findall("joint"):
@@ -481,14 +488,14 @@ def from_urdf(path: str | os.PathLike, *, floating_base: bool | None = None,
         srdf_declared, srdf_why = _srdf_base(_parse_xml(srdf_path, "SRDF"), urdf_joints,
                                              srdf_path)
         if declared is not None and srdf_declared is not None and declared != srdf_declared:
-            raise ValueError(f"{path.name} and {srdf_path.name} disagree about the base: "
+            raise RobotModelError(f"{path.name} and {srdf_path.name} disagree about the base: "
                              f"{why}, but {srdf_why}")
         if declared is None and srdf_declared is not None:
             declared, why = srdf_declared, srdf_why
     if floating_base is not None and not isinstance(floating_base, (bool, np.bool_)):
-        raise ValueError(f"floating_base must be True, False or None, got {floating_base!r}")
+        raise RobotModelError(f"floating_base must be True, False or None, got {floating_base!r}")
     if floating_base is not None and declared is not None and bool(floating_base) != declared:
-        raise ValueError(f"floating_base={bool(floating_base)} contradicts {path.name}: "
+        raise RobotModelError(f"floating_base={bool(floating_base)} contradicts {path.name}: "
                          f"{why} (leave floating_base=None to use it)")
     floating = declared if declared is not None else bool(floating_base)
     try:
@@ -497,16 +504,16 @@ def from_urdf(path: str | os.PathLike, *, floating_base: bool | None = None,
         else:
             model = pin.buildModelFromUrdf(str(path))
     except (RuntimeError, ValueError) as exc:
-        raise ValueError(f"pinocchio could not build a model from {path}: {exc}") from None
+        raise RobotModelError(f"pinocchio could not build a model from {path}: {exc}") from None
     if has_free_flyer(model) != floating:
-        raise ValueError(f"{path}: the model built has joint 1 {model.names[1]!r} "
+        raise RobotModelError(f"{path}: the model built has joint 1 {model.names[1]!r} "
                          f"({model.joints[1].shortname()}), expected "
                          f"{'a free flyer' if floating else 'no free flyer'}")
     if srdf_path is not None:
         try:
             pin.loadReferenceConfigurations(model, str(srdf_path), False)
         except (RuntimeError, ValueError) as exc:
-            raise ValueError(f"pinocchio could not read the reference configurations of "
+            raise RobotModelError(f"pinocchio could not read the reference configurations of "
                              f"{srdf_path}: {exc}") from None
     q = _configuration(model, q0, srdf_path)
     if locked_joints:
@@ -520,7 +527,7 @@ def from_urdf(path: str | os.PathLike, *, floating_base: bool | None = None,
     robot_name = name or model.name or path.stem
     for role, frame in frames.items():
         if not model.existFrame(frame):
-            raise KeyError(f"robot {robot_name!r} ({path.name}) has no frame {frame!r} "
+            raise UnknownNameError(f"robot {robot_name!r} ({path.name}) has no frame {frame!r} "
                            f"(role {role!r})")
     return RobotModel(robot_name, model, q, frames, str(path), floating, tuple(dirs))
 
@@ -549,16 +556,16 @@ def _configuration(model: pin.Model, q0, srdf: Path | None) -> np.ndarray:
     if isinstance(q0, str):
         if q0 not in refs:
             known = ", ".join(sorted(entry.key() for entry in refs)) or "none"
-            raise KeyError(f"no group state {q0!r} in "
+            raise UnknownNameError(f"no group state {q0!r} in "
                            f"{srdf.name if srdf else 'the model (no SRDF given)'} "
                            f"(known: {known})")
         return np.array(refs[q0])
     q = np.array(q0, dtype=float).reshape(-1)
     if q.shape != (model.nq,) or not np.isfinite(q).all():
-        raise ValueError(f"q0 must be {model.nq} finite numbers (the loaded model's n_q, "
+        raise RobotModelError(f"q0 must be {model.nq} finite numbers (the loaded model's n_q, "
                          f"before locking), got shape {np.shape(q0)}")
     if has_free_flyer(model) and np.linalg.norm(q[3:7]) < 1e-9:
-        raise ValueError("q0's base quaternion (entries 3-6) is zero")
+        raise RobotModelError("q0's base quaternion (entries 3-6) is zero")
     return q
 
 
@@ -567,7 +574,7 @@ def _lock(model: pin.Model, q: np.ndarray, joints: Sequence[str]):
     ids = []
     for joint in joints:
         if not model.existJointName(joint):
-            raise KeyError(f"cannot lock joint {joint!r}: the model has no such joint")
+            raise UnknownNameError(f"cannot lock joint {joint!r}: the model has no such joint")
         ids.append(model.getJointId(joint))
     reduced = pin.buildReducedModel(model, ids, q)
     parts = []
@@ -580,10 +587,10 @@ def _lock(model: pin.Model, q: np.ndarray, joints: Sequence[str]):
 
 def _set_joint(model: pin.Model, q: np.ndarray, joint: str, value: float) -> None:
     if not model.existJointName(joint):
-        raise KeyError(f"no joint {joint!r}")
+        raise UnknownNameError(f"no joint {joint!r}")
     jm = model.joints[model.getJointId(joint)]
     if jm.nq != 1:
-        raise ValueError(f"joint {joint!r} has {jm.nq} configuration entries; give it in a "
+        raise RobotModelError(f"joint {joint!r} has {jm.nq} configuration entries; give it in a "
                          "q0 array")
     q[jm.idx_q] = value
 
@@ -669,8 +676,8 @@ def panda() -> RobotModel:
                           frames={"hand": "panda_hand", "tcp": "panda_hand_tcp"})
 
 
-#: the Panda's finger joints (lock them for a 7-joint arm)
 PANDA_FINGERS = ("panda_finger_joint1", "panda_finger_joint2")
+"""The Panda's finger joints (lock them for a 7-joint arm)."""
 
 UR5_URDF = "ur_description/urdf/ur5_robot.urdf"
 UR5_SRDF = "ur_description/srdf/ur5.srdf"
@@ -730,7 +737,7 @@ def spatial_chain(n_links: int, link_length: float = 0.3, seed: int = 0) -> Robo
     ``±0.5`` rad; limits are ``±2.5`` rad and velocity limits 10 rad/s.
     """
     if not isinstance(n_links, (int, np.integer)) or n_links < 1:
-        raise ValueError(f"n_links must be an integer ≥ 1, got {n_links!r}")
+        raise RobotModelError(f"n_links must be an integer ≥ 1, got {n_links!r}")
     model = pin.Model()
     model.name = f"chain{n_links}"
     parent = 0
@@ -754,10 +761,10 @@ def spatial_chain(n_links: int, link_length: float = 0.3, seed: int = 0) -> Robo
                       "built in", floating_base=False)
 
 
-#: name -> loader (no arguments)
 LOADERS = {"g1": g1, "talos": talos, "panda": panda, "ur5": ur5, "go2": go2,
            "solo12": solo12, "sample_humanoid": sample_humanoid,
            "chain7": lambda: spatial_chain(7)}
+"""Robot name → loader (no arguments)."""
 
 
 def load(robot: str | os.PathLike, **kwargs) -> RobotModel:
@@ -777,13 +784,13 @@ def load(robot: str | os.PathLike, **kwargs) -> RobotModel:
             robot.lower().endswith(".urdf") or os.sep in robot or "/" in robot)):
         return from_urdf(robot, **kwargs)
     if not isinstance(robot, str):
-        raise ValueError(f"robot must be a name or a URDF path, got {robot!r}")
+        raise RobotModelError(f"robot must be a name or a URDF path, got {robot!r}")
     if kwargs:
-        raise ValueError(f"options {sorted(kwargs)} are for a URDF path; robot {robot!r} "
+        raise RobotModelError(f"options {sorted(kwargs)} are for a URDF path; robot {robot!r} "
                          "is a name")
     if robot.startswith("chain") and robot[5:].isdigit():
         return spatial_chain(int(robot[5:]))
     if robot not in LOADERS:
-        raise ValueError(f"unknown robot {robot!r}; known: {', '.join(LOADERS)}, chainN, "
+        raise RobotModelError(f"unknown robot {robot!r}; known: {', '.join(LOADERS)}, chainN, "
                          "or a URDF path")
     return LOADERS[robot]()

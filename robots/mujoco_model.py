@@ -38,6 +38,8 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from prioik.errors import PrioikError
+
 from .models import RobotModel
 
 __all__ = ["MujocoModelError", "MujocoModel", "mujoco_urdf", "to_mujoco", "COMPILER"]
@@ -48,7 +50,7 @@ COMPILER = {"fusestatic": "false", "discardvisual": "true", "balanceinertia": "t
 _DROPPED = ("visual", "collision", "mimic")
 
 
-class MujocoModelError(ValueError):
+class MujocoModelError(PrioikError, ValueError):
     """A URDF MuJoCo cannot load, or a MuJoCo model whose joints do not match the
     robot's (the message names the joints)."""
 

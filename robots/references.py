@@ -13,6 +13,8 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 
+from prioik.hierarchy import TaskStackError
+
 __all__ = ["Reference", "minimum_jerk", "minimum_jerk_profile", "Waypoints"]
 
 
@@ -34,7 +36,7 @@ def minimum_jerk_profile(t0: float, duration: float, t: float) -> tuple[float, f
         ValueError: ``duration`` is not > 0.
     """
     if not duration > 0:
-        raise ValueError(f"duration must be > 0, got {duration}")
+        raise TaskStackError(f"duration must be > 0, got {duration}")
     s = min(max((t - t0) / duration, 0.0), 1.0)
     s2 = s * s
     p = s2 * s * (10.0 - 15.0 * s + 6.0 * s2)
@@ -56,7 +58,7 @@ def minimum_jerk(x0, x1, t0: float, duration: float, t: float) -> Reference:
     x0 = np.asarray(x0, dtype=float)
     x1 = np.asarray(x1, dtype=float)
     if x0.shape != x1.shape:
-        raise ValueError(f"x0 and x1 differ in shape: {x0.shape} vs {x1.shape}")
+        raise TaskStackError(f"x0 and x1 differ in shape: {x0.shape} vs {x1.shape}")
     p, dp, ddp = minimum_jerk_profile(t0, duration, t)
     d = x1 - x0
     return Reference(x0 + p * d, dp * d, ddp * d)
@@ -76,12 +78,12 @@ class Waypoints:
 
     def __post_init__(self) -> None:
         if len(self.times) != len(self.points) or len(self.times) < 1:
-            raise ValueError("Waypoints needs as many times as points (≥ 1)")
+            raise TaskStackError("Waypoints needs as many times as points (≥ 1)")
         if np.any(np.diff(np.asarray(self.times, float)) <= 0):
-            raise ValueError(f"waypoint times must increase, got {list(self.times)}")
+            raise TaskStackError(f"waypoint times must increase, got {list(self.times)}")
         pts = [np.asarray(p, float) for p in self.points]
         if any(p.shape != pts[0].shape for p in pts):
-            raise ValueError(f"waypoints differ in shape: {[p.shape for p in pts]}")
+            raise TaskStackError(f"waypoints differ in shape: {[p.shape for p in pts]}")
         # converted once (a frozen dataclass: set through object.__setattr__)
         object.__setattr__(self, "_times", tuple(float(t) for t in self.times))
         object.__setattr__(self, "_points", tuple(pts))
@@ -121,7 +123,7 @@ class Waypoints:
         """
         pts = self._points
         if pts[0].shape != ():
-            raise ValueError(f"Waypoints.scalar needs scalar points, these have shape "
+            raise TaskStackError(f"Waypoints.scalar needs scalar points, these have shape "
                              f"{pts[0].shape}")
         i, p, dp, ddp = self._segment(t)
         if i < 0 or i == len(pts) - 1:

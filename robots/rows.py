@@ -11,13 +11,16 @@ the drift ``J̇ q̇``; :meth:`TaskWriter.targets` then forms every equality targ
 pass:
 
 * ``mode="velocity"``: ``b = ẋ* + K e`` (``J q̇ = ẋ* + K e``; no drift is computed, so a
-  ``KinematicState(drift=False)`` suffices);
+  ``KinematicState(drift=False)`` suffices), scaled down to ``‖b‖ = max_rate`` for a
+  task declared with a ``max_rate`` that it exceeds;
 * ``mode="acceleration"``: ``b = ẍ* + K_d (ẋ* − J q̇) + K_p e − J̇ q̇`` (eq. 2-4).
 
 Task kinds: frame position, a point fixed on a frame, frame orientation (error
 ``log(R* Rᵀ)``), frame pose, contact (a pose held at a placement), centre of mass,
-posture, and joint limits in two forms — activation rows (one per actuated joint,
-masked to zero outside the margins: fixed size, for the equality formulations) and
+posture, damping (``q̇ = 0`` or ``q̈ = 0`` on every coordinate, weighted within its
+level: that level's damped least squares), and joint limits in two forms — activation
+rows (one per actuated joint, masked to zero outside the margins: fixed size, for the
+equality formulations) and
 bounds (an inequality task: ``data.lower``/``data.upper`` on ``q̇`` or ``q̈`` from the
 position limits, the velocity limits or both, for the inequality formulations), and
 regions (inequality tasks keeping a frame's point or the centre of mass inside
@@ -36,22 +39,24 @@ against finite differences.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
 import pinocchio as pin
 
+from prioik.formulations.base import CoreInputError
 from prioik.hierarchy import StackData, StackLayout, TaskStackError
 
 from prioik._core import rows as _k
-from .models import RobotModel
+from .models import RobotModel, StateError
 
 __all__ = ["MODES", "TaskWriter", "JointLimitActivation"]
 
 
-#: levels of a :class:`TaskWriter`
 MODES = ("velocity", "acceleration")
+"""The levels a :class:`TaskWriter` writes rows at."""
 
 
 @dataclass(frozen=True)
@@ -89,7 +94,7 @@ class _Task:
     """One declared task: what its writer needs, fixed at declaration."""
 
     kind: str                 # "position", "orientation", "pose", "contact", "com",
-    #                           "posture", "limits", "frame_region", "com_region"
+    #                           "posture", "damping", "limits", "frame_region", "com_region"
     name: str
     level: int
     rows: int
@@ -97,6 +102,7 @@ class _Task:
     kp: float = 0.0
     kd: float = 0.0
     weight: float = 1.0
+    max_rate: float = 0.0                # velocity level: ‖b‖ ≤ max_rate (0: no cap)
     start: int = -1
     fid: int = -1
     cols: np.ndarray | None = None
@@ -113,6 +119,8 @@ class _Task:
     horizon: float = 0.0
     dt: float = 0.0
     activation: JointLimitActivation | None = None
+    keep: bool = False                   # keep its last rows when not written before targets
+    stamp: int = -1                      # the writer's step count at its last write
     limits: np.ndarray | None = None     # lo, hi, then q̇_max (bounds) or margin widths (3 × n_a)
     bound_params: np.ndarray | None = None   # the kernel's parameters (at _fix)
     region: _Region | None = None        # region tasks: C, lower, upper and scratch
@@ -215,17 +223,28 @@ class TaskWriter:
     Args:
         robot: The robot (its ``n_v`` is the layout's width).
         mode: ``"velocity"`` (``J q̇ = ẋ* + K e``) or ``"acceleration"`` (eq. 2-4).
-
+        hard: The levels declared hard (``layout.hard``; :func:`~prioik.hierarchy.hard`):
+            a solution that leaves one violated is ``"failed"``, naming it and its
+            tasks (e.g. ``hard=(0,)`` for support contacts that must hold). Checked
+            against the declared levels when the layout is fixed.
     Declare tasks with the ``add_*`` methods (each takes ``level``: the priority, 0 the
     highest; ``None`` puts the task on a new level below every level so far; tasks of one
     level keep their declaration order). Gains: ``gain=K`` at velocity level,
-    ``gain=(K_p, K_d)`` at acceleration level; ``weight`` is the task's weight within its
-    level (its rows of ``data.sqrt_weight`` hold ``√weight``). The first read of :attr:`layout` or
-    :attr:`data` (or the first write) fixes the layout; no task can be added after.
+    ``gain=(K_p, K_d)`` at acceleration level, finite and ≥ 0; ``weight`` is the task's
+    weight within its level (its rows of ``data.sqrt_weight`` hold ``√weight``);
+    ``keep=True``: the task keeps its last rows on a step where it is not written (see
+    :meth:`targets`). At velocity level the frame-position, point, orientation and CoM
+    tasks take ``max_rate``: their target ``b = ẋ* + K e`` is scaled down to
+    ``‖b‖ = max_rate`` (m/s, rad/s) where it is larger — a bounded task-space speed
+    towards a far target. The first read of :attr:`layout` or :attr:`data` (or the first
+    write) fixes the layout; no task can be added after.
 
     Per step: one writer call per task (named like the ``add_`` method without its
-    prefix), then :meth:`targets`. A writer call with a ``KinematicState(drift=False)``
-    is refused at acceleration level for tasks that have a drift (frames, CoM).
+    prefix), then :meth:`targets`, which refuses a task not written since the last call
+    unless it was declared with ``keep=True``. A writer refuses a reference that is not
+    finite (naming the task and the argument) before writing anything, and at
+    acceleration level a ``KinematicState(drift=False)`` for tasks that have a drift
+    (frames, CoM).
 
     A writer writes into its one :class:`~prioik.hierarchy.StackData`: use it from one
     thread at a time (one writer per thread; the builders of :mod:`robots.tasks` keep
@@ -239,11 +258,13 @@ class TaskWriter:
             fixed; ``kp`` is ``K`` at velocity level).
     """
 
-    def __init__(self, robot: RobotModel, mode: str = "velocity") -> None:
+    def __init__(self, robot: RobotModel, mode: str = "velocity", *,
+                 hard: Sequence[int] = ()) -> None:
         if mode not in MODES:
-            raise ValueError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
+            raise TaskStackError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
         self.robot = robot
         self.mode = mode
+        self._hard = hard                 # checked with the layout, at _fix
         self._accel = mode == "acceleration"
         self._tasks: dict[str, _Task] = {}
         self._layout: StackLayout | None = None
@@ -251,6 +272,8 @@ class TaskWriter:
         self._Q = np.zeros((6, 0))
         self._views: _DataViews | None = None
         self._last_level = -1
+        self._capped: tuple = ()                # (start, stop, max_rate) per capped task
+        self._stamp = 0                         # targets() calls so far
         q_index = robot.actuated_q_index()
         self._q_index = q_index
         #: q entries of the actuated joints when q_ref ⊖ q is q_ref − q for all of them
@@ -262,65 +285,115 @@ class TaskWriter:
 
     # ----------------------------------------------------------------- declaring
     def add_frame_position(self, name: str, frame: str, *, gain, level: int | None = None,
-                           weight: float = 1.0) -> None:
-        """A frame origin's world position (3 rows)."""
-        self._add_frame(name, frame, "position", 3, gain, level, weight, np.zeros(3))
+                           weight: float = 1.0, max_rate: float | None = None,
+                           keep: bool = False) -> None:
+        """A frame origin's world position (3 rows); ``max_rate`` (velocity level, m/s):
+        the target's speed ``‖ẋ* + K e‖`` capped at it."""
+        cap = self._max_rate(name, max_rate)
+        self._add_frame(name, frame, "position", 3, gain, level, weight, np.zeros(3), keep)
+        self._tasks[name].max_rate = cap
 
     def add_point(self, name: str, frame: str, offset, *, gain, level: int | None = None,
-                  weight: float = 1.0) -> None:
+                  weight: float = 1.0, max_rate: float | None = None,
+                  keep: bool = False) -> None:
         """The world position of a point fixed on a frame (3 rows), ``offset`` in the
-        frame's coordinates (e.g. a tool tip; no extra frame is added to the model)."""
+        frame's coordinates (e.g. a tool tip; no extra frame is added to the model);
+        ``max_rate`` as in :meth:`add_frame_position`."""
         off = np.array(offset, dtype=float).reshape(-1)
         if off.shape != (3,) or not np.isfinite(off).all():
-            raise ValueError(f"task {name!r}: offset must be 3 finite numbers, got {offset!r}")
-        self._add_frame(name, frame, "position", 3, gain, level, weight, off)
+            raise TaskStackError(f"offset must be 3 finite numbers, got {offset!r}", task=name)
+        cap = self._max_rate(name, max_rate)
+        self._add_frame(name, frame, "position", 3, gain, level, weight, off, keep)
+        self._tasks[name].max_rate = cap
 
     def add_frame_orientation(self, name: str, frame: str, *, gain,
-                              level: int | None = None, weight: float = 1.0) -> None:
-        """A frame's orientation (3 rows, world axes; error ``log(R* Rᵀ)``)."""
-        self._add_frame(name, frame, "orientation", 3, gain, level, weight, np.zeros(3))
+                              level: int | None = None, weight: float = 1.0,
+                              max_rate: float | None = None, keep: bool = False) -> None:
+        """A frame's orientation (3 rows, world axes; error ``log(R* Rᵀ)``);
+        ``max_rate`` (velocity level, rad/s): the target's angular speed capped at it."""
+        cap = self._max_rate(name, max_rate)
+        self._add_frame(name, frame, "orientation", 3, gain, level, weight, np.zeros(3), keep)
+        self._tasks[name].max_rate = cap
 
     def add_frame_pose(self, name: str, frame: str, *, gain, level: int | None = None,
-                       weight: float = 1.0) -> None:
+                       weight: float = 1.0, keep: bool = False) -> None:
         """A frame's position (rows 0-2) and orientation (rows 3-5)."""
-        self._add_frame(name, frame, "pose", 6, gain, level, weight, np.zeros(3))
+        self._add_frame(name, frame, "pose", 6, gain, level, weight, np.zeros(3), keep)
 
     def add_contact(self, name: str, frame: str, *, gain, level: int | None = None,
-                    weight: float = 1.0) -> None:
+                    weight: float = 1.0, keep: bool = False) -> None:
         """A support contact: the frame's pose held at a placement (6 rows, zero reference
         velocity and acceleration); write it with :meth:`contact`."""
-        self._add_frame(name, frame, "pose", 6, gain, level, weight, np.zeros(3))
+        self._add_frame(name, frame, "pose", 6, gain, level, weight, np.zeros(3), keep)
         self._tasks[name].kind = "contact"
 
     def add_com(self, name: str = "com", *, gain, axes: Sequence[int] = (0, 1),
-                level: int | None = None, weight: float = 1.0) -> None:
-        """The centre of mass on world ``axes`` (default horizontal; eq. 32-33)."""
+                level: int | None = None, weight: float = 1.0,
+                max_rate: float | None = None, keep: bool = False) -> None:
+        """The centre of mass on world ``axes`` (default horizontal; eq. 32-33);
+        ``max_rate`` as in :meth:`add_frame_position`."""
         idx = np.array(axes, dtype=np.int64).reshape(-1)
         if idx.size < 1 or idx.size > 3 or not np.all((idx >= 0) & (idx < 3)) \
                 or np.unique(idx).size != idx.size:
-            raise ValueError(f"task {name!r}: com axes must be distinct among 0, 1, 2, got "
-                             f"{list(axes)}")
-        task = self._add(name, "com", idx.size, level, gain, weight)
+            raise TaskStackError(f"com axes must be distinct among 0, 1, 2, got {list(axes)}",
+                                 task=name)
+        cap = self._max_rate(name, max_rate)
+        task = self._add(name, "com", idx.size, level, gain, weight, keep=keep)
         task.axes = idx
+        task.max_rate = cap
 
     def add_posture(self, name: str = "posture", *, gain, level: int | None = None,
-                    weight: float = 1.0) -> None:
+                    weight: float = 1.0, keep: bool = False) -> None:
         """The actuated joints (velocity rows ``n_base:``) to a reference configuration."""
-        self._add(name, "posture", self.robot.nv - self.robot.n_base, level, gain, weight)
+        self._add(name, "posture", self.robot.nv - self.robot.n_base, level, gain, weight,
+                  keep=keep)
+
+    def add_damping(self, name: str = "damping", *, weight: float,
+                    level: int | None = None) -> None:
+        """Damping of a level: one row per velocity coordinate (floating base included),
+        ``q̇ = 0`` at velocity level, ``q̈ = 0`` at acceleration level, of weight
+        ``weight = λ²`` within its level.
+
+        With the level's other tasks (rows ``J``, target ``b``) the level then solves
+        the damped least squares ``min ‖J q̇ − b‖² + λ² ‖q̇‖²`` (Levenberg-Marquardt;
+        Wampler 1986, Nakamura & Hanafusa 1986) under the higher levels: where ``J`` is well
+        conditioned (singular values ``σ ≫ λ``) nothing visible changes, and along a
+        direction of singular value ``σ`` the step is ``σ b / (σ² + λ²)``, at most
+        ``‖b‖ / 2λ``, instead of the least-squares ``b / σ``. Its rows have full rank,
+        so the damped level leaves no freedom to the levels below it. Use it at
+        velocity level on the level of a task whose target may leave the robot's
+        reach: at the edge of the workspace the exact least-squares step along the
+        lost direction grows as ``1/σ`` and flips sign as a step crosses the
+        singularity (joints flipping between their velocity bounds every step);
+        damped, the loop settles. At acceleration level the rows damp ``q̈`` (the
+        level's Tikhonov term on the acceleration).
+
+        Args:
+            weight: ``λ²`` (``(m/rad)²`` against a position task: ``λ`` is the singular
+                value below which the level is damped), finite and > 0.
+
+        The rows are constant (written once): no writer call per step.
+        """
+        if not (np.isscalar(weight) and not isinstance(weight, (str, bool))
+                and np.isfinite(weight) and weight > 0):
+            raise TaskStackError(f"damping weight must be finite and > 0, got {weight!r}",
+                                 task=name if isinstance(name, str) else None)
+        self._add(name, "damping", self.robot.nv, level, None, weight)
 
     def add_joint_limits(self, name: str = "joint_limits", *, form: str,
                          level: int | None = None, position: bool = True,
                          velocity: bool = True, horizon: float | None = None,
                          dt: float | None = None,
                          activation: JointLimitActivation | None = None,
-                         weight: float = 1.0) -> None:
+                         weight: float = 1.0, keep: bool = False) -> None:
         """Joint limits of the actuated joints, one row per joint.
 
         Args:
             form: ``"activation"`` — equality rows pushing a joint out of its margin
                 (:class:`JointLimitActivation`; position limits only), masked to zero
                 rows while outside; ``"bounds"`` — an inequality task.
-            position, velocity: Which limits the bounds hold (position and/or velocity).
+            position: The bounds hold the position limits.
+            velocity: The bounds hold the velocity limits.
             horizon: Bounds: at velocity level ``q + q̇ T`` stays within the position
                 limits for ``T = horizon`` (default ``dt``); at acceleration level the
                 constant-acceleration position at ``T`` does (required).
@@ -329,12 +402,12 @@ class TaskWriter:
             activation: Parameters of the activation rows (defaults if omitted).
         """
         if form not in ("activation", "bounds"):
-            raise ValueError(f"task {name!r}: form must be 'activation' or 'bounds', got "
-                             f"{form!r}")
+            raise TaskStackError(f"form must be 'activation' or 'bounds', got {form!r}",
+                                 task=name)
         lo, hi, _ = self._joint_limits()
         if form == "activation":
             params = activation or JointLimitActivation()
-            task = self._add(name, "limits", lo.size, level, None, weight)
+            task = self._add(name, "limits", lo.size, level, None, weight, keep=keep)
             task.form, task.activation = form, params
             task.kp, task.kd = (params.kp, params.kd) if self._accel else (params.k, 0.0)
             with np.errstate(invalid="ignore"):
@@ -345,15 +418,16 @@ class TaskWriter:
             task.limits.setflags(write=False)
             return
         if not (position or velocity):
-            raise ValueError(f"task {name!r}: bounds need position or velocity limits")
+            raise TaskStackError("bounds need position or velocity limits", task=name)
         if not _positive(dt):
-            raise ValueError(f"task {name!r}: joint-limit bounds need dt > 0, got {dt!r}")
+            raise TaskStackError(f"joint-limit bounds need dt > 0, got {dt!r}", task=name)
         if horizon is None and self._accel and position:
-            raise ValueError(f"task {name!r}: acceleration-level bounds need a horizon")
+            raise TaskStackError("acceleration-level bounds need a horizon", task=name)
         T = dt if horizon is None else horizon
         if not _positive(T):
-            raise ValueError(f"task {name!r}: horizon must be > 0, got {horizon!r}")
-        task = self._add(name, "limits", lo.size, level, None, weight, inequality=True)
+            raise TaskStackError(f"horizon must be > 0, got {horizon!r}", task=name)
+        task = self._add(name, "limits", lo.size, level, None, weight, inequality=True,
+                         keep=keep)
         task.form = form
         task.position, task.velocity = bool(position), bool(velocity)
         task.horizon, task.dt = float(T), float(dt)
@@ -363,7 +437,8 @@ class TaskWriter:
 
     def add_frame_region(self, name: str, frame: str, normals, lower=None, upper=None, *,
                          dt: float, horizon: float | None = None, offset=None,
-                         level: int | None = None, weight: float = 1.0) -> None:
+                         level: int | None = None, weight: float = 1.0,
+                         keep: bool = False) -> None:
         """Keep a point of a frame inside a region: ``lower ≤ C p ≤ upper`` (an inequality
         task, one row per row of ``C``), ``p`` the frame's origin or the point ``offset``
         (frame coordinates) fixed on it, world coordinates: a hand inside a workspace box,
@@ -372,8 +447,9 @@ class TaskWriter:
         Args:
             normals: ``C`` (``k × 3``, or one 3-vector): the directions, world axes; rows
                 finite and non-zero.
-            lower, upper: ``k`` bounds on ``C p`` (numbers broadcast; ``None``: none on
+            lower: ``k`` lower bounds on ``C p`` (numbers broadcast; ``None``: none on
                 that side); ``lower ≤ upper``, every row with a finite bound.
+            upper: ``k`` upper bounds on ``C p``, as ``lower``.
             dt: The control step; horizon: ``T`` (default ``dt``). The rows bound what
                 a step does to ``C p`` as the joint-limit bounds bound ``q``
                 (:meth:`add_joint_limits`): at velocity level ``C (p + J q̇ T)`` within
@@ -394,24 +470,24 @@ class TaskWriter:
         region.point_rows = np.zeros((3, self.robot.nv))
         region.point_values = np.zeros((6, 3))
         task = self._add(name, "frame_region", region.C.shape[0], level, None, weight,
-                         inequality=True)
+                         inequality=True, keep=keep)
         task.region = region
         self._frame_geometry(task, fid, off)
 
     def add_com_region(self, name: str, normals, lower=None, upper=None, *, dt: float,
                        horizon: float | None = None, level: int | None = None,
-                       weight: float = 1.0) -> None:
+                       weight: float = 1.0, keep: bool = False) -> None:
         """Keep the centre of mass inside a region: ``lower ≤ C c ≤ upper`` (e.g. over
         the support polygon, :func:`polygon_region`); the arguments and the rows'
         meaning as in :meth:`add_frame_region`."""
         region = _Region.of(name, normals, lower, upper, dt, horizon)
         task = self._add(name, "com_region", region.C.shape[0], level, None, weight,
-                         inequality=True)
+                         inequality=True, keep=keep)
         task.region = region
 
-    def _add_frame(self, name, frame, kind, rows, gain, level, weight, offset) -> None:
+    def _add_frame(self, name, frame, kind, rows, gain, level, weight, offset, keep) -> None:
         fid = self.robot.frame_id(frame)              # KeyError naming a missing frame
-        task = self._add(name, kind, rows, level, gain, weight)
+        task = self._add(name, kind, rows, level, gain, weight, keep=keep)
         self._frame_geometry(task, fid, offset)
 
     def _frame_geometry(self, task: _Task, fid: int, offset: np.ndarray) -> None:
@@ -431,7 +507,8 @@ class TaskWriter:
         task.geo = np.vstack([offset, placement.translation + rotation @ offset, rotation])
         task.geo.setflags(write=False)
 
-    def _add(self, name, kind, rows, level, gain, weight, inequality=False) -> _Task:
+    def _add(self, name, kind, rows, level, gain, weight, inequality=False,
+             keep=False) -> _Task:
         if self._layout is not None:
             raise TaskStackError("the layout is fixed (it was read or written): declare "
                                  "every task before", task=name)
@@ -446,28 +523,47 @@ class TaskWriter:
                                  task=name)
         if not (np.isfinite(weight) and weight > 0):
             raise TaskStackError(f"weight must be finite and > 0, got {weight!r}", task=name)
+        if not isinstance(keep, (bool, np.bool_)):
+            raise TaskStackError(f"keep must be True or False, got {keep!r}", task=name)
         task = _Task(kind, name, int(level), int(rows), inequality, weight=float(weight),
-                     shape=(int(rows),))
-        if kind not in ("limits", "frame_region", "com_region"):
+                     shape=(int(rows),), keep=bool(keep))
+        if kind not in ("limits", "frame_region", "com_region", "damping"):
             task.kp, task.kd = self._gains(name, gain)
         self._last_level = max(self._last_level, int(level))
         self._tasks[name] = task
         return task
 
+    def _max_rate(self, name: str, max_rate) -> float:
+        """A task's validated ``max_rate`` (velocity level; ``None``: 0, no cap)."""
+        if max_rate is None:
+            return 0.0
+        if self._accel:
+            raise TaskStackError("max_rate caps a velocity-level target; at acceleration "
+                                 "level bound the reference instead", task=name)
+        if not (np.isscalar(max_rate) and not isinstance(max_rate, (str, bool))
+                and np.isfinite(max_rate) and max_rate > 0):
+            raise TaskStackError(f"max_rate must be finite and > 0, got {max_rate!r}",
+                                 task=name)
+        return float(max_rate)
+
     def _gains(self, name: str, gain) -> tuple[float, float]:
+        """``(K_p, K_d)`` from a declared ``gain``: finite and ≥ 0 (a negative gain
+        drives the task away from its target)."""
         if self._accel:
             try:
                 kp, kd = (float(g) for g in gain)
             except (TypeError, ValueError):
-                raise ValueError(f"task {name!r}: at acceleration level gain is (K_p, K_d), "
-                                 f"got {gain!r}") from None
+                raise TaskStackError(f"at acceleration level gain is (K_p, K_d), got "
+                                     f"{gain!r}", task=name) from None
         else:
             if not np.isscalar(gain) or isinstance(gain, (str, bool)):
-                raise ValueError(f"task {name!r}: at velocity level gain is one number K, "
-                                 f"got {gain!r}")
+                raise TaskStackError(f"at velocity level gain is one number K, got {gain!r}",
+                                     task=name)
             kp, kd = float(gain), 0.0
-        if not (np.isfinite(kp) and np.isfinite(kd)):
-            raise ValueError(f"task {name!r}: gains must be finite, got {gain!r}")
+        if not (math.isfinite(kp) and math.isfinite(kd)):
+            raise TaskStackError(f"gain must be finite, got {gain!r}", task=name)
+        if kp < 0 or kd < 0:
+            raise TaskStackError(f"gain must be ≥ 0, got {gain!r}", task=name)
         return kp, kd
 
     # ------------------------------------------------------------------- layout
@@ -497,7 +593,7 @@ class TaskWriter:
                                  "without gaps)", level=missing[0])
         self._layout = StackLayout(self.robot.nv, [
             [(t.name, t.rows, "inequality" if t.inequality else "equality")
-             for t in levels[i]] for i in range(len(levels))])
+             for t in levels[i]] for i in range(len(levels))], hard=self._hard)
         self._data = data = self._layout.data()
         self._Q = np.zeros((6, data.m))
         nb = self.robot.n_base
@@ -529,6 +625,11 @@ class TaskWriter:
                     task.kind == "limits" and task.form == "activation"):
                 A = data.A[sl]
                 A[:, nb:] = np.eye(task.rows)      # constant unit rows, written once
+            elif task.kind == "damping":
+                data.A[sl] = np.eye(task.rows)      # every coordinate, the base's too
+                task.keep, task.stamp = True, 0     # (written here, once for good)
+        self._capped = tuple((t.start, t.start + t.rows, t.max_rate)
+                             for t in self._tasks.values() if t.max_rate > 0)
 
     error = property(lambda self: self._Q[_k.ERROR],
                      doc="Per-row error ``e = x* − x`` (a view).")
@@ -545,8 +646,10 @@ class TaskWriter:
         """New gains of one task (``K`` or ``(K_p, K_d)`` as at declaration)."""
         task = self._task(name, None)
         if task.kind == "limits":
-            raise ValueError(f"task {name!r}: joint-limit gains are set by its "
-                             "JointLimitActivation")
+            raise TaskStackError("joint-limit gains are set by its JointLimitActivation",
+                                 task=name)
+        if task.kind == "damping":
+            raise TaskStackError("a damping task has no gain (its weight is λ²)", task=name)
         task.kp, task.kd = self._gains(name, gain)
         if self._layout is not None:
             sl = slice(task.start, task.start + task.rows)
@@ -574,10 +677,14 @@ class TaskWriter:
             x = _vec3(x, name, "x")
         if self._accel and not state.has_drift:
             self._drift(state, task)                          # refuses a drift-free state
-        if xd is None and xdd is None:        # a fixed target: two arguments fewer
-            _k.position_target_rows(*hot[1], x)
-        else:
-            _k.position_rows(*hot[1], x, _vec3(xd, name, "xd"), _vec3(xdd, name, "xdd"))
+        try:
+            if xd is None and xdd is None:        # a fixed target: two arguments fewer
+                _k.position_target_rows(*hot[1], x)
+            else:
+                _k.position_rows(*hot[1], x, _vec3(xd, name, "xd"), _vec3(xdd, name, "xdd"))
+        except CoreInputError as exc:
+            raise _refused(task, exc) from None
+        task.stamp = self._stamp
 
     point = frame_position
 
@@ -654,7 +761,11 @@ class TaskWriter:
         if xdd is None or not (xdd.__class__ is _NDARRAY and xdd.dtype is _F64
                                and xdd.shape == shape):
             xdd = _vec(xdd, task.rows, name, "xdd")
-        _k.com_rows(*hot[1], x, xd, xdd, not (self._accel and self._drift(state, task)))
+        try:
+            _k.com_rows(*hot[1], x, xd, xdd, not (self._accel and self._drift(state, task)))
+        except CoreInputError as exc:
+            raise _refused(task, exc) from None
+        task.stamp = self._stamp
 
     def posture(self, state, name: str, q_ref) -> None:
         """The actuated joints to ``q_ref`` (``n_q``): error ``q_ref ⊖ q`` on rows
@@ -667,14 +778,22 @@ class TaskWriter:
                 and q_ref.shape == self._q_shape):
             q_ref = _vec(q_ref, self._nq, name, "q_ref")
         if self._posture_q is not None:
-            _k.posture_error(self._Q, task.start, state.q, q_ref, self._posture_q)
+            try:
+                _k.posture_error(self._Q, task.start, state.q, q_ref, self._posture_q)
+            except CoreInputError as exc:
+                raise _refused(task, exc) from None
         else:
+            if not np.isfinite(q_ref).all():
+                bad = int(np.flatnonzero(~np.isfinite(q_ref))[0])
+                raise TaskStackError(f"q_ref[{bad}] is not finite ({q_ref[bad]})",
+                                     task=name, level=task.level)
             robot = self.robot
             sl = slice(task.start, task.start + task.rows)
             self.error[sl] = pin.difference(robot.model, state.q, q_ref)[robot.n_base:]
             self.velocity_ref[sl] = 0.0
             self.feedforward[sl] = 0.0
             self.drift[sl] = 0.0
+        task.stamp = self._stamp
 
     def joint_limits(self, state, name: str = "joint_limits") -> int:
         """The joint-limit rows at ``state``: activation rows (returns how many are
@@ -686,9 +805,12 @@ class TaskWriter:
         if task.form != "activation":
             _k.bounds_at(data.lower, data.upper, state.q, state.v, self._q_index,
                          task.limits, task.bound_params, self._qa)
+            task.stamp = self._stamp
             return task.rows
-        return _k.activation_at(data.A, self._Q, state.q, self._q_index, task.limits,
-                                task.bound_params, self._qa)
+        active = _k.activation_at(data.A, self._Q, state.q, self._q_index, task.limits,
+                                  task.bound_params, self._qa)
+        task.stamp = self._stamp
+        return active
 
     def frame_region(self, state, name: str, normals=None, lower=None, upper=None) -> None:
         """A frame point's region rows at ``state`` (:meth:`add_frame_region`): the rows
@@ -732,29 +854,74 @@ class TaskWriter:
         _k.region_rows(data.A, data.lower, data.upper, task.start, reg.C, Jp, p, psign, v,
                        drift, reg.lower, reg.upper, reg.y, reg.yd, reg.no_speed_limit,
                        reg.horizon, reg.dt, accel)
+        task.stamp = self._stamp
 
     # ------------------------------------------------------------------ targets
     def targets(self, state) -> StackData:
         """Every equality target from the rows written (velocity level:
         ``b = ẋ* + K e``; acceleration level: eq. 2-4 with ``q̇ = state.v``); returns
-        :attr:`data`. Inequality rows keep the bounds their writer set (``b`` = 0)."""
+        :attr:`data`. Inequality rows keep the bounds their writer set (``b`` = 0).
+
+        Every declared task must have been written since the previous call (or, the
+        first time, at all): rows left from an earlier step would be solved as if they
+        were current. A task declared with ``keep=True`` keeps its last rows when it
+        is not written (a fixed target written once); it must be written once.
+
+        Raises:
+            TaskStackError: a task not written since the last call, naming it (and
+                every other such task).
+        """
         if self._accel:
             return self.acceleration_targets(state.v)
         return self.velocity_targets()
 
     def velocity_targets(self) -> StackData:
-        """``b = ẋ* + K e`` into the data; returns it."""
+        """``b = ẋ* + K e`` into the data, each ``max_rate`` task's part scaled down to
+        ``‖b‖ = max_rate`` where it is larger; returns the data.
+
+        Raises:
+            TaskStackError: a task not written since the last call (see :meth:`targets`).
+        """
         data = self._data
         if data is None:
             data = self.data
-        _k.velocity_targets(data.b, self._Q)
+        self._check_written()
+        b = data.b
+        _k.velocity_targets(b, self._Q)
+        for start, stop, cap in self._capped:
+            part = b[start:stop]
+            norm = math.sqrt(float(part @ part))
+            if norm > cap:
+                part *= cap / norm
         return data
 
     def acceleration_targets(self, v: np.ndarray) -> StackData:
-        """``b = ẍ* + K_d (ẋ* − J q̇) + K_p e − J̇ q̇`` (eq. 2-4) into the data; returns it."""
+        """``b = ẍ* + K_d (ẋ* − J q̇) + K_p e − J̇ q̇`` (eq. 2-4) into the data; returns it.
+
+        Raises:
+            TaskStackError: a task not written since the last call (see :meth:`targets`).
+        """
         data = self.data
+        self._check_written()
         _k.acceleration_targets(data.A, data.b, self._Q, v)
         return data
+
+    def _check_written(self) -> None:
+        """Refuses targets while a task has not been written since the last targets
+        (a task declared with ``keep=True``: not written at all); counts the call."""
+        stamp = self._stamp
+        for task in self._tasks.values():
+            if task.stamp != stamp and (task.stamp < 0 or not task.keep):
+                stale = [t for t in self._tasks.values()
+                         if t.stamp != stamp and (t.stamp < 0 or not t.keep)]
+                first = stale[0]
+                raise TaskStackError(
+                    f"not written {'yet' if first.stamp < 0 else 'since the last targets()'}"
+                    f" (unwritten: {', '.join(t.name for t in stale)}); call its writer "
+                    f"({first.kind if first.kind != 'limits' else 'joint_limits'}) every "
+                    "step before targets(), or declare it with keep=True to keep its last "
+                    "rows", task=first.name, level=first.level)
+        self._stamp = stamp + 1
 
     # ------------------------------------------------------------------ helpers
     def _task(self, name: str, kind: str | None) -> _Task:
@@ -775,7 +942,12 @@ class TaskWriter:
             hot = self._frame_args(task, state)
         if self._accel and not state.has_drift:
             self._drift(state, task)                          # refuses a drift-free state
-        _k.frame_rows(*hot[1], x, xd, xdd, rot, w, wd)
+        try:
+            _k.frame_rows(*hot[1], x, xd, xdd, rot, w, wd)
+        except CoreInputError as exc:
+            raise _refused(task, exc, _CONTACT_ARGUMENTS if task.kind == "contact"
+                           else _ARGUMENTS) from None
+        task.stamp = self._stamp
 
     def _frame_args(self, task: _Task, state, A=None, Q=None) -> tuple:
         """``(state.data, (A, Q, J, t, R, spec, geo, a_j, v_j))``: the frame kernels'
@@ -797,15 +969,15 @@ class TaskWriter:
         if not self._accel:
             return False
         if not state.has_drift:
-            raise ValueError(f"task {task.name!r}: an acceleration-level writer needs "
-                             "J̇q̇, but the KinematicState was built with drift=False")
+            raise TaskStackError("an acceleration-level writer needs J̇q̇, but the "
+                                 "KinematicState was built with drift=False", task=task.name)
         return True
 
     def _data_views(self, state) -> "_DataViews":
         views = self._views
         if views is None or views.data is not state.data:
             if state.robot.model is not self.robot.model:
-                raise ValueError(f"the state is of robot {state.robot.name!r}, the writer "
+                raise StateError(f"the state is of robot {state.robot.name!r}, the writer "
                                  f"of {self.robot.name!r}")
             views = self._views = _DataViews(state.data)
         return views
@@ -853,6 +1025,22 @@ _NDARRAY = np.ndarray
 _ZEROS: dict[int, np.ndarray] = {}        # m -> zeros(m), never written
 
 
+#: the compiled writers' names of the writers' arguments, where they differ
+_ARGUMENTS = {"Rstar": "rotation", "w": "angular_velocity", "wd": "angular_acceleration"}
+_CONTACT_ARGUMENTS = {"x": "translation", "Rstar": "rotation"}
+
+
+def _refused(task: _Task, exc: CoreInputError, names: dict = _ARGUMENTS) -> Exception:
+    """A reference the compiled writer refused (an entry not finite) as the task's
+    :class:`TaskStackError` naming the writer's argument; any other refusal as it was."""
+    message = str(exc)
+    array, bracket, rest = message.partition("[")
+    if not bracket or "] is not finite" not in rest:
+        return exc
+    return TaskStackError(f"{names.get(array, array)}[{rest}", task=task.name,
+                          level=task.level)
+
+
 def _vec(value, m: int, task: str, what: str) -> np.ndarray:
     """``value`` as a float64 vector of ``m`` entries (zeros for ``None``); the common
     case (such an ndarray already) is checked first and passed through as is."""
@@ -863,9 +1051,12 @@ def _vec(value, m: int, task: str, what: str) -> np.ndarray:
         return zeros
     if type(value) is np.ndarray and value.dtype == _F64 and value.shape == (m,):
         return value
-    out = np.asarray(value, dtype=np.float64)
+    try:
+        out = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise TaskStackError(f"{what} must be {m} numbers, got {value!r}", task=task) from None
     if out.shape != (m,):
-        raise ValueError(f"task {task!r}: {what} must have {m} entries, got shape {out.shape}")
+        raise TaskStackError(f"{what} must have {m} entries, got shape {out.shape}", task=task)
     return out
 
 
@@ -885,7 +1076,11 @@ _SHAPE33 = (3, 3)
 def _rotation(rotation, task: str) -> np.ndarray:
     rot = rotation
     if type(rot) is not np.ndarray or rot.dtype != _F64:
-        rot = np.asarray(rotation, dtype=np.float64)
+        try:
+            rot = np.asarray(rotation, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise TaskStackError(f"rotation must be 3 × 3 numbers, got {rotation!r}",
+                                 task=task) from None
     if rot.shape != (3, 3):
-        raise ValueError(f"task {task!r}: rotation must be 3 × 3, got {rot.shape}")
+        raise TaskStackError(f"rotation must be 3 × 3, got {rot.shape}", task=task)
     return rot

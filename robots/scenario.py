@@ -36,7 +36,7 @@ from typing import ClassVar
 import numpy as np
 
 from .models import RobotModel
-from .simulate import StepTasks
+from .simulate import SimulationError, StepTasks
 from .tasks import KinematicState
 
 __all__ = ["BaselineTask", "Scenario", "SCENARIOS", "make"]
@@ -104,7 +104,7 @@ class Scenario:
             return lambda state, t: self.velocity_stack(state, t, gain=gain, limits=limits,
                                                         dt=dt)
         if level != "acceleration":
-            raise ValueError(f"level must be 'acceleration' or 'velocity', got {level!r}")
+            raise SimulationError(f"level must be 'acceleration' or 'velocity', got {level!r}")
         return lambda state, t: self.acceleration_stack(state, t, limits=limits, dt=dt)
 
     def acceleration_stack(self, state: KinematicState, t: float, limits: str = "activation",
@@ -159,6 +159,6 @@ def make(name: str, variant: str | None = None) -> Scenario:
     if not SCENARIOS:
         SCENARIOS.update(_registry())
     if name not in SCENARIOS:
-        raise ValueError(f"unknown scenario {name!r}; known: {', '.join(SCENARIOS)}")
+        raise SimulationError(f"unknown scenario {name!r}; known: {', '.join(SCENARIOS)}")
     cls = SCENARIOS[name]
     return cls(variant or cls.variants[0])

@@ -38,6 +38,7 @@ from typing import Any, Callable, Generator
 import numpy as np
 import pinocchio as pin
 
+from prioik.errors import PrioikError
 from prioik.hierarchy import (StackData, StackLayout, Task, TaskStack,
                               algorithmic_error_norms)
 
@@ -143,7 +144,7 @@ class SimulationResult:
             try:
                 json.dumps(value)
             except TypeError as exc:
-                raise ValueError(f"SimulationResult.info[{key!r}] cannot be saved as JSON "
+                raise SimulationError(f"SimulationResult.info[{key!r}] cannot be saved as JSON "
                                  f"({exc})") from None
         meta = {"format": "prioik.SimulationResult/1", "failed": bool(self.failed),
                 "message": self.message, "failed_step": self.failed_step,
@@ -172,14 +173,14 @@ class SimulationResult:
                 files = set(z.files)
                 missing = [k for k in (*cls._ARRAYS, "statuses", "meta") if k not in files]
                 if missing:
-                    raise ValueError(f"{path} is not a saved SimulationResult (no "
+                    raise SimulationError(f"{path} is not a saved SimulationResult (no "
                                      f"{', '.join(missing)})")
                 meta = json.loads(str(z["meta"]))
                 arrays = {k: np.array(z[k]) for k in cls._ARRAYS}
                 errors = {k: np.array(z[f"error:{k}"]) for k in meta["error_names"]}
                 statuses = [str(s) for s in z["statuses"]]
         except (KeyError, json.JSONDecodeError) as exc:
-            raise ValueError(f"{path} is not a saved SimulationResult ({exc})") from None
+            raise SimulationError(f"{path} is not a saved SimulationResult ({exc})") from None
         info = dict(meta.get("info", {}))
         info.setdefault("versions", meta.get("versions", {}))
         return cls(arrays["t"], arrays["q"], arrays["v"], arrays["a"], arrays["tau"], errors,
@@ -350,8 +351,10 @@ def _algorithmic_error(stack: TaskStack | StackData, x: np.ndarray,
     return float(np.sqrt(np.sum(np.square(norms))))
 
 
-class SimulationError(ValueError):
-    """:func:`simulate` was called with a ``duration``, ``dt`` or ``level`` it cannot run."""
+class SimulationError(PrioikError, ValueError):
+    """:func:`simulate` was called with a ``duration``, ``dt`` or ``level`` it cannot run,
+    a scenario with a variant or limits it does not have, or a run cannot be saved or
+    read (:meth:`SimulationResult.save`, :meth:`SimulationResult.load`)."""
 
 
 def _check_times(duration: float, dt: float) -> None:
@@ -557,8 +560,8 @@ def _steps(robot, build, solve, duration, dt, q0, v0, needs_dynamics, torque_fro
             if len(errors[name]) < len(T):
                 errors[name].append(np.nan)
         if algorithmic_error:     # evaluated after the run: an SVD per level between
-            # steps evicts the control loop's working set and inflated its timed phases
-            # (measured on G1: kinematics 43 -> 60 µs, solve 17 -> 22 µs)
+            # steps would evict the control loop's working set and inflate its timed
+            # phases, so the timed steps run without it
             stack = step.stack
             if isinstance(stack, StackData):     # written in place by the next step
                 if record is None:

@@ -27,6 +27,7 @@ bounds on ``q̈`` or ``q̇`` for the QP formulations. :func:`frame_region` and
 
 from __future__ import annotations
 
+import math
 import threading
 from dataclasses import dataclass
 
@@ -36,7 +37,8 @@ import pinocchio as pin
 from prioik._core import rows as _core_rows
 from prioik.hierarchy import Task, TaskStackError
 
-from .models import UNIT_NORM_TOL, RobotModel, check_configuration, check_velocity
+from .models import (UNIT_NORM_TOL, RobotModel, StateError, check_configuration,
+                     check_velocity)
 from .references import Reference
 from .rows import JointLimitActivation, TaskWriter
 
@@ -194,10 +196,10 @@ class KinematicState:
         """``J̇ q̇`` (6): classical acceleration of the frame origin at ``q̈ = 0``.
 
         Raises:
-            ValueError: the state was built with ``drift=False``.
+            StateError: the state was built with ``drift=False``.
         """
         if not self.has_drift:
-            raise ValueError("this KinematicState was built with drift=False "
+            raise StateError("this KinematicState was built with drift=False "
                              "(velocity level): it has no J̇q̇ terms")
         key = ("dJv", frame)
         if key not in self._cache:
@@ -234,17 +236,25 @@ class TaskTerm:
         """``J θ̈ = ẍ* + K_d ė + K_p e − J̇ θ̇`` (eq. 2-4).
 
         Raises:
-            ValueError: the term has no drift (built with ``drift=False``), naming it.
+            TaskStackError: the term has no drift (built with ``drift=False``), or a gain
+                negative or not finite; naming the task.
         """
         if self.drift is None:
-            raise ValueError(f"task {self.name!r} was built from a KinematicState("
-                             "drift=False): an acceleration task needs J̇q̇ (build the "
-                             "state with drift=True, or use .velocity(k))")
+            raise TaskStackError("it was built from a KinematicState(drift=False): an "
+                                 "acceleration task needs J̇q̇ (build the state with "
+                                 "drift=True, or use .velocity(k))", task=self.name)
+        _check_gain(self.name, "kp", kp)
+        _check_gain(self.name, "kd", kd)
         h = self.feedforward + kd * self.rate_error + kp * self.error - self.drift
         return Task(self.name, self.J, h, weight=weight)
 
     def velocity(self, k: float, weight=1.0) -> Task:
-        """``J q̇ = ẋ* + K e`` (velocity-level closed-loop inverse kinematics)."""
+        """``J q̇ = ẋ* + K e`` (velocity-level closed-loop inverse kinematics).
+
+        Raises:
+            TaskStackError: ``k`` negative or not finite, naming the task.
+        """
+        _check_gain(self.name, "k", k)
         return Task(self.name, self.J, self.velocity_ref + k * self.error, weight=weight)
 
     def select(self, rows) -> "TaskTerm":
@@ -253,6 +263,23 @@ class TaskTerm:
         return TaskTerm(self.name, self.J[idx],
                         None if self.drift is None else self.drift[idx], self.error[idx],
                         self.rate_error[idx], self.feedforward[idx], self.velocity_ref[idx])
+
+
+def _check_gain(task: str, what: str, gain) -> None:
+    """Refuses a gain (a number, or one per row) that is not finite and ≥ 0, naming the
+    task and the gain."""
+    if isinstance(gain, (int, float)) and not isinstance(gain, bool):
+        ok = math.isfinite(gain) and gain >= 0          # the common case, at once
+    else:
+        try:
+            g = np.asarray(gain, dtype=np.float64)
+            ok = (not isinstance(gain, (bool, str, bytes)) and g.ndim <= 1
+                  and bool(np.isfinite(g).all() and (g >= 0).all()))
+        except (TypeError, ValueError):
+            ok = False
+    if not ok:
+        raise TaskStackError(f"gain {what} must be a finite number ≥ 0 (or one per row), "
+                             f"got {gain!r}", task=task)
 
 
 # ------------------------------------------------------- one-task writers, per thread
@@ -284,6 +311,17 @@ def _writer(state: KinematicState, key: tuple, declare, mode: str | None = None
     return entry[1]
 
 
+def _write(name: str, write, *args) -> None:
+    """``write(*args)``, a one-task writer's call; its :class:`TaskStackError` names the
+    builder's task ``name`` (not the writer's inner one)."""
+    try:
+        write(*args)
+    except TaskStackError as exc:
+        if exc.task != _T:
+            raise
+        raise TaskStackError(exc.reason, task=name, **exc.detail) from None
+
+
 def _term(w: TaskWriter, state: KinematicState, name: str) -> TaskTerm:
     """The writer's one task as a :class:`TaskTerm` (copied out)."""
     sl = w.layout.task_slice(_T)
@@ -297,10 +335,11 @@ def _term(w: TaskWriter, state: KinematicState, name: str) -> TaskTerm:
 def frame_position(state: KinematicState, frame: str, ref: Reference,
                    name: str | None = None) -> TaskTerm:
     """Position of a frame origin, world coordinates (3 rows)."""
+    name = name or f"{frame}_position"
     w = _writer(state, ("position", frame),
                 lambda w, g: w.add_frame_position(_T, frame, gain=g))
-    w.frame_position(state, _T, ref.x, ref.xd, ref.xdd)
-    return _term(w, state, name or f"{frame}_position")
+    _write(name, w.frame_position, state, _T, ref.x, ref.xd, ref.xdd)
+    return _term(w, state, name)
 
 
 def point_position(state: KinematicState, frame: str, offset, ref: Reference,
@@ -310,8 +349,9 @@ def point_position(state: KinematicState, frame: str, offset, ref: Reference,
     off = tuple(float(v) for v in np.asarray(offset, dtype=float).reshape(-1))
     w = _writer(state, ("point", frame, off),
                 lambda w, g: w.add_point(_T, frame, off, gain=g))
-    w.point(state, _T, ref.x, ref.xd, ref.xdd)
-    return _term(w, state, name or f"{frame}_point")
+    name = name or f"{frame}_point"
+    _write(name, w.point, state, _T, ref.x, ref.xd, ref.xdd)
+    return _term(w, state, name)
 
 
 def frame_orientation(state: KinematicState, frame: str, rotation: np.ndarray,
@@ -326,8 +366,10 @@ def frame_orientation(state: KinematicState, frame: str, rotation: np.ndarray,
     """
     w = _writer(state, ("orientation", frame),
                 lambda w, g: w.add_frame_orientation(_T, frame, gain=g))
-    w.frame_orientation(state, _T, rotation, angular_velocity, angular_acceleration)
-    return _term(w, state, name or f"{frame}_orientation")
+    name = name or f"{frame}_orientation"
+    _write(name, w.frame_orientation, state, _T, rotation, angular_velocity,
+           angular_acceleration)
+    return _term(w, state, name)
 
 
 def frame_pose(state: KinematicState, frame: str, ref: Reference, rotation: np.ndarray,
@@ -335,8 +377,9 @@ def frame_pose(state: KinematicState, frame: str, ref: Reference, rotation: np.n
     """Position (rows 0-2, following ``ref``) and orientation (rows 3-5, fixed
     ``rotation``) of a frame: 6 rows."""
     w = _writer(state, ("pose", frame), lambda w, g: w.add_frame_pose(_T, frame, gain=g))
-    w.frame_pose(state, _T, ref.x, rotation, ref.xd, ref.xdd)
-    return _term(w, state, name or f"{frame}_pose")
+    name = name or f"{frame}_pose"
+    _write(name, w.frame_pose, state, _T, ref.x, rotation, ref.xd, ref.xdd)
+    return _term(w, state, name)
 
 
 def contact(state: KinematicState, frame: str, placement: pin.SE3,
@@ -344,8 +387,9 @@ def contact(state: KinematicState, frame: str, placement: pin.SE3,
     """A support contact: the frame held at ``placement`` (6 rows, zero reference
     velocity and acceleration; with gains this is ``ẍ = −K_d ẋ + K_p e``)."""
     w = _writer(state, ("contact", frame), lambda w, g: w.add_contact(_T, frame, gain=g))
-    w.contact(state, _T, placement)
-    return _term(w, state, name or f"{frame}_contact")
+    name = name or f"{frame}_contact"
+    _write(name, w.contact, state, _T, placement)
+    return _term(w, state, name)
 
 
 def com_position(state: KinematicState, ref: Reference, axes=(0, 1),
@@ -354,7 +398,7 @@ def com_position(state: KinematicState, ref: Reference, axes=(0, 1),
     ``ref`` given on those axes or as 3-vectors."""
     idx = tuple(int(a) for a in axes)
     w = _writer(state, ("com", idx), lambda w, g: w.add_com(_T, gain=g, axes=idx))
-    w.com(state, _T, *(_on_axes(v, idx) for v in (ref.x, ref.xd, ref.xdd)))
+    _write(name, w.com, state, _T, *(_on_axes(v, idx) for v in (ref.x, ref.xd, ref.xdd)))
     return _term(w, state, name)
 
 
@@ -367,7 +411,7 @@ def _on_axes(values, idx: tuple) -> np.ndarray:
 def posture(state: KinematicState, q_ref, name: str = "posture") -> TaskTerm:
     """Actuated joints to ``q_ref`` (rows ``n_base:`` of the velocity); no drift."""
     w = _writer(state, ("posture",), lambda w, g: w.add_posture(_T, gain=g))
-    w.posture(state, _T, q_ref)
+    _write(name, w.posture, state, _T, q_ref)
     term = _term(w, state, name)
     if term.drift is None:
         term.drift = np.zeros(term.J.shape[0])     # a posture has no drift at all

@@ -73,7 +73,8 @@ def pytest_report_header(config):
         info = core.build_info()
         built = (f"C++ core {'native' if info.native else 'portable'}, "
                  f"{'fast math' if info.fast_math else 'IEEE'}, "
-                 f"{'contraction' if info.fp_contract else 'no contraction'}")
+                 f"{'contraction' if info.fp_contract else 'no contraction'}, "
+                 f"hot functions' clone {info.vector_clones}")
     except ImportError:
         built = "C++ core not built"
     blas = ", ".join(f"{i['internal_api']} {i.get('version')} {i.get('architecture')}"

@@ -13,7 +13,7 @@ pytest.importorskip("proxsuite")
 
 
 def test_run_returns_rows_and_ratios_for_the_g1_bounds_stacks():
-    from prioik.benchmarks.active_set_bench import format_table, run
+    from prioik.benchmarks.active_set_bench import format_table, lexls_available, run
     out = run(windows=1, steps=2, repeats=1, ik=False)
     assert [(r["variant"], r["level"]) for r in out["rows"]] == [
         ("compatible", "acceleration"), ("compatible", "velocity"),
@@ -31,10 +31,18 @@ def test_run_returns_rows_and_ratios_for_the_g1_bounds_stacks():
             assert math.isfinite(worst) and worst > 0 and math.isfinite(total) and total > 0
             assert worst >= total * (1 - 1e-12)
     names = [x["name"] for x in out["ratios"]]
-    assert len(names) == 12 and len(set(names)) == 12
+    # with lexls built: its cold and hot-started rows and two ratios per stack set
+    with_lexls = lexls_available()
+    expected = 16 + (8 if with_lexls else 0)
+    assert len(names) == expected and len(set(names)) == expected
+    for r in out["rows"]:
+        assert ("cold/lexls_cold" in r) == with_lexls
+        if with_lexls:
+            assert r["median_s"]["lexls cold"] > 0 and r["median_s"]["lexls hot"] > 0
     assert all(math.isfinite(x["value"]) and x["value"] > 0 for x in out["ratios"])
     table = format_table(out)
     assert "cold/raw" in table and "worst warm/raw" in table
+    assert ("warm / lexls hot" in table) == with_lexls
 
 
 def test_each_window_comes_with_the_step_before_it():

@@ -101,7 +101,7 @@ def test_arm_command_writes_tables_runs_and_page(tmp_path, capsys):
     doc = tmp_path / "docs" / "arm.md"
     out = tmp_path / "res"
     assert main(["arm", "--duration", "0.1", "--formulations", "extended_jacobian,sns,pink",
-                 "--out", str(out), "--doc", str(doc), "--quiet"]) == 0
+                 "--out", str(out), "--doc", str(doc), "--quiet", "--save-runs"]) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert set(summary["reach"]) == {"extended_jacobian", "sns", "pink"}
     for label in ("extended_jacobian", "sns", "pink"):
@@ -109,5 +109,7 @@ def test_arm_command_writes_tables_runs_and_page(tmp_path, capsys):
     page = doc.read_text()
     assert "| `sns` |" in page and "| `pink` |" in page and "img/arm_reach_tip_error.png" in page
     assert (out / "reach_replay.html").is_file()
+    assert "MeshCat.Viewer" in (out / "reach_replay_meshes.html").read_text()
+    assert "`reach_replay_meshes.html`" in page
     header = (out / "reach_sns.csv").read_text().splitlines()[0].split(",")
     assert "q:panda_joint1" in header and "tau:panda_joint7" in header

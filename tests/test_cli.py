@@ -69,10 +69,15 @@ def test_solve_tells_peer_json_from_a_task_stack_file(name, fmt, capsys):
 
 def test_solve_picks_problems_of_a_soth_file(capsys):
     """soth's new.txt holds three problems; its third is malformed ('equalities 1' with two
-    rows): the whole file is refused naming it, --problems 0,1 solves the first two."""
+    rows): the whole file is refused naming it and the --problems that selects the
+    problems that parse; --problems 0,1 solves the first two."""
     path = str(PEER / "soth_new.txt")
     assert main(["solve", path]) == 2
-    assert "problem 2, level 2: 'equalities 1' but 2 rows follow" in capsys.readouterr().err
+    err = capsys.readouterr().err.strip()
+    assert "problem 2, level 2: 'equalities 1' but 2 rows follow" in err
+    assert err.endswith("problems 0, 1 parse: read them alone with problems=[0, 1] "
+                        "(prioik solve --problems 0,1)")
+    assert len(err.splitlines()) == 1
     assert main(["solve", path, "--problems", "0,1", "-f", "hierarchical_active_set",
                  "--check"]) == 0
     out = capsys.readouterr().out
@@ -191,3 +196,74 @@ def test_turn_steps_must_be_a_non_negative_integer(command, capsys):
         main([command, "--turn-steps", "-1"])
     assert exc.value.code == 2
     assert "--turn-steps: invalid non-negative integer value: '-1'" in capsys.readouterr().err
+
+
+def _nothing_may_run(monkeypatch):
+    """Every command's work made to fail the test: an unknown name must exit before."""
+    def ran(*args, **kwargs):
+        raise AssertionError("the command ran before refusing an unknown name")
+    from prioik.benchmarks import compare, fuzz, scenario_runs, validation
+    from prioik.benchmarks.bench import run as bench_run
+    monkeypatch.setattr(validation, "run_family", ran)
+    monkeypatch.setattr(validation, "report", ran)
+    monkeypatch.setattr(bench_run, "run_benchmark", ran)
+    monkeypatch.setattr(scenario_runs, "run_scenario", ran)
+    monkeypatch.setattr(fuzz, "run", ran)
+    monkeypatch.setattr(compare, "compare_stack", ran)
+
+
+@pytest.mark.parametrize("argv, message, known", [
+    (["validate", "--formulations", "nosuch"], "unknown formulation 'nosuch'; known: ",
+     "extended_jacobian"),
+    (["validate", "--formulations", "reference,nosuch[x]"],
+     "unknown formulation 'nosuch[x]'; known: ", "hierarchical_active_set"),
+    (["validate", "--families", "nosuch"], "unknown families ['nosuch']; known: ",
+     "conflicting"),
+    (["bench", "--formulations", "nosuch"], "unknown formulation 'nosuch'; known: ",
+     "extended_jacobian"),
+    (["bench", "--family", "nosuch"], "unknown family 'nosuch'; known: ", "conflicting"),
+    (["fuzz", "--paths", "nosuch"], "unknown fuzz path 'nosuch'; known: ", "ej_qr_cpp"),
+    (["fencing", "--formulations", "nosuch"], "unknown run(s) nosuch; known: ",
+     "extended_jacobian"),
+    (["compare", "--formulations", "nosuch"], "unknown formulation 'nosuch'; known: ",
+     "extended_jacobian"),
+])
+def test_an_unknown_name_exits_2_at_once_with_the_valid_ones(argv, message, known, tmp_path,
+                                                            monkeypatch, capsys):
+    """prioik validate --formulations nosuch used to run every family and exit 0."""
+    _nothing_may_run(monkeypatch)
+    out = tmp_path / "out"
+    extra = {"validate": ["--out", str(out / "v.md")], "bench": ["--out", str(out)],
+             "fencing": ["--out", str(out)], "fuzz": ["--out", str(out)]}
+    assert main(argv + extra.get(argv[0], [])) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and known in err and len(err.splitlines()) == 1, err
+    assert not out.exists()
+
+
+def test_an_unknown_row_label_of_a_known_formulation_lists_the_labels(tmp_path, monkeypatch,
+                                                                      capsys):
+    from prioik.benchmarks import validation
+    monkeypatch.setattr(validation, "run_family", lambda *a, **k: pytest.fail("ran"))
+    out = tmp_path / "v.md"
+    for argv in (["validate", "--out", str(out)], ["bench", "--out", str(tmp_path / "b")]):
+        assert main(argv + ["--formulations", "extended_jacobian[nosuch]"]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.startswith(f"prioik {argv[0]}: error: unknown formulation or row label "
+                              "'extended_jacobian[nosuch]'; known formulations: reference, ")
+        assert "; row labels: " in err and len(err.splitlines()) == 1, err
+    assert not out.exists()
+
+
+def test_every_library_error_is_one_line_and_exit_2(monkeypatch, capsys):
+    """An UnknownNameError (a KeyError) raised under a command is reported as the
+    others are, not as a traceback."""
+    from prioik.benchmarks import library
+    from prioik.errors import UnknownNameError
+
+    def unknown(*args, **kwargs):
+        raise UnknownNameError("model 'x' has no frame 'tip'")
+    monkeypatch.setattr(library, "_problems", unknown)
+    assert main(["solve", SMALL]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == "prioik solve: error: model 'x' has no frame 'tip'"

@@ -4,6 +4,8 @@ that every array it is handed is checked at the boundary."""
 
 from __future__ import annotations
 
+import platform
+import sys
 import threading
 import time
 from pathlib import Path
@@ -39,6 +41,10 @@ def test_core_is_built_with_the_stated_rounding_rule():
     assert info.fp_contract is False      # a * b + c is rounded twice, as written
     assert info.eigen.startswith("3.4.")
     assert info.compiler
+    # the AVX2 and baseline clones of the hot functions: a portable GCC build on x86-64 Linux
+    portable_gcc = (not info.native and not info.sanitized and info.compiler.startswith("GNU")
+                    and sys.platform == "linux" and platform.machine() == "x86_64")
+    assert info.vector_clones in (("avx2", "default") if portable_gcc else ("none",))
 
 
 def test_core_constants_are_the_hierarchy_s():

@@ -122,7 +122,7 @@ def test_fencing_command_writes_summary_csv_plots_and_doc(tmp_path, capsys):
     doc = tmp_path / "docs" / "reproduction.md"
     rc = main(["fencing", "--variant", "both", "--formulations",
                "extended_jacobian,nullspace", "--duration", "0.1", "--out", str(out),
-               "--doc", str(doc), "--quiet"])
+               "--doc", str(doc), "--quiet", "--save-runs"])
     assert rc == 0
     printed = capsys.readouterr().out
     assert "fencing — compatible tasks" in printed and "fencing — incompatible tasks" in printed
@@ -141,6 +141,7 @@ def test_fencing_command_writes_summary_csv_plots_and_doc(tmp_path, capsys):
         assert np.loadtxt(csv, delimiter=",", skiprows=1).shape == (50, len(header))
         assert (out / f"{variant}_extended_jacobian.npz").is_file()
         assert (out / f"{variant}_replay.html").stat().st_size > 1000
+        assert (out / f"{variant}_replay_meshes.html").stat().st_size > 1e6
         for key in ("tip_error", "algorithmic_error", "qdd"):
             assert (out / f"{variant}_{key}.png").stat().st_size > 1000
     text = doc.read_text()
@@ -148,6 +149,32 @@ def test_fencing_command_writes_summary_csv_plots_and_doc(tmp_path, capsys):
     for line in text.splitlines():
         if line.startswith("!["):
             assert (doc.parent / line.rsplit("](", 1)[1].rstrip(")")).is_file()
+
+
+def test_fencing_command_writes_what_a_reader_looks_at_by_default(tmp_path, capsys):
+    """Without --save-runs: the summary, plots and replay pages, no trajectory files; the
+    printout is the labelled tables and the cross-check table, no dict dumps."""
+    out = tmp_path / "results"
+    rc = main(["fencing", "--variant", "both", "--formulations",
+               "extended_jacobian,extended_jacobian[step_bound]", "--duration", "0.04",
+               "--out", str(out), "--quiet", "--headline-rounds", "0"])
+    assert rc == 0
+    printed = capsys.readouterr().out
+    names = {p.name for p in out.iterdir()}
+    assert not [n for n in names if n.endswith((".csv", ".npz"))]
+    assert {"summary.json", "run_info.json", "crosscheck.json", "step_time.png",
+            "compatible_replay.html", "incompatible_replay.html",
+            "compatible_tip_error.png", "incompatible_qdd.png"} <= names
+    # a 0.04 s run: the two meshed replay pages ~2 MB each (meshcat's script and the
+    # decimated meshes), the rest a few hundred kB (the 3 s default run: under 20 MB)
+    assert {"compatible_replay_meshes.html", "incompatible_replay_meshes.html"} <= names
+    assert sum(p.stat().st_size for p in out.iterdir()) < 6_000_000
+    assert "columns:" in printed and "step ms   " in printed
+    assert "cross-check:" in printed and "{" not in printed
+    assert "σ_min" not in printed
+    info = json.loads((out / "run_info.json").read_text())
+    assert info["saved_runs"] is False
+    assert set(info["diagnostics"]) >= {"standing_sigmas", "sigma_trace", "max_limit_target"}
 
 
 def test_fencing_command_times_the_headline_pair_side_by_side(tmp_path):

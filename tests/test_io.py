@@ -87,3 +87,22 @@ def test_format_1_and_known_keys_load(tmp_path):
     path = _file(tmp_path, '{"description": "d", "format": 1, "n": 2, "levels": [['
                  + GOOD_TASK + ']]}')
     assert load_stack(path).n == 2
+
+
+def test_hard_levels_are_saved_and_read(tmp_path):
+    from prioik.hierarchy import hard
+    a = Task("a", np.eye(2), np.ones(2))
+    b = Task("b", np.eye(2), np.zeros(2))
+    stack = a / hard(b)
+    path = tmp_path / "hard.json"
+    save_stack(stack, path)
+    assert json.loads(path.read_text())["hard"] == [1]
+    assert load_stack(path).layout == stack.layout
+    assert "hard" not in json.loads(json.dumps(
+        __import__("prioik").hierarchy.stack_to_dict(a / b)))
+    for bad in ([2], [-1], "1", [True], [1.0]):
+        with pytest.raises(TaskStackError, match="'hard' must be a list of level indices "
+                                                 r"0 … 1"):
+            stack_from_dict({"levels": [{"name": "a", "A": [[1.0]], "b": [1.0]},
+                                        {"name": "b", "A": [[1.0]], "b": [0.0]}],
+                             "hard": bad})

@@ -100,8 +100,13 @@ def test_soth_file_with_several_problems():
     # the third problem says "equalities 1" and gives two rows (soth's reader would
     # misread it): refused, naming it
     with pytest.raises(TaskStackError, match=r"soth_new.txt: problem 2, level 2: "
-                                             r"'equalities 1' but 2 rows follow"):
+                                             r"'equalities 1' but 2 rows follow; problems "
+                                             r"0, 1 parse: read them alone with "
+                                             r"problems=\[0, 1\]") as err:
         load_soth(PEER / "soth_new.txt")
+    assert (err.value.detail["failed"], err.value.detail["parsed"]) == ([2], [0, 1])
+    with pytest.raises(TaskStackError, match=r"problem 2, level 2: .* rows follow$"):
+        load_soth(PEER / "soth_new.txt", problems=[2])      # nothing else asked: no hint
     with pytest.raises(TaskStackError, match="problem 5 requested, the file holds 3"):
         load_soth(PEER / "soth_new.txt", problems=[5])
 

@@ -207,3 +207,26 @@ def test_stacks_of_one_shape_share_their_layout():
     with pytest.raises(TaskStackError, match="n ≥ 1"):
         StackLayout.shared(True, [[("a", 1, "equality")]])
     assert StackLayout.shared(3, [[("a", 2)], [("b", 3, "inequality")]]) is one.layout
+
+
+def test_hard_violations_reads_each_hard_level_against_its_scale():
+    """A hard level is violated beyond the certificate's tolerance times its scale;
+    rounding-sized residuals are not violations; inequality levels count their distance
+    to the bounds; levels not declared hard are never listed."""
+    from prioik.hierarchy import DEFAULT_CERTIFICATE_TOL, hard, hard_violations
+    box = Task("box", np.eye(2), lower=np.array([-1.0, -1.0]), upper=np.array([1.0, 1.0]))
+    line = Task("line", np.array([[1.0, 1.0]]), np.array([4.0]))
+    stack = TaskStack([hard(box), hard(line), Task("free", np.eye(2), np.zeros(2))])
+    data = stack.data
+    assert hard_violations(data, np.array([2.0, 2.0])) == [
+        (0, pytest.approx(np.sqrt(2.0)), pytest.approx(4.0 * np.sqrt(2.0)))]   # 3√2 + √2
+    assert hard_violations(data, np.array([1.0, 3.0]))[0][0] == 0       # row 1 beyond 1
+    (level, r, scale), = hard_violations(data, np.array([0.5, 0.5]))
+    assert (level, r) == (1, 3.0) and scale == pytest.approx(5.0 + np.sqrt(2.0))
+    # within the tolerance of the scale: held (rounding, not a violation)
+    x = np.array([1.0, 3.0 + 0.5 * DEFAULT_CERTIFICATE_TOL])
+    ok = TaskStack([hard(line), Task("free", np.eye(2), np.zeros(2))])
+    assert hard_violations(ok.data, x) == []
+    assert hard_violations(ok.data, np.array([1.0, 3.0 + 1e-6]))[0][0] == 0
+    assert hard_violations(ok.data, np.array([np.nan, 0.0]))[0][0] == 0
+    assert hard_violations(TaskStack([line]).data, np.zeros(2)) == []    # none declared

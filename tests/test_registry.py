@@ -190,3 +190,79 @@ def test_a_first_solve_in_a_fresh_process_compiles_nothing():
                          timeout=120, check=True).stdout.split()
     assert len(out) == 2 and all(float(t) < 2.0 for t in out), out
 
+
+
+# ------------------------------------------------------------------ hard levels
+def _contradictory_hard_top(hard_top: bool = True) -> TaskStack:
+    """Level 0 asks x0 = 1 and x0 = -1 (its least-squares optimum: x0 = 0, residual
+    √2); level 1 a posture. Declared hard, level 0 cannot hold."""
+    from prioik.hierarchy import hard
+    up = Task("up", np.array([[1.0, 0.0, 0.0]]), np.array([1.0]))
+    down = Task("down", np.array([[1.0, 0.0, 0.0]]), np.array([-1.0]))
+    posture = Task("posture", np.eye(3), np.array([0.5, -0.25, 2.0]))
+    top = up + down
+    return TaskStack([hard(top) if hard_top else top, posture])
+
+
+def _options(info, n):
+    from prioik.hierarchy.families import random_spd
+    return ({"mass_matrix": random_spd(np.random.default_rng(1), n)}
+            if info.capabilities.needs_mass_matrix else {})
+
+
+RUNNABLE = [f for f in formulations.available() if f.available and f.capabilities.equalities]
+
+
+@pytest.mark.parametrize("info", RUNNABLE, ids=lambda f: f.name)
+def test_a_contradictory_hard_top_level_fails_naming_it_on_every_formulation(info):
+    """The least-squares compromise of a contradictory level is what every formulation
+    returns (residual √2 at level 0); declared hard, the answer is "failed" with the
+    fault naming level 0 and its tasks — the same check for every plugin, made once
+    where statuses are finalised. Undeclared, the status is the formulation's own."""
+    stack = _contradictory_hard_top()
+    opts = _options(info, stack.n)
+    soft = formulations.solve(_contradictory_hard_top(hard_top=False), info.name, **opts)
+    sol = formulations.solve(stack, info.name, **opts)
+    assert soft.status != "failed", soft.info.get("message")
+    np.testing.assert_allclose(sol.x, soft.x, rtol=0, atol=1e-12)  # the same answer
+    assert sol.residuals[0] == pytest.approx(np.sqrt(2.0), rel=1e-6)
+    assert sol.status == "failed"
+    assert sol.info["fault_level"] == 0 and sol.info["fault_tasks"] == ["up", "down"]
+    assert sol.info["hard_violations"] == [0]
+    assert sol.info["message"].startswith("hard level 0 (up, down) is left violated: "
+                                          "residual 1.41")
+    solver = formulations.prepare(stack.layout, info.name, **opts)
+    batch = solver.solve_batch([stack, stack])
+    assert list(batch.statuses) == ["failed", "failed"]
+
+
+@pytest.mark.parametrize("info", RUNNABLE, ids=lambda f: f.name)
+def test_a_hard_level_that_holds_leaves_the_status_as_it_was(info):
+    """Level 1 hard and satisfiable below a free level 0: an exact formulation's answer
+    holds it, and its status is unchanged; a formulation with algorithmic error (or soft
+    priorities) that leaves it violated is "failed" for it."""
+    from prioik.hierarchy import hard, hard_violations
+    rng = np.random.default_rng(7)
+    top = Task("top", rng.normal(size=(2, 5)), rng.normal(size=2))
+    held = Task("held", rng.normal(size=(2, 5)), rng.normal(size=2))
+    rest = Task("rest", np.eye(5), np.zeros(5))
+    stack = TaskStack([top, hard(held), rest])
+    assert stack.hard == (1,) and stack.layout.hard == (1,)
+    opts = _options(info, stack.n)
+    plain = formulations.solve(TaskStack([top, held, rest]), info.name, **opts)
+    sol = formulations.solve(stack, info.name, **opts)
+    np.testing.assert_array_equal(sol.x, plain.x)
+    violated = hard_violations(stack.data, plain.x)
+    if info.capabilities.exact:
+        assert violated == [] and sol.status == plain.status == "optimal"
+        assert "hard_violations" not in sol.info
+    else:
+        assert sol.status == ("failed" if violated else plain.status)
+        assert sol.info.get("hard_violations", []) == [v[0] for v in violated]
+
+
+def test_a_new_formulation_gets_the_hard_check_with_no_edit(toy_plugin):
+    from conftest import TOY
+    sol = formulations.solve(_contradictory_hard_top(), TOY)
+    assert sol.status == "failed" and sol.info["fault_level"] == 0
+    assert formulations.solve(_contradictory_hard_top(hard_top=False), TOY).status != "failed"

@@ -185,8 +185,8 @@ def test_builders_work_at_both_levels_and_are_the_writers_rows(robot, seed):
         assert a.drift is not None and np.all(np.isfinite(a.acceleration(4.0, 2.0).b))
         if kind != "posture":
             assert b.drift is None, kind
-            with pytest.raises(ValueError, match=f"task {b.name!r} was built from a "
-                                                 r"KinematicState\(drift=False\)"):
+            with pytest.raises(TaskStackError, match=f"task {b.name!r}: it was built from a "
+                                                     r"KinematicState\(drift=False\)"):
                 b.acceleration(4.0, 2.0)
     # the point on the hand equals the sword-tip frame at the same place
     tip, pt = build["position"](full), build["point"](full)
@@ -406,6 +406,161 @@ def test_writer_errors_name_the_task(robot):
     other = spatial_chain(3)
     with pytest.raises(ValueError, match="the state is of robot 'chain3'"):
         w.com(KinematicState(other, other.q0, np.zeros(3)), "com", np.zeros(2))
+
+
+@pytest.mark.parametrize("mode, gain, message", [
+    ("velocity", -1.0, r"gain must be ≥ 0, got -1.0"),
+    ("velocity", np.nan, r"gain must be finite, got nan"),
+    ("velocity", np.inf, r"gain must be finite, got inf"),
+    ("acceleration", (10.0, -2.0), r"gain must be ≥ 0, got \(10.0, -2.0\)"),
+    ("acceleration", (-10.0, 2.0), r"gain must be ≥ 0"),
+    ("acceleration", (np.nan, 2.0), r"gain must be finite"),
+])
+def test_a_negative_or_non_finite_gain_is_refused_at_declaration(robot, mode, gain, message):
+    w = TaskWriter(robot, mode)
+    for declare in (lambda: w.add_frame_position("tip", "sword_tip", gain=gain),
+                    lambda: w.add_com("tip", gain=gain),
+                    lambda: w.add_posture("tip", gain=gain)):
+        with pytest.raises(TaskStackError, match="task 'tip': " + message) as err:
+            declare()
+        assert err.value.task == "tip"
+    assert w.tasks() == ()
+    ok = 1.0 if mode == "velocity" else (1.0, 1.0)
+    w.add_frame_position("tip", "sword_tip", gain=ok)
+    with pytest.raises(TaskStackError, match="task 'tip': " + message):
+        w.set_gains("tip", gain)
+    assert w.kp[:3].tolist() == [1.0] * 3                 # the gains it had
+    w.set_gains("tip", 0.0 if mode == "velocity" else (0.0, 0.0))   # 0: feed-forward only
+
+
+def test_a_non_finite_reference_is_refused_at_the_writer_naming_task_and_argument(robot):
+    """Every reference of every writer (targets, rates, rotations, q_ref): a NaN or an
+    infinity raises at the call, naming the task, its level and the argument; the rows
+    written before stay as they were."""
+    w = TaskWriter(robot, "acceleration")
+    w.add_frame_position("tip", "sword_tip", gain=(1.0, 1.0), level=0)
+    w.add_frame_orientation("turn", "left_hand", gain=(1.0, 1.0), level=0)
+    w.add_frame_pose("pose", "left_foot", gain=(1.0, 1.0), level=1)
+    w.add_contact("foot", "right_foot", gain=(1.0, 1.0), level=1)
+    w.add_com("com", gain=(1.0, 1.0), level=2)
+    w.add_posture("posture", gain=(1.0, 1.0), level=3)
+    state = _state(robot, 3)
+    z, R = np.zeros(3), np.eye(3)
+
+    def bad(shape, index, value=np.nan):
+        a = np.zeros(shape) if shape != (3, 3) else np.eye(3)
+        a[index] = value
+        return a
+
+    w.frame_position(state, "tip", z)
+    before = w.data.A.copy(), w.error.copy()
+    cases = [
+        (lambda: w.frame_position(state, "tip", bad(3, 1)), "tip", 0, r"x\[1\] .*\(nan\)"),
+        (lambda: w.frame_position(state, "tip", z, bad(3, 2, np.inf)), "tip", 0,
+         r"xd\[2\] is not finite \(inf\)"),
+        (lambda: w.frame_position(state, "tip", z, None, bad(3, 0, -np.inf)), "tip", 0,
+         r"xdd\[0\] is not finite \(-inf\)"),
+        (lambda: w.frame_orientation(state, "turn", bad((3, 3), (1, 2))), "turn", 0,
+         r"rotation\[1, 2\] is not finite \(nan\)"),
+        (lambda: w.frame_orientation(state, "turn", R, bad(3, 0)), "turn", 0,
+         r"angular_velocity\[0\] is not finite"),
+        (lambda: w.frame_orientation(state, "turn", R, None, bad(3, 2)), "turn", 0,
+         r"angular_acceleration\[2\] is not finite"),
+        (lambda: w.frame_pose(state, "pose", bad(3, 0), R), "pose", 1, r"x\[0\] is not"),
+        (lambda: w.frame_pose(state, "pose", z, bad((3, 3), (0, 0), np.inf)), "pose", 1,
+         r"rotation\[0, 0\] is not finite \(inf\)"),
+        (lambda: w.contact(state, "foot", translation=bad(3, 1), rotation=R), "foot", 1,
+         r"translation\[1\] is not finite"),
+        (lambda: w.contact(state, "foot", pin.SE3(R, bad(3, 2))), "foot", 1,
+         r"translation\[2\] is not finite"),
+        (lambda: w.com(state, "com", bad(2, 1)), "com", 2, r"x\[1\] is not finite"),
+        (lambda: w.com(state, "com", np.zeros(2), bad(2, 0)), "com", 2, r"xd\[0\] is not"),
+        (lambda: w.posture(state, "posture", bad(robot.nq, 9)), "posture", 3,
+         r"q_ref\[9\] is not finite \(nan\)"),
+        (lambda: w.posture(state, "posture", list(bad(robot.nq, 8, np.inf))), "posture", 3,
+         r"q_ref\[8\] is not finite \(inf\)"),
+    ]
+    for call, task, level, message in cases:
+        with pytest.raises(TaskStackError, match=rf"level {level}, task '{task}': {message}") \
+                as err:
+            call()
+        assert (err.value.task, err.value.level) == (task, level)
+    assert np.array_equal(w.data.A, before[0]) and np.array_equal(w.error, before[1])
+
+
+def test_builders_name_their_task_in_reference_and_gain_errors(robot):
+    """The builders of robots.tasks refuse the same references, naming their own task
+    (not their writer's inner one), and their terms refuse negative or non-finite gains."""
+    state = _state(robot, 4)
+    ref = Reference(np.array([0.3, np.nan, 0.5]), np.zeros(3), np.zeros(3))
+    with pytest.raises(TaskStackError, match=r"task 'hand': x\[1\] is not finite") as err:
+        frame_position(state, "sword_tip", ref, name="hand")
+    assert err.value.task == "hand"
+    with pytest.raises(TaskStackError, match=r"task 'sword_tip_pose': x\[1\] is not finite"):
+        frame_pose(state, "sword_tip", ref, np.eye(3))
+    term = frame_position(state, "sword_tip", Reference(np.zeros(3), np.zeros(3),
+                                                        np.zeros(3)), name="hand")
+    for call, message in ((lambda: term.velocity(-1.0), r"gain k must be .*got -1.0"),
+                          (lambda: term.velocity(np.inf), r"gain k must be .*got inf"),
+                          (lambda: term.acceleration(1.0, -2.0), r"gain kd .*got -2.0"),
+                          (lambda: term.acceleration(np.nan, 2.0), r"gain kp .*got nan"),
+                          (lambda: term.velocity("1"), r"gain k .*got '1'"),
+                          (lambda: term.velocity(np.array([1.0, -1.0, 1.0])),
+                           r"gain k .*got array")):
+        with pytest.raises(TaskStackError, match=r"task 'hand': " + message):
+            call()
+    assert np.all(np.isfinite(term.acceleration(0.0, 0.0).b))
+    per_row = term.velocity(np.array([1.0, 2.0, 3.0])).b          # one gain per row
+    np.testing.assert_array_equal(per_row, term.velocity_ref
+                                  + np.array([1.0, 2.0, 3.0]) * term.error)
+
+
+def _declared(robot, keep=()):
+    w = TaskWriter(robot, "velocity")
+    w.add_frame_position("tip", "sword_tip", gain=1.0, level=0, keep="tip" in keep)
+    w.add_com("com", gain=1.0, level=1, keep="com" in keep)
+    w.add_posture("posture", gain=1.0, level=2, keep="posture" in keep)
+    return w
+
+
+def test_a_task_not_written_since_the_last_targets_is_refused_naming_it(robot):
+    state = _state(robot, 5, drift=False)
+    w = _declared(robot)
+    w.frame_position(state, "tip", np.zeros(3))
+    with pytest.raises(TaskStackError, match=r"level 1, task 'com': not written yet "
+                                             r"\(unwritten: com, posture\).*keep=True") as err:
+        w.targets(state)
+    assert (err.value.task, err.value.level) == ("com", 1)
+    w.com(state, "com", np.zeros(2))
+    w.posture(state, "posture", robot.q0)
+    first = w.targets(state).b.copy()
+    w.frame_position(state, "tip", np.zeros(3))
+    w.posture(state, "posture", robot.q0)
+    with pytest.raises(TaskStackError, match=r"task 'com': not written since the last "
+                                             r"targets\(\) \(unwritten: com\)"):
+        w.velocity_targets()
+    w.com(state, "com", np.zeros(2))
+    assert np.array_equal(w.targets(state).b, first)        # same state, same targets
+    with pytest.raises(TaskStackError, match=r"unwritten: tip, com, posture"):
+        w.targets(state)                  # nothing written since the last targets()
+
+
+def test_a_task_declared_with_keep_keeps_its_last_rows(robot):
+    state = _state(robot, 6, drift=False)
+    w = _declared(robot, keep=("com",))
+    w.frame_position(state, "tip", np.zeros(3))
+    w.posture(state, "posture", robot.q0)
+    with pytest.raises(TaskStackError, match=r"task 'com': not written yet"):
+        w.targets(state)                  # a kept task is written once first
+    w.com(state, "com", np.array([0.1, -0.2]))
+    sl = w.layout.task_slice("com")
+    first = w.targets(state).b[sl].copy()
+    for _ in range(3):                    # com never written again: its rows stay
+        w.frame_position(state, "tip", np.zeros(3))
+        w.posture(state, "posture", robot.q0)
+        assert np.array_equal(w.targets(state).b[sl], first)
+    with pytest.raises(TaskStackError, match="keep must be True or False, got 'yes'"):
+        TaskWriter(robot, "velocity").add_posture("p", gain=1.0, keep="yes")
 
 
 def test_writers_follow_a_reused_data_across_states(robot):
@@ -630,3 +785,105 @@ def test_region_errors_name_the_task(robot):
     with pytest.raises(TaskStackError, match="task 'f' was declared as frame_region, not "
                        "com_region"):
         w.com_region(_state(robot, 0), "f")
+
+
+# ------------------------------------------------- damping and capped target rates
+@pytest.mark.parametrize("mode", ["velocity", "acceleration"])
+def test_damping_rows_are_the_identity_on_every_coordinate_with_zero_target(robot, mode):
+    w = TaskWriter(robot, mode)
+    gain = 5.0 if mode == "velocity" else (25.0, 10.0)
+    w.add_frame_position("tip", "sword_tip", gain=gain, level=0)
+    w.add_damping("damping", weight=0.04, level=0)
+    state = _state(robot, 1)
+    w.frame_position(state, "tip", np.array([0.3, 0.2, 0.9]))
+    A, b = w.targets(state).rows("damping")
+    assert np.array_equal(A, np.eye(robot.nv))          # the floating base's columns too
+    assert np.array_equal(b, np.zeros(robot.nv))
+    assert np.all(w.data.weights("damping") == 0.2)
+    assert w.layout.names == (("tip", "damping"),)
+
+
+def test_a_damped_level_is_the_damped_least_squares_step(robot):
+    """One level, a frame task and the damping task of weight λ²: the exact solvers
+    give ``Jᵀ (J Jᵀ + λ² I)⁻¹ b`` (relative 1e-10)."""
+    lam2 = 0.01
+    w = TaskWriter(robot, "velocity")
+    w.add_frame_position("tip", "sword_tip", gain=5.0, level=0)
+    w.add_damping("damping", weight=lam2, level=0)
+    state = _state(robot, 2, drift=False)
+    w.frame_position(state, "tip", np.array([1.5, 0.2, 0.9]))
+    data = w.targets(state)
+    J, b = data.rows("tip")
+    expected = J.T @ np.linalg.solve(J @ J.T + lam2 * np.eye(3), b)
+    for name in ("hierarchical_active_set", "extended_jacobian", "reference"):
+        x = formulations.solve(data.as_stack(), name).x
+        assert np.linalg.norm(x - expected) <= 1e-10 * np.linalg.norm(expected), name
+
+
+def test_max_rate_caps_the_velocity_target_and_leaves_a_smaller_one(robot):
+    w = TaskWriter(robot, "velocity")
+    w.add_frame_position("tip", "sword_tip", gain=10.0, level=0, max_rate=0.5)
+    w.add_com("com", gain=10.0, level=0, max_rate=0.05)
+    w.add_frame_orientation("turn", "left_foot", gain=10.0, level=1, max_rate=100.0)
+    w.add_frame_position("free", "right_hand", gain=10.0, level=1)
+    state = _state(robot, 3, drift=False)
+    far = np.array([1.5, 0.2, 0.9])
+    w.frame_position(state, "tip", far)
+    w.com(state, "com", state.com[:2] + 0.004)             # K e = 0.0566 > 0.05
+    w.frame_orientation(state, "turn", np.eye(3))
+    w.frame_position(state, "free", far)
+    data = w.targets(state)
+    sl = w.layout.task_slice
+    for name, cap in (("tip", 0.5), ("com", 0.05)):
+        uncapped = 10.0 * w.error[sl(name)]
+        b = data.rows(name)[1]
+        assert np.linalg.norm(uncapped) > cap
+        assert abs(np.linalg.norm(b) - cap) <= 1e-12 * cap
+        assert _close(b / np.linalg.norm(b), uncapped / np.linalg.norm(uncapped))
+    assert _close(data.rows("turn")[1], 10.0 * w.error[sl("turn")])     # under its cap
+    assert _close(data.rows("free")[1], 10.0 * w.error[sl("free")])     # no cap
+
+
+def test_damping_and_max_rate_errors_are_named(robot):
+    w = TaskWriter(robot, "velocity")
+    for bad in (0.0, -1.0, np.inf, "1", True):
+        with pytest.raises(TaskStackError, match="damping weight must be finite and > 0"):
+            w.add_damping("d", weight=bad)
+        with pytest.raises(ValueError, match="task 'tip': max_rate must be finite and > 0"):
+            w.add_frame_position("tip", "sword_tip", gain=1.0, max_rate=bad)
+    assert w.tasks() == ()                          # nothing half-declared
+    w.add_damping("d", weight=1e-2)
+    with pytest.raises(ValueError, match="task 'd': a damping task has no gain"):
+        w.set_gains("d", 1.0)
+    a = TaskWriter(robot, "acceleration")
+    with pytest.raises(ValueError, match="task 'tip': max_rate caps a velocity-level"):
+        a.add_frame_position("tip", "sword_tip", gain=(1.0, 1.0), max_rate=1.0)
+
+
+def test_a_writer_declares_hard_levels_and_a_violated_one_fails_the_solve(robot):
+    """Two targets for one hand on a hard level 0 cannot both hold: the solve is
+    "failed" naming level 0 and its tasks; the same rows with level 0 not hard give the
+    least-squares compromise as the formulation's own status."""
+    import prioik
+    state = _state(robot, 8, drift=False)
+    answers = {}
+    for hard in ((0,), ()):
+        w = TaskWriter(robot, "velocity", hard=hard)
+        w.add_frame_position("reach", "left_hand", gain=1.0, level=0)
+        w.add_frame_position("away", "left_hand", gain=1.0, level=0)
+        w.add_posture("posture", gain=1.0, level=1)
+        assert w.layout.hard == hard
+        w.frame_position(state, "reach", np.array([0.3, 0.2, 1.0]))
+        w.frame_position(state, "away", np.array([0.3, 0.2, 0.0]))
+        w.posture(state, "posture", robot.q0)
+        solver = prioik.prepare(w.layout, "hierarchical_active_set")
+        answers[hard] = solver.solve(w.targets(state))
+    sol, soft = answers[(0,)], answers[()]
+    assert soft.status == "optimal" and sol.status == "failed"
+    assert sol.info["fault_level"] == 0 and sol.info["fault_tasks"] == ["reach", "away"]
+    np.testing.assert_array_equal(sol.x, soft.x)
+    bad = TaskWriter(robot, "velocity", hard=(1,))
+    bad.add_posture("posture", gain=1.0, level=0)
+    with pytest.raises(TaskStackError, match=r"hard levels must be distinct level indices "
+                                             r"0 … 0, got \(1,\)"):
+        bad.layout

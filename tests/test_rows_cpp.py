@@ -3,7 +3,8 @@
 reference): every writer's rows equal within 1e-13 relative, row for
 row, on random states of the Panda, G1 and TALOS at velocity and acceleration level;
 ``log3`` near θ = 0 and θ = π; the bound and activation formulas on joints inside,
-at and past their limits; a closed loop (the README's Panda reach with limits) gives
+at and past their limits; a closed loop (a Panda reach with limits: docs/usage.md's,
+undamped and with a posture level) gives
 the same trajectory with both; bad inputs at the binding boundary raise
 :class:`~prioik.formulations.base.CoreInputError` naming the array."""
 
@@ -318,7 +319,8 @@ def _readme_loop(robot, steps):
 
 
 def test_closed_loop_trajectory_equals_the_reference(robots, with_reference):
-    """The README's Panda reach with limits, 300 steps, on each path."""
+    """A Panda reach with limits (docs/usage.md's, undamped, a posture level), 300 steps,
+    on each path."""
     robot = robots["panda"]
     cpp, at_bound = _readme_loop(robot, 300)
     with_reference()

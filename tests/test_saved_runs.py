@@ -69,6 +69,9 @@ def test_replay_and_plot_commands_work_on_saved_runs(fencing_run, tmp_path, caps
     assert main(["replay", str(path), "--out", str(tmp_path / "r")]) == 0
     html = tmp_path / "r" / "compatible_extended_jacobian_replay.html"
     assert html.is_file() and "const DATA" in html.read_text()
+    meshed = tmp_path / "r" / "compatible_extended_jacobian_replay_meshes.html"
+    assert "MeshCat.Viewer" in meshed.read_text() and meshed.stat().st_size < 4e6
+    assert "replay_meshes.html" in capsys.readouterr().out
     assert main(["plot", str(path), "--out", str(tmp_path / "p")]) == 0
     assert {f.name for f in (tmp_path / "p").iterdir()} >= {"compatible_tip_error.png",
                                                            "compatible_qdd.png"}
@@ -112,3 +115,29 @@ def test_replay_page_draws_the_robot_in_headless_chromium(tmp_path):
                    timeout=120)
     img2 = np.asarray(Image.open(shot2).convert("RGB")).astype(int)
     assert np.all(np.abs(img2 - np.array(ROBOT_RGB)) <= 2, axis=2).sum() == 0
+
+
+def test_replay_of_a_users_own_run_needs_the_robot_and_writes_the_meshed_page(tmp_path,
+                                                                             capsys):
+    """A run that names no scenario (a user's own loop, SimulationResult.save) is
+    replayed with its meshes once --robot names its robot; without it the command says
+    what to give."""
+    from prioik.benchmarks.cli import main
+    from prioik.benchmarks.saved_runs import TRIANGLES
+    from prioik.robots import mesh_replay, panda
+    assert TRIANGLES == mesh_replay.TRIANGLES
+    robot = panda()
+    k = 20
+    q = robot.q0 + np.linspace(0, 0.5, k)[:, None] * np.ones(robot.nq)
+    z = np.zeros((k, robot.nv))
+    run = SimulationResult(0.01 * np.arange(k), q, z, z, z, {}, np.zeros(k), np.zeros(k),
+                           np.zeros(k), np.zeros(k), ["optimal"] * k)
+    path = run.save(tmp_path / "mine.npz")
+    assert main(["replay", str(path), "--out", str(tmp_path)]) == 2
+    assert "--robot" in capsys.readouterr().err
+    assert main(["replay", str(path), "--out", str(tmp_path), "--robot", "panda",
+                 "--triangles", "5000"]) == 0
+    assert [f.name for f in tmp_path.glob("*.html")] == ["mine_replay_meshes.html"]
+    assert main(["replay", str(path), "--out", str(tmp_path / "n"), "--robot", "panda",
+                 "--no-meshes"]) == 2
+    assert "nothing to write" in capsys.readouterr().err

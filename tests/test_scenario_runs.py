@@ -70,3 +70,14 @@ def test_placo_baseline_runs_in_turns_like_alone():
     alone = run_one(table["placo_kinematics_solver"], "compatible", 0.02, 0.002)
     assert res.steps == alone.steps == 10
     np.testing.assert_allclose(res.q, alone.q, rtol=0, atol=1e-12)
+
+
+def test_without_the_view_extra_the_meshed_page_is_left_out_with_a_note(monkeypatch,
+                                                                       tmp_path, capsys):
+    import prioik.extras
+    from prioik.benchmarks import scenario_runs
+    monkeypatch.setattr(prioik.extras, "missing_distributions",
+                        lambda extra: ("fast-simplification",) if extra == "view" else ())
+    page = tmp_path / "reach_replay_meshes.html"
+    assert scenario_runs._write_mesh_replay(page, "arm", "reach", {}) is None
+    assert not page.exists() and "`view` extra" in capsys.readouterr().err

@@ -193,3 +193,48 @@ def test_error_bad_weight():
 
 def test_error_not_a_task_in_level():
     _raises([eq("a"), [np.eye(3)]], task=None, level=1, match="a level holds Task objects")
+
+
+# ------------------------------------------------------------------ hard levels
+def _tasks():
+    rng = np.random.default_rng(3)
+    return [Task(name, rng.normal(size=(2, 4)), rng.normal(size=2)) for name in "abcd"]
+
+
+def test_a_level_is_declared_hard_and_stays_so_through_composition():
+    from prioik.hierarchy import hard
+    a, b, c, d = _tasks()
+    assert not Level.of(a).hard and hard(a).hard and hard([a, b]).hard
+    assert (hard(a) + b).hard and (b + hard(a)).hard and not (a + b).hard
+    assert Level.of(hard(a), hard=False).hard is False
+    stack = hard(a + b) / c / hard(d)
+    assert stack.hard == (0, 2) and stack.layout.hard == (0, 2)
+    assert TaskStack([[a, b], hard(c)]).hard == (1,)
+    assert (a / hard(b)).hard == (1,) and (hard(a) / TaskStack([b, c])).hard == (0,)
+    assert repr(stack).startswith("TaskStack(n=4, 3 levels: hard a[2] + b[2] / c[2] / hard d")
+    assert stack.layout.describe() == "n=4: hard a[2] + b[2] / c[2] / hard d[2]"
+    # the layout: part of the shape (a solver prepared for one refuses the other)
+    plain = TaskStack([[a, b], c, d])
+    assert plain.hard == () and plain.layout != stack.layout
+    assert hash(plain.layout) != hash(stack.layout)
+    assert TaskStack([hard([a, b]), c, hard(d)]).layout is stack.layout      # shared
+    # the stack a StackData rebuilds, and the rescaled one, keep their hard levels
+    assert stack.data.to_stack().hard == (0, 2)
+    assert stack.data.to_stack().layout == stack.layout
+    tiny = TaskStack([hard(Task("t", 1e-200 * np.eye(2), np.ones(2)))])
+    scaled, levels = tiny.equilibrated()
+    assert levels == [0] and scaled.hard == (0,)
+
+
+def test_hard_levels_of_a_layout_are_level_indices():
+    from prioik.hierarchy import StackLayout
+    levels = [[("a", 2)], [("b", 1)]]
+    assert StackLayout(3, levels, hard=[1]).hard == (1,)
+    assert StackLayout(3, levels, hard=(1, 0)).hard == (0, 1)
+    for bad in ([2], [-1], [0, 0], [True], [0.5], "0", None):
+        with pytest.raises(TaskStackError, match="hard levels must be distinct level "
+                                                 r"indices 0 … 1"):
+            StackLayout(3, levels, hard=bad)
+    with pytest.raises(TaskStackError, match="a level is a Task or a sequence of Tasks"):
+        from prioik.hierarchy import hard
+        hard(3)

@@ -12,6 +12,10 @@ IK step against PlaCo (:mod:`.ik_step`) and the paper's per-control-step compari
 ``summary.json``, ``time_vs_n.png``, ``time_vs_k.png``; ``--doc FILE`` also writes the
 documentation page (:mod:`.page`, ``templates/benchmarks.md``).
 
+With ``--test-set NAME`` it runs test sets in qpbenchmark's shape instead
+(:mod:`prioik.benchmarks.testsets`: success per tolerance profile, shifted geometric
+means; ``testsets.csv`` and ``testsets.md`` in ``--out``).
+
 One module per concern: :mod:`.settings` (what a run measures), :mod:`.tables`,
 :mod:`.batch`, :mod:`.control_step`, :mod:`.ik_step`, :mod:`.ratios`, :mod:`.page`,
 :mod:`.run` (the whole run) and :mod:`.command` (argument parsing only).

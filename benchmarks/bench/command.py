@@ -15,7 +15,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("bench", help="time every formulation and back-end (G1 and random "
                                      "stacks); CSV, markdown and plots",
                        description="Time every formulation and back-end on G1 fencing "
-                                   "and random stacks.")
+                                   "and random stacks; with --test-set, run test sets "
+                                   "in qpbenchmark's shape instead.")
     p.add_argument("--out", type=Path, default=Path("bench-results"),
                    help="output directory (default: bench-results)")
     p.add_argument("--doc", type=Path, default=None,
@@ -27,7 +28,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "are reduced")
     p.add_argument("--family", default=None, help="random stack family (hierarchy.families)")
     p.add_argument("--formulations", default="",
-                   help="comma-separated formulation names or row labels (default: all)")
+                   help="comma-separated formulation names or row labels (default: all; "
+                        "an unknown one exits 2 listing the known ones)")
     p.add_argument("--sizes", default=None, help="comma-separated n of the random cases "
                                                  f"(default: {','.join(map(str, SIZES))})")
     p.add_argument("--levels", default=None, help="comma-separated k of the random cases "
@@ -39,6 +41,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "loop; 0: leave BLAS's default)")
     p.add_argument("--no-g1", action="store_true",
                    help="random stacks only (no G1 cases, batch, IK-step or control-step runs)")
+    from prioik.benchmarks.testsets.command import add_arguments
+    add_arguments(p)
     p.set_defaults(func=run, extras=("plots",))
 
 
@@ -74,6 +78,12 @@ def _int_list(text: str, what: str) -> tuple[int, ...]:
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.test_set is not None:
+        from prioik.benchmarks.testsets.command import run as run_test_sets
+        return run_test_sets(args)
+    from prioik.benchmarks.variants import check_formulations, split_labels, table
+    only = tuple(split_labels(args.formulations))
+    check_formulations(only)                      # an unknown name: before anything
     settings = quick_settings() if args.quick else Settings()
     if args.repeats is not None:
         if args.repeats < 1:
@@ -85,9 +95,12 @@ def run(args: argparse.Namespace) -> int:
             raise ValueError(f"--cap must be > 0, got {args.cap}")
         settings.cap_s = args.cap
     if args.family:
+        from prioik.hierarchy.families import FAMILIES
+        if args.family not in FAMILIES:
+            raise ValueError(f"unknown family {args.family!r}; known: {', '.join(FAMILIES)}")
         settings.family = args.family
-    from prioik.benchmarks.variants import split_labels
-    settings.only = tuple(split_labels(args.formulations))
+    settings.only = only
+    table("bench").check_names(only)              # an unknown row label: before anything runs
     if args.sizes:
         settings.sizes = _int_list(args.sizes, "--sizes")
     if args.levels:

@@ -51,6 +51,7 @@ from typing import Any
 import numpy as np
 
 from prioik.benchmarks.variants import Variant, parse_label
+from prioik.errors import PrioikError
 
 from .scenarios import SWEEP_SCENARIOS, SweepScenario
 
@@ -60,7 +61,7 @@ TOP_KEYS = ("scenario", "formulations", "seed", "algorithmic_error", "fixed", "g
             "sample", "criteria", "title")
 
 
-class SweepConfigError(ValueError):
+class SweepConfigError(PrioikError, ValueError):
     """A sweep file that cannot run; the message names the file, key and value."""
 
 

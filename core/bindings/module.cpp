@@ -194,7 +194,10 @@ NB_MODULE(_core, m) {
       .def_ro("sanitized", &prioik::BuildInfo::sanitized)
       .def_ro("fast_math", &prioik::BuildInfo::fast_math)
       .def_ro("fp_contract", &prioik::BuildInfo::fp_contract,
-              "a * b + c contracted into a fused multiply-add");
+              "a * b + c contracted into a fused multiply-add")
+      .def_ro("vector_clones", &prioik::BuildInfo::vector_clones,
+              "the hot functions' clone this CPU runs: 'avx2' or 'default' (a portable "
+              "x86-64 GCC build on Linux; the same answers, bit for bit), else 'none'");
   m.def("build_info", &prioik::build_info, "The flags the core was compiled with.");
   bind_active_set(m);
 

@@ -6,13 +6,16 @@
 // index a writer follows (a row start, the columns of a frame's spec, the entries of
 // iq, axes and unit) within the arrays it indexes. Anything else raises
 // prioik.formulations.base.CoreInputError naming the array before C++ reads it (None
-// in place of an array too). Non-finite values are the writers' to propagate (IEEE
-// arithmetic): the solvers' own checks name them. The GIL is released
-// while a writer runs.
+// in place of an array too). A writer's references (a target, its rates, a target
+// rotation, a posture's q_ref) must be finite: a NaN or an infinity there raises
+// CoreInputError naming the array and the entry (robots/rows.py names the task). Other
+// non-finite values (the state's) are the writers' to propagate (IEEE arithmetic): the
+// state and the solvers check them. The GIL is released while a writer runs.
 #include "rows_bindings.hpp"
 
 #include <nanobind/nanobind.h>
 
+#include <cmath>
 #include <cstdint>
 #include <string>
 #include <type_traits>
@@ -193,6 +196,29 @@ MatrixView<T> matrix(Buffers& bufs, nb::handle h, const char* name, Index rows, 
                        static_cast<Index>(v.strides[1] / 8)};
 }
 
+// `v` (a writer's reference), or InputError naming its first entry that is not finite
+template <class View>
+View finite(const View& v, const char* name) {
+  for (Index k = 0; k < v.size; ++k)
+    if (!std::isfinite(v[k]))
+      throw InputError(std::string(name) + "[" + std::to_string(k) + "] is not finite (" +
+                       (std::isnan(v[k]) ? "nan" : (v[k] > 0 ? "inf" : "-inf")) + ")");
+  return v;
+}
+
+// the 3 x 3 matrix `m` (a target rotation), or InputError naming its first entry that
+// is not finite
+ConstMatrix finite_matrix(const ConstMatrix& m, const char* name) {
+  for (Index i = 0; i < m.rows; ++i)
+    for (Index j = 0; j < m.cols; ++j)
+      if (!std::isfinite(m(i, j)))
+        throw InputError(std::string(name) + "[" + std::to_string(i) + ", " +
+                         std::to_string(j) + "] is not finite (" +
+                         (std::isnan(m(i, j)) ? "nan" : (m(i, j) > 0 ? "inf" : "-inf")) +
+                         ")");
+  return m;
+}
+
 // InputError(message()) unless ok (the message is built only for an error)
 template <class Message>
 void require(bool ok, const Message& message) {
@@ -251,9 +277,9 @@ void position_rows(nb::handle A, nb::handle Q, nb::handle J, nb::handle t, nb::h
                    nb::handle xd, nb::handle xdd) {
   Buffers bufs;
   const FrameArgs f = frame_args(bufs, A, Q, J, t, R, spec, geo, aj, vj, true);
-  const ConstVector xv = vector<const double>(bufs, x, "x", 3);
-  const ConstVector xdv = vector<const double>(bufs, xd, "xd", 3);
-  const ConstVector xddv = vector<const double>(bufs, xdd, "xdd", 3);
+  const ConstVector xv = finite(vector<const double>(bufs, x, "x", 3), "x");
+  const ConstVector xdv = finite(vector<const double>(bufs, xd, "xd", 3), "xd");
+  const ConstVector xddv = finite(vector<const double>(bufs, xdd, "xdd", 3), "xdd");
   nb::gil_scoped_release release;
   point_rows(f, xv, xdv, xddv, true);
 }
@@ -263,7 +289,7 @@ void position_target_rows(nb::handle A, nb::handle Q, nb::handle J, nb::handle t
                           nb::handle vj, nb::handle x) {
   Buffers bufs;
   const FrameArgs f = frame_args(bufs, A, Q, J, t, R, spec, geo, aj, vj, true);
-  const ConstVector xv = vector<const double>(bufs, x, "x", 3);
+  const ConstVector xv = finite(vector<const double>(bufs, x, "x", 3), "x");
   nb::gil_scoped_release release;
   point_rows(f, xv, xv, xv, false);
 }
@@ -274,12 +300,13 @@ void frame_rows_binding(nb::handle A, nb::handle Q, nb::handle J, nb::handle t, 
                         nb::handle w, nb::handle wd) {
   Buffers bufs;
   const FrameArgs f = frame_args(bufs, A, Q, J, t, R, spec, geo, aj, vj, false);
-  const ConstVector xv = vector<const double>(bufs, x, "x", 3);
-  const ConstVector xdv = vector<const double>(bufs, xd, "xd", 3);
-  const ConstVector xddv = vector<const double>(bufs, xdd, "xdd", 3);
-  const ConstMatrix Rs = matrix<const double>(bufs, Rstar, "Rstar", 3, 3);
-  const ConstVector wv = vector<const double>(bufs, w, "w", 3);
-  const ConstVector wdv = vector<const double>(bufs, wd, "wd", 3);
+  const ConstVector xv = finite(vector<const double>(bufs, x, "x", 3), "x");
+  const ConstVector xdv = finite(vector<const double>(bufs, xd, "xd", 3), "xd");
+  const ConstVector xddv = finite(vector<const double>(bufs, xdd, "xdd", 3), "xdd");
+  const ConstMatrix Rs =
+      finite_matrix(matrix<const double>(bufs, Rstar, "Rstar", 3, 3), "Rstar");
+  const ConstVector wv = finite(vector<const double>(bufs, w, "w", 3), "w");
+  const ConstVector wdv = finite(vector<const double>(bufs, wd, "wd", 3), "wd");
   nb::gil_scoped_release release;
   frame_rows(f, xv, xdv, xddv, Rs, wv, wdv);
 }
@@ -296,9 +323,9 @@ void com_rows_binding(nb::handle A, nb::handle Q, Index s, nb::handle Jcom, nb::
   const ConstIndices ax = vector<const std::int64_t>(bufs, axes, "axes", -1);
   indices_within(ax, 0, 0, 3, "axes", "the world axes");
   rows_within(s, ax.size, Am.rows, "the task's rows", "A");
-  const ConstVector xv = vector<const double>(bufs, x, "x", ax.size);
-  const ConstVector xdv = vector<const double>(bufs, xd, "xd", ax.size);
-  const ConstVector xddv = vector<const double>(bufs, xdd, "xdd", ax.size);
+  const ConstVector xv = finite(vector<const double>(bufs, x, "x", ax.size), "x");
+  const ConstVector xdv = finite(vector<const double>(bufs, xd, "xd", ax.size), "xd");
+  const ConstVector xddv = finite(vector<const double>(bufs, xdd, "xdd", ax.size), "xdd");
   nb::gil_scoped_release release;
   com_rows(Am, Qm, s, Jc, c, ac, ax, xv, xdv, xddv, zero_drift);
 }
@@ -308,7 +335,7 @@ void posture_error_binding(nb::handle Q, Index s, nb::handle q, nb::handle q_ref
   Buffers bufs;
   const Matrix Qm = matrix<double>(bufs, Q, "Q", 6, -1);
   const ConstVector qv = vector<const double>(bufs, q, "q", -1);
-  const ConstVector qr = vector<const double>(bufs, q_ref, "q_ref", qv.size);
+  const ConstVector qr = finite(vector<const double>(bufs, q_ref, "q_ref", qv.size), "q_ref");
   const ConstIndices idx = vector<const std::int64_t>(bufs, iq, "iq", -1);
   indices_within(idx, 0, 0, qv.size, "iq", "q");
   rows_within(s, idx.size, Qm.cols, "the task's rows", "Q");

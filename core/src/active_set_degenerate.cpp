@@ -4,9 +4,12 @@
 
 #include "active_set_internal.hpp"
 
+#include "vector_clones.hpp"
+
 namespace prioik::detail {
 
 
+PRIOIK_VECTOR_CLONES
 void rows_at_bounds(Ctx& c, index hard_end, double ynorm, index& m, index& extra) {
     index d = c.n - c.col;
     Mat E = c.Lw;
@@ -46,6 +49,7 @@ namespace {
 
 /// Row p of the LQ T[:p] (reflector t in V[t, t:d]): row copied, the p reflectors
 /// applied, its own reflector made when what is left exceeds floor.
+PRIOIK_VECTOR_CLONES
 bool lq_append(Ctx& c, index p, const double* row, index d, double floor) {
     double* u = c.T.row(p);
     for (index k = 0; k < d; ++k) u[k] = row[k];
@@ -58,6 +62,7 @@ bool lq_append(Ctx& c, index p, const double* row, index d, double floor) {
 
 }  // namespace
 
+PRIOIK_VECTOR_CLONES
 bool nnls_working_set(Ctx& c, index m, index d, double gscale) {
     Mat E = c.Lw;
     const double* g = c.g;

@@ -6,6 +6,8 @@
 
 #include "active_set_equality_first.hpp"
 
+#include "vector_clones.hpp"
+
 namespace prioik::detail {
 
 
@@ -346,6 +348,7 @@ bool rows_valid_eq(const Ctx& c) {
 
 /// Verdict −1 (x* is the answer, written), −3 with a next guess
 /// (row, side; side 0 a release), FIXED_REFUSED, or −2.
+PRIOIK_VECTOR_CLONES
 index equality_first_try(Ctx& c, EqFirst& e, bool allow_fixed, index& row, int& side) {
     row = -1;
     side = 0;
@@ -383,6 +386,7 @@ namespace {
 
 /// The row, not held, that first leaves its interval on the segment from xref to x;
 /// xref moves to the blocking point.
+PRIOIK_VECTOR_CLONES
 void first_blocking(Ctx& c, double* xref, index& row, int& side) {
     index n = c.n;
     double best = 2.0;

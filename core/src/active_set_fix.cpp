@@ -5,6 +5,8 @@
 
 #include "active_set_internal.hpp"
 
+#include "vector_clones.hpp"
+
 namespace prioik::detail {
 
 
@@ -12,6 +14,7 @@ namespace {
 
 /// The last step's reflectors (no hard row held, every held row fixed) taken as the
 /// fixing ones; returns the rows they fix.
+PRIOIK_VECTOR_CLONES
 index reuse_step_reflectors(Ctx& c, index s0, index s1, index rs) {
     index n = c.n, d = n - c.col;
     for (index t = 0; t < rs; ++t) {
@@ -35,6 +38,7 @@ index reuse_step_reflectors(Ctx& c, index s0, index s1, index rs) {
 
 /// The row-pivoted LQ of the rows[rf:nfix] to fix on the free coordinates; each pivot
 /// a fixing reflector that rotates y; returns the rows fixed.
+PRIOIK_VECTOR_CLONES
 index fixing_lq(Ctx& c, index lev, index rf, index nfix, double soft_tol) {
     index n = c.n;
     for (index i = 0; i < nfix; ++i) {
@@ -195,6 +199,7 @@ namespace {
 
 /// Held box rows off their bound by x's precision put on it; the box rows x's
 /// precision cannot resolve, counted.
+PRIOIK_VECTOR_CLONES
 index box_row_pass(Ctx& c) {
     double xn = std::sqrt(dot(c.x, c.x, c.n));
     index unresolved = 0;

@@ -91,7 +91,12 @@ struct StepOut {
 };
 
 // ---- primitives of rows (active_set_step.cpp)
-double odot(const Ctx& c, index j, const double* v);
+/// row j of the original rows times v (its one column's product for a box row)
+inline double odot(const Ctx& c, index j, const double* v) {
+    index col = c.ucol[j];
+    if (col >= 0) return c.Bo(j, col) * v[col];
+    return dot(c.Bo.row(j), v, c.n);
+}
 double row_size(const Ctx& c, index j, double ynorm, const double* x);
 inline double tol_of(double primal_tol, double size, double bound) {
     return primal_tol * (size + std::fabs(bound));

@@ -5,9 +5,12 @@
 
 #include "active_set_equality_first.hpp"
 
+#include "vector_clones.hpp"
+
 namespace prioik::detail {
 
 
+PRIOIK_VECTOR_CLONES
 double add_level_gradient(const Ctx& c, const EqFirst& e, index s0, index s1, const double* x,
                           double* g) {
     index n = c.n;
@@ -73,6 +76,7 @@ void held_pivots(const Ctx& c, EqFirst& e, index& complete, index& ctri, index& 
 
 /// z_h = C⁻¹ e_h of each held pivot h (rows of Z), cn its pivot row's norm; −2 when a
 /// held pivot lies where the QR is not triangular, else the count.
+PRIOIK_VECTOR_CLONES
 index held_inverse_columns(const Ctx& c, EqFirst& e, Mat Z, double* cn, index ctri, index ncol) {
     index nh = 0;
     for (index h = 0; h < ncol; ++h) {
@@ -97,6 +101,7 @@ index held_inverse_columns(const Ctx& c, EqFirst& e, Mat Z, double* cn, index ct
 
 }  // namespace
 
+PRIOIK_VECTOR_CLONES
 index held_rows_optimal(const Ctx& c, EqFirst& e, const double* x) {
     index n = c.n, k = c.k;
     Mat Z = e.Lmat;
@@ -173,6 +178,7 @@ namespace {
 /// The gradient of level lev below the held rows on the reduced QR's rotated free
 /// coordinates (gf[:colv]) and on the held columns (gc); false when the level has no
 /// gradient to read (met, or inequality rows only); -2 in code when unreadable.
+PRIOIK_VECTOR_CLONES
 bool fixed_level_gradient(const Ctx& c, EqFirst& e, index lev, index colv, const double* x,
                           double xn, index complete, double& scale, index& code) {
     index n = c.n, n2 = e.n2, M = c.M, k = c.k;
@@ -233,6 +239,7 @@ bool fixed_level_gradient(const Ctx& c, EqFirst& e, index lev, index colv, const
 
 }  // namespace
 
+PRIOIK_VECTOR_CLONES
 index fixed_columns_optimal(const Ctx& c, EqFirst& e, const double* x) {
     index n = c.n, n2 = e.n2, M = c.M, k = c.k;
     const double* y = e.y;

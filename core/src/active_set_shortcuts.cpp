@@ -5,12 +5,15 @@
 
 #include "active_set_internal.hpp"
 
+#include "vector_clones.hpp"
+
 namespace prioik::detail {
 
 
 namespace {
 
 /// The rows' fixing reflectors applied transposed, all rows at once, into W (n × nw).
+PRIOIK_VECTOR_CLONES
 void rotate_transposed(Ctx& c, index nw, Mat W, index r0, double* w) {
     index n = c.n;
     for (index tf = r0; tf < c.nf; ++tf) {
@@ -34,6 +37,7 @@ void rotate_transposed(Ctx& c, index nw, Mat W, index r0, double* w) {
 
 /// The step of nw ≥ d working soft rows and no hard row, of full column rank on the d
 /// free coordinates: p by one column-pivoted QR; its margin, or −1.
+PRIOIK_VECTOR_CLONES
 double full_rank_step(Ctx& c, index nw, double soft_tol) {
     index n = c.n, col = c.col, d = n - col;
     const index* rows = c.rows;
@@ -126,6 +130,7 @@ double full_rank_step(Ctx& c, index nw, double soft_tol) {
 /// The unit-rows step's hard rows (box rows) by the Schur complement of the normal
 /// equations (the second half of unit_rows_step); false when their free directions
 /// are not well conditioned. Writes p, nu; gn = ‖g‖.
+PRIOIK_VECTOR_CLONES
 bool unit_rows_hard(Ctx& c, index nh, index nu_cols, double s, bool reach, double& gn) {
     index n = c.n, col = c.col, d = n - col;
     Mat Zu = c.T, G = c.Lw;
@@ -177,6 +182,7 @@ bool unit_rows_hard(Ctx& c, index nh, index nu_cols, double s, bool reach, doubl
 
 /// The step of nw working unit rows under nh working box rows; its
 /// margin (and ‖g‖ in gn), or −1.
+PRIOIK_VECTOR_CLONES
 double unit_rows_step(Ctx& c, index nh, index nw, double soft_tol, bool reach, double& gn) {
     index n = c.n, col = c.col, d = n - col, R = c.R;
     gn = -1.0;

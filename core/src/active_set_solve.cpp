@@ -5,6 +5,8 @@
 
 #include "active_set_internal.hpp"
 
+#include "vector_clones.hpp"
+
 namespace prioik::detail {
 
 
@@ -39,6 +41,7 @@ bool rows_valid(const Ctx& c, std::int8_t* flags) {
 
 /// The rows weighed into B and Bo, bounds, norms, equality flags, single columns;
 /// false at the first value that is not valid.
+PRIOIK_VECTOR_CLONES
 bool load_rows(Ctx& c) {
     index M = c.M, n = c.n;
     if (!rows_valid(c, c.eqr)) return false;
@@ -73,6 +76,7 @@ bool load_rows(Ctx& c) {
 }
 
 /// Whether a level is of extreme scale.
+PRIOIK_VECTOR_CLONES
 bool extreme_scale_rows(const Ctx& c) {
     for (index lev = 0; lev < c.k; ++lev) {
         double acc = 0.0;
@@ -86,6 +90,7 @@ bool extreme_scale_rows(const Ctx& c) {
 }
 
 /// The working rows: hard ones first, then the level's.
+PRIOIK_VECTOR_CLONES
 void gather(Ctx& c, Level& L) {
     index nh = 0;
     for (index j = 0; j < L.hard_end; ++j) {
@@ -175,6 +180,7 @@ void take_full_step(Ctx& c, const Level& L) {
 
 /// The warm try: the step of last time's working set; kept when every hard row stays
 /// feasible at its end, else undone (the level starts cold, `refuted`).
+PRIOIK_VECTOR_CLONES
 void warm_try(Ctx& c, Level& L) {
     index lev = L.lev;
     for (index j = 0; j < L.s1; ++j) c.saved[j] = c.state[j];
@@ -220,6 +226,7 @@ void warm_try(Ctx& c, Level& L) {
 
 /// The ratio test of the step p (length pn): the first non-working row it would take
 /// out of its interval (blk, at alpha, on side bside).
+PRIOIK_VECTOR_CLONES
 void ratio_test(Ctx& c, const Level& L, double pn, double& alpha, index& blk, int& bside) {
     alpha = 1.0;
     blk = -1;
@@ -306,6 +313,7 @@ bool iterate_step(Ctx& c, Level& L) {
 
 /// Soft rows on the wrong side of their bound: released or switched (true when any
 /// changed); near_release noted.
+PRIOIK_VECTOR_CLONES
 bool release_wrong_side(Ctx& c, Level& L, double ynorm) {
     bool changed = false;
     L.near_release = false;
@@ -343,6 +351,7 @@ void pick_release(bool bland, index j, double value, index& drop, double& worst)
 }
 
 /// The hard row to release by its multiplier (−1: none), gscale the dual threshold.
+PRIOIK_VECTOR_CLONES
 index pick_drop(Ctx& c, Level& L, double ynorm, double& gscale) {
     index nh = L.nh, nw = L.nw, hr = L.st.hr;
     double gn = L.st.gn >= 0.0 ? L.st.gn : hard_multipliers(c, nh, hr, nw);

@@ -5,14 +5,10 @@
 
 #include "active_set_internal.hpp"
 
+#include "vector_clones.hpp"
+
 namespace prioik::detail {
 
-
-double odot(const Ctx& c, index j, const double* v) {
-    index col = c.ucol[j];
-    if (col >= 0) return c.Bo(j, col) * v[col];
-    return dot(c.Bo.row(j), v, c.n);
-}
 
 double row_size(const Ctx& c, index j, double ynorm, const double* x) {
     index col = c.ucol[j];
@@ -26,6 +22,7 @@ int violated_side(double r, double lo, double up, double tol_lo, double tol_up) 
     return 0;
 }
 
+PRIOIK_VECTOR_CLONES
 void bring(Ctx& c, index j) {
     double* Bj = c.B.row(j);
     index n = c.n;
@@ -40,12 +37,14 @@ void bring(Ctx& c, index j) {
     c.nrot[j] = c.nf;
 }
 
+PRIOIK_VECTOR_CLONES
 void lift(Ctx& c, const double* p, double* px) {
     for (index k = 0; k < c.col; ++k) px[k] = 0.0;
     for (index k = 0; k < c.n - c.col; ++k) px[c.col + k] = p[k];
     apply_q(px, c.n, dense::reflectors(c.Vf, c.n, c.betaf, c.posf, c.nf));
 }
 
+PRIOIK_VECTOR_CLONES
 void reflect_vector(double* x, index d, index r, Mat V, const double* beta, const index* vpos,
                     bool transposed) {
     for (index i = 0; i < r; ++i) {
@@ -59,6 +58,7 @@ void reflect_vector(double* x, index d, index r, Mat V, const double* beta, cons
     }
 }
 
+PRIOIK_VECTOR_CLONES
 void reflect_row(Mat T, index i, index q, index w, Mat V, double* beta, index nref,
                  index first, index last) {
     double* row = T.row(i) + q;
@@ -82,6 +82,7 @@ void reflect_row(Mat T, index i, index q, index w, Mat V, double* beta, index nr
     }
 }
 
+PRIOIK_VECTOR_CLONES
 void lq_multipliers(double* g, index d, index r, Mat T, Mat V, const double* beta,
                     const index* vpos, double* out) {
     reflect_vector(g, d, r, V, beta, vpos, true);
@@ -118,6 +119,7 @@ void swap_step_rows(Ctx& c, index i, index j, index d) {
 
 /// The soft rows T[nh:nh + nw] on the directions the hr hard reflectors
 /// leave (p[:hr] the hard part of the step), then p in the free coordinates.
+PRIOIK_VECTOR_CLONES
 void eqp_soft(Ctx& c, index nh, index nw, index hr, index d, double soft_tol, StepOut& o) {
     index nr = nh + nw;
     for (index i = nh; i < nr; ++i) {
@@ -178,6 +180,7 @@ void eqp_soft(Ctx& c, index nh, index nw, index hr, index d, double soft_tol, St
 
 /// The minimum-norm step keeping the nh working hard rows at their bounds (reach:
 /// moving them onto them) and least squares over the nw working soft rows.
+PRIOIK_VECTOR_CLONES
 StepOut eqp_impl(Ctx& c, index nh, index nw, double soft_tol, bool reach) {
     index n = c.n, col = c.col, d = n - col, nr = nh + nw;
     StepOut o;
@@ -235,6 +238,7 @@ StepOut eqp_general(Ctx& c, index nh, index nw, double soft_tol, bool reach) {
     return eqp_impl(c, nh, nw, soft_tol, reach);
 }
 
+PRIOIK_VECTOR_CLONES
 StepOut eqp_append(Ctx& c, index nh, index nw, double soft_tol, index jb, double tb) {
     index n = c.n, col = c.col, d = n - col;
     StepOut o;
@@ -275,6 +279,7 @@ StepOut eqp_append(Ctx& c, index nh, index nw, double soft_tol, index jb, double
     return o;
 }
 
+PRIOIK_VECTOR_CLONES
 double hard_multipliers(Ctx& c, index nh, index hr, index nw) {
     index d = c.n - c.col;
     soft_gradient(c, nh, nw, c.g);
@@ -283,6 +288,7 @@ double hard_multipliers(Ctx& c, index nh, index hr, index nw) {
     return gn;
 }
 
+PRIOIK_VECTOR_CLONES
 void soft_gradient(Ctx& c, index nh, index nw, double* g) {
     index d = c.n - c.col;
     for (index k = 0; k < d; ++k) g[k] = 0.0;
@@ -296,6 +302,7 @@ void soft_gradient(Ctx& c, index nh, index nw, double* g) {
     }
 }
 
+PRIOIK_VECTOR_CLONES
 void soft_gradient_x(Ctx& c, index nh, index nw, double* gx, double* g) {
     index n = c.n;
     for (index k = 0; k < n; ++k) gx[k] = 0.0;
@@ -316,6 +323,7 @@ void soft_gradient_x(Ctx& c, index nh, index nw, double* gx, double* g) {
     for (index k = 0; k < n - c.col; ++k) g[k] = gx[c.col + k];
 }
 
+PRIOIK_VECTOR_CLONES
 void freed_gain(Ctx& c, index nh, index hr, index nw, index rs, index i, double& un,
                 double& gain) {
     double* w = c.px;

@@ -2,6 +2,8 @@
 
 #include <Eigen/Core>
 
+#include "vector_clones.hpp"
+
 namespace prioik {
 
 namespace {
@@ -30,6 +32,11 @@ BuildInfo build_info() {
   info.fast_math = false;
 #endif
   info.fp_contract = contracts_multiply_add();
+#if PRIOIK_HAS_VECTOR_CLONES
+  info.vector_clones = __builtin_cpu_supports("avx2") ? "avx2" : "default";
+#else
+  info.vector_clones = "none";
+#endif
   return info;
 }
 

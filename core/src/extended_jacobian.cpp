@@ -6,6 +6,8 @@
 #include <thread>
 #include <utility>
 
+#include "vector_clones.hpp"
+
 namespace prioik {
 
 namespace {
@@ -55,6 +57,7 @@ ExtendedJacobianWorkspace::ExtendedJacobianWorkspace(Index M, Index n, Index k)
   result.ranks.assign(k, 0);
 }
 
+PRIOIK_VECTOR_CLONES
 bool weigh_rows(const double* A, const double* b, const double* w, Index M, Index n, double* B,
                 double* c) {
   bool ok = true;
@@ -67,6 +70,7 @@ bool weigh_rows(const double* A, const double* b, const double* w, Index M, Inde
   return ok;
 }
 
+PRIOIK_VECTOR_CLONES
 bool level_scales(const double* A, const double* b, Index M, Index n, const Index* starts,
                   Index k, double* scales) {
   bool finite = true;
@@ -82,6 +86,7 @@ bool level_scales(const double* A, const double* b, Index M, Index n, const Inde
   return finite;
 }
 
+PRIOIK_VECTOR_CLONES
 void level_residuals(const double* A, const double* b, const double* w, Index n,
                      const Index* starts, Index k, const double* x, double* out) {
   for (Index lev = 0; lev < k; ++lev) {

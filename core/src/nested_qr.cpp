@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "vector_clones.hpp"
+
 namespace prioik {
 
 namespace {
@@ -259,6 +261,7 @@ NestedQRWorkspace::NestedQRWorkspace(Index rows, Index cols)
       cover(cols),
       ucols(cols) {}
 
+PRIOIK_VECTOR_CLONES
 double bounded_step(MatrixRef L, const double* rhs, Index m, Index r, double mu2_min,
                     double step_bound, double* z, double* scratch) {
   MatrixRef W{scratch, r, m, m};
@@ -305,6 +308,7 @@ double bounded_step(MatrixRef L, const double* rhs, Index m, Index r, double mu2
   return mu2;
 }
 
+PRIOIK_VECTOR_CLONES
 void nested_qr(MatrixRef B, double* c, const Index* starts, Index k, const double* scales,
                const NestedQRParameters& params, bool trust_region, NestedQRWorkspace& ws,
                const NestedQROutput& out) {

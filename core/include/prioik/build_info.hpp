@@ -12,6 +12,8 @@ struct BuildInfo {
   bool sanitized;         // built with -fsanitize=address,undefined
   bool fast_math;         // compiled with fast math (never: the rounding rule)
   bool fp_contract;       // a * b + c contracted into a fused multiply-add (never: the rounding rule)
+  std::string vector_clones;  // the hot functions' clone this CPU runs: "avx2" or "default"
+                              // (a portable x86-64 GCC build on Linux), else "none"
 };
 
 // The flags this library was compiled with, as the compiler saw them.
