@@ -20,8 +20,18 @@ import argparse
 import sys
 from pathlib import Path
 
-from .report import (Page, baselines_block, copy_figures, ms, replays_line, run_settings,
-                     sci, step_time_figure, stops_and_figures, table)
+from .report import (
+    Page,
+    baselines_block,
+    copy_figures,
+    ms,
+    replays_line,
+    run_settings,
+    sci,
+    step_time_figure,
+    stops_and_figures,
+    table,
+)
 from .variants import Variant
 
 VARIANTS = ("reach",)

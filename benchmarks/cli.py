@@ -51,6 +51,7 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``prioik`` console script."""
     from prioik.errors import PrioikError
     from prioik.extras import require
+
     from .threads import blas_threads
     args = build_parser().parse_args(argv)
     args.command_line = list(sys.argv[1:] if argv is None else argv)

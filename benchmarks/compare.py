@@ -16,8 +16,13 @@ import numpy as np
 
 from prioik import formulations
 from prioik.formulations.registry import check_support
-from prioik.hierarchy import (TaskStack, UnsupportedTaskError, check_lexicographic, load_stack,
-                       relative_distance)
+from prioik.hierarchy import (
+    TaskStack,
+    UnsupportedTaskError,
+    check_lexicographic,
+    load_stack,
+    relative_distance,
+)
 
 
 @dataclass

@@ -12,9 +12,10 @@ algorithmic error (eq. 29) is not defined for a weighted soft hierarchy and is N
 from __future__ import annotations
 
 import time
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
+
 
 def distribution_version(distribution: str) -> str:
     """The installed version of ``distribution``, or ``"(not installed)"``."""

@@ -203,7 +203,7 @@ def projected_sigmas(stack) -> dict[str, float]:
     level has no direction left), by the level's first task name."""
     from prioik.hierarchy import singularity_distance
     out = {}
-    for level, sigma in zip(stack.levels, singularity_distance(stack)):
+    for level, sigma in zip(stack.levels, singularity_distance(stack), strict=False):
         scale = float(np.linalg.norm(level.A))
         out[level.names[0]] = sigma / scale if scale > 0 else 0.0
     return out

@@ -56,25 +56,35 @@ from __future__ import annotations
 
 import argparse
 import sys
-import threading
 import time
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
 from prioik import formulations
-from prioik.formulations import FormulationError
-from prioik.formulations import ConcurrentUseError
-from prioik.hierarchy import (TaskStack, TaskStackError, check_lexicographic,
-                              relative_distance, save_stack)
-from prioik.hierarchy.families import same_shape_batch
+from prioik.formulations import ConcurrentUseError, FormulationError
+from prioik.hierarchy import (
+    TaskStack,
+    TaskStackError,
+    check_lexicographic,
+    relative_distance,
+    save_stack,
+)
 from prioik.hierarchy.exact import ExactOptimum, exact_optimum
-from prioik.hierarchy.fuzz import (FuzzCase, bounds_case, equality_case, inequality_case,
-                                   mixed_scale_case, nested_truth, rotation_spread,
-                                   rounding_error)
+from prioik.hierarchy.families import same_shape_batch
+from prioik.hierarchy.fuzz import (
+    FuzzCase,
+    bounds_case,
+    equality_case,
+    inequality_case,
+    mixed_scale_case,
+    nested_truth,
+    rotation_spread,
+    rounding_error,
+)
 
 #: Relative distance from the ground truth above which an ``optimal`` answer is wrong.
 WRONG_TOL = 1e-6
@@ -242,7 +252,7 @@ class _Runner:
             rep.solves[path.name] = rep.solves.get(path.name, 0) + 1
             try:
                 sol = _solve(path, stack)
-            except DOCUMENTED_ERRORS as exc:
+            except DOCUMENTED_ERRORS:
                 rep.refused[path.name] = rep.refused.get(path.name, 0) + 1
                 rep.statuses.setdefault(path.name, {}).setdefault("refused", 0)
                 rep.statuses[path.name]["refused"] += 1
@@ -276,7 +286,8 @@ class _Runner:
                     if dist > WRONG_TOL or not cert.ok:
                         self.fail(case_id, case, "wrong", path.name,
                                   f"optimal but {dist:.2e} from the truth, certificate "
-                                  f"{'ok' if cert.ok else 'fails at level ' + str(cert.first_failure.level)}")
+                                  + ("ok" if cert.ok
+                                     else f"fails at level {cert.first_failure.level}"))
                 elif not cert.ok:
                     self.fail(case_id, case, "uncertified", path.name,
                               f"optimal but the certificate fails at level "

@@ -13,6 +13,7 @@ __all__ = ["add_parser"]
 
 def _qp_backends_line() -> str:
     import importlib.util
+
     from prioik.extras import install_hint
     if importlib.util.find_spec("qpsolvers") is None:
         return f"QP back-ends: none (qpsolvers is not installed; {install_hint('qp')})"
@@ -138,7 +139,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
         finite = bool(np.isfinite(sol.x).all())
         w2 = lexicographic_residuals(stack, sol.x) ** 2 if finite else None
         target, source = _peer_levels(peer)
-        for i, (level, r) in enumerate(zip(stack.levels, sol.residuals)):
+        for i, (level, r) in enumerate(zip(stack.levels, sol.residuals, strict=False)):
             line = f"level {i} ({', '.join(level.names)}): residual {r:.3e}"
             if w2 is not None:
                 line += f"  ‖w‖² {w2[i]:.6e}"

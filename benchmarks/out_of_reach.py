@@ -170,7 +170,7 @@ def humanoid_run(name: str, remedy: bool = True, steps: int = 300) -> dict[str, 
         pin.framesForwardKinematics(robot.model, data, q)
         drift = max(drift, max(float(np.linalg.norm(data.oMf[i].translation
                                                     - places[f].translation))
-                               for i, f in zip(ids, feet)))
+                               for i, f in zip(ids, feet, strict=False)))
     hand = data.oMf[robot.frame_id("left_hand")].translation
     return {"robot": name, "remedy": remedy, "feet_drift_m": drift,
             "max_joint_speed": speed, "statuses": statuses,
@@ -256,11 +256,11 @@ def placo_humanoid_run(steps: int = 300) -> dict[str, Any]:
     data = robot.model.createData()
     ids = [robot.frame_id(f) for f in FEET]
     drift, speed = 0.0, 0.0
-    for before, after in zip(states[:-1], states[1:]):
+    for before, after in zip(states[:-1], states[1:], strict=False):
         pin.framesForwardKinematics(robot.model, data, after)
         drift = max(drift, max(float(np.linalg.norm(data.oMf[i].translation
                                                     - setup["places"][f].translation))
-                               for i, f in zip(ids, FEET)))
+                               for i, f in zip(ids, FEET, strict=False)))
         v = pin.difference(robot.model, before, after) / dt
         speed = max(speed, float(np.abs(v[robot.n_base:]).max()))
     hand = data.oMf[robot.frame_id("left_hand")].translation

@@ -18,8 +18,9 @@ same states (PlaCo's trajectory), median of several interleaved rounds:
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -140,7 +141,8 @@ def panda_step_times(steps: int = 300, rounds: int = 7) -> dict[str, Any]:
     placo_reset()
     best = _rounds({"prepared": prepared_step, "one-off": oneoff_step, "placo": placo_step},
                    steps, rounds)
-    distance = max(relative_distance(a, b) for a, b in zip(xs["prepared"], xs["one-off"]))
+    distance = max(relative_distance(a, b)
+                   for a, b in zip(xs["prepared"], xs["one-off"], strict=False))
     if not distance <= 1e-9:
         raise RuntimeError(f"the prepared and one-off Panda paths differ by {distance:.2e}")
 

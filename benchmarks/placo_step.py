@@ -96,7 +96,7 @@ def ik_step_times(steps: int = 300, formulation: str = "extended_jacobian"
         t0 = time.perf_counter()
         scenario.com_ref(t), scenario.left_foot_ref(t), scenario.tip_ref(t)
         refs.append(time.perf_counter() - t0)
-    distance = max(relative_distance(a, b) for a, b in zip(fxs, xs))
+    distance = max(relative_distance(a, b) for a, b in zip(fxs, xs, strict=False))
     refs = np.array(refs)
     ours = kin + build + solve
     fast_step = fkin + fbuild + fsolve
@@ -132,7 +132,8 @@ def ik_step_times(steps: int = 300, formulation: str = "extended_jacobian"
                         "path (`KinematicState`, task terms, `Task`/`TaskStack`, plugin "
                         "`solve`) and the preallocated path (`KinematicState(drift=False)`, "
                         "`FencingScenario.write_velocity_rows` into a `TaskWriter`'s data, "
-                        "a solver prepared once, `solver.solve(rows.data)`); their answers differ by at most "
+                        "a solver prepared once, `solver.solve(rows.data)`); their answers "
+                        "differ by at most "
                         f"{distance:.1e} (relative). All three compute the same Python "
                         "references. Phase medians (µs): PlaCo kinematics "
                         f"{us(placo_run.kinematics_time_s, 50):.1f}, solve "

@@ -105,7 +105,7 @@ def grouped_series(path: Path, results: dict, get, ylabel: str, title: str) -> P
     lims = _log_limits(list(series.values()))
     fig, axes = plt.subplots(len(groups), 1, figsize=(9.0, 2.3 * len(groups) + 0.6),
                              sharex=True, squeeze=False)
-    for ax, (group, runs) in zip(axes[:, 0], groups.items()):
+    for ax, (group, runs) in zip(axes[:, 0], groups.items(), strict=False):
         for label, res in runs:
             if label not in series:
                 continue
@@ -152,7 +152,7 @@ def step_times(path: Path, summary: dict, title: str,
     fig, axes = plt.subplots(1, len(variants), figsize=(4.5 * len(variants) + 1.5,
                                                           0.28 * len(labels) + 1.2),
                              sharey=True, squeeze=False)
-    for ax, variant in zip(axes[0], variants):
+    for ax, variant in zip(axes[0], variants, strict=False):
         runs = summary[variant]
         for i, lb in enumerate(labels):
             s = runs.get(lb)
@@ -242,12 +242,12 @@ def time_vs_size(rows: list, out: Path) -> list[str]:
         ticks = sorted({getattr(r, axis) for r in sub})
         fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels) + 2.5, 4.6),
                                  squeeze=False, sharey=True)
-        for ax, p in zip(axes[0], panels):
+        for ax, p in zip(axes[0], panels, strict=False):
             for lb in labels:
                 pts = sorted((getattr(r, axis), r.median_us) for r in sub
                              if r.label == lb and getattr(r, other) == p)
                 if pts:
-                    xs, ys = zip(*pts)
+                    xs, ys = zip(*pts, strict=False)
                     ax.plot(xs, ys, ms=3, label=lb, **style(lb))
             ax.set_xscale("log")
             ax.set_yscale("log")

@@ -31,12 +31,19 @@ from pathlib import Path
 import numpy as np
 
 from prioik import formulations
-from prioik.hierarchy import (DEFAULT_RCOND, Task, TaskStack, algorithmic_error_norms,
-                              check_lexicographic, rank_profile)
+from prioik.hierarchy import (
+    DEFAULT_RCOND,
+    Task,
+    TaskStack,
+    algorithmic_error_norms,
+    check_lexicographic,
+    rank_profile,
+)
 from prioik.hierarchy.families import FAMILIES, near_singular, random_spd
 
 from .report import Page, table
-from .variants import Variant, capabilities, table as variant_table
+from .variants import Variant, capabilities
+from .variants import table as variant_table
 
 #: σ values of the near-singular sweep (0: exactly conflicting)
 SIGMAS = (1e-1, 1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-10, 0.0)
@@ -271,7 +278,7 @@ def render(sweep: SingularitySweep, errors: dict[str, dict[str, ErrorSummary]],
                  for i, s in enumerate(sweep.sigmas)]
     rot = [v.label for v in sweep.rotated_variants]
     rotated = [[_sigma(s), *(f"{_fmt(a)} / {_fmt(b)}" for a, b in
-                             zip(sweep.rotated_top[i], sweep.rotated_lower[i]))]
+                             zip(sweep.rotated_top[i], sweep.rotated_lower[i], strict=False))]
                for i, s in enumerate(sweep.sigmas)]
     error_tables = []
     for family, tbl in errors.items():
@@ -458,5 +465,6 @@ def run(args: argparse.Namespace) -> int:
 
 if __name__ == "__main__":  # pragma: no cover
     import sys
+
     from prioik.benchmarks.cli import main
     sys.exit(main(["properties", *sys.argv[1:]]))

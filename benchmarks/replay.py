@@ -108,6 +108,7 @@ def live_view(res, *, open_browser: bool = False, speed: float = 1.0):  # pragma
     opens it. Interactive use only: the tests cover the HTML replay.
     """
     import time
+
     from pinocchio.visualize import MeshcatVisualizer
 
     from prioik.robots.models import example_robot_data_dir
@@ -168,7 +169,9 @@ for (const label of Object.keys(DATA.runs)) {
 function pick(label) {
   run = DATA.runs[label]; frame = 0; slider.max = run.t.length - 1; slider.value = 0;
   const p = run.points[0], n = p.length / 3, lo = [1e9, 1e9, 1e9], hi = [-1e9, -1e9, -1e9];
-  const grow = (x, y, z) => { [x, y, z].forEach((v, i) => { lo[i] = Math.min(lo[i], v); hi[i] = Math.max(hi[i], v); }); };
+  const grow = (x, y, z) => {
+    [x, y, z].forEach((v, i) => { lo[i] = Math.min(lo[i], v); hi[i] = Math.max(hi[i], v); });
+  };
   for (let i = 0; i < n; i++) grow(p[3 * i], p[3 * i + 1], p[3 * i + 2]);
   for (const m of run.markers[0]) grow(m[0], m[1], m[2]);
   centre = lo.map((v, i) => 0.5 * (v + hi[i]));
@@ -192,9 +195,11 @@ function draw() {
   ctx.strokeStyle = '#d5d8dd'; ctx.lineWidth = 1;
   const g = 250, span = Math.ceil(radius / g + 2) * g;
   for (let v = -span; v <= span; v += g) {
-    let a = project(centre[0] + v, centre[1] - span, 0), b = project(centre[0] + v, centre[1] + span, 0);
+    let a = project(centre[0] + v, centre[1] - span, 0);
+    let b = project(centre[0] + v, centre[1] + span, 0);
     ctx.beginPath(); ctx.moveTo(a[0], a[1]); ctx.lineTo(b[0], b[1]); ctx.stroke();
-    a = project(centre[0] - span, centre[1] + v, 0); b = project(centre[0] + span, centre[1] + v, 0);
+    a = project(centre[0] - span, centre[1] + v, 0);
+    b = project(centre[0] + span, centre[1] + v, 0);
     ctx.beginPath(); ctx.moveTo(a[0], a[1]); ctx.lineTo(b[0], b[1]); ctx.stroke();
   }
   const p = run.points[frame], n = p.length / 3, P = [];
@@ -208,9 +213,13 @@ function draw() {
   // links, far ones first
   const segs = run.segments.map(([a, b]) => [a, b, P[a][2] + P[b][2]]).sort((u, v) => v[2] - u[2]);
   ctx.lineCap = 'round'; ctx.strokeStyle = RGB; ctx.lineWidth = 7;
-  for (const [a, b] of segs) { ctx.beginPath(); ctx.moveTo(P[a][0], P[a][1]); ctx.lineTo(P[b][0], P[b][1]); ctx.stroke(); }
+  for (const [a, b] of segs) {
+    ctx.beginPath(); ctx.moveTo(P[a][0], P[a][1]); ctx.lineTo(P[b][0], P[b][1]); ctx.stroke();
+  }
   ctx.fillStyle = '#0b2545';
-  for (let i = 0; i < run.joints; i++) { ctx.beginPath(); ctx.arc(P[i][0], P[i][1], 3.5, 0, 7); ctx.fill(); }
+  for (let i = 0; i < run.joints; i++) {
+    ctx.beginPath(); ctx.arc(P[i][0], P[i][1], 3.5, 0, 7); ctx.fill();
+  }
   // markers
   run.markers[frame].forEach((m, i) => {
     const q = project(...m); ctx.fillStyle = MARK[i % MARK.length];
@@ -238,7 +247,8 @@ let drag = null;
 cv.onmousedown = e => { drag = [e.clientX, e.clientY]; };
 window.onmouseup = () => { drag = null; };
 window.onmousemove = e => { if (!drag) return; az += (e.clientX - drag[0]) * 0.01;
-  el = Math.max(-1.4, Math.min(1.4, el + (e.clientY - drag[1]) * 0.01)); drag = [e.clientX, e.clientY]; draw(); };
+  el = Math.max(-1.4, Math.min(1.4, el + (e.clientY - drag[1]) * 0.01));
+  drag = [e.clientX, e.clientY]; draw(); };
 cv.onwheel = e => { e.preventDefault(); zoom *= Math.exp(-e.deltaY * 0.001); draw(); };
 pick(sel.value); draw(); requestAnimationFrame(tick);
 </script></body></html>

@@ -26,18 +26,19 @@ from __future__ import annotations
 import math
 import re
 import shutil
-from functools import lru_cache
+from collections.abc import Iterable, Sequence
+from functools import cache
 from importlib import resources
 from pathlib import Path
 from string import Template
-from typing import Any, Iterable, Sequence
+from typing import Any
 
 __all__ = ["Page", "table", "sci", "mm", "ms", "us", "copy_figures"]
 
 _BLOCK = re.compile(r"^<!-- block: ([\w.-]+) -->[ \t]*$", re.M)
 
 
-@lru_cache(maxsize=None)
+@cache
 def _text(name: str) -> str:
     return resources.files("prioik.benchmarks").joinpath("templates", name).read_text(
         encoding="utf-8")
@@ -189,7 +190,7 @@ def baselines_table(meta: dict) -> str:
     return table(["baseline", "library", "level", "priority model", "given", "here"], rows)
 
 
-def baselines_block(page: "Page", meta: dict, summary: dict,
+def baselines_block(page: Page, meta: dict, summary: dict,
                     reference: str = "hierarchical_active_set") -> str:
     """The page's ``baselines`` block: :func:`baselines_table` and, for each scenario
     variant where TSID and ``reference`` both ran, their median steps and ratio

@@ -11,8 +11,17 @@ from __future__ import annotations
 from pathlib import Path
 
 from . import paper
-from .report import (Page, baselines_block, copy_figures, mm, run_settings, sci,
-                     step_time_figure, stops_and_figures, table)
+from .report import (
+    Page,
+    baselines_block,
+    copy_figures,
+    mm,
+    run_settings,
+    sci,
+    step_time_figure,
+    stops_and_figures,
+    table,
+)
 from .variants import is_damped, parse_label
 
 __all__ = ["write_page"]

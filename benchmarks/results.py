@@ -101,7 +101,7 @@ class RunSummary:
     failed: bool = False
 
     @classmethod
-    def of(cls, res, errors: tuple[str, ...]) -> "RunSummary":
+    def of(cls, res, errors: tuple[str, ...]) -> RunSummary:
         """The summary of a :class:`~prioik.robots.SimulationResult` with the maxima of
         ``errors`` (keys of ``res.errors``; a missing one is ``None``)."""
         tip = res.errors.get("tip_error_m", np.array([]))

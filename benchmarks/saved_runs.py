@@ -11,7 +11,6 @@ known: its scenario's, or ``--robot``).
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 #: triangles of the meshed page's robot (robots.mesh_replay.TRIANGLES; not imported

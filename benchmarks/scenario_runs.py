@@ -27,15 +27,15 @@ import importlib
 import json
 import sys
 import time
+from collections.abc import Callable, Generator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Generator
+from typing import Any
 
 import numpy as np
 
 from .results import RunSummary
-from .variants import (BASELINES, Variant, VariantTable, baseline_profiles, capabilities,
-                       table)
+from .variants import BASELINES, Variant, VariantTable, baseline_profiles, capabilities, table
 
 __all__ = ["VELOCITY_GAIN", "TURN_STEPS", "run_table", "run_one", "run_steps", "in_turns",
            "add_turn_steps_argument", "add_save_runs_argument", "table_legend",

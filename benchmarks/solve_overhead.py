@@ -6,9 +6,11 @@ Python around it: the layout check, the one-thread-at-a-time guard, the timing a
 :class:`~prioik.formulations.Solution` (the plugin's ``Outcome``, ``info``, residuals).
 Both are timed here on the same rows, alternating call by call: ``solver.solve(data)``
 (the public call) and the core called directly, the solver's own prepared
-``ExtendedJacobian`` writing into arrays allocated once (the floor; a measurement only). The overhead is
+``ExtendedJacobian`` writing into arrays allocated once (the floor; a measurement only). The
+overhead is
 the median of the paired differences (each public call minus the kernel call beside
-it, the two taking turns to go first), the lowest over the rounds: the kernel's own time varies by more than the
+it, the two taking turns to go first), the lowest over the rounds: the kernel's own time varies by
+more than the
 overhead between rounds on a shared machine, and a difference of two separately timed
 medians carried that variation.
 
@@ -20,7 +22,8 @@ from __future__ import annotations
 
 import argparse
 import time
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 

@@ -9,7 +9,7 @@ itself never changes the process's threads or environment.
 from __future__ import annotations
 
 import contextlib
-from typing import Iterator
+from collections.abc import Iterator
 
 from threadpoolctl import threadpool_info, threadpool_limits
 

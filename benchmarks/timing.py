@@ -12,8 +12,9 @@ around the plugin's solve alone), not the loop's wall time.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 

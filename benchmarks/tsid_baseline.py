@@ -87,8 +87,9 @@ REPORT_VARIANTS = ()
 #: the level the library solves at (the scenario pages' baseline table)
 LEVEL = "acceleration"
 
-__all__ = ["REQUIREMENTS", "NAME", "LEVEL", "profile", "python_path", "environment", "unavailable_reason",
-           "setup_request", "step_references", "steps", "run_tsid", "TsidError"]
+__all__ = ["REQUIREMENTS", "NAME", "LEVEL", "profile", "python_path", "environment",
+           "unavailable_reason", "setup_request", "step_references", "steps", "run_tsid",
+           "TsidError"]
 
 
 class TsidError(RuntimeError):
@@ -104,7 +105,7 @@ def python_path() -> Path:
     return Path(__file__).resolve().parent.parent / ".venv-tsid" / "bin" / "python"
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _probe(python: str) -> dict:
     if not Path(python).is_file():
         return {"error": f"not installed (no TSID environment at {python}); build it with "
@@ -354,7 +355,7 @@ def tsid_steps(scenario, *, duration: float, dt: float, progress=None, label: st
             state["asked"] += n
             state["error"] = reply.get("error")
             buffer.extend(zip(reply["q"], reply["v"], reply["reference_time_s"],
-                              reply["solve_time_s"]))
+                              reply["solve_time_s"], strict=False))
             if not buffer:
                 raise RuntimeError(state["error"] or "TSID returned no step")
         q_next, v_next, t_ref, t_solve = buffer.pop(0)

@@ -46,7 +46,8 @@ A malformed setup or request is answered by ``{"error": "<why>"}`` and the runne
 exits with status 2. End of input ends the run (status 0).
 
 The times are ``time.perf_counter`` in this process: ``reference_time_s`` setting the
-tasks' references (read from the request before the step), ``solve_time_s`` ``computeProblemData`` (TSID's kinematics and
+tasks' references (read from the request before the step), ``solve_time_s`` ``computeProblemData``
+(TSID's kinematics and
 dynamics, ``pinocchio.computeAllTerms``, and every task's rows) plus the QP solve.
 TSID keeps C++ references to its tasks and contacts, so this module keeps the Python
 objects alive for the whole run.

@@ -24,7 +24,8 @@ ablations plugins declare for ``validate``), and writes a markdown table per fam
 
 Formulations that cannot take a family (closed-form methods on inequality
 stacks) are skipped and listed; without the ``cvxpy`` extra (the inequality families'
-reference) the default run leaves the inequality families out and says so; formulations that need a mass matrix get
+reference) the default run leaves the inequality families out and says so; formulations that need a
+mass matrix get
 ``mass_matrix = I`` (their metric tie-break is then the minimum norm of
 ``reference``). Progress goes to stderr.
 """
@@ -44,13 +45,19 @@ import numpy as np
 
 from prioik import formulations
 from prioik.formulations.registry import check_support
-from prioik.hierarchy import (DEFAULT_CERTIFICATE_TOL, TaskStack, UnsupportedTaskError,
-                              check_lexicographic, relative_distance)
+from prioik.hierarchy import (
+    DEFAULT_CERTIFICATE_TOL,
+    TaskStack,
+    UnsupportedTaskError,
+    check_lexicographic,
+    relative_distance,
+)
 from prioik.hierarchy.families import FAMILIES, INEQUALITY_FAMILIES
 
 from .machine import versions
 from .report import Page
-from .variants import Variant, table as variant_table
+from .variants import Variant
+from .variants import table as variant_table
 
 EQUALITY_FAMILY_NAMES = ("compatible", "conflicting", "rank_deficient")
 INEQUALITY_FAMILY_NAMES = ("with_inequalities", "infeasible_inequality", "random_inequality")

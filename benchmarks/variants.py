@@ -190,7 +190,7 @@ class Variant:
                 "only_in": list(self.only_in)}
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "Variant":
+    def from_dict(cls, d: dict[str, Any]) -> Variant:
         """The inverse of :meth:`to_dict`."""
         return cls(d["formulation"], d.get("tag", ""), dict(d.get("options") or {}),
                    mass=d.get("mass"), level=d.get("level", "acceleration"),

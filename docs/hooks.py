@@ -15,9 +15,9 @@ from __future__ import annotations
 
 import importlib
 import shutil
-import tomllib
 from pathlib import Path
 
+import tomllib
 from mkdocs.structure.files import File
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -5,12 +5,29 @@
 >>> [f.name for f in formulations.available() if f.available]   # doctest: +SKIP
 """
 
-from .base import (STATUSES, Capabilities, ConcurrentUseError, FormulationError, Outcome,
-                   ReportVariant, Solution)
+from .base import (
+                   STATUSES,
+                   Capabilities,
+                   ConcurrentUseError,
+                   FormulationError,
+                   Outcome,
+                   ReportVariant,
+                   Solution,
+)
 from .options import Option
 from .prepared import PreparedSolver
-from .registry import (PLUGINS, BatchSolution, FormulationInfo, available, compile_kernels,
-                       get, names, prepare, solve, solve_batch)
+from .registry import (
+                   PLUGINS,
+                   BatchSolution,
+                   FormulationInfo,
+                   available,
+                   compile_kernels,
+                   get,
+                   names,
+                   prepare,
+                   solve,
+                   solve_batch,
+)
 
 __all__ = ["BatchSolution", "STATUSES", "Capabilities", "ConcurrentUseError", "FormulationError",
            "FormulationInfo", "Option", "Outcome", "PLUGINS", "PreparedSolver", "ReportVariant",

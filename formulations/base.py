@@ -2,16 +2,26 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
 from prioik.errors import PrioikError
-from prioik.hierarchy import (DEFAULT_CERTIFICATE_TOL, X_PRECISION, StackData, TaskStack,
-                              TaskStackError, ambiguity_reason, check_lexicographic,
-                              level_residuals, level_scale, precision_limited_levels,
-                              precision_reason)
+from prioik.hierarchy import (
+    DEFAULT_CERTIFICATE_TOL,
+    X_PRECISION,
+    StackData,
+    TaskStack,
+    TaskStackError,
+    ambiguity_reason,
+    check_lexicographic,
+    level_residuals,
+    level_scale,
+    precision_limited_levels,
+    precision_reason,
+)
 
 #: Values of :attr:`Solution.status`.
 STATUSES = ("optimal", "approximate", "failed")
@@ -164,7 +174,7 @@ class Solution:
         return f"<table><caption>Solution</caption>{body}</table>"
 
 
-def in_original_units(out: "Outcome", data, levels: list[int]) -> "Outcome":
+def in_original_units(out: Outcome, data, levels: list[int]) -> Outcome:
     """``out``, solved on the stack ``data`` with ``levels`` equilibrated
     (:meth:`~prioik.hierarchy.TaskStack.equilibrated`: each of those levels' values
     multiplied by a power of two), with its residuals (and ``info["level_violation"]``,
@@ -298,7 +308,7 @@ def lower_point(stack: TaskStack | StackData, x: np.ndarray,
         ``(i, value at x, value at x_a)``, or ``None`` (no such level, or the solver gave
         no finite point).
     """
-    from . import hierarchical_active_set as active_set     # (it imports this module)
+    from . import hierarchical_active_set as active_set  # (it imports this module)
     from .options import validate_options
     data = stack if isinstance(stack, StackData) else stack.data
     try:

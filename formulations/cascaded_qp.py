@@ -45,7 +45,7 @@ import numpy as np
 import qpsolvers
 import scipy.sparse as spa
 
-from prioik.hierarchy import DEFAULT_RCOND, TaskStack
+from prioik.hierarchy import TaskStack
 
 from .base import Capabilities, FormulationError, Outcome, ReportVariant
 from .base import certify as certify_outcome
@@ -313,7 +313,7 @@ class Fixed:
     tasks: list[str]
 
     @classmethod
-    def start(cls, n: int) -> "Fixed":
+    def start(cls, n: int) -> Fixed:
         return cls(np.zeros(n), np.eye(n), np.zeros((n, 0)), [], [], [], [], [])
 
     def add(self, rows: LevelRows, names, x: np.ndarray, rcond: float,
@@ -484,7 +484,7 @@ def build_level_qp(rows: LevelRows | None, fixed: Fixed, fixing: str, eps: float
             E.append(blk)
             e.append(A_h @ fixed.x)
     delta = margin * max(1.0, float(np.linalg.norm(fixed.x)))
-    for A_h, lo, up in zip(fixed.A_in, fixed.lower, fixed.upper):
+    for A_h, lo, up in zip(fixed.A_in, fixed.lower, fixed.upper, strict=False):
         A_h, lo, up = _unit_rows(A_h, lo, up)
         lo, up = lo - delta, up + delta
         blk = np.zeros((A_h.shape[0], nz))
@@ -562,8 +562,9 @@ def _solve_daqp(qp: LevelQP, settings: dict[str, Any]
     the inequality levels of the validation families, and a 3-variable example in
     tests/test_cascaded_qp.py). Passing ``blower = bupper = b`` fixes it.
     """
-    import daqp
     from ctypes import c_int
+
+    import daqp
 
     n_z = qp.P.shape[0]
     G = qp.G if qp.G is not None else np.zeros((0, n_z))

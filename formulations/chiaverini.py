@@ -2,7 +2,8 @@
 
 Chiaverini (1997) treats two tasks, ``θ̈ = J_1^# h_1 + (I − J_1⁺J_1) J_2^# h_2``; the
 sum over ``k`` levels with the augmented projectors below is the usual later
-generalisation, not his paper's. Each level is first solved *on its own* — ``J_i^# h_i``, ignoring the levels above —
+generalisation, not his paper's. Each level is first solved *on its own* — ``J_i^# h_i``, ignoring
+the levels above —
 and that solution is then projected into the null space of the augmented Jacobian
 of the higher levels (``J_{i-1}^A``, eq. 7 of Jeong & Chang 2009)::
 
@@ -29,11 +30,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from prioik.hierarchy import DEFAULT_RCOND, TaskStack, nested_null_spaces
+from prioik.hierarchy import TaskStack, nested_null_spaces
 
 from .base import Capabilities, Outcome
-from .options import Option, rcond_option
 from .nullspace import check_nonnegative, generalized_inverse
+from .options import Option, rcond_option
 
 NAME = "chiaverini"
 DESCRIPTION = "singularity-robust task priority (Chiaverini 1997): Σ N^A_{i-1} J_i^# h_i"
@@ -58,7 +59,7 @@ def solve(stack: TaskStack, *, damping: float, rcond: float) -> Outcome:
     bases = nested_null_spaces(stack, float(rcond))      # Z_i: basis of null(J_{i-1}^A)
     x = np.zeros(stack.n)
     own = []
-    for level, Z in zip(stack.levels, bases):
+    for level, Z in zip(stack.levels, bases, strict=False):
         A, b = level.A, level.b
         tol = float(rcond) * float(np.linalg.norm(A))
         J_sharp, _, _ = generalized_inverse(A, tol, damping)

@@ -29,13 +29,21 @@ from typing import Any
 import cvxpy as cp
 import numpy as np
 
-from prioik.hierarchy import DEFAULT_RCOND, TaskStack
+from prioik.hierarchy import TaskStack
 
 from .base import Capabilities, FormulationError, Outcome
 from .base import certify as certify_outcome
+from .cascaded_qp import (
+    ACTIVE_TOL,
+    MULTIPLIER_TOL,
+    Fixed,
+    _unit_rows,
+    level_rows,
+    quiet_unless_verbose,
+    record_level,
+    scaled_level,
+)
 from .options import Option, dictionary, positive_semidefinite, rcond_option
-from .cascaded_qp import (ACTIVE_TOL, MULTIPLIER_TOL, Fixed, _unit_rows, level_rows,
-                          quiet_unless_verbose, record_level, scaled_level)
 
 NAME = "cvxpy"
 DESCRIPTION = "the cascaded QP modelled in cvxpy (independent reference for inequalities)"
@@ -142,7 +150,7 @@ def solve(stack: TaskStack, *, solver: str, backend_options: dict | None, fixing
             for A_h in fixed.eq_rows:
                 cons.append(A_h @ x == A_h @ fixed.x)
         delta = margin * max(1.0, float(np.linalg.norm(fixed.x)))
-        for A_h, lo, up in zip(fixed.A_in, fixed.lower, fixed.upper):
+        for A_h, lo, up in zip(fixed.A_in, fixed.lower, fixed.upper, strict=False):
             A_u, lo, up = _unit_rows(A_h, lo, up)
             if A_u.shape[0]:
                 _bounds(A_u @ x, lo - delta, up + delta, A_u, cons, tracked)

@@ -32,7 +32,7 @@ from typing import Any
 import daqp
 import numpy as np
 
-from prioik.hierarchy import DEFAULT_RCOND, TaskStack
+from prioik.hierarchy import TaskStack
 
 from .base import Capabilities, FormulationError, Outcome, ReportVariant, certify
 from .options import Option, dictionary, rcond_option

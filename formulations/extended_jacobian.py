@@ -43,14 +43,32 @@ import math
 import numpy as np
 from scipy.linalg import lapack
 
-from prioik.hierarchy import (AMBIGUITY, NEAR_AMBIGUITY, StackData, StackLayout,
-                              TaskStack, UnsupportedTaskError, ambiguity_reason,
-                              ambiguous_decision, decision_margin, level_scale,
-                              near_ambiguity_reason, rank_threshold)
+from prioik.hierarchy import (
+    AMBIGUITY,
+    NEAR_AMBIGUITY,
+    StackData,
+    StackLayout,
+    TaskStack,
+    UnsupportedTaskError,
+    ambiguity_reason,
+    ambiguous_decision,
+    decision_margin,
+    level_scale,
+    near_ambiguity_reason,
+    rank_threshold,
+)
 from prioik.hierarchy.linalg import numpy_svd
 
-from .base import (Capabilities, CoreInputError, FormulationError, Outcome, ReportVariant,
-                   certify, precision_status, solve_equilibrated)
+from .base import (
+    Capabilities,
+    CoreInputError,
+    FormulationError,
+    Outcome,
+    ReportVariant,
+    certify,
+    precision_status,
+    solve_equilibrated,
+)
 from .options import Option, rcond_option, validate_options
 
 try:  # the compiled C++ core (core/, built by pip install)
@@ -562,7 +580,7 @@ def _extended_blocks(stack: TaskStack, rcond: float, damping: float, zs,
     """
     rows, rhs = [], []
     n = stack.n
-    for i, ((A, b), Z) in enumerate(zip(stack.equality_matrices(), zs)):
+    for i, ((A, b), Z) in enumerate(zip(stack.equality_matrices(), zs, strict=False)):
         if targets is not None:
             b = targets[i]
         if ranges is not None:
@@ -650,7 +668,7 @@ def _svd_task_ranges(stack: TaskStack, zs: list[np.ndarray]) -> list[np.ndarray]
     ``r_i = dim null(J_{i-1}^A) − dim null(J_i^A)`` (eq. 12) from ``zs``; they span
     ``range(N_{i-1} J_iᵀ)`` (``N_{i-1} = Z_i Z_iᵀ``)."""
     out = []
-    for level, Z, Z_next in zip(stack.levels, zs, zs[1:]):
+    for level, Z, Z_next in zip(stack.levels, zs, zs[1:], strict=False):
         r = Z.shape[1] - Z_next.shape[1]
         if r <= 0:
             out.append(np.zeros((stack.n, 0)))
@@ -816,7 +834,7 @@ def _solve_damped(stack: TaskStack, damping: float, rcond: float, nullspace: str
     return Outcome(x, "approximate", info)
 
 
-def _solve_batch(prepared: "Prepared", datas: list[StackData]) -> tuple[np.ndarray, list[str]]:
+def _solve_batch(prepared: Prepared, datas: list[StackData]) -> tuple[np.ndarray, list[str]]:
     """Many stacks of one layout at once: the compiled kernel over the batch, stacks in
     parallel (a loop of :meth:`Prepared.solve` off the compiled path)."""
     if not prepared.compiled:
@@ -825,7 +843,7 @@ def _solve_batch(prepared: "Prepared", datas: list[StackData]) -> tuple[np.ndarr
     return _solve_batch_core(prepared, datas)
 
 
-def _solve_batch_core(prepared: "Prepared", datas: list[StackData]
+def _solve_batch_core(prepared: Prepared, datas: list[StackData]
                       ) -> tuple[np.ndarray, list[str]]:
     """:func:`_solve_batch` on the C++ core: the stacks' rows copied into one array each,
     solved one after the other by the prepared core."""

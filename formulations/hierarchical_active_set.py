@@ -40,18 +40,32 @@ The algorithm, its hard cases, tolerances and complexity: ``docs/active-set.md``
 
 from __future__ import annotations
 
-import math
 from itertools import compress
 from types import SimpleNamespace
 
 import numpy as np
 
-from prioik.hierarchy import (AMBIGUITY, NEAR_AMBIGUITY, X_PRECISION, StackData, StackLayout,
-                              TaskStack, ambiguity_reason, check_lexicographic)
+from prioik.hierarchy import (
+    AMBIGUITY,
+    NEAR_AMBIGUITY,
+    X_PRECISION,
+    StackData,
+    StackLayout,
+    TaskStack,
+    ambiguity_reason,
+    check_lexicographic,
+)
 from prioik.hierarchy.analysis import prepare_certificate
 
-from .base import (Capabilities, CoreInputError, FormulationError, Outcome, ReportVariant,
-                   precision_status, solve_equilibrated)
+from .base import (
+    Capabilities,
+    CoreInputError,
+    FormulationError,
+    Outcome,
+    ReportVariant,
+    precision_status,
+    solve_equilibrated,
+)
 from .options import Option, rcond_option, validate_options
 
 try:

@@ -28,8 +28,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from prioik.hierarchy import (AMBIGUITY, DEFAULT_RCOND, TaskStack, ambiguity_reason,
-                              ambiguous_decision, rank_threshold)
+from prioik.hierarchy import (
+    AMBIGUITY,
+    DEFAULT_RCOND,
+    TaskStack,
+    ambiguity_reason,
+    ambiguous_decision,
+    rank_threshold,
+)
 
 from .base import Capabilities, FormulationError, Outcome, ReportVariant
 from .options import Option, rcond_option

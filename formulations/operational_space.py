@@ -41,11 +41,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import solve_triangular
 
-from prioik.hierarchy import DEFAULT_RCOND, TaskStack
+from prioik.hierarchy import TaskStack
 
 from .base import Capabilities, FormulationError, Outcome, ReportVariant
-from .options import Option, rcond_option
 from .nullspace import check_nonnegative, truncated_svd
+from .options import Option, rcond_option
 
 NAME = "operational_space"
 DESCRIPTION = "prioritized operational-space control (Khatib, Sentis), mass_matrix=M"

@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 import placo
 
-from prioik.hierarchy import DEFAULT_RCOND, TaskStack
+from prioik.hierarchy import TaskStack
 
 from .base import Capabilities, FormulationError, Outcome, certify
 from .options import Option, rcond_option

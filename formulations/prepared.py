@@ -19,18 +19,34 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Sequence
 from types import ModuleType
-from typing import TYPE_CHECKING, Any, Sequence
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from prioik.hierarchy import (DEFAULT_CERTIFICATE_TOL, StackData, StackLayout, TaskStack,
-                              TaskStackError, UnsupportedTaskError, hard_violations,
-                              level_residuals)
+from prioik.hierarchy import (
+    DEFAULT_CERTIFICATE_TOL,
+    StackData,
+    StackLayout,
+    TaskStack,
+    TaskStackError,
+    UnsupportedTaskError,
+    hard_violations,
+    level_residuals,
+)
 from prioik.hierarchy.linalg import PRECISION_LIMIT_NORM
 
-from .base import (STATUSES, Capabilities, ConcurrentUseError, FormulationError, Outcome,
-                   Solution, in_original_units, precision_status)
+from .base import (
+    STATUSES,
+    Capabilities,
+    ConcurrentUseError,
+    FormulationError,
+    Outcome,
+    Solution,
+    in_original_units,
+    precision_status,
+)
 
 if TYPE_CHECKING:
     from .registry import BatchSolution
@@ -308,7 +324,7 @@ class PreparedSolver:
             status = precision_status(status, info, data, x)
         return Solution(x, self.formulation, self._given, status, residuals, elapsed, info)
 
-    def solve_batch(self, stacks_or_data: Sequence) -> "BatchSolution":
+    def solve_batch(self, stacks_or_data: Sequence) -> BatchSolution:
         """Solve many stacks of the layout (the plugin's batched kernel when it has one,
         else a loop of :meth:`solve`), each on its own: a plugin's warm start is reset
         before each stack, so that row ``i`` equals ``prioik.solve(stacks[i])``.
@@ -337,14 +353,14 @@ class PreparedSolver:
         elapsed = time.perf_counter() - t0
         X = np.asarray(X, dtype=np.float64)
         bad = ~np.isfinite(X).all(axis=1)
-        statuses = ["failed" if b else st for b, st in zip(bad, statuses)]
+        statuses = ["failed" if b else st for b, st in zip(bad, statuses, strict=False)]
         # as solve: float64 cannot give every level at a huge ‖x‖ (a batched kernel's
         # statuses do not know it)
         for i in np.flatnonzero(np.linalg.norm(X, axis=1) > PRECISION_LIMIT_NORM).tolist():
             statuses[i] = precision_status(statuses[i], {}, datas[i], X[i])
         if self._hard:          # as solve: a hard level left violated fails the answer
             statuses = ["failed" if st != "failed" and hard_violations(d, x) else st
-                        for st, d, x in zip(statuses, datas, X)]
+                        for st, d, x in zip(statuses, datas, X, strict=False)]
         return BatchSolution(X, statuses, self.formulation, dict(self._given), elapsed, batched)
 
     def _one_by_one(self, datas: list[StackData]) -> tuple[np.ndarray, list[str]]:

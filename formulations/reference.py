@@ -26,8 +26,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from prioik.hierarchy import (AMBIGUITY, DEFAULT_RCOND, TaskStack, ambiguity_reason,
-                              ambiguous_decision, level_scale, rank_threshold)
+from prioik.hierarchy import (
+    AMBIGUITY,
+    DEFAULT_RCOND,
+    TaskStack,
+    ambiguity_reason,
+    ambiguous_decision,
+    level_scale,
+    rank_threshold,
+)
 
 from .base import Capabilities, FormulationError, Outcome
 from .nullspace import REFINEMENT_STEPS, refinement
@@ -175,7 +182,7 @@ def solve_batch(stacks, *, rcond: float = DEFAULT_RCOND, metric=None, level_damp
         groups = {d: (np.concatenate([i for i, _ in parts]),
                       np.concatenate([z for _, z in parts]))
                   for d, parts in new_groups.items()}
-    statuses = ["approximate" if amb else st for st, amb in zip(statuses, ambiguous)]
+    statuses = ["approximate" if amb else st for st, amb in zip(statuses, ambiguous, strict=False)]
     if metric is not None:
         W = np.asarray(metric, dtype=np.float64)
         for d, (idx, Z) in groups.items():

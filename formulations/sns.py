@@ -36,8 +36,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from prioik.hierarchy import (DEFAULT_RCOND, TaskStack, UnsupportedTaskError, ambiguity_reason,
-                              rank_threshold)
+from prioik.hierarchy import (
+    DEFAULT_RCOND,
+    TaskStack,
+    UnsupportedTaskError,
+    ambiguity_reason,
+    rank_threshold,
+)
 
 from .base import Capabilities, FormulationError, Outcome, ReportVariant
 from .nullspace import check_nonnegative, project_level, truncated_svd

@@ -45,8 +45,8 @@ from scipy.linalg import cho_factor, cho_solve
 from prioik.hierarchy import DEFAULT_RCOND, TaskStack
 
 from .base import Capabilities, FormulationError, Outcome, ReportVariant
-from .options import Option, rcond_option
 from .nullspace import check_nonnegative, generalized_inverse
+from .options import Option, rcond_option
 
 NAME = "unifying"
 DESCRIPTION = "unifying framework (Peters et al. 2008), paper's eq. 36-40 with mass_matrix=M"

@@ -20,11 +20,21 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .layout import StackData, level_residuals
 from .errors import TaskStackError, UnsupportedTaskError
-from .linalg import (CERTIFICATE_SIGMA_FLOOR, DEFAULT_CERTIFICATE_TOL, DEFAULT_RCOND, X_PRECISION,
-                     ambiguous_decision, level_scale, matrix_rank, nonnegative_least_squares,
-                     range_basis, row_activity_from_values, svd)
+from .layout import StackData, level_residuals
+from .linalg import (
+    CERTIFICATE_SIGMA_FLOOR,
+    DEFAULT_CERTIFICATE_TOL,
+    DEFAULT_RCOND,
+    X_PRECISION,
+    ambiguous_decision,
+    level_scale,
+    matrix_rank,
+    nonnegative_least_squares,
+    range_basis,
+    row_activity_from_values,
+    svd,
+)
 from .stack import TaskStack
 
 
@@ -66,7 +76,7 @@ def rank_profile(stack: TaskStack, rcond: float = DEFAULT_RCOND) -> list[int]:
 def conflicting_levels(stack: TaskStack, rcond: float = DEFAULT_RCOND) -> list[bool]:
     """For each level, whether it conflicts with the levels above (eq. 35)."""
     prof = rank_profile(stack, rcond)
-    return [matrix_rank(level.A, rcond) > r for level, r in zip(stack.levels, prof)]
+    return [matrix_rank(level.A, rcond) > r for level, r in zip(stack.levels, prof, strict=False)]
 
 
 def singularity_distance(stack: TaskStack, rcond: float = DEFAULT_RCOND) -> list[float]:
@@ -79,7 +89,7 @@ def singularity_distance(stack: TaskStack, rcond: float = DEFAULT_RCOND) -> list
     """
     Zs = nested_null_spaces(stack, rcond)
     out = []
-    for level, Z in zip(stack.levels, Zs):
+    for level, Z in zip(stack.levels, Zs, strict=False):
         A = level.A
         if A.shape[0] == 0 or Z.shape[1] == 0:
             out.append(0.0)
@@ -114,7 +124,7 @@ def feasible_split(stack: TaskStack, rcond: float = DEFAULT_RCOND) -> list[Feasi
     _require_equality(stack, "feasible_split")
     Zs = nested_null_spaces(stack, rcond)
     out = []
-    for i, (level, Z) in enumerate(zip(stack.levels, Zs)):
+    for i, (level, Z) in enumerate(zip(stack.levels, Zs, strict=False)):
         A, b = level.A, level.b
         Uf, Uc, _ = range_basis(A @ Z, rcond, scale=float(np.linalg.norm(A)))
         out.append(FeasibleSplit(i, Uf, Uc, Uf.T @ A, Uf.T @ b))
@@ -379,13 +389,13 @@ def check_lexicographic(stack: TaskStack | StackData, x: np.ndarray,
     checks = report.levels + ((report.minimum_norm,) if minimum_norm else ())
     near_checks = again.levels + ((again.minimum_norm,) if minimum_norm else ())
     if again.ok and all(abs(c.residual - d.residual) <= tol * d.scale
-                        for c, d in zip(checks, near_checks)):
+                        for c, d in zip(checks, near_checks, strict=False)):
         return dataclasses.replace(again, snapped_rows=count)
     return report
 
 
 def _read(data: StackData, x: np.ndarray, tol: float, rcond: float, minimum_norm: bool,
-          metric: np.ndarray | None) -> "LexicographicReport":
+          metric: np.ndarray | None) -> LexicographicReport:
     """The check of ``x`` (:func:`_check_lexicographic`), read again with the band rows
     fixed when that first reading fails and there are such rows."""
     report = _check_lexicographic(data, x, tol, rcond, minimum_norm, metric, False)
@@ -413,7 +423,7 @@ class _Activity:
     v: np.ndarray | None = None
 
     @classmethod
-    def of(cls, data: StackData, x: np.ndarray, tol: float) -> "_Activity":
+    def of(cls, data: StackData, x: np.ndarray, tol: float) -> _Activity:
         eq = data.layout.row_is_equality
         A = data.A
         act = cls(np.where(eq, data.b, data.lower), np.where(eq, data.b, data.upper),
@@ -481,7 +491,7 @@ def prepare_certificate() -> None:
     import scipy.optimize  # noqa: F401  (the import is the point)
 
 
-def _feasible(A: np.ndarray, act: "_Activity", fixed: np.ndarray, s1: int,
+def _feasible(A: np.ndarray, act: _Activity, fixed: np.ndarray, s1: int,
               small: np.ndarray) -> bool:
     """Whether some point keeps the rows above level ``rows[s0:s1]`` as read (``fixed``,
     their mask of rows read as fixed: at their values at ``x``, the others inside their
@@ -547,7 +557,7 @@ def _level_passes(res: float, scale: float, violation: float, tol: float) -> boo
 _DESCENT_TRIES = 4
 
 
-def _descent_drop(A: np.ndarray, s0: int, s1: int, fixed: np.ndarray, act: "_Activity",
+def _descent_drop(A: np.ndarray, s0: int, s1: int, fixed: np.ndarray, act: _Activity,
                   sqrt_weight: np.ndarray, x: np.ndarray, x_norm: float, d: np.ndarray,
                   limit: float) -> float:
     """How much level ``rows[s0:s1]``'s value drops at the best point of ``x + α d``
@@ -624,7 +634,7 @@ _BAND_FLOOR = 1e-12
 
 def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: float,
                          minimum_norm: bool, metric: np.ndarray | None,
-                         fix_band: bool) -> "LexicographicReport":
+                         fix_band: bool) -> LexicographicReport:
     """:func:`check_lexicographic` with the band rows read as held (``fix_band=False``;
     the report's ``band_rows_fixed`` then counts the band rows found) or as fixed."""
     n = data.n

@@ -7,7 +7,7 @@ Every generator takes a ``numpy.random.Generator`` and returns a :class:`TaskSta
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
@@ -326,7 +326,8 @@ def random_inequality_hierarchy(rng: np.random.Generator, n: int, k: int) -> Tas
             else:
                 half = rng.uniform(0.0, 0.5, m)
                 lo, up = centre - half, centre + half
-                kind = rng.integers(0, 4, m)      # 0 two-sided, 1 upper only, 2 lower only, 3 pinned
+                # 0 two-sided, 1 upper only, 2 lower only, 3 pinned
+                kind = rng.integers(0, 4, m)
                 lo[kind == 1] = -np.inf
                 up[kind == 2] = np.inf
                 lo[kind == 3] = up[kind == 3] = centre[kind == 3]

@@ -27,8 +27,8 @@ most ``CONDITIONED_ERROR``: the larger of Wedin's bound per level
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 

@@ -6,9 +6,10 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -496,7 +497,8 @@ def load_peer_json(path: str | Path) -> PeerProblem:
             raise TaskStackError(f"{path}: level {i} needs 'A', 'lb' and 'ub'")
         try:
             levels.append((np.array(lv["A"], dtype=np.float64).reshape(-1, n),
-                           np.array(lv["lb"], dtype=np.float64), np.array(lv["ub"], dtype=np.float64)))
+                           np.array(lv["lb"], dtype=np.float64),
+                           np.array(lv["ub"], dtype=np.float64)))
         except (TypeError, ValueError) as exc:
             raise TaskStackError(f"{path}: level {i}: {exc}") from None
     stack, kept = _peer_stack(levels, n, str(path))

@@ -25,7 +25,8 @@ way the rows were written.
 from __future__ import annotations
 
 import weakref
-from typing import TYPE_CHECKING, Sequence
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -51,7 +52,7 @@ EQUILIBRATE_ABOVE = 1e100
 
 #: the layouts :meth:`StackLayout.shared` hands out, by ``(n, levels)``; an entry lives as
 #: long as its layout does
-_SHARED: "weakref.WeakValueDictionary[tuple, StackLayout]" = weakref.WeakValueDictionary()
+_SHARED: weakref.WeakValueDictionary[tuple, StackLayout] = weakref.WeakValueDictionary()
 
 
 class StackLayout:
@@ -138,7 +139,7 @@ class StackLayout:
 
     @classmethod
     def shared(cls, n: int, levels: Sequence[Sequence[tuple]],
-               hard: Sequence[int] = ()) -> "StackLayout":
+               hard: Sequence[int] = ()) -> StackLayout:
         """The layout of ``n`` and ``levels`` (as for the constructor), one object per
         distinct shape while something holds it: the stacks of one shape share it, and a
         prepared solver recognises their data by identity instead of comparing layouts
@@ -237,7 +238,7 @@ class StackLayout:
         """Every task, level by level."""
         return tuple(self._slices)
 
-    def data(self) -> "StackData":
+    def data(self) -> StackData:
         """New preallocated data of this layout: zero rows and targets, unbounded
         inequality rows, unit weights."""
         return StackData(self)
@@ -360,14 +361,14 @@ class StackData:
         return [i for i, p in enumerate(self.level_peaks().tolist())
                 if p > 0 and not EQUILIBRATE_BELOW <= p <= EQUILIBRATE_ABOVE]
 
-    def copy(self) -> "StackData":
+    def copy(self) -> StackData:
         """A writable copy."""
         out = StackData(self.layout)
         for key in ("A", "b", "lower", "upper", "sqrt_weight"):
             getattr(out, key)[...] = getattr(self, key)
         return out
 
-    def freeze(self) -> "StackData":
+    def freeze(self) -> StackData:
         """Make the arrays read-only (returns ``self``)."""
         for key in ("A", "b", "lower", "upper", "sqrt_weight"):
             getattr(self, key).setflags(write=False)

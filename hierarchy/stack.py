@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from typing import Iterator, Sequence
+from collections.abc import Iterator, Sequence
 
 import numpy as np
 
@@ -128,12 +128,12 @@ class TaskStack:
                                 f"{', '.join(t.name for t in self.tasks)})")
 
     # ------------------------------------------------------------- composition
-    def __truediv__(self, other) -> "TaskStack":
+    def __truediv__(self, other) -> TaskStack:
         if isinstance(other, TaskStack):
             return TaskStack(self._levels + other.levels)
         return TaskStack(self._levels + (Level.of(other),))
 
-    def __rtruediv__(self, other) -> "TaskStack":
+    def __rtruediv__(self, other) -> TaskStack:
         return TaskStack((Level.of(other),) + self._levels)
 
     @property
@@ -165,7 +165,7 @@ class TaskStack:
             self._data = data.freeze()
         return self._data
 
-    def equilibrated(self) -> tuple["TaskStack", list[int]]:
+    def equilibrated(self) -> tuple[TaskStack, list[int]]:
         """The stack with every level of extreme scale rescaled, and those levels.
 
         A level whose largest entry lies outside ``[EQUILIBRATE_BELOW,
@@ -212,7 +212,8 @@ class TaskStack:
         :meth:`summary` gives the table with ranks."""
         parts = []
         for level in self._levels[:8]:
-            parts.append(("hard " if level.hard else "") + " + ".join(f"{t.name}[{t.m}{'' if t.is_equality else '≤'}]"
+            parts.append(("hard " if level.hard else "") + " + ".join(
+                f"{t.name}[{t.m}{'' if t.is_equality else '≤'}]"
                                     for t in level[:4]) + (" + …" if len(level) > 4 else ""))
         more = f" / … ({len(self) - 8} more)" if len(self) > 8 else ""
         return f"TaskStack(n={self.n}, {len(self)} levels: {' / '.join(parts)}{more})"

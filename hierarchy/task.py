@@ -7,7 +7,8 @@ library is agnostic of what ``x`` is (accelerations, velocities, torques).
 from __future__ import annotations
 
 import numbers
-from typing import TYPE_CHECKING, Iterable, Sequence
+from collections.abc import Iterable, Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -204,7 +205,7 @@ class Task:
         return lo, up
 
     # ------------------------------------------------------------- composition
-    def rows(self, indices: Sequence[int] | slice) -> "Task":
+    def rows(self, indices: Sequence[int] | slice) -> Task:
         """A task made of the selected rows, named ``name[i,j,...]``."""
         if self.A.ndim != 2:
             self.validate()
@@ -220,7 +221,7 @@ class Task:
                     pick(self.b), lower=pick(self.lower), upper=pick(self.upper),
                     weight=self.weight[idx] if self.weight.ndim == 1 else self.weight)
 
-    def scaled(self, factor: float) -> "Task":
+    def scaled(self, factor: float) -> Task:
         """A copy with ``A``, ``b`` and the bounds multiplied by ``factor > 0`` (same
         weight): the task's optimal set is unchanged."""
         w = self.weight if not self._unit_weight else 1.0
@@ -230,16 +231,16 @@ class Task:
         up = None if self.upper is None else self.upper * factor
         return Task(self.name, self.A * factor, lower=lo, upper=up, weight=w)
 
-    def with_weight(self, weight) -> "Task":
+    def with_weight(self, weight) -> Task:
         """A copy of this task with another weight."""
         if self.is_equality:
             return Task(self.name, self.A, self.b, weight=weight)
         return Task(self.name, self.A, lower=self.lower, upper=self.upper, weight=weight)
 
-    def __add__(self, other) -> "Level":
+    def __add__(self, other) -> Level:
         return Level.of(self) + other
 
-    def __truediv__(self, other) -> "TaskStack":
+    def __truediv__(self, other) -> TaskStack:
         from .stack import TaskStack
         return TaskStack([self]) / other
 
@@ -261,7 +262,7 @@ class Level(tuple):
     """
 
     @classmethod
-    def of(cls, item, hard: bool | None = None) -> "Level":
+    def of(cls, item, hard: bool | None = None) -> Level:
         """``item`` (a :class:`Level`, a :class:`Task` or a sequence of tasks) as a
         level; ``hard``: declare it hard or not (``None``: as ``item`` is, else not)."""
         if isinstance(item, Level):
@@ -288,15 +289,15 @@ class Level(tuple):
         """Whether the level is declared hard (:func:`hard`)."""
         return self.__dict__.get("_hard", False)
 
-    def __add__(self, other) -> "Level":
+    def __add__(self, other) -> Level:
         other = Level.of(other)
         return Level.of(tuple(self) + tuple(other), hard=self.hard or other.hard)
 
-    def __radd__(self, other) -> "Level":
+    def __radd__(self, other) -> Level:
         other = Level.of(other)
         return Level.of(tuple(other) + tuple(self), hard=self.hard or other.hard)
 
-    def __truediv__(self, other) -> "TaskStack":
+    def __truediv__(self, other) -> TaskStack:
         from .stack import TaskStack
         return TaskStack([self]) / other
 
@@ -348,8 +349,8 @@ class Level(tuple):
         n = self[0].n
         if eq:
             s = [np.sqrt(t.weight) for t in eq]
-            A = np.vstack([si[:, None] * t.A for si, t in zip(s, eq)])
-            b = np.concatenate([si * t.b for si, t in zip(s, eq)])
+            A = np.vstack([si[:, None] * t.A for si, t in zip(s, eq, strict=False)])
+            b = np.concatenate([si * t.b for si, t in zip(s, eq, strict=False)])
         else:
             A, b = np.zeros((0, n)), np.zeros(0)
         A.setflags(write=False)

@@ -30,17 +30,39 @@ thread setting).
 from __future__ import annotations
 
 import importlib
-from importlib.metadata import PackageNotFoundError, version as _version
+from importlib.metadata import PackageNotFoundError
+from importlib.metadata import version as _version
 
 from . import errors, extras, formulations, hierarchy
 from .errors import PrioikError, UnknownNameError
 from .extras import MissingExtraError
-from .formulations import (BatchSolution, Capabilities, ConcurrentUseError, FormulationError,
-                           Option, PreparedSolver, Solution, available, prepare, solve,
-                           solve_batch)
-from .hierarchy import (Level, LexicographicReport, StackData, StackLayout, Task, TaskStack,
-                        TaskStackError, UnsupportedTaskError, check_lexicographic, hard,
-                        load_stack, save_stack)
+from .formulations import (
+    BatchSolution,
+    Capabilities,
+    ConcurrentUseError,
+    FormulationError,
+    Option,
+    PreparedSolver,
+    Solution,
+    available,
+    prepare,
+    solve,
+    solve_batch,
+)
+from .hierarchy import (
+    Level,
+    LexicographicReport,
+    StackData,
+    StackLayout,
+    Task,
+    TaskStack,
+    TaskStackError,
+    UnsupportedTaskError,
+    check_lexicographic,
+    hard,
+    load_stack,
+    save_stack,
+)
 
 
 def _installed_version() -> str:
@@ -73,7 +95,8 @@ __all__ = [
     "BatchSolution", "Capabilities", "ConcurrentUseError", "FormulationError", "Level",
     "LexicographicReport", "MissingExtraError", "Option", "PreparedSolver", "PrioikError",
     "Solution", "StackData", "StackLayout", "Task", "TaskStack", "TaskStackError",
-    "UnknownNameError", "UnsupportedTaskError", "__version__", "available", "benchmarks", "check_lexicographic",
+    "UnknownNameError", "UnsupportedTaskError", "__version__", "available", "benchmarks",
+    "check_lexicographic",
     "errors", "extras", "formulations", "hard", "hierarchy", "load_stack", "prepare",
     "robots", "save_stack", "solve", "solve_batch",
 ]

@@ -1,7 +1,8 @@
 """The optional parts of prioik: which ``pip install prioik[EXTRA]`` brings which module.
 
 ``pip install prioik`` installs the core (numpy, scipy, threadpoolctl, tqdm and the compiled
-C++ core ``prioik._core``): the task-stack spec, the closed-form formulations and the ``solve``/``list``/``validate``/
+C++ core ``prioik._core``): the task-stack spec, the closed-form formulations and the
+``solve``/``list``/``validate``/
 ``compare``/``properties`` commands. Everything else is an extra of ``pyproject.toml``
 named by what it is for; :data:`EXTRAS` names the distributions that show each one is
 installed, and a part that needs a missing extra raises :class:`MissingExtraError`

@@ -14,20 +14,58 @@ from prioik.extras import MissingExtraError
 if importlib.util.find_spec("pinocchio") is None:
     raise MissingExtraError(("robots",), "prioik.robots", ("pinocchio",))
 
-from .models import (LOADERS, PANDA_FINGERS, ModelNotFoundError, RobotModel, StateError,
-                     check_configuration, check_velocity, example_robot_data_dir, from_urdf,
-                     g1, go2, has_free_flyer, load, panda, sample_humanoid, solo12,
-                     spatial_chain, talos, ur5)
 from .mesh_replay import MeshReplayError, write_mesh_replay
+from .models import (
+    LOADERS,
+    PANDA_FINGERS,
+    ModelNotFoundError,
+    RobotModel,
+    StateError,
+    check_configuration,
+    check_velocity,
+    example_robot_data_dir,
+    from_urdf,
+    g1,
+    go2,
+    has_free_flyer,
+    load,
+    panda,
+    sample_humanoid,
+    solo12,
+    spatial_chain,
+    talos,
+    ur5,
+)
 from .references import Reference, Waypoints, minimum_jerk
 from .rows import MODES, TaskWriter
-from .simulate import (SimulationError, SimulationResult, StepTasks, equality_view, run_to_end,
-                       simulate, simulation_steps)
-from .tasks import (JointLimitActivation, KinematicState, TaskTerm, com_position,
-                    com_region, contact, frame_orientation, frame_pose, frame_position,
-                    frame_region, joint_limit_bounds, joint_limit_rows,
-                    joint_limit_violation, joint_velocity_bounds, point_position,
-                    polygon_region, posture)
+from .simulate import (
+    SimulationError,
+    SimulationResult,
+    StepTasks,
+    equality_view,
+    run_to_end,
+    simulate,
+    simulation_steps,
+)
+from .tasks import (
+    JointLimitActivation,
+    KinematicState,
+    TaskTerm,
+    com_position,
+    com_region,
+    contact,
+    frame_orientation,
+    frame_pose,
+    frame_position,
+    frame_region,
+    joint_limit_bounds,
+    joint_limit_rows,
+    joint_limit_violation,
+    joint_velocity_bounds,
+    point_position,
+    polygon_region,
+    posture,
+)
 
 __all__ = [
     "LOADERS", "PANDA_FINGERS", "ModelNotFoundError", "RobotModel", "StateError",

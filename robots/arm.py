@@ -33,8 +33,16 @@ from .models import RobotModel, example_robot_data_dir
 from .references import Reference, minimum_jerk
 from .scenario import BaselineTask, Scenario
 from .simulate import SimulationError, StepTasks
-from .tasks import (JointLimitActivation, KinematicState, frame_orientation, frame_position,
-                    joint_limit_bounds, joint_limit_rows, joint_limit_violation, posture)
+from .tasks import (
+    JointLimitActivation,
+    KinematicState,
+    frame_orientation,
+    frame_position,
+    joint_limit_bounds,
+    joint_limit_rows,
+    joint_limit_violation,
+    posture,
+)
 
 __all__ = ["ArmScenario", "TARGETS", "PANDA_URDF", "panda", "ACCELERATION_LIMITS"]
 
@@ -56,7 +64,7 @@ def panda() -> RobotModel:
     path = example_robot_data_dir() / PANDA_URDF
     names = [f"panda_joint{i}" for i in range(1, 8)]
     return from_urdf(path, floating_base=False, locked_joints=PANDA_FINGERS,
-                     q0=dict(zip(names, PANDA_READY)), name="panda",
+                     q0=dict(zip(names, PANDA_READY, strict=False)), name="panda",
                      frames={"tool": TOOL, "hand": "panda_hand", "base": "panda_link0"})
 
 
@@ -209,7 +217,8 @@ class ArmScenario(Scenario):
         if limits in ("bounds", "hard_bounds"):
             levels.append(self.velocity_bounds(state, dt))
         elif limits != "none":
-            raise SimulationError(f"limits must be 'bounds', 'hard_bounds' or 'none', got {limits!r}")
+            raise SimulationError(f"limits must be 'bounds', 'hard_bounds' or 'none', got "
+                                  f"{limits!r}")
         levels.append(terms["tool_position"].velocity(gain))
         levels.append(terms["tool_orientation"].velocity(gain))
         n_tasks = len(levels)

@@ -38,13 +38,23 @@ from prioik.errors import UnknownNameError
 from prioik.hierarchy import StackData, TaskStack
 
 from .models import RobotModel, g1
-from .references import Reference, Waypoints, minimum_jerk, minimum_jerk_profile
+from .references import Reference, Waypoints, minimum_jerk_profile
 from .rows import TaskWriter
 from .scenario import BaselineTask, Scenario
 from .simulate import SimulationError, StepTasks
-from .tasks import (JointLimitActivation, KinematicState, com_position, contact,
-                    frame_pose, frame_position, joint_limit_bounds, joint_limit_rows,
-                    joint_limit_violation, joint_velocity_bounds, posture)
+from .tasks import (
+    JointLimitActivation,
+    KinematicState,
+    com_position,
+    contact,
+    frame_pose,
+    frame_position,
+    joint_limit_bounds,
+    joint_limit_rows,
+    joint_limit_violation,
+    joint_velocity_bounds,
+    posture,
+)
 
 __all__ = ["VARIANTS", "TARGETS", "FencingScenario", "LEVEL_NAMES"]
 

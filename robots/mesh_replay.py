@@ -229,7 +229,7 @@ def _runs(robot: RobotModel, runs, dt: float | None, labels) -> list[_Run]:
         labels = [str(x) for x in labels]
         if len(labels) != len(runs):
             raise MeshReplayError(f"{len(labels)} labels for {len(runs)} runs")
-        items = list(zip(labels, runs))
+        items = list(zip(labels, runs, strict=False))
     if not items:
         raise MeshReplayError("no trajectory to replay")
     if len({label for label, _ in items}) != len(items):
@@ -562,7 +562,8 @@ viewer.scene_tree.find(['meshcat', 'robot']).object.traverse(o => {
   if (o.isMesh && o.geometry && o.geometry.attributes.position &&
       o.geometry.attributes.position.count > 0) count++;
 });
-window.prioikReplay = {meshes: count, triangles: DATA.triangles, runs: Object.keys(DATA.runs).length};
+window.prioikReplay = {meshes: count, triangles: DATA.triangles,
+                       runs: Object.keys(DATA.runs).length};
 document.body.dataset.meshes = count;
 requestAnimationFrame(show);
 </script></body></html>

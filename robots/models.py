@@ -37,7 +37,8 @@ import pinocchio as pin
 from prioik.errors import PrioikError, UnknownNameError
 from prioik.extras import install_hint
 
-__all__ = ["ModelNotFoundError", "RobotModelError", "StateError", "check_configuration", "check_velocity",
+__all__ = ["ModelNotFoundError", "RobotModelError", "StateError", "check_configuration",
+           "check_velocity",
            "RobotModel", "example_robot_data_dir", "from_urdf",
            "has_free_flyer", "g1", "talos", "panda", "ur5", "go2", "solo12", "PANDA_FINGERS",
            "sample_humanoid", "spatial_chain", "LOADERS", "load"]
@@ -70,7 +71,7 @@ _UNIT_PARTS = {"JointModelFreeFlyer": (3, 4), "JointModelSpherical": (0, 4),
                "JointModelRevoluteUnboundedUnaligned": (0, 2)}
 
 
-def check_configuration(robot: "RobotModel", q, what: str = "q") -> np.ndarray:
+def check_configuration(robot: RobotModel, q, what: str = "q") -> np.ndarray:
     """``q`` as a float copy of ``n_q`` finite values with unit quaternions.
 
     A ``q`` outside the joint limits is accepted (the limit tasks push it back and
@@ -82,12 +83,12 @@ def check_configuration(robot: "RobotModel", q, what: str = "q") -> np.ndarray:
     return _check_vector(robot, q, robot.nq, what, unit=True)
 
 
-def check_velocity(robot: "RobotModel", v, what: str = "v") -> np.ndarray:
+def check_velocity(robot: RobotModel, v, what: str = "v") -> np.ndarray:
     """``v`` as a float copy of ``n_v`` finite values (:class:`StateError` otherwise)."""
     return _check_vector(robot, v, robot.nv, what, unit=False)
 
 
-def _check_vector(robot: "RobotModel", value, size: int, what: str, unit: bool
+def _check_vector(robot: RobotModel, value, size: int, what: str, unit: bool
                   ) -> np.ndarray:
     try:
         arr = np.array(value, dtype=float, copy=True)
@@ -279,7 +280,7 @@ class RobotModel:
         vmax[~(vmax > 0) | (vmax > big)] = np.inf
         return lo, hi, vmax
 
-    def with_point_frame(self, name: str, parent: str, offset) -> "RobotModel":
+    def with_point_frame(self, name: str, parent: str, offset) -> RobotModel:
         """A copy of this robot with a frame ``name`` fixed at ``offset`` in ``parent``.
 
         Args:
@@ -307,7 +308,7 @@ class RobotModel:
         return RobotModel(self.name, model, self.q0.copy(), frames, self.source,
                           self.floating_base, self.package_dirs)
 
-    def with_armature(self, armature: float) -> "RobotModel":
+    def with_armature(self, armature: float) -> RobotModel:
         """A copy of this robot with rotor inertia ``armature`` (kg·m²) on every actuated
         joint: pinocchio adds ``model.armature`` to the diagonal of ``M(q)`` (CRBA,
         ABA, RNEA); kinematics are unchanged.

@@ -32,7 +32,8 @@ LOCAL_WORLD_ALIGNED Jacobian is formed from them), ``data.oMf``, ``data.Jcom``,
 ``data.com[0]``, and for the drifts the joints' spatial velocities and accelerations at
 ``q̈ = 0`` ``data.v``, ``data.a`` and ``data.acom[0]`` — taken once per ``Data``.
 The readable builders of :mod:`robots.tasks` (``frame_position(state, frame, ref)`` →
-``TaskTerm`` → ``Task``) are thin wrappers over these writers; ``tests/test_rows.py`` checks the writers against
+``TaskTerm`` → ``Task``) are thin wrappers over these writers; ``tests/test_rows.py`` checks the
+writers against
 independent pinocchio/numpy formulas and ``tests/test_tasks.py`` every Jacobian and drift
 against finite differences.
 """
@@ -40,16 +41,16 @@ against finite differences.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import numpy as np
 import pinocchio as pin
 
+from prioik._core import rows as _k
 from prioik.formulations.base import CoreInputError
 from prioik.hierarchy import StackData, StackLayout, TaskStackError
 
-from prioik._core import rows as _k
 from .models import RobotModel, StateError
 
 __all__ = ["MODES", "TaskWriter", "JointLimitActivation"]
@@ -146,7 +147,7 @@ class _Region:
     point_values: np.ndarray | None = None
 
     @classmethod
-    def of(cls, name: str, normals, lower, upper, dt, horizon) -> "_Region":
+    def of(cls, name: str, normals, lower, upper, dt, horizon) -> _Region:
         if not _positive(dt):
             raise TaskStackError(f"a region needs dt > 0, got {dt!r}", task=name)
         T = dt if horizon is None else horizon
@@ -973,7 +974,7 @@ class TaskWriter:
                                  "KinematicState was built with drift=False", task=task.name)
         return True
 
-    def _data_views(self, state) -> "_DataViews":
+    def _data_views(self, state) -> _DataViews:
         views = self._views
         if views is None or views.data is not state.data:
             if state.robot.model is not self.robot.model:

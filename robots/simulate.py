@@ -31,16 +31,16 @@ from __future__ import annotations
 import json
 import math
 import time
+from collections.abc import Callable, Generator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Generator
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
 from prioik.errors import PrioikError
-from prioik.hierarchy import (StackData, StackLayout, Task, TaskStack,
-                              algorithmic_error_norms)
+from prioik.hierarchy import StackData, StackLayout, Task, TaskStack, algorithmic_error_norms
 
 from .models import RobotModel
 from .tasks import KinematicState
@@ -160,7 +160,7 @@ class SimulationResult:
         return path
 
     @classmethod
-    def load(cls, path) -> "SimulationResult":
+    def load(cls, path) -> SimulationResult:
         """Read a run written by :meth:`save`.
 
         Raises:

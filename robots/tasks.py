@@ -37,8 +37,7 @@ import pinocchio as pin
 from prioik._core import rows as _core_rows
 from prioik.hierarchy import Task, TaskStackError
 
-from .models import (UNIT_NORM_TOL, RobotModel, StateError, check_configuration,
-                     check_velocity)
+from .models import UNIT_NORM_TOL, RobotModel, StateError, check_configuration, check_velocity
 from .references import Reference
 from .rows import JointLimitActivation, TaskWriter
 
@@ -257,7 +256,7 @@ class TaskTerm:
         _check_gain(self.name, "k", k)
         return Task(self.name, self.J, self.velocity_ref + k * self.error, weight=weight)
 
-    def select(self, rows) -> "TaskTerm":
+    def select(self, rows) -> TaskTerm:
         """The term restricted to some rows (e.g. the horizontal axes)."""
         idx = list(rows)
         return TaskTerm(self.name, self.J[idx],

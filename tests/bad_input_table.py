@@ -2,8 +2,15 @@
 """Bad-input table: each case is handled when the library answers right or raises its
 own error (class defined in prioik) whose message names the culprit; CLI cases when the
 exit status is right and stderr is one line naming the culprit."""
-import io, json, os, subprocess, sys, tempfile, contextlib
+import contextlib
+import io
+import json
+import os
+import subprocess
+import sys
+import tempfile
 from types import SimpleNamespace
+
 import numpy as np
 
 rows = []
@@ -25,8 +32,9 @@ def api(group, name, fn, word=None, check=None):
     rows.append((group, name, ok, f"returned {str(out)[:90]}"))
 
 
-from prioik.hierarchy import Task, TaskStack, check_lexicographic
 import prioik.formulations as F
+from prioik.hierarchy import Task, TaskStack, check_lexicographic
+
 
 def S(A, b, **kw):
     return TaskStack([[Task("a", A, b, **kw)]])
@@ -67,8 +75,9 @@ for f, opts, word in (("extended_jacobian", {"damping": "a"}, "damping"),
         check=lambda s: False)
 
 # ---------------------------------------------------------------- robots
-from prioik.robots import KinematicState, g1, spatial_chain, simulate, joint_limit_violation
 from prioik import robots as R
+from prioik.robots import KinematicState, g1, joint_limit_violation, simulate, spatial_chain
+
 robot = g1()
 def state(change):
     q, v = robot.q0.copy(), np.zeros(robot.nv)
@@ -89,6 +98,7 @@ api("robots", "q 1e6 past a limit: accepted, reported",
     lambda: joint_limit_violation(chain, [0, hi[1] + 1e6, 0]) if KinematicState(chain, [0, hi[1] + 1e6, 0], np.zeros(3)) else None,
     check=lambda v: abs(v - 1e6) < 1)
 from prioik.robots import Reference, StepTasks, frame_position, posture
+
 
 def build(state, t):
     tip = frame_position(state, "tip", Reference(np.array([0.5, 0.2, 0.3]), np.zeros(3), np.zeros(3)), name="tip")
@@ -119,6 +129,7 @@ api("robots", "simulate dt > duration", lambda: simulate(chain, build, None, dur
     check=lambda r: False)
 
 from prioik.robots import com_region, frame_region, polygon_region
+
 free = KinematicState(chain, chain.q0, np.zeros(3), drift=False)
 for name, fn, word in (
         ("region: zero normal", lambda: com_region(free, [[0, 0, 0]], upper=1.0, dt=0.01), "normal 0"),
@@ -136,6 +147,7 @@ for name, fn, word in (
 
 # ---------------------------------------------------------------- the compiled core
 import prioik._core as core
+
 good_A, good_b, good_w = np.ones((4, 3)), np.ones(4), np.ones(4)
 ej = core.ExtendedJacobian([0, 2, 4], 3, rcond=1e-10)
 def nan_at(a, i):

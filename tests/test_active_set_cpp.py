@@ -16,15 +16,17 @@ import numpy as np
 import pytest
 
 import prioik._core as core
-
 from prioik import formulations
 from prioik.formulations import hierarchical_active_set as has
 from prioik.formulations.base import CoreInputError
 from prioik.hierarchy import Task, TaskStack, TaskStackError, check_lexicographic
-from prioik.hierarchy.families import (FAMILIES, INEQUALITY_FAMILIES, box_bounded,
-                                       random_inequality_hierarchy)
+from prioik.hierarchy.families import (
+    FAMILIES,
+    INEQUALITY_FAMILIES,
+    box_bounded,
+    random_inequality_hierarchy,
+)
 from prioik.hierarchy.io import load_stack
-
 
 DATA = Path(__file__).parent / "data"
 SAVED = sorted((DATA / "fuzz").glob("*.json")) + sorted((DATA / "adversarial").glob("*.json"))
@@ -76,7 +78,8 @@ def differences(stack: TaskStack, got, ref) -> dict:
     statuses side by side."""
     floor = w2_floor(stack, ref.x)
     w_got, w_ref = _violation(got), _violation(ref)
-    allowed = W2_REL * np.maximum(w_ref, w_got) + floor * (floor + 2.0 * np.sqrt(np.maximum(w_ref, 0.0)))
+    allowed = (W2_REL * np.maximum(w_ref, w_got)
+               + floor * (floor + 2.0 * np.sqrt(np.maximum(w_ref, 0.0))))
     dw = np.abs(w_got - w_ref)
     dx = float(np.linalg.norm(got.x - ref.x)) / max(1.0, float(np.linalg.norm(ref.x)))
     return {"status": (got.status, ref.status), "dw": dw, "allowed": allowed, "dx": dx}

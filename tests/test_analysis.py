@@ -5,9 +5,17 @@ import numpy as np
 import pytest
 
 from prioik import formulations
-from prioik.hierarchy import (Task, TaskStack, TaskStackError, check_lexicographic, conflicting_levels,
-                       lexicographic_residuals, nested_null_spaces, rank_profile,
-                       singularity_distance)
+from prioik.hierarchy import (
+    Task,
+    TaskStack,
+    TaskStackError,
+    check_lexicographic,
+    conflicting_levels,
+    lexicographic_residuals,
+    nested_null_spaces,
+    rank_profile,
+    singularity_distance,
+)
 from prioik.hierarchy.families import FAMILIES, near_singular
 
 

@@ -3,11 +3,20 @@
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from prioik import formulations
-from prioik.hierarchy import (Task, TaskStack, UnsupportedTaskError, algorithmic_error,
-                       algorithmic_error_norms, feasible_split, matrix_rank, rank_profile)
+from prioik.hierarchy import (
+    Task,
+    TaskStack,
+    UnsupportedTaskError,
+    algorithmic_error,
+    algorithmic_error_norms,
+    feasible_split,
+    matrix_rank,
+    rank_profile,
+)
 from prioik.hierarchy.families import FAMILIES, compatible, near_singular
 
 EQUALITY_FAMILIES = sorted(FAMILIES)
@@ -25,7 +34,7 @@ def test_split_matches_eq_19_20_and_rank_profile(family, seed):
     threshold for the augmented matrix J_i^A cannot match the per-level rule.)"""
     stack, _ = draw(family, 7000 + seed)
     above = np.zeros((0, stack.n))
-    for sp, level, r in zip(feasible_split(stack), stack.levels, rank_profile(stack)):
+    for sp, level, r in zip(feasible_split(stack), stack.levels, rank_profile(stack), strict=False):
         A = level.A
         m = A.shape[0]
         assert sp.feasible.shape == (m, r) and sp.conflicting.shape == (m, m - r)
@@ -61,7 +70,7 @@ def test_compatible_levels_are_entirely_feasible(seed):
     """If the i-th task is compatible, J_i_feasible = J_i (eq. 21, up to a rotation)."""
     rng = np.random.default_rng(seed)
     stack = compatible(rng, 20, 4)
-    for sp, level in zip(feasible_split(stack), stack.levels):
+    for sp, level in zip(feasible_split(stack), stack.levels, strict=False):
         assert sp.conflicting.shape[1] == 0
         np.testing.assert_allclose(sp.feasible @ sp.J_feasible, level.A, atol=1e-12)
 
@@ -74,7 +83,7 @@ def test_compatible_levels_are_entirely_feasible(seed):
 def test_zero_for_exact_solutions_at_every_level(formulation, options, family, seed):
     stack, _ = draw(family, 8000 + seed)
     x = formulations.solve(stack, formulation, **options).x
-    for e, level in zip(algorithmic_error(stack, x), stack.levels):
+    for e, level in zip(algorithmic_error(stack, x), stack.levels, strict=False):
         scale = np.linalg.norm(level.A) * np.linalg.norm(x) + np.linalg.norm(level.b)
         assert np.linalg.norm(e) <= 1e-9 * max(scale, 1e-300)
 
@@ -88,7 +97,7 @@ def test_perturbation_shows_up_linearly(family, seed):
     v = rng.standard_normal(stack.n)
     delta = 1e-3
     errors = algorithmic_error(stack, x + delta * v)
-    for e, sp in zip(errors, feasible_split(stack)):
+    for e, sp in zip(errors, feasible_split(stack), strict=False):
         np.testing.assert_allclose(e, -delta * (sp.J_feasible @ v),
                                    atol=1e-9 * (1.0 + np.linalg.norm(sp.h_feasible)))
     assert errors[0].size and np.linalg.norm(errors[0]) > 1e-6   # level 1 always has rows

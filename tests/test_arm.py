@@ -9,7 +9,6 @@ import pinocchio as pin
 import pytest
 
 import prioik
-from prioik.benchmarks import arm as cmd
 from prioik.benchmarks.scenario_runs import run_one, run_table
 from prioik.robots import KinematicState
 from prioik.robots.arm import ACCELERATION_LIMITS, OUT_OF_REACH, ArmScenario

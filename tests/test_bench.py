@@ -10,12 +10,10 @@ import math
 import numpy as np
 import pytest
 
-from prioik.benchmarks import bench
-from prioik.benchmarks.bench import CSV_COLUMNS, Row, Settings, ratios, run_benchmark
-from prioik.benchmarks.bench import page, tables
-from prioik.benchmarks.variants import table
+from prioik.benchmarks.bench import CSV_COLUMNS, Row, Settings, page, ratios, run_benchmark, tables
 from prioik.benchmarks.cli import main
 from prioik.benchmarks.stacks import random_case, random_mass_matrix
+from prioik.benchmarks.variants import table
 
 #: whole-scenario runs (see the `slow` marker in pyproject.toml)
 pytestmark = pytest.mark.slow
@@ -236,8 +234,8 @@ def test_skipped_and_unsupported_rows_are_recorded_not_timed():
 
 def test_random_cases_are_seeded_and_mass_matrices_spd():
     a, b = random_case(20, 4, samples=3), random_case(20, 4, samples=3)
-    for s, t in zip(a.stacks, b.stacks):
-        for la, lb in zip(s.levels, t.levels):
+    for s, t in zip(a.stacks, b.stacks, strict=False):
+        for la, lb in zip(s.levels, t.levels, strict=False):
             assert np.array_equal(la.A, lb.A) and np.array_equal(la.b, lb.b)
     assert all(len(s) == 4 and s.n == 20 for s in a.stacks)
     M = random_mass_matrix(20)
@@ -280,7 +278,7 @@ def test_g1_fencing_samples_give_robot_stacks_and_mass_matrices():
     from prioik.benchmarks.stacks import g1_fencing_samples
     samples = g1_fencing_samples("compatible", 3, dt=0.01, duration=0.1)
     assert len(samples.stacks) == 3 and samples.times[0] == 0.0
-    for stack, M in zip(samples.stacks, samples.mass_matrices):
+    for stack, M in zip(samples.stacks, samples.mass_matrices, strict=False):
         assert stack.n == 35 and stack.is_equality
         assert stack.levels[0].names == ("support_foot",)
         assert np.array_equal(M, M.T) and np.linalg.eigvalsh(M).min() > 0

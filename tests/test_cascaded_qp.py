@@ -8,15 +8,20 @@ their eps at 1e-9 (the default here); HiGHS is loose (its QP solver regularises)
 """
 
 import numpy as np
-from conftest import assert_truthful
 import pytest
+from conftest import assert_truthful
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from prioik import formulations
-from prioik.hierarchy import relative_distance
 from prioik.formulations import FormulationError, cascaded_qp
-from prioik.hierarchy import Task, TaskStack, check_lexicographic, lexicographic_residuals
+from prioik.hierarchy import (
+    Task,
+    TaskStack,
+    check_lexicographic,
+    lexicographic_residuals,
+    relative_distance,
+)
 from prioik.hierarchy.families import FAMILIES, infeasible_inequality, with_inequalities
 
 BACKENDS = cascaded_qp.backends()
@@ -142,7 +147,8 @@ def test_inequality_level_above_equality_level_is_preserved():
                        Task("goal", np.eye(3)[:2], [2.0, 1.0])])
     for backend in BACKENDS:
         sol = formulations.solve(stack, "cascaded_qp", solver=backend)
-        assert np.allclose(sol.x, [0.5, 1.0, 0.0], atol=tolerance(EQUALITY_TOL, backend) * 10), backend
+        atol = tolerance(EQUALITY_TOL, backend) * 10
+        assert np.allclose(sol.x, [0.5, 1.0, 0.0], atol=atol), backend
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
@@ -208,7 +214,7 @@ def test_inputs_are_not_mutated():
     W = np.eye(6) * 2.0
     formulations.solve(stack, "cascaded_qp", metric=W)
     assert np.array_equal(W, np.eye(6) * 2.0)
-    for (A, b), t in zip(before, stack.tasks):
+    for (A, b), t in zip(before, stack.tasks, strict=False):
         assert np.array_equal(A, t.A) and (b is None or np.array_equal(b, t.b))
 
 
@@ -264,6 +270,7 @@ def test_concurrent_quiet_solves_leave_stdout_alone(capfd):
 
 def _degenerate1():
     from pathlib import Path
+
     from prioik.hierarchy import load_peer_json
     return load_peer_json(Path(__file__).parent / "data" / "peer" / "daqp_jl_degenerate1.json")
 

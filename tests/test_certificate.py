@@ -10,9 +10,18 @@ import numpy as np
 import pytest
 
 from prioik import formulations
-from prioik.hierarchy import (DEFAULT_CERTIFICATE_TOL, Task, TaskStack, algorithmic_error_norms,
-                              check_lexicographic, lexicographic_residuals, load_lexls,
-                              load_peer, nonnegative_least_squares, row_activity)
+from prioik.hierarchy import (
+    DEFAULT_CERTIFICATE_TOL,
+    Task,
+    TaskStack,
+    algorithmic_error_norms,
+    check_lexicographic,
+    lexicographic_residuals,
+    load_lexls,
+    load_peer,
+    nonnegative_least_squares,
+    row_activity,
+)
 from prioik.hierarchy.families import FAMILIES, random_inequality_hierarchy
 from prioik.hierarchy.linalg import X_PRECISION
 
@@ -105,7 +114,8 @@ def test_rejects_worse_at_one_level_better_at_a_lower_one():
         for i in range(len(stack) - 1):
             y = _optimum(_merged(stack, i))
             wy = _w2(stack, y)
-            if wy[i] > w[i] + 1e-6 * max(1.0, w[i]) and wy[i + 1] < w[i + 1] - 1e-6 * max(1.0, w[i + 1]):
+            if (wy[i] > w[i] + 1e-6 * max(1.0, w[i])
+                    and wy[i + 1] < w[i + 1] - 1e-6 * max(1.0, w[i + 1])):
                 report = check_lexicographic(stack, y)
                 assert not report.ok and report.fault_level == i, str(report)
                 found += 1
@@ -150,7 +160,8 @@ def test_minimum_norm_step_is_checked_when_asked():
     stack = TaskStack([Task("a", [[1.0, 0.0]], [1.0])])
     assert check_lexicographic(stack, np.array([1.0, 0.5])).ok
     report = check_lexicographic(stack, np.array([1.0, 0.5]), minimum_norm=True)
-    assert not report.ok and report.fault_level == 1 and report.first_failure.tasks == ("minimum-norm",)
+    assert not report.ok and report.fault_level == 1
+    assert report.first_failure.tasks == ("minimum-norm",)
     assert check_lexicographic(stack, np.array([1.0, 0.0]), minimum_norm=True).ok
 
 
@@ -263,6 +274,7 @@ def test_nonnegative_least_squares_tolerance_follows_the_target_scale():
     reaches 1.6e-20, rejecting an answer the quadprog and clarabel cascades agree with
     to ~10 digits (5.1e-7 relative)."""
     from scipy.optimize import nnls
+
     from prioik.hierarchy.fuzz import bounds_case
     from prioik.hierarchy.linalg import nonnegative_least_squares
     stack = bounds_case(np.random.default_rng([2, 1322]), 1322).stack

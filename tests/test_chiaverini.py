@@ -4,8 +4,14 @@ import numpy as np
 import pytest
 
 from prioik import formulations
-from prioik.hierarchy import (Task, TaskStack, UnsupportedTaskError, algorithmic_error_norms,
-                       check_lexicographic, rank_profile)
+from prioik.hierarchy import (
+    Task,
+    TaskStack,
+    UnsupportedTaskError,
+    algorithmic_error_norms,
+    check_lexicographic,
+    rank_profile,
+)
 from prioik.hierarchy.families import FAMILIES, near_singular
 
 
@@ -95,7 +101,8 @@ def test_inequalities_and_bad_options_are_named():
         formulations.solve(near_singular(0.1), "chiaverini", damping=float("nan"))
 
 
-from hypothesis import given, settings, strategies as st  # noqa: E402
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
 
 
 @settings(max_examples=80, deadline=None)

@@ -119,7 +119,8 @@ def test_bad_input_prints_one_line_and_exits_2(argv, message, capsys):
 
 def test_invalid_stack_file_names_the_task(tmp_path, capsys):
     bad = tmp_path / "nan.json"
-    bad.write_text(json.dumps({"levels": [{"name": "arm", "A": [[1.0, 2.0]], "b": [float("nan")]}]}))
+    bad.write_text(json.dumps({"levels": [{"name": "arm", "A": [[1.0, 2.0]],
+                                           "b": [float("nan")]}]}))
     assert main(["solve", str(bad)]) == 2
     assert "task 'arm': b holds NaN" in capsys.readouterr().err
 

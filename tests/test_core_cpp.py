@@ -18,8 +18,7 @@ from hypothesis import strategies as st
 import prioik._core as core
 from prioik import formulations
 from prioik.formulations.base import ConcurrentUseError, CoreInputError
-from prioik.hierarchy import Task, TaskStack, TaskStackError, load_stack
-from prioik.hierarchy import linalg
+from prioik.hierarchy import Task, TaskStack, TaskStackError, linalg, load_stack
 from prioik.hierarchy.families import FAMILIES, near_singular, same_shape_batch
 
 #: rounding edges: `make test-forced-cpu` runs this module again with the LAPACK path (the
@@ -125,8 +124,10 @@ def _equality_part(stack: TaskStack, bounds_as_targets: bool) -> TaskStack | Non
             if t.is_equality:
                 tasks.append(Task(t.name, t.A, t.b, weight=t.weight))
             elif bounds_as_targets:
-                lo = np.asarray(t.lower, dtype=float) if t.lower is not None else np.full(t.m, -np.inf)
-                up = np.asarray(t.upper, dtype=float) if t.upper is not None else np.full(t.m, np.inf)
+                lo = (np.asarray(t.lower, dtype=float) if t.lower is not None
+                      else np.full(t.m, -np.inf))
+                up = (np.asarray(t.upper, dtype=float) if t.upper is not None
+                      else np.full(t.m, np.inf))
                 target = np.where(np.isfinite(lo) & np.isfinite(up), 0.5 * (lo + up),
                                   np.where(np.isfinite(lo), lo, np.where(np.isfinite(up),
                                                                          up, 0.0)))
@@ -194,7 +195,8 @@ def test_core_equals_lapack_on_a_unit_row_posture_below_a_floating_base():
     posture = np.zeros((n - 6, n))
     posture[np.arange(n - 6), np.arange(6, n)] = 2.0
     for top in (3, 8, 14):
-        stack = TaskStack([[Task("contact", rng.standard_normal((top, n)), rng.standard_normal(top))],
+        contact = Task("contact", rng.standard_normal((top, n)), rng.standard_normal(top))
+        stack = TaskStack([[contact],
                            [Task("posture", posture, rng.standard_normal(n - 6))]])
         assert_same_answer(stack)
         sol = formulations.solve(stack, "extended_jacobian", kernel="cpp")
@@ -212,9 +214,9 @@ def test_core_batch_equals_the_lapack_answers(options):
                                    **OPTION_SETS[options])
     assert got.batched
     assert list(got.statuses) == list(ref.statuses)
-    for x, y in zip(got.X, ref.X):
+    for x, y in zip(got.X, ref.X, strict=False):
         assert np.linalg.norm(x - y) <= 1e-10 * max(1.0, np.linalg.norm(y))
-    for s, x in zip(stacks, got.X):       # each row is that stack's own solve
+    for s, x in zip(stacks, got.X, strict=False):       # each row is that stack's own solve
         one = formulations.solve(s, "extended_jacobian", kernel="cpp", **OPTION_SETS[options])
         np.testing.assert_array_equal(x, one.x)
 
@@ -316,7 +318,7 @@ def test_every_bad_array_of_a_batch_gives_prioik_s_error_naming_it(case):
     arrays, name = BAD_ARRAYS[case]
     solver = _solver()
     batch = []
-    for good, bad in zip((A, B, W), arrays):
+    for good, bad in zip((A, B, W), arrays, strict=False):
         if (isinstance(bad, np.ndarray) and bad.shape == good.shape
                 and bad.dtype == np.float64 and bad.flags.c_contiguous):
             batch.append(np.stack([good, bad]))   # a bad value (or the good array)
@@ -382,7 +384,8 @@ def test_the_result_is_read_by_name_and_each_answer_is_its_own():
     np.testing.assert_array_equal(res.ranks, first.info["rank_profile"])
     assert res.ranks.dtype == np.int64
     # the answer written into the caller's arrays
-    out, w, r = np.full(stack.n, np.nan), np.full(len(stack), np.nan), np.zeros(len(stack), np.int64)
+    out, w = np.full(stack.n, np.nan), np.full(len(stack), np.nan)
+    r = np.zeros(len(stack), np.int64)
     core_solver.solve(d.A, d.b, d.sqrt_weight, out, w, r)
     np.testing.assert_array_equal(out, first.x)
     np.testing.assert_array_equal(w, first.residuals)

@@ -1,13 +1,12 @@
 """cvxpy: the cascade modelled in cvxpy against reference and cascaded_qp."""
 
 import numpy as np
-from conftest import assert_truthful
 import pytest
+from conftest import assert_truthful
 
 from prioik import formulations
-from prioik.hierarchy import relative_distance
 from prioik.formulations import FormulationError, cvxpy_
-from prioik.hierarchy import check_lexicographic
+from prioik.hierarchy import check_lexicographic, relative_distance
 from prioik.hierarchy.families import FAMILIES, infeasible_inequality, with_inequalities
 
 #: relative distance to reference per cvxpy solver (Clarabel measured ≤ 1e-10)
@@ -71,6 +70,7 @@ def test_unavailable_solver_names_it_and_lists_available():
 
 def test_zero_row_with_unreachable_bounds_keeps_its_fixed_violation():
     from pathlib import Path
+
     from prioik.hierarchy import load_peer_json
     p = load_peer_json(Path(__file__).parent / "data" / "peer" / "daqp_jl_degenerate1.json")
     sol = formulations.solve(p.stack, "cvxpy")

@@ -1,15 +1,19 @@
 """daqp_hierarchical: exact where DAQP's free-direction count is right, flagged otherwise."""
 
 import numpy as np
-from conftest import assert_truthful
 import pytest
+from conftest import assert_truthful
 
 from prioik import formulations
-from prioik.hierarchy import relative_distance
 from prioik.formulations import FormulationError
-from prioik.hierarchy import Task, TaskStack, check_lexicographic, conflicting_levels
+from prioik.hierarchy import (
+    Task,
+    TaskStack,
+    check_lexicographic,
+    conflicting_levels,
+    relative_distance,
+)
 from prioik.hierarchy.families import FAMILIES
-
 
 
 @pytest.mark.parametrize("family", ["compatible", "rank_deficient"])
@@ -57,8 +61,8 @@ def test_default_primal_tol_is_the_accurate_setting():
         stack = FAMILIES["compatible"](rng, int(rng.integers(4, 16)), 3)
         ref = formulations.solve(stack, "reference").x
         tight.append(relative_distance(formulations.solve(stack, "daqp_hierarchical").x, ref))
-        loose.append(relative_distance(formulations.solve(stack, "daqp_hierarchical", primal_tol=1e-6).x,
-                           ref))
+        loose_x = formulations.solve(stack, "daqp_hierarchical", primal_tol=1e-6).x
+        loose.append(relative_distance(loose_x, ref))
     # DAQP's default 1e-6 leaves ~1e-7..1e-6; 1e-10 leaves ~1e-10
     assert max(tight) <= 1e-8 < max(loose)
 
@@ -100,6 +104,7 @@ def test_optimal_status_is_truthful_on_badly_scaled_stacks():
 
 def test_zero_row_with_unreachable_bounds_keeps_its_fixed_violation():
     from pathlib import Path
+
     from prioik.hierarchy import load_peer_json
     p = load_peer_json(Path(__file__).parent / "data" / "peer" / "daqp_jl_degenerate1.json")
     sol = formulations.solve(p.stack, "daqp_hierarchical")

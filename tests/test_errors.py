@@ -105,7 +105,7 @@ def _core_input_error():
 def _concurrent_use_error():
     stack = prioik.Task("t", np.eye(2), np.ones(2)) / prioik.Task("u", np.eye(2), np.ones(2))
     solver = prioik.prepare(stack.layout, "extended_jacobian")
-    inside, leave, errors = threading.Event(), threading.Event(), []
+    inside, leave = threading.Event(), threading.Event()
 
     def hold():
         solver._acquire(False)         # as a solve in another thread holds it

@@ -10,7 +10,7 @@ import pytest
 from prioik import formulations
 from prioik.hierarchy import Task, TaskStack, check_lexicographic, load_stack, rank_threshold
 from prioik.hierarchy.exact import VALUE_TOL, exact_optimum
-from prioik.hierarchy.fuzz import equality_case, judged, mixed_scale_case
+from prioik.hierarchy.fuzz import equality_case, mixed_scale_case
 
 pytest.importorskip("mpmath")
 

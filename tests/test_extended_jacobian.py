@@ -7,10 +7,9 @@ import pytest
 
 import prioik
 from prioik import formulations
-from prioik.hierarchy import (Task, TaskStack, check_lexicographic, load_stack,
-                              relative_distance)
-from prioik.hierarchy.fuzz import judged, nested_truth
+from prioik.hierarchy import Task, TaskStack, check_lexicographic, load_stack, relative_distance
 from prioik.hierarchy.families import FAMILIES, compatible, near_singular, same_shape_batch
+from prioik.hierarchy.fuzz import judged, nested_truth
 
 #: the ways to compute eq. 18: compiled nested QR (C++), LAPACK nested QR, the paper's SVD
 #: rounding edges: `make test-forced-cpu` (and CI) runs this module again with OpenBLAS on
@@ -32,7 +31,7 @@ def test_compatible_equals_reference_and_meets_every_task(path, seed):
     assert sol.status == "optimal"
     # relative 1e-9 to the reference, and every task met to 1e-9 of its scale
     assert np.linalg.norm(sol.x - ref) <= 1e-9 * max(1.0, np.linalg.norm(ref))
-    for level, r in zip(stack.levels, sol.residuals):
+    for level, r in zip(stack.levels, sol.residuals, strict=False):
         assert r <= 1e-9 * max(1.0, np.linalg.norm(level.b))
 
 
@@ -65,11 +64,12 @@ def test_damped_is_bounded_near_singularity_and_tends_to_reference(path):
     errs = [np.linalg.norm(formulations.solve(stack, "extended_jacobian", damping=mu,
                                               nullspace=nullspace).x - ref)
             for mu in (1e-2, 1e-4, 1e-6, 1e-8)]
-    assert all(b < a for a, b in zip(errs, errs[1:]))
+    assert all(b < a for a, b in zip(errs, errs[1:], strict=False))
     assert errs[-1] < 1e-6
 
 
-from hypothesis import given, settings, strategies as st  # noqa: E402
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
 
 
 @settings(max_examples=150, deadline=None)
@@ -312,7 +312,7 @@ def test_solve_batch_uses_the_compiled_kernel_and_matches_solve(family):
         stacks.append(type(base)(levels))
     batch = formulations.solve_batch(stacks, "extended_jacobian")
     assert batch.batched and batch.X.shape == (16, 20)
-    for x, s in zip(batch.X, stacks):
+    for x, s in zip(batch.X, stacks, strict=False):
         ref = formulations.solve(s, "reference").x
         assert np.linalg.norm(x - ref) <= 1e-8 * max(1.0, np.linalg.norm(ref))
 
@@ -400,7 +400,7 @@ def test_step_bound_batch_matches_solve():
     stacks = same_shape_batch(FAMILIES["conflicting"](rng, 20, 4), rng, 6, reduce=0.3)
     opts = {"step_bound": 0.5}
     batch = formulations.solve_batch(stacks, "extended_jacobian", **opts)
-    for s, x, status in zip(stacks, batch.X, batch.statuses):
+    for s, x, status in zip(stacks, batch.X, batch.statuses, strict=False):
         one = formulations.solve(s, "extended_jacobian", **opts)
         assert relative_distance(x, one.x) <= 1e-12 and status == one.status
     assert "approximate" in batch.statuses          # the bound acted somewhere
@@ -451,8 +451,8 @@ def test_frozen_and_writable_rows_give_the_same_bits():
 
 
 def test_prepared_solver_refills_and_refuses_other_layouts_and_nan():
-    from prioik.hierarchy import StackLayout, TaskStackError
     from prioik.formulations.base import FormulationError
+    from prioik.hierarchy import StackLayout, TaskStackError
     rng = np.random.default_rng(5)
     s1 = compatible(rng, 10, 3)
     data = _data_of(s1)
@@ -624,6 +624,7 @@ def test_bad_z_basis_is_named():
 def test_theory_page_states_the_kernel_crossover_the_code_uses():
     """docs/theory.md names the n up to which kernel='auto' compiles: the code's."""
     from pathlib import Path
+
     from prioik.formulations.extended_jacobian import AUTO_CPP_MAX_N
     text = (Path(__file__).parents[1] / "docs" / "theory.md").read_text(encoding="utf-8")
     assert f"compiled core up to n = {AUTO_CPP_MAX_N}" in text.replace("\n  ", " ")

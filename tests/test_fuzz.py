@@ -23,8 +23,7 @@ from prioik.benchmarks import fuzz
 from prioik.benchmarks.cli import main
 from prioik.formulations import Outcome, registry
 from prioik.hierarchy import check_lexicographic, load_stack, relative_distance
-from prioik.hierarchy.fuzz import (ROW_FEATURES, equality_case, inequality_case,
-                                   nested_truth)
+from prioik.hierarchy.fuzz import ROW_FEATURES, equality_case, inequality_case, nested_truth
 
 SMALL = {"max_n": 12, "max_levels": 5, "max_rows": 8}
 SMALL_INEQ = {"max_n": 8, "max_levels": 4, "max_rows": 6}
@@ -70,7 +69,7 @@ def test_bounds_generator_draws_every_kind_of_box():
     cases = [bounds_case(np.random.default_rng([7, i])) for i in range(300)]
     boxes = [c.stack.levels[0][0] for c in cases]
     assert all(c.kind == "bounds" and (np.count_nonzero(b.A, axis=1) == 1).all()
-               for c, b in zip(cases, boxes))
+               for c, b in zip(cases, boxes, strict=False))
     factors = np.concatenate([b.A[b.A != 0] for b in boxes])
     assert factors.min() < -100 and factors.max() > 100 and np.abs(factors).min() < 1e-2
     lo, up = np.concatenate([b.lower for b in boxes]), np.concatenate([b.upper for b in boxes])
@@ -92,7 +91,7 @@ def test_generator_is_reproducible_from_the_seed():
     a = equality_case(np.random.default_rng([3, 17]))
     b = fuzz.draw("equality", 3, 17)
     assert [t.name for t in a.stack.tasks] == [t.name for t in b.stack.tasks]
-    assert all(np.array_equal(s.A, t.A) for s, t in zip(a.stack.tasks, b.stack.tasks))
+    assert all(np.array_equal(s.A, t.A) for s, t in zip(a.stack.tasks, b.stack.tasks, strict=False))
 
 
 def test_truth_is_the_lexicographic_optimum_of_well_conditioned_stacks():
@@ -236,7 +235,7 @@ def test_a_wrong_formulation_is_caught_and_its_stacks_saved_for_prioik_solve(
     index = int(files[0].stem.split("-")[-1])
     saved = load_stack(files[0])
     drawn = fuzz.draw("equality", 4, index, SMALL).stack
-    assert all(np.array_equal(a.A, b.A) for a, b in zip(saved.tasks, drawn.tasks))
+    assert all(np.array_equal(a.A, b.A) for a, b in zip(saved.tasks, drawn.tasks, strict=False))
     assert main(["solve", str(files[0]), "-f", "reference"]) == 0
     assert "status: " in capsys.readouterr().out
 

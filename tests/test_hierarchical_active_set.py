@@ -21,8 +21,13 @@ from scipy.optimize import lsq_linear
 
 import prioik
 from prioik import formulations
-from prioik.hierarchy import (Task, TaskStack, TaskStackError, check_lexicographic,
-                              lexicographic_residuals)
+from prioik.hierarchy import (
+    Task,
+    TaskStack,
+    TaskStackError,
+    check_lexicographic,
+    lexicographic_residuals,
+)
 from prioik.hierarchy.families import FAMILIES, INEQUALITY_FAMILIES
 from prioik.hierarchy.io import load_peer, load_soth
 
@@ -118,7 +123,7 @@ def level_w2(stack: TaskStack, x: np.ndarray) -> np.ndarray:
 def lexicographically_no_worse(mine: np.ndarray, other: np.ndarray, tol: float) -> bool:
     """At the first level where the two differ beyond ``tol`` (relative to
     ``max(1, other)``), ``mine`` is the smaller."""
-    for a, b in zip(mine, other):
+    for a, b in zip(mine, other, strict=False):
         if abs(a - b) > tol * max(1.0, abs(b)):
             return a < b
     return True
@@ -744,7 +749,7 @@ def _limits_trajectory(seed: int, steps: int = 10) -> list[TaskStack]:
         if sub is not None:
             levels.append([Task("vlimits", np.eye(n)[sub], lower=-vel[sub], upper=vel[sub])])
         levels += [[Task(f"t{i}", A, t + d * step)]
-                   for i, (A, t, d) in enumerate(zip(tasks, targets, drifts))]
+                   for i, (A, t, d) in enumerate(zip(tasks, targets, drifts, strict=False))]
         levels.append([Task("posture", np.eye(n), posture, weight=0.1)])
         out.append(TaskStack(levels))
     return out

@@ -6,7 +6,14 @@ import numpy as np
 import pytest
 
 from prioik.benchmarks.compare import examples_dir
-from prioik.hierarchy import Task, TaskStack, TaskStackError, load_stack, save_stack, stack_from_dict
+from prioik.hierarchy import (
+    Task,
+    TaskStack,
+    TaskStackError,
+    load_stack,
+    save_stack,
+    stack_from_dict,
+)
 
 
 def test_round_trip_keeps_everything(tmp_path):
@@ -17,7 +24,7 @@ def test_round_trip_keeps_everything(tmp_path):
     save_stack(s, path, "test stack")
     back = load_stack(path)
     assert [lv.names for lv in back] == [lv.names for lv in s]
-    for t, u in zip(s.tasks, back.tasks):
+    for t, u in zip(s.tasks, back.tasks, strict=False):
         np.testing.assert_array_equal(t.A, u.A)
         np.testing.assert_array_equal(t.weight, u.weight)
         if t.is_equality:

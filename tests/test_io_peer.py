@@ -5,8 +5,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from prioik.hierarchy import (TaskStackError, lexicographic_residuals, load_lexls, load_peer,
-                              load_peer_json, load_soth)
+from prioik.hierarchy import (
+    TaskStackError,
+    lexicographic_residuals,
+    load_lexls,
+    load_peer,
+    load_peer_json,
+    load_soth,
+)
 
 PEER = Path(__file__).parent / "data" / "peer"
 

@@ -4,8 +4,14 @@ boundary check; a TaskStack is a layout with frozen data."""
 import numpy as np
 import pytest
 
-from prioik.hierarchy import (StackData, StackLayout, Task, TaskStack, TaskStackError,
-                              precision_limited_levels, precision_reason)
+from prioik.hierarchy import (
+    StackLayout,
+    Task,
+    TaskStack,
+    TaskStackError,
+    precision_limited_levels,
+    precision_reason,
+)
 from prioik.hierarchy.families import FAMILIES
 
 LAYOUT = [[("a", 2)], [("b", 1), ("c", 3)], [("d", 4)]]
@@ -91,7 +97,7 @@ def test_to_stack_round_trips_a_stack(family):
         A, b = buf.rows(t.name)
         A[:], b[:] = t.A, t.b
     back = buf.to_stack()
-    for level, other in zip(stack.levels, back.levels):
+    for level, other in zip(stack.levels, back.levels, strict=False):
         assert np.array_equal(level.A, other.A) and np.array_equal(level.b, other.b)
     assert not back.tasks[0].A.flags.writeable       # validated Task copies, not views
     buf.A[:] = 0.0

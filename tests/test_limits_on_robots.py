@@ -7,7 +7,8 @@ at level 0, support contacts at level 1 (floating-base robots), a far target for
 below them and the posture last. Closed loop, velocity and acceleration level, ``dt = 10
 ms``: every answer ``optimal``; the warm-started solver gives the cold one (relative
 ``1e-9``); every 10th answer passes :func:`prioik.hierarchy.check_lexicographic`; ``q``
-never leaves its limits (beyond rounding, ``1e-10``); the contacts' rows are met exactly (the limits leave room
+never leaves its limits (beyond rounding, ``1e-10``); the contacts' rows are met exactly (the
+limits leave room
 for them; relative ``1e-10``); and the limits
 are met with equality at some steps (the test is not vacuous: the reach drives joints
 to them). ``sample_humanoid`` (pinocchio's sample model) is left out: no reach drives its
@@ -27,8 +28,14 @@ import pytest
 
 import prioik
 from prioik.hierarchy import check_lexicographic
-from prioik.robots import (KinematicState, TaskWriter, example_robot_data_dir, from_urdf, load,
-                           polygon_region)
+from prioik.robots import (
+    KinematicState,
+    TaskWriter,
+    example_robot_data_dir,
+    from_urdf,
+    load,
+    polygon_region,
+)
 
 DT = 0.01
 STEPS = 60

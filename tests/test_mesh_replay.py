@@ -14,8 +14,16 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from prioik.robots import (MeshReplayError, StateError, g1, models, panda, sample_humanoid,
-                           talos, write_mesh_replay)
+from prioik.robots import (
+    MeshReplayError,
+    StateError,
+    g1,
+    models,
+    panda,
+    sample_humanoid,
+    talos,
+    write_mesh_replay,
+)
 from prioik.robots.mesh_replay import MIN_TRIANGLES_PER_MESH, TRIANGLES, robot_parts
 
 

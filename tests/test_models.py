@@ -129,8 +129,17 @@ def test_with_armature_adds_rotor_inertia_to_the_actuated_diagonal_only():
 
 
 # ------------------------------------------------------------------ any robot: from_urdf
-from prioik.robots import (KinematicState, RobotModel, from_urdf, go2, joint_limit_bounds,  # noqa: E402
-                           panda, posture, solo12, ur5)
+from prioik.robots import (  # noqa: E402
+    KinematicState,
+    RobotModel,
+    from_urdf,
+    go2,
+    joint_limit_bounds,
+    panda,
+    posture,
+    solo12,
+    ur5,
+)
 from prioik.robots.models import PANDA_FINGERS  # noqa: E402
 
 _LINK = ('<link name="{0}"><inertial><mass value="1"/><inertia ixx="1" ixy="0" ixz="0" '

@@ -7,8 +7,14 @@ import pinocchio as pin
 import pytest
 
 from prioik.robots import load
-from prioik.robots.mujoco_model import (COMPILER, MujocoModelError, body_positions,
-                                        frame_positions, mujoco_urdf, to_mujoco)
+from prioik.robots.mujoco_model import (
+    COMPILER,
+    MujocoModelError,
+    body_positions,
+    frame_positions,
+    mujoco_urdf,
+    to_mujoco,
+)
 
 
 def test_the_urdf_loses_its_geometry_and_mimics_and_gains_the_compiler():

@@ -18,7 +18,7 @@ def test_compatible_equals_reference_and_meets_every_task(seed):
     sol = formulations.solve(stack, "nullspace")
     assert sol.status == "optimal"
     assert np.linalg.norm(sol.x - ref) <= 1e-9 * max(1.0, np.linalg.norm(ref))
-    for level, r in zip(stack.levels, sol.residuals):
+    for level, r in zip(stack.levels, sol.residuals, strict=False):
         assert r <= 1e-9 * max(1.0, np.linalg.norm(level.b))
 
 
@@ -63,7 +63,7 @@ def test_damped_tends_to_reference_as_lambda_vanishes():
     ref = formulations.solve(stack, "reference").x
     errs = [np.linalg.norm(formulations.solve(stack, "nullspace", damping=lam).x - ref)
             for lam in (1e-2, 1e-4, 1e-6, 1e-8)]
-    assert all(b < a for a, b in zip(errs, errs[1:]))
+    assert all(b < a for a, b in zip(errs, errs[1:], strict=False))
     assert errs[-1] < 1e-5 * max(1.0, np.linalg.norm(ref))
 
 
@@ -121,7 +121,8 @@ def test_bad_options_and_inequalities_are_named():
         formulations.solve(s, "nullspace")
 
 
-from hypothesis import given, settings, strategies as st  # noqa: E402
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
 
 
 @settings(max_examples=80, deadline=None)
@@ -149,7 +150,7 @@ def test_solve_batch_matches_the_loop(family, damping):
     stacks = same_shape_batch(FAMILIES[family](rng, 12, 4), rng, 20, reduce=0.3)
     batch = formulations.solve_batch(stacks, "nullspace", damping=damping)
     assert batch.batched
-    for x, status, s in zip(batch.X, batch.statuses, stacks):
+    for x, status, s in zip(batch.X, batch.statuses, stacks, strict=False):
         one = formulations.solve(s, "nullspace", damping=damping)
         assert np.array_equal(x, one.x) and status == one.status
 
@@ -167,6 +168,6 @@ def test_solve_batch_equals_solve_on_the_fuzz_stack():
     stack = load_stack(Path(__file__).parent / "data" / "fuzz" / "equality-2026-2083.json")
     stacks = [stack] + same_shape_batch(stack, np.random.default_rng(2090), 2, reduce=0.3)
     batch = formulations.solve_batch(stacks, "nullspace")
-    for x, status, s in zip(batch.X, batch.statuses, stacks):
+    for x, status, s in zip(batch.X, batch.statuses, stacks, strict=False):
         one = formulations.solve(s, "nullspace")
         assert np.array_equal(x, one.x) and status == one.status

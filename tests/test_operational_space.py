@@ -17,7 +17,7 @@ def test_compatible_meets_every_task_and_equals_reference_with_metric_m(seed):
     M = random_spd(rng, n)
     sol = formulations.solve(stack, "operational_space", mass_matrix=M)
     assert sol.status == "optimal"
-    for level, r in zip(stack.levels, sol.residuals):
+    for level, r in zip(stack.levels, sol.residuals, strict=False):
         assert r <= 1e-9 * max(1.0, np.linalg.norm(level.b))
     ref = formulations.solve(stack, "reference", metric=M).x
     assert np.linalg.norm(sol.x - ref) <= 1e-9 * max(1.0, np.linalg.norm(ref))
@@ -119,7 +119,8 @@ def test_needs_an_spd_mass_matrix():
         formulations.solve(s, "operational_space", mass_matrix=np.eye(3))
 
 
-from hypothesis import given, settings, strategies as st  # noqa: E402
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
 
 
 @settings(max_examples=60, deadline=None)

@@ -6,8 +6,14 @@ speed is capped and its level damped; without the remedy both fail."""
 import numpy as np
 import pytest
 
-from prioik.benchmarks.out_of_reach import (PANDA_TARGET, ZERO_SPEED, humanoid_run,
-                                            panda_run, settled_step, sign_changes)
+from prioik.benchmarks.out_of_reach import (
+    PANDA_TARGET,
+    ZERO_SPEED,
+    humanoid_run,
+    panda_run,
+    settled_step,
+    sign_changes,
+)
 
 #: the most sign changes of a joint's q̇ per 100 steps once the hand stopped moving
 MAX_SIGN_CHANGES = 2

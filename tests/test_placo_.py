@@ -1,16 +1,13 @@
 """placo: first level hard, lower levels soft; exact for two equality levels."""
 
 import numpy as np
-from conftest import assert_truthful
 import pytest
+from conftest import assert_truthful
 
 from prioik import formulations
-from prioik.hierarchy import relative_distance
 from prioik.formulations import FormulationError, placo_
-from prioik.hierarchy import Task, TaskStack
+from prioik.hierarchy import Task, TaskStack, relative_distance
 from prioik.hierarchy.families import FAMILIES, infeasible_inequality, with_inequalities
-
-
 
 #: two levels, measured max distance to reference over 10 stacks per family:
 #: compatible 1.1e-7, conflicting 9.4e-8, rank_deficient 1.4e-6 (ε = 1e-8 tie-break)

@@ -207,7 +207,7 @@ def test_solve_batch_is_one_prepared_solver_over_many_stacks():
     solver = prioik.prepare(base.layout, "extended_jacobian")
     batch = solver.solve_batch(stacks)
     assert batch.batched and batch.X.shape == (6, 12)
-    for x, s in zip(batch.X, stacks):
+    for x, s in zip(batch.X, stacks, strict=False):
         np.testing.assert_allclose(x, prioik.solve(s, "extended_jacobian").x, rtol=1e-12,
                                    atol=1e-13)
     again = prioik.solve_batch(stacks, "extended_jacobian")

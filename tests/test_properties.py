@@ -8,7 +8,7 @@ from prioik.benchmarks.properties import error_table, singularity_sweep
 
 def test_sweep_slopes_and_bounds():
     sweep = singularity_sweep()
-    slope = {v.label: s for v, s in zip(sweep.variants, sweep.slopes)}
+    slope = {v.label: s for v, s in zip(sweep.variants, sweep.slopes, strict=False)}
     for label in ("reference", "extended_jacobian", "extended_jacobian[svd]", "nullspace",
                   "operational_space"):
         assert -1.01 <= slope[label] <= -0.99, (label, slope[label])

@@ -79,6 +79,6 @@ def test_batch_does_not_touch_the_stacks():
     stacks = same_shape_batch(FAMILIES["conflicting"](rng, 10, 3), rng, 5, reduce=0.3)
     before = [[lvl.A.copy() for lvl in s.levels] for s in stacks]
     formulations.solve_batch(stacks, "reference")
-    for s, mats in zip(stacks, before):
-        for lvl, A in zip(s.levels, mats):
+    for s, mats in zip(stacks, before, strict=False):
+        for lvl, A in zip(s.levels, mats, strict=False):
             assert np.array_equal(lvl.A, A)

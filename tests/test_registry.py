@@ -32,7 +32,8 @@ def test_unknown_formulation_lists_known_ones(stack):
 
 
 def test_failed_import_is_recorded_and_repeated(monkeypatch, stack):
-    monkeypatch.setitem(registry.PLUGINS, "ghost", ("prioik.formulations._no_such_module", "ghostpkg"))
+    monkeypatch.setitem(registry.PLUGINS, "ghost",
+                        ("prioik.formulations._no_such_module", "ghostpkg"))
     monkeypatch.delitem(registry._failed, "ghost", raising=False)
     info = {f.name: f for f in formulations.available()}["ghost"]
     assert not info.available and "_no_such_module" in info.reason
@@ -90,7 +91,8 @@ def test_mass_matrix_is_required_validated_and_never_mutated(monkeypatch, stack)
     _fake(monkeypatch, "dyn", record, Capabilities(needs_mass_matrix=True))
     with pytest.raises(FormulationError, match="needs mass_matrix=M .the 6x6"):
         formulations.solve(stack, "dyn")
-    with pytest.raises(FormulationError, match="option 'mass_matrix' must be 6x6 .* shape \\(5, 5\\)"):
+    with pytest.raises(FormulationError,
+                       match="option 'mass_matrix' must be 6x6 .* shape \\(5, 5\\)"):
         formulations.solve(stack, "dyn", mass_matrix=np.eye(5))
     with pytest.raises(FormulationError, match="must be symmetric"):
         formulations.solve(stack, "dyn", mass_matrix=np.triu(np.ones((6, 6))))
@@ -106,7 +108,7 @@ def test_solve_does_not_mutate_inputs_and_reports_time(name, stack):
     before = [(t.A.copy(), t.b.copy()) for t in stack.tasks]
     sol = formulations.solve(stack, name)
     assert sol.time_s > 0 and sol.formulation == name and sol.residuals.shape == (2,)
-    for (A, b), t in zip(before, stack.tasks):
+    for (A, b), t in zip(before, stack.tasks, strict=False):
         np.testing.assert_array_equal(A, t.A)
         np.testing.assert_array_equal(b, t.b)
 
@@ -129,7 +131,7 @@ def test_solve_batch_loops_and_matches_single_solves(name, batched):
     assert batch.batched is batched
     assert batch.X.shape == (4, 10)
     singles = [formulations.solve(s, name) for s in stacks]
-    for x, one in zip(batch.X, singles):
+    for x, one in zip(batch.X, singles, strict=False):
         np.testing.assert_allclose(x, one.x, atol=1e-9)
     assert batch.statuses == [one.status for one in singles]
     assert "failed" not in batch.statuses and batch.time_per_stack_s > 0
@@ -181,8 +183,9 @@ def test_a_first_solve_in_a_fresh_process_compiles_nothing():
         "from prioik import formulations\n"
         "from prioik.hierarchy.families import FAMILIES, random_inequality_hierarchy\n"
         "rng = np.random.default_rng(1)\n"
-        "for name, stack in (('extended_jacobian', FAMILIES['conflicting'](rng, 12, 3)),\n"
-        "                    ('hierarchical_active_set', random_inequality_hierarchy(rng, 12, 3))):\n"
+        "cases = (('extended_jacobian', FAMILIES['conflicting'](rng, 12, 3)),\n"
+        "         ('hierarchical_active_set', random_inequality_hierarchy(rng, 12, 3)))\n"
+        "for name, stack in cases:\n"
         "    t = time.perf_counter()\n"
         "    formulations.solve(stack, name)\n"
         "    print(time.perf_counter() - t)\n")

@@ -12,14 +12,28 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from prioik import formulations
-from prioik.hierarchy import Task, TaskStack, TaskStackError
-from prioik.robots import (JointLimitActivation, KinematicState, Reference, TaskWriter,
-                           com_position, contact, frame_orientation, frame_pose,
-                           frame_position, g1, joint_limit_bounds, joint_limit_rows,
-                           joint_velocity_bounds, panda, point_position, posture,
-                           spatial_chain)
-from prioik.robots import com_region, frame_region
-from prioik._core import rows as _k          # the row writers robots.rows calls
+from prioik._core import rows as _k  # the row writers robots.rows calls
+from prioik.hierarchy import TaskStackError
+from prioik.robots import (
+    JointLimitActivation,
+    KinematicState,
+    Reference,
+    TaskWriter,
+    com_position,
+    com_region,
+    contact,
+    frame_orientation,
+    frame_pose,
+    frame_position,
+    frame_region,
+    g1,
+    joint_limit_bounds,
+    joint_velocity_bounds,
+    panda,
+    point_position,
+    posture,
+    spatial_chain,
+)
 from prioik.robots.fencing import FencingScenario
 
 #: the two paths do the same arithmetic in another order: rows agree to rounding
@@ -886,4 +900,4 @@ def test_a_writer_declares_hard_levels_and_a_violated_one_fails_the_solve(robot)
     bad.add_posture("posture", gain=1.0, level=0)
     with pytest.raises(TaskStackError, match=r"hard levels must be distinct level indices "
                                              r"0 … 0, got \(1,\)"):
-        bad.layout
+        _ = bad.layout

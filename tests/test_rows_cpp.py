@@ -1,5 +1,6 @@
 """The C++ row writers (``prioik._core.rows``, what :mod:`robots.rows` and
-:mod:`robots.tasks` call) against the same formulas in plain Python (``tests/rows_reference.py``, the readable
+:mod:`robots.tasks` call) against the same formulas in plain Python (``tests/rows_reference.py``,
+the readable
 reference): every writer's rows equal within 1e-13 relative, row for
 row, on random states of the Panda, G1 and TALOS at velocity and acceleration level;
 ``log3`` near θ = 0 and θ = π; the bound and activation formulas on joints inside,
@@ -18,7 +19,6 @@ from prioik.formulations.base import CoreInputError
 from prioik.robots import KinematicState, TaskWriter, g1, panda, talos
 from prioik.robots import rows as rows_module
 from prioik.robots import tasks as tasks_module
-
 from tests import rows_reference as reference_rows
 
 cpp_rows = _core.rows
@@ -165,7 +165,7 @@ def test_every_writer_equals_the_reference(robots, with_reference, name, mode):
         assert kernel in reference_rows.CALLED, f"the reference never ran {kernel}"
     worst = 0.0
     layout = cpp.layout
-    for (active_c, c), (active_n, n) in zip(cpp_out, reference_out):
+    for (active_c, c), (active_n, n) in zip(cpp_out, reference_out, strict=False):
         assert active_c == active_n
         for task in cpp.tasks():
             sl = layout.task_slice(task)
@@ -327,7 +327,8 @@ def test_closed_loop_trajectory_equals_the_reference(robots, with_reference):
     oracle, _ = _readme_loop(robot, 300)
     assert at_bound > 0, "no step held an arm joint at a limit bound"
     worst = float(np.abs(cpp - oracle).max())
-    print(f"\nclosed loop: 300 steps, {at_bound} with an arm joint at a bound, max |Δq| {worst:.1e}")
+    print(f"\nclosed loop: 300 steps, {at_bound} with an arm joint at a bound, "
+          f"max |Δq| {worst:.1e}")
     assert worst <= 1e-12
 
 
@@ -342,7 +343,7 @@ def frame_call(robots):
     task = w._task("pose", "pose")
     _, args = w._frame_args(task, state)
     names = ("A", "Q", "J", "t", "R", "spec", "geo", "aj", "vj")
-    call = dict(zip(names, args))
+    call = dict(zip(names, args, strict=False))
     call.update(x=np.zeros(3), xd=np.zeros(3), xdd=np.zeros(3), Rstar=np.eye(3),
                 w=np.zeros(3), wd=np.zeros(3))
     cpp_rows.frame_rows(**call)                   # valid as given

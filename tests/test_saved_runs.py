@@ -5,14 +5,12 @@ from __future__ import annotations
 
 import shutil
 import subprocess
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from prioik.benchmarks.scenario_runs import run_one, run_table
 from prioik.robots import SimulationResult
-
 
 
 def spec(label: str):

@@ -54,8 +54,8 @@ def test_a_run_advanced_in_turns_equals_the_run_alone():
 
 
 def test_run_steps_checks_the_run_before_its_first_step():
-    from prioik.hierarchy import UnsupportedTaskError
     from prioik.benchmarks.variants import Variant
+    from prioik.hierarchy import UnsupportedTaskError
     variant = Variant("extended_jacobian", level="velocity")
     with pytest.raises(UnsupportedTaskError, match="velocity-level runs"):
         run_steps(variant, "compatible", 0.01, 0.002)

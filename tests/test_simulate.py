@@ -8,8 +8,16 @@ import pytest
 
 from prioik import formulations
 from prioik.hierarchy import Task, TaskStack, algorithmic_error_norms
-from prioik.robots import (SimulationError, Reference, StepTasks, equality_view, frame_position, posture, simulate,
-                    spatial_chain)
+from prioik.robots import (
+    Reference,
+    SimulationError,
+    StepTasks,
+    equality_view,
+    frame_position,
+    posture,
+    simulate,
+    spatial_chain,
+)
 
 TARGET = np.array([1.2, 0.6, 0.4])
 

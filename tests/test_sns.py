@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import prioik
 from prioik.formulations import FormulationError
@@ -159,7 +160,7 @@ def test_caller_stack_is_not_mutated():
     stack = box_bounded(np.random.default_rng(4), 6, 2, 5.0)
     before = [t.A.copy() for t in stack.tasks]
     prioik.solve(stack, "sns")
-    assert all(np.array_equal(a, t.A) for a, t in zip(before, stack.tasks))
+    assert all(np.array_equal(a, t.A) for a, t in zip(before, stack.tasks, strict=False))
 
 
 @pytest.mark.parametrize("family", sorted(FAMILIES))

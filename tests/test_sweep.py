@@ -38,7 +38,8 @@ azimuth_deg = [-30.0, 30.0]
 """
 
 
-def write_config(tmp_path: Path, name="tiny.toml", formulations='["extended_jacobian", "nullspace"]',
+def write_config(tmp_path: Path, name="tiny.toml",
+                 formulations='["extended_jacobian", "nullspace"]',
                  duration=0.2, n=2, text=None) -> Path:
     path = tmp_path / name
     path.write_text(text if text is not None else
@@ -60,13 +61,15 @@ def deterministic(rows: dict) -> dict:
 @pytest.mark.parametrize("edit, message", [
     (lambda t: t.replace("[sample]", "[sample]\nwingspan = [0.0, 1.0]"),
      "unknown parameter 'wingspan'"),
-    (lambda t: t.replace('"nullspace"', '"nullspace_typo"'), "unknown formulation 'nullspace_typo'"),
+    (lambda t: t.replace('"nullspace"', '"nullspace_typo"'),
+     "unknown formulation 'nullspace_typo'"),
     (lambda t: t.replace("[fixed]", '[fixed]\nrobot = "atlas"'), "'atlas' is not one of 'g1'"),
     (lambda t: t.replace("[sample]", "[grid]\nkp = []\n[sample]"), "grid axis 'kp' is empty"),
     (lambda t: t.replace("n = 2", "n = 0"), "n must be an integer ≥ 1"),
     (lambda t: t.replace('formulations = ["extended_jacobian", "nullspace"]', "formulations = []"),
      "'formulations' is empty"),
-    (lambda t: t.replace('title = "tiny"', 'title = "tiny"\nworkers = 3'), "unknown key(s) workers"),
+    (lambda t: t.replace('title = "tiny"', 'title = "tiny"\nworkers = 3'),
+     "unknown key(s) workers"),
     (lambda t: t.replace("duration = 0.2", "duration = 0.05"), "ends before the sword move"),
     (lambda t: t.replace("[sample]", "[grid]\nazimuth_deg = [0.0]\n[sample]"),
      "'azimuth_deg' is in both [grid] and [sample]"),

@@ -12,14 +12,34 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from prioik.robots import (JointLimitActivation, KinematicState, Reference, StateError,
-                           Waypoints, com_position, contact, frame_orientation, frame_pose,
-                           frame_position, g1, go2, joint_limit_bounds, joint_limit_rows,
-                           joint_limit_violation, joint_velocity_bounds, minimum_jerk, panda,
-                           point_position, polygon_region, posture, sample_humanoid,
-                           spatial_chain)
-from prioik.robots import com_region, frame_region
 from prioik.hierarchy import TaskStackError
+from prioik.robots import (
+    JointLimitActivation,
+    KinematicState,
+    Reference,
+    StateError,
+    Waypoints,
+    com_position,
+    com_region,
+    contact,
+    frame_orientation,
+    frame_pose,
+    frame_position,
+    frame_region,
+    g1,
+    go2,
+    joint_limit_bounds,
+    joint_limit_rows,
+    joint_limit_violation,
+    joint_velocity_bounds,
+    minimum_jerk,
+    panda,
+    point_position,
+    polygon_region,
+    posture,
+    sample_humanoid,
+    spatial_chain,
+)
 
 H = 1e-6
 TOL = 1e-6
@@ -477,7 +497,8 @@ def test_polygon_region_is_the_hull_shrunk_by_the_margin():
     assert np.all(C @ inside <= upper)
     assert np.any(C @ np.array([0.8, 0.0, 0.0]) > upper)
     tri, tu = polygon_region([[0, 0, 5], [2, 0, 5], [0, 2, 5], [1, 1, 5]])
-    rows = sorted(zip(map(tuple, np.round(tri[:, :2], 12) + 0.0), np.round(tu, 12) + 0.0))
+    rows = sorted(zip(map(tuple, np.round(tri[:, :2], 12) + 0.0), np.round(tu, 12) + 0.0,
+                      strict=True))
     r = np.round(2 ** -0.5, 12)
     assert rows == [((-1, 0), 0), ((0, -1), 0), ((r, r), np.round(2 ** 0.5, 12))]
 

@@ -14,7 +14,7 @@ import pytest
 from prioik.benchmarks import tsid_baseline as tb
 from prioik.benchmarks.pink_baseline import LEVEL_COSTS, POSTURE_COST
 from prioik.benchmarks.variants import baseline_profiles, table
-from prioik.robots.arm import ArmScenario, TOOL
+from prioik.robots.arm import ArmScenario
 from prioik.robots.fencing import FencingScenario
 
 REPO = Path(__file__).resolve().parent.parent

@@ -6,8 +6,14 @@ from scipy.linalg import cho_factor
 
 from prioik import formulations
 from prioik.formulations.unifying import torque_recursion, weighted_pinv
-from prioik.hierarchy import (Task, TaskStack, UnsupportedTaskError, algorithmic_error_norms,
-                       check_lexicographic, rank_profile)
+from prioik.hierarchy import (
+    Task,
+    TaskStack,
+    UnsupportedTaskError,
+    algorithmic_error_norms,
+    check_lexicographic,
+    rank_profile,
+)
 from prioik.hierarchy.families import FAMILIES, near_singular, random_spd
 
 
@@ -122,7 +128,8 @@ def test_does_not_touch_the_callers_arrays():
     assert np.array_equal(M, M0) and np.array_equal(bias, b0)
 
 
-from hypothesis import example, given, settings, strategies as st  # noqa: E402
+from hypothesis import example, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
 
 
 @settings(max_examples=60, deadline=None)

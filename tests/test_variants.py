@@ -9,10 +9,16 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 from conftest import TOY
-from prioik.benchmarks.variants import (REPORTS, Variant, VariantTable, parse_label,
-                                        split_labels, table)
+
+from prioik.benchmarks.variants import (
+    REPORTS,
+    Variant,
+    VariantTable,
+    parse_label,
+    split_labels,
+    table,
+)
 
 
 def test_labels_have_one_syntax():
@@ -91,7 +97,7 @@ def test_the_toy_plugin_runs_in_validate_properties_bench_and_scenarios(toy_plug
     page = tmp_path / "properties.md"
     assert main(["properties", "--out", str(page), "--stacks", "1"]) == 0
     text = page.read_text()
-    assert f"| σ | reference |" in text and f" {TOY} |" in text.splitlines()[
+    assert "| σ | reference |" in text and f" {TOY} |" in text.splitlines()[
         text.splitlines().index("### ‖θ̈‖ against σ") + 2]
     assert f"* `{TOY}` is" in text                      # an approximate method's finding
 

@@ -51,7 +51,7 @@ class References:
 def references(case: Case, with_metric: bool) -> References:
     """Solve every stack of ``case`` with ``reference`` (and ``metric=M``)."""
     xs, res, xm = [], [], []
-    for stack, M in zip(case.stacks, case.mass_matrices):
+    for stack, M in zip(case.stacks, case.mass_matrices, strict=False):
         sol = formulations.solve(stack, "reference")
         xs.append(sol.x)
         res.append(sol.residuals)

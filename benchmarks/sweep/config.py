@@ -44,7 +44,7 @@ import hashlib
 import itertools
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -275,7 +275,8 @@ def _points(cfg: dict, sc: SweepScenario) -> tuple[list[dict], list[str]]:
     axes = {name: _axis(cfg, name, v) for name, v in grid.items()}
     rng = np.random.default_rng(cfg.get("seed", 0))
     samplers = {name: _sampler(cfg, name, v, rng) for name, v in sample.items()}
-    grid_points = [dict(zip(axes, combo)) for combo in itertools.product(*axes.values())]
+    grid_points = [dict(zip(axes, combo, strict=False))
+                   for combo in itertools.product(*axes.values())]
     draws = [{name: draw() for name, draw in samplers.items()} for _ in range(n or 1)]
     points = [{**fixed, **g, **d} for d in draws for g in grid_points]
     return points, list(axes) + list(samplers)

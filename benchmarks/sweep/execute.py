@@ -19,9 +19,10 @@ import json
 import os
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from .config import Plan
 from .schema import columns
@@ -84,9 +85,9 @@ def warm_up() -> None:
     """What every worker process does once before its first run (part of the cluster
     start, not of the runs' wall time): import the scenario and solver modules."""
     from prioik import formulations
+    from prioik.benchmarks import fencing  # noqa: F401
 
     from . import task  # noqa: F401 - the worker's entry point and its imports
-    from prioik.benchmarks import fencing  # noqa: F401
 
     formulations.get("extended_jacobian")
     formulations.get("hierarchical_active_set")

@@ -37,7 +37,7 @@ def error_vs_margin(path: Path, judged: list[dict[str, Any]], labels: list[str],
     lo = max(min(vals), 1e-12) if vals else 1e-9
     hi = max(vals) if vals else 1.0
     top = hi * 3
-    for ax, label in zip(axes.flat, labels):
+    for ax, label in zip(axes.flat, labels, strict=False):
         rs = [r for r in judged if r["label"] == label]
         ok = [r for r in rs if not r["failed"] and r.get(key) is not None]
         bad = [r for r in rs if r["failed"]]
@@ -75,13 +75,14 @@ def success_rates(path: Path, table: dict, labels: list[str], criteria: list[tup
                                                         0.35 * len(labels) + 1.2),
                              sharey=True, squeeze=False)
     y = np.arange(len(labels))
-    for ax, (key, name) in zip(axes[0], criteria):
+    for ax, (key, name) in zip(axes[0], criteria, strict=False):
         rates = [table[lb][key] for lb in labels]
         r = np.array([x.rate for x in rates])
         lo = np.array([x.interval[0] for x in rates])
         hi = np.array([x.interval[1] for x in rates])
         ax.barh(y, np.nan_to_num(r), color=[color_of(lb) for lb in labels], alpha=0.85)
-        ax.errorbar(r, y, xerr=[np.clip(np.nan_to_num(r - lo), 0, None), np.clip(np.nan_to_num(hi - r), 0, None)], fmt="none",
+        ax.errorbar(r, y, xerr=[np.clip(np.nan_to_num(r - lo), 0, None),
+                                np.clip(np.nan_to_num(hi - r), 0, None)], fmt="none",
                     ecolor="black", elinewidth=0.8, capsize=2)
         ax.set_xlim(0, 1.02)
         ax.set_title(name, fontsize=9)
@@ -109,7 +110,7 @@ def step_times(path: Path, judged: list[dict[str, Any]], labels: list[str], titl
     if data:
         parts = ax.boxplot(data, orientation="horizontal", patch_artist=True, widths=0.6,
                            flierprops={"markersize": 3})
-        for patch, lb in zip(parts["boxes"], shown):
+        for patch, lb in zip(parts["boxes"], shown, strict=False):
             patch.set_facecolor(color_of(lb))
             patch.set_alpha(0.8)
         ax.set_yticks(np.arange(1, len(shown) + 1), shown, fontsize=8)

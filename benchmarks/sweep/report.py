@@ -167,7 +167,8 @@ def write_report(plan: Plan, rows: dict[str, dict[str, Any]], out, info: dict,
                    + (f"; CPU pressure (share of time a runnable task waited for a core, "
                       f"60 s average) {i['cpu_pressure_avg60_start']:.0f} % at start"
                       if i.get("cpu_pressure_avg60_start") is not None else "") + ".")
-    from .throughput import describe, load as load_throughput
+    from .throughput import describe
+    from .throughput import load as load_throughput
     throughput = load_throughput(out)
     if throughput is not None:
         how.append(describe(throughput))

@@ -34,7 +34,7 @@ def flatten_params(params: dict[str, Any]) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for k, v in params.items():
         if isinstance(v, (list, tuple)):
-            for axis, x in zip("xyz", v):
+            for axis, x in zip("xyz", v, strict=False):
                 out[f"{k}_{axis}"] = x
         else:
             out[k] = v

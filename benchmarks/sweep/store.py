@@ -13,8 +13,9 @@ import fcntl
 import io
 import math
 import os
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
 __all__ = ["RowStore", "read_rows"]
 
@@ -59,7 +60,7 @@ def read_rows(path) -> list[dict[str, Any]]:
     header = next(reader, None)
     if header is None:
         return []
-    return [{c: _parse(c, v) for c, v in zip(header, line)} for line in reader
+    return [{c: _parse(c, v) for c, v in zip(header, line, strict=False)} for line in reader
             if len(line) == len(header)]
 
 
@@ -123,7 +124,7 @@ class RowStore:
         self._file.close()
         self._lock.close()
 
-    def __enter__(self) -> "RowStore":
+    def __enter__(self) -> RowStore:
         return self
 
     def __exit__(self, *exc) -> None:

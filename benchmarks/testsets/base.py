@@ -9,8 +9,9 @@ order (each sequence starts from a freshly prepared, cold, solver).
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import ClassVar, Iterator
+from typing import ClassVar
 
 import numpy as np
 

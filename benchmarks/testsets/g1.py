@@ -15,8 +15,8 @@ matrix of each problem is the robot's ``M(q)``.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from functools import lru_cache
-from typing import Iterator
 
 import numpy as np
 

@@ -24,7 +24,7 @@ shift ``s`` on the scale of the data (:data:`TIME_SHIFT_S`, 10 µs: the solves t
 from __future__ import annotations
 
 import math
-from typing import Iterable
+from collections.abc import Iterable
 
 import numpy as np
 

@@ -13,7 +13,7 @@ from ``numpy.random.default_rng([seed, family index, n, k, i])``. Not sequential
 
 from __future__ import annotations
 
-from typing import Callable, Iterator
+from collections.abc import Callable, Iterator
 
 import numpy as np
 

@@ -11,7 +11,7 @@ consecutive steps (sequential); the mass matrix of each problem is ``M(q)``.
 
 from __future__ import annotations
 
-from typing import Iterator
+from collections.abc import Iterator
 
 import numpy as np
 

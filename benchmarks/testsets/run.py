@@ -25,17 +25,24 @@ import csv
 import json
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
 from prioik.hierarchy import check_lexicographic, level_residuals
 
 from .base import Problem, TestSet
-from .metrics import (JUDGED_BY_CERTIFICATE, JUDGED_BY_VALUES, PROFILES, VALUE_JUDGED,
-                      certificate_success, value_success)
+from .metrics import (
+    JUDGED_BY_CERTIFICATE,
+    JUDGED_BY_VALUES,
+    PROFILES,
+    VALUE_JUDGED,
+    certificate_success,
+    value_success,
+)
 from .report import GENERIC_UNSUPPORTED
 
 __all__ = ["Row", "EXACT", "default_rows", "run_test_set", "write_csv", "load_csv",

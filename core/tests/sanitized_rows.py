@@ -4,7 +4,8 @@ Run by ``make asan-bindings``: ``python core/tests/sanitized_rows.py PATH`` with
 ``PATH`` the extension built with ``-fsanitize=address,undefined``
 (``PRIOIK_SANITIZE=ON``, ``PRIOIK_PYTHON=ON``) and the sanitizer runtimes preloaded. It
 loads that build as ``prioik._core`` and runs, from ``tests/test_rows_cpp.py``, every
-writer against the plain-Python reference on the Panda, G1 and TALOS at both levels, log3, the bound and
+writer against the plain-Python reference on the Panda, G1 and TALOS at both levels, log3, the
+bound and
 activation formulas, the bad inputs and 40 seeds of the boundary fuzz; a sanitizer
 report aborts the process.
 """
@@ -28,6 +29,7 @@ def load_core(path: str):
 def main(path: str) -> None:
     core = load_core(path)
     import numpy as np
+
     from prioik.robots import KinematicState, TaskWriter, g1, panda, talos
     from prioik.robots import rows as rows_module
     from prioik.robots import tasks as tasks_module
@@ -59,7 +61,7 @@ def main(path: str) -> None:
     writer.add_frame_pose("pose", "left_foot", gain=(1.0, 1.0))
     state = KinematicState(robot, robot.q0, np.zeros(robot.nv))
     _, args = writer._frame_args(writer._task("pose", "pose"), state)
-    call = dict(zip(("A", "Q", "J", "t", "R", "spec", "geo", "aj", "vj"), args))
+    call = dict(zip(("A", "Q", "J", "t", "R", "spec", "geo", "aj", "vj"), args, strict=False))
     call.update(x=np.zeros(3), xd=np.zeros(3), xdd=np.zeros(3), Rstar=np.eye(3),
                 w=np.zeros(3), wd=np.zeros(3))
     for case in t.test_bad_input_raises_prioiks_error.pytestmark[0].args[1]:

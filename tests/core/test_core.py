@@ -93,7 +93,7 @@ def test_extended_jacobian_agrees_with_reference_on_conflicting_stacks(kernel):
               == formulations.registry.stack_shape(stacks[0])]
     batch = formulations.solve_batch(stacks, "extended_jacobian", kernel=kernel)
     assert batch.batched and batch.statuses == ["optimal"] * len(stacks)
-    for s, x in zip(stacks, batch.X):
+    for s, x in zip(stacks, batch.X, strict=False):
         assert np.allclose(x, formulations.solve(s, "reference").x, rtol=0, atol=1e-8)
 
 
