@@ -66,6 +66,9 @@ Certificate::Certificate(ActiveSetLayout layout, CertificateOptions options)
     if (layout_.k < 1 || layout_.n < 1 || static_cast<index>(layout_.starts.size()) != layout_.k + 1 ||
         static_cast<index>(layout_.row_eq.size()) != layout_.M || layout_.starts[layout_.k] != layout_.M)
         throw std::invalid_argument("certificate: the layout's starts and row_eq disagree");
+    for (index i = 0; i < layout_.k; ++i)
+        if (layout_.starts[0] != 0 || layout_.starts[i] > layout_.starts[i + 1])
+            throw std::invalid_argument("certificate: the layout's starts must rise from 0");
     ws_.allocate(layout_.M, layout_.n);
     for (auto* r : {&result_, &retry_, &near_}) r->allocate(layout_.k);
     // the feasibility check's solver: one soft level of the M unit rows (certificate.hpp)
