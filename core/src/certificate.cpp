@@ -45,12 +45,13 @@ void CertificateWorkspace::allocate(index M, index n) {
     lsq.assign(R * N, 0.0);
     for (auto* v : {&Zt, &Vt, &Znew, &lsqV}) v->assign(N * N, 0.0);
     house.assign(N * (N + 1), 0.0);
-    faceV.assign(R * R, 0.0);
+    qr_work.assign(N + 2 * R, 0.0);
     for (auto* v : {&sig, &g, &zg, &y, &D, &rho, &step, &dir, &tmp_d, &tmp_n, &xp, &near_x,
                     &face_res})
         v->assign(N, 0.0);
     nnls_w.assign(R + N, 0.0);
     nnls_res.assign(R, 0.0);
+    jnorms.assign(std::max(R, N), 0.0);
     alphas.assign(32, 0.0);
     along.assign(32, 0.0);
     order.assign(32, 0);
@@ -58,6 +59,8 @@ void CertificateWorkspace::allocate(index M, index n) {
     level_side.assign(R, 0);
     keep_index.assign(R, 0);
     face_index.assign(R, 0);
+    fix_index.assign(R, 0);
+    face_perm.assign(R, 0);
     for (auto* v : {&fixed, &keep, &passive, &null, &small}) v->assign(std::max(R, N), 0);
 }
 
@@ -167,7 +170,7 @@ index Certificate::snapped(const Stack& s, const double* x) {
     // the least-norm solution (lstsq's rank rule: σ > eps max(m, n) σ_max)
     for (index c = 0; c < n; ++c)
         for (index j = 0; j < n; ++j) w.lsqV[c * n + j] = c == j ? 1.0 : 0.0;
-    cert::jacobi_rows(w.lsq.data(), n, m, M, w.lsqV.data(), n, n);
+    cert::jacobi_rows(w.lsq.data(), n, m, M, w.lsqV.data(), n, n, w.jnorms.data());
     double top = 0.0;
     for (index c = 0; c < n; ++c) {
         w.tmp_n[c] = std::sqrt(dot(w.lsq.data() + c * M, w.lsq.data() + c * M, m));

@@ -21,9 +21,10 @@ constexpr int kDescentTries = 4;
 constexpr double kInfinity = std::numeric_limits<double>::infinity();
 
 cert::FaceSpace face_space(CertificateWorkspace& w, index n, index M) {
-    return cert::FaceSpace{w.face.data(), n, w.faceV.data(), std::max<index>(M, 1),
-                           w.face_s.data(), w.face_res.data(), w.nnls_w.data(),
-                           w.mu.data(), w.nnls_s.data(), w.face_index.data(),
+    (void)M;
+    return cert::FaceSpace{w.face.data(), n, w.face_s.data(), w.face_res.data(),
+                           w.nnls_w.data(), w.mu.data(), w.nnls_s.data(), w.qr_work.data(),
+                           w.face_index.data(), w.face_perm.data(),
                            reinterpret_cast<signed char*>(w.passive.data())};
 }
 
@@ -61,6 +62,8 @@ double Certificate::kkt(const double* grad, bool with_b, const double*, index m,
         kkt_floor_ = floor;
         if (m) {
             right_svd(m, d);
+            svd_rows_ = m;
+            svd_d_ = d;
         } else {
             for (index j = 0; j < d; ++j) {
                 for (index c = 0; c < d; ++c) w.Vt[j * n + c] = c == j ? 1.0 : 0.0;
@@ -141,26 +144,10 @@ void Certificate::descent(int which, double* direction) {
         double frob2 = 0.0;
         for (index t = 0; t < q; ++t) frob2 += dot(w.face.data() + t * n, w.face.data() + t * n, d);
         const double frob = std::sqrt(frob2);
-        cert::jacobi_rows(w.face.data(), q, d, n, nullptr, 0, 0);
-        const double threshold = 1e-15 * frob;
-        index rank = 0;
-        for (index t = 0; t < q; ++t) {
-            w.nnls_s[t] = std::sqrt(dot(w.face.data() + t * n, w.face.data() + t * n, d));
-            rank += w.nnls_s[t] > threshold;
-        }
-        for (index j = 0; j < d; ++j) w.rho[j] = w.zg[j];
-        for (index t = 0; t < q && rank > 0; ++t) {
-            const double sigma = w.nnls_s[t];
-            if (!(sigma > threshold)) continue;
-            if (rank > d) {     // (a wide face: its smallest values are rounding)
-                index larger = 0;
-                for (index u = 0; u < q; ++u) larger += w.nnls_s[u] > sigma;
-                if (larger >= d) continue;
-            }
-            const double* u = w.face.data() + t * n;
-            const double coef = dot(u, w.zg.data(), d) / (sigma * sigma);
-            for (index j = 0; j < d; ++j) w.rho[j] -= u[j] * coef;
-        }
+        // zg off the span of the columns whose pivots exceed 1e-15 ‖face‖_F
+        cert::pivoted_least_squares(w.face.data(), q, d, n, w.zg.data(), 0.0, 1e-15 * frob,
+                                    nullptr, w.rho.data(), w.qr_work.data(),
+                                    w.face_perm.data());
         return minus_z_times(w.Zt.data(), d, n, w.rho.data(), direction);
     } else {
         // the null coordinates weighted as the floored ones: the multipliers cancel the

@@ -137,6 +137,7 @@ void Certificate::check_level(const Stack& s, const double* x, double x_norm, in
     auto& w = ws_;
     index* side = w.level_side.data();
     const double* v = w.v.data() + s0;
+    svd_rows_ = -1;
     const double* sw = s.sw + s0;
     index m_b = 0;
     for (index r = 0; r < mi; ++r) {
@@ -249,15 +250,24 @@ void Certificate::add_level(const Stack& s, index s0, index s1, index level,
     for (index r = 0; r < mi; ++r) {
         w.fixed[s0 + r] = side[r] == 2;
         if (side[r] != 2) continue;
-        w.keep_index[m++] = s0 + r;
+        w.fix_index[m++] = s0 + r;
         const double* row = w.WA.data() + (s0 + r) * n;
         f2 += dot(row, row, n);
     }
     if (m) {
         const double tol_r = options_.rcond * std::sqrt(f2);
-        if (d_ && tol_r > 0) fix_null_space(m, tol_r, level, out);
+        if (d_ && tol_r > 0) {
+            // the level's KKT step factored these rows already when they were its
+            // active rows (the same matrix: its singular values and vectors serve)
+            const bool same = svd_rows_ == m && svd_d_ == d_ &&
+                              std::equal(w.fix_index.begin(), w.fix_index.begin() + m,
+                                         w.keep_index.begin());
+            std::copy(w.fix_index.begin(), w.fix_index.begin() + m, w.keep_index.begin());
+            fix_null_space(m, tol_r, level, out, !same);
+        }
         fixed_count_ += m;
     }
+    svd_rows_ = -1;
     for (index r = 0; r < mi; ++r) {
         const double norm = w.norms[s0 + r];
         if (!((side[r] == 1 || side[r] == -1) && norm > 0)) continue;
@@ -268,10 +278,11 @@ void Certificate::add_level(const Stack& s, index s0, index s1, index level,
     }
 }
 
-void Certificate::fix_null_space(index m, double tol_r, index level, CertificateResult& out) {
+void Certificate::fix_null_space(index m, double tol_r, index level, CertificateResult& out,
+                                 bool factor) {
     const index n = layout_.n, d = d_;
     auto& w = ws_;
-    right_svd(m, d);
+    if (factor) right_svd(m, d);
     if (ambiguous_decision(w.sig.data(), d, tol_r)) out.ambiguous[level] = 1;
     index kept = 0;
     for (index j = 0; j < d; ++j) {
@@ -303,14 +314,14 @@ void Certificate::right_svd(index m, index d) {
                 P[j * M + i] = dot(w.WA.data() + w.keep_index[i] * n, w.Zt.data() + j * n, n);
         for (index j = 0; j < d; ++j)
             for (index c = 0; c < d; ++c) w.Vt[j * n + c] = c == j ? 1.0 : 0.0;
-        cert::jacobi_rows(P, d, m, M, w.Vt.data(), d, n);
+        cert::jacobi_rows(P, d, m, M, w.Vt.data(), d, n, w.jnorms.data());
         for (index j = 0; j < d; ++j) w.sig[j] = std::sqrt(dot(P + j * M, P + j * M, m));
         return;
     }
     for (index i = 0; i < m; ++i)
         for (index j = 0; j < d; ++j)
             P[i * n + j] = dot(w.WA.data() + w.keep_index[i] * n, w.Zt.data() + j * n, n);
-    cert::jacobi_rows(P, m, d, n, nullptr, 0, 0);
+    cert::jacobi_rows(P, m, d, n, nullptr, 0, 0, w.jnorms.data());
     index r = 0;
     for (index i = 0; i < m; ++i) {
         const double sigma = std::sqrt(dot(P + i * n, P + i * n, d));

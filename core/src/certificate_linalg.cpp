@@ -35,18 +35,21 @@ void rotate(double* p, double* q, Index len, double c, double s) {
 }  // namespace
 
 void jacobi_rows(double* R, Index count, Index len, Index stride, double* acc, Index acc_len,
-                 Index acc_stride) {
+                 Index acc_stride, double* norms) {
     constexpr int kSweeps = 60;
     for (int sweep = 0; sweep < kSweeps; ++sweep) {
+        // the rows' squared norms, measured at each sweep and carried through its
+        // rotations (a rotation that zeroes γ moves t γ from one to the other)
+        for (Index i = 0; i < count; ++i) norms[i] = dot(R + i * stride, R + i * stride, len);
         bool rotated = false;
         for (Index i = 0; i + 1 < count; ++i) {
             double* p = R + i * stride;
             for (Index j = i + 1; j < count; ++j) {
+                const double alpha = norms[i], beta = norms[j];
+                if (alpha == 0.0 || beta == 0.0) continue;
                 double* q = R + j * stride;
-                const double alpha = dot(p, p, len), beta = dot(q, q, len);
                 const double gamma = dot(p, q, len);
                 if (!(std::fabs(gamma) > kEps * std::sqrt(alpha) * std::sqrt(beta))) continue;
-                if (alpha == 0.0 || beta == 0.0) continue;
                 // the rotation that makes rows i and j orthogonal (Rutishauser's form)
                 const double zeta = (beta - alpha) / (2.0 * gamma);
                 const double t = (zeta >= 0 ? 1.0 : -1.0) /
@@ -54,6 +57,8 @@ void jacobi_rows(double* R, Index count, Index len, Index stride, double* acc, I
                 const double c = 1.0 / std::sqrt(1.0 + t * t), s = c * t;
                 rotate(p, q, len, c, s);
                 if (acc != nullptr) rotate(acc + i * acc_stride, acc + j * acc_stride, acc_len, c, s);
+                norms[i] = alpha - t * gamma;
+                norms[j] = beta + t * gamma;
                 rotated = true;
             }
         }
@@ -100,34 +105,76 @@ void complete_basis(const double* U, Index r, Index d, Index stride, double* out
     }
 }
 
+Index pivoted_least_squares(double* F, Index q, Index d, Index fs, const double* y,
+                            double rel_tol, double abs_tol, double* s, double* res,
+                            double* work, Index* perm) {
+    double* z = work;              // d: Qᵀ y
+    double* diag = work + d;       // q: R_kk
+    double* beta = work + d + q;   // q: the reflectors' 2 / vᵀv
+    for (Index j = 0; j < q; ++j) perm[j] = j;
+    const Index steps = std::min(q, d);
+    Index rank = 0;
+    double first = 0.0;
+    for (Index k = 0; k < steps; ++k) {
+        Index pivot = k;
+        double top = -1.0;
+        for (Index j = k; j < q; ++j) {
+            const double* col = F + j * fs;
+            const double norm2 = dot(col + k, col + k, d - k);
+            if (norm2 > top) { top = norm2; pivot = j; }
+        }
+        if (pivot != k) {
+            for (Index c = 0; c < d; ++c) std::swap(F[k * fs + c], F[pivot * fs + c]);
+            std::swap(perm[k], perm[pivot]);
+        }
+        const double norm = std::sqrt(top);
+        if (k == 0) first = norm;
+        if (!(norm > std::max(abs_tol, rel_tol * first))) break;
+        double* v = F + k * fs + k;
+        const double alpha = v[0] >= 0 ? -norm : norm;
+        diag[k] = alpha;
+        v[0] -= alpha;
+        const double vv = dot(v, v, d - k);
+        beta[k] = vv > 0 ? 2.0 / vv : 0.0;
+        for (Index j = k + 1; j < q; ++j) {
+            double* col = F + j * fs + k;
+            const double f = beta[k] * dot(v, col, d - k);
+            for (Index c = 0; c < d - k; ++c) col[c] -= f * v[c];
+        }
+        rank = k + 1;
+    }
+    for (Index c = 0; c < d; ++c) z[c] = y[c];
+    for (Index k = 0; k < rank; ++k) {
+        const double* v = F + k * fs + k;
+        const double f = beta[k] * dot(v, z + k, d - k);
+        for (Index c = 0; c < d - k; ++c) z[k + c] -= f * v[c];
+    }
+    if (s != nullptr) {
+        for (Index j = 0; j < q; ++j) s[j] = 0.0;
+        for (Index k = rank - 1; k >= 0; --k) {     // R s = z on the pivot columns
+            double acc = z[k];
+            for (Index j = k + 1; j < rank; ++j) acc -= F[j * fs + k] * s[perm[j]];
+            s[perm[k]] = acc / diag[k];
+        }
+    }
+    for (Index c = 0; c < d; ++c) res[c] = c < rank ? 0.0 : z[c];
+    for (Index k = rank - 1; k >= 0; --k) {
+        const double* v = F + k * fs + k;
+        const double f = beta[k] * dot(v, res + k, d - k);
+        for (Index c = 0; c < d - k; ++c) res[k + c] -= f * v[c];
+    }
+    return rank;
+}
+
 void face_solve(const double* M, Index mstride, Index d, const Index* cols, Index q,
                 const double* y, FaceSpace& f) {
     for (Index t = 0; t < q; ++t) {
         const double* col = M + cols[t] * mstride;
-        double* row = f.face + t * f.fstride;
-        for (Index c = 0; c < d; ++c) row[c] = col[c];
-        double* v = f.V + t * f.vstride;
-        for (Index c = 0; c < q; ++c) v[c] = c == t ? 1.0 : 0.0;
+        std::copy(col, col + d, f.face + t * f.fstride);
     }
-    jacobi_rows(f.face, q, d, f.fstride, f.V, q, f.vstride);
-    double top = 0.0;
-    for (Index t = 0; t < q; ++t) {
-        f.tmp[t] = std::sqrt(dot(f.face + t * f.fstride, f.face + t * f.fstride, d));
-        top = std::max(top, f.tmp[t]);
-    }
-    const double threshold = kEps * static_cast<double>(std::max(d, q)) * top;
-    for (Index t = 0; t < q; ++t) f.s[cols[t]] = 0.0;
-    for (Index c = 0; c < d; ++c) f.res[c] = y[c];
-    if (!(top > 0.0)) return;
-    for (Index t = 0; t < q; ++t) {
-        const double sigma = f.tmp[t];
-        if (!(sigma > threshold)) continue;
-        const double* u = f.face + t * f.fstride;
-        const double coef = dot(u, y, d) / (sigma * sigma);
-        const double* v = f.V + t * f.vstride;
-        for (Index c = 0; c < q; ++c) f.s[cols[c]] += v[c] * coef;
-        for (Index c = 0; c < d; ++c) f.res[c] -= u[c] * coef;
-    }
+    const double rel = kEps * static_cast<double>(std::max(d, q));
+    pivoted_least_squares(f.face, q, d, f.fstride, y, rel, 0.0, f.tmp, f.res, f.work, f.perm);
+    for (Index t = 0; t < q; ++t) f.s[cols[t]] = f.tmp[t];
 }
 
 double nnls(const double* M, Index mstride, Index d, Index p, const double* y, FaceSpace& f) {

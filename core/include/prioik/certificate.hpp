@@ -82,8 +82,8 @@ struct CertificateWorkspace {
     // the KKT residual: gradients, weights, masks, the held columns, the NNLS
     std::vector<double> g, zg, y, D, held, unit, mu, rho, step, dir, tmp_d, tmp_n;
     std::vector<std::int8_t> null, keep, passive, small;
-    std::vector<double> face, faceV, face_s, face_res, nnls_s, nnls_w, nnls_res, ucols;
-    std::vector<index> keep_index, face_index;
+    std::vector<double> face, face_s, face_res, nnls_s, nnls_w, nnls_res, ucols, jnorms, qr_work;
+    std::vector<index> keep_index, fix_index, face_index, face_perm;
     // the descent walk and the snap
     std::vector<double> h, hh, alphas, along, xp, ap, near_x, lsq, lsqV, rhs;
     std::vector<index> order;
@@ -138,7 +138,8 @@ private:
     void check_level(const Stack& s, const double* x, double x_norm, index level,
                      bool fix_band, CertificateResult& out);
     void right_svd(index m, index d);
-    void fix_null_space(index m, double tol_r, index level, CertificateResult& out);
+    void fix_null_space(index m, double tol_r, index level, CertificateResult& out,
+                        bool factor);
 
     ActiveSetLayout layout_;
     CertificateOptions options_;
@@ -152,6 +153,9 @@ private:
     double kkt_floor_ = 0.0;
     bool kkt_has_D_ = false, kkt_any_null_ = false;
     index kkt_keep_ = 0;
+    /// rows of the last right_svd (keep_index[0..svd_rows_)) at null space dimension
+    /// svd_d_ (−1: none): add_level reuses it when its fixed rows are the same
+    index svd_rows_ = -1, svd_d_ = -1;
 };
 
 }  // namespace prioik
