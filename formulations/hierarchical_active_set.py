@@ -96,8 +96,9 @@ the minimum-norm tie-break); on equality stacks these are the extended Jacobian'
 decisions and statuses. Pivots are re-measured exactly before a rank decision stops
 (downdated norms lose the largest remaining row to cancellation). When only an earlier
 step of a level decided ambiguously (its last step clear), the working set it led to
-may not be the optimum: the answer is then checked by
-:func:`~prioik.hierarchy.check_lexicographic` and is ``optimal`` only if it passes
+may not be the optimum: the answer is then checked by the certificate
+(:func:`~prioik.hierarchy.check_lexicographic`'s verdict, computed in the core:
+``prioik._core.Certificate``, prepared with the solver) and is ``optimal`` only if it passes
 and the level's weighted row norms span at most :data:`CERTIFIABLE_SPREAD` (the
 certificate's tolerances are relative to the terms of a level's rows: an independent
 check found levels spanning 6.8e6-4.1e8 certified above their optimum by 1.4e-6 to
