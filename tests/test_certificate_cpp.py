@@ -89,10 +89,19 @@ def test_the_core_certificate_gives_the_oracle_s_verdict(name, stack):
         assert not python[0] and not cpp[0]
 
 
-def test_the_corpus_exercises_every_reading():
+def test_the_corpus_exercises_every_reading(monkeypatch):
     """The parity above is not vacuous: across the corpus the oracle passes and rejects,
-    at a level below the first, reads band rows as fixed and snaps rows onto bounds —
-    and the core's certificate does the same on each."""
+    at a level below the first, reads band rows as fixed, snaps rows onto bounds and
+    asks its LP whether slack rows can be met (both answers) — and the core's
+    certificate gives the same verdict on each."""
+    from prioik.hierarchy import analysis
+    lp = analysis._feasible
+    answers = []
+
+    def feasible(*args):
+        answers.append(lp(*args))
+        return answers[-1]
+    monkeypatch.setattr(analysis, "_feasible", feasible)
     seen = {"ok": 0, "rejected": 0, "lower_level": 0, "band": 0, "snap": 0}
     for _, stack in STACKS:
         sol = prioik.solve(stack, "hierarchical_active_set")
@@ -106,6 +115,7 @@ def test_the_corpus_exercises_every_reading():
             seen["lower_level"] += python[1] > 0
             seen["band"] += python[2] > 0
             seen["snap"] += python[3] > 0
+    seen.update(lp_feasible=sum(answers), lp_infeasible=len(answers) - sum(answers))
     assert all(count > 0 for count in seen.values()), seen
 
 

@@ -38,9 +38,11 @@ void CertificateResult::allocate(index k) {
 void CertificateWorkspace::allocate(index M, index n) {
     const index R = std::max<index>(M, 1), N = std::max<index>(n, 1);
     for (auto* v : {&lower, &upper, &norms, &a, &terms, &size, &v, &mu, &rhs, &h, &ap,
-                    &face_s, &nnls_s, &fb, &flo, &fup, &fsw})
+                    &face_s, &nnls_s})
         v->assign(R, 0.0);
-    for (auto* v : {&WA, &signed_rows, &held, &unit, &face, &ucols, &fA}) v->assign(R * N, 0.0);
+    for (auto* v : {&fb, &flo, &fup, &fsw}) v->assign(2 * R, 0.0);
+    for (auto* v : {&WA, &signed_rows, &held, &unit, &face, &ucols}) v->assign(R * N, 0.0);
+    fA.assign(2 * R * N, 0.0);
     P.assign(R * N + N * N, 0.0);
     lsq.assign(R * N, 0.0);
     for (auto* v : {&Zt, &Vt, &Znew, &lsqV}) v->assign(N * N, 0.0);
@@ -74,17 +76,18 @@ Certificate::Certificate(ActiveSetLayout layout, CertificateOptions options)
             throw std::invalid_argument("certificate: the layout's starts must rise from 0");
     ws_.allocate(layout_.M, layout_.n);
     for (auto* r : {&result_, &retry_, &near_}) r->allocate(layout_.k);
-    // the feasibility check's solver: one soft level of the M unit rows (certificate.hpp)
-    ActiveSetLayout one;
-    one.M = layout_.M;
-    one.n = layout_.n;
-    one.k = 1;
-    one.starts = {0, layout_.M};
-    one.row_eq.assign(layout_.M, 0);
+    // the feasibility check's solver: two levels of the M unit rows, the rows kept at
+    // their values first, then the others (certificate.hpp)
+    ActiveSetLayout two;
+    two.M = 2 * layout_.M;
+    two.n = layout_.n;
+    two.k = 2;
+    two.starts = {0, layout_.M, 2 * layout_.M};
+    two.row_eq.assign(2 * layout_.M, 0);
     ActiveSetOptions tight;
     tight.primal_tol = 1e-12;
     tight.warm_start = false;
-    feasibility_ = std::make_unique<ActiveSetSolver>(std::move(one), tight);
+    feasibility_ = std::make_unique<ActiveSetSolver>(std::move(two), tight);
 }
 
 Certificate::~Certificate() = default;
@@ -194,26 +197,27 @@ bool Certificate::feasible(const Stack& s, index s0, index s1, const std::int8_t
     const index n = layout_.n, M = layout_.M;
     auto& w = ws_;
     constexpr double inf = std::numeric_limits<double>::infinity();
-    for (index r = 0; r < M; ++r) {
-        double* row = w.fA.data() + r * n;
+    // row r of the stack is row r of level 0 when kept at its value, else row M + r of
+    // level 1; the other copy is a zero row without bounds
+    for (index r = 0; r < 2 * M; ++r) {
         w.fsw[r] = 1.0;
         w.fb[r] = 0.0;
-        if (r >= s1) {            // rows below the level: free
-            for (index c = 0; c < n; ++c) row[c] = 0.0;
-            w.flo[r] = -inf;
-            w.fup[r] = inf;
-            continue;
-        }
+        w.flo[r] = -inf;
+        w.fup[r] = inf;
+        std::fill(w.fA.begin() + r * n, w.fA.begin() + (r + 1) * n, 0.0);
+    }
+    for (index r = 0; r < s1; ++r) {
         const double a = w.a[r];
         double lo = w.lower[r], up = w.upper[r];
         const bool fix = r < s0 ? w.fixed[r] != 0
                                 : (!small[r - s0] && !(a >= lo && a <= up));
         if (fix) lo = up = a;
+        const index at = fix ? r : M + r;
         double norm = w.norms[r];
         if (norm == 0.0) norm = 1.0;
-        for (index c = 0; c < n; ++c) row[c] = s.A[r * n + c] / norm;
-        w.flo[r] = lo / norm;
-        w.fup[r] = up / norm;
+        for (index c = 0; c < n; ++c) w.fA[at * n + c] = s.A[r * n + c] / norm;
+        w.flo[at] = lo / norm;
+        w.fup[at] = up / norm;
     }
     const SolveCode code = feasibility_->solve(w.fA.data(), w.fb.data(), w.flo.data(),
                                                w.fup.data(), w.fsw.data());
@@ -221,7 +225,8 @@ bool Certificate::feasible(const Stack& s, index s0, index s1, const std::int8_t
     const double* y = feasibility_->result().x.data();
     for (index c = 0; c < n; ++c)
         if (!std::isfinite(y[c])) return false;
-    for (index r = 0; r < s1; ++r) {
+    for (index r = 0; r < 2 * M; ++r) {
+        if (r % M >= s1) continue;
         const double* row = w.fA.data() + r * n;
         double val = 0.0, terms = 0.0;
         for (index c = 0; c < n; ++c) {
@@ -229,7 +234,7 @@ bool Certificate::feasible(const Stack& s, index s0, index s1, const std::int8_t
             terms += std::fabs(row[c]) * std::fabs(y[c]);
         }
         const double outside = std::max(std::max(w.flo[r] - val, val - w.fup[r]), 0.0);
-        if (!(outside <= kFeasibilityTol * (1.0 + terms))) return false;
+        if (!(outside <= kFeasibilityTol + cert::kXPrecision * terms)) return false;
     }
     return true;
 }

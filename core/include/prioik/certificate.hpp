@@ -15,9 +15,13 @@
 // snap). Same rules, tolerances and order as the Python oracle; see its docstring.
 //
 // The feasibility question of the slack rows (Python: an LP, HiGHS, primal feasibility
-// 1e-10 on unit rows) is answered by the core's own active set on one soft level of the
-// same unit rows (fixed rows as lower = upper): the rows are met together when that
-// level's least violation leaves every row within 1e-10 (1 + |â_j| |y|) of its interval.
+// 1e-10 on unit rows) is answered by the core's own active set on the same unit rows in
+// two levels: first the rows kept at their values at x (lower = upper), then the others
+// (the slack rows to meet, the rest inside their intervals). The rows are met together
+// when the lexicographic optimum y leaves every row within 1e-10 + 16 eps |â_j| |y| of
+// its interval (HiGHS's absolute tolerance and y's rounding); the kept rows being a
+// level above, a direction they pin (by the rank rule) is not traded for the others,
+// as the LP's equalities are not.
 //
 // The SVDs are one-sided Jacobi (Hestenes) rotations over the workspace's rows; a right
 // basis wider than the rows is completed by Householder reflectors. Levels of extreme
