@@ -77,7 +77,7 @@ def _solver(layout, certificate: str, record: list | None = None):
     import prioik
     solver = prioik.prepare(layout, "hierarchical_active_set")
     impl = solver._impl
-    chain = [impl, impl._refiner, impl._refiner._refiner]
+    chain = [impl, impl._refiner(), impl._refiner()._refiner()]
     for part in chain:
         inner = part._certify if certificate == "cpp" else _oracle
 

@@ -298,14 +298,11 @@ class Prepared:
         self._n, self._k = layout.n, layout.k
         self._levels = range(layout.k)
         self._prepare_cpp(layout)
-        #: how many more times a rejected answer is re-solved (:meth:`_refined`), and
-        #: the solver that re-solves it: prepared here for the layout, cold, at
-        #: :data:`REFINE` times these tolerances, refining once less itself
+        #: how many more times a rejected answer is re-solved (:meth:`_refined`)
         self._refine = REFINE_ROUNDS if refine_rounds is None else refine_rounds
-        self._refiner = Prepared(layout, {
-            "rcond": self.rcond, "primal_tol": self.primal_tol * REFINE,
-            "dual_tol": self.dual_tol * REFINE, "max_iter": self.max_iter,
-            "warm_start": False}, refine_rounds=self._refine - 1) if self._refine > 0 else None
+        #: the solver that re-solves it (:meth:`_refiner`), prepared at the first
+        #: refinement and kept
+        self._refining = None
 
     def _prepare_cpp(self, layout: StackLayout) -> None:
         """The C++ kernel's solver (``prioik._core.ActiveSetSolver``): its workspace is
@@ -471,20 +468,31 @@ class Prepared:
             status = precision_status(status, info, data, x)
         return Outcome(x, status, info, residuals=residuals, checked=True)
 
+    def _refiner(self) -> "Prepared":
+        """The refining solver: this layout's, cold, at :data:`REFINE` times these
+        tolerances, refining once less itself; prepared at the first refinement (a
+        one-shot solve that needs none does not pay it) and kept for the next."""
+        if self._refining is None:
+            self._refining = Prepared(self.layout, {
+                "rcond": self.rcond, "primal_tol": self.primal_tol * REFINE,
+                "dual_tol": self.dual_tol * REFINE, "max_iter": self.max_iter,
+                "warm_start": False}, refine_rounds=self._refine - 1)
+        return self._refining
+
     def _refined(self, data: StackData, info: dict, rejected: str) -> Outcome | None:
         """The stack re-solved cold at :data:`REFINE` times ``primal_tol`` and
         ``dual_tol``, after the certificate rejected an answer with a near-release level
         or a row held off its bound: the release tolerance scales with ``primal_tol``,
         so a row kept held inside its bound is released, and the dual one with
         ``dual_tol``, so a row held off its bound may be fixed at its violation. The
-        refining solver (prepared with this one) refines its own rejected answer once
+        refining solver (:meth:`_refiner`, prepared once) refines its own rejected answer once
         more while rounds are left (:data:`REFINE_ROUNDS`). The refined answer is returned
         only when it is ``optimal`` and passes the certificate (:meth:`_certify`)
         (``info["refined_primal_tol"]`` and ``info["refined_dual_tol"]``: the tolerances
         that found it; the first answer's reason in ``info["refined_from"]``); ``None``
         otherwise."""
         tol, dual = self.primal_tol * REFINE, self.dual_tol * REFINE
-        out = self._refiner.solve(data)
+        out = self._refiner().solve(data)
         if out.status != "optimal":
             return None
         # a refining solve that was flagged itself certified its answer already

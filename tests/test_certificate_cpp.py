@@ -140,7 +140,7 @@ def test_flagged_answers_get_the_oracle_s_verdict_in_the_solver():
         def oracle(data, x, minimum_norm):
             report = check_lexicographic(data, x, minimum_norm=minimum_norm)
             return report.ok, report.first_failure
-        for s in (solver, solver._refiner, solver._refiner._refiner):
+        for s in (solver, solver._refiner(), solver._refiner()._refiner()):
             s._certify = oracle
         ref = solver.solve(stack.data)
         assert ref.status == sol.status, path.stem
@@ -261,3 +261,19 @@ def test_a_non_finite_x_fails_every_level_as_the_oracle_does():
 def test_a_malformed_layout_is_refused(starts, word):
     with pytest.raises(CoreInputError, match=word):
         core.Certificate(3, np.array(starts, dtype=np.int64), np.zeros(2, dtype=np.int8))
+
+
+def test_the_refining_solver_is_prepared_once():
+    """A prepared solver refines with one refining solver (and it with one of its own),
+    prepared at the first refinement and kept: not one per rejected answer."""
+    stack = load_stack(DATA / "fuzz" / "inequality-7002-1384.json")
+    solver = H.Prepared(stack.layout, H.validate_options(H.NAME, H.OPTIONS, {}, stack.n))
+    assert solver._refining is None
+    first = solver.solve(stack.data)
+    refiner = solver._refining
+    inner = refiner._refining
+    assert refiner is not None and inner is not None
+    again = solver.solve(stack.data)
+    assert solver._refining is refiner and refiner._refining is inner
+    assert first.status == again.status == "optimal"
+    assert np.array_equal(first.x, again.x)
