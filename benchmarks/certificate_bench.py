@@ -13,7 +13,8 @@ Trajectories (each solved warm, in order, by one prepared solver):
   target :data:`TALOS_REACH` from its start (beyond the arm), level 2 the posture; its
   stacks are recorded along the closed loop of the core-certified solver.
 
-Per trajectory and certificate, ``rounds`` passes interleaved (per step the fastest):
+Per trajectory and certificate, ``rounds`` passes interleaved (per step the fastest;
+each pass starts warm, from the trajectory's first stack solved untimed):
 the median step, the slowest, their ratio, and the flagged steps (those whose answer is
 certified). Then, on the flagged steps' answers, one certificate against the other
 (the same data and ``x``; per step the fastest of ``rounds`` calls; the median ratio).
@@ -91,23 +92,28 @@ def _solver(layout, certificate: str, record: list | None = None):
 
 def step_times(stacks: list, rounds: int) -> dict[str, Any]:
     """Per certificate, the per-step times (s, fastest of ``rounds`` interleaved warm
-    passes), and the steps it certified."""
+    passes; the first stack solved untimed before each pass, as a control loop's last
+    step), and the steps it certified."""
     layout = stacks[0].layout
-    times = {c: np.full(len(stacks), np.inf) for c in ("python", "cpp")}
+    times = {c: np.full(len(stacks) - 1, np.inf) for c in ("python", "cpp")}
     flagged: list = []
     for r in range(rounds):
         for certificate in ("python", "cpp"):
-            record: list = []
+            # (the certified answers recorded on the first pass, not timed after it)
+            record: list | None = [] if r == 0 else None
             solver = _solver(layout, certificate, record)
-            for i, data in enumerate(stacks):
-                before = len(record)
+            solver.solve(stacks[0])
+            if record is not None:
+                del record[:]
+            for i, data in enumerate(stacks[1:]):
+                before = len(record) if record is not None else 0
                 t0 = time.perf_counter()
                 solver.solve(data)
                 dt = time.perf_counter() - t0
                 times[certificate][i] = min(times[certificate][i], dt)
-                if r == 0 and certificate == "cpp" and len(record) > before:
+                if record is not None and certificate == "cpp" and len(record) > before:
                     flagged.append(i)
-            if r == 0 and certificate == "cpp":
+            if record is not None and certificate == "cpp":
                 checks = record
     return {"times": times, "flagged": flagged, "checks": checks}
 
@@ -151,7 +157,7 @@ def run(steps: int = 200, talos_steps: int = 300, rounds: int = 3) -> list[dict[
         trajectories["TALOS reach out of reach"] = talos_trajectory(talos_steps)
         for name, stacks in trajectories.items():
             res = step_times(stacks, rounds)
-            row = {"name": name, "steps": len(stacks), "flagged": len(res["flagged"])}
+            row = {"name": name, "steps": len(stacks) - 1, "flagged": len(res["flagged"])}
             for c, t in res["times"].items():
                 row[c] = {"median": float(np.median(t)), "max": float(t.max()),
                           "ratio": float(t.max() / np.median(t))}
