@@ -52,7 +52,6 @@ void CertificateWorkspace::allocate(index M, index n) {
                     &face_res})
         v->assign(N, 0.0);
     nnls_w.assign(R + N, 0.0);
-    nnls_res.assign(R, 0.0);
     jnorms.assign(std::max(R, N), 0.0);
     alphas.assign(32, 0.0);
     along.assign(32, 0.0);

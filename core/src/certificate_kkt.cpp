@@ -20,8 +20,7 @@ constexpr double kSigmaFloor = 1e-6;
 constexpr int kDescentTries = 4;
 constexpr double kInfinity = std::numeric_limits<double>::infinity();
 
-cert::FaceSpace face_space(CertificateWorkspace& w, index n, index M) {
-    (void)M;
+cert::FaceSpace face_space(CertificateWorkspace& w, index n) {
     return cert::FaceSpace{w.face.data(), n, w.face_s.data(), w.face_res.data(),
                            w.nnls_w.data(), w.mu.data(), w.nnls_s.data(), w.qr_work.data(),
                            w.face_index.data(), w.face_perm.data(),
@@ -40,9 +39,8 @@ void minus_z_times(const double* Zt, index d, index n, const double* coef, doubl
 
 }  // namespace
 
-double Certificate::kkt(const double* grad, bool with_b, const double*, index m,
-                        double floor_scale, index level, CertificateResult& out,
-                        int& descents) {
+double Certificate::kkt(const double* grad, bool with_b, index m, double floor_scale,
+                        index level, CertificateResult& out, int& descents) {
     descents = 0;
     const index n = layout_.n, d = d_;
     if (d == 0) return 0.0;
@@ -113,7 +111,7 @@ double Certificate::kkt(const double* grad, bool with_b, const double*, index m,
     }
     kkt_keep_ = p;
     for (index j = 0; j < d; ++j) w.rho[j] = -w.y[j];
-    cert::FaceSpace f = face_space(w, n, layout_.M);
+    cert::FaceSpace f = face_space(w, n);
     const double res = cert::nnls(w.unit.data(), n, d, p, w.rho.data(), f);
     descents = with_b && kkt_any_null_ ? 3 : 2;
     return res;
@@ -168,7 +166,7 @@ void Certificate::descent(int which, double* direction) {
             ++q;
         }
         for (index j = 0; j < d; ++j) w.rho[j] = -w.tmp_d[j];
-        cert::FaceSpace f = face_space(w, n, layout_.M);
+        cert::FaceSpace f = face_space(w, n);
         cert::nnls(w.ucols.data(), n, d, q, w.rho.data(), f);
         for (index j = 0; j < d; ++j) w.rho[j] = w.tmp_d[j];
         for (index t = 0; t < q; ++t) {

@@ -116,7 +116,7 @@ void Certificate::read_once(const Stack& s, const double* x, bool fix_band,
     if (!minimum_norm) return;
     int descents = 0;
     const double scale = std::max(1.0, xn);
-    const double res = kkt(x, false, nullptr, 0, 1.0, k, out, descents);
+    const double res = kkt(x, false, 0, 1.0, k, out, descents);
     out.residual[k] = xn;
     out.projected_gradient[k] = res;
     out.scale[k] = scale;
@@ -161,7 +161,7 @@ void Certificate::check_level(const Stack& s, const double* x, double x_norm, in
     }
     const double scale = robust_norm(w.rhs.data(), mi) + an;
     int descents = 0;
-    double res = kkt(w.g.data(), true, nullptr, m_b, an, level, out, descents);
+    double res = kkt(w.g.data(), true, m_b, an, level, out, descents);
     for (index r = 0; r < mi; ++r) w.rhs[r] = sw[r] * v[r];
     const double violation = robust_norm(w.rhs.data(), mi);
     bool ok = level_passes(res, scale, violation, tol);

@@ -86,10 +86,10 @@ struct CertificateWorkspace {
     // the KKT residual: gradients, weights, masks, the held columns, the NNLS
     std::vector<double> g, zg, y, D, held, unit, mu, rho, step, dir, tmp_d, tmp_n;
     std::vector<std::int8_t> null, keep, passive, small;
-    std::vector<double> face, face_s, face_res, nnls_s, nnls_w, nnls_res, ucols, jnorms, qr_work;
+    std::vector<double> face, face_s, face_res, nnls_s, nnls_w, ucols, jnorms, qr_work;
     std::vector<index> keep_index, fix_index, face_index, face_perm;
     // the descent walk and the snap
-    std::vector<double> h, hh, alphas, along, xp, ap, near_x, lsq, lsqV, rhs;
+    std::vector<double> h, alphas, along, xp, ap, near_x, lsq, lsqV, rhs;
     std::vector<index> order;
     // the feasibility check's unit rows
     std::vector<double> fA, fb, flo, fup, fsw;
@@ -130,10 +130,9 @@ public:
     index snapped(const Stack& s, const double* x);
 
 private:
-    struct Level;
     void activity(const Stack& s, const double* x);
-    double kkt(const double* grad, bool with_b, const double* B_rows, index m_rows,
-               double floor_scale, index level, CertificateResult& out, int& descents);
+    double kkt(const double* grad, bool with_b, index m_rows, double floor_scale, index level,
+               CertificateResult& out, int& descents);
     void descent(int which, double* direction);
     double descent_drop(const Stack& s, index s0, index s1, const double* x, double x_norm,
                         const double* d, double limit);
