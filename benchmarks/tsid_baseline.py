@@ -60,6 +60,8 @@ from pathlib import Path
 
 import numpy as np
 
+from prioik.errors import PrioikError
+
 #: the TSID environment's packages: the prebuilt tsid 1.7.1 wheel and the pinocchio it
 #: was built against (``make tsid`` installs them into ``.venv-tsid``)
 REQUIREMENTS = ("tsid==1.7.1", "pin==3.4.0", "cmeel-urdfdom>=4,<5", "cmeel-tinyxml2>=10,<11")
@@ -92,7 +94,7 @@ __all__ = ["REQUIREMENTS", "NAME", "LEVEL", "profile", "python_path", "environme
            "TsidError"]
 
 
-class TsidError(RuntimeError):
+class TsidError(PrioikError, RuntimeError):
     """The TSID process refused the scenario or stopped (the message says why)."""
 
 

@@ -47,6 +47,7 @@ import numpy as np
 
 from prioik.hierarchy import (
     AMBIGUITY,
+    DEFAULT_CERTIFICATE_TOL,
     NEAR_AMBIGUITY,
     X_PRECISION,
     StackData,
@@ -55,7 +56,7 @@ from prioik.hierarchy import (
     ambiguity_reason,
     check_lexicographic,
 )
-from prioik.hierarchy.analysis import prepare_certificate
+from prioik.hierarchy.analysis import LevelCheck
 
 from .base import (
     Capabilities,
@@ -172,12 +173,15 @@ class Prepared:
     Args:
         layout: The stack layout (equality and inequality tasks).
         options: Every option of :data:`OPTIONS`, validated.
+        refine_rounds: How many times a rejected flagged answer is re-solved at finer
+            tolerances (:meth:`_refined`; :data:`REFINE_ROUNDS`).
 
     Raises:
         FormulationError: the compiled core is not importable here.
     """
 
-    def __init__(self, layout: StackLayout, options: dict) -> None:
+    def __init__(self, layout: StackLayout, options: dict, *,
+                 refine_rounds: int | None = None) -> None:
         self.layout = layout
         self.rcond = float(options["rcond"])
         self.primal_tol = float(options["primal_tol"])
@@ -186,17 +190,17 @@ class Prepared:
         self.warm_start = bool(options["warm_start"])
         #: the compiled kernel: "cpp"
         self.kernel = "cpp"
-        #: how many more times a rejected near-release answer is re-solved
-        #: (:meth:`_refined`; one fewer in each refining solve)
-        self._refine = REFINE_ROUNDS
-        # a flagged answer is certified (_certify_flagged): its imports are paid here
-        prepare_certificate()
         # the equality-first try needs the equality rows' solve (an inequality-only stack
         # has none to try)
         self._try_first = self.warm_start and bool(layout.row_is_equality.any())
         self._n, self._k = layout.n, layout.k
         self._levels = range(layout.k)
         self._prepare_cpp(layout)
+        #: how many more times a rejected answer is re-solved (:meth:`_refined`)
+        self._refine = REFINE_ROUNDS if refine_rounds is None else refine_rounds
+        #: the solver that re-solves it (:meth:`_refiner`), prepared at the first
+        #: refinement and kept
+        self._refining = None
 
     def _prepare_cpp(self, layout: StackLayout) -> None:
         """The C++ kernel's solver (``prioik._core.ActiveSetSolver``): its workspace is
@@ -212,6 +216,11 @@ class Prepared:
         self._x, self._w2, self._res = cpp.x, cpp.w2, cpp.res
         self._margins, self._iterations, self._flags = cpp.margins, cpp.iterations, cpp.flags
         self._ranks, self._over = cpp.ranks[:k], cpp.over[:k]
+        # the certificate of flagged answers (_certify): its workspace allocated here
+        self._certificate = core.Certificate(
+            layout.n, np.ascontiguousarray(layout.starts, dtype=np.int64),
+            np.ascontiguousarray(layout.row_is_equality, dtype=np.int8),
+            DEFAULT_CERTIFICATE_TOL)
 
     def _summary_values(self) -> tuple[float, float, float, float, float]:
         """The kernel's summary: ``‖x‖``, cap (``1``) or non-finite (``-1``) flag,
@@ -238,7 +247,7 @@ class Prepared:
             TaskStackError: a value is not valid (naming the task, level and row).
         """
         out = self.solve_checked(data)
-        if isinstance(out, tuple):
+        if type(out) is tuple:
             x, status, info, residuals = out
             return Outcome(x, status, info, residuals=residuals, checked=True)
         return out
@@ -357,29 +366,35 @@ class Prepared:
             status = precision_status(status, info, data, x)
         return Outcome(x, status, info, residuals=residuals, checked=True)
 
+    def _refiner(self) -> Prepared:
+        """The refining solver: this layout's, cold, at :data:`REFINE` times these
+        tolerances, refining once less itself; prepared at the first refinement (a
+        one-shot solve that needs none does not pay it) and kept for the next."""
+        if self._refining is None:
+            self._refining = Prepared(self.layout, {
+                "rcond": self.rcond, "primal_tol": self.primal_tol * REFINE,
+                "dual_tol": self.dual_tol * REFINE, "max_iter": self.max_iter,
+                "warm_start": False}, refine_rounds=self._refine - 1)
+        return self._refining
+
     def _refined(self, data: StackData, info: dict, rejected: str) -> Outcome | None:
         """The stack re-solved cold at :data:`REFINE` times ``primal_tol`` and
         ``dual_tol``, after the certificate rejected an answer with a near-release level
         or a row held off its bound: the release tolerance scales with ``primal_tol``,
         so a row kept held inside its bound is released, and the dual one with
         ``dual_tol``, so a row held off its bound may be fixed at its violation. The
-        refining solver refines its own rejected answer once more while rounds are left
-        (:data:`REFINE_ROUNDS`). The refined answer is returned only when it is
-        ``optimal`` and passes :func:`~prioik.hierarchy.check_lexicographic`
+        refining solver (:meth:`_refiner`, prepared once) refines its own rejected answer once
+        more while rounds are left (:data:`REFINE_ROUNDS`). The refined answer is returned
+        only when it is ``optimal`` and passes the certificate (:meth:`_certify`)
         (``info["refined_primal_tol"]`` and ``info["refined_dual_tol"]``: the tolerances
         that found it; the first answer's reason in ``info["refined_from"]``); ``None``
         otherwise."""
         tol, dual = self.primal_tol * REFINE, self.dual_tol * REFINE
-        again = Prepared(self.layout, {"rcond": self.rcond, "primal_tol": tol,
-                                       "dual_tol": dual, "max_iter": self.max_iter,
-                                       "warm_start": False})
-        again._refine = self._refine - 1
-        out = again.solve(data)
+        out = self._refiner().solve(data)
         if out.status != "optimal":
             return None
         # a refining solve that was flagged itself certified its answer already
-        if (not out.info.get("path_certified")
-                and not check_lexicographic(data, out.x).ok):
+        if not out.info.get("path_certified") and not self._certify(data, out.x, False)[0]:
             return None
         # a refining solve refined once more reports its own (finer) tolerances
         out.info.setdefault("refined_primal_tol", tol)
@@ -390,6 +405,27 @@ class Prepared:
             if key in info:
                 out.info[key] = info[key]
         return out
+
+    def _certify(self, data: StackData, x: np.ndarray, minimum_norm: bool
+                 ) -> tuple[bool, LevelCheck | None]:
+        """:func:`~prioik.hierarchy.check_lexicographic`'s verdict on ``x`` (at its default
+        tolerance and rank threshold; the tie-break too when ``minimum_norm``) by the
+        core's certificate (``prioik._core.Certificate``, prepared with the solver: no
+        step of a solve leaves C++): ``(True, None)``, or ``(False, the first failing
+        level's check)``. A stack with a level of extreme scale (the solver equilibrates
+        those before it gets here) is checked by the Python oracle."""
+        cert = self._certificate
+        if not cert.check(data.A, data.b, data.lower, data.upper, data.sqrt_weight, x,
+                          minimum_norm):
+            report = check_lexicographic(data, x, minimum_norm=minimum_norm)
+            return report.ok, report.first_failure
+        if cert.ok:
+            return True, None
+        lv = cert.failing_level
+        return False, LevelCheck(
+            lv, tuple(self.layout.names[lv]) if lv < self._k else ("minimum-norm",),
+            float(cert.residual[lv]), float(cert.projected_gradient[lv]),
+            float(cert.scale[lv]), False, value_gap=float(cert.value_gap[lv]))
 
     def _certify_flagged(self, data: StackData, x: np.ndarray, flagged: dict[str, list[int]],
                          info: dict) -> list[str]:
@@ -402,20 +438,21 @@ class Prepared:
         levels below (``FLAG_HELD_OFF_BOUND``: it may block a direction they need), or a
         clear rank decision within ``NEAR_AMBIGUITY`` times the ambiguity band
         (``FLAG_NEAR_AMBIGUOUS``), or a level that stopped a cycle of working sets
-        without a step that moved (``FLAG_STALLED``). The answer is checked by
-        :func:`~prioik.hierarchy.check_lexicographic` (at its default tolerance, the
-        minimum-norm tie-break too when it was flagged); ``[]`` when it passes, unless a
+        without a step that moved (``FLAG_STALLED``). The answer is checked by the
+        certificate (:meth:`_certify`: :func:`~prioik.hierarchy.check_lexicographic`'s
+        verdict at its default tolerance, the minimum-norm tie-break too when it was
+        flagged); ``[]`` when it passes, unless a
         level on an ambiguous path has rows spanning more than :data:`CERTIFIABLE_SPREAD`
         in scale (the certificate cannot vouch for it: the reason names the level)."""
         k = self._k
         tie_break = any(k in levels for levels in flagged.values())
-        report = check_lexicographic(data, x, minimum_norm=tie_break)
+        ok, bad = self._certify(data, x, tie_break)
         info.update(flagged)
         spread = _row_scale_spread(data, flagged.get("ambiguous_path_levels", ()))
-        info["path_certified"] = report.ok and not spread
-        if report.ok and not spread:
+        info["path_certified"] = ok and not spread
+        if ok and not spread:
             return []
-        if report.ok:
+        if ok:
             # the certificate's tolerances are relative to the terms of a level's rows:
             # where the largest dwarf the rows that carry its violation it passes answers
             # it cannot resolve (an independent check, exact arithmetic: of ten levels of
@@ -426,11 +463,10 @@ class Prepared:
                     f"weighted norms span more than {CERTIFIABLE_SPREAD:g}x: the "
                     f"certificate, relative to the terms of a level's rows, cannot vouch "
                     f"for its smallest"]
-        bad = report.first_failure
         where = (f"level {bad.level} ({', '.join(bad.tasks)})" if bad.level < k
                  else "the minimum-norm tie-break")
         info["ambiguous_levels"] = sorted(set().union(*flagged.values()))
-        rejects = f"the certificate rejects {where} ({bad.failure(report.tol)})"
+        rejects = f"the certificate rejects {where} ({bad.failure(DEFAULT_CERTIFICATE_TOL)})"
         reasons = []
         for _, key, why in _CERTIFIED_FLAGS:
             if key in flagged:

@@ -483,14 +483,6 @@ def _snapped(data: StackData, x: np.ndarray, tol: float
 _NEARLY_FEASIBLE = 1e-6
 
 
-def prepare_certificate() -> None:
-    """Import what :func:`check_lexicographic` may need beyond numpy (scipy's HiGHS LP
-    of the slack check, ~0.2-0.3 s the first time in a process), so that no later check
-    pays it: a prepared solver that certifies flagged answers calls it when prepared,
-    not at a control loop's first flagged step."""
-    import scipy.optimize  # noqa: F401  (the import is the point)
-
-
 def _feasible(A: np.ndarray, act: _Activity, fixed: np.ndarray, s1: int,
               small: np.ndarray) -> bool:
     """Whether some point keeps the rows above level ``rows[s0:s1]`` as read (``fixed``,

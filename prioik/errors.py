@@ -26,9 +26,12 @@ Subclasses (defined where they are raised), with their builtin base:
 * :class:`prioik.robots.simulate.SimulationError` (``ValueError``): a simulation,
   scenario or saved run that cannot run or be read as asked.
 * :class:`prioik.robots.mujoco_model.MujocoModelError` (``ValueError``): a URDF MuJoCo
-  cannot load, or a MuJoCo model that does not match the robot.
+  cannot load, or a MuJoCo model that does not match the robot;
+  :class:`prioik.robots.mesh_replay.MeshReplayError` (``ValueError``): meshes that
+  cannot be read, or malformed trajectories given to the meshed replay.
 * :class:`prioik.benchmarks.sweep.config.SweepConfigError` (``ValueError``): a sweep
-  file that cannot run.
+  file that cannot run; :class:`prioik.benchmarks.tsid_baseline.TsidError`
+  (``RuntimeError``): the TSID baseline's process refused a scenario or stopped.
 """
 
 from __future__ import annotations

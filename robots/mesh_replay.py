@@ -37,6 +37,8 @@ from pathlib import Path
 import numpy as np
 import pinocchio as pin
 
+from prioik.errors import PrioikError
+
 from .models import RobotModel, StateError, has_free_flyer_joint, load
 
 __all__ = ["FPS", "TRIANGLES", "MeshReplayError", "write_mesh_replay"]
@@ -53,7 +55,7 @@ ROD_RADIUS = 0.008
 MARKER_RGB = (0xd62728, 0x2ca02c, 0x9467bd, 0x8c564b)
 
 
-class MeshReplayError(ValueError):
+class MeshReplayError(PrioikError, ValueError):
     """The robot's meshes cannot be read, or the trajectories given are malformed."""
 
 

@@ -12,6 +12,7 @@
 from __future__ import annotations
 
 import importlib
+import importlib.util
 import inspect
 import pkgutil
 import re
@@ -124,6 +125,8 @@ def _public_objects() -> dict[str, object]:
         value = getattr(prioik, key)
         visit(f"prioik.{key}", value, isinstance(value, types.ModuleType))
     for info in pkgutil.iter_modules(prioik.formulations.__path__):
+        if info.name == "lexls_" and importlib.util.find_spec("prioik._lexls") is None:
+            continue                # built only with lexls's headers (PRIOIK_LEXLS_DIR)
         module = importlib.import_module(f"prioik.formulations.{info.name}")
         visit(module.__name__, module, False)
         for key, value in vars(module).items():

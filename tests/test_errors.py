@@ -15,19 +15,31 @@ from prioik import PrioikError, extras
 from prioik.formulations.base import CoreInputError
 
 
+#: modules that are not imported here: the compiled extensions, TSID's runner (a script
+#: run by the TSID environment's python) and the lexls plugin where prioik was built
+#: without lexls's headers (it then raises ImportError by design)
+NOT_IMPORTED = {"prioik.prioik", "prioik._core", "prioik._lexls",
+                "prioik.benchmarks.tsid_runner"}
+
+
 def _package_modules():
     """Every module of the installed package (imported: the full venv has every extra).
     An editable install also puts the source tree on ``prioik.__path__``, where the
     folder ``prioik/`` is the package itself: it is skipped."""
+    import importlib.util
+    skip = set(NOT_IMPORTED)
+    if importlib.util.find_spec("prioik._lexls") is None:
+        skip.add("prioik.formulations.lexls_")
     names = {"prioik"}
     for info in pkgutil.iter_modules(prioik.__path__, "prioik."):
-        if info.name in ("prioik.prioik", "prioik._core"):
+        if info.name in skip:
             continue
         names.add(info.name)
         if info.ispkg:
             package = importlib.import_module(info.name)
             names.update(sub.name for sub in pkgutil.walk_packages(package.__path__,
-                                                                   info.name + "."))
+                                                                   info.name + ".")
+                         if sub.name not in skip)
     return [importlib.import_module(name) for name in sorted(names)]
 
 
@@ -55,6 +67,8 @@ BUILTIN_BASES = {
     "prioik.robots.simulate.SimulationError": ValueError,
     "prioik.robots.mujoco_model.MujocoModelError": ValueError,
     "prioik.benchmarks.sweep.config.SweepConfigError": ValueError,
+    "prioik.benchmarks.tsid_baseline.TsidError": RuntimeError,
+    "prioik.robots.mesh_replay.MeshReplayError": ValueError,
 }
 
 
@@ -163,6 +177,19 @@ def _mujoco_model_error():
     mujoco_urdf("<robot")
 
 
+def _tsid_error(monkeypatch):
+    from prioik.benchmarks import tsid_baseline
+    from prioik.robots.arm import ArmScenario
+    monkeypatch.setenv(tsid_baseline.PYTHON_VARIABLE, "/nonexistent/venv/bin/python")
+    tsid_baseline.run_tsid(ArmScenario(), duration=0.01, dt=0.002)
+
+
+def _mesh_replay_error(monkeypatch):
+    from prioik.robots import write_mesh_replay
+    monkeypatch.chdir(__import__("tempfile").mkdtemp())
+    write_mesh_replay("chain.html", _chain_robot(), [np.zeros(3)], dt=0.01)
+
+
 def _sweep_config_error():
     from prioik.benchmarks.sweep.config import plan_from_config
     plan_from_config({"nosuch_key": 1})
@@ -182,6 +209,8 @@ BAD_CALLS = {
     "SimulationError": _simulation_error,
     "MujocoModelError": _mujoco_model_error,
     "SweepConfigError": _sweep_config_error,
+    "TsidError": _tsid_error,
+    "MeshReplayError": _mesh_replay_error,
 }
 
 

@@ -1488,21 +1488,22 @@ def test_a_row_held_off_its_bound_for_the_levels_below_is_refined_to_the_optimum
     assert wo[3] == pytest.approx(12.9, rel=1e-2)
     assert np.all(np.abs(wo[:3] - w[:3]) <= 1e-9 * np.maximum(1.0, w[:3]))
 
-def test_preparing_imports_what_the_certificate_needs():
-    """A flagged answer is certified, and the certificate's slack LP (scipy's HiGHS)
-    takes ~0.2-0.3 s to import: a prepared solver imports it when prepared, so that a
-    control loop does not pay it at its first flagged step (in a fresh process,
-    ``import prioik`` does not load it; preparing does)."""
+def test_a_flagged_solve_stays_in_the_compiled_core():
+    """A flagged answer is certified and refined by the core's certificate (C++): in a
+    fresh process, preparing the solver and solving a stack whose answer is flagged,
+    rejected and refined (fuzz inequality-7002-1384) imports neither scipy nor the
+    Python certificate's LP."""
     import subprocess
     import sys
-    code = ("import sys, numpy as np, prioik\n"
-            "from prioik.hierarchy import Task, TaskStack\n"
-            "s = TaskStack([[Task('a', np.eye(2), lower=-np.ones(2), upper=np.ones(2))]])\n"
-            "before = 'scipy.optimize' in sys.modules\n"
-            "prioik.prepare(s.layout, 'hierarchical_active_set')\n"
-            "print(before, 'scipy.optimize' in sys.modules)\n")
+    path = Path(__file__).parent / "data" / "fuzz" / "inequality-7002-1384.json"
+    code = ("import sys, prioik\n"
+            "from prioik.hierarchy import load_stack\n"
+            f"s = load_stack({str(path)!r})\n"
+            "sol = prioik.prepare(s.layout, 'hierarchical_active_set').solve(s.data)\n"
+            "print(sol.status, sol.info['path_certified'], 'refined_primal_tol' in sol.info,\n"
+            "      'scipy' in sys.modules)\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=300, env={**os.environ, "OPENBLAS_NUM_THREADS": "1"})
     assert out.returncode == 0, out.stderr
-    assert out.stdout.split() == ["False", "True"]
+    assert out.stdout.split() == ["optimal", "True", "True", "False"]
 

@@ -13,6 +13,7 @@
 #include <utility>
 
 #include "prioik/active_set.hpp"
+#include "prioik/certificate.hpp"
 #include "prioik/extended_jacobian.hpp"
 
 namespace nb = nanobind;
@@ -69,9 +70,9 @@ struct Inputs {
 };
 
 /// The five arrays checked: dtypes, shapes, contiguity, not empty.
-Inputs check_inputs(const ActiveSetSolver& s, nb::handle A, nb::handle b, nb::handle lower,
-                    nb::handle upper, nb::handle sw) {
-    I64 M = s.layout().M, n = s.layout().n;
+Inputs check_inputs(const prioik::ActiveSetLayout& layout, nb::handle A, nb::handle b,
+                    nb::handle lower, nb::handle upper, nb::handle sw) {
+    I64 M = layout.M, n = layout.n;
     return Inputs{checked(A, "A", M, n), checked(b, "b", M, -1), checked(lower, "lower", M, -1),
                   checked(upper, "upper", M, -1), checked(sw, "sqrt_weight", M, -1)};
 }
@@ -81,8 +82,8 @@ Inputs check_inputs(const ActiveSetSolver& s, nb::handle A, nb::handle b, nb::ha
 /// bound, a non-finite equality target). Returns when none is (an interval the layer
 /// above names, or a level of extreme scale it equilibrates). The solve's own pass finds
 /// them: a valid stack pays no second pass.
-void name_refused_value(const ActiveSetSolver& s, const Inputs& in) {
-    I64 M = s.layout().M, n = s.layout().n;
+void name_refused_value(const prioik::ActiveSetLayout& layout, const Inputs& in) {
+    I64 M = layout.M, n = layout.n;
     auto at = [](I64 j) { return "[" + std::to_string(j) + "]"; };
     for (I64 j = 0; j < M; ++j) {
         for (I64 c = 0; c < n; ++c)
@@ -93,7 +94,7 @@ void name_refused_value(const ActiveSetSolver& s, const Inputs& in) {
             raise_input_error("sqrt_weight" + at(j) + " must be finite and > 0");
         if (std::isnan(in.lower[j])) raise_input_error("lower" + at(j) + " is NaN");
         if (std::isnan(in.upper[j])) raise_input_error("upper" + at(j) + " is NaN");
-        if (s.layout().row_eq[j] && !std::isfinite(in.b[j]))
+        if (layout.row_eq[j] && !std::isfinite(in.b[j]))
             raise_input_error("b" + at(j) + " is not finite (an equality row's target)");
     }
 }
@@ -108,6 +109,90 @@ nb::ndarray<nb::numpy, T> view(std::vector<T>& v, nb::handle owner) {
 template <class T>
 auto result_view(std::vector<T> prioik::ActiveSetResult::*part) {
     return [part](nb::handle h) { return view(nb::cast<ActiveSetSolver&>(h).result().*part, h); };
+}
+
+/// A property reading one of the certificate's per-level arrays as a numpy view.
+template <class T>
+auto certificate_view(std::vector<T> prioik::CertificateResult::*part) {
+    return [part](nb::handle h) {
+        auto& c = nb::cast<prioik::Certificate&>(h);
+        return view(const_cast<prioik::CertificateResult&>(c.result()).*part, h);
+    };
+}
+
+/// The layout of a prepared solver's constructor arguments (shared by both classes).
+prioik::ActiveSetLayout make_layout(I64 n, const std::int64_t* starts, size_t k1,
+                                    const std::int8_t* row_eq, size_t M) {
+    prioik::ActiveSetLayout layout;
+    layout.n = n;
+    layout.k = static_cast<I64>(k1) - 1;
+    layout.M = static_cast<I64>(M);
+    layout.starts.assign(starts, starts + k1);
+    layout.row_eq.assign(row_eq, row_eq + M);
+    return layout;
+}
+
+/// Every value the certificate reads is valid (the stack's boundary check, on the
+/// arrays): else InputError naming the first that is not.
+void check_certificate_values(const prioik::ActiveSetLayout& layout, const Inputs& in) {
+    name_refused_value(layout, in);
+    for (I64 j = 0; j < layout.M; ++j)
+        if (!layout.row_eq[j] && !(in.lower[j] <= in.upper[j]))
+            raise_input_error("lower[" + std::to_string(j) + "] > upper[" + std::to_string(j) +
+                              "] (an empty interval)");
+}
+
+void bind_certificate(nb::module_& m) {
+    using Int8In = nb::ndarray<const std::int8_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
+    using IndexIn = nb::ndarray<const std::int64_t, nb::ndim<1>, nb::c_contig, nb::device::cpu>;
+    using prioik::Certificate;
+    using prioik::CertificateResult;
+    nb::class_<Certificate>(m, "Certificate",
+                            "The lexicographic certificate prepared for one layout "
+                            "(core/include/prioik/certificate.hpp; hierarchy."
+                            "check_lexicographic's verdict); one thread at a time.")
+        .def(
+            "__init__",
+            [](Certificate* self, I64 n, IndexIn starts, Int8In row_eq, double tol,
+               double rcond) {
+                if (starts.shape(0) < 2) raise_input_error("starts must hold k + 1 >= 2 offsets");
+                auto layout = make_layout(n, starts.data(), starts.shape(0), row_eq.data(),
+                                          row_eq.shape(0));
+                try {
+                    new (self) Certificate(std::move(layout), prioik::CertificateOptions{tol, rcond});
+                } catch (const std::invalid_argument& e) {
+                    raise_input_error(e.what());
+                }
+            },
+            nb::arg("n"), nb::arg("starts"), nb::arg("row_eq"), nb::arg("tol") = 1e-8,
+            nb::arg("rcond") = 1e-9)
+        .def(
+            "check",
+            [](Certificate& c, nb::handle A, nb::handle b, nb::handle lower, nb::handle upper,
+               nb::handle sw, nb::handle x, bool minimum_norm) {
+                Inputs in = check_inputs(c.layout(), A, b, lower, upper, sw);
+                const double* xp = checked(x, "x", c.layout().n, -1);
+                check_certificate_values(c.layout(), in);
+                nb::gil_scoped_release release;
+                return static_cast<int>(
+                    c.check(in.A, in.b, in.lower, in.upper, in.sw, xp, minimum_norm));
+            },
+            nb::arg("A"), nb::arg("b"), nb::arg("lower"), nb::arg("upper"),
+            nb::arg("sqrt_weight"), nb::arg("x"), nb::arg("minimum_norm") = false,
+            "The verdict on x (1: in the properties; 0: a level of extreme scale, not "
+            "checked here). A value it cannot read raises CoreInputError naming it.")
+        .def_prop_ro("ok", [](const Certificate& c) { return c.result().ok; })
+        .def_prop_ro("failing_level", [](const Certificate& c) { return c.result().failing_level; },
+                     "the first failing level (k: the tie-break), -1 when none")
+        .def_prop_ro("band_rows_fixed", [](const Certificate& c) { return c.result().band_rows_fixed; })
+        .def_prop_ro("snapped_rows", [](const Certificate& c) { return c.result().snapped_rows; })
+        .def_prop_ro("residual", certificate_view(&CertificateResult::residual), "k + 1")
+        .def_prop_ro("projected_gradient",
+                     certificate_view(&CertificateResult::projected_gradient), "k + 1")
+        .def_prop_ro("scale", certificate_view(&CertificateResult::scale), "k + 1")
+        .def_prop_ro("value_gap", certificate_view(&CertificateResult::value_gap), "k + 1")
+        .def_prop_ro("level_ok", certificate_view(&CertificateResult::level_ok), "k + 1")
+        .def_prop_ro("ambiguous", certificate_view(&CertificateResult::ambiguous), "k + 1");
 }
 
 }  // namespace
@@ -129,6 +214,7 @@ void bind_active_set(nb::module_& m) {
     codes["FLAG_NEAR_AMBIGUOUS"] = static_cast<int>(prioik::FLAG_NEAR_AMBIGUOUS);
     codes["FLAG_STALLED"] = static_cast<int>(prioik::FLAG_STALLED);
     m.attr("ACTIVE_SET_CODES") = codes;
+    bind_certificate(m);
     nb::class_<ActiveSetSolver>(m, "ActiveSetSolver",
                                 "The hierarchical active set prepared for one layout "
                                 "(core/include/prioik/active_set.hpp); one thread at a time.")
@@ -157,13 +243,13 @@ void bind_active_set(nb::module_& m) {
             "solve",
             [](ActiveSetSolver& s, nb::handle A, nb::handle b, nb::handle lower, nb::handle upper,
                nb::handle sw) {
-                Inputs in = check_inputs(s, A, b, lower, upper, sw);
+                Inputs in = check_inputs(s.layout(), A, b, lower, upper, sw);
                 prioik::SolveCode code;
                 {
                     nb::gil_scoped_release release;
                     code = s.solve(in.A, in.b, in.lower, in.upper, in.sw);
                 }
-                if (code == prioik::SolveCode::not_solved) name_refused_value(s, in);
+                if (code == prioik::SolveCode::not_solved) name_refused_value(s.layout(), in);
                 return static_cast<int>(code);
             },
             nb::arg("A"), nb::arg("b"), nb::arg("lower"), nb::arg("upper"),
@@ -175,7 +261,7 @@ void bind_active_set(nb::module_& m) {
             "equality_first",
             [](ActiveSetSolver& s, nb::handle A, nb::handle b, nb::handle lower, nb::handle upper,
                nb::handle sw) {
-                Inputs in = check_inputs(s, A, b, lower, upper, sw);
+                Inputs in = check_inputs(s.layout(), A, b, lower, upper, sw);
                 nb::gil_scoped_release release;
                 return static_cast<int>(
                     s.equality_first(in.A, in.b, in.lower, in.upper, in.sw));

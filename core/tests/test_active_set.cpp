@@ -2,7 +2,8 @@
 // -fsanitize=address,undefined): equality stacks against the extended Jacobian (the same
 // optimum, eq. 18), box-bounded and random inequality stacks solved cold and warm along
 // drifting sequences (the same answers; the box held; the equality-first try taken), and
-// a malformed layout refused.
+// a malformed layout refused; the certificate (certificate.hpp) passes the solver's clean
+// answers and rejects them moved.
 #include <cmath>
 #include <cstdio>
 #include <random>
@@ -10,6 +11,7 @@
 #include <vector>
 
 #include "prioik/active_set.hpp"
+#include "prioik/certificate.hpp"
 #include "prioik/extended_jacobian.hpp"
 #include "check.hpp"
 
@@ -158,6 +160,58 @@ void a_malformed_layout_is_refused() {
   CHECK(threw);
 }
 
+void the_certificate_passes_clean_answers_and_rejects_moved_ones() {
+  std::mt19937 rng(49);
+  std::normal_distribution<double> g;
+  int certified = 0;
+  for (int seq = 0; seq < 16; ++seq) {
+    Stack st;
+    st.layout.n = 5 + seq % 10;
+    st.add_level(rng, 0, true, 0.0, 0.0);
+    if (seq % 2) st.add_level(rng, 2, false, 1.0, 0.3);
+    for (I lev = 0; lev < 2 + seq % 3; ++lev)
+      st.add_level(rng, 1 + (seq + lev) % 4, false, 2.0, 0.0);
+    ActiveSetOptions cold;
+    cold.warm_start = false;
+    ActiveSetSolver s(st.layout, cold);
+    prioik::Certificate cert(st.layout);
+    const SolveCode code = solve(s, st, false);
+    if (code != SolveCode::clean && code != SolveCode::infeasible) continue;
+    std::vector<double> x = s.result().x;
+    auto check = [&](const std::vector<double>& at) {
+      return cert.check(st.A.data(), st.b.data(), st.lower.data(), st.upper.data(),
+                        st.sw.data(), at.data(), true);
+    };
+    CHECK(check(x) == prioik::CertificateCode::checked);
+    CHECK(cert.result().ok);
+    CHECK(cert.result().failing_level == -1);
+    for (auto& v : x) v += 1e-3 * (1.0 + std::fabs(v)) * g(rng);
+    CHECK(check(x) == prioik::CertificateCode::checked);
+    CHECK(!cert.result().ok);
+    CHECK(cert.result().failing_level >= 0 && cert.result().failing_level <= st.layout.k);
+    x[0] = NAN;
+    check(x);
+    CHECK(!cert.result().ok && cert.result().failing_level == 0);
+    ++certified;
+    for (auto& a : st.A) a *= 1e120;
+    CHECK(check(x) == prioik::CertificateCode::extreme_scale);
+  }
+  CHECK(certified >= 8);
+  ActiveSetLayout bad;
+  bad.n = 3;
+  bad.k = 2;
+  bad.M = 2;
+  bad.starts = {0, 3, 2};
+  bad.row_eq = {1, 1};
+  bool threw = false;
+  try {
+    prioik::Certificate c(bad);
+  } catch (const std::invalid_argument&) {
+    threw = true;
+  }
+  CHECK(threw);
+}
+
 }  // namespace
 
 int main() {
@@ -165,6 +219,7 @@ int main() {
   inequality_stacks_solve_the_same_cold_and_warm();
   invalid_values_are_not_solved();
   a_malformed_layout_is_refused();
+  the_certificate_passes_clean_answers_and_rejects_moved_ones();
   if (prioik_test::failures) {
     std::printf("%d failure(s)\n", prioik_test::failures);
     return 1;

@@ -1,0 +1,252 @@
+// The certificate's dense steps (certificate_linalg.hpp).
+#include "certificate_linalg.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace prioik::cert {
+
+double robust_norm(const double* a, Index n) {
+    double sum = 0.0;
+    for (Index j = 0; j < n; ++j) sum += a[j] * a[j];
+    const double norm = std::sqrt(sum);
+    if (norm > 1e-150 && norm < 1e150) return norm;
+    double peak = 0.0;
+    for (Index j = 0; j < n; ++j) {
+        const double m = std::fabs(a[j]);
+        if (!(m <= peak)) peak = m;     // (NaN propagates)
+    }
+    if (peak == 0.0 || !std::isfinite(peak)) return peak;
+    sum = 0.0;
+    for (Index j = 0; j < n; ++j) sum += (a[j] / peak) * (a[j] / peak);
+    return peak * std::sqrt(sum);
+}
+
+namespace {
+
+void rotate(double* p, double* q, Index len, double c, double s) {
+    for (Index t = 0; t < len; ++t) {
+        const double a = p[t], b = q[t];
+        p[t] = c * a - s * b;
+        q[t] = s * a + c * b;
+    }
+}
+
+}  // namespace
+
+void jacobi_rows(double* R, Index count, Index len, Index stride, double* acc, Index acc_len,
+                 Index acc_stride, double* norms) {
+    constexpr int kSweeps = 60;
+    for (int sweep = 0; sweep < kSweeps; ++sweep) {
+        // the rows' squared norms, measured at each sweep and carried through its
+        // rotations (a rotation that zeroes γ moves t γ from one to the other)
+        for (Index i = 0; i < count; ++i) norms[i] = dot(R + i * stride, R + i * stride, len);
+        bool rotated = false;
+        for (Index i = 0; i + 1 < count; ++i) {
+            double* p = R + i * stride;
+            for (Index j = i + 1; j < count; ++j) {
+                const double alpha = norms[i], beta = norms[j];
+                if (alpha == 0.0 || beta == 0.0) continue;
+                double* q = R + j * stride;
+                const double gamma = dot(p, q, len);
+                if (!(std::fabs(gamma) > kEps * std::sqrt(alpha) * std::sqrt(beta))) continue;
+                // the rotation that makes rows i and j orthogonal (Rutishauser's form)
+                const double zeta = (beta - alpha) / (2.0 * gamma);
+                const double t = (zeta >= 0 ? 1.0 : -1.0) /
+                                 (std::fabs(zeta) + std::sqrt(1.0 + zeta * zeta));
+                const double c = 1.0 / std::sqrt(1.0 + t * t), s = c * t;
+                rotate(p, q, len, c, s);
+                if (acc != nullptr) rotate(acc + i * acc_stride, acc + j * acc_stride, acc_len, c, s);
+                norms[i] = alpha - t * gamma;
+                norms[j] = beta + t * gamma;
+                rotated = true;
+            }
+        }
+        if (!rotated) return;
+    }
+}
+
+void complete_basis(const double* U, Index r, Index d, Index stride, double* out,
+                    double* house) {
+    // house row t (d + 1 long): reflector t's vector (entries t..d−1), then its beta
+    const Index hs = d + 1;
+    for (Index t = 0; t < r; ++t)
+        for (Index c = 0; c < d; ++c) house[t * hs + c] = U[t * stride + c];
+    for (Index t = 0; t < r; ++t) {
+        double* v = house + t * hs;
+        for (Index s = 0; s < t; ++s) {      // reflectors 0..t−1 on column t (row t)
+            const double* w = house + s * hs;
+            double proj = 0.0;
+            for (Index c = s; c < d; ++c) proj += w[c] * v[c];
+            proj *= w[d];
+            for (Index c = s; c < d; ++c) v[c] -= proj * w[c];
+        }
+        for (Index c = 0; c < t; ++c) v[c] = 0.0;
+        double norm = 0.0;
+        for (Index c = t; c < d; ++c) norm += v[c] * v[c];
+        norm = std::sqrt(norm);
+        const double alpha = v[t] >= 0 ? -norm : norm;
+        v[t] -= alpha;
+        double vv = 0.0;
+        for (Index c = t; c < d; ++c) vv += v[c] * v[c];
+        v[d] = vv > 0 ? 2.0 / vv : 0.0;
+    }
+    // Q e_j = H_0 H_1 … H_{r−1} e_j for j = r..d−1
+    for (Index j = r; j < d; ++j) {
+        double* q = out + j * stride;
+        for (Index c = 0; c < d; ++c) q[c] = c == j ? 1.0 : 0.0;
+        for (Index s = r - 1; s >= 0; --s) {
+            const double* w = house + s * hs;
+            double proj = 0.0;
+            for (Index c = s; c < d; ++c) proj += w[c] * q[c];
+            proj *= w[d];
+            for (Index c = s; c < d; ++c) q[c] -= proj * w[c];
+        }
+    }
+}
+
+Index pivoted_least_squares(double* F, Index q, Index d, Index fs, const double* y,
+                            double rel_tol, double abs_tol, double* s, double* res,
+                            double* work, Index* perm) {
+    double* z = work;              // d: Qᵀ y
+    double* diag = work + d;       // q: R_kk
+    double* beta = work + d + q;   // q: the reflectors' 2 / vᵀv
+    for (Index j = 0; j < q; ++j) perm[j] = j;
+    const Index steps = std::min(q, d);
+    Index rank = 0;
+    double first = 0.0;
+    for (Index k = 0; k < steps; ++k) {
+        Index pivot = k;
+        double top = -1.0;
+        for (Index j = k; j < q; ++j) {
+            const double* col = F + j * fs;
+            const double norm2 = dot(col + k, col + k, d - k);
+            if (norm2 > top) { top = norm2; pivot = j; }
+        }
+        if (pivot != k) {
+            for (Index c = 0; c < d; ++c) std::swap(F[k * fs + c], F[pivot * fs + c]);
+            std::swap(perm[k], perm[pivot]);
+        }
+        const double norm = std::sqrt(top);
+        if (k == 0) first = norm;
+        if (!(norm > std::max(abs_tol, rel_tol * first))) break;
+        double* v = F + k * fs + k;
+        const double alpha = v[0] >= 0 ? -norm : norm;
+        diag[k] = alpha;
+        v[0] -= alpha;
+        const double vv = dot(v, v, d - k);
+        beta[k] = vv > 0 ? 2.0 / vv : 0.0;
+        for (Index j = k + 1; j < q; ++j) {
+            double* col = F + j * fs + k;
+            const double f = beta[k] * dot(v, col, d - k);
+            for (Index c = 0; c < d - k; ++c) col[c] -= f * v[c];
+        }
+        rank = k + 1;
+    }
+    for (Index c = 0; c < d; ++c) z[c] = y[c];
+    for (Index k = 0; k < rank; ++k) {
+        const double* v = F + k * fs + k;
+        const double f = beta[k] * dot(v, z + k, d - k);
+        for (Index c = 0; c < d - k; ++c) z[k + c] -= f * v[c];
+    }
+    if (s != nullptr) {
+        for (Index j = 0; j < q; ++j) s[j] = 0.0;
+        for (Index k = rank - 1; k >= 0; --k) {     // R s = z on the pivot columns
+            double acc = z[k];
+            for (Index j = k + 1; j < rank; ++j) acc -= F[j * fs + k] * s[perm[j]];
+            s[perm[k]] = acc / diag[k];
+        }
+    }
+    for (Index c = 0; c < d; ++c) res[c] = c < rank ? 0.0 : z[c];
+    for (Index k = rank - 1; k >= 0; --k) {
+        const double* v = F + k * fs + k;
+        const double f = beta[k] * dot(v, res + k, d - k);
+        for (Index c = 0; c < d - k; ++c) res[k + c] -= f * v[c];
+    }
+    return rank;
+}
+
+void face_solve(const double* M, Index mstride, Index d, const Index* cols, Index q,
+                const double* y, FaceSpace& f) {
+    for (Index t = 0; t < q; ++t) {
+        const double* col = M + cols[t] * mstride;
+        std::copy(col, col + d, f.face + t * f.fstride);
+    }
+    const double rel = kEps * static_cast<double>(std::max(d, q));
+    pivoted_least_squares(f.face, q, d, f.fstride, y, rel, 0.0, f.tmp, f.res, f.work, f.perm);
+    for (Index t = 0; t < q; ++t) f.s[cols[t]] = f.tmp[t];
+}
+
+double nnls(const double* M, Index mstride, Index d, Index p, const double* y, FaceSpace& f) {
+    for (Index j = 0; j < p; ++j) f.mu[j] = 0.0;
+    if (p == 0 || d == 0) return robust_norm(y, d);
+    const Index cap = 3 * p + 10;
+    if (p > 1) {
+        for (Index j = 0; j < p; ++j) f.index[j] = j;
+        face_solve(M, mstride, d, f.index, p, y, f);
+        double lowest = kInf;
+        for (Index j = 0; j < p; ++j) lowest = std::min(lowest, f.s[j]);
+        if (lowest > 0) {
+            for (Index j = 0; j < p; ++j) f.mu[j] = f.s[j];
+            return robust_norm(f.res, d);
+        }
+    }
+    double colsum = 0.0;
+    for (Index j = 0; j < p; ++j) {
+        double s = 0.0;
+        for (Index c = 0; c < d; ++c) s += std::fabs(M[j * mstride + c]);
+        colsum = std::max(colsum, s);
+    }
+    const double tol = 10.0 * kEps * static_cast<double>(std::max(d, p)) *
+                       std::max(colsum, 1e-300) * std::max(robust_norm(y, d), 1e-300);
+    const double* res = f.res;   // a face's residual (face_solve)
+    for (Index j = 0; j < p; ++j) f.passive[j] = 0;
+    double* r = f.w + p;   // d entries after w (the caller sized w at p + d)
+    for (Index c = 0; c < d; ++c) r[c] = y[c];
+    for (Index j = 0; j < p; ++j) f.w[j] = dot(M + j * mstride, r, d);
+    Index it = 0;
+    while (it < cap) {
+        Index best = -1;
+        double top = -kInf;
+        for (Index j = 0; j < p; ++j)
+            if (!f.passive[j] && f.w[j] > top) { top = f.w[j]; best = j; }
+        if (best < 0 || !(top > tol)) break;
+        f.passive[best] = 1;
+        while (it < cap) {
+            Index q = 0;
+            for (Index j = 0; j < p; ++j) if (f.passive[j]) f.index[q++] = j;
+            if (q == 0) break;
+            ++it;
+            for (Index j = 0; j < p; ++j) f.s[j] = 0.0;
+            face_solve(M, mstride, d, f.index, q, y, f);
+            double lowest = kInf;
+            for (Index t = 0; t < q; ++t) lowest = std::min(lowest, f.s[f.index[t]]);
+            if (lowest > 0) {
+                for (Index j = 0; j < p; ++j) f.mu[j] = f.s[j];
+                for (Index c = 0; c < d; ++c) r[c] = res[c];
+                break;
+            }
+            double alpha = kInf;
+            for (Index t = 0; t < q; ++t) {
+                const Index j = f.index[t];
+                if (!(f.s[j] <= 0)) continue;
+                const double den = f.mu[j] - f.s[j];
+                alpha = std::min(alpha, den > 0 ? f.mu[j] / den : 0.0);
+            }
+            if (alpha == kInf) alpha = 0.0;     // (a face solution of NaN: no step)
+            for (Index j = 0; j < p; ++j) {
+                f.mu[j] = f.mu[j] + alpha * (f.s[j] - f.mu[j]);
+                if (f.passive[j] && !(f.mu[j] > tol)) f.passive[j] = 0;
+                if (!f.passive[j]) f.mu[j] = 0.0;
+            }
+            for (Index c = 0; c < d; ++c) r[c] = y[c];
+            for (Index j = 0; j < p; ++j)
+                if (f.mu[j] != 0.0)
+                    for (Index c = 0; c < d; ++c) r[c] -= M[j * mstride + c] * f.mu[j];
+        }
+        for (Index j = 0; j < p; ++j) f.w[j] = dot(M + j * mstride, r, d);
+    }
+    return robust_norm(r, d);
+}
+
+}  // namespace prioik::cert

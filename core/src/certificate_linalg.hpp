@@ -1,0 +1,66 @@
+// The certificate's dense steps (certificate*.cpp): robust norms, one-sided Jacobi
+// rotations, the completion of an orthonormal basis, a least squares on a face of
+// columns and the non-negative least squares. Every function works on its caller's
+// memory (the Certificate's workspace) and allocates nothing.
+#pragma once
+
+#include "prioik/householder.hpp"
+
+namespace prioik::cert {
+
+constexpr double kEps = 2.220446049250313e-16;
+/// float64 rounding through orthogonal transformations (hierarchy.linalg.X_PRECISION)
+constexpr double kXPrecision = 16 * kEps;
+
+/// ‖a‖₂ over n entries without the squares' overflow or underflow (level_scale)
+double robust_norm(const double* a, Index n);
+
+/// Orthogonalise the `count` rows of R (each `len` long, row i at R + i stride) by plane
+/// rotations until every pair is orthogonal to rounding (one-sided Jacobi, Hestenes),
+/// applying each rotation to the rows of acc (acc_len long, acc_stride) when not null;
+/// norms: count scratch entries (the rows' squared norms).
+void jacobi_rows(double* R, Index count, Index len, Index stride, double* acc, Index acc_len,
+                 Index acc_stride, double* norms);
+
+/// Rows r..d−1 of out (stride) set to an orthonormal basis of the complement of the r
+/// orthonormal rows U (d long, stride) by r Householder reflectors (house: r × d scratch).
+void complete_basis(const double* U, Index r, Index d, Index stride, double* out,
+                    double* house);
+
+/// Least squares on q columns of length d held as the rows of F (stride fs; overwritten
+/// by the factorization) by a column-pivoted Householder QR, stopped at the first pivot
+/// |R_kk| ≤ max(abs_tol, rel_tol |R_00|) (the rank r returned): the solution on the r
+/// pivot columns into s (q, by column; zero on the others) when s is not null, and the
+/// residual y − Q_r Q_rᵀ y (the projection of y off their span) into res. work: d + 2q
+/// scratch, perm: q.
+Index pivoted_least_squares(double* F, Index q, Index d, Index fs, const double* y,
+                            double rel_tol, double abs_tol, double* s, double* res,
+                            double* work, Index* perm);
+
+/// The workspace of face_solve and nnls (each at least the sizes noted).
+struct FaceSpace {
+    double* face;      // q × d rows (stride fstride): a face's columns
+    Index fstride;
+    double* s;         // p: a face's solution
+    double* res;       // d: its residual
+    double* w;         // p: the gradient Mᵀ r
+    double* mu;        // p: the multipliers
+    double* tmp;       // p
+    double* work;      // d + 2p: the QR's scratch
+    Index* index;      // p: the face's columns
+    Index* perm;       // p: the QR's pivots
+    signed char* passive;  // p
+};
+
+/// min ‖M s − y‖ over the columns `cols` (count q) of M (p columns of length d, column j
+/// held in row j, stride mstride) by pivoted_least_squares with lstsq's rank rule
+/// (a pivot > eps max(d, q) times the first): the solution into f.s (at the columns'
+/// positions, others left), the projected residual y − Q Qᵀ y into f.res.
+void face_solve(const double* M, Index mstride, Index d, const Index* cols, Index q,
+                const double* y, FaceSpace& f);
+
+/// min ‖M μ − y‖ over μ ≥ 0 (Lawson & Hanson, hierarchy.linalg.nonnegative_least_squares
+/// step for step): μ into f.mu, the residual norm returned.
+double nnls(const double* M, Index mstride, Index d, Index p, const double* y, FaceSpace& f);
+
+}  // namespace prioik::cert
