@@ -89,7 +89,7 @@ test-core: $(CORE_STAMP)
 
 # The core's tests run beside the full suite (side by side on two cores the wall time is
 # the full suite's); the core's output follows the suite's.
-test: $(STAMP) $(CORE_STAMP_BUILT) $(CORE_STAMP)
+test: $(STAMP) $(CORE_STAMP_BUILT) $(CORE_STAMP) lint
 	@$(CORE_TEST) > $(CORE_VENV)/test-core.log 2>&1 & core=$$!; \
 	$(PY) -m pytest -q -p no:cacheprovider; full=$$?; \
 	wait $$core; status=$$?; \

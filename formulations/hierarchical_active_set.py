@@ -42,6 +42,7 @@ from __future__ import annotations
 
 from itertools import compress
 from types import SimpleNamespace
+from typing import Any
 
 import numpy as np
 
@@ -76,7 +77,7 @@ except ImportError as exc:  # pragma: no cover - built by pip install
     _CORE_CODES = None
     _core_error = f"{type(exc).__name__}: {exc}"
 #: the C++ kernel's return codes and level flags (prioik._core.ACTIVE_SET_CODES)
-_codes = SimpleNamespace(**_CORE_CODES) if _CORE_CODES is not None else None
+_codes: Any = SimpleNamespace(**_CORE_CODES) if _CORE_CODES is not None else None
 #: the kernel's codes of a clean solve (module constants: read once, not per call)
 _SOLVED_CLEAN, _SOLVED_INFEASIBLE, _SOLVED_OTHER, _NOT_TRIED = (
     (_codes.SOLVED_CLEAN, _codes.SOLVED_INFEASIBLE, _codes.SOLVED_OTHER, _codes.NOT_TRIED)
@@ -200,7 +201,7 @@ class Prepared:
         self._refine = REFINE_ROUNDS if refine_rounds is None else refine_rounds
         #: the solver that re-solves it (:meth:`_refiner`), prepared at the first
         #: refinement and kept
-        self._refining = None
+        self._refining: Prepared | None = None
 
     def _prepare_cpp(self, layout: StackLayout) -> None:
         """The C++ kernel's solver (``prioik._core.ActiveSetSolver``): its workspace is
@@ -247,7 +248,7 @@ class Prepared:
             TaskStackError: a value is not valid (naming the task, level and row).
         """
         out = self.solve_checked(data)
-        if type(out) is tuple:
+        if isinstance(out, tuple):
             x, status, info, residuals = out
             return Outcome(x, status, info, residuals=residuals, checked=True)
         return out
@@ -463,6 +464,7 @@ class Prepared:
                     f"weighted norms span more than {CERTIFIABLE_SPREAD:g}x: the "
                     f"certificate, relative to the terms of a level's rows, cannot vouch "
                     f"for its smallest"]
+        assert bad is not None              # (a verdict that is not ok names its level)
         where = (f"level {bad.level} ({', '.join(bad.tasks)})" if bad.level < k
                  else "the minimum-norm tie-break")
         info["ambiguous_levels"] = sorted(set().union(*flagged.values()))

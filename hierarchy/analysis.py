@@ -386,8 +386,11 @@ def check_lexicographic(stack: TaskStack | StackData, x: np.ndarray,
         return report
     near, count = snapped
     again = _read(data, near, tol, rcond, minimum_norm, metric)
-    checks = report.levels + ((report.minimum_norm,) if minimum_norm else ())
-    near_checks = again.levels + ((again.minimum_norm,) if minimum_norm else ())
+    checks = list(report.levels)
+    near_checks = list(again.levels)
+    if minimum_norm and report.minimum_norm is not None and again.minimum_norm is not None:
+        checks.append(report.minimum_norm)
+        near_checks.append(again.minimum_norm)
     if again.ok and all(abs(c.residual - d.residual) <= tol * d.scale
                         for c, d in zip(checks, near_checks, strict=False)):
         return dataclasses.replace(again, snapped_rows=count)
@@ -406,21 +409,25 @@ def _read(data: StackData, x: np.ndarray, tol: float, rcond: float, minimum_norm
     return dataclasses.replace(report, band_rows_fixed=0)
 
 
+def _empty() -> np.ndarray:
+    return np.zeros(0)
+
+
 @dataclass
 class _Activity:
     """Every row's activity at ``x`` (:func:`~hierarchy.linalg.row_activity`), with what
     it is read from: the interval ``[lower, upper]`` (``b`` on equality rows), the norms
     ``‖a_r‖``, and at a finite ``x`` the values ``a = A x``, ``terms = |A| |x|``, the
-    sizes ``terms + norms``, the side and the violation (``None`` otherwise)."""
+    sizes ``terms + norms``, the side and the violation (empty arrays otherwise)."""
 
     lower: np.ndarray
     upper: np.ndarray
     norms: np.ndarray
-    a: np.ndarray | None = None
-    terms: np.ndarray | None = None
-    size: np.ndarray | None = None
-    side: np.ndarray | None = None
-    v: np.ndarray | None = None
+    a: np.ndarray = field(default_factory=_empty)
+    terms: np.ndarray = field(default_factory=_empty)
+    size: np.ndarray = field(default_factory=_empty)
+    side: np.ndarray = field(default_factory=_empty)
+    v: np.ndarray = field(default_factory=_empty)
 
     @classmethod
     def of(cls, data: StackData, x: np.ndarray, tol: float) -> _Activity:
@@ -739,6 +746,7 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
             # stands for free moves that let the level's rows move elsewhere (a level at
             # 1.08e-2 over a box, its optimum 0 at 240 away, read at 5.5e-13: along this
             # direction a point 5.6e-4 lower)
+            assert D is not None            # (made only where B gave the metric)
             weight = D.copy()
             weight[null] = 1.0 / floor
             w = weight * (vt @ zg if vt is not None else zg)
