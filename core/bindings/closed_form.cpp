@@ -1,0 +1,89 @@
+// prioik._core's closed-form formulations beside the extended Jacobian (closed_form.hpp):
+// prepared solvers whose solve checks its arrays (array_checks.hpp: float64, the layout's
+// shape, C-contiguous, not empty) and raises CoreInputError naming the array or the
+// entry at fault; a solve releases the GIL.
+#include <nanobind/nanobind.h>
+#include <nanobind/ndarray.h>
+#include <nanobind/stl/string.h>
+#include <nanobind/stl/vector.h>
+
+#include <algorithm>
+#include <utility>
+#include <vector>
+
+#include "array_checks.hpp"
+#include "prioik/closed_form.hpp"
+
+namespace nb = nanobind;
+using prioik::Index;
+using prioik::bindings::copy1;
+using prioik::bindings::input;
+using prioik::bindings::output;
+
+namespace {
+
+using prioik::NullspaceResult;
+using prioik::NullspaceSolver;
+
+const NullspaceResult& solve_nullspace(NullspaceSolver& self, nb::handle A, nb::handle b,
+                                       nb::handle w, nb::handle x, nb::handle residuals) {
+  const Index M = self.rows(), n = self.cols(), k = self.levels();
+  const prioik::StackArrays data{input(A, "A", {M, n}), input(b, "b", {M}),
+                                 input(w, "sqrt_weight", {M})};
+  double* x_out = x.is_none() ? nullptr : output<double>(x, "x", {n});
+  double* residuals_out = residuals.is_none() ? nullptr
+                                              : output<double>(residuals, "residuals", {k});
+  nb::gil_scoped_release release;
+  const NullspaceResult& res = self.solve(data);
+  if (x_out != nullptr) std::copy(res.x.begin(), res.x.end(), x_out);
+  if (residuals_out != nullptr)
+    std::copy(res.residuals.begin(), res.residuals.end(), residuals_out);
+  return res;
+}
+
+}  // namespace
+
+void bind_closed_form(nb::module_& m) {
+  nb::class_<NullspaceResult>(
+      m, "NullspaceResult",
+      "One null-space projection solve's answer, the solver's own (the next solve "
+      "overwrites it): each read of an array field returns a new array.")
+      .def_prop_ro("x", [](const NullspaceResult& r) { return copy1(r.x); }, nb::rv_policy::move)
+      .def_prop_ro("residuals", [](const NullspaceResult& r) { return copy1(r.residuals); },
+                   nb::rv_policy::move)
+      .def_prop_ro("min_pivots", [](const NullspaceResult& r) { return copy1(r.min_pivots); },
+                   nb::rv_policy::move, "the smallest kept pivot norm of each Ĵ_i (0: none)")
+      .def_prop_ro("margins", [](const NullspaceResult& r) { return copy1(r.margins); },
+                   nb::rv_policy::move)
+      .def_prop_ro("ranks", [](const NullspaceResult& r) { return copy1(r.ranks); },
+                   nb::rv_policy::move)
+      .def_ro("flops", &NullspaceResult::flops, "floating-point operations of the solve")
+      .def_ro("solved", &NullspaceResult::solved,
+              "False: a level's scale is outside [SCALE_LOW, SCALE_HIGH], nothing solved")
+      .def_ro("finite", &NullspaceResult::finite)
+      .def_ro("ambiguous", &NullspaceResult::ambiguous);
+
+  nb::class_<NullspaceSolver>(
+      m, "NullspaceSolver",
+      "Recursive null-space projection prepared for one layout (closed_form.hpp): "
+      "workspaces allocated here, none per solve. One thread at a time.")
+      .def("__init__",
+           [](NullspaceSolver* self, std::vector<Index> starts, Index n, double rcond,
+              double damping, bool reproject) {
+             prioik::NullspaceOptions o;
+             o.rcond = rcond;
+             o.damping = damping;
+             o.reproject = reproject;
+             new (self) NullspaceSolver(std::move(starts), n, o);
+           },
+           nb::arg("starts"), nb::arg("n"), nb::kw_only(), nb::arg("rcond"),
+           nb::arg("damping") = 0.0, nb::arg("reproject") = true)
+      .def("solve", &solve_nullspace, nb::arg("A").none(), nb::arg("b").none(),
+           nb::arg("sqrt_weight").none(), nb::arg("x") = nb::none(),
+           nb::arg("residuals") = nb::none(), nb::rv_policy::reference_internal,
+           "Solve one stack (A: M × n, b and sqrt_weight: M; C-contiguous float64); x (n) "
+           "and residuals (k), when given, receive the answer's.")
+      .def_prop_ro("rows", &NullspaceSolver::rows)
+      .def_prop_ro("cols", &NullspaceSolver::cols)
+      .def_prop_ro("levels", &NullspaceSolver::levels);
+}

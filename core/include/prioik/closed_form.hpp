@@ -1,0 +1,107 @@
+// The closed-form formulations beside the extended Jacobian, compiled alike: each a
+// prepared solver over one workspace allocated at construction (nothing allocated per
+// solve), on householder.hpp's primitives, with the core's rank rule (a pivot of the
+// row-pivoted LQ counts when its norm exceeds rcond ‖A_i‖_F, the RRQR estimate of the
+// singular value the readable paths test) and its rounding rule (core/CMakeLists.txt).
+// Each solve counts its floating-point operations (a multiply, an add, a divide or a
+// square root is one; comparisons and copies are none) in its result's `flops`.
+//
+// Recursive null-space projection (Nakamura 1987; Siciliano & Slotine 1991), for each
+// level i with x_0 = 0 and N_0 = I:
+//     Ĵ_i = A_i N_{i-1},   x_i = x_{i-1} + N_{i-1} Ĵ_i^# (b_i − A_i x_{i-1}),
+//     N_i = N_{i-1} − V_i V_iᵀ   (V_i: an orthonormal basis of Ĵ_i's kept row space,
+//                                 re-orthonormalised inside range(N_{i-1}))
+// Ĵ_i^# is the truncated pseudo-inverse (damping 0) or Ĵᵀ(ĴĴᵀ + λI)⁻¹ on the kept
+// directions (damping λ). Ĵ_i comes from a row-pivoted LQ (Householder reflectors from
+// the right): Ĵ_i = Pᵀ [L 0] Q, Ĵ^# e = Q_rᵀ argmin ‖L z − P e‖² + λ ‖z‖², V_i = Q_rᵀ.
+//
+// One thread at a time per solver (a second concurrent call throws ConcurrentUse).
+#pragma once
+
+#include <atomic>
+#include <vector>
+
+#include "prioik/extended_jacobian.hpp"
+
+namespace prioik {
+
+struct NullspaceOptions {
+  double rcond = 1e-9;
+  double damping = 0.0;     // λ of the damped inverse (0: pseudo-inverse)
+  bool reproject = true;    // multiply each step by N_{i-1} once more (exact no-op)
+};
+
+// The answer of one solve, read by name.
+struct NullspaceResult {
+  std::vector<double> x;            // n
+  std::vector<double> residuals;    // k: ‖√w ∘ (A_i x − b_i)‖
+  std::vector<double> min_pivots;   // k: the smallest kept pivot norm of Ĵ_i (0: none)
+  std::vector<double> margins;      // k: the rank decisions' margins (inf: none decided)
+  std::vector<Index> ranks;         // k: the kept rank of Ĵ_i
+  double flops = 0.0;               // floating-point operations of the solve
+  bool solved = false;       // false: a level's scale is outside [1e-100, 1e100] and
+                             // nothing was solved (the caller equilibrates)
+  bool finite = false;       // the residuals (and so x) are finite
+  bool ambiguous = false;    // some level's margin ≤ kAmbiguity
+};
+
+// What one solve works in, allocated at prepare.
+struct NullspaceWorkspace {
+  NullspaceWorkspace() = default;
+  NullspaceWorkspace(Index M, Index n, Index k, Index m_max);
+
+  std::vector<double> B;        // M × n: diag(√w) A
+  std::vector<double> c;        // M: √w ∘ b
+  std::vector<double> scales;   // k: ‖A_i‖_F of the weighted rows
+  std::vector<double> N;        // n × n: the projector N_{i-1} (symmetric, held whole)
+  std::vector<double> J;        // m_max × n: Ĵ_i, then its LQ's [L 0]
+  std::vector<double> e;        // m_max: b_i − A_i x_{i-1}, permuted as J's rows
+  std::vector<double> norms;    // m_max: J's rows' squared norms on the trailing columns
+  std::vector<double> V;        // n × n: reflector t in V(t, t:)
+  std::vector<double> beta;     // n
+  std::vector<Index> pos;       // n
+  std::vector<double> basis;    // n × n: row l = V_i's column l (orthonormalised)
+  std::vector<double> step;     // n
+  std::vector<double> aux;      // n
+  std::vector<double> L;        // m_max × n: the least squares' matrix
+  std::vector<double> spare;    // small_least_squares' scratch
+  bool projected = false;       // some level has updated N (else N = I)
+  NullspaceResult result;
+};
+
+class NullspaceSolver {
+ public:
+  // starts: the k + 1 row offsets of the levels; n: the columns. Throws InputError on a
+  // malformed layout or options.
+  NullspaceSolver(std::vector<Index> starts, Index n, NullspaceOptions options);
+
+  // Solve one stack of the layout; the result is this solver's, overwritten by the next
+  // solve. Throws InputError naming the array of a non-finite entry or a √w ≤ 0.
+  const NullspaceResult& solve(const StackArrays& data);
+
+  const NullspaceResult& result() const { return work_.result; }
+  Index rows() const { return M_; }
+  Index cols() const { return n_; }
+  Index levels() const { return k_; }
+  const NullspaceOptions& options() const { return options_; }
+
+ private:
+  // level lev's step and projector update on the workspace; returns the level's flops
+  double solve_level(Index lev, bool last);
+
+  std::vector<Index> starts_;
+  Index M_, n_, k_;
+  NullspaceOptions options_;
+  NullspaceWorkspace work_;
+  std::atomic<bool> busy_{false};
+};
+
+// Throws InputError naming the first entry of A or b that is not finite, or the first
+// √w not finite and > 0 (M rows of n columns).
+void check_stack_entries(const StackArrays& data, Index M, Index n);
+
+// The floating-point operations of small_least_squares(L, rhs, m, r, mu2, …) as its loops
+// are written (damped: mu2 > 0, the QR of [L; √mu2 I] and no refinement).
+double small_least_squares_flops(Index m, Index r, bool damped);
+
+}  // namespace prioik

@@ -1,0 +1,127 @@
+"""The closed-form formulations compiled in the C++ core (core/include/prioik/closed_form.hpp)
+against their readable numpy paths (``kernel="numpy"``, the oracles): the same answer
+(where the optimum is unique) and the same status on every family of
+:data:`hierarchy.families.FAMILIES` and on the G1 fencing stacks; the flop counts the
+kernels report; and the checks at the bindings' boundary."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import prioik._core as core
+from prioik import formulations
+from prioik.formulations.base import CoreInputError
+from prioik.hierarchy import Task, TaskStack
+from prioik.hierarchy.families import FAMILIES
+
+#: relative agreement of the compiled and readable answers, ‖x_cpp − x_numpy‖ / max(1, ‖x‖):
+#: the two factor Ĵ_i differently (row-pivoted LQ, SVD) and round differently
+AGREEMENT = 1e-8
+#: the nullspace settings compared: plain, damped (λ multiplies I), textbook step
+NULLSPACE_SETTINGS = {"plain": {}, "damped": {"damping": 1e-2},
+                      "no_reproject": {"reproject": False}}
+
+
+def family_stacks(seeds: int = 12):
+    for family, make in FAMILIES.items():
+        for seed in range(seeds):
+            rng = np.random.default_rng(7000 + seed)
+            yield family, seed, make(rng, int(rng.integers(3, 40)), int(rng.integers(1, 7)))
+
+
+def assert_kernels_agree(stack: TaskStack, name: str, **options) -> tuple:
+    cpp = formulations.solve(stack, name, kernel="cpp", **options)
+    ref = formulations.solve(stack, name, kernel="numpy", **options)
+    assert cpp.info["kernel"] == "cpp" and ref.info["kernel"] == "numpy"
+    assert cpp.status == ref.status, (cpp.status, ref.status, cpp.info.get("reason"))
+    scale = max(1.0, float(np.linalg.norm(ref.x)))
+    assert np.linalg.norm(cpp.x - ref.x) <= AGREEMENT * scale, np.linalg.norm(cpp.x - ref.x)
+    return cpp, ref
+
+
+@pytest.mark.parametrize("setting", sorted(NULLSPACE_SETTINGS))
+def test_nullspace_cpp_equals_numpy_on_every_family(setting):
+    for family, seed, stack in family_stacks():
+        cpp, ref = assert_kernels_agree(stack, "nullspace", **NULLSPACE_SETTINGS[setting])
+        assert cpp.info["rank_profile"] == ref.info["rank_profile"], (family, seed)
+
+
+@pytest.fixture(scope="module")
+def g1_stacks():
+    pytest.importorskip("pinocchio")
+    from prioik.benchmarks.stacks import g1_fencing_samples
+    return [s for v in ("compatible", "incompatible")
+            for s in g1_fencing_samples(v, 6).stacks]
+
+
+@pytest.mark.parametrize("setting", sorted(NULLSPACE_SETTINGS))
+def test_nullspace_cpp_equals_numpy_on_the_g1_fencing_stacks(g1_stacks, setting):
+    for stack in g1_stacks:
+        assert stack.n == 35
+        assert_kernels_agree(stack, "nullspace", **NULLSPACE_SETTINGS[setting])
+
+
+def test_nullspace_auto_is_the_compiled_kernel_and_reports_flops():
+    stack = FAMILIES["conflicting"](np.random.default_rng(1), 12, 3)
+    sol = formulations.solve(stack, "nullspace")
+    assert sol.info["kernel"] == "cpp" and sol.info["flops"] > 0
+    batch = formulations.solve_batch([stack, stack], "nullspace")
+    np.testing.assert_array_equal(batch.X[0], sol.x)
+    assert batch.statuses == [sol.status] * 2
+
+
+# ------------------------------------------------------------------------------ flops
+def householder_lq_applications(m: int, n: int) -> int:
+    """The flops of a dense Householder LQ of an ``m × n`` matrix (``m ≤ n``, full row
+    rank) in its reflector applications: reflector ``r`` updates the ``m − r − 1`` rows
+    below it on ``n − r`` columns, a dot product and an update, ``4 (n − r)`` each; in
+    total ``2 n m² − 2 m³ / 3`` to first order (the QR of the transposed ``n × m``)."""
+    return sum(4 * (m - r - 1) * (n - r) for r in range(m))
+
+
+@pytest.mark.parametrize("m, n", [(20, 40), (60, 90), (35, 35)])
+def test_nullspace_flops_of_one_level_are_a_householder_lq_and_lower_order_terms(m, n):
+    """One level of full row rank: N = I, so the kernel does one row-pivoted Householder
+    LQ of the m × n level, a forward substitution and the reflectors on the step; every
+    other operation is O(m n)."""
+    rng = np.random.default_rng(m * n)
+    stack = TaskStack([Task("only", rng.standard_normal((m, n)), rng.standard_normal(m))])
+    flops = formulations.solve(stack, "nullspace", kernel="cpp").info["flops"]
+    lq = householder_lq_applications(m, n)
+    assert abs(lq - (2 * n * m * m - 2 * m ** 3 / 3)) <= 4 * m * n     # the dense count
+    assert lq <= flops <= lq + 16 * m * n + m * m, (flops, lq)
+
+
+def test_nullspace_flops_grow_with_the_projections_of_the_lower_levels():
+    """A second level adds Ĵ_2 = A_2 N (2 m_2 n² flops) and the projector update
+    (≥ r_1 n² flops) to the first level's count."""
+    rng = np.random.default_rng(5)
+    n, m1, m2 = 30, 6, 8
+    first = Task("a", rng.standard_normal((m1, n)), rng.standard_normal(m1))
+    second = Task("b", rng.standard_normal((m2, n)), rng.standard_normal(m2))
+    one = formulations.solve(TaskStack([first]), "nullspace", kernel="cpp").info["flops"]
+    two = formulations.solve(TaskStack([first, second]), "nullspace",
+                             kernel="cpp").info["flops"]
+    assert two - one >= 2 * m2 * n * n + m1 * n * n
+
+
+# ------------------------------------------------------------------------- boundary
+def test_nullspace_solver_checks_its_arrays():
+    solver = core.NullspaceSolver([0, 2, 3], 4, rcond=1e-9)
+    A, b, w = np.ones((3, 4)), np.zeros(3), np.ones(3)
+    with pytest.raises(CoreInputError, match="A must have shape"):
+        solver.solve(np.ones((3, 5)), b, w)
+    with pytest.raises(CoreInputError, match="sqrt_weight must be float64"):
+        solver.solve(A, b, np.ones(3, dtype=np.int64))
+    with pytest.raises(CoreInputError, match="C-contiguous"):
+        solver.solve(np.ones((4, 3)).T, b, w)
+    bad = A.copy()
+    bad[1, 2] = np.nan
+    with pytest.raises(CoreInputError, match=r"A\[1, 2\] is not finite"):
+        solver.solve(bad, b, w)
+    with pytest.raises(CoreInputError, match=r"sqrt_weight\[0\] must be finite and > 0"):
+        solver.solve(A, b, np.array([0.0, 1.0, 1.0]))
+    with pytest.raises(CoreInputError, match="damping must be finite"):
+        core.NullspaceSolver([0, 3], 4, rcond=1e-9, damping=-1.0)
+    assert solver.solve(A, b, w).finite        # the solver still works after refusals
