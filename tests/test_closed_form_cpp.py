@@ -125,3 +125,35 @@ def test_nullspace_solver_checks_its_arrays():
     with pytest.raises(CoreInputError, match="damping must be finite"):
         core.NullspaceSolver([0, 3], 4, rcond=1e-9, damping=-1.0)
     assert solver.solve(A, b, w).finite        # the solver still works after refusals
+
+
+def householder_qr_applications(m: int, n: int) -> int:
+    """The flops of a dense Householder QR of an ``m × n`` matrix (``m ≥ n``, full column
+    rank) in its reflector applications: column ``j``'s reflector updates the ``n − j − 1``
+    later columns on ``m − j`` rows, ``4 (m − j)`` each; ``2 m n² − 2 n³ / 3`` to first
+    order."""
+    return sum(4 * (n - j - 1) * (m - j) for j in range(n))
+
+
+@pytest.mark.parametrize("m, n", [(50, 20), (90, 60), (35, 35)])
+def test_extended_jacobian_flops_of_a_full_rank_level_are_a_householder_qr(m, n):
+    """One level of full column rank (m ≥ n): the nested QR solves it by one column-pivoted
+    Householder QR, a back substitution and one refinement step; the rest is O(m n)."""
+    rng = np.random.default_rng(m + n)
+    stack = TaskStack([Task("only", rng.standard_normal((m, n)), rng.standard_normal(m))])
+    sol = formulations.solve(stack, "extended_jacobian", kernel="cpp")
+    qr = householder_qr_applications(m, n)
+    assert abs(qr - (2 * m * n * n - 2 * n ** 3 / 3)) <= 4 * m * n
+    assert qr <= sol.info["flops"] <= qr + 16 * m * n + 4 * n * n, (sol.info["flops"], qr)
+
+
+def test_extended_jacobian_and_nullspace_count_the_same_lq_on_one_level():
+    """On one level of full row rank (m < n) both kernels do one row-pivoted LQ, a forward
+    substitution and the reflectors on the answer: their counts differ by O(m n) only."""
+    rng = np.random.default_rng(3)
+    m, n = 25, 60
+    stack = TaskStack([Task("only", rng.standard_normal((m, n)), rng.standard_normal(m))])
+    ej = formulations.solve(stack, "extended_jacobian", kernel="cpp").info["flops"]
+    ns = formulations.solve(stack, "nullspace", kernel="cpp").info["flops"]
+    assert abs(ej - ns) <= 6 * m * n
+    assert ej >= householder_lq_applications(m, n)

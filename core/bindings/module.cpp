@@ -134,6 +134,8 @@ NB_MODULE(_core, m) {
                    [](nb::handle s) { return copy1(nb::cast<ExtendedJacobianResult&>(s).margins); }, nb::rv_policy::move)
       .def_prop_ro("ranks",
                    [](nb::handle s) { return copy1(nb::cast<ExtendedJacobianResult&>(s).ranks); }, nb::rv_policy::move)
+      .def_ro("flops", &ExtendedJacobianResult::flops,
+              "floating-point operations of the nested QR, by formula over its sizes")
       .def_ro("solved", &ExtendedJacobianResult::solved,
               "False: a level's scale is outside [SCALE_LOW, SCALE_HIGH], nothing solved")
       .def_ro("finite", &ExtendedJacobianResult::finite)

@@ -196,18 +196,6 @@ double subtract_outer_products(MatrixRef N, MatrixRef basis, Index r) {
 
 }  // namespace
 
-double small_least_squares_flops(Index m, Index r, bool damped) {
-  const Index rows = damped ? m + r : m;
-  double flops = damped ? 1.0 : 0.0;
-  for (Index j = 0; j < r; ++j) {
-    const double w = static_cast<double>(rows - j);
-    flops += 2.0 * w + 5.0 + static_cast<double>(r - j - 1) * (4.0 * w + 2.0) + 4.0 * w + 2.0;
-  }
-  flops += static_cast<double>(r * r);
-  if (!damped) flops += 4.0 * static_cast<double>(m * r) + 2.0 * static_cast<double>(r * r) + r;
-  return flops;
-}
-
 void check_stack_entries(const StackArrays& data, Index M, Index n) {
   for (Index i = 0; i < M; ++i)
     for (Index j = 0; j < n; ++j)

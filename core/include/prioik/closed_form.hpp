@@ -22,6 +22,7 @@
 #include <vector>
 
 #include "prioik/extended_jacobian.hpp"
+#include "prioik/flops.hpp"
 
 namespace prioik {
 
@@ -99,9 +100,5 @@ class NullspaceSolver {
 // Throws InputError naming the first entry of A or b that is not finite, or the first
 // √w not finite and > 0 (M rows of n columns).
 void check_stack_entries(const StackArrays& data, Index M, Index n);
-
-// The floating-point operations of small_least_squares(L, rhs, m, r, mu2, …) as its loops
-// are written (damped: mu2 > 0, the QR of [L; √mu2 I] and no refinement).
-double small_least_squares_flops(Index m, Index r, bool damped);
 
 }  // namespace prioik
