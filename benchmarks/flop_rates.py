@@ -23,7 +23,8 @@ from .threads import blas_threads
 KERNELS = {"extended_jacobian": ({"kernel": "cpp"}, {"kernel": "lapack"}),
            "nullspace": ({"kernel": "cpp"}, {"kernel": "numpy"}),
            "nullspace[damped]": ({"kernel": "cpp", "damping": 0.05},
-                                 {"kernel": "numpy", "damping": 0.05})}
+                                 {"kernel": "numpy", "damping": 0.05}),
+           "chiaverini": ({"kernel": "cpp"}, {"kernel": "numpy"})}
 
 
 def _solver(label: str, layout, options: dict):

@@ -62,6 +62,20 @@ def test_nullspace_cpp_equals_numpy_on_the_g1_fencing_stacks(g1_stacks, setting)
         assert_kernels_agree(stack, "nullspace", **NULLSPACE_SETTINGS[setting])
 
 
+@pytest.mark.parametrize("damping", [0.0, 1e-2])
+def test_chiaverini_cpp_equals_numpy_on_every_family(damping):
+    for family, seed, stack in family_stacks():
+        cpp, ref = assert_kernels_agree(stack, "chiaverini", damping=damping)
+        for own, own_ref in zip(cpp.info["task_solutions"], ref.info["task_solutions"]):
+            assert np.linalg.norm(own - own_ref) <= AGREEMENT * max(1.0, np.linalg.norm(own_ref))
+
+
+@pytest.mark.parametrize("damping", [0.0, 1e-2])
+def test_chiaverini_cpp_equals_numpy_on_the_g1_fencing_stacks(g1_stacks, damping):
+    for stack in g1_stacks:
+        assert_kernels_agree(stack, "chiaverini", damping=damping)
+
+
 def test_nullspace_auto_is_the_compiled_kernel_and_reports_flops():
     stack = FAMILIES["conflicting"](np.random.default_rng(1), 12, 3)
     sol = formulations.solve(stack, "nullspace")
@@ -107,8 +121,9 @@ def test_nullspace_flops_grow_with_the_projections_of_the_lower_levels():
 
 
 # ------------------------------------------------------------------------- boundary
-def test_nullspace_solver_checks_its_arrays():
-    solver = core.NullspaceSolver([0, 2, 3], 4, rcond=1e-9)
+@pytest.mark.parametrize("make", [core.NullspaceSolver, core.ChiaveriniSolver])
+def test_the_closed_form_solvers_check_their_arrays(make):
+    solver = make([0, 2, 3], 4, rcond=1e-9)
     A, b, w = np.ones((3, 4)), np.zeros(3), np.ones(3)
     with pytest.raises(CoreInputError, match="A must have shape"):
         solver.solve(np.ones((3, 5)), b, w)
@@ -123,7 +138,9 @@ def test_nullspace_solver_checks_its_arrays():
     with pytest.raises(CoreInputError, match=r"sqrt_weight\[0\] must be finite and > 0"):
         solver.solve(A, b, np.array([0.0, 1.0, 1.0]))
     with pytest.raises(CoreInputError, match="damping must be finite"):
-        core.NullspaceSolver([0, 3], 4, rcond=1e-9, damping=-1.0)
+        make([0, 3], 4, rcond=1e-9, damping=-1.0)
+    with pytest.raises(CoreInputError, match="starts must be non-decreasing"):
+        make([0, 3, 2], 4, rcond=1e-9)
     assert solver.solve(A, b, w).finite        # the solver still works after refusals
 
 

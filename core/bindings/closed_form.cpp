@@ -1,4 +1,5 @@
-// prioik._core's closed-form formulations beside the extended Jacobian (closed_form.hpp):
+// prioik._core's closed-form formulations beside the extended Jacobian (closed_form.hpp),
+// nullspace and chiaverini:
 // prepared solvers whose solve checks its arrays (array_checks.hpp: float64, the layout's
 // shape, C-contiguous, not empty) and raises CoreInputError naming the array or the
 // entry at fault; a solve releases the GIL.
@@ -22,14 +23,30 @@ using prioik::bindings::output;
 
 namespace {
 
+using prioik::ChiaveriniResult;
+using prioik::ChiaveriniSolver;
 using prioik::NullspaceResult;
 using prioik::NullspaceSolver;
 
+// The stack's arrays checked against the solver's layout (M × n, M, M).
+template <class Solver>
+prioik::StackArrays stack_arrays(const Solver& self, nb::handle A, nb::handle b, nb::handle w) {
+  const Index M = self.rows(), n = self.cols();
+  return prioik::StackArrays{input(A, "A", {M, n}), input(b, "b", {M}),
+                             input(w, "sqrt_weight", {M})};
+}
+
+const ChiaveriniResult& solve_chiaverini(ChiaveriniSolver& self, nb::handle A, nb::handle b,
+                                         nb::handle w) {
+  const prioik::StackArrays data = stack_arrays(self, A, b, w);
+  nb::gil_scoped_release release;
+  return self.solve(data);
+}
+
 const NullspaceResult& solve_nullspace(NullspaceSolver& self, nb::handle A, nb::handle b,
                                        nb::handle w, nb::handle x, nb::handle residuals) {
-  const Index M = self.rows(), n = self.cols(), k = self.levels();
-  const prioik::StackArrays data{input(A, "A", {M, n}), input(b, "b", {M}),
-                                 input(w, "sqrt_weight", {M})};
+  const Index n = self.cols(), k = self.levels();
+  const prioik::StackArrays data = stack_arrays(self, A, b, w);
   double* x_out = x.is_none() ? nullptr : output<double>(x, "x", {n});
   double* residuals_out = residuals.is_none() ? nullptr
                                               : output<double>(residuals, "residuals", {k});
@@ -86,4 +103,40 @@ void bind_closed_form(nb::module_& m) {
       .def_prop_ro("rows", &NullspaceSolver::rows)
       .def_prop_ro("cols", &NullspaceSolver::cols)
       .def_prop_ro("levels", &NullspaceSolver::levels);
+
+  nb::class_<ChiaveriniResult>(
+      m, "ChiaveriniResult",
+      "One Chiaverini solve's answer, the solver's own (the next solve overwrites it): "
+      "each read of an array field returns a new array.")
+      .def_prop_ro("x", [](const ChiaveriniResult& r) { return copy1(r.x); }, nb::rv_policy::move)
+      .def_prop_ro("residuals", [](const ChiaveriniResult& r) { return copy1(r.residuals); },
+                   nb::rv_policy::move)
+      .def_prop_ro("task_solutions",
+                   [](const ChiaveriniResult& r) { return copy1(r.task_solutions); },
+                   nb::rv_policy::move, "k × n, flattened: row i = A_i^# b_i")
+      .def_ro("flops", &ChiaveriniResult::flops, "floating-point operations of the solve")
+      .def_ro("solved", &ChiaveriniResult::solved,
+              "False: a level's scale is outside [SCALE_LOW, SCALE_HIGH], nothing solved")
+      .def_ro("finite", &ChiaveriniResult::finite);
+
+  nb::class_<ChiaveriniSolver>(
+      m, "ChiaveriniSolver",
+      "Chiaverini's task priority prepared for one layout (closed_form.hpp): workspaces "
+      "allocated here, none per solve. One thread at a time.")
+      .def("__init__",
+           [](ChiaveriniSolver* self, std::vector<Index> starts, Index n, double rcond,
+              double damping) {
+             prioik::ChiaveriniOptions o;
+             o.rcond = rcond;
+             o.damping = damping;
+             new (self) ChiaveriniSolver(std::move(starts), n, o);
+           },
+           nb::arg("starts"), nb::arg("n"), nb::kw_only(), nb::arg("rcond"),
+           nb::arg("damping") = 0.0)
+      .def("solve", &solve_chiaverini, nb::arg("A").none(), nb::arg("b").none(),
+           nb::arg("sqrt_weight").none(), nb::rv_policy::reference_internal,
+           "Solve one stack (A: M × n, b and sqrt_weight: M; C-contiguous float64).")
+      .def_prop_ro("rows", &ChiaveriniSolver::rows)
+      .def_prop_ro("cols", &ChiaveriniSolver::cols)
+      .def_prop_ro("levels", &ChiaveriniSolver::levels);
 }

@@ -46,17 +46,18 @@ struct NullspaceResult {
   bool ambiguous = false;    // some level's margin ≤ kAmbiguity
 };
 
-// What one solve works in, allocated at prepare.
-struct NullspaceWorkspace {
-  NullspaceWorkspace() = default;
-  NullspaceWorkspace(Index M, Index n, Index k, Index m_max);
+// What one solve of a projector recursion (nullspace, chiaverini) works in, allocated at
+// prepare: the weighted rows, the projector N, one level's LQ and the step's scratch.
+struct ProjectionWorkspace {
+  ProjectionWorkspace() = default;
+  ProjectionWorkspace(Index M, Index n, Index k, Index m_max);
 
   std::vector<double> B;        // M × n: diag(√w) A
   std::vector<double> c;        // M: √w ∘ b
   std::vector<double> scales;   // k: ‖A_i‖_F of the weighted rows
   std::vector<double> N;        // n × n: the projector N_{i-1} (symmetric, held whole)
-  std::vector<double> J;        // m_max × n: Ĵ_i, then its LQ's [L 0]
-  std::vector<double> e;        // m_max: b_i − A_i x_{i-1}, permuted as J's rows
+  std::vector<double> J;        // m_max × n: Ĵ_i (or A_i), then its LQ's [L 0]
+  std::vector<double> e;        // m_max: the level's right-hand side, permuted as J's rows
   std::vector<double> norms;    // m_max: J's rows' squared norms on the trailing columns
   std::vector<double> V;        // n × n: reflector t in V(t, t:)
   std::vector<double> beta;     // n
@@ -67,7 +68,6 @@ struct NullspaceWorkspace {
   std::vector<double> L;        // m_max × n: the least squares' matrix
   std::vector<double> spare;    // small_least_squares' scratch
   bool projected = false;       // some level has updated N (else N = I)
-  NullspaceResult result;
 };
 
 class NullspaceSolver {
@@ -80,7 +80,7 @@ class NullspaceSolver {
   // solve. Throws InputError naming the array of a non-finite entry or a √w ≤ 0.
   const NullspaceResult& solve(const StackArrays& data);
 
-  const NullspaceResult& result() const { return work_.result; }
+  const NullspaceResult& result() const { return result_; }
   Index rows() const { return M_; }
   Index cols() const { return n_; }
   Index levels() const { return k_; }
@@ -93,7 +93,50 @@ class NullspaceSolver {
   std::vector<Index> starts_;
   Index M_, n_, k_;
   NullspaceOptions options_;
-  NullspaceWorkspace work_;
+  ProjectionWorkspace work_;
+  NullspaceResult result_;
+  std::atomic<bool> busy_{false};
+};
+
+// Chiaverini's singularity-robust task priority in its k-level form (Chiaverini 1997):
+//     x = Σ_i N^A_{i-1} A_i^# b_i,   N^A_{i-1} the projector onto null(J_{i-1}^A)
+// A_i^# (the level's own pseudo-inverse, or A_iᵀ(A_i A_iᵀ + λI)⁻¹ on the kept directions)
+// from a row-pivoted LQ of A_i; N^A_i updated as NullspaceSolver's N_i (the same
+// projector: a basis of A_i N^A_{i-1}'s kept row space, re-orthonormalised).
+struct ChiaveriniOptions {
+  double rcond = 1e-9;
+  double damping = 0.0;     // λ of the damped inverse (0: pseudo-inverse)
+};
+
+struct ChiaveriniResult {
+  std::vector<double> x;               // n
+  std::vector<double> residuals;       // k: ‖√w ∘ (A_i x − b_i)‖
+  std::vector<double> task_solutions;  // k × n: row i = A_i^# b_i, the level's own solution
+  double flops = 0.0;                  // floating-point operations of the solve
+  bool solved = false;       // false: a level's scale is outside [1e-100, 1e100]
+  bool finite = false;       // the residuals (and so x) are finite
+};
+
+class ChiaveriniSolver {
+ public:
+  ChiaveriniSolver(std::vector<Index> starts, Index n, ChiaveriniOptions options);
+
+  // Solve one stack of the layout (as NullspaceSolver::solve).
+  const ChiaveriniResult& solve(const StackArrays& data);
+
+  const ChiaveriniResult& result() const { return result_; }
+  Index rows() const { return M_; }
+  Index cols() const { return n_; }
+  Index levels() const { return k_; }
+
+ private:
+  double solve_level(Index lev, bool last);
+
+  std::vector<Index> starts_;
+  Index M_, n_, k_;
+  ChiaveriniOptions options_;
+  ProjectionWorkspace work_;
+  ChiaveriniResult result_;
   std::atomic<bool> busy_{false};
 };
 
