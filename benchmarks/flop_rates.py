@@ -24,20 +24,25 @@ KERNELS = {"extended_jacobian": ({"kernel": "cpp"}, {"kernel": "lapack"}),
            "nullspace": ({"kernel": "cpp"}, {"kernel": "numpy"}),
            "nullspace[damped]": ({"kernel": "cpp", "damping": 0.05},
                                  {"kernel": "numpy", "damping": 0.05}),
-           "chiaverini": ({"kernel": "cpp"}, {"kernel": "numpy"})}
+           "chiaverini": ({"kernel": "cpp"}, {"kernel": "numpy"}),
+           "unifying": ({"kernel": "cpp"}, {"kernel": "numpy"})}
 
 
-def _solver(label: str, layout, options: dict):
-    return formulations.prepare(layout, label.split("[")[0], **options)
+def _solver(label: str, layout, options: dict, mass_matrix: np.ndarray):
+    name = label.split("[")[0]
+    if formulations.get(name).CAPABILITIES.needs_mass_matrix:
+        options = dict(options, mass_matrix=mass_matrix)
+    return formulations.prepare(layout, name, **options)
 
 
-def measure(stacks: list, repeats: int) -> dict[str, dict[str, float]]:
-    """Median µs per solve (compiled, readable) and the median flops, per formulation."""
+def measure(samples: list, repeats: int) -> dict[str, dict[str, float]]:
+    """Median µs per solve (compiled, readable) and the median flops, per formulation, over
+    ``(stack, M)`` samples."""
     times = {(label, path): [] for label in KERNELS for path in (0, 1)}
     flops = {label: [] for label in KERNELS}
-    for stack in stacks:
+    for stack, mass in samples:
         data = stack.data
-        solvers = {(label, path): _solver(label, stack.layout, KERNELS[label][path])
+        solvers = {(label, path): _solver(label, stack.layout, KERNELS[label][path], mass)
                    for label in KERNELS for path in (0, 1)}
         for label in KERNELS:
             flops[label].append(solvers[label, 0].solve(data).info["flops"])
@@ -69,11 +74,11 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--samples", type=int, default=24, help="states per fencing run")
     parser.add_argument("--repeats", type=int, default=30, help="solves per stack")
     args = parser.parse_args(argv)
-    stacks = [s for v in ("compatible", "incompatible")
-              for s in g1_fencing_samples(v, args.samples).stacks]
+    runs = [g1_fencing_samples(v, args.samples) for v in ("compatible", "incompatible")]
+    samples = [(s, M) for run in runs for s, M in zip(run.stacks, run.mass_matrices)]
     with blas_threads(1):
-        rows = measure(stacks, args.repeats)
-    print(f"G1 fencing stacks: {len(stacks)} (n = {stacks[0].n}), {args.repeats} solves "
+        rows = measure(samples, args.repeats)
+    print(f"G1 fencing stacks: {len(samples)} (n = {samples[0][0].n}), {args.repeats} solves "
           f"each, medians")
     print(table(rows))
 

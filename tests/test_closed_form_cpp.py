@@ -13,7 +13,7 @@ import prioik._core as core
 from prioik import formulations
 from prioik.formulations.base import CoreInputError
 from prioik.hierarchy import Task, TaskStack
-from prioik.hierarchy.families import FAMILIES
+from prioik.hierarchy.families import FAMILIES, random_spd
 
 #: relative agreement of the compiled and readable answers, ‖x_cpp − x_numpy‖ / max(1, ‖x‖):
 #: the two factor Ĵ_i differently (row-pivoted LQ, SVD) and round differently
@@ -48,11 +48,17 @@ def test_nullspace_cpp_equals_numpy_on_every_family(setting):
 
 
 @pytest.fixture(scope="module")
-def g1_stacks():
+def g1_samples():
+    """(stack, M(q)) at 6 states of each G1 fencing run."""
     pytest.importorskip("pinocchio")
     from prioik.benchmarks.stacks import g1_fencing_samples
-    return [s for v in ("compatible", "incompatible")
-            for s in g1_fencing_samples(v, 6).stacks]
+    runs = [g1_fencing_samples(v, 6) for v in ("compatible", "incompatible")]
+    return [(s, M) for run in runs for s, M in zip(run.stacks, run.mass_matrices)]
+
+
+@pytest.fixture(scope="module")
+def g1_stacks(g1_samples):
+    return [stack for stack, _ in g1_samples]
 
 
 @pytest.mark.parametrize("setting", sorted(NULLSPACE_SETTINGS))
@@ -74,6 +80,36 @@ def test_chiaverini_cpp_equals_numpy_on_every_family(damping):
 def test_chiaverini_cpp_equals_numpy_on_the_g1_fencing_stacks(g1_stacks, damping):
     for stack in g1_stacks:
         assert_kernels_agree(stack, "chiaverini", damping=damping)
+
+
+def test_unifying_cpp_equals_numpy_on_every_family():
+    for family, seed, stack in family_stacks():
+        M = random_spd(np.random.default_rng(seed), stack.n)
+        bias = np.linspace(-1.0, 1.0, stack.n)
+        cpp, ref = assert_kernels_agree(stack, "unifying", mass_matrix=M, bias=bias)
+        np.testing.assert_allclose(cpp.info["tau"], M @ cpp.x + bias, rtol=0, atol=1e-12 *
+                                   max(1.0, float(np.abs(M @ cpp.x).max())))
+
+
+def test_unifying_cpp_equals_numpy_on_the_g1_fencing_stacks(g1_samples):
+    for stack, M in g1_samples:
+        assert_kernels_agree(stack, "unifying", mass_matrix=M)
+
+
+def test_unifying_cpp_names_a_mass_matrix_it_cannot_take():
+    stack = FAMILIES["conflicting"](np.random.default_rng(2), 6, 2)
+    with pytest.raises(formulations.FormulationError, match="positive definite"):
+        formulations.solve(stack, "unifying", kernel="cpp", mass_matrix=-np.eye(6))
+    # the binding checks M itself (the plugin's options refuse these before it)
+    solver = core.UnifyingSolver([int(s) for s in stack.layout.starts], 6, rcond=1e-9)
+    data = stack.data
+    bad = np.eye(6)
+    bad[2, 1] = np.inf
+    with pytest.raises(CoreInputError, match=r"mass_matrix\[2, 1\] is not finite"):
+        solver.solve(data.A, data.b, data.sqrt_weight, bad)
+    with pytest.raises(CoreInputError, match="mass_matrix must have shape"):
+        solver.solve(data.A, data.b, data.sqrt_weight, np.eye(5))
+    assert solver.solve(data.A, data.b, data.sqrt_weight, np.eye(6)).finite
 
 
 def test_nullspace_auto_is_the_compiled_kernel_and_reports_flops():

@@ -1,5 +1,5 @@
 // prioik._core's closed-form formulations beside the extended Jacobian (closed_form.hpp),
-// nullspace and chiaverini:
+// nullspace, chiaverini and unifying:
 // prepared solvers whose solve checks its arrays (array_checks.hpp: float64, the layout's
 // shape, C-contiguous, not empty) and raises CoreInputError naming the array or the
 // entry at fault; a solve releases the GIL.
@@ -27,6 +27,8 @@ using prioik::ChiaveriniResult;
 using prioik::ChiaveriniSolver;
 using prioik::NullspaceResult;
 using prioik::NullspaceSolver;
+using prioik::UnifyingResult;
+using prioik::UnifyingSolver;
 
 // The stack's arrays checked against the solver's layout (M × n, M, M).
 template <class Solver>
@@ -56,6 +58,14 @@ const NullspaceResult& solve_nullspace(NullspaceSolver& self, nb::handle A, nb::
   if (residuals_out != nullptr)
     std::copy(res.residuals.begin(), res.residuals.end(), residuals_out);
   return res;
+}
+
+const UnifyingResult& solve_unifying(UnifyingSolver& self, nb::handle A, nb::handle b,
+                                     nb::handle w, nb::handle mass_matrix) {
+  const prioik::StackArrays data = stack_arrays(self, A, b, w);
+  const double* mass = input(mass_matrix, "mass_matrix", {self.cols(), self.cols()});
+  nb::gil_scoped_release release;
+  return self.solve(data, mass);
 }
 
 }  // namespace
@@ -139,4 +149,36 @@ void bind_closed_form(nb::module_& m) {
       .def_prop_ro("rows", &ChiaveriniSolver::rows)
       .def_prop_ro("cols", &ChiaveriniSolver::cols)
       .def_prop_ro("levels", &ChiaveriniSolver::levels);
+
+  nb::class_<UnifyingResult>(
+      m, "UnifyingResult",
+      "One unifying-framework solve's answer, the solver's own (the next solve overwrites "
+      "it): each read of an array field returns a new array.")
+      .def_prop_ro("x", [](const UnifyingResult& r) { return copy1(r.x); }, nb::rv_policy::move)
+      .def_prop_ro("residuals", [](const UnifyingResult& r) { return copy1(r.residuals); },
+                   nb::rv_policy::move)
+      .def_prop_ro("ranks", [](const UnifyingResult& r) { return copy1(r.ranks); },
+                   nb::rv_policy::move, "the kept rank of each A_i M⁻¹")
+      .def_ro("flops", &UnifyingResult::flops, "floating-point operations of the solve")
+      .def_ro("solved", &UnifyingResult::solved,
+              "False: M is not positive definite, or a level's scale is outside "
+              "[SCALE_LOW, SCALE_HIGH]; nothing solved")
+      .def_ro("mass_positive_definite", &UnifyingResult::mass_positive_definite)
+      .def_ro("finite", &UnifyingResult::finite);
+
+  nb::class_<UnifyingSolver>(
+      m, "UnifyingSolver",
+      "The unifying framework (eq. 40) prepared for one layout (closed_form.hpp): "
+      "workspaces allocated here, none per solve; M given with each solve. One thread at "
+      "a time.")
+      .def(nb::init<std::vector<Index>, Index, double>(), nb::arg("starts"), nb::arg("n"),
+           nb::kw_only(), nb::arg("rcond"))
+      .def("solve", &solve_unifying, nb::arg("A").none(), nb::arg("b").none(),
+           nb::arg("sqrt_weight").none(), nb::arg("mass_matrix").none(),
+           nb::rv_policy::reference_internal,
+           "Solve one stack (A: M × n, b and sqrt_weight: M, mass_matrix: n × n SPD; "
+           "C-contiguous float64).")
+      .def_prop_ro("rows", &UnifyingSolver::rows)
+      .def_prop_ro("cols", &UnifyingSolver::cols)
+      .def_prop_ro("levels", &UnifyingSolver::levels);
 }

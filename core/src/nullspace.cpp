@@ -43,7 +43,10 @@ ProjectionWorkspace::ProjectionWorkspace(Index M, Index n, Index k, Index m_max)
       step(n, 0.0),
       aux(n, 0.0),
       L(m_max * n, 0.0),
-      spare(small_least_squares_scratch(m_max, std::min(m_max, n)), 0.0) {}
+      spare(small_least_squares_scratch(m_max, std::min(m_max, n)), 0.0),
+      chol(n * n, 0.0),
+      left(n * n, 0.0),
+      right(n * n, 0.0) {}
 
 NullspaceSolver::NullspaceSolver(std::vector<Index> starts, Index n, NullspaceOptions options)
     : starts_(std::move(starts)), n_(n), options_(options) {

@@ -67,6 +67,9 @@ struct ProjectionWorkspace {
   std::vector<double> aux;      // n
   std::vector<double> L;        // m_max × n: the least squares' matrix
   std::vector<double> spare;    // small_least_squares' scratch
+  std::vector<double> chol;     // n × n: the mass matrix's Cholesky factor (unifying)
+  std::vector<double> left;     // n × n: M⁻¹ V (unifying)
+  std::vector<double> right;    // n × n: M V (unifying)
   bool projected = false;       // some level has updated N (else N = I)
 };
 
@@ -137,6 +140,48 @@ class ChiaveriniSolver {
   ChiaveriniOptions options_;
   ProjectionWorkspace work_;
   ChiaveriniResult result_;
+  std::atomic<bool> busy_{false};
+};
+
+// The unifying framework of Peters et al. (2008) in the reading of Jeong & Chang (2009),
+// eq. 40, with the joint-space inertia M = L Lᵀ given per solve:
+//     x = Σ_i N_i J_i^{M²+} b_i,   J^{M²+} = M⁻¹ (A M⁻¹)⁺,
+//     N_1 = I,   N_{i+1} = N_i (I − J_i^{M²+} A_i) = N_i − (N_i M⁻¹ V)(M V)ᵀ
+// (B = A M⁻¹ = Pᵀ [L_B 0] Q by a row-pivoted LQ, rank rule rcond ‖B‖_F; B⁺ y =
+// Q_rᵀ argmin ‖L_B z − P y‖ and J^{M²+} A = M⁻¹ B⁺ B M = M⁻¹ V Vᵀ M with V = Q_rᵀ).
+struct UnifyingResult {
+  std::vector<double> x;            // n
+  std::vector<double> residuals;    // k: ‖√w ∘ (A_i x − b_i)‖
+  std::vector<Index> ranks;         // k: the kept rank of A_i M⁻¹
+  double flops = 0.0;               // floating-point operations of the solve
+  bool solved = false;       // false: a level's scale is outside [1e-100, 1e100], or M is
+                             // not positive definite (mass_positive_definite)
+  bool mass_positive_definite = false;   // the Cholesky factorization of M succeeded
+  bool finite = false;       // the residuals (and so x) are finite
+};
+
+class UnifyingSolver {
+ public:
+  UnifyingSolver(std::vector<Index> starts, Index n, double rcond);
+
+  // Solve one stack of the layout with the joint-space inertia M (n × n, row-major; its
+  // lower triangle is read). Throws InputError naming a non-finite entry, a √w ≤ 0 or a
+  // non-finite entry of M.
+  const UnifyingResult& solve(const StackArrays& data, const double* mass_matrix);
+
+  const UnifyingResult& result() const { return result_; }
+  Index rows() const { return M_; }
+  Index cols() const { return n_; }
+  Index levels() const { return k_; }
+
+ private:
+  double solve_level(Index lev, bool last);
+
+  std::vector<Index> starts_;
+  Index M_, n_, k_;
+  double rcond_;
+  ProjectionWorkspace work_;
+  UnifyingResult result_;
   std::atomic<bool> busy_{false};
 };
 
