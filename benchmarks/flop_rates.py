@@ -25,7 +25,8 @@ KERNELS = {"extended_jacobian": ({"kernel": "cpp"}, {"kernel": "lapack"}),
            "nullspace[damped]": ({"kernel": "cpp", "damping": 0.05},
                                  {"kernel": "numpy", "damping": 0.05}),
            "chiaverini": ({"kernel": "cpp"}, {"kernel": "numpy"}),
-           "unifying": ({"kernel": "cpp"}, {"kernel": "numpy"})}
+           "unifying": ({"kernel": "cpp"}, {"kernel": "numpy"}),
+           "operational_space": ({"kernel": "cpp"}, {"kernel": "numpy"})}
 
 
 def _solver(label: str, layout, options: dict, mass_matrix: np.ndarray):

@@ -96,6 +96,33 @@ def test_unifying_cpp_equals_numpy_on_the_g1_fencing_stacks(g1_samples):
         assert_kernels_agree(stack, "unifying", mass_matrix=M)
 
 
+@pytest.mark.parametrize("reproject", [True, False])
+def test_operational_space_cpp_equals_numpy_on_every_family(reproject):
+    for family, seed, stack in family_stacks():
+        M = random_spd(np.random.default_rng(seed), stack.n)
+        cpp, ref = assert_kernels_agree(stack, "operational_space", mass_matrix=M,
+                                        reproject=reproject)
+        assert cpp.info["rank_profile"] == ref.info["rank_profile"], (family, seed)
+
+
+def test_operational_space_cpp_equals_numpy_on_the_g1_fencing_stacks(g1_samples):
+    for stack, M in g1_samples:
+        assert_kernels_agree(stack, "operational_space", mass_matrix=M)
+
+
+@pytest.mark.parametrize("name", ["unifying", "operational_space"])
+def test_mass_matrix_solvers_take_m_per_solve(name):
+    """A prepared solver takes a new M (and bias) with every solve, as the readable one."""
+    rng = np.random.default_rng(11)
+    stack = FAMILIES["coupled"](rng, 9, 3)
+    solver = formulations.prepare(stack, name)
+    for seed in range(3):
+        M = random_spd(np.random.default_rng(seed), 9)
+        got = solver.solve(stack, mass_matrix=M)
+        ref = formulations.solve(stack, name, mass_matrix=M, kernel="numpy")
+        assert np.linalg.norm(got.x - ref.x) <= AGREEMENT * max(1.0, np.linalg.norm(ref.x))
+
+
 def test_unifying_cpp_names_a_mass_matrix_it_cannot_take():
     stack = FAMILIES["conflicting"](np.random.default_rng(2), 6, 2)
     with pytest.raises(formulations.FormulationError, match="positive definite"):

@@ -1,5 +1,5 @@
 // prioik._core's closed-form formulations beside the extended Jacobian (closed_form.hpp),
-// nullspace, chiaverini and unifying:
+// nullspace, chiaverini, unifying and operational_space:
 // prepared solvers whose solve checks its arrays (array_checks.hpp: float64, the layout's
 // shape, C-contiguous, not empty) and raises CoreInputError naming the array or the
 // entry at fault; a solve releases the GIL.
@@ -27,6 +27,7 @@ using prioik::ChiaveriniResult;
 using prioik::ChiaveriniSolver;
 using prioik::NullspaceResult;
 using prioik::NullspaceSolver;
+using prioik::OperationalSpaceSolver;
 using prioik::UnifyingResult;
 using prioik::UnifyingSolver;
 
@@ -60,8 +61,10 @@ const NullspaceResult& solve_nullspace(NullspaceSolver& self, nb::handle A, nb::
   return res;
 }
 
-const UnifyingResult& solve_unifying(UnifyingSolver& self, nb::handle A, nb::handle b,
-                                     nb::handle w, nb::handle mass_matrix) {
+// a solve with a mass matrix (unifying, operational_space), M checked as n × n
+template <class Solver>
+const UnifyingResult& solve_with_mass(Solver& self, nb::handle A, nb::handle b, nb::handle w,
+                                      nb::handle mass_matrix) {
   const prioik::StackArrays data = stack_arrays(self, A, b, w);
   const double* mass = input(mass_matrix, "mass_matrix", {self.cols(), self.cols()});
   nb::gil_scoped_release release;
@@ -173,7 +176,7 @@ void bind_closed_form(nb::module_& m) {
       "a time.")
       .def(nb::init<std::vector<Index>, Index, double>(), nb::arg("starts"), nb::arg("n"),
            nb::kw_only(), nb::arg("rcond"))
-      .def("solve", &solve_unifying, nb::arg("A").none(), nb::arg("b").none(),
+      .def("solve", &solve_with_mass<UnifyingSolver>, nb::arg("A").none(), nb::arg("b").none(),
            nb::arg("sqrt_weight").none(), nb::arg("mass_matrix").none(),
            nb::rv_policy::reference_internal,
            "Solve one stack (A: M × n, b and sqrt_weight: M, mass_matrix: n × n SPD; "
@@ -181,4 +184,28 @@ void bind_closed_form(nb::module_& m) {
       .def_prop_ro("rows", &UnifyingSolver::rows)
       .def_prop_ro("cols", &UnifyingSolver::cols)
       .def_prop_ro("levels", &UnifyingSolver::levels);
+
+  nb::class_<OperationalSpaceSolver>(
+      m, "OperationalSpaceSolver",
+      "Prioritized operational-space control prepared for one layout (closed_form.hpp): "
+      "workspaces allocated here, none per solve; M given with each solve (its answer a "
+      "UnifyingResult). One thread at a time.")
+      .def("__init__",
+           [](OperationalSpaceSolver* self, std::vector<Index> starts, Index n, double rcond,
+              bool reproject) {
+             prioik::OperationalSpaceOptions o;
+             o.rcond = rcond;
+             o.reproject = reproject;
+             new (self) OperationalSpaceSolver(std::move(starts), n, o);
+           },
+           nb::arg("starts"), nb::arg("n"), nb::kw_only(), nb::arg("rcond"),
+           nb::arg("reproject") = true)
+      .def("solve", &solve_with_mass<OperationalSpaceSolver>, nb::arg("A").none(),
+           nb::arg("b").none(), nb::arg("sqrt_weight").none(), nb::arg("mass_matrix").none(),
+           nb::rv_policy::reference_internal,
+           "Solve one stack (A: M × n, b and sqrt_weight: M, mass_matrix: n × n SPD; "
+           "C-contiguous float64).")
+      .def_prop_ro("rows", &OperationalSpaceSolver::rows)
+      .def_prop_ro("cols", &OperationalSpaceSolver::cols)
+      .def_prop_ro("levels", &OperationalSpaceSolver::levels);
 }

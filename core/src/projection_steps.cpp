@@ -235,4 +235,21 @@ Index check_layout(const std::vector<Index>& starts, Index n, double rcond, doub
   return m_max;
 }
 
+// The flops of cholesky_lower on n × n, as its loops are written
+double cholesky_flops(Index n) {
+  double flops = 0.0;
+  for (Index a = 0; a < n; ++a)
+    for (Index b = 0; b <= a; ++b) flops += 2.0 * static_cast<double>(b) + 1.0;
+  return flops;
+}
+
+// Throws InputError naming the first entry of M (n × n) that is not finite
+void check_mass_matrix(const double* mass, Index n) {
+  for (Index a = 0; a < n; ++a)
+    for (Index b = 0; b < n; ++b)
+      if (!std::isfinite(mass[a * n + b]))
+        throw InputError("mass_matrix[" + std::to_string(a) + ", " + std::to_string(b) +
+                         "] is not finite (" + fmt(mass[a * n + b]) + ")");
+}
+
 }  // namespace prioik::projection

@@ -60,4 +60,10 @@ void reset(ProjectionWorkspace& ws);
 // Throws InputError on a malformed layout or options; returns the largest level's rows.
 Index check_layout(const std::vector<Index>& starts, Index n, double rcond, double damping);
 
+// The flops of cholesky_lower on n × n, as its loops are written
+double cholesky_flops(Index n);
+
+// Throws InputError naming the first entry of M (n × n) that is not finite
+void check_mass_matrix(const double* mass, Index n);
+
 }  // namespace prioik::projection

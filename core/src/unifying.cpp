@@ -17,23 +17,6 @@ double mass_solve(MatrixRef chol, double* v) {
   return 2.0 * static_cast<double>(chol.rows * chol.rows);
 }
 
-// The flops of cholesky_lower on n × n, as its loops are written
-double cholesky_flops(Index n) {
-  double flops = 0.0;
-  for (Index a = 0; a < n; ++a)
-    for (Index b = 0; b <= a; ++b) flops += 2.0 * static_cast<double>(b) + 1.0;
-  return flops;
-}
-
-// Throws InputError naming the first entry of M (n × n) that is not finite
-void check_mass_matrix(const double* mass, Index n) {
-  for (Index a = 0; a < n; ++a)
-    for (Index b = 0; b < n; ++b)
-      if (!std::isfinite(mass[a * n + b]))
-        throw InputError("mass_matrix[" + std::to_string(a) + ", " + std::to_string(b) +
-                         "] is not finite (" + projection::fmt(mass[a * n + b]) + ")");
-}
-
 }  // namespace
 
 UnifyingSolver::UnifyingSolver(std::vector<Index> starts, Index n, double rcond)
@@ -142,13 +125,13 @@ const UnifyingResult& UnifyingSolver::solve(const StackArrays& data, const doubl
   }
   if (!(weights_ok && scales_ok && mass_finite)) {
     check_stack_entries(data, M_, n_);     // a NaN, inf or √w ≤ 0 is an input error
-    check_mass_matrix(mass_matrix, n_);
+    projection::check_mass_matrix(mass_matrix, n_);
   }
   res.mass_positive_definite = cholesky_lower(MatrixRef{ws.chol.data(), n_, n_, n_}, n_);
   res.solved = weights_ok && scales_ok && res.mass_positive_definite;
   if (!res.solved) return res;
   projection::reset(ws);
-  double flops = cholesky_flops(n_);
+  double flops = projection::cholesky_flops(n_);
   for (Index lev = 0; lev < k_; ++lev) flops += solve_level(lev, lev == k_ - 1);
   res.flops = flops;
   level_residuals(data.A, data.b, data.sqrt_weight, n_, starts_.data(), k_, res.x.data(),

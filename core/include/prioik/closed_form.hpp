@@ -149,10 +149,11 @@ class ChiaveriniSolver {
 //     N_1 = I,   N_{i+1} = N_i (I − J_i^{M²+} A_i) = N_i − (N_i M⁻¹ V)(M V)ᵀ
 // (B = A M⁻¹ = Pᵀ [L_B 0] Q by a row-pivoted LQ, rank rule rcond ‖B‖_F; B⁺ y =
 // Q_rᵀ argmin ‖L_B z − P y‖ and J^{M²+} A = M⁻¹ B⁺ B M = M⁻¹ V Vᵀ M with V = Q_rᵀ).
+// The answer of a solve with a mass matrix (unifying, operational_space), read by name.
 struct UnifyingResult {
   std::vector<double> x;            // n
   std::vector<double> residuals;    // k: ‖√w ∘ (A_i x − b_i)‖
-  std::vector<Index> ranks;         // k: the kept rank of A_i M⁻¹
+  std::vector<Index> ranks;         // k: the kept rank of each level's factored matrix
   double flops = 0.0;               // floating-point operations of the solve
   bool solved = false;       // false: a level's scale is outside [1e-100, 1e100], or M is
                              // not positive definite (mass_positive_definite)
@@ -182,6 +183,41 @@ class UnifyingSolver {
   double rcond_;
   ProjectionWorkspace work_;
   UnifyingResult result_;
+  std::atomic<bool> busy_{false};
+};
+
+// Prioritized operational-space control (Khatib 1987; Sentis & Khatib 2005) with the
+// joint-space inertia M = L Lᵀ given per solve, for each level (x_0 = 0, N_0 = I):
+//     J_{i|prev} = A_i N_{i-1},  B = J_{i|prev} L⁻ᵀ = Pᵀ [L_B 0] Q (row-pivoted LQ, rank
+//     rule rcond ‖A_i L⁻ᵀ‖_F),  J̄ = L⁻ᵀ B⁺,
+//     x_i = x_{i-1} + N_{i-1} J̄ (b_i − A_i x_{i-1}),  N_i = N_{i-1} − (L⁻ᵀ V)(L V)ᵀ
+// (J̄ J_{i|prev} = L⁻ᵀ B⁺ B Lᵀ = L⁻ᵀ V Vᵀ Lᵀ with V = Q_rᵀ).
+struct OperationalSpaceOptions {
+  double rcond = 1e-9;
+  bool reproject = true;    // multiply each step by N_{i-1} once more (exact no-op)
+};
+
+class OperationalSpaceSolver {
+ public:
+  OperationalSpaceSolver(std::vector<Index> starts, Index n, OperationalSpaceOptions options);
+
+  // Solve one stack with the joint-space inertia M (n × n, row-major; its lower triangle
+  // is read); as UnifyingSolver::solve.
+  const UnifyingResult& solve(const StackArrays& data, const double* mass_matrix);
+
+  const UnifyingResult& result() const { return result_; }
+  Index rows() const { return M_; }
+  Index cols() const { return n_; }
+  Index levels() const { return k_; }
+
+ private:
+  double solve_level(Index lev, bool last);
+
+  std::vector<Index> starts_;
+  Index M_, n_, k_;
+  OperationalSpaceOptions options_;
+  ProjectionWorkspace work_;
+  UnifyingResult result_;     // x, residuals, ranks of J_{i|prev} L⁻ᵀ, flops, flags
   std::atomic<bool> busy_{false};
 };
 
