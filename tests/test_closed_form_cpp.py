@@ -183,6 +183,27 @@ def test_nullspace_flops_grow_with_the_projections_of_the_lower_levels():
     assert two - one >= 2 * m2 * n * n + m1 * n * n
 
 
+def test_one_level_flops_of_the_other_kernels():
+    """One level of full row rank (m < n): chiaverini does nullspace's LQ, solve and
+    reflectors without the error b − A x (2 m n + m flops fewer, exactly); unifying and
+    operational_space add M's Cholesky factorization (n³/3 to first order) and a
+    triangular solve per row (n² each: B = A M⁻¹ takes two, A L⁻ᵀ one) to that LQ."""
+    rng = np.random.default_rng(4)
+    m, n = 12, 30
+    stack = TaskStack([Task("only", rng.standard_normal((m, n)), rng.standard_normal(m))])
+    M = random_spd(rng, n)
+    count = {name: formulations.solve(stack, name, kernel="cpp", **opts).info["flops"]
+             for name, opts in [("nullspace", {}), ("chiaverini", {}),
+                                ("unifying", {"mass_matrix": M}),
+                                ("operational_space", {"mass_matrix": M})]}
+    assert count["nullspace"] - count["chiaverini"] == 2 * m * n + m
+    lq = householder_lq_applications(m, n)
+    cholesky = sum(2 * b + 1 for a in range(n) for b in range(a + 1))
+    assert count["unifying"] >= cholesky + 2 * m * n * n + lq
+    assert count["operational_space"] >= cholesky + 2 * m * n * n + lq
+    assert abs(cholesky - n ** 3 / 3) <= n * n
+
+
 # ------------------------------------------------------------------------- boundary
 @pytest.mark.parametrize("make", [core.NullspaceSolver, core.ChiaveriniSolver])
 def test_the_closed_form_solvers_check_their_arrays(make):

@@ -12,6 +12,46 @@ namespace {
 // Python's min(a, b): a unless b < a
 inline double first_min(double a, double b) { return b < a ? b : a; }
 
+// The rows l < r of `basis` made orthonormal (classical Gram-Schmidt, twice); returns the
+// flops.
+double orthonormalize_rows(MatrixRef basis, Index r) {
+  const Index n = basis.cols;
+  double flops = 0.0;
+  for (Index l = 0; l < r; ++l) {
+    double* bl = basis.row(l);
+    for (int pass = 0; pass < 2; ++pass) {
+      for (Index p = 0; p < l; ++p) {
+        const double* bp = basis.row(p);
+        const double h = dot(bp, bl, n);
+        for (Index j = 0; j < n; ++j) bl[j] -= h * bp[j];
+      }
+      flops += 4.0 * static_cast<double>(l * n);
+    }
+    const double norm = std::sqrt(dot(bl, bl, n));
+    const double inv = 1.0 / norm;
+    for (Index j = 0; j < n; ++j) bl[j] *= inv;
+    flops += 3.0 * n + 2.0;
+  }
+  return flops;
+}
+
+// N ← N − Σ_{l<r} b_l b_lᵀ on the lower triangle, mirrored (N stays exactly symmetric);
+// returns the flops.
+double subtract_outer_products(MatrixRef N, MatrixRef basis, Index r) {
+  const Index n = N.cols;
+  for (Index l = 0; l < r; ++l) {
+    const double* bl = basis.row(l);
+    for (Index a = 0; a < n; ++a) {
+      const double wa = bl[a];
+      double* Na = N.row(a);
+      for (Index b = 0; b <= a; ++b) Na[b] -= wa * bl[b];
+    }
+  }
+  for (Index a = 0; a < n; ++a)
+    for (Index b = 0; b < a; ++b) N(b, a) = N(a, b);
+  return static_cast<double>(r * n * (n + 1));
+}
+
 }  // namespace
 
 std::string fmt(double v) {
@@ -137,47 +177,6 @@ double level_unknowns(MatrixRef J, const double* e, Index r, double damping, dou
   small_least_squares(L, e, m, r, damping, z, ws.spare.data());
   return small_least_squares_flops(m, r, damping > 0.0);
 }
-
-// The rows l < r of `basis` made orthonormal (classical Gram-Schmidt, twice); returns the
-// flops.
-double orthonormalize_rows(MatrixRef basis, Index r) {
-  const Index n = basis.cols;
-  double flops = 0.0;
-  for (Index l = 0; l < r; ++l) {
-    double* bl = basis.row(l);
-    for (int pass = 0; pass < 2; ++pass) {
-      for (Index p = 0; p < l; ++p) {
-        const double* bp = basis.row(p);
-        const double h = dot(bp, bl, n);
-        for (Index j = 0; j < n; ++j) bl[j] -= h * bp[j];
-      }
-      flops += 4.0 * static_cast<double>(l * n);
-    }
-    const double norm = std::sqrt(dot(bl, bl, n));
-    const double inv = 1.0 / norm;
-    for (Index j = 0; j < n; ++j) bl[j] *= inv;
-    flops += 3.0 * n + 2.0;
-  }
-  return flops;
-}
-
-// N ← N − Σ_{l<r} b_l b_lᵀ on the lower triangle, mirrored (N stays exactly symmetric);
-// returns the flops.
-double subtract_outer_products(MatrixRef N, MatrixRef basis, Index r) {
-  const Index n = N.cols;
-  for (Index l = 0; l < r; ++l) {
-    const double* bl = basis.row(l);
-    for (Index a = 0; a < n; ++a) {
-      const double wa = bl[a];
-      double* Na = N.row(a);
-      for (Index b = 0; b <= a; ++b) Na[b] -= wa * bl[b];
-    }
-  }
-  for (Index a = 0; a < n; ++a)
-    for (Index b = 0; b < a; ++b) N(b, a) = N(a, b);
-  return static_cast<double>(r * n * (n + 1));
-}
-
 
 double project_rows(MatrixRef B, const ProjectionWorkspace& ws, MatrixRef J) {
   if (!ws.projected) {
