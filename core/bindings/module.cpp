@@ -89,7 +89,8 @@ ExtendedJacobianBatch solve_many(ExtendedJacobian& self, nb::handle A, nb::handl
 }  // namespace
 
 NB_MODULE(_core, m) {
-  m.doc() = "prioik's compiled core (C++17): the extended Jacobian's nested pivoted QR.";
+  m.doc() = "prioik's compiled core (C++17): the extended Jacobian's nested pivoted QR, the "
+            "hierarchical active set and the closed-form formulations beside them.";
 
   nb::register_exception_translator([](const std::exception_ptr& p, void*) {
     try {

@@ -9,7 +9,7 @@ namespace prioik {
 
 namespace {
 
-inline double f_rows(Index v) { return static_cast<double>(v); }
+inline double to_flops(Index v) { return static_cast<double>(v); }
 
 // Python's min(a, b): a unless b < a
 inline double first_min(double a, double b) { return b < a ? b : a; }
@@ -331,7 +331,7 @@ void nested_qr(MatrixRef B, double* c, const Index* starts, Index k, const doubl
       const bool solved = solve_unit_level(B, c, s0, m, tol, ws, at, &out.ranks[lev],
                                            &out.margins[lev]);
       flops += solved ? unit_rows_flops(m, n, col, ws.pos.data(), at.nref)
-                      : f_rows(m) * reflectors_flops(ws.pos.data(), at.nref, n);
+                      : to_flops(m) * reflectors_flops(ws.pos.data(), at.nref, n);
       if (solved) continue;
     }
     level_rhs_and_norms(B, c, s0, m, at.col, ws);
@@ -342,7 +342,7 @@ void nested_qr(MatrixRef B, double* c, const Index* starts, Index k, const doubl
                                 &out.margins[lev], ws.spare.data(), ws.iscratch.data())) {
       out.ranks[lev] = d;
       out.margins[lev] = out.margins[lev] / tol;
-      flops += f_rows(m) * (2.0 * f_rows(n) + 1.0) + full_rank_least_squares_flops(m, d);
+      flops += to_flops(m) * (2.0 * to_flops(n) + 1.0) + full_rank_least_squares_flops(m, d);
       at.col = n;
       continue;
     }
@@ -354,7 +354,7 @@ void nested_qr(MatrixRef B, double* c, const Index* starts, Index k, const doubl
     out.level_mu2[lev] = solve_level_unknowns(B, s0, m, r, scales[lev], lev, params,
                                               bounded_any, ws, at.col);
     flops += r == m && out.level_mu2[lev] == 0.0
-                 ? f_rows(r * r)
+                 ? to_flops(r * r)
                  : small_least_squares_flops(m, r, out.level_mu2[lev] > 0.0);
     at.col += r;
   }

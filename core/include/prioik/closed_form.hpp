@@ -1,8 +1,9 @@
 // The closed-form formulations beside the extended Jacobian, compiled alike: each a
 // prepared solver over one workspace allocated at construction (nothing allocated per
 // solve), on householder.hpp's primitives, with the core's rank rule (a pivot of the
-// row-pivoted LQ counts when its norm exceeds rcond ‖A_i‖_F, the RRQR estimate of the
-// singular value the readable paths test) and its rounding rule (core/CMakeLists.txt).
+// row-pivoted LQ counts when its norm exceeds rcond times the level's scale — ‖A_i‖_F,
+// or ‖A_i M⁻¹‖_F and ‖A_i L⁻ᵀ‖_F where the readable paths use those — the RRQR estimate
+// of the singular value they test) and its rounding rule (core/CMakeLists.txt).
 // Each solve counts its floating-point operations (a multiply, an add, a divide or a
 // square root is one; comparisons and copies are none) in its result's `flops`.
 //
