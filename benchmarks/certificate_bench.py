@@ -122,7 +122,6 @@ def certificate_times(checks: list, rounds: int) -> dict[str, float]:
     """The two certificates on the same answers: per check the fastest of ``rounds``;
     their medians (s) and the median of the per-check ratio."""
     import prioik._core as core
-
     from prioik.hierarchy import DEFAULT_CERTIFICATE_TOL, check_lexicographic
     if not checks:
         return {}

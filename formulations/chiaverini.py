@@ -2,10 +2,10 @@
 
 Chiaverini (1997) treats two tasks, ``θ̈ = J_1^# h_1 + (I − J_1⁺J_1) J_2^# h_2``; the
 sum over ``k`` levels with the augmented projectors below is the usual later
-generalisation, not his paper's. Each level is first solved *on its own* — ``J_i^# h_i``, ignoring
-the levels above —
-and that solution is then projected into the null space of the augmented Jacobian
-of the higher levels (``J_{i-1}^A``, eq. 7 of Jeong & Chang 2009)::
+generalisation, not his paper's. Each level is first solved *on its own* —
+``J_i^# h_i``, ignoring the levels above — and that solution is then projected into the
+null space of the augmented Jacobian of the higher levels (``J_{i-1}^A``, eq. 7 of
+Jeong & Chang 2009)::
 
     θ̈ = Σ_i N^A_{i-1} J_i^# h_i ,     N^A_0 = I ,
     N^A_{i-1} = I − (J_{i-1}^A)⁺ J_{i-1}^A   (orthogonal projector onto null(J_{i-1}^A))
@@ -24,17 +24,23 @@ part) has none either (tests).
 ``J_iᵀ (J_i J_iᵀ + λ I)⁻¹`` (``damping = λ > 0``, λ multiplies ``I`` as in eq. 27),
 which also bounds ``θ̈`` at *kinematic* singularities of a task. The projectors
 ``N^A_{i-1}`` are exact (nested SVD null spaces with the same rank rule).
+
+Two kernels compute it (option ``kernel``): ``"cpp"`` (the default where prioik's
+compiled core is built, :class:`Prepared`) in C++, each ``J_i^#`` and the projector
+``N^A_i`` from row-pivoted LQs (the rank rule on their pivot norms), counting its
+floating-point operations (``info["flops"]``); ``"numpy"`` is :func:`solve_readable`, the
+sum as written here, the oracle the tests hold the compiled kernel to.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from prioik.hierarchy import TaskStack, nested_null_spaces
+from prioik.hierarchy import StackData, StackLayout, TaskStack, nested_null_spaces
 
-from .base import Capabilities, Outcome
-from .nullspace import check_nonnegative, generalized_inverse
-from .options import Option, rcond_option
+from .base import Capabilities, CoreInputError, Outcome, ReportVariant, solve_equilibrated
+from .nullspace import _core, _resolve_kernel, check_nonnegative, generalized_inverse
+from .options import Option, rcond_option, validate_options
 
 NAME = "chiaverini"
 DESCRIPTION = "singularity-robust task priority (Chiaverini 1997): Σ N^A_{i-1} J_i^# h_i"
@@ -44,11 +50,22 @@ OPTIONS = {
     "damping": Option(0.0, "float", "λ: J^# = Jᵀ(JJᵀ + λI)⁻¹ (λ multiplies I); 0: pseudo-inverse",
                       minimum=0.0),
     "rcond": rcond_option("‖J_i‖_F"),
+    "kernel": Option("auto", "str", "'cpp': the compiled C++ core (prioik._core, row-pivoted "
+                     "LQ); 'numpy': the readable SVD sum; 'auto': cpp where built",
+                     choices=("auto", "cpp", "numpy")),
 }
 
 
-def solve(stack: TaskStack, *, damping: float, rcond: float) -> Outcome:
-    """Chiaverini's singularity-robust task priority; see the module docstring.
+def solve(stack: TaskStack, **options) -> Outcome:
+    """Chiaverini's task priority: :class:`Prepared` for the stack's layout, then its
+    :meth:`Prepared.solve` (``kernel`` picks the compiled or the readable path)."""
+    opts = validate_options(NAME, OPTIONS, options, stack.n)
+    return Prepared(stack.layout, opts).solve(stack.data)
+
+
+def solve_readable(stack: TaskStack, *, damping: float, rcond: float) -> Outcome:
+    """Chiaverini's singularity-robust task priority in numpy (``kernel="numpy"``), the
+    readable oracle of the compiled kernel; see the module docstring.
 
     Returns:
         ``Outcome`` (status ``"approximate"``: the method has algorithmic error) with
@@ -66,4 +83,59 @@ def solve(stack: TaskStack, *, damping: float, rcond: float) -> Outcome:
         x_own = J_sharp @ b
         own.append(x_own)
         x = x + Z @ (Z.T @ x_own)                        # N^A_{i-1} = Z_i Z_iᵀ
-    return Outcome(x, "approximate", {"task_solutions": own, "damping": damping})
+    return Outcome(x, "approximate", {"task_solutions": own, "damping": damping,
+                                      "kernel": "numpy"})
+
+
+class Prepared:
+    """Chiaverini's task priority prepared for one layout: options checked, and on the
+    compiled kernel (``kernel="cpp"``) the C++ solver with every workspace allocated once
+    (``prioik._core.ChiaveriniSolver``: each level's own inverse and the projector
+    ``N^A_i`` from row-pivoted LQs, the rank rule on their pivots; ``info["flops"]``
+    counts the solve's floating-point operations). ``kernel="numpy"`` is
+    :func:`solve_readable`.
+
+    Args:
+        layout: The stack layout (equality tasks only; the registry checked it).
+        options: Every option of :data:`OPTIONS`, validated.
+    """
+
+    def __init__(self, layout: StackLayout, options: dict) -> None:
+        self.layout = layout
+        self.kernel = _resolve_kernel(options["kernel"])
+        check_nonnegative(damping=options["damping"], rcond=options["rcond"])
+        self.damping = float(options["damping"])
+        self.rcond = float(options["rcond"])
+        self.compiled = self.kernel == "cpp"
+        if self.compiled:
+            self._core = _core.ChiaveriniSolver([int(s) for s in layout.starts], layout.n,
+                                                rcond=self.rcond, damping=self.damping)
+
+    def solve(self, data: StackData) -> Outcome:
+        """Solve one stack of the layout.
+
+        Raises:
+            TaskStackError: a value is not finite (naming the task, level and row).
+        """
+        if not self.compiled:
+            return solve_readable(data.as_stack(), damping=self.damping, rcond=self.rcond)
+        try:
+            res = self._core.solve(data.A, data.b, data.sqrt_weight)
+        except CoreInputError:
+            data.check()     # names the task, level and row of a NaN, inf or bad √w
+            raise
+        if not res.solved:
+            return solve_equilibrated(self.solve, data, "the rows' scale overflows float64 "
+                                      "(‖A_i‖_F² is not finite): scale the tasks down")
+        own = res.task_solutions.reshape(self.layout.k, self.layout.n)
+        info = {"task_solutions": list(own), "damping": self.damping, "kernel": "cpp",
+                "flops": res.flops}
+        return Outcome(res.x, "approximate", info, res.residuals)
+
+# ------------------------------------------------------------------------ reports
+#: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
+REPORT_VARIANTS = (
+    ReportVariant("numpy", {"kernel": "numpy"}, reports=("bench",),
+                  note="the readable numpy SVD sum (the default, kernel='auto', is the "
+                       "compiled C++ core)"),
+)

@@ -269,7 +269,7 @@ class Prepared:
             # finite rows of extreme scale: solve the equilibrated stack (same optimum)
             return solve_equilibrated(self.solve, data, "the rows' scale overflows float64 "
                                       "(‖A_i‖_F² is not finite): scale the tasks down")
-        info = {"rank_profile": ranks, "nullspace": "qr", "kernel": "cpp"}
+        info = {"rank_profile": ranks, "nullspace": "qr", "kernel": "cpp", "flops": res.flops}
         if res.clear and not self._damped:
             return (x, "optimal", info, residuals)     # the common case
         status = "optimal"

@@ -21,7 +21,12 @@ without it; ``docs/properties.md`` measures both). The kept singular vectors are
 re-orthonormalised inside ``range(N_{i-1})`` before each projector update, so ``N_i``
 stays a projector to rounding over any number of levels.
 
-In detail: ``docs/formulations.md``.
+Two kernels (option ``kernel``): ``"cpp"`` (the default; :class:`Prepared`) runs the
+recursion in the C++ core over one workspace, a row-pivoted LQ of ``Ĵ_i`` in place of
+its SVD (rank rule on the pivot norms), and counts its floating-point operations
+(``info["flops"]``); ``"numpy"`` is :func:`solve_readable`, the SVD recursion as
+written, the oracle the tests hold the compiled kernel to. In detail:
+``docs/formulations.md``.
 """
 
 from __future__ import annotations
@@ -31,14 +36,31 @@ import numpy as np
 from prioik.hierarchy import (
     AMBIGUITY,
     DEFAULT_RCOND,
+    StackData,
+    StackLayout,
     TaskStack,
     ambiguity_reason,
     ambiguous_decision,
     rank_threshold,
 )
 
-from .base import Capabilities, FormulationError, Outcome, ReportVariant
-from .options import Option, rcond_option
+from .base import (
+    Capabilities,
+    CoreInputError,
+    FormulationError,
+    Outcome,
+    ReportVariant,
+    in_original_units,
+    solve_equilibrated,
+)
+from .options import Option, rcond_option, validate_options
+
+try:  # the compiled C++ core (core/, built by pip install)
+    from prioik import _core
+    _core_error = ""
+except ImportError as exc:  # pragma: no cover - built with the package
+    _core = None
+    _core_error = f"{type(exc).__name__}: {exc}"
 
 NAME = "nullspace"
 DESCRIPTION = "recursive null-space projection (Nakamura 1987), damped LS inverse option"
@@ -50,6 +72,9 @@ OPTIONS = {
     "rcond": rcond_option("‖J_i‖_F"),
     "reproject": Option(True, "bool", "apply N_{i-1} to each step (exact no-op; keeps "
                         "round-off ≈ ε/σ)"),
+    "kernel": Option("auto", "str", "'cpp': the compiled C++ core (prioik._core, row-pivoted "
+                     "LQ); 'numpy': the readable SVD recursion; 'auto': cpp where built",
+                     choices=("auto", "cpp", "numpy")),
 }
 
 
@@ -184,8 +209,17 @@ def project_level(A: np.ndarray, b: np.ndarray, x: np.ndarray, N: np.ndarray, to
     return X[0], N[0], sv[0][keep[0]], bool(near[0])
 
 
-def solve(stack: TaskStack, *, damping: float, rcond: float, reproject: bool) -> Outcome:
-    """Recursive null-space projection; see the module docstring.
+def solve(stack: TaskStack, **options) -> Outcome:
+    """Recursive null-space projection: :class:`Prepared` for the stack's layout, then
+    its :meth:`Prepared.solve` (``kernel`` picks the compiled or the readable path)."""
+    opts = validate_options(NAME, OPTIONS, options, stack.n)
+    return Prepared(stack.layout, opts).solve(stack.data)
+
+
+def solve_readable(stack: TaskStack, *, damping: float, rcond: float, reproject: bool
+                   ) -> Outcome:
+    """Recursive null-space projection in numpy (``kernel="numpy"``), the readable
+    oracle of the compiled kernel; see the module docstring.
 
     Returns:
         ``Outcome`` with ``info["rank_profile"]`` (kept rank of each ``Ĵ_i``) and
@@ -207,7 +241,8 @@ def solve(stack: TaskStack, *, damping: float, rcond: float, reproject: bool) ->
         ranks.append(int(s.size))
         sigmas.append(float(s.min()) if s.size else 0.0)
     status = "approximate" if damping > 0 or ambiguous else "optimal"
-    info = {"rank_profile": ranks, "min_singular_values": sigmas, "damping": damping}
+    info = {"rank_profile": ranks, "min_singular_values": sigmas, "damping": damping,
+            "kernel": "numpy"}
     if ambiguous:
         info["ambiguous_levels"] = ambiguous
         info["reason"] = ambiguity_reason(ambiguous)
@@ -217,7 +252,7 @@ def solve(stack: TaskStack, *, damping: float, rcond: float, reproject: bool) ->
 def solve_batch(stacks: list[TaskStack], *, damping: float = 0.0,
                 rcond: float = DEFAULT_RCOND, reproject: bool = True
                 ) -> tuple[np.ndarray, list[str]]:
-    """:func:`solve` for many stacks of one shape: :func:`project_levels` on the
+    """:func:`solve_readable` for many stacks of one shape: :func:`project_levels` on the
     stacked levels (one stacked SVD per level), the same arithmetic as :func:`solve`."""
     check_nonnegative(damping=damping, rcond=rcond)
     damping = float(damping)
@@ -233,9 +268,99 @@ def solve_batch(stacks: list[TaskStack], *, damping: float = 0.0,
         near |= amb
     return X, ["approximate" if damping > 0 or amb else "optimal" for amb in near]
 
+def _resolve_kernel(kernel: str) -> str:
+    """``"cpp"`` or ``"numpy"`` for the ``kernel`` option (``"auto"``: cpp where the
+    compiled core is built).
+
+    Raises:
+        FormulationError: ``kernel="cpp"`` and the compiled core is not importable here.
+    """
+    if kernel == "numpy" or (kernel == "auto" and _core is None):
+        return "numpy"
+    if _core is None:
+        raise FormulationError(f"kernel='cpp' needs prioik's compiled core (prioik._core): "
+                               f"{_core_error}; reinstall prioik (`pip install -e .`)")
+    return "cpp"
+
+
+class Prepared:
+    """Null-space projection prepared for one layout: options checked, and on the
+    compiled kernel (``kernel="cpp"``) the C++ solver with every workspace allocated
+    once (``prioik._core.NullspaceSolver``).
+
+    The compiled kernel runs the recursion of the module docstring with a row-pivoted
+    LQ of ``Ĵ_i`` (Householder reflectors) in place of its SVD: the rank rule tests the
+    pivot norms (the rank-revealing estimates of ``σ``, :mod:`hierarchy.linalg`),
+    ``info["min_singular_values"]`` holds the smallest kept pivot norm of each ``Ĵ_i``
+    (``σ_min`` itself where the kept rows are orthogonal), and ``info["flops"]`` the
+    solve's floating-point operations, counted in the kernel. ``kernel="numpy"`` is
+    :func:`solve_readable`.
+
+    Args:
+        layout: The stack layout (equality tasks only; the registry checked it).
+        options: Every option of :data:`OPTIONS`, validated.
+    """
+
+    def __init__(self, layout: StackLayout, options: dict) -> None:
+        self.layout = layout
+        self.kernel = _resolve_kernel(options["kernel"])
+        check_nonnegative(damping=options["damping"], rcond=options["rcond"])
+        self.damping = float(options["damping"])
+        self.rcond = float(options["rcond"])
+        self.reproject = bool(options["reproject"])
+        self.compiled = self.kernel == "cpp"
+        if self.compiled:
+            self._core = _core.NullspaceSolver([int(s) for s in layout.starts], layout.n,
+                                               rcond=self.rcond, damping=self.damping,
+                                               reproject=self.reproject)
+
+    def solve(self, data: StackData) -> Outcome:
+        """Solve one stack of the layout.
+
+        Raises:
+            TaskStackError: a value is not finite (naming the task, level and row).
+        """
+        if not self.compiled:
+            stack, levels = data.as_stack().equilibrated()
+            out = solve_readable(stack, damping=self.damping, rcond=self.rcond,
+                                 reproject=self.reproject)
+            return in_original_units(out, data, levels) if levels else out
+        try:
+            res = self._core.solve(data.A, data.b, data.sqrt_weight)
+        except CoreInputError:
+            data.check()     # names the task, level and row of a NaN, inf or bad √w
+            raise
+        if not res.solved:
+            return solve_equilibrated(self.solve, data, "the rows' scale overflows float64 "
+                                      "(‖A_i‖_F² is not finite): scale the tasks down")
+        info = {"rank_profile": res.ranks.tolist(),
+                "min_singular_values": res.min_pivots.tolist(), "damping": self.damping,
+                "kernel": "cpp", "flops": res.flops}
+        status = "approximate" if self.damping > 0 else "optimal"
+        if res.ambiguous:
+            levels = np.flatnonzero(res.margins <= AMBIGUITY).tolist()
+            info["ambiguous_levels"] = levels
+            info["reason"] = ambiguity_reason(levels)
+            status = "approximate"
+        return Outcome(res.x, status, info, res.residuals)
+
+    def solve_batch(self, datas: list[StackData]) -> tuple[np.ndarray, list[str]]:
+        """Many stacks of the layout: ``(X, statuses)`` (:func:`solve_batch` on the
+        numpy kernel, one compiled solve after the other on the cpp kernel)."""
+        if not self.compiled:
+            stacks = [d.as_stack().equilibrated()[0] for d in datas]
+            return solve_batch(stacks, damping=self.damping, rcond=self.rcond,
+                               reproject=self.reproject)
+        outs = [self.solve(d) for d in datas]
+        return np.array([o.x for o in outs]), [o.status for o in outs]
+
+
 # ------------------------------------------------------------------------ reports
 #: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
 REPORT_VARIANTS = (
+    ReportVariant("numpy", {"kernel": "numpy"}, reports=("bench",),
+                  note="the readable numpy SVD recursion (the default, kernel='auto', is the "
+                       "compiled C++ core)"),
     ReportVariant("damped", {"damping": 0.05}, reports=("scenario",),
                   note="the SR (damped least-squares) inverse on every level, λ = 0.05 "
                        "(λ = 1e-2 left q̈ peaks of 355 in the incompatible fencing run, 0.05 "

@@ -32,6 +32,12 @@ number: ``B⁺`` comes from an SVD keeping ``σ > rcond·‖J_i L⁻ᵀ‖_F``. 
 (``N_{i-1} J̄_{i|prev} = J̄_{i|prev}`` exactly, but not in round-off): without it the
 higher levels' residuals grow like ``ε/σ²`` near an algorithmic singularity instead of
 ``ε/σ`` (measured in ``docs/properties.md``).
+
+Two kernels compute it (option ``kernel``): ``"cpp"`` (the default where prioik's
+compiled core is built, :class:`Prepared`) in C++, counting its floating-point operations
+(``info["flops"]``); ``"numpy"`` is :func:`solve_readable`, the recursion as written here
+with its per-level quantities in ``info["levels"]``, the oracle the tests hold the
+compiled kernel to.
 """
 
 from __future__ import annotations
@@ -41,11 +47,18 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import solve_triangular
 
-from prioik.hierarchy import TaskStack
+from prioik.hierarchy import StackData, StackLayout, TaskStack
 
-from .base import Capabilities, FormulationError, Outcome, ReportVariant
-from .nullspace import check_nonnegative, truncated_svd
-from .options import Option, rcond_option
+from .base import (
+    Capabilities,
+    CoreInputError,
+    FormulationError,
+    Outcome,
+    ReportVariant,
+    solve_equilibrated,
+)
+from .nullspace import _core, _resolve_kernel, check_nonnegative, truncated_svd
+from .options import Option, rcond_option, validate_options
 
 NAME = "operational_space"
 DESCRIPTION = "prioritized operational-space control (Khatib, Sentis), mass_matrix=M"
@@ -59,6 +72,9 @@ OPTIONS = {
     "rcond": rcond_option("‖J_i L⁻ᵀ‖_F"),
     "reproject": Option(True, "bool", "apply N_{i-1} to each step (exact no-op; keeps "
                         "round-off ≈ ε/σ)"),
+    "kernel": Option("auto", "str", "'cpp': the compiled C++ core (prioik._core, row-pivoted "
+                     "LQ); 'numpy': the readable recursion (with info['levels']); 'auto': "
+                     "cpp where built", choices=("auto", "cpp", "numpy")),
 }
 
 
@@ -103,8 +119,17 @@ def task_space_torque(levels: list[PrioritizedLevel], null_projector: np.ndarray
     return tau
 
 
-def solve(stack: TaskStack, *, mass_matrix, bias, rcond: float, reproject: bool) -> Outcome:
-    """Prioritized operational-space control; see the module docstring.
+def solve(stack: TaskStack, **options) -> Outcome:
+    """Prioritized operational-space control: :class:`Prepared` for the stack's layout,
+    then its :meth:`Prepared.solve` (``kernel`` picks the compiled or the readable path)."""
+    opts = validate_options(NAME, OPTIONS, options, stack.n)
+    return Prepared(stack.layout, opts).solve(stack.data)
+
+
+def solve_readable(stack: TaskStack, *, mass_matrix, bias, rcond: float, reproject: bool
+                   ) -> Outcome:
+    """Prioritized operational-space control in numpy (``kernel="numpy"``), the readable
+    oracle of the compiled kernel; see the module docstring.
 
     Returns:
         ``Outcome`` with ``info["levels"]`` (one :class:`PrioritizedLevel` each),
@@ -135,14 +160,85 @@ def solve(stack: TaskStack, *, mass_matrix, bias, rcond: float, reproject: bool)
         x = x + (N @ step if reproject else step)   # N_{i-1} J̄_{i|prev} = J̄_{i|prev}
         N = N - J_bar @ Jp
     info = {"levels": levels, "null_projector": N,
-            "rank_profile": [lv.rank for lv in levels]}
+            "rank_profile": [lv.rank for lv in levels], "kernel": "numpy"}
     if bias is not None:
         info["tau"] = M @ x + np.asarray(bias, dtype=np.float64)
     return Outcome(x, "optimal", info)
 
+
+class Prepared:
+    """Prioritized operational-space control prepared for one layout: options checked, and
+    on the compiled kernel (``kernel="cpp"``) the C++ solver with every workspace allocated
+    once (``prioik._core.OperationalSpaceSolver``: ``M = L Lᵀ`` factored in the solve,
+    ``B = J_{i|prev} L⁻ᵀ`` by a row-pivoted LQ with the rank rule on its pivots,
+    ``J̄ = L⁻ᵀ B⁺`` applied to the level's error, ``N_i = N_{i-1} − (L⁻ᵀ V)(L V)ᵀ``
+    with ``V`` the LQ's kept row space, which is ``N_{i-1} − J̄ J_{i|prev}``;
+    ``info["flops"]`` counts the solve's floating-point operations). The per-level
+    quantities (``info["levels"]``, ``info["null_projector"]``) are the readable path's
+    (``kernel="numpy"``, :func:`solve_readable`). ``mass_matrix`` and ``bias`` may change
+    with every solve.
+
+    Args:
+        layout: The stack layout (equality tasks only; the registry checked it).
+        options: Every option of :data:`OPTIONS`, validated.
+    """
+
+    accepts_step_options = True
+
+    def __init__(self, layout: StackLayout, options: dict) -> None:
+        self.layout = layout
+        self.options = options
+        self.kernel = _resolve_kernel(options["kernel"])
+        check_nonnegative(rcond=options["rcond"])
+        self.rcond = float(options["rcond"])
+        self.reproject = bool(options["reproject"])
+        self.compiled = self.kernel == "cpp"
+        if self.compiled:
+            self._core = _core.OperationalSpaceSolver(
+                [int(s) for s in layout.starts], layout.n, rcond=self.rcond,
+                reproject=self.reproject)
+
+    def solve(self, data: StackData, options: dict | None = None) -> Outcome:
+        """Solve one stack of the layout (``options``: this call's, else the prepared ones).
+
+        Raises:
+            FormulationError: no ``mass_matrix``, or one that is not positive definite.
+            TaskStackError: a value is not finite (naming the task, level and row).
+        """
+        options = options or self.options
+        mass, bias = options["mass_matrix"], options["bias"]
+        if mass is None:
+            raise FormulationError("formulation 'operational_space' needs mass_matrix=M")
+        if not self.compiled:
+            return solve_readable(data.as_stack(), mass_matrix=mass, bias=bias,
+                                  rcond=self.rcond, reproject=self.reproject)
+        M = np.ascontiguousarray(mass, dtype=np.float64)
+        try:
+            res = self._core.solve(data.A, data.b, data.sqrt_weight, M)
+        except CoreInputError as exc:
+            if "mass_matrix" not in str(exc):
+                data.check()     # names the task, level and row of a NaN, inf or bad √w
+            raise
+        if not res.mass_positive_definite:
+            _cholesky_lower(M)      # raises, with M's smallest eigenvalue
+            raise FormulationError("mass_matrix must be positive definite (its Cholesky "
+                                   "factorization broke down)")
+        if not res.solved:
+            return solve_equilibrated(lambda d: self.solve(d, options), data,
+                                      "the rows' scale overflows float64 (‖A_i‖_F² is not "
+                                      "finite): scale the tasks down")
+        info = {"rank_profile": res.ranks.tolist(), "kernel": "cpp", "flops": res.flops}
+        x = res.x
+        if bias is not None:
+            info["tau"] = M @ x + np.asarray(bias, dtype=np.float64)
+        return Outcome(x, "optimal", info, res.residuals)
+
 # ------------------------------------------------------------------------ reports
 #: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
 REPORT_VARIANTS = (
+    ReportVariant("numpy", {"kernel": "numpy"}, reports=("bench",),
+                  note="the readable numpy recursion (the default, kernel='auto', is the "
+                       "compiled C++ core)"),
     ReportVariant("reproject=False", {"reproject": False}, reports=("roundoff",),
                   note="the textbook projector step, without the extra N_{i-1}"),
 )

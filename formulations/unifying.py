@@ -8,12 +8,10 @@ one torque per level, lowest priority first (eq. 37)::
     τ_i = (J_i M⁻¹)⁺ (h_i − J_i M⁻¹ τ_i_post) ,   τ_i_post = Σ_{j>i} τ_j
 
 so the highest level, computed last, corrects whatever the lower ones did to it.
-The paper is inconsistent about the bias here: eq. 37 carries ``−(C+G)`` inside the
-bracket and eq. 38 defines ``θ̈_i_post = M⁻¹[τ_i_post − (C+G)]`` (eq. 39 inherits it
-through ``θ̈_i_post``), while eq. 40 — the form the paper compares against — has no
-bias term in ``θ̈_i``. What is implemented is eq. 40's reading: with the bias
-compensated outside the sum, ``M θ̈ = Σ_i τ_i`` and the acceleration the other levels
-produce is ``M⁻¹ τ_i_post``. Using ``(J M⁻¹)⁺ = M J^{M²+}`` with the ``M²``-weighted pseudo-inverse
+Implemented is eq. 40's reading (the paper's eq. 37-39 carry the bias ``C+G`` inside
+the bracket, eq. 40 does not; ``docs/formulations.md``): with the bias compensated
+outside the sum, ``M θ̈ = Σ_i τ_i``. Using ``(J M⁻¹)⁺ = M J^{M²+}`` with the
+``M²``-weighted pseudo-inverse
 
     J^{M²+} = M⁻² Jᵀ (J M⁻² Jᵀ)⁺        (check: M J^{M²+} = M⁻¹Jᵀ(JM⁻¹(JM⁻¹)ᵀ)⁺ = (JM⁻¹)⁺)
 
@@ -35,18 +33,32 @@ augmented Jacobian that Chiaverini's k-level sum uses (tests).
 
 Every ``M⁻¹`` is applied through the Cholesky factor of ``M``; the pseudo-inverse of
 ``B_i = J_i M⁻¹`` uses an SVD with the shared rank rule relative to ``‖B_i‖_F``.
+
+Two kernels compute it (option ``kernel``): ``"cpp"`` (the default where prioik's
+compiled core is built, :class:`Prepared`) in C++, counting its floating-point operations
+(``info["flops"]``); ``"numpy"`` is :func:`solve_readable`, eq. 40 as written here, the
+oracle the tests hold the compiled kernel to.
 """
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve
 
-from prioik.hierarchy import DEFAULT_RCOND, TaskStack
+from prioik.hierarchy import DEFAULT_RCOND, StackData, StackLayout, TaskStack
 
-from .base import Capabilities, FormulationError, Outcome, ReportVariant
-from .nullspace import check_nonnegative, generalized_inverse
-from .options import Option, rcond_option
+from .base import (
+    Capabilities,
+    CoreInputError,
+    FormulationError,
+    Outcome,
+    ReportVariant,
+    solve_equilibrated,
+)
+from .nullspace import _core, _resolve_kernel, check_nonnegative, generalized_inverse
+from .options import Option, rcond_option, validate_options
 
 NAME = "unifying"
 DESCRIPTION = "unifying framework (Peters et al. 2008), paper's eq. 36-40 with mass_matrix=M"
@@ -58,6 +70,9 @@ OPTIONS = {
     "bias": Option(None, "vector", "C + G (n): with it, info['tau'] = M θ̈ + C + G (eq. 40)",
                    optional=True),
     "rcond": rcond_option("‖J_i M⁻¹‖_F"),
+    "kernel": Option("auto", "str", "'cpp': the compiled C++ core (prioik._core, row-pivoted "
+                     "LQ); 'numpy': the readable eq. 40; 'auto': cpp where built",
+                     choices=("auto", "cpp", "numpy")),
 }
 
 
@@ -109,8 +124,16 @@ def torque_recursion(stack: TaskStack, mass_matrix: np.ndarray, bias=None,
     return tau_post + bias_vec, taus
 
 
-def solve(stack: TaskStack, *, mass_matrix, bias, rcond: float) -> Outcome:
-    """Eq. 40: ``θ̈ = Σ_i N_i J_i^{M²+} h_i``; see the module docstring.
+def solve(stack: TaskStack, **options) -> Outcome:
+    """Eq. 40: :class:`Prepared` for the stack's layout, then its :meth:`Prepared.solve`
+    (``kernel`` picks the compiled or the readable path)."""
+    opts = validate_options(NAME, OPTIONS, options, stack.n)
+    return Prepared(stack.layout, opts).solve(stack.data)
+
+
+def solve_readable(stack: TaskStack, *, mass_matrix, bias, rcond: float) -> Outcome:
+    """Eq. 40 in numpy, ``θ̈ = Σ_i N_i J_i^{M²+} h_i`` (``kernel="numpy"``), the readable
+    oracle of the compiled kernel; see the module docstring.
 
     Returns:
         ``Outcome`` (status ``"approximate"``: the method has algorithmic error) with
@@ -129,14 +152,81 @@ def solve(stack: TaskStack, *, mass_matrix, bias, rcond: float) -> Outcome:
         K = weighted_pinv(A, factor, rcond)              # J_i^{M²+}
         x = x + N @ (K @ b)                              # θ̈_i = N_i J_i^{M²+} h_i
         N = N - (N @ K) @ A                              # N_{i+1} = N_i (I − J_i^{M²+} J_i)
-    info = {}
+    info: dict[str, Any] = {"kernel": "numpy"}
     if bias is not None:
         info["tau"] = M @ x + np.asarray(bias, dtype=np.float64)
     return Outcome(x, "approximate", info)
 
+
+class Prepared:
+    """The unifying framework prepared for one layout: options checked, and on the compiled
+    kernel (``kernel="cpp"``) the C++ solver with every workspace allocated once
+    (``prioik._core.UnifyingSolver``: ``M = L Lᵀ`` factored in the solve, each
+    ``(A_i M⁻¹)⁺`` from a row-pivoted LQ with the rank rule on its pivots, and
+    ``N_{i+1} = N_i − (N_i M⁻¹ V)(M V)ᵀ`` with ``V`` the LQ's kept row space, which is
+    ``N_i (I − J_i^{M²+} J_i)`` since ``J^{M²+} J = M⁻¹ B⁺ B M``; ``info["flops"]`` counts
+    the solve's floating-point operations). ``kernel="numpy"`` is :func:`solve_readable`.
+    ``mass_matrix`` and ``bias`` may change with every solve.
+
+    Args:
+        layout: The stack layout (equality tasks only; the registry checked it).
+        options: Every option of :data:`OPTIONS`, validated.
+    """
+
+    accepts_step_options = True
+
+    def __init__(self, layout: StackLayout, options: dict) -> None:
+        self.layout = layout
+        self.options = options
+        self.kernel = _resolve_kernel(options["kernel"])
+        check_nonnegative(rcond=options["rcond"])
+        self.rcond = float(options["rcond"])
+        self.compiled = self.kernel == "cpp"
+        if self.compiled:
+            self._core = _core.UnifyingSolver([int(s) for s in layout.starts], layout.n,
+                                              rcond=self.rcond)
+
+    def solve(self, data: StackData, options: dict | None = None) -> Outcome:
+        """Solve one stack of the layout (``options``: this call's, else the prepared ones).
+
+        Raises:
+            FormulationError: no ``mass_matrix``, or one that is not positive definite.
+            TaskStackError: a value is not finite (naming the task, level and row).
+        """
+        options = options or self.options
+        mass, bias = options["mass_matrix"], options["bias"]
+        if mass is None:
+            raise FormulationError("formulation 'unifying' needs mass_matrix=M")
+        if not self.compiled:
+            return solve_readable(data.as_stack(), mass_matrix=mass, bias=bias,
+                                  rcond=self.rcond)
+        M = np.ascontiguousarray(mass, dtype=np.float64)
+        try:
+            res = self._core.solve(data.A, data.b, data.sqrt_weight, M)
+        except CoreInputError as exc:
+            if "mass_matrix" not in str(exc):
+                data.check()     # names the task, level and row of a NaN, inf or bad √w
+            raise
+        if not res.mass_positive_definite:
+            cholesky(M)      # raises, with M's smallest eigenvalue
+            raise FormulationError("mass_matrix must be positive definite (its Cholesky "
+                                   "factorization broke down)")
+        if not res.solved:
+            return solve_equilibrated(lambda d: self.solve(d, options), data,
+                                      "the rows' scale overflows float64 (‖A_i‖_F² is not "
+                                      "finite): scale the tasks down")
+        info = {"rank_profile": res.ranks.tolist(), "kernel": "cpp", "flops": res.flops}
+        x = res.x
+        if bias is not None:
+            info["tau"] = M @ x + np.asarray(bias, dtype=np.float64)
+        return Outcome(x, "approximate", info, res.residuals)
+
 # ------------------------------------------------------------------------ reports
 #: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
 REPORT_VARIANTS = (
+    ReportVariant("numpy", {"kernel": "numpy"}, reports=("bench",),
+                  note="the readable numpy eq. 40 (the default, kernel='auto', is the "
+                       "compiled C++ core)"),
     ReportVariant("M=I", mass="identity", reports=("properties",),
                   note="with M = I (the report's other row has a seeded SPD M)"),
 )

@@ -20,8 +20,13 @@ import prioik._core as core
 from prioik.formulations import hierarchical_active_set as H
 from prioik.formulations.base import CoreInputError
 from prioik.hierarchy import check_lexicographic, load_stack
-from prioik.hierarchy.families import (FAMILIES, box_bounded, infeasible_inequality,
-                                       random_inequality_hierarchy, with_inequalities)
+from prioik.hierarchy.families import (
+    FAMILIES,
+    box_bounded,
+    infeasible_inequality,
+    random_inequality_hierarchy,
+    with_inequalities,
+)
 
 #: rounding edges: `make test-forced-cpu` runs this module again on OpenBLAS's kernels for
 #: another core type (the oracle's SVDs)

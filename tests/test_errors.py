@@ -2,7 +2,6 @@
 (found by walking the package's modules, so a new class without it fails here), each
 keeps its builtin base, and one representative bad call per class raises it."""
 
-import importlib
 import inspect
 import pkgutil
 import threading
@@ -13,7 +12,6 @@ import pytest
 import prioik
 from prioik import PrioikError, extras
 from prioik.formulations.base import CoreInputError
-
 
 #: modules that are not imported here: the compiled extensions, TSID's runner (a script
 #: run by the TSID environment's python) and the lexls plugin where prioik was built

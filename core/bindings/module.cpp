@@ -17,106 +17,21 @@
 
 #include "prioik/build_info.hpp"
 #include "prioik/extended_jacobian.hpp"
+#include "array_checks.hpp"
 #include "rows_bindings.hpp"
 
 namespace nb = nanobind;
 using prioik::Index;
 
 void bind_active_set(nb::module_& m);
+void bind_closed_form(nb::module_& m);
 
 namespace {
 
-using AnyArray = nb::ndarray<nb::ro>;
-
-std::string python_type_name(nb::handle h) { return Py_TYPE(h.ptr())->tp_name; }
-
-template <class Array>
-std::string dtype_text(const Array& a) {
-  const nb::dlpack::dtype t = a.dtype();
-  const char* kind = "an unknown type";
-  switch (static_cast<nb::dlpack::dtype_code>(t.code)) {
-    case nb::dlpack::dtype_code::Int: kind = "int"; break;
-    case nb::dlpack::dtype_code::UInt: kind = "uint"; break;
-    case nb::dlpack::dtype_code::Float: kind = "float"; break;
-    case nb::dlpack::dtype_code::Complex: kind = "complex"; break;
-    case nb::dlpack::dtype_code::Bool: kind = "bool"; break;
-    default: break;
-  }
-  return std::string(kind) + std::to_string(t.bits);
-}
-
-template <class Array>
-std::string shape_text(const Array& a) {
-  std::string s = "(";
-  for (size_t i = 0; i < a.ndim(); ++i) s += (i ? ", " : "") + std::to_string(a.shape(i));
-  return s + (a.ndim() == 1 ? ",)" : ")");
-}
-
-std::string expected_text(const std::vector<Index>& shape) {
-  std::string s = "(";
-  for (size_t i = 0; i < shape.size(); ++i) s += (i ? ", " : "") + std::to_string(shape[i]);
-  return s + (shape.size() == 1 ? ",)" : ")");
-}
-
-// The data of `h` as a C-contiguous array of T of `shape` (-1: any extent > 0; an
-// output is writable), or InputError naming `name`. `got` receives the shape.
-template <class T, class Array>
-T* checked(nb::handle h, const char* name, std::initializer_list<Index> shape,
-           Index* got = nullptr) {
-  Array a;
-  if (!nb::try_cast(h, a, false))
-    throw prioik::InputError(std::string(name) + " must be a " +
-                             (std::is_same_v<std::remove_const_t<T>, double> ? "float64" : "int64") +
-                             " numpy array" +
-                             (std::is_const_v<T> ? "" : " (writable)") + ", got " +
-                             python_type_name(h));
-  if (a.dtype() != nb::dtype<std::remove_const_t<T>>())
-    throw prioik::InputError(std::string(name) + " must be " +
-                             (std::is_same_v<std::remove_const_t<T>, double> ? "float64" : "int64") +
-                             ", got " + dtype_text(a));
-  if (a.device_type() != nb::device::cpu::value)
-    throw prioik::InputError(std::string(name) + " must be on the CPU");
-  if (a.ndim() != shape.size())
-    throw prioik::InputError(std::string(name) + " must have " + std::to_string(shape.size()) +
-                             " dimensions, got shape " + shape_text(a));
-  size_t i = 0;
-  for (Index want : shape) {
-    if (a.shape(i) == 0)
-      throw prioik::InputError(std::string(name) + " is empty (shape " + shape_text(a) + ")");
-    if (want >= 0 && static_cast<Index>(a.shape(i)) != want)
-      throw prioik::InputError(std::string(name) + " must have shape " +
-                               expected_text(std::vector<Index>(shape)) + ", got " + shape_text(a));
-    if (got != nullptr) got[i] = static_cast<Index>(a.shape(i));
-    ++i;
-  }
-  int64_t expect = 1;
-  for (size_t d = shape.size(); d-- > 0;) {
-    if (a.shape(d) > 1 && a.stride(d) != expect)
-      throw prioik::InputError(std::string(name) + " must be C-contiguous (a view with strides "
-                               "is not taken: pass np.ascontiguousarray of it)");
-    expect *= static_cast<int64_t>(a.shape(d));
-  }
-  return static_cast<T*>(a.data());
-}
-
-const double* input(nb::handle h, const char* name, std::initializer_list<Index> shape,
-                    Index* got = nullptr) {
-  return checked<const double, nb::ndarray<nb::ro>>(h, name, shape, got);
-}
-
-template <class T>
-T* output(nb::handle h, const char* name, std::initializer_list<Index> shape) {
-  return checked<T, nb::ndarray<>>(h, name, shape);
-}
-
-// a new numpy array holding a copy of v (the caller keeps it; the next solve leaves it)
-template <class T>
-nb::ndarray<nb::numpy, T, nb::ndim<1>> copy1(const std::vector<T>& v) {
-  T* data = new T[v.size()];
-  std::copy(v.begin(), v.end(), data);
-  nb::capsule owner(data, [](void* p) noexcept { delete[] static_cast<T*>(p); });
-  return nb::ndarray<nb::numpy, T, nb::ndim<1>>(data, {v.size()}, owner);
-}
+using prioik::bindings::checked;
+using prioik::bindings::copy1;
+using prioik::bindings::input;
+using prioik::bindings::output;
 
 template <class T>
 nb::ndarray<nb::numpy, const T, nb::ndim<1>> view1(const std::vector<T>& v, nb::handle owner) {
@@ -174,7 +89,8 @@ ExtendedJacobianBatch solve_many(ExtendedJacobian& self, nb::handle A, nb::handl
 }  // namespace
 
 NB_MODULE(_core, m) {
-  m.doc() = "prioik's compiled core (C++17): the extended Jacobian's nested pivoted QR.";
+  m.doc() = "prioik's compiled core (C++17): the extended Jacobian's nested pivoted QR, the "
+            "hierarchical active set and the closed-form formulations beside them.";
 
   nb::register_exception_translator([](const std::exception_ptr& p, void*) {
     try {
@@ -200,6 +116,7 @@ NB_MODULE(_core, m) {
               "x86-64 GCC build on Linux; the same answers, bit for bit), else 'none'");
   m.def("build_info", &prioik::build_info, "The flags the core was compiled with.");
   bind_active_set(m);
+  bind_closed_form(m);
 
   m.attr("AMBIGUITY") = prioik::kAmbiguity;
   m.attr("NEAR_AMBIGUITY") = prioik::kNearAmbiguity;
@@ -221,6 +138,8 @@ NB_MODULE(_core, m) {
                    [](nb::handle s) { return copy1(nb::cast<ExtendedJacobianResult&>(s).margins); }, nb::rv_policy::move)
       .def_prop_ro("ranks",
                    [](nb::handle s) { return copy1(nb::cast<ExtendedJacobianResult&>(s).ranks); }, nb::rv_policy::move)
+      .def_ro("flops", &ExtendedJacobianResult::flops,
+              "floating-point operations of the nested QR, by formula over its sizes")
       .def_ro("solved", &ExtendedJacobianResult::solved,
               "False: a level's scale is outside [SCALE_LOW, SCALE_HIGH], nothing solved")
       .def_ro("finite", &ExtendedJacobianResult::finite)

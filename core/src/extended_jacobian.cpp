@@ -183,7 +183,7 @@ void ExtendedJacobian::solve_on(const StackArrays& data, ExtendedJacobianWorkspa
     return;
   }
   const NestedQROutput out{res.x.data(), res.ranks.data(), res.level_mu2.data(),
-                           res.margins.data(), nullptr};
+                           res.margins.data(), nullptr, &res.flops};
   nested_qr(MatrixRef{work.B.data(), M_, n_, n_}, work.c.data(), starts_.data(), k_,
             work.scales.data(), params_, trust_region_, work.qr, out);
   summarize(data, res);

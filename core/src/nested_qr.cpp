@@ -1,5 +1,7 @@
 #include "prioik/nested_qr.hpp"
 
+#include "prioik/flops.hpp"
+
 #include <algorithm>
 #include <cmath>
 
@@ -8,6 +10,8 @@
 namespace prioik {
 
 namespace {
+
+inline double to_flops(Index v) { return static_cast<double>(v); }
 
 // Python's min(a, b): a unless b < a
 inline double first_min(double a, double b) { return b < a ? b : a; }
@@ -317,6 +321,7 @@ void nested_qr(MatrixRef B, double* c, const Index* starts, Index k, const doubl
   std::fill(ws.y.begin(), ws.y.end(), 0.0);   // coordinates no level claims stay 0
   defer_unit_level(B, starts, k, params, ws, at);
   const bool bounded_any = trust_region && params.step_bound != nullptr;
+  double flops = 0.0;     // by formula over the sizes each level used (flops.hpp)
   for (Index lev = 0; lev < k; ++lev) {
     const Index s0 = starts[lev];
     const Index m = starts[lev + 1] - s0;
@@ -325,9 +330,14 @@ void nested_qr(MatrixRef B, double* c, const Index* starts, Index k, const doubl
     out.margins[lev] = kInf;
     if (m == 0 || at.col >= n) continue;
     const double tol = params.rcond * scales[lev];
-    if (lev == k - 1 && at.rot_end < B.rows &&
-        solve_unit_level(B, c, s0, m, tol, ws, at, &out.ranks[lev], &out.margins[lev]))
-      continue;
+    if (lev == k - 1 && at.rot_end < B.rows) {
+      const Index col = at.col;
+      const bool solved = solve_unit_level(B, c, s0, m, tol, ws, at, &out.ranks[lev],
+                                           &out.margins[lev]);
+      flops += solved ? unit_rows_flops(m, n, col, ws.pos.data(), at.nref)
+                      : to_flops(m) * reflectors_flops(ws.pos.data(), at.nref, n);
+      if (solved) continue;
+    }
     level_rhs_and_norms(B, c, s0, m, at.col, ws);
     const Index d = n - at.col;
     const bool level_bounded = bounded_any && params.step_bound[lev] > 0.0;
@@ -336,19 +346,26 @@ void nested_qr(MatrixRef B, double* c, const Index* starts, Index k, const doubl
                                 &out.margins[lev], ws.spare.data(), ws.iscratch.data())) {
       out.ranks[lev] = d;
       out.margins[lev] = out.margins[lev] / tol;
+      flops += to_flops(m) * (2.0 * to_flops(n) + 1.0) + full_rank_least_squares_flops(m, d);
       at.col = n;
       continue;
     }
     out.margins[lev] = kInf;    // (a full-rank attempt that failed wrote its pivots)
     const Index r = pivoted_lq_level(B, s0, m, tol, ws, at, out.rowperm, &out.margins[lev]);
     out.ranks[lev] = r;
+    flops += pivoted_lq_level_flops(m, n, at.col, r, at.rot_end - (s0 + m));
     if (r == 0) continue;
     out.level_mu2[lev] = solve_level_unknowns(B, s0, m, r, scales[lev], lev, params,
                                               bounded_any, ws, at.col);
+    flops += r == m && out.level_mu2[lev] == 0.0
+                 ? to_flops(r * r)
+                 : small_least_squares_flops(m, r, out.level_mu2[lev] > 0.0);
     at.col += r;
   }
   for (Index j = 0; j < n; ++j) out.x[j] = ws.y[j];
   apply_q(out.x, n, ws.reflectors(at.nref));
+  flops += reflectors_flops(ws.pos.data(), at.nref, n);
+  if (out.flops != nullptr) *out.flops = flops;
 }
 
 }  // namespace prioik

@@ -48,6 +48,7 @@ struct ExtendedJacobianResult {
   std::vector<double> level_mu2;    // k: the damping μ_i² (0 where the level is exact)
   std::vector<double> margins;      // k: the rank decisions' margins (inf: none decided)
   std::vector<Index> ranks;         // k: r_i
+  double flops = 0.0;               // floating-point operations of the nested QR (flops.hpp)
   bool solved = false;       // false: some level's scale is outside [1e-100, 1e100] and
                              // nothing was solved (the caller equilibrates)
   bool finite = false;       // the residuals (and so x) are finite

@@ -77,6 +77,7 @@ struct NestedQROutput {
   double* level_mu2 = nullptr;
   double* margins = nullptr;
   Index* rowperm = nullptr;
+  double* flops = nullptr;    // the solve's floating-point operations (flops.hpp), when given
 };
 
 // Solve one stack in place: B (M × n) the weighted rows and c (M) the targets, both

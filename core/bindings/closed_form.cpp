@@ -1,0 +1,211 @@
+// prioik._core's closed-form formulations beside the extended Jacobian (closed_form.hpp),
+// nullspace, chiaverini, unifying and operational_space:
+// prepared solvers whose solve checks its arrays (array_checks.hpp: float64, the layout's
+// shape, C-contiguous, not empty) and raises CoreInputError naming the array or the
+// entry at fault; a solve releases the GIL.
+#include <nanobind/nanobind.h>
+#include <nanobind/ndarray.h>
+#include <nanobind/stl/string.h>
+#include <nanobind/stl/vector.h>
+
+#include <algorithm>
+#include <utility>
+#include <vector>
+
+#include "array_checks.hpp"
+#include "prioik/closed_form.hpp"
+
+namespace nb = nanobind;
+using prioik::Index;
+using prioik::bindings::copy1;
+using prioik::bindings::input;
+using prioik::bindings::output;
+
+namespace {
+
+using prioik::ChiaveriniResult;
+using prioik::ChiaveriniSolver;
+using prioik::NullspaceResult;
+using prioik::NullspaceSolver;
+using prioik::OperationalSpaceSolver;
+using prioik::UnifyingResult;
+using prioik::UnifyingSolver;
+
+// The stack's arrays checked against the solver's layout (M × n, M, M).
+template <class Solver>
+prioik::StackArrays stack_arrays(const Solver& self, nb::handle A, nb::handle b, nb::handle w) {
+  const Index M = self.rows(), n = self.cols();
+  return prioik::StackArrays{input(A, "A", {M, n}), input(b, "b", {M}),
+                             input(w, "sqrt_weight", {M})};
+}
+
+const ChiaveriniResult& solve_chiaverini(ChiaveriniSolver& self, nb::handle A, nb::handle b,
+                                         nb::handle w) {
+  const prioik::StackArrays data = stack_arrays(self, A, b, w);
+  nb::gil_scoped_release release;
+  return self.solve(data);
+}
+
+const NullspaceResult& solve_nullspace(NullspaceSolver& self, nb::handle A, nb::handle b,
+                                       nb::handle w, nb::handle x, nb::handle residuals) {
+  const Index n = self.cols(), k = self.levels();
+  const prioik::StackArrays data = stack_arrays(self, A, b, w);
+  double* x_out = x.is_none() ? nullptr : output<double>(x, "x", {n});
+  double* residuals_out = residuals.is_none() ? nullptr
+                                              : output<double>(residuals, "residuals", {k});
+  nb::gil_scoped_release release;
+  const NullspaceResult& res = self.solve(data);
+  if (x_out != nullptr) std::copy(res.x.begin(), res.x.end(), x_out);
+  if (residuals_out != nullptr)
+    std::copy(res.residuals.begin(), res.residuals.end(), residuals_out);
+  return res;
+}
+
+// a solve with a mass matrix (unifying, operational_space), M checked as n × n
+template <class Solver>
+const UnifyingResult& solve_with_mass(Solver& self, nb::handle A, nb::handle b, nb::handle w,
+                                      nb::handle mass_matrix) {
+  const prioik::StackArrays data = stack_arrays(self, A, b, w);
+  const double* mass = input(mass_matrix, "mass_matrix", {self.cols(), self.cols()});
+  nb::gil_scoped_release release;
+  return self.solve(data, mass);
+}
+
+}  // namespace
+
+void bind_closed_form(nb::module_& m) {
+  nb::class_<NullspaceResult>(
+      m, "NullspaceResult",
+      "One null-space projection solve's answer, the solver's own (the next solve "
+      "overwrites it): each read of an array field returns a new array.")
+      .def_prop_ro("x", [](const NullspaceResult& r) { return copy1(r.x); }, nb::rv_policy::move)
+      .def_prop_ro("residuals", [](const NullspaceResult& r) { return copy1(r.residuals); },
+                   nb::rv_policy::move)
+      .def_prop_ro("min_pivots", [](const NullspaceResult& r) { return copy1(r.min_pivots); },
+                   nb::rv_policy::move, "the smallest kept pivot norm of each Ĵ_i (0: none)")
+      .def_prop_ro("margins", [](const NullspaceResult& r) { return copy1(r.margins); },
+                   nb::rv_policy::move)
+      .def_prop_ro("ranks", [](const NullspaceResult& r) { return copy1(r.ranks); },
+                   nb::rv_policy::move)
+      .def_ro("flops", &NullspaceResult::flops, "floating-point operations of the solve")
+      .def_ro("solved", &NullspaceResult::solved,
+              "False: a level's scale is outside [SCALE_LOW, SCALE_HIGH], nothing solved")
+      .def_ro("finite", &NullspaceResult::finite)
+      .def_ro("ambiguous", &NullspaceResult::ambiguous);
+
+  nb::class_<NullspaceSolver>(
+      m, "NullspaceSolver",
+      "Recursive null-space projection prepared for one layout (closed_form.hpp): "
+      "workspaces allocated here, none per solve. One thread at a time.")
+      .def("__init__",
+           [](NullspaceSolver* self, std::vector<Index> starts, Index n, double rcond,
+              double damping, bool reproject) {
+             prioik::NullspaceOptions o;
+             o.rcond = rcond;
+             o.damping = damping;
+             o.reproject = reproject;
+             new (self) NullspaceSolver(std::move(starts), n, o);
+           },
+           nb::arg("starts"), nb::arg("n"), nb::kw_only(), nb::arg("rcond"),
+           nb::arg("damping") = 0.0, nb::arg("reproject") = true)
+      .def("solve", &solve_nullspace, nb::arg("A").none(), nb::arg("b").none(),
+           nb::arg("sqrt_weight").none(), nb::arg("x") = nb::none(),
+           nb::arg("residuals") = nb::none(), nb::rv_policy::reference_internal,
+           "Solve one stack (A: M × n, b and sqrt_weight: M; C-contiguous float64); x (n) "
+           "and residuals (k), when given, receive the answer's.")
+      .def_prop_ro("rows", &NullspaceSolver::rows)
+      .def_prop_ro("cols", &NullspaceSolver::cols)
+      .def_prop_ro("levels", &NullspaceSolver::levels);
+
+  nb::class_<ChiaveriniResult>(
+      m, "ChiaveriniResult",
+      "One Chiaverini solve's answer, the solver's own (the next solve overwrites it): "
+      "each read of an array field returns a new array.")
+      .def_prop_ro("x", [](const ChiaveriniResult& r) { return copy1(r.x); }, nb::rv_policy::move)
+      .def_prop_ro("residuals", [](const ChiaveriniResult& r) { return copy1(r.residuals); },
+                   nb::rv_policy::move)
+      .def_prop_ro("task_solutions",
+                   [](const ChiaveriniResult& r) { return copy1(r.task_solutions); },
+                   nb::rv_policy::move, "k × n, flattened: row i = A_i^# b_i")
+      .def_ro("flops", &ChiaveriniResult::flops, "floating-point operations of the solve")
+      .def_ro("solved", &ChiaveriniResult::solved,
+              "False: a level's scale is outside [SCALE_LOW, SCALE_HIGH], nothing solved")
+      .def_ro("finite", &ChiaveriniResult::finite);
+
+  nb::class_<ChiaveriniSolver>(
+      m, "ChiaveriniSolver",
+      "Chiaverini's task priority prepared for one layout (closed_form.hpp): workspaces "
+      "allocated here, none per solve. One thread at a time.")
+      .def("__init__",
+           [](ChiaveriniSolver* self, std::vector<Index> starts, Index n, double rcond,
+              double damping) {
+             prioik::ChiaveriniOptions o;
+             o.rcond = rcond;
+             o.damping = damping;
+             new (self) ChiaveriniSolver(std::move(starts), n, o);
+           },
+           nb::arg("starts"), nb::arg("n"), nb::kw_only(), nb::arg("rcond"),
+           nb::arg("damping") = 0.0)
+      .def("solve", &solve_chiaverini, nb::arg("A").none(), nb::arg("b").none(),
+           nb::arg("sqrt_weight").none(), nb::rv_policy::reference_internal,
+           "Solve one stack (A: M × n, b and sqrt_weight: M; C-contiguous float64).")
+      .def_prop_ro("rows", &ChiaveriniSolver::rows)
+      .def_prop_ro("cols", &ChiaveriniSolver::cols)
+      .def_prop_ro("levels", &ChiaveriniSolver::levels);
+
+  nb::class_<UnifyingResult>(
+      m, "UnifyingResult",
+      "One unifying-framework solve's answer, the solver's own (the next solve overwrites "
+      "it): each read of an array field returns a new array.")
+      .def_prop_ro("x", [](const UnifyingResult& r) { return copy1(r.x); }, nb::rv_policy::move)
+      .def_prop_ro("residuals", [](const UnifyingResult& r) { return copy1(r.residuals); },
+                   nb::rv_policy::move)
+      .def_prop_ro("ranks", [](const UnifyingResult& r) { return copy1(r.ranks); },
+                   nb::rv_policy::move, "the kept rank of each A_i M⁻¹")
+      .def_ro("flops", &UnifyingResult::flops, "floating-point operations of the solve")
+      .def_ro("solved", &UnifyingResult::solved,
+              "False: M is not positive definite, or a level's scale is outside "
+              "[SCALE_LOW, SCALE_HIGH]; nothing solved")
+      .def_ro("mass_positive_definite", &UnifyingResult::mass_positive_definite)
+      .def_ro("finite", &UnifyingResult::finite);
+
+  nb::class_<UnifyingSolver>(
+      m, "UnifyingSolver",
+      "The unifying framework (eq. 40) prepared for one layout (closed_form.hpp): "
+      "workspaces allocated here, none per solve; M given with each solve. One thread at "
+      "a time.")
+      .def(nb::init<std::vector<Index>, Index, double>(), nb::arg("starts"), nb::arg("n"),
+           nb::kw_only(), nb::arg("rcond"))
+      .def("solve", &solve_with_mass<UnifyingSolver>, nb::arg("A").none(), nb::arg("b").none(),
+           nb::arg("sqrt_weight").none(), nb::arg("mass_matrix").none(),
+           nb::rv_policy::reference_internal,
+           "Solve one stack (A: M × n, b and sqrt_weight: M, mass_matrix: n × n SPD; "
+           "C-contiguous float64).")
+      .def_prop_ro("rows", &UnifyingSolver::rows)
+      .def_prop_ro("cols", &UnifyingSolver::cols)
+      .def_prop_ro("levels", &UnifyingSolver::levels);
+
+  nb::class_<OperationalSpaceSolver>(
+      m, "OperationalSpaceSolver",
+      "Prioritized operational-space control prepared for one layout (closed_form.hpp): "
+      "workspaces allocated here, none per solve; M given with each solve (its answer a "
+      "UnifyingResult). One thread at a time.")
+      .def("__init__",
+           [](OperationalSpaceSolver* self, std::vector<Index> starts, Index n, double rcond,
+              bool reproject) {
+             prioik::OperationalSpaceOptions o;
+             o.rcond = rcond;
+             o.reproject = reproject;
+             new (self) OperationalSpaceSolver(std::move(starts), n, o);
+           },
+           nb::arg("starts"), nb::arg("n"), nb::kw_only(), nb::arg("rcond"),
+           nb::arg("reproject") = true)
+      .def("solve", &solve_with_mass<OperationalSpaceSolver>, nb::arg("A").none(),
+           nb::arg("b").none(), nb::arg("sqrt_weight").none(), nb::arg("mass_matrix").none(),
+           nb::rv_policy::reference_internal,
+           "Solve one stack (A: M × n, b and sqrt_weight: M, mass_matrix: n × n SPD; "
+           "C-contiguous float64).")
+      .def_prop_ro("rows", &OperationalSpaceSolver::rows)
+      .def_prop_ro("cols", &OperationalSpaceSolver::cols)
+      .def_prop_ro("levels", &OperationalSpaceSolver::levels);
+}

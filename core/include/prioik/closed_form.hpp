@@ -1,0 +1,229 @@
+// The closed-form formulations beside the extended Jacobian, compiled alike: each a
+// prepared solver over one workspace allocated at construction (nothing allocated per
+// solve), on householder.hpp's primitives, with the core's rank rule (a pivot of the
+// row-pivoted LQ counts when its norm exceeds rcond times the level's scale — ‖A_i‖_F,
+// or ‖A_i M⁻¹‖_F and ‖A_i L⁻ᵀ‖_F where the readable paths use those — the RRQR estimate
+// of the singular value they test) and its rounding rule (core/CMakeLists.txt).
+// Each solve counts its floating-point operations (a multiply, an add, a divide or a
+// square root is one; comparisons and copies are none) in its result's `flops`.
+//
+// Recursive null-space projection (Nakamura 1987; Siciliano & Slotine 1991), for each
+// level i with x_0 = 0 and N_0 = I:
+//     Ĵ_i = A_i N_{i-1},   x_i = x_{i-1} + N_{i-1} Ĵ_i^# (b_i − A_i x_{i-1}),
+//     N_i = N_{i-1} − V_i V_iᵀ   (V_i: an orthonormal basis of Ĵ_i's kept row space,
+//                                 re-orthonormalised inside range(N_{i-1}))
+// Ĵ_i^# is the truncated pseudo-inverse (damping 0) or Ĵᵀ(ĴĴᵀ + λI)⁻¹ on the kept
+// directions (damping λ). Ĵ_i comes from a row-pivoted LQ (Householder reflectors from
+// the right): Ĵ_i = Pᵀ [L 0] Q, Ĵ^# e = Q_rᵀ argmin ‖L z − P e‖² + λ ‖z‖², V_i = Q_rᵀ.
+//
+// One thread at a time per solver (a second concurrent call throws ConcurrentUse).
+#pragma once
+
+#include <atomic>
+#include <vector>
+
+#include "prioik/extended_jacobian.hpp"
+#include "prioik/flops.hpp"
+
+namespace prioik {
+
+struct NullspaceOptions {
+  double rcond = 1e-9;
+  double damping = 0.0;     // λ of the damped inverse (0: pseudo-inverse)
+  bool reproject = true;    // multiply each step by N_{i-1} once more (exact no-op)
+};
+
+// The answer of one solve, read by name.
+struct NullspaceResult {
+  std::vector<double> x;            // n
+  std::vector<double> residuals;    // k: ‖√w ∘ (A_i x − b_i)‖
+  std::vector<double> min_pivots;   // k: the smallest kept pivot norm of Ĵ_i (0: none)
+  std::vector<double> margins;      // k: the rank decisions' margins (inf: none decided)
+  std::vector<Index> ranks;         // k: the kept rank of Ĵ_i
+  double flops = 0.0;               // floating-point operations of the solve
+  bool solved = false;       // false: a level's scale is outside [1e-100, 1e100] and
+                             // nothing was solved (the caller equilibrates)
+  bool finite = false;       // the residuals (and so x) are finite
+  bool ambiguous = false;    // some level's margin ≤ kAmbiguity
+};
+
+// What one solve of a projector recursion (nullspace, chiaverini) works in, allocated at
+// prepare: the weighted rows, the projector N, one level's LQ and the step's scratch.
+struct ProjectionWorkspace {
+  ProjectionWorkspace() = default;
+  ProjectionWorkspace(Index M, Index n, Index k, Index m_max);
+
+  std::vector<double> B;        // M × n: diag(√w) A
+  std::vector<double> c;        // M: √w ∘ b
+  std::vector<double> scales;   // k: ‖A_i‖_F of the weighted rows
+  std::vector<double> N;        // n × n: the projector N_{i-1} (symmetric, held whole)
+  std::vector<double> J;        // m_max × n: Ĵ_i (or A_i), then its LQ's [L 0]
+  std::vector<double> e;        // m_max: the level's right-hand side, permuted as J's rows
+  std::vector<double> norms;    // m_max: J's rows' squared norms on the trailing columns
+  std::vector<double> V;        // n × n: reflector t in V(t, t:)
+  std::vector<double> beta;     // n
+  std::vector<Index> pos;       // n
+  std::vector<double> basis;    // n × n: row l = V_i's column l (orthonormalised)
+  std::vector<double> step;     // n
+  std::vector<double> aux;      // n
+  std::vector<double> L;        // m_max × n: the least squares' matrix
+  std::vector<double> spare;    // small_least_squares' scratch
+  std::vector<double> chol;     // n × n: the mass matrix's Cholesky factor (unifying)
+  std::vector<double> left;     // n × n: M⁻¹ V (unifying)
+  std::vector<double> right;    // n × n: M V (unifying)
+  bool projected = false;       // some level has updated N (else N = I)
+};
+
+class NullspaceSolver {
+ public:
+  // starts: the k + 1 row offsets of the levels; n: the columns. Throws InputError on a
+  // malformed layout or options.
+  NullspaceSolver(std::vector<Index> starts, Index n, NullspaceOptions options);
+
+  // Solve one stack of the layout; the result is this solver's, overwritten by the next
+  // solve. Throws InputError naming the array of a non-finite entry or a √w ≤ 0.
+  const NullspaceResult& solve(const StackArrays& data);
+
+  const NullspaceResult& result() const { return result_; }
+  Index rows() const { return M_; }
+  Index cols() const { return n_; }
+  Index levels() const { return k_; }
+  const NullspaceOptions& options() const { return options_; }
+
+ private:
+  // level lev's step and projector update on the workspace; returns the level's flops
+  double solve_level(Index lev, bool last);
+
+  std::vector<Index> starts_;
+  Index M_, n_, k_;
+  NullspaceOptions options_;
+  ProjectionWorkspace work_;
+  NullspaceResult result_;
+  std::atomic<bool> busy_{false};
+};
+
+// Chiaverini's singularity-robust task priority in its k-level form (Chiaverini 1997):
+//     x = Σ_i N^A_{i-1} A_i^# b_i,   N^A_{i-1} the projector onto null(J_{i-1}^A)
+// A_i^# (the level's own pseudo-inverse, or A_iᵀ(A_i A_iᵀ + λI)⁻¹ on the kept directions)
+// from a row-pivoted LQ of A_i; N^A_i updated as NullspaceSolver's N_i (the same
+// projector: a basis of A_i N^A_{i-1}'s kept row space, re-orthonormalised).
+struct ChiaveriniOptions {
+  double rcond = 1e-9;
+  double damping = 0.0;     // λ of the damped inverse (0: pseudo-inverse)
+};
+
+struct ChiaveriniResult {
+  std::vector<double> x;               // n
+  std::vector<double> residuals;       // k: ‖√w ∘ (A_i x − b_i)‖
+  std::vector<double> task_solutions;  // k × n: row i = A_i^# b_i, the level's own solution
+  double flops = 0.0;                  // floating-point operations of the solve
+  bool solved = false;       // false: a level's scale is outside [1e-100, 1e100]
+  bool finite = false;       // the residuals (and so x) are finite
+};
+
+class ChiaveriniSolver {
+ public:
+  ChiaveriniSolver(std::vector<Index> starts, Index n, ChiaveriniOptions options);
+
+  // Solve one stack of the layout (as NullspaceSolver::solve).
+  const ChiaveriniResult& solve(const StackArrays& data);
+
+  const ChiaveriniResult& result() const { return result_; }
+  Index rows() const { return M_; }
+  Index cols() const { return n_; }
+  Index levels() const { return k_; }
+
+ private:
+  double solve_level(Index lev, bool last);
+
+  std::vector<Index> starts_;
+  Index M_, n_, k_;
+  ChiaveriniOptions options_;
+  ProjectionWorkspace work_;
+  ChiaveriniResult result_;
+  std::atomic<bool> busy_{false};
+};
+
+// The unifying framework of Peters et al. (2008) in the reading of Jeong & Chang (2009),
+// eq. 40, with the joint-space inertia M = L Lᵀ given per solve:
+//     x = Σ_i N_i J_i^{M²+} b_i,   J^{M²+} = M⁻¹ (A M⁻¹)⁺,
+//     N_1 = I,   N_{i+1} = N_i (I − J_i^{M²+} A_i) = N_i − (N_i M⁻¹ V)(M V)ᵀ
+// (B = A M⁻¹ = Pᵀ [L_B 0] Q by a row-pivoted LQ, rank rule rcond ‖B‖_F; B⁺ y =
+// Q_rᵀ argmin ‖L_B z − P y‖ and J^{M²+} A = M⁻¹ B⁺ B M = M⁻¹ V Vᵀ M with V = Q_rᵀ).
+// The answer of a solve with a mass matrix (unifying, operational_space), read by name.
+struct UnifyingResult {
+  std::vector<double> x;            // n
+  std::vector<double> residuals;    // k: ‖√w ∘ (A_i x − b_i)‖
+  std::vector<Index> ranks;         // k: the kept rank of each level's factored matrix
+  double flops = 0.0;               // floating-point operations of the solve
+  bool solved = false;       // false: a level's scale is outside [1e-100, 1e100], or M is
+                             // not positive definite (mass_positive_definite)
+  bool mass_positive_definite = false;   // the Cholesky factorization of M succeeded
+  bool finite = false;       // the residuals (and so x) are finite
+};
+
+class UnifyingSolver {
+ public:
+  UnifyingSolver(std::vector<Index> starts, Index n, double rcond);
+
+  // Solve one stack of the layout with the joint-space inertia M (n × n, row-major; its
+  // lower triangle is read). Throws InputError naming a non-finite entry, a √w ≤ 0 or a
+  // non-finite entry of M.
+  const UnifyingResult& solve(const StackArrays& data, const double* mass_matrix);
+
+  const UnifyingResult& result() const { return result_; }
+  Index rows() const { return M_; }
+  Index cols() const { return n_; }
+  Index levels() const { return k_; }
+
+ private:
+  double solve_level(Index lev, bool last);
+
+  std::vector<Index> starts_;
+  Index M_, n_, k_;
+  double rcond_;
+  ProjectionWorkspace work_;
+  UnifyingResult result_;
+  std::atomic<bool> busy_{false};
+};
+
+// Prioritized operational-space control (Khatib 1987; Sentis & Khatib 2005) with the
+// joint-space inertia M = L Lᵀ given per solve, for each level (x_0 = 0, N_0 = I):
+//     J_{i|prev} = A_i N_{i-1},  B = J_{i|prev} L⁻ᵀ = Pᵀ [L_B 0] Q (row-pivoted LQ, rank
+//     rule rcond ‖A_i L⁻ᵀ‖_F),  J̄ = L⁻ᵀ B⁺,
+//     x_i = x_{i-1} + N_{i-1} J̄ (b_i − A_i x_{i-1}),  N_i = N_{i-1} − (L⁻ᵀ V)(L V)ᵀ
+// (J̄ J_{i|prev} = L⁻ᵀ B⁺ B Lᵀ = L⁻ᵀ V Vᵀ Lᵀ with V = Q_rᵀ).
+struct OperationalSpaceOptions {
+  double rcond = 1e-9;
+  bool reproject = true;    // multiply each step by N_{i-1} once more (exact no-op)
+};
+
+class OperationalSpaceSolver {
+ public:
+  OperationalSpaceSolver(std::vector<Index> starts, Index n, OperationalSpaceOptions options);
+
+  // Solve one stack with the joint-space inertia M (n × n, row-major; its lower triangle
+  // is read); as UnifyingSolver::solve.
+  const UnifyingResult& solve(const StackArrays& data, const double* mass_matrix);
+
+  const UnifyingResult& result() const { return result_; }
+  Index rows() const { return M_; }
+  Index cols() const { return n_; }
+  Index levels() const { return k_; }
+
+ private:
+  double solve_level(Index lev, bool last);
+
+  std::vector<Index> starts_;
+  Index M_, n_, k_;
+  OperationalSpaceOptions options_;
+  ProjectionWorkspace work_;
+  UnifyingResult result_;     // x, residuals, ranks of J_{i|prev} L⁻ᵀ, flops, flags
+  std::atomic<bool> busy_{false};
+};
+
+// Throws InputError naming the first entry of A or b that is not finite, or the first
+// √w not finite and > 0 (M rows of n columns).
+void check_stack_entries(const StackArrays& data, Index M, Index n);
+
+}  // namespace prioik

@@ -1,0 +1,174 @@
+// Prioritized operational-space control, compiled (closed_form.hpp).
+#include <algorithm>
+#include <cmath>
+#include <utility>
+
+#include "prioik/closed_form.hpp"
+#include "projection_steps.hpp"
+
+namespace prioik {
+
+namespace {
+
+// v = L⁻¹ v (forward substitution, L in the lower triangle of chol); returns the flops
+double lower_solve(MatrixRef chol, double* v) {
+  const Index n = chol.rows;
+  for (Index a = 0; a < n; ++a) v[a] = (v[a] - dot(chol.row(a), v, a)) / chol(a, a);
+  return static_cast<double>(n * n);
+}
+
+// v = L⁻ᵀ v (back substitution on the transpose); returns the flops
+double lower_transpose_solve(MatrixRef chol, double* v) {
+  const Index n = chol.rows;
+  for (Index a = n - 1; a >= 0; --a) {
+    double acc = v[a];
+    for (Index c = a + 1; c < n; ++c) acc -= chol(c, a) * v[c];
+    v[a] = acc / chol(a, a);
+  }
+  return static_cast<double>(n * n);
+}
+
+// J = B N for a general N (n × n; the dynamically consistent projector is not symmetric),
+// row by row as combinations of N's rows; returns the flops
+double right_multiply(MatrixRef B, MatrixRef N, MatrixRef J) {
+  const Index n = N.cols;
+  for (Index i = 0; i < B.rows; ++i) {
+    double* Ji = J.row(i);
+    std::fill(Ji, Ji + n, 0.0);
+    const double* Bi = B.row(i);
+    for (Index k = 0; k < n; ++k) {
+      const double bik = Bi[k];
+      const double* Nk = N.row(k);
+      for (Index j = 0; j < n; ++j) Ji[j] += bik * Nk[j];
+    }
+  }
+  return 2.0 * static_cast<double>(B.rows * n * n);
+}
+
+}  // namespace
+
+OperationalSpaceSolver::OperationalSpaceSolver(std::vector<Index> starts, Index n,
+                                               OperationalSpaceOptions options)
+    : starts_(std::move(starts)), n_(n), options_(options) {
+  const Index m_max = projection::check_layout(starts_, n_, options_.rcond, 0.0);
+  k_ = static_cast<Index>(starts_.size()) - 1;
+  M_ = starts_.back();
+  work_ = ProjectionWorkspace(M_, n_, k_, m_max);
+  result_.x.assign(n_, 0.0);
+  result_.residuals.assign(k_, 0.0);
+  result_.ranks.assign(k_, 0);
+}
+
+double OperationalSpaceSolver::solve_level(Index lev, bool last) {
+  ProjectionWorkspace& ws = work_;
+  UnifyingResult& res = result_;
+  const Index s0 = starts_[lev], m = starts_[lev + 1] - s0, n = n_;
+  const MatrixRef chol{ws.chol.data(), n, n, n};
+  MatrixRef N{ws.N.data(), n, n, n};
+  MatrixRef J{ws.J.data(), m, n, n};
+  MatrixRef B{ws.B.data() + s0 * n, m, n, n};
+  // the scale ‖A_i L⁻ᵀ‖_F (row by row in ws.aux), B = A_i N L⁻ᵀ and e = b_i − A_i x
+  double flops = 0.0, scale2 = 0.0;
+  for (Index i = 0; i < m; ++i) {
+    std::copy(B.row(i), B.row(i) + n, ws.aux.begin());
+    flops += lower_solve(chol, ws.aux.data());
+    scale2 += dot(ws.aux.data(), ws.aux.data(), n);
+  }
+  flops += 2.0 * static_cast<double>(m * n) + 1.0;
+  if (ws.projected) {
+    flops += right_multiply(B, N, J);
+  } else {
+    std::copy(B.data, B.data + m * n, J.data);
+  }
+  for (Index i = 0; i < m; ++i) flops += lower_solve(chol, J.row(i));
+  flops += projection::multiply_rows(B, res.x.data(), ws.e.data());
+  for (Index i = 0; i < m; ++i) ws.e[i] = ws.c[s0 + i] - ws.e[i];
+  flops += static_cast<double>(m);
+  const double tol = options_.rcond * std::sqrt(scale2);
+  if (!(tol > 0.0)) return flops;
+  Reflectors H{MatrixRef{ws.V.data(), n, n, n}, ws.beta.data(), ws.pos.data(), 0};
+  Index r = 0;
+  double min_pivot = 0.0, margin = kInf;
+  flops += projection::pivoted_lq(J, ws.e.data(), tol, ws.norms.data(), H, &r, &min_pivot,
+                                  &margin);
+  res.ranks[lev] = r;
+  if (r == 0) return flops;
+  // the step J̄ e = L⁻ᵀ B⁺ e, reprojected by N_{i-1}
+  double* step = ws.step.data();
+  std::fill(step, step + n, 0.0);
+  flops += projection::level_unknowns(J, ws.e.data(), r, 0.0, step, ws);
+  flops += projection::apply_leading_reflectors(H, r - 1, step, n);
+  flops += lower_transpose_solve(chol, step);
+  const double* add = step;
+  if (options_.reproject && ws.projected) {
+    flops += projection::multiply_rows(N, step, ws.aux.data());
+    add = ws.aux.data();
+  }
+  for (Index j = 0; j < n; ++j) res.x[j] += add[j];
+  flops += static_cast<double>(n);
+  if (last) return flops;
+  // N_i = N_{i-1} − (L⁻ᵀ V)(L V)ᵀ, V = Q_rᵀ
+  MatrixRef left{ws.left.data(), r, n, n}, right{ws.right.data(), r, n, n};
+  for (Index l = 0; l < r; ++l) {
+    double* vl = ws.basis.data() + l * n;
+    std::fill(vl, vl + n, 0.0);
+    vl[l] = 1.0;
+    flops += projection::apply_leading_reflectors(H, l, vl, n);
+    double* rl = right.row(l);
+    for (Index a = 0; a < n; ++a) rl[a] = dot(chol.row(a), vl, a + 1);
+    flops += static_cast<double>(n * (n + 1));
+    std::copy(vl, vl + n, left.row(l));
+    flops += lower_transpose_solve(chol, left.row(l));
+  }
+  for (Index l = 0; l < r; ++l) {
+    const double* pl = left.row(l);
+    const double* ql = right.row(l);
+    for (Index a = 0; a < n; ++a) {
+      const double pa = pl[a];
+      double* Na = N.row(a);
+      for (Index b = 0; b < n; ++b) Na[b] -= pa * ql[b];
+    }
+  }
+  flops += 2.0 * static_cast<double>(r * n * n);
+  ws.projected = true;
+  return flops;
+}
+
+const UnifyingResult& OperationalSpaceSolver::solve(const StackArrays& data,
+                                                    const double* mass_matrix) {
+  projection::BusyGuard guard(busy_);
+  ProjectionWorkspace& ws = work_;
+  UnifyingResult& res = result_;
+  const bool weights_ok = weigh_rows(data.A, data.b, data.sqrt_weight, M_, n_, ws.B.data(),
+                                     ws.c.data());
+  const bool scales_ok = level_scales(ws.B.data(), ws.c.data(), M_, n_, starts_.data(), k_,
+                                      ws.scales.data());
+  res.flops = 0.0;
+  std::fill(res.x.begin(), res.x.end(), 0.0);
+  std::fill(res.ranks.begin(), res.ranks.end(), 0);
+  res.finite = false;
+  bool mass_finite = true;
+  for (Index i = 0; i < n_ * n_; ++i) {
+    ws.chol[i] = mass_matrix[i];
+    if (!std::isfinite(mass_matrix[i])) mass_finite = false;
+  }
+  if (!(weights_ok && scales_ok && mass_finite)) {
+    check_stack_entries(data, M_, n_);     // a NaN, inf or √w ≤ 0 is an input error
+    projection::check_mass_matrix(mass_matrix, n_);
+  }
+  res.mass_positive_definite = cholesky_lower(MatrixRef{ws.chol.data(), n_, n_, n_}, n_);
+  res.solved = weights_ok && scales_ok && res.mass_positive_definite;
+  if (!res.solved) return res;
+  projection::reset(ws);
+  double flops = projection::cholesky_flops(n_);
+  for (Index lev = 0; lev < k_; ++lev) flops += solve_level(lev, lev == k_ - 1);
+  res.flops = flops;
+  level_residuals(data.A, data.b, data.sqrt_weight, n_, starts_.data(), k_, res.x.data(),
+                  res.residuals.data());
+  double acc = 0.0;
+  for (Index lev = 0; lev < k_; ++lev) acc += res.residuals[lev];
+  res.finite = std::isfinite(acc);
+  return res;
+}
+
+}  // namespace prioik

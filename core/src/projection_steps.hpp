@@ -1,0 +1,69 @@
+// The steps shared by the compiled projector recursions (nullspace.cpp, chiaverini.cpp):
+// each works on a ProjectionWorkspace (closed_form.hpp), allocates nothing and returns the
+// floating-point operations it performed (counted as its loops execute).
+#pragma once
+
+#include <atomic>
+#include <string>
+#include <vector>
+
+#include "prioik/closed_form.hpp"
+
+namespace prioik::projection {
+
+// Marks a solver busy for the scope of a solve.
+class BusyGuard {
+ public:
+  explicit BusyGuard(std::atomic<bool>& busy) : busy_(busy) {
+    if (busy_.exchange(true, std::memory_order_acquire))
+      throw ConcurrentUse("a prepared solver serves one thread at a time: another thread is "
+                          "solving with it");
+  }
+  ~BusyGuard() { busy_.store(false, std::memory_order_release); }
+  BusyGuard(const BusyGuard&) = delete;
+  BusyGuard& operator=(const BusyGuard&) = delete;
+
+ private:
+  std::atomic<bool>& busy_;
+};
+
+std::string fmt(double v);
+
+// out[i] = X row i · y for the rows of X
+double multiply_rows(MatrixRef X, const double* y, double* out);
+
+// v = H_0 H_1 … H_from v (the reflectors t = from, …, 0 of H applied in turn; pos_t = t)
+double apply_leading_reflectors(const Reflectors& H, Index from, double* v, Index n);
+
+// The row-pivoted LQ of J (m × n) in place, J = Pᵀ [L 0] Q: one reflector per row whose
+// pivot norm exceeds tol (H.V row r, pos r, H.count = the rank), applied to the rows after
+// it; e permuted with the rows. Writes the rank, the smallest kept pivot norm (0: none) and
+// the decision's margin (the smaller of kept / tol and tol / the largest rejected).
+double pivoted_lq(MatrixRef J, double* e, double tol, double* norms, Reflectors& H, Index* rank,
+                  double* min_pivot, double* margin);
+
+// z[:r] = argmin ‖L z − e‖² + λ ‖z‖², L = J[:m, :r] lower trapezoidal (after pivoted_lq):
+// forward substitution when r = m and λ = 0, else small_least_squares (ws.L, ws.spare)
+double level_unknowns(MatrixRef J, const double* e, Index r, double damping, double* z,
+                      ProjectionWorkspace& ws);
+
+// J = B N (N = ws.N, symmetric; a copy of B while ws.N = I)
+double project_rows(MatrixRef B, const ProjectionWorkspace& ws, MatrixRef J);
+
+// N ← N − V Vᵀ for V = Q e_l (l < r; Q = H_0 … H_{r-1}) mapped by N and re-orthonormalised
+// inside range(N) (classical Gram-Schmidt, twice); N kept exactly symmetric
+double update_projector(ProjectionWorkspace& ws, const Reflectors& H, Index r);
+
+// N = I
+void reset(ProjectionWorkspace& ws);
+
+// Throws InputError on a malformed layout or options; returns the largest level's rows.
+Index check_layout(const std::vector<Index>& starts, Index n, double rcond, double damping);
+
+// The flops of cholesky_lower on n × n, as its loops are written
+double cholesky_flops(Index n);
+
+// Throws InputError naming the first entry of M (n × n) that is not finite
+void check_mass_matrix(const double* mass, Index n);
+
+}  // namespace prioik::projection
