@@ -197,7 +197,8 @@ class LevelCheck:
             ``|x| ≲ 1``; ``max(1, ‖x‖)`` for the minimum-norm step.
         ok: ``projected_gradient ≤ tol · scale``, and for a level also
             ``value_gap ≤ tol · max(1, residual²)`` unless ``projected_gradient`` is at the
-            rounding of the level's terms (``≤ X_PRECISION · scale``).
+            level's rounding (``≤ X_PRECISION · max(scale, ‖x‖ ‖√W_i A_i‖_F)``: its terms',
+            and that of coordinates known to ``X_PRECISION ‖x‖``).
         value_gap: ``projected_gradient²``: how much the level's value ``‖w_i‖²`` could
             still drop along the directions the KKT residual reads (for a least-squares
             level, the square of the reachable part of its weighted violation; with rows
@@ -533,8 +534,24 @@ def _precision(tol: float) -> float:
     return X_PRECISION * max(1.0, tol / DEFAULT_CERTIFICATE_TOL)
 
 
-def _level_passes(res: float, scale: float, violation: float, tol: float) -> bool:
-    """A level's verdict from its KKT residual ``res`` (task space), scale and violation.
+def _rounding(tol: float, scale: float, x_norm: float, level_norm: float) -> float:
+    """How far rounding alone may leave a level's weighted rows ``√W_i A_i x`` from
+    where they belong, at an answer checked at ``tol``: :func:`_precision` times the
+    larger of the level's ``scale`` (the rounding of its terms, ``|A_i| |x|`` and its
+    targets) and ``‖x‖ ‖√W_i A_i‖_F``. An answer computed through orthogonal
+    transformations has every coordinate known to about ``X_PRECISION ‖x‖``, whatever
+    its size, so a level that a huge ``x`` barely touches (its columns small where ``x``
+    is large) still has its rows moved by up to ``X_PRECISION ‖x‖ ‖√W_i A_i‖_F``: the
+    bound :func:`~hierarchy.layout.precision_limited_levels`,
+    :func:`~hierarchy.exact.ExactOptimum.floors` and the solvers' comparison with the
+    exact active-set answer read too."""
+    return _precision(tol) * max(scale, x_norm * level_norm)
+
+
+def _level_passes(res: float, scale: float, violation: float, tol: float,
+                  rounding: float) -> bool:
+    """A level's verdict from its KKT residual ``res`` (task space), scale, violation
+    and rounding (:func:`_rounding`).
 
     ``res ≤ tol · scale`` reads the residual against the size of the level's terms; on
     its own it lets the value ``‖w_i‖²`` sit ``res²`` above its optimum, up to
@@ -542,14 +559,12 @@ def _level_passes(res: float, scale: float, violation: float, tol: float) -> boo
     that carry its violation (rows of 1e4 beside rows of 1e-3: a point whose small rows
     were 0.1 off, the level 3e-4 above its optimum of 0, passed at 2.6e-11). So the
     value the level could still gain, ``res²``, must also be ``≤ tol · max(1, value)``,
-    the accuracy the value is asked to — except where ``res`` is at the rounding of the
-    level's terms (``≤ precision · scale``, :func:`_precision`), below which the answer
-    is not asked to go.
+    the accuracy the value is asked to — except where ``res`` is at the level's rounding
+    (``≤ rounding``, :func:`_rounding`), below which the answer is not asked to go.
     """
     if not (np.isfinite(res) and res <= tol * max(scale, 1e-300)):
         return False
-    return bool(res * res <= tol * max(1.0, violation * violation)
-                or res <= _precision(tol) * scale)
+    return bool(res * res <= tol * max(1.0, violation * violation) or res <= rounding)
 
 
 #: how many of a descent's best points :func:`_descent_drop` checks before it gives up
@@ -812,7 +827,8 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
             scale = np.nan
         res, descents = kkt(g, WA[(side == 2) | (v != 0)], an) if finite else (np.nan, [])
         violation = level_scale(sw * v)
-        ok = _level_passes(res, scale, violation, tol)
+        rounding = _rounding(tol, scale, xn, an) if finite else np.nan
+        ok = _level_passes(res, scale, violation, tol, rounding)
         gap = float(res) * float(res)
         if ok and res > 0:
             # the KKT residual reads directions of small gain at 1/‖B‖ or 1/floor, where
@@ -822,7 +838,6 @@ def _check_lexicographic(data: StackData, x: np.ndarray, tol: float, rcond: floa
             # when a point that keeps the rows above lowers the value
             # — beyond the tolerance and the rounding of both points' values (x' within
             # ‖x‖ of x: its terms at most twice x's)
-            rounding = _precision(tol) * scale
             limit = tol * max(1.0, violation * violation) + 8 * rounding * (
                 2 * violation + 2 * rounding)
             # (the value cannot drop by more than itself)

@@ -1,4 +1,5 @@
-"""Test configuration: single-threaded BLAS (small matrices; see prioik.benchmarks.threads).
+"""Test configuration: single-threaded BLAS (small matrices; see prioik.benchmarks.threads)
+and the hypothesis profile (``ci`` where the environment variable ``CI`` is set).
 
 Set here, for the test process only: importing prioik changes no environment variable.
 """
@@ -7,6 +8,19 @@ import os
 
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
+
+# hypothesis: in CI (the environment variable CI set) every run draws the same examples
+# (derandomize, no example database) and a failure prints the blob that replays it
+# (@reproduce_failure); elsewhere the default profile keeps drawing new examples.
+# (tests/core runs in the core-only environment, without hypothesis.)
+try:
+    from hypothesis import settings as _hypothesis_settings
+except ImportError:
+    _hypothesis_settings = None
+if _hypothesis_settings is not None:
+    _hypothesis_settings.register_profile("ci", derandomize=True, database=None,
+                                          print_blob=True)
+    _hypothesis_settings.load_profile("ci" if os.environ.get("CI") else "default")
 
 
 def assert_truthful(sol, stack, metric=None):

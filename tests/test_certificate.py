@@ -767,3 +767,37 @@ def test_a_lower_point_is_found_against_worse_answers_and_not_against_the_optimu
         assert got is not None and got[0] == first, (got, first)
         refuted += 1
     assert refuted > 0 or not w.any()
+
+
+NESTED = ("reference", "nullspace", "hierarchical_active_set", "extended_jacobian")
+
+
+@pytest.mark.parametrize("name", NESTED)
+def test_a_level_a_huge_x_barely_touches_is_read_at_its_coordinates_rounding(name):
+    """A hypothesis equality stack (n 3): level 0 (rank 2) leaves one direction, along
+    which level 1 (norm 8.4e-10) drives ‖x‖ to 1.8e13; level 0's optimum is 0. Every
+    nested path leaves level 0 at the rounding of its null basis times that step
+    (‖A_0 Z_1‖ ~ ε ‖A_0‖, times 1.8e13: 4e-4 to 1.7e-3), within the rounding of
+    coordinates known to X_PRECISION ‖x‖, ``ρ_0 = X_PRECISION ‖x‖ ‖A_0‖_F`` (2.1e-2), and
+    within what the 50-digit truth says float64 can tell apart. The check passes them,
+    and rejects the same answer moved off level 0 by 10 ρ_0, which the truth rejects
+    too. (Read against ``|A_0| |x|``, 29x smaller, the rounding floor failed the
+    reference's answer.)"""
+    from prioik.hierarchy import load_stack
+    from prioik.hierarchy.exact import exact_optimum
+    stack = load_stack(FUZZ / "equality-hypothesis-288.json")
+    truth = exact_optimum(stack)
+    assert truth is not None and not truth.ambiguous and truth.values[0] < 1e-60
+    x = formulations.solve(stack, name).x
+    A0, b0 = stack.levels[0].A, stack.levels[0].b
+    rho = X_PRECISION * np.linalg.norm(x) * np.linalg.norm(A0)
+    assert np.linalg.norm(A0 @ x - b0) < rho / 2
+    assert np.abs(truth.excess(x)).max() < 0.5
+    report = check_lexicographic(stack, x)
+    assert report.ok, str(report)
+    off = np.linalg.pinv(A0) @ (10 * rho * np.array([0.6, 0.8]))
+    moved = x + off
+    assert np.linalg.norm(A0 @ moved - b0) > 5 * rho
+    assert truth.excess(moved)[0] > 10
+    bad = check_lexicographic(stack, moved)
+    assert not bad.ok and bad.fault_level == 0, str(bad)
