@@ -282,3 +282,15 @@ def test_the_refining_solver_is_prepared_once():
     assert solver._refining is refiner and refiner._refining is inner
     assert first.status == again.status == "optimal"
     assert np.array_equal(first.x, again.x)
+
+
+@pytest.mark.parametrize("name", ["reference", "extended_jacobian", "nullspace",
+                                  "hierarchical_active_set"])
+def test_a_level_a_huge_x_barely_touches_gets_the_same_verdict(name):
+    """‖x‖ = 1.8e13 along a null vector of level 0: each formulation's answer leaves
+    level 0 at its coordinates' rounding (16 eps ‖x‖ ‖A_0‖_F); both certificates read it
+    there (the same verdict, whichever way it goes)."""
+    stack = load_stack(DATA / "fuzz" / "equality-hypothesis-288.json")
+    x = prioik.solve(stack, name).x
+    python, cpp = _verdicts(stack.data, x, False)
+    assert python == cpp

@@ -28,11 +28,19 @@ constexpr double kDefaultTol = 1e-8;
 
 double precision(double tol) { return cert::kXPrecision * std::max(1.0, tol / kDefaultTol); }
 
+/// _rounding: how far rounding alone may leave a level's weighted rows from where they
+/// belong — precision(tol) times the larger of the level's scale (its terms) and
+/// ‖x‖ ‖√W_i A_i‖_F (coordinates known to X_PRECISION ‖x‖, however small the level's
+/// columns where x is large)
+double level_rounding(double tol, double scale, double x_norm, double level_norm) {
+    return precision(tol) * std::max(scale, x_norm * level_norm);
+}
+
 /// _level_passes: the residual against the level's scale, and its square (what the
-/// value could still gain) against the value, unless it is at the terms' rounding
-bool level_passes(double res, double scale, double violation, double tol) {
+/// value could still gain) against the value, unless it is at the level's rounding
+bool level_passes(double res, double scale, double violation, double tol, double rounding) {
     if (!(std::isfinite(res) && res <= tol * std::max(scale, 1e-300))) return false;
-    return res * res <= tol * std::max(1.0, violation * violation) || res <= precision(tol) * scale;
+    return res * res <= tol * std::max(1.0, violation * violation) || res <= rounding;
 }
 
 bool ambiguous_decision(const double* values, index count, double tol) {
@@ -164,11 +172,11 @@ void Certificate::check_level(const Stack& s, const double* x, double x_norm, in
     double res = kkt(w.g.data(), true, m_b, an, level, out, descents);
     for (index r = 0; r < mi; ++r) w.rhs[r] = sw[r] * v[r];
     const double violation = robust_norm(w.rhs.data(), mi);
-    bool ok = level_passes(res, scale, violation, tol);
+    const double rounding = level_rounding(tol, scale, x_norm, an);
+    bool ok = level_passes(res, scale, violation, tol, rounding);
     double gap = res * res;
     if (ok && res > 0) {
         // walk the descent directions: a verified drop beyond the tolerance rejects x
-        const double rounding = precision(tol) * scale;
         const double limit = tol * std::max(1.0, violation * violation) +
                              8 * rounding * (2 * violation + 2 * rounding);
         if (violation * violation > limit) {
