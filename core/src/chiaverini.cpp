@@ -62,14 +62,11 @@ const ChiaveriniResult& ChiaveriniSolver::solve(const StackArrays& data) {
   projection::BusyGuard guard(busy_);
   ProjectionWorkspace& ws = work_;
   ChiaveriniResult& res = result_;
-  const bool weights_ok = weigh_rows(data.A, data.b, data.sqrt_weight, M_, n_, ws.B.data(),
-                                     ws.c.data());
-  const bool scales_ok = level_scales(ws.B.data(), ws.c.data(), M_, n_, starts_.data(), k_,
-                                      ws.scales.data());
+  const bool stack_ok = projection::weigh_stack(data, starts_, n_, ws);
   res.flops = 0.0;
   std::fill(res.x.begin(), res.x.end(), 0.0);
   std::fill(res.task_solutions.begin(), res.task_solutions.end(), 0.0);
-  res.solved = weights_ok && scales_ok;
+  res.solved = stack_ok;
   if (!res.solved) {
     check_stack_entries(data, M_, n_);     // a NaN, inf or √w ≤ 0 is an input error
     res.finite = false;
@@ -79,11 +76,8 @@ const ChiaveriniResult& ChiaveriniSolver::solve(const StackArrays& data) {
   double flops = 0.0;
   for (Index lev = 0; lev < k_; ++lev) flops += solve_level(lev, lev == k_ - 1);
   res.flops = flops;
-  level_residuals(data.A, data.b, data.sqrt_weight, n_, starts_.data(), k_, res.x.data(),
-                  res.residuals.data());
-  double acc = 0.0;
-  for (Index lev = 0; lev < k_; ++lev) acc += res.residuals[lev];
-  res.finite = std::isfinite(acc);
+  res.finite =
+      projection::stack_residuals(data, starts_, n_, res.x.data(), res.residuals.data());
   return res;
 }
 

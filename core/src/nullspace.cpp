@@ -99,16 +99,13 @@ const NullspaceResult& NullspaceSolver::solve(const StackArrays& data) {
   projection::BusyGuard guard(busy_);
   ProjectionWorkspace& ws = work_;
   NullspaceResult& res = result_;
-  const bool weights_ok = weigh_rows(data.A, data.b, data.sqrt_weight, M_, n_, ws.B.data(),
-                                     ws.c.data());
-  const bool scales_ok = level_scales(ws.B.data(), ws.c.data(), M_, n_, starts_.data(), k_,
-                                      ws.scales.data());
+  const bool stack_ok = projection::weigh_stack(data, starts_, n_, ws);
   res.flops = 0.0;
   std::fill(res.x.begin(), res.x.end(), 0.0);
   std::fill(res.ranks.begin(), res.ranks.end(), 0);
   std::fill(res.min_pivots.begin(), res.min_pivots.end(), 0.0);
   std::fill(res.margins.begin(), res.margins.end(), kInf);
-  res.solved = weights_ok && scales_ok;
+  res.solved = stack_ok;
   if (!res.solved) {
     check_stack_entries(data, M_, n_);     // a NaN, inf or √w ≤ 0 is an input error
     res.finite = res.ambiguous = false;
@@ -118,15 +115,11 @@ const NullspaceResult& NullspaceSolver::solve(const StackArrays& data) {
   double flops = 0.0;
   for (Index lev = 0; lev < k_; ++lev) flops += solve_level(lev, lev == k_ - 1);
   res.flops = flops;
-  level_residuals(data.A, data.b, data.sqrt_weight, n_, starts_.data(), k_, res.x.data(),
-                  res.residuals.data());
-  double acc = 0.0;
+  res.finite =
+      projection::stack_residuals(data, starts_, n_, res.x.data(), res.residuals.data());
   res.ambiguous = false;
-  for (Index lev = 0; lev < k_; ++lev) {
-    acc += res.residuals[lev];
+  for (Index lev = 0; lev < k_; ++lev)
     if (res.margins[lev] <= kAmbiguity) res.ambiguous = true;
-  }
-  res.finite = std::isfinite(acc);
   return res;
 }
 

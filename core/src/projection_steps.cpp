@@ -196,9 +196,7 @@ double update_projector(ProjectionWorkspace& ws, const Reflectors& H, Index r) {
   double flops = 0.0;
   for (Index l = 0; l < r; ++l) {
     double* bl = basis.row(l);
-    std::fill(bl, bl + n, 0.0);
-    bl[l] = 1.0;
-    flops += apply_leading_reflectors(H, l, bl, n);
+    flops += reflector_column(H, l, bl, n);
     if (ws.projected) {
       flops += multiply_rows(N, bl, ws.aux.data());
       std::copy(ws.aux.begin(), ws.aux.end(), bl);
@@ -215,6 +213,59 @@ void reset(ProjectionWorkspace& ws) {
   for (Index a = 0; a < n; ++a)
     for (Index b = 0; b < n; ++b) ws.N[a * n + b] = a == b ? 1.0 : 0.0;
   ws.projected = false;
+}
+
+double reflector_column(const Reflectors& H, Index l, double* v, Index n) {
+  std::fill(v, v + n, 0.0);
+  v[l] = 1.0;
+  return apply_leading_reflectors(H, l, v, n);
+}
+
+double subtract_products(MatrixRef N, MatrixRef left, MatrixRef right, Index r) {
+  const Index n = N.cols;
+  for (Index l = 0; l < r; ++l) {
+    const double* pl = left.row(l);
+    const double* ql = right.row(l);
+    for (Index a = 0; a < n; ++a) {
+      const double pa = pl[a];
+      double* Na = N.row(a);
+      for (Index b = 0; b < n; ++b) Na[b] -= pa * ql[b];
+    }
+  }
+  return 2.0 * static_cast<double>(r * n * n);
+}
+
+bool weigh_stack(const StackArrays& data, const std::vector<Index>& starts, Index n,
+                 ProjectionWorkspace& ws) {
+  const Index M = starts.back(), k = static_cast<Index>(starts.size()) - 1;
+  const bool weights_ok = weigh_rows(data.A, data.b, data.sqrt_weight, M, n, ws.B.data(),
+                                     ws.c.data());
+  const bool scales_ok = level_scales(ws.B.data(), ws.c.data(), M, n, starts.data(), k,
+                                      ws.scales.data());
+  return weights_ok && scales_ok;
+}
+
+bool factor_mass_matrix(const StackArrays& data, const double* mass, bool stack_ok, Index n,
+                        ProjectionWorkspace& ws) {
+  bool mass_finite = true;
+  for (Index i = 0; i < n * n; ++i) {
+    ws.chol[i] = mass[i];
+    if (!std::isfinite(mass[i])) mass_finite = false;
+  }
+  if (!(stack_ok && mass_finite)) {
+    check_stack_entries(data, static_cast<Index>(ws.c.size()), n);   // a NaN, inf or √w ≤ 0
+    check_mass_matrix(mass, n);
+  }
+  return cholesky_lower(MatrixRef{ws.chol.data(), n, n, n}, n);
+}
+
+bool stack_residuals(const StackArrays& data, const std::vector<Index>& starts, Index n,
+                     const double* x, double* residuals) {
+  const Index k = static_cast<Index>(starts.size()) - 1;
+  level_residuals(data.A, data.b, data.sqrt_weight, n, starts.data(), k, x, residuals);
+  double acc = 0.0;
+  for (Index lev = 0; lev < k; ++lev) acc += residuals[lev];
+  return std::isfinite(acc);
 }
 
 Index check_layout(const std::vector<Index>& starts, Index n, double rcond, double damping) {

@@ -57,6 +57,29 @@ double update_projector(ProjectionWorkspace& ws, const Reflectors& H, Index r);
 // N = I
 void reset(ProjectionWorkspace& ws);
 
+// v = Q e_l, Q = H_0 … H_{l} (the column l of the reflectors' product)
+double reflector_column(const Reflectors& H, Index l, double* v, Index n);
+
+// N ← N − Σ_{l<r} p_l q_lᵀ (p_l, q_l the rows l of left and right; N general)
+double subtract_products(MatrixRef N, MatrixRef left, MatrixRef right, Index r);
+
+// ws.B, ws.c = √w ∘ A, √w ∘ b and ws.scales = the levels' scales; whether every row and
+// level is usable (√w finite and > 0, entries finite, scales in [1e-100, 1e100]). Both
+// checks always run.
+bool weigh_stack(const StackArrays& data, const std::vector<Index>& starts, Index n,
+                 ProjectionWorkspace& ws);
+
+// ws.chol = the lower Cholesky factor of the mass matrix (n × n, row-major). Throws
+// InputError naming a non-finite entry of the stack (when !stack_ok) or of the mass matrix;
+// returns whether the factorization succeeded (M positive definite).
+bool factor_mass_matrix(const StackArrays& data, const double* mass, bool stack_ok, Index n,
+                        ProjectionWorkspace& ws);
+
+// residuals[i] = ‖√w ∘ (A_i x − b_i)‖ for the k = starts.size() − 1 levels; whether their
+// sum (and so x) is finite
+bool stack_residuals(const StackArrays& data, const std::vector<Index>& starts, Index n,
+                     const double* x, double* residuals);
+
 // Throws InputError on a malformed layout or options; returns the largest level's rows.
 Index check_layout(const std::vector<Index>& starts, Index n, double rcond, double damping);
 

@@ -73,9 +73,7 @@ double UnifyingSolver::solve_level(Index lev, bool last) {
   MatrixRef left{ws.left.data(), r, n, n}, right{ws.right.data(), r, n, n};
   for (Index l = 0; l < r; ++l) {
     double* vl = ws.basis.data() + l * n;
-    std::fill(vl, vl + n, 0.0);
-    vl[l] = 1.0;
-    flops += projection::apply_leading_reflectors(H, l, vl, n);
+    flops += projection::reflector_column(H, l, vl, n);
     // M V from the factor: M v = L (Lᵀ v)
     double* rl = right.row(l);
     for (Index a = 0; a < n; ++a) {
@@ -92,16 +90,7 @@ double UnifyingSolver::solve_level(Index lev, bool last) {
       std::copy(ws.aux.begin(), ws.aux.end(), left.row(l));
     }
   }
-  for (Index l = 0; l < r; ++l) {
-    const double* pl = left.row(l);
-    const double* ql = right.row(l);
-    for (Index a = 0; a < n; ++a) {
-      const double pa = pl[a];
-      double* Na = N.row(a);
-      for (Index b = 0; b < n; ++b) Na[b] -= pa * ql[b];
-    }
-  }
-  flops += 2.0 * static_cast<double>(r * n * n);
+  flops += projection::subtract_products(N, left, right, r);
   ws.projected = true;
   return flops;
 }
@@ -110,35 +99,21 @@ const UnifyingResult& UnifyingSolver::solve(const StackArrays& data, const doubl
   projection::BusyGuard guard(busy_);
   ProjectionWorkspace& ws = work_;
   UnifyingResult& res = result_;
-  const bool weights_ok = weigh_rows(data.A, data.b, data.sqrt_weight, M_, n_, ws.B.data(),
-                                     ws.c.data());
-  const bool scales_ok = level_scales(ws.B.data(), ws.c.data(), M_, n_, starts_.data(), k_,
-                                      ws.scales.data());
+  const bool stack_ok = projection::weigh_stack(data, starts_, n_, ws);
   res.flops = 0.0;
   std::fill(res.x.begin(), res.x.end(), 0.0);
   std::fill(res.ranks.begin(), res.ranks.end(), 0);
   res.finite = false;
-  bool mass_finite = true;
-  for (Index i = 0; i < n_ * n_; ++i) {
-    ws.chol[i] = mass_matrix[i];
-    if (!std::isfinite(mass_matrix[i])) mass_finite = false;
-  }
-  if (!(weights_ok && scales_ok && mass_finite)) {
-    check_stack_entries(data, M_, n_);     // a NaN, inf or √w ≤ 0 is an input error
-    projection::check_mass_matrix(mass_matrix, n_);
-  }
-  res.mass_positive_definite = cholesky_lower(MatrixRef{ws.chol.data(), n_, n_, n_}, n_);
-  res.solved = weights_ok && scales_ok && res.mass_positive_definite;
+  res.mass_positive_definite = projection::factor_mass_matrix(data, mass_matrix, stack_ok, n_,
+                                                              ws);
+  res.solved = stack_ok && res.mass_positive_definite;
   if (!res.solved) return res;
   projection::reset(ws);
   double flops = projection::cholesky_flops(n_);
   for (Index lev = 0; lev < k_; ++lev) flops += solve_level(lev, lev == k_ - 1);
   res.flops = flops;
-  level_residuals(data.A, data.b, data.sqrt_weight, n_, starts_.data(), k_, res.x.data(),
-                  res.residuals.data());
-  double acc = 0.0;
-  for (Index lev = 0; lev < k_; ++lev) acc += res.residuals[lev];
-  res.finite = std::isfinite(acc);
+  res.finite =
+      projection::stack_residuals(data, starts_, n_, res.x.data(), res.residuals.data());
   return res;
 }
 
