@@ -38,8 +38,9 @@ import numpy as np
 
 from prioik.hierarchy import StackData, StackLayout, TaskStack, nested_null_spaces
 
-from .base import Capabilities, CoreInputError, Outcome, ReportVariant, solve_equilibrated
-from .nullspace import _core, _resolve_kernel, check_nonnegative, generalized_inverse
+from ._compiled import _core, resolve_kernel, solve_compiled, solve_rescaled
+from .base import Capabilities, Outcome, ReportVariant
+from .nullspace import check_nonnegative, generalized_inverse
 from .options import Option, rcond_option, validate_options
 
 NAME = "chiaverini"
@@ -102,7 +103,7 @@ class Prepared:
 
     def __init__(self, layout: StackLayout, options: dict) -> None:
         self.layout = layout
-        self.kernel = _resolve_kernel(options["kernel"])
+        self.kernel = resolve_kernel(options["kernel"])
         check_nonnegative(damping=options["damping"], rcond=options["rcond"])
         self.damping = float(options["damping"])
         self.rcond = float(options["rcond"])
@@ -119,14 +120,9 @@ class Prepared:
         """
         if not self.compiled:
             return solve_readable(data.as_stack(), damping=self.damping, rcond=self.rcond)
-        try:
-            res = self._core.solve(data.A, data.b, data.sqrt_weight)
-        except CoreInputError:
-            data.check()     # names the task, level and row of a NaN, inf or bad √w
-            raise
+        res = solve_compiled(self._core, data)
         if not res.solved:
-            return solve_equilibrated(self.solve, data, "the rows' scale overflows float64 "
-                                      "(‖A_i‖_F² is not finite): scale the tasks down")
+            return solve_rescaled(self.solve, data)
         own = res.task_solutions.reshape(self.layout.k, self.layout.n)
         info = {"task_solutions": list(own), "damping": self.damping, "kernel": "cpp",
                 "flops": res.flops}

@@ -59,6 +59,7 @@ from prioik.hierarchy import (
 )
 from prioik.hierarchy.linalg import numpy_svd
 
+from ._compiled import _core, core_error
 from .base import (
     Capabilities,
     CoreInputError,
@@ -70,13 +71,6 @@ from .base import (
     solve_equilibrated,
 )
 from .options import Option, rcond_option, validate_options
-
-try:  # the compiled C++ core (core/, built by pip install)
-    from prioik import _core
-    _core_error = ""
-except ImportError as exc:  # pragma: no cover - built with the package
-    _core = None
-    _core_error = f"{type(exc).__name__}: {exc}"
 
 
 def step_bound_value(value):
@@ -159,7 +153,7 @@ def _resolve_kernel(kernel: str, n: int = 0) -> str:
         return "lapack"
     if _core is None:
         raise FormulationError(f"kernel={kernel!r} needs prioik's compiled core "
-                               f"(prioik._core): {_core_error}; reinstall prioik "
+                               f"(prioik._core): {core_error}; reinstall prioik "
                                f"(`pip install -e .`) to build it")
     return "cpp"
 

@@ -44,23 +44,15 @@ from prioik.hierarchy import (
     rank_threshold,
 )
 
+from ._compiled import _core, resolve_kernel, solve_compiled, solve_rescaled
 from .base import (
     Capabilities,
-    CoreInputError,
     FormulationError,
     Outcome,
     ReportVariant,
     in_original_units,
-    solve_equilibrated,
 )
 from .options import Option, rcond_option, validate_options
-
-try:  # the compiled C++ core (core/, built by pip install)
-    from prioik import _core
-    _core_error = ""
-except ImportError as exc:  # pragma: no cover - built with the package
-    _core = None
-    _core_error = f"{type(exc).__name__}: {exc}"
 
 NAME = "nullspace"
 DESCRIPTION = "recursive null-space projection (Nakamura 1987), damped LS inverse option"
@@ -268,21 +260,6 @@ def solve_batch(stacks: list[TaskStack], *, damping: float = 0.0,
         near |= amb
     return X, ["approximate" if damping > 0 or amb else "optimal" for amb in near]
 
-def _resolve_kernel(kernel: str) -> str:
-    """``"cpp"`` or ``"numpy"`` for the ``kernel`` option (``"auto"``: cpp where the
-    compiled core is built).
-
-    Raises:
-        FormulationError: ``kernel="cpp"`` and the compiled core is not importable here.
-    """
-    if kernel == "numpy" or (kernel == "auto" and _core is None):
-        return "numpy"
-    if _core is None:
-        raise FormulationError(f"kernel='cpp' needs prioik's compiled core (prioik._core): "
-                               f"{_core_error}; reinstall prioik (`pip install -e .`)")
-    return "cpp"
-
-
 class Prepared:
     """Null-space projection prepared for one layout: options checked, and on the
     compiled kernel (``kernel="cpp"``) the C++ solver with every workspace allocated
@@ -303,7 +280,7 @@ class Prepared:
 
     def __init__(self, layout: StackLayout, options: dict) -> None:
         self.layout = layout
-        self.kernel = _resolve_kernel(options["kernel"])
+        self.kernel = resolve_kernel(options["kernel"])
         check_nonnegative(damping=options["damping"], rcond=options["rcond"])
         self.damping = float(options["damping"])
         self.rcond = float(options["rcond"])
@@ -325,14 +302,9 @@ class Prepared:
             out = solve_readable(stack, damping=self.damping, rcond=self.rcond,
                                  reproject=self.reproject)
             return in_original_units(out, data, levels) if levels else out
-        try:
-            res = self._core.solve(data.A, data.b, data.sqrt_weight)
-        except CoreInputError:
-            data.check()     # names the task, level and row of a NaN, inf or bad √w
-            raise
+        res = solve_compiled(self._core, data)
         if not res.solved:
-            return solve_equilibrated(self.solve, data, "the rows' scale overflows float64 "
-                                      "(‖A_i‖_F² is not finite): scale the tasks down")
+            return solve_rescaled(self.solve, data)
         info = {"rank_profile": res.ranks.tolist(),
                 "min_singular_values": res.min_pivots.tolist(), "damping": self.damping,
                 "kernel": "cpp", "flops": res.flops}

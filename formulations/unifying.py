@@ -49,15 +49,14 @@ from scipy.linalg import cho_factor, cho_solve
 
 from prioik.hierarchy import DEFAULT_RCOND, StackData, StackLayout, TaskStack
 
+from ._compiled import _core, mass_matrix_outcome, resolve_kernel, solve_compiled, solve_rescaled
 from .base import (
     Capabilities,
-    CoreInputError,
     FormulationError,
     Outcome,
     ReportVariant,
-    solve_equilibrated,
 )
-from .nullspace import _core, _resolve_kernel, check_nonnegative, generalized_inverse
+from .nullspace import check_nonnegative, generalized_inverse
 from .options import Option, rcond_option, validate_options
 
 NAME = "unifying"
@@ -178,7 +177,7 @@ class Prepared:
     def __init__(self, layout: StackLayout, options: dict) -> None:
         self.layout = layout
         self.options = options
-        self.kernel = _resolve_kernel(options["kernel"])
+        self.kernel = resolve_kernel(options["kernel"])
         check_nonnegative(rcond=options["rcond"])
         self.rcond = float(options["rcond"])
         self.compiled = self.kernel == "cpp"
@@ -201,25 +200,11 @@ class Prepared:
             return solve_readable(data.as_stack(), mass_matrix=mass, bias=bias,
                                   rcond=self.rcond)
         M = np.ascontiguousarray(mass, dtype=np.float64)
-        try:
-            res = self._core.solve(data.A, data.b, data.sqrt_weight, M)
-        except CoreInputError as exc:
-            if "mass_matrix" not in str(exc):
-                data.check()     # names the task, level and row of a NaN, inf or bad √w
-            raise
-        if not res.mass_positive_definite:
-            cholesky(M)      # raises, with M's smallest eigenvalue
-            raise FormulationError("mass_matrix must be positive definite (its Cholesky "
-                                   "factorization broke down)")
-        if not res.solved:
-            return solve_equilibrated(lambda d: self.solve(d, options), data,
-                                      "the rows' scale overflows float64 (‖A_i‖_F² is not "
-                                      "finite): scale the tasks down")
-        info = {"rank_profile": res.ranks.tolist(), "kernel": "cpp", "flops": res.flops}
-        x = res.x
-        if bias is not None:
-            info["tau"] = M @ x + np.asarray(bias, dtype=np.float64)
-        return Outcome(x, "approximate", info, res.residuals)
+        res = solve_compiled(self._core, data, M)
+        out = mass_matrix_outcome(res, M, bias, "approximate", cholesky)
+        if out is None:
+            return solve_rescaled(lambda d: self.solve(d, options), data)
+        return out
 
 # ------------------------------------------------------------------------ reports
 #: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
