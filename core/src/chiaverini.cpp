@@ -59,7 +59,7 @@ double ChiaveriniSolver::solve_level(Index lev, bool last) {
 }
 
 const ChiaveriniResult& ChiaveriniSolver::solve(const StackArrays& data) {
-  projection::BusyGuard guard(busy_);
+  BusyGuard guard(busy_);
   ProjectionWorkspace& ws = work_;
   ChiaveriniResult& res = result_;
   const bool stack_ok = projection::weigh_stack(data, starts_, n_, ws);

@@ -6,6 +6,7 @@
 #include <thread>
 #include <utility>
 
+#include "busy_guard.hpp"
 #include "vector_clones.hpp"
 
 namespace prioik {
@@ -23,22 +24,6 @@ bool level_extreme(const double* A, Index n, double lev_sq, Index s0, Index s1) 
   }
   return false;
 }
-
-// Marks a solver busy for the scope of a solve.
-class BusyGuard {
- public:
-  explicit BusyGuard(std::atomic<bool>& busy) : busy_(busy) {
-    if (busy_.exchange(true, std::memory_order_acquire))
-      throw ConcurrentUse("a prepared solver serves one thread at a time: another thread is "
-                          "solving with it");
-  }
-  ~BusyGuard() { busy_.store(false, std::memory_order_release); }
-  BusyGuard(const BusyGuard&) = delete;
-  BusyGuard& operator=(const BusyGuard&) = delete;
-
- private:
-  std::atomic<bool>& busy_;
-};
 
 std::string fmt(double v) {
   std::ostringstream s;

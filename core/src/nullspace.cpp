@@ -96,7 +96,7 @@ double NullspaceSolver::solve_level(Index lev, bool last) {
 }
 
 const NullspaceResult& NullspaceSolver::solve(const StackArrays& data) {
-  projection::BusyGuard guard(busy_);
+  BusyGuard guard(busy_);
   ProjectionWorkspace& ws = work_;
   NullspaceResult& res = result_;
   const bool stack_ok = projection::weigh_stack(data, starts_, n_, ws);

@@ -125,7 +125,7 @@ double OperationalSpaceSolver::solve_level(Index lev, bool last) {
 
 const UnifyingResult& OperationalSpaceSolver::solve(const StackArrays& data,
                                                     const double* mass_matrix) {
-  projection::BusyGuard guard(busy_);
+  BusyGuard guard(busy_);
   ProjectionWorkspace& ws = work_;
   UnifyingResult& res = result_;
   const bool stack_ok = projection::weigh_stack(data, starts_, n_, ws);

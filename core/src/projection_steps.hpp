@@ -1,31 +1,16 @@
-// The steps shared by the compiled projector recursions (nullspace.cpp, chiaverini.cpp):
-// each works on a ProjectionWorkspace (closed_form.hpp), allocates nothing and returns the
-// floating-point operations it performed (counted as its loops execute).
+// The steps shared by the compiled closed forms (nullspace, chiaverini, unifying,
+// operational_space): each works on a ProjectionWorkspace (closed_form.hpp), allocates
+// nothing and returns the floating-point operations it performed (counted as its loops
+// execute).
 #pragma once
 
-#include <atomic>
 #include <string>
 #include <vector>
 
+#include "busy_guard.hpp"
 #include "prioik/closed_form.hpp"
 
 namespace prioik::projection {
-
-// Marks a solver busy for the scope of a solve.
-class BusyGuard {
- public:
-  explicit BusyGuard(std::atomic<bool>& busy) : busy_(busy) {
-    if (busy_.exchange(true, std::memory_order_acquire))
-      throw ConcurrentUse("a prepared solver serves one thread at a time: another thread is "
-                          "solving with it");
-  }
-  ~BusyGuard() { busy_.store(false, std::memory_order_release); }
-  BusyGuard(const BusyGuard&) = delete;
-  BusyGuard& operator=(const BusyGuard&) = delete;
-
- private:
-  std::atomic<bool>& busy_;
-};
 
 std::string fmt(double v);
 

@@ -96,7 +96,7 @@ double UnifyingSolver::solve_level(Index lev, bool last) {
 }
 
 const UnifyingResult& UnifyingSolver::solve(const StackArrays& data, const double* mass_matrix) {
-  projection::BusyGuard guard(busy_);
+  BusyGuard guard(busy_);
   ProjectionWorkspace& ws = work_;
   UnifyingResult& res = result_;
   const bool stack_ok = projection::weigh_stack(data, starts_, n_, ws);
