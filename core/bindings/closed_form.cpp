@@ -113,9 +113,9 @@ void bind_closed_form(nb::module_& m) {
            nb::arg("residuals") = nb::none(), nb::rv_policy::reference_internal,
            "Solve one stack (A: M × n, b and sqrt_weight: M; C-contiguous float64); x (n) "
            "and residuals (k), when given, receive the answer's.")
-      .def_prop_ro("rows", &NullspaceSolver::rows)
-      .def_prop_ro("cols", &NullspaceSolver::cols)
-      .def_prop_ro("levels", &NullspaceSolver::levels);
+      .def_prop_ro("rows", [](const NullspaceSolver& s) { return s.rows(); })
+      .def_prop_ro("cols", [](const NullspaceSolver& s) { return s.cols(); })
+      .def_prop_ro("levels", [](const NullspaceSolver& s) { return s.levels(); });
 
   nb::class_<ChiaveriniResult>(
       m, "ChiaveriniResult",
@@ -149,9 +149,9 @@ void bind_closed_form(nb::module_& m) {
       .def("solve", &solve_chiaverini, nb::arg("A").none(), nb::arg("b").none(),
            nb::arg("sqrt_weight").none(), nb::rv_policy::reference_internal,
            "Solve one stack (A: M × n, b and sqrt_weight: M; C-contiguous float64).")
-      .def_prop_ro("rows", &ChiaveriniSolver::rows)
-      .def_prop_ro("cols", &ChiaveriniSolver::cols)
-      .def_prop_ro("levels", &ChiaveriniSolver::levels);
+      .def_prop_ro("rows", [](const ChiaveriniSolver& s) { return s.rows(); })
+      .def_prop_ro("cols", [](const ChiaveriniSolver& s) { return s.cols(); })
+      .def_prop_ro("levels", [](const ChiaveriniSolver& s) { return s.levels(); });
 
   nb::class_<UnifyingResult>(
       m, "UnifyingResult",
@@ -181,9 +181,9 @@ void bind_closed_form(nb::module_& m) {
            nb::rv_policy::reference_internal,
            "Solve one stack (A: M × n, b and sqrt_weight: M, mass_matrix: n × n SPD; "
            "C-contiguous float64).")
-      .def_prop_ro("rows", &UnifyingSolver::rows)
-      .def_prop_ro("cols", &UnifyingSolver::cols)
-      .def_prop_ro("levels", &UnifyingSolver::levels);
+      .def_prop_ro("rows", [](const UnifyingSolver& s) { return s.rows(); })
+      .def_prop_ro("cols", [](const UnifyingSolver& s) { return s.cols(); })
+      .def_prop_ro("levels", [](const UnifyingSolver& s) { return s.levels(); });
 
   nb::class_<OperationalSpaceSolver>(
       m, "OperationalSpaceSolver",
@@ -205,7 +205,7 @@ void bind_closed_form(nb::module_& m) {
            nb::rv_policy::reference_internal,
            "Solve one stack (A: M × n, b and sqrt_weight: M, mass_matrix: n × n SPD; "
            "C-contiguous float64).")
-      .def_prop_ro("rows", &OperationalSpaceSolver::rows)
-      .def_prop_ro("cols", &OperationalSpaceSolver::cols)
-      .def_prop_ro("levels", &OperationalSpaceSolver::levels);
+      .def_prop_ro("rows", [](const OperationalSpaceSolver& s) { return s.rows(); })
+      .def_prop_ro("cols", [](const OperationalSpaceSolver& s) { return s.cols(); })
+      .def_prop_ro("levels", [](const OperationalSpaceSolver& s) { return s.levels(); });
 }

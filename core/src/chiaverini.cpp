@@ -9,11 +9,8 @@
 namespace prioik {
 
 ChiaveriniSolver::ChiaveriniSolver(std::vector<Index> starts, Index n, ChiaveriniOptions options)
-    : starts_(std::move(starts)), n_(n), options_(options) {
-  const Index m_max = projection::check_layout(starts_, n_, options_.rcond, options_.damping);
-  k_ = static_cast<Index>(starts_.size()) - 1;
-  M_ = starts_.back();
-  work_ = ProjectionWorkspace(M_, n_, k_, m_max);
+    : ProjectionSolver(std::move(starts), n, options.rcond, options.damping),
+      options_(options) {
   result_.x.assign(n_, 0.0);
   result_.residuals.assign(k_, 0.0);
   result_.task_solutions.assign(k_ * n_, 0.0);

@@ -48,12 +48,18 @@ ProjectionWorkspace::ProjectionWorkspace(Index M, Index n, Index k, Index m_max)
       left(n * n, 0.0),
       right(n * n, 0.0) {}
 
-NullspaceSolver::NullspaceSolver(std::vector<Index> starts, Index n, NullspaceOptions options)
-    : starts_(std::move(starts)), n_(n), options_(options) {
-  const Index m_max = projection::check_layout(starts_, n_, options_.rcond, options_.damping);
+ProjectionSolver::ProjectionSolver(std::vector<Index> starts, Index n, double rcond,
+                                   double damping)
+    : starts_(std::move(starts)), n_(n) {
+  const Index m_max = projection::check_layout(starts_, n_, rcond, damping);
   k_ = static_cast<Index>(starts_.size()) - 1;
   M_ = starts_.back();
   work_ = ProjectionWorkspace(M_, n_, k_, m_max);
+}
+
+NullspaceSolver::NullspaceSolver(std::vector<Index> starts, Index n, NullspaceOptions options)
+    : ProjectionSolver(std::move(starts), n, options.rcond, options.damping),
+      options_(options) {
   result_.x.assign(n_, 0.0);
   result_.residuals.assign(k_, 0.0);
   result_.min_pivots.assign(k_, 0.0);

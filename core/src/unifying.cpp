@@ -1,4 +1,5 @@
-// The unifying framework (eq. 40 of Jeong & Chang 2009), compiled (closed_form.hpp).
+// The unifying framework (eq. 40 of Jeong & Chang 2009), compiled (closed_form.hpp), and
+// the solve with a mass matrix it shares with operational_space.cpp (MassMatrixSolver).
 #include <algorithm>
 #include <cmath>
 #include <string>
@@ -19,16 +20,37 @@ double mass_solve(MatrixRef chol, double* v) {
 
 }  // namespace
 
-UnifyingSolver::UnifyingSolver(std::vector<Index> starts, Index n, double rcond)
-    : starts_(std::move(starts)), n_(n), rcond_(rcond) {
-  const Index m_max = projection::check_layout(starts_, n_, rcond_, 0.0);
-  k_ = static_cast<Index>(starts_.size()) - 1;
-  M_ = starts_.back();
-  work_ = ProjectionWorkspace(M_, n_, k_, m_max);
+MassMatrixSolver::MassMatrixSolver(std::vector<Index> starts, Index n, double rcond)
+    : ProjectionSolver(std::move(starts), n, rcond, 0.0) {
   result_.x.assign(n_, 0.0);
   result_.residuals.assign(k_, 0.0);
   result_.ranks.assign(k_, 0);
 }
+
+const UnifyingResult& MassMatrixSolver::solve(const StackArrays& data, const double* mass_matrix) {
+  BusyGuard guard(busy_);
+  ProjectionWorkspace& ws = work_;
+  UnifyingResult& res = result_;
+  const bool stack_ok = projection::weigh_stack(data, starts_, n_, ws);
+  res.flops = 0.0;
+  std::fill(res.x.begin(), res.x.end(), 0.0);
+  std::fill(res.ranks.begin(), res.ranks.end(), 0);
+  res.finite = false;
+  res.mass_positive_definite = projection::factor_mass_matrix(data, mass_matrix, stack_ok, n_,
+                                                              ws);
+  res.solved = stack_ok && res.mass_positive_definite;
+  if (!res.solved) return res;
+  projection::reset(ws);
+  double flops = projection::cholesky_flops(n_);
+  for (Index lev = 0; lev < k_; ++lev) flops += solve_level(lev, lev == k_ - 1);
+  res.flops = flops;
+  res.finite =
+      projection::stack_residuals(data, starts_, n_, res.x.data(), res.residuals.data());
+  return res;
+}
+
+UnifyingSolver::UnifyingSolver(std::vector<Index> starts, Index n, double rcond)
+    : MassMatrixSolver(std::move(starts), n, rcond), rcond_(rcond) {}
 
 double UnifyingSolver::solve_level(Index lev, bool last) {
   ProjectionWorkspace& ws = work_;
@@ -93,28 +115,6 @@ double UnifyingSolver::solve_level(Index lev, bool last) {
   flops += projection::subtract_products(N, left, right, r);
   ws.projected = true;
   return flops;
-}
-
-const UnifyingResult& UnifyingSolver::solve(const StackArrays& data, const double* mass_matrix) {
-  BusyGuard guard(busy_);
-  ProjectionWorkspace& ws = work_;
-  UnifyingResult& res = result_;
-  const bool stack_ok = projection::weigh_stack(data, starts_, n_, ws);
-  res.flops = 0.0;
-  std::fill(res.x.begin(), res.x.end(), 0.0);
-  std::fill(res.ranks.begin(), res.ranks.end(), 0);
-  res.finite = false;
-  res.mass_positive_definite = projection::factor_mass_matrix(data, mass_matrix, stack_ok, n_,
-                                                              ws);
-  res.solved = stack_ok && res.mass_positive_definite;
-  if (!res.solved) return res;
-  projection::reset(ws);
-  double flops = projection::cholesky_flops(n_);
-  for (Index lev = 0; lev < k_; ++lev) flops += solve_level(lev, lev == k_ - 1);
-  res.flops = flops;
-  res.finite =
-      projection::stack_residuals(data, starts_, n_, res.x.data(), res.residuals.data());
-  return res;
 }
 
 }  // namespace prioik

@@ -74,7 +74,26 @@ struct ProjectionWorkspace {
   bool projected = false;       // some level has updated N (else N = I)
 };
 
-class NullspaceSolver {
+// What every compiled closed form holds: the layout (the k + 1 row offsets `starts` of
+// the levels, n columns), its ProjectionWorkspace allocated at construction, and the
+// one-thread-at-a-time flag. The constructor throws InputError on a malformed layout,
+// rcond outside (0, 1) or a damping not finite and ≥ 0.
+class ProjectionSolver {
+ public:
+  Index rows() const { return M_; }
+  Index cols() const { return n_; }
+  Index levels() const { return k_; }
+
+ protected:
+  ProjectionSolver(std::vector<Index> starts, Index n, double rcond, double damping);
+
+  std::vector<Index> starts_;
+  Index M_, n_, k_;
+  ProjectionWorkspace work_;
+  std::atomic<bool> busy_{false};
+};
+
+class NullspaceSolver : public ProjectionSolver {
  public:
   // starts: the k + 1 row offsets of the levels; n: the columns. Throws InputError on a
   // malformed layout or options.
@@ -85,21 +104,14 @@ class NullspaceSolver {
   const NullspaceResult& solve(const StackArrays& data);
 
   const NullspaceResult& result() const { return result_; }
-  Index rows() const { return M_; }
-  Index cols() const { return n_; }
-  Index levels() const { return k_; }
   const NullspaceOptions& options() const { return options_; }
 
  private:
   // level lev's step and projector update on the workspace; returns the level's flops
   double solve_level(Index lev, bool last);
 
-  std::vector<Index> starts_;
-  Index M_, n_, k_;
   NullspaceOptions options_;
-  ProjectionWorkspace work_;
   NullspaceResult result_;
-  std::atomic<bool> busy_{false};
 };
 
 // Chiaverini's singularity-robust task priority in its k-level form (Chiaverini 1997):
@@ -121,7 +133,7 @@ struct ChiaveriniResult {
   bool finite = false;       // the residuals (and so x) are finite
 };
 
-class ChiaveriniSolver {
+class ChiaveriniSolver : public ProjectionSolver {
  public:
   ChiaveriniSolver(std::vector<Index> starts, Index n, ChiaveriniOptions options);
 
@@ -129,19 +141,12 @@ class ChiaveriniSolver {
   const ChiaveriniResult& solve(const StackArrays& data);
 
   const ChiaveriniResult& result() const { return result_; }
-  Index rows() const { return M_; }
-  Index cols() const { return n_; }
-  Index levels() const { return k_; }
 
  private:
   double solve_level(Index lev, bool last);
 
-  std::vector<Index> starts_;
-  Index M_, n_, k_;
   ChiaveriniOptions options_;
-  ProjectionWorkspace work_;
   ChiaveriniResult result_;
-  std::atomic<bool> busy_{false};
 };
 
 // The unifying framework of Peters et al. (2008) in the reading of Jeong & Chang (2009),
@@ -162,9 +167,12 @@ struct UnifyingResult {
   bool finite = false;       // the residuals (and so x) are finite
 };
 
-class UnifyingSolver {
+// A solver with the joint-space inertia M = L Lᵀ given per solve (unifying,
+// operational_space): one solve factors M, then runs the derived solver's level step
+// over the levels.
+class MassMatrixSolver : public ProjectionSolver {
  public:
-  UnifyingSolver(std::vector<Index> starts, Index n, double rcond);
+  virtual ~MassMatrixSolver() = default;
 
   // Solve one stack of the layout with the joint-space inertia M (n × n, row-major; its
   // lower triangle is read). Throws InputError naming a non-finite entry, a √w ≤ 0 or a
@@ -172,19 +180,25 @@ class UnifyingSolver {
   const UnifyingResult& solve(const StackArrays& data, const double* mass_matrix);
 
   const UnifyingResult& result() const { return result_; }
-  Index rows() const { return M_; }
-  Index cols() const { return n_; }
-  Index levels() const { return k_; }
+
+ protected:
+  MassMatrixSolver(std::vector<Index> starts, Index n, double rcond);
+
+  // level lev's step and projector update on the workspace (ws.chol: M's factor);
+  // returns the level's flops
+  virtual double solve_level(Index lev, bool last) = 0;
+
+  UnifyingResult result_;     // x, residuals, ranks of the factored matrices, flops, flags
+};
+
+class UnifyingSolver final : public MassMatrixSolver {
+ public:
+  UnifyingSolver(std::vector<Index> starts, Index n, double rcond);
 
  private:
-  double solve_level(Index lev, bool last);
+  double solve_level(Index lev, bool last) override;
 
-  std::vector<Index> starts_;
-  Index M_, n_, k_;
   double rcond_;
-  ProjectionWorkspace work_;
-  UnifyingResult result_;
-  std::atomic<bool> busy_{false};
 };
 
 // Prioritized operational-space control (Khatib 1987; Sentis & Khatib 2005) with the
@@ -198,28 +212,14 @@ struct OperationalSpaceOptions {
   bool reproject = true;    // multiply each step by N_{i-1} once more (exact no-op)
 };
 
-class OperationalSpaceSolver {
+class OperationalSpaceSolver final : public MassMatrixSolver {
  public:
   OperationalSpaceSolver(std::vector<Index> starts, Index n, OperationalSpaceOptions options);
 
-  // Solve one stack with the joint-space inertia M (n × n, row-major; its lower triangle
-  // is read); as UnifyingSolver::solve.
-  const UnifyingResult& solve(const StackArrays& data, const double* mass_matrix);
-
-  const UnifyingResult& result() const { return result_; }
-  Index rows() const { return M_; }
-  Index cols() const { return n_; }
-  Index levels() const { return k_; }
-
  private:
-  double solve_level(Index lev, bool last);
+  double solve_level(Index lev, bool last) override;
 
-  std::vector<Index> starts_;
-  Index M_, n_, k_;
   OperationalSpaceOptions options_;
-  ProjectionWorkspace work_;
-  UnifyingResult result_;     // x, residuals, ranks of J_{i|prev} L⁻ᵀ, flops, flags
-  std::atomic<bool> busy_{false};
 };
 
 // Throws InputError naming the first entry of A or b that is not finite, or the first
