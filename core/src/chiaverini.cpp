@@ -30,13 +30,9 @@ double ChiaveriniSolver::solve_level(Index lev, bool last) {
   std::copy(ws.c.begin() + s0, ws.c.begin() + s0 + m, ws.e.begin());
   Index r = 0;
   double min_pivot = 0.0, margin = kInf;
-  double flops = projection::pivoted_lq(J, ws.e.data(), tol, ws.norms.data(), H, &r, &min_pivot,
-                                        &margin);
   double* own = res.task_solutions.data() + lev * n;
-  if (r > 0) {
-    flops += projection::level_unknowns(J, ws.e.data(), r, options_.damping, own, ws);
-    flops += projection::apply_leading_reflectors(H, r - 1, own, n);
-  }
+  double flops = projection::lq_step(J, ws.e.data(), tol, options_.damping, H, &r, &min_pivot,
+                                     &margin, own, ws);
   // x += N^A_{i-1} A_i^# b_i
   const double* add = own;
   if (ws.projected) {

@@ -81,16 +81,13 @@ double NullspaceSolver::solve_level(Index lev, bool last) {
   flops += static_cast<double>(m);
   if (!(tol > 0.0)) return flops;                      // a zero level keeps nothing
   Reflectors H{MatrixRef{ws.V.data(), n, n, n}, ws.beta.data(), ws.pos.data(), 0};
-  Index r = 0;
-  flops += projection::pivoted_lq(J, ws.e.data(), tol, ws.norms.data(), H, &r,
-                                  &res.min_pivots[lev], &res.margins[lev]);
-  res.ranks[lev] = r;
-  if (r == 0) return flops;
   // the step Q_rᵀ z, reprojected by N_{i-1}
   double* step = ws.step.data();
-  std::fill(step, step + n, 0.0);
-  flops += projection::level_unknowns(J, ws.e.data(), r, options_.damping, step, ws);
-  flops += projection::apply_leading_reflectors(H, r - 1, step, n);
+  Index r = 0;
+  flops += projection::lq_step(J, ws.e.data(), tol, options_.damping, H, &r,
+                               &res.min_pivots[lev], &res.margins[lev], step, ws);
+  res.ranks[lev] = r;
+  if (r == 0) return flops;
   if (options_.reproject && ws.projected) {
     flops += projection::multiply_rows(MatrixRef{ws.N.data(), n, n, n}, step, ws.aux.data());
     std::copy(ws.aux.begin(), ws.aux.end(), ws.step.begin());

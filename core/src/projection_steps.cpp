@@ -178,6 +178,17 @@ double level_unknowns(MatrixRef J, const double* e, Index r, double damping, dou
   return small_least_squares_flops(m, r, damping > 0.0);
 }
 
+double lq_step(MatrixRef J, double* e, double tol, double damping, Reflectors& H, Index* rank,
+               double* min_pivot, double* margin, double* z, ProjectionWorkspace& ws) {
+  const Index n = J.cols;
+  double flops = pivoted_lq(J, e, tol, ws.norms.data(), H, rank, min_pivot, margin);
+  std::fill(z, z + n, 0.0);
+  if (*rank == 0) return flops;
+  flops += level_unknowns(J, e, *rank, damping, z, ws);
+  flops += apply_leading_reflectors(H, *rank - 1, z, n);
+  return flops;
+}
+
 double project_rows(MatrixRef B, const ProjectionWorkspace& ws, MatrixRef J) {
   if (!ws.projected) {
     std::copy(B.data, B.data + B.rows * B.cols, J.data);

@@ -32,6 +32,12 @@ double pivoted_lq(MatrixRef J, double* e, double tol, double* norms, Reflectors&
 double level_unknowns(MatrixRef J, const double* e, Index r, double damping, double* z,
                       ProjectionWorkspace& ws);
 
+// The level's step z = J^# e with J's rank decided by tol: pivoted_lq of J (the rank, the
+// smallest kept pivot and the margin written as it says), then Q_rᵀ level_unknowns
+// (damping λ); z = 0 when the rank is 0
+double lq_step(MatrixRef J, double* e, double tol, double damping, Reflectors& H, Index* rank,
+               double* min_pivot, double* margin, double* z, ProjectionWorkspace& ws);
+
 // J = B N (N = ws.N, symmetric; a copy of B while ws.N = I)
 double project_rows(MatrixRef B, const ProjectionWorkspace& ws, MatrixRef J);
 

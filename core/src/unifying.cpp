@@ -71,17 +71,13 @@ double UnifyingSolver::solve_level(Index lev, bool last) {
   const double tol = rcond_ * std::sqrt(scale2);
   if (!(tol > 0.0)) return flops;
   Reflectors H{MatrixRef{ws.V.data(), n, n, n}, ws.beta.data(), ws.pos.data(), 0};
-  Index r = 0;
-  double min_pivot = 0.0, margin = kInf;
-  flops += projection::pivoted_lq(J, ws.e.data(), tol, ws.norms.data(), H, &r, &min_pivot,
-                                  &margin);
-  res.ranks[lev] = r;
-  if (r == 0) return flops;
   // θ̈_i = N_i M⁻¹ B⁺ b_i
   double* step = ws.step.data();
-  std::fill(step, step + n, 0.0);
-  flops += projection::level_unknowns(J, ws.e.data(), r, 0.0, step, ws);
-  flops += projection::apply_leading_reflectors(H, r - 1, step, n);
+  Index r = 0;
+  double min_pivot = 0.0, margin = kInf;
+  flops += projection::lq_step(J, ws.e.data(), tol, 0.0, H, &r, &min_pivot, &margin, step, ws);
+  res.ranks[lev] = r;
+  if (r == 0) return flops;
   flops += mass_solve(chol, step);
   const double* add = step;
   if (ws.projected) {
