@@ -34,13 +34,7 @@ double ChiaveriniSolver::solve_level(Index lev, bool last) {
   double flops = projection::lq_step(J, ws.e.data(), tol, options_.damping, H, &r, &min_pivot,
                                      &margin, own, ws);
   // x += N^A_{i-1} A_i^# b_i
-  const double* add = own;
-  if (ws.projected) {
-    flops += projection::multiply_rows(MatrixRef{ws.N.data(), n, n, n}, own, ws.aux.data());
-    add = ws.aux.data();
-  }
-  for (Index j = 0; j < n; ++j) res.x[j] += add[j];
-  flops += static_cast<double>(n);
+  flops += projection::add_step(ws, own, true, res.x.data());
   if (last) return flops;
   // N^A_i from the kept row space of A_i N^A_{i-1} (the nested null spaces' rank r_i)
   flops += projection::project_rows(B, ws, J);

@@ -88,12 +88,7 @@ double NullspaceSolver::solve_level(Index lev, bool last) {
                                &res.min_pivots[lev], &res.margins[lev], step, ws);
   res.ranks[lev] = r;
   if (r == 0) return flops;
-  if (options_.reproject && ws.projected) {
-    flops += projection::multiply_rows(MatrixRef{ws.N.data(), n, n, n}, step, ws.aux.data());
-    std::copy(ws.aux.begin(), ws.aux.end(), ws.step.begin());
-  }
-  for (Index j = 0; j < n; ++j) res.x[j] += step[j];
-  flops += static_cast<double>(n);
+  flops += projection::add_step(ws, step, options_.reproject, res.x.data());
   if (!last) flops += projection::update_projector(ws, H, r);
   return flops;
 }

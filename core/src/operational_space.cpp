@@ -87,13 +87,7 @@ double OperationalSpaceSolver::solve_level(Index lev, bool last) {
   res.ranks[lev] = r;
   if (r == 0) return flops;
   flops += lower_transpose_solve(chol, step);
-  const double* add = step;
-  if (options_.reproject && ws.projected) {
-    flops += projection::multiply_rows(N, step, ws.aux.data());
-    add = ws.aux.data();
-  }
-  for (Index j = 0; j < n; ++j) res.x[j] += add[j];
-  flops += static_cast<double>(n);
+  flops += projection::add_step(ws, step, options_.reproject, res.x.data());
   if (last) return flops;
   // N_i = N_{i-1} − (L⁻ᵀ V)(L V)ᵀ, V = Q_rᵀ
   MatrixRef left{ws.left.data(), r, n, n}, right{ws.right.data(), r, n, n};

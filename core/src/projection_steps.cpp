@@ -189,6 +189,18 @@ double lq_step(MatrixRef J, double* e, double tol, double damping, Reflectors& H
   return flops;
 }
 
+double add_step(ProjectionWorkspace& ws, const double* z, bool reproject, double* x) {
+  const Index n = static_cast<Index>(ws.aux.size());
+  double flops = 0.0;
+  const double* add = z;
+  if (reproject && ws.projected) {
+    flops += multiply_rows(MatrixRef{ws.N.data(), n, n, n}, z, ws.aux.data());
+    add = ws.aux.data();
+  }
+  for (Index j = 0; j < n; ++j) x[j] += add[j];
+  return flops + static_cast<double>(n);
+}
+
 double project_rows(MatrixRef B, const ProjectionWorkspace& ws, MatrixRef J) {
   if (!ws.projected) {
     std::copy(B.data, B.data + B.rows * B.cols, J.data);

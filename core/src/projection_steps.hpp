@@ -38,6 +38,9 @@ double level_unknowns(MatrixRef J, const double* e, Index r, double damping, dou
 double lq_step(MatrixRef J, double* e, double tol, double damping, Reflectors& H, Index* rank,
                double* min_pivot, double* margin, double* z, ProjectionWorkspace& ws);
 
+// x += N z (N = ws.N), or x += z when !reproject or ws.N = I
+double add_step(ProjectionWorkspace& ws, const double* z, bool reproject, double* x);
+
 // J = B N (N = ws.N, symmetric; a copy of B while ws.N = I)
 double project_rows(MatrixRef B, const ProjectionWorkspace& ws, MatrixRef J);
 

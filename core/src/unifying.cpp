@@ -79,13 +79,7 @@ double UnifyingSolver::solve_level(Index lev, bool last) {
   res.ranks[lev] = r;
   if (r == 0) return flops;
   flops += mass_solve(chol, step);
-  const double* add = step;
-  if (ws.projected) {
-    flops += projection::multiply_rows(N, step, ws.aux.data());
-    add = ws.aux.data();
-  }
-  for (Index j = 0; j < n; ++j) res.x[j] += add[j];
-  flops += static_cast<double>(n);
+  flops += projection::add_step(ws, step, true, res.x.data());
   if (last) return flops;
   // N_{i+1} = N_i − (N_i M⁻¹ V)(M V)ᵀ, V = Q_rᵀ
   MatrixRef left{ws.left.data(), r, n, n}, right{ws.right.data(), r, n, n};
