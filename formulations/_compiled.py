@@ -74,21 +74,20 @@ def solve_rescaled(solve: Callable[[StackData], Outcome], data: StackData) -> Ou
     return solve_equilibrated(solve, data, OVERFLOW_MESSAGE)
 
 
-def mass_matrix_outcome(res: Any, M: np.ndarray, bias: Any, status: str,
-                        factor: Callable[[np.ndarray], object]) -> Outcome | None:
+def mass_matrix_outcome(res: Any, M: np.ndarray, bias: Any, status: str) -> Outcome | None:
     """The answer of a compiled solve with the mass matrix ``M`` (``UnifyingResult``):
     ``x`` with ``info["rank_profile"]`` and ``info["flops"]`` (and ``info["tau"] = M x +
     bias`` when ``bias`` is given) in ``status``; ``None`` when the kernel refused a
     level's scale (the caller rescales, :func:`solve_rescaled`).
 
     Raises:
-        FormulationError: ``M`` is not positive definite (``factor``, the readable path's
-            Cholesky, raises naming ``M``'s smallest eigenvalue).
+        FormulationError: ``M`` is not positive definite (naming its smallest
+            eigenvalue, as the readable paths do).
     """
     if not res.mass_positive_definite:
-        factor(M)      # raises, with M's smallest eigenvalue
-        raise FormulationError("mass_matrix must be positive definite (its Cholesky "
-                               "factorization broke down)")
+        w = np.linalg.eigvalsh(M)
+        raise FormulationError(f"mass_matrix must be positive definite (smallest "
+                               f"eigenvalue {w.min():.3e})")
     if not res.solved:
         return None
     info = {"rank_profile": res.ranks.tolist(), "kernel": "cpp", "flops": res.flops}

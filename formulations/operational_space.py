@@ -213,7 +213,7 @@ class Prepared:
                                   rcond=self.rcond, reproject=self.reproject)
         M = np.ascontiguousarray(mass, dtype=np.float64)
         res = solve_compiled(self._core, data, M)
-        out = mass_matrix_outcome(res, M, bias, "optimal", _cholesky_lower)
+        out = mass_matrix_outcome(res, M, bias, "optimal")
         if out is None:
             return solve_rescaled(lambda d: self.solve(d, options), data)
         return out

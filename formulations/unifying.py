@@ -201,7 +201,7 @@ class Prepared:
                                   rcond=self.rcond)
         M = np.ascontiguousarray(mass, dtype=np.float64)
         res = solve_compiled(self._core, data, M)
-        out = mass_matrix_outcome(res, M, bias, "approximate", cholesky)
+        out = mass_matrix_outcome(res, M, bias, "approximate")
         if out is None:
             return solve_rescaled(lambda d: self.solve(d, options), data)
         return out
