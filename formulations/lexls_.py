@@ -111,11 +111,12 @@ class Prepared:
             CoreInputError: a value lexls cannot take (non-finite ``A``, a NaN bound,
                 ``lower > upper``), naming it.
         """
-        sw = data.sqrt_weight
+        sw, eq = data.sqrt_weight, self._eq
         np.multiply(sw[:, None], data.A, out=self._A)
-        eq = self._eq
-        np.multiply(sw, np.where(eq, data.b, data.lower), out=self._lower)
-        np.multiply(sw, np.where(eq, data.b, data.upper), out=self._upper)
+        for bound, side in ((self._lower, data.lower), (self._upper, data.upper)):
+            np.copyto(bound, side)
+            np.copyto(bound, data.b, where=eq)      # an equality row: b ≤ A x − v ≤ b
+            bound *= sw
         # a zero row's violation is the same at every x: left free (lexls would hold it
         # violated and print a warning), its residual counted by the registry as is
         zero = ~self._A.any(axis=1)
