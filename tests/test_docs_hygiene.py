@@ -124,9 +124,12 @@ def _public_objects() -> dict[str, object]:
             continue
         value = getattr(prioik, key)
         visit(f"prioik.{key}", value, isinstance(value, types.ModuleType))
+    from prioik.formulations.registry import PLUGINS
+    unavailable = {PLUGINS[f.name][0] for f in prioik.formulations.available()
+                   if not f.available}          # (the registry says why: extra, build)
     for info in pkgutil.iter_modules(prioik.formulations.__path__):
-        if info.name == "lexls_" and importlib.util.find_spec("prioik._lexls") is None:
-            continue                # built only with lexls's headers (PRIOIK_LEXLS_DIR)
+        if f"prioik.formulations.{info.name}" in unavailable:
+            continue
         module = importlib.import_module(f"prioik.formulations.{info.name}")
         visit(module.__name__, module, False)
         for key, value in vars(module).items():

@@ -2,6 +2,7 @@
 (found by walking the package's modules, so a new class without it fails here), each
 keeps its builtin base, and one representative bad call per class raises it."""
 
+import importlib
 import inspect
 import pkgutil
 import threading
@@ -13,21 +14,26 @@ import prioik
 from prioik import PrioikError, extras
 from prioik.formulations.base import CoreInputError
 
-#: modules that are not imported here: the compiled extensions, TSID's runner (a script
-#: run by the TSID environment's python) and the lexls plugin where prioik was built
-#: without lexls's headers (it then raises ImportError by design)
+#: modules that are not imported here: the compiled extensions and TSID's runner (a
+#: script run by the TSID environment's python); the formulation plugins the registry
+#: says cannot run here are left out too (:func:`unavailable_plugins`)
 NOT_IMPORTED = {"prioik.prioik", "prioik._core", "prioik._lexls",
                 "prioik.benchmarks.tsid_runner"}
+
+
+def unavailable_plugins() -> set[str]:
+    """The modules of the registered formulations that cannot be imported here (the
+    registry's reason says why: a missing extra, or lexls built without its headers)."""
+    from prioik.formulations import available
+    from prioik.formulations.registry import PLUGINS
+    return {PLUGINS[f.name][0] for f in available() if not f.available}
 
 
 def _package_modules():
     """Every module of the installed package (imported: the full venv has every extra).
     An editable install also puts the source tree on ``prioik.__path__``, where the
     folder ``prioik/`` is the package itself: it is skipped."""
-    import importlib.util
-    skip = set(NOT_IMPORTED)
-    if importlib.util.find_spec("prioik._lexls") is None:
-        skip.add("prioik.formulations.lexls_")
+    skip = NOT_IMPORTED | unavailable_plugins()
     names = {"prioik"}
     for info in pkgutil.iter_modules(prioik.__path__, "prioik."):
         if info.name in skip:
