@@ -31,7 +31,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "test sets (qpbenchmark's shape)",
         "With --test-set, bench runs test sets instead of its timing tables: every "
         "formulation row on every problem, success per tolerance profile (low 1e-3, "
-        "mid 1e-6, high 1e-9), shifted geometric means of time normalised to the best; "
+        "mid 1e-6, high 1e-9), shifted geometric means of time and of flops (the "
+        "compiled closed forms count them) normalised to the best; "
         "writes OUT/testsets.csv (one row per problem × formulation) and "
         "OUT/testsets.md (generated from the CSV). --formulations, --repeats (default 3 "
         "passes), --out and --doc apply.")
