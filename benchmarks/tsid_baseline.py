@@ -14,7 +14,7 @@ times, measured in its own process.
 The scenario's tasks (:meth:`robots.scenario.Scenario.baseline_tasks`) map as TSID's
 examples map theirs:
 
-* ``frame`` held by the scenario (``hard``, a foot in contact) on a floating base →
+* ``frame_pose`` held by the scenario (``hard``, a foot in contact) on a floating base →
   ``Contact6d``, a rigid contact of level 0 (its pose held, gains of the scenario,
   force regularisation weight :data:`FORCE_WEIGHT`). The scenarios are kinematic (a
   held foot takes whatever wrench holding it needs), so the contact's sole is a
@@ -170,20 +170,29 @@ def profile() -> dict:
 
 
 # ---------------------------------------------------------------- the scenario
-def _weight(spec) -> float:
+#: the runner's task kinds (:data:`prioik.benchmarks.tsid_runner.KINDS`) of the task
+#: kinds TSID's mapping has
+RUNNER_KINDS = {"frame_pose": "frame", "frame_position": "position",
+                "frame_orientation": "orientation", "com": "com_xy", "posture": "posture"}
+
+
+def _weight(spec, runner_kind: str) -> float:
     from .pink_baseline import LEVEL_COSTS, POSTURE_COST
-    if spec.kind == "posture":
+    if runner_kind == "posture":
         return POSTURE_COST ** 2
     return (LEVEL_COSTS[min(spec.priority, len(LEVEL_COSTS) - 1)] * spec.weight) ** 2
 
 
 def setup_request(scenario, dt: float) -> dict:
-    """The runner's setup (:mod:`prioik.benchmarks.tsid_runner`) for ``scenario``.
+    """The runner's setup (:mod:`prioik.benchmarks.tsid_runner`) for ``scenario``: each
+    task as the runner's kind (:data:`RUNNER_KINDS`).
 
     Raises:
         ValueError: a task without gains in ``scenario.gains``, or a kind TSID's
             mapping lacks.
     """
+    from prioik.robots import task_kind
+
     robot = scenario.robot
     lower, upper, vmax = robot.joint_limits()
     amax = getattr(scenario, "amax", None)
@@ -193,13 +202,15 @@ def setup_request(scenario, dt: float) -> dict:
         if spec.name not in scenario.gains:
             raise ValueError(f"TSID baseline: the scenario gives task {spec.name!r} no "
                              f"gains (scenario.gains has {', '.join(scenario.gains)})")
-        if spec.kind not in ("frame", "position", "orientation", "com_xy", "posture"):
-            raise ValueError(f"TSID baseline: no mapping for task kind {spec.kind!r}")
+        runner_kind = RUNNER_KINDS.get(spec.kind)
+        if runner_kind is None:
+            raise ValueError(f"TSID baseline: no mapping for task kind {spec.kind!r} "
+                             f"(mapped: {', '.join(RUNNER_KINDS)})")
         kp, kd = scenario.gains[spec.name]
-        task = {"name": spec.name, "kind": spec.kind, "frame": spec.frame,
-                "kp": float(kp), "kd": float(kd), "weight": _weight(spec),
+        task = {"name": spec.name, "kind": runner_kind, "frame": spec.frame,
+                "kp": float(kp), "kd": float(kd), "weight": _weight(spec, runner_kind),
                 "role": "weighted"}
-        if spec.kind == "frame" and spec.hard and robot.floating_base:
+        if task_kind(spec.kind).hard_is_constraint and spec.hard and robot.floating_base:
             s = SOLE_HALF_SIDE
             task.update(role="contact", contact={
                 "points": [[s, s, 0.0], [s, -s, 0.0], [-s, s, 0.0], [-s, -s, 0.0]],

@@ -249,6 +249,9 @@ class RobotTask:
     no_gain_reason: ClassVar[str] = "it has no gain"
     #: takes ``max_rate`` at velocity level
     capped: ClassVar[bool] = False
+    #: a ``hard`` baseline task of this kind is an equality constraint where the library
+    #: has them (mink)
+    hard_is_constraint: ClassVar[bool] = False
     #: the :class:`TaskWriter` method writing it by name (default: ``kind``)
     written_by: ClassVar[str] = ""
 

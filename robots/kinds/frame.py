@@ -293,8 +293,7 @@ class FramePoseTask(FrameTask):
     """
 
     kind = "frame_pose"
-    #: a hard task of this kind is an equality constraint where the library has them
-    hard_is_constraint: ClassVar[bool] = True
+    hard_is_constraint = True
 
     def __init__(self, name: str, frame: str, *, gain=None, level=None, weight=1.0,
                  keep=False) -> None:
