@@ -473,8 +473,9 @@ class TaskWriter:
         :meth:`~RobotTask.write` then writes its rows).
 
         Raises:
-            TaskStackError: the layout is fixed, the name taken, the task in another
-                writer, or a declared value refused (the level, weight, keep, gain,
+            TaskStackError: the task's class is not a registered kind
+                (:func:`register_task_kind`), the layout is fixed, the name taken, the
+                task in another writer, or a declared value refused (the level, weight, keep, gain,
                 max_rate, or what the kind checks), naming the task.
             KeyError: a frame the robot does not have.
         """
@@ -482,6 +483,9 @@ class TaskWriter:
             raise TaskStackError(f"a task is a RobotTask (a task kind's object), got "
                                  f"{task!r}")
         name = task.name
+        if TASK_KINDS.get(task.kind) is not type(task):
+            raise TaskStackError(f"{type(task).__name__} is not a registered task kind "
+                                 "(register_task_kind)", task=name)
         if self._layout is not None:
             raise TaskStackError("the layout is fixed (it was read or written): declare "
                                  "every task before", task=name)
