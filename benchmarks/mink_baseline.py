@@ -124,12 +124,13 @@ def mink_problem(scenario, dt: float):
     mj = to_mujoco(robot, scenario.urdf_text())
     config = mink.Configuration(mj.model, mj.to_qpos(robot.q0))
     tasks, constraints, setters = [], [], []
-    context = {"robot": robot, "model": mj.model, "gain": GAIN, "posture_cost": POSTURE_COST,
+    context = {"robot": robot, "model": mj.model, "gain": GAIN, "level_costs": LEVEL_COSTS,
+               "posture_cost": POSTURE_COST,
                "to_qpos": mj.to_qpos,
                "com_height": float(config.data.subtree_com[1][2])}
     for spec in scenario.baseline_tasks():
         kind = task_kind(spec.kind)             # the kind maps itself onto mink's task
-        context["cost"] = LEVEL_COSTS[min(spec.priority, len(LEVEL_COSTS) - 1)] * spec.weight
+        context["cost"] = kind.baseline_cost(spec, context)
         task = kind.baseline_task("mink", spec, scenario.baseline_target(spec.name, 0.0),
                                   context)
         hard = spec.hard and kind.hard_is_constraint

@@ -120,10 +120,10 @@ def pink_steps(scenario, *, duration: float, dt: float, solver: str = DEFAULT_SO
     model = robot.model.copy()
     data = model.createData()
     tasks, setters = [], []
-    context = {"robot": robot, "posture_cost": POSTURE_COST}
+    context = {"robot": robot, "level_costs": LEVEL_COSTS, "posture_cost": POSTURE_COST}
     for spec in scenario.baseline_tasks():
         kind = task_kind(spec.kind)             # the kind maps itself onto pink's task
-        context["cost"] = LEVEL_COSTS[min(spec.priority, len(LEVEL_COSTS) - 1)] * spec.weight
+        context["cost"] = kind.baseline_cost(spec, context)
         task = kind.baseline_task("pink", spec, scenario.baseline_target(spec.name, 0.0),
                                   context)
         tasks.append(task)

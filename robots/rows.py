@@ -166,8 +166,10 @@ def _check_gain(task: str, what: str, gain) -> None:
 
 
 # ------------------------------------------------------------------ task kinds
-#: registered task kinds: name → class (:func:`register_task_kind`)
 TASK_KINDS: dict[str, type[RobotTask]] = {}
+"""The registered task kinds: name (``RobotTask.kind``) → class
+(:func:`register_task_kind`; the built-in kinds of :mod:`robots.kinds` register on
+import)."""
 
 
 def register_task_kind(cls: type[RobotTask]) -> type[RobotTask]:
@@ -362,6 +364,10 @@ class RobotTask:
                 spec's cost), ``"model"`` (mink's MuJoCo model), ``"gain"`` (mink),
                 ``"robot"`` (the :class:`~robots.models.RobotModel`).
 
+        Returns:
+            ``library``'s task object; for ``"tsid"`` (whose runner runs in its own
+            process) the runner's task kind (:data:`prioik.benchmarks.tsid_runner.KINDS`).
+
         Raises:
             TaskStackError: the kind does not map onto ``library``.
         """
@@ -369,8 +375,28 @@ class RobotTask:
                              task=spec.name)
 
     @classmethod
+    def baseline_cost(cls, spec, context: dict) -> float:
+        """The cost of task ``spec`` in a library without priorities (pink, mink; TSID's
+        weights are its square): ``context["level_costs"]`` at the spec's priority (the
+        last beyond them) times its weight."""
+        costs = context["level_costs"]
+        return costs[min(spec.priority, len(costs) - 1)] * spec.weight
+
+    @classmethod
     def baseline_target(cls, library: str, task, target, context: dict) -> None:
         """Give ``library``'s ``task`` (from :meth:`baseline_task`) the new ``target``."""
+        raise TaskStackError(f"a {cls.kind} task has no {library} counterpart")
+
+    @classmethod
+    def baseline_reference(cls, library: str, targets, step: float, context: dict
+                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(x*, ẋ*, ẍ*)`` as ``library`` takes them (TSID's runner:
+        :mod:`prioik.benchmarks.tsid_runner`), from the targets at ``t − step``, ``t``,
+        ``t + step`` (central differences); ``context`` gives ``"model"`` (pinocchio).
+
+        Raises:
+            TaskStackError: the kind does not map onto ``library``.
+        """
         raise TaskStackError(f"a {cls.kind} task has no {library} counterpart")
 
     def __repr__(self) -> str:

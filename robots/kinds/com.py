@@ -95,6 +95,8 @@ class ComTask(RobotTask):
             task.mask.set_axises("xy")
             task.com0 = com0
             return task
+        if library == "tsid":
+            return "com_xy"
         if library == "pink":
             from pink.tasks import ComTask as PinkComTask
             return PinkComTask(cost=[c, c, 0.0])
@@ -102,6 +104,14 @@ class ComTask(RobotTask):
             import mink
             return mink.ComTask(cost=[c, c, 0.0], gain=context["gain"])
         return super().baseline_task(library, spec, target, context)
+
+    @classmethod
+    def baseline_reference(cls, library, targets, step, context):
+        if library != "tsid":
+            return super().baseline_reference(library, targets, step, context)
+        x0, x1, x2 = targets
+        vel, acc = (x2 - x0) / (2 * step), (x2 - 2 * x1 + x0) / step ** 2
+        return np.append(x1, 0.0), np.append(vel, 0.0), np.append(acc, 0.0)
 
     @classmethod
     def baseline_target(cls, library, task, target, context) -> None:

@@ -35,6 +35,16 @@ __all__ = ["ContactTask", "FrameOrientationTask", "FramePoseTask", "FramePositio
 _CONTACT_ARGUMENTS = {"x": "translation", "Rstar": "rotation"}
 
 
+def _rates(p, R, step: float) -> tuple[np.ndarray, np.ndarray]:
+    """Velocity and acceleration (linear, angular: 6 each) by central differences of
+    three positions ``p`` and rotations ``R`` ``step`` apart."""
+    w01 = np.asarray(pin.log3(R[1] @ R[0].T))
+    w12 = np.asarray(pin.log3(R[2] @ R[1].T))
+    vel = np.concatenate([(p[2] - p[0]) / (2 * step), (w01 + w12) / (2 * step)])
+    acc = np.concatenate([(p[2] - 2 * p[1] + p[0]) / step ** 2, (w12 - w01) / step ** 2])
+    return vel, acc
+
+
 def _offset(name: str, offset) -> np.ndarray:
     """A point's ``offset`` (frame coordinates): 3 finite numbers, copied, read-only."""
     try:
@@ -187,11 +197,21 @@ class FramePositionTask(FrameTask):
             task = context["solver"].add_position_task(spec.frame, np.asarray(target))
             task.configure(spec.name, context["priority"], spec.weight)
             return task
+        if library == "tsid":
+            return "position"
         if library == "pink":
             return cls._pink_frame_task(spec, context, True, False)
         if library == "mink":
             return cls._mink_frame_task(spec, context, True, False)
         return super().baseline_task(library, spec, target, context)
+
+    @classmethod
+    def baseline_reference(cls, library, targets, step, context):
+        if library != "tsid":
+            return super().baseline_reference(library, targets, step, context)
+        x0, x1, x2 = targets
+        vel, acc = (x2 - x0) / (2 * step), (x2 - 2 * x1 + x0) / step ** 2
+        return x1, np.append(vel, np.zeros(3)), np.append(acc, np.zeros(3))
 
     @classmethod
     def baseline_target(cls, library, task, target, context) -> None:
@@ -263,11 +283,19 @@ class FrameOrientationTask(FrameTask):
             task = context["solver"].add_orientation_task(spec.frame, np.asarray(target))
             task.configure(spec.name, context["priority"], spec.weight)
             return task
+        if library == "tsid":
+            return "orientation"
         if library == "pink":
             return cls._pink_frame_task(spec, context, False, True)
         if library == "mink":
             return cls._mink_frame_task(spec, context, False, True)
         return super().baseline_task(library, spec, target, context)
+
+    @classmethod
+    def baseline_reference(cls, library, targets, step, context):
+        if library != "tsid":
+            return super().baseline_reference(library, targets, step, context)
+        return (targets[1], *_rates([np.zeros(3)] * 3, targets, step))
 
     @classmethod
     def baseline_target(cls, library, task, target, context) -> None:
@@ -328,11 +356,20 @@ class FramePoseTask(FrameTask):
             task = context["solver"].add_frame_task(spec.frame, np.asarray(target))
             task.configure(spec.name, context["priority"], spec.weight, spec.weight)
             return task
+        if library == "tsid":
+            return "frame"
         if library == "pink":
             return cls._pink_frame_task(spec, context, True, True)
         if library == "mink":
             return cls._mink_frame_task(spec, context, True, True)
         return super().baseline_task(library, spec, target, context)
+
+    @classmethod
+    def baseline_reference(cls, library, targets, step, context):
+        if library != "tsid":
+            return super().baseline_reference(library, targets, step, context)
+        return (targets[1], *_rates([x[:3, 3] for x in targets],
+                                    [x[:3, :3] for x in targets], step))
 
     @classmethod
     def baseline_target(cls, library, task, target, context) -> None:

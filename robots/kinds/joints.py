@@ -36,8 +36,8 @@ class PostureTask(RobotTask):
 
     Written with ``write(state, q_ref)`` (``n_q``): error ``q_ref ⊖ q`` (``q_ref − q``
     where every actuated joint has one coordinate; pinocchio's ``difference``
-    otherwise). Baselines: PlaCo's joints task, pink's and mink's posture task (the
-    baselines' posture cost); the target ``q``.
+    otherwise). Baselines: PlaCo's joints task, pink's and mink's posture task (of cost
+    ``context["posture_cost"]``); the target ``q``.
     """
 
     kind = "posture"
@@ -92,14 +92,30 @@ class PostureTask(RobotTask):
             task.configure(spec.name, context["priority"], spec.weight)
             task.q_ref = np.array(target, dtype=float)
             return task
+        if library == "tsid":
+            return "posture"
         if library == "pink":
             from pink.tasks import PostureTask as PinkPostureTask
-            return PinkPostureTask(cost=context["posture_cost"])
+            return PinkPostureTask(cost=context["cost"])
         if library == "mink":
             import mink
-            return mink.PostureTask(context["model"], cost=context["posture_cost"],
+            return mink.PostureTask(context["model"], cost=context["cost"],
                                     gain=context["gain"])
         return super().baseline_task(library, spec, target, context)
+
+    @classmethod
+    def baseline_cost(cls, spec, context) -> float:
+        """``context["posture_cost"]``, whatever the priority and weight."""
+        return context["posture_cost"]
+
+    @classmethod
+    def baseline_reference(cls, library, targets, step, context):
+        if library != "tsid":
+            return super().baseline_reference(library, targets, step, context)
+        model = context["model"]
+        d01 = pin.difference(model, targets[0], targets[1])
+        d12 = pin.difference(model, targets[1], targets[2])
+        return targets[1], (d01 + d12) / (2 * step), (d12 - d01) / step ** 2
 
     @staticmethod
     def _placo_joints(task, q_ref, context) -> None:
@@ -191,7 +207,9 @@ class JointLimitsTask(RobotTask):
         dt: The control step (required for the bounds; see
             :func:`robots.tasks.joint_limit_bounds`).
         activation: Parameters of the activation rows (defaults if omitted).
-        level, weight, keep: As :class:`~robots.rows.RobotTask`.
+        level: As :class:`~robots.rows.RobotTask`.
+        weight: As :class:`~robots.rows.RobotTask`.
+        keep: As :class:`~robots.rows.RobotTask`.
 
     Written with ``write(state)``: returns how many activation rows are active, or the
     row count (bounds). No baseline counterpart (the libraries impose their own limits).

@@ -177,7 +177,9 @@ class FrameRegionTask(_RegionTask, FrameTask):
             peak before ``T`` (``prioik._core.rows.acceleration_bounds`` with no
             speed limit), the drift ``C J̇ q̇`` taken off.
         offset: The point on the frame (frame coordinates; default its origin).
-        level, weight, keep: As :class:`~robots.rows.RobotTask`.
+        level: As :class:`~robots.rows.RobotTask`.
+        weight: As :class:`~robots.rows.RobotTask`.
+        keep: As :class:`~robots.rows.RobotTask`.
 
     Written with ``write(state, normals=None, lower=None, upper=None)``: the ones given
     replace the declared ones from this step on (a region that moves with the robot's
