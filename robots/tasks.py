@@ -4,9 +4,10 @@ Every builder returns a :class:`TaskTerm` holding, for one task ``x = f(q)``:
 its Jacobian ``J`` (``ẋ = J q̇``), the drift ``J̇ q̇`` (``None`` from a
 ``KinematicState(drift=False)``), the error ``e = x* − x``, the rate error
 ``ė = ẋ* − ẋ`` and the feed-forward ``ẍ*``. The builders are one-off, readable
-wrappers over the task writers of :mod:`robots.rows` (a one-task
-:class:`~robots.rows.TaskWriter` per task kind, kept per thread): the same rows, copied
-out. From these
+wrappers over the task kinds of :mod:`robots.kinds`: each builds its kind's task and
+returns its :meth:`~robots.rows.RobotTask.term` (written by a one-task
+:class:`~robots.rows.TaskWriter` per kind, kept per thread): the same rows as a
+writer's, copied out. From these
 
 * :meth:`TaskTerm.acceleration` gives the paper's task ``J θ̈ = h`` with
   ``h = ẍ* + K_d (ẋ* − ẋ) + K_p (x* − x) − J̇ θ̇`` (eq. 2-4);
