@@ -230,9 +230,10 @@ class RobotTask:
 
     A subclass sets ``kind`` (its registry name and the :class:`TaskWriter` method that
     writes it by name), ``inequality`` and ``has_gain``, and implements
-    :meth:`_declare` (validates what depends on the robot and mode; returns the row
-    count), :meth:`_prepare` (once the layout is fixed: constant rows, the compiled
-    writers' arguments) and :meth:`write`.
+    :meth:`declare` (validates what depends on the robot and mode; returns the row
+    count), :meth:`prepare` (once the layout is fixed: constant rows, the compiled
+    writers' arguments) and :meth:`write` (fills its rows of :meth:`ready_writer`, then
+    :meth:`mark_written`); :func:`register_task_kind` registers it.
 
     Attributes:
         name, level, weight, keep: As declared (``level`` an int once added).
@@ -285,12 +286,14 @@ class RobotTask:
         self.hot: tuple | None = None  # the compiled writer's arguments per pin.Data
 
     # ------------------------------------------------------------- the contract
-    def _declare(self, writer: TaskWriter) -> int:  # pragma: no cover - abstract
-        """Validate what depends on ``writer`` (its robot, mode); returns the rows."""
+    def declare(self, writer: TaskWriter) -> int:  # pragma: no cover - abstract
+        """Validate what depends on ``writer`` (its robot, mode); returns the row count
+        (called by :meth:`TaskWriter.add`)."""
         raise NotImplementedError
 
-    def _prepare(self, writer: TaskWriter, start: int) -> None:
-        """Once the layout is fixed: constant rows, the compiled writers' arguments."""
+    def prepare(self, writer: TaskWriter, start: int) -> None:
+        """Once the layout is fixed (``start``: the task's first row): constant rows, the
+        compiled writers' arguments (called by the writer; default nothing)."""
 
     def write(self, state, *references) -> None:  # pragma: no cover - abstract
         """Write the task's rows at ``state`` (a :class:`~robots.tasks.KinematicState`)
@@ -407,6 +410,21 @@ class RobotTask:
         """Refuses a drift-free state at acceleration level (a kind with a drift)."""
         raise TaskStackError("an acceleration-level writer needs J̇q̇, but the "
                              "KinematicState was built with drift=False", task=self.name)
+
+    def ready_writer(self) -> TaskWriter:
+        """The task's writer, its layout fixed (what :meth:`write` writes into: its
+        ``data``, ``error``, ``velocity_ref``, ``feedforward``, ``drift`` at rows
+        ``start:start + rows``).
+
+        Raises:
+            TaskStackError: the task is in no writer.
+        """
+        return self._unwritable()
+
+    def mark_written(self) -> None:
+        """Record the task as written this step (:meth:`write` ends with it;
+        :meth:`TaskWriter.targets` refuses a task not written since its last call)."""
+        self.stamp = self.writer._stamp
 
     def _unwritable(self) -> TaskWriter:
         """The task's writer, its layout fixed (refusing a task in none)."""
@@ -532,7 +550,7 @@ class TaskWriter:
         if not isinstance(task.keep, (bool, np.bool_)):
             raise TaskStackError(f"keep must be True or False, got {task.keep!r}", task=name)
         cap = self._max_rate(name, task.max_rate)
-        rows = int(task._declare(self))
+        rows = int(task.declare(self))
         if task.has_gain:
             task.kp, task.kd = self._gains(name, task.gain)
         elif task.gain is not None:
@@ -716,7 +734,7 @@ class TaskWriter:
             data.sqrt_weight[sl] = np.sqrt(task.weight)
             self._Q[_k.KP, sl] = task.kp
             self._Q[_k.KD, sl] = task.kd
-            task._prepare(self, sl.start)
+            task.prepare(self, sl.start)
         self._capped = tuple((t.start, t.start + t.rows, t.cap)
                              for t in self._tasks.values() if t.cap > 0)
         self._order = tuple(self._tasks.values())

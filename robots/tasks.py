@@ -270,7 +270,7 @@ def com_position(state: KinematicState, ref: Reference, axes=(0, 1),
     """Centre of mass (eq. 32-33) on the selected world axes (default horizontal;
     :class:`~robots.kinds.ComTask`); ``ref`` given on those axes or as 3-vectors."""
     task = ComTask(name, axes=axes)
-    idx = task.key()
+    idx = tuple(int(a) for a in task.axes)
     return task.term(state, *(_on_axes(v, idx) for v in (ref.x, ref.xd, ref.xdd)))
 
 

@@ -202,18 +202,18 @@ class FrameHeightTask(RobotTask):
     def key(self):
         return (self.frame,)
 
-    def _declare(self, writer):
+    def declare(self, writer):
         writer.robot.frame_id(self.frame)
         return 1
 
     def write(self, state, z):
-        w = self._unwritable()
+        w = self.ready_writer()
         i = self.start
         w.data.A[i] = state.frame_jacobian(self.frame)[2]
         w.error[i] = z - state.placement(self.frame).translation[2]
         w.velocity_ref[i] = w.feedforward[i] = 0.0
         w.drift[i] = state.frame_drift(self.frame)[2] if w.mode == "acceleration" else 0.0
-        self.stamp = w._stamp
+        self.mark_written()
 
     @classmethod
     def baseline_task(cls, library, spec, target, context):

@@ -55,7 +55,7 @@ class ComTask(RobotTask):
     def key(self) -> tuple:
         return tuple(int(a) for a in self.axes)
 
-    def _declare(self, writer) -> int:
+    def declare(self, writer) -> int:
         return self.axes.size
 
     def write(self, state, x, xd=None, xdd=None) -> None:

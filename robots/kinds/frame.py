@@ -81,7 +81,7 @@ class FrameTask(RobotTask):
     def key(self) -> tuple:
         return (self.frame, tuple(self.offset))
 
-    def _declare(self, writer) -> int:
+    def declare(self, writer) -> int:
         model = writer.robot.model
         fid = writer.robot.frame_id(self.frame)          # KeyError naming a missing frame
         joint = model.frames[fid].parentJoint
@@ -97,7 +97,7 @@ class FrameTask(RobotTask):
         self.geo.setflags(write=False)
         return self.frame_rows
 
-    def _prepare(self, writer, start: int) -> None:
+    def prepare(self, writer, start: int) -> None:
         self.spec = np.array([start, self.frame_mode, not writer._accel, *self.cols],
                              dtype=np.int64)
         self.spec.setflags(write=False)

@@ -46,10 +46,10 @@ class PostureTask(RobotTask):
                  keep=False) -> None:
         super().__init__(name, gain=gain, level=level, weight=weight, keep=keep)
 
-    def _declare(self, writer) -> int:
+    def declare(self, writer) -> int:
         return writer.robot.nv - writer.robot.n_base
 
-    def _prepare(self, writer, start: int) -> None:
+    def prepare(self, writer, start: int) -> None:
         writer._data.A[start:start + self.rows, writer.robot.n_base:] = np.eye(self.rows)
 
     def write(self, state, q_ref) -> None:
@@ -179,10 +179,10 @@ class DampingTask(RobotTask):
                                  task=name if isinstance(name, str) else None)
         super().__init__(name, level=level, weight=weight)
 
-    def _declare(self, writer) -> int:
+    def declare(self, writer) -> int:
         return writer.robot.nv
 
-    def _prepare(self, writer, start: int) -> None:
+    def prepare(self, writer, start: int) -> None:
         writer._data.A[start:start + self.rows] = np.eye(self.rows)   # the base's too
         self.keep, self.stamp = True, 0           # (written here, once for good)
 
@@ -249,7 +249,7 @@ class JointLimitsTask(RobotTask):
         return (self.form, self.activation, self.position, self.velocity, self.dt,
                 self.horizon_given)
 
-    def _declare(self, writer) -> int:
+    def declare(self, writer) -> int:
         lo, hi, vmax = writer._joint_limits()
         if self.form == "activation":
             params = self.activation
@@ -267,7 +267,7 @@ class JointLimitsTask(RobotTask):
         self.limits.setflags(write=False)
         return lo.size
 
-    def _prepare(self, writer, start: int) -> None:
+    def prepare(self, writer, start: int) -> None:
         nb = writer.robot.n_base
         if self.form == "activation":
             params = [start, nb, *self.push]

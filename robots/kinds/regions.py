@@ -201,14 +201,14 @@ class FrameRegionTask(_RegionTask, FrameTask):
         reg = self.region
         return (self.frame, tuple(self.offset), reg.C.shape[0], reg.dt, self._horizon)
 
-    def _declare(self, writer) -> int:
-        FrameTask._declare(self, writer)
+    def declare(self, writer) -> int:
+        FrameTask.declare(self, writer)
         self.region.point_rows = np.zeros((3, writer.robot.nv))
         self.region.point_values = np.zeros((6, 3))
         return self.region.C.shape[0]
 
-    def _prepare(self, writer, start: int) -> None:
-        FrameTask._prepare(self, writer, 0)           # the point's rows, in its scratch
+    def prepare(self, writer, start: int) -> None:
+        FrameTask.prepare(self, writer, 0)           # the point's rows, in its scratch
 
     def write(self, state, normals=None, lower=None, upper=None) -> None:
         """The region's rows and bounds at ``state``."""
@@ -244,7 +244,7 @@ class ComRegionTask(_RegionTask):
         reg = self.region
         return (reg.C.shape[0], reg.dt, self._horizon)
 
-    def _declare(self, writer) -> int:
+    def declare(self, writer) -> int:
         return self.region.C.shape[0]
 
     def write(self, state, normals=None, lower=None, upper=None) -> None:
