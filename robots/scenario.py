@@ -19,8 +19,8 @@ members only:
   the two above, or the scenario's own faster path (the fencing scenario writes its
   rows in place);
 * :meth:`Scenario.baseline_tasks` and :meth:`Scenario.baseline_target` — the same
-  tasks as declarative records for the external IK libraries (PlaCo, pink, mink), which
-  build their own task objects from them;
+  tasks as declarative records for the external IK libraries (PlaCo, pink, mink): each
+  record names a registered task kind, whose class builds the library's task;
 * :meth:`Scenario.markers` — world points to draw in the replay (targets, references),
   and ``tip_frame``, the frame whose path the replay traces;
 * :meth:`Scenario.urdf_text` — the robot's URDF as the baselines must load it (with
@@ -51,10 +51,12 @@ class BaselineTask:
 
     Attributes:
         name: The scenario's task name.
-        kind: ``"frame"`` (pose of ``frame``), ``"position"`` (origin of ``frame``),
-            ``"orientation"`` (rotation of ``frame``),
-            ``"com_xy"`` (horizontal centre of mass) or ``"posture"``.
-        frame: Frame name (``None`` for ``com_xy`` and ``posture``).
+        kind: A registered task kind (:data:`~robots.rows.TASK_KINDS`), whose class
+            maps the task onto each library (:meth:`~robots.rows.RobotTask.baseline_task`):
+            ``"frame_pose"`` (pose of ``frame``), ``"frame_position"`` (origin of
+            ``frame``), ``"frame_orientation"`` (rotation of ``frame``), ``"com"``
+            (horizontal centre of mass), ``"posture"``, or any other registered kind.
+        frame: Frame name (``None`` for ``com`` and ``posture``).
         priority: The task's level in the scenario's stack (0 highest, limits excluded).
         hard: Whether a two-level library (PlaCo) makes it a hard constraint.
         weight: Its weight among the soft tasks.
@@ -120,8 +122,10 @@ class Scenario:
         raise NotImplementedError
 
     def baseline_target(self, name: str, t: float):  # pragma: no cover - abstract
-        """Target of baseline task ``name`` at ``t``: a 4×4 pose (``frame``), a
-        3-vector (``position``), a 2-vector (``com_xy``) or ``q`` (``posture``)."""
+        """Target of baseline task ``name`` at ``t``: a 4×4 pose (``frame_pose``), a
+        3-vector (``frame_position``), a 3×3 rotation (``frame_orientation``), a 2-vector
+        (``com``) or ``q`` (``posture``): what the kind's
+        :meth:`~robots.rows.RobotTask.baseline_target` takes."""
         raise NotImplementedError
 
     def markers(self, t: float) -> dict[str, np.ndarray]:  # pragma: no cover - abstract
