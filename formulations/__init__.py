@@ -11,7 +11,6 @@ from .base import (
                    ConcurrentUseError,
                    FormulationError,
                    Outcome,
-                   ReportVariant,
                    Solution,
 )
 from .options import Option
@@ -30,6 +29,6 @@ from .registry import (
 )
 
 __all__ = ["BatchSolution", "STATUSES", "Capabilities", "ConcurrentUseError", "FormulationError",
-           "FormulationInfo", "Option", "Outcome", "PLUGINS", "PreparedSolver", "ReportVariant",
+           "FormulationInfo", "Option", "Outcome", "PLUGINS", "PreparedSolver",
            "Solution", "available", "compile_kernels", "get", "names", "prepare", "solve",
            "solve_batch"]

@@ -64,44 +64,6 @@ class Capabilities:
     exact: bool = True
 
 
-@dataclass(frozen=True)
-class ReportVariant:
-    """A setting of a formulation worth a row of its own in prioik's reports.
-
-    A plugin lists them in ``REPORT_VARIANTS`` (a tuple); :mod:`prioik.benchmarks.variants`
-    turns each into a row of the reports it names, labelled ``NAME[tag]`` — so the
-    reports need no edit when a formulation or a setting is added. The reports are
-    ``"bench"``, ``"validate"``, ``"properties"``, ``"roundoff"`` (the rotated-coordinates
-    table of ``prioik properties``), ``"control_step"`` and the scenario reports
-    ``"fencing"``, ``"arm"`` and ``"sweep"`` (``"scenario"`` names all three).
-
-    Attributes:
-        tag: What distinguishes the row, e.g. ``"svd"`` or ``"clarabel,fixing=rows"``
-            (``""`` with ``replaces_default``: the default row itself, changed).
-        options: Options of every solve.
-        reports: The reports the row appears in (``()``: every report).
-        note: Why the row is there (printed where the report lists its rows).
-        replaces_default: The row takes the place of the formulation's default row in
-            those reports (e.g. the back-end a control loop uses).
-        mass: ``"identity"``: the formulation gets ``M = I`` instead of the report's
-            mass matrix (formulations that need one).
-        level: Scenario reports: ``"acceleration"`` or ``"velocity"`` (the same tasks
-            as ``J q̇ = ẋ* + K e``).
-        limits: Scenario reports: the joint-limit form of the stack (``"activation"``,
-            ``"bounds"``, ``"hard_bounds"``; ``None``: bounds for formulations that
-            take inequality tasks, activation rows for the others).
-    """
-
-    tag: str
-    options: dict[str, Any] = field(default_factory=dict)
-    reports: tuple[str, ...] = ()
-    note: str = ""
-    replaces_default: bool = False
-    mass: str | None = None
-    level: str = "acceleration"
-    limits: str | None = None
-
-
 @dataclass(slots=True)
 class Outcome:
     """What a plugin's ``solve`` returns; the registry turns it into a :class:`Solution`.

@@ -47,7 +47,7 @@ import scipy.sparse as spa
 
 from prioik.hierarchy import TaskStack
 
-from .base import Capabilities, FormulationError, Outcome, ReportVariant
+from .base import Capabilities, FormulationError, Outcome
 from .base import certify as certify_outcome
 from .options import Option, dictionary, per_level_nonnegative, positive_semidefinite, rcond_option
 
@@ -720,34 +720,3 @@ def solve(stack: TaskStack, *, solver: str, tolerance: float | None, backend_opt
     if certify and level_damping is None:
         out = certify_outcome(stack, out, metric=metric)
     return out
-
-# ------------------------------------------------------------------------ reports
-#: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
-REPORT_VARIANTS = (
-    ReportVariant("daqp", {"solver": "daqp"}, reports=("fencing", "sweep", "control_step"),
-                  replaces_default=True,
-                  note="one QP per level with DAQP, the fastest exact back-end on the G1 "
-                       "stacks; joint limits as bounds"),
-    ReportVariant("daqp,velocity", {"solver": "daqp"}, reports=("fencing", "sweep"),
-                  level="velocity",
-                  note="the same tasks at velocity level (J q̇ = ẋ* + K e, limits as bounds "
-                       "on q̇), exact hierarchy: the like-for-like counterpart of PlaCo's "
-                       "KinematicsSolver"),
-    ReportVariant("quadprog", {"solver": "quadprog"}, reports=("arm",), replaces_default=True,
-                  note="one QP per level with quadprog (DAQP finds no solution at the "
-                       "Panda's orientation level after 1.7 s), joint limits as bounds"),
-    ReportVariant("quadprog,velocity", {"solver": "quadprog"}, reports=("arm",),
-                  level="velocity",
-                  note="the same at velocity level (J q̇ = ẋ* + K e, bounds on q̇)"),
-    # how the higher optima are fixed in the cascade
-    ReportVariant("clarabel,fixing=rows", {"solver": "clarabel", "fixing": "rows"},
-                  reports=("validate",)),
-    ReportVariant("clarabel,fixing=nullspace", {"solver": "clarabel", "fixing": "nullspace"},
-                  reports=("validate",)),
-    ReportVariant("quadprog,fixing=rows", {"solver": "quadprog", "fixing": "rows"},
-                  reports=("validate",)),
-    ReportVariant("proxqp,fixing=nullspace", {"solver": "proxqp", "fixing": "nullspace"},
-                  reports=("validate",)),
-    ReportVariant("quadprog,fix_active=False", {"solver": "quadprog", "fix_active": False},
-                  reports=("validate",)),
-)

@@ -39,7 +39,7 @@ import numpy as np
 from prioik.hierarchy import StackData, StackLayout, TaskStack, nested_null_spaces
 
 from ._compiled import _core, resolve_kernel, solve_compiled, solve_rescaled
-from .base import Capabilities, Outcome, ReportVariant
+from .base import Capabilities, Outcome
 from .nullspace import check_nonnegative, generalized_inverse
 from .options import Option, rcond_option, validate_options
 
@@ -127,11 +127,3 @@ class Prepared:
         info = {"task_solutions": list(own), "damping": self.damping, "kernel": "cpp",
                 "flops": res.flops}
         return Outcome(res.x, "approximate", info, res.residuals)
-
-# ------------------------------------------------------------------------ reports
-#: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
-REPORT_VARIANTS = (
-    ReportVariant("numpy", {"kernel": "numpy"}, reports=("bench",),
-                  note="the readable numpy SVD sum (the default, kernel='auto', is the "
-                       "compiled C++ core)"),
-)

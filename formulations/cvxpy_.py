@@ -214,16 +214,3 @@ def solve(stack: TaskStack, *, solver: str, backend_options: dict | None, fixing
     out = Outcome(np.asarray(x.value, dtype=np.float64),
                   "approximate" if info["inaccurate_levels"] else "optimal", info)
     return certify_outcome(stack, out, metric=metric) if certify else out
-
-
-# ------------------------------------------------------------------------ reports
-#: reports whose default selection leaves this formulation out, and why
-#: (prioik.benchmarks.variants)
-REPORT_OPT_OUTS = {
-    "scenario": "a modelling layer, tens of ms per level QP: a scenario run takes minutes; "
-                "cascaded_qp solves the same cascade",
-    "control_step": "a modelling layer, tens of ms per level QP; cascaded_qp solves the "
-                    "same cascade",
-    "validate:backends": "a modelling layer over the solvers cascaded_qp's rows cover: "
-                         "Clarabel alone unless --cvxpy-backends",
-}

@@ -34,7 +34,7 @@ import numpy as np
 
 from prioik.hierarchy import TaskStack
 
-from .base import Capabilities, FormulationError, Outcome, ReportVariant, certify
+from .base import Capabilities, FormulationError, Outcome, certify
 from .options import Option, dictionary, rcond_option
 
 NAME = "daqp_hierarchical"
@@ -218,13 +218,3 @@ def dependent_active_levels(A: np.ndarray, bu: np.ndarray, bl: np.ndarray, bps: 
             rank = r
         start = stop
     return out
-
-# ------------------------------------------------------------------------ reports
-#: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
-REPORT_VARIANTS = (
-    ReportVariant("raw", {"compress_levels": False, "check": False}, reports=("bench",),
-                  note="DAQP's C call alone: no SVD compression of the levels, no "
-                       "conflicting-level check (faster, not exact on conflicting levels)"),
-    ReportVariant("compress_levels=False", {"compress_levels": False}, reports=("validate",),
-                  note="without the SVD compression of the levels"),
-)

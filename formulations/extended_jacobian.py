@@ -65,7 +65,6 @@ from .base import (
     CoreInputError,
     FormulationError,
     Outcome,
-    ReportVariant,
     certify,
     precision_status,
     solve_equilibrated,
@@ -870,25 +869,3 @@ def _batch_statuses(datas: list[StackData], X: np.ndarray, mu2: np.ndarray,
         _certify_near_ambiguous(datas[i], outcome, margins[i])
         approximate[i] = outcome.status != "optimal"
     return ["approximate" if a else "optimal" for a in approximate.tolist()]
-
-# ------------------------------------------------------------------------ reports
-#: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
-REPORT_VARIANTS = (
-    ReportVariant("svd", {"nullspace": "svd"}, reports=("bench", "properties"),
-                  note="the paper's SVD path (J_{i-1}^A by SVD)"),
-    ReportVariant("lapack", {"kernel": "lapack"}, reports=("bench",),
-                  note="the readable LAPACK nested-QR path (the default, kernel='auto', is "
-                       f"the compiled C++ core up to n = {AUTO_CPP_MAX_N}, LAPACK above)"),
-    ReportVariant("eq27", {"damping": 1e-2}, reports=("scenario", "properties"),
-                  note="the paper's eq. 27, λ = 0.01, with Z_i of r_i rows spanning "
-                       "range(N_{i-1} J_iᵀ) (z_basis='task_range', eq. 12-13 and Theorem 1)"),
-    ReportVariant("eq27_null_space", {"damping": 1e-2, "z_basis": "null_space"},
-                  reports=("fencing", "properties"),
-                  note="eq. 27, λ = 0.01, read with a basis of the whole null space of the "
-                       "higher levels (z_basis='null_space')"),
-    ReportVariant("svd,eq27", {"nullspace": "svd", "damping": 1e-2}, reports=("properties",),
-                  note="eq. 27 on the SVD path"),
-    ReportVariant("svd,eq27_null_space",
-                  {"nullspace": "svd", "damping": 1e-2, "z_basis": "null_space"},
-                  reports=("properties",), note="eq. 27, whole null space, on the SVD path"),
-)

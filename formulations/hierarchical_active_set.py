@@ -64,7 +64,6 @@ from .base import (
     CoreInputError,
     FormulationError,
     Outcome,
-    ReportVariant,
     precision_status,
     solve_equilibrated,
 )
@@ -499,12 +498,3 @@ def _row_scale_spread(data: StackData, levels) -> list[tuple[int, float]]:
         if norms.size and norms.max() > CERTIFIABLE_SPREAD * norms.min():
             out.append((i, float(norms.max() / norms.min())))
     return out
-
-
-# ------------------------------------------------------------------------ reports
-#: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
-REPORT_VARIANTS = (
-    ReportVariant("velocity", level="velocity", reports=("scenario",),
-                  note="the same at velocity level (J q̇ = ẋ* + K e, the limits as bounds on "
-                       "q̇): exact, like for like with PlaCo's KinematicsSolver"),
-)

@@ -36,7 +36,7 @@ import numpy as np
 
 from prioik.hierarchy import StackData, StackLayout, TaskStack
 
-from .base import Capabilities, Outcome, ReportVariant, certify
+from .base import Capabilities, Outcome, certify
 from .options import Option, validate_options
 
 try:
@@ -138,11 +138,3 @@ class Prepared:
             return Outcome(x, "approximate", info)
         out = Outcome(x, "optimal", info)
         return certify(data, out, minimum_norm=False) if self.check else out
-
-# ------------------------------------------------------------------------ reports
-#: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
-REPORT_VARIANTS = (
-    ReportVariant("raw", {"check": False}, reports=("bench",),
-                  note="lexls's C++ solve alone (no certificate): its status as it "
-                       "reports it"),
-)

@@ -49,7 +49,6 @@ from .base import (
     Capabilities,
     FormulationError,
     Outcome,
-    ReportVariant,
     in_original_units,
 )
 from .options import Option, rcond_option, validate_options
@@ -325,20 +324,3 @@ class Prepared:
                                reproject=self.reproject)
         outs = [self.solve(d) for d in datas]
         return np.array([o.x for o in outs]), [o.status for o in outs]
-
-
-# ------------------------------------------------------------------------ reports
-#: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
-REPORT_VARIANTS = (
-    ReportVariant("numpy", {"kernel": "numpy"}, reports=("bench",),
-                  note="the readable numpy SVD recursion (the default, kernel='auto', is the "
-                       "compiled C++ core)"),
-    ReportVariant("damped", {"damping": 0.05}, reports=("scenario",),
-                  note="the SR (damped least-squares) inverse on every level, λ = 0.05 "
-                       "(λ = 1e-2 left q̈ peaks of 355 in the incompatible fencing run, 0.05 "
-                       "keeps them at 65)"),
-    ReportVariant("damping=0.01", {"damping": 1e-2}, reports=("properties",),
-                  note="the damped least-squares inverse with the λ of eq. 27's rows"),
-    ReportVariant("reproject=False", {"reproject": False}, reports=("roundoff",),
-                  note="the textbook projector step, without the extra N_{i-1}"),
-)

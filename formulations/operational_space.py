@@ -54,7 +54,6 @@ from .base import (
     Capabilities,
     FormulationError,
     Outcome,
-    ReportVariant,
 )
 from .nullspace import check_nonnegative, truncated_svd
 from .options import Option, rcond_option, validate_options
@@ -217,13 +216,3 @@ class Prepared:
         if out is None:
             return solve_rescaled(lambda d: self.solve(d, options), data)
         return out
-
-# ------------------------------------------------------------------------ reports
-#: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
-REPORT_VARIANTS = (
-    ReportVariant("numpy", {"kernel": "numpy"}, reports=("bench",),
-                  note="the readable numpy recursion (the default, kernel='auto', is the "
-                       "compiled C++ core)"),
-    ReportVariant("reproject=False", {"reproject": False}, reports=("roundoff",),
-                  note="the textbook projector step, without the extra N_{i-1}"),
-)

@@ -211,8 +211,3 @@ def solve_batch(stacks, *, rcond: float = DEFAULT_RCOND, metric=None, level_damp
                 X[gi] = np.nan
                 statuses[gi] = "failed"
     return X, statuses
-
-# ------------------------------------------------------------------------ reports
-#: reports whose default selection leaves this formulation out, and why
-REPORT_OPT_OUTS = {"scenario": "the test oracle: one nested SVD per level and step; "
-                               "extended_jacobian gives the same q̈"}

@@ -11,13 +11,11 @@ A plugin is a module that defines
   adapter calls ``solve`` on the data's stack,
 * optionally ``backends() -> list[str]``, the back-ends it can use here,
 * optionally ``solve_batch(stacks, **options) -> (X, statuses)`` for many stacks of one
-  shape (stacked linear algebra); :func:`solve_batch` loops over ``solve`` otherwise,
-* optionally, for prioik's reports (:mod:`prioik.benchmarks.variants`; the reports read
-  nothing else, so a new plugin appears in every one of them by itself):
-  ``REPORT_VARIANTS``, a tuple of :class:`~.base.ReportVariant` (settings worth a row of
-  their own), and ``REPORT_OPT_OUTS``, ``{report: reason}`` (reports whose default
-  selection leaves it out; ``"validate:backends"``-style keys keep one row instead of
-  one per back-end).
+  shape (stacked linear algebra); :func:`solve_batch` loops over ``solve`` otherwise.
+
+The rows a formulation adds to prioik's reports are declared by the benchmarks
+(:mod:`prioik.benchmarks.report_rows`), not here: a new plugin appears in every report
+with its defaults by itself.
 
 A plugin whose optional dependency is not installed is unavailable; the reason,
 ending with the extra to install (``install it with `pip install prioik[qp]```), is

@@ -44,7 +44,7 @@ from prioik.hierarchy import (
     rank_threshold,
 )
 
-from .base import Capabilities, FormulationError, Outcome, ReportVariant
+from .base import Capabilities, FormulationError, Outcome
 from .nullspace import check_nonnegative, project_level, truncated_svd
 from .options import Option, rcond_option
 
@@ -249,15 +249,3 @@ def solve(stack: TaskStack, *, rcond: float = DEFAULT_RCOND, bound_tolerance: fl
         info["ambiguous_levels"] = ambiguous
         info["reason"] = ambiguity_reason(ambiguous)
     return Outcome(x, status, info)
-
-# ------------------------------------------------------------------------ reports
-#: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
-REPORT_VARIANTS = (
-    ReportVariant("", limits="hard_bounds", reports=("scenario", "control_step"),
-                  replaces_default=True,
-                  note="the joint-limit bounds as hard limits above every task (level 0), "
-                       "strict priorities, task scaling when a task cannot be met within "
-                       "them"),
-    ReportVariant("velocity", level="velocity", limits="hard_bounds", reports=("scenario",),
-                  note="SNS at velocity level (J q̇ = ẋ* + K e, the q̇ bounds as level 0)"),
-)

@@ -54,7 +54,6 @@ from .base import (
     Capabilities,
     FormulationError,
     Outcome,
-    ReportVariant,
 )
 from .nullspace import check_nonnegative, generalized_inverse
 from .options import Option, rcond_option, validate_options
@@ -205,13 +204,3 @@ class Prepared:
         if out is None:
             return solve_rescaled(lambda d: self.solve(d, options), data)
         return out
-
-# ------------------------------------------------------------------------ reports
-#: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
-REPORT_VARIANTS = (
-    ReportVariant("numpy", {"kernel": "numpy"}, reports=("bench",),
-                  note="the readable numpy eq. 40 (the default, kernel='auto', is the "
-                       "compiled C++ core)"),
-    ReportVariant("M=I", mass="identity", reports=("properties",),
-                  note="with M = I (the report's other row has a seeded SPD M)"),
-)

@@ -57,7 +57,9 @@ def toy_plugin(monkeypatch):
 
     import numpy as np
 
-    from prioik.formulations import Capabilities, Option, ReportVariant, registry
+    from prioik.benchmarks import report_rows
+    from prioik.benchmarks.report_rows import ReportVariant
+    from prioik.formulations import Capabilities, Option, registry
     from prioik.formulations.base import Outcome
 
     def solve(stack, *, scale=1.0):
@@ -70,9 +72,11 @@ def toy_plugin(monkeypatch):
     toy.CAPABILITIES = Capabilities(exact=False)
     toy.OPTIONS = {"scale": Option(1.0, "float", "factor on the answer", minimum=0.0)}
     toy.solve = solve
-    toy.REPORT_VARIANTS = (ReportVariant("half", {"scale": 0.5}, reports=("bench",),
-                                         note="the answer halved"),)
-    toy.REPORT_OPT_OUTS = {"arm": "a toy: not for robots"}
+    # its report rows, declared by the benchmarks' table (not by the plugin)
+    monkeypatch.setitem(report_rows.REPORT_VARIANTS, TOY,
+                        (ReportVariant("half", {"scale": 0.5}, reports=("bench",),
+                                       note="the answer halved"),))
+    monkeypatch.setitem(report_rows.REPORT_OPT_OUTS, TOY, {"arm": "a toy: not for robots"})
     monkeypatch.setitem(registry.PLUGINS, TOY, ("tests.toy_flat_lstsq", ""))
     monkeypatch.setitem(registry._loaded, TOY, toy)
     return toy
