@@ -15,9 +15,9 @@ import time
 import numpy as np
 
 from prioik import formulations
+from prioik.threads import blas_threads
 
 from .stacks import g1_fencing_samples
-from .threads import blas_threads
 
 #: formulation → (compiled options, readable options)
 KERNELS = {"extended_jacobian": ({"kernel": "cpp"}, {"kernel": "lapack"}),

@@ -1,11 +1,18 @@
 """The ``prioik`` command line: argument parsing and dispatch only.
 
-Every sub-command is declared by the module that runs it (``add_parser(subparsers)``,
-listed in :data:`SUBCOMMAND_MODULES`); this module builds the parser from them, runs the
-chosen command with BLAS limited to its ``--blas-threads`` (one by default,
-:mod:`.threads`) and turns the library's errors (every :class:`~prioik.PrioikError`, and
-the ``ValueError``/``OSError`` of a bad argument or file) into one line on stderr (exit
-status 2).
+The core commands (``list``, ``solve``, ``compile``: :mod:`prioik.commands`;
+``compare``: :mod:`prioik.compare`) belong to the library; the reports and experiments
+(``fencing``, ``bench``, ``validate``, ...) to :mod:`prioik.benchmarks`. Every
+sub-command is declared by the module that runs it (``add_parser(subparsers)``);
+:data:`COMMANDS` names that module for each command, in the order ``prioik --help``
+lists them. A command line naming one command imports its module alone (``prioik
+solve`` imports nothing of :mod:`prioik.benchmarks`); ``prioik --help``, no command or
+an unknown one builds the whole parser.
+
+The chosen command runs with BLAS limited to its ``--blas-threads`` (one by default,
+:mod:`prioik.threads`); the library's errors (every :class:`~prioik.PrioikError`, and
+the ``ValueError``/``OSError`` of a bad argument or file) become one line on stderr
+(exit status 2).
 
 Building the parser imports no optional dependency: a sub-command module imports what
 it needs when it runs, and a sub-command that needs extras names them in its defaults
@@ -20,29 +27,51 @@ import importlib
 import os
 import sys
 
-#: modules that contribute a sub-command through ``add_parser(subparsers)``
-SUBCOMMAND_MODULES = [
-    "prioik.benchmarks.library",
-    "prioik.benchmarks.fencing",
-    "prioik.benchmarks.arm",
-    "prioik.benchmarks.saved_runs",
-    "prioik.benchmarks.compare",
-    "prioik.benchmarks.bench.command",
-    "prioik.benchmarks.properties",
-    "prioik.benchmarks.validation",
-    "prioik.benchmarks.sweep.command",
-    "prioik.benchmarks.fuzz",
-]
+__all__ = ["COMMANDS", "build_parser", "main"]
+
+#: command → the module whose ``add_parser(subparsers)`` declares it, in the order
+#: ``prioik --help`` lists them (a module declaring several commands is called once)
+COMMANDS: dict[str, str] = {
+    "list": "prioik.commands",
+    "solve": "prioik.commands",
+    "compile": "prioik.commands",
+    "fencing": "prioik.benchmarks.fencing",
+    "arm": "prioik.benchmarks.arm",
+    "replay": "prioik.benchmarks.saved_runs",
+    "plot": "prioik.benchmarks.saved_runs",
+    "compare": "prioik.compare",
+    "bench": "prioik.benchmarks.bench.command",
+    "properties": "prioik.benchmarks.properties",
+    "validate": "prioik.benchmarks.validation",
+    "sweep": "prioik.benchmarks.sweep.command",
+    "fuzz": "prioik.benchmarks.fuzz",
+}
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+class _OneModuleParser(argparse.ArgumentParser):
+    """A parser that raises ``argparse.ArgumentError`` where argparse would print and
+    exit: a command line it refuses is parsed again by the whole parser, which says
+    why."""
+
+    def error(self, message: str):  # type: ignore[override]
+        raise argparse.ArgumentError(None, message)
+
+
+def build_parser(command: str | None = None,
+                 parser_class: type[argparse.ArgumentParser] = argparse.ArgumentParser
+                 ) -> argparse.ArgumentParser:
+    """The ``prioik`` parser: every command's (``command=None``), or only the commands of
+    the module that declares ``command`` (what :func:`main` parses a command line naming
+    it with, importing that module alone)."""
+    parser = parser_class(
         prog="prioik",
         description="Task-priority inverse kinematics: one task-stack spec, every formulation.")
     from prioik import __version__
     parser.add_argument("--version", action="version", version=f"prioik {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
-    for name in SUBCOMMAND_MODULES:
+    modules = [COMMANDS[command]] if command in COMMANDS else list(dict.fromkeys(
+        COMMANDS.values()))
+    for name in modules:
         importlib.import_module(name).add_parser(sub)
     return parser
 
@@ -53,8 +82,16 @@ def main(argv: list[str] | None = None) -> int:
     from prioik.extras import require
 
     from .threads import blas_threads
-    args = build_parser().parse_args(argv)
-    args.command_line = list(sys.argv[1:] if argv is None else argv)
+    command_line = list(sys.argv[1:] if argv is None else argv)
+    args = None
+    if command_line and command_line[0] in COMMANDS:
+        try:    # the command's own module alone
+            args = build_parser(command_line[0], _OneModuleParser).parse_args(command_line)
+        except argparse.ArgumentError:
+            args = None     # refused: the whole parser prints its usage and the error
+    if args is None:
+        args = build_parser().parse_args(command_line)
+    args.command_line = command_line
     try:
         require(*getattr(args, "extras", ()), what="this command")
         with blas_threads(getattr(args, "blas_threads", 1)):

@@ -1,4 +1,4 @@
-"""Test configuration: single-threaded BLAS (small matrices; see prioik.benchmarks.threads)
+"""Test configuration: single-threaded BLAS (small matrices; see prioik.threads)
 and the hypothesis profile (``ci`` where the environment variable ``CI`` is set).
 
 Set here, for the test process only: importing prioik changes no environment variable.

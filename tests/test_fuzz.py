@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 
 from prioik import formulations
 from prioik.benchmarks import fuzz
-from prioik.benchmarks.cli import main
+from prioik.cli import main
 from prioik.formulations import Outcome, registry
 from prioik.hierarchy import check_lexicographic, load_stack, relative_distance
 from prioik.hierarchy.fuzz import ROW_FEATURES, equality_case, inequality_case, nested_truth

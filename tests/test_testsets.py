@@ -7,7 +7,6 @@ import math
 import numpy as np
 import pytest
 
-from prioik.benchmarks.cli import main
 from prioik.benchmarks.testsets import TEST_SETS, get
 from prioik.benchmarks.testsets.metrics import (
     PROFILES,
@@ -19,6 +18,7 @@ from prioik.benchmarks.testsets.metrics import (
 )
 from prioik.benchmarks.testsets.report import format_report, summarize
 from prioik.benchmarks.testsets.run import CSV_FIELDS, Row, load_csv, run_test_set, write_csv
+from prioik.cli import main
 from prioik.hierarchy import Task, TaskStack, check_lexicographic
 
 #: the smallest size of every test set (one or two problems per family or trajectory)

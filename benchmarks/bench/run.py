@@ -16,8 +16,8 @@ from prioik.benchmarks.plots import time_vs_size
 from prioik.benchmarks.progress import Progress
 from prioik.benchmarks.results import TimingRow, write_csv
 from prioik.benchmarks.stacks import Case, g1_fencing_cases, random_case
-from prioik.benchmarks.threads import blas_info, blas_threads
 from prioik.benchmarks.variants import Variant, table
+from prioik.threads import blas_info, blas_threads
 
 from . import tables
 from .batch import batched_formulations, measure_batch

@@ -18,7 +18,7 @@ import pytest
 
 import prioik
 from prioik import extras, formulations
-from prioik.benchmarks.cli import main
+from prioik.cli import main
 from prioik.formulations.registry import PLUGINS
 from prioik.hierarchy import check_lexicographic, load_stack
 from prioik.hierarchy.families import compatible, conflicting, random_spd, with_inequalities
