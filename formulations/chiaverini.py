@@ -39,8 +39,8 @@ import numpy as np
 from prioik.hierarchy import StackData, StackLayout, TaskStack, nested_null_spaces
 
 from ._compiled import _core, resolve_kernel, solve_compiled, solve_rescaled
+from ._numerics import check_nonnegative, generalized_inverse
 from .base import Capabilities, Outcome
-from .nullspace import check_nonnegative, generalized_inverse
 from .options import Option, rcond_option, validate_options
 
 NAME = "chiaverini"

@@ -8,8 +8,8 @@ as cvxpy expressions — ``sum_squares(√W (A x − b)) + sum_squares(√w ∘ 
 solver that takes QPs (``solver=``, default Clarabel). Only the bookkeeping of
 what a solved level fixes (the orthonormal row-space basis of the higher equality
 rows, relaxed inequality bounds, strongly active rows read from cvxpy's dual
-values) is shared with :mod:`formulations.cascaded_qp`; the modelling, the
-canonicalisation and the solver interfaces are cvxpy's.
+values) is shared with :mod:`formulations.cascaded_qp` (:mod:`formulations._numerics`);
+the modelling, the canonicalisation and the solver interfaces are cvxpy's.
 
 ``fixing="basis"`` keeps the higher equality rows as ``Rᵀ x = Rᵀ x*`` with ``R`` an
 orthonormal basis of their row space; ``fixing="rows"`` keeps the literal rows
@@ -31,18 +31,18 @@ import numpy as np
 
 from prioik.hierarchy import TaskStack
 
-from .base import Capabilities, FormulationError, Outcome
-from .base import certify as certify_outcome
-from .cascaded_qp import (
+from ._numerics import (
     ACTIVE_TOL,
     MULTIPLIER_TOL,
     Fixed,
-    _unit_rows,
     level_rows,
     quiet_unless_verbose,
     record_level,
     scaled_level,
+    unit_rows,
 )
+from .base import Capabilities, FormulationError, Outcome
+from .base import certify as certify_outcome
 from .options import Option, dictionary, positive_semidefinite, rcond_option
 
 NAME = "cvxpy"
@@ -151,7 +151,7 @@ def solve(stack: TaskStack, *, solver: str, backend_options: dict | None, fixing
                 cons.append(A_h @ x == A_h @ fixed.x)
         delta = margin * max(1.0, float(np.linalg.norm(fixed.x)))
         for A_h, lo, up in zip(fixed.A_in, fixed.lower, fixed.upper, strict=False):
-            A_u, lo, up = _unit_rows(A_h, lo, up)
+            A_u, lo, up = unit_rows(A_h, lo, up)
             if A_u.shape[0]:
                 _bounds(A_u @ x, lo - delta, up + delta, A_u, cons, tracked)
         return cons

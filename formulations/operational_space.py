@@ -50,12 +50,12 @@ from scipy.linalg import solve_triangular
 from prioik.hierarchy import StackData, StackLayout, TaskStack
 
 from ._compiled import _core, mass_matrix_outcome, resolve_kernel, solve_compiled, solve_rescaled
+from ._numerics import check_nonnegative, truncated_svd
 from .base import (
     Capabilities,
     FormulationError,
     Outcome,
 )
-from .nullspace import check_nonnegative, truncated_svd
 from .options import Option, rcond_option, validate_options
 
 NAME = "operational_space"

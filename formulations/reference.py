@@ -10,7 +10,7 @@ with ``Z_1 = I`` and every pseudo-inverse and null space from an SVD in float64
 ``AMBIGUITY`` of it makes the status ``approximate``). Each level is solved in the least-squares
 sense, so rank-deficient and infeasible levels are handled; the step ``y_i`` gets
 ``REFINEMENT_STEPS`` steps of iterative refinement from the level's residual, formed
-row by row (:func:`formulations.nullspace.refinement`): the SVD reads rows far smaller
+row by row (:func:`formulations._numerics.refinement`): the SVD reads rows far smaller
 than the level's norm with errors of ``ε ‖M_i‖``, which their large targets would carry
 into the step. Because every ``y_i``
 lies in the row space of ``M_i``, the result is the minimum-norm point of the
@@ -36,8 +36,8 @@ from prioik.hierarchy import (
     rank_threshold,
 )
 
+from ._numerics import REFINEMENT_STEPS, refinement
 from .base import Capabilities, FormulationError, Outcome
-from .nullspace import REFINEMENT_STEPS, refinement
 from .options import Option, per_level_nonnegative, positive_semidefinite, rcond_option
 
 NAME = "reference"
@@ -91,7 +91,7 @@ def solve(stack: TaskStack, *, rcond: float, metric, level_damping) -> Outcome:
         if r:
             c = b - A @ x
             y = vt[:r].T @ ((u[:, :r].T @ c) * s[:r] / (s[:r] ** 2 + mu2[i]))
-            for _ in range(0 if mu2[i] else REFINEMENT_STEPS):   # nullspace.refinement
+            for _ in range(0 if mu2[i] else REFINEMENT_STEPS):   # _numerics.refinement
                 y = y + vt[:r].T @ ((vt[:r] @ (M.T @ (c - M @ y))) / s[:r] ** 2)
             x = x + Z @ y
         Z = Z @ vt[r:].T
@@ -171,7 +171,7 @@ def solve_batch(stacks, *, rcond: float = DEFAULT_RCOND, metric=None, level_damp
             w = np.where(keep, w * s / np.where(keep, s * s + mu2[li], 1.0), 0.0)
             #   Σ_r⁻¹ U_rᵀ c (σ/(σ² + μ²) when damped), masked
             y = np.einsum("gpd,gp->gd", vt[:, :p, :], w)          # V_r (…)
-            for _ in range(0 if mu2[li] else REFINEMENT_STEPS):  # nullspace.refinement
+            for _ in range(0 if mu2[li] else REFINEMENT_STEPS):  # _numerics.refinement
                 y = y + refinement(M, c[:, :, None], y[:, :, None], vt[:, :p, :], keep,
                                    s)[:, :, 0]
             X[idx] += np.einsum("gnd,gd->gn", Z, y)

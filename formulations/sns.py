@@ -44,8 +44,8 @@ from prioik.hierarchy import (
     rank_threshold,
 )
 
+from ._numerics import check_nonnegative, project_level, truncated_svd
 from .base import Capabilities, FormulationError, Outcome
-from .nullspace import check_nonnegative, project_level, truncated_svd
 from .options import Option, rcond_option
 
 NAME = "sns"

@@ -50,12 +50,12 @@ from scipy.linalg import cho_factor, cho_solve
 from prioik.hierarchy import DEFAULT_RCOND, StackData, StackLayout, TaskStack
 
 from ._compiled import _core, mass_matrix_outcome, resolve_kernel, solve_compiled, solve_rescaled
+from ._numerics import check_nonnegative, generalized_inverse
 from .base import (
     Capabilities,
     FormulationError,
     Outcome,
 )
-from .nullspace import check_nonnegative, generalized_inverse
 from .options import Option, rcond_option, validate_options
 
 NAME = "unifying"
