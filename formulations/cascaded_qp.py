@@ -21,7 +21,7 @@ Back-ends: ``solver=`` any of ``qpsolvers.available_solvers`` (default Clarabel)
 (:data:`DEFAULT_TOLERANCES`); DAQP is called as ``daqp.solve`` directly.
 
 Statuses: ``optimal`` only when the answer passes
-:func:`~prioik.formulations.base.certify` (the lexicographic certificate with the
+:func:`~prioik.formulations.verification.certify` (the lexicographic certificate with the
 minimum-norm tie-break, no ambiguous rank decision, no lower point found), else
 ``approximate`` with ``info["fault_level"]``. A back-end that raises or finds no
 solution gives ``failed`` with ``info["failed_level"]``, ``info["failed_tasks"]`` and
@@ -57,8 +57,8 @@ from ._numerics import (
     unit_rows,
 )
 from .base import Capabilities, FormulationError, Outcome
-from .base import certify as certify_outcome
 from .options import Option, dictionary, per_level_nonnegative, positive_semidefinite, rcond_option
+from .verification import certify as certify_outcome
 
 NAME = "cascaded_qp"
 DESCRIPTION = "one QP per level through qpsolvers (Kanoun et al. 2011), any back-end"

@@ -42,8 +42,8 @@ from ._numerics import (
     unit_rows,
 )
 from .base import Capabilities, FormulationError, Outcome
-from .base import certify as certify_outcome
 from .options import Option, dictionary, positive_semidefinite, rcond_option
+from .verification import certify as certify_outcome
 
 NAME = "cvxpy"
 DESCRIPTION = "the cascaded QP modelled in cvxpy (independent reference for inequalities)"

@@ -16,7 +16,7 @@ same least-squares optimum). A level whose active rows depend on those above (a
 setting changes this, and the status says so.
 
 Statuses (``check=True``): ``optimal`` when DAQP exits with flag 1 or 2 and the answer
-passes :func:`~prioik.formulations.base.certify`; ``approximate`` otherwise, with
+passes :func:`~prioik.formulations.verification.certify`; ``approximate`` otherwise, with
 ``info["fault_level"]`` and ``info["conflicting_levels"]``; ``failed`` on a negative
 exit flag (``info["message"]``, for infeasibility the hard inequality tasks involved).
 ``check=False`` skips the certificate. ``primal_tol`` defaults to 1e-10.
@@ -34,8 +34,9 @@ import numpy as np
 
 from prioik.hierarchy import TaskStack
 
-from .base import Capabilities, FormulationError, Outcome, certify
+from .base import Capabilities, FormulationError, Outcome
 from .options import Option, dictionary, rcond_option
+from .verification import certify
 
 NAME = "daqp_hierarchical"
 DESCRIPTION = "DAQP's hierarchical QP: the whole stack in one daqp.solve call (break_points)"

@@ -65,11 +65,11 @@ from .base import (
     CoreInputError,
     FormulationError,
     Outcome,
-    certify,
     precision_status,
     solve_equilibrated,
 )
 from .options import Option, rcond_option, validate_options
+from .verification import certify
 
 
 def step_bound_value(value):

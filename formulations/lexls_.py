@@ -21,7 +21,7 @@ levels only). A prepared solver hot-starts as lexls's documentation says — the
 clear a hot start).
 
 Status: ``"optimal"`` when lexls reports the problem solved and, with ``check=True``
-(default), the answer passes :func:`~prioik.formulations.base.certify` on the levels
+(default), the answer passes :func:`~prioik.formulations.verification.certify` on the levels
 (no tie-break: the certificate, its ambiguity record, and the exact active set's answer
 as a witness of a lower point); ``"approximate"`` when it does not (``info["message"]``
 says why) or lexls stopped at its factorization cap (``info["capped"]``: its answer is
@@ -36,8 +36,9 @@ import numpy as np
 
 from prioik.hierarchy import StackData, StackLayout, TaskStack
 
-from .base import Capabilities, Outcome, certify
+from .base import Capabilities, Outcome
 from .options import Option, validate_options
+from .verification import certify
 
 try:
     from prioik import _lexls

@@ -20,8 +20,9 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass
 from types import ModuleType
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -48,10 +49,7 @@ from .base import (
     precision_status,
 )
 
-if TYPE_CHECKING:
-    from .registry import BatchSolution
-
-__all__ = ["PreparedSolver", "check_layout_support", "check_support"]
+__all__ = ["BatchSolution", "PreparedSolver", "check_layout_support", "check_support"]
 
 _clock = time.perf_counter
 
@@ -113,6 +111,32 @@ class _StackAdapter:
             out.info = dict(out.info)
             out = in_original_units(out, data, levels)
         return out
+
+
+@dataclass
+class BatchSolution:
+    """The answers of one formulation to many stacks of the same shape.
+
+    Attributes:
+        X: Solutions, one row per stack (``B × n``).
+        statuses: One status per stack.
+        formulation: Name of the formulation.
+        options: Options it was called with.
+        time_s: Wall time of the whole batch (solve alone).
+        batched: Whether the plugin's own batched kernel ran (else a loop of ``solve``).
+    """
+
+    X: np.ndarray
+    statuses: list[str]
+    formulation: str
+    options: dict[str, Any]
+    time_s: float
+    batched: bool
+
+    @property
+    def time_per_stack_s(self) -> float:
+        """``time_s`` divided by the number of stacks."""
+        return self.time_s / max(1, len(self.statuses))
 
 
 class PreparedSolver:
@@ -333,7 +357,6 @@ class PreparedSolver:
             TaskStackError: an empty batch.
             FormulationError: a stack has another layout (naming its index).
         """
-        from .registry import BatchSolution
         if len(stacks_or_data) == 0:
             raise TaskStackError("solve_batch needs at least one stack")
         datas = []

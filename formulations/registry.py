@@ -30,14 +30,12 @@ from dataclasses import dataclass, field
 from types import ModuleType
 from typing import Any
 
-import numpy as np
-
 from prioik.extras import install_hint
 from prioik.hierarchy import StackData, StackLayout, TaskStack
 
 from .base import Capabilities, FormulationError, Solution
 from .options import Option, validate_options
-from .prepared import PreparedSolver, check_support  # noqa: F401  (re-exported)
+from .prepared import BatchSolution, PreparedSolver, check_support  # noqa: F401  (re-exported)
 
 #: name -> (module, the extra of pyproject.toml that brings its dependencies; "" for the
 #: core). prioik.extras.EXTRAS names the extras.
@@ -219,32 +217,6 @@ def solve(stack, formulation: str = "extended_jacobian", **options: Any) -> Solu
     if not isinstance(stack, (TaskStack, StackData)):
         stack = TaskStack(stack)
     return prepare(stack.layout, formulation, **options).solve(stack)
-
-
-@dataclass
-class BatchSolution:
-    """The answers of one formulation to many stacks of the same shape.
-
-    Attributes:
-        X: Solutions, one row per stack (``B × n``).
-        statuses: One status per stack.
-        formulation: Name of the formulation.
-        options: Options it was called with.
-        time_s: Wall time of the whole batch (solve alone).
-        batched: Whether the plugin's own batched kernel ran (else a loop of ``solve``).
-    """
-
-    X: np.ndarray
-    statuses: list[str]
-    formulation: str
-    options: dict[str, Any]
-    time_s: float
-    batched: bool
-
-    @property
-    def time_per_stack_s(self) -> float:
-        """``time_s`` divided by the number of stacks."""
-        return self.time_s / max(1, len(self.statuses))
 
 
 def stack_shape(stack: TaskStack) -> tuple:

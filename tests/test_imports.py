@@ -59,3 +59,97 @@ def test_no_plugin_imports_another_plugin():
             if (target in plugins or full in plugins) and module not in (target, full):
                 found.append(f"{module} imports {full}")
     assert found == []
+
+
+def _type_checking_only(tree: ast.AST) -> set[int]:
+    """ids of the import nodes inside ``if TYPE_CHECKING:`` blocks (never run)."""
+    out = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+            out |= {id(n) for stmt in node.body for n in ast.walk(stmt)}
+    return out
+
+
+def import_graph() -> dict[str, set[str]]:
+    """module → the prioik modules it imports (module-level and function-local imports;
+    ``from package import name`` is an edge to ``package.name`` when that is a module,
+    else to ``package``; imports under ``if TYPE_CHECKING:`` are left out: they never
+    run)."""
+    files = module_files()
+    graph: dict[str, set[str]] = {}
+    for module, path in files.items():
+        package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        skip = _type_checking_only(tree)
+        edges: set[str] = set()
+        for node in ast.walk(tree):
+            if id(node) in skip:
+                continue
+            if isinstance(node, ast.Import):
+                edges |= {a.name for a in node.names if a.name in files}
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    anchor = package.split(".")
+                    anchor = anchor[:len(anchor) - (node.level - 1)]
+                    base = ".".join(anchor + ([base] if base else []))
+                for a in node.names:
+                    if f"{base}.{a.name}" in files:
+                        edges.add(f"{base}.{a.name}")
+                    elif base in files:
+                        edges.add(base)
+        edges.discard(module)
+        graph[module] = edges
+    return graph
+
+
+def import_cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan), each sorted:
+    every import circle lies in one of them."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    out: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in sorted(graph.get(v, ())):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                out.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return sorted(out)
+
+
+def test_the_import_graph_is_read_whole():
+    graph = import_graph()
+    assert "prioik.formulations.registry" in graph["prioik.formulations"]
+    assert "prioik.formulations.base" in graph["prioik.formulations.prepared"]
+    assert "prioik.benchmarks.fencing" not in graph["prioik.cli"]     # (named as strings)
+    assert import_cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == \
+        [["a", "b", "c"]]
+
+
+def test_no_import_circle_between_prioik_modules():
+    """No module of prioik imports, directly or through others, a module that imports it
+    back — neither at module level nor inside a function (a function-local import only
+    hides a circle): each concern sits on a layer above the modules it uses."""
+    assert import_cycles(import_graph()) == []

@@ -55,7 +55,7 @@ def test_reprs_are_short(fencing_run):
     text = repr(fencing_run)
     assert len(text) < 300 and "50 steps" in text and "extended_jacobian" in text
     assert "<table>" in fencing_run._repr_html_()
-    from prioik.robots.scenario import make
+    from prioik.robots.scenarios import make
     sc = make("fencing")
     assert len(repr(sc.robot)) < 250 and len(repr(sc)) < 120
     assert "left_hip_pitch_joint" in sc.robot._repr_html_()
