@@ -161,7 +161,7 @@ def kinds_of(path: Path_) -> tuple[str, ...]:
     capabilities take (``"equality"``; ``"inequality"`` and ``"bounds"``)."""
     if path.kinds is not None:
         return path.kinds
-    caps = formulations.get(path.formulation).CAPABILITIES
+    caps = formulations.get(path.formulation).capabilities
     return (("equality",) if caps.equalities else ()) + \
         (("inequality", "bounds") if caps.inequalities else ())
 

@@ -159,7 +159,7 @@ def _steps(variant: Variant, scenario, duration: float, dt: float, progress,
         mod = importlib.import_module(BASELINES[variant.formulation])
         return mod.steps(scenario, variant, duration=duration, dt=dt, progress=progress)
     from prioik import formulations
-    caps = formulations.get(variant.formulation).CAPABILITIES
+    caps = formulations.get(variant.formulation).capabilities
     limits = stack_limits(variant)
     solve = _solver(variant.formulation, dict(variant.options))
     if variant.level == "velocity":

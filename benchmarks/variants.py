@@ -216,7 +216,7 @@ def capabilities(formulation: str):
     if formulation in BASELINES or formulation not in formulations.PLUGINS:
         return None
     try:
-        return formulations.get(formulation).CAPABILITIES
+        return formulations.get(formulation).capabilities
     except formulations.FormulationError:
         return None
 

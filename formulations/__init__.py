@@ -13,6 +13,7 @@ from .base import (
                    Outcome,
                    Solution,
 )
+from .contract import Formulation, Prepared, StackPrepared
 from .options import Option
 from .prepared import PreparedSolver
 from .registry import (
@@ -29,6 +30,6 @@ from .registry import (
 )
 
 __all__ = ["BatchSolution", "STATUSES", "Capabilities", "ConcurrentUseError", "FormulationError",
-           "FormulationInfo", "Option", "Outcome", "PLUGINS", "PreparedSolver",
-           "Solution", "available", "compile_kernels", "get", "names", "prepare", "solve",
-           "solve_batch"]
+           "Formulation", "FormulationInfo", "Option", "Outcome", "PLUGINS", "Prepared",
+           "PreparedSolver", "Solution", "StackPrepared", "available", "compile_kernels", "get",
+           "names", "prepare", "solve", "solve_batch"]

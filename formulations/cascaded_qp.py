@@ -44,6 +44,7 @@ import scipy.sparse as spa
 
 from prioik.hierarchy import TaskStack
 
+from . import contract
 from ._numerics import (
     ACTIVE_TOL,
     MULTIPLIER_TOL,
@@ -462,3 +463,19 @@ def solve(stack: TaskStack, *, solver: str, tolerance: float | None, backend_opt
     if certify and level_damping is None:
         out = certify_outcome(stack, out, metric=metric)
     return out
+
+
+class Prepared(contract.StackPrepared):
+    """The QP cascade prepared for one layout: :func:`solve` on each stack (one QP
+    per level, built per solve)."""
+
+    name = NAME
+    capabilities = CAPABILITIES
+
+    def solve_stack(self, stack: TaskStack, options: dict[str, Any]) -> Outcome:
+        return solve(stack, **options)
+
+
+#: the plugin (:mod:`prioik.formulations.registry`)
+FORMULATION = contract.Formulation(NAME, DESCRIPTION, CAPABILITIES, OPTIONS, Prepared,
+                                   backends=backends)

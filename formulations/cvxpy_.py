@@ -31,6 +31,7 @@ import numpy as np
 
 from prioik.hierarchy import TaskStack
 
+from . import contract
 from ._numerics import (
     ACTIVE_TOL,
     MULTIPLIER_TOL,
@@ -214,3 +215,19 @@ def solve(stack: TaskStack, *, solver: str, backend_options: dict | None, fixing
     out = Outcome(np.asarray(x.value, dtype=np.float64),
                   "approximate" if info["inaccurate_levels"] else "optimal", info)
     return certify_outcome(stack, out, metric=metric) if certify else out
+
+
+class Prepared(contract.StackPrepared):
+    """The cvxpy cascade prepared for one layout: :func:`solve` on each stack
+    (modelled per solve)."""
+
+    name = NAME
+    capabilities = CAPABILITIES
+
+    def solve_stack(self, stack: TaskStack, options: dict[str, Any]) -> Outcome:
+        return solve(stack, **options)
+
+
+#: the plugin (:mod:`prioik.formulations.registry`)
+FORMULATION = contract.Formulation(NAME, DESCRIPTION, CAPABILITIES, OPTIONS, Prepared,
+                                   backends=backends)

@@ -34,6 +34,7 @@ import numpy as np
 
 from prioik.hierarchy import TaskStack
 
+from . import contract
 from .base import Capabilities, FormulationError, Outcome
 from .options import Option, dictionary, rcond_option
 from .verification import certify
@@ -219,3 +220,18 @@ def dependent_active_levels(A: np.ndarray, bu: np.ndarray, bl: np.ndarray, bps: 
             rank = r
         start = stop
     return out
+
+
+class Prepared(contract.StackPrepared):
+    """DAQP's hierarchical solve prepared for one layout: :func:`solve` on each
+    stack."""
+
+    name = NAME
+    capabilities = CAPABILITIES
+
+    def solve_stack(self, stack: TaskStack, options: dict[str, Any]) -> Outcome:
+        return solve(stack, **options)
+
+
+#: the plugin (:mod:`prioik.formulations.registry`)
+FORMULATION = contract.Formulation(NAME, DESCRIPTION, CAPABILITIES, OPTIONS, Prepared)

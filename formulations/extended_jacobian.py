@@ -39,6 +39,7 @@ The two paths, the two readings of ``Z_i`` and the damping rules in detail:
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from scipy.linalg import lapack
@@ -59,6 +60,7 @@ from prioik.hierarchy import (
 )
 from prioik.hierarchy.linalg import numpy_svd
 
+from . import contract
 from ._compiled import _core, core_error
 from .base import (
     Capabilities,
@@ -164,7 +166,7 @@ def solve(stack: TaskStack, **options) -> Outcome:
     return Prepared(stack.layout, opts).solve(stack.data)
 
 
-class Prepared:
+class Prepared(contract.Prepared):
     """The extended Jacobian prepared for one layout: options checked, workspaces
     allocated once.
 
@@ -221,7 +223,7 @@ class Prepared:
                 level_damping=self.level_damping, singular_threshold=self.singular_threshold,
                 step_bound=self.step_bound.tolist())
 
-    def solve(self, data: StackData) -> Outcome:
+    def solve(self, data: StackData, options: dict[str, Any] | None = None) -> Outcome:
         """Solve one stack of the layout (its data; the registry checked the layout).
 
         Raises:
@@ -869,3 +871,7 @@ def _batch_statuses(datas: list[StackData], X: np.ndarray, mu2: np.ndarray,
         _certify_near_ambiguous(datas[i], outcome, margins[i])
         approximate[i] = outcome.status != "optimal"
     return ["approximate" if a else "optimal" for a in approximate.tolist()]
+
+
+#: the plugin (:mod:`prioik.formulations.registry`)
+FORMULATION = contract.Formulation(NAME, DESCRIPTION, CAPABILITIES, OPTIONS, Prepared)

@@ -32,10 +32,13 @@ in the final working set), ``hot_started``.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from prioik.hierarchy import StackData, StackLayout, TaskStack
 
+from . import contract
 from .base import Capabilities, Outcome
 from .options import Option, validate_options
 from .verification import certify
@@ -78,7 +81,7 @@ def solve(stack: TaskStack, **options) -> Outcome:
     return Prepared(stack.layout, opts).solve(stack.data)
 
 
-class Prepared:
+class Prepared(contract.Prepared):
     """lexls prepared for one layout: the weighted rows' buffers allocated once, the
     previous ``x`` and working set kept for the next solve's hot start.
 
@@ -105,7 +108,7 @@ class Prepared:
         """Forget the previous solve (the next one is cold)."""
         self._solver.reset()
 
-    def solve(self, data: StackData) -> Outcome:
+    def solve(self, data: StackData, options: dict[str, Any] | None = None) -> Outcome:
         """lexls on the data's rows, weighted by ``√w`` (see the module docstring).
 
         Raises:
@@ -139,3 +142,7 @@ class Prepared:
             return Outcome(x, "approximate", info)
         out = Outcome(x, "optimal", info)
         return certify(data, out, minimum_norm=False) if self.check else out
+
+
+#: the plugin (:mod:`prioik.formulations.registry`)
+FORMULATION = contract.Formulation(NAME, DESCRIPTION, CAPABILITIES, OPTIONS, Prepared)

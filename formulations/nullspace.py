@@ -31,6 +31,8 @@ written, the oracle the tests hold the compiled kernel to. In detail:
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from prioik.hierarchy import (
@@ -43,6 +45,7 @@ from prioik.hierarchy import (
     rank_threshold,
 )
 
+from . import contract
 from ._compiled import _core, resolve_kernel, solve_compiled, solve_rescaled
 from ._numerics import check_nonnegative, project_level, project_levels
 from .base import (
@@ -127,7 +130,7 @@ def solve_batch(stacks: list[TaskStack], *, damping: float = 0.0,
         near |= amb
     return X, ["approximate" if damping > 0 or amb else "optimal" for amb in near]
 
-class Prepared:
+class Prepared(contract.Prepared):
     """Null-space projection prepared for one layout: options checked, and on the
     compiled kernel (``kernel="cpp"``) the C++ solver with every workspace allocated
     once (``prioik._core.NullspaceSolver``).
@@ -152,19 +155,19 @@ class Prepared:
         self.damping = float(options["damping"])
         self.rcond = float(options["rcond"])
         self.reproject = bool(options["reproject"])
-        self.compiled = self.kernel == "cpp"
-        if self.compiled:
+        self._cpp = self.kernel == "cpp"
+        if self._cpp:
             self._core = _core.NullspaceSolver([int(s) for s in layout.starts], layout.n,
                                                rcond=self.rcond, damping=self.damping,
                                                reproject=self.reproject)
 
-    def solve(self, data: StackData) -> Outcome:
+    def solve(self, data: StackData, options: dict[str, Any] | None = None) -> Outcome:
         """Solve one stack of the layout.
 
         Raises:
             TaskStackError: a value is not finite (naming the task, level and row).
         """
-        if not self.compiled:
+        if not self._cpp:
             stack, levels = data.as_stack().equilibrated()
             out = solve_readable(stack, damping=self.damping, rcond=self.rcond,
                                  reproject=self.reproject)
@@ -186,9 +189,13 @@ class Prepared:
     def solve_batch(self, datas: list[StackData]) -> tuple[np.ndarray, list[str]]:
         """Many stacks of the layout: ``(X, statuses)`` (:func:`solve_batch` on the
         numpy kernel, one compiled solve after the other on the cpp kernel)."""
-        if not self.compiled:
+        if not self._cpp:
             stacks = [d.as_stack().equilibrated()[0] for d in datas]
             return solve_batch(stacks, damping=self.damping, rcond=self.rcond,
                                reproject=self.reproject)
         outs = [self.solve(d) for d in datas]
         return np.array([o.x for o in outs]), [o.status for o in outs]
+
+
+#: the plugin (:mod:`prioik.formulations.registry`)
+FORMULATION = contract.Formulation(NAME, DESCRIPTION, CAPABILITIES, OPTIONS, Prepared)

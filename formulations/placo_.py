@@ -32,6 +32,7 @@ import placo
 
 from prioik.hierarchy import TaskStack
 
+from . import contract
 from .base import Capabilities, FormulationError, Outcome
 from .options import Option, rcond_option
 from .verification import certify
@@ -158,3 +159,18 @@ def solve(stack: TaskStack, *, weight_ratio: float | None, regularization: float
     out = Outcome(np.array(x.value, dtype=np.float64), "optimal" if exact else "approximate",
                   info)
     return certify(stack, out)
+
+
+class Prepared(contract.StackPrepared):
+    """PlaCo's problem prepared for one layout: :func:`solve` on each stack (built
+    per solve)."""
+
+    name = NAME
+    capabilities = CAPABILITIES
+
+    def solve_stack(self, stack: TaskStack, options: dict[str, Any]) -> Outcome:
+        return solve(stack, **options)
+
+
+#: the plugin (:mod:`prioik.formulations.registry`)
+FORMULATION = contract.Formulation(NAME, DESCRIPTION, CAPABILITIES, OPTIONS, Prepared)

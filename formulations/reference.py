@@ -24,11 +24,15 @@ singular values): the damped hierarchy that ``extended_jacobian`` (selective dam
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import Any
+
 import numpy as np
 
 from prioik.hierarchy import (
     AMBIGUITY,
     DEFAULT_RCOND,
+    StackData,
     TaskStack,
     ambiguity_reason,
     ambiguous_decision,
@@ -36,6 +40,7 @@ from prioik.hierarchy import (
     rank_threshold,
 )
 
+from . import contract
 from ._numerics import REFINEMENT_STEPS, refinement
 from .base import Capabilities, FormulationError, Outcome
 from .options import Option, per_level_nonnegative, positive_semidefinite, rcond_option
@@ -211,3 +216,22 @@ def solve_batch(stacks, *, rcond: float = DEFAULT_RCOND, metric=None, level_damp
                 X[gi] = np.nan
                 statuses[gi] = "failed"
     return X, statuses
+
+
+class Prepared(contract.StackPrepared):
+    """The reference prepared for one layout: the nested SVDs of :func:`solve` on
+    each stack (:func:`solve_batch` for a batch)."""
+
+    name = NAME
+    capabilities = CAPABILITIES
+
+    def solve_stack(self, stack: TaskStack, options: dict[str, Any]) -> Outcome:
+        return solve(stack, **options)
+
+    def solve_batch(self, datas: Sequence[StackData]) -> tuple[np.ndarray, list[str]]:
+        """Many stacks of the layout at once (:func:`solve_batch`)."""
+        return solve_batch(self.stacks_of(datas), **self.options)
+
+
+#: the plugin (:mod:`prioik.formulations.registry`)
+FORMULATION = contract.Formulation(NAME, DESCRIPTION, CAPABILITIES, OPTIONS, Prepared)

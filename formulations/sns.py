@@ -34,6 +34,8 @@ The algorithm step by step: ``docs/formulations.md``.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from prioik.hierarchy import (
@@ -44,6 +46,7 @@ from prioik.hierarchy import (
     rank_threshold,
 )
 
+from . import contract
 from ._numerics import check_nonnegative, project_level, truncated_svd
 from .base import Capabilities, FormulationError, Outcome
 from .options import Option, rcond_option
@@ -249,3 +252,17 @@ def solve(stack: TaskStack, *, rcond: float = DEFAULT_RCOND, bound_tolerance: fl
         info["ambiguous_levels"] = ambiguous
         info["reason"] = ambiguity_reason(ambiguous)
     return Outcome(x, status, info)
+
+
+class Prepared(contract.StackPrepared):
+    """SNS prepared for one layout: :func:`solve` on each stack."""
+
+    name = NAME
+    capabilities = CAPABILITIES
+
+    def solve_stack(self, stack: TaskStack, options: dict[str, Any]) -> Outcome:
+        return solve(stack, **options)
+
+
+#: the plugin (:mod:`prioik.formulations.registry`)
+FORMULATION = contract.Formulation(NAME, DESCRIPTION, CAPABILITIES, OPTIONS, Prepared)

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import stack_formulation
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -212,11 +213,8 @@ def test_saved_fuzz_failures_now_hold_every_property(path):
 @pytest.fixture
 def wrong_plugin(monkeypatch):
     """A formulation that answers 0 and says ``optimal``: every check must see it."""
-    mod = type("fake", (), {})()
-    mod.NAME, mod.DESCRIPTION, mod.OPTIONS = "always_zero", "", {}
-    mod.CAPABILITIES = formulations.Capabilities()
-    mod.solve = lambda stack: Outcome(np.zeros(stack.n), "optimal")
-    monkeypatch.setitem(registry._loaded, "always_zero", mod)
+    form = stack_formulation("always_zero", lambda stack: Outcome(np.zeros(stack.n), "optimal"))
+    monkeypatch.setitem(registry._loaded, "always_zero", form)
     monkeypatch.setitem(registry.PLUGINS, "always_zero", ("always_zero", ""))
     return "always_zero"        # fuzzed as registered: no edit of the fuzz
 

@@ -173,7 +173,7 @@ def test_approximate_is_a_success_at_an_ambiguous_rank_decision():
 def test_value_judged_formulations_are_not_exact_by_design():
     from prioik import formulations
     for name in VALUE_JUDGED:
-        assert formulations.get(name).CAPABILITIES.exact is False, name
+        assert formulations.get(name).capabilities.exact is False, name
 
 
 ROWS = [Row("hierarchical_active_set", "hierarchical_active_set", {"warm_start": False}),

@@ -40,7 +40,7 @@ def _estimates(rows: list[TimingRow], variants: list[Variant]) -> dict[str, floa
     for v in variants:
         label = v.label
         if label not in by_label and not v.options:
-            opts = formulations.get(v.formulation).OPTIONS
+            opts = formulations.get(v.formulation).options
             if "solver" in opts:
                 label = f"{v.formulation}[{opts['solver'].default}]"
         if label in by_label:
