@@ -361,7 +361,7 @@ def run(windows: int = 4, steps: int = 6, repeats: int = REPEATS, ik_steps: int 
         ``{"rows": [...], "g1_step": {...}, "panda_step": {...}, "ratios": [...]}``; each
         ratio a dict ``name, value, target`` (``value ≤ target`` meets it).
     """
-    from prioik.benchmarks.threads import blas_threads
+    from prioik.threads import blas_threads
     out: dict[str, Any] = {"rows": [], "ratios": []}
     with blas_threads(1):
         if stacks:

@@ -47,15 +47,9 @@ from typing import Any
 
 import numpy as np
 
+from .stacks import TIP_STEP_BOUND
 from .variants import Variant
 
-#: Bound (rad/s²) on the sword-tip level's step in the incompatible
-#: ``extended_jacobian[step_bound]`` run (its ``step_bound``). Measured over 3 s (max
-#: ‖q̈‖ / final tip error): Δ = 5: 76 / 385 mm, 10: 55 / 382 mm, 20: 142 / 375 mm; support
-#: foot, CoM and joint limits exact in all three. Bounding every level instead also caps
-#: the joint-limit rows (targets of hundreds of rad/s²) and lets joints pass their
-#: limits by 0.3 rad.
-TIP_STEP_BOUND = 10.0
 #: Armature (kg·m²) of the ``unifying[armature]`` run (``unifying[armature_low]`` shows
 #: that 0.02 is not enough; both are measured by the command).
 UNIFYING_ARMATURE = 0.1

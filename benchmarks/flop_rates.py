@@ -15,9 +15,9 @@ import time
 import numpy as np
 
 from prioik import formulations
+from prioik.threads import blas_threads
 
 from .stacks import g1_fencing_samples
-from .threads import blas_threads
 
 #: formulation → (compiled options, readable options)
 KERNELS = {"extended_jacobian": ({"kernel": "cpp"}, {"kernel": "lapack"}),
@@ -31,7 +31,7 @@ KERNELS = {"extended_jacobian": ({"kernel": "cpp"}, {"kernel": "lapack"}),
 
 def _solver(label: str, layout, options: dict, mass_matrix: np.ndarray):
     name = label.split("[")[0]
-    if formulations.get(name).CAPABILITIES.needs_mass_matrix:
+    if formulations.get(name).capabilities.needs_mass_matrix:
         options = dict(options, mass_matrix=mass_matrix)
     return formulations.prepare(layout, name, **options)
 

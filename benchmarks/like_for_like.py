@@ -63,7 +63,7 @@ def measure(samples: list[tuple[Any, np.ndarray]], names: tuple[str, ...] = FORM
         raise ValueError(f"repeats must be ≥ 1, got {repeats}")
     available = {info.name for info in formulations.available()}
     names = tuple(n for n in names if n in available)
-    needs_mass = {n: formulations.get(n).CAPABILITIES.needs_mass_matrix for n in names}
+    needs_mass = {n: formulations.get(n).capabilities.needs_mass_matrix for n in names}
     times: dict[str, list[float]] = {n: [] for n in names}
     flops: dict[str, list[float]] = {n: [] for n in names}
     compiled = dict.fromkeys(names, False)
@@ -135,8 +135,9 @@ def measure_fencing(variants: list[str], samples: int = 16, repeats: int = 20
     Raises:
         ValueError: ``samples < 1`` or ``repeats < 1``.
     """
+    from prioik.threads import blas_threads
+
     from .stacks import g1_fencing_samples
-    from .threads import blas_threads
     if samples < 1:
         raise ValueError(f"samples must be ≥ 1, got {samples}")
     pairs = []

@@ -36,8 +36,6 @@ from __future__ import annotations
 
 import time
 
-from prioik.formulations.base import ReportVariant
-
 from .external import distribution_version as _version
 from .pink_baseline import LEVEL_COSTS, POSTURE_COST
 
@@ -71,13 +69,6 @@ def profile() -> dict:
             "given": f"QP back-end {DEFAULT_SOLVER} (mink's documentation's; a quadprog row "
                      f"beside it), task gains {GAIN:g} (dead-beat), ConfigurationLimit and "
                      "VelocityLimit, the URDF converted to MuJoCo"}
-
-
-#: rows beside the default one (``options["solver"]``: the QP back-end)
-REPORT_VARIANTS = (
-    ReportVariant("quadprog", {"solver": "quadprog"}, reports=("scenario",),
-                  note="the same with quadprog, the pink row's back-end"),
-)
 
 
 def unavailable_reason(options: dict | None = None) -> str | None:

@@ -218,7 +218,7 @@ def run(steps: int = 300, solvers: tuple[str, ...] | None = None,
     """:func:`panda_mink_step` and :func:`g1_feet_mink_step` with each of ``solvers``
     (default: mink's documented back-end) as mink's back-end, one BLAS thread;
     ``rounds``: each function's default unless given."""
-    from prioik.benchmarks.threads import blas_threads
+    from prioik.threads import blas_threads
 
     from .mink_baseline import DEFAULT_SOLVER
     out: dict[str, Any] = {}

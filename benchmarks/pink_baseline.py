@@ -27,8 +27,6 @@ import time
 
 import numpy as np
 
-from prioik.formulations.base import ReportVariant
-
 #: cost of a task by its level in the scenario (0 = highest)
 LEVEL_COSTS = (100.0, 10.0, 1.0, 0.1, 0.01)
 POSTURE_COST = 1e-3
@@ -54,15 +52,6 @@ def profile() -> dict:
                           f"{POSTURE_COST:g})",
             "given": f"QP back-end {DEFAULT_SOLVER} (qpsolvers; a daqp row beside it), task "
                      "gains 1 (dead-beat), ConfigurationLimit and VelocityLimit"}
-
-
-#: rows beside the default one (``options["solver"]``: the QP back-end)
-REPORT_VARIANTS = (
-    ReportVariant("daqp", {"solver": "daqp"}, reports=("scenario",),
-                  note="the same with DAQP, the fastest back-end measured here for pink's "
-                       "QPs (G1, 0.2 s: daqp 161, quadprog 173, proxqp 293, osqp 1143 µs "
-                       "per solve)"),
-)
 
 
 def unavailable_reason(options: dict | None = None) -> str | None:

@@ -33,7 +33,6 @@ import numpy as np
 NAME = "placo_kinematics_solver"
 DESCRIPTION = ("PlaCo's own KinematicsSolver at velocity level (hard tasks, soft weighted "
                "tasks, its joint and velocity limits): what users run today")
-REPORT_VARIANTS = ()
 #: the level the library solves at (the scenario pages' baseline table)
 LEVEL = "velocity"
 

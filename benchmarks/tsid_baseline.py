@@ -85,7 +85,6 @@ RUNNER = Path(__file__).with_name("tsid_runner.py")
 
 #: the baseline's name in the scenario reports (:data:`prioik.benchmarks.variants.BASELINES`)
 NAME = "tsid"
-REPORT_VARIANTS = ()
 #: the level the library solves at (the scenario pages' baseline table)
 LEVEL = "acceleration"
 

@@ -11,9 +11,9 @@ from .base import (
                    ConcurrentUseError,
                    FormulationError,
                    Outcome,
-                   ReportVariant,
                    Solution,
 )
+from .contract import Formulation, Prepared, StackPrepared
 from .options import Option
 from .prepared import PreparedSolver
 from .registry import (
@@ -30,6 +30,6 @@ from .registry import (
 )
 
 __all__ = ["BatchSolution", "STATUSES", "Capabilities", "ConcurrentUseError", "FormulationError",
-           "FormulationInfo", "Option", "Outcome", "PLUGINS", "PreparedSolver", "ReportVariant",
-           "Solution", "available", "compile_kernels", "get", "names", "prepare", "solve",
-           "solve_batch"]
+           "Formulation", "FormulationInfo", "Option", "Outcome", "PLUGINS", "Prepared",
+           "PreparedSolver", "Solution", "StackPrepared", "available", "compile_kernels", "get",
+           "names", "prepare", "solve", "solve_batch"]

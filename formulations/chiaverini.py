@@ -34,13 +34,16 @@ sum as written here, the oracle the tests hold the compiled kernel to.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from prioik.hierarchy import StackData, StackLayout, TaskStack, nested_null_spaces
 
+from . import contract
 from ._compiled import _core, resolve_kernel, solve_compiled, solve_rescaled
-from .base import Capabilities, Outcome, ReportVariant
-from .nullspace import check_nonnegative, generalized_inverse
+from ._numerics import check_nonnegative, generalized_inverse
+from .base import Capabilities, Outcome
 from .options import Option, rcond_option, validate_options
 
 NAME = "chiaverini"
@@ -88,7 +91,7 @@ def solve_readable(stack: TaskStack, *, damping: float, rcond: float) -> Outcome
                                       "kernel": "numpy"})
 
 
-class Prepared:
+class Prepared(contract.Prepared):
     """Chiaverini's task priority prepared for one layout: options checked, and on the
     compiled kernel (``kernel="cpp"``) the C++ solver with every workspace allocated once
     (``prioik._core.ChiaveriniSolver``: each level's own inverse and the projector
@@ -107,18 +110,18 @@ class Prepared:
         check_nonnegative(damping=options["damping"], rcond=options["rcond"])
         self.damping = float(options["damping"])
         self.rcond = float(options["rcond"])
-        self.compiled = self.kernel == "cpp"
-        if self.compiled:
+        self._cpp = self.kernel == "cpp"
+        if self._cpp:
             self._core = _core.ChiaveriniSolver([int(s) for s in layout.starts], layout.n,
                                                 rcond=self.rcond, damping=self.damping)
 
-    def solve(self, data: StackData) -> Outcome:
+    def solve(self, data: StackData, options: dict[str, Any] | None = None) -> Outcome:
         """Solve one stack of the layout.
 
         Raises:
             TaskStackError: a value is not finite (naming the task, level and row).
         """
-        if not self.compiled:
+        if not self._cpp:
             return solve_readable(data.as_stack(), damping=self.damping, rcond=self.rcond)
         res = solve_compiled(self._core, data)
         if not res.solved:
@@ -128,10 +131,6 @@ class Prepared:
                 "flops": res.flops}
         return Outcome(res.x, "approximate", info, res.residuals)
 
-# ------------------------------------------------------------------------ reports
-#: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
-REPORT_VARIANTS = (
-    ReportVariant("numpy", {"kernel": "numpy"}, reports=("bench",),
-                  note="the readable numpy SVD sum (the default, kernel='auto', is the "
-                       "compiled C++ core)"),
-)
+
+#: the plugin (:mod:`prioik.formulations.registry`)
+FORMULATION = contract.Formulation(NAME, DESCRIPTION, CAPABILITIES, OPTIONS, Prepared)

@@ -16,7 +16,7 @@ same least-squares optimum). A level whose active rows depend on those above (a
 setting changes this, and the status says so.
 
 Statuses (``check=True``): ``optimal`` when DAQP exits with flag 1 or 2 and the answer
-passes :func:`~prioik.formulations.base.certify`; ``approximate`` otherwise, with
+passes :func:`~prioik.formulations.verification.certify`; ``approximate`` otherwise, with
 ``info["fault_level"]`` and ``info["conflicting_levels"]``; ``failed`` on a negative
 exit flag (``info["message"]``, for infeasibility the hard inequality tasks involved).
 ``check=False`` skips the certificate. ``primal_tol`` defaults to 1e-10.
@@ -34,8 +34,10 @@ import numpy as np
 
 from prioik.hierarchy import TaskStack
 
-from .base import Capabilities, FormulationError, Outcome, ReportVariant, certify
+from . import contract
+from .base import Capabilities, FormulationError, Outcome
 from .options import Option, dictionary, rcond_option
+from .verification import certify
 
 NAME = "daqp_hierarchical"
 DESCRIPTION = "DAQP's hierarchical QP: the whole stack in one daqp.solve call (break_points)"
@@ -219,12 +221,17 @@ def dependent_active_levels(A: np.ndarray, bu: np.ndarray, bl: np.ndarray, bps: 
         start = stop
     return out
 
-# ------------------------------------------------------------------------ reports
-#: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
-REPORT_VARIANTS = (
-    ReportVariant("raw", {"compress_levels": False, "check": False}, reports=("bench",),
-                  note="DAQP's C call alone: no SVD compression of the levels, no "
-                       "conflicting-level check (faster, not exact on conflicting levels)"),
-    ReportVariant("compress_levels=False", {"compress_levels": False}, reports=("validate",),
-                  note="without the SVD compression of the levels"),
-)
+
+class Prepared(contract.StackPrepared):
+    """DAQP's hierarchical solve prepared for one layout: :func:`solve` on each
+    stack."""
+
+    name = NAME
+    capabilities = CAPABILITIES
+
+    def solve_stack(self, stack: TaskStack, options: dict[str, Any]) -> Outcome:
+        return solve(stack, **options)
+
+
+#: the plugin (:mod:`prioik.formulations.registry`)
+FORMULATION = contract.Formulation(NAME, DESCRIPTION, CAPABILITIES, OPTIONS, Prepared)

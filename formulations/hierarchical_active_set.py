@@ -59,12 +59,12 @@ from prioik.hierarchy import (
 )
 from prioik.hierarchy.analysis import LevelCheck
 
+from . import contract
 from .base import (
     Capabilities,
     CoreInputError,
     FormulationError,
     Outcome,
-    ReportVariant,
     precision_status,
     solve_equilibrated,
 )
@@ -158,7 +158,7 @@ def solve(stack: TaskStack, **options) -> Outcome:
     return Prepared(stack.layout, opts).solve(stack.data)
 
 
-class Prepared:
+class Prepared(contract.Prepared):
     """The active-set solver prepared for one layout: workspaces allocated once, and the
     working set of every level kept from one solve to the next.
 
@@ -180,6 +180,9 @@ class Prepared:
     Raises:
         FormulationError: the compiled core is not importable here.
     """
+
+    #: its solve_checked is the compiled kernel's, reading the data's arrays
+    compiled = True
 
     def __init__(self, layout: StackLayout, options: dict, *,
                  refine_rounds: int | None = None) -> None:
@@ -241,7 +244,7 @@ class Prepared:
         """Forget the kept working sets (the next solve starts cold)."""
         self._cpp.reset()
 
-    def solve(self, data: StackData) -> Outcome:
+    def solve(self, data: StackData, options: dict[str, Any] | None = None) -> Outcome:
         """Solve one stack of the layout (its data; the registry checked the layout).
 
         Raises:
@@ -501,10 +504,5 @@ def _row_scale_spread(data: StackData, levels) -> list[tuple[int, float]]:
     return out
 
 
-# ------------------------------------------------------------------------ reports
-#: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
-REPORT_VARIANTS = (
-    ReportVariant("velocity", level="velocity", reports=("scenario",),
-                  note="the same at velocity level (J q̇ = ẋ* + K e, the limits as bounds on "
-                       "q̇): exact, like for like with PlaCo's KinematicsSolver"),
-)
+#: the plugin (:mod:`prioik.formulations.registry`)
+FORMULATION = contract.Formulation(NAME, DESCRIPTION, CAPABILITIES, OPTIONS, Prepared)

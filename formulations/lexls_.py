@@ -21,7 +21,7 @@ levels only). A prepared solver hot-starts as lexls's documentation says — the
 clear a hot start).
 
 Status: ``"optimal"`` when lexls reports the problem solved and, with ``check=True``
-(default), the answer passes :func:`~prioik.formulations.base.certify` on the levels
+(default), the answer passes :func:`~prioik.formulations.verification.certify` on the levels
 (no tie-break: the certificate, its ambiguity record, and the exact active set's answer
 as a witness of a lower point); ``"approximate"`` when it does not (``info["message"]``
 says why) or lexls stopped at its factorization cap (``info["capped"]``: its answer is
@@ -32,12 +32,16 @@ in the final working set), ``hot_started``.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from prioik.hierarchy import StackData, StackLayout, TaskStack
 
-from .base import Capabilities, Outcome, ReportVariant, certify
+from . import contract
+from .base import Capabilities, Outcome
 from .options import Option, validate_options
+from .verification import certify
 
 try:
     from prioik import _lexls
@@ -77,7 +81,7 @@ def solve(stack: TaskStack, **options) -> Outcome:
     return Prepared(stack.layout, opts).solve(stack.data)
 
 
-class Prepared:
+class Prepared(contract.Prepared):
     """lexls prepared for one layout: the weighted rows' buffers allocated once, the
     previous ``x`` and working set kept for the next solve's hot start.
 
@@ -104,7 +108,7 @@ class Prepared:
         """Forget the previous solve (the next one is cold)."""
         self._solver.reset()
 
-    def solve(self, data: StackData) -> Outcome:
+    def solve(self, data: StackData, options: dict[str, Any] | None = None) -> Outcome:
         """lexls on the data's rows, weighted by ``√w`` (see the module docstring).
 
         Raises:
@@ -139,10 +143,6 @@ class Prepared:
         out = Outcome(x, "optimal", info)
         return certify(data, out, minimum_norm=False) if self.check else out
 
-# ------------------------------------------------------------------------ reports
-#: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
-REPORT_VARIANTS = (
-    ReportVariant("raw", {"check": False}, reports=("bench",),
-                  note="lexls's C++ solve alone (no certificate): its status as it "
-                       "reports it"),
-)
+
+#: the plugin (:mod:`prioik.formulations.registry`)
+FORMULATION = contract.Formulation(NAME, DESCRIPTION, CAPABILITIES, OPTIONS, Prepared)

@@ -14,7 +14,7 @@ level is replaced by its feasible rows ``U_rᵀ A_1 x = U_rᵀ b_1``
 
 Statuses: ``optimal`` only for two levels with an equality first level (the
 lexicographic optimum up to ``ε``) whose answer passes
-:func:`~prioik.formulations.base.certify`; deeper stacks are a weighted compromise
+:func:`~prioik.formulations.verification.certify`; deeper stacks are a weighted compromise
 and, like any stack with an inequality task below the first level, ``approximate``
 (``info["fault_level"]``). PlaCo raises on infeasible hard inequalities: the status is
 then ``failed`` with ``info["failed_level"]`` and ``info["failed_tasks"]`` (the first
@@ -32,8 +32,10 @@ import placo
 
 from prioik.hierarchy import TaskStack
 
-from .base import Capabilities, FormulationError, Outcome, certify
+from . import contract
+from .base import Capabilities, FormulationError, Outcome
 from .options import Option, rcond_option
+from .verification import certify
 
 NAME = "placo"
 DESCRIPTION = "PlaCo placo.Problem: first level hard, lower levels soft (geometric weights)"
@@ -157,3 +159,18 @@ def solve(stack: TaskStack, *, weight_ratio: float | None, regularization: float
     out = Outcome(np.array(x.value, dtype=np.float64), "optimal" if exact else "approximate",
                   info)
     return certify(stack, out)
+
+
+class Prepared(contract.StackPrepared):
+    """PlaCo's problem prepared for one layout: :func:`solve` on each stack (built
+    per solve)."""
+
+    name = NAME
+    capabilities = CAPABILITIES
+
+    def solve_stack(self, stack: TaskStack, options: dict[str, Any]) -> Outcome:
+        return solve(stack, **options)
+
+
+#: the plugin (:mod:`prioik.formulations.registry`)
+FORMULATION = contract.Formulation(NAME, DESCRIPTION, CAPABILITIES, OPTIONS, Prepared)

@@ -10,7 +10,7 @@ with ``Z_1 = I`` and every pseudo-inverse and null space from an SVD in float64
 ``AMBIGUITY`` of it makes the status ``approximate``). Each level is solved in the least-squares
 sense, so rank-deficient and infeasible levels are handled; the step ``y_i`` gets
 ``REFINEMENT_STEPS`` steps of iterative refinement from the level's residual, formed
-row by row (:func:`formulations.nullspace.refinement`): the SVD reads rows far smaller
+row by row (:func:`formulations._numerics.refinement`): the SVD reads rows far smaller
 than the level's norm with errors of ``ε ‖M_i‖``, which their large targets would carry
 into the step. Because every ``y_i``
 lies in the row space of ``M_i``, the result is the minimum-norm point of the
@@ -24,11 +24,15 @@ singular values): the damped hierarchy that ``extended_jacobian`` (selective dam
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import Any
+
 import numpy as np
 
 from prioik.hierarchy import (
     AMBIGUITY,
     DEFAULT_RCOND,
+    StackData,
     TaskStack,
     ambiguity_reason,
     ambiguous_decision,
@@ -36,8 +40,9 @@ from prioik.hierarchy import (
     rank_threshold,
 )
 
+from . import contract
+from ._numerics import REFINEMENT_STEPS, refinement
 from .base import Capabilities, FormulationError, Outcome
-from .nullspace import REFINEMENT_STEPS, refinement
 from .options import Option, per_level_nonnegative, positive_semidefinite, rcond_option
 
 NAME = "reference"
@@ -91,7 +96,7 @@ def solve(stack: TaskStack, *, rcond: float, metric, level_damping) -> Outcome:
         if r:
             c = b - A @ x
             y = vt[:r].T @ ((u[:, :r].T @ c) * s[:r] / (s[:r] ** 2 + mu2[i]))
-            for _ in range(0 if mu2[i] else REFINEMENT_STEPS):   # nullspace.refinement
+            for _ in range(0 if mu2[i] else REFINEMENT_STEPS):   # _numerics.refinement
                 y = y + vt[:r].T @ ((vt[:r] @ (M.T @ (c - M @ y))) / s[:r] ** 2)
             x = x + Z @ y
         Z = Z @ vt[r:].T
@@ -171,7 +176,7 @@ def solve_batch(stacks, *, rcond: float = DEFAULT_RCOND, metric=None, level_damp
             w = np.where(keep, w * s / np.where(keep, s * s + mu2[li], 1.0), 0.0)
             #   Σ_r⁻¹ U_rᵀ c (σ/(σ² + μ²) when damped), masked
             y = np.einsum("gpd,gp->gd", vt[:, :p, :], w)          # V_r (…)
-            for _ in range(0 if mu2[li] else REFINEMENT_STEPS):  # nullspace.refinement
+            for _ in range(0 if mu2[li] else REFINEMENT_STEPS):  # _numerics.refinement
                 y = y + refinement(M, c[:, :, None], y[:, :, None], vt[:, :p, :], keep,
                                    s)[:, :, 0]
             X[idx] += np.einsum("gnd,gd->gn", Z, y)
@@ -212,7 +217,21 @@ def solve_batch(stacks, *, rcond: float = DEFAULT_RCOND, metric=None, level_damp
                 statuses[gi] = "failed"
     return X, statuses
 
-# ------------------------------------------------------------------------ reports
-#: reports whose default selection leaves this formulation out, and why
-REPORT_OPT_OUTS = {"scenario": "the test oracle: one nested SVD per level and step; "
-                               "extended_jacobian gives the same q̈"}
+
+class Prepared(contract.StackPrepared):
+    """The reference prepared for one layout: the nested SVDs of :func:`solve` on
+    each stack (:func:`solve_batch` for a batch)."""
+
+    name = NAME
+    capabilities = CAPABILITIES
+
+    def solve_stack(self, stack: TaskStack, options: dict[str, Any]) -> Outcome:
+        return solve(stack, **options)
+
+    def solve_batch(self, datas: Sequence[StackData]) -> tuple[np.ndarray, list[str]]:
+        """Many stacks of the layout at once (:func:`solve_batch`)."""
+        return solve_batch(self.stacks_of(datas), **self.options)
+
+
+#: the plugin (:mod:`prioik.formulations.registry`)
+FORMULATION = contract.Formulation(NAME, DESCRIPTION, CAPABILITIES, OPTIONS, Prepared)

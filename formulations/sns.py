@@ -34,6 +34,8 @@ The algorithm step by step: ``docs/formulations.md``.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from prioik.hierarchy import (
@@ -44,8 +46,9 @@ from prioik.hierarchy import (
     rank_threshold,
 )
 
-from .base import Capabilities, FormulationError, Outcome, ReportVariant
-from .nullspace import check_nonnegative, project_level, truncated_svd
+from . import contract
+from ._numerics import check_nonnegative, project_level, truncated_svd
+from .base import Capabilities, FormulationError, Outcome
 from .options import Option, rcond_option
 
 NAME = "sns"
@@ -250,14 +253,16 @@ def solve(stack: TaskStack, *, rcond: float = DEFAULT_RCOND, bound_tolerance: fl
         info["reason"] = ambiguity_reason(ambiguous)
     return Outcome(x, status, info)
 
-# ------------------------------------------------------------------------ reports
-#: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
-REPORT_VARIANTS = (
-    ReportVariant("", limits="hard_bounds", reports=("scenario", "control_step"),
-                  replaces_default=True,
-                  note="the joint-limit bounds as hard limits above every task (level 0), "
-                       "strict priorities, task scaling when a task cannot be met within "
-                       "them"),
-    ReportVariant("velocity", level="velocity", limits="hard_bounds", reports=("scenario",),
-                  note="SNS at velocity level (J q̇ = ẋ* + K e, the q̇ bounds as level 0)"),
-)
+
+class Prepared(contract.StackPrepared):
+    """SNS prepared for one layout: :func:`solve` on each stack."""
+
+    name = NAME
+    capabilities = CAPABILITIES
+
+    def solve_stack(self, stack: TaskStack, options: dict[str, Any]) -> Outcome:
+        return solve(stack, **options)
+
+
+#: the plugin (:mod:`prioik.formulations.registry`)
+FORMULATION = contract.Formulation(NAME, DESCRIPTION, CAPABILITIES, OPTIONS, Prepared)

@@ -49,14 +49,14 @@ from scipy.linalg import cho_factor, cho_solve
 
 from prioik.hierarchy import DEFAULT_RCOND, StackData, StackLayout, TaskStack
 
+from . import contract
 from ._compiled import _core, mass_matrix_outcome, resolve_kernel, solve_compiled, solve_rescaled
+from ._numerics import check_nonnegative, generalized_inverse
 from .base import (
     Capabilities,
     FormulationError,
     Outcome,
-    ReportVariant,
 )
-from .nullspace import check_nonnegative, generalized_inverse
 from .options import Option, rcond_option, validate_options
 
 NAME = "unifying"
@@ -157,7 +157,7 @@ def solve_readable(stack: TaskStack, *, mass_matrix, bias, rcond: float) -> Outc
     return Outcome(x, "approximate", info)
 
 
-class Prepared:
+class Prepared(contract.Prepared):
     """The unifying framework prepared for one layout: options checked, and on the compiled
     kernel (``kernel="cpp"``) the C++ solver with every workspace allocated once
     (``prioik._core.UnifyingSolver``: ``M = L Lᵀ`` factored in the solve, each
@@ -180,12 +180,12 @@ class Prepared:
         self.kernel = resolve_kernel(options["kernel"])
         check_nonnegative(rcond=options["rcond"])
         self.rcond = float(options["rcond"])
-        self.compiled = self.kernel == "cpp"
-        if self.compiled:
+        self._cpp = self.kernel == "cpp"
+        if self._cpp:
             self._core = _core.UnifyingSolver([int(s) for s in layout.starts], layout.n,
                                               rcond=self.rcond)
 
-    def solve(self, data: StackData, options: dict | None = None) -> Outcome:
+    def solve(self, data: StackData, options: dict[str, Any] | None = None) -> Outcome:
         """Solve one stack of the layout (``options``: this call's, else the prepared ones).
 
         Raises:
@@ -196,7 +196,7 @@ class Prepared:
         mass, bias = options["mass_matrix"], options["bias"]
         if mass is None:
             raise FormulationError("formulation 'unifying' needs mass_matrix=M")
-        if not self.compiled:
+        if not self._cpp:
             return solve_readable(data.as_stack(), mass_matrix=mass, bias=bias,
                                   rcond=self.rcond)
         M = np.ascontiguousarray(mass, dtype=np.float64)
@@ -206,12 +206,6 @@ class Prepared:
             return solve_rescaled(lambda d: self.solve(d, options), data)
         return out
 
-# ------------------------------------------------------------------------ reports
-#: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
-REPORT_VARIANTS = (
-    ReportVariant("numpy", {"kernel": "numpy"}, reports=("bench",),
-                  note="the readable numpy eq. 40 (the default, kernel='auto', is the "
-                       "compiled C++ core)"),
-    ReportVariant("M=I", mass="identity", reports=("properties",),
-                  note="with M = I (the report's other row has a seeded SPD M)"),
-)
+
+#: the plugin (:mod:`prioik.formulations.registry`)
+FORMULATION = contract.Formulation(NAME, DESCRIPTION, CAPABILITIES, OPTIONS, Prepared)

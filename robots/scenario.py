@@ -25,7 +25,7 @@ members only:
   and ``tip_frame``, the frame whose path the replay traces;
 * :meth:`Scenario.urdf_text` — the robot's URDF as the baselines must load it (with
   the scenario's extra frames and locked joints), and ``info()`` to rebuild the
-  scenario from a saved run (:func:`make`).
+  scenario from a saved run (:func:`robots.scenarios.make`).
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ from .models import RobotModel
 from .simulate import SimulationError, StepTasks
 from .tasks import KinematicState
 
-__all__ = ["BaselineTask", "Scenario", "SCENARIOS", "make"]
+__all__ = ["BaselineTask", "Scenario"]
 
 LIMIT_FORMS_ACCELERATION = ("activation", "bounds", "hard_bounds")
 LIMIT_FORMS_VELOCITY = ("none", "bounds", "hard_bounds")
@@ -135,34 +135,9 @@ class Scenario:
         raise NotImplementedError
 
     def info(self) -> dict:
-        """What :func:`make` needs to rebuild this scenario."""
+        """What :func:`robots.scenarios.make` needs to rebuild this scenario."""
         return {"scenario": self.name, "variant": self.variant, "robot": self.robot.name}
 
     def __repr__(self) -> str:
         return (f"{type(self).__name__}(variant={self.variant!r}, robot={self.robot.name!r}, "
                 f"n_v={self.robot.nv})")
-
-
-def _registry() -> dict[str, type]:
-    from .arm import ArmScenario
-    from .fencing import FencingScenario
-    return {"fencing": FencingScenario, "arm": ArmScenario}
-
-
-#: scenario name -> class (filled on first use: the modules import this one)
-SCENARIOS: dict[str, type] = {}
-
-
-def make(name: str, variant: str | None = None) -> Scenario:
-    """Build scenario ``name`` (``"fencing"``, ``"arm"``) in ``variant`` (its first by
-    default).
-
-    Raises:
-        ValueError: unknown scenario or variant (lists the known ones).
-    """
-    if not SCENARIOS:
-        SCENARIOS.update(_registry())
-    if name not in SCENARIOS:
-        raise SimulationError(f"unknown scenario {name!r}; known: {', '.join(SCENARIOS)}")
-    cls = SCENARIOS[name]
-    return cls(variant or cls.variants[0])

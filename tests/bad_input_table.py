@@ -254,11 +254,11 @@ cases = [
     ("compare --formulations foo", ["compare", gp, "--formulations", "foo", "--repeats", "1"], 2, "foo"),
 ]
 for name, argv, code, word in cases:
-    res = subprocess.run([sys.executable, "-m", "prioik.benchmarks.cli", *argv], capture_output=True, text=True, timeout=600)
+    res = subprocess.run([sys.executable, "-m", "prioik.cli", *argv], capture_output=True, text=True, timeout=600)
     err = res.stderr.strip()
     ok = res.returncode == code and len(err.splitlines()) == 1 and word in err
     rows.append(("CLI", name, ok, f"exit {res.returncode}, stderr {len(err.splitlines())} lines: {err[-90:]!r}"))
-proc = subprocess.Popen([sys.executable, "-m", "prioik.benchmarks.cli", "solve", gp], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+proc = subprocess.Popen([sys.executable, "-m", "prioik.cli", "solve", gp], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
 proc.stdout.close()
 err = proc.stderr.read().decode()
 code = proc.wait(timeout=600)

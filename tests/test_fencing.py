@@ -8,10 +8,10 @@ import pytest
 
 from prioik import formulations
 from prioik.benchmarks import fencing as cmd
-from prioik.benchmarks.cli import main
 from prioik.benchmarks.results import RunSummary
 from prioik.benchmarks.scenario_runs import run_one, run_table
 from prioik.benchmarks.variants import Variant
+from prioik.cli import main
 from prioik.robots import KinematicState, simulate
 from prioik.robots.fencing import LEVEL_NAMES, TARGETS, FencingScenario
 

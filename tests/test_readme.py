@@ -113,7 +113,7 @@ def test_make_demo_is_the_command_readme_names():
 
 def test_the_commands_readme_names_parse():
     """Every `prioik ...` command README shows is accepted by the command line."""
-    from prioik.benchmarks.cli import build_parser
+    from prioik.cli import build_parser
     commands = re.findall(r"`(prioik [a-z]+[^`]*)`", README.read_text())
     assert commands
     parser = build_parser()

@@ -7,7 +7,6 @@ import math
 import numpy as np
 import pytest
 
-from prioik.benchmarks.cli import main
 from prioik.benchmarks.testsets import TEST_SETS, get
 from prioik.benchmarks.testsets.metrics import (
     PROFILES,
@@ -19,6 +18,7 @@ from prioik.benchmarks.testsets.metrics import (
 )
 from prioik.benchmarks.testsets.report import format_report, summarize
 from prioik.benchmarks.testsets.run import CSV_FIELDS, Row, load_csv, run_test_set, write_csv
+from prioik.cli import main
 from prioik.hierarchy import Task, TaskStack, check_lexicographic
 
 #: the smallest size of every test set (one or two problems per family or trajectory)
@@ -173,7 +173,7 @@ def test_approximate_is_a_success_at_an_ambiguous_rank_decision():
 def test_value_judged_formulations_are_not_exact_by_design():
     from prioik import formulations
     for name in VALUE_JUDGED:
-        assert formulations.get(name).CAPABILITIES.exact is False, name
+        assert formulations.get(name).capabilities.exact is False, name
 
 
 ROWS = [Row("hierarchical_active_set", "hierarchical_active_set", {"warm_start": False}),

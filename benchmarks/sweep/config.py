@@ -155,7 +155,7 @@ def _table_variant(cfg: dict, e: dict) -> Variant:
         raise _err(cfg, f"formulation {name!r}: {exc}") from None
     opts = dict(e.get("options", {}))
     try:
-        validate_options(name, mod.OPTIONS, opts, None)
+        validate_options(name, mod.options, opts, None)
     except formulations.FormulationError as exc:
         raise _err(cfg, str(exc)) from None
     level = e.get("level", "acceleration")

@@ -79,7 +79,7 @@ CSV_FIELDS = ("test_set", "problem", "sequence", "row", "formulation", "n", "lev
 
 def _warm_option(formulation: str) -> str | None:
     from prioik import formulations
-    opts = formulations.get(formulation).OPTIONS
+    opts = formulations.get(formulation).options
     return next((o for o in WARM_OPTIONS if o in opts), None)
 
 
@@ -123,7 +123,7 @@ class _Solvers:
     def __init__(self, row: Row) -> None:
         from prioik import formulations
         self.row = row
-        self.caps = formulations.get(row.formulation).CAPABILITIES
+        self.caps = formulations.get(row.formulation).capabilities
         self._by_layout: dict = {}
         self._sequence: str | None = None
 
