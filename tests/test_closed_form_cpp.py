@@ -259,3 +259,101 @@ def test_extended_jacobian_and_nullspace_count_the_same_lq_on_one_level():
     ns = formulations.solve(stack, "nullspace", kernel="cpp").info["flops"]
     assert abs(ej - ns) <= 6 * m * n
     assert ej >= householder_lq_applications(m, n)
+
+
+# ------------------------------------------------------------------------- reference
+#: the reference's settings compared: minimum norm, damped levels, a metric's tie-break
+REFERENCE_SETTINGS = ("plain", "damped", "metric")
+
+
+def reference_options(setting: str, stack: TaskStack) -> dict:
+    if setting == "damped":
+        return {"level_damping": [1e-2] * len(stack)}
+    if setting == "metric":
+        return {"metric": random_spd(np.random.default_rng(stack.n), stack.n)}
+    return {}
+
+
+@pytest.mark.parametrize("setting", REFERENCE_SETTINGS)
+def test_reference_cpp_equals_numpy_on_every_family(setting):
+    for family, seed, stack in family_stacks():
+        cpp, ref = assert_kernels_agree(stack, "reference", **reference_options(setting, stack))
+        assert cpp.info["rank_profile"] == ref.info["rank_profile"], (family, seed)
+        assert cpp.info["null_space_dim"] == ref.info["null_space_dim"], (family, seed)
+
+
+@pytest.mark.parametrize("setting", REFERENCE_SETTINGS)
+def test_reference_cpp_equals_numpy_on_the_g1_fencing_stacks(g1_stacks, setting):
+    for stack in g1_stacks:
+        cpp, ref = assert_kernels_agree(stack, "reference", **reference_options(setting, stack))
+        assert cpp.info["rank_profile"] == ref.info["rank_profile"]
+
+
+def test_reference_cpp_names_a_metric_the_null_space_cannot_take():
+    """A metric singular on the last null space fails the solve on both kernels (the
+    readable path's LinAlgError, reported as status "failed")."""
+    stack = FAMILIES["rank_deficient"](np.random.default_rng(3), 8, 2)
+    W = np.zeros((8, 8))
+    for kernel in ("cpp", "numpy"):
+        sol = formulations.solve(stack, "reference", kernel=kernel, metric=W)
+        assert sol.status == "failed" and "positive definite" in sol.info["message"]
+
+
+def test_reference_auto_is_the_compiled_kernel_and_batches_by_solves():
+    stack = FAMILIES["conflicting"](np.random.default_rng(1), 12, 3)
+    sol = formulations.solve(stack, "reference")
+    assert sol.info["kernel"] == "cpp" and sol.info["flops"] > 0
+    batch = formulations.solve_batch([stack, stack], "reference")
+    np.testing.assert_array_equal(batch.X[0], sol.x)
+    assert batch.statuses == [sol.status] * 2
+
+
+@pytest.mark.parametrize("m, n", [(6, 20), (15, 35), (30, 30)])
+def test_reference_flops_of_one_level_are_counted_operation_by_operation(m, n):
+    """One level of full row rank (m ≤ n, Z = I): M = A Z, the row-pivoted LQ of M, the
+    Jacobi sweeps over L's m columns (each pair: three dot products; each rotation: two
+    rows of L and of W turned), the step's coordinates, Z Qᵀ W, and the step with two
+    refinements. Every term is written out here except the LQ's, bounded as nullspace's."""
+    rng = np.random.default_rng(m + 100 * n)
+    stack = TaskStack([Task("only", rng.standard_normal((m, n)), rng.standard_normal(m))])
+    info = formulations.solve(stack, "reference", kernel="cpp").info
+    assert info["rank_profile"] == [m]
+    pairs = m * (m - 1) // 2
+    jacobi = (info["jacobi_sweeps"] * pairs * (6 * m + 3)
+              + info["jacobi_rotations"] * (12 + 6 * (m + m)) + m * (2 * m + 1))
+    formation = 2 * m * n * n + 2 * m * n + m
+    coordinates = m * (2 * m + 3)
+    rotate_z = n * sum(4 * (n - t) + 1 for t in range(m)) + 2 * n * m * m
+    step = 3 * 2 * n * m + 2 * (4 * m * n + m + m * (2 * n + 3)) + n
+    known = formation + jacobi + coordinates + rotate_z + step
+    lq = householder_lq_applications(m, n)
+    assert info["jacobi_sweeps"] >= 2 and info["jacobi_rotations"] >= pairs
+    assert known + lq <= info["flops"] <= known + lq + 16 * m * n + m * m, (info, known + lq)
+
+
+def test_reference_solver_checks_its_arrays_and_options():
+    solver = core.ReferenceSolver([0, 2, 3], 4, rcond=1e-9)
+    A, b, w = np.ones((3, 4)), np.zeros(3), np.ones(3)
+    with pytest.raises(CoreInputError, match="A must have shape"):
+        solver.solve(np.ones((3, 5)), b, w)
+    with pytest.raises(CoreInputError, match="b must be float64"):
+        solver.solve(A, np.zeros(3, dtype=np.float32), w)
+    with pytest.raises(CoreInputError, match="C-contiguous"):
+        solver.solve(np.ones((4, 3)).T, b, w)
+    bad = A.copy()
+    bad[2, 3] = np.inf
+    with pytest.raises(CoreInputError, match=r"A\[2, 3\] is not finite"):
+        solver.solve(bad, b, w)
+    with pytest.raises(CoreInputError, match=r"sqrt_weight\[1\] must be finite and > 0"):
+        solver.solve(A, b, np.array([1.0, -1.0, 1.0]))
+    with pytest.raises(CoreInputError, match="level_damping must hold 2 values"):
+        core.ReferenceSolver([0, 2, 3], 4, rcond=1e-9, level_damping=[0.1])
+    with pytest.raises(CoreInputError, match="level_damping must be finite"):
+        core.ReferenceSolver([0, 2, 3], 4, rcond=1e-9, level_damping=[0.1, -1.0])
+    with pytest.raises(CoreInputError, match="metric must have shape"):
+        core.ReferenceSolver([0, 2, 3], 4, rcond=1e-9, metric=np.eye(3))
+    with pytest.raises(CoreInputError, match="metric must be finite"):
+        core.ReferenceSolver([0, 2, 3], 4, rcond=1e-9, metric=np.full((4, 4), np.nan))
+    with pytest.raises(CoreInputError, match="rcond must be in"):
+        core.ReferenceSolver([0, 2, 3], 4, rcond=0.0)
+    assert solver.solve(A, b, w).finite        # the solver still works after refusals

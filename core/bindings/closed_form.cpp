@@ -1,5 +1,5 @@
 // prioik._core's closed-form formulations beside the extended Jacobian (closed_form.hpp),
-// nullspace, chiaverini, unifying and operational_space:
+// nullspace, chiaverini, unifying, operational_space, reference and sns:
 // prepared solvers whose solve checks its arrays (array_checks.hpp: float64, the layout's
 // shape, C-contiguous, not empty) and raises CoreInputError naming the array or the
 // entry at fault; a solve releases the GIL.
@@ -28,6 +28,8 @@ using prioik::ChiaveriniSolver;
 using prioik::NullspaceResult;
 using prioik::NullspaceSolver;
 using prioik::OperationalSpaceSolver;
+using prioik::ReferenceResult;
+using prioik::ReferenceSolver;
 using prioik::UnifyingResult;
 using prioik::UnifyingSolver;
 
@@ -69,6 +71,28 @@ const UnifyingResult& solve_with_mass(Solver& self, nb::handle A, nb::handle b, 
   const double* mass = input(mass_matrix, "mass_matrix", {self.cols(), self.cols()});
   nb::gil_scoped_release release;
   return self.solve(data, mass);
+}
+
+const ReferenceResult& solve_reference(ReferenceSolver& self, nb::handle A, nb::handle b,
+                                       nb::handle w) {
+  const prioik::StackArrays data = stack_arrays(self, A, b, w);
+  nb::gil_scoped_release release;
+  return self.solve(data);
+}
+
+// ReferenceSolver(starts, n, rcond=, level_damping=, metric=): the metric (n × n) checked
+// as the stack's arrays are
+void init_reference(ReferenceSolver* self, std::vector<Index> starts, Index n, double rcond,
+                    std::vector<double> level_damping, nb::handle metric) {
+  prioik::ReferenceOptions o;
+  o.rcond = rcond;
+  o.level_damping = std::move(level_damping);
+  if (!metric.is_none()) {
+    if (n <= 0) throw prioik::InputError("n must be positive, got " + std::to_string(n));
+    const double* W = input(metric, "metric", {n, n});
+    o.metric.assign(W, W + n * n);
+  }
+  new (self) ReferenceSolver(std::move(starts), n, std::move(o));
 }
 
 }  // namespace
@@ -208,4 +232,40 @@ void bind_closed_form(nb::module_& m) {
       .def_prop_ro("rows", [](const OperationalSpaceSolver& s) { return s.rows(); })
       .def_prop_ro("cols", [](const OperationalSpaceSolver& s) { return s.cols(); })
       .def_prop_ro("levels", [](const OperationalSpaceSolver& s) { return s.levels(); });
+
+  nb::class_<ReferenceResult>(
+      m, "ReferenceResult",
+      "One nested-SVD reference solve's answer, the solver's own (the next solve "
+      "overwrites it): each read of an array field returns a new array.")
+      .def_prop_ro("x", [](const ReferenceResult& r) { return copy1(r.x); }, nb::rv_policy::move)
+      .def_prop_ro("residuals", [](const ReferenceResult& r) { return copy1(r.residuals); },
+                   nb::rv_policy::move)
+      .def_prop_ro("ranks", [](const ReferenceResult& r) { return copy1(r.ranks); },
+                   nb::rv_policy::move, "the kept rank of each M_i = A_i Z_i")
+      .def_prop_ro("ambiguous", [](const ReferenceResult& r) { return copy1(r.ambiguous); },
+                   nb::rv_policy::move,
+                   "1 where a singular value of M_i lies within AMBIGUITY of the threshold")
+      .def_ro("null_space_dim", &ReferenceResult::null_space_dim)
+      .def_ro("sweeps", &ReferenceResult::sweeps, "the Jacobi sweeps of the solve")
+      .def_ro("rotations", &ReferenceResult::rotations, "the Jacobi rotations of the solve")
+      .def_ro("flops", &ReferenceResult::flops, "floating-point operations of the solve")
+      .def_ro("solved", &ReferenceResult::solved,
+              "False: a level's scale is outside [SCALE_LOW, SCALE_HIGH], nothing solved")
+      .def_ro("finite", &ReferenceResult::finite)
+      .def_ro("metric_positive_definite", &ReferenceResult::metric_positive_definite,
+              "False: ZᵀWZ is not positive definite (x without the metric's tie-break)");
+
+  nb::class_<ReferenceSolver>(
+      m, "ReferenceSolver",
+      "The nested-SVD lexicographic least squares prepared for one layout "
+      "(closed_form.hpp): workspaces allocated here, none per solve. One thread at a time.")
+      .def("__init__", &init_reference, nb::arg("starts"), nb::arg("n"), nb::kw_only(),
+           nb::arg("rcond"), nb::arg("level_damping") = std::vector<double>(),
+           nb::arg("metric") = nb::none())
+      .def("solve", &solve_reference, nb::arg("A").none(), nb::arg("b").none(),
+           nb::arg("sqrt_weight").none(), nb::rv_policy::reference_internal,
+           "Solve one stack (A: M × n, b and sqrt_weight: M; C-contiguous float64).")
+      .def_prop_ro("rows", [](const ReferenceSolver& s) { return s.rows(); })
+      .def_prop_ro("cols", [](const ReferenceSolver& s) { return s.cols(); })
+      .def_prop_ro("levels", [](const ReferenceSolver& s) { return s.levels(); });
 }

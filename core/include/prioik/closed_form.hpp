@@ -222,6 +222,73 @@ class OperationalSpaceSolver final : public MassMatrixSolver {
   OperationalSpaceOptions options_;
 };
 
+// The exact lexicographic minimum-norm least squares by nested SVD null spaces (the
+// `reference` formulation), for each level i with x = 0 and Z_1 = I (n × n):
+//     M_i = A_i Z_i,   y_i = V_r diag(σ/(σ² + μ_i²)) U_rᵀ (b_i − A_i x),   x ← x + Z_i y_i,
+//     Z_{i+1} = Z_i · null(M_i)
+// rank r = #{σ > rcond ‖A_i‖_F} (the readable path's rule, on singular values), a σ within
+// kAmbiguity of the threshold marking the level ambiguous; undamped steps get two steps of
+// iterative refinement from the level's residual formed row by row. The SVD of M_i is a
+// Householder LQ, M_i = [L 0] Q, then a one-sided (Hestenes) Jacobi SVD of L's columns,
+// L W = U Σ (rotations until every pair of columns is orthogonal to m ε): σ are the
+// singular values of M_i to its relative accuracy, V = Qᵀ [W; 0] and null(M_i) = Qᵀ's
+// columns past L's and W's columns with σ ≤ the threshold. With a metric W_x (n × n,
+// SPD on the last null space) the tie-break solves (ZᵀW_xZ) z = −ZᵀW_x x by Cholesky.
+struct ReferenceOptions {
+  double rcond = 1e-9;
+  std::vector<double> level_damping;   // k values μ_i² ≥ 0 (empty: none)
+  std::vector<double> metric;          // n × n, row-major (empty: minimum norm)
+};
+
+struct ReferenceResult {
+  std::vector<double> x;            // n
+  std::vector<double> residuals;    // k: ‖√w ∘ (A_i x − b_i)‖
+  std::vector<Index> ranks;         // k: the kept rank of M_i
+  std::vector<Index> ambiguous;     // k: 1 where a σ of M_i lies within kAmbiguity of the
+                                    // threshold
+  Index null_space_dim = 0;         // the columns of the last Z
+  Index sweeps = 0;                 // the Jacobi sweeps of the solve, over every level
+  Index rotations = 0;              // the Jacobi rotations of the solve, over every level
+  double flops = 0.0;               // floating-point operations of the solve
+  bool solved = false;       // false: a level's scale is outside [1e-100, 1e100]
+  bool finite = false;       // the residuals (and so x) are finite
+  bool metric_positive_definite = true;   // ZᵀW_xZ factored (false: x without tie-break)
+};
+
+class ReferenceSolver : public ProjectionSolver {
+ public:
+  // Throws InputError on a malformed layout, rcond outside (0, 1), level_damping not k
+  // finite values ≥ 0, or a metric not n × n finite values.
+  ReferenceSolver(std::vector<Index> starts, Index n, ReferenceOptions options);
+
+  // Solve one stack of the layout (as NullspaceSolver::solve).
+  const ReferenceResult& solve(const StackArrays& data);
+
+  const ReferenceResult& result() const { return result_; }
+
+ private:
+  // level lev on the workspace (Z: n × d, d the null space's dimension); returns its flops
+  double solve_level(Index lev);
+  // the level's step from the kept singular directions (Zq's columns), refined; its flops
+  double level_step(Index lev, Index s0, Index m, Index r);
+  // the metric's tie-break on the last null space; its flops
+  double metric_step();
+
+  ReferenceOptions options_;
+  ReferenceResult result_;
+  Index d_ = 0;                 // the current null space's dimension (Z's columns)
+  std::vector<double> Z_;       // n × n: the null-space basis Z_i (columns < d_)
+  std::vector<double> Gt_;      // n × m_max: L's columns as rows (Jacobi's matrix)
+  std::vector<double> Wt_;      // n × n: the Jacobi rotations' product, transposed
+  std::vector<double> sigma_;   // n: the singular values of M_i
+  std::vector<Index> order_;    // n: the kept columns first, then the null ones
+  std::vector<double> gain_;    // n: the step's coordinates on the kept columns
+  std::vector<double> res0_;    // m_max: b_i − A_i x, the level's rows in order
+  std::vector<double> row_;     // n: scratch
+  std::vector<double> G_;       // n × n: ZᵀW_xZ and its Cholesky factor
+  std::vector<double> WZ_;      // n × n: W_x Z
+};
+
 // Throws InputError naming the first entry of A or b that is not finite, or the first
 // √w not finite and > 0 (M rows of n columns).
 void check_stack_entries(const StackArrays& data, Index M, Index n);
