@@ -12,8 +12,8 @@ import pytest
 import prioik._core as core
 from prioik import formulations
 from prioik.formulations.base import CoreInputError
-from prioik.hierarchy import Task, TaskStack
-from prioik.hierarchy.families import FAMILIES, random_spd
+from prioik.hierarchy import Task, TaskStack, UnsupportedTaskError
+from prioik.hierarchy.families import FAMILIES, box_bounded, random_spd
 
 #: relative agreement of the compiled and readable answers, ‖x_cpp − x_numpy‖ / max(1, ‖x‖):
 #: the two factor Ĵ_i differently (row-pivoted LQ, SVD) and round differently
@@ -357,3 +357,115 @@ def test_reference_solver_checks_its_arrays_and_options():
     with pytest.raises(CoreInputError, match="rcond must be in"):
         core.ReferenceSolver([0, 2, 3], 4, rcond=0.0)
     assert solver.solve(A, b, w).finite        # the solver still works after refusals
+
+
+# ------------------------------------------------------------------------------- sns
+def assert_sns_kernels_agree(stack: TaskStack, **options) -> tuple:
+    """The same answer, status, scaling, saturated joints (in order) and rounds."""
+    cpp, ref = assert_kernels_agree(stack, "sns", **options)
+    np.testing.assert_allclose(cpp.info["task_scaling"], ref.info["task_scaling"], rtol=0,
+                               atol=1e-9)
+    for key in ("saturated", "iterations", "scaled_tasks", "bounds_level", "first_task_level"):
+        assert cpp.info[key] == ref.info[key], (key, cpp.info[key], ref.info[key])
+    return cpp, ref
+
+
+def test_sns_cpp_equals_numpy_on_every_family():
+    """Without bounds SNS is null-space projection: the kernels agree as nullspace's do."""
+    for _family, _seed, stack in family_stacks():
+        assert_sns_kernels_agree(stack)
+
+
+def test_sns_cpp_equals_numpy_on_the_g1_fencing_stacks(g1_stacks):
+    for stack in g1_stacks:
+        assert_sns_kernels_agree(stack)
+
+
+@pytest.mark.parametrize("target_scale", [0.1, 1.0, 5.0, 50.0])
+@pytest.mark.parametrize("offset", [False, True])
+def test_sns_cpp_equals_numpy_under_box_bounds(target_scale, offset):
+    """Hard box bounds over 1-4 equality levels, from inactive (0.1) to every level scaled
+    or dropped (50; the later levels then start at a vertex of the box, where the rounds'
+    ties are decided by SATURATION_TIE on both kernels)."""
+    saturated = 0
+    for seed in range(24):
+        rng = np.random.default_rng(9000 + seed)
+        n, k = int(rng.integers(2, 20)), int(rng.integers(1, 5))
+        stack = box_bounded(rng, n, k, target_scale, offset)
+        cpp, _ = assert_sns_kernels_agree(stack)
+        saturated += sum(len(s) for s in cpp.info["saturated"])
+    assert saturated > 0 or target_scale < 1.0      # the rounds ran
+
+
+def test_sns_cpp_options_reach_the_kernel():
+    rng = np.random.default_rng(4)
+    stack = box_bounded(rng, 8, 2, 5.0)
+    for options in ({"max_saturations": 1}, {"max_saturations": 0}, {"bound_tolerance": 1e-3},
+                    {"rcond": 1e-6}):
+        assert_sns_kernels_agree(stack, **options)
+    capped = formulations.solve(stack, "sns", max_saturations=1)
+    assert max(len(s) for s in capped.info["saturated"]) <= 1
+
+
+def test_sns_cpp_names_bounds_it_cannot_take():
+    n = 4
+    two_columns = np.zeros((1, n))
+    two_columns[0, :2] = 1.0
+    stack = TaskStack([Task("limits", two_columns, lower=[-1.0], upper=[1.0]),
+                       Task("goal", np.ones((1, n)), [1.0])])
+    with pytest.raises(UnsupportedTaskError, match="row 0 has 2 nonzero entries"):
+        formulations.solve(stack, "sns", kernel="cpp")
+    one = np.zeros((1, n))
+    one[0, 1] = 1.0
+    apart = TaskStack([[Task("low", one, lower=[-2.0], upper=[-1.0]),
+                        Task("high", one, lower=[1.0], upper=[2.0])],
+                       Task("goal", np.ones((1, n)), [1.0])])
+    with pytest.raises(formulations.FormulationError, match="bounds of column 1 do not"):
+        formulations.solve(apart, "sns", kernel="cpp")
+
+
+def test_sns_solver_checks_its_arrays_and_options():
+    solver = core.SnsSolver([0, 2, 3], 4, rcond=1e-9, bounds_level=True)
+    A = np.array([[1.0, 0, 0, 0], [0, 2.0, 0, 0], [1.0, 1.0, 1.0, 1.0]])
+    b, w = np.array([0.0, 0.0, 3.0]), np.ones(3)
+    lo, up = np.array([-1.0, -1.0, -np.inf]), np.array([1.0, 1.0, np.inf])
+    with pytest.raises(CoreInputError, match="lower must have shape"):
+        solver.solve(A, b, w, lo[:2], up)
+    with pytest.raises(CoreInputError, match="upper must be float64"):
+        solver.solve(A, b, w, lo, up.astype(np.float32))
+    with pytest.raises(CoreInputError, match=r"the bounds of row 1 are not an interval"):
+        solver.solve(A, b, w, np.array([-1.0, np.nan, 0.0]), up)
+    bad = A.copy()
+    bad[2, 0] = np.nan
+    with pytest.raises(CoreInputError, match=r"A\[2, 0\] is not finite"):
+        solver.solve(bad, b, w, lo, up)
+    with pytest.raises(CoreInputError, match="bound_tolerance must be finite"):
+        core.SnsSolver([0, 2, 3], 4, rcond=1e-9, bound_tolerance=-1.0)
+    with pytest.raises(CoreInputError, match="max_saturations must be"):
+        core.SnsSolver([0, 2, 3], 4, rcond=1e-9, max_saturations=-2)
+    res = solver.solve(A, b, w, lo, up)        # the solver still works after refusals
+    assert res.solved and res.finite and res.bounds == 0
+    x = res.x
+    assert abs(x[0]) <= 1 + 1e-9 and abs(2 * x[1]) <= 1 + 1e-9
+    np.testing.assert_allclose(res.lower[:2], [-1.0, -0.5])
+
+
+def test_sns_flops_are_nullspace_flops_and_the_rounds():
+    """Without saturation the kernel does nullspace's level and three residual norms per
+    level (2 m n + 2 m + 1 each); every saturation round adds at least M = A_i P̄
+    (2 m n² flops) to it."""
+    rng = np.random.default_rng(12)
+    n = 12
+    tasks = [Task(f"t{i}", rng.standard_normal((m, n)), rng.standard_normal(m))
+             for i, m in enumerate((2, 3, 1))]
+    plain = formulations.solve(TaskStack(tasks), "sns", kernel="cpp").info["flops"]
+    ns = formulations.solve(TaskStack(tasks), "nullspace", kernel="cpp").info["flops"]
+    assert plain - ns == sum(3 * (2 * t.m * n + 2 * t.m + 1) for t in tasks)
+    # a box too tight for the tasks: every level saturates
+    box = Task("box", np.eye(n), lower=np.full(n, -0.05), upper=np.full(n, 0.05))
+    sol = formulations.solve(TaskStack([box, *tasks]), "sns", kernel="cpp")
+    rounds = sum(1 + len(s) for s in sol.info["saturated"] if s)
+    assert rounds > 3
+    factorizations = sum((1 + len(s)) * 2 * t.m * n * n
+                         for s, t in zip(sol.info["saturated"], tasks, strict=True) if s)
+    assert sol.info["flops"] >= ns + factorizations

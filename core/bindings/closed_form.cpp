@@ -30,6 +30,8 @@ using prioik::NullspaceSolver;
 using prioik::OperationalSpaceSolver;
 using prioik::ReferenceResult;
 using prioik::ReferenceSolver;
+using prioik::SnsResult;
+using prioik::SnsSolver;
 using prioik::UnifyingResult;
 using prioik::UnifyingSolver;
 
@@ -93,6 +95,16 @@ void init_reference(ReferenceSolver* self, std::vector<Index> starts, Index n, d
     o.metric.assign(W, W + n * n);
   }
   new (self) ReferenceSolver(std::move(starts), n, std::move(o));
+}
+
+// an SNS solve: the stack's arrays and the rows' bounds (lower, upper: M) checked
+const SnsResult& solve_sns(SnsSolver& self, nb::handle A, nb::handle b, nb::handle w,
+                           nb::handle lower, nb::handle upper) {
+  const prioik::StackArrays data = stack_arrays(self, A, b, w);
+  const double* lo = input(lower, "lower", {self.rows()});
+  const double* up = input(upper, "upper", {self.rows()});
+  nb::gil_scoped_release release;
+  return self.solve(data, lo, up);
 }
 
 }  // namespace
@@ -268,4 +280,64 @@ void bind_closed_form(nb::module_& m) {
       .def_prop_ro("rows", [](const ReferenceSolver& s) { return s.rows(); })
       .def_prop_ro("cols", [](const ReferenceSolver& s) { return s.cols(); })
       .def_prop_ro("levels", [](const ReferenceSolver& s) { return s.levels(); });
+
+  nb::class_<SnsResult>(
+      m, "SnsResult",
+      "One SNS solve's answer, the solver's own (the next solve overwrites it): each read "
+      "of an array field returns a new array.")
+      .def_prop_ro("x", [](const SnsResult& r) { return copy1(r.x); }, nb::rv_policy::move)
+      .def_prop_ro("task_scaling", [](const SnsResult& r) { return copy1(r.task_scaling); },
+                   nb::rv_policy::move, "each level's scaling s (the bounds level: 1)")
+      .def_prop_ro("margins", [](const SnsResult& r) { return copy1(r.margins); },
+                   nb::rv_policy::move, "the unbounded step's rank decision margins")
+      .def_prop_ro("ranks", [](const SnsResult& r) { return copy1(r.ranks); },
+                   nb::rv_policy::move)
+      .def_prop_ro("iterations", [](const SnsResult& r) { return copy1(r.iterations); },
+                   nb::rv_policy::move, "the saturation rounds of each level")
+      .def_prop_ro("saturated", [](const SnsResult& r) { return copy1(r.saturated); },
+                   nb::rv_policy::move,
+                   "k × n, flattened: row i begins with level i's saturated columns")
+      .def_prop_ro("saturated_count", [](const SnsResult& r) { return copy1(r.saturated_count); },
+                   nb::rv_policy::move)
+      .def_prop_ro("lower", [](const SnsResult& r) { return copy1(r.lower); },
+                   nb::rv_policy::move, "the box the bounds rows give (n)")
+      .def_prop_ro("upper", [](const SnsResult& r) { return copy1(r.upper); },
+                   nb::rv_policy::move)
+      .def_prop_ro("bounds", [](const SnsResult& r) { return static_cast<int>(r.bounds); },
+                   "0: the bounds rows are a box; 1: row bad_entry is not a single-column "
+                   "row; 2: column bad_entry's bounds do not intersect")
+      .def_ro("bad_entry", &SnsResult::bad_entry)
+      .def_ro("flops", &SnsResult::flops, "floating-point operations of the solve")
+      .def_ro("solved", &SnsResult::solved,
+              "False: a level's scale is outside [SCALE_LOW, SCALE_HIGH] or the bounds are "
+              "malformed; nothing solved")
+      .def_ro("finite", &SnsResult::finite)
+      .def_ro("exact", &SnsResult::exact,
+              "every level reached its residual without bounds");
+
+  nb::class_<SnsSolver>(
+      m, "SnsSolver",
+      "Saturation in the Null Space prepared for one layout (closed_form.hpp): workspaces "
+      "allocated here, none per solve. One thread at a time.")
+      .def("__init__",
+           [](SnsSolver* self, std::vector<Index> starts, Index n, double rcond,
+              double bound_tolerance, Index max_saturations, bool bounds_level) {
+             prioik::SnsOptions o;
+             o.rcond = rcond;
+             o.bound_tolerance = bound_tolerance;
+             o.max_saturations = max_saturations;
+             o.bounds_level = bounds_level;
+             new (self) SnsSolver(std::move(starts), n, o);
+           },
+           nb::arg("starts"), nb::arg("n"), nb::kw_only(), nb::arg("rcond"),
+           nb::arg("bound_tolerance") = 1e-9, nb::arg("max_saturations") = -1,
+           nb::arg("bounds_level") = false)
+      .def("solve", &solve_sns, nb::arg("A").none(), nb::arg("b").none(),
+           nb::arg("sqrt_weight").none(), nb::arg("lower").none(), nb::arg("upper").none(),
+           nb::rv_policy::reference_internal,
+           "Solve one stack (A: M × n, b, sqrt_weight, lower and upper: M; C-contiguous "
+           "float64; lower and upper are read on the first level's rows when bounds_level).")
+      .def_prop_ro("rows", [](const SnsSolver& s) { return s.rows(); })
+      .def_prop_ro("cols", [](const SnsSolver& s) { return s.cols(); })
+      .def_prop_ro("levels", [](const SnsSolver& s) { return s.levels(); });
 }

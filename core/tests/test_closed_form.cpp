@@ -168,6 +168,42 @@ void test_reference_equals_nested_svd() {
   }
 }
 
+// SNS: without bounds NullspaceSolver's answer bit for bit; under a box too tight for the
+// tasks every answer within the box, every scaling in [0, 1]; a bounds row on two columns
+// refused
+void test_sns_stays_in_the_box() {
+  std::mt19937 rng(5);
+  const Index n = 9;
+  const Stack free_stack = random_stack(rng, n, {2, 3, 1});
+  prioik::SnsSolver unbounded(free_stack.starts, n, prioik::SnsOptions{});
+  prioik::NullspaceSolver ns(free_stack.starts, n, prioik::NullspaceOptions{});
+  const Vec none = Vec::Zero(free_stack.starts.back());
+  const auto& ru = unbounded.solve(free_stack.arrays(), none.data(), none.data());
+  CHECK(ru.solved && ru.finite && ru.exact);
+  CHECK(as_vec(ru.x) == as_vec(ns.solve(free_stack.arrays()).x));
+  for (double half_width : {0.05, 0.3, 2.0}) {
+    Stack s = random_stack(rng, n, {n, 2, 3, 1});
+    s.A.topRows(n) = Mat::Identity(n, n);
+    s.b.head(n).setZero();
+    const Vec lower = Vec::Constant(s.starts.back(), -half_width);
+    const Vec upper = Vec::Constant(s.starts.back(), half_width);
+    prioik::SnsOptions o;
+    o.bounds_level = true;
+    prioik::SnsSolver sns(s.starts, n, o);
+    const auto& r = sns.solve(s.arrays(), lower.data(), upper.data());
+    CHECK(r.solved && r.finite && r.flops > 0.0);
+    for (Index j = 0; j < n; ++j) CHECK(std::fabs(r.x[j]) <= half_width * (1.0 + 1e-9));
+    for (Index lev = 1; lev < 4; ++lev)
+      CHECK(r.task_scaling[lev] >= 0.0 && r.task_scaling[lev] <= 1.0);
+    const Index rounds = r.saturated_count[1] + r.saturated_count[2] + r.saturated_count[3];
+    if (half_width == 0.05) CHECK(rounds > 0 && !r.exact);
+    s.A(0, 1) = 1.0;                    // the first bounds row on two columns
+    CHECK(!sns.solve(s.arrays(), lower.data(), upper.data()).solved);
+    CHECK(sns.result().bounds == prioik::SnsBounds::not_single_column &&
+          sns.result().bad_entry == 0);
+  }
+}
+
 void test_each_solver_equals_its_recursion() {
   std::mt19937 rng(7);
   const std::vector<std::vector<Index>> layouts = {{3, 4, 5}, {4, 9}, {2, 2, 2, 2}, {12}};
@@ -256,6 +292,7 @@ void test_bad_input() {
 int main() {
   test_each_solver_equals_its_recursion();
   test_reference_equals_nested_svd();
+  test_sns_stays_in_the_box();
   test_damped_nullspace_stays_bounded();
   test_bad_input();
   std::printf(prioik_test::failures == 0 ? "closed-form tests: all passed\n"

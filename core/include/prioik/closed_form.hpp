@@ -3,7 +3,8 @@
 // solve), on householder.hpp's primitives, with the core's rank rule (a pivot of the
 // row-pivoted LQ counts when its norm exceeds rcond times the level's scale — ‖A_i‖_F,
 // or ‖A_i M⁻¹‖_F and ‖A_i L⁻ᵀ‖_F where the readable paths use those — the RRQR estimate
-// of the singular value they test) and its rounding rule (core/CMakeLists.txt).
+// of the singular value they test; ReferenceSolver, the nested-SVD reference, tests the
+// singular values themselves) and its rounding rule (core/CMakeLists.txt).
 // Each solve counts its floating-point operations (a multiply, an add, a divide or a
 // square root is one; comparisons and copies are none) in its result's `flops`.
 //
@@ -287,6 +288,89 @@ class ReferenceSolver : public ProjectionSolver {
   std::vector<double> row_;     // n: scratch
   std::vector<double> G_;       // n × n: ZᵀW_xZ and its Cholesky factor
   std::vector<double> WZ_;      // n × n: W_x Z
+};
+
+// Saturation in the Null Space (SNS; Flacco, De Luca & Khatib, T-RO 2015, Algorithm 2):
+// box bounds on x from the first level's single-column rows (lower ≤ a·x_j ≤ upper), hard,
+// and strict priorities over the equality levels below. Per level, NullspaceSolver's step
+// (x_free, and N_i after the level); when x_free leaves the box, the most critical joint
+// is saturated at its bound and the level solved again in the null space left,
+//     x_s = c + s a,  a = M⁺ b_i,  c = x − M⁺ A_i x + (I − M⁺ A_i) B⁺ (x_N − x)_sat,
+//     M = A_i P̄,  P̄ = P − B⁺ B,  B = the rows `sat` of P = N_{i-1},
+// keeping the best feasible scaling s ∈ [0, 1]; a level whose rank would drop stops, and
+// one with no feasible scaling is dropped (s = 0). Every pseudo-inverse is a row-pivoted
+// LQ (M: rank rule rcond ‖A_i‖_F; B: 1e-12 max(1, ‖B‖_F)), applied to vectors.
+struct SnsOptions {
+  double rcond = 1e-9;
+  double bound_tolerance = 1e-9;   // a bound is met within tol · max(1, |bound|)
+  Index max_saturations = -1;      // saturated joints per level (-1: the bounded columns)
+  bool bounds_level = false;       // the first level holds the bounds (else: none)
+};
+
+// what a solve found wrong with the bounds rows (the caller names the task)
+enum class SnsBounds : int { ok = 0, not_single_column = 1, empty_box = 2 };
+
+struct SnsResult {
+  std::vector<double> x;              // n
+  std::vector<double> task_scaling;   // k: each equality level's s (the bounds level: 1)
+  std::vector<double> margins;        // k: the unbounded step's rank decision margins
+  std::vector<Index> ranks;           // k: the unbounded step's kept rank
+  std::vector<Index> iterations;      // k: the saturation rounds of each level
+  std::vector<Index> saturated;       // k × n: row i holds level i's saturated columns ...
+  std::vector<Index> saturated_count; // k: ... this many of them, in order
+  std::vector<double> lower, upper;   // n: the box the bounds rows give
+  SnsBounds bounds = SnsBounds::ok;   // not ok: nothing solved (`bad_entry` says where)
+  Index bad_entry = -1;               // the row (not_single_column) or column (empty_box)
+  double flops = 0.0;                 // floating-point operations of the solve
+  bool solved = false;       // false: a level's scale is outside [1e-100, 1e100] or the
+                             // bounds are malformed (`bounds`); nothing solved
+  bool finite = false;       // x is finite
+  bool exact = false;        // every level reached its unbounded residual
+};
+
+class SnsSolver : public ProjectionSolver {
+ public:
+  SnsSolver(std::vector<Index> starts, Index n, SnsOptions options);
+
+  // Solve one stack of the layout: A, b, sqrt_weight as NullspaceSolver::solve; lower and
+  // upper (M) the bounds of the first level's rows (read when options.bounds_level).
+  // Throws InputError naming a non-finite entry, a √w ≤ 0 or a NaN bound.
+  const SnsResult& solve(const StackArrays& data, const double* lower, const double* upper);
+
+  const SnsResult& result() const { return result_; }
+
+ private:
+  // the box from the bounds rows; false when they are malformed (result_.bounds says why).
+  // Throws InputError naming a bound that is NaN, lower = +inf, upper = −inf or lower > upper.
+  bool read_bounds(const StackArrays& data, const double* lower, const double* upper);
+  // the scaling interval [s_min, s_max] of c + s a within the box, col_hi_ each column's
+  // upper end (formulations.sns._scale_interval); returns the flops
+  double scale_interval(double* s_min, double* s_max) const;
+  bool feasible(const double* v) const;
+  // level lev; returns its flops
+  double solve_level(Index lev, bool last);
+  // the saturation rounds of level lev from x (x_new: the answer, *scale its s; false:
+  // none feasible); returns the flops
+  double saturate(Index lev, Index rank, double* x_new, double* scale, bool* found);
+  // z = M⁺ y for the factored M (J, perm, H, rank); returns the flops
+  double apply_pinv(MatrixRef J, const double* perm, const Reflectors& H, Index rank,
+                    const double* y, double* z);
+  // factor M = A_i P̄ with P̄ = P − B⁺B for the saturated rows; returns the flops
+  double factor_saturated(Index lev, Index count, Index* rank_m, Index* rank_b);
+
+  SnsOptions options_;
+  SnsResult result_;
+  std::vector<double> tol_;         // n: the bounds' tolerances
+  std::vector<double> x_free_, x_new_, best_, xs_, cvec_, a_, corr_, u_, x_sat_;
+  mutable std::vector<double> col_hi_;   // n: each column's upper end of s
+  std::vector<double> Pbar_;        // n × n
+  std::vector<double> Jm_, perm_m_, Vm_, beta_m_;   // M = A_i P̄'s LQ
+  std::vector<Index> pos_m_;
+  std::vector<double> Jb_, perm_b_, Vb_, beta_b_;   // B's LQ
+  std::vector<Index> pos_b_;
+  std::vector<double> y_, v_;       // m_max, n: scratch of apply_pinv's callers
+  std::vector<char> free_;          // n
+  Index bounded_ = 0;               // the bounded columns
 };
 
 // Throws InputError naming the first entry of A or b that is not finite, or the first

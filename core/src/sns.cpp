@@ -1,0 +1,404 @@
+// Saturation in the Null Space, compiled (closed_form.hpp, SnsSolver): the readable
+// path's rounds (formulations/sns.py) on the projector recursion's steps.
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <string>
+#include <utility>
+
+#include "prioik/closed_form.hpp"
+#include "projection_steps.hpp"
+
+namespace prioik {
+
+namespace {
+
+constexpr double kMaxFinite = std::numeric_limits<double>::max();
+// scales within this factor of max(1, |s|) of each other are one: joints leaving their
+// bounds at such scales leave them together (the lowest column goes first), and a scaling
+// interval [s_min, s_t] that much narrower than empty is the point s_t (formulations.sns
+// SATURATION_TIE)
+constexpr double kSaturationTie = 1e-9;
+
+// kSaturationTie at the scale s (0 where s is not finite)
+inline double tie_at(double s) {
+  return std::isfinite(s) ? kSaturationTie * std::max(1.0, std::fabs(s)) : 0.0;
+}
+
+inline double f(Index v) { return static_cast<double>(v); }
+
+// p = 0, 1, …, m − 1 (a row-pivoted LQ permutes it with the rows: then p[i] is the row
+// that became row i)
+void identity_order(double* p, Index m) {
+  for (Index i = 0; i < m; ++i) p[i] = static_cast<double>(i);
+}
+
+// ‖B v − c‖ over B's rows; flops 2 m n + 2 m + 1
+double residual_norm(MatrixRef B, const double* c, const double* v) {
+  double acc = 0.0;
+  for (Index i = 0; i < B.rows; ++i) {
+    const double r = dot(B.row(i), v, B.cols) - c[i];
+    acc += r * r;
+  }
+  return std::sqrt(acc);
+}
+
+// numpy.nan_to_num(v, nan=fill): NaN → fill, ±inf → ±the largest finite double
+inline double nan_to_num(double v, double fill) {
+  if (std::isnan(v)) return fill;
+  if (v == kInf) return kMaxFinite;
+  if (v == -kInf) return -kMaxFinite;
+  return v;
+}
+
+// numpy.clip(v, lo, hi)
+inline double clip(double v, double lo, double hi) { return std::min(std::max(v, lo), hi); }
+
+}  // namespace
+
+SnsSolver::SnsSolver(std::vector<Index> starts, Index n, SnsOptions options)
+    : ProjectionSolver(std::move(starts), n, options.rcond, 0.0), options_(options) {
+  if (!(options_.bound_tolerance >= 0.0 && options_.bound_tolerance < kInf))
+    throw InputError("bound_tolerance must be finite and >= 0, got " +
+                     projection::fmt(options_.bound_tolerance));
+  if (options_.max_saturations < -1)
+    throw InputError("max_saturations must be >= 0 (or -1: the bounded columns), got " +
+                     std::to_string(options_.max_saturations));
+  const Index m_max = static_cast<Index>(work_.e.size());
+  const Index big = std::max(m_max, n_);   // the saturated rows B have up to n rows
+  work_ = ProjectionWorkspace(M_, n_, k_, big);
+  for (auto* v : {&tol_, &x_free_, &x_new_, &best_, &xs_, &cvec_, &a_, &corr_, &u_, &x_sat_,
+                  &col_hi_, &v_, &beta_m_, &beta_b_})
+    v->assign(n_, 0.0);
+  y_.assign(big, 0.0);
+  perm_m_.assign(big, 0.0);
+  perm_b_.assign(n_, 0.0);
+  Pbar_.assign(n_ * n_, 0.0);
+  Jm_.assign(m_max * n_, 0.0);
+  Vm_.assign(n_ * n_, 0.0);
+  Jb_.assign(n_ * n_, 0.0);
+  Vb_.assign(n_ * n_, 0.0);
+  pos_m_.assign(n_, 0);
+  pos_b_.assign(n_, 0);
+  free_.assign(n_, 1);
+  result_.x.assign(n_, 0.0);
+  result_.task_scaling.assign(k_, 1.0);
+  result_.margins.assign(k_, kInf);
+  result_.ranks.assign(k_, 0);
+  result_.iterations.assign(k_, 0);
+  result_.saturated.assign(k_ * n_, 0);
+  result_.saturated_count.assign(k_, 0);
+  result_.lower.assign(n_, -kInf);
+  result_.upper.assign(n_, kInf);
+}
+
+bool SnsSolver::read_bounds(const StackArrays& data, const double* lower, const double* upper) {
+  SnsResult& res = result_;
+  const Index n = n_;
+  std::fill(res.lower.begin(), res.lower.end(), -kInf);
+  std::fill(res.upper.begin(), res.upper.end(), kInf);
+  const Index rows = options_.bounds_level ? starts_[1] : 0;
+  for (Index i = 0; i < rows; ++i) {
+    const double lo = lower[i], up = upper[i];
+    if (std::isnan(lo) || std::isnan(up) || lo == kInf || up == -kInf || lo > up)
+      throw InputError("the bounds of row " + std::to_string(i) + " are not an interval (" +
+                       projection::fmt(lo) + ", " + projection::fmt(up) + ")");
+    const double* row = data.A + i * n;
+    Index col = -1, count = 0;
+    for (Index j = 0; j < n; ++j)
+      if (row[j] != 0.0) {
+        if (count == 0) col = j;
+        ++count;
+      }
+    if (count != 1) {
+      res.bounds = SnsBounds::not_single_column;
+      res.bad_entry = i;
+      return false;
+    }
+    const double c = row[col];
+    const double lo_x = c > 0.0 ? lo / c : up / c, up_x = c > 0.0 ? up / c : lo / c;
+    res.lower[col] = std::max(res.lower[col], lo_x);
+    res.upper[col] = std::min(res.upper[col], up_x);
+  }
+  bounded_ = 0;
+  for (Index j = 0; j < n; ++j) {
+    if (res.lower[j] > res.upper[j]) {
+      res.bounds = SnsBounds::empty_box;
+      res.bad_entry = j;
+      return false;
+    }
+    const double lo = std::fabs(res.lower[j]), up = std::fabs(res.upper[j]);
+    tol_[j] = options_.bound_tolerance *
+              std::max(1.0, std::max(lo == kInf ? 0.0 : lo, up == kInf ? 0.0 : up));
+    if (res.lower[j] != -kInf || res.upper[j] != kInf) ++bounded_;
+  }
+  return true;
+}
+
+bool SnsSolver::feasible(const double* v) const {
+  for (Index j = 0; j < n_; ++j)
+    if (!(v[j] >= result_.lower[j] - tol_[j]) || !(v[j] <= result_.upper[j] + tol_[j]))
+      return false;
+  return true;
+}
+
+double SnsSolver::scale_interval(double* s_min, double* s_max) const {
+  const Index n = n_;
+  const double* lower = result_.lower.data();
+  const double* upper = result_.upper.data();
+  double peak = 0.0;
+  for (Index j = 0; j < n; ++j) peak = std::max(peak, std::fabs(a_[j]));
+  const double small = 1e-14 * std::max(1.0, peak);
+  // a saturated column has a = 0 exactly (its row of P̄ is zero): whatever rounding left
+  // in it, it takes no part
+  double lo_max = -kInf, hi_min = kInf;
+  for (Index j = 0; j < n; ++j) {
+    const double a = a_[j], c = cvec_[j];
+    double s_lo, s_hi;
+    if (!free_[j] || std::fabs(a) <= small) {
+      const bool inside = c >= lower[j] - tol_[j] && c <= upper[j] + tol_[j];
+      s_lo = inside ? -kInf : kInf;
+      s_hi = inside ? kInf : -kInf;
+    } else {
+      s_lo = nan_to_num(a > 0.0 ? (lower[j] - c) / a : (upper[j] - c) / a, -kInf);
+      s_hi = nan_to_num(a > 0.0 ? (upper[j] - c) / a : (lower[j] - c) / a, kInf);
+    }
+    col_hi_[j] = s_hi;
+    lo_max = std::max(lo_max, s_lo);
+    hi_min = std::min(hi_min, s_hi);
+  }
+  *s_min = lo_max;
+  *s_max = hi_min;
+  return 4.0 * f(n);
+}
+
+double SnsSolver::apply_pinv(MatrixRef J, const double* perm, const Reflectors& H, Index rank,
+                             const double* y, double* z) {
+  ProjectionWorkspace& ws = work_;
+  const Index n = n_;
+  std::fill(z, z + n, 0.0);
+  if (rank == 0) return 0.0;
+  for (Index i = 0; i < J.rows; ++i) ws.e[i] = y[static_cast<Index>(perm[i])];
+  double flops = projection::level_unknowns(J, ws.e.data(), rank, 0.0, z, ws);
+  return flops + projection::apply_leading_reflectors(H, rank - 1, z, n);
+}
+
+double SnsSolver::factor_saturated(Index lev, Index count, Index* rank_m, Index* rank_b) {
+  ProjectionWorkspace& ws = work_;
+  const Index n = n_, s0 = starts_[lev], m = starts_[lev + 1] - s0;
+  const Index* sat = result_.saturated.data() + lev * n;
+  double flops = 0.0, dummy = 0.0, margin = kInf;
+  std::copy(ws.N.begin(), ws.N.end(), Pbar_.begin());
+  *rank_b = 0;
+  if (count > 0) {
+    // B = the rows `sat` of P, factored; P̄ = P − B⁺B = P − Σ_l q_l q_lᵀ (q_l = Qᵀ e_l)
+    MatrixRef Bm{Jb_.data(), count, n, n};
+    double norm2 = 0.0;
+    for (Index l = 0; l < count; ++l) {
+      std::copy(ws.N.begin() + sat[l] * n, ws.N.begin() + (sat[l] + 1) * n, Bm.row(l));
+      norm2 += dot(Bm.row(l), Bm.row(l), n);
+    }
+    flops += 2.0 * f(count * n) + 1.0;
+    identity_order(perm_b_.data(), count);
+    Reflectors Hb{MatrixRef{Vb_.data(), n, n, n}, beta_b_.data(), pos_b_.data(), 0};
+    flops += projection::pivoted_lq(Bm, perm_b_.data(), 1e-12 * std::max(1.0, std::sqrt(norm2)),
+                                    ws.norms.data(), Hb, rank_b, &dummy, &margin);
+    MatrixRef basis{ws.basis.data(), n, n, n};
+    for (Index l = 0; l < *rank_b; ++l) flops += projection::reflector_column(Hb, l, basis.row(l), n);
+    flops += projection::subtract_products(MatrixRef{Pbar_.data(), n, n, n}, basis, basis,
+                                           *rank_b);
+  }
+  // M = A_i P̄ (P̄ symmetric: row i = P̄ a_i), factored with the level's rank rule
+  MatrixRef B{ws.B.data() + s0 * n, m, n, n};
+  MatrixRef Jm{Jm_.data(), m, n, n};
+  const MatrixRef Pbar{Pbar_.data(), n, n, n};
+  for (Index i = 0; i < m; ++i) flops += projection::multiply_rows(Pbar, B.row(i), Jm.row(i));
+  identity_order(perm_m_.data(), m);
+  Reflectors Hm{MatrixRef{Vm_.data(), n, n, n}, beta_m_.data(), pos_m_.data(), 0};
+  margin = kInf;
+  flops += projection::pivoted_lq(Jm, perm_m_.data(), options_.rcond * ws.scales[lev],
+                                  ws.norms.data(), Hm, rank_m, &dummy, &margin);
+  return flops;
+}
+
+double SnsSolver::saturate(Index lev, Index rank, double* x_new, double* scale, bool* found) {
+  ProjectionWorkspace& ws = work_;
+  SnsResult& res = result_;
+  const Index n = n_, s0 = starts_[lev], m = starts_[lev + 1] - s0;
+  const double* x = res.x.data();
+  const double* c_level = ws.c.data() + s0;
+  const double* lower = res.lower.data();
+  const double* upper = res.upper.data();
+  MatrixRef B{ws.B.data() + s0 * n, m, n, n};
+  MatrixRef Jm{Jm_.data(), m, n, n};
+  Index* sat = res.saturated.data() + lev * n;
+  // a free bounded joint outside its bounds at x_s
+  const auto candidate = [&](Index j) {
+    const bool bounded = lower[j] != -kInf || upper[j] != kInf;
+    const bool violated = xs_[j] < lower[j] - tol_[j] || xs_[j] > upper[j] + tol_[j];
+    return free_[j] && bounded && violated;
+  };
+  const Index cap = options_.max_saturations < 0 ? bounded_ : options_.max_saturations;
+  Index rank_m = 0, rank_b = 0, count = 0, rounds = 0;
+  double flops = factor_saturated(lev, 0, &rank_m, &rank_b);
+  std::fill(free_.begin(), free_.end(), 1);
+  std::fill(x_sat_.begin(), x_sat_.end(), 0.0);
+  double best_s = -kInf;
+  *found = false;
+  while (true) {
+    ++rounds;
+    const Reflectors Hm{MatrixRef{Vm_.data(), n, n, n}, beta_m_.data(), pos_m_.data(), rank_m};
+    // corr = (I − M⁺ A_i) B⁺ (x_N − x)_sat
+    std::fill(corr_.begin(), corr_.end(), 0.0);
+    if (count > 0) {
+      for (Index l = 0; l < count; ++l) v_[l] = x_sat_[sat[l]] - x[sat[l]];
+      const Reflectors Hb{MatrixRef{Vb_.data(), n, n, n}, beta_b_.data(), pos_b_.data(), rank_b};
+      flops += f(count) + apply_pinv(MatrixRef{Jb_.data(), count, n, n}, perm_b_.data(), Hb,
+                                     rank_b, v_.data(), u_.data());
+      flops += projection::multiply_rows(B, u_.data(), y_.data());
+      flops += apply_pinv(Jm, perm_m_.data(), Hm, rank_m, y_.data(), corr_.data());
+      for (Index j = 0; j < n; ++j) corr_[j] = u_[j] - corr_[j];
+      flops += f(n);
+    }
+    // a = M⁺ b_i, c = x − M⁺ A_i x + corr, x_s = c + a
+    flops += apply_pinv(Jm, perm_m_.data(), Hm, rank_m, c_level, a_.data());
+    flops += projection::multiply_rows(B, x, y_.data());
+    flops += apply_pinv(Jm, perm_m_.data(), Hm, rank_m, y_.data(), cvec_.data());
+    for (Index j = 0; j < n; ++j) {
+      cvec_[j] = x[j] - cvec_[j] + corr_[j];
+      xs_[j] = cvec_[j] + a_[j];
+    }
+    flops += 3.0 * f(n);
+    if (feasible(xs_.data())) {
+      std::copy(xs_.begin(), xs_.end(), x_new);
+      *scale = 1.0;
+      *found = true;
+      break;
+    }
+    double s_min = 0.0, s_max = 0.0;
+    flops += scale_interval(&s_min, &s_max);
+    const double s_t = s_max < 1.0 ? s_max : 1.0;
+    if (s_min <= s_t + tie_at(s_t) && s_t >= 0.0 && s_t > best_s) {
+      best_s = s_t;
+      for (Index j = 0; j < n; ++j) best_[j] = cvec_[j] + s_t * a_[j];
+      flops += 2.0 * f(n);
+    }
+    // the most critical free bounded joint: the first to leave its bounds as s grows, the
+    // lowest of those within kSaturationTie of it
+    Index pick = -1;
+    double first = kInf;
+    for (Index j = 0; j < n; ++j) {
+      if (!candidate(j)) continue;
+      if (pick < 0 || col_hi_[j] < first) first = col_hi_[j];
+      pick = 0;
+    }
+    if (pick == 0) {
+      pick = -1;
+      for (Index j = 0; j < n && pick < 0; ++j)
+        if (candidate(j) && col_hi_[j] <= first + tie_at(first)) pick = j;
+    }
+    if (pick < 0 || count >= cap) break;
+    free_[pick] = 0;
+    x_sat_[pick] = clip(xs_[pick], lower[pick], upper[pick]);
+    sat[count++] = pick;
+    flops += factor_saturated(lev, count, &rank_m, &rank_b);
+    if (rank_m < rank) break;
+  }
+  res.iterations[lev] = rounds;
+  res.saturated_count[lev] = count;
+  if (!*found && best_s > 0.0) {      // the best scaled solution (best_s = -inf: none)
+    std::copy(best_.begin(), best_.end(), x_new);
+    *scale = best_s;
+    *found = true;
+  }
+  return flops;
+}
+
+double SnsSolver::solve_level(Index lev, bool last) {
+  ProjectionWorkspace& ws = work_;
+  SnsResult& res = result_;
+  const Index s0 = starts_[lev], m = starts_[lev + 1] - s0, n = n_;
+  const double tol = options_.rcond * ws.scales[lev];
+  MatrixRef J{ws.J.data(), m, n, n};
+  MatrixRef B{ws.B.data() + s0 * n, m, n, n};
+  const double* c_level = ws.c.data() + s0;
+  // nullspace's step: x_free = x + N_{i-1} Ĵ_i^# (b_i − A_i x)
+  std::copy(res.x.begin(), res.x.end(), x_free_.begin());
+  double flops = projection::project_rows(B, ws, J);
+  flops += projection::multiply_rows(B, x_free_.data(), ws.e.data());
+  for (Index i = 0; i < m; ++i) ws.e[i] = c_level[i] - ws.e[i];
+  flops += static_cast<double>(m);
+  Reflectors H{MatrixRef{ws.V.data(), n, n, n}, ws.beta.data(), ws.pos.data(), 0};
+  Index r = 0;
+  if (tol > 0.0) {
+    double min_pivot = 0.0;
+    flops += projection::lq_step(J, ws.e.data(), tol, 0.0, H, &r, &min_pivot, &res.margins[lev],
+                                 ws.step.data(), ws);
+    if (r > 0) flops += projection::add_step(ws, ws.step.data(), true, x_free_.data());
+  }
+  res.ranks[lev] = r;
+  const double res_free = residual_norm(B, c_level, x_free_.data());
+  // the level's answer within the box
+  double s_level = 1.0;
+  const double* chosen = res.x.data();
+  if (r > 0 && feasible(x_free_.data())) {
+    chosen = x_free_.data();
+  } else if (r > 0) {
+    bool found = false;
+    flops += saturate(lev, r, x_new_.data(), &s_level, &found);
+    chosen = found ? x_new_.data() : nullptr;
+  }
+  if (chosen == nullptr || !feasible(chosen)) {      // dropped (or round-off)
+    s_level = 0.0;
+    for (Index j = 0; j < n; ++j) x_new_[j] = clip(res.x[j], res.lower[j], res.upper[j]);
+    chosen = feasible(res.x.data()) ? res.x.data() : x_new_.data();
+  }
+  const double residual = residual_norm(B, c_level, chosen);
+  double b_norm = 0.0;
+  for (Index i = 0; i < m; ++i) b_norm += c_level[i] * c_level[i];
+  if (residual > res_free + 1e-9 * std::max(1.0, std::sqrt(b_norm))) res.exact = false;
+  flops += 3.0 * (2.0 * f(m * n) + 2.0 * f(m) + 1.0);
+  if (chosen != res.x.data()) std::copy(chosen, chosen + n, res.x.begin());
+  res.task_scaling[lev] = s_level;
+  if (r > 0 && !last) flops += projection::update_projector(ws, H, r);
+  return flops;
+}
+
+const SnsResult& SnsSolver::solve(const StackArrays& data, const double* lower,
+                                  const double* upper) {
+  BusyGuard guard(busy_);
+  ProjectionWorkspace& ws = work_;
+  SnsResult& res = result_;
+  const bool stack_ok = projection::weigh_stack(data, starts_, n_, ws);
+  res.flops = 0.0;
+  std::fill(res.x.begin(), res.x.end(), 0.0);
+  std::fill(res.task_scaling.begin(), res.task_scaling.end(), 1.0);
+  std::fill(res.margins.begin(), res.margins.end(), kInf);
+  std::fill(res.ranks.begin(), res.ranks.end(), 0);
+  std::fill(res.iterations.begin(), res.iterations.end(), 0);
+  std::fill(res.saturated_count.begin(), res.saturated_count.end(), 0);
+  res.bounds = SnsBounds::ok;
+  res.bad_entry = -1;
+  res.exact = true;
+  res.finite = false;
+  res.solved = false;
+  if (!stack_ok) {
+    check_stack_entries(data, M_, n_);     // a NaN, inf or √w ≤ 0 is an input error
+    return res;
+  }
+  if (!read_bounds(data, lower, upper)) return res;
+  res.solved = true;
+  projection::reset(ws);
+  const Index first = options_.bounds_level ? 1 : 0;
+  double flops = 0.0;
+  for (Index lev = first; lev < k_; ++lev) flops += solve_level(lev, lev == k_ - 1);
+  if (first == k_ && !feasible(res.x.data()))      // bounds alone: the box's minimum-norm point
+    for (Index j = 0; j < n_; ++j) res.x[j] = clip(res.x[j], res.lower[j], res.upper[j]);
+  res.flops = flops;
+  res.finite = true;
+  for (double v : res.x)
+    if (!std::isfinite(v)) res.finite = false;
+  return res;
+}
+
+}  // namespace prioik
