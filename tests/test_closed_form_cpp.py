@@ -48,12 +48,18 @@ def test_nullspace_cpp_equals_numpy_on_every_family(setting):
 
 
 @pytest.fixture(scope="module")
-def g1_samples():
-    """(stack, M(q)) at 6 states of each G1 fencing run."""
+def g1_runs():
+    """6 states of each G1 fencing run."""
     pytest.importorskip("pinocchio")
     from prioik.benchmarks.stacks import g1_fencing_samples
-    runs = [g1_fencing_samples(v, 6) for v in ("compatible", "incompatible")]
-    return [(s, M) for run in runs for s, M in zip(run.stacks, run.mass_matrices, strict=False)]
+    return [g1_fencing_samples(v, 6) for v in ("compatible", "incompatible")]
+
+
+@pytest.fixture(scope="module")
+def g1_samples(g1_runs):
+    """(stack, M(q)) at 6 states of each G1 fencing run."""
+    return [(s, M) for run in g1_runs
+            for s, M in zip(run.stacks, run.mass_matrices, strict=False)]
 
 
 @pytest.fixture(scope="module")
@@ -379,6 +385,16 @@ def test_sns_cpp_equals_numpy_on_every_family():
 def test_sns_cpp_equals_numpy_on_the_g1_fencing_stacks(g1_stacks):
     for stack in g1_stacks:
         assert_sns_kernels_agree(stack)
+
+
+def test_sns_cpp_equals_numpy_on_the_g1_hard_bounds_stacks(g1_runs):
+    """The same states with the joint limits as hard bounds above every task (the form SNS
+    takes; prioik.benchmarks.flop_rates' [bounds] rows)."""
+    from prioik.benchmarks.flop_rates import bounded_stacks
+    for run in g1_runs:
+        for stack in bounded_stacks(run):
+            assert stack.levels[0].has_inequality
+            assert_sns_kernels_agree(stack)
 
 
 @pytest.mark.parametrize("target_scale", [0.1, 1.0, 5.0, 50.0])
