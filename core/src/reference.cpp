@@ -89,6 +89,18 @@ double reflect_row(const Reflectors& H, double* z, Index d) {
 
 }  // namespace
 
+ReferenceWorkspace::ReferenceWorkspace(Index n, Index m_max)
+    : Z(n * n, 0.0),
+      Gt(n * std::max<Index>(m_max, 1), 0.0),
+      Wt(n * n, 0.0),
+      sigma(n, 0.0),
+      order(n, 0),
+      gain(n, 0.0),
+      res0(std::max<Index>(m_max, 1), 0.0),
+      row(n, 0.0),
+      G(n * n, 0.0),
+      WZ(n * n, 0.0) {}
+
 ReferenceSolver::ReferenceSolver(std::vector<Index> starts, Index n, ReferenceOptions options)
     : ProjectionSolver(std::move(starts), n, options.rcond, 0.0), options_(std::move(options)) {
   if (options_.level_damping.empty()) options_.level_damping.assign(k_, 0.0);
@@ -105,17 +117,7 @@ ReferenceSolver::ReferenceSolver(std::vector<Index> starts, Index n, ReferenceOp
     for (double w : options_.metric)
       if (!std::isfinite(w)) throw InputError("metric must be finite, got " + projection::fmt(w));
   }
-  const Index m_max = static_cast<Index>(work_.e.size());
-  Z_.assign(n_ * n_, 0.0);
-  Gt_.assign(n_ * std::max<Index>(m_max, 1), 0.0);
-  Wt_.assign(n_ * n_, 0.0);
-  sigma_.assign(n_, 0.0);
-  order_.assign(n_, 0);
-  gain_.assign(n_, 0.0);
-  res0_.assign(std::max<Index>(m_max, 1), 0.0);
-  row_.assign(n_, 0.0);
-  G_.assign(n_ * n_, 0.0);
-  WZ_.assign(n_ * n_, 0.0);
+  nested_ = ReferenceWorkspace(n_, static_cast<Index>(work_.e.size()));
   result_.x.assign(n_, 0.0);
   result_.residuals.assign(k_, 0.0);
   result_.ranks.assign(k_, 0);
@@ -126,7 +128,7 @@ double ReferenceSolver::level_step(Index lev, Index s0, Index m, Index r) {
   ProjectionWorkspace& ws = work_;
   const Index n = n_, p = r;
   const double mu2 = options_.level_damping[lev];
-  MatrixRef Zq{Z_.data(), n, n, n};
+  MatrixRef Zq{nested_.Z.data(), n, n, n};
   MatrixRef B{ws.B.data() + s0 * n, m, n, n};
   double* step = ws.step.data();
   double* t = ws.aux.data();
@@ -134,7 +136,7 @@ double ReferenceSolver::level_step(Index lev, Index s0, Index m, Index r) {
   for (int pass = 0; pass <= (mu2 > 0.0 ? 0 : kRefinementSteps); ++pass) {
     if (pass > 0) {
       // the correction V_r Σ_r⁻² V_rᵀ Mᵀ (c − M y), M y = A (Z y) formed row by row
-      for (Index i = 0; i < m; ++i) ws.e[i] = res0_[i] - dot(B.row(i), step, n);
+      for (Index i = 0; i < m; ++i) ws.e[i] = nested_.res0[i] - dot(B.row(i), step, n);
       std::fill(t, t + n, 0.0);
       for (Index i = 0; i < m; ++i) {
         const double ri = ws.e[i];
@@ -143,10 +145,10 @@ double ReferenceSolver::level_step(Index lev, Index s0, Index m, Index r) {
       }
       flops += 4.0 * f(m * n) + f(m);
       for (Index l = 0; l < p; ++l) {
-        const Index col = order_[l];
+        const Index col = nested_.order[l];
         double h = 0.0;
         for (Index a = 0; a < n; ++a) h += Zq(a, col) * t[a];
-        gain_[l] += h / (sigma_[col] * sigma_[col]);
+        nested_.gain[l] += h / (nested_.sigma[col] * nested_.sigma[col]);
         flops += 2.0 * f(n) + 3.0;
       }
     }
@@ -155,7 +157,7 @@ double ReferenceSolver::level_step(Index lev, Index s0, Index m, Index r) {
     for (Index a = 0; a < n; ++a) {
       const double* za = Zq.row(a);
       double acc = 0.0;
-      for (Index l = 0; l < p; ++l) acc += gain_[l] * za[order_[l]];
+      for (Index l = 0; l < p; ++l) acc += nested_.gain[l] * za[nested_.order[l]];
       step[a] = acc;
     }
     flops += 2.0 * f(n * p);
@@ -167,10 +169,10 @@ double ReferenceSolver::level_step(Index lev, Index s0, Index m, Index r) {
 double ReferenceSolver::solve_level(Index lev) {
   ProjectionWorkspace& ws = work_;
   ReferenceResult& res = result_;
-  const Index s0 = starts_[lev], m = starts_[lev + 1] - s0, n = n_, d = d_;
+  const Index s0 = starts_[lev], m = starts_[lev + 1] - s0, n = n_, d = nested_.d;
   const double tol = options_.rcond * ws.scales[lev];
   if (d == 0 || m == 0 || !(tol > 0.0)) return 0.0;   // nothing left, or a zero level
-  MatrixRef Z{Z_.data(), n, d, n};
+  MatrixRef Z{nested_.Z.data(), n, d, n};
   MatrixRef B{ws.B.data() + s0 * n, m, n, n};
   MatrixRef M{ws.J.data(), m, d, n};
   // M_i = A_i Z_i and the level's residual c − A_i x
@@ -184,8 +186,8 @@ double ReferenceSolver::solve_level(Index lev) {
       const double* za = Z.row(a);
       for (Index j = 0; j < d; ++j) mi[j] += w * za[j];
     }
-    res0_[i] = ws.c[s0 + i] - dot(bi, res.x.data(), n);
-    ws.e[i] = res0_[i];
+    nested_.res0[i] = ws.c[s0 + i] - dot(bi, res.x.data(), n);
+    ws.e[i] = nested_.res0[i];
   }
   // M = Pᵀ [L 0] Q, then L W = U Σ (Jacobi on L's columns, held as Gt's rows)
   Reflectors H{MatrixRef{ws.V.data(), n, n, n}, ws.beta.data(), ws.pos.data(), 0};
@@ -193,57 +195,57 @@ double ReferenceSolver::solve_level(Index lev) {
   double min_pivot = 0.0, margin = kInf;
   flops += projection::pivoted_lq(M, ws.e.data(), std::numeric_limits<double>::min(),
                                   ws.norms.data(), H, &p, &min_pivot, &margin);
-  MatrixRef Gt{Gt_.data(), p, m, m};
+  MatrixRef Gt{nested_.Gt.data(), p, m, m};
   for (Index j = 0; j < p; ++j)
     for (Index i = 0; i < m; ++i) Gt(j, i) = M(i, j);
-  MatrixRef Wt{Wt_.data(), p, p, p};
-  flops += jacobi_rows(Gt, Wt, sigma_.data(), &res.sweeps, &res.rotations);
+  MatrixRef Wt{nested_.Wt.data(), p, p, p};
+  flops += jacobi_rows(Gt, Wt, nested_.sigma.data(), &res.sweeps, &res.rotations);
   // the rank rule and the ambiguity of the readable path, on σ
   Index r = 0, nulls = 0;
   for (Index j = 0; j < p; ++j) {
-    const double s = sigma_[j];
+    const double s = nested_.sigma[j];
     if (s > tol / kAmbiguity && s <= tol * kAmbiguity) res.ambiguous[lev] = 1;
-    if (s > tol) order_[r++] = j;
+    if (s > tol) nested_.order[r++] = j;
   }
   res.ranks[lev] = r;
-  if (r == 0) return flops;                     // Z_{i+1} = Z_i (the same span)
+  if (r == 0) return flops;                     // nested_.Z{i+1} = Z_i (the same span)
   for (Index j = 0; j < p; ++j)
-    if (!(sigma_[j] > tol)) order_[r + nulls++] = j;
-  for (Index j = p; j < d; ++j) order_[r + nulls++] = j;
+    if (!(nested_.sigma[j] > tol)) nested_.order[r + nulls++] = j;
+  for (Index j = p; j < d; ++j) nested_.order[r + nulls++] = j;
   // the step's coordinates Σ_r⁻¹ U_rᵀ e = (Gt_j · e) / σ_j² (σ/(σ² + μ²) when damped)
   const double mu2 = options_.level_damping[lev];
   for (Index l = 0; l < r; ++l) {
-    const Index j = order_[l];
-    gain_[l] = dot(Gt.row(j), ws.e.data(), m) / (sigma_[j] * sigma_[j] + mu2);
+    const Index j = nested_.order[l];
+    nested_.gain[l] = dot(Gt.row(j), ws.e.data(), m) / (nested_.sigma[j] * nested_.sigma[j] + mu2);
   }
   flops += f(r) * (2.0 * f(m) + 3.0);
   // Zq = Z Qᵀ [W 0; 0 I]: the singular directions of M_i mapped by Z
   for (Index a = 0; a < n; ++a) {
     double* za = Z.row(a);
     flops += reflect_row(H, za, d);
-    for (Index j = 0; j < p; ++j) row_[j] = dot(Wt.row(j), za, p);
-    std::copy(row_.begin(), row_.begin() + p, za);
+    for (Index j = 0; j < p; ++j) nested_.row[j] = dot(Wt.row(j), za, p);
+    std::copy(nested_.row.begin(), nested_.row.begin() + p, za);
   }
   flops += 2.0 * f(n * p * p);
   flops += level_step(lev, s0, m, r);
-  // Z_{i+1} = the columns of Zq past the kept ones, in order_
+  // nested_.Z{i+1} = the columns of Zq past the kept ones, in nested_.order
   for (Index a = 0; a < n; ++a) {
     double* za = Z.row(a);
-    for (Index l = 0; l < d - r; ++l) row_[l] = za[order_[r + l]];
-    std::copy(row_.begin(), row_.begin() + (d - r), za);
+    for (Index l = 0; l < d - r; ++l) nested_.row[l] = za[nested_.order[r + l]];
+    std::copy(nested_.row.begin(), nested_.row.begin() + (d - r), za);
   }
-  d_ = d - r;
+  nested_.d = d - r;
   return flops;
 }
 
 double ReferenceSolver::metric_step() {
-  const Index n = n_, d = d_;
+  const Index n = n_, d = nested_.d;
   const double* W = options_.metric.data();
-  MatrixRef Z{Z_.data(), n, d, n};
-  MatrixRef WZ{WZ_.data(), n, d, n};
-  MatrixRef G{G_.data(), d, d, n};
+  MatrixRef Z{nested_.Z.data(), n, d, n};
+  MatrixRef WZ{nested_.WZ.data(), n, d, n};
+  MatrixRef G{nested_.G.data(), d, d, n};
   double* x = result_.x.data();
-  double* wx = row_.data();
+  double* wx = nested_.row.data();
   // WZ = W_x Z, G = Zᵀ W_x Z, rhs = −Zᵀ W_x x
   for (Index a = 0; a < n; ++a) {
     double* wz = WZ.row(a);
@@ -261,7 +263,7 @@ double ReferenceSolver::metric_step() {
       for (Index a = 0; a < n; ++a) acc += Z(a, i) * WZ(a, j);
       G(i, j) = acc;
     }
-  double* rhs = gain_.data();
+  double* rhs = nested_.gain.data();
   for (Index j = 0; j < d; ++j) {
     double acc = 0.0;
     for (Index a = 0; a < n; ++a) acc += Z(a, j) * wx[a];
@@ -296,12 +298,12 @@ const ReferenceResult& ReferenceSolver::solve(const StackArrays& data) {
     return res;
   }
   for (Index a = 0; a < n_; ++a)
-    for (Index b = 0; b < n_; ++b) Z_[a * n_ + b] = a == b ? 1.0 : 0.0;
-  d_ = n_;
+    for (Index b = 0; b < n_; ++b) nested_.Z[a * n_ + b] = a == b ? 1.0 : 0.0;
+  nested_.d = n_;
   double flops = 0.0;
   for (Index lev = 0; lev < k_; ++lev) flops += solve_level(lev);
-  if (!options_.metric.empty() && d_ > 0) flops += metric_step();
-  res.null_space_dim = d_;
+  if (!options_.metric.empty() && nested_.d > 0) flops += metric_step();
+  res.null_space_dim = nested_.d;
   res.flops = flops;
   res.finite =
       projection::stack_residuals(data, starts_, n_, res.x.data(), res.residuals.data());

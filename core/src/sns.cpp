@@ -56,6 +56,13 @@ inline double clip(double v, double lo, double hi) { return std::min(std::max(v,
 
 }  // namespace
 
+SnsWorkspace::SnsWorkspace(Index n, Index m_max)
+    : tol(n, 0.0), x_free(n, 0.0), x_new(n, 0.0), best(n, 0.0), xs(n, 0.0), cvec(n, 0.0),
+      a(n, 0.0), corr(n, 0.0), u(n, 0.0), x_sat(n, 0.0), col_hi(n, 0.0), free(n, 1),
+      Pbar(n * n, 0.0), Jm(m_max * n, 0.0), perm_m(std::max(m_max, n), 0.0), Vm(n * n, 0.0),
+      beta_m(n, 0.0), pos_m(n, 0), Jb(n * n, 0.0), perm_b(n, 0.0), Vb(n * n, 0.0),
+      beta_b(n, 0.0), pos_b(n, 0), y(std::max(m_max, n), 0.0), v(n, 0.0) {}
+
 SnsSolver::SnsSolver(std::vector<Index> starts, Index n, SnsOptions options)
     : ProjectionSolver(std::move(starts), n, options.rcond, 0.0), options_(options) {
   if (!(options_.bound_tolerance >= 0.0 && options_.bound_tolerance < kInf))
@@ -65,22 +72,8 @@ SnsSolver::SnsSolver(std::vector<Index> starts, Index n, SnsOptions options)
     throw InputError("max_saturations must be >= 0 (or -1: the bounded columns), got " +
                      std::to_string(options_.max_saturations));
   const Index m_max = static_cast<Index>(work_.e.size());
-  const Index big = std::max(m_max, n_);   // the saturated rows B have up to n rows
-  work_ = ProjectionWorkspace(M_, n_, k_, big);
-  for (auto* v : {&tol_, &x_free_, &x_new_, &best_, &xs_, &cvec_, &a_, &corr_, &u_, &x_sat_,
-                  &col_hi_, &v_, &beta_m_, &beta_b_})
-    v->assign(n_, 0.0);
-  y_.assign(big, 0.0);
-  perm_m_.assign(big, 0.0);
-  perm_b_.assign(n_, 0.0);
-  Pbar_.assign(n_ * n_, 0.0);
-  Jm_.assign(m_max * n_, 0.0);
-  Vm_.assign(n_ * n_, 0.0);
-  Jb_.assign(n_ * n_, 0.0);
-  Vb_.assign(n_ * n_, 0.0);
-  pos_m_.assign(n_, 0);
-  pos_b_.assign(n_, 0);
-  free_.assign(n_, 1);
+  work_ = ProjectionWorkspace(M_, n_, k_, std::max(m_max, n_));   // B has up to n rows
+  rounds_ = SnsWorkspace(n_, m_max);
   result_.x.assign(n_, 0.0);
   result_.task_scaling.assign(k_, 1.0);
   result_.margins.assign(k_, kInf);
@@ -93,6 +86,7 @@ SnsSolver::SnsSolver(std::vector<Index> starts, Index n, SnsOptions options)
 }
 
 bool SnsSolver::read_bounds(const StackArrays& data, const double* lower, const double* upper) {
+  SnsWorkspace& rw = rounds_;
   SnsResult& res = result_;
   const Index n = n_;
   std::fill(res.lower.begin(), res.lower.end(), -kInf);
@@ -120,7 +114,7 @@ bool SnsSolver::read_bounds(const StackArrays& data, const double* lower, const 
     res.lower[col] = std::max(res.lower[col], lo_x);
     res.upper[col] = std::min(res.upper[col], up_x);
   }
-  bounded_ = 0;
+  rw.bounded = 0;
   for (Index j = 0; j < n; ++j) {
     if (res.lower[j] > res.upper[j]) {
       res.bounds = SnsBounds::empty_box;
@@ -128,42 +122,44 @@ bool SnsSolver::read_bounds(const StackArrays& data, const double* lower, const 
       return false;
     }
     const double lo = std::fabs(res.lower[j]), up = std::fabs(res.upper[j]);
-    tol_[j] = options_.bound_tolerance *
+    rw.tol[j] = options_.bound_tolerance *
               std::max(1.0, std::max(lo == kInf ? 0.0 : lo, up == kInf ? 0.0 : up));
-    if (res.lower[j] != -kInf || res.upper[j] != kInf) ++bounded_;
+    if (res.lower[j] != -kInf || res.upper[j] != kInf) ++rw.bounded;
   }
   return true;
 }
 
 bool SnsSolver::feasible(const double* v) const {
+  const SnsWorkspace& rw = rounds_;
   for (Index j = 0; j < n_; ++j)
-    if (!(v[j] >= result_.lower[j] - tol_[j]) || !(v[j] <= result_.upper[j] + tol_[j]))
+    if (!(v[j] >= result_.lower[j] - rw.tol[j]) || !(v[j] <= result_.upper[j] + rw.tol[j]))
       return false;
   return true;
 }
 
-double SnsSolver::scale_interval(double* s_min, double* s_max) const {
+double SnsSolver::scale_interval(double* s_min, double* s_max) {
+  SnsWorkspace& rw = rounds_;
   const Index n = n_;
   const double* lower = result_.lower.data();
   const double* upper = result_.upper.data();
   double peak = 0.0;
-  for (Index j = 0; j < n; ++j) peak = std::max(peak, std::fabs(a_[j]));
+  for (Index j = 0; j < n; ++j) peak = std::max(peak, std::fabs(rw.a[j]));
   const double small = 1e-14 * std::max(1.0, peak);
   // a saturated column has a = 0 exactly (its row of P̄ is zero): whatever rounding left
   // in it, it takes no part
   double lo_max = -kInf, hi_min = kInf;
   for (Index j = 0; j < n; ++j) {
-    const double a = a_[j], c = cvec_[j];
+    const double a = rw.a[j], c = rw.cvec[j];
     double s_lo, s_hi;
-    if (!free_[j] || std::fabs(a) <= small) {
-      const bool inside = c >= lower[j] - tol_[j] && c <= upper[j] + tol_[j];
+    if (!rw.free[j] || std::fabs(a) <= small) {
+      const bool inside = c >= lower[j] - rw.tol[j] && c <= upper[j] + rw.tol[j];
       s_lo = inside ? -kInf : kInf;
       s_hi = inside ? kInf : -kInf;
     } else {
       s_lo = nan_to_num(a > 0.0 ? (lower[j] - c) / a : (upper[j] - c) / a, -kInf);
       s_hi = nan_to_num(a > 0.0 ? (upper[j] - c) / a : (lower[j] - c) / a, kInf);
     }
-    col_hi_[j] = s_hi;
+    rw.col_hi[j] = s_hi;
     lo_max = std::max(lo_max, s_lo);
     hi_min = std::min(hi_min, s_hi);
   }
@@ -184,44 +180,47 @@ double SnsSolver::apply_pinv(MatrixRef J, const double* perm, const Reflectors& 
 }
 
 double SnsSolver::factor_saturated(Index lev, Index count, Index* rank_m, Index* rank_b) {
+  SnsWorkspace& rw = rounds_;
   ProjectionWorkspace& ws = work_;
   const Index n = n_, s0 = starts_[lev], m = starts_[lev + 1] - s0;
   const Index* sat = result_.saturated.data() + lev * n;
   double flops = 0.0, dummy = 0.0, margin = kInf;
-  std::copy(ws.N.begin(), ws.N.end(), Pbar_.begin());
+  std::copy(ws.N.begin(), ws.N.end(), rw.Pbar.begin());
   *rank_b = 0;
   if (count > 0) {
     // B = the rows `sat` of P, factored; P̄ = P − B⁺B = P − Σ_l q_l q_lᵀ (q_l = Qᵀ e_l)
-    MatrixRef Bm{Jb_.data(), count, n, n};
+    MatrixRef Bm{rw.Jb.data(), count, n, n};
     double norm2 = 0.0;
     for (Index l = 0; l < count; ++l) {
       std::copy(ws.N.begin() + sat[l] * n, ws.N.begin() + (sat[l] + 1) * n, Bm.row(l));
       norm2 += dot(Bm.row(l), Bm.row(l), n);
     }
     flops += 2.0 * f(count * n) + 1.0;
-    identity_order(perm_b_.data(), count);
-    Reflectors Hb{MatrixRef{Vb_.data(), n, n, n}, beta_b_.data(), pos_b_.data(), 0};
-    flops += projection::pivoted_lq(Bm, perm_b_.data(), 1e-12 * std::max(1.0, std::sqrt(norm2)),
+    identity_order(rw.perm_b.data(), count);
+    Reflectors Hb{MatrixRef{rw.Vb.data(), n, n, n}, rw.beta_b.data(), rw.pos_b.data(), 0};
+    flops += projection::pivoted_lq(Bm, rw.perm_b.data(), 1e-12 * std::max(1.0, std::sqrt(norm2)),
                                     ws.norms.data(), Hb, rank_b, &dummy, &margin);
     MatrixRef basis{ws.basis.data(), n, n, n};
-    for (Index l = 0; l < *rank_b; ++l) flops += projection::reflector_column(Hb, l, basis.row(l), n);
-    flops += projection::subtract_products(MatrixRef{Pbar_.data(), n, n, n}, basis, basis,
+    for (Index l = 0; l < *rank_b; ++l)
+      flops += projection::reflector_column(Hb, l, basis.row(l), n);
+    flops += projection::subtract_products(MatrixRef{rw.Pbar.data(), n, n, n}, basis, basis,
                                            *rank_b);
   }
   // M = A_i P̄ (P̄ symmetric: row i = P̄ a_i), factored with the level's rank rule
   MatrixRef B{ws.B.data() + s0 * n, m, n, n};
-  MatrixRef Jm{Jm_.data(), m, n, n};
-  const MatrixRef Pbar{Pbar_.data(), n, n, n};
+  MatrixRef Jm{rw.Jm.data(), m, n, n};
+  const MatrixRef Pbar{rw.Pbar.data(), n, n, n};
   for (Index i = 0; i < m; ++i) flops += projection::multiply_rows(Pbar, B.row(i), Jm.row(i));
-  identity_order(perm_m_.data(), m);
-  Reflectors Hm{MatrixRef{Vm_.data(), n, n, n}, beta_m_.data(), pos_m_.data(), 0};
+  identity_order(rw.perm_m.data(), m);
+  Reflectors Hm{MatrixRef{rw.Vm.data(), n, n, n}, rw.beta_m.data(), rw.pos_m.data(), 0};
   margin = kInf;
-  flops += projection::pivoted_lq(Jm, perm_m_.data(), options_.rcond * ws.scales[lev],
+  flops += projection::pivoted_lq(Jm, rw.perm_m.data(), options_.rcond * ws.scales[lev],
                                   ws.norms.data(), Hm, rank_m, &dummy, &margin);
   return flops;
 }
 
 double SnsSolver::saturate(Index lev, Index rank, double* x_new, double* scale, bool* found) {
+  SnsWorkspace& rw = rounds_;
   ProjectionWorkspace& ws = work_;
   SnsResult& res = result_;
   const Index n = n_, s0 = starts_[lev], m = starts_[lev + 1] - s0;
@@ -230,47 +229,49 @@ double SnsSolver::saturate(Index lev, Index rank, double* x_new, double* scale, 
   const double* lower = res.lower.data();
   const double* upper = res.upper.data();
   MatrixRef B{ws.B.data() + s0 * n, m, n, n};
-  MatrixRef Jm{Jm_.data(), m, n, n};
+  MatrixRef Jm{rw.Jm.data(), m, n, n};
   Index* sat = res.saturated.data() + lev * n;
   // a free bounded joint outside its bounds at x_s
   const auto candidate = [&](Index j) {
     const bool bounded = lower[j] != -kInf || upper[j] != kInf;
-    const bool violated = xs_[j] < lower[j] - tol_[j] || xs_[j] > upper[j] + tol_[j];
-    return free_[j] && bounded && violated;
+    const bool violated = rw.xs[j] < lower[j] - rw.tol[j] || rw.xs[j] > upper[j] + rw.tol[j];
+    return rw.free[j] && bounded && violated;
   };
-  const Index cap = options_.max_saturations < 0 ? bounded_ : options_.max_saturations;
+  const Index cap = options_.max_saturations < 0 ? rw.bounded : options_.max_saturations;
   Index rank_m = 0, rank_b = 0, count = 0, rounds = 0;
   double flops = factor_saturated(lev, 0, &rank_m, &rank_b);
-  std::fill(free_.begin(), free_.end(), 1);
-  std::fill(x_sat_.begin(), x_sat_.end(), 0.0);
+  std::fill(rw.free.begin(), rw.free.end(), 1);
+  std::fill(rw.x_sat.begin(), rw.x_sat.end(), 0.0);
   double best_s = -kInf;
   *found = false;
   while (true) {
     ++rounds;
-    const Reflectors Hm{MatrixRef{Vm_.data(), n, n, n}, beta_m_.data(), pos_m_.data(), rank_m};
+    const Reflectors Hm{MatrixRef{rw.Vm.data(), n, n, n}, rw.beta_m.data(), rw.pos_m.data(),
+                        rank_m};
     // corr = (I − M⁺ A_i) B⁺ (x_N − x)_sat
-    std::fill(corr_.begin(), corr_.end(), 0.0);
+    std::fill(rw.corr.begin(), rw.corr.end(), 0.0);
     if (count > 0) {
-      for (Index l = 0; l < count; ++l) v_[l] = x_sat_[sat[l]] - x[sat[l]];
-      const Reflectors Hb{MatrixRef{Vb_.data(), n, n, n}, beta_b_.data(), pos_b_.data(), rank_b};
-      flops += f(count) + apply_pinv(MatrixRef{Jb_.data(), count, n, n}, perm_b_.data(), Hb,
-                                     rank_b, v_.data(), u_.data());
-      flops += projection::multiply_rows(B, u_.data(), y_.data());
-      flops += apply_pinv(Jm, perm_m_.data(), Hm, rank_m, y_.data(), corr_.data());
-      for (Index j = 0; j < n; ++j) corr_[j] = u_[j] - corr_[j];
+      for (Index l = 0; l < count; ++l) rw.v[l] = rw.x_sat[sat[l]] - x[sat[l]];
+      const Reflectors Hb{MatrixRef{rw.Vb.data(), n, n, n}, rw.beta_b.data(), rw.pos_b.data(),
+                          rank_b};
+      flops += f(count) + apply_pinv(MatrixRef{rw.Jb.data(), count, n, n}, rw.perm_b.data(), Hb,
+                                     rank_b, rw.v.data(), rw.u.data());
+      flops += projection::multiply_rows(B, rw.u.data(), rw.y.data());
+      flops += apply_pinv(Jm, rw.perm_m.data(), Hm, rank_m, rw.y.data(), rw.corr.data());
+      for (Index j = 0; j < n; ++j) rw.corr[j] = rw.u[j] - rw.corr[j];
       flops += f(n);
     }
     // a = M⁺ b_i, c = x − M⁺ A_i x + corr, x_s = c + a
-    flops += apply_pinv(Jm, perm_m_.data(), Hm, rank_m, c_level, a_.data());
-    flops += projection::multiply_rows(B, x, y_.data());
-    flops += apply_pinv(Jm, perm_m_.data(), Hm, rank_m, y_.data(), cvec_.data());
+    flops += apply_pinv(Jm, rw.perm_m.data(), Hm, rank_m, c_level, rw.a.data());
+    flops += projection::multiply_rows(B, x, rw.y.data());
+    flops += apply_pinv(Jm, rw.perm_m.data(), Hm, rank_m, rw.y.data(), rw.cvec.data());
     for (Index j = 0; j < n; ++j) {
-      cvec_[j] = x[j] - cvec_[j] + corr_[j];
-      xs_[j] = cvec_[j] + a_[j];
+      rw.cvec[j] = x[j] - rw.cvec[j] + rw.corr[j];
+      rw.xs[j] = rw.cvec[j] + rw.a[j];
     }
     flops += 3.0 * f(n);
-    if (feasible(xs_.data())) {
-      std::copy(xs_.begin(), xs_.end(), x_new);
+    if (feasible(rw.xs.data())) {
+      std::copy(rw.xs.begin(), rw.xs.end(), x_new);
       *scale = 1.0;
       *found = true;
       break;
@@ -280,7 +281,7 @@ double SnsSolver::saturate(Index lev, Index rank, double* x_new, double* scale, 
     const double s_t = s_max < 1.0 ? s_max : 1.0;
     if (s_min <= s_t + tie_at(s_t) && s_t >= 0.0 && s_t > best_s) {
       best_s = s_t;
-      for (Index j = 0; j < n; ++j) best_[j] = cvec_[j] + s_t * a_[j];
+      for (Index j = 0; j < n; ++j) rw.best[j] = rw.cvec[j] + s_t * rw.a[j];
       flops += 2.0 * f(n);
     }
     // the most critical free bounded joint: the first to leave its bounds as s grows, the
@@ -289,17 +290,17 @@ double SnsSolver::saturate(Index lev, Index rank, double* x_new, double* scale, 
     double first = kInf;
     for (Index j = 0; j < n; ++j) {
       if (!candidate(j)) continue;
-      if (pick < 0 || col_hi_[j] < first) first = col_hi_[j];
+      if (pick < 0 || rw.col_hi[j] < first) first = rw.col_hi[j];
       pick = 0;
     }
     if (pick == 0) {
       pick = -1;
       for (Index j = 0; j < n && pick < 0; ++j)
-        if (candidate(j) && col_hi_[j] <= first + tie_at(first)) pick = j;
+        if (candidate(j) && rw.col_hi[j] <= first + tie_at(first)) pick = j;
     }
     if (pick < 0 || count >= cap) break;
-    free_[pick] = 0;
-    x_sat_[pick] = clip(xs_[pick], lower[pick], upper[pick]);
+    rw.free[pick] = 0;
+    rw.x_sat[pick] = clip(rw.xs[pick], lower[pick], upper[pick]);
     sat[count++] = pick;
     flops += factor_saturated(lev, count, &rank_m, &rank_b);
     if (rank_m < rank) break;
@@ -307,7 +308,7 @@ double SnsSolver::saturate(Index lev, Index rank, double* x_new, double* scale, 
   res.iterations[lev] = rounds;
   res.saturated_count[lev] = count;
   if (!*found && best_s > 0.0) {      // the best scaled solution (best_s = -inf: none)
-    std::copy(best_.begin(), best_.end(), x_new);
+    std::copy(rw.best.begin(), rw.best.end(), x_new);
     *scale = best_s;
     *found = true;
   }
@@ -315,6 +316,7 @@ double SnsSolver::saturate(Index lev, Index rank, double* x_new, double* scale, 
 }
 
 double SnsSolver::solve_level(Index lev, bool last) {
+  SnsWorkspace& rw = rounds_;
   ProjectionWorkspace& ws = work_;
   SnsResult& res = result_;
   const Index s0 = starts_[lev], m = starts_[lev + 1] - s0, n = n_;
@@ -323,9 +325,9 @@ double SnsSolver::solve_level(Index lev, bool last) {
   MatrixRef B{ws.B.data() + s0 * n, m, n, n};
   const double* c_level = ws.c.data() + s0;
   // nullspace's step: x_free = x + N_{i-1} Ĵ_i^# (b_i − A_i x)
-  std::copy(res.x.begin(), res.x.end(), x_free_.begin());
+  std::copy(res.x.begin(), res.x.end(), rw.x_free.begin());
   double flops = projection::project_rows(B, ws, J);
-  flops += projection::multiply_rows(B, x_free_.data(), ws.e.data());
+  flops += projection::multiply_rows(B, rw.x_free.data(), ws.e.data());
   for (Index i = 0; i < m; ++i) ws.e[i] = c_level[i] - ws.e[i];
   flops += static_cast<double>(m);
   Reflectors H{MatrixRef{ws.V.data(), n, n, n}, ws.beta.data(), ws.pos.data(), 0};
@@ -334,24 +336,24 @@ double SnsSolver::solve_level(Index lev, bool last) {
     double min_pivot = 0.0;
     flops += projection::lq_step(J, ws.e.data(), tol, 0.0, H, &r, &min_pivot, &res.margins[lev],
                                  ws.step.data(), ws);
-    if (r > 0) flops += projection::add_step(ws, ws.step.data(), true, x_free_.data());
+    if (r > 0) flops += projection::add_step(ws, ws.step.data(), true, rw.x_free.data());
   }
   res.ranks[lev] = r;
-  const double res_free = residual_norm(B, c_level, x_free_.data());
+  const double res_free = residual_norm(B, c_level, rw.x_free.data());
   // the level's answer within the box
   double s_level = 1.0;
   const double* chosen = res.x.data();
-  if (r > 0 && feasible(x_free_.data())) {
-    chosen = x_free_.data();
+  if (r > 0 && feasible(rw.x_free.data())) {
+    chosen = rw.x_free.data();
   } else if (r > 0) {
     bool found = false;
-    flops += saturate(lev, r, x_new_.data(), &s_level, &found);
-    chosen = found ? x_new_.data() : nullptr;
+    flops += saturate(lev, r, rw.x_new.data(), &s_level, &found);
+    chosen = found ? rw.x_new.data() : nullptr;
   }
   if (chosen == nullptr || !feasible(chosen)) {      // dropped (or round-off)
     s_level = 0.0;
-    for (Index j = 0; j < n; ++j) x_new_[j] = clip(res.x[j], res.lower[j], res.upper[j]);
-    chosen = feasible(res.x.data()) ? res.x.data() : x_new_.data();
+    for (Index j = 0; j < n; ++j) rw.x_new[j] = clip(res.x[j], res.lower[j], res.upper[j]);
+    chosen = feasible(res.x.data()) ? res.x.data() : rw.x_new.data();
   }
   const double residual = residual_norm(B, c_level, chosen);
   double b_norm = 0.0;

@@ -256,6 +256,24 @@ struct ReferenceResult {
   bool metric_positive_definite = true;   // ZᵀW_xZ factored (false: x without tie-break)
 };
 
+// What a reference solve works in beside its ProjectionWorkspace, allocated at prepare.
+struct ReferenceWorkspace {
+  ReferenceWorkspace() = default;
+  ReferenceWorkspace(Index n, Index m_max);
+
+  Index d = 0;                  // the current null space's dimension (Z's columns)
+  std::vector<double> Z;        // n × n: the null-space basis Z_i (columns < d)
+  std::vector<double> Gt;       // n × m_max: L's columns as rows (Jacobi's matrix)
+  std::vector<double> Wt;       // n × n: the Jacobi rotations' product, transposed
+  std::vector<double> sigma;    // n: the singular values of M_i
+  std::vector<Index> order;     // n: the kept columns first, then the null ones
+  std::vector<double> gain;     // n: the step's coordinates on the kept columns
+  std::vector<double> res0;     // m_max: b_i − A_i x, the level's rows in order
+  std::vector<double> row;      // n: scratch
+  std::vector<double> G;        // n × n: ZᵀW_xZ and its Cholesky factor
+  std::vector<double> WZ;       // n × n: W_x Z
+};
+
 class ReferenceSolver : public ProjectionSolver {
  public:
   // Throws InputError on a malformed layout, rcond outside (0, 1), level_damping not k
@@ -277,17 +295,7 @@ class ReferenceSolver : public ProjectionSolver {
 
   ReferenceOptions options_;
   ReferenceResult result_;
-  Index d_ = 0;                 // the current null space's dimension (Z's columns)
-  std::vector<double> Z_;       // n × n: the null-space basis Z_i (columns < d_)
-  std::vector<double> Gt_;      // n × m_max: L's columns as rows (Jacobi's matrix)
-  std::vector<double> Wt_;      // n × n: the Jacobi rotations' product, transposed
-  std::vector<double> sigma_;   // n: the singular values of M_i
-  std::vector<Index> order_;    // n: the kept columns first, then the null ones
-  std::vector<double> gain_;    // n: the step's coordinates on the kept columns
-  std::vector<double> res0_;    // m_max: b_i − A_i x, the level's rows in order
-  std::vector<double> row_;     // n: scratch
-  std::vector<double> G_;       // n × n: ZᵀW_xZ and its Cholesky factor
-  std::vector<double> WZ_;      // n × n: W_x Z
+  ReferenceWorkspace nested_;   // beside work_ (the weighted rows, M_i's LQ)
 };
 
 // Saturation in the Null Space (SNS; Flacco, De Luca & Khatib, T-RO 2015, Algorithm 2):
@@ -328,6 +336,26 @@ struct SnsResult {
   bool exact = false;        // every level reached its unbounded residual
 };
 
+// What an SNS solve works in beside its ProjectionWorkspace, allocated at prepare: the
+// box, the rounds' vectors (n each) and the two factorizations they apply.
+struct SnsWorkspace {
+  SnsWorkspace() = default;
+  SnsWorkspace(Index n, Index m_max);
+
+  Index bounded = 0;            // the bounded columns
+  std::vector<double> tol;      // the bounds' tolerances
+  std::vector<double> x_free, x_new, best, xs, cvec, a, corr, u, x_sat;
+  std::vector<double> col_hi;   // each column's upper end of s
+  std::vector<char> free;       // the columns not saturated
+  std::vector<double> Pbar;     // n × n: P − B⁺B
+  std::vector<double> Jm, perm_m, Vm, beta_m;   // M = A_i P̄'s LQ (Jm: m_max × n)
+  std::vector<Index> pos_m;
+  std::vector<double> Jb, perm_b, Vb, beta_b;   // B's LQ (Jb: n × n)
+  std::vector<Index> pos_b;
+  std::vector<double> y;        // max(m_max, n): scratch of apply_pinv's callers
+  std::vector<double> v;        // n
+};
+
 class SnsSolver : public ProjectionSolver {
  public:
   SnsSolver(std::vector<Index> starts, Index n, SnsOptions options);
@@ -345,7 +373,7 @@ class SnsSolver : public ProjectionSolver {
   bool read_bounds(const StackArrays& data, const double* lower, const double* upper);
   // the scaling interval [s_min, s_max] of c + s a within the box, col_hi_ each column's
   // upper end (formulations.sns._scale_interval); returns the flops
-  double scale_interval(double* s_min, double* s_max) const;
+  double scale_interval(double* s_min, double* s_max);
   bool feasible(const double* v) const;
   // level lev; returns its flops
   double solve_level(Index lev, bool last);
@@ -360,17 +388,7 @@ class SnsSolver : public ProjectionSolver {
 
   SnsOptions options_;
   SnsResult result_;
-  std::vector<double> tol_;         // n: the bounds' tolerances
-  std::vector<double> x_free_, x_new_, best_, xs_, cvec_, a_, corr_, u_, x_sat_;
-  mutable std::vector<double> col_hi_;   // n: each column's upper end of s
-  std::vector<double> Pbar_;        // n × n
-  std::vector<double> Jm_, perm_m_, Vm_, beta_m_;   // M = A_i P̄'s LQ
-  std::vector<Index> pos_m_;
-  std::vector<double> Jb_, perm_b_, Vb_, beta_b_;   // B's LQ
-  std::vector<Index> pos_b_;
-  std::vector<double> y_, v_;       // m_max, n: scratch of apply_pinv's callers
-  std::vector<char> free_;          // n
-  Index bounded_ = 0;               // the bounded columns
+  SnsWorkspace rounds_;         // beside work_ (the weighted rows, the projector, its LQ)
 };
 
 // Throws InputError naming the first entry of A or b that is not finite, or the first
