@@ -402,7 +402,7 @@ class Prepared:
             info["ambiguous_levels"] = ambiguous
             info["reason"] = ambiguity_reason(ambiguous)
         exact = res.exact and not info["scaled_tasks"] and not ambiguous
-        return Outcome(res.x, "optimal" if exact else "approximate", info)
+        return Outcome(res.x, "optimal" if exact else "approximate", info, res.residuals)
 
 
 # ------------------------------------------------------------------------ reports

@@ -12,7 +12,7 @@ import pytest
 import prioik._core as core
 from prioik import formulations
 from prioik.formulations.base import CoreInputError
-from prioik.hierarchy import Task, TaskStack, UnsupportedTaskError
+from prioik.hierarchy import Task, TaskStack, UnsupportedTaskError, level_residuals
 from prioik.hierarchy.families import FAMILIES, box_bounded, random_spd
 
 #: relative agreement of the compiled and readable answers, ‖x_cpp − x_numpy‖ / max(1, ‖x‖):
@@ -367,8 +367,14 @@ def test_reference_solver_checks_its_arrays_and_options():
 
 # ------------------------------------------------------------------------------- sns
 def assert_sns_kernels_agree(stack: TaskStack, **options) -> tuple:
-    """The same answer, status, scaling, saturated joints (in order) and rounds."""
+    """The same answer, status, scaling, saturated joints (in order) and rounds; the
+    kernel's residuals (the bounds level's: the distance to the box) are the stack's, to
+    1e-12 of each level's scale ‖√w ∘ (|A_i| |x| + |b_i|)‖ (the rows' rounding)."""
     cpp, ref = assert_kernels_agree(stack, "sns", **options)
+    data = stack.data
+    magnitude = data.sqrt_weight * (np.abs(data.A) @ np.abs(cpp.x) + np.abs(data.b))
+    scale = np.sqrt(np.add.reduceat(magnitude ** 2, data.layout.starts[:-1]))
+    assert np.all(np.abs(cpp.residuals - level_residuals(data, cpp.x)) <= 1e-12 * scale)
     np.testing.assert_allclose(cpp.info["task_scaling"], ref.info["task_scaling"], rtol=0,
                                atol=1e-9)
     for key in ("saturated", "iterations", "scaled_tasks", "bounds_level", "first_task_level"):

@@ -286,6 +286,9 @@ void bind_closed_form(nb::module_& m) {
       "One SNS solve's answer, the solver's own (the next solve overwrites it): each read "
       "of an array field returns a new array.")
       .def_prop_ro("x", [](const SnsResult& r) { return copy1(r.x); }, nb::rv_policy::move)
+      .def_prop_ro("residuals", [](const SnsResult& r) { return copy1(r.residuals); },
+                   nb::rv_policy::move,
+                   "‖√w ∘ (A_i x − b_i)‖ per level (the bounds level: the bounds' violation)")
       .def_prop_ro("task_scaling", [](const SnsResult& r) { return copy1(r.task_scaling); },
                    nb::rv_policy::move, "each level's scaling s (the bounds level: 1)")
       .def_prop_ro("margins", [](const SnsResult& r) { return copy1(r.margins); },

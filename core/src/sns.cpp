@@ -75,6 +75,7 @@ SnsSolver::SnsSolver(std::vector<Index> starts, Index n, SnsOptions options)
   work_ = ProjectionWorkspace(M_, n_, k_, std::max(m_max, n_));   // B has up to n rows
   rounds_ = SnsWorkspace(n_, m_max);
   result_.x.assign(n_, 0.0);
+  result_.residuals.assign(k_, 0.0);
   result_.task_scaling.assign(k_, 1.0);
   result_.margins.assign(k_, kInf);
   result_.ranks.assign(k_, 0);
@@ -397,9 +398,19 @@ const SnsResult& SnsSolver::solve(const StackArrays& data, const double* lower,
   if (first == k_ && !feasible(res.x.data()))      // bounds alone: the box's minimum-norm point
     for (Index j = 0; j < n_; ++j) res.x[j] = clip(res.x[j], res.lower[j], res.upper[j]);
   res.flops = flops;
-  res.finite = true;
-  for (double v : res.x)
-    if (!std::isfinite(v)) res.finite = false;
+  res.finite =
+      projection::stack_residuals(data, starts_, n_, res.x.data(), res.residuals.data());
+  if (first == 1) {          // the bounds rows: the distance of A_0 x to [lower, upper]
+    double acc = 0.0;
+    for (Index i = 0; i < starts_[1]; ++i) {
+      const double r = dot(data.A + i * n_, res.x.data(), n_);
+      const double v = data.sqrt_weight[i] *
+                       (std::max(lower[i] - r, 0.0) + std::max(r - upper[i], 0.0));
+      acc += v * v;
+    }
+    res.residuals[0] = std::sqrt(acc);
+    res.finite = res.finite && std::isfinite(res.residuals[0]);
+  }
   return res;
 }
 

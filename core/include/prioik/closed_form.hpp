@@ -320,6 +320,8 @@ enum class SnsBounds : int { ok = 0, not_single_column = 1, empty_box = 2 };
 
 struct SnsResult {
   std::vector<double> x;              // n
+  std::vector<double> residuals;      // k: ‖√w ∘ (A_i x − b_i)‖; the bounds level:
+                                      // ‖√w ∘ the distance of A_0 x to [lower, upper]‖
   std::vector<double> task_scaling;   // k: each equality level's s (the bounds level: 1)
   std::vector<double> margins;        // k: the unbounded step's rank decision margins
   std::vector<Index> ranks;           // k: the unbounded step's kept rank
@@ -332,7 +334,7 @@ struct SnsResult {
   double flops = 0.0;                 // floating-point operations of the solve
   bool solved = false;       // false: a level's scale is outside [1e-100, 1e100] or the
                              // bounds are malformed (`bounds`); nothing solved
-  bool finite = false;       // x is finite
+  bool finite = false;       // the residuals (and so x) are finite
   bool exact = false;        // every level reached its unbounded residual
 };
 
