@@ -20,6 +20,8 @@ import importlib
 import os
 import sys
 
+from .smoke import ENV, EPILOG, active, shrink_arguments
+
 #: modules that contribute a sub-command through ``add_parser(subparsers)``
 SUBCOMMAND_MODULES = [
     "prioik.benchmarks.library",
@@ -38,7 +40,8 @@ SUBCOMMAND_MODULES = [
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="prioik",
-        description="Task-priority inverse kinematics: one task-stack spec, every formulation.")
+        description="Task-priority inverse kinematics: one task-stack spec, every formulation.",
+        epilog=EPILOG)
     from prioik import __version__
     parser.add_argument("--version", action="version", version=f"prioik {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -53,8 +56,11 @@ def main(argv: list[str] | None = None) -> int:
     from prioik.extras import require
 
     from .threads import blas_threads
-    args = build_parser().parse_args(argv)
+    args = shrink_arguments(build_parser().parse_args(argv))     # PRIOIK_SMOKE=1: a few steps
     args.command_line = list(sys.argv[1:] if argv is None else argv)
+    if active():
+        print(f"prioik {args.command}: {ENV} is set: a few steps, stacks and solves "
+              "(a testing aid; its numbers are not measurements)", file=sys.stderr)
     try:
         require(*getattr(args, "extras", ()), what="this command")
         with blas_threads(getattr(args, "blas_threads", 1)):

@@ -139,10 +139,11 @@ def g1_fencing_samples(variant: str, samples: int, dt: float = 0.005,
         RuntimeError: the simulated run failed.
     """
     from prioik import formulations
+    from prioik.benchmarks.smoke import SAMPLED_RUN_S, cap
     from prioik.robots.fencing import FencingScenario
     from prioik.robots.simulate import simulate
     from prioik.robots.tasks import KinematicState
-
+    duration = cap(duration, SAMPLED_RUN_S)              # PRIOIK_SMOKE=1: a few steps
     scenario = FencingScenario(variant)
     robot = scenario.robot
     driver, options = G1_DRIVERS.get(variant, ("reference", {}))
