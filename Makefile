@@ -140,10 +140,11 @@ docs: $(STAMP) $(CORE_STAMP_BUILT)
 
 # Every command README.md and the site's user pages show, run as written at full size
 # (tests/test_doc_commands.py with PRIOIK_SMOKE=0; `make test` runs them shrunk to a few
-# steps), each page's commands in a folder of DOC_COMMANDS_DIR: the figures they print
-# (-s: each command's time and output files) and the pages they write, to set beside
-# docs/. Over an hour on 2 cores: the shipped sweep alone is ~40 min (select parts with
-# DOC_COMMANDS_SELECT="-k 'README or benchmark'").
+# steps), each page's commands in a folder of DOC_COMMANDS_DIR with what each printed
+# (command-N.log: the figures) beside the pages and plots it wrote, to set beside docs/;
+# -s prints each command's time. Over an hour on 2 cores: the shipped sweep alone ~40 min,
+# prioik bench and prioik fencing several minutes each, `pip wheel .` ~2 min. A part:
+# DOC_COMMANDS_SELECT="-k 'README or scenarios'".
 DOC_COMMANDS_DIR ?= build/docs-commands
 DOC_COMMANDS_SELECT ?=
 docs-commands: $(STAMP) $(CORE_STAMP_BUILT)

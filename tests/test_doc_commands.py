@@ -15,7 +15,8 @@ says otherwise), every file it writes is non-empty and parses (JSON, CSV, PNG, `
 HTML), its ``--out``/``--doc`` and the ``-> PATH`` of its comment exist afterwards, and
 an output line the page shows after it (``# …``) is printed. The commands not run are
 in :data:`NOT_RUN` (or are templates: an upper-case word stands for the reader's own
-value), each with the reason.
+value), each with the reason. A command shown on several pages runs once, where it is
+first shown.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ import shutil
 import subprocess
 import sys
 import time
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -172,11 +174,11 @@ def _sessions() -> tuple[list[Session], list[tuple[str, str]]]:
             elif c.bare not in seen:
                 seen.add(c.bare)
                 runnable.append(c)
-        block = [c for c in runnable if c in commands]
+        block = [c for c in runnable if any(c is b for b in commands)]
         if block:
             sessions.append(Session(page, first, block, files))
         for c in runnable:
-            if c not in commands:
+            if not any(c is b for b in commands):
                 line = text[:text.index(c.text)].count("\n") + 1
                 sessions.append(Session(page, line, [c], files))
     return sessions, not_run
@@ -186,7 +188,7 @@ def _not_run_reason(command: str) -> str | None:
     for pattern, reason in NOT_RUN.items():
         if re.fullmatch(pattern, command) and not (FULL and pattern in FULL_ONLY):
             return reason
-    if PLACEHOLDER.search(command.split("=", 1)[0] if "=" in command.split()[0] else command):
+    if PLACEHOLDER.search(command):
         return "a template: an upper-case word stands for the reader's own value"
     return None
 
@@ -244,6 +246,8 @@ def _check_written(path: Path) -> None:
             assert npz.files, path
     elif suffix == ".html":
         assert "<html" in path.read_text().lower(), path
+    elif suffix == ".whl":
+        assert zipfile.is_zipfile(path), path
     elif suffix == ".toml":
         tomllib.loads(path.read_text())
 
@@ -272,7 +276,7 @@ def run_session(session: Session, folder: Path) -> list[tuple[str, float]]:
            "PATH": f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}"}
     env.pop("PYTEST_CURRENT_TEST", None)
     times = []
-    for command in session.commands:
+    for index, command in enumerate(session.commands, 1):
         _copy_inputs(command.bare, folder, session.files)
         before = _files(folder)
         start, cpu = time.perf_counter(), _children_cpu()
@@ -287,7 +291,8 @@ def run_session(session: Session, folder: Path) -> list[tuple[str, float]]:
         assert run.returncode == EXIT_STATUS.get(command.bare, 0), log
         written = [p for p, stamp in _files(folder).items() if before.get(p) != stamp]
         for path in written:
-            if path.suffix != ".lock":                  # a lock file is empty
+            # a lock file is empty; `pip wheel .`'s CMake tree in build/ is its own
+            if path.suffix != ".lock" and path.relative_to(folder).parts[0] != "build":
                 _check_written(path)
         for claimed in _claimed_outputs(command):
             path = folder / claimed
@@ -295,6 +300,10 @@ def run_session(session: Session, folder: Path) -> list[tuple[str, float]]:
                 or path.is_dir() and any(path.iterdir()), f"`{command.bare}`: no {claimed}"
         for line in command.shown:
             assert line in run.stdout + run.stderr, f"`{command.bare}` did not print {line!r}"
+        # what it printed, beside what it wrote (make docs-commands: the figures to read)
+        (folder / f"command-{index}.log").write_text(
+            f"$ {command.bare}\n# {seconds:.1f} s, PRIOIK_SMOKE={SMOKE}\n{run.stdout}"
+            f"\n--- stderr\n{run.stderr}")
     return times
 
 
