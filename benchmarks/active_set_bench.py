@@ -259,10 +259,12 @@ def g1_limits_step(steps: int = 300, rounds: int = 5) -> dict[str, Any]:
     import prioik
     from prioik.robots.fencing import FencingScenario
     from prioik.robots.tasks import KinematicState
+    from prioik.smoke import cap
 
     from .placo_baseline import run_placo
     from .placo_step import DT, GAIN
 
+    rounds = cap(rounds, 1)                  # PRIOIK_SMOKE=1: PlaCo set up twice, not 6 times
     scenario = FencingScenario("compatible")
     robot = scenario.robot
     placo_run = run_placo(scenario, duration=steps * DT, dt=DT)

@@ -244,7 +244,10 @@ def format_table(results: dict[str, Any]) -> str:
 if __name__ == "__main__":   # pragma: no cover - the measurement's command
     import json
     import sys
-    res = run(int(sys.argv[1]) if len(sys.argv) > 1 else 300,
-              tuple(sys.argv[2].split(",")) if len(sys.argv) > 2 else None)
+
+    from prioik.smoke import active, cap
+    res = run(cap(int(sys.argv[1]) if len(sys.argv) > 1 else 300, 20),   # PRIOIK_SMOKE=1
+              tuple(sys.argv[2].split(",")) if len(sys.argv) > 2 else None,
+              rounds=1 if active() else None)
     print(format_table(res))
     print(json.dumps(res, indent=1, default=str))

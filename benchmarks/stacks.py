@@ -148,7 +148,8 @@ def g1_fencing_samples(variant: str, samples: int, dt: float = 0.005,
     from prioik.robots.fencing import FencingScenario
     from prioik.robots.simulate import simulate
     from prioik.robots.tasks import KinematicState
-
+    from prioik.smoke import SAMPLED_RUN_S, cap
+    duration = cap(duration, SAMPLED_RUN_S)              # PRIOIK_SMOKE=1: a few steps
     scenario = FencingScenario(variant)
     robot = scenario.robot
     driver, options = G1_DRIVERS.get(variant, ("reference", {}))

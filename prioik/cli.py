@@ -27,6 +27,8 @@ import importlib
 import os
 import sys
 
+from .smoke import ENV, EPILOG, active, shrink_arguments
+
 __all__ = ["COMMANDS", "build_parser", "main"]
 
 #: command → the module whose ``add_parser(subparsers)`` declares it, in the order
@@ -65,7 +67,8 @@ def build_parser(command: str | None = None,
     it with, importing that module alone)."""
     parser = parser_class(
         prog="prioik",
-        description="Task-priority inverse kinematics: one task-stack spec, every formulation.")
+        description="Task-priority inverse kinematics: one task-stack spec, every formulation.",
+        epilog=EPILOG)
     from prioik import __version__
     parser.add_argument("--version", action="version", version=f"prioik {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -91,7 +94,11 @@ def main(argv: list[str] | None = None) -> int:
             args = None     # refused: the whole parser prints its usage and the error
     if args is None:
         args = build_parser().parse_args(command_line)
+    args = shrink_arguments(args)       # PRIOIK_SMOKE=1: a few steps
     args.command_line = command_line
+    if active():
+        print(f"prioik {args.command}: {ENV} is set: a few steps, stacks and solves "
+              "(a testing aid; its numbers are not measurements)", file=sys.stderr)
     try:
         require(*getattr(args, "extras", ()), what="this command")
         with blas_threads(getattr(args, "blas_threads", 1)):

@@ -252,6 +252,8 @@ def _sampler(cfg: dict, name: str, value: Any, rng: np.random.Generator):
 
 
 def _points(cfg: dict, sc: SweepScenario) -> tuple[list[dict], list[str]]:
+    from prioik.smoke import shrink_sweep_config
+    cfg = shrink_sweep_config(cfg, sc.smoke_parameters)     # PRIOIK_SMOKE=1: a short run
     fixed = cfg.get("fixed", {}) or {}
     grid = cfg.get("grid", {}) or {}
     sample = dict(cfg.get("sample", {}) or {})

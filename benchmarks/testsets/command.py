@@ -108,7 +108,8 @@ def run(args: argparse.Namespace) -> int:
                          f"{', '.join(TEST_SETS)} (or 'all', 'list')")
     if args.from_csv is not None:
         return _report_from_csv(args, names)
-    repeats = 3 if args.repeats is None else args.repeats
+    from prioik.smoke import ARGUMENT_CAPS, cap
+    repeats = cap(3, ARGUMENT_CAPS["repeats"]) if args.repeats is None else args.repeats
     if repeats < 1:
         raise ValueError(f"--repeats must be ≥ 1, got {repeats}")
     options = parse_set_options(args.set_option)
