@@ -11,6 +11,8 @@ import numpy as np
 import pytest
 
 from prioik.benchmarks.bench import CSV_COLUMNS, Row, Settings, page, ratios, run_benchmark, tables
+from prioik.benchmarks.bench.choice import choice_markdown
+from prioik.benchmarks.results import TimingRow, read_csv
 from prioik.benchmarks.stacks import random_case, random_mass_matrix
 from prioik.benchmarks.variants import table
 from prioik.cli import main
@@ -36,7 +38,7 @@ def tiny_run(tmp_path_factory):
 
 def test_writes_csv_markdown_plots_summary_and_doc(tiny_run):
     out, doc, summary, rows = tiny_run
-    for name in ("results.csv", "results.md", "summary.json", "time_vs_n.png",
+    for name in ("results.csv", "results.md", "choice.md", "summary.json", "time_vs_n.png",
                  "time_vs_k.png"):
         assert (out / name).stat().st_size > 0, name
     assert (out / "time_vs_n.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -45,6 +47,9 @@ def test_writes_csv_markdown_plots_summary_and_doc(tiny_run):
     assert "prioik bench (test)" in text and "**Machine**" in text
     assert "](../time_vs_n.png)" in text           # plot paths relative to the page
     assert "G1 part skipped: --no-g1" in text
+    # the decision table's figures, from the CSV just written
+    assert (out / "choice.md").read_text() == choice_markdown(
+        read_csv(out / "results.csv", TimingRow), out / "results.csv", out)
 
 
 def test_one_row_per_case_and_variant_with_the_csv_columns(tiny_run):

@@ -63,6 +63,21 @@ def test_site_builds_strict_with_every_user_page(site):
         assert f"<code>{name}</code>" in options, name
 
 
+def test_generated_figures_are_included_in_their_page(site):
+    """choose-a-formulation.md shows the table of docs/benchmarks/choice.md (included by
+    pymdownx.snippets), and that file is not a page of its own."""
+    html = (site / "how-to" / "choose-a-formulation" / "index.html").read_text()
+    snippet = (DOCS / "benchmarks" / "choice.md").read_text()
+    rows = [line for line in snippet.splitlines() if line.startswith("| ")]
+    assert len(rows) > 2
+    for row in rows[1:3]:                     # the first data rows, cell by cell
+        cells = [c.strip() for c in row.strip("|").split("|")][2:]
+        for cell in cells:
+            assert f">{cell}<" in html, cell
+    assert "--8&lt;--" not in html and "--8<--" not in html
+    assert not (site / "benchmarks" / "choice").exists()
+
+
 def test_every_public_name_has_a_reference_entry(site):
     anchors = _anchors(site)
     assert [n for n in prioik.__all__ if f"prioik.{n}" not in anchors] == []

@@ -9,16 +9,19 @@ path a control loop runs) — :mod:`.tables`. Then, from the same run, the ratio
 benchmark issues name (:mod:`.ratios`), the batch experiment (:mod:`.batch`), the whole
 IK step against PlaCo (:mod:`.ik_step`) and the paper's per-control-step comparison
 (:mod:`.control_step`). Outputs in ``--out``: ``results.csv``, ``results.md``,
-``summary.json``, ``time_vs_n.png``, ``time_vs_k.png``; ``--doc FILE`` also writes the
-documentation page (:mod:`.page`, ``templates/benchmarks.md``).
+``choice.md`` (the figures of the decision table of
+``docs/how-to/choose-a-formulation.md``, :mod:`.choice`; ``--from-csv CSV`` writes it
+from a ``results.csv`` alone, no run), ``summary.json``, ``time_vs_n.png``,
+``time_vs_k.png``; ``--doc FILE`` also writes the documentation page (:mod:`.page`,
+``templates/benchmarks.md``).
 
 With ``--test-set NAME`` it runs test sets in qpbenchmark's shape instead
 (:mod:`prioik.benchmarks.testsets`: success per tolerance profile, shifted geometric
 means; ``testsets.csv`` and ``testsets.md`` in ``--out``).
 
 One module per concern: :mod:`.settings` (what a run measures), :mod:`.tables`,
-:mod:`.batch`, :mod:`.control_step`, :mod:`.ik_step`, :mod:`.ratios`, :mod:`.page`,
-:mod:`.run` (the whole run) and :mod:`.command` (argument parsing only).
+:mod:`.choice`, :mod:`.batch`, :mod:`.control_step`, :mod:`.ik_step`, :mod:`.ratios`,
+:mod:`.page`, :mod:`.run` (the whole run) and :mod:`.command` (argument parsing only).
 """
 
 from prioik.benchmarks.results import TimingRow, csv_columns

@@ -79,10 +79,25 @@ def _int_list(text: str, what: str) -> tuple[int, ...]:
     return values
 
 
+def _choice_from_csv(args: argparse.Namespace) -> int:
+    """``--from-csv`` without ``--test-set``: ``OUT/choice.md`` from a ``results.csv``."""
+    if args.doc is not None:
+        raise ValueError("--from-csv without --test-set writes OUT/choice.md only; "
+                         "--doc needs a run (drop --from-csv)")
+    from prioik.benchmarks.results import TimingRow, read_csv
+
+    from .choice import write_choice
+    path = write_choice(read_csv(args.from_csv, TimingRow), args.from_csv, args.out)
+    print(f"wrote {path}")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     if args.test_set is not None:
         from prioik.benchmarks.testsets.command import run as run_test_sets
         return run_test_sets(args)
+    if args.from_csv is not None:
+        return _choice_from_csv(args)
     from prioik.benchmarks.variants import check_formulations, split_labels, table
     only = tuple(split_labels(args.formulations))
     check_formulations(only)                      # an unknown name: before anything

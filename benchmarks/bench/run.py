@@ -21,6 +21,7 @@ from prioik.threads import blas_info, blas_threads
 
 from . import tables
 from .batch import batched_formulations, measure_batch
+from .choice import write_choice
 from .control_step import measure_control_step
 from .ik_step import measure_ik_step
 from .page import doc_page, note, results_markdown
@@ -53,8 +54,9 @@ def run_benchmark(settings: Settings, out: Path, doc: Path | None = None,
     """Run everything, write the outputs; returns the summary (also ``summary.json``).
 
     Outputs in ``out``: ``results.csv`` (:class:`~prioik.benchmarks.results.TimingRow`),
-    ``results.md``, ``summary.json``, ``time_vs_n.png``, ``time_vs_k.png``; ``doc``: the
-    documentation page (plots linked relative to it).
+    ``results.md``, ``choice.md`` (the decision table's figures, :mod:`.choice`),
+    ``summary.json``, ``time_vs_n.png``, ``time_vs_k.png``; ``doc``: the documentation
+    page (plots linked relative to it).
     """
     with blas_threads(settings.blas_threads):
         limited = settings.blas_threads > 0 and bool(blas_info())
@@ -136,6 +138,7 @@ def _run(settings: Settings, out: Path, doc: Path | None, command: str,
 
     rats = ratios(rows, batch, ik)
     write_csv(out / "results.csv", rows, TimingRow)
+    write_choice(rows, out / "results.csv", out)
     plots = time_vs_size(rows, out)
     (out / "results.md").write_text(results_markdown(rows, rats, batch, ik, control, notes,
                                                      settings, plots))

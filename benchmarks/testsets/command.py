@@ -42,9 +42,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="the tolerance profile of the report's time columns and failure "
                         "list (success is reported at every profile; default mid)")
     g.add_argument("--from-csv", type=Path, default=None, metavar="CSV",
-                   help="with --test-set: no run; write the report of the test sets of "
+                   help="no run. With --test-set: write the report of the test sets of "
                         "this testsets.csv (those named, or every one with 'all') to "
-                        "OUT/testsets.md (and --doc)")
+                        "OUT/testsets.md (and --doc); without: write OUT/choice.md (the "
+                        "figures of docs/how-to/choose-a-formulation.md) from this "
+                        "results.csv of a bench run")
     g.add_argument("--set-option", action="append", default=[], metavar="KEY=VALUE",
                    help="a size option of the test sets (integer), e.g. samples=2, n=8, "
                         "steps=6, windows=2; repeatable; a set ignores keys it does "
