@@ -21,6 +21,8 @@ from pathlib import Path
 from prioik.benchmarks.report import table, us
 from prioik.benchmarks.results import TimingRow
 
+from .settings import SUCCESS_TOL
+
 __all__ = ["Choice", "CHOICES", "G1_CASES", "GROWTH_LABELS", "NOT_MEASURED", "FILE_NAME",
            "choice_markdown", "write_choice"]
 
@@ -198,8 +200,10 @@ def choice_markdown(rows: list[TimingRow], csv_path: str | Path, out: str | Path
         "",
         f"Medians from `{csv_path}` (the G1 fencing stacks: {_g1_shape(rows)}; joint "
         f"limits as activation rows, so that every formulation takes the same stacks). "
-        f"**× fastest exact** is the median over that of the fastest row of the case that "
-        f"matched `reference` on every solve: {_fastest_line(rows)}.",
+        f"**Matched `reference`**: the share of solves whose residual at every level is "
+        f"within {SUCCESS_TOL:g}·max(1, ‖b_i‖) of `reference`'s. **× fastest exact**: the "
+        f"median over that of the fastest row of the case that matched `reference` on "
+        f"every solve: {_fastest_line(rows)}.",
         "",
         choice_table(rows),
         "",
