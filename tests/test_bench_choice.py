@@ -37,6 +37,7 @@ def _hand_made() -> list[TimingRow]:
                  _row(case, "cascaded_qp[daqp]", 1000.0 * scale),
                  _row(case, "cascaded_qp[osqp]", 4000.0 * scale, success=0.25)]
     rows.append(_row("g1 compatible", "sns", math.nan, status="skipped"))
+    rows.append(_row("g1 compatible", "lexls", 50.0, success=math.nan))
     rows += [_row("random n=12 k=2", "extended_jacobian", 3.0, n=12, k=2),
              _row("random n=100 k=2", "extended_jacobian", 100.0, n=100, k=2),
              _row("random n=12 k=16", "extended_jacobian", 2.5, n=12, k=16)]
@@ -79,6 +80,7 @@ def test_cells_are_the_csv_medians_and_their_ratios_to_the_fastest_exact_row():
     # placo is faster but matched reference on half its solves only
     assert rows["`placo`"][2:7] == ["1.0 µs", "2.0 µs", "0.2×", "0.2×", "50% / 50%"]
     assert "`extended_jacobian` (5.0 µs) on compatible" in text
+    assert rows["`lexls`"][2:7] == ["50.0 µs", choice.NOT_MEASURED, "10×", "–", "– / –"]
     qp = rows["`cascaded_qp` (one row per back-end)"]
     assert qp[2] == "1000.0 µs (`cascaded_qp[daqp]`) to 4000.0 µs"
     assert qp[4] == "200× to 800×"

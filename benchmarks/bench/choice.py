@@ -89,6 +89,10 @@ def _ratio(v: float) -> str:
     return f"{v:.1f}×" if v < 10 else f"{v:,.0f}×"
 
 
+def _share(v: float) -> str:
+    return f"{v:.0%}" if math.isfinite(v) else "–"
+
+
 def _fastest_exact(rows: list[TimingRow], case: str) -> TimingRow | None:
     """The fastest row of ``case`` that matched ``reference`` on every solve."""
     exact = [r for r in rows if r.case == case and _timed(r) and r.success_rate >= 1.0]
@@ -115,14 +119,14 @@ def _cells(rows: list[TimingRow], case: str, choice: Choice) -> tuple[str, str, 
     if lo is hi:
         median = _time(lo.median_us)
         ratio = _ratio(lo.median_us / base.median_us) if base else "–"
-        success = f"{lo.success_rate:.0%}"
+        success = _share(lo.success_rate)
     else:
         median = f"{_time(lo.median_us)} (`{lo.label}`) to {_time(hi.median_us)}"
         ratio = (f"{_ratio(lo.median_us / base.median_us)} to "
                  f"{_ratio(hi.median_us / base.median_us)}" if base else "–")
-        rates = sorted(r.success_rate for r in timed)
-        success = (f"{rates[0]:.0%}" if rates[0] == rates[-1]
-                   else f"{rates[0]:.0%} to {rates[-1]:.0%}")
+        rates = sorted(r.success_rate for r in timed if math.isfinite(r.success_rate))
+        success = ("–" if not rates else _share(rates[0]) if rates[0] == rates[-1]
+                   else f"{_share(rates[0])} to {_share(rates[-1])}")
     return median, ratio, success
 
 
