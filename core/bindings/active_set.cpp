@@ -68,9 +68,47 @@ bool native_float64(const Py_buffer& v) {
     return f[0] == 'd' && f[1] == '\0';
 }
 
-/// One input array, read through the buffer protocol (numpy's arrays: no DLPack capsule,
-/// no allocation) and held until the call returns, or through nanobind's ndarray (any
-/// other array on the CPU: DLPack).
+/// The leading fields of numpy's array object (numpy/ndarraytypes.h, PyArrayObject_fields:
+/// public and the same in numpy 1.x and 2.x; pybind11's numpy support reads them alike).
+struct NumpyArrayHead {
+    PyObject_HEAD
+    char* data;
+    int nd;
+    Py_ssize_t* dimensions;
+    Py_ssize_t* strides;
+    PyObject* base;
+    PyObject* descr;
+    int flags;
+};
+
+/// numpy.ndarray and the float64 dtype (native byte order), looked up at the first call
+/// (null when numpy cannot be imported: every array then takes the buffer protocol).
+struct NumpyFloat64 {
+    PyTypeObject* ndarray = nullptr;
+    PyObject* dtype = nullptr;
+
+    static const NumpyFloat64& get() {
+        static const NumpyFloat64 types = [] {
+            NumpyFloat64 t;
+            try {
+                nb::module_ numpy = nb::module_::import_("numpy");
+                nb::object ndarray = numpy.attr("ndarray");
+                nb::object dtype = numpy.attr("dtype")("float64");
+                t.ndarray = reinterpret_cast<PyTypeObject*>(ndarray.release().ptr());
+                t.dtype = dtype.release().ptr();
+            } catch (const nb::python_error&) {
+                t = NumpyFloat64{};
+            }
+            return t;
+        }();
+        return types;
+    }
+};
+
+/// One input array: an exact numpy.ndarray of float64 read from its fields (a solve's
+/// five arrays then cost no Python call), another buffer exporter through the buffer
+/// protocol (held until the call returns), anything else through nanobind's ndarray
+/// (DLPack). The caller's references keep the arrays alive for the call.
 class InputArray {
 public:
     InputArray() = default;
@@ -84,6 +122,19 @@ public:
     /// cols ≥ 0, not empty; else InputError naming it (the extended Jacobian's wording).
     const double* read(nb::handle h, const char* name, I64 rows, I64 cols) {
         const std::string what(name);
+        const NumpyFloat64& numpy = NumpyFloat64::get();
+        if (Py_TYPE(h.ptr()) == numpy.ndarray) {
+            const auto* a = reinterpret_cast<const NumpyArrayHead*>(h.ptr());
+            if (a->descr == numpy.dtype) {
+                check_layout(
+                    what, a->nd, [&](I64 d) { return static_cast<I64>(a->dimensions[d]); },
+                    [&](I64 d, I64 e) {
+                        return a->strides[d] == e * static_cast<I64>(sizeof(double));
+                    },
+                    rows, cols);
+                return reinterpret_cast<const double*>(a->data);
+            }
+        }
         if (PyObject_CheckBuffer(h.ptr())) {
             if (PyObject_GetBuffer(h.ptr(), &view_, PyBUF_RECORDS_RO) == 0) {
                 held_ = true;
