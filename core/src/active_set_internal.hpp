@@ -60,6 +60,13 @@ inline index one_column(const double* a, index n, index hint) {
     return one_column_hint(a, n, nz, hint);
 }
 
+/// ‖a‖² as dot(a, a, n) sums it, a[:n] having its one non-zero entry at `column` when
+/// column ≥ 0 (one_column's): that entry squared, the same bits (the other squares are
+/// +0 and add nothing).
+inline double norm2_of_row(const double* a, index n, index column) {
+    return column >= 0 ? a[column] * a[column] : dot(a, a, n);
+}
+
 /// Exchange M[i, :w] and M[j, :w].
 inline void swap_rows_upto(Mat M, index i, index j, index w) { swap_rows(M.ref(0, w), i, j); }
 
