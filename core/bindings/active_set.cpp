@@ -81,8 +81,9 @@ struct NumpyArrayHead {
     int flags;
 };
 
-/// numpy.ndarray and the float64 dtype (native byte order), looked up at the first call
-/// (null when numpy cannot be imported: every array then takes the buffer protocol).
+/// numpy.ndarray and the float64 dtype (native byte order), looked up once, when the
+/// module is loaded (bind_active_set; null when numpy cannot be imported: every array then
+/// takes the buffer protocol).
 struct NumpyFloat64 {
     PyTypeObject* ndarray = nullptr;
     PyObject* dtype = nullptr;
@@ -321,6 +322,7 @@ void bind_active_set(nb::module_& m) {
     codes["FLAG_NEAR_AMBIGUOUS"] = static_cast<int>(prioik::FLAG_NEAR_AMBIGUOUS);
     codes["FLAG_STALLED"] = static_cast<int>(prioik::FLAG_STALLED);
     m.attr("ACTIVE_SET_CODES") = codes;
+    NumpyFloat64::get();    // under the import's GIL, before any call can race for it
     bind_certificate(m);
     nb::class_<ActiveSetSolver>(m, "ActiveSetSolver",
                                 "The hierarchical active set prepared for one layout "
