@@ -29,53 +29,160 @@ using I64 = std::int64_t;
 
 using AnyArray = nb::ndarray<nb::ro, nb::device::cpu>;
 
-std::string shape_of(const AnyArray& a) {
-    std::string out = "(";
-    for (size_t i = 0; i < a.ndim(); ++i) out += (i ? ", " : "") + std::to_string(a.shape(i));
-    return out + (a.ndim() == 1 ? ",)" : ")");
-}
-
-/// The array `name` as float64, C-contiguous, of shape (rows,) or (rows, cols) when
-/// cols ≥ 0, not empty; else InputError naming it (the extended Jacobian's wording).
-const double* checked(nb::handle h, const char* name, I64 rows, I64 cols) {
-    const std::string what(name);
-    AnyArray a;
-    if (!nb::try_cast(h, a, false))
-        raise_input_error(what + " must be a float64 numpy array, got " +
-                          nb::cast<std::string>(nb::handle(reinterpret_cast<PyObject*>(
-                              Py_TYPE(h.ptr()))).attr("__name__")));
-    if (a.dtype() != nb::dtype<double>()) raise_input_error(what + " must be float64");
+/// InputError naming `what` unless the array of ndim_got extents extent(d) has shape
+/// (rows,) or (rows, cols) when cols ≥ 0, is not empty and is C-contiguous
+/// (steps(d, e): whether its stride along d is e elements).
+template <class Extent, class Steps>
+void check_layout(const std::string& what, I64 ndim_got, Extent extent, Steps steps, I64 rows,
+                  I64 cols) {
+    auto shape_text = [&] {
+        std::string out = "(";
+        for (I64 i = 0; i < ndim_got; ++i)
+            out += (i ? ", " : "") + std::to_string(extent(i));
+        return out + (ndim_got == 1 ? ",)" : ")");
+    };
     const I64 ndim = cols < 0 ? 1 : 2;
-    for (size_t d = 0; d < a.ndim(); ++d)
-        if (a.shape(d) == 0) raise_input_error(what + " is empty (shape " + shape_of(a) + ")");
-    const bool wrong = static_cast<I64>(a.ndim()) != ndim ||
-                       static_cast<I64>(a.shape(0)) != rows ||
-                       (ndim == 2 && static_cast<I64>(a.shape(1)) != cols);
+    for (I64 d = 0; d < ndim_got; ++d)
+        if (extent(d) == 0) raise_input_error(what + " is empty (shape " + shape_text() + ")");
+    const bool wrong = ndim_got != ndim || extent(0) != rows || (ndim == 2 && extent(1) != cols);
     if (wrong)
         raise_input_error(what + " must have shape (" + std::to_string(rows) +
                           (ndim == 2 ? ", " + std::to_string(cols) + ")" : ",)") + ", got " +
-                          shape_of(a));
+                          shape_text());
     I64 expect = 1;
     for (I64 d = ndim - 1; d >= 0; --d) {
-        if (a.shape(d) > 1 && a.stride(d) != expect)
+        if (extent(d) > 1 && !steps(d, expect))
             raise_input_error(what + " must be C-contiguous (a view with strides is not "
                               "taken: pass np.ascontiguousarray of it)");
-        expect *= static_cast<I64>(a.shape(d));
+        expect *= extent(d);
     }
-    return static_cast<const double*>(a.data());
 }
 
-struct Inputs {
-    const double *A, *b, *lower, *upper, *sw;
+/// Whether a buffer's format is a float64 in the machine's byte order ("d", "@d", "=d",
+/// or "<d"/">d" naming that order).
+bool native_float64(const Py_buffer& v) {
+    if (v.itemsize != 8 || v.format == nullptr) return false;
+    const char* f = v.format;
+    constexpr char own_order = PY_LITTLE_ENDIAN ? '<' : '>';
+    if (*f == '@' || *f == '=' || *f == own_order) ++f;
+    return f[0] == 'd' && f[1] == '\0';
+}
+
+/// The leading fields of numpy's array object (numpy/ndarraytypes.h, PyArrayObject_fields:
+/// public and the same in numpy 1.x and 2.x; pybind11's numpy support reads them alike).
+struct NumpyArrayHead {
+    PyObject_HEAD
+    char* data;
+    int nd;
+    Py_ssize_t* dimensions;
+    Py_ssize_t* strides;
+    PyObject* base;
+    PyObject* descr;
+    int flags;
 };
 
-/// The five arrays checked: dtypes, shapes, contiguity, not empty.
-Inputs check_inputs(const prioik::ActiveSetLayout& layout, nb::handle A, nb::handle b,
-                    nb::handle lower, nb::handle upper, nb::handle sw) {
-    I64 M = layout.M, n = layout.n;
-    return Inputs{checked(A, "A", M, n), checked(b, "b", M, -1), checked(lower, "lower", M, -1),
-                  checked(upper, "upper", M, -1), checked(sw, "sqrt_weight", M, -1)};
-}
+/// numpy.ndarray and the float64 dtype (native byte order), looked up once, when the
+/// module is loaded (bind_active_set; null when numpy cannot be imported: every array then
+/// takes the buffer protocol).
+struct NumpyFloat64 {
+    PyTypeObject* ndarray = nullptr;
+    PyObject* dtype = nullptr;
+
+    static const NumpyFloat64& get() {
+        static const NumpyFloat64 types = [] {
+            NumpyFloat64 t;
+            try {
+                nb::module_ numpy = nb::module_::import_("numpy");
+                nb::object ndarray = numpy.attr("ndarray");
+                nb::object dtype = numpy.attr("dtype")("float64");
+                t.ndarray = reinterpret_cast<PyTypeObject*>(ndarray.release().ptr());
+                t.dtype = dtype.release().ptr();
+            } catch (const nb::python_error&) {
+                t = NumpyFloat64{};
+            }
+            return t;
+        }();
+        return types;
+    }
+};
+
+/// One input array: an exact numpy.ndarray of float64 read from its fields (a solve's
+/// five arrays then cost no Python call), another buffer exporter through the buffer
+/// protocol (held until the call returns), anything else through nanobind's ndarray
+/// (DLPack). The caller's references keep the arrays alive for the call.
+class InputArray {
+public:
+    InputArray() = default;
+    InputArray(const InputArray&) = delete;
+    InputArray& operator=(const InputArray&) = delete;
+    ~InputArray() {
+        if (held_) PyBuffer_Release(&view_);
+    }
+
+    /// The array `name` as float64, C-contiguous, of shape (rows,) or (rows, cols) when
+    /// cols ≥ 0, not empty; else InputError naming it (the extended Jacobian's wording).
+    const double* read(nb::handle h, const char* name, I64 rows, I64 cols) {
+        const std::string what(name);
+        const NumpyFloat64& numpy = NumpyFloat64::get();
+        if (Py_TYPE(h.ptr()) == numpy.ndarray) {
+            const auto* a = reinterpret_cast<const NumpyArrayHead*>(h.ptr());
+            if (a->descr == numpy.dtype) {
+                check_layout(
+                    what, a->nd, [&](I64 d) { return static_cast<I64>(a->dimensions[d]); },
+                    [&](I64 d, I64 e) {
+                        return a->strides[d] == e * static_cast<I64>(sizeof(double));
+                    },
+                    rows, cols);
+                return reinterpret_cast<const double*>(a->data);
+            }
+        }
+        if (PyObject_CheckBuffer(h.ptr())) {
+            if (PyObject_GetBuffer(h.ptr(), &view_, PyBUF_RECORDS_RO) == 0) {
+                held_ = true;
+                if (!native_float64(view_)) raise_input_error(what + " must be float64");
+                check_layout(
+                    what, view_.ndim, [&](I64 d) { return static_cast<I64>(view_.shape[d]); },
+                    [&](I64 d, I64 e) { return view_.strides[d] == e * view_.itemsize; },
+                    rows, cols);
+                return static_cast<const double*>(view_.buf);
+            }
+            PyErr_Clear();    // a buffer it cannot export as strided: read it below
+        }
+        AnyArray a;
+        if (!nb::try_cast(h, a, false))
+            raise_input_error(what + " must be a float64 numpy array, got " +
+                              nb::cast<std::string>(nb::handle(reinterpret_cast<PyObject*>(
+                                  Py_TYPE(h.ptr()))).attr("__name__")));
+        if (a.dtype() != nb::dtype<double>()) raise_input_error(what + " must be float64");
+        check_layout(
+            what, static_cast<I64>(a.ndim()), [&](I64 d) { return static_cast<I64>(a.shape(d)); },
+            [&](I64 d, I64 e) { return a.stride(d) == e; }, rows, cols);
+        return static_cast<const double*>(a.data());
+    }
+
+private:
+    Py_buffer view_{};
+    bool held_ = false;
+};
+
+/// The five arrays of a stack, checked (dtypes, shapes, contiguity, not empty) and held
+/// for the call.
+struct Inputs {
+    const double *A = nullptr, *b = nullptr, *lower = nullptr, *upper = nullptr, *sw = nullptr;
+
+    Inputs(const prioik::ActiveSetLayout& layout, nb::handle A_, nb::handle b_, nb::handle lower_,
+           nb::handle upper_, nb::handle sw_) {
+        I64 M = layout.M, n = layout.n;
+        A = arrays_[0].read(A_, "A", M, n);
+        b = arrays_[1].read(b_, "b", M, -1);
+        lower = arrays_[2].read(lower_, "lower", M, -1);
+        upper = arrays_[3].read(upper_, "upper", M, -1);
+        sw = arrays_[4].read(sw_, "sqrt_weight", M, -1);
+    }
+
+private:
+    InputArray arrays_[5];
+};
 
 /// After a solve that refused the values (SolveCode::not_solved): the first value the
 /// solver cannot read, named (a non-finite entry of A, a √w not finite and > 0, a NaN
@@ -170,8 +277,9 @@ void bind_certificate(nb::module_& m) {
             "check",
             [](Certificate& c, nb::handle A, nb::handle b, nb::handle lower, nb::handle upper,
                nb::handle sw, nb::handle x, bool minimum_norm) {
-                Inputs in = check_inputs(c.layout(), A, b, lower, upper, sw);
-                const double* xp = checked(x, "x", c.layout().n, -1);
+                Inputs in(c.layout(), A, b, lower, upper, sw);
+                InputArray x_array;
+                const double* xp = x_array.read(x, "x", c.layout().n, -1);
                 check_certificate_values(c.layout(), in);
                 nb::gil_scoped_release release;
                 return static_cast<int>(
@@ -214,6 +322,7 @@ void bind_active_set(nb::module_& m) {
     codes["FLAG_NEAR_AMBIGUOUS"] = static_cast<int>(prioik::FLAG_NEAR_AMBIGUOUS);
     codes["FLAG_STALLED"] = static_cast<int>(prioik::FLAG_STALLED);
     m.attr("ACTIVE_SET_CODES") = codes;
+    NumpyFloat64::get();    // under the import's GIL, before any call can race for it
     bind_certificate(m);
     nb::class_<ActiveSetSolver>(m, "ActiveSetSolver",
                                 "The hierarchical active set prepared for one layout "
@@ -243,7 +352,7 @@ void bind_active_set(nb::module_& m) {
             "solve",
             [](ActiveSetSolver& s, nb::handle A, nb::handle b, nb::handle lower, nb::handle upper,
                nb::handle sw) {
-                Inputs in = check_inputs(s.layout(), A, b, lower, upper, sw);
+                Inputs in(s.layout(), A, b, lower, upper, sw);
                 prioik::SolveCode code;
                 {
                     nb::gil_scoped_release release;
@@ -261,7 +370,7 @@ void bind_active_set(nb::module_& m) {
             "equality_first",
             [](ActiveSetSolver& s, nb::handle A, nb::handle b, nb::handle lower, nb::handle upper,
                nb::handle sw) {
-                Inputs in = check_inputs(s.layout(), A, b, lower, upper, sw);
+                Inputs in(s.layout(), A, b, lower, upper, sw);
                 nb::gil_scoped_release release;
                 return static_cast<int>(
                     s.equality_first(in.A, in.b, in.lower, in.upper, in.sw));

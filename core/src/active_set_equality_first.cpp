@@ -49,8 +49,8 @@ namespace {
 
 /// (‖a‖², its one non-zero column or −1).
 double sparsity(const double* a, index n, index hint, index& column) {
-    column = one_column_hint(a, n, count_nonzero(a, n), hint);
-    return dot(a, a, n);
+    column = one_column(a, n, hint);
+    return norm2_of_row(a, n, column);
 }
 
 /// The held rows, and whether they are taken as fixed coordinates (box rows on
@@ -156,16 +156,16 @@ double equality_row(Ctx& c, EqFirst& e, index j) {
     const double* Aj = c.A.row(j);
     double* row = e.eB.row(e.m);
     for (index q = 0; q < n; ++q) row[q] = s * Aj[q];
-    double nn = dot(row, row, n);
-    index nz = count_nonzero(Aj, n);
+    index column;
     if (c.eqr[j]) {
         e.ec[e.m] = s * (c.row_eq[j] ? c.b[j] : c.lower[j]);
         e.ucol[j] = -2;
-        e.ecol[j] = one_column_hint(Aj, n, nz, e.ecol[j]);
+        column = e.ecol[j] = one_column(Aj, n, e.ecol[j]);
     } else {
         e.ec[e.m] = s * (c.held[j] > 0 ? c.upper[j] : c.lower[j]);
-        e.ucol[j] = one_column_hint(Aj, n, nz, e.ucol[j]);
+        column = e.ucol[j] = one_column(Aj, n, e.ucol[j]);
     }
+    double nn = norm2_of_row(row, n, column);
     e.erow[e.m] = j;
     e.rowperm[e.m] = e.m;
     ++e.m;

@@ -13,7 +13,7 @@ using dense::inf;
 
 /// The number of non-zero entries of a[:n] (±0 count as zero), by integer tests of
 /// their bits in 32-bit halves (a pass the compiler vectorises even on baseline x86-64,
-/// which has no 64-bit compare: a row scan of every solve).
+/// which has no 64-bit compare).
 inline index count_nonzero(const double* a, index n) {
     std::uint32_t nz = 0;
     for (index k = 0; k < n; ++k) {
@@ -26,6 +26,17 @@ inline index count_nonzero(const double* a, index n) {
     return static_cast<index>(nz);
 }
 
+/// The bits of a[from:to] but their signs, or-ed (0: every entry is ±0).
+inline std::uint64_t magnitude_bits(const double* a, index from, index to) {
+    std::uint64_t acc = 0;
+    for (index k = from; k < to; ++k) {
+        std::uint64_t bits;
+        std::memcpy(&bits, a + k, sizeof bits);
+        acc |= bits;
+    }
+    return acc << 1;
+}
+
 /// The column of the only non-zero entry of a[:n] when it has nz = 1 of them (hint
 /// first: the row's column at the last solve), else −1.
 inline index one_column_hint(const double* a, index n, index nz, index hint) {
@@ -34,6 +45,26 @@ inline index one_column_hint(const double* a, index n, index nz, index hint) {
     for (index k = 0; k < n; ++k)
         if (a[k] != 0.0) return k;
     return -1;
+}
+
+/// one_column_hint(a, n, count_nonzero(a, n), hint) without counting every entry: when
+/// a[hint] is non-zero the others are tested at once, else the scan stops at the second
+/// non-zero entry (a row scan of every solve: rows keep their pattern from solve to solve).
+inline index one_column(const double* a, index n, index hint) {
+    index nz = 0;
+    if (hint >= 0 && hint < n && magnitude_bits(a, hint, hint + 1) != 0) {
+        nz = (magnitude_bits(a, 0, hint) | magnitude_bits(a, hint + 1, n)) != 0 ? 2 : 1;
+    } else {
+        for (index k = 0; k < n && nz < 2; ++k) nz += magnitude_bits(a, k, k + 1) != 0 ? 1 : 0;
+    }
+    return one_column_hint(a, n, nz, hint);
+}
+
+/// ‖a‖² as dot(a, a, n) sums it, a[:n] having its one non-zero entry at `column` when
+/// column ≥ 0 (one_column's): that entry squared, the same bits (the other squares are
+/// +0 and add nothing).
+inline double norm2_of_row(const double* a, index n, index column) {
+    return column >= 0 ? a[column] * a[column] : dot(a, a, n);
 }
 
 /// Exchange M[i, :w] and M[j, :w].

@@ -55,8 +55,8 @@ bool load_rows(Ctx& c) {
             Bj[k] = v;
             Boj[k] = v;
         }
-        double nn = dot(Bj, Bj, n);
-        c.ucol[j] = c.row_eq[j] ? -1 : one_column_hint(Aj, n, count_nonzero(Aj, n), c.ucol[j]);
+        c.ucol[j] = c.row_eq[j] ? -1 : one_column(Aj, n, c.ucol[j]);
+        double nn = norm2_of_row(Bj, n, c.ucol[j]);
         c.nrot[j] = 0;
         bool e = c.row_eq[j] != 0;
         c.blo[j] = s * (e ? c.b[j] : c.lower[j]);
