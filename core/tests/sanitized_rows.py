@@ -40,7 +40,8 @@ def main(path: str) -> None:
     assert t.cpp_rows is core.rows and rows_module._k is core.rows
 
     def use(kernels):
-        rows_module._k = kernels
+        for module in t.WRITER_MODULES:       # robots.rows and the task kinds' modules
+            module._k = kernels
         tasks_module._state_is_valid = kernels.state_is_valid
 
     robots = {"panda": panda(), "g1": g1(), "talos": talos()}
@@ -60,7 +61,7 @@ def main(path: str) -> None:
     writer = TaskWriter(robot, "acceleration")
     writer.add_frame_pose("pose", "left_foot", gain=(1.0, 1.0))
     state = KinematicState(robot, robot.q0, np.zeros(robot.nv))
-    _, args = writer._frame_args(writer._task("pose", "pose"), state)
+    _, args = writer._task("pose", "frame_pose")._frame_args(state)
     call = dict(zip(("A", "Q", "J", "t", "R", "spec", "geo", "aj", "vj"), args, strict=False))
     call.update(x=np.zeros(3), xd=np.zeros(3), xdd=np.zeros(3), Rstar=np.eye(3),
                 w=np.zeros(3), wd=np.zeros(3))
