@@ -7,12 +7,19 @@
 
 from .base import (
                    STATUSES,
+                   VERIFY_MODES,
                    Capabilities,
+                   CheckRequest,
                    ConcurrentUseError,
+                   Diagnostics,
+                   Fault,
                    FormulationError,
+                   LowerPoint,
                    Outcome,
                    ReportVariant,
                    Solution,
+                   Status,
+                   Verification,
 )
 from .options import Option
 from .prepared import PreparedSolver
@@ -29,7 +36,8 @@ from .registry import (
                    solve_batch,
 )
 
-__all__ = ["BatchSolution", "STATUSES", "Capabilities", "ConcurrentUseError", "FormulationError",
-           "FormulationInfo", "Option", "Outcome", "PLUGINS", "PreparedSolver", "ReportVariant",
-           "Solution", "available", "compile_kernels", "get", "names", "prepare", "solve",
-           "solve_batch"]
+__all__ = ["BatchSolution", "STATUSES", "VERIFY_MODES", "Capabilities", "CheckRequest",
+           "ConcurrentUseError", "Diagnostics", "Fault", "FormulationError", "FormulationInfo",
+           "LowerPoint", "Option", "Outcome", "PLUGINS", "PreparedSolver", "ReportVariant",
+           "Solution", "Status", "Verification", "available", "compile_kernels", "get",
+           "names", "prepare", "solve", "solve_batch"]

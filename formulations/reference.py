@@ -24,6 +24,8 @@ singular values): the damped hierarchy that ``extended_jacobian`` (selective dam
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from prioik.hierarchy import (
@@ -36,9 +38,21 @@ from prioik.hierarchy import (
     rank_threshold,
 )
 
-from .base import Capabilities, FormulationError, Outcome
+from .base import Capabilities, Diagnostics, FormulationError, Outcome, Status
 from .nullspace import REFINEMENT_STEPS, refinement
 from .options import Option, per_level_nonnegative, positive_semidefinite, rcond_option
+
+
+@dataclass(frozen=True, slots=True)
+class Detail:
+    """``reference``'s own record (``sol.diagnostics.detail``).
+
+    Attributes:
+        null_space_dim: Dimension of the null space left below the last level.
+    """
+
+    null_space_dim: int
+
 
 NAME = "reference"
 DESCRIPTION = "exact lexicographic least squares, nested SVD null spaces (ground truth)"
@@ -106,11 +120,14 @@ def solve(stack: TaskStack, *, rcond: float, metric, level_damping) -> Outcome:
                                         "remaining null space") from None
         z = np.linalg.solve(L.T, np.linalg.solve(L, -(Z.T @ (W @ x))))
         x = x + Z @ z
-    info = {"rank_profile": ranks, "null_space_dim": int(Z.shape[1])}
+    diagnostics = Diagnostics(ranks=np.array(ranks), ambiguous_levels=list(ambiguous),
+                              detail=Detail(int(Z.shape[1])))
     if ambiguous:
-        info["ambiguous_levels"] = ambiguous
-        info["reason"] = ambiguity_reason(ambiguous)
-    return Outcome(x, "approximate" if mu2.any() or ambiguous else "optimal", info)
+        diagnostics.reason = ambiguity_reason(ambiguous)
+    elif mu2.any():
+        diagnostics.reason = "damped levels (level_damping): a damped least-squares answer"
+    return Outcome(x, Status.APPROXIMATE if mu2.any() or ambiguous else Status.OPTIMAL,
+                   diagnostics)
 
 
 def solve_batch(stacks, *, rcond: float = DEFAULT_RCOND, metric=None, level_damping=None

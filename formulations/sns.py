@@ -22,17 +22,16 @@ stack without bounds gets ``nullspace``'s answer bit for bit.
 
 Statuses: ``optimal`` when every level reached its least-squares residual without
 bounds (then ``x`` is the exact lexicographic optimum with the bounds on top);
-``approximate`` when a task was scaled, dropped or its residual grew (``info
-["scaled_tasks"]``), or at an ambiguous rank decision (``info["reason"]``).
-
-``info``: ``task_scaling`` (one ``s`` per equality level), ``scaled_tasks``,
-``saturated`` (per level, the saturated columns), ``iterations`` (saturation rounds
-per level), ``bounds_level`` (``0`` or ``None``).
+``approximate`` when a task was scaled, dropped or its residual grew
+(:attr:`Detail.scaled_tasks`), or at an ambiguous rank decision
+(``diagnostics.reason``). Its own record: :class:`Detail`.
 
 The algorithm step by step: ``docs/formulations.md``.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -44,9 +43,31 @@ from prioik.hierarchy import (
     rank_threshold,
 )
 
-from .base import Capabilities, FormulationError, Outcome, ReportVariant
+from .base import Capabilities, Diagnostics, FormulationError, Outcome, ReportVariant, Status
 from .nullspace import check_nonnegative, project_level, truncated_svd
 from .options import Option, rcond_option
+
+
+@dataclass(slots=True)
+class Detail:
+    """``sns``'s own record (``sol.diagnostics.detail``).
+
+    Attributes:
+        task_scaling: One scale ``s`` per equality level (``1``: met in full).
+        scaled_tasks: The levels scaled or dropped (their task names, comma-joined).
+        saturated: Per level, the saturated columns.
+        iterations: Saturation rounds per equality level.
+        bounds_level: The level of the bounds (``0``) or ``None``.
+        first_task_level: The first level of equality tasks.
+    """
+
+    task_scaling: list[float]
+    scaled_tasks: list[str]
+    saturated: list
+    iterations: list[int]
+    bounds_level: int | None
+    first_task_level: int
+
 
 NAME = "sns"
 DESCRIPTION = ("Saturation in the Null Space (Flacco, De Luca, Khatib 2012/2015): strict "
@@ -242,13 +263,17 @@ def solve(stack: TaskStack, *, rcond: float = DEFAULT_RCOND, bound_tolerance: fl
         P = P_next
     if not levels and not feasible(x):
         x = np.clip(x, lower, upper)        # bounds alone: the box's minimum-norm point
-    status = "optimal" if exact and not scaled and not ambiguous else "approximate"
-    info = {"task_scaling": scaling, "scaled_tasks": scaled, "saturated": saturated,
-            "iterations": iterations, "bounds_level": bounds_level, "first_task_level": first}
+    optimal = exact and not scaled and not ambiguous
+    diagnostics = Diagnostics(ambiguous_levels=list(ambiguous),
+                              detail=Detail(scaling, scaled, saturated, iterations,
+                                            bounds_level, first))
     if ambiguous:
-        info["ambiguous_levels"] = ambiguous
-        info["reason"] = ambiguity_reason(ambiguous)
-    return Outcome(x, status, info)
+        diagnostics.add_reason(ambiguity_reason(ambiguous))
+    if scaled:
+        diagnostics.add_reason(f"task scaling under the bounds: {'; '.join(scaled)}")
+    elif not optimal and not ambiguous:
+        diagnostics.add_reason("a level's residual grew under the bounds")
+    return Outcome(x, Status.OPTIMAL if optimal else Status.APPROXIMATE, diagnostics)
 
 # ------------------------------------------------------------------------ reports
 #: rows of prioik's reports beside the default one (prioik.benchmarks.variants)

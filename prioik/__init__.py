@@ -40,10 +40,14 @@ from .formulations import (
     BatchSolution,
     Capabilities,
     ConcurrentUseError,
+    Diagnostics,
+    Fault,
     FormulationError,
     Option,
     PreparedSolver,
     Solution,
+    Status,
+    Verification,
     available,
     prepare,
     solve,
@@ -92,9 +96,10 @@ def __dir__() -> list[str]:
 
 
 __all__ = [
-    "BatchSolution", "Capabilities", "ConcurrentUseError", "FormulationError", "Level",
+    "BatchSolution", "Capabilities", "ConcurrentUseError", "Diagnostics", "Fault",
+    "FormulationError", "Level",
     "LexicographicReport", "MissingExtraError", "Option", "PreparedSolver", "PrioikError",
-    "Solution", "StackData", "StackLayout", "Task", "TaskStack", "TaskStackError",
+    "Solution", "StackData", "Status", "Verification", "StackLayout", "Task", "TaskStack", "TaskStackError",
     "UnknownNameError", "UnsupportedTaskError", "__version__", "available", "benchmarks",
     "check_lexicographic",
     "errors", "extras", "formulations", "hard", "hierarchy", "load_stack", "prepare",

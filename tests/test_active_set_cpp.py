@@ -46,8 +46,10 @@ SPREAD_FACTOR = 4.0
 _OPTIONS = {"rcond": 1e-9, "primal_tol": 1e-10, "dual_tol": 1e-12, "max_iter": 500}
 
 
-def prepared(stack: TaskStack, warm: bool = False) -> has.Prepared:
-    return has.Prepared(stack.layout, dict(_OPTIONS, warm_start=warm))
+def prepared(stack: TaskStack, warm: bool = False) -> formulations.PreparedSolver:
+    """The prepared solver (the plugin's solve, then the verification stage that applies
+    its certificate's verdict)."""
+    return formulations.prepare(stack.layout, has.NAME, **_OPTIONS, warm_start=warm)
 
 
 def w2_floor(stack: TaskStack, x: np.ndarray) -> np.ndarray:
@@ -150,11 +152,11 @@ def check_cold(stack: TaskStack, what: str) -> bool:
 # ------------------------------------------------------------------ the path exists
 def test_the_solver_is_the_compiled_core():
     stack = random_inequality_hierarchy(np.random.default_rng(3), 8, 3)
-    solver = prepared(stack)
+    solver = has.Prepared(stack.layout, dict(_OPTIONS, warm_start=False))
     assert isinstance(solver._cpp, core.ActiveSetSolver)
     out = solver.solve(stack.data)
     np.testing.assert_array_equal(out.x, solver._cpp.x)
-    assert out.info["iterations"].sum() > 0
+    assert out.diagnostics.iterations.sum() > 0
     assert formulations.prepare(stack.layout, "hierarchical_active_set",
                                 kernel="cpp").solve(stack).x.tolist() == out.x.tolist()
 
@@ -267,7 +269,7 @@ def test_warm_sequences_equal_the_cold_answers(family):
 # ------------------------------------------------------------------ the boundary
 def _solver_and_data():
     stack = random_inequality_hierarchy(np.random.default_rng(5), 6, 3)
-    return prepared(stack)._cpp, stack.data
+    return has.Prepared(stack.layout, dict(_OPTIONS, warm_start=False))._cpp, stack.data
 
 
 @pytest.mark.parametrize("name", ["A", "b", "lower", "upper", "sqrt_weight"])
@@ -395,7 +397,7 @@ def test_closed_loop_robot_runs_are_certified(name, mode):
         w.add_contact(c, c, gain=gain, level=1)
     w.add_frame_position("reach", limb, gain=gain)
     w.add_posture("posture", gain=(10.0, 6.0) if accel else 1.0)
-    solvers = {warm: has.Prepared(w.layout, dict(_OPTIONS, warm_start=warm))
+    solvers = {warm: formulations.prepare(w.layout, has.NAME, **_OPTIONS, warm_start=warm)
                for warm in (True, False)}
     q, v = robot.q0.copy(), np.zeros(robot.nv)
     start = KinematicState(robot, q, v)

@@ -158,12 +158,13 @@ def test_infeasible_hard_level_gives_least_violation_with_diagnostics(backend):
     sol = formulations.solve(stack, "cascaded_qp", solver=backend)
     assert_truthful(sol, stack)
     if backend in CERTIFIED:
-        assert sol.status == "optimal", sol.info.get("message")
+        assert sol.status == "optimal", sol.diagnostics.reason
     c = stack.task("keepout").A[0]
     # least violation of c x ≥ 1, c x ≤ −1 (unit c, equal weights): c x = 0
     assert abs(c @ sol.x) <= 1e-5
     assert sol.residuals[0] == pytest.approx(np.sqrt(2.0), abs=1e-5)
-    (entry,) = sol.info["infeasible_levels"]
+    assert sol.diagnostics.infeasible_levels == [0]
+    (entry,) = sol.detail.violated
     assert entry["level"] == 0 and entry["tasks"] == ["keepout"]
 
 
@@ -171,8 +172,8 @@ def test_infeasible_hard_level_fails_cleanly_when_asked():
     stack = infeasible_inequality(np.random.default_rng(12), 6, 3)
     sol = formulations.solve(stack, "cascaded_qp", on_infeasible="fail")
     assert sol.status == "failed" and not sol.ok
-    assert sol.info["failed_level"] == 0
-    assert sol.info["failed_tasks"] == ["keepout"]
+    assert sol.diagnostics.fault.level == 0
+    assert sol.diagnostics.fault.tasks == ("keepout",)
     assert "keepout" in sol.info["message"]
     assert np.isnan(sol.x).all()
 

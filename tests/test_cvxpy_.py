@@ -53,10 +53,10 @@ def test_infeasible_hard_level_least_violation_and_fail_option():
     sol = formulations.solve(stack, "cvxpy")
     assert sol.status == "optimal"
     assert abs(stack.task("keepout").A[0] @ sol.x) <= 1e-6
-    assert sol.info["infeasible_levels"][0]["tasks"] == ["keepout"]
+    assert sol.detail.violated[0]["tasks"] == ["keepout"]
     bad = formulations.solve(stack, "cvxpy", on_infeasible="fail")
-    assert bad.status == "failed" and bad.info["failed_level"] == 0
-    assert bad.info["failed_tasks"] == ["keepout"]
+    assert bad.status == "failed" and bad.diagnostics.fault.level == 0
+    assert bad.diagnostics.fault.tasks == ("keepout",)
 
 
 def test_unavailable_solver_names_it_and_lists_available():

@@ -135,10 +135,11 @@ def test_a_near_ambiguous_rank_decision_has_its_answer_certified(path):
     assert relative_distance(sol.x, ref.x) > 1e-3          # the answer is off...
     assert not check_lexicographic(stack, sol.x).ok         # ...and the certificate sees it
     assert sol.status == "approximate"
-    assert sol.info["near_ambiguous_levels"] == [1, 3, 4]
-    assert sol.info["path_certified"] is False and sol.info["fault_level"] == 4
-    assert "near-ambiguous at levels 1, 3, 4" in sol.info["reason"]
-    assert "certificate at level 4 (l4t0, l4t1, l4t2)" in sol.info["reason"]
+    assert sol.detail.near_ambiguous_levels == [1, 3, 4]
+    assert sol.diagnostics.verification.ok is False
+    assert sol.diagnostics.fault.level == 4 and sol.diagnostics.fault.code == "certificate"
+    assert "near-ambiguous at levels 1, 3, 4" in sol.diagnostics.reason
+    assert "certificate at level 4 (l4t0, l4t1, l4t2)" in sol.diagnostics.reason
 
 
 @pytest.mark.parametrize("case", [5, 20])
@@ -154,8 +155,8 @@ def test_a_certified_near_ambiguous_answer_stays_optimal(case):
     assert case.well_conditioned
     for options in ({}, {"kernel": "lapack"}):
         sol = formulations.solve(case.stack, "extended_jacobian", **options)
-        assert sol.info["near_ambiguous_levels"] and sol.info["path_certified"] is True
-        assert sol.status == "optimal" and "reason" not in sol.info
+        assert sol.detail.near_ambiguous_levels and sol.diagnostics.verification.ok
+        assert sol.status == "optimal" and sol.diagnostics.reason == ""
         assert relative_distance(sol.x, case.truth) <= max(1e-9, case.rounding_error)
 
 
