@@ -1,6 +1,6 @@
 """Compiled closed-form formulations against the extended Jacobian on the G1 fencing
 stacks: per formulation, the median time of a prepared solve on the compiled kernel and
-on the readable one, and the flop rate (the kernel's ``info["flops"]`` over the compiled
+on the readable one, and the flop rate (the kernel's ``sol.detail.flops`` over the compiled
 time) relative to the extended Jacobian's. Every solver runs in one process, the stacks
 interleaved, one BLAS thread (only ratios measured side by side mean anything).
 
@@ -46,7 +46,7 @@ def measure(samples: list, repeats: int) -> dict[str, dict[str, float]]:
         solvers = {(label, path): _solver(label, stack.layout, KERNELS[label][path], mass)
                    for label in KERNELS for path in (0, 1)}
         for label in KERNELS:
-            flops[label].append(solvers[label, 0].solve(data).info["flops"])
+            flops[label].append(solvers[label, 0].solve(data).detail.flops)
         for _ in range(repeats):
             for key, solver in solvers.items():
                 t0 = time.perf_counter()

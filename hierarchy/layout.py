@@ -544,7 +544,7 @@ def hard_violations(data: StackData, x: np.ndarray, residuals: np.ndarray | None
 
 
 def precision_reason(levels: list[int], x_norm: float) -> str:
-    """The ``info["reason"]`` of an ``approximate`` status due to
+    """The ``diagnostics.reason`` of an ``approximate`` status due to
     :func:`precision_limited_levels`."""
     return (f"‖x‖ = {x_norm:.3g}: x's coordinates are known to about "
             f"{X_PRECISION * x_norm:.2g}, too coarse for level"

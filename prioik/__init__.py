@@ -97,11 +97,10 @@ def __dir__() -> list[str]:
 
 __all__ = [
     "BatchSolution", "Capabilities", "ConcurrentUseError", "Diagnostics", "Fault",
-    "FormulationError", "Level",
-    "LexicographicReport", "MissingExtraError", "Option", "PreparedSolver", "PrioikError",
-    "Solution", "StackData", "Status", "Verification", "StackLayout", "Task", "TaskStack", "TaskStackError",
-    "UnknownNameError", "UnsupportedTaskError", "__version__", "available", "benchmarks",
-    "check_lexicographic",
-    "errors", "extras", "formulations", "hard", "hierarchy", "load_stack", "prepare",
-    "robots", "save_stack", "solve", "solve_batch",
+    "FormulationError", "Level", "LexicographicReport", "MissingExtraError", "Option",
+    "PreparedSolver", "PrioikError", "Solution", "StackData", "StackLayout", "Status", "Task",
+    "TaskStack", "TaskStackError", "UnknownNameError", "UnsupportedTaskError", "Verification",
+    "__version__", "available", "benchmarks", "check_lexicographic", "errors", "extras",
+    "formulations", "hard", "hierarchy", "load_stack", "prepare", "robots", "save_stack",
+    "solve", "solve_batch",
 ]

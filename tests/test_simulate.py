@@ -199,7 +199,7 @@ def test_torque_from_solution_without_tau_fails_the_run(chain):
     res = simulate(chain, _build(chain),
                    lambda s, **kw: SimpleNamespace(x=np.zeros(s.n), status="optimal", info={}),
                    duration=0.1, dt=0.01, torque_from_solution=True)
-    assert res.failed and res.failed_step == 0 and "no info['tau']" in res.message
+    assert res.failed and res.failed_step == 0 and "no diagnostics.detail.tau" in res.message
 
 
 @pytest.mark.parametrize("duration, dt, message", [

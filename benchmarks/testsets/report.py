@@ -38,8 +38,9 @@ def summarize(records: list[dict[str, Any]], profile: str = "mid",
               shift: float = TIME_SHIFT_S) -> dict[str, list[dict[str, Any]]]:
     """Per test set, one summary per row (in the records' order): ``row``, ``taken``,
     ``success`` (profile → rate), ``sgm_s`` and ``sgm_norm`` (the shifted geometric mean
-    of times and its ratio to the best row's), ``worst_s``, ``within_2x`` (share of the
-    problems taken), ``failures`` ((problem, status, reason) at ``profile``).
+    of times and its ratio to the best row's), ``worst_s``, ``verify_s`` (the median
+    verification stage, NaN where none ran), ``within_2x`` (share of the problems
+    taken), ``failures`` ((problem, status, reason) at ``profile``).
 
     Raises:
         ValueError: unknown profile.
@@ -62,6 +63,8 @@ def summarize(records: list[dict[str, Any]], profile: str = "mid",
         for label, rr in rows.items():
             taken = [r for r in rr if _taken(r)]
             times = [r["time_s"] for r in taken if r["time_s"] != ""]
+            verify = [r.get("verify_time_s", "") for r in taken]
+            verify = [v for v in verify if v != "" and v > 0]
             s = {"row": label, "formulation": rr[0]["formulation"], "taken": len(taken),
                  "problems": len(rr),
                  "judged_by": next((r["judged_by"] for r in taken if r["judged_by"]), ""),
@@ -69,6 +72,7 @@ def summarize(records: list[dict[str, Any]], profile: str = "mid",
                                  if taken else math.nan) for p in PROFILES},
                  "sgm_s": shifted_geometric_mean(times, shift) if times else math.nan,
                  "worst_s": max(times) if times else math.nan,
+                 "verify_s": float(np.median(verify)) if verify else math.nan,
                  "within_2x": (float(np.mean([
                      r[f"success_{profile}"] == 1 and r["problem"] in best
                      and r["time_s"] <= WITHIN * best[r["problem"]] for r in taken]))
@@ -111,8 +115,8 @@ def _set_section(name: str, recs: list[dict[str, Any]], summaries: list[dict[str
         lines.append(f"Best shifted geometric mean: `{best['row']}`, "
                      f"{1e6 * best['sgm_s']:.1f} µs.")
     lines += ["", "| row | taken | success low | mid | high | time (SGM, ×best) "
-              f"| worst (µs) | within {WITHIN:g}× best ({profile}) |",
-              "|---|---:|---:|---:|---:|---:|---:|---:|"]
+              f"| worst (µs) | verify (median µs) | within {WITHIN:g}× best ({profile}) |",
+              "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for s in summaries:
         if s["taken"] == 0:
             continue
@@ -120,7 +124,8 @@ def _set_section(name: str, recs: list[dict[str, Any]], summaries: list[dict[str
         lines.append(f"| `{s['row']}`{mark} | {s['taken']}/{s['problems']} | "
                      f"{_pct(s['success']['low'])} | {_pct(s['success']['mid'])} | "
                      f"{_pct(s['success']['high'])} | {_num(s['sgm_norm'], '.2f')} | "
-                     f"{_num(1e6 * s['worst_s'], '.0f')} | {_pct(s['within_2x'])} |")
+                     f"{_num(1e6 * s['worst_s'], '.0f')} | "
+                     f"{_num(1e6 * s['verify_s'], '.0f')} | {_pct(s['within_2x'])} |")
     none_taken = [s["row"] for s in summaries if s["taken"] == 0]
     if none_taken:
         lines += ["", "Not taking any problem of this set (inequality tasks they cannot "
@@ -188,7 +193,8 @@ def format_report(records: list[dict[str, Any]], profile: str = "mid", *,
         "level's residual ‖w_i‖ is within tol·max(1, ‖w_i*‖) of the exact answer's "
         "(`hierarchical_active_set`, cold, cross-checked against the stated answers "
         "where a problem has them). **Time**: the wall time of the prepared solver's "
-        "`solve` (`prioik.prepare`, untimed), per problem the fastest of the passes, "
+        "`solve` (`prioik.prepare`, untimed) less its verification stage (reported apart: "
+        "**verify**, `Solution.verify_time_s`), per problem the fastest of the passes, "
         "rows interleaved; on sequential test sets warm/hot rows follow each sequence "
         "and `[cold]` rows do not. **SGM** is the shifted geometric mean "
         f"exp(mean(log(t + s))) − s, s = {1e6 * shift:g} µs, over every solve the row "
