@@ -23,15 +23,13 @@ Statuses: ``optimal`` when every level's multiplier test passed with every rank 
 clear of the ambiguity band, or, for a level the kernel flags (:class:`Detail`'s
 ``ambiguous_path_levels``, ``near_ambiguous_levels``, ``near_release_levels``,
 ``held_off_bound_levels``; ``diagnostics.stalled_levels``), when the answer passes the
-core's certificate, part of the solve (:func:`~prioik.hierarchy.check_lexicographic`'s
-verdict, after at most :data:`REFINE_ROUNDS` re-solves at :data:`REFINE` times the
-tolerances): a rejected answer carries that verdict
-(``diagnostics.verification.method == "solver"``) and the verification stage demotes it.
-``approximate`` with ``diagnostics.reason`` at an ambiguous rank decision
-(``diagnostics.ambiguous_levels``), a rejected certificate, a precision-limited level or
-the iteration cap (``diagnostics.capped_levels``); ``failed`` on non-finite values.
-``diagnostics.infeasible_levels`` names the levels with ``f_i* > 0``,
-``diagnostics.equilibrated_levels`` those solved rescaled by a power of two.
+core's certificate, part of the solve (``check_lexicographic``'s verdict, after at most
+:data:`REFINE_ROUNDS` re-solves at :data:`REFINE` times the tolerances; a rejected
+answer carries the verdict, ``verification.method == "solver"``, for the verification
+stage to demote). ``approximate`` with ``diagnostics.reason`` at an ambiguous rank
+decision (``ambiguous_levels``), a rejected certificate, a precision-limited level or the
+iteration cap (``capped_levels``); ``failed`` on non-finite values. ``infeasible_levels``
+names the levels with ``f_i* > 0``, ``equilibrated_levels`` those solved rescaled.
 
 Warm start (:class:`Prepared`): each level starts from the last solve's working set;
 when the last answer fixed no inequality row at a violation, the equality rows and the
