@@ -568,11 +568,11 @@ def certify(stack, x: np.ndarray, diagnostics: Diagnostics, *, metric=None,
 
 def lower_point_solver(layout):
     """The exact active-set solver :func:`lower_point` compares with, prepared for
-    ``layout`` (cold: no warm start between the answers it checks)."""
+    ``layout`` with its default options (:func:`lower_point` resets it before each
+    answer: every comparison starts cold, as a freshly prepared one)."""
     from . import hierarchical_active_set as active_set  # (it imports this module)
     from .options import validate_options
-    opts = validate_options(active_set.NAME, active_set.OPTIONS, {"warm_start": False},
-                            layout.n)
+    opts = validate_options(active_set.NAME, active_set.OPTIONS, {}, layout.n)
     return active_set.Prepared(layout, opts)
 
 
@@ -593,7 +593,8 @@ def lower_point(stack: TaskStack | StackData, x: np.ndarray,
         x: The answer.
         tol: The certificate's relative tolerance.
         solver: The active-set solver to compare with (:func:`lower_point_solver`,
-            prepared once for the layout; ``None``: one is prepared for this call).
+            prepared once for the layout, reset here; ``None``: one is prepared for
+            this call).
 
     Returns:
         ``(i, value at x, value at x_a)``, or ``None`` (no such level, or the solver gave
@@ -603,6 +604,7 @@ def lower_point(stack: TaskStack | StackData, x: np.ndarray,
     try:
         if solver is None:
             solver = lower_point_solver(data.layout)
+        solver.reset()      # cold: the answer does not depend on the last one checked
         xa = solver.solve(data).x
     except (FormulationError, TaskStackError, ArithmeticError, np.linalg.LinAlgError):
         return None
