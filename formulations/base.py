@@ -322,11 +322,6 @@ class Outcome:
     check: CheckRequest | None = None
     explain: Callable[[], str] | None = None
 
-    @property
-    def info(self) -> dict[str, Any]:
-        """Deprecated: as :attr:`Solution.info`, derived from :attr:`diagnostics`."""
-        return legacy_info(self.diagnostics)
-
     def fail(self, message: str, code: str = "solver_error", level: int | None = None,
              tasks=()) -> Outcome:
         """This outcome made ``failed`` (``x`` NaN) with a :class:`Fault`; returns it."""
@@ -376,13 +371,6 @@ class Solution:
         """The formulation's own record (``diagnostics.detail``)."""
         return self.diagnostics.detail
 
-    @property
-    def info(self) -> dict[str, Any]:
-        """Deprecated: a read-only dict derived from :attr:`diagnostics` under the keys
-        of prioik's former open ``info`` dict (:func:`legacy_info`); read the typed
-        fields instead."""
-        return legacy_info(self.diagnostics)
-
     def __repr__(self) -> str:
         x = np.asarray(self.x)
         head = np.array2string(x[:4], precision=4, separator=", ")[1:-1]
@@ -406,51 +394,6 @@ class Solution:
         body = "".join(f"<tr><th style='text-align:left'>{escape(k)}</th>"
                        f"<td>{escape(v)}</td></tr>" for k, v in rows)
         return f"<table><caption>Solution</caption>{body}</table>"
-
-
-def legacy_info(diagnostics: Diagnostics) -> dict[str, Any]:
-    """The deprecated ``Solution.info`` dict, derived from ``diagnostics``: its non-empty
-    fields under their former keys (``ranks`` → ``"rank_profile"``,
-    ``hard_violated_levels`` → ``"hard_violations"``, ``reason`` → ``"reason"`` and
-    ``"message"``, the fault's level and tasks → ``"fault_level"``/``"failed_level"`` and
-    ``"fault_tasks"``/``"failed_tasks"``, the verification → ``"certificate"``,
-    ``"lower_point"`` or ``"path_certified"``), and the detail record's fields that are not
-    ``None``."""
-    d = diagnostics
-    out: dict[str, Any] = {}
-    if d.ranks is not None:
-        out["rank_profile"] = np.asarray(d.ranks).tolist()
-    for key in ("iterations", "margins"):
-        if getattr(d, key) is not None:
-            out[key] = getattr(d, key)
-    for key in ("infeasible_levels", "capped_levels", "stalled_levels", "ambiguous_levels",
-                "equilibrated_levels", "precision_limited_levels"):
-        if getattr(d, key):
-            out[key] = getattr(d, key)
-    if d.hard_violated_levels:
-        out["hard_violations"] = d.hard_violated_levels
-    if d.reason:
-        out["reason"] = out["message"] = d.reason
-    if d.fault is not None:
-        out["fault_level"] = out["failed_level"] = d.fault.level
-        out["fault_tasks"] = out["failed_tasks"] = list(d.fault.tasks)
-    v = d.verification
-    if v is not None:
-        if v.method == "solver":
-            out["path_certified"] = v.ok
-        elif v.method != "precision":
-            out["certificate"] = {"ok": v.ok, "tol": v.tol, "worst_relative": v.worst_relative,
-                                  "fault_level": None if v.ok or d.fault is None
-                                  else d.fault.level}
-        if v.lower_point is not None:
-            lp = v.lower_point
-            out["lower_point"] = {"level": lp.level, "value": lp.value, "reached": lp.reached}
-    if d.detail is not None:
-        for f in fields(d.detail):
-            value = getattr(d.detail, f.name)
-            if value is not None:
-                out.setdefault(f.name, value)
-    return out
 
 
 def in_original_units(out: Outcome, data, levels: list[int]) -> Outcome:

@@ -70,7 +70,7 @@ def w2_floor(stack: TaskStack, x: np.ndarray) -> np.ndarray:
 
 def _violation(out) -> np.ndarray:
     """Each level's ``‖w_i‖²`` of an answer (the active set's own, or the residuals')."""
-    w2 = out.info.get("level_violation")
+    w2 = getattr(out.detail, "level_violation", None)      # the reference has none
     return np.asarray(w2) if w2 is not None else np.asarray(out.residuals) ** 2
 
 
@@ -118,8 +118,8 @@ def assert_close(stack: TaskStack, got, ref, what: str, spread=None) -> None:
     with it by ``O(1)``) is compared by its status only."""
     d = differences(stack, got, ref)
     flipped = spread is not None and got.status != ref.status and got.status in spread[2]
-    assert got.status == ref.status or flipped, (what, d, got.info, ref.info)
-    if ref.status != "optimal" and ref.info.get("ambiguous_levels"):
+    assert got.status == ref.status or flipped, (what, d, got.diagnostics, ref.diagnostics)
+    if ref.status != "optimal" and ref.diagnostics.ambiguous_levels:
         return
     allowed, dx_allowed = d["allowed"], X_REL
     if spread is not None:
@@ -360,7 +360,7 @@ def test_warm_limit_sequences_equal_the_cold_answers(redundant, level_of_box):
             a, b = warm.solve(stack.data), cold.solve(stack.data)
             assert_close(stack, a, b, f"limits sequence {seq} step {step}")
             assert assert_certified(stack, a, f"limits sequence {seq} step {step}")
-            tried += a.info["equality_first"]
+            tried += a.detail.equality_first
         assert tried > 0
 
 

@@ -125,7 +125,9 @@ def test_the_corpus_exercises_every_reading(monkeypatch):
 
 
 def _flagged(sol) -> bool:
-    return any(key in sol.info for _, key, _ in H._CERTIFIED_FLAGS)
+    d = sol.diagnostics
+    return bool(d.stalled_levels) or any(getattr(d.detail, key, None)
+                                         for _, key, _ in H._CERTIFIED_FLAGS)
 
 
 def test_flagged_answers_get_the_oracle_s_verdict_in_the_solver():
@@ -179,8 +181,8 @@ def test_a_flagged_solve_never_calls_the_python_certificate(monkeypatch):
     monkeypatch.setattr(H, "check_lexicographic", refuse)
     stack = load_stack(DATA / "fuzz" / "inequality-7002-1384.json")
     sol = prioik.solve(stack, "hierarchical_active_set")
-    assert sol.status == "optimal" and sol.info["path_certified"]
-    assert sol.info["refined_primal_tol"] == pytest.approx(1e-14)
+    assert sol.status == "optimal" and sol.diagnostics.verification.ok
+    assert sol.detail.refined_primal_tol == pytest.approx(1e-14)
     monkeypatch.undo()
     assert check_lexicographic(stack, sol.x).ok
 
@@ -191,7 +193,7 @@ def test_a_rejected_flagged_answer_is_approximate():
     naming the level the certificate rejects."""
     stack = load_stack(DATA / "adversarial" / "independent2-scales-4-302.json")
     sol = prioik.solve(stack, "hierarchical_active_set")
-    assert sol.status == "approximate" and "the certificate rejects level" in sol.info["reason"]
+    assert sol.status == "approximate" and "the certificate rejects level" in sol.diagnostics.reason
     assert not check_lexicographic(stack, sol.x, minimum_norm=True).ok
 
 

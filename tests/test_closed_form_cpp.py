@@ -33,8 +33,8 @@ def family_stacks(seeds: int = 12):
 def assert_kernels_agree(stack: TaskStack, name: str, **options) -> tuple:
     cpp = formulations.solve(stack, name, kernel="cpp", **options)
     ref = formulations.solve(stack, name, kernel="numpy", **options)
-    assert cpp.info["kernel"] == "cpp" and ref.info["kernel"] == "numpy"
-    assert cpp.status == ref.status, (cpp.status, ref.status, cpp.info.get("reason"))
+    assert cpp.detail.kernel == "cpp" and ref.detail.kernel == "numpy"
+    assert cpp.status == ref.status, (cpp.status, ref.status, cpp.diagnostics.reason)
     scale = max(1.0, float(np.linalg.norm(ref.x)))
     assert np.linalg.norm(cpp.x - ref.x) <= AGREEMENT * scale, np.linalg.norm(cpp.x - ref.x)
     return cpp, ref
@@ -44,7 +44,7 @@ def assert_kernels_agree(stack: TaskStack, name: str, **options) -> tuple:
 def test_nullspace_cpp_equals_numpy_on_every_family(setting):
     for family, seed, stack in family_stacks():
         cpp, ref = assert_kernels_agree(stack, "nullspace", **NULLSPACE_SETTINGS[setting])
-        assert cpp.info["rank_profile"] == ref.info["rank_profile"], (family, seed)
+        assert cpp.diagnostics.ranks.tolist() == ref.diagnostics.ranks.tolist(), (family, seed)
 
 
 @pytest.fixture(scope="module")
@@ -72,7 +72,7 @@ def test_nullspace_cpp_equals_numpy_on_the_g1_fencing_stacks(g1_stacks, setting)
 def test_chiaverini_cpp_equals_numpy_on_every_family(damping):
     for _family, _seed, stack in family_stacks():
         cpp, ref = assert_kernels_agree(stack, "chiaverini", damping=damping)
-        for own, own_ref in zip(cpp.info["task_solutions"], ref.info["task_solutions"],
+        for own, own_ref in zip(cpp.detail.task_solutions, ref.detail.task_solutions,
                                 strict=True):
             assert np.linalg.norm(own - own_ref) <= AGREEMENT * max(1.0, np.linalg.norm(own_ref))
 
@@ -88,7 +88,7 @@ def test_unifying_cpp_equals_numpy_on_every_family():
         M = random_spd(np.random.default_rng(seed), stack.n)
         bias = np.linspace(-1.0, 1.0, stack.n)
         cpp, ref = assert_kernels_agree(stack, "unifying", mass_matrix=M, bias=bias)
-        np.testing.assert_allclose(cpp.info["tau"], M @ cpp.x + bias, rtol=0, atol=1e-12 *
+        np.testing.assert_allclose(cpp.detail.tau, M @ cpp.x + bias, rtol=0, atol=1e-12 *
                                    max(1.0, float(np.abs(M @ cpp.x).max())))
 
 
@@ -103,7 +103,7 @@ def test_operational_space_cpp_equals_numpy_on_every_family(reproject):
         M = random_spd(np.random.default_rng(seed), stack.n)
         cpp, ref = assert_kernels_agree(stack, "operational_space", mass_matrix=M,
                                         reproject=reproject)
-        assert cpp.info["rank_profile"] == ref.info["rank_profile"], (family, seed)
+        assert cpp.diagnostics.ranks.tolist() == ref.diagnostics.ranks.tolist(), (family, seed)
 
 
 def test_operational_space_cpp_equals_numpy_on_the_g1_fencing_stacks(g1_samples):
@@ -143,7 +143,7 @@ def test_unifying_cpp_names_a_mass_matrix_it_cannot_take():
 def test_nullspace_auto_is_the_compiled_kernel_and_reports_flops():
     stack = FAMILIES["conflicting"](np.random.default_rng(1), 12, 3)
     sol = formulations.solve(stack, "nullspace")
-    assert sol.info["kernel"] == "cpp" and sol.info["flops"] > 0
+    assert sol.detail.kernel == "cpp" and sol.detail.flops > 0
     batch = formulations.solve_batch([stack, stack], "nullspace")
     np.testing.assert_array_equal(batch.X[0], sol.x)
     assert batch.statuses == [sol.status] * 2
@@ -165,7 +165,7 @@ def test_nullspace_flops_of_one_level_are_a_householder_lq_and_lower_order_terms
     other operation is O(m n)."""
     rng = np.random.default_rng(m * n)
     stack = TaskStack([Task("only", rng.standard_normal((m, n)), rng.standard_normal(m))])
-    flops = formulations.solve(stack, "nullspace", kernel="cpp").info["flops"]
+    flops = formulations.solve(stack, "nullspace", kernel="cpp").detail.flops
     lq = householder_lq_applications(m, n)
     assert abs(lq - (2 * n * m * m - 2 * m ** 3 / 3)) <= 4 * m * n     # the dense count
     assert lq <= flops <= lq + 16 * m * n + m * m, (flops, lq)
@@ -178,9 +178,9 @@ def test_nullspace_flops_grow_with_the_projections_of_the_lower_levels():
     n, m1, m2 = 30, 6, 8
     first = Task("a", rng.standard_normal((m1, n)), rng.standard_normal(m1))
     second = Task("b", rng.standard_normal((m2, n)), rng.standard_normal(m2))
-    one = formulations.solve(TaskStack([first]), "nullspace", kernel="cpp").info["flops"]
+    one = formulations.solve(TaskStack([first]), "nullspace", kernel="cpp").detail.flops
     two = formulations.solve(TaskStack([first, second]), "nullspace",
-                             kernel="cpp").info["flops"]
+                             kernel="cpp").detail.flops
     assert two - one >= 2 * m2 * n * n + m1 * n * n
 
 
@@ -193,7 +193,7 @@ def test_one_level_flops_of_the_other_kernels():
     m, n = 12, 30
     stack = TaskStack([Task("only", rng.standard_normal((m, n)), rng.standard_normal(m))])
     M = random_spd(rng, n)
-    count = {name: formulations.solve(stack, name, kernel="cpp", **opts).info["flops"]
+    count = {name: formulations.solve(stack, name, kernel="cpp", **opts).detail.flops
              for name, opts in [("nullspace", {}), ("chiaverini", {}),
                                 ("unifying", {"mass_matrix": M}),
                                 ("operational_space", {"mass_matrix": M})]}
@@ -246,7 +246,7 @@ def test_extended_jacobian_flops_of_a_full_rank_level_are_a_householder_qr(m, n)
     sol = formulations.solve(stack, "extended_jacobian", kernel="cpp")
     qr = householder_qr_applications(m, n)
     assert abs(qr - (2 * m * n * n - 2 * n ** 3 / 3)) <= 4 * m * n
-    assert qr <= sol.info["flops"] <= qr + 16 * m * n + 4 * n * n, (sol.info["flops"], qr)
+    assert qr <= sol.detail.flops <= qr + 16 * m * n + 4 * n * n, (sol.detail.flops, qr)
 
 
 def test_extended_jacobian_and_nullspace_count_the_same_lq_on_one_level():
@@ -255,7 +255,7 @@ def test_extended_jacobian_and_nullspace_count_the_same_lq_on_one_level():
     rng = np.random.default_rng(3)
     m, n = 25, 60
     stack = TaskStack([Task("only", rng.standard_normal((m, n)), rng.standard_normal(m))])
-    ej = formulations.solve(stack, "extended_jacobian", kernel="cpp").info["flops"]
-    ns = formulations.solve(stack, "nullspace", kernel="cpp").info["flops"]
+    ej = formulations.solve(stack, "extended_jacobian", kernel="cpp").detail.flops
+    ns = formulations.solve(stack, "nullspace", kernel="cpp").detail.flops
     assert abs(ej - ns) <= 6 * m * n
     assert ej >= householder_lq_applications(m, n)

@@ -5,7 +5,7 @@ solve many stacks of its layout (the same answers as one-off solves), refuses an
 layout naming both, refuses every wrong option type and value with a FormulationError
 naming the option, and is never wrong when called from two threads. Its verification
 stage is its own: the same answers and statuses under every ``verify`` mode as one-off
-solves, and a deprecated ``info`` derived from the typed record.
+solves; its answers are typed (no open ``info`` dict).
 """
 
 from __future__ import annotations
@@ -272,16 +272,15 @@ def test_a_prepared_solvers_verification_equals_one_off_solves(info, verify):
 
 
 @pytest.mark.parametrize("info", AVAILABLE, ids=lambda f: f.name)
-def test_the_deprecated_info_is_derived_from_the_typed_record(info):
-    """``Solution.info`` is read-only, rebuilt from ``diagnostics`` on every read (a
-    write to it changes nothing), and holds the detail record's fields."""
+def test_the_answer_is_typed_through_and_through(info):
+    """No open dict: the solution holds a Diagnostics whose every field is typed, the
+    formulation's record a dataclass of its own module, and no ``info``."""
     import dataclasses
     stack = _stacks_for(info, count=1)[0]
     sol = prioik.solve(stack, info.name, **_options_for(info, stack.n))
-    legacy = sol.info
-    legacy["reason"] = "written"
-    assert sol.info.get("reason", "") == sol.diagnostics.reason
-    for f in dataclasses.fields(sol.detail):
-        value = getattr(sol.detail, f.name)
-        if value is not None:
-            assert f.name in sol.info
+    assert not hasattr(sol, "info")
+    assert type(sol.detail).__module__ == formulations.get(info.name).__name__
+    assert dataclasses.is_dataclass(sol.detail)
+    flat = sol.diagnostics.as_dict()
+    assert set(flat) == {f.name for f in dataclasses.fields(sol.diagnostics)}
+    assert set(flat["detail"]) == {f.name for f in dataclasses.fields(sol.detail)}

@@ -73,14 +73,14 @@ def test_linalg_failure_becomes_failed_status(monkeypatch, stack):
     _fake(monkeypatch, "boom", boom)
     sol = formulations.solve(stack, "boom")
     assert sol.status == "failed" and not sol.ok
-    assert "LinAlgError: Singular matrix" in sol.info["message"]
+    assert "LinAlgError: Singular matrix" in sol.diagnostics.reason
     assert np.isnan(sol.x).all() and np.isnan(sol.residuals).all()
 
 
 def test_non_finite_answer_is_reported_failed(monkeypatch, stack):
     _fake(monkeypatch, "nanny", lambda stack, **_: Outcome(np.full(stack.n, np.nan)))
     sol = formulations.solve(stack, "nanny")
-    assert sol.status == "failed" and "non-finite" in sol.info["message"]
+    assert sol.status == "failed" and "non-finite" in sol.diagnostics.reason
 
 
 def test_mass_matrix_is_required_validated_and_never_mutated(monkeypatch, stack):
