@@ -881,8 +881,17 @@ def _solve_batch(prepared: Prepared, datas: list[StackData]) -> tuple[np.ndarray
     parallel (a loop of :meth:`Prepared.solve` off the compiled path)."""
     if not prepared.compiled:
         outs = [prepared.solve(d) for d in datas]
-        return np.array([o.x for o in outs]), [o.status for o in outs]
+        return np.array([o.x for o in outs]), _outcome_statuses(datas, outs)
     return _solve_batch_core(prepared, datas)
+
+
+def _outcome_statuses(datas: list[StackData], outs: list[Outcome]) -> list[Status]:
+    """The statuses of a batch's outcomes, an ``optimal`` one that asks to be certified
+    (near-ambiguous) certified as :meth:`Prepared.solve`'s verification stage does (a
+    batch has no stage of its own)."""
+    return [Status.APPROXIMATE if o.status == Status.OPTIMAL and o.check is not None
+            and np.isfinite(o.x).all() and not certify(d, o.x, Diagnostics()) else o.status
+            for d, o in zip(datas, outs, strict=True)]
 
 
 def _solve_batch_core(prepared: Prepared, datas: list[StackData]
@@ -901,7 +910,7 @@ def _solve_batch_core(prepared: Prepared, datas: list[StackData]
     if not res.solved.all():
         # finite rows of extreme scale: one by one, equilibrated as in solve
         outs = [prepared.solve(one) for one in datas]
-        return np.array([o.x for o in outs]), [o.status for o in outs]
+        return np.array([o.x for o in outs]), _outcome_statuses(datas, outs)
     X = res.x.copy()
     return X, _batch_statuses(datas, X, res.level_mu2, res.margins)
 
