@@ -885,7 +885,7 @@ def _solve_batch(prepared: Prepared, datas: list[StackData]) -> tuple[np.ndarray
     return _solve_batch_core(prepared, datas)
 
 
-def _outcome_statuses(datas: list[StackData], outs: list[Outcome]) -> list[Status]:
+def _outcome_statuses(datas: list[StackData], outs: list[Outcome]) -> list[str]:
     """The statuses of a batch's outcomes, an ``optimal`` one that asks to be certified
     (near-ambiguous) certified as :meth:`Prepared.solve`'s verification stage does (a
     batch has no stage of its own)."""

@@ -408,7 +408,9 @@ class PreparedSolver:
     def solve_batch(self, stacks_or_data: Sequence) -> BatchSolution:
         """Solve many stacks of the layout (the plugin's batched kernel when it has one,
         else a loop of :meth:`solve`), each on its own: a plugin's warm start is reset
-        before each stack, so that row ``i`` equals ``prioik.solve(stacks[i])``.
+        before each stack, so that row ``i`` equals ``prioik.solve(stacks[i])``. The
+        verification stage of a batched kernel's statuses is the precision check alone
+        (skipped with ``verify="none"``); a loop of :meth:`solve` runs the whole stage.
 
         Raises:
             TaskStackError: an empty batch.
