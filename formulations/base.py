@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, fields
 from enum import Enum
 from typing import Any
@@ -229,7 +229,8 @@ class Diagnostics:
     """What a solve found, typed (:attr:`Solution.diagnostics`).
 
     Per-level arrays have one entry per level (``None``: the formulation does not report
-    it). Level lists are sorted level indices (``k``: the minimum-norm tie-break).
+    it). Level lists are sorted level indices (``k``: the minimum-norm tie-break;
+    ``()`` when none).
 
     Attributes:
         ranks: Rank each level added (the rank rule's decision).
@@ -257,13 +258,13 @@ class Diagnostics:
     ranks: np.ndarray | None = None
     iterations: np.ndarray | None = None
     margins: np.ndarray | None = None
-    infeasible_levels: list[int] = field(default_factory=list)
-    capped_levels: list[int] = field(default_factory=list)
-    stalled_levels: list[int] = field(default_factory=list)
-    ambiguous_levels: list[int] = field(default_factory=list)
-    equilibrated_levels: list[int] = field(default_factory=list)
-    precision_limited_levels: list[int] = field(default_factory=list)
-    hard_violated_levels: list[int] = field(default_factory=list)
+    infeasible_levels: Sequence[int] = ()
+    capped_levels: Sequence[int] = ()
+    stalled_levels: Sequence[int] = ()
+    ambiguous_levels: Sequence[int] = ()
+    equilibrated_levels: Sequence[int] = ()
+    precision_limited_levels: Sequence[int] = ()
+    hard_violated_levels: Sequence[int] = ()
     reason: str = ""
     fault: Fault | None = None
     verification: Verification | None = None

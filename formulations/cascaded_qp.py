@@ -660,7 +660,7 @@ def record_level(diagnostics: Diagnostics, rec: dict, level, x: np.ndarray, tol:
     bad = violated_tasks(level, x, tol)
     if bad:
         rec["violated"] = bad
-        diagnostics.infeasible_levels.append(j)
+        diagnostics.infeasible_levels = [*diagnostics.infeasible_levels, j]
         detail.violated.append({"level": j, "tasks": sorted(bad), "violation": bad})
     detail.levels.append(rec)
     if bad and on_infeasible == "fail":

@@ -324,7 +324,7 @@ class Prepared:
         if code == _SOLVED_CLEAN or code == _SOLVED_INFEASIBLE:
             return (self._x.copy(), Status.OPTIMAL,
                     Diagnostics(ranks=self._ranks.copy(), iterations=self._iterations.copy(),
-                                infeasible_levels=[] if code == _SOLVED_CLEAN else
+                                infeasible_levels=() if code == _SOLVED_CLEAN else
                                 list(compress(self._levels, self._over.tolist())),
                                 detail=Detail(self._w2.copy(), self.warm_start, first)),
                     self._res.copy())

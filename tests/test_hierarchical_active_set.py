@@ -394,7 +394,7 @@ def test_a_cycle_of_rounding_stops_at_the_stall_limit_not_the_cap(warm_start):
     stack = draw("bounds", 1205, 1331).stack
     solver = prioik.prepare(stack.layout, NAME, warm_start=warm_start, max_iter=10_000)
     sol = solver.solve(stack)
-    assert sol.diagnostics.capped_levels == []
+    assert not sol.diagnostics.capped_levels
     # the limit (2 rows + 10, core/src/active_set_solve.cpp) counts the rows up to the
     # level; all of the stack's bound it
     assert sol.diagnostics.iterations[2] <= 2 * stack.layout.m + 10 + 10

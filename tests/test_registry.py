@@ -261,10 +261,10 @@ def test_a_hard_level_that_holds_leaves_the_status_as_it_was(info):
     violated = hard_violations(stack.data, plain.x)
     if info.capabilities.exact:
         assert violated == [] and sol.status == plain.status == "optimal"
-        assert sol.diagnostics.hard_violated_levels == []
+        assert not sol.diagnostics.hard_violated_levels
     else:
         assert sol.status == ("failed" if violated else plain.status)
-        assert sol.diagnostics.hard_violated_levels == [v[0] for v in violated]
+        assert list(sol.diagnostics.hard_violated_levels) == [v[0] for v in violated]
 
 
 def test_a_new_formulation_gets_the_hard_check_with_no_edit(toy_plugin):
