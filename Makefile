@@ -30,7 +30,7 @@ BUILD_REQUIRES = $$($(PY) -c "import tomllib; print(*tomllib.load(open('pyprojec
 EDITABLE_PATHS_OFF = -c "import pathlib, sysconfig; p = pathlib.Path(sysconfig.get_paths()['purelib'], '_editable_skbc_prioik.pth'); p.write_text(''.join(l for l in p.read_text().splitlines(True) if l.startswith('import ')))"
 
 .PHONY: test test-core test-forced-cpu demo docs venv venv-core tsid clean asan asan-bindings \
-	replay-screenshot lint
+	replay-screenshot lint docs-commands
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -137,6 +137,19 @@ demo: $(STAMP) $(CORE_STAMP_BUILT)
 # NO_MKDOCS_2_WARNING: Material for MkDocs' banner about MkDocs 2.0, not about this site
 docs: $(STAMP) $(CORE_STAMP_BUILT)
 	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict --site-dir site
+
+# Every command README.md and the site's user pages show, run as written at full size
+# (tests/test_doc_commands.py with PRIOIK_SMOKE=0; `make test` runs them shrunk to a few
+# steps), each page's commands in a folder of DOC_COMMANDS_DIR with what each printed
+# (command-N.log: the figures) beside the pages and plots it wrote, to set beside docs/;
+# -s prints each command's time. Over an hour on 2 cores: the shipped sweep alone ~40 min,
+# prioik bench and prioik fencing several minutes each, `pip wheel .` ~2 min. A part:
+# DOC_COMMANDS_SELECT="-k 'README or scenarios'".
+DOC_COMMANDS_DIR ?= build/docs-commands
+DOC_COMMANDS_SELECT ?=
+docs-commands: $(STAMP) $(CORE_STAMP_BUILT)
+	PRIOIK_SMOKE=0 $(PY) -m pytest -p no:cacheprovider -s -v tests/test_doc_commands.py \
+		--basetemp=$(DOC_COMMANDS_DIR) $(DOC_COMMANDS_SELECT)
 
 # README's screenshot of the meshed replay: the G1 fencing run (extended_jacobian,
 # compatible) in headless chromium, paused 2.6 s into the run

@@ -1,12 +1,13 @@
-"""Comparisons, validation reports, benchmarks and the ``prioik`` command line.
+"""Comparisons, validation reports, benchmarks and their ``prioik`` commands.
 
 One concern per module:
 
 * :mod:`.variants` — the rows of every report, derived from the formulation registry
-  (one ``Variant`` class, one label syntax ``formulation[tag]``);
+  (one ``Variant`` class, one label syntax ``formulation[tag]``) and the rows declared
+  for each formulation in :mod:`.report_rows`;
 * :mod:`.stacks` — the stacks the benchmarks time (random families, G1 fencing states);
 * :mod:`.timing` — repeats under a time budget, medians and percentiles;
-  :mod:`.threads` — BLAS threads (``threadpoolctl``); :mod:`.progress`, :mod:`.machine`;
+  :mod:`.progress`, :mod:`.machine`;
 * :mod:`.results` — the result records (one dataclass per kind of row) and their CSV
   writer and reader;
 * :mod:`.report` — pages from the templates of ``templates/`` (package data);
@@ -17,12 +18,13 @@ One concern per module:
   libraries (:mod:`.mink_step`: mink's IK step beside prioik's and PlaCo's);
 * one module per experiment: :mod:`.bench` (a package), :mod:`.validation`,
   :mod:`.properties`, :mod:`.fencing` (with :mod:`.reproduction`, its page),
-  :mod:`.arm`, :mod:`.sweep`, :mod:`.fuzz`, :mod:`.compare`, :mod:`.saved_runs`;
-* :mod:`.cli` — argument parsing and dispatch only (:mod:`.library`: ``prioik list``
-  and ``solve``).
+  :mod:`.arm`, :mod:`.sweep`, :mod:`.fuzz`, :mod:`.saved_runs`, each declaring its
+  ``prioik`` command (``add_parser``), which :mod:`prioik.cli` imports only when that
+  command runs (the core commands ``list``, ``solve``, ``compile`` and ``compare`` are
+  :mod:`prioik.commands` and :mod:`prioik.compare`).
 
 Importing this package changes nothing in the process: the ``prioik`` command limits
-BLAS to one thread itself (:mod:`prioik.benchmarks.threads`, with ``threadpoolctl``),
+BLAS to one thread itself (:mod:`prioik.threads`, with ``threadpoolctl``),
 because every matrix here is small and a multi-threaded BLAS spends more on waking
 threads than on arithmetic (measured: ``operational_space`` at n = 35 took 9.7 ms with
 threads, 1.1 ms without).

@@ -259,10 +259,12 @@ def g1_limits_step(steps: int = 300, rounds: int = 5) -> dict[str, Any]:
     import prioik
     from prioik.robots.fencing import FencingScenario
     from prioik.robots.tasks import KinematicState
+    from prioik.smoke import cap
 
     from .placo_baseline import run_placo
     from .placo_step import DT, GAIN
 
+    rounds = cap(rounds, 1)                  # PRIOIK_SMOKE=1: PlaCo set up twice, not 6 times
     scenario = FencingScenario("compatible")
     robot = scenario.robot
     placo_run = run_placo(scenario, duration=steps * DT, dt=DT)
@@ -361,7 +363,7 @@ def run(windows: int = 4, steps: int = 6, repeats: int = REPEATS, ik_steps: int 
         ``{"rows": [...], "g1_step": {...}, "panda_step": {...}, "ratios": [...]}``; each
         ratio a dict ``name, value, target`` (``value ≤ target`` meets it).
     """
-    from prioik.benchmarks.threads import blas_threads
+    from prioik.threads import blas_threads
     out: dict[str, Any] = {"rows": [], "ratios": []}
     with blas_threads(1):
         if stacks:

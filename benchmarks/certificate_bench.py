@@ -149,7 +149,7 @@ def certificate_times(checks: list, rounds: int) -> dict[str, float]:
 
 def run(steps: int = 200, talos_steps: int = 300, rounds: int = 3) -> list[dict[str, Any]]:
     """Every trajectory's row (see the module docstring)."""
-    from .threads import blas_threads
+    from prioik.threads import blas_threads
     rows = []
     with blas_threads(1):
         trajectories = g1_trajectories(steps)

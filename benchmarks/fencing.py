@@ -27,6 +27,10 @@ prints one table per variant and writes into ``--out``:
 * in ``run_info.json`` (``diagnostics``): each level's projected ``σ_min / ‖A_i‖_F`` at
   the standing posture and along the incompatible ``extended_jacobian`` run, and the
   largest joint-limit row target of ``extended_jacobian[step_bound]``;
+* in ``run_info.json`` (``like_for_like``, unless ``--like-for-like-samples 0``): the
+  closed-form formulations' median solve times and flop counts on the same G1 stacks,
+  side by side (:mod:`benchmarks.like_for_like`), printed as their ratios to the
+  extended Jacobian's beside the paper's;
 
 and, with ``--doc PATH``, regenerates the reproduction page (``docs/reproduction.md``,
 :mod:`benchmarks.reproduction`) with the measured numbers, copying the plots it shows
@@ -43,15 +47,9 @@ from typing import Any
 
 import numpy as np
 
+from .stacks import TIP_STEP_BOUND
 from .variants import Variant
 
-#: Bound (rad/s²) on the sword-tip level's step in the incompatible
-#: ``extended_jacobian[step_bound]`` run (its ``step_bound``). Measured over 3 s (max
-#: ‖q̈‖ / final tip error): Δ = 5: 76 / 385 mm, 10: 55 / 382 mm, 20: 142 / 375 mm; support
-#: foot, CoM and joint limits exact in all three. Bounding every level instead also caps
-#: the joint-limit rows (targets of hundreds of rad/s²) and lets joints pass their
-#: limits by 0.3 rad.
-TIP_STEP_BOUND = 10.0
 #: Armature (kg·m²) of the ``unifying[armature]`` run (``unifying[armature_low]`` shows
 #: that 0.02 is not enough; both are measured by the command).
 UNIFYING_ARMATURE = 0.1
@@ -271,6 +269,8 @@ def max_limit_target(variant: str, res, dt: float, every: int = 25) -> float:
 HEADLINE = ("extended_jacobian", "placo_kinematics_solver")
 #: rounds of :func:`headline_timing`
 HEADLINE_ROUNDS = 5
+#: states per variant of the like-for-like measurement (``--like-for-like-samples``)
+LIKE_FOR_LIKE_SAMPLES = 16
 
 
 def headline_timing(variant: str, duration: float, dt: float,
@@ -294,11 +294,34 @@ def headline_timing(variant: str, duration: float, dt: float,
             "ratio": best[HEADLINE[0]] / best[HEADLINE[1]]}
 
 
+def like_for_like_table(lfl: dict[str, Any]) -> str:
+    """:func:`benchmarks.like_for_like.measure_fencing`'s result as a labelled table of
+    ratios to the extended Jacobian's (the reproduction page's, in plain text)."""
+    from .like_for_like import ratio_rows
+
+    def f(x, spec=".2f"):
+        return "—" if x is None else format(x, spec)
+
+    lines = [f"like for like: median solve on {lfl['stacks']} G1 stacks (n = {lfl['n']}), "
+             f"{lfl['repeats']} solves each, ratios to extended_jacobian",
+             f"  {'formulation':<18} {'paper':>6} {'kernel':>7} {'solve µs':>9} "
+             f"{'time':>6} {'flops':>8} {'flops×':>7} {'rate×':>6}"]
+    for r in ratio_rows(lfl["measured"]):
+        lines.append(f"  {r['formulation']:<18} {f(r['paper_ratio']):>6} "
+                     f"{'C++' if r['compiled'] else 'numpy':>7} {1e6 * r['time_s']:>9.1f} "
+                     f"{f(r['time_ratio']):>6} {f(r['flops'], '.3g'):>8} "
+                     f"{f(r['flop_ratio']):>7} {f(r['rate_ratio']):>6}")
+    return "\n".join(lines)
+
+
 def run_command(args: argparse.Namespace) -> int:
     """``prioik fencing``: see the module docstring."""
     from .reproduction import write_page
     from .scenario_runs import VELOCITY_GAIN, run_scenario, run_table
     variants = ["compatible", "incompatible"] if args.variant == "both" else [args.variant]
+    if args.like_for_like_samples < 0:
+        raise ValueError(f"--like-for-like-samples must be ≥ 0, got "
+                         f"{args.like_for_like_samples}")
     run_table("fencing").select(args.formulations)     # an unknown label: fail before anything
     diagnostics: dict[str, Any] = {"standing_sigmas": standing_sigmas(args.dt)}
     checks: dict[str, Any] = {}
@@ -337,6 +360,10 @@ def run_command(args: argparse.Namespace) -> int:
         # the chart again, with the side-by-side medians marked on it
         from .plots import step_time_figure
         step_time_figure(args.out, runs.summary, "fencing", meta["headline_timing"])
+    if args.like_for_like_samples > 0:
+        from .like_for_like import measure_fencing
+        meta["like_for_like"] = measure_fencing(variants, args.like_for_like_samples)
+        print(like_for_like_table(meta["like_for_like"]))
     meta["unifying_diagnostic"] = (unifying_diagnostic(args.dt)
                                    if any(r["formulation"] == "unifying"
                                           for r in meta["runs"].values()) else None)
@@ -385,6 +412,11 @@ def add_parser(subparsers) -> None:
     p.add_argument("--headline-rounds", type=int, default=HEADLINE_ROUNDS,
                    help="rounds of the side-by-side timing of extended_jacobian and PlaCo's "
                         "KinematicsSolver (alternating, the fastest of each; 0: skip)")
+    p.add_argument("--like-for-like-samples", type=int, default=LIKE_FOR_LIKE_SAMPLES,
+                   metavar="N",
+                   help="states per variant of the side-by-side timing and flop count of "
+                        "the closed-form formulations on the same G1 stacks (ratios to "
+                        "the extended Jacobian's beside the paper's; 0: skip)")
     add_turn_steps_argument(p)
     add_save_runs_argument(p)
     p.add_argument("--no-crosscheck", action="store_true",

@@ -4,6 +4,10 @@ on the readable one, and the flop rate (the kernel's ``sol.detail.flops`` over t
 time) relative to the extended Jacobian's. Every solver runs in one process, the stacks
 interleaved, one BLAS thread (only ratios measured side by side mean anything).
 
+The rows marked ``[bounds]`` solve the same states' stacks with the joint limits as hard
+bounds above every task (``limits="hard_bounds"``, the form ``sns`` takes: its
+saturation rounds run); the others take the joint limits as activation rows.
+
 Run: ``python -m prioik.benchmarks.flop_rates [--samples 24] [--repeats 30]``.
 """
 
@@ -15,9 +19,9 @@ import time
 import numpy as np
 
 from prioik import formulations
+from prioik.threads import blas_threads
 
 from .stacks import g1_fencing_samples
-from .threads import blas_threads
 
 #: formulation → (compiled options, readable options)
 KERNELS = {"extended_jacobian": ({"kernel": "cpp"}, {"kernel": "lapack"}),
@@ -26,35 +30,51 @@ KERNELS = {"extended_jacobian": ({"kernel": "cpp"}, {"kernel": "lapack"}),
                                  {"kernel": "numpy", "damping": 0.05}),
            "chiaverini": ({"kernel": "cpp"}, {"kernel": "numpy"}),
            "unifying": ({"kernel": "cpp"}, {"kernel": "numpy"}),
-           "operational_space": ({"kernel": "cpp"}, {"kernel": "numpy"})}
+           "operational_space": ({"kernel": "cpp"}, {"kernel": "numpy"}),
+           "sns": ({"kernel": "cpp"}, {"kernel": "numpy"}),
+           "sns[bounds]": ({"kernel": "cpp"}, {"kernel": "numpy"}),
+           "reference": ({"kernel": "cpp"}, {"kernel": "numpy"})}
 
 
 def _solver(label: str, layout, options: dict, mass_matrix: np.ndarray):
     name = label.split("[")[0]
-    if formulations.get(name).CAPABILITIES.needs_mass_matrix:
+    if formulations.get(name).capabilities.needs_mass_matrix:
         options = dict(options, mass_matrix=mass_matrix)
     return formulations.prepare(layout, name, **options)
 
 
 def measure(samples: list, repeats: int) -> dict[str, dict[str, float]]:
     """Median µs per solve (compiled, readable) and the median flops, per formulation, over
-    ``(stack, M)`` samples."""
+    ``(stack, M, bounded stack)`` samples (the ``[bounds]`` rows solve the third)."""
     times = {(label, path): [] for label in KERNELS for path in (0, 1)}
     flops = {label: [] for label in KERNELS}
-    for stack, mass in samples:
-        data = stack.data
-        solvers = {(label, path): _solver(label, stack.layout, KERNELS[label][path], mass)
+    for stack, mass, bounded in samples:
+        chosen = {label: bounded if label.endswith("[bounds]") else stack for label in KERNELS}
+        solvers = {(label, path): _solver(label, chosen[label].layout, KERNELS[label][path],
+                                          mass)
                    for label in KERNELS for path in (0, 1)}
         for label in KERNELS:
-            flops[label].append(solvers[label, 0].solve(data).detail.flops)
+            flops[label].append(solvers[label, 0].solve(chosen[label].data).flops)
         for _ in range(repeats):
-            for key, solver in solvers.items():
+            for (label, path), solver in solvers.items():
+                data = chosen[label].data
                 t0 = time.perf_counter()
                 solver.solve(data)
-                times[key].append(time.perf_counter() - t0)
+                times[label, path].append(time.perf_counter() - t0)
     return {label: {"cpp_us": 1e6 * float(np.median(times[label, 0])),
                     "readable_us": 1e6 * float(np.median(times[label, 1])),
                     "flops": float(np.median(flops[label]))} for label in KERNELS}
+
+
+def bounded_stacks(run) -> list:
+    """The stacks of ``run``'s sampled states with the joint limits as hard bounds above
+    every task (``limits="hard_bounds"``)."""
+    from prioik.robots.tasks import KinematicState
+    robot, scenario = run.scenario.robot, run.scenario
+    data = robot.model.createData()
+    return [scenario.acceleration_stack(KinematicState(robot, q, v, data), float(t),
+                                        limits="hard_bounds").stack
+            for (q, v), t in zip(run.states, run.times, strict=True)]
 
 
 def table(rows: dict[str, dict[str, float]]) -> str:
@@ -76,7 +96,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--repeats", type=int, default=30, help="solves per stack")
     args = parser.parse_args(argv)
     runs = [g1_fencing_samples(v, args.samples) for v in ("compatible", "incompatible")]
-    samples = [(s, M) for run in runs for s, M in zip(run.stacks, run.mass_matrices, strict=False)]
+    samples = [(s, M, b) for run in runs
+               for s, M, b in zip(run.stacks, run.mass_matrices, bounded_stacks(run),
+                                  strict=True)]
     with blas_threads(1):
         rows = measure(samples, args.repeats)
     print(f"G1 fencing stacks: {len(samples)} (n = {samples[0][0].n}), {args.repeats} solves "

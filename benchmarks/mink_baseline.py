@@ -7,15 +7,16 @@ tasks given as ``constraints`` as equalities ``J Δq = −gain·e``, and its
 :class:`~mink.VelocityLimit` (``|v| ≤ v_max``) as inequalities. There are no
 priorities: the scenario's hierarchy becomes cost weights, one decade per level, as in
 the pink baseline (:data:`~prioik.benchmarks.pink_baseline.LEVEL_COSTS`), from
-:meth:`robots.scenario.Scenario.baseline_tasks`:
+:meth:`robots.scenario.Scenario.baseline_tasks`, each task mapped by its kind
+(:meth:`prioik.robots.RobotTask.baseline_task`):
 
-* ``frame`` held by the scenario (``hard``: a foot in contact) → ``FrameTask`` as an
+* ``frame_pose`` held by the scenario (``hard``: a foot in contact) → ``FrameTask`` as an
   equality constraint (``solve_ik(..., constraints=[...])``);
-* ``frame`` → ``FrameTask(body, position_cost=c, orientation_cost=c)``;
-* ``position`` → ``FrameTask(body, position_cost=c, orientation_cost=0)`` (a position
-  target is never a constraint: the arm's tool target can be out of reach);
-* ``orientation`` → ``FrameTask(body, position_cost=0, orientation_cost=c)``;
-* ``com_xy`` → ``ComTask(cost=[c, c, 0])``;
+* ``frame_pose`` → ``FrameTask(body, position_cost=c, orientation_cost=c)``;
+* ``frame_position`` → ``FrameTask(body, position_cost=c, orientation_cost=0)`` (a
+  position target is never a constraint: the arm's tool target can be out of reach);
+* ``frame_orientation`` → ``FrameTask(body, position_cost=0, orientation_cost=c)``;
+* ``com`` (horizontal) → ``ComTask(cost=[c, c, 0])``;
 * ``posture`` → ``PostureTask(cost=POSTURE_COST)`` (the free joint excluded, as mink does).
 
 The robot is the scenario's URDF (:meth:`~robots.scenario.Scenario.urdf_text`) converted
@@ -34,10 +35,6 @@ back to pinocchio's ``q``.
 from __future__ import annotations
 
 import time
-
-import numpy as np
-
-from prioik.formulations.base import ReportVariant
 
 from .external import distribution_version as _version
 from .pink_baseline import LEVEL_COSTS, POSTURE_COST
@@ -72,13 +69,6 @@ def profile() -> dict:
             "given": f"QP back-end {DEFAULT_SOLVER} (mink's documentation's; a quadprog row "
                      f"beside it), task gains {GAIN:g} (dead-beat), ConfigurationLimit and "
                      "VelocityLimit, the URDF converted to MuJoCo"}
-
-
-#: rows beside the default one (``options["solver"]``: the QP back-end)
-REPORT_VARIANTS = (
-    ReportVariant("quadprog", {"solver": "quadprog"}, reports=("scenario",),
-                  note="the same with quadprog, the pink row's back-end"),
-)
 
 
 def unavailable_reason(options: dict | None = None) -> str | None:
@@ -118,45 +108,32 @@ def mink_problem(scenario, dt: float):
     the limits, and ``set_targets(t)`` giving every task its target at ``t``."""
     import mink
 
+    from prioik.robots import task_kind
     from prioik.robots.mujoco_model import to_mujoco
 
     robot = scenario.robot
     mj = to_mujoco(robot, scenario.urdf_text())
     config = mink.Configuration(mj.model, mj.to_qpos(robot.q0))
     tasks, constraints, setters = [], [], []
+    context = {"robot": robot, "model": mj.model, "gain": GAIN, "level_costs": LEVEL_COSTS,
+               "posture_cost": POSTURE_COST,
+               "to_qpos": mj.to_qpos,
+               "com_height": float(config.data.subtree_com[1][2])}
     for spec in scenario.baseline_tasks():
-        c = LEVEL_COSTS[min(spec.priority, len(LEVEL_COSTS) - 1)] * spec.weight
-        if spec.kind in ("frame", "position", "orientation"):
-            task = mink.FrameTask(spec.frame, "body",
-                                  position_cost=0.0 if spec.kind == "orientation" else c,
-                                  orientation_cost=0.0 if spec.kind == "position" else c,
-                                  gain=GAIN)
-        elif spec.kind == "com_xy":
-            task = mink.ComTask(cost=[c, c, 0.0], gain=GAIN)
-        elif spec.kind == "posture":
-            task = mink.PostureTask(mj.model, cost=POSTURE_COST, gain=GAIN)
-        else:  # pragma: no cover - a scenario declaring a kind this module lacks
-            raise ValueError(f"mink baseline: no mapping for task kind {spec.kind!r}")
-        (constraints if spec.kind == "frame" and spec.hard else tasks).append(task)
-        setters.append((spec, task))
+        kind = task_kind(spec.kind)             # the kind maps itself onto mink's task
+        context["cost"] = kind.baseline_cost(spec, context)
+        task = kind.baseline_task("mink", spec, scenario.baseline_target(spec.name, 0.0),
+                                  context)
+        hard = spec.hard and kind.hard_is_constraint
+        (constraints if hard else tasks).append(task)
+        setters.append((spec, kind, task))
     limits = [mink.ConfigurationLimit(mj.model),
               mink.VelocityLimit(mj.model, mj.velocity_limits())]
-    z_com = float(config.data.subtree_com[1][2])
 
     def set_targets(t: float) -> None:
-        for spec, task in setters:
-            target = scenario.baseline_target(spec.name, t)
-            if spec.kind == "frame":
-                task.set_target(mink.SE3.from_matrix(np.asarray(target)))
-            elif spec.kind == "position":
-                task.set_target(mink.SE3.from_translation(np.asarray(target)))
-            elif spec.kind == "orientation":
-                task.set_target(mink.SE3.from_rotation(
-                    mink.SO3.from_matrix(np.asarray(target))))
-            elif spec.kind == "com_xy":
-                task.set_target(np.array([target[0], target[1], z_com]))
-            else:
-                task.set_target(mj.to_qpos(target))
+        for spec, kind, task in setters:
+            kind.baseline_target("mink", task, scenario.baseline_target(spec.name, t),
+                                 context)
 
     return mj, config, tasks, constraints, limits, set_targets
 

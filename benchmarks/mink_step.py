@@ -218,7 +218,7 @@ def run(steps: int = 300, solvers: tuple[str, ...] | None = None,
     """:func:`panda_mink_step` and :func:`g1_feet_mink_step` with each of ``solvers``
     (default: mink's documented back-end) as mink's back-end, one BLAS thread;
     ``rounds``: each function's default unless given."""
-    from prioik.benchmarks.threads import blas_threads
+    from prioik.threads import blas_threads
 
     from .mink_baseline import DEFAULT_SOLVER
     out: dict[str, Any] = {}
@@ -244,7 +244,10 @@ def format_table(results: dict[str, Any]) -> str:
 if __name__ == "__main__":   # pragma: no cover - the measurement's command
     import json
     import sys
-    res = run(int(sys.argv[1]) if len(sys.argv) > 1 else 300,
-              tuple(sys.argv[2].split(",")) if len(sys.argv) > 2 else None)
+
+    from prioik.smoke import active, cap
+    res = run(cap(int(sys.argv[1]) if len(sys.argv) > 1 else 300, 20),   # PRIOIK_SMOKE=1
+              tuple(sys.argv[2].split(",")) if len(sys.argv) > 2 else None,
+              rounds=1 if active() else None)
     print(format_table(res))
     print(json.dumps(res, indent=1, default=str))

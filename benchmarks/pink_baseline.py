@@ -6,12 +6,13 @@ pink solves, each control step, one weighted least-squares QP for the velocity
 limits over the step, with its ``config_limit_gain``) and
 :class:`~pink.limits.VelocityLimit` (``|v| ≤ v_max``) as QP inequalities. There are no
 priorities: the scenario's hierarchy becomes cost weights, one decade per level
-(:data:`LEVEL_COSTS`), from :meth:`robots.scenario.Scenario.baseline_tasks`:
+(:data:`LEVEL_COSTS`), from :meth:`robots.scenario.Scenario.baseline_tasks`, each task
+mapped by its kind (:meth:`prioik.robots.RobotTask.baseline_task`):
 
-* ``frame`` → ``FrameTask(frame, position_cost=c, orientation_cost=c)``;
-* ``position`` → ``FrameTask(frame, position_cost=c, orientation_cost=0)``;
-* ``orientation`` → ``FrameTask(frame, position_cost=0, orientation_cost=c)``;
-* ``com_xy`` → ``ComTask(cost=[c, c, 0])``;
+* ``frame_pose`` → ``FrameTask(frame, position_cost=c, orientation_cost=c)``;
+* ``frame_position`` → ``FrameTask(frame, position_cost=c, orientation_cost=0)``;
+* ``frame_orientation`` → ``FrameTask(frame, position_cost=0, orientation_cost=c)``;
+* ``com`` (horizontal) → ``ComTask(cost=[c, c, 0])``;
 * ``posture`` → ``PostureTask(cost=POSTURE_COST)``.
 
 Targets are the scenario's references at ``t + dt``. The QP back-end is a qpsolvers
@@ -25,8 +26,6 @@ from __future__ import annotations
 import time
 
 import numpy as np
-
-from prioik.formulations.base import ReportVariant
 
 #: cost of a task by its level in the scenario (0 = highest)
 LEVEL_COSTS = (100.0, 10.0, 1.0, 0.1, 0.01)
@@ -53,15 +52,6 @@ def profile() -> dict:
                           f"{POSTURE_COST:g})",
             "given": f"QP back-end {DEFAULT_SOLVER} (qpsolvers; a daqp row beside it), task "
                      "gains 1 (dead-beat), ConfigurationLimit and VelocityLimit"}
-
-
-#: rows beside the default one (``options["solver"]``: the QP back-end)
-REPORT_VARIANTS = (
-    ReportVariant("daqp", {"solver": "daqp"}, reports=("scenario",),
-                  note="the same with DAQP, the fastest back-end measured here for pink's "
-                       "QPs (G1, 0.2 s: daqp 161, quadprog 173, proxqp 293, osqp 1143 µs "
-                       "per solve)"),
-)
 
 
 def unavailable_reason(options: dict | None = None) -> str | None:
@@ -108,9 +98,9 @@ def pink_steps(scenario, *, duration: float, dt: float, solver: str = DEFAULT_SO
     from pink import Configuration, solve_ik
     from pink.exceptions import PinkError
     from pink.limits import ConfigurationLimit, VelocityLimit
-    from pink.tasks import ComTask, FrameTask, PostureTask
 
     from prioik.benchmarks.external import record_steps
+    from prioik.robots import task_kind
 
     if solver not in qpsolvers.available_solvers:
         raise ValueError(f"pink: QP back-end {solver!r} is not available here; available: "
@@ -119,43 +109,23 @@ def pink_steps(scenario, *, duration: float, dt: float, solver: str = DEFAULT_SO
     model = robot.model.copy()
     data = model.createData()
     tasks, setters = [], []
+    context = {"robot": robot, "level_costs": LEVEL_COSTS, "posture_cost": POSTURE_COST}
     for spec in scenario.baseline_tasks():
-        c = LEVEL_COSTS[min(spec.priority, len(LEVEL_COSTS) - 1)] * spec.weight
-        if spec.kind in ("frame", "position", "orientation"):
-            task = FrameTask(spec.frame,
-                             position_cost=0.0 if spec.kind == "orientation" else c,
-                             orientation_cost=0.0 if spec.kind == "position" else c)
-        elif spec.kind == "com_xy":
-            task = ComTask(cost=[c, c, 0.0])
-        elif spec.kind == "posture":
-            task = PostureTask(cost=POSTURE_COST)
-        else:  # pragma: no cover - a scenario declaring a kind this module lacks
-            raise ValueError(f"pink baseline: no mapping for task kind {spec.kind!r}")
+        kind = task_kind(spec.kind)             # the kind maps itself onto pink's task
+        context["cost"] = kind.baseline_cost(spec, context)
+        task = kind.baseline_task("pink", spec, scenario.baseline_target(spec.name, 0.0),
+                                  context)
         tasks.append(task)
-        setters.append((spec, task))
+        setters.append((spec, kind, task))
     limits = [ConfigurationLimit(model), VelocityLimit(model)]
     config = Configuration(model, data, robot.q0.copy())
-
-    def set_target(spec, task, t):
-        target = scenario.baseline_target(spec.name, t)
-        if spec.kind == "frame":
-            task.set_target(pin.SE3(np.asarray(target)))
-        elif spec.kind == "position":
-            task.set_target(pin.SE3(np.eye(3), np.asarray(target)))
-        elif spec.kind == "orientation":
-            task.set_target(pin.SE3(np.asarray(target), np.zeros(3)))
-        elif spec.kind == "com_xy":
-            com = np.zeros(3)
-            com[:2] = target
-            task.set_target(com)
-        else:
-            task.set_target(np.asarray(target))
 
     def step(q, v, t):
         t0 = time.perf_counter()
         config.update(q)
-        for spec, task in setters:
-            set_target(spec, task, t + dt)
+        for spec, kind, task in setters:
+            kind.baseline_target("pink", task, scenario.baseline_target(spec.name, t + dt),
+                                 context)
         t1 = time.perf_counter()
         try:
             vel = solve_ik(config, tasks, dt, solver=solver, limits=limits,

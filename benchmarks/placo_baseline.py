@@ -33,7 +33,6 @@ import numpy as np
 NAME = "placo_kinematics_solver"
 DESCRIPTION = ("PlaCo's own KinematicsSolver at velocity level (hard tasks, soft weighted "
                "tasks, its joint and velocity limits): what users run today")
-REPORT_VARIANTS = ()
 #: the level the library solves at (the scenario pages' baseline table)
 LEVEL = "velocity"
 
@@ -81,7 +80,8 @@ def placo_steps(scenario, *, duration: float, dt: float, progress=None,
     :class:`robots.SimulationResult` (:func:`prioik.benchmarks.external.record_steps`).
 
     The tasks come from :meth:`robots.scenario.Scenario.baseline_tasks` (``hard``
-    ones as PlaCo hard tasks, the others soft with their ``weight``), the URDF from
+    ones as PlaCo hard tasks, the others soft with their ``weight``), each mapped by its
+    task kind (:meth:`prioik.robots.RobotTask.baseline_task`), the URDF from
     :meth:`~robots.scenario.Scenario.urdf_text`. PlaCo always models a floating base;
     for a fixed-base robot it is masked (``mask_fbase(True)``) at the identity.
 
@@ -94,6 +94,7 @@ def placo_steps(scenario, *, duration: float, dt: float, progress=None,
     import placo
 
     from prioik.benchmarks.external import record_steps
+    from prioik.robots import task_kind
     from prioik.robots.models import example_robot_data_dir
 
     robot = scenario.robot
@@ -118,47 +119,21 @@ def placo_steps(scenario, *, duration: float, dt: float, progress=None,
     solver.enable_joint_limits(True)
     solver.enable_velocity_limits(True)
     solver.dt = dt
+    context = {"solver": solver, "robot_wrapper": pw, "robot": robot, "joint_names": names}
     setters = []
     for spec in scenario.baseline_tasks():
-        prio = "hard" if spec.hard else "soft"
-        target = scenario.baseline_target(spec.name, 0.0)
-        if spec.kind == "frame":
-            task = solver.add_frame_task(spec.frame, np.asarray(target))
-            task.configure(spec.name, prio, spec.weight, spec.weight)
-        elif spec.kind == "position":
-            task = solver.add_position_task(spec.frame, np.asarray(target))
-            task.configure(spec.name, prio, spec.weight)
-        elif spec.kind == "orientation":
-            task = solver.add_orientation_task(spec.frame, np.asarray(target))
-            task.configure(spec.name, prio, spec.weight)
-        elif spec.kind == "com_xy":
-            com0 = np.array(pw.com_world())
-            task = solver.add_com_task(com0)
-            task.configure(spec.name, prio, spec.weight)
-            task.mask.set_axises("xy")
-            task.com0 = com0
-        elif spec.kind == "posture":
-            task = solver.add_joints_task()
-            q_ref = np.asarray(target)
-            task.set_joints({n: float(q_ref[robot.model.joints[robot.model.getJointId(n)].idx_q])
-                             for n in names})
-            task.configure(spec.name, prio, spec.weight)
-        else:  # pragma: no cover - a scenario declaring a kind this module lacks
-            raise ValueError(f"PlaCo baseline: no mapping for task kind {spec.kind!r}")
-        setters.append((spec, task))
+        kind = task_kind(spec.kind)             # the kind maps itself onto PlaCo's task
+        context["priority"] = "hard" if spec.hard else "soft"
+        task = kind.baseline_task("placo", spec, scenario.baseline_target(spec.name, 0.0),
+                                  context)
+        setters.append((spec, kind, task))
 
     def step(q, v, t):
         t0 = time.perf_counter()
         pw.update_kinematics()
-        for spec, task in setters:
-            if spec.kind == "frame":
-                task.T_world_frame = np.asarray(scenario.baseline_target(spec.name, t + dt))
-            elif spec.kind == "position":
-                task.target_world = np.asarray(scenario.baseline_target(spec.name, t + dt))
-            elif spec.kind == "com_xy":
-                c = task.com0.copy()
-                c[:2] = scenario.baseline_target(spec.name, t + dt)
-                task.target_world = c
+        for spec, kind, task in setters:
+            kind.baseline_target("placo", task, scenario.baseline_target(spec.name, t + dt),
+                                 context)
         t1 = time.perf_counter()
         dq = np.array(solver.solve(True))           # raises RuntimeError when infeasible
         t2 = time.perf_counter()

@@ -466,5 +466,5 @@ def run(args: argparse.Namespace) -> int:
 if __name__ == "__main__":  # pragma: no cover
     import sys
 
-    from prioik.benchmarks.cli import main
+    from prioik.cli import main
     sys.exit(main(["properties", *sys.argv[1:]]))

@@ -27,7 +27,7 @@ ROBOT_RGB = (31, 78, 156)
 
 
 def _scenario_of(res):
-    from prioik.robots.scenario import make
+    from prioik.robots.scenarios import make
     info = res.info or {}
     if "scenario" not in info:
         raise ValueError("this run does not say which scenario it comes from "

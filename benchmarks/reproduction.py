@@ -11,6 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from . import paper
+from .like_for_like import BASE, ratio_rows
 from .report import (
     Page,
     baselines_block,
@@ -24,7 +25,7 @@ from .report import (
 )
 from .variants import is_damped, parse_label
 
-__all__ = ["write_page"]
+__all__ = ["write_page", "like_for_like_section"]
 
 #: runs quoted by claim 1 (final tip error, compatible) and claim 2 (algorithmic error)
 CLAIM_TIP = ("extended_jacobian", "nullspace", "operational_space", "cascaded_qp",
@@ -139,6 +140,95 @@ def _order(page: Page, comp: dict, inc: dict, settings: dict) -> str:
                       paper=" < ".join(f"`{p}`" for p in ranked),
                       same="the same" if same else "different",
                       why="" if same else page.inline("order_differs"))
+
+
+def _ratio(x, spec: str = ".2f") -> str:
+    return "—" if x is None else format(x, spec)
+
+
+def _relation(pairs: list[tuple[str, float, float]]) -> str:
+    """``"below"``, ``"above"`` or which are which, for ``(name, a, b)``: ``a`` against
+    ``b``."""
+    below = [n for n, a, b in pairs if a < b]
+    above = [n for n, a, b in pairs if a >= b]
+    if not above:
+        return "all below"
+    if not below:
+        return "all at or above"
+    return (f"below for {', '.join(f'`{n}`' for n in below)} and at or above for "
+            f"{', '.join(f'`{n}`' for n in above)}")
+
+
+def _ranked(rows: list[dict], key: str) -> list[str]:
+    return [r["formulation"] for r in sorted(rows, key=lambda r: r[key])]
+
+
+def like_for_like_section(page: Page, lfl: dict | None) -> str:
+    """The like-for-like table and its reading (``run_info.json``'s ``like_for_like``,
+    :func:`benchmarks.like_for_like.measure_fencing`): per formulation, the paper's
+    per-step ratio, the compiled time ratio and the flop ratio to the extended
+    Jacobian's, the flop rate; ``""`` without a measurement."""
+    if not lfl or not lfl.get("measured"):
+        return ""
+    rows = ratio_rows(lfl["measured"])
+    cells = [[f"`{r['formulation']}`", r["paper_name"] or "—",
+              _ratio(r["paper_ratio"]), "C++" if r["compiled"] else "numpy",
+              f"{1e6 * r['time_s']:.1f} µs",
+              _ratio(r["time_ratio"]) if r["compiled"] else "— (numpy)",
+              "—" if r["flops"] is None else f"{r['flops']:.3g}",
+              _ratio(r["flop_ratio"]), _ratio(r["rate_ratio"])] for r in rows]
+    tbl = table(["formulation", "the paper's method", "paper: per-step ratio", "kernel here",
+                 "median solve", "time ratio (compiled)", "flops", "flop ratio",
+                 "flop rate / EJ's"], cells)
+    others = [r for r in rows if r["formulation"] != BASE]
+    counted = [r for r in others if r["flop_ratio"] is not None]
+    reading = []
+    if counted:
+        reading.append(page.inline("lfl_formulations", items=", ".join(
+            f"`{r['formulation']}` does {r['flop_ratio']:.2f}×" for r in counted)))
+    rated = [r for r in others if r["rate_ratio"] is not None]
+    base = next(r for r in rows if r["formulation"] == BASE)
+    if rated:
+        above = [r["formulation"] for r in rated if r["rate_ratio"] > 1]
+        below = [r["formulation"] for r in rated if r["rate_ratio"] < 1]
+        reading.append(page.inline(
+            "lfl_rates", items=", ".join(f"`{r['formulation']}` {r['rate_ratio']:.2f}"
+                                         for r in rated),
+            above=page.inline("lfl_above", names=", ".join(f"`{n}`" for n in above))
+            if above else "",
+            below=page.inline("lfl_below", names=", ".join(f"`{n}`" for n in below))
+            if below else "",
+            base_us=f"{1e6 * base['time_s']:.1f}"))
+    in_paper = [r for r in counted if r["paper_ratio"] is not None
+                and r["time_ratio"] is not None]
+    if in_paper:
+        by_paper = _ranked(in_paper, "paper_ratio")
+
+        def order(key: str) -> str:
+            ranked = _ranked(in_paper, key)
+            return ("in the paper's order" if ranked == by_paper else
+                    "in another order than the paper's: "
+                    + " < ".join(f"`{n}`" for n in ranked) + " (paper: "
+                    + " < ".join(f"`{n}`" for n in by_paper) + ")")
+        reading.append(page.inline(
+            "lfl_paper",
+            paper=", ".join(f"`{r['formulation']}` {r['paper_ratio']:.2f}" for r in in_paper),
+            flops=", ".join(f"{r['flop_ratio']:.2f}" for r in in_paper),
+            times=", ".join(f"{r['time_ratio']:.2f}" for r in in_paper),
+            relation=_relation([(r["formulation"], r["paper_ratio"], r["flop_ratio"])
+                                for r in in_paper]),
+            time_relation=_relation([(r["formulation"], r["time_ratio"], r["paper_ratio"])
+                                     for r in in_paper]).replace("all ", ""),
+            order=order("flop_ratio"), time_order=order("time_ratio")))
+    numpy = [r for r in rows if not r["compiled"]]
+    if numpy:
+        reading.append(page.inline("lfl_numpy", items=", ".join(
+            f"`{r['formulation']}` ({1e6 * r['time_s']:.0f} µs)" for r in numpy)))
+    variants = lfl.get("variants") or []
+    return page.block("like_for_like", stacks=lfl["stacks"], n=lfl["n"],
+                      states=lfl["stacks"] // max(1, len(variants)),
+                      variants=" and ".join(variants), repeats=lfl["repeats"],
+                      table=tbl, reading="\n\n".join(reading))
 
 
 def _beyond(page: Page, summary: dict, meta: dict) -> str:
@@ -346,7 +436,9 @@ def write_page(path: Path, summary: dict, meta: dict, pngs: dict, command: str,
         crosscheck=_crosscheck(page, meta.get("crosscheck", {})),
         phases_table=table(["run", "variant", "kinematics", "solve", "torque",
                             "total (median)"], phases),
-        order=_order(page, comp, inc, meta["runs"]), step_time=step_time_figure(shown),
+        order=_order(page, comp, inc, meta["runs"]),
+        like_for_like=like_for_like_section(page, meta.get("like_for_like")),
+        step_time=step_time_figure(shown),
         beyond=_beyond(page, summary, meta), differences=_differences(page, summary, meta))
     path.write_text(text)
     return path

@@ -54,7 +54,7 @@ def cmd_replay(args: argparse.Namespace) -> int:
                              "scenarios only, and --no-meshes leaves out the meshed page")
         return 0
     from prioik.robots import write_mesh_replay
-    from prioik.robots.scenario import make
+    from prioik.robots.scenarios import make
     markers = None
     if args.robot is not None:
         robot = args.robot

@@ -59,10 +59,8 @@ def run_table(scenario: str, report: str | None = None) -> VariantTable:
 
 def scenario_class(name: str):
     """The :class:`~prioik.robots.scenario.Scenario` class called ``name``."""
-    from prioik.robots import scenario as sc
-    if not sc.SCENARIOS:
-        sc.SCENARIOS.update(sc._registry())
-    return sc.SCENARIOS[name]
+    from prioik.robots.scenarios import SCENARIOS
+    return SCENARIOS[name]
 
 
 def file_stem(variant: str, label: str) -> str:
@@ -105,7 +103,7 @@ def run_one(variant: Variant, scenario_variant: str, duration: float, dt: float,
     Args:
         variant: The run (:func:`run_table` lists a scenario's).
         scenario_variant: The scenario's variant (``"compatible"``, ``"reach"``, ...).
-        scenario: A scenario name (built by :func:`robots.scenario.make` in
+        scenario: A scenario name (built by :func:`robots.scenarios.make` in
             ``scenario_variant``) or a built :class:`robots.scenario.Scenario` (a
             sweep's, with its own target and gains).
         algorithmic_error: Record eq. 29 at every step (an SVD per level per step).
@@ -131,7 +129,7 @@ def run_steps(variant: Variant, scenario_variant: str, duration: float, dt: floa
     Raises:
         UnsupportedTaskError, FormulationError: as :func:`run_one`.
     """
-    from prioik.robots.scenario import make
+    from prioik.robots.scenarios import make
     sc = make(scenario, scenario_variant) if isinstance(scenario, str) else scenario
     if variant.armature:
         robot = sc.robot.with_armature(variant.armature)
@@ -161,7 +159,7 @@ def _steps(variant: Variant, scenario, duration: float, dt: float, progress,
         mod = importlib.import_module(BASELINES[variant.formulation])
         return mod.steps(scenario, variant, duration=duration, dt=dt, progress=progress)
     from prioik import formulations
-    caps = formulations.get(variant.formulation).CAPABILITIES
+    caps = formulations.get(variant.formulation).capabilities
     limits = stack_limits(variant)
     solve = _solver(variant.formulation, dict(variant.options))
     if variant.level == "velocity":
@@ -362,7 +360,7 @@ def _write_mesh_replay(path: Path, scenario: str, variant: str, results: dict):
               file=sys.stderr)
         return None
     from prioik.robots import write_mesh_replay
-    from prioik.robots.scenario import make
+    from prioik.robots.scenarios import make
     sc = make(scenario, variant)
     return write_mesh_replay(path, sc.robot, results, title=f"{scenario}, {variant}",
                              markers=sc.markers)

@@ -14,7 +14,7 @@ times, measured in its own process.
 The scenario's tasks (:meth:`robots.scenario.Scenario.baseline_tasks`) map as TSID's
 examples map theirs:
 
-* ``frame`` held by the scenario (``hard``, a foot in contact) on a floating base →
+* ``frame_pose`` held by the scenario (``hard``, a foot in contact) on a floating base →
   ``Contact6d``, a rigid contact of level 0 (its pose held, gains of the scenario,
   force regularisation weight :data:`FORCE_WEIGHT`). The scenarios are kinematic (a
   held foot takes whatever wrench holding it needs), so the contact's sole is a
@@ -85,7 +85,6 @@ RUNNER = Path(__file__).with_name("tsid_runner.py")
 
 #: the baseline's name in the scenario reports (:data:`prioik.benchmarks.variants.BASELINES`)
 NAME = "tsid"
-REPORT_VARIANTS = ()
 #: the level the library solves at (the scenario pages' baseline table)
 LEVEL = "acceleration"
 
@@ -170,20 +169,20 @@ def profile() -> dict:
 
 
 # ---------------------------------------------------------------- the scenario
-def _weight(spec) -> float:
-    from .pink_baseline import LEVEL_COSTS, POSTURE_COST
-    if spec.kind == "posture":
-        return POSTURE_COST ** 2
-    return (LEVEL_COSTS[min(spec.priority, len(LEVEL_COSTS) - 1)] * spec.weight) ** 2
-
-
 def setup_request(scenario, dt: float) -> dict:
-    """The runner's setup (:mod:`prioik.benchmarks.tsid_runner`) for ``scenario``.
+    """The runner's setup (:mod:`prioik.benchmarks.tsid_runner`) for ``scenario``: each
+    task as the runner's kind its task kind gives
+    (:meth:`prioik.robots.RobotTask.baseline_task`).
 
     Raises:
         ValueError: a task without gains in ``scenario.gains``, or a kind TSID's
             mapping lacks.
     """
+    from prioik.hierarchy import TaskStackError
+    from prioik.robots import task_kind
+
+    from .pink_baseline import LEVEL_COSTS, POSTURE_COST
+    costs = {"level_costs": LEVEL_COSTS, "posture_cost": POSTURE_COST}
     robot = scenario.robot
     lower, upper, vmax = robot.joint_limits()
     amax = getattr(scenario, "amax", None)
@@ -193,13 +192,17 @@ def setup_request(scenario, dt: float) -> dict:
         if spec.name not in scenario.gains:
             raise ValueError(f"TSID baseline: the scenario gives task {spec.name!r} no "
                              f"gains (scenario.gains has {', '.join(scenario.gains)})")
-        if spec.kind not in ("frame", "position", "orientation", "com_xy", "posture"):
-            raise ValueError(f"TSID baseline: no mapping for task kind {spec.kind!r}")
+        kind = task_kind(spec.kind)
+        try:        # the kind maps itself onto the runner's task kinds
+            runner_kind = kind.baseline_task("tsid", spec, None, {})
+        except TaskStackError:
+            raise ValueError(f"TSID baseline: no mapping for task kind {spec.kind!r}") from None
         kp, kd = scenario.gains[spec.name]
-        task = {"name": spec.name, "kind": spec.kind, "frame": spec.frame,
-                "kp": float(kp), "kd": float(kd), "weight": _weight(spec),
+        task = {"name": spec.name, "kind": runner_kind, "frame": spec.frame,
+                "kp": float(kp), "kd": float(kd),
+                "weight": kind.baseline_cost(spec, costs) ** 2,
                 "role": "weighted"}
-        if spec.kind == "frame" and spec.hard and robot.floating_base:
+        if kind.hard_is_constraint and spec.hard and robot.floating_base:
             s = SOLE_HALF_SIDE
             task.update(role="contact", contact={
                 "points": [[s, s, 0.0], [s, -s, 0.0], [-s, s, 0.0], [-s, -s, 0.0]],
@@ -214,40 +217,22 @@ def setup_request(scenario, dt: float) -> dict:
                        "velocity": vmax.tolist(), "acceleration": amax.tolist()}}
 
 
-def _log3(R: np.ndarray) -> np.ndarray:
-    import pinocchio as pin
-    return np.asarray(pin.log3(R))
-
-
 def step_references(scenario, tasks: list, t: float) -> dict:
     """``{name: [x, ẋ, ẍ]}`` of the weighted ``tasks`` at ``t`` (JSON-ready): the
-    scenario's targets and their central differences (:data:`DIFFERENCE_STEP`)."""
-    import pinocchio as pin
+    scenario's targets and their central differences (:data:`DIFFERENCE_STEP`), as each
+    task's kind gives them (:meth:`prioik.robots.RobotTask.baseline_reference`)."""
+    from prioik.robots import task_kind
     h = DIFFERENCE_STEP
+    kinds = {spec.name: task_kind(spec.kind) for spec in scenario.baseline_tasks()}
+    context = {"model": scenario.robot.model}
     out = {}
     for spec in tasks:
         if spec["role"] == "contact":
             continue
-        name, kind = spec["name"], spec["kind"]
-        x0, x1, x2 = (np.asarray(scenario.baseline_target(name, s), dtype=float)
-                      for s in (t - h, t, t + h))
-        if kind in ("frame", "orientation"):
-            R0, R1, R2 = ((x[:3, :3] if kind == "frame" else x) for x in (x0, x1, x2))
-            w01, w12 = _log3(R1 @ R0.T), _log3(R2 @ R1.T)
-            p0, p1, p2 = ((x[:3, 3] if kind == "frame" else np.zeros(3))
-                          for x in (x0, x1, x2))
-            vel = np.concatenate([(p2 - p0) / (2 * h), (w01 + w12) / (2 * h)])
-            acc = np.concatenate([(p2 - 2 * p1 + p0) / h ** 2, (w12 - w01) / h ** 2])
-        elif kind == "posture":
-            model = scenario.robot.model
-            d01, d12 = pin.difference(model, x0, x1), pin.difference(model, x1, x2)
-            vel, acc = (d01 + d12) / (2 * h), (d12 - d01) / h ** 2
-        else:
-            vel, acc = (x2 - x0) / (2 * h), (x2 - 2 * x1 + x0) / h ** 2
-            if kind == "com_xy":
-                x1, vel, acc = (np.append(a, 0.0) for a in (x1, vel, acc))
-            else:
-                vel, acc = np.append(vel, np.zeros(3)), np.append(acc, np.zeros(3))
+        name = spec["name"]
+        targets = [np.asarray(scenario.baseline_target(name, s), dtype=float)
+                   for s in (t - h, t, t + h)]
+        x1, vel, acc = kinds[name].baseline_reference("tsid", targets, h, context)
         out[name] = [x1.tolist(), vel.tolist(), acc.tolist()]
     return out
 

@@ -162,7 +162,7 @@ def panda_tsid_step(steps: int = 300, rounds: int = 7, python=None) -> dict[str,
 
 def run(steps: int = 300, rounds: int | None = None) -> dict[str, Any]:
     """:func:`panda_tsid_step` with one BLAS thread."""
-    from prioik.benchmarks.threads import blas_threads
+    from prioik.threads import blas_threads
     with blas_threads(1):
         return panda_tsid_step(steps, **({"rounds": rounds} if rounds else {}))
 

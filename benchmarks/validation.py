@@ -147,7 +147,7 @@ def run_family(family: str, n_stacks: int, vs: list[Variant], n_range, k_range,
         for v in vs:
             info = formulations.get(v.formulation)
             try:
-                check_support(v.formulation, info.CAPABILITIES, stack)
+                check_support(v.formulation, info.capabilities, stack)
             except UnsupportedTaskError as exc:
                 skipped[v.label] = str(exc).split(":")[0]
                 continue

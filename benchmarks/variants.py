@@ -11,18 +11,19 @@ the form of the stack it gets — under one label, in one syntax everywhere:
 1. every available formulation of :data:`prioik.formulations.registry.PLUGINS` with its
    default options — one row per back-end in the reports that compare back-ends
    (:data:`BACKEND_REPORTS`);
-2. the plugin's own ``REPORT_VARIANTS`` for that report
-   (:class:`prioik.formulations.ReportVariant`: extra rows, or a setting that replaces
-   the default row there);
+2. the rows :data:`prioik.benchmarks.report_rows.REPORT_VARIANTS` declares for that
+   formulation and report (:class:`~prioik.benchmarks.report_rows.ReportVariant`: extra
+   rows, or a setting that replaces the default row there);
 3. in the scenario reports (:data:`SCENARIO_REPORTS`), the external IK libraries of
    :data:`BASELINES` and the scenario experiment's own studies (``STUDIES`` of
    :data:`STUDY_MODULES`: runs that only make sense for that scenario, such as a step
    bound on its sword-tip task).
 
-A plugin whose ``REPORT_OPT_OUTS`` names the report (or ``"scenario"`` for every
-scenario report) is left out of the report's default selection, with its reason in the
-report's notes; its rows stay known, so a report that takes labels (``prioik fencing
---formulations``, a sweep file) can still ask for them. A key ``"REPORT:backends"``
+A formulation whose :data:`~prioik.benchmarks.report_rows.REPORT_OPT_OUTS` entry names
+the report (or ``"scenario"`` for every scenario report) is left out of the report's
+default selection, with its reason in the report's notes; its rows stay known, so a
+report that takes labels (``prioik fencing --formulations``, a sweep file) can still ask
+for them. A key ``"REPORT:backends"``
 keeps one row (the default back-end) where the report would have one per back-end.
 
 So a formulation added to the registry appears in ``prioik validate``, ``properties``,
@@ -35,8 +36,10 @@ import dataclasses
 import importlib
 import re
 from dataclasses import dataclass, field
-from types import ModuleType
 from typing import Any
+
+from . import report_rows
+from .report_rows import ReportVariant
 
 __all__ = ["Variant", "VariantTable", "table", "parse_label", "split_labels", "is_damped",
            "capabilities", "REPORTS",
@@ -52,7 +55,7 @@ SCENARIO_REPORTS = ("fencing", "arm", "sweep")
 #: the reports that give each back-end of a formulation a row of its own
 BACKEND_REPORTS = ("bench", "validate")
 #: external IK libraries run in the scenario reports: name → module (``NAME``,
-#: ``DESCRIPTION``, ``REPORT_VARIANTS``, ``LEVEL``, ``profile()``,
+#: ``DESCRIPTION``, ``LEVEL``, ``profile()``,
 #: ``unavailable_reason(options)``,
 #: ``steps(scenario, variant, duration=, dt=, progress=)``: the run as a step generator
 #: that returns its result, as :func:`prioik.robots.simulation_steps`)
@@ -134,8 +137,9 @@ class Variant:
         armature: Scenario runs: rotor inertia added to every actuated joint of ``M``
             (kg·m²).
         only_in: Scenario runs: the scenario variants it is run in (``()``: every one).
-        origin: ``"default"``, ``"backend"``, ``"declared"`` (a plugin's
-            ``REPORT_VARIANTS``), ``"study"`` or ``"baseline"``.
+        origin: ``"default"``, ``"backend"``, ``"declared"``
+            (:data:`~prioik.benchmarks.report_rows.REPORT_VARIANTS`), ``"study"`` or
+            ``"baseline"``.
     """
 
     formulation: str
@@ -212,7 +216,7 @@ def capabilities(formulation: str):
     if formulation in BASELINES or formulation not in formulations.PLUGINS:
         return None
     try:
-        return formulations.get(formulation).CAPABILITIES
+        return formulations.get(formulation).capabilities
     except formulations.FormulationError:
         return None
 
@@ -298,8 +302,8 @@ class VariantTable:
         return chosen, skipped
 
 
-def _declared(mod: ModuleType) -> tuple:
-    return tuple(getattr(mod, "REPORT_VARIANTS", ()) or ())
+def _declared(name: str) -> tuple[ReportVariant, ...]:
+    return report_rows.declared(name)
 
 
 def _names_report(reports: tuple[str, ...], report: str) -> bool:
@@ -307,8 +311,8 @@ def _names_report(reports: tuple[str, ...], report: str) -> bool:
             or ("scenario" in reports and report in SCENARIO_REPORTS))
 
 
-def _opt_out(mod: ModuleType, key: str) -> str | None:
-    outs = getattr(mod, "REPORT_OPT_OUTS", {}) or {}
+def _opt_out(name: str, key: str) -> str | None:
+    outs = report_rows.opt_outs(name)
     if key in outs:
         return outs[key]
     if key in SCENARIO_REPORTS and "scenario" in outs:
@@ -321,16 +325,16 @@ def _from_declaration(name: str, rv, origin: str = "declared") -> Variant:
                    origin=origin)
 
 
-def _formulation_rows(info, mod: ModuleType, report: str, all_backends: bool
+def _formulation_rows(info, report: str, all_backends: bool
                       ) -> tuple[list[Variant], list[str]]:
     """The rows of one available formulation in ``report``, and notes."""
     name = info.name
     notes: list[str] = []
-    declared = [rv for rv in _declared(mod) if _names_report(tuple(rv.reports), report)]
+    declared = [rv for rv in _declared(name) if _names_report(tuple(rv.reports), report)]
     for rv in declared:
         unknown = sorted(set(rv.options) - set(info.options))
         if unknown:
-            raise ValueError(f"formulation {name!r}: REPORT_VARIANTS tag {rv.tag!r} sets "
+            raise ValueError(f"formulation {name!r}: report row tag {rv.tag!r} sets "
                              f"unknown option(s) {', '.join(unknown)}")
     usable = []
     for rv in declared:
@@ -343,7 +347,7 @@ def _formulation_rows(info, mod: ModuleType, report: str, all_backends: bool
     rows: list[Variant] = []
     expand = (report in BACKEND_REPORTS and "solver" in info.options
               and len(info.backends) > 1)
-    one_row = _opt_out(mod, f"{report}:backends")
+    one_row = _opt_out(name, f"{report}:backends")
     if expand and one_row is not None and not all_backends:
         notes.append(f"{name}: one row (its default back-end) in {report} ({one_row})")
         expand = False
@@ -368,7 +372,7 @@ def _baseline_rows(report: str) -> tuple[list[Variant], dict[str, str]]:
             continue
         rows.append(Variant(name, "", {}, mod.DESCRIPTION, level=mod.LEVEL,
                             origin="baseline"))
-        for rv in _declared(mod):
+        for rv in _declared(name):
             if not _names_report(tuple(rv.reports), report):
                 continue
             if mod.unavailable_reason(rv.options) is None:
@@ -434,15 +438,15 @@ def table(report: str, scenario: str | None = None, all_backends: bool = False
             notes.append(f"{info.name}: not available here ({info.reason})")
             continue
         try:
-            mod = formulations.get(info.name)
+            formulations.get(info.name)
         except formulations.FormulationError as exc:
             unavailable[info.name] = str(exc)
             notes.append(f"{info.name}: {exc}")
             continue
-        out = _opt_out(mod, report)
+        out = _opt_out(info.name, report)
         if out is not None:
             notes.append(f"{info.name}: left out of {report} ({out})")
-        own, more = _formulation_rows(info, mod, report, all_backends)
+        own, more = _formulation_rows(info, report, all_backends)
         notes += more
         for v in own:
             add(v, out is None)

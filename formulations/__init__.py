@@ -16,11 +16,11 @@ from .base import (
                    FormulationError,
                    LowerPoint,
                    Outcome,
-                   ReportVariant,
                    Solution,
                    Status,
                    Verification,
 )
+from .contract import Formulation, Prepared, StackPrepared
 from .options import Option
 from .prepared import PreparedSolver
 from .registry import (
@@ -37,7 +37,8 @@ from .registry import (
 )
 
 __all__ = ["BatchSolution", "STATUSES", "VERIFY_MODES", "Capabilities", "CheckRequest",
-           "ConcurrentUseError", "Diagnostics", "Fault", "FormulationError", "FormulationInfo",
-           "LowerPoint", "Option", "Outcome", "PLUGINS", "PreparedSolver", "ReportVariant",
-           "Solution", "Status", "Verification", "available", "compile_kernels", "get",
+           "ConcurrentUseError", "Diagnostics", "Fault", "Formulation", "FormulationError",
+           "FormulationInfo", "LowerPoint", "Option", "Outcome", "PLUGINS", "Prepared",
+           "PreparedSolver", "Solution", "StackPrepared", "Status", "Verification",
+           "available", "compile_kernels", "get",
            "names", "prepare", "solve", "solve_batch"]

@@ -1,6 +1,6 @@
 """The compiled core as the closed forms' ``Prepared`` classes call it (nullspace,
-chiaverini, unifying, operational_space; the extended Jacobian imports the core from
-here too).
+chiaverini, unifying, operational_space, sns, reference; the extended Jacobian imports
+the core from here too).
 
 :data:`_core` is ``prioik._core``, or ``None`` where it is not built (then
 :data:`core_error` says why); :func:`resolve_kernel` reads the ``kernel`` option;

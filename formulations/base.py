@@ -12,12 +12,7 @@ import numpy as np
 from prioik.errors import PrioikError
 from prioik.hierarchy import (
     DEFAULT_CERTIFICATE_TOL,
-    X_PRECISION,
-    StackData,
-    TaskStack,
     TaskStackError,
-    ambiguity_reason,
-    check_lexicographic,
     level_residuals,
     level_scale,
     precision_limited_levels,
@@ -93,44 +88,6 @@ class Capabilities:
     exact: bool = True
 
 
-@dataclass(frozen=True)
-class ReportVariant:
-    """A setting of a formulation worth a row of its own in prioik's reports.
-
-    A plugin lists them in ``REPORT_VARIANTS`` (a tuple); :mod:`prioik.benchmarks.variants`
-    turns each into a row of the reports it names, labelled ``NAME[tag]`` — so the
-    reports need no edit when a formulation or a setting is added. The reports are
-    ``"bench"``, ``"validate"``, ``"properties"``, ``"roundoff"`` (the rotated-coordinates
-    table of ``prioik properties``), ``"control_step"`` and the scenario reports
-    ``"fencing"``, ``"arm"`` and ``"sweep"`` (``"scenario"`` names all three).
-
-    Attributes:
-        tag: What distinguishes the row, e.g. ``"svd"`` or ``"clarabel,fixing=rows"``
-            (``""`` with ``replaces_default``: the default row itself, changed).
-        options: Options of every solve.
-        reports: The reports the row appears in (``()``: every report).
-        note: Why the row is there (printed where the report lists its rows).
-        replaces_default: The row takes the place of the formulation's default row in
-            those reports (e.g. the back-end a control loop uses).
-        mass: ``"identity"``: the formulation gets ``M = I`` instead of the report's
-            mass matrix (formulations that need one).
-        level: Scenario reports: ``"acceleration"`` or ``"velocity"`` (the same tasks
-            as ``J q̇ = ẋ* + K e``).
-        limits: Scenario reports: the joint-limit form of the stack (``"activation"``,
-            ``"bounds"``, ``"hard_bounds"``; ``None``: bounds for formulations that
-            take inequality tasks, activation rows for the others).
-    """
-
-    tag: str
-    options: dict[str, Any] = field(default_factory=dict)
-    reports: tuple[str, ...] = ()
-    note: str = ""
-    replaces_default: bool = False
-    mass: str | None = None
-    level: str = "acceleration"
-    limits: str | None = None
-
-
 #: Values of :attr:`Fault.code`.
 FAULT_CODES = ("certificate", "lower_point", "hard_level", "iteration_cap", "non_finite",
                "solver_error", "infeasible", "shape")
@@ -146,7 +103,7 @@ class Fault:
         tasks: The names of its tasks (``("minimum-norm",)`` for the tie-break).
         code: What failed, one of :data:`FAULT_CODES`: ``"certificate"`` (the answer
             fails :func:`~prioik.hierarchy.check_lexicographic`), ``"lower_point"``
-            (the exact active set reaches a lower value, :func:`lower_point`),
+            (the exact active set reaches a lower value, :func:`~.verification.lower_point`),
             ``"hard_level"`` (a hard level left violated, :func:`~prioik.hierarchy.hard`),
             ``"iteration_cap"``, ``"non_finite"``, ``"solver_error"`` (a back-end raised
             or found no answer), ``"infeasible"`` (hard inequalities that cannot hold
@@ -162,8 +119,8 @@ class Fault:
 
 @dataclass(frozen=True, slots=True)
 class LowerPoint:
-    """A witness against an answer (:func:`lower_point`): the exact active set's value at
-    the first level where it is lower.
+    """A witness against an answer (:func:`~.verification.lower_point`): the exact active
+    set's value at the first level where it is lower.
 
     Attributes:
         level: That level.
@@ -182,7 +139,7 @@ class Verification:
 
     Attributes:
         method: ``"certificate"`` (:func:`~prioik.hierarchy.check_lexicographic`),
-            ``"lower_point"`` (the certificate, then :func:`lower_point`),
+            ``"lower_point"`` (the certificate, then :func:`~.verification.lower_point`),
             ``"precision"`` (only :func:`~prioik.hierarchy.precision_limited_levels`
             was read), or ``"solver"`` (the formulation's own certificate inside its
             solve: ``hierarchical_active_set``'s flagged steps).
@@ -208,8 +165,9 @@ class CheckRequest:
     """How an answer is to be certified (a plugin sets it on its :class:`Outcome`).
 
     Under ``verify="auto"`` the verification stage certifies an ``optimal`` answer
-    (:func:`certify`, with the comparison of :func:`lower_point`) only when ``auto``
-    (the plugin's own option asked, e.g. ``check=True``); under ``"certificate"`` and
+    (:func:`~.verification.certify`, with the comparison of
+    :func:`~.verification.lower_point`) only when ``auto`` (the plugin's own option
+    asked, e.g. ``check=True``); under ``"certificate"`` and
     ``"lower_point"`` every ``optimal`` answer is certified, with these settings.
 
     Attributes:
@@ -372,6 +330,13 @@ class Solution:
         """The formulation's own record (``diagnostics.detail``)."""
         return self.diagnostics.detail
 
+    @property
+    def flops(self) -> int | None:
+        """The solve's floating-point operations as the formulation's compiled kernel
+        counted them (its detail record's ``flops``: the closed forms on the compiled
+        core); ``None`` when it does not count them."""
+        return getattr(self.diagnostics.detail, "flops", None)
+
     def __repr__(self) -> str:
         x = np.asarray(self.x)
         head = np.array2string(x[:4], precision=4, separator=", ")[1:-1]
@@ -440,131 +405,3 @@ def precision_holds(diagnostics: Diagnostics, data, x: np.ndarray) -> bool:
     diagnostics.add_reason(precision_reason(levels, level_scale(x)))
     return False
 
-
-def certify(stack, x: np.ndarray, diagnostics: Diagnostics, *, metric=None,
-            tol: float | None = None, minimum_norm: bool = True, compare: bool = True,
-            solver=None) -> bool:
-    """Whether ``x`` passes the lexicographic certificate; what it found goes in
-    ``diagnostics`` (:attr:`Diagnostics.verification`, and on failure
-    :attr:`Diagnostics.fault` and :attr:`Diagnostics.reason`). The caller, the
-    verification stage of :class:`~prioik.formulations.PreparedSolver`, demotes an answer
-    that does not pass to ``approximate``.
-
-    The certificate is :func:`hierarchy.check_lexicographic` with the minimum-norm
-    tie-break (``xᵀ W x`` with ``metric``; ``minimum_norm=False``: the levels only, for
-    a formulation without that tie-break) at ``tol`` (default
-    :data:`hierarchy.DEFAULT_CERTIFICATE_TOL`). An answer that fails it has a
-    :class:`Fault` of code ``"certificate"`` (level ``k`` for the tie-break). An answer
-    that passes but where the check took an ambiguous rank decision
-    (``report.ambiguous_levels``: a singular value within :data:`hierarchy.AMBIGUITY` of
-    the rank rule's threshold) does not pass either (its levels in
-    :attr:`Diagnostics.ambiguous_levels`): it is the rank rule's optimum, and the exact
-    solvers say ``approximate`` at such a decision. With ``compare``, any other answer
-    that passes is compared with the exact active-set solver's answer on the same stack
-    (:func:`lower_point`, with ``solver``: that solver prepared once by the caller):
-    when that point is no higher at every level above some level and lower there by more
-    than ``tol · max(1, value)`` (and the values' rounding), the answer is not the
-    lexicographic optimum whatever the check read (a :class:`Fault` of code
-    ``"lower_point"``, the witness in :attr:`Verification.lower_point`). The check reads
-    rows a solver left violated within its tolerance at a level above as that level's
-    optimal violation, fixed for the levels below, which can pin them far from their
-    optimum; the comparison does not depend on that reading.
-    """
-    tol = DEFAULT_CERTIFICATE_TOL if tol is None else float(tol)
-    x = np.asarray(x, dtype=np.float64).reshape(-1)
-    if x.shape != (stack.n,) or not np.isfinite(x).all():
-        return True
-    method = "lower_point" if compare else "certificate"
-    report = check_lexicographic(stack, x, tol=tol, minimum_norm=minimum_norm, metric=metric)
-    bad = report.first_failure
-    worst = float(report.worst_relative)
-    if bad is not None:
-        what = ("the minimum-norm tie-break" if bad.tasks == ("minimum-norm",)
-                else f"level {bad.level} ({', '.join(bad.tasks)})")
-        message = (f"the answer fails the lexicographic certificate at {what}: "
-                   f"{bad.failure(tol)}")
-        diagnostics.verification = Verification(method, False, tol, worst)
-        diagnostics.fault = Fault(bad.level, tuple(bad.tasks), "certificate", message)
-        diagnostics.add_reason(message)
-        return False
-    if report.ambiguous_levels:
-        levels = list(report.ambiguous_levels)
-        diagnostics.verification = Verification(method, False, tol, worst)
-        diagnostics.ambiguous_levels = sorted(set(diagnostics.ambiguous_levels) | set(levels))
-        diagnostics.add_reason(ambiguity_reason(levels))
-        return False
-    lower = lower_point(stack, x, tol, solver=solver) if compare else None
-    if lower is None:
-        diagnostics.verification = Verification(method, True, tol, worst)
-        return True
-    level, value, reached = lower
-    data = stack if isinstance(stack, StackData) else stack.data
-    names = tuple(data.layout.names[level])
-    message = (f"not the lexicographic optimum: hierarchical_active_set reaches "
-               f"{reached:.10g} at level {level} ({', '.join(names)}) where the answer "
-               f"has {value:.10g}, no higher at every level above")
-    diagnostics.verification = Verification(method, False, tol, worst,
-                                            LowerPoint(level, value, reached))
-    diagnostics.fault = Fault(level, names, "lower_point", message)
-    diagnostics.add_reason(message)
-    return False
-
-
-def lower_point_solver(layout):
-    """The exact active-set solver :func:`lower_point` compares with, prepared for
-    ``layout`` with its default options (:func:`lower_point` resets it before each
-    answer: every comparison starts cold, as a freshly prepared one)."""
-    from . import hierarchical_active_set as active_set  # (it imports this module)
-    from .options import validate_options
-    opts = validate_options(active_set.NAME, active_set.OPTIONS, {}, layout.n)
-    return active_set.Prepared(layout, opts)
-
-
-def lower_point(stack: TaskStack | StackData, x: np.ndarray,
-                tol: float = DEFAULT_CERTIFICATE_TOL, solver=None
-                ) -> tuple[int, float, float] | None:
-    """A witness against ``x``: the exact active-set solver's answer ``x_a`` on the same
-    stack, when it is lexicographically lower — at the first level ``i`` where the two
-    differ beyond rounding, ``‖w_i(x_a)‖² < ‖w_i(x)‖² − tol · max(1, ‖w_i(x)‖²)``, and
-    no higher at every level above (each within ``1e-12 · max(1, value)``). The values'
-    rounding is added to both margins (``r_i = X_PRECISION · max(‖x‖, ‖x_a‖) ·
-    ‖√W_i A_i‖_F``, a value's ``2 r_i ‖w_i‖ + r_i²``). A point that used a level's
-    tolerance above to gain below is no witness (it is higher there), so an exact answer
-    is never refuted by the solver's own slack.
-
-    Args:
-        stack: The stack (or its data).
-        x: The answer.
-        tol: The certificate's relative tolerance.
-        solver: The active-set solver to compare with (:func:`lower_point_solver`,
-            prepared once for the layout, reset here; ``None``: one is prepared for
-            this call).
-
-    Returns:
-        ``(i, value at x, value at x_a)``, or ``None`` (no such level, or the solver gave
-        no finite point).
-    """
-    data = stack if isinstance(stack, StackData) else stack.data
-    try:
-        if solver is None:
-            solver = lower_point_solver(data.layout)
-        solver.reset()      # cold: the answer does not depend on the last one checked
-        xa = solver.solve(data).x
-    except (FormulationError, TaskStackError, ArithmeticError, np.linalg.LinAlgError):
-        return None
-    if not np.isfinite(xa).all():
-        return None
-    wc = level_residuals(data, x) ** 2
-    wa = level_residuals(data, xa) ** 2
-    if not (np.isfinite(wc).all() and np.isfinite(wa).all()):
-        return None
-    WA = data.sqrt_weight[:, None] * data.A
-    scale = np.sqrt(np.add.reduceat((WA * WA).sum(axis=1), data.layout.starts[:-1]))
-    r = X_PRECISION * max(float(np.linalg.norm(x)), float(np.linalg.norm(xa))) * scale
-    rounding = 2 * r * (np.sqrt(wc) + np.sqrt(wa)) + 2 * r * r
-    for i in range(wc.shape[0]):
-        if wa[i] < wc[i] - tol * max(1.0, wc[i]) - rounding[i]:
-            return i, float(wc[i]), float(wa[i])
-        if wa[i] > wc[i] + 1e-12 * max(1.0, wc[i]) + rounding[i]:
-            return None
-    return None

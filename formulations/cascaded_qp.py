@@ -21,7 +21,7 @@ Back-ends: ``solver=`` any of ``qpsolvers.available_solvers`` (default Clarabel)
 (:data:`DEFAULT_TOLERANCES`); DAQP is called as ``daqp.solve`` directly.
 
 Statuses: ``optimal`` only when the answer passes the verification stage's
-certificate (:func:`~prioik.formulations.base.certify`, asked by ``certify=True``: the
+certificate (:func:`~prioik.formulations.verification.certify`, asked by ``certify=True``: the
 lexicographic certificate with the minimum-norm tie-break, no ambiguous rank decision,
 no lower point found), else ``approximate`` with ``diagnostics.fault``. A back-end that
 raises or finds no solution gives ``failed`` with a
@@ -36,9 +36,6 @@ In detail: ``docs/formulations.md``; settings and measurements per back-end:
 
 from __future__ import annotations
 
-import contextlib
-import sys
-import threading
 import warnings
 from dataclasses import dataclass, field
 from typing import Any
@@ -49,13 +46,25 @@ import scipy.sparse as spa
 
 from prioik.hierarchy import TaskStack
 
+from . import contract
+from ._numerics import (
+    ACTIVE_TOL,
+    MULTIPLIER_TOL,
+    Fixed,
+    LevelRows,
+    level_rows,
+    level_scale,
+    quiet_unless_verbose,
+    record_level,
+    scaled_level,
+    unit_rows,
+)
 from .base import (
     Capabilities,
     CheckRequest,
     Diagnostics,
     FormulationError,
     Outcome,
-    ReportVariant,
     Status,
 )
 from .options import Option, dictionary, per_level_nonnegative, positive_semidefinite, rcond_option
@@ -183,64 +192,6 @@ def backend_settings(solver: str, tolerance: float | None) -> dict[str, Any]:
     return {}
 
 
-class _ThreadSilencer:
-    """A ``sys.stdout`` stand-in that drops the writes of the threads it silences and
-    passes every other thread's writes to the stream it replaced."""
-
-    def __init__(self, target) -> None:
-        self.target = target
-        self.silenced: dict[int, int] = {}          # thread id -> nesting depth
-
-    def write(self, text: str) -> int:
-        if threading.get_ident() in self.silenced:
-            return len(text)
-        return self.target.write(text)
-
-    def __getattr__(self, name: str):
-        return getattr(self.target, name)
-
-
-_silencer_lock = threading.Lock()
-_silencer: _ThreadSilencer | None = None
-
-
-@contextlib.contextmanager
-def _silence_this_thread():
-    global _silencer
-    tid = threading.get_ident()
-    with _silencer_lock:
-        if _silencer is None or sys.stdout is not _silencer:
-            _silencer = _ThreadSilencer(sys.stdout)
-            sys.stdout = _silencer
-        _silencer.silenced[tid] = _silencer.silenced.get(tid, 0) + 1
-        mine = _silencer
-    try:
-        yield
-    finally:
-        with _silencer_lock:
-            depth = mine.silenced.pop(tid) - 1
-            if depth:
-                mine.silenced[tid] = depth
-            if not mine.silenced and sys.stdout is mine:
-                sys.stdout = mine.target
-                _silencer = None
-
-
-def quiet_unless_verbose(settings: dict[str, Any]):
-    """A context that discards what a back-end prints unless ``settings["verbose"]``.
-
-    OSQP prints "Polishing not needed ..." through Python's ``sys.stdout`` at every
-    solve with ``polishing=True`` (which :func:`backend_settings` sets), even with
-    ``verbose=False``; a back-end's own log is asked for with
-    ``backend_options={"verbose": True}``. Only the calling thread is silenced
-    (``contextlib.redirect_stdout`` swaps the stream of every thread, and concurrent
-    solves could leave it swapped).
-    """
-    if settings.get("verbose"):
-        return contextlib.nullcontext()
-    return _silence_this_thread()
-
-
 def resolve_solver(solver: str) -> str:
     """Check that ``solver`` is a qpsolvers back-end available here.
 
@@ -252,148 +203,6 @@ def resolve_solver(solver: str) -> str:
         raise FormulationError(f"QP back-end {solver!r} is not available here; "
                                f"available: {', '.join(available)}")
     return solver
-
-
-# ----------------------------------------------------------------- the levels
-@dataclass
-class LevelRows:
-    """The rows of one level in QP form.
-
-    Attributes:
-        A_eq: Weighted equality rows ``√W A`` (``m_e × n``).
-        b_eq: ``√W b``.
-        A_in: Inequality rows with at least one finite bound.
-        lower: Their lower bounds (``-inf`` allowed).
-        upper: Their upper bounds (``+inf`` allowed).
-        w_in: Weight of each inequality row.
-        task_of_row: Task name of each inequality row.
-    """
-
-    A_eq: np.ndarray
-    b_eq: np.ndarray
-    A_in: np.ndarray
-    lower: np.ndarray
-    upper: np.ndarray
-    w_in: np.ndarray
-    task_of_row: list[str] = field(default_factory=list)
-
-
-def level_rows(level) -> LevelRows:
-    """Split a :class:`~hierarchy.Level` into weighted equality and inequality rows.
-
-    Inequality rows without a finite bound, and zero rows (whose violation no ``x``
-    changes), are left out.
-    """
-    n = level[0].n
-    A_in, lo, up, w, names = [], [], [], [], []
-    for t in level:
-        if t.is_equality:
-            continue
-        tl, tu = t.bounds()
-        # a zero row has a fixed violation (0 ∉ [l, u] stays violated whatever x is):
-        # it stays in the level's ‖w_i‖² but not in the QP, where normalising it gave NaN
-        keep = (np.isfinite(tl) | np.isfinite(tu)) & np.any(t.A != 0.0, axis=1)
-        A_in.append(t.A[keep])
-        lo.append(tl[keep])
-        up.append(tu[keep])
-        w.append(np.broadcast_to(t.weight, (t.m,))[keep])
-        names += [t.name] * int(keep.sum())
-    if A_in:
-        return LevelRows(level.A, level.b, np.vstack(A_in), np.concatenate(lo),
-                         np.concatenate(up), np.concatenate(w), names)
-    return LevelRows(level.A, level.b, np.zeros((0, n)), np.zeros(0), np.zeros(0),
-                     np.zeros(0), names)
-
-
-def slacks(A: np.ndarray, lower: np.ndarray, upper: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Signed violation ``v = A x − clip(A x, lower, upper)`` of inequality rows."""
-    Ax = A @ x
-    return Ax - np.clip(Ax, lower, upper)
-
-
-def split_null_space(A: np.ndarray, Z: np.ndarray, rcond: float
-                     ) -> tuple[np.ndarray, np.ndarray]:
-    """Split ``range(Z)`` into the directions ``A`` sees and its null space (eq. 13).
-
-    Returns:
-        ``(Z V_r, Z V_0)``: orthonormal ``n × r`` and ``n × (d − r)`` bases, ``r`` the
-        rank of ``A Z`` with threshold ``rcond · ‖A‖_F``.
-    """
-    if A.shape[0] == 0 or Z.shape[1] == 0:
-        return Z[:, :0], Z
-    _, s, vt = np.linalg.svd(A @ Z, full_matrices=True)
-    tol = rcond * float(np.linalg.norm(A))
-    r = int(np.count_nonzero(s > tol)) if tol > 0 else 0
-    return Z @ vt[:r].T, Z @ vt[r:].T
-
-
-@dataclass
-class Fixed:
-    """What the levels solved so far impose on the next ones.
-
-    Attributes:
-        x: The latest level's answer ``x*``.
-        Z: Orthonormal basis of the null space of every higher equality row.
-        R: Orthonormal basis of their row space (``[R Z]`` is orthogonal).
-        eq_rows: The literal higher equality rows (``fixing="rows"``).
-        A_in, lower, upper: Higher inequality rows with bounds relaxed by slacks.
-        tasks: Names of the tasks fixed so far.
-    """
-
-    x: np.ndarray
-    Z: np.ndarray
-    R: np.ndarray
-    eq_rows: list[np.ndarray]
-    A_in: list[np.ndarray]
-    lower: list[np.ndarray]
-    upper: list[np.ndarray]
-    tasks: list[str]
-
-    @classmethod
-    def start(cls, n: int) -> Fixed:
-        return cls(np.zeros(n), np.eye(n), np.zeros((n, 0)), [], [], [], [], [])
-
-    def add(self, rows: LevelRows, names, x: np.ndarray, rcond: float,
-            active: np.ndarray | None = None) -> np.ndarray:
-        """Fix a solved level at ``x``; returns the slacks of its inequality rows.
-
-        ``active`` holds unit rows of inequality constraints that are strongly active
-        at ``x`` (positive multiplier): every optimum of the level satisfies them with
-        equality (complementary slackness), so they join the equality fixing.
-        """
-        self.x = x
-        v = slacks(rows.A_in, rows.lower, rows.upper, x)
-        extra = [] if active is None else [active]
-        if rows.A_in.shape[0]:
-            # a violated row keeps A x = bound + v at every optimum (v is unique)
-            viol = np.abs(v) > ACTIVE_TOL * np.maximum(1.0, np.abs(rows.A_in @ x))
-            norms = np.linalg.norm(rows.A_in, axis=1)
-            viol &= norms > 0     # a violated zero row (0 ∉ [lower, upper]) fixes nothing
-            if viol.any():
-                extra.append(rows.A_in[viol] / norms[viol, None])
-        eq = rows.A_eq
-        if extra:
-            blocks = [eq / max(float(np.linalg.norm(eq)) / np.sqrt(eq.shape[0]), 1e-300)] \
-                if eq.shape[0] else []
-            eq = np.vstack(blocks + extra)
-        if eq.shape[0]:
-            Rn, self.Z = split_null_space(eq, self.Z, rcond)
-            self.R = np.hstack([self.R, Rn])
-            self.eq_rows.append(eq)
-        if rows.A_in.shape[0]:
-            self.A_in.append(rows.A_in)
-            self.lower.append(rows.lower + v)
-            self.upper.append(rows.upper + v)
-        # An inequality row inside the fixed row space has a constant value on the
-        # optimal set (the value it has at x), so it is implied: drop it.
-        for i in range(len(self.A_in)):
-            A = self.A_in[i]
-            keep = np.linalg.norm(A @ self.Z, axis=1) > 1e-8 * np.linalg.norm(A, axis=1)
-            if not keep.all():
-                self.A_in[i], self.lower[i], self.upper[i] = \
-                    A[keep], self.lower[i][keep], self.upper[i][keep]
-        self.tasks += list(names)
-        return v
 
 
 @dataclass
@@ -428,29 +237,6 @@ def _two_sided(M: np.ndarray, lower: np.ndarray, upper: np.ndarray, offset: np.n
         h.append(offset[lo] - lower[lo])
         G_x.append(X[lo])
     return G, h
-
-
-def _unit_rows(A: np.ndarray, lower: np.ndarray, upper: np.ndarray):
-    """``lower ≤ A x ≤ upper`` with every row scaled to unit norm (same set)."""
-    s = np.linalg.norm(A, axis=1)
-    s[s == 0] = 1.0
-    return A / s[:, None], lower / s, upper / s
-
-
-def level_scale(rows: LevelRows) -> float:
-    """The level's RMS row norm (1 when it is zero or not finite)."""
-    m = rows.A_eq.shape[0] + rows.A_in.shape[0]
-    s = np.sqrt((float(np.sum(rows.A_eq ** 2)) + float(np.sum(rows.A_in ** 2))) / max(m, 1))
-    return s if np.isfinite(s) and s > 0 else 1.0
-
-
-def scaled_level(rows: LevelRows) -> LevelRows:
-    """The level divided by its RMS row norm: same minimiser, better-scaled QP."""
-    s = level_scale(rows)
-    if s == 1.0:
-        return rows
-    return LevelRows(rows.A_eq / s, rows.b_eq / s, rows.A_in / s, rows.lower / s,
-                     rows.upper / s, rows.w_in, rows.task_of_row)
 
 
 def build_level_qp(rows: LevelRows | None, fixed: Fixed, fixing: str, eps: float,
@@ -522,7 +308,7 @@ def build_level_qp(rows: LevelRows | None, fixed: Fixed, fixing: str, eps: float
             e.append(A_h @ fixed.x)
     delta = margin * max(1.0, float(np.linalg.norm(fixed.x)))
     for A_h, lo, up in zip(fixed.A_in, fixed.lower, fixed.upper, strict=False):
-        A_h, lo, up = _unit_rows(A_h, lo, up)
+        A_h, lo, up = unit_rows(A_h, lo, up)
         lo, up = lo - delta, up + delta
         blk = np.zeros((A_h.shape[0], nz))
         blk[:, :ny] = A_h @ Z
@@ -626,13 +412,6 @@ def _solve_daqp(qp: LevelQP, settings: dict[str, Any]
     return qp.x0 + qp.Z @ z[:ny], "", extras
 
 
-#: A constraint ``g z ≤ h`` counts as strongly active when its multiplier exceeds
-#: ``MULTIPLIER_TOL · max(1, ‖λ‖_∞)`` and its slack ``h − g z`` is below
-#: ``ACTIVE_TOL · max(1, |h|)``.
-MULTIPLIER_TOL = 1e-7
-ACTIVE_TOL = 1e-7
-
-
 def strongly_active(qp: LevelQP, z: np.ndarray, lam: np.ndarray) -> np.ndarray:
     """Unit ``x``-space rows of the inequality constraints strongly active at ``z``."""
     if qp.G is None or qp.h is None or qp.G_x is None:      # (no inequality constraint)
@@ -641,47 +420,6 @@ def strongly_active(qp: LevelQP, z: np.ndarray, lam: np.ndarray) -> np.ndarray:
     lam_tol = MULTIPLIER_TOL * max(1.0, float(np.max(np.abs(lam), initial=0.0)))
     act = (lam > lam_tol) & (slack <= ACTIVE_TOL * np.maximum(1.0, np.abs(qp.h)))
     return qp.G_x[act]
-
-
-def record_level(diagnostics: Diagnostics, rec: dict, level, x: np.ndarray, tol: float,
-                 on_infeasible: str, fail) -> Outcome | None:
-    """Append level ``rec["level"]``'s record to the cascade's detail record
-    (``diagnostics.detail``: its ``levels`` and ``violated``) and diagnose its
-    inequalities.
-
-    Inequality tasks of the level that ``x`` violates beyond ``tol`` are named in
-    ``rec["violated"]`` and :attr:`Detail.violated`, the level in
-    ``diagnostics.infeasible_levels``; with ``on_infeasible="fail"`` the failed
-    :class:`Outcome` from ``fail(level, tasks, message, x)`` is returned (``None``
-    otherwise), shared by every cascade.
-    """
-    j = rec["level"]
-    detail = diagnostics.detail
-    bad = violated_tasks(level, x, tol)
-    if bad:
-        rec["violated"] = bad
-        diagnostics.infeasible_levels = [*diagnostics.infeasible_levels, j]
-        detail.violated.append({"level": j, "tasks": sorted(bad), "violation": bad})
-    detail.levels.append(rec)
-    if bad and on_infeasible == "fail":
-        names = ", ".join(f"{k} (violation {v:.3g})" for k, v in bad.items())
-        return fail(j, sorted(bad), f"level {j}: inequality tasks {names} cannot "
-                    f"hold together with the levels above", x)
-    return None
-
-
-def violated_tasks(level, x: np.ndarray, tol: float) -> dict[str, float]:
-    """Inequality tasks of ``level`` violated at ``x`` beyond ``tol`` (relative)."""
-    out = {}
-    for t in level:
-        if t.is_equality:
-            continue
-        lo, up = t.bounds()
-        v = slacks(t.A, lo, up, x)
-        viol = float(np.sqrt(np.sum(np.broadcast_to(t.weight, (t.m,)) * v * v)))
-        if viol > tol * max(1.0, float(np.linalg.norm(t.A)) * float(np.linalg.norm(x))):
-            out[t.name] = viol
-    return out
 
 
 def run_cascade(stack: TaskStack, solve_qp, *, fixing: str, metric, rcond: float,
@@ -762,33 +500,18 @@ def solve(stack: TaskStack, *, solver: str, tolerance: float | None, backend_opt
     out.check = CheckRequest(auto=bool(certify) and level_damping is None, metric=metric)
     return out
 
-# ------------------------------------------------------------------------ reports
-#: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
-REPORT_VARIANTS = (
-    ReportVariant("daqp", {"solver": "daqp"}, reports=("fencing", "sweep", "control_step"),
-                  replaces_default=True,
-                  note="one QP per level with DAQP, the fastest exact back-end on the G1 "
-                       "stacks; joint limits as bounds"),
-    ReportVariant("daqp,velocity", {"solver": "daqp"}, reports=("fencing", "sweep"),
-                  level="velocity",
-                  note="the same tasks at velocity level (J q̇ = ẋ* + K e, limits as bounds "
-                       "on q̇), exact hierarchy: the like-for-like counterpart of PlaCo's "
-                       "KinematicsSolver"),
-    ReportVariant("quadprog", {"solver": "quadprog"}, reports=("arm",), replaces_default=True,
-                  note="one QP per level with quadprog (DAQP finds no solution at the "
-                       "Panda's orientation level after 1.7 s), joint limits as bounds"),
-    ReportVariant("quadprog,velocity", {"solver": "quadprog"}, reports=("arm",),
-                  level="velocity",
-                  note="the same at velocity level (J q̇ = ẋ* + K e, bounds on q̇)"),
-    # how the higher optima are fixed in the cascade
-    ReportVariant("clarabel,fixing=rows", {"solver": "clarabel", "fixing": "rows"},
-                  reports=("validate",)),
-    ReportVariant("clarabel,fixing=nullspace", {"solver": "clarabel", "fixing": "nullspace"},
-                  reports=("validate",)),
-    ReportVariant("quadprog,fixing=rows", {"solver": "quadprog", "fixing": "rows"},
-                  reports=("validate",)),
-    ReportVariant("proxqp,fixing=nullspace", {"solver": "proxqp", "fixing": "nullspace"},
-                  reports=("validate",)),
-    ReportVariant("quadprog,fix_active=False", {"solver": "quadprog", "fix_active": False},
-                  reports=("validate",)),
-)
+
+class Prepared(contract.StackPrepared):
+    """The QP cascade prepared for one layout: :func:`solve` on each stack (one QP
+    per level, built per solve)."""
+
+    name = NAME
+    capabilities = CAPABILITIES
+
+    def solve_stack(self, stack: TaskStack, options: dict[str, Any]) -> Outcome:
+        return solve(stack, **options)
+
+
+#: the plugin (:mod:`prioik.formulations.registry`)
+FORMULATION = contract.Formulation(NAME, DESCRIPTION, CAPABILITIES, OPTIONS, Prepared,
+                                   backends=backends)

@@ -35,14 +35,16 @@ sum as written here, the oracle the tests hold the compiled kernel to.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from prioik.hierarchy import StackData, StackLayout, TaskStack, nested_null_spaces
 
+from . import contract
 from ._compiled import _core, resolve_kernel, solve_compiled, solve_rescaled
-from .base import Capabilities, Diagnostics, Outcome, ReportVariant, Status
-from .nullspace import check_nonnegative, generalized_inverse
+from ._numerics import check_nonnegative, generalized_inverse
+from .base import Capabilities, Diagnostics, Outcome, Status
 from .options import Option, rcond_option, validate_options
 
 
@@ -116,7 +118,7 @@ def _outcome(x, own, damping: float, kernel: str, flops, residuals=None) -> Outc
                                detail=Detail(list(own), damping, kernel, flops)), residuals)
 
 
-class Prepared:
+class Prepared(contract.Prepared):
     """Chiaverini's task priority prepared for one layout: options checked, and on the
     compiled kernel (``kernel="cpp"``) the C++ solver with every workspace allocated once
     (``prioik._core.ChiaveriniSolver``: each level's own inverse and the projector
@@ -135,18 +137,18 @@ class Prepared:
         check_nonnegative(damping=options["damping"], rcond=options["rcond"])
         self.damping = float(options["damping"])
         self.rcond = float(options["rcond"])
-        self.compiled = self.kernel == "cpp"
-        if self.compiled:
+        self._cpp = self.kernel == "cpp"
+        if self._cpp:
             self._core = _core.ChiaveriniSolver([int(s) for s in layout.starts], layout.n,
                                                 rcond=self.rcond, damping=self.damping)
 
-    def solve(self, data: StackData) -> Outcome:
+    def solve(self, data: StackData, options: dict[str, Any] | None = None) -> Outcome:
         """Solve one stack of the layout.
 
         Raises:
             TaskStackError: a value is not finite (naming the task, level and row).
         """
-        if not self.compiled:
+        if not self._cpp:
             return solve_readable(data.as_stack(), damping=self.damping, rcond=self.rcond)
         res = solve_compiled(self._core, data)
         if not res.solved:
@@ -154,10 +156,6 @@ class Prepared:
         own = res.task_solutions.reshape(self.layout.k, self.layout.n)
         return _outcome(res.x, own, self.damping, "cpp", res.flops, res.residuals)
 
-# ------------------------------------------------------------------------ reports
-#: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
-REPORT_VARIANTS = (
-    ReportVariant("numpy", {"kernel": "numpy"}, reports=("bench",),
-                  note="the readable numpy SVD sum (the default, kernel='auto', is the "
-                       "compiled C++ core)"),
-)
+
+#: the plugin (:mod:`prioik.formulations.registry`)
+FORMULATION = contract.Formulation(NAME, DESCRIPTION, CAPABILITIES, OPTIONS, Prepared)

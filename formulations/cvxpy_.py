@@ -8,8 +8,8 @@ as cvxpy expressions — ``sum_squares(√W (A x − b)) + sum_squares(√w ∘ 
 solver that takes QPs (``solver=``, default Clarabel). Only the bookkeeping of
 what a solved level fixes (the orthonormal row-space basis of the higher equality
 rows, relaxed inequality bounds, strongly active rows read from cvxpy's dual
-values) is shared with :mod:`formulations.cascaded_qp`; the modelling, the
-canonicalisation and the solver interfaces are cvxpy's.
+values) is shared with :mod:`formulations.cascaded_qp` (:mod:`formulations._numerics`);
+the modelling, the canonicalisation and the solver interfaces are cvxpy's.
 
 ``fixing="basis"`` keeps the higher equality rows as ``Rᵀ x = Rᵀ x*`` with ``R`` an
 orthonormal basis of their row space; ``fixing="rows"`` keeps the literal rows
@@ -20,7 +20,7 @@ A solver status of ``optimal_inaccurate`` at some level gives
 any other non-optimal status gives ``status="failed"`` with a
 :class:`~prioik.formulations.base.Fault` naming the level and its tasks. With
 ``certify=True`` (default) an ``optimal`` answer is certified by the verification stage
-(:func:`~prioik.formulations.base.certify`).
+(:func:`~prioik.formulations.verification.certify`).
 """
 
 from __future__ import annotations
@@ -34,17 +34,18 @@ import numpy as np
 
 from prioik.hierarchy import TaskStack
 
-from .base import Capabilities, CheckRequest, Diagnostics, FormulationError, Outcome, Status
-from .cascaded_qp import (
+from . import contract
+from ._numerics import (
     ACTIVE_TOL,
     MULTIPLIER_TOL,
     Fixed,
-    _unit_rows,
     level_rows,
     quiet_unless_verbose,
     record_level,
     scaled_level,
+    unit_rows,
 )
+from .base import Capabilities, CheckRequest, Diagnostics, FormulationError, Outcome, Status
 from .options import Option, dictionary, positive_semidefinite, rcond_option
 
 
@@ -181,7 +182,7 @@ def solve(stack: TaskStack, *, solver: str, backend_options: dict | None, fixing
                 cons.append(A_h @ x == A_h @ fixed.x)
         delta = margin * max(1.0, float(np.linalg.norm(fixed.x)))
         for A_h, lo, up in zip(fixed.A_in, fixed.lower, fixed.upper, strict=False):
-            A_u, lo, up = _unit_rows(A_h, lo, up)
+            A_u, lo, up = unit_rows(A_h, lo, up)
             if A_u.shape[0]:
                 _bounds(A_u @ x, lo - delta, up + delta, A_u, cons, tracked)
         return cons
@@ -249,14 +250,17 @@ def solve(stack: TaskStack, *, solver: str, backend_options: dict | None, fixing
                    diagnostics, check=CheckRequest(auto=bool(certify), metric=metric))
 
 
-# ------------------------------------------------------------------------ reports
-#: reports whose default selection leaves this formulation out, and why
-#: (prioik.benchmarks.variants)
-REPORT_OPT_OUTS = {
-    "scenario": "a modelling layer, tens of ms per level QP: a scenario run takes minutes; "
-                "cascaded_qp solves the same cascade",
-    "control_step": "a modelling layer, tens of ms per level QP; cascaded_qp solves the "
-                    "same cascade",
-    "validate:backends": "a modelling layer over the solvers cascaded_qp's rows cover: "
-                         "Clarabel alone unless --cvxpy-backends",
-}
+class Prepared(contract.StackPrepared):
+    """The cvxpy cascade prepared for one layout: :func:`solve` on each stack
+    (modelled per solve)."""
+
+    name = NAME
+    capabilities = CAPABILITIES
+
+    def solve_stack(self, stack: TaskStack, options: dict[str, Any]) -> Outcome:
+        return solve(stack, **options)
+
+
+#: the plugin (:mod:`prioik.formulations.registry`)
+FORMULATION = contract.Formulation(NAME, DESCRIPTION, CAPABILITIES, OPTIONS, Prepared,
+                                   backends=backends)

@@ -17,7 +17,7 @@ setting changes this, and the status says so.
 
 Statuses: ``optimal`` when DAQP exits with flag 1 or 2 and, with ``check=True``, the
 answer passes the verification stage's certificate
-(:func:`~prioik.formulations.base.certify`, run after the timed solve); ``approximate``
+(:func:`~prioik.formulations.verification.certify`, run after the timed solve); ``approximate``
 otherwise, with ``diagnostics.fault`` and, computed then, :attr:`Detail.conflicting_levels`;
 ``failed`` on a negative exit flag (``diagnostics.fault``, for infeasibility the hard
 inequality tasks involved). ``check=False`` skips the certificate. ``primal_tol``
@@ -30,19 +30,20 @@ from __future__ import annotations
 
 from ctypes import c_int
 from dataclasses import dataclass, field
+from typing import Any
 
 import daqp
 import numpy as np
 
 from prioik.hierarchy import TaskStack
 
+from . import contract
 from .base import (
     Capabilities,
     CheckRequest,
     Diagnostics,
     FormulationError,
     Outcome,
-    ReportVariant,
     Status,
 )
 from .options import Option, dictionary, rcond_option
@@ -256,12 +257,17 @@ def dependent_active_levels(A: np.ndarray, bu: np.ndarray, bl: np.ndarray, bps: 
         start = stop
     return out
 
-# ------------------------------------------------------------------------ reports
-#: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
-REPORT_VARIANTS = (
-    ReportVariant("raw", {"compress_levels": False, "check": False}, reports=("bench",),
-                  note="DAQP's C call alone: no SVD compression of the levels, no "
-                       "conflicting-level check (faster, not exact on conflicting levels)"),
-    ReportVariant("compress_levels=False", {"compress_levels": False}, reports=("validate",),
-                  note="without the SVD compression of the levels"),
-)
+
+class Prepared(contract.StackPrepared):
+    """DAQP's hierarchical solve prepared for one layout: :func:`solve` on each
+    stack."""
+
+    name = NAME
+    capabilities = CAPABILITIES
+
+    def solve_stack(self, stack: TaskStack, options: dict[str, Any]) -> Outcome:
+        return solve(stack, **options)
+
+
+#: the plugin (:mod:`prioik.formulations.registry`)
+FORMULATION = contract.Formulation(NAME, DESCRIPTION, CAPABILITIES, OPTIONS, Prepared)

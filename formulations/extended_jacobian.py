@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.linalg import lapack
@@ -60,6 +61,7 @@ from prioik.hierarchy import (
 )
 from prioik.hierarchy.linalg import numpy_svd
 
+from . import contract
 from ._compiled import _core, core_error
 from .base import (
     Capabilities,
@@ -68,12 +70,11 @@ from .base import (
     Diagnostics,
     FormulationError,
     Outcome,
-    ReportVariant,
     Status,
-    certify,
     solve_equilibrated,
 )
 from .options import Option, rcond_option, validate_options
+from .verification import certify
 
 
 @dataclass(slots=True)
@@ -201,7 +202,7 @@ def solve(stack: TaskStack, **options) -> Outcome:
     return Prepared(stack.layout, opts).solve(stack.data)
 
 
-class Prepared:
+class Prepared(contract.Prepared):
     """The extended Jacobian prepared for one layout: options checked, workspaces
     allocated once.
 
@@ -258,7 +259,7 @@ class Prepared:
                 level_damping=self.level_damping, singular_threshold=self.singular_threshold,
                 step_bound=self.step_bound.tolist())
 
-    def solve(self, data: StackData) -> Outcome:
+    def solve(self, data: StackData, options: dict[str, Any] | None = None) -> Outcome:
         """Solve one stack of the layout (its data; the registry checked the layout).
 
         Raises:
@@ -927,24 +928,6 @@ def _batch_statuses(datas: list[StackData], X: np.ndarray, mu2: np.ndarray,
         approximate[i] = not certify(datas[i], X[i], Diagnostics())
     return [Status.APPROXIMATE if a else Status.OPTIMAL for a in approximate.tolist()]
 
-# ------------------------------------------------------------------------ reports
-#: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
-REPORT_VARIANTS = (
-    ReportVariant("svd", {"nullspace": "svd"}, reports=("bench", "properties"),
-                  note="the paper's SVD path (J_{i-1}^A by SVD)"),
-    ReportVariant("lapack", {"kernel": "lapack"}, reports=("bench",),
-                  note="the readable LAPACK nested-QR path (the default, kernel='auto', is "
-                       f"the compiled C++ core up to n = {AUTO_CPP_MAX_N}, LAPACK above)"),
-    ReportVariant("eq27", {"damping": 1e-2}, reports=("scenario", "properties"),
-                  note="the paper's eq. 27, λ = 0.01, with Z_i of r_i rows spanning "
-                       "range(N_{i-1} J_iᵀ) (z_basis='task_range', eq. 12-13 and Theorem 1)"),
-    ReportVariant("eq27_null_space", {"damping": 1e-2, "z_basis": "null_space"},
-                  reports=("fencing", "properties"),
-                  note="eq. 27, λ = 0.01, read with a basis of the whole null space of the "
-                       "higher levels (z_basis='null_space')"),
-    ReportVariant("svd,eq27", {"nullspace": "svd", "damping": 1e-2}, reports=("properties",),
-                  note="eq. 27 on the SVD path"),
-    ReportVariant("svd,eq27_null_space",
-                  {"nullspace": "svd", "damping": 1e-2, "z_basis": "null_space"},
-                  reports=("properties",), note="eq. 27, whole null space, on the SVD path"),
-)
+
+#: the plugin (:mod:`prioik.formulations.registry`)
+FORMULATION = contract.Formulation(NAME, DESCRIPTION, CAPABILITIES, OPTIONS, Prepared)

@@ -61,6 +61,7 @@ from prioik.hierarchy import (
 )
 from prioik.hierarchy.analysis import LevelCheck
 
+from . import contract
 from .base import (
     Capabilities,
     CoreInputError,
@@ -68,7 +69,6 @@ from .base import (
     Fault,
     FormulationError,
     Outcome,
-    ReportVariant,
     Status,
     Verification,
     solve_equilibrated,
@@ -196,7 +196,7 @@ def solve(stack: TaskStack, **options) -> Outcome:
     return Prepared(stack.layout, opts).solve(stack.data)
 
 
-class Prepared:
+class Prepared(contract.Prepared):
     """The active-set solver prepared for one layout: workspaces allocated once, and the
     working set of every level kept from one solve to the next.
 
@@ -218,6 +218,9 @@ class Prepared:
     Raises:
         FormulationError: the compiled core is not importable here.
     """
+
+    #: its solve_checked is the compiled kernel's, reading the data's arrays
+    compiled = True
 
     def __init__(self, layout: StackLayout, options: dict, *,
                  refine_rounds: int | None = None) -> None:
@@ -279,7 +282,7 @@ class Prepared:
         """Forget the kept working sets (the next solve starts cold)."""
         self._cpp.reset()
 
-    def solve(self, data: StackData) -> Outcome:
+    def solve(self, data: StackData, options: dict[str, Any] | None = None) -> Outcome:
         """Solve one stack of the layout (its data; the registry checked the layout).
 
         Raises:
@@ -560,10 +563,5 @@ def _row_scale_spread(data: StackData, levels) -> list[tuple[int, float]]:
     return out
 
 
-# ------------------------------------------------------------------------ reports
-#: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
-REPORT_VARIANTS = (
-    ReportVariant("velocity", level="velocity", reports=("scenario",),
-                  note="the same at velocity level (J q̇ = ẋ* + K e, the limits as bounds on "
-                       "q̇): exact, like for like with PlaCo's KinematicsSolver"),
-)
+#: the plugin (:mod:`prioik.formulations.registry`)
+FORMULATION = contract.Formulation(NAME, DESCRIPTION, CAPABILITIES, OPTIONS, Prepared)

@@ -22,7 +22,7 @@ clear a hot start).
 
 Status: ``"optimal"`` when lexls reports the problem solved and, with ``check=True``
 (default), the answer passes the verification stage's certificate
-(:func:`~prioik.formulations.base.certify`) on the levels (no tie-break: the
+(:func:`~prioik.formulations.verification.certify`) on the levels (no tie-break: the
 certificate, its ambiguity record, and the exact active set's answer as a witness of a
 lower point); ``"approximate"`` when it does not (``diagnostics.reason`` says why) or
 lexls stopped at its factorization cap (:attr:`Detail.capped`: its answer is where it
@@ -33,12 +33,14 @@ stopped, not solved); ``"failed"`` on a non-finite answer. Its own record:
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from prioik.hierarchy import StackData, StackLayout, TaskStack
 
-from .base import Capabilities, CheckRequest, Diagnostics, Outcome, ReportVariant, Status
+from . import contract
+from .base import Capabilities, CheckRequest, Diagnostics, Outcome, Status
 from .options import Option, validate_options
 
 try:
@@ -98,7 +100,7 @@ def solve(stack: TaskStack, **options) -> Outcome:
     return Prepared(stack.layout, opts).solve(stack.data)
 
 
-class Prepared:
+class Prepared(contract.Prepared):
     """lexls prepared for one layout: the weighted rows' buffers allocated once, the
     previous ``x`` and working set kept for the next solve's hot start.
 
@@ -127,7 +129,7 @@ class Prepared:
         """Forget the previous solve (the next one is cold)."""
         self._solver.reset()
 
-    def solve(self, data: StackData) -> Outcome:
+    def solve(self, data: StackData, options: dict[str, Any] | None = None) -> Outcome:
         """lexls on the data's rows, weighted by ``√w`` (see the module docstring).
 
         Raises:
@@ -161,10 +163,6 @@ class Prepared:
                                       f" factorizations (max_factorizations): not solved")
         return out
 
-# ------------------------------------------------------------------------ reports
-#: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
-REPORT_VARIANTS = (
-    ReportVariant("raw", {"check": False}, reports=("bench",),
-                  note="lexls's C++ solve alone (no certificate): its status as it "
-                       "reports it"),
-)
+
+#: the plugin (:mod:`prioik.formulations.registry`)
+FORMULATION = contract.Formulation(NAME, DESCRIPTION, CAPABILITIES, OPTIONS, Prepared)

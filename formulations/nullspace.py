@@ -32,6 +32,7 @@ written, the oracle the tests hold the compiled kernel to. In detail:
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -42,17 +43,16 @@ from prioik.hierarchy import (
     StackLayout,
     TaskStack,
     ambiguity_reason,
-    ambiguous_decision,
     rank_threshold,
 )
 
+from . import contract
 from ._compiled import _core, resolve_kernel, solve_compiled, solve_rescaled
+from ._numerics import check_nonnegative, project_level, project_levels
 from .base import (
     Capabilities,
     Diagnostics,
-    FormulationError,
     Outcome,
-    ReportVariant,
     Status,
     in_original_units,
 )
@@ -93,137 +93,6 @@ OPTIONS = {
                      "LQ); 'numpy': the readable SVD recursion; 'auto': cpp where built",
                      choices=("auto", "cpp", "numpy")),
 }
-
-
-def check_nonnegative(**values: float) -> None:
-    """Raise :class:`FormulationError` for an option that is not a finite number ≥ 0."""
-    for key, val in values.items():
-        try:
-            v = float(val)
-        except (TypeError, ValueError):
-            raise FormulationError(f"{key} must be a number ≥ 0, got {val!r}") from None
-        if not np.isfinite(v) or v < 0:
-            raise FormulationError(f"{key} must be a finite number ≥ 0, got {val}")
-
-
-def truncated_svd(M: np.ndarray, tol: float, report: bool = False):
-    """``(U_r, s_r, V_r)`` of ``M`` keeping the singular values ``σ > tol``.
-
-    ``U_r`` is ``m × r``, ``V_r`` is ``n × r``. An empty ``M`` (or ``tol ≤ 0`` with a
-    zero scale) gives ``r = 0``. With ``report``, a fourth value says whether the
-    decision was ambiguous (:func:`hierarchy.ambiguous_decision`).
-    """
-    m, n = M.shape
-    if M.size == 0:
-        out = np.zeros((m, 0)), np.zeros(0), np.zeros((n, 0))
-        return (*out, False) if report else out
-    u, s, vt = np.linalg.svd(M, full_matrices=False)
-    r = int(np.count_nonzero(s > tol)) if tol > 0 else 0
-    out = u[:, :r], s[:r], vt[:r].T
-    return (*out, ambiguous_decision(s, tol)) if report else out
-
-
-def generalized_inverse(M: np.ndarray, tol: float, damping: float = 0.0
-                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``M^#`` and the orthonormal bases of ``M``'s kept row and column spaces.
-
-    ``M^# = V diag(σ/(σ² + λ)) Uᵀ`` over the singular values ``σ > tol``; with
-    ``damping = λ = 0`` that is the truncated pseudo-inverse ``M⁺``.
-
-    Returns:
-        ``(M^#, V_r, U_r)``; ``V_r V_rᵀ = M⁺ M`` is the projector onto the kept row space.
-    """
-    U, s, V = truncated_svd(M, tol)
-    gain = s / (s * s + damping) if damping > 0 else 1.0 / s
-    return (V * gain) @ U.T, V, U
-
-
-#: Steps of :func:`refinement` a level's least-squares step gets: one left a level of a
-#: task at 6e-10 beside rows of 0.5 and zero rows with targets 6e-6 off, two reach ε.
-REFINEMENT_STEPS = 2
-
-
-def refinement(M: np.ndarray, c: np.ndarray, y: np.ndarray, Vt: np.ndarray,
-               keep: np.ndarray, sv: np.ndarray) -> np.ndarray:
-    """The correction of a least-squares step ``y ≈ M_r⁺ c`` computed from an SVD
-    ``M = U Σ Vᵀ`` (rank rule ``keep``): ``V_r Σ_r⁻² V_rᵀ Mᵀ (c − M y)``, one step of
-    iterative refinement, for ``B`` stacks at once (``B × m × d`` ``M``, ``B × m × 1``
-    ``c``, ``B × d × 1`` ``y``, ``B × p × d`` ``Vt``, ``B × p`` ``keep`` and ``sv``).
-
-    An SVD is backward stable in norm only: a level's rows far smaller than its norm
-    (zero or tiny rows beside large ones, tasks decades apart) are read with errors of
-    ``ε ‖M‖``, and where their targets are large their residuals leak into ``U_rᵀ c``
-    and the step by ``ε ‖M‖ ‖c‖ / σ²``. ``Mᵀ (c − M y)`` is formed row by row, each
-    row's term on its own scale (a zero row adds exactly nothing), so the correction
-    removes that error; on a level whose rows share one scale it is at rounding level.
-    """
-    r = c - M @ y                                                      # B × m × 1
-    g = Vt @ (np.swapaxes(M, 1, 2) @ r)                                # B × p × 1
-    safe = np.where(keep, sv, 1.0)
-    return np.swapaxes(Vt, 1, 2) @ (np.where(keep, 1.0 / (safe * safe), 0.0)[:, :, None] * g)
-
-
-def project_levels(A: np.ndarray, b: np.ndarray, X: np.ndarray, N: np.ndarray,
-                   tol: np.ndarray, damping: float = 0.0, reproject: bool = True
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """One level of the recursion (module docstring) for ``B`` stacks at once:
-    ``Ĵ_i = A N_{i-1}``, the step ``x_i = x_{i-1} + N_{i-1} Ĵ_i^# (b − A x_{i-1})``
-    (without the leading ``N_{i-1}`` when not ``reproject``) and
-    ``N_i = N_{i-1} − V Vᵀ`` with ``V`` re-orthonormalised in ``range(N_{i-1})``.
-
-    The one implementation of a level: :func:`solve` runs it on one stack (``B = 1``),
-    :func:`solve_batch` on many, ``sns`` for its unbounded step — so every path makes
-    the same rank decisions with the same arithmetic (a stacked SVD or product is the
-    per-matrix one), and ``solve`` equals ``solve_batch`` bit for bit. Singular values
-    are masked by the rank rule instead of truncated, so stacks of different ranks
-    share the arrays.
-
-    Args:
-        A, b: ``B × m × n`` rows and ``B × m`` targets of the level (weighted).
-        X, N: ``B × n`` answers and ``B × n × n`` projectors so far (not modified).
-        tol: ``B`` absolute rank thresholds (:func:`hierarchy.rank_threshold` of each
-            ``A``; ``≤ 0``: the level keeps nothing).
-        damping: ``λ`` of the damped inverse (0: pseudo-inverse).
-        reproject: Multiply the step by ``N_{i-1}`` once more.
-
-    Returns:
-        ``(X_i, N_i, keep, σ, ambiguous)``: ``keep`` (``B × p``) masks the kept singular
-        values ``σ`` of ``Ĵ_i`` (sorted, largest first); ``ambiguous`` (``B``) flags a
-        singular value within :data:`hierarchy.AMBIGUITY` of ``tol``.
-    """
-    count, m, n = A.shape
-    if m == 0:
-        return (X, N, np.zeros((count, 0), dtype=bool), np.zeros((count, 0)),
-                np.zeros(count, dtype=bool))
-    J = A @ N
-    U, sv, Vt = np.linalg.svd(J, full_matrices=False)
-    t = tol[:, None]
-    keep = (sv > t) & (t > 0)
-    near = ((sv > t / AMBIGUITY) & (sv <= t * AMBIGUITY) & (t > 0)).any(axis=1)
-    safe = np.where(keep, sv, 1.0)
-    gain = np.where(keep, safe / (safe * safe + damping) if damping > 0 else 1.0 / safe, 0.0)
-    residual = b[:, :, None] - A @ X[:, :, None]                       # B × m × 1
-    step = np.swapaxes(Vt, 1, 2) @ (gain[:, :, None] * (np.swapaxes(U, 1, 2) @ residual))
-    if damping == 0:
-        for _ in range(REFINEMENT_STEPS):
-            step = step + refinement(J, residual, step, Vt, keep, sv)
-    if reproject:
-        step = N @ step                                            # N_{i-1} Ĵ_i^# = Ĵ_i^#
-    X = X + step[:, :, 0]
-    # V in range(N_{i-1}) to rounding (module docstring): the kept singular vectors come
-    # first (σ sorted), so the QR's leading columns span N V_r; the others are masked
-    V, _ = np.linalg.qr(N @ np.swapaxes(Vt, 1, 2))                  # B × n × p
-    V = V * keep[:, None, :]
-    return X, N - V @ np.swapaxes(V, 1, 2), keep, sv, near         # N_i = N_{i-1} − Ĵ⁺Ĵ
-
-
-def project_level(A: np.ndarray, b: np.ndarray, x: np.ndarray, N: np.ndarray, tol: float,
-                  damping: float = 0.0, reproject: bool = True
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
-    """:func:`project_levels` on one stack: ``(x_i, N_i, σ_kept, ambiguous)``."""
-    X, N, keep, sv, near = project_levels(A[None], b[None], x[None], N[None],
-                                          np.array([tol]), damping, reproject)
-    return X[0], N[0], sv[0][keep[0]], bool(near[0])
 
 
 def solve(stack: TaskStack, **options) -> Outcome:
@@ -292,7 +161,7 @@ def solve_batch(stacks: list[TaskStack], *, damping: float = 0.0,
         near |= amb
     return X, ["approximate" if damping > 0 or amb else "optimal" for amb in near]
 
-class Prepared:
+class Prepared(contract.Prepared):
     """Null-space projection prepared for one layout: options checked, and on the
     compiled kernel (``kernel="cpp"``) the C++ solver with every workspace allocated
     once (``prioik._core.NullspaceSolver``).
@@ -317,19 +186,19 @@ class Prepared:
         self.damping = float(options["damping"])
         self.rcond = float(options["rcond"])
         self.reproject = bool(options["reproject"])
-        self.compiled = self.kernel == "cpp"
-        if self.compiled:
+        self._cpp = self.kernel == "cpp"
+        if self._cpp:
             self._core = _core.NullspaceSolver([int(s) for s in layout.starts], layout.n,
                                                rcond=self.rcond, damping=self.damping,
                                                reproject=self.reproject)
 
-    def solve(self, data: StackData) -> Outcome:
+    def solve(self, data: StackData, options: dict[str, Any] | None = None) -> Outcome:
         """Solve one stack of the layout.
 
         Raises:
             TaskStackError: a value is not finite (naming the task, level and row).
         """
-        if not self.compiled:
+        if not self._cpp:
             stack, levels = data.as_stack().equilibrated()
             out = solve_readable(stack, damping=self.damping, rcond=self.rcond,
                                  reproject=self.reproject)
@@ -346,7 +215,7 @@ class Prepared:
     def solve_batch(self, datas: list[StackData]) -> tuple[np.ndarray, list[str]]:
         """Many stacks of the layout: ``(X, statuses)`` (:func:`solve_batch` on the
         numpy kernel, one compiled solve after the other on the cpp kernel)."""
-        if not self.compiled:
+        if not self._cpp:
             stacks = [d.as_stack().equilibrated()[0] for d in datas]
             return solve_batch(stacks, damping=self.damping, rcond=self.rcond,
                                reproject=self.reproject)
@@ -354,18 +223,5 @@ class Prepared:
         return np.array([o.x for o in outs]), [o.status for o in outs]
 
 
-# ------------------------------------------------------------------------ reports
-#: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
-REPORT_VARIANTS = (
-    ReportVariant("numpy", {"kernel": "numpy"}, reports=("bench",),
-                  note="the readable numpy SVD recursion (the default, kernel='auto', is the "
-                       "compiled C++ core)"),
-    ReportVariant("damped", {"damping": 0.05}, reports=("scenario",),
-                  note="the SR (damped least-squares) inverse on every level, λ = 0.05 "
-                       "(λ = 1e-2 left q̈ peaks of 355 in the incompatible fencing run, 0.05 "
-                       "keeps them at 65)"),
-    ReportVariant("damping=0.01", {"damping": 1e-2}, reports=("properties",),
-                  note="the damped least-squares inverse with the λ of eq. 27's rows"),
-    ReportVariant("reproject=False", {"reproject": False}, reports=("roundoff",),
-                  note="the textbook projector step, without the extra N_{i-1}"),
-)
+#: the plugin (:mod:`prioik.formulations.registry`)
+FORMULATION = contract.Formulation(NAME, DESCRIPTION, CAPABILITIES, OPTIONS, Prepared)

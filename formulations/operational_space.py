@@ -43,22 +43,23 @@ compiled kernel to.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.linalg import solve_triangular
 
 from prioik.hierarchy import StackData, StackLayout, TaskStack
 
+from . import contract
 from ._compiled import _core, mass_matrix_outcome, resolve_kernel, solve_compiled, solve_rescaled
+from ._numerics import check_nonnegative, truncated_svd
 from .base import (
     Capabilities,
     Diagnostics,
     FormulationError,
     Outcome,
-    ReportVariant,
     Status,
 )
-from .nullspace import check_nonnegative, truncated_svd
 from .options import Option, rcond_option, validate_options
 
 
@@ -188,7 +189,7 @@ def solve_readable(stack: TaskStack, *, mass_matrix, bias, rcond: float, reproje
                                detail=Detail("numpy", None, tau, levels, N)))
 
 
-class Prepared:
+class Prepared(contract.Prepared):
     """Prioritized operational-space control prepared for one layout: options checked, and
     on the compiled kernel (``kernel="cpp"``) the C++ solver with every workspace allocated
     once (``prioik._core.OperationalSpaceSolver``: ``M = L Lᵀ`` factored in the solve,
@@ -214,13 +215,13 @@ class Prepared:
         check_nonnegative(rcond=options["rcond"])
         self.rcond = float(options["rcond"])
         self.reproject = bool(options["reproject"])
-        self.compiled = self.kernel == "cpp"
-        if self.compiled:
+        self._cpp = self.kernel == "cpp"
+        if self._cpp:
             self._core = _core.OperationalSpaceSolver(
                 [int(s) for s in layout.starts], layout.n, rcond=self.rcond,
                 reproject=self.reproject)
 
-    def solve(self, data: StackData, options: dict | None = None) -> Outcome:
+    def solve(self, data: StackData, options: dict[str, Any] | None = None) -> Outcome:
         """Solve one stack of the layout (``options``: this call's, else the prepared ones).
 
         Raises:
@@ -231,7 +232,7 @@ class Prepared:
         mass, bias = options["mass_matrix"], options["bias"]
         if mass is None:
             raise FormulationError("formulation 'operational_space' needs mass_matrix=M")
-        if not self.compiled:
+        if not self._cpp:
             return solve_readable(data.as_stack(), mass_matrix=mass, bias=bias,
                                   rcond=self.rcond, reproject=self.reproject)
         M = np.ascontiguousarray(mass, dtype=np.float64)
@@ -241,12 +242,6 @@ class Prepared:
             return solve_rescaled(lambda d: self.solve(d, options), data)
         return out
 
-# ------------------------------------------------------------------------ reports
-#: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
-REPORT_VARIANTS = (
-    ReportVariant("numpy", {"kernel": "numpy"}, reports=("bench",),
-                  note="the readable numpy recursion (the default, kernel='auto', is the "
-                       "compiled C++ core)"),
-    ReportVariant("reproject=False", {"reproject": False}, reports=("roundoff",),
-                  note="the textbook projector step, without the extra N_{i-1}"),
-)
+
+#: the plugin (:mod:`prioik.formulations.registry`)
+FORMULATION = contract.Formulation(NAME, DESCRIPTION, CAPABILITIES, OPTIONS, Prepared)

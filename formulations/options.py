@@ -8,9 +8,12 @@ values; ``prioik list`` and ``--help`` print the same declarations.
 
 from __future__ import annotations
 
+import copy
+import dataclasses
+import functools
 import math
 import numbers
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -18,7 +21,7 @@ import numpy as np
 
 from .base import FormulationError
 
-__all__ = ["Option", "validate_options", "describe"]
+__all__ = ["Option", "validate_options", "describe", "settings_class"]
 
 #: ``kind`` values an :class:`Option` understands.
 KINDS = ("float", "int", "bool", "str", "matrix", "vector", "any")
@@ -230,7 +233,7 @@ def per_level_nonnegative(value: Any):
     return value
 
 
-def validate_options(formulation: str, declared: dict[str, Option], given: dict[str, Any],
+def validate_options(formulation: str, declared: Mapping[str, Option], given: dict[str, Any],
                      n: int | None) -> dict[str, Any]:
     """Every declared option's value: the given ones validated, the rest defaulted.
 
@@ -255,3 +258,32 @@ def validate_options(formulation: str, declared: dict[str, Option], given: dict[
 def describe(declared: dict[str, Option]) -> dict[str, tuple[Any, str]]:
     """``{option: (default, one-line doc)}`` for listings."""
     return {key: (opt.default, opt.doc()) for key, opt in declared.items()}
+
+
+#: the Python type of an option's value, by :attr:`Option.kind`
+_TYPES: dict[str, Any] = {"float": float, "int": int, "bool": bool, "str": str,
+                          "matrix": np.ndarray, "vector": np.ndarray, "any": Any}
+
+
+def settings_class(formulation: str, declared: Mapping[str, Option]) -> type:
+    """A frozen dataclass with one field per declared option, in order: its type from
+    :attr:`Option.kind` (``T | None`` when ``optional``), its default the option's, its
+    description in the field's metadata (``"description"``). Its name is the
+    formulation's in CamelCase with ``Settings`` (``ExtendedJacobianSettings``).
+
+    ``settings_class(name, declared)(**validate_options(name, declared, given, n))`` is
+    a formulation's settings, typed.
+    """
+    fields = []
+    for key, opt in declared.items():
+        kind = _TYPES[opt.kind]
+        kind = kind | None if opt.optional and kind is not Any else kind
+        default = opt.default
+        meta = {"description": opt.description}
+        spec = (dataclasses.field(default_factory=functools.partial(copy.copy, default),
+                                  metadata=meta)
+                if type(default).__hash__ is None      # a dict, list or array: copied
+                else dataclasses.field(default=default, metadata=meta))
+        fields.append((key, kind, spec))
+    name = "".join(part.capitalize() for part in formulation.split("_") if part) + "Settings"
+    return dataclasses.make_dataclass(name, fields, frozen=True)

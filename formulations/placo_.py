@@ -14,7 +14,7 @@ level is replaced by its feasible rows ``U_rᵀ A_1 x = U_rᵀ b_1``
 
 Statuses: ``optimal`` only for two levels with an equality first level (the
 lexicographic optimum up to ``ε``) whose answer passes the verification stage's
-certificate (:func:`~prioik.formulations.base.certify`, asked for every answer); deeper
+certificate (:func:`~prioik.formulations.verification.certify`, asked for every answer); deeper
 stacks are a weighted compromise and, like any stack with an inequality task below the
 first level, ``approximate``. PlaCo raises on infeasible hard inequalities: the status
 is then ``failed`` with a :class:`~prioik.formulations.base.Fault` naming the first level
@@ -27,12 +27,14 @@ In detail: ``docs/formulations.md``; measurements: ``docs/qp-formulations.md``.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import placo
 
 from prioik.hierarchy import TaskStack
 
+from . import contract
 from .base import (
     Capabilities,
     CheckRequest,
@@ -183,3 +185,18 @@ def solve(stack: TaskStack, *, weight_ratio: float | None, regularization: float
     return Outcome(np.array(x.value, dtype=np.float64),
                    Status.OPTIMAL if exact else Status.APPROXIMATE, diagnostics,
                    check=CheckRequest())
+
+
+class Prepared(contract.StackPrepared):
+    """PlaCo's problem prepared for one layout: :func:`solve` on each stack (built
+    per solve)."""
+
+    name = NAME
+    capabilities = CAPABILITIES
+
+    def solve_stack(self, stack: TaskStack, options: dict[str, Any]) -> Outcome:
+        return solve(stack, **options)
+
+
+#: the plugin (:mod:`prioik.formulations.registry`)
+FORMULATION = contract.Formulation(NAME, DESCRIPTION, CAPABILITIES, OPTIONS, Prepared)

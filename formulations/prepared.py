@@ -5,15 +5,13 @@ workspaces once; :meth:`PreparedSolver.solve` then takes any stack (or
 :class:`~prioik.hierarchy.StackData`) of that layout. :func:`prioik.solve` is prepare +
 solve, so the one-off and the prepared answers are the same computation.
 
-A plugin provides its own prepared solver as a class ``Prepared(layout, options)`` with
-``solve(data) -> Outcome`` (and optionally ``solve_batch(datas) -> (X, statuses)``);
-for the others a default adapter solves ``data.as_stack()`` with the module's ``solve``.
-A ``Prepared`` may also define ``solve_checked(data)``, called instead of ``solve`` by
-:meth:`PreparedSolver.solve`: it returns either an ``Outcome`` or, for a clean answer
-the plugin's kernel checked itself (what ``Outcome(..., checked=True)`` means: finite,
-of the right length, residuals given, ``‖x‖`` below the precision limit) with the status
-``optimal``, the tuple ``(x, status, diagnostics, residuals)`` — one object fewer per
-solve on a control loop's path.
+Each formulation provides its own prepared solver, a subclass of
+:class:`~prioik.formulations.contract.Prepared` built by its
+:class:`~prioik.formulations.contract.Formulation`; its ``solve_checked(data)`` returns
+either an ``Outcome`` or, for a clean answer the plugin's kernel checked itself (what
+``Outcome(..., checked=True)`` means: finite, of the right length, residuals given,
+``‖x‖`` below the precision limit) with the status ``optimal``, the tuple ``(x, status,
+diagnostics, residuals)`` — one object fewer per solve on a control loop's path.
 
 After the timed solve, :meth:`PreparedSolver.solve` runs the **verification stage**
 (its ``verify`` mode, :data:`~prioik.formulations.base.VERIFY_MODES`), timed apart
@@ -26,8 +24,8 @@ from __future__ import annotations
 import threading
 import time
 from collections.abc import Sequence
-from types import ModuleType
-from typing import TYPE_CHECKING, Any
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -37,7 +35,6 @@ from prioik.hierarchy import (
     StackLayout,
     TaskStack,
     TaskStackError,
-    UnsupportedTaskError,
     hard_violations,
     level_residuals,
 )
@@ -45,7 +42,6 @@ from prioik.hierarchy.linalg import PRECISION_LIMIT_NORM
 
 from .base import (
     VERIFY_MODES,
-    Capabilities,
     CheckRequest,
     ConcurrentUseError,
     Diagnostics,
@@ -55,76 +51,52 @@ from .base import (
     Solution,
     Status,
     Verification,
-    certify,
-    in_original_units,
-    lower_point_solver,
     precision_holds,
 )
+from .contract import Formulation, check_layout_support, check_support  # noqa: F401
+from .options import validate_options
+from .verification import certify, lower_point_solver
 
-if TYPE_CHECKING:
-    from .registry import BatchSolution
-
-__all__ = ["PreparedSolver", "check_layout_support", "check_support"]
+__all__ = ["BatchSolution", "PreparedSolver", "check_layout_support", "check_support"]
 
 _clock = time.perf_counter
 
 
-def check_layout_support(name: str, caps: Capabilities, layout: StackLayout) -> None:
-    """Raise :class:`UnsupportedTaskError` naming the first task of ``layout`` whose kind
-    ``caps`` cannot take."""
-    for i, level in enumerate(layout.levels):
-        for task, _, kind in level:
-            if kind == "inequality" and not caps.inequalities:
-                raise UnsupportedTaskError("inequality tasks are not supported",
-                                           formulation=name, task=task, level=i)
-            if kind == "equality" and not caps.equalities:
-                raise UnsupportedTaskError("equality tasks are not supported",
-                                           formulation=name, task=task, level=i)
-
-
-def check_support(name: str, caps: Capabilities, stack: TaskStack) -> None:
-    """Raise :class:`UnsupportedTaskError` naming the first task ``caps`` cannot take
-    (kinds, and differently weighted tasks sharing a level)."""
-    check_layout_support(name, caps, stack.layout)
-    if caps.weights:
-        return
-    for i, level in enumerate(stack.levels):
-        if len(level) > 1:
-            w = {float(v) for t in level for v in np.unique(t.weight)}
-            if len(w) > 1:
-                raise UnsupportedTaskError("weighted tasks sharing a level are not "
-                                           "supported", formulation=name,
-                                           task=level[0].name, level=i)
-
-
-def _step_options(name: str, module: ModuleType, n: int, given: dict) -> dict:
-    from .options import validate_options
-    declared = {k: module.OPTIONS[k] for k in given if k in module.OPTIONS}
+def _step_options(formulation: Formulation, n: int, given: dict) -> dict:
+    options = formulation.options
+    declared = {k: options[k] for k in given if k in options}
     unknown = sorted(set(given) - set(declared))
     if unknown:
-        raise FormulationError(f"formulation {name!r} has no option {', '.join(unknown)}; "
-                               f"its options: {', '.join(module.OPTIONS) or 'none'}")
-    return validate_options(name, declared, given, n)
+        raise FormulationError(f"formulation {formulation.name!r} has no option "
+                               f"{', '.join(unknown)}; its options: "
+                               f"{', '.join(options) or 'none'}")
+    return validate_options(formulation.name, declared, given, n)
 
 
-class _StackAdapter:
-    """The default prepared solver: the module's ``solve`` on the data's stack."""
+@dataclass
+class BatchSolution:
+    """The answers of one formulation to many stacks of the same shape.
 
-    accepts_step_options = True
+    Attributes:
+        X: Solutions, one row per stack (``B × n``).
+        statuses: One :class:`~prioik.formulations.Status` per stack.
+        formulation: Name of the formulation.
+        options: Options it was called with.
+        time_s: Wall time of the whole batch (solve alone).
+        batched: Whether the plugin's own batched kernel ran (else a loop of ``solve``).
+    """
 
-    def __init__(self, name: str, module: ModuleType, options: dict) -> None:
-        self._name, self._module, self._options = name, module, options
+    X: np.ndarray
+    statuses: list[Status]
+    formulation: str
+    options: dict[str, Any]
+    time_s: float
+    batched: bool
 
-    def solve(self, data: StackData, options: dict | None = None) -> Outcome:
-        stack = data.as_stack()
-        check_support(self._name, self._module.CAPABILITIES, stack)
-        levels = []
-        if self._module.CAPABILITIES.exact:     # levels of extreme scale rescaled
-            stack, levels = stack.equilibrated()
-        out = self._module.solve(stack, **(options or self._options))
-        if levels:
-            out = in_original_units(out, data, levels)
-        return out
+    @property
+    def time_per_stack_s(self) -> float:
+        """``time_s`` divided by the number of stacks."""
+        return self.time_s / max(1, len(self.statuses))
 
 
 class PreparedSolver:
@@ -140,8 +112,9 @@ class PreparedSolver:
     ``optimal`` answer is demoted to ``approximate``; its ``verify`` mode is one of
 
     * ``"auto"`` (default): what the formulation asks — its own options (e.g.
-      ``check=True``) decide whether the answer is certified (:func:`certify`, with the
-      exact active set's comparison, :func:`lower_point`), a solver's own certificate
+      ``check=True``) decide whether the answer is certified
+      (:func:`~.verification.certify`, with the exact active set's comparison,
+      :func:`~.verification.lower_point`), a solver's own certificate
       (``hierarchical_active_set``'s flagged steps) is applied, and an answer at a huge
       ``‖x‖`` is demoted where float64 cannot give a level's values
       (:func:`precision_holds`);
@@ -162,35 +135,32 @@ class PreparedSolver:
         compiled: The plugin solves the data's arrays in a compiled kernel.
     """
 
-    def __init__(self, formulation: str, module: ModuleType, layout: StackLayout,
+    def __init__(self, formulation: Formulation, layout: StackLayout,
                  options: dict[str, Any], given: dict[str, Any], verify: str = "auto"
                  ) -> None:
-        check_layout_support(formulation, module.CAPABILITIES, layout)
+        check_layout_support(formulation.name, formulation.capabilities, layout)
         if verify not in VERIFY_MODES:
             raise FormulationError(f"verify must be one of {', '.join(VERIFY_MODES)}; "
                                    f"got {verify!r}")
         self.verify = verify
         #: the exact active set of the lower-point comparison (prepared at first use)
         self._lower_solver: Any = None
-        self.formulation = formulation
+        self.formulation = formulation.name
         self.layout = layout
         self.options = options
         self._given = dict(given)
-        self._module = module
+        self._plugin = formulation
         self._lock = threading.Lock()
         self._n = layout.n
         self._sqrt_n = float(np.sqrt(layout.n))
         self._hard = layout.hard
-        self._needs_mass_matrix = module.CAPABILITIES.needs_mass_matrix
-        prepared = getattr(module, "Prepared", None)
-        self._impl = (prepared(layout, options) if prepared is not None
-                      else _StackAdapter(formulation, module, options))
+        self._needs_mass_matrix = formulation.capabilities.needs_mass_matrix
+        self._impl = formulation.prepare(layout, options)
         # a plugin's solve_checked may give its verified answers as a tuple (no Outcome)
-        checked = getattr(self._impl, "solve_checked", None)
-        self._impl_solve = checked or self._impl.solve
-        #: whether the plugin's own prepared solver reads the data's arrays in a compiled
-        #: kernel (``solve_checked``)
-        self.compiled = checked is not None and bool(getattr(self._impl, "compiled", True))
+        self._impl_solve = self._impl.solve_checked
+        #: whether the plugin's prepared solver reads the data's arrays in a compiled
+        #: kernel that checks its own answers (``solve_checked``)
+        self.compiled = bool(self._impl.compiled)
         self._acquire, self._release = self._lock.acquire, self._lock.release
 
     def _data(self, stack_or_data) -> StackData:
@@ -249,7 +219,7 @@ class PreparedSolver:
             except (np.linalg.LinAlgError, ArithmeticError) as exc:
                 out = Outcome(np.full(self._n, np.nan)).fail(f"{type(exc).__name__}: {exc}")
             elapsed = _clock() - t0
-            if type(out) is tuple:  # solve_checked's clean answer (see the module doc)
+            if isinstance(out, tuple):  # solve_checked's clean answer (see the module doc)
                 x, status, diagnostics, residuals = out
                 sol = Solution(x, self.formulation, self._given, status, residuals, elapsed,
                                diagnostics)
@@ -335,14 +305,11 @@ class PreparedSolver:
         Raises:
             ConcurrentUseError: another thread is using this solver.
         """
-        reset = getattr(self._impl, "reset", None)
-        if reset is None:
-            return
         if not self._acquire(False):
             raise ConcurrentUseError(f"this prepared {self.formulation!r} solver is busy in "
                                      f"another thread; prepare one solver per thread")
         try:
-            reset()
+            self._impl.reset()
         finally:
             self._release()
 
@@ -352,13 +319,12 @@ class PreparedSolver:
         ``mass_matrix`` refuses a call without one."""
         merged = None
         if step_options:
-            if not getattr(self._impl, "accepts_step_options", False):
+            if not self._impl.accepts_step_options:
                 raise FormulationError(f"formulation {self.formulation!r} fixes its options "
                                        f"when prepared; prepare another solver for "
                                        f"{', '.join(step_options)}")
             merged = dict(self.options)
-            merged.update(_step_options(self.formulation, self._module, self._n,
-                                        step_options))
+            merged.update(_step_options(self._plugin, self._n, step_options))
         if self._needs_mass_matrix and (merged or self.options).get("mass_matrix") is None:
             raise FormulationError(f"formulation {self.formulation!r} needs mass_matrix=M "
                                    f"(the {self._n}x{self._n} joint-space inertia matrix, "
@@ -416,7 +382,6 @@ class PreparedSolver:
             TaskStackError: an empty batch.
             FormulationError: a stack has another layout (naming its index).
         """
-        from .registry import BatchSolution
         if len(stacks_or_data) == 0:
             raise TaskStackError("solve_batch needs at least one stack")
         datas = []
@@ -425,14 +390,18 @@ class PreparedSolver:
                 datas.append(self._data(s))
             except FormulationError as exc:
                 raise FormulationError(f"stack {i} of the batch: {exc}") from None
-        batched = hasattr(self._impl, "solve_batch") or hasattr(self._module, "solve_batch")
         t0 = time.perf_counter()
         try:
-            X, statuses = self._batched(datas)
+            out = self._impl.solve_batch(datas)     # None: the plugin has no batched kernel
+            batched = out is not None
         except (np.linalg.LinAlgError, ArithmeticError):
             # a stack the batched kernel cannot take (e.g. an SVD that does not
             # converge): one by one, so that stack alone is "failed", as in solve
+            out, batched = None, True
+        if out is None:
             X, statuses = self._one_by_one(datas)
+        else:
+            X, statuses = out[0], list(out[1])
         elapsed = time.perf_counter() - t0
         X = np.asarray(X, dtype=np.float64)
         bad = ~np.isfinite(X).all(axis=1)
@@ -455,30 +424,14 @@ class PreparedSolver:
         # solve (``reset()``) starts each one cold, so row i is prioik.solve(stack_i)
         # (a warm start decides ranks on another path, which may give another status
         # on a rank near its threshold); a sequence of solve() calls stays warm
-        reset = getattr(self._impl, "reset", None)
         X = np.empty((len(datas), self._n))
         statuses = []
         for i, d in enumerate(datas):
-            if reset is not None:
-                reset()
+            self._impl.reset()
             sol = self.solve(d)
             X[i] = sol.x
             statuses.append(sol.status)
         return X, statuses
-
-    def _batched(self, datas: list[StackData]) -> tuple[np.ndarray, list]:
-        if hasattr(self._impl, "solve_batch"):
-            X, statuses = self._impl.solve_batch(datas)
-        elif hasattr(self._module, "solve_batch"):
-            stacks = [d.as_stack() for d in datas]
-            for s in stacks:
-                check_support(self.formulation, self._module.CAPABILITIES, s)
-            if self._module.CAPABILITIES.exact:     # as solve: extreme levels rescaled
-                stacks = [s.equilibrated()[0] for s in stacks]
-            X, statuses = self._module.solve_batch(stacks, **self.options)
-        else:
-            X, statuses = self._one_by_one(datas)
-        return X, list(statuses)
 
     def __repr__(self) -> str:
         opts = ", ".join(f"{k}={v!r}" for k, v in self._given.items())

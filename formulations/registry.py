@@ -1,23 +1,17 @@
 """The formulation registry: one line per plugin module, imported on demand.
 
-A plugin is a module that defines
+A plugin is a module that defines ``FORMULATION``, a
+:class:`~prioik.formulations.contract.Formulation`: its name, one-line description,
+:class:`Capabilities`, typed ``{option: Option(...)}`` (:mod:`.options`, the only options
+it accepts, validated once by the registry: the plugin receives every option, clean),
+the back-ends it can use here, and its own
+:class:`~prioik.formulations.contract.Prepared` subclass (``solve(data)``, and when it
+has them ``solve_checked``, ``solve_batch``, ``reset``), built once per layout by
+:func:`prepare`. Adding a formulation is its module and one line of :data:`PLUGINS`.
 
-* ``NAME`` (str), ``DESCRIPTION`` (one line), ``CAPABILITIES`` (:class:`Capabilities`),
-* ``OPTIONS``: ``{option: Option(...)}`` (:mod:`.options`), the only options it accepts
-  (validated once by the registry: the plugin receives every option, clean),
-* ``solve(stack, **options) -> Outcome``,
-* optionally ``Prepared(layout, options)`` with ``solve(data) -> Outcome`` (and
-  ``solve_batch(datas)``): its own prepared solver (:func:`prepare`); otherwise a default
-  adapter calls ``solve`` on the data's stack,
-* optionally ``backends() -> list[str]``, the back-ends it can use here,
-* optionally ``solve_batch(stacks, **options) -> (X, statuses)`` for many stacks of one
-  shape (stacked linear algebra); :func:`solve_batch` loops over ``solve`` otherwise,
-* optionally, for prioik's reports (:mod:`prioik.benchmarks.variants`; the reports read
-  nothing else, so a new plugin appears in every one of them by itself):
-  ``REPORT_VARIANTS``, a tuple of :class:`~.base.ReportVariant` (settings worth a row of
-  their own), and ``REPORT_OPT_OUTS``, ``{report: reason}`` (reports whose default
-  selection leaves it out; ``"validate:backends"``-style keys keep one row instead of
-  one per back-end).
+The rows a formulation adds to prioik's reports are declared by the benchmarks
+(:mod:`prioik.benchmarks.report_rows`), not here: a new plugin appears in every report
+with its defaults by itself.
 
 A plugin whose optional dependency is not installed is unavailable; the reason,
 ending with the extra to install (``install it with `pip install prioik[qp]```), is
@@ -29,17 +23,15 @@ from __future__ import annotations
 import importlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from types import ModuleType
 from typing import Any
-
-import numpy as np
 
 from prioik.extras import install_hint
 from prioik.hierarchy import StackData, StackLayout, TaskStack
 
-from .base import Capabilities, FormulationError, Solution, Status
+from .base import Capabilities, FormulationError, Solution
+from .contract import Formulation
 from .options import Option, validate_options
-from .prepared import PreparedSolver, check_support  # noqa: F401  (re-exported)
+from .prepared import BatchSolution, PreparedSolver, check_support  # noqa: F401  (re-exported)
 
 #: name -> (module, the extra of pyproject.toml that brings its dependencies; "" for the
 #: core). prioik.extras.EXTRAS names the extras.
@@ -59,7 +51,7 @@ PLUGINS: dict[str, tuple[str, str]] = {
     "lexls": ("prioik.formulations.lexls_", ""),
 }
 
-_loaded: dict[str, ModuleType] = {}
+_loaded: dict[str, Formulation] = {}
 _failed: dict[str, str] = {}
 
 
@@ -88,7 +80,7 @@ class FormulationInfo:
     extra: str = ""
 
 
-def _load(name: str) -> ModuleType | None:
+def _load(name: str) -> Formulation | None:
     if name in _loaded:
         return _loaded[name]
     if name in _failed:
@@ -97,15 +89,19 @@ def _load(name: str) -> ModuleType | None:
     try:
         mod = importlib.import_module(module_name)
     except ImportError as exc:
-        missing = getattr(exc, "name", None) or ""
+        missing = exc.name or ""
         own = missing == module_name or missing.startswith("prioik.")
         if extra and not own:  # an optional dependency: say which extra brings it
             _failed[name] = f"{exc} (the `{extra}` extra); {install_hint(extra)}"
         else:  # a broken installation or a bug: the error as it is
             _failed[name] = f"{type(exc).__name__}: {exc}"
         return None
-    _loaded[name] = mod
-    return mod
+    formulation = mod.FORMULATION
+    if not isinstance(formulation, Formulation) or formulation.name != name:
+        raise FormulationError(f"module {module_name} declares no Formulation named "
+                               f"{name!r} as its FORMULATION")
+    _loaded[name] = formulation
+    return formulation
 
 
 def names() -> list[str]:
@@ -117,14 +113,13 @@ def available() -> list[FormulationInfo]:
     """Every registered formulation, with whether it can run here and why not."""
     out = []
     for name in PLUGINS:
-        mod = _load(name)
+        form = _load(name)
         extra = PLUGINS[name][1]
-        if mod is None:
+        if form is None:
             out.append(FormulationInfo(name, False, _failed[name], extra=extra))
             continue
-        backends = tuple(mod.backends()) if hasattr(mod, "backends") else ()
-        out.append(FormulationInfo(name, True, "", mod.DESCRIPTION, mod.CAPABILITIES,
-                                   dict(mod.OPTIONS), backends, extra))
+        out.append(FormulationInfo(name, True, "", form.description, form.capabilities,
+                                   dict(form.options), tuple(form.backends()), extra))
     return out
 
 
@@ -154,8 +149,9 @@ def compile_kernels(names: list[str] | None = None,
     return []
 
 
-def get(name: str) -> ModuleType:
-    """The plugin module called ``name``.
+def get(name: str) -> Formulation:
+    """The formulation called ``name`` (its plugin's
+    :class:`~prioik.formulations.contract.Formulation`).
 
     Raises:
         FormulationError: unknown name (lists the known ones) or not available here
@@ -163,10 +159,10 @@ def get(name: str) -> ModuleType:
     """
     if name not in PLUGINS:
         raise FormulationError(f"unknown formulation {name!r}; known: {', '.join(PLUGINS)}")
-    mod = _load(name)
-    if mod is None:
+    form = _load(name)
+    if form is None:
         raise FormulationError(f"formulation {name!r} is not available here: {_failed[name]}")
-    return mod
+    return form
 
 
 def prepare(stack_or_layout, formulation: str = "extended_jacobian", *, verify: str = "auto",
@@ -182,7 +178,7 @@ def prepare(stack_or_layout, formulation: str = "extended_jacobian", *, verify: 
             place an answer is demoted to ``approximate``: ``"auto"`` (what the
             formulation's options ask), ``"none"``, ``"certificate"`` or
             ``"lower_point"`` (see :class:`PreparedSolver`).
-        **options: The formulation's options (see its ``OPTIONS``).
+        **options: The formulation's options (:attr:`Formulation.options`).
 
     Raises:
         FormulationError: unknown/unavailable formulation, unknown or invalid option or
@@ -192,15 +188,15 @@ def prepare(stack_or_layout, formulation: str = "extended_jacobian", *, verify: 
     A formulation that needs ``mass_matrix`` may get it here or with every solve
     (``solver.solve(stack, mass_matrix=M, bias=b)``: it changes with the state).
     """
-    mod = get(formulation)
+    form = get(formulation)
     if isinstance(stack_or_layout, StackLayout):
         layout = stack_or_layout
     elif isinstance(stack_or_layout, (TaskStack, StackData)):
         layout = stack_or_layout.layout
     else:
         layout = TaskStack(stack_or_layout).layout
-    opts = validate_options(formulation, mod.OPTIONS, options, layout.n)
-    return PreparedSolver(formulation, mod, layout, opts, options, verify)
+    opts = validate_options(formulation, form.options, options, layout.n)
+    return PreparedSolver(form, layout, opts, options, verify)
 
 
 def solve(stack, formulation: str = "extended_jacobian", *, verify: str = "auto",
@@ -212,7 +208,7 @@ def solve(stack, formulation: str = "extended_jacobian", *, verify: str = "auto"
             accepts), or a :class:`~prioik.hierarchy.StackData`.
         formulation: Registry name (see :func:`available`).
         verify: The verification stage (see :func:`prepare`).
-        **options: The formulation's options (see its ``OPTIONS``).
+        **options: The formulation's options (:attr:`Formulation.options`).
 
     Returns:
         A :class:`Solution`. A numerical failure inside the formulation gives
@@ -231,32 +227,6 @@ def solve(stack, formulation: str = "extended_jacobian", *, verify: str = "auto"
     return prepare(stack.layout, formulation, verify=verify, **options).solve(stack)
 
 
-@dataclass
-class BatchSolution:
-    """The answers of one formulation to many stacks of the same shape.
-
-    Attributes:
-        X: Solutions, one row per stack (``B × n``).
-        statuses: One :class:`Status` per stack.
-        formulation: Name of the formulation.
-        options: Options it was called with.
-        time_s: Wall time of the whole batch (solve alone).
-        batched: Whether the plugin's own batched kernel ran (else a loop of ``solve``).
-    """
-
-    X: np.ndarray
-    statuses: list[Status]
-    formulation: str
-    options: dict[str, Any]
-    time_s: float
-    batched: bool
-
-    @property
-    def time_per_stack_s(self) -> float:
-        """``time_s`` divided by the number of stacks."""
-        return self.time_s / max(1, len(self.statuses))
-
-
 def stack_shape(stack: TaskStack) -> tuple:
     """What must agree for stacks to share a batch: ``n`` and each task's rows and kind
     (the stack's layout, as a tuple)."""
@@ -268,9 +238,9 @@ def solve_batch(stacks, formulation: str = "extended_jacobian", *, verify: str =
     """Solve many stacks of one layout (sampled states, retargeting frames, sweeps): one
     prepared solver over every stack.
 
-    Uses the plugin's batched kernel when it has one (``Prepared.solve_batch`` or a
-    module-level ``solve_batch``), otherwise loops over the prepared solve. ``verify``
-    as :func:`prepare` (a batched kernel's statuses get the precision check only).
+    Uses the plugin's batched kernel when it has one (``Prepared.solve_batch``),
+    otherwise loops over the prepared solve. ``verify`` as :func:`prepare` (a batched
+    kernel's statuses get the precision check only).
 
     Raises:
         TaskStackError: an empty batch.

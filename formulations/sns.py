@@ -26,26 +26,47 @@ bounds (then ``x`` is the exact lexicographic optimum with the bounds on top);
 (:attr:`Detail.scaled_tasks`), or at an ambiguous rank decision
 (``diagnostics.reason``). Its own record: :class:`Detail`.
 
+Two kernels (option ``kernel``): ``"cpp"`` (the default; :class:`Prepared`) runs the
+algorithm in the C++ core over one workspace (``prioik._core.SnsSolver``): the
+unbounded step is ``nullspace``'s compiled level (a row-pivoted LQ of ``J_k P``, the rank
+rule on its pivots), every pseudo-inverse of the saturation rounds a row-pivoted LQ
+applied to vectors, and :attr:`Detail.flops` counts the solve's floating-point operations;
+``"numpy"`` is :func:`solve_readable`, the SVD version as written, the oracle the tests
+hold the compiled kernel to.
+
 The algorithm step by step: ``docs/formulations.md``.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from prioik.hierarchy import (
+    AMBIGUITY,
     DEFAULT_RCOND,
+    StackData,
+    StackLayout,
     TaskStack,
     UnsupportedTaskError,
     ambiguity_reason,
     rank_threshold,
 )
 
-from .base import Capabilities, Diagnostics, FormulationError, Outcome, ReportVariant, Status
-from .nullspace import check_nonnegative, project_level, truncated_svd
-from .options import Option, rcond_option
+from . import contract
+from ._compiled import _core, resolve_kernel, solve_compiled, solve_rescaled
+from ._numerics import check_nonnegative, project_level, truncated_svd
+from .base import (
+    Capabilities,
+    Diagnostics,
+    FormulationError,
+    Outcome,
+    Status,
+    in_original_units,
+)
+from .options import Option, rcond_option, validate_options
 
 
 @dataclass(slots=True)
@@ -59,6 +80,9 @@ class Detail:
         iterations: Saturation rounds per equality level.
         bounds_level: The level of the bounds (``0``) or ``None``.
         first_task_level: The first level of equality tasks.
+        kernel: ``"cpp"`` or ``"numpy"``.
+        flops: Floating-point operations of the solve, counted in the compiled kernel
+            (``None`` on the numpy path).
     """
 
     task_scaling: list[float]
@@ -67,6 +91,8 @@ class Detail:
     iterations: list[int]
     bounds_level: int | None
     first_task_level: int
+    kernel: str = "numpy"
+    flops: int | None = None
 
 
 NAME = "sns"
@@ -83,6 +109,9 @@ OPTIONS = {
                               "tol·max(1, |bound|)", minimum=0.0),
     "max_saturations": Option(None, "int", "cap on saturated joints per task (default: "
                               "the number of bounded columns)", minimum=0, optional=True),
+    "kernel": Option("auto", "str", "'cpp': the compiled C++ core (prioik._core, row-pivoted "
+                     "LQs); 'numpy': the readable SVD version; 'auto': cpp where built",
+                     choices=("auto", "cpp", "numpy")),
 }
 
 
@@ -140,10 +169,12 @@ def split_bounds(stack: TaskStack) -> tuple[np.ndarray, np.ndarray, int | None]:
 
 
 def _scale_interval(a: np.ndarray, c: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-                    tol: np.ndarray) -> tuple[float, float, np.ndarray]:
+                    tol: np.ndarray, free: np.ndarray) -> tuple[float, float, np.ndarray]:
     """Interval of ``s`` with ``lo ≤ c + s a ≤ hi`` (per column, then intersected)
-    and each column's upper end (``+inf`` where unconstrained)."""
-    small = np.abs(a) <= 1e-14 * max(1.0, float(np.abs(a).max(initial=0.0)))
+    and each column's upper end (``+inf`` where unconstrained). A saturated column
+    (``free`` false) has ``a = 0`` exactly (``M`` acts in ``P̄``, whose rows of the
+    saturated columns are zero): it takes no part whatever the rounding left in it."""
+    small = ~free | (np.abs(a) <= 1e-14 * max(1.0, float(np.abs(a).max(initial=0.0))))
     with np.errstate(divide="ignore", invalid="ignore"):
         s_lo = np.where(a > 0, (lo - c) / a, (hi - c) / a)
         s_hi = np.where(a > 0, (hi - c) / a, (lo - c) / a)
@@ -153,25 +184,60 @@ def _scale_interval(a: np.ndarray, c: np.ndarray, lo: np.ndarray, hi: np.ndarray
     return float(s_lo.max(initial=-np.inf)), float(s_hi.min(initial=np.inf)), s_hi
 
 
+#: Scales within this factor of ``max(1, |s|)`` of each other are one: joints that leave
+#: their bounds at such scales leave them together (the lowest column goes first), and a
+#: scaling interval ``[s_min, s_t]`` that much narrower than empty is the point ``s_t``.
+#: Both ties are exact when the levels above left ``x`` at a vertex of the box, and
+#: rounding alone would otherwise decide them.
+SATURATION_TIE = 1e-9
+
+
+def _tie(s: float) -> float:
+    """:data:`SATURATION_TIE` at the scale ``s`` (0 where ``s`` is not finite)."""
+    return SATURATION_TIE * max(1.0, abs(s)) if np.isfinite(s) else 0.0
+
+
+def _most_critical(cand: np.ndarray, col_hi: np.ndarray) -> int:
+    """The column of ``cand`` (ascending) whose bound is left first as ``s`` grows (the
+    smallest ``col_hi``), the lowest of those within :data:`SATURATION_TIE` of it."""
+    first = float(col_hi.min())
+    return int(cand[np.flatnonzero(col_hi <= first + _tie(first))[0]])
+
+
 def _pinv(M: np.ndarray, tol: float) -> tuple[np.ndarray, int]:
     U, s, V = truncated_svd(M, tol)
     return (V / s) @ U.T, int(s.size)
 
 
-# ---------------------------------------------------------------------- solve
-def solve(stack: TaskStack, *, rcond: float = DEFAULT_RCOND, bound_tolerance: float = 1e-9,
-          max_saturations: int | None = None) -> Outcome:
-    """SNS on ``stack``; see the module docstring.
-
-    Raises:
-        UnsupportedTaskError, FormulationError: see :func:`split_bounds`; an option
-            that is not a finite number ≥ 0.
-    """
+def check_saturation_options(rcond, bound_tolerance, max_saturations) -> None:
+    """Raise :class:`FormulationError` for ``rcond`` or ``bound_tolerance`` not a finite
+    number ≥ 0, or ``max_saturations`` neither ``None`` nor an integer ≥ 0."""
     check_nonnegative(rcond=rcond, bound_tolerance=bound_tolerance)
     if max_saturations is not None and (not isinstance(max_saturations, (int, np.integer))
                                         or max_saturations < 0):
         raise FormulationError(f"max_saturations must be an integer ≥ 0 or None, "
                                f"got {max_saturations!r}")
+
+
+# ---------------------------------------------------------------------- solve
+def solve(stack: TaskStack, **options) -> Outcome:
+    """SNS on ``stack``: :class:`Prepared` for the stack's layout, then its
+    :meth:`Prepared.solve` (``kernel`` picks the compiled or the readable path)."""
+    opts = validate_options(NAME, OPTIONS, options, stack.n)
+    return Prepared(stack.layout, opts).solve(stack.data)
+
+
+def solve_readable(stack: TaskStack, *, rcond: float = DEFAULT_RCOND,
+                   bound_tolerance: float = 1e-9, max_saturations: int | None = None
+                   ) -> Outcome:
+    """SNS on ``stack`` in numpy (``kernel="numpy"``), the readable oracle of the compiled
+    kernel; see the module docstring.
+
+    Raises:
+        UnsupportedTaskError, FormulationError: see :func:`split_bounds`; an option
+            that is not a finite number ≥ 0.
+    """
+    check_saturation_options(rcond, bound_tolerance, max_saturations)
     lower, upper, bounds_level = split_bounds(stack)
     n = stack.n
     bounded = np.isfinite(lower) | np.isfinite(upper)
@@ -224,16 +290,16 @@ def solve(stack: TaskStack, *, rcond: float = DEFAULT_RCOND, bound_tolerance: fl
                 if feasible(xs):
                     x_new, s_level = xs, 1.0
                     break
-                s_min, s_max, col_hi = _scale_interval(a, cvec, lower, upper, tol)
+                s_min, s_max, col_hi = _scale_interval(a, cvec, lower, upper, tol, free)
                 s_t = min(1.0, s_max)
-                if s_min <= s_t and s_t >= 0.0 and s_t > best[0]:
+                if s_min <= s_t + _tie(s_t) and s_t >= 0.0 and s_t > best[0]:
                     best = (s_t, cvec + s_t * a)
                 # most critical free bounded joint: the first to leave its bounds as s grows
                 viol = (xs < lower - tol) | (xs > upper + tol)
                 cand = np.flatnonzero(free & bounded & viol)
                 if cand.size == 0 or len(sat) >= cap:
                     break
-                j = int(cand[np.argmin(col_hi[cand])])
+                j = _most_critical(cand, col_hi[cand])
                 free[j] = False
                 xN[j] = np.clip(xs[j], lower[j], upper[j])
                 sat.append(j)
@@ -263,26 +329,124 @@ def solve(stack: TaskStack, *, rcond: float = DEFAULT_RCOND, bound_tolerance: fl
         P = P_next
     if not levels and not feasible(x):
         x = np.clip(x, lower, upper)        # bounds alone: the box's minimum-norm point
+    return _outcome(x, scaling, scaled, saturated, iterations, bounds_level, first,
+                    ambiguous, exact, "numpy", None)
+
+
+def _outcome(x, scaling, scaled, saturated, iterations, bounds_level, first, ambiguous,
+             exact: bool, kernel: str, flops, residuals=None, margins=None) -> Outcome:
+    """The answer with its diagnostics: ``optimal`` when every level reached its
+    unbounded residual, none was scaled and no rank decision was ambiguous."""
     optimal = exact and not scaled and not ambiguous
-    diagnostics = Diagnostics(ambiguous_levels=list(ambiguous),
+    diagnostics = Diagnostics(ambiguous_levels=list(ambiguous), margins=margins,
                               detail=Detail(scaling, scaled, saturated, iterations,
-                                            bounds_level, first))
+                                            bounds_level, first, kernel, flops))
     if ambiguous:
         diagnostics.add_reason(ambiguity_reason(ambiguous))
     if scaled:
         diagnostics.add_reason(f"task scaling under the bounds: {'; '.join(scaled)}")
     elif not optimal and not ambiguous:
         diagnostics.add_reason("a level's residual grew under the bounds")
-    return Outcome(x, Status.OPTIMAL if optimal else Status.APPROXIMATE, diagnostics)
+    return Outcome(x, Status.OPTIMAL if optimal else Status.APPROXIMATE, diagnostics,
+                   residuals)
 
-# ------------------------------------------------------------------------ reports
-#: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
-REPORT_VARIANTS = (
-    ReportVariant("", limits="hard_bounds", reports=("scenario", "control_step"),
-                  replaces_default=True,
-                  note="the joint-limit bounds as hard limits above every task (level 0), "
-                       "strict priorities, task scaling when a task cannot be met within "
-                       "them"),
-    ReportVariant("velocity", level="velocity", limits="hard_bounds", reports=("scenario",),
-                  note="SNS at velocity level (J q̇ = ẋ* + K e, the q̇ bounds as level 0)"),
-)
+
+def check_bounds_layout(layout: StackLayout) -> int | None:
+    """The layout's bounds level (``0`` when its first level holds inequality tasks, else
+    ``None``), as :func:`split_bounds` reads it.
+
+    Raises:
+        UnsupportedTaskError: an inequality task below the first level, or a first level
+            that mixes bounds and equality tasks.
+    """
+    has = False
+    for i, level in enumerate(layout.levels):
+        kinds = [kind for _, _, kind in level]
+        for task, _, kind in level:
+            if kind == "equality":
+                if i == 0 and "inequality" in kinds:
+                    raise UnsupportedTaskError(
+                        "the first level holds the joint bounds; put equality tasks in "
+                        "the levels below it", formulation=NAME, task=task, level=i)
+                continue
+            if i != 0:
+                raise UnsupportedTaskError(
+                    "inequality tasks are taken only as box bounds on single columns at "
+                    "the first level (the hard joint bounds)", formulation=NAME,
+                    task=task, level=i)
+            has = True
+    return 0 if has else None
+
+
+class Prepared(contract.Prepared):
+    """SNS prepared for one layout: options checked, the bounds level read from the
+    layout, and on the compiled kernel (``kernel="cpp"``) the C++ solver with every
+    workspace allocated once (``prioik._core.SnsSolver``; :attr:`Detail.flops` counts the
+    solve's floating-point operations). ``kernel="numpy"`` is :func:`solve_readable`.
+
+    Args:
+        layout: The stack layout.
+        options: Every option of :data:`OPTIONS`, validated.
+
+    Raises:
+        UnsupportedTaskError: see :func:`check_bounds_layout`.
+        FormulationError: an option out of its range.
+    """
+
+    def __init__(self, layout: StackLayout, options: dict) -> None:
+        self.layout = layout
+        self.kernel = resolve_kernel(options["kernel"])
+        self.rcond = options["rcond"]
+        self.bound_tolerance = options["bound_tolerance"]
+        self.max_saturations = options["max_saturations"]
+        check_saturation_options(self.rcond, self.bound_tolerance, self.max_saturations)
+        self.bounds_level = check_bounds_layout(layout)
+        self.first = 1 if self.bounds_level == 0 else 0
+        self._cpp = self.kernel == "cpp"
+        if self._cpp:
+            self._core = _core.SnsSolver(
+                [int(s) for s in layout.starts], layout.n, rcond=float(self.rcond),
+                bound_tolerance=float(self.bound_tolerance),
+                max_saturations=-1 if self.max_saturations is None else
+                int(self.max_saturations), bounds_level=self.bounds_level == 0)
+
+    def solve(self, data: StackData, options: dict[str, Any] | None = None) -> Outcome:
+        """Solve one stack of the layout.
+
+        Raises:
+            TaskStackError: a value is not finite (naming the task, level and row).
+            UnsupportedTaskError, FormulationError: see :func:`split_bounds`.
+        """
+        if not self._cpp:
+            stack, levels = data.as_stack().equilibrated()
+            out = solve_readable(stack, rcond=self.rcond, bound_tolerance=self.bound_tolerance,
+                                 max_saturations=self.max_saturations)
+            return in_original_units(out, data, levels) if levels else out
+        res = solve_compiled(self._core, data, data.lower, data.upper)
+        if res.bounds != 0:
+            split_bounds(data.as_stack())         # raises, naming the task or column
+            raise FormulationError(f"sns: the bounds rows are malformed at entry "
+                                   f"{res.bad_entry}")   # pragma: no cover - split_bounds raised
+        if not res.solved:
+            return solve_rescaled(self.solve, data)
+        return self._outcome(res)
+
+    def _outcome(self, res) -> Outcome:
+        levels = range(self.first, self.layout.k)
+        n = self.layout.n
+        scaling = res.task_scaling.tolist()
+        counts = res.saturated_count.tolist()
+        sat = res.saturated.reshape(self.layout.k, n)
+        names = self.layout.names
+        margins = res.margins
+        scaled = [", ".join(names[i]) for i in levels if scaling[i] < 1.0]
+        ambiguous = [i for i in levels if margins[i] <= AMBIGUITY]
+        return _outcome(res.x, [scaling[i] for i in levels], scaled,
+                        [sat[i, :counts[i]].tolist() for i in levels],
+                        [int(v) for v in res.iterations[self.first:]], self.bounds_level,
+                        self.first, ambiguous, bool(res.exact), "cpp", res.flops,
+                        res.residuals, np.asarray(margins).copy())
+
+
+#: the plugin (:mod:`prioik.formulations.registry`)
+FORMULATION = contract.Formulation(NAME, DESCRIPTION, CAPABILITIES, OPTIONS, Prepared)

@@ -43,22 +43,23 @@ oracle the tests hold the compiled kernel to.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve
 
 from prioik.hierarchy import DEFAULT_RCOND, StackData, StackLayout, TaskStack
 
+from . import contract
 from ._compiled import _core, mass_matrix_outcome, resolve_kernel, solve_compiled, solve_rescaled
+from ._numerics import check_nonnegative, generalized_inverse
 from .base import (
     Capabilities,
     Diagnostics,
     FormulationError,
     Outcome,
-    ReportVariant,
     Status,
 )
-from .nullspace import check_nonnegative, generalized_inverse
 from .options import Option, rcond_option, validate_options
 
 #: the reason of every answer's ``approximate`` status
@@ -179,7 +180,7 @@ def solve_readable(stack: TaskStack, *, mass_matrix, bias, rcond: float) -> Outc
                    Diagnostics(reason=ALGORITHMIC_ERROR, detail=Detail("numpy", None, tau)))
 
 
-class Prepared:
+class Prepared(contract.Prepared):
     """The unifying framework prepared for one layout: options checked, and on the compiled
     kernel (``kernel="cpp"``) the C++ solver with every workspace allocated once
     (``prioik._core.UnifyingSolver``: ``M = L Lᵀ`` factored in the solve, each
@@ -202,12 +203,12 @@ class Prepared:
         self.kernel = resolve_kernel(options["kernel"])
         check_nonnegative(rcond=options["rcond"])
         self.rcond = float(options["rcond"])
-        self.compiled = self.kernel == "cpp"
-        if self.compiled:
+        self._cpp = self.kernel == "cpp"
+        if self._cpp:
             self._core = _core.UnifyingSolver([int(s) for s in layout.starts], layout.n,
                                               rcond=self.rcond)
 
-    def solve(self, data: StackData, options: dict | None = None) -> Outcome:
+    def solve(self, data: StackData, options: dict[str, Any] | None = None) -> Outcome:
         """Solve one stack of the layout (``options``: this call's, else the prepared ones).
 
         Raises:
@@ -218,7 +219,7 @@ class Prepared:
         mass, bias = options["mass_matrix"], options["bias"]
         if mass is None:
             raise FormulationError("formulation 'unifying' needs mass_matrix=M")
-        if not self.compiled:
+        if not self._cpp:
             return solve_readable(data.as_stack(), mass_matrix=mass, bias=bias,
                                   rcond=self.rcond)
         M = np.ascontiguousarray(mass, dtype=np.float64)
@@ -230,12 +231,6 @@ class Prepared:
             return solve_rescaled(lambda d: self.solve(d, options), data)
         return out
 
-# ------------------------------------------------------------------------ reports
-#: rows of prioik's reports beside the default one (prioik.benchmarks.variants)
-REPORT_VARIANTS = (
-    ReportVariant("numpy", {"kernel": "numpy"}, reports=("bench",),
-                  note="the readable numpy eq. 40 (the default, kernel='auto', is the "
-                       "compiled C++ core)"),
-    ReportVariant("M=I", mass="identity", reports=("properties",),
-                  note="with M = I (the report's other row has a seeded SPD M)"),
-)
+
+#: the plugin (:mod:`prioik.formulations.registry`)
+FORMULATION = contract.Formulation(NAME, DESCRIPTION, CAPABILITIES, OPTIONS, Prepared)

@@ -30,14 +30,6 @@ from .io import (
     stack_from_dict,
     stack_to_dict,
 )
-from .layout import (
-    StackData,
-    StackLayout,
-    hard_violations,
-    level_residuals,
-    precision_limited_levels,
-    precision_reason,
-)
 from .linalg import (
     AMBIGUITY,
     DEFAULT_CERTIFICATE_TOL,
@@ -56,8 +48,18 @@ from .linalg import (
     rank_threshold,
     row_activity,
 )
-from .stack import TaskStack
-from .task import Level, Task, hard
+from .stack import (
+    Level,
+    StackData,
+    StackLayout,
+    Task,
+    TaskStack,
+    hard,
+    hard_violations,
+    level_residuals,
+    precision_limited_levels,
+    precision_reason,
+)
 
 __all__ = [
     "AMBIGUITY", "DEFAULT_CERTIFICATE_TOL", "DEFAULT_RCOND", "FeasibleSplit", "Level",

@@ -17,11 +17,11 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .errors import TaskStackError, UnsupportedTaskError
-from .layout import StackData, level_residuals
 from .linalg import (
     CERTIFICATE_SIGMA_FLOOR,
     DEFAULT_CERTIFICATE_TOL,
@@ -30,12 +30,17 @@ from .linalg import (
     ambiguous_decision,
     level_scale,
     matrix_rank,
+    nested_null_spaces,
     nonnegative_least_squares,
     range_basis,
+    rank_profile,
     row_activity_from_values,
     svd,
 )
-from .stack import TaskStack
+from .stack import StackData, level_residuals
+
+if TYPE_CHECKING:
+    from .stack import TaskStack
 
 
 def _require_equality(stack: TaskStack, what: str) -> None:
@@ -44,33 +49,6 @@ def _require_equality(stack: TaskStack, what: str) -> None:
             if not t.is_equality:
                 raise UnsupportedTaskError("it is defined for equality tasks only",
                                            formulation=what, task=t.name, level=i)
-
-
-def nested_null_spaces(stack: TaskStack, rcond: float = DEFAULT_RCOND) -> list[np.ndarray]:
-    """Bases ``Z_1 = I, Z_2, …, Z_{k+1}`` of the null spaces of ``J_0^A … J_k^A``.
-
-    ``Z_{i+1} = Z_i · null(A_i Z_i)``, each rank decision on the scale of ``‖A_i‖_F``.
-    Returned as ``n × d_i`` matrices with orthonormal columns (index ``i`` is the
-    basis *before* level ``i``; the last is the null space of the whole stack).
-    """
-    Z = np.eye(stack.n)
-    out = [Z]
-    for level in stack.levels:
-        A = level.A
-        if A.shape[0] and Z.shape[1]:
-            M = A @ Z
-            _, s, vt = np.linalg.svd(M, full_matrices=True)
-            tol = rcond * float(np.linalg.norm(A))
-            r = int(np.count_nonzero(s > tol)) if tol > 0 else 0
-            Z = Z @ vt[r:].T
-        out.append(Z)
-    return out
-
-
-def rank_profile(stack: TaskStack, rcond: float = DEFAULT_RCOND) -> list[int]:
-    """``r_i = ρ(J_i^A) − ρ(J_{i-1}^A)`` for each level (eq. 12)."""
-    Zs = nested_null_spaces(stack, rcond)
-    return [Zs[i].shape[1] - Zs[i + 1].shape[1] for i in range(len(stack))]
 
 
 def conflicting_levels(stack: TaskStack, rcond: float = DEFAULT_RCOND) -> list[bool]:
@@ -257,7 +235,7 @@ class LexicographicReport:
             them by the rank rule, as the exact solvers do; at such a decision another
             threshold gives another optimum, so a passing answer is the rank rule's
             optimum, not necessarily the exact-arithmetic one (the exact solvers then say
-            ``approximate``, and so does :func:`formulations.base.certify`).
+            ``approximate``, and so does :func:`formulations.verification.certify`).
     """
 
     ok: bool
@@ -542,7 +520,7 @@ def _rounding(tol: float, scale: float, x_norm: float, level_norm: float) -> flo
     transformations has every coordinate known to about ``X_PRECISION ‖x‖``, whatever
     its size, so a level that a huge ``x`` barely touches (its columns small where ``x``
     is large) still has its rows moved by up to ``X_PRECISION ‖x‖ ‖√W_i A_i‖_F``: the
-    bound :func:`~hierarchy.layout.precision_limited_levels`,
+    bound :func:`~hierarchy.stack.precision_limited_levels`,
     :func:`~hierarchy.exact.ExactOptimum.floors` and the solvers' comparison with the
     exact active-set answer read too."""
     return _precision(tol) * max(scale, x_norm * level_norm)

@@ -11,8 +11,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from .stack import TaskStack
-from .task import Task
+from .stack import Task, TaskStack
 
 
 def _split(rng: np.random.Generator, total: int, k: int, low: int = 1) -> list[int]:

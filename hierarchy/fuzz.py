@@ -32,8 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .stack import TaskStack
-from .task import Task
+from .stack import Task, TaskStack
 
 __all__ = ["FuzzCase", "bounds_case", "equality_case", "inequality_case", "judged",
            "mixed_scale_case", "nested_truth",

@@ -14,8 +14,7 @@ from typing import Any
 import numpy as np
 
 from .errors import TaskStackError
-from .stack import TaskStack
-from .task import Level, Task
+from .stack import Level, Task, TaskStack
 
 FORMAT_VERSION = 1
 

@@ -24,7 +24,12 @@ A clear decision within a factor :data:`NEAR_AMBIGUITY` of the band is *near-amb
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
+
+if TYPE_CHECKING:
+    from .stack import TaskStack
 
 #: Default relative rank threshold (see module docstring).
 DEFAULT_RCOND = 1e-9
@@ -330,3 +335,30 @@ def nonnegative_least_squares(M: np.ndarray, y: np.ndarray, max_iter: int | None
             res = y - M @ mu
         w = M.T @ res
     return mu, float(np.linalg.norm(res))
+
+
+def nested_null_spaces(stack: TaskStack, rcond: float = DEFAULT_RCOND) -> list[np.ndarray]:
+    """Bases ``Z_1 = I, Z_2, …, Z_{k+1}`` of the null spaces of ``J_0^A … J_k^A``.
+
+    ``Z_{i+1} = Z_i · null(A_i Z_i)``, each rank decision on the scale of ``‖A_i‖_F``.
+    Returned as ``n × d_i`` matrices with orthonormal columns (index ``i`` is the
+    basis *before* level ``i``; the last is the null space of the whole stack).
+    """
+    Z = np.eye(stack.n)
+    out = [Z]
+    for level in stack.levels:
+        A = level.A
+        if A.shape[0] and Z.shape[1]:
+            M = A @ Z
+            _, s, vt = np.linalg.svd(M, full_matrices=True)
+            tol = rcond * float(np.linalg.norm(A))
+            r = int(np.count_nonzero(s > tol)) if tol > 0 else 0
+            Z = Z @ vt[r:].T
+        out.append(Z)
+    return out
+
+
+def rank_profile(stack: TaskStack, rcond: float = DEFAULT_RCOND) -> list[int]:
+    """``r_i = ρ(J_i^A) − ρ(J_{i-1}^A)`` for each level (eq. 12)."""
+    Zs = nested_null_spaces(stack, rcond)
+    return [Zs[i].shape[1] - Zs[i + 1].shape[1] for i in range(len(stack))]

@@ -17,7 +17,8 @@ Sub-packages (data flows one way, top to bottom):
 * :mod:`prioik.formulations` — the formulation plugins and their registry;
 * :mod:`prioik.robots` — robot models (pinocchio) and task writers (imported on first
   use: it needs the ``robots`` extra);
-* :mod:`prioik.benchmarks` — comparisons, reports and the ``prioik`` command line;
+* :mod:`prioik.benchmarks` — comparisons, reports and their commands (the ``prioik``
+  command line itself: :mod:`prioik.cli`);
 * :mod:`prioik.errors` — :class:`PrioikError`, the base of every error prioik raises;
 * :mod:`prioik.extras` — which ``pip install prioik[EXTRA]`` brings which part
   (``pip install prioik`` is the core: numpy, scipy, threadpoolctl, tqdm and the

@@ -14,6 +14,19 @@ from prioik.extras import MissingExtraError
 if importlib.util.find_spec("pinocchio") is None:
     raise MissingExtraError(("robots",), "prioik.robots", ("pinocchio",))
 
+from .kinds import (
+    ComRegionTask,
+    ComTask,
+    ContactTask,
+    DampingTask,
+    FrameOrientationTask,
+    FramePoseTask,
+    FramePositionTask,
+    FrameRegionTask,
+    JointLimitsTask,
+    PointTask,
+    PostureTask,
+)
 from .mesh_replay import MeshReplayError, write_mesh_replay
 from .models import (
     LOADERS,
@@ -37,7 +50,7 @@ from .models import (
     ur5,
 )
 from .references import Reference, Waypoints, minimum_jerk
-from .rows import MODES, TaskWriter
+from .rows import MODES, TASK_KINDS, RobotTask, TaskWriter, register_task_kind, task_kind
 from .simulate import (
     SimulationError,
     SimulationResult,
@@ -78,4 +91,7 @@ __all__ = [
     "frame_pose", "frame_position", "joint_limit_bounds", "joint_limit_rows",
     "joint_limit_violation", "joint_velocity_bounds", "point_position", "posture",
     "frame_region", "com_region", "polygon_region", "MeshReplayError", "write_mesh_replay",
+    "RobotTask", "TASK_KINDS", "register_task_kind", "task_kind", "ComRegionTask", "ComTask",
+    "ContactTask", "DampingTask", "FrameOrientationTask", "FramePoseTask",
+    "FramePositionTask", "FrameRegionTask", "JointLimitsTask", "PointTask", "PostureTask",
 ]

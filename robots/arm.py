@@ -228,8 +228,8 @@ class ArmScenario(Scenario):
     # ----------------------------------------------------------------- baselines
     def baseline_tasks(self) -> list[BaselineTask]:
         """Tool position (hard in PlaCo), hand orientation (soft, 0.1), posture (1e-4)."""
-        return [BaselineTask("tool_position", "position", TOOL, 0, hard=True),
-                BaselineTask("tool_orientation", "orientation", TOOL, 1, weight=0.1),
+        return [BaselineTask("tool_position", "frame_position", TOOL, 0, hard=True),
+                BaselineTask("tool_orientation", "frame_orientation", TOOL, 1, weight=0.1),
                 BaselineTask("posture", "posture", None, 2, weight=1e-4)]
 
     def baseline_target(self, name: str, t: float):

@@ -287,11 +287,11 @@ class FencingScenario(Scenario):
     def baseline_tasks(self) -> list[BaselineTask]:
         """Hard support foot and CoM, soft left foot and sword tip (weight 1), soft
         posture (1e-4): the mapping of ``benchmarks/placo_baseline.py``."""
-        out = [BaselineTask("support_foot", "frame", self.robot.frames["right_foot"], 0,
+        out = [BaselineTask("support_foot", "frame_pose", self.robot.frames["right_foot"], 0,
                             hard=True),
-               BaselineTask("com", "com_xy", None, 1, hard=True),
-               BaselineTask("left_foot", "frame", self.robot.frames["left_foot"], 2),
-               BaselineTask("sword_tip", "position", "sword_tip", 3)]
+               BaselineTask("com", "com", None, 1, hard=True),
+               BaselineTask("left_foot", "frame_pose", self.robot.frames["left_foot"], 2),
+               BaselineTask("sword_tip", "frame_position", "sword_tip", 3)]
         if self.with_posture:
             out.append(BaselineTask("posture", "posture", None, 4, weight=1e-4))
         return out

@@ -19,13 +19,13 @@ members only:
   the two above, or the scenario's own faster path (the fencing scenario writes its
   rows in place);
 * :meth:`Scenario.baseline_tasks` and :meth:`Scenario.baseline_target` — the same
-  tasks as declarative records for the external IK libraries (PlaCo, pink, mink), which
-  build their own task objects from them;
+  tasks as declarative records for the external IK libraries (PlaCo, pink, mink): each
+  record names a registered task kind, whose class builds the library's task;
 * :meth:`Scenario.markers` — world points to draw in the replay (targets, references),
   and ``tip_frame``, the frame whose path the replay traces;
 * :meth:`Scenario.urdf_text` — the robot's URDF as the baselines must load it (with
   the scenario's extra frames and locked joints), and ``info()`` to rebuild the
-  scenario from a saved run (:func:`make`).
+  scenario from a saved run (:func:`robots.scenarios.make`).
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ from .models import RobotModel
 from .simulate import SimulationError, StepTasks
 from .tasks import KinematicState
 
-__all__ = ["BaselineTask", "Scenario", "SCENARIOS", "make"]
+__all__ = ["BaselineTask", "Scenario"]
 
 LIMIT_FORMS_ACCELERATION = ("activation", "bounds", "hard_bounds")
 LIMIT_FORMS_VELOCITY = ("none", "bounds", "hard_bounds")
@@ -51,10 +51,12 @@ class BaselineTask:
 
     Attributes:
         name: The scenario's task name.
-        kind: ``"frame"`` (pose of ``frame``), ``"position"`` (origin of ``frame``),
-            ``"orientation"`` (rotation of ``frame``),
-            ``"com_xy"`` (horizontal centre of mass) or ``"posture"``.
-        frame: Frame name (``None`` for ``com_xy`` and ``posture``).
+        kind: A registered task kind (:data:`~robots.rows.TASK_KINDS`), whose class
+            maps the task onto each library (:meth:`~robots.rows.RobotTask.baseline_task`):
+            ``"frame_pose"`` (pose of ``frame``), ``"frame_position"`` (origin of
+            ``frame``), ``"frame_orientation"`` (rotation of ``frame``), ``"com"``
+            (horizontal centre of mass), ``"posture"``, or any other registered kind.
+        frame: Frame name (``None`` for ``com`` and ``posture``).
         priority: The task's level in the scenario's stack (0 highest, limits excluded).
         hard: Whether a two-level library (PlaCo) makes it a hard constraint.
         weight: Its weight among the soft tasks.
@@ -120,8 +122,10 @@ class Scenario:
         raise NotImplementedError
 
     def baseline_target(self, name: str, t: float):  # pragma: no cover - abstract
-        """Target of baseline task ``name`` at ``t``: a 4×4 pose (``frame``), a
-        3-vector (``position``), a 2-vector (``com_xy``) or ``q`` (``posture``)."""
+        """Target of baseline task ``name`` at ``t``: a 4×4 pose (``frame_pose``), a
+        3-vector (``frame_position``), a 3×3 rotation (``frame_orientation``), a 2-vector
+        (``com``) or ``q`` (``posture``): what the kind's
+        :meth:`~robots.rows.RobotTask.baseline_target` takes."""
         raise NotImplementedError
 
     def markers(self, t: float) -> dict[str, np.ndarray]:  # pragma: no cover - abstract
@@ -131,34 +135,9 @@ class Scenario:
         raise NotImplementedError
 
     def info(self) -> dict:
-        """What :func:`make` needs to rebuild this scenario."""
+        """What :func:`robots.scenarios.make` needs to rebuild this scenario."""
         return {"scenario": self.name, "variant": self.variant, "robot": self.robot.name}
 
     def __repr__(self) -> str:
         return (f"{type(self).__name__}(variant={self.variant!r}, robot={self.robot.name!r}, "
                 f"n_v={self.robot.nv})")
-
-
-def _registry() -> dict[str, type]:
-    from .arm import ArmScenario
-    from .fencing import FencingScenario
-    return {"fencing": FencingScenario, "arm": ArmScenario}
-
-
-#: scenario name -> class (filled on first use: the modules import this one)
-SCENARIOS: dict[str, type] = {}
-
-
-def make(name: str, variant: str | None = None) -> Scenario:
-    """Build scenario ``name`` (``"fencing"``, ``"arm"``) in ``variant`` (its first by
-    default).
-
-    Raises:
-        ValueError: unknown scenario or variant (lists the known ones).
-    """
-    if not SCENARIOS:
-        SCENARIOS.update(_registry())
-    if name not in SCENARIOS:
-        raise SimulationError(f"unknown scenario {name!r}; known: {', '.join(SCENARIOS)}")
-    cls = SCENARIOS[name]
-    return cls(variant or cls.variants[0])

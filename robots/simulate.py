@@ -6,7 +6,7 @@
    stack from the caller's ``build(state, t)`` (plus ``M(q)`` and the bias
    ``b(q, q̇) = C q̇ + g`` when the formulation works at torque level);
 2. **solve** — the caller's ``solve(stack, mass_matrix=..., bias=...)`` (any object
-   with ``x``, ``status``, ``info``), giving ``q̈``;
+   with ``x``, ``status``, ``diagnostics``), giving ``q̈``;
 3. **torque** — inverse dynamics by RNEA (``τ = M q̈ + b``, O(n)) for acceleration-
    resolved formulations, or the formulation's own ``diagnostics.detail.tau`` (unifying /
    operational space); the checks of the answer between solve and torque are the
@@ -391,9 +391,8 @@ def _answer(sol: Any, nv: int) -> tuple[np.ndarray | None, str]:
     if status not in STATUSES:
         return None, f"the solver returned {type(sol).__name__} with status {status!r} " \
                      f"(expected one of {', '.join(STATUSES)})"
-    info = getattr(sol, "info", None)
     if status == "failed":
-        detail = info.get("message", "") if isinstance(info, dict) else ""
+        detail = getattr(getattr(sol, "diagnostics", None), "reason", "")
         return None, f"solution failed{': ' + str(detail) if detail else ''}"
     try:
         x = np.asarray(getattr(sol, "x", None), dtype=float)

@@ -4,9 +4,10 @@ Every builder returns a :class:`TaskTerm` holding, for one task ``x = f(q)``:
 its Jacobian ``J`` (``ẋ = J q̇``), the drift ``J̇ q̇`` (``None`` from a
 ``KinematicState(drift=False)``), the error ``e = x* − x``, the rate error
 ``ė = ẋ* − ẋ`` and the feed-forward ``ẍ*``. The builders are one-off, readable
-wrappers over the task writers of :mod:`robots.rows` (a one-task
-:class:`~robots.rows.TaskWriter` per task kind, kept per thread): the same rows, copied
-out. From these
+wrappers over the task kinds of :mod:`robots.kinds`: each builds its kind's task and
+returns its :meth:`~robots.rows.RobotTask.term` (written by a one-task
+:class:`~robots.rows.TaskWriter` per kind, kept per thread): the same rows as a
+writer's, copied out. From these
 
 * :meth:`TaskTerm.acceleration` gives the paper's task ``J θ̈ = h`` with
   ``h = ẍ* + K_d (ẋ* − ẋ) + K_p (x* − x) − J̇ θ̇`` (eq. 2-4);
@@ -27,19 +28,27 @@ bounds on ``q̈`` or ``q̇`` for the QP formulations. :func:`frame_region` and
 
 from __future__ import annotations
 
-import math
-import threading
-from dataclasses import dataclass
-
 import numpy as np
 import pinocchio as pin
 
 from prioik._core import rows as _core_rows
 from prioik.hierarchy import Task, TaskStackError
 
+from .kinds import (
+    ComRegionTask,
+    ComTask,
+    ContactTask,
+    FrameOrientationTask,
+    FramePoseTask,
+    FramePositionTask,
+    FrameRegionTask,
+    JointLimitsTask,
+    PointTask,
+    PostureTask,
+)
 from .models import UNIT_NORM_TOL, RobotModel, StateError, check_configuration, check_velocity
 from .references import Reference
-from .rows import JointLimitActivation, TaskWriter
+from .rows import JointLimitActivation, TaskTerm
 
 __all__ = ["KinematicState", "TaskTerm", "frame_position", "point_position",
            "frame_orientation", "frame_pose", "com_position", "contact", "posture",
@@ -208,197 +217,61 @@ class KinematicState:
         return self._cache[key]
 
 
-@dataclass
-class TaskTerm:
-    """One task's kinematics at one state; see the module docstring.
-
-    Attributes:
-        name: Task name (unique in a stack).
-        J: Task Jacobian (``m × n``).
-        drift: ``J̇ q̇`` (``m``), or ``None`` when built from a
-            ``KinematicState(drift=False)`` (then only :meth:`velocity` applies).
-        error: ``e = x* − x`` (``m``).
-        rate_error: ``ė = ẋ* − ẋ`` (``m``).
-        feedforward: ``ẍ*`` (``m``).
-        velocity_ref: ``ẋ*`` (``m``).
-    """
-
-    name: str
-    J: np.ndarray
-    drift: np.ndarray | None
-    error: np.ndarray
-    rate_error: np.ndarray
-    feedforward: np.ndarray
-    velocity_ref: np.ndarray
-
-    def acceleration(self, kp: float, kd: float, weight=1.0) -> Task:
-        """``J θ̈ = ẍ* + K_d ė + K_p e − J̇ θ̇`` (eq. 2-4).
-
-        Raises:
-            TaskStackError: the term has no drift (built with ``drift=False``), or a gain
-                negative or not finite; naming the task.
-        """
-        if self.drift is None:
-            raise TaskStackError("it was built from a KinematicState(drift=False): an "
-                                 "acceleration task needs J̇q̇ (build the state with "
-                                 "drift=True, or use .velocity(k))", task=self.name)
-        _check_gain(self.name, "kp", kp)
-        _check_gain(self.name, "kd", kd)
-        h = self.feedforward + kd * self.rate_error + kp * self.error - self.drift
-        return Task(self.name, self.J, h, weight=weight)
-
-    def velocity(self, k: float, weight=1.0) -> Task:
-        """``J q̇ = ẋ* + K e`` (velocity-level closed-loop inverse kinematics).
-
-        Raises:
-            TaskStackError: ``k`` negative or not finite, naming the task.
-        """
-        _check_gain(self.name, "k", k)
-        return Task(self.name, self.J, self.velocity_ref + k * self.error, weight=weight)
-
-    def select(self, rows) -> TaskTerm:
-        """The term restricted to some rows (e.g. the horizontal axes)."""
-        idx = list(rows)
-        return TaskTerm(self.name, self.J[idx],
-                        None if self.drift is None else self.drift[idx], self.error[idx],
-                        self.rate_error[idx], self.feedforward[idx], self.velocity_ref[idx])
-
-
-def _check_gain(task: str, what: str, gain) -> None:
-    """Refuses a gain (a number, or one per row) that is not finite and ≥ 0, naming the
-    task and the gain."""
-    if isinstance(gain, (int, float)) and not isinstance(gain, bool):
-        ok = math.isfinite(gain) and gain >= 0          # the common case, at once
-    else:
-        try:
-            g = np.asarray(gain, dtype=np.float64)
-            ok = (not isinstance(gain, (bool, str, bytes)) and g.ndim <= 1
-                  and bool(np.isfinite(g).all() and (g >= 0).all()))
-        except (TypeError, ValueError):
-            ok = False
-    if not ok:
-        raise TaskStackError(f"gain {what} must be a finite number ≥ 0 (or one per row), "
-                             f"got {gain!r}", task=task)
-
-
-# ------------------------------------------------------- one-task writers, per thread
-_LOCAL = threading.local()
-_MAX_WRITERS = 256      # per thread; the cache is cleared beyond (a builder is one-off)
-_T = "task"             # the one task's name inside a builder's writer
-
-
-def _writer(state: KinematicState, key: tuple, declare, mode: str | None = None
-            ) -> TaskWriter:
-    """The thread's one-task writer of ``state``'s robot for ``key`` (declared by
-    ``declare(writer, gain)`` on first use); ``mode`` defaults to what the state allows
-    (acceleration with drift, else velocity)."""
-    cache = getattr(_LOCAL, "writers", None)
-    if cache is None:
-        cache = _LOCAL.writers = {}
-    if mode is None:
-        mode = "acceleration" if state.has_drift else "velocity"
-    robot = state.robot
-    full = (id(robot), mode) + key
-    entry = cache.get(full)
-    if entry is None or entry[0] is not robot:
-        if len(cache) >= _MAX_WRITERS:
-            cache.clear()
-        w = TaskWriter(robot, mode)
-        declare(w, (0.0, 0.0) if mode == "acceleration" else 0.0)
-        _ = w.layout                       # (the layout built once, here)
-        entry = cache[full] = (robot, w)
-    return entry[1]
-
-
-def _write(name: str, write, *args) -> None:
-    """``write(*args)``, a one-task writer's call; its :class:`TaskStackError` names the
-    builder's task ``name`` (not the writer's inner one)."""
-    try:
-        write(*args)
-    except TaskStackError as exc:
-        if exc.task != _T:
-            raise
-        raise TaskStackError(exc.reason, task=name, **exc.detail) from None
-
-
-def _term(w: TaskWriter, state: KinematicState, name: str) -> TaskTerm:
-    """The writer's one task as a :class:`TaskTerm` (copied out)."""
-    sl = w.layout.task_slice(_T)
-    J = w.data.A[sl].copy()
-    vref = w.velocity_ref[sl].copy()
-    drift = w.drift[sl].copy() if w.mode == "acceleration" else None
-    return TaskTerm(name, J, drift, w.error[sl].copy(), vref - J @ state.v,
-                    w.feedforward[sl].copy(), vref)
-
-
 def frame_position(state: KinematicState, frame: str, ref: Reference,
                    name: str | None = None) -> TaskTerm:
-    """Position of a frame origin, world coordinates (3 rows)."""
-    name = name or f"{frame}_position"
-    w = _writer(state, ("position", frame),
-                lambda w, g: w.add_frame_position(_T, frame, gain=g))
-    _write(name, w.frame_position, state, _T, ref.x, ref.xd, ref.xdd)
-    return _term(w, state, name)
+    """Position of a frame origin, world coordinates (3 rows;
+    :class:`~robots.kinds.FramePositionTask`)."""
+    return FramePositionTask(name or f"{frame}_position", frame).term(
+        state, ref.x, ref.xd, ref.xdd)
 
 
 def point_position(state: KinematicState, frame: str, offset, ref: Reference,
                    name: str | None = None) -> TaskTerm:
     """Position of a point fixed on a frame (``offset`` in the frame's coordinates),
-    world coordinates (3 rows); :meth:`RobotModel.with_point_frame` is the other way."""
-    off = tuple(float(v) for v in np.asarray(offset, dtype=float).reshape(-1))
-    w = _writer(state, ("point", frame, off),
-                lambda w, g: w.add_point(_T, frame, off, gain=g))
-    name = name or f"{frame}_point"
-    _write(name, w.point, state, _T, ref.x, ref.xd, ref.xdd)
-    return _term(w, state, name)
+    world coordinates (3 rows; :class:`~robots.kinds.PointTask`);
+    :meth:`RobotModel.with_point_frame` is the other way."""
+    return PointTask(name or f"{frame}_point", frame, offset).term(
+        state, ref.x, ref.xd, ref.xdd)
 
 
 def frame_orientation(state: KinematicState, frame: str, rotation: np.ndarray,
                       name: str | None = None, angular_velocity=None,
                       angular_acceleration=None) -> TaskTerm:
-    """Orientation of a frame (3 rows): error ``log(R* Rᵀ)`` in world coordinates.
+    """Orientation of a frame (3 rows; :class:`~robots.kinds.FrameOrientationTask`):
+    error ``log(R* Rᵀ)`` in world coordinates.
 
     Args:
         rotation: Target rotation ``R*`` (3×3).
         angular_velocity: ``ω*`` (world), zero if omitted.
         angular_acceleration: ``ω̇*`` (world), zero if omitted.
     """
-    w = _writer(state, ("orientation", frame),
-                lambda w, g: w.add_frame_orientation(_T, frame, gain=g))
-    name = name or f"{frame}_orientation"
-    _write(name, w.frame_orientation, state, _T, rotation, angular_velocity,
-           angular_acceleration)
-    return _term(w, state, name)
+    return FrameOrientationTask(name or f"{frame}_orientation", frame).term(
+        state, rotation, angular_velocity, angular_acceleration)
 
 
 def frame_pose(state: KinematicState, frame: str, ref: Reference, rotation: np.ndarray,
                name: str | None = None) -> TaskTerm:
     """Position (rows 0-2, following ``ref``) and orientation (rows 3-5, fixed
-    ``rotation``) of a frame: 6 rows."""
-    w = _writer(state, ("pose", frame), lambda w, g: w.add_frame_pose(_T, frame, gain=g))
-    name = name or f"{frame}_pose"
-    _write(name, w.frame_pose, state, _T, ref.x, rotation, ref.xd, ref.xdd)
-    return _term(w, state, name)
+    ``rotation``) of a frame: 6 rows (:class:`~robots.kinds.FramePoseTask`)."""
+    return FramePoseTask(name or f"{frame}_pose", frame).term(
+        state, ref.x, rotation, ref.xd, ref.xdd)
 
 
 def contact(state: KinematicState, frame: str, placement: pin.SE3,
             name: str | None = None) -> TaskTerm:
     """A support contact: the frame held at ``placement`` (6 rows, zero reference
-    velocity and acceleration; with gains this is ``ẍ = −K_d ẋ + K_p e``)."""
-    w = _writer(state, ("contact", frame), lambda w, g: w.add_contact(_T, frame, gain=g))
-    name = name or f"{frame}_contact"
-    _write(name, w.contact, state, _T, placement)
-    return _term(w, state, name)
+    velocity and acceleration; with gains this is ``ẍ = −K_d ẋ + K_p e``;
+    :class:`~robots.kinds.ContactTask`)."""
+    return ContactTask(name or f"{frame}_contact", frame).term(state, placement)
 
 
 def com_position(state: KinematicState, ref: Reference, axes=(0, 1),
                  name: str = "com") -> TaskTerm:
-    """Centre of mass (eq. 32-33) on the selected world axes (default horizontal);
-    ``ref`` given on those axes or as 3-vectors."""
-    idx = tuple(int(a) for a in axes)
-    w = _writer(state, ("com", idx), lambda w, g: w.add_com(_T, gain=g, axes=idx))
-    _write(name, w.com, state, _T, *(_on_axes(v, idx) for v in (ref.x, ref.xd, ref.xdd)))
-    return _term(w, state, name)
+    """Centre of mass (eq. 32-33) on the selected world axes (default horizontal;
+    :class:`~robots.kinds.ComTask`); ``ref`` given on those axes or as 3-vectors."""
+    task = ComTask(name, axes=axes)
+    idx = tuple(int(a) for a in task.axes)
+    return task.term(state, *(_on_axes(v, idx) for v in (ref.x, ref.xd, ref.xdd)))
 
 
 def _on_axes(values, idx: tuple) -> np.ndarray:
@@ -408,13 +281,9 @@ def _on_axes(values, idx: tuple) -> np.ndarray:
 
 
 def posture(state: KinematicState, q_ref, name: str = "posture") -> TaskTerm:
-    """Actuated joints to ``q_ref`` (rows ``n_base:`` of the velocity); no drift."""
-    w = _writer(state, ("posture",), lambda w, g: w.add_posture(_T, gain=g))
-    _write(name, w.posture, state, _T, q_ref)
-    term = _term(w, state, name)
-    if term.drift is None:
-        term.drift = np.zeros(term.J.shape[0])     # a posture has no drift at all
-    return term
+    """Actuated joints to ``q_ref`` (rows ``n_base:`` of the velocity); no drift
+    (:class:`~robots.kinds.PostureTask`)."""
+    return PostureTask(name).term(state, q_ref)
 
 
 # ---------------------------------------------------------------------- regions
@@ -424,50 +293,19 @@ def frame_region(state: KinematicState, frame: str, normals, lower=None, upper=N
     """Inequality task keeping a point of a frame inside ``lower ≤ C p ≤ upper`` (world
     coordinates; ``p`` the frame's origin or ``offset`` in its coordinates): rows
     ``C J`` with bounds on ``q̇`` (velocity level) or ``q̈`` (acceleration level; the
-    default with a drift state), see :meth:`robots.rows.TaskWriter.add_frame_region`."""
-    name = name or f"{frame}_region"
-    key = ("frame_region", name, frame, _key_of(offset), _row_count(normals), dt, horizon)
-    w = _writer(state, key, lambda w, g: w.add_frame_region(
-        name, frame, normals, lower, upper, dt=dt, horizon=horizon, offset=offset), mode)
-    w.frame_region(state, name, normals, lower, upper)
-    return _bounds_task(w, name, name)
+    default with a drift state), see :class:`~robots.kinds.FrameRegionTask`."""
+    return FrameRegionTask(name or f"{frame}_region", frame, normals, lower, upper, dt=dt,
+                           horizon=horizon, offset=offset).term(state, mode=mode)
 
 
 def com_region(state: KinematicState, normals, lower=None, upper=None, *, dt: float,
                horizon: float | None = None, mode: str | None = None,
                name: str = "com_region") -> Task:
     """Inequality task keeping the centre of mass inside ``lower ≤ C c ≤ upper`` (e.g.
-    the support polygon of :func:`polygon_region`); see :func:`frame_region`."""
-    key = ("com_region", name, _row_count(normals), dt, horizon)
-    w = _writer(state, key, lambda w, g: w.add_com_region(
-        name, normals, lower, upper, dt=dt, horizon=horizon), mode)
-    w.com_region(state, name, normals, lower, upper)
-    return _bounds_task(w, name, name)
-
-
-def _row_count(normals) -> int:
-    """The rows of a region's normals (``-1`` for what is not an array of numbers: the
-    writer's declaration then names the fault)."""
-    try:
-        return int(np.atleast_2d(np.asarray(normals, dtype=float)).shape[0])
-    except (TypeError, ValueError):
-        return -1
-
-
-def _key_of(offset):
-    """An offset as a hashable key (``repr`` of what is not an array of numbers)."""
-    try:
-        return None if offset is None else tuple(
-            float(v) for v in np.asarray(offset, dtype=float).reshape(-1))
-    except (TypeError, ValueError):
-        return repr(offset)
-
-
-def _bounds_task(w: TaskWriter, name: str, task: str = _T) -> Task:
-    """The writer's inequality task ``task`` as a :class:`~prioik.hierarchy.Task`
-    ``name`` (copied)."""
-    A, lower, upper = w.data.bounds(task)
-    return Task(name, A, lower=lower, upper=upper)
+    the support polygon of :func:`polygon_region`; :class:`~robots.kinds.ComRegionTask`);
+    see :func:`frame_region`."""
+    return ComRegionTask(name, normals, lower, upper, dt=dt, horizon=horizon).term(
+        state, mode=mode)
 
 
 def polygon_region(points, margin: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
@@ -546,15 +384,8 @@ def joint_limit_rows(state: KinematicState, params: JointLimitActivation | None 
     the writer's fixed-size, masked task). ``params`` defaults to
     ``JointLimitActivation()``.
     """
-    params = JointLimitActivation() if params is None else params
-    w = _writer(state, ("limits", "activation", params), lambda w, g: w.add_joint_limits(
-        _T, form="activation", activation=params), mode)
-    if w.joint_limits(state, _T) == 0:
-        return None
-    data = w.targets(state)
-    A, b = data.rows(_T)
-    rows = np.flatnonzero(A.any(axis=1))
-    return Task(name, A[rows], b[rows])
+    return JointLimitsTask(name, form="activation", activation=params).term(state,
+                                                                            mode=mode)
 
 
 def joint_limit_bounds(state: KinematicState, horizon: float, dt: float,
@@ -577,11 +408,8 @@ def joint_limit_bounds(state: KinematicState, horizon: float, dt: float,
     towards, clipped to the speed range (the hardest admissible braking), so the
     task stays feasible.
     """
-    key = ("limits", "bounds", float(horizon), float(dt))
-    w = _writer(state, key, lambda w, g: w.add_joint_limits(
-        _T, form="bounds", horizon=horizon, dt=dt), "acceleration")
-    w.joint_limits(state, _T)
-    return _bounds_task(w, name)
+    return JointLimitsTask(name, form="bounds", horizon=horizon, dt=dt).term(
+        state, mode="acceleration")
 
 
 def joint_velocity_bounds(state: KinematicState, dt: float, horizon: float | None = None,
@@ -590,11 +418,8 @@ def joint_velocity_bounds(state: KinematicState, dt: float, horizon: float | Non
     ``q + q̇ T`` within the position limits (``T = horizon``, default ``dt``) and
     ``|q̇| ≤ q̇_max``; a joint past a limit by more than ``q̇_max T`` gets
     ``lower = upper`` (the fastest return)."""
-    key = ("limits", "velocity_bounds", float(dt), None if horizon is None else float(horizon))
-    w = _writer(state, key, lambda w, g: w.add_joint_limits(
-        _T, form="bounds", horizon=horizon, dt=dt), "velocity")
-    w.joint_limits(state, _T)
-    return _bounds_task(w, name)
+    return JointLimitsTask(name, form="bounds", horizon=horizon, dt=dt).term(
+        state, mode="velocity")
 
 
 def joint_limit_violation(robot: RobotModel, q) -> float:

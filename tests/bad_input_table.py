@@ -109,7 +109,7 @@ def bad_after(bad, at=3):
     def solve(stack, **kw):
         calls.append(1)
         if len(calls) <= at:
-            return SimpleNamespace(x=np.zeros(stack.n), status="optimal", info={})
+            return SimpleNamespace(x=np.zeros(stack.n), status="optimal")
         return bad(stack)
     return solve
 
@@ -117,10 +117,10 @@ def raising(s):
     raise RuntimeError("solver exploded")
 
 for name, bad, word in (("solver raises", raising, "exploded"),
-                        ("NaN answer called optimal", lambda s: SimpleNamespace(x=np.full(s.n, np.nan), status="optimal", info={}), "non-finite"),
-                        ("wrong-length x", lambda s: SimpleNamespace(x=np.zeros(s.n + 1), status="optimal", info={}), "shape"),
-                        ("x is None", lambda s: SimpleNamespace(x=None, status="optimal", info={}), "shape"),
-                        ("unknown status", lambda s: SimpleNamespace(x=np.zeros(s.n), status="great", info={}), "great")):
+                        ("NaN answer called optimal", lambda s: SimpleNamespace(x=np.full(s.n, np.nan), status="optimal"), "non-finite"),
+                        ("wrong-length x", lambda s: SimpleNamespace(x=np.zeros(s.n + 1), status="optimal"), "shape"),
+                        ("x is None", lambda s: SimpleNamespace(x=None, status="optimal"), "shape"),
+                        ("unknown status", lambda s: SimpleNamespace(x=np.zeros(s.n), status="great"), "great")):
     api("robots", f"simulate: {name}", lambda: simulate(chain, build, bad_after(bad), duration=0.2, dt=0.01),
         check=lambda r, word=word: r.failed and r.steps == 3 and word in r.message)
 api("robots", "simulate duration=inf", lambda: simulate(chain, build, None, duration=float("inf"), dt=0.01), "duration",
@@ -254,11 +254,11 @@ cases = [
     ("compare --formulations foo", ["compare", gp, "--formulations", "foo", "--repeats", "1"], 2, "foo"),
 ]
 for name, argv, code, word in cases:
-    res = subprocess.run([sys.executable, "-m", "prioik.benchmarks.cli", *argv], capture_output=True, text=True, timeout=600)
+    res = subprocess.run([sys.executable, "-m", "prioik.cli", *argv], capture_output=True, text=True, timeout=600)
     err = res.stderr.strip()
     ok = res.returncode == code and len(err.splitlines()) == 1 and word in err
     rows.append(("CLI", name, ok, f"exit {res.returncode}, stderr {len(err.splitlines())} lines: {err[-90:]!r}"))
-proc = subprocess.Popen([sys.executable, "-m", "prioik.benchmarks.cli", "solve", gp], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+proc = subprocess.Popen([sys.executable, "-m", "prioik.cli", "solve", gp], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
 proc.stdout.close()
 err = proc.stderr.read().decode()
 code = proc.wait(timeout=600)

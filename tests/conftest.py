@@ -1,4 +1,4 @@
-"""Test configuration: single-threaded BLAS (small matrices; see prioik.benchmarks.threads)
+"""Test configuration: single-threaded BLAS (small matrices; see prioik.threads)
 and the hypothesis profile (``ci`` where the environment variable ``CI`` is set).
 
 Set here, for the test process only: importing prioik changes no environment variable.
@@ -48,32 +48,60 @@ import pytest  # noqa: E402
 TOY = "toy_flat_lstsq"
 
 
+def stack_formulation(name, solve, capabilities=None, options=None, description=""):
+    """A test double of a formulation: a :class:`~prioik.formulations.contract.Formulation`
+    whose prepared solver is a :class:`~prioik.formulations.contract.StackPrepared` over
+    ``solve(stack, **options)``."""
+    from prioik.formulations import Capabilities
+    from prioik.formulations.contract import Formulation, StackPrepared
+
+    class Prepared(StackPrepared):
+        def solve_stack(self, stack, options):
+            return solve(stack, **options)
+
+    Prepared.name = name
+    Prepared.capabilities = Capabilities() if capabilities is None else capabilities
+    return Formulation(name, description, Prepared.capabilities, dict(options or {}),
+                       Prepared)
+
+
 @pytest.fixture
 def toy_plugin(monkeypatch):
-    """A formulation registered for one test (registry.PLUGINS and its loaded module):
-    every row of every level in one least-squares problem, with a ``scale`` option, one
-    declared bench row (``toy_flat_lstsq[half]``) and an opt-out of the arm report. The
-    reports must show it with no edit of their own."""
-    import types
-
+    """A formulation registered for one test (registry.PLUGINS and its loaded
+    Formulation), built on the plugin base classes as a plugin module is: every row of
+    every level in one least-squares problem, with a ``scale`` option; the benchmarks'
+    table declares one bench row for it (``toy_flat_lstsq[half]``) and an opt-out of the
+    arm report. The reports must show it with no edit of their own."""
     import numpy as np
 
-    from prioik.formulations import Capabilities, Option, ReportVariant, registry
+    from prioik.benchmarks import report_rows
+    from prioik.benchmarks.report_rows import ReportVariant
+    from prioik.formulations import Capabilities, Option, registry
     from prioik.formulations.base import Outcome
+    from prioik.formulations.contract import Formulation, StackPrepared
 
-    def solve(stack, *, scale=1.0):
-        A = np.vstack([t.A for t in stack.tasks])
-        b = np.concatenate([t.b for t in stack.tasks])
-        return Outcome(scale * np.linalg.lstsq(A, b, rcond=None)[0], "approximate")
+    capabilities = Capabilities(exact=False)
 
-    toy = types.ModuleType(TOY)
-    toy.NAME, toy.DESCRIPTION = TOY, "every row in one least-squares problem"
-    toy.CAPABILITIES = Capabilities(exact=False)
-    toy.OPTIONS = {"scale": Option(1.0, "float", "factor on the answer", minimum=0.0)}
-    toy.solve = solve
-    toy.REPORT_VARIANTS = (ReportVariant("half", {"scale": 0.5}, reports=("bench",),
-                                         note="the answer halved"),)
-    toy.REPORT_OPT_OUTS = {"arm": "a toy: not for robots"}
+    class ToyPrepared(StackPrepared):
+        """The toy prepared for one layout: one least-squares solve per stack."""
+
+        name = TOY
+
+        def solve_stack(self, stack, options):
+            A = np.vstack([t.A for t in stack.tasks])
+            b = np.concatenate([t.b for t in stack.tasks])
+            return Outcome(options["scale"] * np.linalg.lstsq(A, b, rcond=None)[0],
+                           "approximate")
+
+    ToyPrepared.capabilities = capabilities
+    toy = Formulation(TOY, "every row in one least-squares problem", capabilities,
+                      {"scale": Option(1.0, "float", "factor on the answer", minimum=0.0)},
+                      ToyPrepared)
+    # its report rows, declared by the benchmarks' table (not by the plugin)
+    monkeypatch.setitem(report_rows.REPORT_VARIANTS, TOY,
+                        (ReportVariant("half", {"scale": 0.5}, reports=("bench",),
+                                       note="the answer halved"),))
+    monkeypatch.setitem(report_rows.REPORT_OPT_OUTS, TOY, {"arm": "a toy: not for robots"})
     monkeypatch.setitem(registry.PLUGINS, TOY, ("tests.toy_flat_lstsq", ""))
     monkeypatch.setitem(registry._loaded, TOY, toy)
     return toy

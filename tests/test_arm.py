@@ -96,7 +96,7 @@ def test_pink_and_placo_baselines_run_on_the_arm(scenario):
 
 
 def test_arm_command_writes_tables_runs_and_page(tmp_path, capsys):
-    from prioik.benchmarks.cli import main
+    from prioik.cli import main
     doc = tmp_path / "docs" / "arm.md"
     out = tmp_path / "res"
     assert main(["arm", "--duration", "0.1", "--formulations", "extended_jacobian,sns,pink",

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from prioik.benchmarks.bench import CSV_COLUMNS, Row, Settings, page, ratios, run_benchmark, tables
-from prioik.benchmarks.cli import main
 from prioik.benchmarks.stacks import random_case, random_mass_matrix
 from prioik.benchmarks.variants import table
+from prioik.cli import main
 
 #: whole-scenario runs (see the `slow` marker in pyproject.toml)
 pytestmark = pytest.mark.slow
@@ -264,7 +264,7 @@ def test_cli_rejects_bad_lists(tmp_path, capsys):
 
 
 def test_blas_threads_are_set_and_restored():
-    from prioik.benchmarks.threads import blas_info, blas_threads
+    from prioik.threads import blas_info, blas_threads
     before = [p["num_threads"] for p in blas_info()]
     assert before, "no BLAS found in this process"
     with blas_threads(1):

@@ -720,7 +720,7 @@ def test_a_lower_point_refutes_an_answer_the_check_passes():
     and passes the answer. The active set's answer meets level 0 (1.8e-37) and reaches
     10.58 at level 1: a lower point, so certify says 'approximate' naming level 1. Neither
     the active set's own answer nor Clarabel's (10.58 too) is refuted."""
-    from prioik.formulations.base import lower_point
+    from prioik.formulations.verification import lower_point
     from prioik.hierarchy import load_stack
     stack = load_stack(FUZZ / "bounds-1248-41.json")
     raw = formulations.solve(stack, "cascaded_qp", solver="quadprog", certify=False)
@@ -748,7 +748,7 @@ def test_a_lower_point_is_found_against_worse_answers_and_not_against_the_optimu
     by cvxpy) is not refuted; the optimum moved at random (0.05 per coordinate), worse at
     the first level where its values differ from the optimum's (by more than 1e-8), is
     refuted at that level."""
-    from prioik.formulations.base import lower_point
+    from prioik.formulations.verification import lower_point
     stack = _draw(seed)
     x = _optimum(stack)
     assert lower_point(stack, x) is None

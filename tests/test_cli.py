@@ -8,8 +8,8 @@ from pathlib import Path
 
 import pytest
 
-from prioik.benchmarks.cli import main
-from prioik.benchmarks.compare import examples_dir
+from prioik.cli import main
+from prioik.compare import examples_dir
 
 
 def test_list_shows_formulations_and_backends(capsys):
@@ -133,7 +133,7 @@ def test_compare_prints_a_table(capsys):
 
 
 def test_console_script_runs():
-    exe = [sys.executable, "-m", "prioik.benchmarks.cli", "list"]
+    exe = [sys.executable, "-m", "prioik.cli", "list"]
     res = subprocess.run(exe, capture_output=True, text=True, timeout=120)
     assert res.returncode == 0 and "reference" in res.stdout
 
@@ -165,7 +165,7 @@ def test_compare_refuses_an_unknown_formulation(capsys):
 
 def test_closed_pipe_exits_quietly():
     # `prioik solve FILE | head -0`: the reader leaves before the output is written
-    exe = [sys.executable, "-m", "prioik.benchmarks.cli", "solve", SMALL]
+    exe = [sys.executable, "-m", "prioik.cli", "solve", SMALL]
     proc = subprocess.Popen(exe, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     proc.stdout.close()          # closed before the first write: every write fails
     err = proc.stderr.read().decode()
@@ -203,7 +203,8 @@ def _nothing_may_run(monkeypatch):
     """Every command's work made to fail the test: an unknown name must exit before."""
     def ran(*args, **kwargs):
         raise AssertionError("the command ran before refusing an unknown name")
-    from prioik.benchmarks import compare, fuzz, scenario_runs, validation
+    from prioik import compare
+    from prioik.benchmarks import fuzz, scenario_runs, validation
     from prioik.benchmarks.bench import run as bench_run
     monkeypatch.setattr(validation, "run_family", ran)
     monkeypatch.setattr(validation, "report", ran)
@@ -259,12 +260,61 @@ def test_an_unknown_row_label_of_a_known_formulation_lists_the_labels(tmp_path, 
 def test_every_library_error_is_one_line_and_exit_2(monkeypatch, capsys):
     """An UnknownNameError (a KeyError) raised under a command is reported as the
     others are, not as a traceback."""
-    from prioik.benchmarks import library
+    from prioik import commands
     from prioik.errors import UnknownNameError
 
     def unknown(*args, **kwargs):
         raise UnknownNameError("model 'x' has no frame 'tip'")
-    monkeypatch.setattr(library, "_problems", unknown)
+    monkeypatch.setattr(commands, "_problems", unknown)
     assert main(["solve", SMALL]) == 2
     err = capsys.readouterr().err.strip()
     assert err == "prioik solve: error: model 'x' has no frame 'tip'"
+
+
+@pytest.mark.parametrize("argv", [["list"], ["solve", SMALL], ["compile"],
+                                  ["compare", SMALL, "--repeats", "1",
+                                   "--formulations", "reference"]])
+def test_core_commands_import_nothing_of_the_benchmarks(argv):
+    """``list``, ``solve``, ``compile`` and ``compare`` are the library's own commands
+    (prioik.cli, prioik.commands, prioik.compare): running one imports no module of
+    prioik.benchmarks."""
+    code = ("import sys; from prioik.cli import main; code = main(sys.argv[1:]); "
+            "print([m for m in sys.modules if m.startswith('prioik.benchmarks')]); "
+            "sys.exit(code)")
+    res = subprocess.run([sys.executable, "-c", code, *argv], capture_output=True,
+                         text=True, timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip().splitlines()[-1] == "[]"
+
+
+def test_a_benchmark_command_is_dispatched_to_its_module_alone():
+    from prioik import cli
+    assert cli.COMMANDS["fencing"] == "prioik.benchmarks.fencing"
+    parser = cli.build_parser("fencing")
+    choices = parser._subparsers._group_actions[0].choices     # the commands it declares
+    assert list(choices) == ["fencing"]
+    full = cli.build_parser()._subparsers._group_actions[0].choices
+    assert list(full) == list(cli.COMMANDS)       # every command, in COMMANDS' order
+
+
+@pytest.mark.parametrize("command", [None, "list", "solve", "fencing", "replay", "bench"])
+def test_help_is_the_same_whichever_parser_is_built(command, capsys):
+    """A command's ``--help`` from its one-module parser equals the whole parser's."""
+    from prioik import cli
+    argv = [command, "--help"] if command else ["--help"]
+    outs = []
+    for parser in (cli.build_parser(), cli.build_parser(command)):
+        with pytest.raises(SystemExit) as exc:
+            parser.parse_args(argv)
+        assert exc.value.code == 0
+        outs.append(capsys.readouterr().out)
+    assert outs[0] == outs[1] and "usage: prioik" in outs[0]
+
+
+def test_a_refused_command_line_prints_the_whole_usage(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["list", "--no-such-option"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "{list,solve,compile,fencing," in err
+    assert "unrecognized arguments: --no-such-option" in err

@@ -94,7 +94,7 @@ def test_user_page_commands_parse(page, line):
     """Every `prioik` command of the user pages is accepted by the command line as written
     (the sub-command and its options; running them is the commands' own tests), and the
     repository files it names exist."""
-    from prioik.benchmarks.cli import build_parser
+    from prioik.cli import build_parser
     argv = shlex.split(line, comments=True)[1:]
     build_parser().parse_args(argv)                  # SystemExit on an unknown option
     for arg in argv:

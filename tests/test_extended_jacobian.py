@@ -506,7 +506,7 @@ def test_eq27_with_the_papers_z_equals_the_damped_hierarchy(nullspace, family, s
     assert sol.detail.z_basis == "task_range"
     assert np.linalg.norm(sol.x - oracle.x) <= 1e-9 * max(1.0, np.linalg.norm(oracle.x))
     assert sol.detail.extended_rows == sum(oracle.diagnostics.ranks)
-    # the same damped hierarchy is what info["level_damping"] says it is
+    # the same damped hierarchy is what detail.level_damping says it is
     mu2 = sol.detail.level_damping
     again = formulations.solve(stack, "reference", level_damping=mu2).x
     assert np.linalg.norm(again - oracle.x) <= 1e-12 * max(1.0, np.linalg.norm(oracle.x))

@@ -12,8 +12,7 @@ import numpy as np
 import pytest
 import tomllib
 
-from prioik import extras, formulations
-from prioik.benchmarks import cli
+from prioik import cli, extras, formulations
 from prioik.formulations import registry
 from prioik.hierarchy.families import compatible
 
@@ -106,7 +105,7 @@ _HEAVY = ("pinocchio", "example_robot_data", "qpsolvers", "osqp", "proxsuite", "
 @pytest.mark.parametrize("setup, allowed", [
     ("import prioik", set()),
     # the parser of every sub-command, without running one
-    ("import prioik.benchmarks.cli as c; c.build_parser()", set()),
+    ("import prioik.cli as c; c.build_parser()", set()),
 ])
 def test_importing_prioik_and_building_the_cli_load_no_heavy_module(tmp_path, setup, allowed):
     code = _LOADED.format(setup=setup, heavy=repr(set(_HEAVY)))

@@ -8,10 +8,10 @@ import pytest
 
 from prioik import formulations
 from prioik.benchmarks import fencing as cmd
-from prioik.benchmarks.cli import main
 from prioik.benchmarks.results import RunSummary
 from prioik.benchmarks.scenario_runs import run_one, run_table
 from prioik.benchmarks.variants import Variant
+from prioik.cli import main
 from prioik.robots import KinematicState, simulate
 from prioik.robots.fencing import LEVEL_NAMES, TARGETS, FencingScenario
 
@@ -122,7 +122,7 @@ def test_fencing_command_writes_summary_csv_plots_and_doc(tmp_path, capsys):
     doc = tmp_path / "docs" / "reproduction.md"
     rc = main(["fencing", "--variant", "both", "--formulations",
                "extended_jacobian,nullspace", "--duration", "0.1", "--out", str(out),
-               "--doc", str(doc), "--quiet", "--save-runs"])
+               "--doc", str(doc), "--quiet", "--save-runs", "--like-for-like-samples", "2"])
     assert rc == 0
     printed = capsys.readouterr().out
     assert "fencing — compatible tasks" in printed and "fencing — incompatible tasks" in printed
@@ -146,6 +146,12 @@ def test_fencing_command_writes_summary_csv_plots_and_doc(tmp_path, capsys):
             assert (out / f"{variant}_{key}.png").stat().st_size > 1000
     text = doc.read_text()
     assert "| `extended_jacobian` |" in text
+    # the like-for-like measurement: every closed form on the same 2 + 2 G1 stacks
+    lfl = json.loads((out / "run_info.json").read_text())["like_for_like"]
+    assert lfl["stacks"] == 4 and lfl["n"] == 35
+    assert lfl["measured"]["extended_jacobian"]["compiled"]
+    assert "like for like: median solve on 4 G1 stacks" in printed
+    assert "**Like for like.**" in text and "| `nullspace` | resolved acceleration" in text
     for line in text.splitlines():
         if line.startswith("!["):
             assert (doc.parent / line.rsplit("](", 1)[1].rstrip(")")).is_file()
@@ -204,6 +210,8 @@ def test_fencing_command_rejects_unknown_runs_and_skips_unavailable(tmp_path, mo
                                                                      capsys):
     rc = main(["fencing", "--formulations", "no_such_method", "--out", str(tmp_path)])
     assert rc == 2 and "unknown run(s) no_such_method" in capsys.readouterr().err
+    rc = main(["fencing", "--like-for-like-samples", "-1", "--out", str(tmp_path)])
+    assert rc == 2 and "--like-for-like-samples must be ≥ 0" in capsys.readouterr().err
     real_get = formulations.get
 
     def get(name):

@@ -15,12 +15,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import stack_formulation
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from prioik import formulations
 from prioik.benchmarks import fuzz
-from prioik.benchmarks.cli import main
+from prioik.cli import main
 from prioik.formulations import Outcome, registry
 from prioik.hierarchy import check_lexicographic, load_stack, relative_distance
 from prioik.hierarchy.fuzz import ROW_FEATURES, equality_case, inequality_case, nested_truth
@@ -167,7 +168,8 @@ def test_hypothesis_equality_stacks(seed):
     case = equality_case(np.random.default_rng(seed), seed, **SMALL)
     report = fuzz.FuzzReport()
     fuzz._Runner(report, threads=2, keep=20).run_case(
-        f"equality-{seed}", case, [p for p in fuzz.PATHS.values() if "equality" in p.kinds],
+        f"equality-{seed}", case, [p for p in fuzz.registry_paths().values()
+                                  if fuzz.takes(p, "equality")],
         check_threads=False)
     _assert_clean(report)
 
@@ -178,7 +180,7 @@ def test_hypothesis_inequality_stacks(seed):
     case = inequality_case(np.random.default_rng(seed), seed, **SMALL_INEQ)
     report = fuzz.FuzzReport()
     fuzz._Runner(report, threads=2, keep=20).run_case(
-        f"inequality-{seed}", case, [fuzz.PATHS["cascaded_qp"]], check_threads=False)
+        f"inequality-{seed}", case, [fuzz.registry_paths()["cascaded_qp"]], check_threads=False)
     _assert_clean(report)
 
 
@@ -202,7 +204,7 @@ def test_saved_fuzz_failures_now_hold_every_property(path):
         case = FuzzCase(stack, 0, kind)
     report = fuzz.FuzzReport()
     fuzz._Runner(report, threads=2, keep=20).run_case(
-        path.stem, case, [p for p in fuzz.PATHS.values() if fuzz.takes(p, kind)],
+        path.stem, case, [p for p in fuzz.registry_paths().values() if fuzz.takes(p, kind)],
         check_threads=True, exact=exact)
     _assert_clean(report)
 
@@ -211,15 +213,10 @@ def test_saved_fuzz_failures_now_hold_every_property(path):
 @pytest.fixture
 def wrong_plugin(monkeypatch):
     """A formulation that answers 0 and says ``optimal``: every check must see it."""
-    mod = type("fake", (), {})()
-    mod.NAME, mod.DESCRIPTION, mod.OPTIONS = "always_zero", "", {}
-    mod.CAPABILITIES = formulations.Capabilities()
-    mod.solve = lambda stack: Outcome(np.zeros(stack.n), "optimal")
-    monkeypatch.setitem(registry._loaded, "always_zero", mod)
+    form = stack_formulation("always_zero", lambda stack: Outcome(np.zeros(stack.n), "optimal"))
+    monkeypatch.setitem(registry._loaded, "always_zero", form)
     monkeypatch.setitem(registry.PLUGINS, "always_zero", ("always_zero", ""))
-    monkeypatch.setitem(fuzz.PATHS, "always_zero",
-                        fuzz.Path_("always_zero", "always_zero", {}))
-    return "always_zero"
+    return "always_zero"        # fuzzed as registered: no edit of the fuzz
 
 
 def test_a_wrong_formulation_is_caught_and_its_stacks_saved_for_prioik_solve(
@@ -250,6 +247,27 @@ def test_prioik_fuzz_command(tmp_path, capsys):
     assert "| hierarchical_active_set | 20 |" in out and "| sns | 20 |" in out
     assert "| above |" in out
     assert code == (1 if "failing stacks saved" in out else 0)
+
+
+def test_the_fuzz_takes_its_formulations_from_the_registry(toy_plugin):
+    """Every registered formulation is fuzzed by its defaults on the kinds its
+    capabilities take, unless the fuzz's SETTINGS give its paths or LEFT_OUT leaves it
+    out (with a reason): a formulation registered for a test is among the paths."""
+    from conftest import TOY
+    known = fuzz.registry_paths()
+    assert set(fuzz.LEFT_OUT) | set(fuzz.SETTINGS) <= set(formulations.names())
+    assert not set(fuzz.LEFT_OUT) & set(known)
+    assert all(reason for reason in fuzz.LEFT_OUT.values())
+    for name in formulations.names():
+        assert name in fuzz.LEFT_OUT or any(p.formulation == name for p in known.values())
+    assert known[TOY] == fuzz.Path_(TOY, TOY, {})
+    assert fuzz.kinds_of(known[TOY]) == ("equality",)          # its capabilities
+    assert fuzz.kinds_of(known["sns"]) == ("equality", "inequality", "bounds")
+    assert fuzz.kinds_of(known["cascaded_qp"]) == ("inequality", "bounds")   # SETTINGS
+    assert [p.name for p in known.values() if p.formulation == "extended_jacobian"] == \
+        ["ej_qr_cpp", "ej_qr_lapack", "ej_svd"]
+    report = fuzz.run(3, 1, paths=[TOY], sizes=SMALL, thread_every=0)
+    assert report.solves == {TOY: 3} and report.statuses[TOY] == {"approximate": 3}
 
 
 def test_prioik_fuzz_refuses_an_unknown_path(capsys):
@@ -287,5 +305,6 @@ def test_a_reused_solvers_variant_is_judged_by_its_own_rounding():
     case = fuzz.draw("equality", 303, 842)
     report = fuzz.FuzzReport()
     fuzz._Runner(report, threads=2, keep=20).run_case(
-        "equality-303-842", case, [fuzz.PATHS["hierarchical_active_set"]], check_threads=False)
+        "equality-303-842", case, [fuzz.registry_paths()["hierarchical_active_set"]],
+        check_threads=False)
     _assert_clean(report)

@@ -561,7 +561,7 @@ def _limits_stack(n, target, *, box=1.0, level_of_box=1, equal_rows=False):
 def test_equality_first_answers_while_no_inequality_row_is_held(level_of_box, equal_rows):
     """A warm solve whose last answer held no inequality row first solves the equality
     rows alone (the extended Jacobian's nested QR); that answer satisfies every bound
-    here, so it is the answer: zero iterations, info['equality_first'], the cold answer
+    here, so it is the answer: zero iterations, detail.equality_first, the cold answer
     to 1e-12 and the independent KKT check. The first solve has no last answer."""
     n = 6
     warm = prioik.prepare(_limits_stack(n, [0.1, 0.2], level_of_box=level_of_box,
@@ -619,7 +619,7 @@ def _reach_beyond_limits(n, target):
 
 def test_held_rows_are_tried_as_equalities_and_proved_by_their_multipliers():
     """Every warm answer after the first is an equality-first try's, proved: zero
-    iterations, info['equality_first'], the cold answer to 1e-12, the KKT check.
+    iterations, detail.equality_first, the cold answer to 1e-12, the KKT check.
 
     At 1.3 the equality rows' answer (x₀ = 1.3) violates x₀ ≤ 1, and the second guess
     holds that row. At 1.4 and 1.6 the first guess is the kept held row: the reach
@@ -708,7 +708,7 @@ def test_a_released_row_that_overshoots_holds_the_row_that_blocks_first():
     0), leaves both limits: x₀ beyond 2 by 8 and x₁ below −0.1 by 0.9. On the way there
     from the last feasible guess's answer, (0, 0, 0), x₁ leaves first (at 1/10 of the way,
     x₀ at 1/5): the guess after holds x₁ (the primal active-set ratio test), whose answer
-    (1, −0.1, 0) is proved: zero iterations, info['equality_first'], the cold answer.
+    (1, −0.1, 0) is proved: zero iterations, detail.equality_first, the cold answer.
     Holding the most violated row (x₀ at 2) instead, three guesses were refuted and the
     step ran the active set (1, 1 and 3 iterations on its levels)."""
     def stack(p):

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from prioik.benchmarks.compare import examples_dir
+from prioik.compare import examples_dir
 from prioik.hierarchy import (
     Task,
     TaskStack,

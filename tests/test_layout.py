@@ -1,5 +1,5 @@
-"""hierarchy.layout: the stack layout (immutable, hashable), its preallocated data, views and
-boundary check; a TaskStack is a layout with frozen data."""
+"""hierarchy.stack, layout and data: the stack layout (immutable, hashable), its
+preallocated data, views and boundary check; a TaskStack is a layout with frozen data."""
 
 import numpy as np
 import pytest

@@ -104,7 +104,7 @@ def test_a_hot_start_from_the_same_data_reuses_the_working_set():
 @needs_lexls
 def test_a_capped_solve_is_not_optimal():
     """At lexls's factorization cap the answer is where it stopped: 'approximate' with
-    info['capped'], never 'optimal'."""
+    detail.capped, never 'optimal'."""
     n = 10
     rng = np.random.default_rng(2)
     box = Task("box", np.eye(n), lower=-0.1 * np.ones(n), upper=0.1 * np.ones(n))

@@ -135,7 +135,7 @@ def test_meshes_are_decimated_to_the_budget_and_mirrored_ones_keep_their_faces_o
 
 def test_a_point_frame_is_drawn_as_a_rod_from_its_parent():
     from prioik.robots.fencing import SWORD_LENGTH
-    from prioik.robots.scenario import make
+    from prioik.robots.scenarios import make
     robot = make("fencing").robot
     rods = [p for p in robot_parts(robot, triangles=2_000) if p.name == "sword_tip_rod"]
     assert len(rods) == 1 and rods[0].frame == "sword_tip"
@@ -261,7 +261,7 @@ def test_the_meshed_page_draws_the_robot_in_headless_chromium(tmp_path):
     if browser is None:
         pytest.skip("chromium is not installed (.ci/run installs it)")
     from prioik.benchmarks.scenario_runs import run_one, run_table
-    from prioik.robots.scenario import make
+    from prioik.robots.scenarios import make
     res = run_one(run_table("fencing")["extended_jacobian"], "compatible", 0.2, 0.002)
     scenario = make("fencing")
     page = write_mesh_replay(tmp_path / "meshes.html", scenario.robot,

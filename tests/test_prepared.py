@@ -279,7 +279,7 @@ def test_the_answer_is_typed_through_and_through(info):
     stack = _stacks_for(info, count=1)[0]
     sol = prioik.solve(stack, info.name, **_options_for(info, stack.n))
     assert not hasattr(sol, "info")
-    assert type(sol.detail).__module__ == formulations.get(info.name).__name__
+    assert type(sol.detail).__module__ == formulations.get(info.name).prepared.__module__
     assert dataclasses.is_dataclass(sol.detail)
     flat = sol.diagnostics.as_dict()
     assert set(flat) == {f.name for f in dataclasses.fields(sol.diagnostics)}

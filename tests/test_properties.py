@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from prioik.benchmarks.cli import main
 from prioik.benchmarks.properties import error_table, singularity_sweep
+from prioik.cli import main
 
 
 def test_sweep_slopes_and_bounds():

@@ -113,7 +113,7 @@ def test_make_demo_is_the_command_readme_names():
 
 def test_the_commands_readme_names_parse():
     """Every `prioik ...` command README shows is accepted by the command line."""
-    from prioik.benchmarks.cli import build_parser
+    from prioik.cli import build_parser
     commands = re.findall(r"`(prioik [a-z]+[^`]*)`", README.read_text())
     assert commands
     parser = build_parser()
@@ -127,3 +127,20 @@ def test_readme_benchmark_command_exists():
     import importlib
     assert "python -m prioik.benchmarks.mink_step 300 daqp,quadprog" in README.read_text()
     assert callable(importlib.import_module("prioik.benchmarks.mink_step").run)
+
+
+def test_every_measured_figure_names_its_command():
+    """A README line quoting a measurement (µs, a ratio ×, a %) follows, within its
+    paragraph and table, the command that produces it (tests/test_doc_commands.py runs
+    that command as written)."""
+    lines = README.read_text().splitlines()
+    figures = [i for i, line in enumerate(lines)
+               if re.search(r"\d\s*(µs|×)|\d\s*%", line) and not line.startswith("```")]
+    for i in figures:
+        start = i
+        while start > 0 and (lines[start - 1].strip() or lines[start].startswith("|")):
+            start -= 1                      # back to the paragraph before the table
+        context = "\n".join(lines[start:i + 1])
+        assert re.search(r"`(python -m prioik\.[\w.]+|prioik [a-z]+)[^`]*`", context), \
+            f"README.md:{i + 1} quotes a figure without the command that produces it"
+    assert figures

@@ -1,10 +1,11 @@
 """The registry: names, availability, option checks, failures as statuses."""
 
 import dataclasses
-import types
+import importlib
 
 import numpy as np
 import pytest
+from conftest import stack_formulation
 
 from prioik import formulations
 from prioik.formulations import Capabilities, FormulationError, Option, Outcome, registry
@@ -56,15 +57,13 @@ def test_inequality_task_in_closed_form_method_names_the_task():
 
 
 def _fake(monkeypatch, name, solve, caps=None):
-    caps = Capabilities() if caps is None else caps
-    mod = types.ModuleType(name)
-    mod.NAME, mod.DESCRIPTION, mod.CAPABILITIES = name, "test double", caps
-    mod.OPTIONS = {"mass_matrix": Option(None, "matrix", "M", optional=True),
-                   "bias": Option(None, "vector", "C+G", optional=True)}
-    mod.solve = solve
+    form = stack_formulation(name, solve, caps,
+                             {"mass_matrix": Option(None, "matrix", "M", optional=True),
+                              "bias": Option(None, "vector", "C+G", optional=True)},
+                             "test double")
     monkeypatch.setitem(registry.PLUGINS, name, (f"tests.{name}", ""))
-    monkeypatch.setitem(registry._loaded, name, mod)
-    return mod
+    monkeypatch.setitem(registry._loaded, name, form)
+    return form
 
 
 def test_linalg_failure_becomes_failed_status(monkeypatch, stack):
@@ -143,9 +142,7 @@ def test_solve_batch_loop_marks_a_failing_stack_failed(monkeypatch):
         if stack.levels[0].b[0] > 0:
             raise np.linalg.LinAlgError("singular")
         return Outcome(np.zeros(stack.n))
-    mod = types.SimpleNamespace(NAME="fake", DESCRIPTION="", OPTIONS={},
-                                CAPABILITIES=Capabilities(), solve=boom)
-    monkeypatch.setitem(registry._loaded, "fake", mod)
+    monkeypatch.setitem(registry._loaded, "fake", stack_formulation("fake", boom))
     monkeypatch.setitem(registry.PLUGINS, "fake", ("fake", ""))
     stacks = [TaskStack([Task("a", np.eye(2), [v, 0.0])]) for v in (-1.0, 1.0)]
     batch = formulations.solve_batch(stacks, "fake")
@@ -285,7 +282,8 @@ def test_every_formulation_returns_a_status_and_its_own_detail_record(info):
     assert isinstance(sol.status, Status) and sol.status == sol.status.value
     assert str(sol.status) == f"{sol.status}" == sol.status.value
     assert isinstance(sol.diagnostics, Diagnostics)
-    assert type(sol.detail) is formulations.get(info.name).Detail
+    module = importlib.import_module(registry.PLUGINS[info.name][0])
+    assert type(sol.detail) is module.Detail
     assert dataclasses.is_dataclass(sol.detail)
     assert (sol.status == "optimal") == (sol.diagnostics.reason == "")
     assert sol.time_s > 0 and sol.verify_time_s >= 0
@@ -317,16 +315,12 @@ def _perturbed_plugin(monkeypatch, ask: bool):
     class Detail:
         moved: float
 
-    def solve(stack):
+    def solve(stack, **_):
         x = formulations.solve(stack, "reference").x + 1e-3 * stack.levels[0].A[0]
         return Outcome(x, "optimal", Diagnostics(detail=Detail(1e-3)),
                        check=CheckRequest(auto=ask))
 
-    mod = types.ModuleType("perturbed")
-    mod.NAME, mod.DESCRIPTION = "perturbed", "the optimum moved along a row"
-    mod.CAPABILITIES, mod.OPTIONS, mod.solve, mod.Detail = Capabilities(), {}, solve, Detail
-    monkeypatch.setitem(registry.PLUGINS, "perturbed", ("tests.perturbed", ""))
-    monkeypatch.setitem(registry._loaded, "perturbed", mod)
+    _fake(monkeypatch, "perturbed", solve)
 
 
 def test_the_certificate_demotes_a_perturbed_answer_and_none_does_not(monkeypatch, stack):
@@ -366,9 +360,9 @@ def test_daqp_hierarchical_timed_solve_does_not_run_the_active_set(monkeypatch):
     calls = {"active_set": 0, "inside": 0}
     original_solve, original_active = dh.solve, has.Prepared.solve
 
-    def active(self, data):
+    def active(self, data, options=None):
         calls["active_set"] += 1
-        return original_active(self, data)
+        return original_active(self, data, options)
 
     def timed(stack, **options):
         before = calls["active_set"]
@@ -404,3 +398,58 @@ def test_the_verification_solver_is_prepared_once_per_prepared_solver(monkeypatc
     assert [s.diagnostics.verification.method for s in sols] == ["lower_point"] * 5
     assert all(s.status == "optimal" for s in sols)
     assert len(built) == 1
+
+
+# ------------------------------------------------------------------ the contract
+def test_every_plugin_declares_a_formulation_with_its_own_prepared_class():
+    """Each registered module's FORMULATION is a Formulation of its name whose prepared
+    solver is a subclass of contract.Prepared defined in that module."""
+    import importlib
+
+    from prioik.formulations import contract
+    for name, (module, _) in registry.PLUGINS.items():
+        try:
+            mod = importlib.import_module(module)
+        except ImportError:
+            continue            # its extra is not installed here
+        form = mod.FORMULATION
+        assert isinstance(form, contract.Formulation) and form.name == name
+        assert issubclass(form.prepared, contract.Prepared), name
+        assert form.prepared.__module__ == module, name
+        assert form.prepared is not contract.StackPrepared
+        assert registry.get(name) is form
+
+
+def test_the_registry_and_the_prepared_solver_probe_nothing():
+    """The plugin contract is declared (contract.py), not discovered: no getattr or
+    hasattr call in registry.py or prepared.py."""
+    import ast
+    import pathlib
+    root = pathlib.Path(registry.__file__).parent
+    for path in (root / "registry.py", root / "prepared.py"):
+        calls = [node.func.id for node in ast.walk(ast.parse(path.read_text()))
+                 if isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
+                 and node.func.id in ("getattr", "hasattr")]
+        assert calls == [], path.name
+
+
+def test_a_formulations_settings_are_a_typed_dataclass_of_its_options():
+    import dataclasses
+
+    import numpy as np
+    form = registry.get("extended_jacobian")
+    settings = form.settings
+    assert settings.__name__ == "ExtendedJacobianSettings"
+    fields = {f.name: f for f in dataclasses.fields(settings)}
+    assert list(fields) == list(form.options)
+    assert fields["damping"].type is float and fields["kernel"].type is str
+    assert fields["damping"].metadata["description"] == form.options["damping"].description
+    values = settings()
+    assert values.damping == form.options["damping"].default
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        values.damping = 1.0
+    solver = formulations.prepare(TaskStack([Task("a", np.eye(2), [1.0, 2.0])]),
+                                  "extended_jacobian", damping=0.1)
+    assert settings(**solver.options).damping == 0.1
+    metric = registry.get("reference").settings.__dataclass_fields__["metric"]
+    assert metric.type == np.ndarray | None and metric.default is None

@@ -413,7 +413,8 @@ def test_writer_errors_name_the_task(robot):
         w.com(full, "com", np.zeros(2), np.zeros(3))
     with pytest.raises(ValueError, match="task 'pose': rotation must be 3 × 3"):
         w.frame_pose(full, "pose", np.zeros(3), np.eye(2))
-    with pytest.raises(TaskStackError, match="task 'pose' was declared as pose, not position"):
+    with pytest.raises(TaskStackError,
+                       match="task 'pose' was declared as frame_pose, not frame_position"):
         w.frame_position(full, "pose", np.zeros(3))
     with pytest.raises(TaskStackError, match="no task 'foot' declared"):
         w.frame_pose(full, "foot", np.zeros(3), np.eye(3))

@@ -19,7 +19,11 @@ from prioik.formulations.base import CoreInputError
 from prioik.robots import KinematicState, TaskWriter, g1, panda, talos
 from prioik.robots import rows as rows_module
 from prioik.robots import tasks as tasks_module
+from prioik.robots.kinds import com, frame, joints, regions
 from tests import rows_reference as reference_rows
+
+#: the modules that call the compiled row writers (``_k``)
+WRITER_MODULES = (rows_module, frame, com, joints, regions)
 
 cpp_rows = _core.rows
 
@@ -36,9 +40,11 @@ def robots():
 
 @pytest.fixture
 def with_reference(monkeypatch):
-    """Run :mod:`robots.rows` and :mod:`robots.tasks` on the plain-Python reference."""
+    """Run :mod:`robots.rows`, the task kinds and :mod:`robots.tasks` on the plain-Python
+    reference."""
     def switch():
-        monkeypatch.setattr(rows_module, "_k", reference_rows)
+        for module in WRITER_MODULES:
+            monkeypatch.setattr(module, "_k", reference_rows)
         monkeypatch.setattr(tasks_module, "_state_is_valid", reference_rows.state_is_valid)
     return switch
 
@@ -63,7 +69,7 @@ def worst_row_difference(a, b) -> float:
 
 def test_the_writers_call_the_cpp_core():
     """robots/ runs on prioik._core.rows, not on the reference."""
-    assert rows_module._k is cpp_rows
+    assert all(module._k is cpp_rows for module in WRITER_MODULES)
     assert tasks_module._state_is_valid is cpp_rows.state_is_valid
 
 
@@ -340,8 +346,8 @@ def frame_call(robots):
     w = TaskWriter(robot, "acceleration")
     w.add_frame_pose("pose", "left_foot", gain=(1.0, 1.0))
     state = KinematicState(robot, robot.q0, np.zeros(robot.nv))
-    task = w._task("pose", "pose")
-    _, args = w._frame_args(task, state)
+    task = w.task("pose")
+    _, args = task._frame_args(state)
     names = ("A", "Q", "J", "t", "R", "spec", "geo", "aj", "vj")
     call = dict(zip(names, args, strict=False))
     call.update(x=np.zeros(3), xd=np.zeros(3), xdd=np.zeros(3), Rstar=np.eye(3),

@@ -55,14 +55,14 @@ def test_reprs_are_short(fencing_run):
     text = repr(fencing_run)
     assert len(text) < 300 and "50 steps" in text and "extended_jacobian" in text
     assert "<table>" in fencing_run._repr_html_()
-    from prioik.robots.scenario import make
+    from prioik.robots.scenarios import make
     sc = make("fencing")
     assert len(repr(sc.robot)) < 250 and len(repr(sc)) < 120
     assert "left_hip_pitch_joint" in sc.robot._repr_html_()
 
 
 def test_replay_and_plot_commands_work_on_saved_runs(fencing_run, tmp_path, capsys):
-    from prioik.benchmarks.cli import main
+    from prioik.cli import main
     path = fencing_run.save(tmp_path / "compatible_extended_jacobian.npz")
     assert main(["replay", str(path), "--out", str(tmp_path / "r")]) == 0
     html = tmp_path / "r" / "compatible_extended_jacobian_replay.html"
@@ -120,8 +120,8 @@ def test_replay_of_a_users_own_run_needs_the_robot_and_writes_the_meshed_page(tm
     """A run that names no scenario (a user's own loop, SimulationResult.save) is
     replayed with its meshes once --robot names its robot; without it the command says
     what to give."""
-    from prioik.benchmarks.cli import main
     from prioik.benchmarks.saved_runs import TRIANGLES
+    from prioik.cli import main
     from prioik.robots import mesh_replay, panda
     assert TRIANGLES == mesh_replay.TRIANGLES
     robot = panda()

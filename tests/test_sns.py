@@ -165,13 +165,16 @@ def test_caller_stack_is_not_mutated():
 
 @pytest.mark.parametrize("family", sorted(FAMILIES))
 def test_without_bounds_sns_is_nullspace_bit_for_bit(family):
-    """Its unbounded step and projector are nullspace's readable level (the numpy kernel):
+    """Its unbounded step and projector are nullspace's level, on either kernel (the
+    readable SVD level on the numpy kernels, the compiled LQ level on the cpp kernels):
     same x, same status."""
     rng = np.random.default_rng(8)
     for _ in range(5):
         stack = FAMILIES[family](rng, int(rng.integers(3, 30)), int(rng.integers(1, 8)))
-        s, r = prioik.solve(stack, "sns"), prioik.solve(stack, "nullspace", kernel="numpy")
-        assert np.array_equal(s.x, r.x) and s.status == r.status
+        for kernel in ("numpy", "cpp"):
+            s = prioik.solve(stack, "sns", kernel=kernel)
+            r = prioik.solve(stack, "nullspace", kernel=kernel)
+            assert np.array_equal(s.x, r.x) and s.status == r.status, kernel
 
 
 def test_many_levels_keep_the_projector_on_the_fuzz_stack():

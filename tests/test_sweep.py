@@ -16,10 +16,10 @@ import pytest
 
 pytest.importorskip("distributed")
 
-from prioik.benchmarks.cli import main  # noqa: E402
 from prioik.benchmarks.sweep import SweepConfigError, load_config, plan_from_config, run_sweep  # noqa: E402
 from prioik.benchmarks.sweep.schema import DETERMINISTIC_EXCLUDE  # noqa: E402
 from prioik.benchmarks.sweep.stats import wilson  # noqa: E402
+from prioik.cli import main  # noqa: E402
 
 TINY = """
 title = "tiny"
@@ -180,7 +180,7 @@ def test_interrupted_sweep_resumes_running_only_the_missing_rows(tmp_path):
     plan = plan_from_config(load_config(cfg))
     out = tmp_path / "out"
     rows_csv = out / "rows.csv"
-    proc = subprocess.Popen([sys.executable, "-m", "prioik.benchmarks.cli", "sweep", str(cfg),
+    proc = subprocess.Popen([sys.executable, "-m", "prioik.cli", "sweep", str(cfg),
                              "--out", str(out), "--workers", "0", "--quiet"],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 120

@@ -7,7 +7,6 @@ import math
 import numpy as np
 import pytest
 
-from prioik.benchmarks.cli import main
 from prioik.benchmarks.testsets import TEST_SETS, get
 from prioik.benchmarks.testsets.metrics import (
     PROFILES,
@@ -19,6 +18,7 @@ from prioik.benchmarks.testsets.metrics import (
 )
 from prioik.benchmarks.testsets.report import format_report, summarize
 from prioik.benchmarks.testsets.run import CSV_FIELDS, Row, load_csv, run_test_set, write_csv
+from prioik.cli import main
 from prioik.hierarchy import Task, TaskStack, check_lexicographic
 
 #: the smallest size of every test set (one or two problems per family or trajectory)
@@ -173,7 +173,7 @@ def test_approximate_is_a_success_at_an_ambiguous_rank_decision():
 def test_value_judged_formulations_are_not_exact_by_design():
     from prioik import formulations
     for name in VALUE_JUDGED:
-        assert formulations.get(name).CAPABILITIES.exact is False, name
+        assert formulations.get(name).capabilities.exact is False, name
 
 
 ROWS = [Row("hierarchical_active_set", "hierarchical_active_set", {"warm_start": False}),
@@ -227,10 +227,40 @@ def test_tiny_run_judges_rows_as_their_design_says():
             assert r["success_low"] == r["success_mid"] == 1
 
 
-def _record(problem, row, time_s, success, status="optimal"):
+def test_flops_column_holds_the_kernels_count_and_reloads(tmp_path):
+    """A compiled closed form's flop count is the one its prepared solver reports for
+    the same stack; a formulation that does not count them leaves the column empty;
+    the CSV reloads the counts as floats, and a file without the column loads empty."""
+    import prioik
+    rows = [Row("extended_jacobian", "extended_jacobian"),
+            Row("reference[numpy]", "reference", {"kernel": "numpy"})]
+    test_set = get("random_equality", n=5, k=2, samples=1)
+    records = run_test_set(test_set, rows, repeats=1)
+    assert "flops" in CSV_FIELDS
+    problems = {p.name: p for p in test_set.problems()}
+    counted = [r for r in records if r["row"] == "extended_jacobian"]
+    assert counted and all(r["flops"] != "" for r in counted)
+    for r in counted:
+        stack = problems[r["problem"]].stack
+        direct = prioik.prepare(stack.layout, "extended_jacobian").solve(stack.data)
+        assert r["flops"] == float(direct.flops) > 0
+    uncounted = [r for r in records if r["row"] == "reference[numpy]"]
+    assert uncounted and all(r["flops"] == "" for r in uncounted)
+    loaded = load_csv(write_csv(records, tmp_path / "r.csv"))
+    assert [r["flops"] for r in loaded] == [r["flops"] for r in records]
+    old = tmp_path / "old.csv"          # a file written before the column existed
+    lines = (tmp_path / "r.csv").read_text().splitlines()
+    col = lines[0].split(",").index("flops")
+    old.write_text("\n".join(",".join(c for i, c in enumerate(line.split(","))
+                                       if i != col) for line in lines[:2]) + "\n")
+    (first,) = load_csv(old)
+    assert first["flops"] == "" and first["row"] == records[0]["row"]
+
+
+def _record(problem, row, time_s, success, status="optimal", flops=""):
     rec = {f: "" for f in CSV_FIELDS}
     rec.update(test_set="s", problem=problem, row=row, formulation=row, status=status,
-               time_s=time_s, judged_by="certificate", n=2, levels=1, rows=2,
+               time_s=time_s, flops=flops, judged_by="certificate", n=2, levels=1, rows=2,
                exact_status="optimal", stated_by="")
     for p in PROFILES:
         rec[f"success_{p}"], rec[f"reason_{p}"] = success, ("" if success else "why")
@@ -252,6 +282,33 @@ def test_summary_normalises_to_the_best_and_counts_within_2x():
     text = format_report(records, "mid", command="prioik bench --test-set s")
     assert "| `b` | 2/2 | 50 % | 50 % | 50 % |" in text
     assert "- `b` (1) — approximate: why — p2" in text
+
+
+def test_flop_summary_normalises_to_the_fewest_among_the_rows_that_count():
+    """Row a: 1e4 and 4e4 flops; row b: 3e4 and 6e4; row c counts none; row d counts
+    one of its two solves (2e4). Shift s = 1e4: SGM(a) = √(2e4 · 5e4) − 1e4,
+    SGM(b) = √(4e4 · 7e4) − 1e4, SGM(d) = 2e4; d is the fewest, the others relative to it."""
+    records = [_record("p1", "a", 10e-6, 1, flops=1e4), _record("p2", "a", 10e-6, 1, flops=4e4),
+               _record("p1", "b", 10e-6, 1, flops=3e4), _record("p2", "b", 10e-6, 1, flops=6e4),
+               _record("p1", "c", 10e-6, 1), _record("p2", "c", 10e-6, 1),
+               _record("p1", "d", 10e-6, 1, flops=2e4), _record("p2", "d", 10e-6, 1)]
+    a, b, c, d = summarize(records, "mid", flop_shift=1e4)["s"]
+    sgm_a = (2e4 * 5e4) ** 0.5 - 1e4
+    sgm_b = (4e4 * 7e4) ** 0.5 - 1e4
+    assert a["sgm_flops"] == pytest.approx(sgm_a, rel=1e-12)
+    assert b["sgm_flops"] == pytest.approx(sgm_b, rel=1e-12)
+    assert d["sgm_flops"] == pytest.approx(2e4, rel=1e-12)
+    assert d["sgm_flops_norm"] == pytest.approx(1.0, rel=1e-12)
+    assert a["sgm_flops_norm"] == pytest.approx(sgm_a / 2e4, rel=1e-12)
+    assert b["sgm_flops_norm"] == pytest.approx(sgm_b / 2e4, rel=1e-12)
+    assert c["flops_counted"] == 0 and math.isnan(c["sgm_flops_norm"])
+    assert (d["flops_counted"], d["solves"]) == (1, 2)
+    text = format_report(records, "mid", flop_shift=1e4)
+    assert f"| `a` | 2/2 | 100 % | 100 % | 100 % | 1.00 | {sgm_a / 2e4:.2f} |" in text
+    assert "| `c` | 2/2 | 100 % | 100 % | 100 % | 1.00 | — |" in text
+    assert "| `d` | 2/2 | 100 % | 100 % | 100 % | 1.00 | 1.00 (1/2) |" in text
+    assert "Flops —: not counted by `c` " in text
+    assert "s = 10000 flops" in text
 
 
 def test_cli_lists_and_runs_one_tiny_test_set(tmp_path, capsys):

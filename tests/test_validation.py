@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from prioik.benchmarks import cli, validation
+from prioik import cli
+from prioik.benchmarks import validation
 
 #: whole-scenario runs (see the `slow` marker in pyproject.toml)
 pytestmark = pytest.mark.slow

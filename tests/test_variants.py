@@ -59,6 +59,41 @@ def test_plugin_declarations_land_in_their_reports():
     assert "cascaded_qp[clarabel,fixing=rows]" in {v.label for v in ablations}
 
 
+def test_report_rows_are_declared_by_the_benchmarks_for_known_names():
+    """The table of benchmarks/report_rows.py is keyed by registry (or baseline) names,
+    and no solver module declares report rows of its own."""
+    import ast
+    import pathlib
+
+    from prioik import formulations
+    from prioik.benchmarks import report_rows
+    from prioik.benchmarks.variants import BASELINES
+    known = set(formulations.names()) | set(BASELINES)
+    assert set(report_rows.REPORT_VARIANTS) <= known
+    assert set(report_rows.REPORT_OPT_OUTS) <= known
+    assert report_rows.declared("extended_jacobian")[0].tag == "svd"
+    assert report_rows.declared("no such formulation") == ()
+    # the table is plain data (building the parser imports no solver module): a number
+    # it quotes is the module's
+    from prioik.formulations.extended_jacobian import AUTO_CPP_MAX_N
+    lapack = [rv for rv in report_rows.declared("extended_jacobian") if rv.tag == "lapack"]
+    assert f"up to n = {AUTO_CPP_MAX_N}," in lapack[0].note
+    root = pathlib.Path(formulations.__file__).parent
+    for path in root.glob("*.py"):
+        names = {t.id for node in ast.parse(path.read_text()).body
+                 if isinstance(node, ast.Assign) for t in node.targets
+                 if isinstance(t, ast.Name)}
+        assert not names & {"REPORT_VARIANTS", "REPORT_OPT_OUTS", "ReportVariant"}, path.name
+
+
+def test_a_declared_row_with_an_unknown_option_is_refused(monkeypatch):
+    from prioik.benchmarks import report_rows
+    monkeypatch.setitem(report_rows.REPORT_VARIANTS, "nullspace",
+                        (report_rows.ReportVariant("bad", {"no_such_option": 1}),))
+    with pytest.raises(ValueError, match="nullspace.*'bad'.*no_such_option"):
+        table("bench")
+
+
 def test_select_names_unknown_and_unavailable_runs():
     t = VariantTable("fencing", [Variant("a")], {"a": Variant("a")}, [],
                      {"b": "not available here (missing)"})
@@ -85,9 +120,9 @@ def test_the_toy_plugin_runs_in_validate_properties_bench_and_scenarios(toy_plug
     properties column, bench rows (its default and its declared one) and a fencing run."""
     from prioik.benchmarks import validation
     from prioik.benchmarks.bench import Settings, run_benchmark
-    from prioik.benchmarks.cli import main
     from prioik.benchmarks.results import TimingRow, read_csv
     from prioik.benchmarks.scenario_runs import run_one
+    from prioik.cli import main
 
     text = validation.report(2, ["compatible"], (4, 8), (2, 3), only=[TOY, "reference"],
                              stream=open("/dev/null", "w"))

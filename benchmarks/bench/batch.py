@@ -18,15 +18,14 @@ __all__ = ["batched_formulations", "measure_batch"]
 
 
 def batched_formulations() -> list[str]:
-    """The available formulations with a batched kernel of their own (a module-level
-    ``solve_batch`` or ``Prepared.solve_batch``) that need no mass matrix."""
+    """The available formulations with a batched kernel of their own
+    (:attr:`~prioik.formulations.contract.Formulation.batched`) that need no mass
+    matrix."""
     out = []
     for info in formulations.available():
         if not info.available or (info.capabilities and info.capabilities.needs_mass_matrix):
             continue
-        mod = formulations.get(info.name)
-        if hasattr(mod, "solve_batch") or hasattr(getattr(mod, "Prepared", None),
-                                                  "solve_batch"):
+        if formulations.get(info.name).batched:
             out.append(info.name)
     return out
 

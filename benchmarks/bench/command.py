@@ -6,6 +6,8 @@ import argparse
 import math
 from pathlib import Path
 
+from prioik.smoke import shrink_bench_settings
+
 from .settings import LEVELS, SIZES, Settings, quick_settings
 
 __all__ = ["add_parser", "run"]
@@ -113,6 +115,7 @@ def run(args: argparse.Namespace) -> int:
     if args.blas_threads < 0:
         raise ValueError(f"--blas-threads must be ≥ 0, got {args.blas_threads}")
     settings.blas_threads = args.blas_threads
+    shrink_bench_settings(settings)               # PRIOIK_SMOKE=1: a few cases and solves
     command = _command(args)
     from .run import run_benchmark
     summary = run_benchmark(settings, args.out, args.doc, command)

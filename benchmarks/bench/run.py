@@ -16,8 +16,8 @@ from prioik.benchmarks.plots import time_vs_size
 from prioik.benchmarks.progress import Progress
 from prioik.benchmarks.results import TimingRow, write_csv
 from prioik.benchmarks.stacks import Case, g1_fencing_cases, random_case
-from prioik.benchmarks.threads import blas_info, blas_threads
 from prioik.benchmarks.variants import Variant, table
+from prioik.threads import blas_info, blas_threads
 
 from . import tables
 from .batch import batched_formulations, measure_batch
@@ -40,7 +40,7 @@ def _estimates(rows: list[TimingRow], variants: list[Variant]) -> dict[str, floa
     for v in variants:
         label = v.label
         if label not in by_label and not v.options:
-            opts = formulations.get(v.formulation).OPTIONS
+            opts = formulations.get(v.formulation).options
             if "solver" in opts:
                 label = f"{v.formulation}[{opts['solver'].default}]"
         if label in by_label:

@@ -155,7 +155,7 @@ def _table_variant(cfg: dict, e: dict) -> Variant:
         raise _err(cfg, f"formulation {name!r}: {exc}") from None
     opts = dict(e.get("options", {}))
     try:
-        validate_options(name, mod.OPTIONS, opts, None)
+        validate_options(name, mod.options, opts, None)
     except formulations.FormulationError as exc:
         raise _err(cfg, str(exc)) from None
     level = e.get("level", "acceleration")
@@ -252,6 +252,8 @@ def _sampler(cfg: dict, name: str, value: Any, rng: np.random.Generator):
 
 
 def _points(cfg: dict, sc: SweepScenario) -> tuple[list[dict], list[str]]:
+    from prioik.smoke import shrink_sweep_config
+    cfg = shrink_sweep_config(cfg, sc.smoke_parameters)     # PRIOIK_SMOKE=1: a short run
     fixed = cfg.get("fixed", {}) or {}
     grid = cfg.get("grid", {}) or {}
     sample = dict(cfg.get("sample", {}) or {})

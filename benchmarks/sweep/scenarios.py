@@ -84,6 +84,9 @@ class SweepScenario:
     parameters: ClassVar[dict[str, Parameter]] = {}
     #: criterion name → (default bound, meaning)
     criteria: ClassVar[dict[str, tuple[float, str]]] = {}
+    #: the parameters fixed under ``PRIOIK_SMOKE=1`` (:mod:`prioik.smoke`): a
+    #: valid run of a few steps
+    smoke_parameters: ClassVar[dict[str, Any]] = {}
 
     def resolve(self, point: dict[str, Any]) -> dict[str, Any]:  # pragma: no cover
         raise NotImplementedError
@@ -165,6 +168,7 @@ class FencingSweep(SweepScenario):
         "dt": Parameter(0.002, "float", "control step (s)", minimum=0.0,
                         exclusive_minimum=True),
     }
+    smoke_parameters = {"tip_start_s": 0.0, "tip_move_s": 0.01, "duration": 0.02}
     criteria = {
         "tip_m": (1e-3, "final sword-tip error, counted when the target is reachable (m)"),
         "support_foot_m": (1e-3, "largest support-foot displacement (m)"),

@@ -25,9 +25,9 @@ def run_task(task: dict[str, Any]) -> dict[str, Any]:
     ``status = "unsupported"``; any other exception a row with ``status = "error"``
     and the message — both are results, written like any row."""
     from prioik.benchmarks.scenario_runs import run_one, scenario_class, summarize
-    from prioik.benchmarks.threads import blas_threads
     from prioik.benchmarks.variants import Variant
     from prioik.hierarchy import UnsupportedTaskError
+    from prioik.threads import blas_threads
 
     from .scenarios import SWEEP_SCENARIOS
 

@@ -31,7 +31,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "test sets (qpbenchmark's shape)",
         "With --test-set, bench runs test sets instead of its timing tables: every "
         "formulation row on every problem, success per tolerance profile (low 1e-3, "
-        "mid 1e-6, high 1e-9), shifted geometric means of time normalised to the best; "
+        "mid 1e-6, high 1e-9), shifted geometric means of time and of flops (the "
+        "compiled closed forms count them) normalised to the best; "
         "writes OUT/testsets.csv (one row per problem × formulation) and "
         "OUT/testsets.md (generated from the CSV). --formulations, --repeats (default 3 "
         "passes), --out and --doc apply.")
@@ -107,7 +108,8 @@ def run(args: argparse.Namespace) -> int:
                          f"{', '.join(TEST_SETS)} (or 'all', 'list')")
     if args.from_csv is not None:
         return _report_from_csv(args, names)
-    repeats = 3 if args.repeats is None else args.repeats
+    from prioik.smoke import ARGUMENT_CAPS, cap
+    repeats = cap(3, ARGUMENT_CAPS["repeats"]) if args.repeats is None else args.repeats
     if repeats < 1:
         raise ValueError(f"--repeats must be ≥ 1, got {repeats}")
     options = parse_set_options(args.set_option)

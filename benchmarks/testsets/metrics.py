@@ -18,7 +18,8 @@ Success of one solve at a profile's tolerance ``tol``:
 
 Aggregates (:func:`shifted_geometric_mean`): ``exp(mean(log(t + s))) − s`` with the
 shift ``s`` on the scale of the data (:data:`TIME_SHIFT_S`, 10 µs: the solves take
-1 µs to a few ms), normalised to the best row of the test set.
+1 µs to a few ms; :data:`FLOP_SHIFT`, 10⁴ flops: the same weight at 1 Gflop/s, the
+counted solves take 10³ to 10⁶ flops), normalised to the best row of the test set.
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ from collections.abc import Iterable
 import numpy as np
 
 __all__ = ["PROFILES", "VALUE_JUDGED", "TIME_SHIFT_S", "JUDGED_BY_CERTIFICATE",
-           "JUDGED_BY_VALUES", "shifted_geometric_mean", "values_within",
+           "JUDGED_BY_VALUES", "FLOP_SHIFT", "shifted_geometric_mean", "values_within",
            "certificate_success", "value_success"]
 
 #: tolerance profile → relative tolerance
@@ -42,6 +43,9 @@ JUDGED_BY_CERTIFICATE = "certificate"
 JUDGED_BY_VALUES = "values"
 #: the shift of the shifted geometric mean of times (s)
 TIME_SHIFT_S = 1e-5
+#: the shift of the shifted geometric mean of flop counts (floating-point operations):
+#: the time shift at 1 Gflop/s
+FLOP_SHIFT = 1e4
 
 
 def shifted_geometric_mean(values: Iterable[float], shift: float = TIME_SHIFT_S) -> float:

@@ -3,9 +3,11 @@
 Per test set and formulation row, at the report's profile: the problems it takes, the
 success rate at every profile, the shifted geometric mean of its solve times (over
 every solve it made, success or not: read it beside the success rate) normalised to
-the best row's, its slowest solve, and the share of the problems where it succeeded
-within 2× the fastest successful solve of any row. Then every failure at the profile,
-grouped by row and reason, and how the exact answers compare with the stated ones.
+the best row's, the same for its flop counts (for the rows whose formulation counts
+them, normalised to the best of those rows), its slowest solve, and the share of the
+problems where it succeeded within 2× the fastest successful solve of any row. Then
+every failure at the profile, grouped by row and reason, and how the exact answers
+compare with the stated ones.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from .metrics import PROFILES, TIME_SHIFT_S, VALUE_JUDGED, shifted_geometric_mean
+from .metrics import FLOP_SHIFT, PROFILES, TIME_SHIFT_S, VALUE_JUDGED, shifted_geometric_mean
 
 __all__ = ["summarize", "format_report", "WITHIN"]
 
@@ -34,11 +36,25 @@ def _taken(rec: dict[str, Any]) -> bool:
     return rec["status"] != "unsupported"
 
 
+def _normalise(summaries: list[dict[str, Any]], key: str, out: str) -> None:
+    """``s[out] = s[key] / min over the rows of s[key]`` (NaN where ``s[key]`` is not
+    finite or the best is not > 0)."""
+    finite = [s[key] for s in summaries if math.isfinite(s[key])]
+    low = min(finite) if finite else math.nan
+    for s in summaries:
+        s[out] = s[key] / low if math.isfinite(s[key]) and low > 0 else math.nan
+
+
 def summarize(records: list[dict[str, Any]], profile: str = "mid",
-              shift: float = TIME_SHIFT_S) -> dict[str, list[dict[str, Any]]]:
+              shift: float = TIME_SHIFT_S, flop_shift: float = FLOP_SHIFT
+              ) -> dict[str, list[dict[str, Any]]]:
     """Per test set, one summary per row (in the records' order): ``row``, ``taken``,
-    ``success`` (profile → rate), ``sgm_s`` and ``sgm_norm`` (the shifted geometric mean
-    of times and its ratio to the best row's), ``worst_s``, ``verify_s`` (the median
+    ``success`` (profile → rate), ``solves`` (the solves it made), ``sgm_s`` and
+    ``sgm_norm`` (the shifted geometric mean
+    of times and its ratio to the best row's), ``flops_counted`` (the solves that report
+    a flop count), ``sgm_flops`` and ``sgm_flops_norm`` (the shifted geometric mean of
+    those counts, shift ``flop_shift``, and its ratio to the best of the rows that count
+    them; NaN for a row that counts none), ``worst_s``, ``verify_s`` (the median
     verification stage, NaN where none ran), ``within_2x`` (share of the problems
     taken), ``failures`` ((problem, status, reason) at ``profile``).
 
@@ -65,12 +81,16 @@ def summarize(records: list[dict[str, Any]], profile: str = "mid",
             times = [r["time_s"] for r in taken if r["time_s"] != ""]
             verify = [r.get("verify_time_s", "") for r in taken]
             verify = [v for v in verify if v != "" and v > 0]
+            flops = [r["flops"] for r in taken if r.get("flops", "") != ""]
             s = {"row": label, "formulation": rr[0]["formulation"], "taken": len(taken),
                  "problems": len(rr),
                  "judged_by": next((r["judged_by"] for r in taken if r["judged_by"]), ""),
                  "success": {p: (float(np.mean([r[f"success_{p}"] == 1 for r in taken]))
                                  if taken else math.nan) for p in PROFILES},
                  "sgm_s": shifted_geometric_mean(times, shift) if times else math.nan,
+                 "solves": len(times), "flops_counted": len(flops),
+                 "sgm_flops": (shifted_geometric_mean(flops, flop_shift) if flops
+                               else math.nan),
                  "worst_s": max(times) if times else math.nan,
                  "verify_s": float(np.median(verify)) if verify else math.nan,
                  "within_2x": (float(np.mean([
@@ -80,11 +100,8 @@ def summarize(records: list[dict[str, Any]], profile: str = "mid",
                  "failures": [(r["problem"], r["status"], r[f"reason_{profile}"])
                               for r in taken if r[f"success_{profile}"] != 1]}
             summaries.append(s)
-        sgms = [s["sgm_s"] for s in summaries if math.isfinite(s["sgm_s"])]
-        low = min(sgms) if sgms else math.nan
-        for s in summaries:
-            s["sgm_norm"] = s["sgm_s"] / low if math.isfinite(s["sgm_s"]) and low > 0 \
-                else math.nan
+        _normalise(summaries, "sgm_s", "sgm_norm")
+        _normalise(summaries, "sgm_flops", "sgm_flops_norm")
         out[name] = summaries
     return out
 
@@ -95,6 +112,15 @@ def _pct(v: float) -> str:
 
 def _num(v: float, fmt: str) -> str:
     return "—" if not math.isfinite(v) else format(v, fmt)
+
+
+def _flop_cell(s: dict[str, Any]) -> str:
+    """The flop SGM ratio, with ``(counted/solves)`` when only some solves counted."""
+    if not s["flops_counted"]:
+        return "—"
+    cell = _num(s["sgm_flops_norm"], ".2f")
+    solves = s.get("solves", s["flops_counted"])
+    return cell if s["flops_counted"] >= solves else f"{cell} ({s['flops_counted']}/{solves})"
 
 
 def _set_section(name: str, recs: list[dict[str, Any]], summaries: list[dict[str, Any]],
@@ -114,18 +140,32 @@ def _set_section(name: str, recs: list[dict[str, Any]], summaries: list[dict[str
     if best is not None:
         lines.append(f"Best shifted geometric mean: `{best['row']}`, "
                      f"{1e6 * best['sgm_s']:.1f} µs.")
+    least = min((s for s in summaries if s["taken"] and math.isfinite(s["sgm_flops"])),
+                key=lambda s: s["sgm_flops"], default=None)
+    if least is not None:
+        lines.append(f"Fewest flops (shifted geometric mean): `{least['row']}`, "
+                     f"{least['sgm_flops']:.3g}.")
     lines += ["", "| row | taken | success low | mid | high | time (SGM, ×best) "
-              f"| worst (µs) | verify (median µs) | within {WITHIN:g}× best ({profile}) |",
-              "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+              f"| flops (SGM, ×best) | worst (µs) | verify (median µs) "
+              f"| within {WITHIN:g}× best ({profile}) |",
+              "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    uncounted = []
     for s in summaries:
         if s["taken"] == 0:
             continue
         mark = " ᵛ" if s["judged_by"] == "values" else ""
+        if not s["flops_counted"]:
+            uncounted.append(s["row"])
         lines.append(f"| `{s['row']}`{mark} | {s['taken']}/{s['problems']} | "
                      f"{_pct(s['success']['low'])} | {_pct(s['success']['mid'])} | "
                      f"{_pct(s['success']['high'])} | {_num(s['sgm_norm'], '.2f')} | "
+                     f"{_flop_cell(s)} | "
                      f"{_num(1e6 * s['worst_s'], '.0f')} | "
                      f"{_num(1e6 * s['verify_s'], '.0f')} | {_pct(s['within_2x'])} |")
+    if uncounted:
+        lines += ["", "Flops —: not counted by " + ", ".join(f"`{r}`" for r in uncounted)
+                  + " (only the compiled closed forms count their floating-point "
+                    "operations)."]
     none_taken = [s["row"] for s in summaries if s["taken"] == 0]
     if none_taken:
         lines += ["", "Not taking any problem of this set (inequality tasks they cannot "
@@ -170,9 +210,9 @@ def _set_section(name: str, recs: list[dict[str, Any]], summaries: list[dict[str
 def format_report(records: list[dict[str, Any]], profile: str = "mid", *,
                   command: str = "", machine: str = "", notes: list[str] | None = None,
                   descriptions: dict[str, str] | None = None,
-                  shift: float = TIME_SHIFT_S) -> str:
+                  shift: float = TIME_SHIFT_S, flop_shift: float = FLOP_SHIFT) -> str:
     """The markdown report of ``records`` (one or several test sets) at ``profile``."""
-    summaries = summarize(records, profile, shift)
+    summaries = summarize(records, profile, shift, flop_shift)
     by_set: dict[str, list[dict[str, Any]]] = defaultdict(list)
     for rec in records:
         by_set[rec["test_set"]].append(rec)
@@ -202,7 +242,12 @@ def format_report(records: list[dict[str, Any]], profile: str = "mid", *,
         "(formulations refusing the stacks' inequality tasks) are compared on those they "
         "take. **Worst**: the slowest solve. **Within 2× best**: the share of "
         "the problems taken where the row succeeded in at most twice the fastest "
-        "successful solve of any row. Flops are not reported (no flop count yet).", ""]
+        "successful solve of any row. **Flops**: the floating-point operations the "
+        "compiled closed forms count in their kernels (`sol.flops`), the same "
+        f"shifted geometric mean with s = {flop_shift:g} flops, divided by the "
+        "fewest among the rows that count them; `—` for the "
+        "rows whose formulation does not count them (QP back-ends, active sets, lexls, "
+        "the numpy formulations), `(k/N)` when only k of its N solves were counted.", ""]
     for note in notes or []:
         lines.append(f"- {note}")
     if notes:

@@ -12,7 +12,9 @@ every solve is cold.
 Timing: ``repeats`` passes over the problems in order, the rows interleaved within a
 pass; per problem the fastest pass's wall time of ``solver.solve(data)``
 (``perf_counter``, the prepared solver of :func:`prioik.prepare`, prepared untimed: one
-per layout, anew at each sequence's start). The answer judged is the first pass's.
+per layout, anew at each sequence's start). The answer judged is the first pass's, and
+so is its flop count (``flops``: the compiled kernel's ``sol.flops`` for the
+formulations that count them, empty for the others).
 
 The exact answer of each problem is ``hierarchical_active_set``'s (cold); where the
 source states a solution or level values, the CSV records how far the exact answer's
@@ -66,9 +68,10 @@ class Row:
     options: dict[str, Any] = field(default_factory=dict, hash=False)
 
 
-#: the CSV's columns (lists are JSON; success columns ``1``/``0``, empty when not judged)
+#: the CSV's columns (lists are JSON; success columns ``1``/``0``, empty when not judged;
+#: ``flops`` empty where the formulation does not count them)
 CSV_FIELDS = ("test_set", "problem", "sequence", "row", "formulation", "n", "levels",
-              "rows", "status", "time_s", "verify_time_s", "judged_by",
+              "rows", "status", "time_s", "verify_time_s", "flops", "judged_by",
               *(f"success_{p}" for p in PROFILES), *(f"reason_{p}" for p in PROFILES),
               "values", "exact_values", "exact_status", "stated_values", "stated_by",
               "exact_vs_stated", "message")
@@ -76,7 +79,7 @@ CSV_FIELDS = ("test_set", "problem", "sequence", "row", "formulation", "n", "lev
 
 def _warm_option(formulation: str) -> str | None:
     from prioik import formulations
-    opts = formulations.get(formulation).OPTIONS
+    opts = formulations.get(formulation).options
     return next((o for o in WARM_OPTIONS if o in opts), None)
 
 
@@ -120,7 +123,7 @@ class _Solvers:
     def __init__(self, row: Row) -> None:
         from prioik import formulations
         self.row = row
-        self.caps = formulations.get(row.formulation).CAPABILITIES
+        self.caps = formulations.get(row.formulation).capabilities
         self._by_layout: dict = {}
         self._sequence: str | None = None
 
@@ -215,6 +218,16 @@ def _judge(row: Row, problem: Problem, sol, exact: np.ndarray | None
     return judged_by, success, reason
 
 
+def _flops(sol) -> float | str:
+    """The solve's floating-point operation count (:attr:`Solution.flops`), ``""`` when
+    the formulation does not count them."""
+    flops = sol.flops
+    if flops is None:
+        return ""
+    flops = float(flops)
+    return flops if math.isfinite(flops) and flops >= 0 else ""
+
+
 def _json(values) -> str:
     return "" if values is None else json.dumps([float(v) for v in values])
 
@@ -284,7 +297,8 @@ def run_test_set(test_set: TestSet, rows: list[Row] | None = None, repeats: int 
             else:
                 judged_by, success, reason = _judge(row, p, sol, exact_values)
                 rec.update(status=sol.status, time_s=float(times[r, j]),
-                           verify_time_s=float(sol.verify_time_s), judged_by=judged_by,
+                           verify_time_s=float(sol.verify_time_s), flops=_flops(sol),
+                           judged_by=judged_by,
                            values=_values(p, sol.x),
                            message=sol.diagnostics.reason[:200])
                 for name in PROFILES:
@@ -309,13 +323,17 @@ def write_csv(records: list[dict[str, Any]], path: str | Path) -> Path:
 
 
 _INT = ("n", "levels", "rows", *(f"success_{p}" for p in PROFILES))
-_FLOAT = ("time_s", "verify_time_s", "exact_vs_stated")
+_FLOAT = ("time_s", "verify_time_s", "flops", "exact_vs_stated")
 _LIST = ("values", "exact_values", "stated_values")
+#: columns added after the first files were written: empty when a file lacks them
+_ADDED = ("flops",)
 
 
 def load_csv(path: str | Path) -> list[dict[str, Any]]:
     """The records of a CSV written by :func:`write_csv`, typed as
     :func:`run_test_set` returns them (lists as float arrays, ``None`` where empty).
+
+    A file written before the ``flops`` column was added loads with it empty.
 
     Raises:
         ValueError: the file lacks a column of :data:`CSV_FIELDS`.
@@ -323,12 +341,14 @@ def load_csv(path: str | Path) -> list[dict[str, Any]]:
     path = Path(path)
     with path.open(newline="") as fh:
         reader = csv.DictReader(fh)
-        missing = [f for f in CSV_FIELDS if f not in (reader.fieldnames or ())]
+        missing = [f for f in CSV_FIELDS if f not in (reader.fieldnames or ())
+                   and f not in _ADDED]
         if missing:
             raise ValueError(f"{path}: not a test-set results file (missing columns "
                              f"{', '.join(missing)})")
         out = []
-        for raw in reader:
+        for row in reader:
+            raw = {f: "" for f in _ADDED} | row
             rec: dict[str, Any] = dict(raw)
             for f in _INT:
                 rec[f] = int(raw[f]) if raw[f] != "" else ""

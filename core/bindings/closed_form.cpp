@@ -1,5 +1,5 @@
 // prioik._core's closed-form formulations beside the extended Jacobian (closed_form.hpp),
-// nullspace, chiaverini, unifying and operational_space:
+// nullspace, chiaverini, unifying, operational_space, reference and sns:
 // prepared solvers whose solve checks its arrays (array_checks.hpp: float64, the layout's
 // shape, C-contiguous, not empty) and raises CoreInputError naming the array or the
 // entry at fault; a solve releases the GIL.
@@ -28,6 +28,10 @@ using prioik::ChiaveriniSolver;
 using prioik::NullspaceResult;
 using prioik::NullspaceSolver;
 using prioik::OperationalSpaceSolver;
+using prioik::ReferenceResult;
+using prioik::ReferenceSolver;
+using prioik::SnsResult;
+using prioik::SnsSolver;
 using prioik::UnifyingResult;
 using prioik::UnifyingSolver;
 
@@ -69,6 +73,38 @@ const UnifyingResult& solve_with_mass(Solver& self, nb::handle A, nb::handle b, 
   const double* mass = input(mass_matrix, "mass_matrix", {self.cols(), self.cols()});
   nb::gil_scoped_release release;
   return self.solve(data, mass);
+}
+
+const ReferenceResult& solve_reference(ReferenceSolver& self, nb::handle A, nb::handle b,
+                                       nb::handle w) {
+  const prioik::StackArrays data = stack_arrays(self, A, b, w);
+  nb::gil_scoped_release release;
+  return self.solve(data);
+}
+
+// ReferenceSolver(starts, n, rcond=, level_damping=, metric=): the metric (n × n) checked
+// as the stack's arrays are
+void init_reference(ReferenceSolver* self, std::vector<Index> starts, Index n, double rcond,
+                    std::vector<double> level_damping, nb::handle metric) {
+  prioik::ReferenceOptions o;
+  o.rcond = rcond;
+  o.level_damping = std::move(level_damping);
+  if (!metric.is_none()) {
+    if (n <= 0) throw prioik::InputError("n must be positive, got " + std::to_string(n));
+    const double* W = input(metric, "metric", {n, n});
+    o.metric.assign(W, W + n * n);
+  }
+  new (self) ReferenceSolver(std::move(starts), n, std::move(o));
+}
+
+// an SNS solve: the stack's arrays and the rows' bounds (lower, upper: M) checked
+const SnsResult& solve_sns(SnsSolver& self, nb::handle A, nb::handle b, nb::handle w,
+                           nb::handle lower, nb::handle upper) {
+  const prioik::StackArrays data = stack_arrays(self, A, b, w);
+  const double* lo = input(lower, "lower", {self.rows()});
+  const double* up = input(upper, "upper", {self.rows()});
+  nb::gil_scoped_release release;
+  return self.solve(data, lo, up);
 }
 
 }  // namespace
@@ -208,4 +244,103 @@ void bind_closed_form(nb::module_& m) {
       .def_prop_ro("rows", [](const OperationalSpaceSolver& s) { return s.rows(); })
       .def_prop_ro("cols", [](const OperationalSpaceSolver& s) { return s.cols(); })
       .def_prop_ro("levels", [](const OperationalSpaceSolver& s) { return s.levels(); });
+
+  nb::class_<ReferenceResult>(
+      m, "ReferenceResult",
+      "One nested-SVD reference solve's answer, the solver's own (the next solve "
+      "overwrites it): each read of an array field returns a new array.")
+      .def_prop_ro("x", [](const ReferenceResult& r) { return copy1(r.x); }, nb::rv_policy::move)
+      .def_prop_ro("residuals", [](const ReferenceResult& r) { return copy1(r.residuals); },
+                   nb::rv_policy::move)
+      .def_prop_ro("ranks", [](const ReferenceResult& r) { return copy1(r.ranks); },
+                   nb::rv_policy::move, "the kept rank of each M_i = A_i Z_i")
+      .def_prop_ro("ambiguous", [](const ReferenceResult& r) { return copy1(r.ambiguous); },
+                   nb::rv_policy::move,
+                   "1 where a singular value of M_i lies within AMBIGUITY of the threshold")
+      .def_ro("null_space_dim", &ReferenceResult::null_space_dim)
+      .def_ro("sweeps", &ReferenceResult::sweeps, "the Jacobi sweeps of the solve")
+      .def_ro("rotations", &ReferenceResult::rotations, "the Jacobi rotations of the solve")
+      .def_ro("flops", &ReferenceResult::flops, "floating-point operations of the solve")
+      .def_ro("solved", &ReferenceResult::solved,
+              "False: a level's scale is outside [SCALE_LOW, SCALE_HIGH], nothing solved")
+      .def_ro("finite", &ReferenceResult::finite)
+      .def_ro("metric_positive_definite", &ReferenceResult::metric_positive_definite,
+              "False: ZᵀWZ is not positive definite (x without the metric's tie-break)");
+
+  nb::class_<ReferenceSolver>(
+      m, "ReferenceSolver",
+      "The nested-SVD lexicographic least squares prepared for one layout "
+      "(closed_form.hpp): workspaces allocated here, none per solve. One thread at a time.")
+      .def("__init__", &init_reference, nb::arg("starts"), nb::arg("n"), nb::kw_only(),
+           nb::arg("rcond"), nb::arg("level_damping") = std::vector<double>(),
+           nb::arg("metric") = nb::none())
+      .def("solve", &solve_reference, nb::arg("A").none(), nb::arg("b").none(),
+           nb::arg("sqrt_weight").none(), nb::rv_policy::reference_internal,
+           "Solve one stack (A: M × n, b and sqrt_weight: M; C-contiguous float64).")
+      .def_prop_ro("rows", [](const ReferenceSolver& s) { return s.rows(); })
+      .def_prop_ro("cols", [](const ReferenceSolver& s) { return s.cols(); })
+      .def_prop_ro("levels", [](const ReferenceSolver& s) { return s.levels(); });
+
+  nb::class_<SnsResult>(
+      m, "SnsResult",
+      "One SNS solve's answer, the solver's own (the next solve overwrites it): each read "
+      "of an array field returns a new array.")
+      .def_prop_ro("x", [](const SnsResult& r) { return copy1(r.x); }, nb::rv_policy::move)
+      .def_prop_ro("residuals", [](const SnsResult& r) { return copy1(r.residuals); },
+                   nb::rv_policy::move,
+                   "‖√w ∘ (A_i x − b_i)‖ per level (the bounds level: the bounds' violation)")
+      .def_prop_ro("task_scaling", [](const SnsResult& r) { return copy1(r.task_scaling); },
+                   nb::rv_policy::move, "each level's scaling s (the bounds level: 1)")
+      .def_prop_ro("margins", [](const SnsResult& r) { return copy1(r.margins); },
+                   nb::rv_policy::move, "the unbounded step's rank decision margins")
+      .def_prop_ro("ranks", [](const SnsResult& r) { return copy1(r.ranks); },
+                   nb::rv_policy::move)
+      .def_prop_ro("iterations", [](const SnsResult& r) { return copy1(r.iterations); },
+                   nb::rv_policy::move, "the saturation rounds of each level")
+      .def_prop_ro("saturated", [](const SnsResult& r) { return copy1(r.saturated); },
+                   nb::rv_policy::move,
+                   "k × n, flattened: row i begins with level i's saturated columns")
+      .def_prop_ro("saturated_count", [](const SnsResult& r) { return copy1(r.saturated_count); },
+                   nb::rv_policy::move)
+      .def_prop_ro("lower", [](const SnsResult& r) { return copy1(r.lower); },
+                   nb::rv_policy::move, "the box the bounds rows give (n)")
+      .def_prop_ro("upper", [](const SnsResult& r) { return copy1(r.upper); },
+                   nb::rv_policy::move)
+      .def_prop_ro("bounds", [](const SnsResult& r) { return static_cast<int>(r.bounds); },
+                   "0: the bounds rows are a box; 1: row bad_entry is not a single-column "
+                   "row; 2: column bad_entry's bounds do not intersect")
+      .def_ro("bad_entry", &SnsResult::bad_entry)
+      .def_ro("flops", &SnsResult::flops, "floating-point operations of the solve")
+      .def_ro("solved", &SnsResult::solved,
+              "False: a level's scale is outside [SCALE_LOW, SCALE_HIGH] or the bounds are "
+              "malformed; nothing solved")
+      .def_ro("finite", &SnsResult::finite)
+      .def_ro("exact", &SnsResult::exact,
+              "every level reached its residual without bounds");
+
+  nb::class_<SnsSolver>(
+      m, "SnsSolver",
+      "Saturation in the Null Space prepared for one layout (closed_form.hpp): workspaces "
+      "allocated here, none per solve. One thread at a time.")
+      .def("__init__",
+           [](SnsSolver* self, std::vector<Index> starts, Index n, double rcond,
+              double bound_tolerance, Index max_saturations, bool bounds_level) {
+             prioik::SnsOptions o;
+             o.rcond = rcond;
+             o.bound_tolerance = bound_tolerance;
+             o.max_saturations = max_saturations;
+             o.bounds_level = bounds_level;
+             new (self) SnsSolver(std::move(starts), n, o);
+           },
+           nb::arg("starts"), nb::arg("n"), nb::kw_only(), nb::arg("rcond"),
+           nb::arg("bound_tolerance") = 1e-9, nb::arg("max_saturations") = -1,
+           nb::arg("bounds_level") = false)
+      .def("solve", &solve_sns, nb::arg("A").none(), nb::arg("b").none(),
+           nb::arg("sqrt_weight").none(), nb::arg("lower").none(), nb::arg("upper").none(),
+           nb::rv_policy::reference_internal,
+           "Solve one stack (A: M × n, b, sqrt_weight, lower and upper: M; C-contiguous "
+           "float64; lower and upper are read on the first level's rows when bounds_level).")
+      .def_prop_ro("rows", [](const SnsSolver& s) { return s.rows(); })
+      .def_prop_ro("cols", [](const SnsSolver& s) { return s.cols(); })
+      .def_prop_ro("levels", [](const SnsSolver& s) { return s.levels(); });
 }

@@ -1,4 +1,4 @@
-// The steps shared by the compiled closed forms (nullspace, chiaverini, unifying,
+// The steps shared by the compiled closed forms (nullspace, chiaverini, unifying, sns,
 // operational_space): each works on a ProjectionWorkspace (closed_form.hpp), allocates
 // nothing and returns the floating-point operations it performed (counted as its loops
 // execute).

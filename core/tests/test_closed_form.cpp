@@ -122,6 +122,88 @@ Vec operational_space_reference(const Stack& s, const Mat& M, Index n) {
   return x;
 }
 
+// nested SVD null spaces: y = V_r Σ_r⁻¹ U_rᵀ (b − A x), x += Z y, Z ← Z null(A Z); with a
+// metric W, the tie-break z = −(ZᵀWZ)⁻¹ ZᵀW x
+Vec reference_recursion(const Stack& s, Index n, const Mat* W) {
+  Vec x = Vec::Zero(n);
+  Mat Z = Mat::Identity(n, n);
+  for (std::size_t lev = 0; lev < s.levels() && Z.cols() > 0; ++lev) {
+    const Mat A = s.rows(lev), K = A * Z;
+    Eigen::JacobiSVD<Mat> svd(K, Eigen::ComputeFullU | Eigen::ComputeFullV);
+    const Vec& sv = svd.singularValues();
+    Index r = 0;
+    while (r < sv.size() && sv(r) > 1e-9 * A.norm()) ++r;
+    const Vec c = s.targets(lev) - A * x;
+    const Mat Vr = svd.matrixV().leftCols(r), Ur = svd.matrixU().leftCols(r);
+    x += Z * (Vr * (sv.head(r).cwiseInverse().asDiagonal() * (Ur.transpose() * c)));
+    Z = (Z * svd.matrixV().rightCols(K.cols() - r)).eval();
+  }
+  if (W != nullptr && Z.cols() > 0) {
+    const Mat G = Z.transpose() * *W * Z;
+    x -= Z * G.llt().solve(Z.transpose() * (*W * x));
+  }
+  return x;
+}
+
+// the reference solver against the recursion on stacks with dependent rows (a level's rows
+// repeated in the next), with and without a metric
+void test_reference_equals_nested_svd() {
+  std::mt19937 rng(11);
+  const std::vector<std::vector<Index>> layouts = {{3, 4, 5}, {4, 9}, {2, 2, 2, 2}, {12}, {6, 6}};
+  for (const auto& rows : layouts) {
+    const Index n = 10;
+    Stack s = random_stack(rng, n, rows);
+    if (s.levels() > 1) s.A.row(s.starts[1]) = 2.0 * s.A.row(0);   // a dependent row
+    const Mat W = random_spd(rng, n);
+    prioik::ReferenceSolver plain(s.starts, n, prioik::ReferenceOptions{});
+    const auto& rp = plain.solve(s.arrays());
+    CHECK(rp.solved && rp.finite && rp.flops > 0.0 && rp.sweeps > 0);
+    CHECK(close(as_vec(rp.x), reference_recursion(s, n, nullptr)));
+    prioik::ReferenceOptions o;
+    o.metric.assign(W.data(), W.data() + n * n);
+    prioik::ReferenceSolver metric(s.starts, n, o);
+    const auto& rm = metric.solve(s.arrays());
+    CHECK(rm.solved && rm.finite && rm.metric_positive_definite);
+    CHECK(close(as_vec(rm.x), reference_recursion(s, n, &W)));
+  }
+}
+
+// SNS: without bounds NullspaceSolver's answer bit for bit; under a box too tight for the
+// tasks every answer within the box, every scaling in [0, 1]; a bounds row on two columns
+// refused
+void test_sns_stays_in_the_box() {
+  std::mt19937 rng(5);
+  const Index n = 9;
+  const Stack free_stack = random_stack(rng, n, {2, 3, 1});
+  prioik::SnsSolver unbounded(free_stack.starts, n, prioik::SnsOptions{});
+  prioik::NullspaceSolver ns(free_stack.starts, n, prioik::NullspaceOptions{});
+  const Vec none = Vec::Zero(free_stack.starts.back());
+  const auto& ru = unbounded.solve(free_stack.arrays(), none.data(), none.data());
+  CHECK(ru.solved && ru.finite && ru.exact);
+  CHECK(as_vec(ru.x) == as_vec(ns.solve(free_stack.arrays()).x));
+  for (double half_width : {0.05, 0.3, 2.0}) {
+    Stack s = random_stack(rng, n, {n, 2, 3, 1});
+    s.A.topRows(n) = Mat::Identity(n, n);
+    s.b.head(n).setZero();
+    const Vec lower = Vec::Constant(s.starts.back(), -half_width);
+    const Vec upper = Vec::Constant(s.starts.back(), half_width);
+    prioik::SnsOptions o;
+    o.bounds_level = true;
+    prioik::SnsSolver sns(s.starts, n, o);
+    const auto& r = sns.solve(s.arrays(), lower.data(), upper.data());
+    CHECK(r.solved && r.finite && r.flops > 0.0);
+    for (Index j = 0; j < n; ++j) CHECK(std::fabs(r.x[j]) <= half_width * (1.0 + 1e-9));
+    for (Index lev = 1; lev < 4; ++lev)
+      CHECK(r.task_scaling[lev] >= 0.0 && r.task_scaling[lev] <= 1.0);
+    const Index rounds = r.saturated_count[1] + r.saturated_count[2] + r.saturated_count[3];
+    if (half_width == 0.05) CHECK(rounds > 0 && !r.exact);
+    s.A(0, 1) = 1.0;                    // the first bounds row on two columns
+    CHECK(!sns.solve(s.arrays(), lower.data(), upper.data()).solved);
+    CHECK(sns.result().bounds == prioik::SnsBounds::not_single_column &&
+          sns.result().bad_entry == 0);
+  }
+}
+
 void test_each_solver_equals_its_recursion() {
   std::mt19937 rng(7);
   const std::vector<std::vector<Index>> layouts = {{3, 4, 5}, {4, 9}, {2, 2, 2, 2}, {12}};
@@ -194,12 +276,23 @@ void test_bad_input() {
     threw = true;
   }
   CHECK(threw);
+  threw = false;
+  try {
+    prioik::ReferenceOptions o;
+    o.level_damping = {1.0};
+    prioik::ReferenceSolver bad(s.starts, n, o);
+  } catch (const prioik::InputError&) {
+    threw = true;
+  }
+  CHECK(threw);
 }
 
 }  // namespace
 
 int main() {
   test_each_solver_equals_its_recursion();
+  test_reference_equals_nested_svd();
+  test_sns_stays_in_the_box();
   test_damped_nullspace_stays_bounded();
   test_bad_input();
   std::printf(prioik_test::failures == 0 ? "closed-form tests: all passed\n"

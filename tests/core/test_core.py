@@ -18,7 +18,7 @@ import pytest
 
 import prioik
 from prioik import extras, formulations
-from prioik.benchmarks.cli import main
+from prioik.cli import main
 from prioik.formulations.registry import PLUGINS
 from prioik.hierarchy import check_lexicographic, load_stack
 from prioik.hierarchy.families import compatible, conflicting, random_spd, with_inequalities
@@ -72,7 +72,7 @@ def test_every_core_formulation_solves_a_compatible_stack(seed):
         opts = {"mass_matrix": mass} if name in ("unifying", "operational_space") else {}
         sol = formulations.solve(stack, name, **opts)
         assert sol.status != "failed" and np.isfinite(sol.x).all(), (name, sol.diagnostics)
-        if formulations.get(name).CAPABILITIES.exact:
+        if formulations.get(name).capabilities.exact:
             assert np.max(sol.residuals) <= 1e-9, (name, sol.residuals)
             assert check_lexicographic(stack, sol.x, tol=1e-8).ok, name
         else:

@@ -3,7 +3,8 @@
 // solve), on householder.hpp's primitives, with the core's rank rule (a pivot of the
 // row-pivoted LQ counts when its norm exceeds rcond times the level's scale — ‖A_i‖_F,
 // or ‖A_i M⁻¹‖_F and ‖A_i L⁻ᵀ‖_F where the readable paths use those — the RRQR estimate
-// of the singular value they test) and its rounding rule (core/CMakeLists.txt).
+// of the singular value they test; ReferenceSolver, the nested-SVD reference, tests the
+// singular values themselves) and its rounding rule (core/CMakeLists.txt).
 // Each solve counts its floating-point operations (a multiply, an add, a divide or a
 // square root is one; comparisons and copies are none) in its result's `flops`.
 //
@@ -220,6 +221,176 @@ class OperationalSpaceSolver final : public MassMatrixSolver {
   double solve_level(Index lev, bool last) override;
 
   OperationalSpaceOptions options_;
+};
+
+// The exact lexicographic minimum-norm least squares by nested SVD null spaces (the
+// `reference` formulation), for each level i with x = 0 and Z_1 = I (n × n):
+//     M_i = A_i Z_i,   y_i = V_r diag(σ/(σ² + μ_i²)) U_rᵀ (b_i − A_i x),   x ← x + Z_i y_i,
+//     Z_{i+1} = Z_i · null(M_i)
+// rank r = #{σ > rcond ‖A_i‖_F} (the readable path's rule, on singular values), a σ within
+// kAmbiguity of the threshold marking the level ambiguous; undamped steps get two steps of
+// iterative refinement from the level's residual formed row by row. The SVD of M_i is a
+// Householder LQ, M_i = [L 0] Q, then a one-sided (Hestenes) Jacobi SVD of L's columns,
+// L W = U Σ (rotations until every pair of columns is orthogonal to m ε): σ are the
+// singular values of M_i to its relative accuracy, V = Qᵀ [W; 0] and null(M_i) = Qᵀ's
+// columns past L's and W's columns with σ ≤ the threshold. With a metric W_x (n × n,
+// SPD on the last null space) the tie-break solves (ZᵀW_xZ) z = −ZᵀW_x x by Cholesky.
+struct ReferenceOptions {
+  double rcond = 1e-9;
+  std::vector<double> level_damping;   // k values μ_i² ≥ 0 (empty: none)
+  std::vector<double> metric;          // n × n, row-major (empty: minimum norm)
+};
+
+struct ReferenceResult {
+  std::vector<double> x;            // n
+  std::vector<double> residuals;    // k: ‖√w ∘ (A_i x − b_i)‖
+  std::vector<Index> ranks;         // k: the kept rank of M_i
+  std::vector<Index> ambiguous;     // k: 1 where a σ of M_i lies within kAmbiguity of the
+                                    // threshold
+  Index null_space_dim = 0;         // the columns of the last Z
+  Index sweeps = 0;                 // the Jacobi sweeps of the solve, over every level
+  Index rotations = 0;              // the Jacobi rotations of the solve, over every level
+  double flops = 0.0;               // floating-point operations of the solve
+  bool solved = false;       // false: a level's scale is outside [1e-100, 1e100]
+  bool finite = false;       // the residuals (and so x) are finite
+  bool metric_positive_definite = true;   // ZᵀW_xZ factored (false: x without tie-break)
+};
+
+// What a reference solve works in beside its ProjectionWorkspace, allocated at prepare.
+struct ReferenceWorkspace {
+  ReferenceWorkspace() = default;
+  ReferenceWorkspace(Index n, Index m_max);
+
+  Index d = 0;                  // the current null space's dimension (Z's columns)
+  std::vector<double> Z;        // n × n: the null-space basis Z_i (columns < d)
+  std::vector<double> Gt;       // n × m_max: L's columns as rows (Jacobi's matrix)
+  std::vector<double> Wt;       // n × n: the Jacobi rotations' product, transposed
+  std::vector<double> sigma;    // n: the singular values of M_i
+  std::vector<Index> order;     // n: the kept columns first, then the null ones
+  std::vector<double> gain;     // n: the step's coordinates on the kept columns
+  std::vector<double> res0;     // m_max: b_i − A_i x, the level's rows in order
+  std::vector<double> row;      // n: scratch
+  std::vector<double> G;        // n × n: ZᵀW_xZ and its Cholesky factor
+  std::vector<double> WZ;       // n × n: W_x Z
+};
+
+class ReferenceSolver : public ProjectionSolver {
+ public:
+  // Throws InputError on a malformed layout, rcond outside (0, 1), level_damping not k
+  // finite values ≥ 0, or a metric not n × n finite values.
+  ReferenceSolver(std::vector<Index> starts, Index n, ReferenceOptions options);
+
+  // Solve one stack of the layout (as NullspaceSolver::solve).
+  const ReferenceResult& solve(const StackArrays& data);
+
+  const ReferenceResult& result() const { return result_; }
+
+ private:
+  // level lev on the workspace (Z: n × d, d the null space's dimension); returns its flops
+  double solve_level(Index lev);
+  // the level's step from the kept singular directions (Zq's columns), refined; its flops
+  double level_step(Index lev, Index s0, Index m, Index r);
+  // the metric's tie-break on the last null space; its flops
+  double metric_step();
+
+  ReferenceOptions options_;
+  ReferenceResult result_;
+  ReferenceWorkspace nested_;   // beside work_ (the weighted rows, M_i's LQ)
+};
+
+// Saturation in the Null Space (SNS; Flacco, De Luca & Khatib, T-RO 2015, Algorithm 2):
+// box bounds on x from the first level's single-column rows (lower ≤ a·x_j ≤ upper), hard,
+// and strict priorities over the equality levels below. Per level, NullspaceSolver's step
+// (x_free, and N_i after the level); when x_free leaves the box, the most critical joint
+// is saturated at its bound and the level solved again in the null space left,
+//     x_s = c + s a,  a = M⁺ b_i,  c = x − M⁺ A_i x + (I − M⁺ A_i) B⁺ (x_N − x)_sat,
+//     M = A_i P̄,  P̄ = P − B⁺ B,  B = the rows `sat` of P = N_{i-1},
+// keeping the best feasible scaling s ∈ [0, 1]; a level whose rank would drop stops, and
+// one with no feasible scaling is dropped (s = 0). Every pseudo-inverse is a row-pivoted
+// LQ (M: rank rule rcond ‖A_i‖_F; B: 1e-12 max(1, ‖B‖_F)), applied to vectors.
+struct SnsOptions {
+  double rcond = 1e-9;
+  double bound_tolerance = 1e-9;   // a bound is met within tol · max(1, |bound|)
+  Index max_saturations = -1;      // saturated joints per level (-1: the bounded columns)
+  bool bounds_level = false;       // the first level holds the bounds (else: none)
+};
+
+// what a solve found wrong with the bounds rows (the caller names the task)
+enum class SnsBounds : int { ok = 0, not_single_column = 1, empty_box = 2 };
+
+struct SnsResult {
+  std::vector<double> x;              // n
+  std::vector<double> residuals;      // k: ‖√w ∘ (A_i x − b_i)‖; the bounds level:
+                                      // ‖√w ∘ the distance of A_0 x to [lower, upper]‖
+  std::vector<double> task_scaling;   // k: each equality level's s (the bounds level: 1)
+  std::vector<double> margins;        // k: the unbounded step's rank decision margins
+  std::vector<Index> ranks;           // k: the unbounded step's kept rank
+  std::vector<Index> iterations;      // k: the saturation rounds of each level
+  std::vector<Index> saturated;       // k × n: row i holds level i's saturated columns ...
+  std::vector<Index> saturated_count; // k: ... this many of them, in order
+  std::vector<double> lower, upper;   // n: the box the bounds rows give
+  SnsBounds bounds = SnsBounds::ok;   // not ok: nothing solved (`bad_entry` says where)
+  Index bad_entry = -1;               // the row (not_single_column) or column (empty_box)
+  double flops = 0.0;                 // floating-point operations of the solve
+  bool solved = false;       // false: a level's scale is outside [1e-100, 1e100] or the
+                             // bounds are malformed (`bounds`); nothing solved
+  bool finite = false;       // the residuals (and so x) are finite
+  bool exact = false;        // every level reached its unbounded residual
+};
+
+// What an SNS solve works in beside its ProjectionWorkspace, allocated at prepare: the
+// box, the rounds' vectors (n each) and the two factorizations they apply.
+struct SnsWorkspace {
+  SnsWorkspace() = default;
+  SnsWorkspace(Index n, Index m_max);
+
+  Index bounded = 0;            // the bounded columns
+  std::vector<double> tol;      // the bounds' tolerances
+  std::vector<double> x_free, x_new, best, xs, cvec, a, corr, u, x_sat;
+  std::vector<double> col_hi;   // each column's upper end of s
+  std::vector<char> free;       // the columns not saturated
+  std::vector<double> Pbar;     // n × n: P − B⁺B
+  std::vector<double> Jm, perm_m, Vm, beta_m;   // M = A_i P̄'s LQ (Jm: m_max × n)
+  std::vector<Index> pos_m;
+  std::vector<double> Jb, perm_b, Vb, beta_b;   // B's LQ (Jb: n × n)
+  std::vector<Index> pos_b;
+  std::vector<double> y;        // max(m_max, n): scratch of apply_pinv's callers
+  std::vector<double> v;        // n
+};
+
+class SnsSolver : public ProjectionSolver {
+ public:
+  SnsSolver(std::vector<Index> starts, Index n, SnsOptions options);
+
+  // Solve one stack of the layout: A, b, sqrt_weight as NullspaceSolver::solve; lower and
+  // upper (M) the bounds of the first level's rows (read when options.bounds_level).
+  // Throws InputError naming a non-finite entry, a √w ≤ 0 or a NaN bound.
+  const SnsResult& solve(const StackArrays& data, const double* lower, const double* upper);
+
+  const SnsResult& result() const { return result_; }
+
+ private:
+  // the box from the bounds rows; false when they are malformed (result_.bounds says why).
+  // Throws InputError naming a bound that is NaN, lower = +inf, upper = −inf or lower > upper.
+  bool read_bounds(const StackArrays& data, const double* lower, const double* upper);
+  // the scaling interval [s_min, s_max] of c + s a within the box, col_hi_ each column's
+  // upper end (formulations.sns._scale_interval); returns the flops
+  double scale_interval(double* s_min, double* s_max);
+  bool feasible(const double* v) const;
+  // level lev; returns its flops
+  double solve_level(Index lev, bool last);
+  // the saturation rounds of level lev from x (x_new: the answer, *scale its s; false:
+  // none feasible); returns the flops
+  double saturate(Index lev, Index rank, double* x_new, double* scale, bool* found);
+  // z = M⁺ y for the factored M (J, perm, H, rank); returns the flops
+  double apply_pinv(MatrixRef J, const double* perm, const Reflectors& H, Index rank,
+                    const double* y, double* z);
+  // factor M = A_i P̄ with P̄ = P − B⁺B for the saturated rows; returns the flops
+  double factor_saturated(Index lev, Index count, Index* rank_m, Index* rank_b);
+
+  SnsOptions options_;
+  SnsResult result_;
+  SnsWorkspace rounds_;         // beside work_ (the weighted rows, the projector, its LQ)
 };
 
 // Throws InputError naming the first entry of A or b that is not finite, or the first

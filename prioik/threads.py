@@ -1,4 +1,4 @@
-"""BLAS thread control for the benchmark commands (``threadpoolctl``).
+"""BLAS thread control for the ``prioik`` commands (``threadpoolctl``).
 
 A control loop solves one small problem at a time on one core; with a multi-threaded
 BLAS on a shared 2-core machine, n ≥ 100 solves were up to 100× slower and erratic.

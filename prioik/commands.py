@@ -1,6 +1,7 @@
-"""``prioik list``, ``prioik solve`` and ``prioik compile``: the library itself from the
-command line (the formulations, their options and back-ends; one task-stack file solved;
-``compile``, which says there is nothing to compile)."""
+"""``prioik list``, ``prioik solve`` and ``prioik compile``, core commands of
+:mod:`prioik.cli`: the library itself from the command line (the formulations, their
+options and back-ends; one task-stack file solved; ``compile``, which says there is
+nothing to compile)."""
 
 from __future__ import annotations
 
