@@ -213,7 +213,7 @@ def measure(stacks: list, repeats: int = REPEATS, cascade_every: int = 1,
     against_lexls = {}
     if lexls:
         t_lc, t_lh = times["lexls cold"], times["lexls hot"]
-        capped = sum(lexls_cold.solve(s).info.get("capped", False) for s in same)
+        capped = sum(lexls_cold.solve(s).detail.capped for s in same)
         med.update({"lexls cold": float(np.median(t_lc)), "lexls hot": float(np.median(t_lh))})
         against_lexls = {"cold/lexls_cold": med["active_set cold"] / med["lexls cold"],
                          "warm/lexls_hot": med["active_set warm"] / med["lexls hot"],

@@ -55,7 +55,7 @@ def write_page(path: Path, summary: dict, meta: dict, pngs: dict, command: str,
         rows.append([f"`{label}`", f"`{r['formulation']}`", opts, stack, r["note"]])
     head = ["run", "final tool error", "max algorithmic error", "max orientation error",
             "max joint-limit violation", "max velocity-limit violation", "max ‖q̈‖",
-            "median step", "median solve", "status"]
+            "median step", "median solve", "median verify", "status"]
     measured = []
     for variant, runs in summary.items():
         body = [[f"`{label}`", "—" if s["final_tip_error_m"] is None
@@ -65,7 +65,8 @@ def write_page(path: Path, summary: dict, meta: dict, pngs: dict, command: str,
                  f"{sci(s.get('max_joint_limit_violation_rad'))} rad",
                  f"{sci(s.get('max_joint_velocity_violation_rad_s'))} rad/s",
                  sci(s["max_qdd_norm"], ".3g"), ms(s["median_step_time_s"]),
-                 ms(s["median_solve_time_s"]), "failed" if s["failed"] else "ran to the end"]
+                 ms(s["median_solve_time_s"]), ms(s.get("median_verify_time_s")),
+                 "failed" if s["failed"] else "ran to the end"]
                 for label, s in runs.items()]
         figures = [(key, page.inline(f"{key}_figure"))
                    for key in ("tip_error", "algorithmic_error", "qdd")]

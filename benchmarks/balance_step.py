@@ -187,7 +187,7 @@ def balance_step_times(steps: int = 300, rounds: int = 5) -> dict[str, Any]:
     def prioik_own(i: int) -> None:
         out = solve(own[i])
         statuses.add(out.status)
-        first.append(bool(out.info.get("equality_first")))
+        first.append(bool(out.detail.equality_first))
 
     def prioik_at_placo(i: int) -> None:
         statuses.add(solve(placo_states[i]).status)

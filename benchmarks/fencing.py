@@ -81,7 +81,7 @@ STUDIES: tuple[Variant, ...] = (
 )
 
 #: runs whose ``q̈`` is cross-checked against ``cascaded_qp`` with the same per-level
-#: Tikhonov terms (``info["level_damping"]``), and in which variants
+#: Tikhonov terms (``sol.detail.level_damping``), and in which variants
 CROSSCHECK_RUNS = {"extended_jacobian": ("compatible",),
                    "extended_jacobian[step_bound]": ("incompatible",),
                    "extended_jacobian[eq27]": ("compatible", "incompatible")}
@@ -96,7 +96,7 @@ def crosscheck(variant: str, res, dt: float, every: int = 25,
     steps the activation-form stack is rebuilt and solved by ``extended_jacobian``
     with the run's options and by ``cascaded_qp`` (DAQP) given the same per-level
     Tikhonov terms (``level_damping`` = the extended Jacobian's
-    ``info["level_damping"]``, zero where a level was solved exactly): the two must
+    ``sol.detail.level_damping``, zero where a level was solved exactly): the two must
     give the same whole ``q̈`` (``‖Δq̈‖ / max(1, ‖q̈‖)``), damped or not. ``None`` when
     ``cascaded_qp`` is not available.
     """
@@ -113,12 +113,12 @@ def crosscheck(variant: str, res, dt: float, every: int = 25,
         state = KinematicState(scenario.robot, res.q[k], res.v[k])
         stack = scenario.acceleration_stack(state, float(res.t[k]), "activation", dt).stack
         a = formulations.solve(stack, "extended_jacobian", **(run_options or {}))
-        mu2 = a.info.get("level_damping")
+        mu2 = a.detail.level_damping
         b = formulations.solve(stack, "cascaded_qp", solver="daqp", level_damping=mu2)
         if not (a.ok and b.ok):
             continue
         diff = float(np.linalg.norm(a.x - b.x) / max(1.0, np.linalg.norm(b.x)))
-        damped = a.info.get("damped_levels") or []
+        damped = a.detail.damped_levels or []
         if damped:
             damped_diff.append(diff)
             damped_names += [stack.levels[i].names[0] for i in damped]

@@ -1,6 +1,6 @@
 """Compiled closed-form formulations against the extended Jacobian on the G1 fencing
 stacks: per formulation, the median time of a prepared solve on the compiled kernel and
-on the readable one, and the flop rate (the kernel's ``info["flops"]`` over the compiled
+on the readable one, and the flop rate (the kernel's ``sol.detail.flops`` over the compiled
 time) relative to the extended Jacobian's. Every solver runs in one process, the stacks
 interleaved, one BLAS thread (only ratios measured side by side mean anything).
 
@@ -54,7 +54,7 @@ def measure(samples: list, repeats: int) -> dict[str, dict[str, float]]:
                                           mass)
                    for label in KERNELS for path in (0, 1)}
         for label in KERNELS:
-            flops[label].append(solvers[label, 0].solve(chosen[label].data).info["flops"])
+            flops[label].append(solvers[label, 0].solve(chosen[label].data).flops)
         for _ in range(repeats):
             for (label, path), solver in solvers.items():
                 data = chosen[label].data

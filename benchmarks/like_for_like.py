@@ -7,7 +7,8 @@ Jacobian's beside the paper's per-step ratios (Jeong & Chang 2009, Sec. III-B.3,
 
 What enters which column is read from the solvers, not from a list: a formulation is
 *compiled* when its prepared solver says so (:attr:`~prioik.PreparedSolver.compiled`) or
-its solve reports a flop count (``info["flops"]``, counted in the compiled kernel); only
+its solve reports a flop count (:attr:`~prioik.formulations.Solution.flops`, counted in
+the compiled kernel); only
 compiled formulations, against a compiled extended Jacobian, get a time ratio (a numpy
 formulation's time measures the interpreter, not the formulation), and only those that
 count flops get a flop ratio.
@@ -75,7 +76,7 @@ def measure(samples: list[tuple[Any, np.ndarray]], names: tuple[str, ...] = FORM
         for n, solver in solvers.items():        # untimed: the counts and statuses
             sol = solver.solve(data, **step[n])
             statuses[n][sol.status] = statuses[n].get(sol.status, 0) + 1
-            count = sol.info.get("flops")
+            count = sol.flops
             if count is not None:
                 flops[n].append(float(count))
             compiled[n] = compiled[n] or bool(solver.compiled) or count is not None

@@ -71,14 +71,14 @@ def _measured(page: Page, meta: dict, summary: dict, shown: dict) -> str:
     out = []
     head = ["run", "final tip error", "max algorithmic error", "max CoM error",
             "max support-foot error", "max left-foot error", "max joint-limit violation",
-            "max ‖q̈‖", "median step", "median solve", "status"]
+            "max ‖q̈‖", "median step", "median solve", "median verify", "status"]
     for variant, runs in summary.items():
         rows = [[f"`{label}`", mm(s["final_tip_error_m"]), sci(s["max_algorithmic_error"]),
                  mm(s.get("max_com_error_m")), mm(s.get("max_support_foot_error_m")),
                  mm(s.get("max_left_foot_error_m")),
                  f"{sci(s.get('max_joint_limit_violation_rad'))} rad",
                  sci(s["max_qdd_norm"], ".3g"), _fmt_ms(s["median_step_time_s"]),
-                 _fmt_ms(s["median_solve_time_s"]),
+                 _fmt_ms(s["median_solve_time_s"]), _fmt_ms(s.get("median_verify_time_s")),
                  "failed" if s["failed"] else "ran to the end"] for label, s in runs.items()]
         figures = [(key, page.inline(f"{key}_figure", variant=variant))
                    for key in ("tip_error", "algorithmic_error", "qdd")]

@@ -13,7 +13,7 @@ from __future__ import annotations
 import csv
 import math
 import typing
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import MISSING, asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -35,10 +35,13 @@ class TimingRow:
         label: The variant's label (:mod:`prioik.benchmarks.variants`).
         formulation, backend, options: What the label stands for.
         repeats: Timed solves.
-        median_us, p10_us, p90_us: Of the timed solves.
+        median_us, p10_us, p90_us: Of the timed solves (the formulation's solve alone,
+            ``Solution.time_s``).
         success_rate: Share of solves that are not failed and match ``reference``'s
             residuals level by level.
         dist_median, dist_max: ``‖x − x_ref‖ / max(1, ‖x_ref‖)`` over the solves.
+        verify_median_us: Median of the verification stage after each solve
+            (``Solution.verify_time_s``); NaN where no verification ran.
         status: ``ok``, ``reduced``, ``skipped``, ``unsupported`` or ``error``.
         note: Why, when the status is not ``ok``.
         probe_s: A skipped row's measured solve (s; not written to the CSV).
@@ -60,6 +63,7 @@ class TimingRow:
     success_rate: float = math.nan
     dist_median: float = math.nan
     dist_max: float = math.nan
+    verify_median_us: float = math.nan
     status: str = "ok"
     note: str = ""
     probe_s: float = field(default=math.nan, metadata={"csv": False})
@@ -75,6 +79,13 @@ def _max(values) -> float | None:
     return _finite(np.nanmax(a)) if a.size and not np.isnan(a).all() else None
 
 
+def _verify_median(times) -> float | None:
+    """The median verification time of a run, ``None`` when it records none or none ran."""
+    if times is None or not len(times) or not (np.asarray(times) > 0).any():
+        return None
+    return _finite(np.median(times))
+
+
 @dataclass
 class RunSummary:
     """What one scenario run measured (a ``summary.json`` entry, a sweep row's metrics).
@@ -87,7 +98,9 @@ class RunSummary:
         maxima: ``max_<error>`` of each of the scenario's ``summary_errors``.
         max_qdd_norm: Largest ``‖q̈‖``.
         median_step_time_s, p90_step_time_s: Of kinematics + solve + torque.
-        median_solve_time_s: Of the solve alone.
+        median_solve_time_s: Of the solve alone (less prioik's verification stage).
+        median_verify_time_s: Of prioik's verification stage (``None`` where the run
+            records none, or none ran).
         failed: The run stopped early.
     """
 
@@ -98,6 +111,7 @@ class RunSummary:
     median_step_time_s: float | None = None
     p90_step_time_s: float | None = None
     median_solve_time_s: float | None = None
+    median_verify_time_s: float | None = None
     failed: bool = False
 
     @classmethod
@@ -114,6 +128,7 @@ class RunSummary:
             median_step_time_s=_finite(np.median(res.step_time_s)) if steps else None,
             p90_step_time_s=_finite(np.percentile(res.step_time_s, 90)) if steps else None,
             median_solve_time_s=_finite(np.median(res.solve_time_s)) if steps else None,
+            median_verify_time_s=_verify_median(res.verify_time_s),
             failed=bool(res.failed))
 
     @staticmethod
@@ -121,7 +136,7 @@ class RunSummary:
         """The keys of :meth:`to_dict` for a scenario whose summary errors are ``errors``."""
         return ("final_tip_error_m", "max_algorithmic_error",
                 *(f"max_{e}" for e in errors), "max_qdd_norm", "median_step_time_s",
-                "p90_step_time_s", "median_solve_time_s", "failed")
+                "p90_step_time_s", "median_solve_time_s", "median_verify_time_s", "failed")
 
     def to_dict(self) -> dict[str, Any]:
         """Flat, in the order of :meth:`keys`."""
@@ -130,7 +145,8 @@ class RunSummary:
                 "max_qdd_norm": self.max_qdd_norm,
                 "median_step_time_s": self.median_step_time_s,
                 "p90_step_time_s": self.p90_step_time_s,
-                "median_solve_time_s": self.median_solve_time_s, "failed": self.failed}
+                "median_solve_time_s": self.median_solve_time_s,
+                "median_verify_time_s": self.median_verify_time_s, "failed": self.failed}
 
 
 # ------------------------------------------------------------------------ CSV
@@ -169,8 +185,12 @@ def _convert(text: str, kind, default):
 def read_csv(path, cls: type[R]) -> list[R]:
     """The records of a file written by :func:`write_csv` for ``cls``.
 
+    A file written before a column with a default existed (e.g. ``verify_median_us``)
+    reads with that column at its default.
+
     Raises:
-        ValueError: the header is not ``cls``'s columns (names the file).
+        ValueError: the header is not ``cls``'s columns, in order, up to columns with a
+            default that the file lacks (names the file).
     """
     path = Path(path)
     hints = typing.get_type_hints(cls)
@@ -178,8 +198,11 @@ def read_csv(path, cls: type[R]) -> list[R]:
     defaults = {f.name: f.default for f in fields(cls)}
     with open(path, newline="") as fh:
         reader = csv.DictReader(fh)
-        if tuple(reader.fieldnames or ()) != cols:
+        found = tuple(reader.fieldnames or ())
+        optional = {c for c in cols if defaults[c] is not MISSING}
+        if found != tuple(c for c in cols if c in found) or not set(cols) - set(found) <= \
+                optional:
             raise ValueError(f"{path}: columns {reader.fieldnames} are not those of "
                              f"{cls.__name__} ({', '.join(cols)})")
-        return [cls(**{k: _convert(row[k], hints[k], defaults[k]) for k in cols})
-                for row in reader]
+        return [cls(**{k: _convert(row[k], hints[k], defaults[k]) if k in row
+                       else defaults[k] for k in cols}) for row in reader]

@@ -164,7 +164,7 @@ def run_family(family: str, n_stacks: int, vs: list[Variant], n_range, k_range,
             tally.times.append(sol.time_s)
             tally.statuses[sol.status] = tally.statuses.get(sol.status, 0) + 1
             if not sol.ok:
-                tally.first_failure = tally.first_failure or str(sol.info.get("message", ""))
+                tally.first_failure = tally.first_failure or sol.diagnostics.reason
                 continue
             x = sol.x
             dist = relative_distance(x, ref.x)
@@ -177,7 +177,8 @@ def run_family(family: str, n_stacks: int, vs: list[Variant], n_range, k_range,
             # the statuses as they are and as the back-end gave them before the certificate
             cert_ok = check_lexicographic(stack, x, tol=DEFAULT_CERTIFICATE_TOL,
                                           minimum_norm=True).ok
-            downgraded = sol.info.get("certificate", {}).get("ok") is False
+            verdict = sol.diagnostics.verification
+            downgraded = verdict is not None and not verdict.ok
             tally.wrong_optimal += sol.status == "optimal" and not cert_ok
             tally.wrong_trusted += (sol.status == "optimal" or downgraded) and not cert_ok
             if not stack.is_equality:

@@ -7,11 +7,18 @@
 
 from .base import (
                    STATUSES,
+                   VERIFY_MODES,
                    Capabilities,
+                   CheckRequest,
                    ConcurrentUseError,
+                   Diagnostics,
+                   Fault,
                    FormulationError,
+                   LowerPoint,
                    Outcome,
                    Solution,
+                   Status,
+                   Verification,
 )
 from .contract import Formulation, Prepared, StackPrepared
 from .options import Option
@@ -29,7 +36,9 @@ from .registry import (
                    solve_batch,
 )
 
-__all__ = ["BatchSolution", "STATUSES", "Capabilities", "ConcurrentUseError", "FormulationError",
-           "Formulation", "FormulationInfo", "Option", "Outcome", "PLUGINS", "Prepared",
-           "PreparedSolver", "Solution", "StackPrepared", "available", "compile_kernels", "get",
+__all__ = ["BatchSolution", "STATUSES", "VERIFY_MODES", "Capabilities", "CheckRequest",
+           "ConcurrentUseError", "Diagnostics", "Fault", "Formulation", "FormulationError",
+           "FormulationInfo", "LowerPoint", "Option", "Outcome", "PLUGINS", "Prepared",
+           "PreparedSolver", "Solution", "StackPrepared", "Status", "Verification",
+           "available", "compile_kernels", "get",
            "names", "prepare", "solve", "solve_batch"]

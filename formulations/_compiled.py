@@ -18,7 +18,7 @@ import numpy as np
 
 from prioik.hierarchy import StackData
 
-from .base import CoreInputError, FormulationError, Outcome, solve_equilibrated
+from .base import CoreInputError, Diagnostics, FormulationError, Outcome, solve_equilibrated
 
 try:  # the compiled C++ core (core/, built by pip install)
     from prioik import _core
@@ -74,11 +74,13 @@ def solve_rescaled(solve: Callable[[StackData], Outcome], data: StackData) -> Ou
     return solve_equilibrated(solve, data, OVERFLOW_MESSAGE)
 
 
-def mass_matrix_outcome(res: Any, M: np.ndarray, bias: Any, status: str) -> Outcome | None:
+def mass_matrix_outcome(res: Any, M: np.ndarray, bias: Any, status: str,
+                        detail: Callable[..., Any]) -> Outcome | None:
     """The answer of a compiled solve with the mass matrix ``M`` (``UnifyingResult``):
-    ``x`` with ``info["rank_profile"]`` and ``info["flops"]`` (and ``info["tau"] = M x +
-    bias`` when ``bias`` is given) in ``status``; ``None`` when the kernel refused a
-    level's scale (the caller rescales, :func:`solve_rescaled`).
+    ``x`` with ``diagnostics.ranks`` and the plugin's record ``detail(kernel="cpp",
+    flops=..., tau=M x + bias)`` (``tau=None`` without ``bias``) in ``status``; ``None``
+    when the kernel refused a level's scale (the caller rescales,
+    :func:`solve_rescaled`).
 
     Raises:
         FormulationError: ``M`` is not positive definite (naming its smallest
@@ -90,8 +92,8 @@ def mass_matrix_outcome(res: Any, M: np.ndarray, bias: Any, status: str) -> Outc
                                f"eigenvalue {w.min():.3e})")
     if not res.solved:
         return None
-    info = {"rank_profile": res.ranks.tolist(), "kernel": "cpp", "flops": res.flops}
     x = res.x
-    if bias is not None:
-        info["tau"] = M @ x + np.asarray(bias, dtype=np.float64)
-    return Outcome(x, status, info, res.residuals)
+    tau = None if bias is None else M @ x + np.asarray(bias, dtype=np.float64)
+    return Outcome(x, status, Diagnostics(ranks=res.ranks.copy(),
+                                          detail=detail(kernel="cpp", flops=res.flops,
+                                                        tau=tau)), res.residuals)

@@ -23,7 +23,7 @@ import numpy as np
 
 from prioik.hierarchy import AMBIGUITY, ambiguous_decision
 
-from .base import FormulationError, Outcome
+from .base import Diagnostics, FormulationError, Outcome
 
 
 def check_nonnegative(**values: float) -> None:
@@ -390,22 +390,26 @@ MULTIPLIER_TOL = 1e-7
 ACTIVE_TOL = 1e-7
 
 
-def record_level(info: dict, rec: dict, level, x: np.ndarray, tol: float,
+def record_level(diagnostics: Diagnostics, rec: dict, level, x: np.ndarray, tol: float,
                  on_infeasible: str, fail) -> Outcome | None:
-    """Append level ``rec["level"]``'s record to ``info`` and diagnose its inequalities.
+    """Append level ``rec["level"]``'s record to the cascade's detail record
+    (``diagnostics.detail``: its ``levels`` and ``violated``) and diagnose its
+    inequalities.
 
     Inequality tasks of the level that ``x`` violates beyond ``tol`` are named in
-    ``rec["violated"]`` and ``info["infeasible_levels"]``; with ``on_infeasible="fail"``
-    the failed :class:`Outcome` from ``fail(level, tasks, message, x)`` is returned
-    (``None`` otherwise), shared by every cascade.
+    ``rec["violated"]`` and the detail's ``violated``, the level in
+    ``diagnostics.infeasible_levels``; with ``on_infeasible="fail"`` the failed
+    :class:`~prioik.formulations.Outcome` from ``fail(level, tasks, message, x)`` is
+    returned (``None`` otherwise), shared by every cascade.
     """
     j = rec["level"]
+    detail = diagnostics.detail
     bad = violated_tasks(level, x, tol)
     if bad:
         rec["violated"] = bad
-        info["infeasible_levels"].append({"level": j, "tasks": sorted(bad),
-                                          "violation": bad})
-    info["levels"].append(rec)
+        diagnostics.infeasible_levels = [*diagnostics.infeasible_levels, j]
+        detail.violated.append({"level": j, "tasks": sorted(bad), "violation": bad})
+    detail.levels.append(rec)
     if bad and on_infeasible == "fail":
         names = ", ".join(f"{k} (violation {v:.3g})" for k, v in bad.items())
         return fail(j, sorted(bad), f"level {j}: inequality tasks {names} cannot "

@@ -20,13 +20,15 @@ Back-ends: ``solver=`` any of ``qpsolvers.available_solvers`` (default Clarabel)
 :func:`backend_settings` maps ``tolerance`` onto each back-end's options
 (:data:`DEFAULT_TOLERANCES`); DAQP is called as ``daqp.solve`` directly.
 
-Statuses: ``optimal`` only when the answer passes
-:func:`~prioik.formulations.verification.certify` (the lexicographic certificate with the
-minimum-norm tie-break, no ambiguous rank decision, no lower point found), else
-``approximate`` with ``info["fault_level"]``. A back-end that raises or finds no
-solution gives ``failed`` with ``info["failed_level"]``, ``info["failed_tasks"]`` and
-``info["fixed_tasks"]``; an infeasible inequality level keeps its least violation
-(``info["infeasible_levels"]``; ``on_infeasible="fail"`` makes it a failure).
+Statuses: ``optimal`` only when the answer passes the verification stage's
+certificate (:func:`~prioik.formulations.verification.certify`, asked by ``certify=True``: the
+lexicographic certificate with the minimum-norm tie-break, no ambiguous rank decision,
+no lower point found), else ``approximate`` with ``diagnostics.fault``. A back-end that
+raises or finds no solution gives ``failed`` with a
+:class:`~prioik.formulations.base.Fault` naming the level, and
+:attr:`Detail.fixed_tasks`; an infeasible inequality level keeps its least violation
+(``diagnostics.infeasible_levels``, the violated tasks in :attr:`Detail.violated`;
+``on_infeasible="fail"`` makes it a failure).
 
 In detail: ``docs/formulations.md``; settings and measurements per back-end:
 ``docs/qp-formulations.md``.
@@ -35,7 +37,7 @@ In detail: ``docs/formulations.md``; settings and measurements per back-end:
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -57,9 +59,43 @@ from ._numerics import (
     scaled_level,
     unit_rows,
 )
-from .base import Capabilities, FormulationError, Outcome
+from .base import (
+    Capabilities,
+    CheckRequest,
+    Diagnostics,
+    FormulationError,
+    Outcome,
+    Status,
+)
 from .options import Option, dictionary, per_level_nonnegative, positive_semidefinite, rcond_option
-from .verification import certify as certify_outcome
+
+
+@dataclass(slots=True)
+class Detail:
+    """``cascaded_qp``'s own record (``sol.diagnostics.detail``).
+
+    Attributes:
+        backend: The QP back-end.
+        fixing: How the higher optima were fixed (option ``fixing``).
+        levels: One record per level QP (the back-end's status and counts; ``violated``
+            when some inequality task of the level is left violated), then the final
+            regularisation level's.
+        violated: Per infeasible level: ``{"level", "tasks", "violation"}`` (the
+            violated inequality tasks and their weighted violation).
+        fixed_tasks: A failed solve: the higher tasks whose optima were constraints of
+            the QP that failed.
+        x_partial: A failed solve: the answer of the levels above (``None``: none).
+        settings: The back-end settings used.
+    """
+
+    backend: str
+    fixing: str
+    levels: list[dict] = field(default_factory=list)
+    violated: list[dict] = field(default_factory=list)
+    fixed_tasks: list[str] = field(default_factory=list)
+    x_partial: np.ndarray | None = None
+    settings: dict = field(default_factory=dict)
+
 
 NAME = "cascaded_qp"
 DESCRIPTION = "one QP per level through qpsolvers (Kanoun et al. 2011), any back-end"
@@ -363,8 +399,8 @@ def _solve_daqp(qp: LevelQP, settings: dict[str, Any]
     bl = np.ascontiguousarray(np.concatenate([np.full(h.shape, -1e30), e]))
     sense = np.concatenate([np.zeros(h.shape[0]), np.full(e.shape[0], 5)]).astype(c_int)
     try:
-        z, _, flag, info = daqp.solve(np.ascontiguousarray(qp.P), np.ascontiguousarray(qp.q),
-                                      A, bu, bl, sense, **settings)
+        z, _, flag, result = daqp.solve(np.ascontiguousarray(qp.P), np.ascontiguousarray(qp.q),
+                                        A, bu, bl, sense, **settings)
     except TypeError as exc:
         raise FormulationError(f"daqp.solve rejected the settings: {exc}") from None
     extras: dict[str, Any] = {"exitflag": int(flag)}
@@ -372,7 +408,7 @@ def _solve_daqp(qp: LevelQP, settings: dict[str, Any]
         return None, f"daqp found no solution (exit flag {flag})", extras
     ny = qp.Z.shape[1]
     if qp.G is not None:
-        extras["_active"] = strongly_active(qp, z, np.asarray(info["lam"][:h.shape[0]]))
+        extras["_active"] = strongly_active(qp, z, np.asarray(result["lam"][:h.shape[0]]))
     return qp.x0 + qp.Z @ z[:ny], "", extras
 
 
@@ -393,19 +429,20 @@ def run_cascade(stack: TaskStack, solve_qp, *, fixing: str, metric, rcond: float
     """The cascade shared by the back-ends: ``solve_qp(LevelQP) -> (x, msg, extras)``."""
     n = stack.n
     fixed = Fixed.start(n)
-    info: dict[str, Any] = {"backend": backend, "fixing": fixing, "levels": [],
-                            "infeasible_levels": []}
+    detail = Detail(backend, fixing)
+    diagnostics = Diagnostics(detail=detail)
 
     def fail(level_index, tasks, message, partial):
-        info.update(message=message, failed_level=level_index, failed_tasks=list(tasks),
-                    fixed_tasks=list(fixed.tasks), x_partial=partial)
-        return Outcome(np.full(n, np.nan), "failed", info)
+        detail.fixed_tasks = list(fixed.tasks)
+        detail.x_partial = partial
+        return Outcome(np.full(n, np.nan), Status.FAILED, diagnostics).fail(
+            message, "solver_error", level_index, tasks)
 
     for j, level in enumerate(stack.levels):
         rows = level_rows(level)
         if rows.A_eq.shape[0] == 0 and rows.A_in.shape[0] == 0:
-            info["levels"].append({"level": j, "skipped": "no row with a finite bound that "
-                                                          "x can change"})
+            detail.levels.append({"level": j, "skipped": "no row with a finite bound that "
+                                                         "x can change"})
             fixed.tasks += list(level.names)
             continue
         scale = float(rows.A_eq.shape[0] + rows.A_in.shape[0])   # ‖A‖_F² after scaling
@@ -419,7 +456,7 @@ def run_cascade(stack: TaskStack, solve_qp, *, fixing: str, metric, rcond: float
         if active is not None:
             extras["strongly_active"] = int(active.shape[0])
         fixed.add(rows, level.names, x, rcond, active)
-        failed = record_level(info, {"level": j, "tasks": list(level.names), **extras},
+        failed = record_level(diagnostics, {"level": j, "tasks": list(level.names), **extras},
                               level, x, infeasibility_tol, on_infeasible, fail)
         if failed is not None:
             return failed
@@ -428,8 +465,8 @@ def run_cascade(stack: TaskStack, solve_qp, *, fixing: str, metric, rcond: float
     extras.pop("_active", None)
     if x is None:
         return fail(len(stack), [], f"final regularisation level: {message}", fixed.x.copy())
-    info["levels"].append({"level": "regularisation", **extras})
-    return Outcome(x, "optimal", info)
+    detail.levels.append({"level": "regularisation", **extras})
+    return Outcome(x, Status.OPTIMAL, diagnostics)
 
 
 def solve(stack: TaskStack, *, solver: str, tolerance: float | None, backend_options: dict
@@ -459,9 +496,8 @@ def solve(stack: TaskStack, *, solver: str, tolerance: float | None, backend_opt
                       infeasibility_tol=float(infeasibility_tol), backend=solver,
                       margin=float(margin), fix_active=bool(fix_active),
                       level_damping=level_damping)
-    out.info["settings"] = settings
-    if certify and level_damping is None:
-        out = certify_outcome(stack, out, metric=metric)
+    out.diagnostics.detail.settings = settings
+    out.check = CheckRequest(auto=bool(certify) and level_damping is None, metric=metric)
     return out
 
 

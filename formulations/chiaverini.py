@@ -28,12 +28,13 @@ which also bounds ``θ̈`` at *kinematic* singularities of a task. The projector
 Two kernels compute it (option ``kernel``): ``"cpp"`` (the default where prioik's
 compiled core is built, :class:`Prepared`) in C++, each ``J_i^#`` and the projector
 ``N^A_i`` from row-pivoted LQs (the rank rule on their pivot norms), counting its
-floating-point operations (``info["flops"]``); ``"numpy"`` is :func:`solve_readable`, the
+floating-point operations (:attr:`Detail.flops`); ``"numpy"`` is :func:`solve_readable`, the
 sum as written here, the oracle the tests hold the compiled kernel to.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -43,8 +44,27 @@ from prioik.hierarchy import StackData, StackLayout, TaskStack, nested_null_spac
 from . import contract
 from ._compiled import _core, resolve_kernel, solve_compiled, solve_rescaled
 from ._numerics import check_nonnegative, generalized_inverse
-from .base import Capabilities, Outcome
+from .base import Capabilities, Diagnostics, Outcome, Status
 from .options import Option, rcond_option, validate_options
+
+
+@dataclass(slots=True)
+class Detail:
+    """``chiaverini``'s own record (``sol.diagnostics.detail``).
+
+    Attributes:
+        task_solutions: Each level's own solution ``J_i^# h_i``.
+        damping: The damping ``λ`` of each level's inverse.
+        kernel: ``"cpp"`` or ``"numpy"``.
+        flops: Floating-point operations of the solve, counted in the compiled kernel
+            (``None`` on the numpy path).
+    """
+
+    task_solutions: list[np.ndarray]
+    damping: float
+    kernel: str
+    flops: int | None = None
+
 
 NAME = "chiaverini"
 DESCRIPTION = "singularity-robust task priority (Chiaverini 1997): Σ N^A_{i-1} J_i^# h_i"
@@ -73,7 +93,7 @@ def solve_readable(stack: TaskStack, *, damping: float, rcond: float) -> Outcome
 
     Returns:
         ``Outcome`` (status ``"approximate"``: the method has algorithmic error) with
-        ``info["task_solutions"]``, each level's own solution ``J_i^# h_i``.
+        :attr:`Detail.task_solutions`, each level's own solution ``J_i^# h_i``.
     """
     check_nonnegative(damping=damping, rcond=rcond)
     damping = float(damping)
@@ -87,15 +107,22 @@ def solve_readable(stack: TaskStack, *, damping: float, rcond: float) -> Outcome
         x_own = J_sharp @ b
         own.append(x_own)
         x = x + Z @ (Z.T @ x_own)                        # N^A_{i-1} = Z_i Z_iᵀ
-    return Outcome(x, "approximate", {"task_solutions": own, "damping": damping,
-                                      "kernel": "numpy"})
+    return _outcome(x, own, damping, "numpy", None)
+
+
+def _outcome(x, own, damping: float, kernel: str, flops, residuals=None) -> Outcome:
+    """The answer (``approximate``: the method has algorithmic error) with its record."""
+    return Outcome(x, Status.APPROXIMATE,
+                   Diagnostics(reason="Chiaverini's task priority has algorithmic error "
+                                      "(not the lexicographic optimum)",
+                               detail=Detail(list(own), damping, kernel, flops)), residuals)
 
 
 class Prepared(contract.Prepared):
     """Chiaverini's task priority prepared for one layout: options checked, and on the
     compiled kernel (``kernel="cpp"``) the C++ solver with every workspace allocated once
     (``prioik._core.ChiaveriniSolver``: each level's own inverse and the projector
-    ``N^A_i`` from row-pivoted LQs, the rank rule on their pivots; ``info["flops"]``
+    ``N^A_i`` from row-pivoted LQs, the rank rule on their pivots; :attr:`Detail.flops`
     counts the solve's floating-point operations). ``kernel="numpy"`` is
     :func:`solve_readable`.
 
@@ -127,9 +154,7 @@ class Prepared(contract.Prepared):
         if not res.solved:
             return solve_rescaled(self.solve, data)
         own = res.task_solutions.reshape(self.layout.k, self.layout.n)
-        info = {"task_solutions": list(own), "damping": self.damping, "kernel": "cpp",
-                "flops": res.flops}
-        return Outcome(res.x, "approximate", info, res.residuals)
+        return _outcome(res.x, own, self.damping, "cpp", res.flops, res.residuals)
 
 
 #: the plugin (:mod:`prioik.formulations.registry`)

@@ -90,9 +90,10 @@ class Prepared(abc.ABC):
 
     def solve_checked(self, data: StackData) -> Outcome | tuple:
         """:meth:`solve`, or, for an answer the plugin checked itself (what
-        ``Outcome(..., checked=True)`` means) with a status of
-        :data:`~prioik.formulations.STATUSES`, the tuple ``(x, status, info,
-        residuals)`` — one object fewer per solve on a control loop's path."""
+        ``Outcome(..., checked=True)`` means: finite, of length ``n``, residuals given,
+        ``‖x‖`` below the precision limit) with the status ``optimal``, the tuple ``(x,
+        status, diagnostics, residuals)`` — one object fewer per solve on a control
+        loop's path. The verification stage runs after it either way."""
         return self.solve(data)
 
     def solve_batch(self, datas: list[StackData]) -> tuple[np.ndarray, list[str]] | None:
@@ -140,7 +141,6 @@ class StackPrepared(Prepared):
             stack, levels = stack.equilibrated()
         out = self.solve_stack(stack, options or self.options)
         if levels:
-            out.info = dict(out.info)
             out = in_original_units(out, data, levels)
         return out
 

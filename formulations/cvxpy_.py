@@ -16,14 +16,17 @@ orthonormal basis of their row space; ``fixing="rows"`` keeps the literal rows
 ``A_h x = A_h x*`` (redundant on rank-deficient or conflicting levels).
 
 A solver status of ``optimal_inaccurate`` at some level gives
-``status="approximate"`` (the levels are listed in ``info["inaccurate_levels"]``);
-any other non-optimal status gives ``status="failed"`` with ``info["message"]``,
-``info["failed_level"]`` and ``info["failed_tasks"]``.
+``status="approximate"`` (the levels are listed in :attr:`Detail.inaccurate_levels`);
+any other non-optimal status gives ``status="failed"`` with a
+:class:`~prioik.formulations.base.Fault` naming the level and its tasks. With
+``certify=True`` (default) an ``optimal`` answer is certified by the verification stage
+(:func:`~prioik.formulations.verification.certify`).
 """
 
 from __future__ import annotations
 
 import warnings
+from dataclasses import dataclass, field
 from typing import Any
 
 import cvxpy as cp
@@ -42,9 +45,36 @@ from ._numerics import (
     scaled_level,
     unit_rows,
 )
-from .base import Capabilities, FormulationError, Outcome
+from .base import Capabilities, CheckRequest, Diagnostics, FormulationError, Outcome, Status
 from .options import Option, dictionary, positive_semidefinite, rcond_option
-from .verification import certify as certify_outcome
+
+
+@dataclass(slots=True)
+class Detail:
+    """``cvxpy``'s own record (``sol.diagnostics.detail``).
+
+    Attributes:
+        backend: The cvxpy solver.
+        fixing: How the higher optima were fixed (option ``fixing``).
+        levels: One record per level problem (cvxpy's status; ``violated`` when some
+            inequality task of the level is left violated), then the final
+            regularisation level's.
+        violated: Per infeasible level: ``{"level", "tasks", "violation"}``.
+        inaccurate_levels: Levels cvxpy solved as ``optimal_inaccurate``.
+        fixed_tasks: A failed solve: the higher tasks whose optima were constraints.
+        x_partial: A failed solve: the answer of the levels above (``None``: none).
+        settings: The solver settings used.
+    """
+
+    backend: str
+    fixing: str
+    levels: list[dict] = field(default_factory=list)
+    violated: list[dict] = field(default_factory=list)
+    inaccurate_levels: list[int] = field(default_factory=list)
+    fixed_tasks: list[str] = field(default_factory=list)
+    x_partial: np.ndarray | None = None
+    settings: dict = field(default_factory=dict)
+
 
 NAME = "cvxpy"
 DESCRIPTION = "the cascaded QP modelled in cvxpy (independent reference for inequalities)"
@@ -134,14 +164,14 @@ def solve(stack: TaskStack, *, solver: str, backend_options: dict | None, fixing
     settings = {**DEFAULT_SETTINGS.get(solver, {}), **(backend_options or {})}
     n = stack.n
     fixed = Fixed.start(n)
-    info: dict[str, Any] = {"backend": solver, "fixing": fixing, "levels": [],
-                            "infeasible_levels": [], "inaccurate_levels": [],
-                            "settings": settings}
+    detail = Detail(solver, fixing, settings=settings)
+    diagnostics = Diagnostics(detail=detail)
 
     def fail(j, tasks, message, partial):
-        info.update(message=message, failed_level=j, failed_tasks=list(tasks),
-                    fixed_tasks=list(fixed.tasks), x_partial=partial)
-        return Outcome(np.full(n, np.nan), "failed", info)
+        detail.fixed_tasks = list(fixed.tasks)
+        detail.x_partial = partial
+        return Outcome(np.full(n, np.nan), Status.FAILED, diagnostics).fail(
+            message, "solver_error", j, tasks)
 
     def fixed_constraints(x: cp.Variable, tracked: list) -> list:
         cons = []
@@ -181,7 +211,7 @@ def solve(stack: TaskStack, *, solver: str, backend_options: dict | None, fixing
             return fail(j, level.names, f"level {j} ({', '.join(level.names)}): "
                         f"{message or f'{solver} status {status}'}", fixed.x.copy() if j else None)
         if status == cp.OPTIMAL_INACCURATE:
-            info["inaccurate_levels"].append(j)
+            detail.inaccurate_levels.append(j)
         xv = np.asarray(x.value, dtype=np.float64)
         active = []
         lam_max = max([float(np.max(np.abs(c.dual_value), initial=0.0)) for c, _ in tracked
@@ -197,7 +227,7 @@ def solve(stack: TaskStack, *, solver: str, backend_options: dict | None, fixing
                 active.append(xrows[act])
         fixed.add(rows, level.names, xv, rcond, np.vstack(active) if active else None)
         rec: dict[str, Any] = {"level": j, "tasks": list(level.names), "status": status}
-        failed = record_level(info, rec, level, xv, float(infeasibility_tol), on_infeasible,
+        failed = record_level(diagnostics, rec, level, xv, float(infeasibility_tol), on_infeasible,
                               fail)
         if failed is not None:
             return failed
@@ -210,11 +240,14 @@ def solve(stack: TaskStack, *, solver: str, backend_options: dict | None, fixing
         return fail(len(stack), [], f"final regularisation level: "
                     f"{message or f'{solver} status {status}'}", fixed.x.copy())
     if status == cp.OPTIMAL_INACCURATE:
-        info["inaccurate_levels"].append(len(stack))
-    info["levels"].append({"level": "regularisation", "status": status})
-    out = Outcome(np.asarray(x.value, dtype=np.float64),
-                  "approximate" if info["inaccurate_levels"] else "optimal", info)
-    return certify_outcome(stack, out, metric=metric) if certify else out
+        detail.inaccurate_levels.append(len(stack))
+    detail.levels.append({"level": "regularisation", "status": status})
+    if detail.inaccurate_levels:
+        diagnostics.reason = (f"{solver} solved levels {detail.inaccurate_levels} only "
+                              f"to reduced accuracy (optimal_inaccurate)")
+    return Outcome(np.asarray(x.value, dtype=np.float64),
+                   Status.APPROXIMATE if detail.inaccurate_levels else Status.OPTIMAL,
+                   diagnostics, check=CheckRequest(auto=bool(certify), metric=metric))
 
 
 class Prepared(contract.StackPrepared):

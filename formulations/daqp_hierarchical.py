@@ -15,11 +15,13 @@ same least-squares optimum). A level whose active rows depend on those above (a
 *conflicting* level) can leave the lower levels far from their optimum; no DAQP
 setting changes this, and the status says so.
 
-Statuses (``check=True``): ``optimal`` when DAQP exits with flag 1 or 2 and the answer
-passes :func:`~prioik.formulations.verification.certify`; ``approximate`` otherwise, with
-``info["fault_level"]`` and ``info["conflicting_levels"]``; ``failed`` on a negative
-exit flag (``info["message"]``, for infeasibility the hard inequality tasks involved).
-``check=False`` skips the certificate. ``primal_tol`` defaults to 1e-10.
+Statuses: ``optimal`` when DAQP exits with flag 1 or 2 and, with ``check=True``, the
+answer passes the verification stage's certificate
+(:func:`~prioik.formulations.verification.certify`, run after the timed solve); ``approximate``
+otherwise, with ``diagnostics.fault`` and, computed then, :attr:`Detail.conflicting_levels`;
+``failed`` on a negative exit flag (``diagnostics.fault``, for infeasibility the hard
+inequality tasks involved). ``check=False`` skips the certificate. ``primal_tol``
+defaults to 1e-10. The timed solve is DAQP's call and the level compression alone.
 
 In detail: ``docs/formulations.md``; measurements: ``docs/qp-formulations.md``.
 """
@@ -27,6 +29,7 @@ In detail: ``docs/formulations.md``; measurements: ``docs/qp-formulations.md``.
 from __future__ import annotations
 
 from ctypes import c_int
+from dataclasses import dataclass, field
 from typing import Any
 
 import daqp
@@ -35,9 +38,41 @@ import numpy as np
 from prioik.hierarchy import TaskStack
 
 from . import contract
-from .base import Capabilities, FormulationError, Outcome
+from .base import (
+    Capabilities,
+    CheckRequest,
+    Diagnostics,
+    FormulationError,
+    Outcome,
+    Status,
+)
 from .options import Option, dictionary, rcond_option
-from .verification import certify
+
+
+@dataclass(slots=True)
+class Detail:
+    """``daqp_hierarchical``'s own record (``sol.diagnostics.detail``).
+
+    Attributes:
+        exitflag: DAQP's exit flag (:data:`EXIT_FLAGS`).
+        exit: Its name.
+        iterations: DAQP's iterations.
+        daqp_solve_time_s: DAQP's own timing of its C solve.
+        break_points: The end row of each level given to DAQP.
+        settings: The ``daqp.solve`` settings used.
+        conflicting_levels: Levels whose active rows at ``x`` depend on those above
+            (:func:`dependent_active_levels`): computed when the verification stage
+            demotes the answer, else ``None``.
+    """
+
+    exitflag: int
+    exit: str
+    iterations: int
+    daqp_solve_time_s: float = 0.0
+    break_points: list[int] = field(default_factory=list)
+    settings: dict = field(default_factory=dict)
+    conflicting_levels: list[int] | None = None
+
 
 NAME = "daqp_hierarchical"
 DESCRIPTION = "DAQP's hierarchical QP: the whole stack in one daqp.solve call (break_points)"
@@ -135,10 +170,11 @@ def solve(stack: TaskStack, *, primal_tol: float, dual_tol: float, compress_leve
         if not np.isfinite(float(val)) or float(val) <= 0:
             raise FormulationError(f"{key} must be a finite number > 0, got {val}")
     A, bu, bl, bps, names = build(stack, bool(compress_levels), float(rcond))
+    request = CheckRequest(auto=bool(check))
     if A.shape[0] == 0:     # every row is zero: any x keeps the (fixed) violations; x = 0
-        return Outcome(np.zeros(stack.n), "optimal",
-                       {"exitflag": 1, "exit": "no row to solve (every row is zero)",
-                        "iterations": 0, "break_points": []})
+        return Outcome(np.zeros(stack.n), Status.OPTIMAL,
+                       Diagnostics(detail=Detail(1, "no row to solve (every row is zero)", 0)),
+                       check=request)
     sense = np.zeros(len(bu), dtype=c_int)
     kwargs = {"primal_tol": float(primal_tol), "dual_tol": float(dual_tol), **(settings or {})}
     try:
@@ -146,34 +182,34 @@ def solve(stack: TaskStack, *, primal_tol: float, dual_tol: float, compress_leve
                                        break_points=bps, **kwargs)
     except TypeError as exc:
         raise FormulationError(f"daqp.solve rejected the settings: {exc}") from None
-    info: dict[str, Any] = {"exitflag": int(flag), "exit": EXIT_FLAGS.get(int(flag), "unknown"),
-                            "iterations": int(dinfo.get("iterations", 0)),
-                            "daqp_solve_time_s": float(dinfo.get("solve_time", 0.0)),
-                            "break_points": bps.tolist(), "settings": kwargs}
+    detail = Detail(int(flag), EXIT_FLAGS.get(int(flag), "unknown"),
+                    int(dinfo.get("iterations", 0)), float(dinfo.get("solve_time", 0.0)),
+                    bps.tolist(), kwargs)
+    out = Outcome(np.asarray(x, dtype=np.float64).copy(), Status.OPTIMAL,
+                  Diagnostics(detail=detail), check=request)
     if flag < 0:
-        msg = f"DAQP exit flag {flag} ({info['exit']})"
+        msg = f"DAQP exit flag {flag} ({detail.exit})"
         if flag == -6:
             msg += ("; the first activation of a level was singular: a level's rows are "
                     "dependent (try compress_levels=True) or repeat higher rows")
-        info.update(message=msg, failed_level=None, failed_tasks=[])
         if flag == -1:
             ineq = [(j, [t.name for t in lvl if not t.is_equality])
                     for j, lvl in enumerate(stack.levels)]
             ineq = [(j, n) for j, n in ineq if n]
             if ineq:
-                info.update(failed_level=ineq[0][0], failed_tasks=ineq[0][1],
-                            message=msg + f"; hard inequality tasks involved: "
-                            f"{', '.join(n for _, ns in ineq for n in ns)}")
-        return Outcome(np.full(stack.n, np.nan), "failed", info)
-    x = np.asarray(x, dtype=np.float64).copy()
-    out = Outcome(x, "optimal", info)
-    if check:
-        conflicts = dependent_active_levels(A, bu, bl, bps, x, float(rcond))
-        info["conflicting_levels"] = conflicts
-        out = certify(stack, out)
-        if out.status != "optimal" and conflicts:
-            info["message"] += (f"; levels {conflicts} conflict with the levels above "
-                                f"(eq. 35), where DAQP's count of free directions goes wrong")
+                return out.fail(msg + f"; hard inequality tasks involved: "
+                                f"{', '.join(n for _, ns in ineq for n in ns)}", "infeasible",
+                                ineq[0][0], ineq[0][1])
+        return out.fail(msg)
+
+    def explain() -> str:
+        # the verification stage demoted the answer: which levels DAQP miscounts
+        conflicts = dependent_active_levels(A, bu, bl, bps, out.x, float(rcond))
+        detail.conflicting_levels = conflicts
+        return (f"levels {conflicts} conflict with the levels above (eq. 35), where DAQP's "
+                f"count of free directions goes wrong" if conflicts else "")
+
+    out.explain = explain
     return out
 
 

@@ -25,12 +25,12 @@ Options (:data:`OPTIONS`):
 * ``rcond`` (the rank rule of :mod:`hierarchy.linalg`), ``kernel``.
 
 Statuses: ``optimal`` unless a rank decision is ambiguous, a near-ambiguous one's answer
-fails :func:`~prioik.hierarchy.check_lexicographic` (``info["path_certified"]``), the
-``svd`` path's ``κ(J_E)`` exceeds its bound, or a level was damped
-(``info["damped_levels"]``): then ``approximate`` with ``info["reason"]``.
-``info["level_damping"]`` holds every level's ``μ_i²`` (0 where exact), so
-``cascaded_qp`` with the same Tikhonov terms reproduces θ̈. :func:`extended_system`
-returns ``J_E`` and ``h_E`` as built, for analysis.
+fails the verification stage's certificate (:attr:`Detail.near_ambiguous_levels`: the
+answer is then certified after the timed solve), the ``svd`` path's ``κ(J_E)`` exceeds
+its bound, or a level was damped (:attr:`Detail.damped_levels`): then ``approximate``
+with ``diagnostics.reason``. :attr:`Detail.level_damping` holds every level's ``μ_i²``
+(0 where exact), so ``cascaded_qp`` with the same Tikhonov terms reproduces θ̈.
+:func:`extended_system` returns ``J_E`` and ``h_E`` as built, for analysis.
 
 The two paths, the two readings of ``Z_i`` and the damping rules in detail:
 ``docs/extended-jacobian.md``.
@@ -39,6 +39,7 @@ The two paths, the two readings of ``Z_i`` and the damping rules in detail:
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -64,15 +65,50 @@ from . import contract
 from ._compiled import _core, core_error
 from .base import (
     Capabilities,
+    CheckRequest,
     CoreInputError,
+    Diagnostics,
     FormulationError,
     Outcome,
-    precision_status,
+    Status,
     solve_equilibrated,
 )
 from .options import Option, rcond_option, validate_options
 from .verification import certify
 
+
+@dataclass(slots=True)
+class Detail:
+    """``extended_jacobian``'s own record (``sol.diagnostics.detail``).
+
+    Attributes:
+        nullspace: ``"qr"`` or ``"svd"`` (option ``nullspace``).
+        kernel: ``"cpp"``, ``"lapack"`` or ``"numpy"``.
+        flops: Floating-point operations of the solve, counted in the compiled kernel
+            (``None`` elsewhere).
+        z_basis: The reading of ``Z_i`` (the ``svd`` path and eq. 27; ``None`` on the
+            nested QR).
+        damping: Eq. 27's ``λ`` (``0``: none).
+        rank: The ``svd`` path: rank of the augmented Jacobian.
+        extended_rows: Rows of ``J_E`` (the ``svd`` path and eq. 27).
+        condition_number: The ``svd`` path's ``κ(J_E)``.
+        damped_levels: Levels solved damped (selective damping, ``step_bound``, eq. 27).
+        level_damping: Every level's ``μ_i²`` (0 where exact), when a level may be damped.
+        near_ambiguous_levels: Levels whose rank decision was near-ambiguous: the
+            verification stage certified the answer.
+    """
+
+    nullspace: str
+    kernel: str
+    flops: int | None = None
+    z_basis: str | None = None
+    damping: float = 0.0
+    rank: int | None = None
+    extended_rows: int | None = None
+    condition_number: float | None = None
+    damped_levels: list[int] | None = None
+    level_damping: np.ndarray | None = None
+    near_ambiguous_levels: list[int] | None = None
 
 def step_bound_value(value):
     """The ``step_bound`` option's type check (its per-level values are checked against
@@ -232,14 +268,14 @@ class Prepared(contract.Prepared):
         """
         out = self.solve_checked(data)
         if isinstance(out, tuple):
-            x, status, info, residuals = out
-            return Outcome(x, status, info, residuals=residuals, checked=True)
+            x, status, diagnostics, residuals = out
+            return Outcome(x, status, diagnostics, residuals=residuals, checked=True)
         return out
 
     def solve_checked(self, data: StackData) -> tuple | Outcome:
         """:meth:`solve`, its common case (the compiled kernel's answer, finite, every
-        rank decision clear, no damping) as the tuple ``(x, "optimal", info,
-        residuals)`` of a checked :class:`Outcome` without the object (the registry's
+        rank decision clear, no damping) as the tuple ``(x, Status.OPTIMAL,
+        diagnostics, residuals)`` of a checked :class:`Outcome` without the object (the registry's
         :class:`~prioik.formulations.PreparedSolver` makes the Solution from it); an
         :class:`Outcome` otherwise.
 
@@ -264,20 +300,21 @@ class Prepared(contract.Prepared):
             # finite rows of extreme scale: solve the equilibrated stack (same optimum)
             return solve_equilibrated(self.solve, data, "the rows' scale overflows float64 "
                                       "(‖A_i‖_F² is not finite): scale the tasks down")
-        info = {"rank_profile": ranks, "nullspace": "qr", "kernel": "cpp", "flops": res.flops}
+        diagnostics = Diagnostics(ranks=ranks, detail=Detail("qr", "cpp", res.flops))
         if res.clear and not self._damped:
-            return (x, "optimal", info, residuals)     # the common case
-        status = "optimal"
+            return (x, Status.OPTIMAL, diagnostics, residuals)     # the common case
+        status = Status.OPTIMAL
         if self._damped:
-            status = _damping_info(info, res.level_mu2, self._selective, self._bounded)
+            status = _damping_info(diagnostics, res.level_mu2, self._selective,
+                                   self._bounded)
         margins = res.margins
+        diagnostics.margins = np.array(margins)
         if res.ambiguous:
-            status = _ambiguity_status(info, status, np.flatnonzero(margins <= AMBIGUITY))
-        outcome = Outcome(x, status, info, residuals, res.finite)
-        if res.near_ambiguous and status == "optimal" and res.finite:
-            _certify_near_ambiguous(data, outcome, margins)
-        if res.precision_limited and res.finite:
-            outcome.status = precision_status(outcome.status, info, data, x)
+            status = _ambiguity_status(diagnostics, status,
+                                       np.flatnonzero(margins <= AMBIGUITY))
+        outcome = Outcome(x, status, diagnostics, residuals, res.finite)
+        if res.near_ambiguous and status == Status.OPTIMAL and res.finite:
+            _ask_certificate(outcome, margins)
         return outcome
 
     def _solve_stack(self, stack: TaskStack) -> Outcome:
@@ -332,14 +369,19 @@ def level_step_bounds(stack: TaskStack | StackLayout, step_bound) -> np.ndarray:
     return out
 
 
-def _damping_info(info: dict, mu2: np.ndarray, selective: bool, bound: bool) -> str:
-    """Record the per-level damping in ``info``; the status it implies."""
+def _damping_info(diagnostics: Diagnostics, mu2: np.ndarray, selective: bool,
+                  bound: bool) -> Status:
+    """Record the per-level damping in the detail record; the status it implies."""
     if not (selective or bound):
-        return "optimal"            # the kernels damp no level without either option
+        return Status.OPTIMAL       # the kernels damp no level without either option
     flagged = np.flatnonzero(mu2 > 0).tolist()
-    info["damped_levels"] = flagged
-    info["level_damping"] = mu2.copy()
-    return "approximate" if flagged else "optimal"
+    diagnostics.detail.damped_levels = flagged
+    diagnostics.detail.level_damping = mu2.copy()
+    if not flagged:
+        return Status.OPTIMAL
+    diagnostics.add_reason(f"levels {flagged} damped (selective damping or step_bound): a "
+                           f"damped hierarchy, not the lexicographic optimum")
+    return Status.APPROXIMATE
 
 
 # --------------------------------------------------------------------------- qr
@@ -503,12 +545,13 @@ def _solve_qr(stack: TaskStack, rcond: float, level_damping: float = 0.0,
         seg = x[col_i:].reshape(-1, 1)
         out, _, _ = _dormqr("L", "N", v, t, seg, 1)
         x[col_i:] = out.ravel()
-    info = {"rank_profile": np.array(ranks), "nullspace": "qr", "kernel": "lapack"}
-    status = _damping_info(info, level_mu2, level_damping > 0, bool(bounds.any()))
-    status = _ambiguity_status(info, status, np.flatnonzero(margins <= AMBIGUITY))
-    outcome = Outcome(x, status, info)
-    if status == "optimal" and np.isfinite(x).all():
-        _certify_near_ambiguous(stack, outcome, margins)
+    diagnostics = Diagnostics(ranks=np.array(ranks), margins=np.asarray(margins),
+                              detail=Detail("qr", "lapack"))
+    status = _damping_info(diagnostics, level_mu2, level_damping > 0, bool(bounds.any()))
+    status = _ambiguity_status(diagnostics, status, np.flatnonzero(margins <= AMBIGUITY))
+    outcome = Outcome(x, status, diagnostics)
+    if status == Status.OPTIMAL and np.isfinite(x).all():
+        _ask_certificate(outcome, margins)
     return outcome
 
 
@@ -519,34 +562,36 @@ def _near_ambiguous_levels(margins: np.ndarray) -> list[int]:
                           & (margins <= NEAR_AMBIGUITY * AMBIGUITY)).tolist()
 
 
-def _certify_near_ambiguous(data, outcome: Outcome, margins: np.ndarray) -> None:
-    """Certify an ``optimal`` answer when a level's rank decision was near-ambiguous
-    (``margins``: each level's): the null space such a decision leaves is accurate to
-    ε over its smallest kept pivot, which rows of a lower level may turn into an error
-    beyond what the certificate accepts (:data:`~prioik.hierarchy.NEAR_AMBIGUITY`). The
-    answer stays ``optimal`` (``info["path_certified"]``) only when
-    :func:`~prioik.hierarchy.check_lexicographic` passes it (minimum-norm tie-break
-    included); otherwise ``approximate``, the level at fault in ``info``."""
+#: what the verification stage checks of a near-ambiguous answer (the certificate with
+#: the minimum-norm tie-break and the exact active set's comparison)
+_NEAR_AMBIGUOUS_CHECK = CheckRequest()
+
+
+def _ask_certificate(outcome: Outcome, margins: np.ndarray) -> None:
+    """Ask the verification stage to certify an ``optimal`` answer when a level's rank
+    decision was near-ambiguous (``margins``: each level's): the null space such a
+    decision leaves is accurate to ε over its smallest kept pivot, which rows of a lower
+    level may turn into an error beyond what the certificate accepts
+    (:data:`~prioik.hierarchy.NEAR_AMBIGUITY`). The levels go in
+    :attr:`Detail.near_ambiguous_levels`; the answer stays ``optimal`` only when the
+    certificate passes it (the reason then names those levels too)."""
     near = _near_ambiguous_levels(margins)
     if not near:
         return
-    outcome.info["near_ambiguous_levels"] = near
-    certify(data, outcome)
-    outcome.info["path_certified"] = outcome.status == "optimal"
-    if outcome.status != "optimal":
-        outcome.info["reason"] = (f"{near_ambiguity_reason(near)}, and "
-                                  f"{outcome.info['message']}")
+    outcome.diagnostics.detail.near_ambiguous_levels = near
+    outcome.check = _NEAR_AMBIGUOUS_CHECK
+    outcome.explain = lambda: near_ambiguity_reason(near)
 
 
-def _ambiguity_status(info: dict, status: str, ambiguous) -> str:
-    """``status``, or ``"approximate"`` with ``info["reason"]`` when some level's rank
-    decision was ambiguous (``ambiguous``: level indices)."""
+def _ambiguity_status(diagnostics: Diagnostics, status: Status, ambiguous) -> Status:
+    """``status``, or ``APPROXIMATE`` with the reason when some level's rank decision was
+    ambiguous (``ambiguous``: level indices)."""
     levels = [int(i) for i in ambiguous]
     if not levels:
         return status
-    info["ambiguous_levels"] = levels
-    info["reason"] = ambiguity_reason(levels)
-    return "approximate"
+    diagnostics.ambiguous_levels = levels
+    diagnostics.add_reason(ambiguity_reason(levels))
+    return Status.APPROXIMATE
 
 
 # -------------------------------------------------------------------------- svd
@@ -677,14 +722,14 @@ def _solve_svd(stack: TaskStack, rcond: float, z_basis: str = "task_range") -> O
     zs, rank, ambiguous = _augmented_decomposition(stack, rcond)
     ranges = _svd_task_ranges(stack, zs) if z_basis == "task_range" else None
     if rank == 0:      # every level is zero: no equation, the minimum-norm x is 0
-        return Outcome(np.zeros(stack.n), "optimal",
-                       {"rank": 0, "nullspace": "svd", "z_basis": z_basis,
-                        "extended_rows": 0, "condition_number": 1.0})
+        return Outcome(np.zeros(stack.n), Status.OPTIMAL,
+                       Diagnostics(detail=Detail("svd", "numpy", z_basis=z_basis, rank=0,
+                                                 extended_rows=0, condition_number=1.0)))
     JE, hE = _extended_blocks(stack, rcond, 0.0, zs, equilibrate=True, ranges=ranges)
     if JE.shape[0] == 0:
-        return Outcome(np.zeros(stack.n), "optimal",
-                       {"rank": rank, "nullspace": "svd", "z_basis": z_basis,
-                        "extended_rows": 0, "condition_number": 1.0})
+        return Outcome(np.zeros(stack.n), Status.OPTIMAL,
+                       Diagnostics(detail=Detail("svd", "numpy", z_basis=z_basis, rank=rank,
+                                                 extended_rows=0, condition_number=1.0)))
     u, s, vt = numpy_svd(JE, full_matrices=False)
     r = min(rank, int(np.count_nonzero(s > 0)))
     x = vt[:r].T @ ((u[:, :r].T @ hE) / s[:r])
@@ -697,19 +742,19 @@ def _solve_svd(stack: TaskStack, rcond: float, z_basis: str = "task_range") -> O
                                  targets=[b - A @ x for A, b in stack.equality_matrices()])
         x = x + vt[:r].T @ ((u[:, :r].T @ hR) / s[:r])
     cond = float(s[0] / s[r - 1]) if r else 1.0
-    info = {"rank": rank, "nullspace": "svd", "z_basis": z_basis,
-            "extended_rows": int(JE.shape[0]), "condition_number": cond}
+    diagnostics = Diagnostics(ambiguous_levels=list(ambiguous),
+                              detail=Detail("svd", "numpy", z_basis=z_basis, rank=rank,
+                                            extended_rows=int(JE.shape[0]),
+                                            condition_number=cond))
     reasons = []
     if ambiguous:
-        info["ambiguous_levels"] = ambiguous
         reasons.append(ambiguity_reason(ambiguous))
     if not cond <= SVD_CERTIFIED_CONDITION:
         reasons.append(f"κ(J_E) = {cond:.3g} > {SVD_CERTIFIED_CONDITION:g}: the svd path's "
                        f"error (≈ ε κ(J_E)) is beyond what it can certify; use "
                        f"nullspace='qr'")
-    if reasons:
-        info["reason"] = "; ".join(reasons)
-    return Outcome(x, "approximate" if reasons else "optimal", info)
+    diagnostics.reason = "; ".join(reasons)
+    return Outcome(x, Status.APPROXIMATE if reasons else Status.OPTIMAL, diagnostics)
 
 
 # ----------------------------------------------------------------------- damped
@@ -817,16 +862,19 @@ def _solve_damped(stack: TaskStack, damping: float, rcond: float, nullspace: str
         lwork = max(1, max(m, n) * 8 + 64)
         _, xb, _, _, _ = lapack.dgelsy(JE, bb.reshape(-1, 1), jpvt, 1e-12, lwork)
         x = xb[:n].ravel()
-    info = {"damping": damping, "nullspace": nullspace, "z_basis": z_basis,
-            "extended_rows": int(m)}
+    detail = Detail(nullspace, "lapack" if nullspace == "qr" else "numpy", z_basis=z_basis,
+                    damping=damping, extended_rows=int(m))
     if ranges is not None:
         # with the paper's Z_i, eq. 27 is the damped hierarchy μ² = (0, λ, …, λ) on
         # the levels that own directions (a cascade given these terms reproduces it)
         mu2 = np.array([damping if i > 0 and V.shape[1] else 0.0
                         for i, V in enumerate(ranges)])
-        info["level_damping"] = mu2
-        info["damped_levels"] = np.flatnonzero(mu2 > 0).tolist()
-    return Outcome(x, "approximate", info)
+        detail.level_damping = mu2
+        detail.damped_levels = np.flatnonzero(mu2 > 0).tolist()
+    return Outcome(x, Status.APPROXIMATE,
+                   Diagnostics(reason=f"eq. 27's damping (damping={damping:g}): a damped "
+                                      f"answer, not the lexicographic optimum",
+                               detail=detail))
 
 
 def _solve_batch(prepared: Prepared, datas: list[StackData]) -> tuple[np.ndarray, list[str]]:
@@ -834,8 +882,17 @@ def _solve_batch(prepared: Prepared, datas: list[StackData]) -> tuple[np.ndarray
     parallel (a loop of :meth:`Prepared.solve` off the compiled path)."""
     if not prepared.compiled:
         outs = [prepared.solve(d) for d in datas]
-        return np.array([o.x for o in outs]), [o.status for o in outs]
+        return np.array([o.x for o in outs]), _outcome_statuses(datas, outs)
     return _solve_batch_core(prepared, datas)
+
+
+def _outcome_statuses(datas: list[StackData], outs: list[Outcome]) -> list[str]:
+    """The statuses of a batch's outcomes, an ``optimal`` one that asks to be certified
+    (near-ambiguous) certified as :meth:`Prepared.solve`'s verification stage does (a
+    batch has no stage of its own)."""
+    return [Status.APPROXIMATE if o.status == Status.OPTIMAL and o.check is not None
+            and np.isfinite(o.x).all() and not certify(d, o.x, Diagnostics()) else o.status
+            for d, o in zip(datas, outs, strict=True)]
 
 
 def _solve_batch_core(prepared: Prepared, datas: list[StackData]
@@ -854,7 +911,7 @@ def _solve_batch_core(prepared: Prepared, datas: list[StackData]
     if not res.solved.all():
         # finite rows of extreme scale: one by one, equilibrated as in solve
         outs = [prepared.solve(one) for one in datas]
-        return np.array([o.x for o in outs]), [o.status for o in outs]
+        return np.array([o.x for o in outs]), _outcome_statuses(datas, outs)
     X = res.x.copy()
     return X, _batch_statuses(datas, X, res.level_mu2, res.margins)
 
@@ -866,11 +923,10 @@ def _batch_statuses(datas: list[StackData], X: np.ndarray, mu2: np.ndarray,
     approximate = np.asarray((mu2 > 0).any(axis=1) | (margins <= AMBIGUITY).any(axis=1))
     near = (margins <= NEAR_AMBIGUITY * AMBIGUITY).any(axis=1) & ~approximate
     for i in np.flatnonzero(near & np.isfinite(X).all(axis=1)).tolist():
-        # as solve: a near-ambiguous answer is optimal only when certified
-        outcome = Outcome(X[i], "optimal", {})
-        _certify_near_ambiguous(datas[i], outcome, margins[i])
-        approximate[i] = outcome.status != "optimal"
-    return ["approximate" if a else "optimal" for a in approximate.tolist()]
+        # as solve's verification stage: a near-ambiguous answer is optimal only when
+        # certified (the certificate the stage runs; a batch has no stage of its own)
+        approximate[i] = not certify(datas[i], X[i], Diagnostics())
+    return [Status.APPROXIMATE if a else Status.OPTIMAL for a in approximate.tolist()]
 
 
 #: the plugin (:mod:`prioik.formulations.registry`)

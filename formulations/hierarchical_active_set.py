@@ -20,26 +20,28 @@ Options: ``rcond`` (rank threshold ``rcond ‖A_i‖_F``, hard rows ``rcond ‖a
 ``primal_tol``, ``dual_tol``, ``max_iter``, ``warm_start``, ``kernel`` (:data:`OPTIONS`).
 
 Statuses: ``optimal`` when every level's multiplier test passed with every rank decision
-clear of the ambiguity band, or, for a level the kernel flags (``info`` keys
+clear of the ambiguity band, or, for a level the kernel flags (:class:`Detail`'s
 ``ambiguous_path_levels``, ``near_ambiguous_levels``, ``near_release_levels``,
-``held_off_bound_levels``, ``stalled_levels``), when the answer passes
-:func:`~prioik.hierarchy.check_lexicographic` (after at most :data:`REFINE_ROUNDS`
-re-solves at :data:`REFINE` times the tolerances); ``approximate`` with
-``info["reason"]`` at an ambiguous rank decision (``info["ambiguous_levels"]``), a
-rejected certificate, a precision-limited level or the iteration cap; ``failed`` on
-non-finite values. ``info["infeasible_levels"]`` names the levels with ``f_i* > 0``,
-``info["equilibrated_levels"]`` those solved rescaled by a power of two.
+``held_off_bound_levels``; ``diagnostics.stalled_levels``), when the answer passes the
+core's certificate, part of the solve (``check_lexicographic``'s verdict, after at most
+:data:`REFINE_ROUNDS` re-solves at :data:`REFINE` times the tolerances; a rejected
+answer carries the verdict, ``verification.method == "solver"``, for the verification
+stage to demote). ``approximate`` with ``diagnostics.reason`` at an ambiguous rank
+decision (``ambiguous_levels``), a rejected certificate, a precision-limited level or the
+iteration cap (``capped_levels``); ``failed`` on non-finite values. ``infeasible_levels``
+names the levels with ``f_i* > 0``, ``equilibrated_levels`` those solved rescaled.
 
 Warm start (:class:`Prepared`): each level starts from the last solve's working set;
 when the last answer fixed no inequality row at a violation, the equality rows and the
 rows it held are first solved by one nested QR, and that point is returned
-(``info["equality_first"]``) only when its multipliers prove it optimal.
+(:attr:`Detail.equality_first`) only when its multipliers prove it optimal.
 
 The algorithm, its hard cases, tolerances and complexity: ``docs/active-set.md``.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from itertools import compress
 from types import SimpleNamespace
 from typing import Any
@@ -63,9 +65,12 @@ from . import contract
 from .base import (
     Capabilities,
     CoreInputError,
+    Diagnostics,
+    Fault,
     FormulationError,
     Outcome,
-    precision_status,
+    Status,
+    Verification,
     solve_equilibrated,
 )
 from .options import Option, rcond_option, validate_options
@@ -85,7 +90,8 @@ _SOLVED_CLEAN, _SOLVED_INFEASIBLE, _SOLVED_OTHER, _NOT_TRIED = (
 
 _NEAR_AMBIGUITY = NEAR_AMBIGUITY
 #: the kernel's level flags after which the answer is certified
-#: (:meth:`Prepared._certify_flagged`): flag, ``info`` key of the flagged levels, and why
+#: (:meth:`Prepared._certify_flagged`): flag, :class:`Detail` field of the flagged levels
+#: (``stalled_levels``: :attr:`~prioik.formulations.base.Diagnostics.stalled_levels`), and why
 #: such a level may not be optimal
 _CERTIFIED_FLAGS = (
     (_codes.FLAG_AMBIGUOUS_PATH if _codes is not None else -1, "ambiguous_path_levels",
@@ -141,6 +147,38 @@ OPTIONS = {
                      choices=("auto", "cpp")),
 }
 
+
+
+@dataclass(slots=True)
+class Detail:
+    """``hierarchical_active_set``'s own record (``sol.diagnostics.detail``).
+
+    Attributes:
+        level_violation: Each level's optimal violation ``f_i*`` (squared residual).
+        warm_start: The solve started from the last solve's working sets.
+        equality_first: The equality-first try of the warm start gave the answer.
+        ambiguous_path_levels: Levels that passed through an ambiguous rank decision
+            before settling (the answer was then certified).
+        near_release_levels: Levels that ended with a held row inside its bound within
+            its release tolerance.
+        held_off_bound_levels: Levels that kept a row off its bound held at it.
+        near_ambiguous_levels: Levels that settled on a near-ambiguous rank decision.
+        refined_primal_tol: ``primal_tol`` of the refining solve that gave the answer
+            (``None``: not refined).
+        refined_dual_tol: Its ``dual_tol``.
+        refined_from: Why the first answer was rejected, when refined.
+    """
+
+    level_violation: np.ndarray
+    warm_start: bool
+    equality_first: bool = False
+    ambiguous_path_levels: list[int] | None = None
+    near_release_levels: list[int] | None = None
+    held_off_bound_levels: list[int] | None = None
+    near_ambiguous_levels: list[int] | None = None
+    refined_primal_tol: float | None = None
+    refined_dual_tol: float | None = None
+    refined_from: str | None = None
 
 def _core_module():
     """``prioik._core`` (the compiled C++ core), or a FormulationError saying why not."""
@@ -252,13 +290,13 @@ class Prepared(contract.Prepared):
         """
         out = self.solve_checked(data)
         if isinstance(out, tuple):
-            x, status, info, residuals = out
-            return Outcome(x, status, info, residuals=residuals, checked=True)
+            x, status, diagnostics, residuals = out
+            return Outcome(x, status, diagnostics, residuals=residuals, checked=True)
         return out
 
     def solve_checked(self, data: StackData) -> tuple | Outcome:
         """:meth:`solve`, its common case (settled, finite, every rank decision clear,
-        every box row resolved) as the tuple ``(x, "optimal", info, residuals)`` of a
+        every box row resolved) as the tuple ``(x, Status.OPTIMAL, diagnostics, residuals)`` of a
         checked :class:`Outcome` without the object (see :mod:`formulations.prepared`).
 
         Raises:
@@ -287,52 +325,56 @@ class Prepared(contract.Prepared):
             data.check()
             raise
         if code == _SOLVED_CLEAN or code == _SOLVED_INFEASIBLE:
-            return (self._x.copy(), "optimal",
-                    {"iterations": self._iterations.copy(),
-                     "rank_profile": self._ranks.copy(),
-                     "level_violation": self._w2.copy(),
-                     "infeasible_levels": [] if code == _SOLVED_CLEAN else
-                     list(compress(self._levels, self._over.tolist())),
-                     "warm_start": self.warm_start, "equality_first": first},
+            return (self._x.copy(), Status.OPTIMAL,
+                    Diagnostics(ranks=self._ranks.copy(), iterations=self._iterations.copy(),
+                                infeasible_levels=() if code == _SOLVED_CLEAN else
+                                list(compress(self._levels, self._over.tolist())),
+                                detail=Detail(self._w2.copy(), self.warm_start, first)),
                     self._res.copy())
         if code == _codes.NOT_SOLVED:
             self.reset()
             data.check()     # names the task, level and row at fault
             # a level of extreme scale (‖A_i‖_F beyond 1e100, or below 1e-100 with a
-            # non-zero entry): solved rescaled, info["equilibrated_levels"] names it
-            return solve_equilibrated(self.solve, data, "the rows' values overflow float64 "
-                                      "(‖√W_i A_i‖_F² is not finite or underflows): scale "
-                                      "the tasks or their weights")
+            # non-zero entry): solved rescaled, diagnostics.equilibrated_levels names it
+            out = solve_equilibrated(self.solve, data, "the rows' values overflow float64 "
+                                     "(‖√W_i A_i‖_F² is not finite or underflows): scale "
+                                     "the tasks or their weights")
+            if out.residuals is not None:   # f_i* in the user's units too
+                out.diagnostics.detail.level_violation = out.residuals * out.residuals
+            return out
         return self._outcome(data)
 
     def _outcome(self, data: StackData) -> Outcome:
         """The answer of a solve that is not clean (capped, non-finite, ambiguous,
         unresolved, or of an ``‖x‖`` at which float64 may limit a level), read from the
-        kernel's summary: ``optimal`` only when none of these holds."""
+        kernel's summary: ``optimal`` only when none of these holds (the precision of a
+        large ``‖x‖`` is the verification stage's check)."""
         k = self._k
         x, w2, residuals = self._x.copy(), self._w2.copy(), self._res.copy()
-        xn, flag, large, ambiguous, unresolved = self._summary_values()
-        infeasible = np.flatnonzero(self._over).tolist()
-        info = {"iterations": self._iterations.copy(), "rank_profile": self._ranks.copy(),
-                "level_violation": w2, "infeasible_levels": infeasible,
-                "warm_start": self.warm_start,
-                "equality_first": self._equality_first_answered()}
+        xn, flag, _large, ambiguous, unresolved = self._summary_values()
+        diagnostics = Diagnostics(
+            ranks=self._ranks.copy(), iterations=self._iterations.copy(),
+            margins=self._margins.copy(), infeasible_levels=np.flatnonzero(self._over).tolist(),
+            detail=Detail(w2, self.warm_start, self._equality_first_answered()))
         if flag < 0.0:
             self.reset()
-            info["message"] = "the active-set iterations produced non-finite values"
-            return Outcome(x, "failed", info, residuals=residuals)
+            return Outcome(x, Status.FAILED, diagnostics, residuals=residuals).fail(
+                "the active-set iterations produced non-finite values", "non_finite")
         reasons = []
         if flag > 0.0:
             flags = self._flags
             capped = np.flatnonzero(flags == _codes.FLAG_ITERATION_CAP).tolist()
             lv = capped[0]
-            what = (f"level {lv} ({', '.join(self.layout.names[lv])})" if lv < k
+            names = tuple(self.layout.names[lv]) if lv < k else ("minimum-norm",)
+            what = (f"level {lv} ({', '.join(names)})" if lv < k
                     else "the minimum-norm tie-break")
-            info.update(capped_levels=capped, failed_level=lv,
-                        message=f"iteration cap max_iter={self.max_iter} hit at {what}: its "
-                                f"working set did not settle (degenerate or cycling); the "
-                                f"levels above are optimal and x keeps their optimum, but it "
-                                f"is not certified optimal from that level down")
+            message = (f"iteration cap max_iter={self.max_iter} hit at {what}: its "
+                       f"working set did not settle (degenerate or cycling); the "
+                       f"levels above are optimal and x keeps their optimum, but it "
+                       f"is not certified optimal from that level down")
+            diagnostics.capped_levels = capped
+            diagnostics.fault = Fault(lv, names, "iteration_cap", message)
+            reasons.append(message)
         levels = np.flatnonzero(self._margins <= AMBIGUITY).tolist() if ambiguous else []
         if levels:
             # a pivot within AMBIGUITY of its threshold: rounding may flip the decision
@@ -342,7 +384,7 @@ class Prepared(contract.Prepared):
             if levels[-1] == k:
                 reasons.append(f"rank decision ambiguous at the minimum-norm tie-break (a "
                                f"pivot within {AMBIGUITY:g}x of its threshold)")
-            info["ambiguous_levels"] = levels
+            diagnostics.ambiguous_levels = levels
         flags = self._flags
         flagged = {}
         if ambiguous:
@@ -350,25 +392,30 @@ class Prepared(contract.Prepared):
                 at = np.flatnonzero(flags == value).tolist()
                 if at:
                     flagged[key] = at
+        rejected: list[str] = []
         if flagged and not levels and flag == 0.0:
-            rejected = self._certify_flagged(data, x, flagged, info)
+            rejected = self._certify_flagged(data, x, flagged, diagnostics)
             if (rejected and self._refine > 0
                     and any(key in flagged for key in _REFINED_KEYS)):
-                refined = self._refined(data, info, rejected[0])
+                refined = self._refined(data, flagged, rejected[0])
                 if refined is not None:
                     return refined
-            reasons.extend(rejected)
         if unresolved:
             reasons.append(f"‖x‖ = {xn:.3g}: x's coordinates are known to about "
                            f"{X_PRECISION * xn:.2g}, coarser than the primal tolerance of "
                            f"{int(unresolved)} box row(s) near a bound (whether they are "
                            f"held is rounding)")
-        if reasons:
-            info["reason"] = "; ".join(reasons)
-        status = "approximate" if (flag > 0.0 or reasons) else "optimal"
-        if large:
-            status = precision_status(status, info, data, x)
-        return Outcome(x, status, info, residuals=residuals, checked=True)
+        if rejected:
+            # the core's certificate rejected the answer: its verdict, for the
+            # verification stage to apply (or the solver's own reasons, when it is not
+            # optimal anyway)
+            diagnostics.verification = Verification(
+                "solver", False, DEFAULT_CERTIFICATE_TOL, reason="; ".join(rejected))
+            if reasons:
+                reasons.extend(rejected)
+        diagnostics.reason = "; ".join(reasons)
+        status = Status.APPROXIMATE if (flag > 0.0 or reasons) else Status.OPTIMAL
+        return Outcome(x, status, diagnostics, residuals=residuals, checked=True)
 
     def _refiner(self) -> Prepared:
         """The refining solver: this layout's, cold, at :data:`REFINE` times these
@@ -381,7 +428,8 @@ class Prepared(contract.Prepared):
                 "warm_start": False}, refine_rounds=self._refine - 1)
         return self._refining
 
-    def _refined(self, data: StackData, info: dict, rejected: str) -> Outcome | None:
+    def _refined(self, data: StackData, flagged: dict[str, list[int]], rejected: str
+                 ) -> Outcome | None:
         """The stack re-solved cold at :data:`REFINE` times ``primal_tol`` and
         ``dual_tol``, after the certificate rejected an answer with a near-release level
         or a row held off its bound: the release tolerance scales with ``primal_tol``,
@@ -390,24 +438,29 @@ class Prepared(contract.Prepared):
         refining solver (:meth:`_refiner`, prepared once) refines its own rejected answer once
         more while rounds are left (:data:`REFINE_ROUNDS`). The refined answer is returned
         only when it is ``optimal`` and passes the certificate (:meth:`_certify`)
-        (``info["refined_primal_tol"]`` and ``info["refined_dual_tol"]``: the tolerances
-        that found it; the first answer's reason in ``info["refined_from"]``); ``None``
-        otherwise."""
+        (:attr:`Detail.refined_primal_tol` and :attr:`Detail.refined_dual_tol`: the
+        tolerances that found it; the first answer's reason in
+        :attr:`Detail.refined_from`); ``None`` otherwise."""
         tol, dual = self.primal_tol * REFINE, self.dual_tol * REFINE
         out = self._refiner().solve(data)
-        if out.status != "optimal":
+        if out.status != Status.OPTIMAL:
             return None
         # a refining solve that was flagged itself certified its answer already
-        if not out.info.get("path_certified") and not self._certify(data, out.x, False)[0]:
+        own = out.diagnostics.verification
+        if own is not None and not own.ok:
             return None
+        if own is None and not self._certify(data, out.x, False)[0]:
+            return None
+        detail = out.diagnostics.detail
         # a refining solve refined once more reports its own (finer) tolerances
-        out.info.setdefault("refined_primal_tol", tol)
-        out.info.setdefault("refined_dual_tol", dual)
-        out.info.update(refined_from=rejected, path_certified=True,
-                        warm_start=self.warm_start)
+        if detail.refined_primal_tol is None:
+            detail.refined_primal_tol, detail.refined_dual_tol = tol, dual
+        detail.refined_from = rejected
+        detail.warm_start = self.warm_start
+        out.diagnostics.verification = Verification("solver", True, DEFAULT_CERTIFICATE_TOL)
         for key in _REFINED_KEYS:
-            if key in info:
-                out.info[key] = info[key]
+            if key in flagged:
+                setattr(detail, key, flagged[key])
         return out
 
     def _certify(self, data: StackData, x: np.ndarray, minimum_norm: bool
@@ -432,9 +485,10 @@ class Prepared(contract.Prepared):
             float(cert.scale[lv]), False, value_gap=float(cert.value_gap[lv]))
 
     def _certify_flagged(self, data: StackData, x: np.ndarray, flagged: dict[str, list[int]],
-                         info: dict) -> list[str]:
-        """The reasons against ``x`` when the kernel flagged levels (``flagged``: an
-        ``info`` key of :data:`_CERTIFIED_FLAGS` → the levels): an ambiguous rank
+                         diagnostics: Diagnostics) -> list[str]:
+        """The reasons against ``x`` when the kernel flagged levels (``flagged``: a
+        field of :data:`_CERTIFIED_FLAGS` → the levels, recorded in ``diagnostics``; the
+        verdict in ``diagnostics.verification`` when it passes): an ambiguous rank
         decision before a level's clear last step (``FLAG_AMBIGUOUS_PATH``: the working
         set it led to may not be the level's optimum), a held soft row inside its bound
         within its release tolerance (``FLAG_NEAR_RELEASE``: releasing it may lower the
@@ -451,10 +505,15 @@ class Prepared(contract.Prepared):
         k = self._k
         tie_break = any(k in levels for levels in flagged.values())
         ok, bad = self._certify(data, x, tie_break)
-        info.update(flagged)
+        detail = diagnostics.detail
+        for key, at in flagged.items():
+            if key == "stalled_levels":
+                diagnostics.stalled_levels = at
+            else:
+                setattr(detail, key, at)
         spread = _row_scale_spread(data, flagged.get("ambiguous_path_levels", ()))
-        info["path_certified"] = ok and not spread
         if ok and not spread:
+            diagnostics.verification = Verification("solver", True, DEFAULT_CERTIFICATE_TOL)
             return []
         if ok:
             # the certificate's tolerances are relative to the terms of a level's rows:
@@ -462,15 +521,15 @@ class Prepared(contract.Prepared):
             # it cannot resolve (an independent check, exact arithmetic: of ten levels of
             # spreads 2e5-7e8 that said 'optimal' 1.4e-6 to 0.18 of max(1, value) above
             # their optimum, it rejects seven and passes three, up to 3.9e-5 above)
-            levels = ", ".join(f"level {i} ({ratio:.1e})" for i, ratio in spread)
-            return [f"passed through an ambiguous rank decision at {levels}, whose rows' "
+            where = ", ".join(f"level {i} ({ratio:.1e})" for i, ratio in spread)
+            return [f"passed through an ambiguous rank decision at {where}, whose rows' "
                     f"weighted norms span more than {CERTIFIABLE_SPREAD:g}x: the "
                     f"certificate, relative to the terms of a level's rows, cannot vouch "
                     f"for its smallest"]
         assert bad is not None              # (a verdict that is not ok names its level)
         where = (f"level {bad.level} ({', '.join(bad.tasks)})" if bad.level < k
                  else "the minimum-norm tie-break")
-        info["ambiguous_levels"] = sorted(set().union(*flagged.values()))
+        diagnostics.ambiguous_levels = sorted(set().union(*flagged.values()))
         rejects = f"the certificate rejects {where} ({bad.failure(DEFAULT_CERTIFICATE_TOL)})"
         reasons = []
         for _, key, why in _CERTIFIED_FLAGS:

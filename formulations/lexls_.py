@@ -21,17 +21,18 @@ levels only). A prepared solver hot-starts as lexls's documentation says — the
 clear a hot start).
 
 Status: ``"optimal"`` when lexls reports the problem solved and, with ``check=True``
-(default), the answer passes :func:`~prioik.formulations.verification.certify` on the levels
-(no tie-break: the certificate, its ambiguity record, and the exact active set's answer
-as a witness of a lower point); ``"approximate"`` when it does not (``info["message"]``
-says why) or lexls stopped at its factorization cap (``info["capped"]``: its answer is
-where it stopped, not solved); ``"failed"`` on a non-finite answer.
-``info``: ``termination`` (lexls's status name), ``factorizations``, ``active`` (rows
-in the final working set), ``hot_started``.
+(default), the answer passes the verification stage's certificate
+(:func:`~prioik.formulations.verification.certify`) on the levels (no tie-break: the
+certificate, its ambiguity record, and the exact active set's answer as a witness of a
+lower point); ``"approximate"`` when it does not (``diagnostics.reason`` says why) or
+lexls stopped at its factorization cap (:attr:`Detail.capped`: its answer is where it
+stopped, not solved); ``"failed"`` on a non-finite answer. Its own record:
+:class:`Detail`.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -39,9 +40,8 @@ import numpy as np
 from prioik.hierarchy import StackData, StackLayout, TaskStack
 
 from . import contract
-from .base import Capabilities, Outcome
+from .base import Capabilities, CheckRequest, Diagnostics, Outcome, Status
 from .options import Option, validate_options
-from .verification import certify
 
 try:
     from prioik import _lexls
@@ -51,6 +51,25 @@ except ImportError as exc:
         "installed; point PRIOIK_LEXLS_DIR at the folder holding lexls/lexlsi.h and "
         "reinstall (`PRIOIK_LEXLS_DIR=... pip install -e .`)", name=__name__) from exc
 
+@dataclass(frozen=True, slots=True)
+class Detail:
+    """``lexls``'s own record (``sol.diagnostics.detail``).
+
+    Attributes:
+        termination: lexls's status name.
+        factorizations: Factorizations lexls made.
+        active: Rows in its final working set.
+        hot_started: The solve started from the last one's ``x`` and working set.
+        capped: lexls stopped at ``max_factorizations`` (its answer is where it stopped).
+    """
+
+    termination: str
+    factorizations: int
+    active: int
+    hot_started: bool
+    capped: bool = False
+
+
 NAME = "lexls"
 DESCRIPTION = ("lexls (Dimitrov, Sherikov & Wieber 2015): C++ lexicographic least squares "
                "with inequalities, a peer built from its headers (no minimum-norm tie-break)")
@@ -58,7 +77,7 @@ CAPABILITIES = Capabilities(equalities=True, inequalities=True, weights=True,
                             needs_mass_matrix=False, exact=False)
 OPTIONS = {
     "max_factorizations": Option(200, "int", "lexls's cap on factorizations (its default "
-                                 "200; a capped solve is 'approximate', info['capped'])",
+                                 "200; a capped solve is 'approximate', Detail.capped)",
                                  minimum=1),
     "tol_linear_dependence": Option(1e-12, "float", "lexls's absolute tolerance on squared "
                                     "column norms in its QR (its default)", minimum=0.0,
@@ -94,6 +113,8 @@ class Prepared(contract.Prepared):
         self.layout = layout
         self.hot_start = bool(options["hot_start"])
         self.check = bool(options["check"])
+        #: the verification stage checks the levels only (lexls has no tie-break)
+        self._check = CheckRequest(auto=self.check, minimum_norm=False)
         self.max_factorizations = int(options["max_factorizations"])
         starts = np.asarray(layout.starts)
         self._solver = _lexls.LexlsSolver(layout.n, np.diff(starts).astype(int).tolist(),
@@ -128,20 +149,19 @@ class Prepared(contract.Prepared):
             self._lower[zero], self._upper[zero] = -np.inf, np.inf
         res = self._solver.solve(self._A, self._lower, self._upper, self.hot_start)
         x = self._solver.x.copy()
-        info = {"termination": _TERMINATION.get(res.termination, str(res.termination)),
-                "factorizations": int(res.factorizations), "active": int(res.active),
-                "hot_started": bool(res.hot_started)}
+        capped = res.termination == _lexls.MAX_NUMBER_OF_FACTORIZATIONS_EXCEEDED
+        detail = Detail(_TERMINATION.get(res.termination, str(res.termination)),
+                        int(res.factorizations), int(res.active), bool(res.hot_started),
+                        capped)
+        out = Outcome(x, Status.OPTIMAL, Diagnostics(detail=detail), check=self._check)
         if not np.isfinite(x).all():
             self._solver.reset()
-            info["message"] = "lexls returned non-finite values"
-            return Outcome(x, "failed", info)
-        if res.termination == _lexls.MAX_NUMBER_OF_FACTORIZATIONS_EXCEEDED:
-            info.update(capped=True, message=f"lexls stopped at its cap of "
-                        f"{self.max_factorizations} factorizations (max_factorizations): "
-                        f"not solved")
-            return Outcome(x, "approximate", info)
-        out = Outcome(x, "optimal", info)
-        return certify(data, out, minimum_norm=False) if self.check else out
+            return out.fail("lexls returned non-finite values", "non_finite")
+        if capped:
+            out.status = Status.APPROXIMATE
+            out.diagnostics.reason = (f"lexls stopped at its cap of {self.max_factorizations}"
+                                      f" factorizations (max_factorizations): not solved")
+        return out
 
 
 #: the plugin (:mod:`prioik.formulations.registry`)

@@ -24,13 +24,14 @@ stays a projector to rounding over any number of levels.
 Two kernels (option ``kernel``): ``"cpp"`` (the default; :class:`Prepared`) runs the
 recursion in the C++ core over one workspace, a row-pivoted LQ of ``Ĵ_i`` in place of
 its SVD (rank rule on the pivot norms), and counts its floating-point operations
-(``info["flops"]``); ``"numpy"`` is :func:`solve_readable`, the SVD recursion as
+(:attr:`Detail.flops`); ``"numpy"`` is :func:`solve_readable`, the SVD recursion as
 written, the oracle the tests hold the compiled kernel to. In detail:
 ``docs/formulations.md``.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -50,10 +51,33 @@ from ._compiled import _core, resolve_kernel, solve_compiled, solve_rescaled
 from ._numerics import check_nonnegative, project_level, project_levels
 from .base import (
     Capabilities,
+    Diagnostics,
     Outcome,
+    Status,
     in_original_units,
 )
 from .options import Option, rcond_option, validate_options
+
+
+@dataclass(slots=True)
+class Detail:
+    """``nullspace``'s own record (``sol.diagnostics.detail``).
+
+    Attributes:
+        min_singular_values: Smallest kept ``σ`` of each ``Ĵ_i`` (the compiled kernel:
+            its smallest kept pivot norm), ``0`` when none: the distance to an
+            algorithmic singularity.
+        damping: The damping ``λ`` of every level's inverse.
+        kernel: ``"cpp"`` or ``"numpy"``.
+        flops: Floating-point operations of the solve, counted in the compiled kernel
+            (``None`` on the numpy path).
+    """
+
+    min_singular_values: list[float]
+    damping: float
+    kernel: str
+    flops: int | None = None
+
 
 NAME = "nullspace"
 DESCRIPTION = "recursive null-space projection (Nakamura 1987), damped LS inverse option"
@@ -84,9 +108,9 @@ def solve_readable(stack: TaskStack, *, damping: float, rcond: float, reproject:
     oracle of the compiled kernel; see the module docstring.
 
     Returns:
-        ``Outcome`` with ``info["rank_profile"]`` (kept rank of each ``Ĵ_i``) and
-        ``info["min_singular_values"]`` (smallest kept ``σ`` of each ``Ĵ_i``, ``0`` when
-        none: the distance to an algorithmic singularity).
+        ``Outcome`` with ``diagnostics.ranks`` (kept rank of each ``Ĵ_i``) and
+        :attr:`Detail.min_singular_values` (smallest kept ``σ`` of each ``Ĵ_i``, ``0``
+        when none: the distance to an algorithmic singularity).
     """
     check_nonnegative(damping=damping, rcond=rcond)
     damping = float(damping)
@@ -102,13 +126,20 @@ def solve_readable(stack: TaskStack, *, damping: float, rcond: float, reproject:
             ambiguous.append(i)
         ranks.append(int(s.size))
         sigmas.append(float(s.min()) if s.size else 0.0)
-    status = "approximate" if damping > 0 or ambiguous else "optimal"
-    info = {"rank_profile": ranks, "min_singular_values": sigmas, "damping": damping,
-            "kernel": "numpy"}
+    return _outcome(x, ranks, sigmas, damping, "numpy", None, ambiguous)
+
+
+def _outcome(x, ranks, sigmas, damping: float, kernel: str, flops, ambiguous,
+             residuals=None) -> Outcome:
+    """The answer with its diagnostics (``approximate`` when damped or ambiguous)."""
+    diagnostics = Diagnostics(ranks=np.asarray(ranks), ambiguous_levels=list(ambiguous),
+                              detail=Detail(list(sigmas), damping, kernel, flops))
     if ambiguous:
-        info["ambiguous_levels"] = ambiguous
-        info["reason"] = ambiguity_reason(ambiguous)
-    return Outcome(x, status, info)
+        diagnostics.reason = ambiguity_reason(list(ambiguous))
+    elif damping > 0:
+        diagnostics.reason = f"damped least squares (damping={damping:g})"
+    status = Status.APPROXIMATE if damping > 0 or ambiguous else Status.OPTIMAL
+    return Outcome(x, status, diagnostics, residuals)
 
 
 def solve_batch(stacks: list[TaskStack], *, damping: float = 0.0,
@@ -138,8 +169,8 @@ class Prepared(contract.Prepared):
     The compiled kernel runs the recursion of the module docstring with a row-pivoted
     LQ of ``Ĵ_i`` (Householder reflectors) in place of its SVD: the rank rule tests the
     pivot norms (the rank-revealing estimates of ``σ``, :mod:`hierarchy.linalg`),
-    ``info["min_singular_values"]`` holds the smallest kept pivot norm of each ``Ĵ_i``
-    (``σ_min`` itself where the kept rows are orthogonal), and ``info["flops"]`` the
+    :attr:`Detail.min_singular_values` holds the smallest kept pivot norm of each ``Ĵ_i``
+    (``σ_min`` itself where the kept rows are orthogonal), and :attr:`Detail.flops` the
     solve's floating-point operations, counted in the kernel. ``kernel="numpy"`` is
     :func:`solve_readable`.
 
@@ -175,16 +206,11 @@ class Prepared(contract.Prepared):
         res = solve_compiled(self._core, data)
         if not res.solved:
             return solve_rescaled(self.solve, data)
-        info = {"rank_profile": res.ranks.tolist(),
-                "min_singular_values": res.min_pivots.tolist(), "damping": self.damping,
-                "kernel": "cpp", "flops": res.flops}
-        status = "approximate" if self.damping > 0 else "optimal"
-        if res.ambiguous:
-            levels = np.flatnonzero(res.margins <= AMBIGUITY).tolist()
-            info["ambiguous_levels"] = levels
-            info["reason"] = ambiguity_reason(levels)
-            status = "approximate"
-        return Outcome(res.x, status, info, res.residuals)
+        levels = np.flatnonzero(res.margins <= AMBIGUITY).tolist() if res.ambiguous else []
+        out = _outcome(res.x, res.ranks.copy(), res.min_pivots.tolist(), self.damping, "cpp",
+                       res.flops, levels, res.residuals)
+        out.diagnostics.margins = np.asarray(res.margins).copy()
+        return out
 
     def solve_batch(self, datas: list[StackData]) -> tuple[np.ndarray, list[str]]:
         """Many stacks of the layout: ``(X, statuses)`` (:func:`solve_batch` on the

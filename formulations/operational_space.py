@@ -35,8 +35,8 @@ higher levels' residuals grow like ``ε/σ²`` near an algorithmic singularity i
 
 Two kernels compute it (option ``kernel``): ``"cpp"`` (the default where prioik's
 compiled core is built, :class:`Prepared`) in C++, counting its floating-point operations
-(``info["flops"]``); ``"numpy"`` is :func:`solve_readable`, the recursion as written here
-with its per-level quantities in ``info["levels"]``, the oracle the tests hold the
+(:attr:`Detail.flops`); ``"numpy"`` is :func:`solve_readable`, the recursion as written here
+with its per-level quantities in :attr:`Detail.levels`, the oracle the tests hold the
 compiled kernel to.
 """
 
@@ -55,10 +55,34 @@ from ._compiled import _core, mass_matrix_outcome, resolve_kernel, solve_compile
 from ._numerics import check_nonnegative, truncated_svd
 from .base import (
     Capabilities,
+    Diagnostics,
     FormulationError,
     Outcome,
+    Status,
 )
 from .options import Option, rcond_option, validate_options
+
+
+@dataclass(slots=True)
+class Detail:
+    """``operational_space``'s own record (``sol.diagnostics.detail``).
+
+    Attributes:
+        kernel: ``"cpp"`` or ``"numpy"``.
+        flops: Floating-point operations of the solve, counted in the compiled kernel
+            (``None`` on the numpy path).
+        tau: ``M θ̈ + C + G`` when the option ``bias`` is given, else ``None``.
+        levels: The readable path's per-level quantities (one :class:`PrioritizedLevel`
+            each; ``None`` on the compiled path).
+        null_projector: The readable path's ``N_k`` (``None`` on the compiled path).
+    """
+
+    kernel: str
+    flops: int | None = None
+    tau: np.ndarray | None = None
+    levels: list | None = None
+    null_projector: np.ndarray | None = None
+
 
 NAME = "operational_space"
 DESCRIPTION = "prioritized operational-space control (Khatib, Sentis), mass_matrix=M"
@@ -67,13 +91,13 @@ CAPABILITIES = Capabilities(equalities=True, inequalities=False, weights=True,
 OPTIONS = {
     "mass_matrix": Option(None, "matrix", "SPD n×n joint-space inertia M (required)",
                           optional=True),
-    "bias": Option(None, "vector", "C + G (n): with it, info['tau'] = M θ̈ + C + G",
+    "bias": Option(None, "vector", "C + G (n): with it, Detail.tau = M θ̈ + C + G",
                    optional=True),
     "rcond": rcond_option("‖J_i L⁻ᵀ‖_F"),
     "reproject": Option(True, "bool", "apply N_{i-1} to each step (exact no-op; keeps "
                         "round-off ≈ ε/σ)"),
     "kernel": Option("auto", "str", "'cpp': the compiled C++ core (prioik._core, row-pivoted "
-                     "LQ); 'numpy': the readable recursion (with info['levels']); 'auto': "
+                     "LQ); 'numpy': the readable recursion (with Detail.levels); 'auto': "
                      "cpp where built", choices=("auto", "cpp", "numpy")),
 }
 
@@ -132,9 +156,9 @@ def solve_readable(stack: TaskStack, *, mass_matrix, bias, rcond: float, reproje
     oracle of the compiled kernel; see the module docstring.
 
     Returns:
-        ``Outcome`` with ``info["levels"]`` (one :class:`PrioritizedLevel` each),
-        ``info["null_projector"]`` (``N_k``) and, when ``bias`` is given,
-        ``info["tau"] = M θ̈ + C + G``.
+        ``Outcome`` whose :class:`Detail` holds ``levels`` (one
+        :class:`PrioritizedLevel` each), ``null_projector`` (``N_k``) and, when ``bias``
+        is given, ``tau = M θ̈ + C + G``.
     """
     if mass_matrix is None:
         raise FormulationError("formulation 'operational_space' needs mass_matrix=M")
@@ -159,11 +183,10 @@ def solve_readable(stack: TaskStack, *, mass_matrix, bias, rcond: float, reproje
         step = J_bar @ err
         x = x + (N @ step if reproject else step)   # N_{i-1} J̄_{i|prev} = J̄_{i|prev}
         N = N - J_bar @ Jp
-    info = {"levels": levels, "null_projector": N,
-            "rank_profile": [lv.rank for lv in levels], "kernel": "numpy"}
-    if bias is not None:
-        info["tau"] = M @ x + np.asarray(bias, dtype=np.float64)
-    return Outcome(x, "optimal", info)
+    tau = None if bias is None else M @ x + np.asarray(bias, dtype=np.float64)
+    return Outcome(x, Status.OPTIMAL,
+                   Diagnostics(ranks=np.array([lv.rank for lv in levels]),
+                               detail=Detail("numpy", None, tau, levels, N)))
 
 
 class Prepared(contract.Prepared):
@@ -173,8 +196,8 @@ class Prepared(contract.Prepared):
     ``B = J_{i|prev} L⁻ᵀ`` by a row-pivoted LQ with the rank rule on its pivots,
     ``J̄ = L⁻ᵀ B⁺`` applied to the level's error, ``N_i = N_{i-1} − (L⁻ᵀ V)(L V)ᵀ``
     with ``V`` the LQ's kept row space, which is ``N_{i-1} − J̄ J_{i|prev}``;
-    ``info["flops"]`` counts the solve's floating-point operations). The per-level
-    quantities (``info["levels"]``, ``info["null_projector"]``) are the readable path's
+    :attr:`Detail.flops` counts the solve's floating-point operations). The per-level
+    quantities (:attr:`Detail.levels`, :attr:`Detail.null_projector`) are the readable path's
     (``kernel="numpy"``, :func:`solve_readable`). ``mass_matrix`` and ``bias`` may change
     with every solve.
 
@@ -214,7 +237,7 @@ class Prepared(contract.Prepared):
                                   rcond=self.rcond, reproject=self.reproject)
         M = np.ascontiguousarray(mass, dtype=np.float64)
         res = solve_compiled(self._core, data, M)
-        out = mass_matrix_outcome(res, M, bias, "optimal")
+        out = mass_matrix_outcome(res, M, bias, Status.OPTIMAL, Detail)
         if out is None:
             return solve_rescaled(lambda d: self.solve(d, options), data)
         return out

@@ -10,21 +10,23 @@ with ``A_j``, ``b_j`` the level's weighted equality rows, ``ρ = weight_ratio`` 
 ratio between soft levels (default ``SOFT_SPAN^(1/(k−2))``, ``SOFT_SPAN = 1e-4``) and
 ``ε = regularization`` PlaCo's Tikhonov term (default 1e-8). A rank-deficient first
 level is replaced by its feasible rows ``U_rᵀ A_1 x = U_rᵀ b_1``
-(``info["first_level_rank"]``), which PlaCo's QR elimination needs.
+(:attr:`Detail.first_level_rank`), which PlaCo's QR elimination needs.
 
 Statuses: ``optimal`` only for two levels with an equality first level (the
-lexicographic optimum up to ``ε``) whose answer passes
-:func:`~prioik.formulations.verification.certify`; deeper stacks are a weighted compromise
-and, like any stack with an inequality task below the first level, ``approximate``
-(``info["fault_level"]``). PlaCo raises on infeasible hard inequalities: the status is
-then ``failed`` with ``info["failed_level"]`` and ``info["failed_tasks"]`` (the first
-level whose hard inequalities cannot hold with those above).
+lexicographic optimum up to ``ε``) whose answer passes the verification stage's
+certificate (:func:`~prioik.formulations.verification.certify`, asked for every answer); deeper
+stacks are a weighted compromise and, like any stack with an inequality task below the
+first level, ``approximate``. PlaCo raises on infeasible hard inequalities: the status
+is then ``failed`` with a :class:`~prioik.formulations.base.Fault` naming the first level
+whose hard inequalities cannot hold with those above (``level=None`` when none can be
+named).
 
 In detail: ``docs/formulations.md``; measurements: ``docs/qp-formulations.md``.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -33,9 +35,33 @@ import placo
 from prioik.hierarchy import TaskStack
 
 from . import contract
-from .base import Capabilities, FormulationError, Outcome
+from .base import (
+    Capabilities,
+    CheckRequest,
+    Diagnostics,
+    FormulationError,
+    Outcome,
+    Status,
+)
 from .options import Option, rcond_option
-from .verification import certify
+
+
+@dataclass(slots=True)
+class Detail:
+    """``placo``'s own record (``sol.diagnostics.detail``).
+
+    Attributes:
+        weight_ratio: ``ρ``, the weight ratio between soft levels.
+        regularization: ``ε``, PlaCo's Tikhonov term.
+        first_level_rank: Rank of the first level (its feasible rows, the hard ones).
+        soft_weights: The weight of each soft level (``ρ^{j−2}``).
+    """
+
+    weight_ratio: float
+    regularization: float
+    first_level_rank: int
+    soft_weights: list[float] = field(default_factory=list)
+
 
 NAME = "placo"
 DESCRIPTION = "PlaCo placo.Problem: first level hard, lower levels soft (geometric weights)"
@@ -126,11 +152,9 @@ def solve(stack: TaskStack, *, weight_ratio: float | None, regularization: float
     problem = placo.Problem()
     problem.regularization = float(regularization)
     x = problem.add_variable(n)
-    info: dict[str, Any] = {"weight_ratio": float(weight_ratio),
-                            "regularization": float(regularization), "soft_weights": []}
     first = stack.levels[0]
     A1, b1, r1 = _first_level_rows(first, rcond)
-    info["first_level_rank"] = r1
+    detail = Detail(float(weight_ratio), float(regularization), r1)
     if r1:
         problem.add_constraint(_expression(x, A1) == np.ascontiguousarray(b1))
     _add_inequalities(problem, x, first)
@@ -140,25 +164,27 @@ def solve(stack: TaskStack, *, weight_ratio: float | None, regularization: float
         if level.A.shape[0]:
             c = problem.add_constraint(_expression(x, level.A) == np.ascontiguousarray(level.b))
             c.configure("soft", w)
-        info["soft_weights"].append(w)
+        detail.soft_weights.append(w)
         low_inequality |= _add_inequalities(problem, x, level) > 0
     try:
         problem.solve()
     except RuntimeError as exc:
+        failed = Outcome(np.full(n, np.nan), Status.FAILED, Diagnostics(detail=detail))
         bad = _hard_infeasible_level(stack, float(regularization))
         if bad is None:
-            info.update(message=f"PlaCo failed: {exc}", failed_level=None, failed_tasks=[])
-        else:
-            names = [t.name for lvl in stack.levels[:bad + 1] for t in lvl if not t.is_equality]
-            info.update(message=f"PlaCo failed: {exc}; the hard inequalities of levels 0..{bad} "
-                                f"({', '.join(names)}) cannot hold together",
-                        failed_level=bad, failed_tasks=[t.name for t in stack.levels[bad]
-                                                      if not t.is_equality])
-        return Outcome(np.full(n, np.nan), "failed", info)
+            return failed.fail(f"PlaCo failed: {exc}")
+        names = [t.name for lvl in stack.levels[:bad + 1] for t in lvl if not t.is_equality]
+        return failed.fail(f"PlaCo failed: {exc}; the hard inequalities of levels 0..{bad} "
+                           f"({', '.join(names)}) cannot hold together", "infeasible", bad,
+                           [t.name for t in stack.levels[bad] if not t.is_equality])
     exact = len(stack) <= 2 and first.is_equality and not low_inequality
-    out = Outcome(np.array(x.value, dtype=np.float64), "optimal" if exact else "approximate",
-                  info)
-    return certify(stack, out)
+    diagnostics = Diagnostics(detail=detail)
+    if not exact:
+        diagnostics.reason = ("a weighted compromise: PlaCo's soft levels are exact only for "
+                              "two levels with an equality first level")
+    return Outcome(np.array(x.value, dtype=np.float64),
+                   Status.OPTIMAL if exact else Status.APPROXIMATE, diagnostics,
+                   check=CheckRequest())
 
 
 class Prepared(contract.StackPrepared):

@@ -8,10 +8,15 @@ solve, so the one-off and the prepared answers are the same computation.
 Each formulation provides its own prepared solver, a subclass of
 :class:`~prioik.formulations.contract.Prepared` built by its
 :class:`~prioik.formulations.contract.Formulation`; its ``solve_checked(data)`` returns
-either an ``Outcome`` or, for an answer the plugin verified itself (what
-``Outcome(..., checked=True)`` means) with a status of
-:data:`~prioik.formulations.base.STATUSES`, the tuple ``(x, status, info, residuals)``
-— one object fewer per solve on a control loop's path.
+either an ``Outcome`` or, for a clean answer the plugin's kernel checked itself (what
+``Outcome(..., checked=True)`` means: finite, of the right length, residuals given,
+``‖x‖`` below the precision limit) with the status ``optimal``, the tuple ``(x, status,
+diagnostics, residuals)`` — one object fewer per solve on a control loop's path.
+
+After the timed solve, :meth:`PreparedSolver.solve` runs the **verification stage**
+(its ``verify`` mode, :data:`~prioik.formulations.base.VERIFY_MODES`), timed apart
+(:attr:`~prioik.formulations.Solution.verify_time_s`): the one place an ``optimal``
+answer is demoted to ``approximate``.
 """
 
 from __future__ import annotations
@@ -36,15 +41,21 @@ from prioik.hierarchy import (
 from prioik.hierarchy.linalg import PRECISION_LIMIT_NORM
 
 from .base import (
-    STATUSES,
+    VERIFY_MODES,
+    CheckRequest,
     ConcurrentUseError,
+    Diagnostics,
+    Fault,
     FormulationError,
     Outcome,
     Solution,
-    precision_status,
+    Status,
+    Verification,
+    precision_holds,
 )
 from .contract import Formulation, check_layout_support, check_support  # noqa: F401
 from .options import validate_options
+from .verification import certify, lower_point_solver
 
 __all__ = ["BatchSolution", "PreparedSolver", "check_layout_support", "check_support"]
 
@@ -68,7 +79,7 @@ class BatchSolution:
 
     Attributes:
         X: Solutions, one row per stack (``B × n``).
-        statuses: One status per stack.
+        statuses: One :class:`~prioik.formulations.Status` per stack.
         formulation: Name of the formulation.
         options: Options it was called with.
         time_s: Wall time of the whole batch (solve alone).
@@ -76,7 +87,7 @@ class BatchSolution:
     """
 
     X: np.ndarray
-    statuses: list[str]
+    statuses: list[Status]
     formulation: str
     options: dict[str, Any]
     time_s: float
@@ -96,16 +107,44 @@ class PreparedSolver:
     running raises :class:`~prioik.formulations.ConcurrentUseError` (it never returns a
     wrong answer); use one prepared solver per thread.
 
+    Each :meth:`solve` is the formulation's solve (timed: ``Solution.time_s``), then the
+    verification stage (timed apart: ``Solution.verify_time_s``), the one place an
+    ``optimal`` answer is demoted to ``approximate``; its ``verify`` mode is one of
+
+    * ``"auto"`` (default): what the formulation asks — its own options (e.g.
+      ``check=True``) decide whether the answer is certified
+      (:func:`~.verification.certify`, with the exact active set's comparison,
+      :func:`~.verification.lower_point`), a solver's own certificate
+      (``hierarchical_active_set``'s flagged steps) is applied, and an answer at a huge
+      ``‖x‖`` is demoted where float64 cannot give a level's values
+      (:func:`precision_holds`);
+    * ``"none"``: nothing is checked, nothing demoted (``verify_time_s == 0``);
+    * ``"certificate"``: every ``optimal`` answer is checked by
+      :func:`~prioik.hierarchy.check_lexicographic` (and as ``"auto"``'s precision
+      and solver checks);
+    * ``"lower_point"``: the certificate, then the comparison with the exact active set.
+
+    The active-set solver of that comparison is prepared once per prepared solver (at
+    its first use).
+
     Attributes:
         formulation: Registry name.
         layout: The layout it solves.
         options: Every option's value (validated; defaults filled in).
+        verify: The verification mode.
         compiled: The plugin solves the data's arrays in a compiled kernel.
     """
 
     def __init__(self, formulation: Formulation, layout: StackLayout,
-                 options: dict[str, Any], given: dict[str, Any]) -> None:
+                 options: dict[str, Any], given: dict[str, Any], verify: str = "auto"
+                 ) -> None:
         check_layout_support(formulation.name, formulation.capabilities, layout)
+        if verify not in VERIFY_MODES:
+            raise FormulationError(f"verify must be one of {', '.join(VERIFY_MODES)}; "
+                                   f"got {verify!r}")
+        self.verify = verify
+        #: the exact active set of the lower-point comparison (prepared at first use)
+        self._lower_solver: Any = None
         self.formulation = formulation.name
         self.layout = layout
         self.options = options
@@ -113,6 +152,7 @@ class PreparedSolver:
         self._plugin = formulation
         self._lock = threading.Lock()
         self._n = layout.n
+        self._sqrt_n = float(np.sqrt(layout.n))
         self._hard = layout.hard
         self._needs_mass_matrix = formulation.capabilities.needs_mass_matrix
         self._impl = formulation.prepare(layout, options)
@@ -152,10 +192,10 @@ class PreparedSolver:
 
         Returns:
             The :class:`~prioik.formulations.Solution` (a numerical failure inside the
-            formulation gives ``status == "failed"`` with ``info["message"]``; so does
-            an answer that leaves a hard level violated, :func:`~prioik.hierarchy.hard`,
-            with ``info["fault_level"]``, ``info["fault_tasks"]`` and
-            ``info["hard_violations"]``).
+            formulation gives ``status == "failed"`` with a
+            :class:`~prioik.formulations.Fault`; so does an answer that leaves a hard
+            level violated, :func:`~prioik.hierarchy.hard`, the fault's code
+            ``"hard_level"``, the levels in ``diagnostics.hard_violated_levels``).
 
         Raises:
             FormulationError: the stack has another layout.
@@ -177,34 +217,71 @@ class PreparedSolver:
                 out = self._impl_solve(data) if merged is None else \
                     self._impl.solve(data, merged)
             except (np.linalg.LinAlgError, ArithmeticError) as exc:
-                out = Outcome(np.full(self._n, np.nan), "failed",
-                              {"message": f"{type(exc).__name__}: {exc}"})
+                out = Outcome(np.full(self._n, np.nan)).fail(f"{type(exc).__name__}: {exc}")
             elapsed = _clock() - t0
+            if isinstance(out, tuple):  # solve_checked's clean answer (see the module doc)
+                x, status, diagnostics, residuals = out
+                sol = Solution(x, self.formulation, self._given, status, residuals, elapsed,
+                               diagnostics)
+                if self.verify in ("certificate", "lower_point"):
+                    self._verify_timed(sol, data, None, None)
+            else:
+                sol = self._solution(out, data, elapsed)
+                if sol.status == Status.OPTIMAL and self.verify != "none":
+                    self._verify_timed(sol, data, out.check, out.explain)
         finally:
             self._release()
-        if isinstance(out, Outcome):
-            sol = self._solution(out, data, elapsed)
-        else:                       # solve_checked's verified answer (see the module doc)
-            x, status, info, residuals = out
-            sol = Solution(x, self.formulation, self._given, status, residuals, elapsed,
-                           info)
-        if self._hard and sol.status != "failed":
+        if self._hard and sol.status != Status.FAILED:
             self._check_hard(sol, data)
         return sol
 
+    def _verify_timed(self, sol: Solution, data: StackData, check: CheckRequest | None,
+                      explain) -> None:
+        t0 = _clock()
+        if not self._verified(sol.x, data, sol.diagnostics, check):
+            sol.status = Status.APPROXIMATE
+            if explain is not None:
+                sol.diagnostics.add_reason(explain())
+        sol.verify_time_s = _clock() - t0
+
+    def _verified(self, x: np.ndarray, data: StackData, diagnostics: Diagnostics,
+                  check: CheckRequest | None) -> bool:
+        """The verification stage on an ``optimal`` answer (see the class doc): whether
+        it stays ``optimal``; what was found goes in ``diagnostics``."""
+        mode = self.verify
+        own = diagnostics.verification
+        if own is not None and own.method == "solver" and not own.ok:
+            diagnostics.add_reason(own.reason)
+            return False
+        if x.size and float(np.abs(x).max()) * self._sqrt_n > PRECISION_LIMIT_NORM and \
+                not precision_holds(diagnostics, data, x):
+            if own is None:
+                diagnostics.verification = Verification("precision", False)
+            return False
+        if mode == "auto":
+            if check is None or not check.auto:
+                return True
+            compare = True
+        else:
+            compare = mode == "lower_point"
+        check = check or CheckRequest()
+        solver = None
+        if compare:
+            if self._lower_solver is None:
+                self._lower_solver = lower_point_solver(self.layout)
+            solver = self._lower_solver
+        return certify(data, x, diagnostics, metric=check.metric,
+                       minimum_norm=check.minimum_norm, compare=compare, solver=solver)
+
     def _check_hard(self, sol: Solution, data: StackData) -> None:
         """``sol`` made ``"failed"`` when it leaves a hard level violated
-        (:func:`~prioik.hierarchy.hard_violations`), its ``info`` naming the first such
+        (:func:`~prioik.hierarchy.hard_violations`), its fault naming the first such
         level and its tasks — the one place every formulation's answer is checked."""
         violated = hard_violations(data, sol.x, sol.residuals)
         if not violated:
             return
         level, r, scale = violated[0]
         names = self.layout.names[level]
-        info = dict(sol.info)
-        info["fault_level"] = level
-        info["fault_tasks"] = list(names)
-        info["hard_violations"] = [i for i, _, _ in violated]
         message = (f"hard level {level} ({', '.join(names)}) is left violated: residual "
                    f"{r:.3g}, beyond {DEFAULT_CERTIFICATE_TOL:g} of its scale {scale:.3g} "
                    f"(its tasks cannot all hold{' under the levels above' if level else ''}"
@@ -212,9 +289,11 @@ class PreparedSolver:
         if len(violated) > 1:
             message += (f"; hard levels {', '.join(str(i) for i, _, _ in violated[1:])} "
                         "too")
-        info["message"] = message
-        sol.status = "failed"
-        sol.info = info
+        d = sol.diagnostics
+        d.hard_violated_levels = [i for i, _, _ in violated]
+        d.fault = Fault(level, tuple(names), "hard_level", message)
+        d.reason = message
+        sol.status = Status.FAILED
 
     def reset(self) -> None:
         """Forget what the formulation kept from the last solve (``hierarchical_active_set``:
@@ -253,16 +332,18 @@ class PreparedSolver:
         return merged
 
     def _solution(self, out: Outcome, data: StackData, elapsed: float) -> Solution:
-        if out.checked and out.residuals is not None:   # verified by the plugin (compiled)
-            if out.status in STATUSES:
-                return Solution(out.x, self.formulation, self._given, out.status,
-                                out.residuals, elapsed, out.info)
         status = out.status
-        if status not in STATUSES:
-            raise FormulationError(f"formulation {self.formulation!r} returned unknown "
-                                   f"status {status!r}")
+        if status.__class__ is not Status:
+            try:
+                status = Status(status)
+            except ValueError:
+                raise FormulationError(f"formulation {self.formulation!r} returned unknown "
+                                       f"status {status!r}") from None
+        diagnostics = out.diagnostics
+        if out.checked and out.residuals is not None:   # verified by the plugin (compiled)
+            return Solution(out.x, self.formulation, self._given, status, out.residuals,
+                            elapsed, diagnostics)
         x = out.x
-        info = out.info
         residuals = out.residuals
         if not (isinstance(x, np.ndarray) and x.shape == (self._n,) and x.dtype == np.float64):
             try:
@@ -270,10 +351,10 @@ class PreparedSolver:
             except (TypeError, ValueError):
                 x = np.full(0, np.nan)
             if x.shape != (self._n,):
-                status = "failed"
-                info = dict(info)
-                info.setdefault("message", f"solution has shape {x.shape}, expected "
-                                           f"({self._n},)")
+                status = Status.FAILED
+                message = f"solution has shape {x.shape}, expected ({self._n},)"
+                diagnostics.fault = Fault(None, (), "shape", message)
+                diagnostics.add_reason(message)
                 x = np.full(self._n, np.nan)
                 residuals = None
         if residuals is None:
@@ -281,19 +362,21 @@ class PreparedSolver:
             residuals = level_residuals(data, x) if finite else np.full(self.layout.k, np.nan)
         else:
             finite = bool(np.isfinite(residuals).all())   # NaN in x shows in a residual
-        if status != "failed" and not finite:
-            status = "failed"
-            info = dict(info)
-            info.setdefault("message", "the formulation produced non-finite values")
-        elif status == "optimal":       # float64 cannot give every level at a huge ‖x‖
-            info = dict(info)
-            status = precision_status(status, info, data, x)
-        return Solution(x, self.formulation, self._given, status, residuals, elapsed, info)
+        if status != Status.FAILED and not finite:
+            status = Status.FAILED
+            if diagnostics.fault is None:
+                message = "the formulation produced non-finite values"
+                diagnostics.fault = Fault(None, (), "non_finite", message)
+                diagnostics.add_reason(message)
+        return Solution(x, self.formulation, self._given, status, residuals, elapsed,
+                        diagnostics)
 
     def solve_batch(self, stacks_or_data: Sequence) -> BatchSolution:
         """Solve many stacks of the layout (the plugin's batched kernel when it has one,
         else a loop of :meth:`solve`), each on its own: a plugin's warm start is reset
-        before each stack, so that row ``i`` equals ``prioik.solve(stacks[i])``.
+        before each stack, so that row ``i`` equals ``prioik.solve(stacks[i])``. The
+        verification stage of a batched kernel's statuses is the precision check alone
+        (skipped with ``verify="none"``); a loop of :meth:`solve` runs the whole stage.
 
         Raises:
             TaskStackError: an empty batch.
@@ -322,17 +405,21 @@ class PreparedSolver:
         elapsed = time.perf_counter() - t0
         X = np.asarray(X, dtype=np.float64)
         bad = ~np.isfinite(X).all(axis=1)
-        statuses = ["failed" if b else st for b, st in zip(bad, statuses, strict=False)]
-        # as solve: float64 cannot give every level at a huge ‖x‖ (a batched kernel's
-        # statuses do not know it)
-        for i in np.flatnonzero(np.linalg.norm(X, axis=1) > PRECISION_LIMIT_NORM).tolist():
-            statuses[i] = precision_status(statuses[i], {}, datas[i], X[i])
+        checked: list[Status] = [Status.FAILED if b else Status(st)
+                                 for b, st in zip(bad, statuses, strict=False)]
+        # as solve's verification stage: float64 cannot give every level at a huge ‖x‖
+        # (a batched kernel's statuses do not know it)
+        if self.verify != "none":
+            for i in np.flatnonzero(np.linalg.norm(X, axis=1) > PRECISION_LIMIT_NORM).tolist():
+                if checked[i] == Status.OPTIMAL and \
+                        not precision_holds(Diagnostics(), datas[i], X[i]):
+                    checked[i] = Status.APPROXIMATE
         if self._hard:          # as solve: a hard level left violated fails the answer
-            statuses = ["failed" if st != "failed" and hard_violations(d, x) else st
-                        for st, d, x in zip(statuses, datas, X, strict=False)]
-        return BatchSolution(X, statuses, self.formulation, dict(self._given), elapsed, batched)
+            checked = [Status.FAILED if st != Status.FAILED and hard_violations(d, x) else st
+                       for st, d, x in zip(checked, datas, X, strict=False)]
+        return BatchSolution(X, checked, self.formulation, dict(self._given), elapsed, batched)
 
-    def _one_by_one(self, datas: list[StackData]) -> tuple[np.ndarray, list[str]]:
+    def _one_by_one(self, datas: list[StackData]) -> tuple[np.ndarray, list]:
         # the stacks of a batch are independent: a plugin that warm-starts from its last
         # solve (``reset()``) starts each one cold, so row i is prioik.solve(stack_i)
         # (a warm start decides ranks on another path, which may give another status

@@ -28,14 +28,15 @@ of ``L``'s columns, ``L W = U Σ``: the singular values of ``M_i`` to its accura
 rank rule (``σ > rcond · ‖A_i‖_F``) and the ambiguity rule are the readable path's, on
 singular values; ``V = Qᵀ [W; 0]``, and the null space is spanned by the columns of
 ``Qᵀ`` past ``L``'s and the right singular vectors with ``σ`` at or below the threshold.
-It counts its floating-point operations (``info["flops"]``; ``info["jacobi_sweeps"]``
-and ``info["jacobi_rotations"]`` over the levels). ``"numpy"`` is
+It counts its floating-point operations (:attr:`Detail.flops`; :attr:`Detail.jacobi_sweeps`
+and :attr:`Detail.jacobi_rotations` over the levels). ``"numpy"`` is
 :func:`solve_readable`, ``np.linalg.svd`` (LAPACK) as written above, the oracle the tests
 hold the compiled kernel to.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -55,7 +56,14 @@ from prioik.hierarchy import (
 from . import contract
 from ._compiled import _core, resolve_kernel, solve_compiled, solve_rescaled
 from ._numerics import REFINEMENT_STEPS, refinement
-from .base import Capabilities, FormulationError, Outcome, in_original_units
+from .base import (
+    Capabilities,
+    Diagnostics,
+    FormulationError,
+    Outcome,
+    Status,
+    in_original_units,
+)
 from .options import (
     Option,
     per_level_nonnegative,
@@ -63,6 +71,29 @@ from .options import (
     rcond_option,
     validate_options,
 )
+
+
+@dataclass(frozen=True, slots=True)
+class Detail:
+    """``reference``'s own record (``sol.diagnostics.detail``).
+
+    Attributes:
+        null_space_dim: Dimension of the null space left below the last level.
+        kernel: ``"cpp"`` or ``"numpy"``.
+        flops: Floating-point operations of the solve, counted in the compiled kernel
+            (``None`` on the numpy path).
+        jacobi_sweeps: The compiled kernel's one-sided Jacobi sweeps over the levels
+            (``None`` on the numpy path).
+        jacobi_rotations: Its Jacobi rotations over the levels (``None`` on the numpy
+            path).
+    """
+
+    null_space_dim: int
+    kernel: str = "numpy"
+    flops: int | None = None
+    jacobi_sweeps: int | None = None
+    jacobi_rotations: int | None = None
+
 
 NAME = "reference"
 DESCRIPTION = "exact lexicographic least squares, nested SVD null spaces (ground truth)"
@@ -112,8 +143,8 @@ def solve_readable(stack: TaskStack, *, rcond: float, metric, level_damping) -> 
     numpy (``kernel="numpy"``), the readable oracle of the compiled kernel.
 
     Returns:
-        ``Outcome`` with ``info["rank_profile"]`` (the kept rank of each ``M_i``) and
-        ``info["null_space_dim"]`` (the columns of the last ``Z``).
+        ``Outcome`` with ``diagnostics.ranks`` (the kept rank of each ``M_i``) and
+        :attr:`Detail.null_space_dim` (the columns of the last ``Z``).
 
     Raises:
         numpy.linalg.LinAlgError: ``metric`` is not positive definite on the last null
@@ -152,11 +183,19 @@ def solve_readable(stack: TaskStack, *, rcond: float, metric, level_damping) -> 
             raise np.linalg.LinAlgError(METRIC_NOT_DEFINITE) from None
         z = np.linalg.solve(L.T, np.linalg.solve(L, -(Z.T @ (W @ x))))
         x = x + Z @ z
-    info = {"rank_profile": ranks, "null_space_dim": int(Z.shape[1]), "kernel": "numpy"}
+    return _outcome(x, ranks, ambiguous, bool(mu2.any()), Detail(int(Z.shape[1]), "numpy"))
+
+
+def _outcome(x, ranks, ambiguous, damped: bool, detail: Detail, residuals=None) -> Outcome:
+    """The answer with its diagnostics (``approximate`` when damped or ambiguous)."""
+    diagnostics = Diagnostics(ranks=np.asarray(ranks), ambiguous_levels=list(ambiguous),
+                              detail=detail)
     if ambiguous:
-        info["ambiguous_levels"] = ambiguous
-        info["reason"] = ambiguity_reason(ambiguous)
-    return Outcome(x, "approximate" if mu2.any() or ambiguous else "optimal", info)
+        diagnostics.reason = ambiguity_reason(ambiguous)
+    elif damped:
+        diagnostics.reason = "damped levels (level_damping): a damped least-squares answer"
+    return Outcome(x, Status.APPROXIMATE if damped or ambiguous else Status.OPTIMAL,
+                   diagnostics, residuals)
 
 
 def solve_batch(stacks, *, rcond: float = DEFAULT_RCOND, metric=None, level_damping=None
@@ -263,7 +302,7 @@ class Prepared(contract.Prepared):
     """The nested-SVD reference prepared for one layout: options checked, and on the
     compiled kernel (``kernel="cpp"``) the C++ solver with every workspace allocated once
     (``prioik._core.ReferenceSolver``, the module docstring's LQ and Jacobi SVD; the
-    rank rule on singular values, ``info["flops"]`` counted in the kernel).
+    rank rule on singular values, :attr:`Detail.flops` counted in the kernel).
     ``kernel="numpy"`` is :func:`solve_readable` (and :func:`solve_batch`).
 
     Args:
@@ -311,16 +350,9 @@ class Prepared(contract.Prepared):
             return solve_rescaled(self.solve, data)
         if not res.metric_positive_definite:
             raise np.linalg.LinAlgError(METRIC_NOT_DEFINITE)
-        info = {"rank_profile": res.ranks.tolist(), "null_space_dim": res.null_space_dim,
-                "kernel": "cpp", "flops": res.flops, "jacobi_sweeps": res.sweeps,
-                "jacobi_rotations": res.rotations}
-        status = "approximate" if self.mu2.any() else "optimal"
-        ambiguous = np.flatnonzero(res.ambiguous).tolist()
-        if ambiguous:
-            info["ambiguous_levels"] = ambiguous
-            info["reason"] = ambiguity_reason(ambiguous)
-            status = "approximate"
-        return Outcome(res.x, status, info, res.residuals)
+        detail = Detail(int(res.null_space_dim), "cpp", res.flops, res.sweeps, res.rotations)
+        return _outcome(res.x, res.ranks.copy(), np.flatnonzero(res.ambiguous).tolist(),
+                        bool(self.mu2.any()), detail, res.residuals)
 
     def solve_batch(self, datas: list[StackData]) -> tuple[np.ndarray, list[str]]:
         """Many stacks of the layout: ``(X, statuses)`` (:func:`solve_batch`, the stacked

@@ -165,7 +165,7 @@ def get(name: str) -> Formulation:
     return form
 
 
-def prepare(stack_or_layout, formulation: str = "extended_jacobian",
+def prepare(stack_or_layout, formulation: str = "extended_jacobian", *, verify: str = "auto",
             **options: Any) -> PreparedSolver:
     """A formulation prepared for one stack layout: options validated and workspaces
     allocated once, then ``solver.solve(stack_or_data)`` per step.
@@ -174,10 +174,15 @@ def prepare(stack_or_layout, formulation: str = "extended_jacobian",
         stack_or_layout: A :class:`~prioik.hierarchy.StackLayout`, or a stack (its layout
             is used).
         formulation: Registry name (see :func:`available`).
+        verify: The verification stage run after each timed solve (timed apart), the one
+            place an answer is demoted to ``approximate``: ``"auto"`` (what the
+            formulation's options ask), ``"none"``, ``"certificate"`` or
+            ``"lower_point"`` (see :class:`PreparedSolver`).
         **options: The formulation's options (:attr:`Formulation.options`).
 
     Raises:
-        FormulationError: unknown/unavailable formulation, unknown or invalid option.
+        FormulationError: unknown/unavailable formulation, unknown or invalid option or
+            ``verify`` mode.
         UnsupportedTaskError: the layout holds a task kind the formulation cannot take.
 
     A formulation that needs ``mass_matrix`` may get it here or with every solve
@@ -191,23 +196,26 @@ def prepare(stack_or_layout, formulation: str = "extended_jacobian",
     else:
         layout = TaskStack(stack_or_layout).layout
     opts = validate_options(formulation, form.options, options, layout.n)
-    return PreparedSolver(form, layout, opts, options)
+    return PreparedSolver(form, layout, opts, options, verify)
 
 
-def solve(stack, formulation: str = "extended_jacobian", **options: Any) -> Solution:
+def solve(stack, formulation: str = "extended_jacobian", *, verify: str = "auto",
+          **options: Any) -> Solution:
     """Solve a task stack with the named formulation: :func:`prepare` + ``solve``.
 
     Args:
         stack: A :class:`~prioik.hierarchy.TaskStack` (or anything ``TaskStack``
             accepts), or a :class:`~prioik.hierarchy.StackData`.
         formulation: Registry name (see :func:`available`).
+        verify: The verification stage (see :func:`prepare`).
         **options: The formulation's options (:attr:`Formulation.options`).
 
     Returns:
         A :class:`Solution`. A numerical failure inside the formulation gives
-        ``status == "failed"`` with ``info["message"]``, not an exception. An exact
-        formulation solves the stack with its levels of extreme scale equilibrated
-        (:meth:`~hierarchy.TaskStack.equilibrated`; ``info["equilibrated_levels"]``).
+        ``status == "failed"`` with ``diagnostics.fault`` and ``diagnostics.reason``,
+        not an exception. An exact formulation solves the stack with its levels of
+        extreme scale equilibrated (:meth:`~hierarchy.TaskStack.equilibrated`;
+        ``diagnostics.equilibrated_levels``).
 
     Raises:
         FormulationError: unknown/unavailable formulation, unknown, invalid or missing
@@ -216,7 +224,7 @@ def solve(stack, formulation: str = "extended_jacobian", **options: Any) -> Solu
     """
     if not isinstance(stack, (TaskStack, StackData)):
         stack = TaskStack(stack)
-    return prepare(stack.layout, formulation, **options).solve(stack)
+    return prepare(stack.layout, formulation, verify=verify, **options).solve(stack)
 
 
 def stack_shape(stack: TaskStack) -> tuple:
@@ -225,12 +233,14 @@ def stack_shape(stack: TaskStack) -> tuple:
     return (stack.n,) + tuple(tuple((t.m, t.is_equality) for t in level) for level in stack)
 
 
-def solve_batch(stacks, formulation: str = "extended_jacobian", **options: Any) -> BatchSolution:
+def solve_batch(stacks, formulation: str = "extended_jacobian", *, verify: str = "auto",
+                **options: Any) -> BatchSolution:
     """Solve many stacks of one layout (sampled states, retargeting frames, sweeps): one
     prepared solver over every stack.
 
     Uses the plugin's batched kernel when it has one (``Prepared.solve_batch``),
-    otherwise loops over the prepared solve.
+    otherwise loops over the prepared solve. ``verify`` as :func:`prepare` (a batched
+    kernel's statuses get the precision check only).
 
     Raises:
         TaskStackError: an empty batch.
@@ -242,4 +252,5 @@ def solve_batch(stacks, formulation: str = "extended_jacobian", **options: Any) 
     stacks = [s if isinstance(s, (TaskStack, StackData)) else TaskStack(s) for s in stacks]
     if not stacks:
         raise TaskStackError("solve_batch needs at least one stack")
-    return prepare(stacks[0].layout, formulation, **options).solve_batch(stacks)
+    return prepare(stacks[0].layout, formulation, verify=verify,
+                   **options).solve_batch(stacks)

@@ -22,18 +22,15 @@ stack without bounds gets ``nullspace``'s answer bit for bit.
 
 Statuses: ``optimal`` when every level reached its least-squares residual without
 bounds (then ``x`` is the exact lexicographic optimum with the bounds on top);
-``approximate`` when a task was scaled, dropped or its residual grew (``info
-["scaled_tasks"]``), or at an ambiguous rank decision (``info["reason"]``).
-
-``info``: ``task_scaling`` (one ``s`` per equality level), ``scaled_tasks``,
-``saturated`` (per level, the saturated columns), ``iterations`` (saturation rounds
-per level), ``bounds_level`` (``0`` or ``None``).
+``approximate`` when a task was scaled, dropped or its residual grew
+(:attr:`Detail.scaled_tasks`), or at an ambiguous rank decision
+(``diagnostics.reason``). Its own record: :class:`Detail`.
 
 Two kernels (option ``kernel``): ``"cpp"`` (the default; :class:`Prepared`) runs the
 algorithm in the C++ core over one workspace (``prioik._core.SnsSolver``): the
 unbounded step is ``nullspace``'s compiled level (a row-pivoted LQ of ``J_k P``, the rank
 rule on its pivots), every pseudo-inverse of the saturation rounds a row-pivoted LQ
-applied to vectors, and ``info["flops"]`` counts the solve's floating-point operations;
+applied to vectors, and :attr:`Detail.flops` counts the solve's floating-point operations;
 ``"numpy"`` is :func:`solve_readable`, the SVD version as written, the oracle the tests
 hold the compiled kernel to.
 
@@ -42,6 +39,7 @@ The algorithm step by step: ``docs/formulations.md``.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -60,8 +58,42 @@ from prioik.hierarchy import (
 from . import contract
 from ._compiled import _core, resolve_kernel, solve_compiled, solve_rescaled
 from ._numerics import check_nonnegative, project_level, truncated_svd
-from .base import Capabilities, FormulationError, Outcome, in_original_units
+from .base import (
+    Capabilities,
+    Diagnostics,
+    FormulationError,
+    Outcome,
+    Status,
+    in_original_units,
+)
 from .options import Option, rcond_option, validate_options
+
+
+@dataclass(slots=True)
+class Detail:
+    """``sns``'s own record (``sol.diagnostics.detail``).
+
+    Attributes:
+        task_scaling: One scale ``s`` per equality level (``1``: met in full).
+        scaled_tasks: The levels scaled or dropped (their task names, comma-joined).
+        saturated: Per level, the saturated columns.
+        iterations: Saturation rounds per equality level.
+        bounds_level: The level of the bounds (``0``) or ``None``.
+        first_task_level: The first level of equality tasks.
+        kernel: ``"cpp"`` or ``"numpy"``.
+        flops: Floating-point operations of the solve, counted in the compiled kernel
+            (``None`` on the numpy path).
+    """
+
+    task_scaling: list[float]
+    scaled_tasks: list[str]
+    saturated: list
+    iterations: list[int]
+    bounds_level: int | None
+    first_task_level: int
+    kernel: str = "numpy"
+    flops: int | None = None
+
 
 NAME = "sns"
 DESCRIPTION = ("Saturation in the Null Space (Flacco, De Luca, Khatib 2012/2015): strict "
@@ -297,14 +329,26 @@ def solve_readable(stack: TaskStack, *, rcond: float = DEFAULT_RCOND,
         P = P_next
     if not levels and not feasible(x):
         x = np.clip(x, lower, upper)        # bounds alone: the box's minimum-norm point
-    status = "optimal" if exact and not scaled and not ambiguous else "approximate"
-    info = {"task_scaling": scaling, "scaled_tasks": scaled, "saturated": saturated,
-            "iterations": iterations, "bounds_level": bounds_level, "first_task_level": first,
-            "kernel": "numpy"}
+    return _outcome(x, scaling, scaled, saturated, iterations, bounds_level, first,
+                    ambiguous, exact, "numpy", None)
+
+
+def _outcome(x, scaling, scaled, saturated, iterations, bounds_level, first, ambiguous,
+             exact: bool, kernel: str, flops, residuals=None, margins=None) -> Outcome:
+    """The answer with its diagnostics: ``optimal`` when every level reached its
+    unbounded residual, none was scaled and no rank decision was ambiguous."""
+    optimal = exact and not scaled and not ambiguous
+    diagnostics = Diagnostics(ambiguous_levels=list(ambiguous), margins=margins,
+                              detail=Detail(scaling, scaled, saturated, iterations,
+                                            bounds_level, first, kernel, flops))
     if ambiguous:
-        info["ambiguous_levels"] = ambiguous
-        info["reason"] = ambiguity_reason(ambiguous)
-    return Outcome(x, status, info)
+        diagnostics.add_reason(ambiguity_reason(ambiguous))
+    if scaled:
+        diagnostics.add_reason(f"task scaling under the bounds: {'; '.join(scaled)}")
+    elif not optimal and not ambiguous:
+        diagnostics.add_reason("a level's residual grew under the bounds")
+    return Outcome(x, Status.OPTIMAL if optimal else Status.APPROXIMATE, diagnostics,
+                   residuals)
 
 
 def check_bounds_layout(layout: StackLayout) -> int | None:
@@ -337,7 +381,7 @@ def check_bounds_layout(layout: StackLayout) -> int | None:
 class Prepared(contract.Prepared):
     """SNS prepared for one layout: options checked, the bounds level read from the
     layout, and on the compiled kernel (``kernel="cpp"``) the C++ solver with every
-    workspace allocated once (``prioik._core.SnsSolver``; ``info["flops"]`` counts the
+    workspace allocated once (``prioik._core.SnsSolver``; :attr:`Detail.flops` counts the
     solve's floating-point operations). ``kernel="numpy"`` is :func:`solve_readable`.
 
     Args:
@@ -395,18 +439,13 @@ class Prepared(contract.Prepared):
         sat = res.saturated.reshape(self.layout.k, n)
         names = self.layout.names
         margins = res.margins
-        info = {"task_scaling": [scaling[i] for i in levels],
-                "scaled_tasks": [", ".join(names[i]) for i in levels if scaling[i] < 1.0],
-                "saturated": [sat[i, :counts[i]].tolist() for i in levels],
-                "iterations": [int(v) for v in res.iterations[self.first:]],
-                "bounds_level": self.bounds_level, "first_task_level": self.first,
-                "kernel": "cpp", "flops": res.flops}
+        scaled = [", ".join(names[i]) for i in levels if scaling[i] < 1.0]
         ambiguous = [i for i in levels if margins[i] <= AMBIGUITY]
-        if ambiguous:
-            info["ambiguous_levels"] = ambiguous
-            info["reason"] = ambiguity_reason(ambiguous)
-        exact = res.exact and not info["scaled_tasks"] and not ambiguous
-        return Outcome(res.x, "optimal" if exact else "approximate", info, res.residuals)
+        return _outcome(res.x, [scaling[i] for i in levels], scaled,
+                        [sat[i, :counts[i]].tolist() for i in levels],
+                        [int(v) for v in res.iterations[self.first:]], self.bounds_level,
+                        self.first, ambiguous, bool(res.exact), "cpp", res.flops,
+                        res.residuals, np.asarray(margins).copy())
 
 
 #: the plugin (:mod:`prioik.formulations.registry`)

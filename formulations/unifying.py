@@ -36,12 +36,13 @@ Every ``M⁻¹`` is applied through the Cholesky factor of ``M``; the pseudo-inv
 
 Two kernels compute it (option ``kernel``): ``"cpp"`` (the default where prioik's
 compiled core is built, :class:`Prepared`) in C++, counting its floating-point operations
-(``info["flops"]``); ``"numpy"`` is :func:`solve_readable`, eq. 40 as written here, the
+(:attr:`Detail.flops`); ``"numpy"`` is :func:`solve_readable`, eq. 40 as written here, the
 oracle the tests hold the compiled kernel to.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -54,10 +55,33 @@ from ._compiled import _core, mass_matrix_outcome, resolve_kernel, solve_compile
 from ._numerics import check_nonnegative, generalized_inverse
 from .base import (
     Capabilities,
+    Diagnostics,
     FormulationError,
     Outcome,
+    Status,
 )
 from .options import Option, rcond_option, validate_options
+
+#: the reason of every answer's ``approximate`` status
+ALGORITHMIC_ERROR = ("the unifying framework's projectors are the levels' own (eq. 40): "
+                     "algorithmic error beyond two levels, not the lexicographic optimum")
+
+
+@dataclass(slots=True)
+class Detail:
+    """``unifying``'s own record (``sol.diagnostics.detail``).
+
+    Attributes:
+        kernel: ``"cpp"`` or ``"numpy"``.
+        flops: Floating-point operations of the solve, counted in the compiled kernel
+            (``None`` on the numpy path).
+        tau: ``M θ̈ + C + G`` when the option ``bias`` is given, else ``None``.
+    """
+
+    kernel: str
+    flops: int | None = None
+    tau: np.ndarray | None = None
+
 
 NAME = "unifying"
 DESCRIPTION = "unifying framework (Peters et al. 2008), paper's eq. 36-40 with mass_matrix=M"
@@ -66,7 +90,7 @@ CAPABILITIES = Capabilities(equalities=True, inequalities=False, weights=True,
 OPTIONS = {
     "mass_matrix": Option(None, "matrix", "SPD n×n joint-space inertia M (required)",
                           optional=True),
-    "bias": Option(None, "vector", "C + G (n): with it, info['tau'] = M θ̈ + C + G (eq. 40)",
+    "bias": Option(None, "vector", "C + G (n): with it, Detail.tau = M θ̈ + C + G (eq. 40)",
                    optional=True),
     "rcond": rcond_option("‖J_i M⁻¹‖_F"),
     "kernel": Option("auto", "str", "'cpp': the compiled C++ core (prioik._core, row-pivoted "
@@ -136,7 +160,7 @@ def solve_readable(stack: TaskStack, *, mass_matrix, bias, rcond: float) -> Outc
 
     Returns:
         ``Outcome`` (status ``"approximate"``: the method has algorithmic error) with
-        ``info["tau"] = M θ̈ + C + G`` when ``bias`` is given.
+        :attr:`Detail.tau` ``= M θ̈ + C + G`` when ``bias`` is given.
     """
     if mass_matrix is None:
         raise FormulationError("formulation 'unifying' needs mass_matrix=M")
@@ -151,10 +175,9 @@ def solve_readable(stack: TaskStack, *, mass_matrix, bias, rcond: float) -> Outc
         K = weighted_pinv(A, factor, rcond)              # J_i^{M²+}
         x = x + N @ (K @ b)                              # θ̈_i = N_i J_i^{M²+} h_i
         N = N - (N @ K) @ A                              # N_{i+1} = N_i (I − J_i^{M²+} J_i)
-    info: dict[str, Any] = {"kernel": "numpy"}
-    if bias is not None:
-        info["tau"] = M @ x + np.asarray(bias, dtype=np.float64)
-    return Outcome(x, "approximate", info)
+    tau = None if bias is None else M @ x + np.asarray(bias, dtype=np.float64)
+    return Outcome(x, Status.APPROXIMATE,
+                   Diagnostics(reason=ALGORITHMIC_ERROR, detail=Detail("numpy", None, tau)))
 
 
 class Prepared(contract.Prepared):
@@ -163,7 +186,7 @@ class Prepared(contract.Prepared):
     (``prioik._core.UnifyingSolver``: ``M = L Lᵀ`` factored in the solve, each
     ``(A_i M⁻¹)⁺`` from a row-pivoted LQ with the rank rule on its pivots, and
     ``N_{i+1} = N_i − (N_i M⁻¹ V)(M V)ᵀ`` with ``V`` the LQ's kept row space, which is
-    ``N_i (I − J_i^{M²+} J_i)`` since ``J^{M²+} J = M⁻¹ B⁺ B M``; ``info["flops"]`` counts
+    ``N_i (I − J_i^{M²+} J_i)`` since ``J^{M²+} J = M⁻¹ B⁺ B M``; :attr:`Detail.flops` counts
     the solve's floating-point operations). ``kernel="numpy"`` is :func:`solve_readable`.
     ``mass_matrix`` and ``bias`` may change with every solve.
 
@@ -201,7 +224,9 @@ class Prepared(contract.Prepared):
                                   rcond=self.rcond)
         M = np.ascontiguousarray(mass, dtype=np.float64)
         res = solve_compiled(self._core, data, M)
-        out = mass_matrix_outcome(res, M, bias, "approximate")
+        out = mass_matrix_outcome(res, M, bias, Status.APPROXIMATE, Detail)
+        if out is not None:
+            out.diagnostics.reason = ALGORITHMIC_ERROR
         if out is None:
             return solve_rescaled(lambda d: self.solve(d, options), data)
         return out

@@ -14,7 +14,7 @@ A decision is *ambiguous* when a singular value (or pivot norm) lies within a fa
 rcond·‖A_i‖_F``: rounding of the rows, or the difference between a pivot norm and
 ``σ``, may then flip it, and with it the answer by ``O(1)``. A formulation that
 meets an ambiguous decision does not say ``optimal``: its status is
-``approximate`` with ``info["reason"]`` naming the levels
+``approximate`` with ``diagnostics.reason`` naming the levels
 (:func:`ambiguous_decision`).
 
 A clear decision within a factor :data:`NEAR_AMBIGUITY` of the band is *near-ambiguous*
@@ -106,7 +106,7 @@ def near_ambiguity_reason(levels: list[int]) -> str:
 
 
 def ambiguity_reason(levels: list[int]) -> str:
-    """The ``info["reason"]`` of an ``approximate`` status due to ambiguous levels."""
+    """The ``diagnostics.reason`` of an ``approximate`` status due to ambiguous levels."""
     return (f"rank decision ambiguous at level{'s' if len(levels) > 1 else ''} "
             f"{', '.join(map(str, levels))}: a singular value lies within "
             f"{AMBIGUITY:g}x of the threshold rcond·‖A_i‖_F")

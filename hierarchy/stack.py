@@ -398,10 +398,10 @@ def hard(item) -> Level:
     the level violated — its residual ``‖√w ∘ violation‖`` beyond
     :data:`~prioik.hierarchy.DEFAULT_CERTIFICATE_TOL` times the level's scale (the
     certificate's: ``‖√w ∘ (|A| |x| + |t|)‖ + ‖√W A‖_F``) — the solution's status is
-    ``"failed"`` (``x`` stays the least-squares compromise) and its ``info`` names the
-    first such level: ``info["fault_level"]``, ``info["fault_tasks"]``,
-    ``info["message"]``, and ``info["hard_violations"]`` lists every such level. Every
-    formulation is checked the same way, in :class:`~prioik.PreparedSolver`.
+    ``"failed"`` (``x`` stays the least-squares compromise) and its
+    ``diagnostics.fault`` names the first such level (code ``"hard_level"``, its level,
+    tasks and message), and ``diagnostics.hard_violated_levels`` lists every such level.
+    Every formulation is checked the same way, in :class:`~prioik.PreparedSolver`.
 
     Raises:
         TaskStackError: ``item`` is not a task, tasks or a level.
@@ -914,7 +914,7 @@ def hard_violations(data: StackData, x: np.ndarray, residuals: np.ndarray | None
 
 
 def precision_reason(levels: list[int], x_norm: float) -> str:
-    """The ``info["reason"]`` of an ``approximate`` status due to
+    """The ``diagnostics.reason`` of an ``approximate`` status due to
     :func:`precision_limited_levels`."""
     return (f"‖x‖ = {x_norm:.3g}: x's coordinates are known to about "
             f"{X_PRECISION * x_norm:.2g}, too coarse for level"

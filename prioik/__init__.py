@@ -41,10 +41,14 @@ from .formulations import (
     BatchSolution,
     Capabilities,
     ConcurrentUseError,
+    Diagnostics,
+    Fault,
     FormulationError,
     Option,
     PreparedSolver,
     Solution,
+    Status,
+    Verification,
     available,
     prepare,
     solve,
@@ -93,11 +97,11 @@ def __dir__() -> list[str]:
 
 
 __all__ = [
-    "BatchSolution", "Capabilities", "ConcurrentUseError", "FormulationError", "Level",
-    "LexicographicReport", "MissingExtraError", "Option", "PreparedSolver", "PrioikError",
-    "Solution", "StackData", "StackLayout", "Task", "TaskStack", "TaskStackError",
-    "UnknownNameError", "UnsupportedTaskError", "__version__", "available", "benchmarks",
-    "check_lexicographic",
-    "errors", "extras", "formulations", "hard", "hierarchy", "load_stack", "prepare",
-    "robots", "save_stack", "solve", "solve_batch",
+    "BatchSolution", "Capabilities", "ConcurrentUseError", "Diagnostics", "Fault",
+    "FormulationError", "Level", "LexicographicReport", "MissingExtraError", "Option",
+    "PreparedSolver", "PrioikError", "Solution", "StackData", "StackLayout", "Status", "Task",
+    "TaskStack", "TaskStackError", "UnknownNameError", "UnsupportedTaskError", "Verification",
+    "__version__", "available", "benchmarks", "check_lexicographic", "errors", "extras",
+    "formulations", "hard", "hierarchy", "load_stack", "prepare", "robots", "save_stack",
+    "solve", "solve_batch",
 ]

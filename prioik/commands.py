@@ -151,7 +151,7 @@ def cmd_solve(args: argparse.Namespace) -> int:
         if source:
             print(f"peer: the file's {source}")
         if sol.status == "failed":
-            print(f"failed: {sol.info.get('message', '')}")
+            print(f"failed: {sol.diagnostics.reason}")
             code = 1
         elif args.check and finite:
             report = check_lexicographic(stack, sol.x, minimum_norm=True)

@@ -6,9 +6,9 @@
    stack from the caller's ``build(state, t)`` (plus ``M(q)`` and the bias
    ``b(q, q̇) = C q̇ + g`` when the formulation works at torque level);
 2. **solve** — the caller's ``solve(stack, mass_matrix=..., bias=...)`` (any object
-   with ``x``, ``status``, ``info``), giving ``q̈``;
+   with ``x``, ``status``, ``diagnostics``), giving ``q̈``;
 3. **torque** — inverse dynamics by RNEA (``τ = M q̈ + b``, O(n)) for acceleration-
-   resolved formulations, or the formulation's own ``info["tau"]`` (unifying /
+   resolved formulations, or the formulation's own ``diagnostics.detail.tau`` (unifying /
    operational space); the checks of the answer between solve and torque are the
    simulation's bookkeeping and are not timed;
 4. semi-implicit Euler: ``q̇ ← q̇ + q̈ dt``, ``q ← q ⊕ q̇ dt`` (``pin.integrate``).
@@ -83,7 +83,8 @@ class SimulationResult:
         q, v, a, tau: ``k × n_q``, ``k × n_v`` arrays (``a`` is ``q̈`` of the step).
         errors: Task error name → ``k`` values.
         algorithmic_error: ``k`` values, ``‖e_algorithm‖`` over every level (eq. 29).
-        kinematics_time_s, solve_time_s, torque_time_s: ``k`` wall times per step.
+        kinematics_time_s, solve_time_s, torque_time_s: ``k`` wall times per step
+            (``solve_time_s``: the solve less prioik's verification stage).
         statuses: Solution status per step.
         failed: Whether the run stopped early.
         message: Why it stopped (empty when it completed): the time, the step and
@@ -94,6 +95,9 @@ class SimulationResult:
             JSON-serialisable, saved with the run.
         failed_step: Index of the step that failed (the trajectory holds the
             ``failed_step`` steps before it), ``None`` when the run completed.
+        verify_time_s: ``k`` wall times of prioik's verification stage per step
+            (``Solution.verify_time_s``; ``None``: a producer without one, e.g. an
+            external baseline).
     """
 
     t: np.ndarray
@@ -113,6 +117,7 @@ class SimulationResult:
     v_names: tuple[str, ...] = ()
     info: dict[str, Any] = field(default_factory=dict)
     failed_step: int | None = None
+    verify_time_s: np.ndarray | None = None
 
     @property
     def steps(self) -> int:
@@ -152,6 +157,8 @@ class SimulationResult:
                 "v_names": list(self.v_names), "error_names": list(self.errors),
                 "info": self.info, "versions": _versions()}
         arrays = {k: np.asarray(getattr(self, k)) for k in self._ARRAYS}
+        if self.verify_time_s is not None:
+            arrays["verify_time_s"] = np.asarray(self.verify_time_s)
         arrays.update({f"error:{k}": np.asarray(v) for k, v in self.errors.items()})
         arrays["statuses"] = np.array(self.statuses, dtype=str)
         arrays["meta"] = np.array(json.dumps(meta))
@@ -179,6 +186,7 @@ class SimulationResult:
                 arrays = {k: np.array(z[k]) for k in cls._ARRAYS}
                 errors = {k: np.array(z[f"error:{k}"]) for k in meta["error_names"]}
                 statuses = [str(s) for s in z["statuses"]]
+                verify = np.array(z["verify_time_s"]) if "verify_time_s" in files else None
         except (KeyError, json.JSONDecodeError) as exc:
             raise SimulationError(f"{path} is not a saved SimulationResult ({exc})") from None
         info = dict(meta.get("info", {}))
@@ -187,7 +195,7 @@ class SimulationResult:
                    arrays["algorithmic_error"], arrays["kinematics_time_s"],
                    arrays["solve_time_s"], arrays["torque_time_s"], statuses,
                    bool(meta["failed"]), str(meta["message"]), tuple(meta["q_names"]),
-                   tuple(meta["v_names"]), info, meta.get("failed_step"))
+                   tuple(meta["v_names"]), info, meta.get("failed_step"), verify)
 
     # ---------------------------------------------------------------- display
     def _summary_items(self) -> list[tuple[str, str]]:
@@ -383,9 +391,8 @@ def _answer(sol: Any, nv: int) -> tuple[np.ndarray | None, str]:
     if status not in STATUSES:
         return None, f"the solver returned {type(sol).__name__} with status {status!r} " \
                      f"(expected one of {', '.join(STATUSES)})"
-    info = getattr(sol, "info", None)
     if status == "failed":
-        detail = info.get("message", "") if isinstance(info, dict) else ""
+        detail = getattr(getattr(sol, "diagnostics", None), "reason", "")
         return None, f"solution failed{': ' + str(detail) if detail else ''}"
     try:
         x = np.asarray(getattr(sol, "x", None), dtype=float)
@@ -401,16 +408,20 @@ def _answer(sol: Any, nv: int) -> tuple[np.ndarray | None, str]:
 
 
 def _torque(sol: Any, nv: int) -> tuple[np.ndarray | None, str]:
-    """``sol.info["tau"]`` as ``nv`` finite floats, or ``(None, why not)``."""
-    info = getattr(sol, "info", None)
-    if not isinstance(info, dict) or "tau" not in info:
-        return None, "torque_from_solution=True but the solution has no info['tau']"
+    """``sol.diagnostics.detail.tau`` (the formulation's own record) as ``nv`` finite
+    floats, or ``(None, why not)``."""
+    detail = getattr(getattr(sol, "diagnostics", None), "detail", None)
+    value = getattr(detail, "tau", None)
+    if value is None:
+        return None, ("torque_from_solution=True but the solution has no "
+                      "diagnostics.detail.tau (give the formulation bias=C+G)")
     try:
-        tau = np.asarray(info["tau"], dtype=float)
+        tau = np.asarray(value, dtype=float)
     except (TypeError, ValueError) as exc:
-        return None, f"info['tau'] cannot be read as numbers ({exc})"
+        return None, f"diagnostics.detail.tau cannot be read as numbers ({exc})"
     if tau.shape != (nv,) or not np.isfinite(tau).all():
-        return None, f"info['tau'] must be {nv} finite values, got shape {tau.shape}"
+        return None, (f"diagnostics.detail.tau must be {nv} finite values, got shape "
+                      f"{tau.shape}")
     return tau, ""
 
 
@@ -436,7 +447,8 @@ def simulate(robot: RobotModel, build: BuildFn, solve: SolveFn, *, duration: flo
         q0: Initial configuration (``robot.q0`` if omitted); copied.
         v0: Initial velocity (zero if omitted); copied.
         needs_dynamics: Pass ``M(q)`` and ``b(q, q̇)`` to ``solve``.
-        torque_from_solution: Take ``τ`` from ``info["tau"]`` instead of RNEA.
+        torque_from_solution: Take ``τ`` from ``sol.diagnostics.detail.tau`` instead of
+            RNEA.
         algorithmic_error: Record eq. 29 (costs an SVD per level per step).
         divergence_limit: Stop (``failed``) when ``‖q̈‖`` exceeds this: the run has
             diverged and would only overflow to NaN a few steps later.
@@ -493,6 +505,7 @@ def _steps(robot, build, solve, duration, dt, q0, v0, needs_dynamics, torque_fro
     v = np.zeros(robot.nv) if v0 is None else np.array(v0, dtype=float, copy=True)
     steps = int(round(duration / dt))
     T, Q, V, A, TAU, ALG, TK, TS, TT, ST = [], [], [], [], [], [], [], [], [], []
+    TV: list[float] = []
     record: _RowRecord | None = None
     errors: dict[str, list[float]] = {}
     failed, message, failed_step = False, "", None
@@ -550,7 +563,9 @@ def _steps(robot, build, solve, duration, dt, q0, v0, needs_dynamics, torque_fro
         A.append(x.copy())
         TAU.append(tau.copy())
         TK.append(t1 - t0)
-        TS.append(t_solved - t1)
+        verify = float(getattr(sol, "verify_time_s", 0.0))
+        TS.append(t_solved - t1 - verify)
+        TV.append(verify)
         TT.append(t3 - t2)
         ST.append(sol.status)
         recorded = step.errors() if callable(step.errors) else step.errors
@@ -591,7 +606,8 @@ def _steps(robot, build, solve, duration, dt, q0, v0, needs_dynamics, torque_fro
                             np.array([_recorded_error(a, record) for a in ALG],
                                      dtype=float),
                             np.array(TK), np.array(TS),
-                            np.array(TT), ST, failed, message, failed_step=failed_step)
+                            np.array(TT), ST, failed, message, failed_step=failed_step,
+                            verify_time_s=np.array(TV, dtype=float))
 
 
 def run_to_end(steps: Generator[Any, None, Any]) -> Any:

@@ -109,7 +109,7 @@ def bad_after(bad, at=3):
     def solve(stack, **kw):
         calls.append(1)
         if len(calls) <= at:
-            return SimpleNamespace(x=np.zeros(stack.n), status="optimal", info={})
+            return SimpleNamespace(x=np.zeros(stack.n), status="optimal")
         return bad(stack)
     return solve
 
@@ -117,10 +117,10 @@ def raising(s):
     raise RuntimeError("solver exploded")
 
 for name, bad, word in (("solver raises", raising, "exploded"),
-                        ("NaN answer called optimal", lambda s: SimpleNamespace(x=np.full(s.n, np.nan), status="optimal", info={}), "non-finite"),
-                        ("wrong-length x", lambda s: SimpleNamespace(x=np.zeros(s.n + 1), status="optimal", info={}), "shape"),
-                        ("x is None", lambda s: SimpleNamespace(x=None, status="optimal", info={}), "shape"),
-                        ("unknown status", lambda s: SimpleNamespace(x=np.zeros(s.n), status="great", info={}), "great")):
+                        ("NaN answer called optimal", lambda s: SimpleNamespace(x=np.full(s.n, np.nan), status="optimal"), "non-finite"),
+                        ("wrong-length x", lambda s: SimpleNamespace(x=np.zeros(s.n + 1), status="optimal"), "shape"),
+                        ("x is None", lambda s: SimpleNamespace(x=None, status="optimal"), "shape"),
+                        ("unknown status", lambda s: SimpleNamespace(x=np.zeros(s.n), status="great"), "great")):
     api("robots", f"simulate: {name}", lambda: simulate(chain, build, bad_after(bad), duration=0.2, dt=0.01),
         check=lambda r, word=word: r.failed and r.steps == 3 and word in r.message)
 api("robots", "simulate duration=inf", lambda: simulate(chain, build, None, duration=float("inf"), dt=0.01), "duration",

@@ -27,11 +27,12 @@ def assert_truthful(sol, stack, metric=None):
     """A Solution says "optimal" exactly when its answer passes the certificate
     (issue 13, point 4), and an "approximate" one names the level at fault."""
     from prioik.hierarchy import check_lexicographic
-    assert sol.status in ("optimal", "approximate"), sol.info.get("message")
+    assert sol.status in ("optimal", "approximate"), sol.diagnostics.reason
     passes = check_lexicographic(stack, sol.x, minimum_norm=True, metric=metric).ok
-    assert (sol.status == "optimal") == passes, (sol.status, sol.info.get("message"))
-    if sol.status == "approximate" and "certificate" in sol.info:
-        assert sol.info["fault_level"] is not None and sol.info["fault_tasks"]
+    assert (sol.status == "optimal") == passes, (sol.status, sol.diagnostics.reason)
+    verdict = sol.diagnostics.verification
+    if sol.status == "approximate" and verdict is not None and verdict.method != "solver":
+        assert sol.diagnostics.fault.level is not None and sol.diagnostics.fault.tasks
 
 
 # tests/core checks the core-only environment (`make test` runs it in .venv-core); where any

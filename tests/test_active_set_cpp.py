@@ -46,8 +46,10 @@ SPREAD_FACTOR = 4.0
 _OPTIONS = {"rcond": 1e-9, "primal_tol": 1e-10, "dual_tol": 1e-12, "max_iter": 500}
 
 
-def prepared(stack: TaskStack, warm: bool = False) -> has.Prepared:
-    return has.Prepared(stack.layout, dict(_OPTIONS, warm_start=warm))
+def prepared(stack: TaskStack, warm: bool = False) -> formulations.PreparedSolver:
+    """The prepared solver (the plugin's solve, then the verification stage that applies
+    its certificate's verdict)."""
+    return formulations.prepare(stack.layout, has.NAME, **_OPTIONS, warm_start=warm)
 
 
 def w2_floor(stack: TaskStack, x: np.ndarray) -> np.ndarray:
@@ -68,7 +70,7 @@ def w2_floor(stack: TaskStack, x: np.ndarray) -> np.ndarray:
 
 def _violation(out) -> np.ndarray:
     """Each level's ``‖w_i‖²`` of an answer (the active set's own, or the residuals')."""
-    w2 = out.info.get("level_violation")
+    w2 = getattr(out.detail, "level_violation", None)      # the reference has none
     return np.asarray(w2) if w2 is not None else np.asarray(out.residuals) ** 2
 
 
@@ -116,8 +118,8 @@ def assert_close(stack: TaskStack, got, ref, what: str, spread=None) -> None:
     with it by ``O(1)``) is compared by its status only."""
     d = differences(stack, got, ref)
     flipped = spread is not None and got.status != ref.status and got.status in spread[2]
-    assert got.status == ref.status or flipped, (what, d, got.info, ref.info)
-    if ref.status != "optimal" and ref.info.get("ambiguous_levels"):
+    assert got.status == ref.status or flipped, (what, d, got.diagnostics, ref.diagnostics)
+    if ref.status != "optimal" and ref.diagnostics.ambiguous_levels:
         return
     allowed, dx_allowed = d["allowed"], X_REL
     if spread is not None:
@@ -150,11 +152,11 @@ def check_cold(stack: TaskStack, what: str) -> bool:
 # ------------------------------------------------------------------ the path exists
 def test_the_solver_is_the_compiled_core():
     stack = random_inequality_hierarchy(np.random.default_rng(3), 8, 3)
-    solver = prepared(stack)
+    solver = has.Prepared(stack.layout, dict(_OPTIONS, warm_start=False))
     assert isinstance(solver._cpp, core.ActiveSetSolver)
     out = solver.solve(stack.data)
     np.testing.assert_array_equal(out.x, solver._cpp.x)
-    assert out.info["iterations"].sum() > 0
+    assert out.diagnostics.iterations.sum() > 0
     assert formulations.prepare(stack.layout, "hierarchical_active_set",
                                 kernel="cpp").solve(stack).x.tolist() == out.x.tolist()
 
@@ -267,7 +269,7 @@ def test_warm_sequences_equal_the_cold_answers(family):
 # ------------------------------------------------------------------ the boundary
 def _solver_and_data():
     stack = random_inequality_hierarchy(np.random.default_rng(5), 6, 3)
-    return prepared(stack)._cpp, stack.data
+    return has.Prepared(stack.layout, dict(_OPTIONS, warm_start=False))._cpp, stack.data
 
 
 @pytest.mark.parametrize("name", ["A", "b", "lower", "upper", "sqrt_weight"])
@@ -358,7 +360,7 @@ def test_warm_limit_sequences_equal_the_cold_answers(redundant, level_of_box):
             a, b = warm.solve(stack.data), cold.solve(stack.data)
             assert_close(stack, a, b, f"limits sequence {seq} step {step}")
             assert assert_certified(stack, a, f"limits sequence {seq} step {step}")
-            tried += a.info["equality_first"]
+            tried += a.detail.equality_first
         assert tried > 0
 
 
@@ -395,7 +397,7 @@ def test_closed_loop_robot_runs_are_certified(name, mode):
         w.add_contact(c, c, gain=gain, level=1)
     w.add_frame_position("reach", limb, gain=gain)
     w.add_posture("posture", gain=(10.0, 6.0) if accel else 1.0)
-    solvers = {warm: has.Prepared(w.layout, dict(_OPTIONS, warm_start=warm))
+    solvers = {warm: formulations.prepare(w.layout, has.NAME, **_OPTIONS, warm_start=warm)
                for warm in (True, False)}
     q, v = robot.q0.copy(), np.zeros(robot.nv)
     start = KinematicState(robot, q, v)

@@ -72,7 +72,7 @@ def test_out_of_reach_target_scales_the_sns_task(scenario):
         sol = prioik.solve(st, "sns")
         lo, hi = st.levels[0][0].bounds()
         assert np.all(sol.x >= lo - 1e-9) and np.all(sol.x <= hi + 1e-9)
-        stats.append((sol.status, sol.info["task_scaling"][0]))
+        stats.append((sol.status, sol.detail.task_scaling[0]))
         v = sol.x
         q = pin.integrate(scenario.robot.model, q, v * dt)
     scaled = [s for st_, s in stats if s < 1.0]

@@ -78,9 +78,9 @@ def test_equality_stacks_agree_with_reference(backend, family, seed):
     sol = formulations.solve(stack, "cascaded_qp", solver=backend)
     assert_truthful(sol, stack)
     if backend in CERTIFIED:
-        assert sol.status == "optimal", sol.info.get("message")
+        assert sol.status == "optimal", sol.diagnostics.reason
     assert relative_distance(sol.x, ref) <= tolerance(EQUALITY_TOL, backend)
-    assert sol.info["backend"] == backend
+    assert sol.detail.backend == backend
 
 
 @pytest.mark.parametrize("fixing", cascaded_qp.FIXINGS)
@@ -92,7 +92,7 @@ def test_fixings_on_rank_deficient_and_conflicting_levels(fixing, family):
         stack = FAMILIES[family](rng, int(rng.integers(4, 13)), int(rng.integers(2, 5)))
         ref = formulations.solve(stack, "reference").x
         sol = formulations.solve(stack, "cascaded_qp", fixing=fixing)
-        assert sol.ok, sol.info.get("message")
+        assert sol.ok, sol.diagnostics.reason
         assert relative_distance(sol.x, ref) <= 1e-7
         assert check_lexicographic(stack, sol.x, tol=1e-7).ok
 
@@ -126,7 +126,7 @@ def test_inequality_stacks_agree_with_cvxpy_and_keep_bounds(backend, inequality_
                                  **INEQUALITY_OPTIONS.get(backend, {}))
         assert_truthful(sol, stack)
         if backend in CERTIFIED:
-            assert sol.status == "optimal", sol.info.get("message")
+            assert sol.status == "optimal", sol.diagnostics.reason
         assert relative_distance(sol.x, ref.x) <= tolerance(INEQUALITY_TOL, backend)
         # the box and the band (levels 1-2, feasible together) hold within tolerance
         tol = BOUND_TOL.get(backend, DEFAULT_BOUND_TOL)
@@ -158,12 +158,13 @@ def test_infeasible_hard_level_gives_least_violation_with_diagnostics(backend):
     sol = formulations.solve(stack, "cascaded_qp", solver=backend)
     assert_truthful(sol, stack)
     if backend in CERTIFIED:
-        assert sol.status == "optimal", sol.info.get("message")
+        assert sol.status == "optimal", sol.diagnostics.reason
     c = stack.task("keepout").A[0]
     # least violation of c x ≥ 1, c x ≤ −1 (unit c, equal weights): c x = 0
     assert abs(c @ sol.x) <= 1e-5
     assert sol.residuals[0] == pytest.approx(np.sqrt(2.0), abs=1e-5)
-    (entry,) = sol.info["infeasible_levels"]
+    assert sol.diagnostics.infeasible_levels == [0]
+    (entry,) = sol.detail.violated
     assert entry["level"] == 0 and entry["tasks"] == ["keepout"]
 
 
@@ -171,9 +172,9 @@ def test_infeasible_hard_level_fails_cleanly_when_asked():
     stack = infeasible_inequality(np.random.default_rng(12), 6, 3)
     sol = formulations.solve(stack, "cascaded_qp", on_infeasible="fail")
     assert sol.status == "failed" and not sol.ok
-    assert sol.info["failed_level"] == 0
-    assert sol.info["failed_tasks"] == ["keepout"]
-    assert "keepout" in sol.info["message"]
+    assert sol.diagnostics.fault.level == 0
+    assert sol.diagnostics.fault.tasks == ("keepout",)
+    assert "keepout" in sol.diagnostics.reason
     assert np.isnan(sol.x).all()
 
 
@@ -184,9 +185,9 @@ def test_backend_failure_is_a_failed_status_naming_level_and_tasks():
     sol = formulations.solve(stack, "cascaded_qp", solver="osqp",
                              backend_options={"max_iter": 1, "polishing": False})
     assert sol.status == "failed"
-    assert sol.info["failed_level"] == 0
-    assert sol.info["failed_tasks"] == list(stack.levels[0].names)
-    assert "osqp" in sol.info["message"] and "level 0" in sol.info["message"]
+    assert sol.diagnostics.fault.level == 0
+    assert sol.diagnostics.fault.tasks == tuple(stack.levels[0].names)
+    assert "osqp" in sol.diagnostics.reason and "level 0" in sol.diagnostics.reason
 
 
 def test_unavailable_backend_names_it_and_lists_available():
@@ -280,7 +281,7 @@ def test_zero_row_with_unreachable_bounds_keeps_its_fixed_violation(backend):
     """DAQP's degenerate test: ``0·x ∈ [2, 5]`` on level 2 (was NaN in every cascade)."""
     stack = _degenerate1().stack
     sol = formulations.solve(stack, "cascaded_qp", solver=backend)
-    assert sol.status == "optimal", sol.info.get("message")
+    assert sol.status == "optimal", sol.diagnostics.reason
     np.testing.assert_allclose(sol.x, [3.0, 1.5, 0.0], atol=1e-7)
     # level 1: x0 = 3 is 1.5 short of 4.5; level 2: the zero row misses [2, 5] by 2
     # and x0 = 3 misses [7, 10] by 4

@@ -700,10 +700,10 @@ def test_no_formulation_says_optimal_at_an_ambiguous_rank_decision(name):
         warnings.simplefilter("ignore")
         for eps, status in ((1e-7, "approximate"), (1e-10, "approximate"), (1e-14, "optimal")):
             sol = formulations.solve(_near_pair(eps), name)
-            assert sol.status == status, (eps, sol.info)
-            if status == "approximate" and "fault_level" not in sol.info:
-                assert sol.info["ambiguous_levels"] == [0]
-                assert "rank decision ambiguous at level 0" in sol.info["reason"]
+            assert sol.status == status, (eps, sol.diagnostics)
+            if status == "approximate" and sol.diagnostics.fault is None:
+                assert sol.diagnostics.ambiguous_levels == [0]
+                assert "rank decision ambiguous at level 0" in sol.diagnostics.reason
             elif status == "approximate":   # the other rank's optimum, rejected (DAQP)
                 assert not check_lexicographic(_near_pair(eps), sol.x).ok
             else:
@@ -725,12 +725,14 @@ def test_a_lower_point_refutes_an_answer_the_check_passes():
     stack = load_stack(FUZZ / "bounds-1248-41.json")
     raw = formulations.solve(stack, "cascaded_qp", solver="quadprog", certify=False)
     assert check_lexicographic(stack, raw.x, minimum_norm=True).ok     # the check's gap
+    from prioik.formulations.base import LowerPoint
     level, value, reached = lower_point(stack, raw.x)
     assert level == 1 and 17.19 < value < 17.20 and 10.58 < reached < 10.59
     sol = formulations.solve(stack, "cascaded_qp", solver="quadprog")
-    assert sol.status == "approximate" and sol.info["fault_level"] == 1
-    assert sol.info["lower_point"] == {"level": 1, "value": value, "reached": reached}
-    assert "hierarchical_active_set reaches 10.58" in sol.info["message"]
+    assert sol.status == "approximate" and sol.diagnostics.fault.level == 1
+    assert sol.diagnostics.verification.lower_point == LowerPoint(1, value, reached)
+    assert sol.diagnostics.fault.code == "lower_point"
+    assert "hierarchical_active_set reaches 10.58" in sol.diagnostics.reason
     exact = formulations.solve(stack, "hierarchical_active_set")
     assert exact.status == "optimal" and lower_point(stack, exact.x) is None
     with warnings.catch_warnings():

@@ -125,7 +125,9 @@ def test_the_corpus_exercises_every_reading(monkeypatch):
 
 
 def _flagged(sol) -> bool:
-    return any(key in sol.info for _, key, _ in H._CERTIFIED_FLAGS)
+    d = sol.diagnostics
+    return bool(d.stalled_levels) or any(getattr(d.detail, key, None)
+                                         for _, key, _ in H._CERTIFIED_FLAGS)
 
 
 def test_flagged_answers_get_the_oracle_s_verdict_in_the_solver():
@@ -140,7 +142,9 @@ def test_flagged_answers_get_the_oracle_s_verdict_in_the_solver():
         if not _flagged(sol):
             continue
         flagged += 1
-        solver = H.Prepared(stack.layout, H.validate_options(H.NAME, H.OPTIONS, {}, stack.n))
+        opts = H.validate_options(H.NAME, H.OPTIONS, {}, stack.n)
+        own = H.Prepared(stack.layout, opts).solve(stack.data)   # the plugin's outcome
+        solver = H.Prepared(stack.layout, opts)
 
         def oracle(data, x, minimum_norm):
             report = check_lexicographic(data, x, minimum_norm=minimum_norm)
@@ -148,21 +152,24 @@ def test_flagged_answers_get_the_oracle_s_verdict_in_the_solver():
         for s in (solver, solver._refiner(), solver._refiner()._refiner()):
             s._certify = oracle
         ref = solver.solve(stack.data)
-        assert ref.status == sol.status, path.stem
-        assert np.array_equal(ref.x, sol.x), path.stem
-        assert _info(ref) == _info(sol), path.stem
+        assert ref.status == own.status, path.stem
+        assert np.array_equal(ref.x, own.x) and np.array_equal(ref.x, sol.x), path.stem
+        assert _info(ref) == _info(own), path.stem
     assert flagged >= 12
 
 
-def _info(sol) -> dict:
-    """The outcome's info, the figures of a rejection's reason left out (the descent
-    point that refutes x is one of several where the multipliers are not unique: the
-    verdict and the level are the same, the drop found may differ)."""
-    out = {k: str(v) for k, v in sol.info.items()}
-    if "reason" in out:
-        out["reason"] = re.sub(r"(the certificate rejects [^()]*\([^)]*\)) \(.*\)",
-                               r"\1", out["reason"])
-    return out
+def _info(out) -> dict:
+    """The outcome's diagnostics as text, the figures of a rejection's reason left out
+    (the descent point that refutes x is one of several where the multipliers are not
+    unique: the verdict and the level are the same, the drop found may differ)."""
+    d = out.diagnostics
+    text = {k: str(v) for k, v in d.as_dict().items() if k not in ("verification",)}
+    v = d.verification
+    text["verdict"] = str(None if v is None else (v.method, v.ok))
+    for key, reason in (("reason", d.reason), ("rejected", v.reason if v else "")):
+        text[key] = re.sub(r"(the certificate rejects [^()]*\([^)]*\)) \(.*\)", r"\1",
+                           reason)
+    return text
 
 
 def test_a_flagged_solve_never_calls_the_python_certificate(monkeypatch):
@@ -174,8 +181,8 @@ def test_a_flagged_solve_never_calls_the_python_certificate(monkeypatch):
     monkeypatch.setattr(H, "check_lexicographic", refuse)
     stack = load_stack(DATA / "fuzz" / "inequality-7002-1384.json")
     sol = prioik.solve(stack, "hierarchical_active_set")
-    assert sol.status == "optimal" and sol.info["path_certified"]
-    assert sol.info["refined_primal_tol"] == pytest.approx(1e-14)
+    assert sol.status == "optimal" and sol.diagnostics.verification.ok
+    assert sol.detail.refined_primal_tol == pytest.approx(1e-14)
     monkeypatch.undo()
     assert check_lexicographic(stack, sol.x).ok
 
@@ -186,7 +193,7 @@ def test_a_rejected_flagged_answer_is_approximate():
     naming the level the certificate rejects."""
     stack = load_stack(DATA / "adversarial" / "independent2-scales-4-302.json")
     sol = prioik.solve(stack, "hierarchical_active_set")
-    assert sol.status == "approximate" and "the certificate rejects level" in sol.info["reason"]
+    assert sol.status == "approximate" and "the certificate rejects level" in sol.diagnostics.reason
     assert not check_lexicographic(stack, sol.x, minimum_norm=True).ok
 
 

@@ -33,8 +33,8 @@ def family_stacks(seeds: int = 12):
 def assert_kernels_agree(stack: TaskStack, name: str, **options) -> tuple:
     cpp = formulations.solve(stack, name, kernel="cpp", **options)
     ref = formulations.solve(stack, name, kernel="numpy", **options)
-    assert cpp.info["kernel"] == "cpp" and ref.info["kernel"] == "numpy"
-    assert cpp.status == ref.status, (cpp.status, ref.status, cpp.info.get("reason"))
+    assert cpp.detail.kernel == "cpp" and ref.detail.kernel == "numpy"
+    assert cpp.status == ref.status, (cpp.status, ref.status, cpp.diagnostics.reason)
     scale = max(1.0, float(np.linalg.norm(ref.x)))
     assert np.linalg.norm(cpp.x - ref.x) <= AGREEMENT * scale, np.linalg.norm(cpp.x - ref.x)
     return cpp, ref
@@ -44,7 +44,7 @@ def assert_kernels_agree(stack: TaskStack, name: str, **options) -> tuple:
 def test_nullspace_cpp_equals_numpy_on_every_family(setting):
     for family, seed, stack in family_stacks():
         cpp, ref = assert_kernels_agree(stack, "nullspace", **NULLSPACE_SETTINGS[setting])
-        assert cpp.info["rank_profile"] == ref.info["rank_profile"], (family, seed)
+        assert cpp.diagnostics.ranks.tolist() == ref.diagnostics.ranks.tolist(), (family, seed)
 
 
 @pytest.fixture(scope="module")
@@ -78,7 +78,7 @@ def test_nullspace_cpp_equals_numpy_on_the_g1_fencing_stacks(g1_stacks, setting)
 def test_chiaverini_cpp_equals_numpy_on_every_family(damping):
     for _family, _seed, stack in family_stacks():
         cpp, ref = assert_kernels_agree(stack, "chiaverini", damping=damping)
-        for own, own_ref in zip(cpp.info["task_solutions"], ref.info["task_solutions"],
+        for own, own_ref in zip(cpp.detail.task_solutions, ref.detail.task_solutions,
                                 strict=True):
             assert np.linalg.norm(own - own_ref) <= AGREEMENT * max(1.0, np.linalg.norm(own_ref))
 
@@ -94,7 +94,7 @@ def test_unifying_cpp_equals_numpy_on_every_family():
         M = random_spd(np.random.default_rng(seed), stack.n)
         bias = np.linspace(-1.0, 1.0, stack.n)
         cpp, ref = assert_kernels_agree(stack, "unifying", mass_matrix=M, bias=bias)
-        np.testing.assert_allclose(cpp.info["tau"], M @ cpp.x + bias, rtol=0, atol=1e-12 *
+        np.testing.assert_allclose(cpp.detail.tau, M @ cpp.x + bias, rtol=0, atol=1e-12 *
                                    max(1.0, float(np.abs(M @ cpp.x).max())))
 
 
@@ -109,7 +109,7 @@ def test_operational_space_cpp_equals_numpy_on_every_family(reproject):
         M = random_spd(np.random.default_rng(seed), stack.n)
         cpp, ref = assert_kernels_agree(stack, "operational_space", mass_matrix=M,
                                         reproject=reproject)
-        assert cpp.info["rank_profile"] == ref.info["rank_profile"], (family, seed)
+        assert cpp.diagnostics.ranks.tolist() == ref.diagnostics.ranks.tolist(), (family, seed)
 
 
 def test_operational_space_cpp_equals_numpy_on_the_g1_fencing_stacks(g1_samples):
@@ -149,7 +149,7 @@ def test_unifying_cpp_names_a_mass_matrix_it_cannot_take():
 def test_nullspace_auto_is_the_compiled_kernel_and_reports_flops():
     stack = FAMILIES["conflicting"](np.random.default_rng(1), 12, 3)
     sol = formulations.solve(stack, "nullspace")
-    assert sol.info["kernel"] == "cpp" and sol.info["flops"] > 0
+    assert sol.detail.kernel == "cpp" and sol.detail.flops > 0
     batch = formulations.solve_batch([stack, stack], "nullspace")
     np.testing.assert_array_equal(batch.X[0], sol.x)
     assert batch.statuses == [sol.status] * 2
@@ -171,7 +171,7 @@ def test_nullspace_flops_of_one_level_are_a_householder_lq_and_lower_order_terms
     other operation is O(m n)."""
     rng = np.random.default_rng(m * n)
     stack = TaskStack([Task("only", rng.standard_normal((m, n)), rng.standard_normal(m))])
-    flops = formulations.solve(stack, "nullspace", kernel="cpp").info["flops"]
+    flops = formulations.solve(stack, "nullspace", kernel="cpp").detail.flops
     lq = householder_lq_applications(m, n)
     assert abs(lq - (2 * n * m * m - 2 * m ** 3 / 3)) <= 4 * m * n     # the dense count
     assert lq <= flops <= lq + 16 * m * n + m * m, (flops, lq)
@@ -184,9 +184,9 @@ def test_nullspace_flops_grow_with_the_projections_of_the_lower_levels():
     n, m1, m2 = 30, 6, 8
     first = Task("a", rng.standard_normal((m1, n)), rng.standard_normal(m1))
     second = Task("b", rng.standard_normal((m2, n)), rng.standard_normal(m2))
-    one = formulations.solve(TaskStack([first]), "nullspace", kernel="cpp").info["flops"]
+    one = formulations.solve(TaskStack([first]), "nullspace", kernel="cpp").detail.flops
     two = formulations.solve(TaskStack([first, second]), "nullspace",
-                             kernel="cpp").info["flops"]
+                             kernel="cpp").detail.flops
     assert two - one >= 2 * m2 * n * n + m1 * n * n
 
 
@@ -199,7 +199,7 @@ def test_one_level_flops_of_the_other_kernels():
     m, n = 12, 30
     stack = TaskStack([Task("only", rng.standard_normal((m, n)), rng.standard_normal(m))])
     M = random_spd(rng, n)
-    count = {name: formulations.solve(stack, name, kernel="cpp", **opts).info["flops"]
+    count = {name: formulations.solve(stack, name, kernel="cpp", **opts).detail.flops
              for name, opts in [("nullspace", {}), ("chiaverini", {}),
                                 ("unifying", {"mass_matrix": M}),
                                 ("operational_space", {"mass_matrix": M})]}
@@ -252,7 +252,7 @@ def test_extended_jacobian_flops_of_a_full_rank_level_are_a_householder_qr(m, n)
     sol = formulations.solve(stack, "extended_jacobian", kernel="cpp")
     qr = householder_qr_applications(m, n)
     assert abs(qr - (2 * m * n * n - 2 * n ** 3 / 3)) <= 4 * m * n
-    assert qr <= sol.info["flops"] <= qr + 16 * m * n + 4 * n * n, (sol.info["flops"], qr)
+    assert qr <= sol.detail.flops <= qr + 16 * m * n + 4 * n * n, (sol.detail.flops, qr)
 
 
 def test_extended_jacobian_and_nullspace_count_the_same_lq_on_one_level():
@@ -261,8 +261,8 @@ def test_extended_jacobian_and_nullspace_count_the_same_lq_on_one_level():
     rng = np.random.default_rng(3)
     m, n = 25, 60
     stack = TaskStack([Task("only", rng.standard_normal((m, n)), rng.standard_normal(m))])
-    ej = formulations.solve(stack, "extended_jacobian", kernel="cpp").info["flops"]
-    ns = formulations.solve(stack, "nullspace", kernel="cpp").info["flops"]
+    ej = formulations.solve(stack, "extended_jacobian", kernel="cpp").detail.flops
+    ns = formulations.solve(stack, "nullspace", kernel="cpp").detail.flops
     assert abs(ej - ns) <= 6 * m * n
     assert ej >= householder_lq_applications(m, n)
 
@@ -284,15 +284,15 @@ def reference_options(setting: str, stack: TaskStack) -> dict:
 def test_reference_cpp_equals_numpy_on_every_family(setting):
     for family, seed, stack in family_stacks():
         cpp, ref = assert_kernels_agree(stack, "reference", **reference_options(setting, stack))
-        assert cpp.info["rank_profile"] == ref.info["rank_profile"], (family, seed)
-        assert cpp.info["null_space_dim"] == ref.info["null_space_dim"], (family, seed)
+        np.testing.assert_array_equal(cpp.diagnostics.ranks, ref.diagnostics.ranks)
+        assert cpp.detail.null_space_dim == ref.detail.null_space_dim, (family, seed)
 
 
 @pytest.mark.parametrize("setting", REFERENCE_SETTINGS)
 def test_reference_cpp_equals_numpy_on_the_g1_fencing_stacks(g1_stacks, setting):
     for stack in g1_stacks:
         cpp, ref = assert_kernels_agree(stack, "reference", **reference_options(setting, stack))
-        assert cpp.info["rank_profile"] == ref.info["rank_profile"]
+        np.testing.assert_array_equal(cpp.diagnostics.ranks, ref.diagnostics.ranks)
 
 
 def test_reference_cpp_names_a_metric_the_null_space_cannot_take():
@@ -302,13 +302,13 @@ def test_reference_cpp_names_a_metric_the_null_space_cannot_take():
     W = np.zeros((8, 8))
     for kernel in ("cpp", "numpy"):
         sol = formulations.solve(stack, "reference", kernel=kernel, metric=W)
-        assert sol.status == "failed" and "positive definite" in sol.info["message"]
+        assert sol.status == "failed" and "positive definite" in sol.diagnostics.reason
 
 
 def test_reference_auto_is_the_compiled_kernel_and_batches_by_solves():
     stack = FAMILIES["conflicting"](np.random.default_rng(1), 12, 3)
     sol = formulations.solve(stack, "reference")
-    assert sol.info["kernel"] == "cpp" and sol.info["flops"] > 0
+    assert sol.detail.kernel == "cpp" and sol.flops > 0
     batch = formulations.solve_batch([stack, stack], "reference")
     np.testing.assert_array_equal(batch.X[0], sol.x)
     assert batch.statuses == [sol.status] * 2
@@ -322,19 +322,20 @@ def test_reference_flops_of_one_level_are_counted_operation_by_operation(m, n):
     refinements. Every term is written out here except the LQ's, bounded as nullspace's."""
     rng = np.random.default_rng(m + 100 * n)
     stack = TaskStack([Task("only", rng.standard_normal((m, n)), rng.standard_normal(m))])
-    info = formulations.solve(stack, "reference", kernel="cpp").info
-    assert info["rank_profile"] == [m]
+    sol = formulations.solve(stack, "reference", kernel="cpp")
+    info = sol.detail
+    assert sol.diagnostics.ranks.tolist() == [m]
     pairs = m * (m - 1) // 2
-    jacobi = (info["jacobi_sweeps"] * pairs * (6 * m + 3)
-              + info["jacobi_rotations"] * (12 + 6 * (m + m)) + m * (2 * m + 1))
+    jacobi = (info.jacobi_sweeps * pairs * (6 * m + 3)
+              + info.jacobi_rotations * (12 + 6 * (m + m)) + m * (2 * m + 1))
     formation = 2 * m * n * n + 2 * m * n + m
     coordinates = m * (2 * m + 3)
     rotate_z = n * sum(4 * (n - t) + 1 for t in range(m)) + 2 * n * m * m
     step = 3 * 2 * n * m + 2 * (4 * m * n + m + m * (2 * n + 3)) + n
     known = formation + jacobi + coordinates + rotate_z + step
     lq = householder_lq_applications(m, n)
-    assert info["jacobi_sweeps"] >= 2 and info["jacobi_rotations"] >= pairs
-    assert known + lq <= info["flops"] <= known + lq + 16 * m * n + m * m, (info, known + lq)
+    assert info.jacobi_sweeps >= 2 and info.jacobi_rotations >= pairs
+    assert known + lq <= info.flops <= known + lq + 16 * m * n + m * m, (info, known + lq)
 
 
 def test_reference_solver_checks_its_arrays_and_options():
@@ -375,10 +376,11 @@ def assert_sns_kernels_agree(stack: TaskStack, **options) -> tuple:
     magnitude = data.sqrt_weight * (np.abs(data.A) @ np.abs(cpp.x) + np.abs(data.b))
     scale = np.sqrt(np.add.reduceat(magnitude ** 2, data.layout.starts[:-1]))
     assert np.all(np.abs(cpp.residuals - level_residuals(data, cpp.x)) <= 1e-12 * scale)
-    np.testing.assert_allclose(cpp.info["task_scaling"], ref.info["task_scaling"], rtol=0,
+    np.testing.assert_allclose(cpp.detail.task_scaling, ref.detail.task_scaling, rtol=0,
                                atol=1e-9)
     for key in ("saturated", "iterations", "scaled_tasks", "bounds_level", "first_task_level"):
-        assert cpp.info[key] == ref.info[key], (key, cpp.info[key], ref.info[key])
+        mine, theirs = getattr(cpp.detail, key), getattr(ref.detail, key)
+        assert mine == theirs, (key, mine, theirs)
     return cpp, ref
 
 
@@ -415,7 +417,7 @@ def test_sns_cpp_equals_numpy_under_box_bounds(target_scale, offset):
         n, k = int(rng.integers(2, 20)), int(rng.integers(1, 5))
         stack = box_bounded(rng, n, k, target_scale, offset)
         cpp, _ = assert_sns_kernels_agree(stack)
-        saturated += sum(len(s) for s in cpp.info["saturated"])
+        saturated += sum(len(s) for s in cpp.detail.saturated)
     assert saturated > 0 or target_scale < 1.0      # the rounds ran
 
 
@@ -426,7 +428,7 @@ def test_sns_cpp_options_reach_the_kernel():
                     {"rcond": 1e-6}):
         assert_sns_kernels_agree(stack, **options)
     capped = formulations.solve(stack, "sns", max_saturations=1)
-    assert max(len(s) for s in capped.info["saturated"]) <= 1
+    assert max(len(s) for s in capped.detail.saturated) <= 1
 
 
 def test_sns_cpp_names_bounds_it_cannot_take():
@@ -480,14 +482,14 @@ def test_sns_flops_are_nullspace_flops_and_the_rounds():
     n = 12
     tasks = [Task(f"t{i}", rng.standard_normal((m, n)), rng.standard_normal(m))
              for i, m in enumerate((2, 3, 1))]
-    plain = formulations.solve(TaskStack(tasks), "sns", kernel="cpp").info["flops"]
-    ns = formulations.solve(TaskStack(tasks), "nullspace", kernel="cpp").info["flops"]
+    plain = formulations.solve(TaskStack(tasks), "sns", kernel="cpp").flops
+    ns = formulations.solve(TaskStack(tasks), "nullspace", kernel="cpp").flops
     assert plain - ns == sum(3 * (2 * t.m * n + 2 * t.m + 1) for t in tasks)
     # a box too tight for the tasks: every level saturates
     box = Task("box", np.eye(n), lower=np.full(n, -0.05), upper=np.full(n, 0.05))
     sol = formulations.solve(TaskStack([box, *tasks]), "sns", kernel="cpp")
-    rounds = sum(1 + len(s) for s in sol.info["saturated"] if s)
+    rounds = sum(1 + len(s) for s in sol.detail.saturated if s)
     assert rounds > 3
     factorizations = sum((1 + len(s)) * 2 * t.m * n * n
-                         for s, t in zip(sol.info["saturated"], tasks, strict=True) if s)
-    assert sol.info["flops"] >= ns + factorizations
+                         for s, t in zip(sol.detail.saturated, tasks, strict=True) if s)
+    assert sol.flops >= ns + factorizations

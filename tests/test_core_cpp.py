@@ -85,19 +85,22 @@ def assert_same_answer(stack: TaskStack, **options) -> None:
     got = prepare(stack.layout, "extended_jacobian", kernel="cpp", **options).solve(stack)
     moved = [prepare(stack.layout, "extended_jacobian", kernel="lapack", **options)
              .solve(_moved(stack, seed)) for seed in range(2)]
-    assert got.info["kernel"] == "cpp" and ref.info["kernel"] == "lapack"
+    assert got.detail.kernel == "cpp" and ref.detail.kernel == "lapack"
     flipped = got.status != ref.status and got.status in {m.status for m in moved}
-    assert got.status == ref.status or flipped, (got.info, ref.info)
-    keys = ("damped_levels", "ambiguous_levels", "near_ambiguous_levels")
+    assert got.status == ref.status or flipped, (got.diagnostics, ref.diagnostics)
+    def levels(sol):        # the flagged levels of an answer, by kind
+        return {"damped_levels": sol.detail.damped_levels or [],
+                "ambiguous_levels": sol.diagnostics.ambiguous_levels,
+                "near_ambiguous_levels": sol.detail.near_ambiguous_levels or []}
+
     # an ambiguous level's rank is either reading (its rounding decides): the levels
     # from there down may take the other one's consequences
-    first = min(ref.info.get("ambiguous_levels") or [len(stack.levels)])
+    first = min(ref.diagnostics.ambiguous_levels or [len(stack.levels)])
     if not flipped:
-        np.testing.assert_array_equal(got.info["rank_profile"][:first],
-                                      ref.info["rank_profile"][:first])
-        for key in keys:
-            assert got.info.get(key) == ref.info.get(key), key
-    bounded = "step_bound" in options and bool(ref.info.get("damped_levels"))
+        np.testing.assert_array_equal(got.diagnostics.ranks[:first],
+                                      ref.diagnostics.ranks[:first])
+        assert levels(got) == levels(ref)
+    bounded = "step_bound" in options and bool(ref.detail.damped_levels)
     spread_w = np.max([np.abs(m.residuals ** 2 - ref.residuals ** 2) for m in moved], axis=0)
     spread_x = max(np.linalg.norm(m.x - ref.x) for m in moved)
     for i, level in enumerate(stack.levels[:first]):
@@ -107,7 +110,7 @@ def assert_same_answer(stack: TaskStack, **options) -> None:
         allowed = max(1e-12 * w_ref ** 2, rounding * (2 * w_ref + rounding),
                       32 * spread_w[i], 2 * w_ref * 1e-10 * scale if bounded else 0.0)
         assert abs(w_got ** 2 - w_ref ** 2) <= allowed, (i, w_got, w_ref, spread_w[i], scale)
-    if not flipped and not any(key in ref.info for key in keys[1:]):
+    if not flipped and not (ref.diagnostics.ambiguous_levels or ref.detail.near_ambiguous_levels):
         size = max(1.0, np.linalg.norm(ref.x))
         allowed = max(1e-10 * size, 32 * spread_x)
         assert np.linalg.norm(got.x - ref.x) <= allowed, (np.linalg.norm(got.x - ref.x),
@@ -164,8 +167,10 @@ def test_the_saved_stacks_cover_every_rank_decision_kind():
         stack = _equality_part(load_stack(path), True)
         if stack is None:
             continue
-        info = formulations.solve(stack, "extended_jacobian", kernel="cpp").info
-        seen.update(key for key in ("ambiguous_levels", "near_ambiguous_levels") if key in info)
+        sol = formulations.solve(stack, "extended_jacobian", kernel="cpp")
+        seen.update(key for key, at in (("ambiguous_levels", sol.diagnostics.ambiguous_levels),
+                                         ("near_ambiguous_levels",
+                                          sol.detail.near_ambiguous_levels)) if at)
     assert seen == {"ambiguous_levels", "near_ambiguous_levels"}
 
 
@@ -201,7 +206,7 @@ def test_core_equals_lapack_on_a_unit_row_posture_below_a_floating_base():
         assert_same_answer(stack)
         sol = formulations.solve(stack, "extended_jacobian", kernel="cpp")
         assert sol.status == "optimal"
-        assert sol.info["rank_profile"][1] == min(n - 6, n - top)   # Woodbury when top ≥ 6
+        assert sol.diagnostics.ranks[1] == min(n - 6, n - top)   # Woodbury when top ≥ 6
 
 
 @pytest.mark.parametrize("options", sorted(OPTION_SETS))
@@ -381,7 +386,7 @@ def test_the_result_is_read_by_name_and_each_answer_is_its_own():
     assert res.solved and res.finite and res.clear and not res.ambiguous
     a, b = res.x, res.x                           # each read is a new array
     assert a is not b and np.array_equal(a, b) and a.shape == (stack.n,)
-    np.testing.assert_array_equal(res.ranks, first.info["rank_profile"])
+    np.testing.assert_array_equal(res.ranks, first.diagnostics.ranks)
     assert res.ranks.dtype == np.int64
     # the answer written into the caller's arrays
     out, w = np.full(stack.n, np.nan), np.full(len(stack), np.nan)
@@ -389,7 +394,7 @@ def test_the_result_is_read_by_name_and_each_answer_is_its_own():
     core_solver.solve(d.A, d.b, d.sqrt_weight, out, w, r)
     np.testing.assert_array_equal(out, first.x)
     np.testing.assert_array_equal(w, first.residuals)
-    np.testing.assert_array_equal(r, first.info["rank_profile"])
+    np.testing.assert_array_equal(r, first.diagnostics.ranks)
 
 
 @pytest.mark.parametrize("which, bad, word", [
@@ -457,11 +462,11 @@ def test_a_solve_releases_the_gil_and_one_solver_serves_one_thread():
 def test_the_core_is_the_default_kernel_up_to_the_crossover():
     from prioik.formulations.extended_jacobian import AUTO_CPP_MAX_N
     stack = FAMILIES["compatible"](np.random.default_rng(4), 8, 2)
-    assert formulations.solve(stack, "extended_jacobian").info["kernel"] == "cpp"
-    assert formulations.solve(stack, "extended_jacobian", kernel="cpp").info["kernel"] == "cpp"
+    assert formulations.solve(stack, "extended_jacobian").detail.kernel == "cpp"
+    assert formulations.solve(stack, "extended_jacobian", kernel="cpp").detail.kernel == "cpp"
     big = FAMILIES["compatible"](np.random.default_rng(4), AUTO_CPP_MAX_N + 1, 2)
-    assert formulations.solve(big, "extended_jacobian").info["kernel"] == "lapack"
-    assert formulations.solve(big, "extended_jacobian", kernel="cpp").info["kernel"] == "cpp"
+    assert formulations.solve(big, "extended_jacobian").detail.kernel == "lapack"
+    assert formulations.solve(big, "extended_jacobian", kernel="cpp").detail.kernel == "cpp"
 
 
 # -------------------------------------------------------------- C++ without Python

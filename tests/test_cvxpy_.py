@@ -22,7 +22,7 @@ def test_equality_stacks_agree_with_reference(fixing, family):
         stack = FAMILIES[family](rng, int(rng.integers(4, 12)), int(rng.integers(2, 5)))
         ref = formulations.solve(stack, "reference").x
         sol = formulations.solve(stack, "cvxpy", fixing=fixing)
-        assert sol.status == "optimal", sol.info.get("message")
+        assert sol.status == "optimal", sol.diagnostics.reason
         assert relative_distance(sol.x, ref) <= TOL["CLARABEL"]
         assert check_lexicographic(stack, sol.x, tol=1e-7).ok
 
@@ -32,7 +32,7 @@ def test_other_cvxpy_solvers_on_a_compatible_stack(solver):
     stack = FAMILIES["compatible"](np.random.default_rng(3), 8, 3)
     ref = formulations.solve(stack, "reference").x
     sol = formulations.solve(stack, "cvxpy", solver=solver)
-    assert sol.ok, sol.info.get("message")
+    assert sol.ok, sol.diagnostics.reason
     assert relative_distance(sol.x, ref) <= TOL[solver]
 
 
@@ -53,10 +53,10 @@ def test_infeasible_hard_level_least_violation_and_fail_option():
     sol = formulations.solve(stack, "cvxpy")
     assert sol.status == "optimal"
     assert abs(stack.task("keepout").A[0] @ sol.x) <= 1e-6
-    assert sol.info["infeasible_levels"][0]["tasks"] == ["keepout"]
+    assert sol.detail.violated[0]["tasks"] == ["keepout"]
     bad = formulations.solve(stack, "cvxpy", on_infeasible="fail")
-    assert bad.status == "failed" and bad.info["failed_level"] == 0
-    assert bad.info["failed_tasks"] == ["keepout"]
+    assert bad.status == "failed" and bad.diagnostics.fault.level == 0
+    assert bad.diagnostics.fault.tasks == ("keepout",)
 
 
 def test_unavailable_solver_names_it_and_lists_available():
@@ -74,6 +74,6 @@ def test_zero_row_with_unreachable_bounds_keeps_its_fixed_violation():
     from prioik.hierarchy import load_peer_json
     p = load_peer_json(Path(__file__).parent / "data" / "peer" / "daqp_jl_degenerate1.json")
     sol = formulations.solve(p.stack, "cvxpy")
-    assert sol.status == "optimal", sol.info.get("message")
+    assert sol.status == "optimal", sol.diagnostics.reason
     np.testing.assert_allclose(sol.x, [3.0, 1.5, 0.0], atol=1e-7)
     np.testing.assert_allclose(sol.residuals ** 2, [0.0, 2.25, 20.0], atol=1e-6)

@@ -25,7 +25,7 @@ def test_exact_on_non_conflicting_stacks(family, seed):
     sol = formulations.solve(stack, "daqp_hierarchical")
     assert_truthful(sol, stack)
     if not any(conflicting_levels(stack)):
-        assert sol.status == "optimal", sol.info
+        assert sol.status == "optimal", sol.diagnostics
     if sol.status == "optimal":
         assert relative_distance(sol.x, ref) <= 1e-8      # measured ≤ 1.3e-10 with primal_tol 1e-10
 
@@ -33,8 +33,8 @@ def test_exact_on_non_conflicting_stacks(family, seed):
 def test_rank_deficient_level_needs_compression():
     stack = FAMILIES["rank_deficient"](np.random.default_rng(21), 10, 3)
     raw = formulations.solve(stack, "daqp_hierarchical", compress_levels=False)
-    assert raw.status == "failed" and raw.info["exitflag"] == -6
-    assert "overdetermined" in raw.info["message"]
+    assert raw.status == "failed" and raw.detail.exitflag == -6
+    assert "overdetermined" in raw.diagnostics.reason
 
 
 def test_conflicting_stacks_are_flagged_approximate():
@@ -48,7 +48,7 @@ def test_conflicting_stacks_are_flagged_approximate():
         if sol.status == "optimal":
             assert relative_distance(sol.x, ref) <= 1e-8
         else:
-            assert sol.info["conflicting_levels"] and "certificate" in sol.info["message"]
+            assert sol.detail.conflicting_levels and "certificate" in sol.diagnostics.reason
             assert relative_distance(sol.x, ref) > 1e-3          # and it is indeed off
             flagged += 1
     assert flagged >= 1
@@ -74,7 +74,9 @@ def test_box_then_task():
     np.testing.assert_allclose(sol.x, [1.0, 0.5], atol=1e-8)
     # the goal's row x0 depends on the active box row x0 ≤ 1, where DAQP's count of free
     # directions is not to be trusted; here the answer is right, and the certificate says so
-    assert sol.info["conflicting_levels"] == [1] and sol.status == "optimal"
+    # (the conflicting levels are computed only for an answer the certificate rejects)
+    assert sol.status == "optimal" and sol.diagnostics.verification.ok
+    assert sol.detail.conflicting_levels is None
     lone = formulations.solve(TaskStack([Task("goal", np.eye(2), [2.0, 0.5])]),
                               "daqp_hierarchical")
     assert lone.status == "optimal"
@@ -108,7 +110,7 @@ def test_zero_row_with_unreachable_bounds_keeps_its_fixed_violation():
     from prioik.hierarchy import load_peer_json
     p = load_peer_json(Path(__file__).parent / "data" / "peer" / "daqp_jl_degenerate1.json")
     sol = formulations.solve(p.stack, "daqp_hierarchical")
-    assert sol.status == "optimal", sol.info.get("message")
+    assert sol.status == "optimal", sol.diagnostics.reason
     np.testing.assert_allclose(sol.x, [3.0, 1.5, 0.0], atol=1e-7)
     np.testing.assert_allclose(sol.residuals ** 2, [0.0, 2.25, 20.0], atol=1e-6)
 

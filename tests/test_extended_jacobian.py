@@ -89,7 +89,7 @@ def test_property_equals_reference_on_any_family(seed, n, k, family, path):
     assert sol.x.shape == (stack.n,) and np.isfinite(sol.x).all()
     tol = 1e-8
     if path == "svd":
-        tol = max(tol, 1e3 * np.finfo(float).eps * sol.info["condition_number"])
+        tol = max(tol, 1e3 * np.finfo(float).eps * sol.detail.condition_number)
     assert np.linalg.norm(sol.x - ref) <= tol * max(1.0, np.linalg.norm(ref))
     assert check_lexicographic(stack, sol.x, tol=max(1e-8, tol)).ok
 
@@ -110,7 +110,7 @@ def test_svd_path_says_optimal_only_where_it_is_right_on_the_fuzz_stacks(name):
     assert case.well_conditioned
     sol = formulations.solve(case.stack, "extended_jacobian", nullspace="svd")
     assert sol.status == "optimal"
-    assert sol.info["condition_number"] <= 1e5
+    assert sol.detail.condition_number <= 1e5
     assert relative_distance(sol.x, case.truth) <= 1e-8
 
 
@@ -135,10 +135,11 @@ def test_a_near_ambiguous_rank_decision_has_its_answer_certified(path):
     assert relative_distance(sol.x, ref.x) > 1e-3          # the answer is off...
     assert not check_lexicographic(stack, sol.x).ok         # ...and the certificate sees it
     assert sol.status == "approximate"
-    assert sol.info["near_ambiguous_levels"] == [1, 3, 4]
-    assert sol.info["path_certified"] is False and sol.info["fault_level"] == 4
-    assert "near-ambiguous at levels 1, 3, 4" in sol.info["reason"]
-    assert "certificate at level 4 (l4t0, l4t1, l4t2)" in sol.info["reason"]
+    assert sol.detail.near_ambiguous_levels == [1, 3, 4]
+    assert sol.diagnostics.verification.ok is False
+    assert sol.diagnostics.fault.level == 4 and sol.diagnostics.fault.code == "certificate"
+    assert "near-ambiguous at levels 1, 3, 4" in sol.diagnostics.reason
+    assert "certificate at level 4 (l4t0, l4t1, l4t2)" in sol.diagnostics.reason
 
 
 @pytest.mark.parametrize("case", [5, 20])
@@ -154,8 +155,8 @@ def test_a_certified_near_ambiguous_answer_stays_optimal(case):
     assert case.well_conditioned
     for options in ({}, {"kernel": "lapack"}):
         sol = formulations.solve(case.stack, "extended_jacobian", **options)
-        assert sol.info["near_ambiguous_levels"] and sol.info["path_certified"] is True
-        assert sol.status == "optimal" and "reason" not in sol.info
+        assert sol.detail.near_ambiguous_levels and sol.diagnostics.verification.ok
+        assert sol.status == "optimal" and sol.diagnostics.reason == ""
         assert relative_distance(sol.x, case.truth) <= max(1e-9, case.rounding_error)
 
 
@@ -168,7 +169,7 @@ def test_the_svd_path_answers_where_divide_and_conquer_does_not_converge():
     from prioik.hierarchy.fuzz import equality_case
     case = judged(equality_case(np.random.default_rng([1245, 1245]), 1245).stack)
     sol = formulations.solve(case.stack, "extended_jacobian", nullspace="svd")
-    assert sol.status == "approximate" and sol.info["condition_number"] > 1e13
+    assert sol.status == "approximate" and sol.detail.condition_number > 1e13
     assert relative_distance(sol.x, case.truth) <= 1e-9
 
 
@@ -184,12 +185,12 @@ def test_the_svd_path_answers_where_the_stacked_triangle_does_not_converge(index
     stack = equality_case(np.random.default_rng([1250, index]), index).stack
     assert stack.n == n
     sol = formulations.solve(stack, "extended_jacobian", nullspace="svd")
-    assert sol.status == "approximate" and sol.info["reason"]
+    assert sol.status == "approximate" and sol.diagnostics.reason
     ref = formulations.solve(stack, "reference")
     if ref.status == "optimal":
         assert relative_distance(sol.x, ref.x) <= 1e-9
     else:
-        assert "ambiguous" in sol.info["reason"] and "ambiguous" in ref.info["reason"]
+        assert "ambiguous" in sol.diagnostics.reason and "ambiguous" in ref.diagnostics.reason
 
 
 def test_decision_margin_reads_the_nearest_value_to_the_threshold():
@@ -224,10 +225,10 @@ def test_svd_path_error_is_within_its_estimate_on_near_dependent_levels(scale, w
         truth = nested_truth(stack)[0]
         sol = formulations.solve(stack, "extended_jacobian", nullspace="svd")
         if sol.status != "optimal":
-            assert sol.info["condition_number"] > 1e5 or "ambiguous" in sol.info["reason"]
+            assert sol.detail.condition_number > 1e5 or "ambiguous" in sol.diagnostics.reason
             continue
         optimal += 1
-        bound = 20 * np.finfo(float).eps * sol.info["condition_number"]
+        bound = 20 * np.finfo(float).eps * sol.detail.condition_number
         assert relative_distance(sol.x, truth) <= bound
     assert optimal >= 1
 
@@ -249,7 +250,7 @@ def test_selective_damping_is_inactive_far_from_singularities():
     ref = formulations.solve(stack, "reference").x
     sol = formulations.solve(stack, "extended_jacobian", level_damping=1e-2,
                              singular_threshold=1e-3)
-    assert sol.status == "optimal" and sol.info["damped_levels"] == []
+    assert sol.status == "optimal" and sol.detail.damped_levels == []
     np.testing.assert_allclose(sol.x, ref, atol=1e-10 * np.linalg.norm(ref))
 
 
@@ -268,7 +269,7 @@ def test_compiled_and_lapack_kernels_agree_on_ranks_and_x(seed):
     stack = FAMILIES[family](rng, int(rng.integers(2, 50)), int(rng.integers(1, 8)))
     a = formulations.solve(stack, "extended_jacobian", kernel="cpp")
     b = formulations.solve(stack, "extended_jacobian", kernel="lapack")
-    np.testing.assert_array_equal(a.info["rank_profile"], b.info["rank_profile"])
+    np.testing.assert_array_equal(a.diagnostics.ranks, b.diagnostics.ranks)
     assert np.linalg.norm(a.x - b.x) <= 1e-9 * max(1.0, np.linalg.norm(b.x))
 
 
@@ -290,7 +291,7 @@ def test_tall_level_on_few_free_directions_is_its_least_squares_optimum(path, ra
     sol = formulations.solve(stack, "extended_jacobian", **PATHS[path])
     ref = formulations.solve(stack, "reference").x
     expected = [top, n - top if rank is None else min(rank, n - top)]
-    np.testing.assert_array_equal(sol.info["rank_profile"], expected)
+    np.testing.assert_array_equal(sol.diagnostics.ranks, expected)
     assert np.linalg.norm(sol.x - ref) <= 1e-9 * max(1.0, np.linalg.norm(ref))
     report = check_lexicographic(stack, sol.x, tol=1e-9)
     assert report.ok, str(report)
@@ -333,9 +334,9 @@ def test_level_damping_solves_the_damped_hierarchy_exactly(kernel, how, family, 
     exact = formulations.solve(stack, "reference").x
     sol = formulations.solve(stack, "extended_jacobian", kernel=kernel,
                              **LEVEL_DAMPINGS[how](exact))
-    mu2 = sol.info["level_damping"]
+    mu2 = sol.detail.level_damping
     assert mu2.shape == (len(stack),) and np.all(mu2 >= 0)
-    assert sol.info["damped_levels"] == np.flatnonzero(mu2).tolist()
+    assert sol.detail.damped_levels == np.flatnonzero(mu2).tolist()
     assert sol.status == ("approximate" if mu2.any() else "optimal")
     oracle = formulations.solve(stack, "reference", level_damping=mu2).x
     assert relative_distance(sol.x, oracle) <= 1e-9
@@ -351,7 +352,7 @@ def test_step_bound_is_the_trust_region_step_of_every_level(kernel, seed):
     stack = FAMILIES["conflicting"](rng, int(rng.integers(8, 40)), int(rng.integers(2, 6)))
     bound = 0.3 * np.linalg.norm(formulations.solve(stack, "reference").x)
     mu2 = formulations.solve(stack, "extended_jacobian", step_bound=bound,
-                             kernel=kernel).info["level_damping"]
+                             kernel=kernel).detail.level_damping
     assert mu2.any()          # the bound is active somewhere in this family
     prev = np.zeros(stack.n)
     for i in range(len(stack)):
@@ -371,7 +372,7 @@ def test_step_bound_keeps_higher_level_exact_and_bounds_x(sigma, kernel):
     sol = formulations.solve(stack, "extended_jacobian", step_bound=2.0, kernel=kernel)
     assert sol.residuals[0] <= 1e-12
     assert np.linalg.norm(sol.x) <= 2.0 * (1 + 1e-9)  # exact optimum: 1/sin σ
-    assert sol.status == "approximate" and sol.info["damped_levels"] == [1]
+    assert sol.status == "approximate" and sol.detail.damped_levels == [1]
 
 
 def test_step_bound_by_task_name_per_level_or_one_value_agree():
@@ -383,7 +384,7 @@ def test_step_bound_by_task_name_per_level_or_one_value_agree():
     np.testing.assert_array_equal(one.x, by_name.x)
     free = formulations.solve(stack, "extended_jacobian", step_bound={"high": 2.0})
     exact = formulations.solve(stack, "extended_jacobian")
-    assert free.status == "optimal" and free.info["damped_levels"] == []
+    assert free.status == "optimal" and free.detail.damped_levels == []
     np.testing.assert_array_equal(free.x, exact.x)
 
 
@@ -432,7 +433,7 @@ def test_prepared_solver_on_written_data_equals_solve_bit_for_bit(family, option
         assert np.array_equal(out.x, ref.x)
         assert np.array_equal(out.residuals, ref.residuals)
         assert out.status == ref.status
-        assert np.array_equal(out.info["rank_profile"], ref.info["rank_profile"])
+        assert np.array_equal(out.diagnostics.ranks, ref.diagnostics.ranks)
         for key in ("A", "b", "sqrt_weight"):                 # the data is not mutated
             assert np.array_equal(getattr(data, key), getattr(before, key))
 
@@ -445,7 +446,7 @@ def test_frozen_and_writable_rows_give_the_same_bits():
     assert not stack.data.writeable and writable.writeable
     solver = formulations.prepare(stack.layout, "extended_jacobian")
     a, b = solver.solve(stack), solver.solve(writable)
-    assert a.info["kernel"] == "cpp"
+    assert a.detail.kernel == "cpp"
     assert np.array_equal(a.x, b.x) and a.status == b.status == "optimal"
     assert np.array_equal(a.residuals, b.residuals)
 
@@ -502,11 +503,11 @@ def test_eq27_with_the_papers_z_equals_the_damped_hierarchy(nullspace, family, s
                                 level_damping=[0.0] + [EQ27_LAMBDA] * (k - 1))
     sol = formulations.solve(stack, "extended_jacobian", damping=EQ27_LAMBDA,
                              nullspace=nullspace)
-    assert sol.info["z_basis"] == "task_range"
+    assert sol.detail.z_basis == "task_range"
     assert np.linalg.norm(sol.x - oracle.x) <= 1e-9 * max(1.0, np.linalg.norm(oracle.x))
-    assert sol.info["extended_rows"] == sum(oracle.info["rank_profile"])
-    # the same damped hierarchy is what info["level_damping"] says it is
-    mu2 = sol.info["level_damping"]
+    assert sol.detail.extended_rows == sum(oracle.diagnostics.ranks)
+    # the same damped hierarchy is what detail.level_damping says it is
+    mu2 = sol.detail.level_damping
     again = formulations.solve(stack, "reference", level_damping=mu2).x
     assert np.linalg.norm(again - oracle.x) <= 1e-12 * max(1.0, np.linalg.norm(oracle.x))
 
@@ -528,7 +529,7 @@ def test_eq27_papers_z_keeps_the_top_level_exact_and_the_other_reading_does_not(
             excess = (sol.residuals[0] - best) / scale
             if z_basis == "task_range":
                 worst_paper = max(worst_paper, excess)
-                assert sol.info["extended_rows"] <= stack.n
+                assert sol.detail.extended_rows <= stack.n
             else:
                 worst_other = max(worst_other, excess)
     assert worst_paper <= 1e-12
@@ -550,7 +551,7 @@ def test_eq27_readings_on_the_issue_stack():
     other = formulations.solve(stack, "extended_jacobian", damping=EQ27_LAMBDA,
                                z_basis="null_space")
     oracle = formulations.solve(stack, "reference", level_damping=[0, 1e-2, 1e-2, 1e-2]).x
-    assert paper.info["extended_rows"] == 12 and other.info["extended_rows"] == 23
+    assert paper.detail.extended_rows == 12 and other.detail.extended_rows == 23
     assert extended_system(stack, damping=EQ27_LAMBDA)[0].shape == (12, 12)
     assert paper.residuals[0] <= 1e-13
     assert other.residuals[0] >= 1e-4
@@ -570,7 +571,7 @@ def test_the_two_readings_agree_for_eq18_and_as_damping_vanishes(family):
         b = formulations.solve(stack, "extended_jacobian", nullspace="svd",
                                z_basis="null_space")
         assert np.linalg.norm(a.x - b.x) <= 1e-8 * max(1.0, np.linalg.norm(a.x))
-        assert a.info["extended_rows"] <= b.info["extended_rows"]
+        assert a.detail.extended_rows <= b.detail.extended_rows
         if family == "degenerate":
             continue            # 1e-6 / 1e4 levels: λ → 0 is relative to no one scale
         exact = formulations.solve(stack, "reference").x

@@ -130,7 +130,7 @@ def lexicographically_no_worse(mine: np.ndarray, other: np.ndarray, tol: float) 
 
 
 def assert_exact(stack: TaskStack, sol, tol: float = KKT_TOL) -> None:
-    assert sol.status == "optimal", sol.info.get("message")
+    assert sol.status == "optimal", sol.diagnostics.reason
     assert np.isfinite(sol.x).all()
     report = kkt_report(stack, sol.x)
     assert max(report) <= tol, report
@@ -246,7 +246,7 @@ def test_frozen_and_writable_rows_give_the_same_answer_bit_for_bit(seed):
         for _ in range(2):        # the second solve of a warm solver tries equality first
             a, b = frozen_solver.solve(stack), writable_solver.solve(writable)
             assert a.status == b.status and np.array_equal(a.x, b.x)
-            assert a.info["equality_first"] == b.info["equality_first"]
+            assert a.detail.equality_first == b.detail.equality_first
             assert np.array_equal(a.residuals, b.residuals)
 
 
@@ -317,8 +317,8 @@ def test_zero_row_with_unreachable_bounds_is_a_constant_violation():
     without = prioik.solve(TaskStack([[box], *lower_levels]), NAME)
     assert with_zero.status == "optimal"
     assert np.isfinite(with_zero.x).all()
-    assert with_zero.info["level_violation"][0] == pytest.approx(4.0, abs=1e-12)
-    assert 0 in with_zero.info["infeasible_levels"]
+    assert with_zero.detail.level_violation[0] == pytest.approx(4.0, abs=1e-12)
+    assert 0 in with_zero.diagnostics.infeasible_levels
     assert np.allclose(with_zero.x, without.x, atol=1e-12)
     # and as a lower level, between other levels
     stack = TaskStack([[box], [zero], *lower_levels])
@@ -332,9 +332,9 @@ def test_infeasible_top_level_keeps_least_violation_and_is_named(seed):
     stack = INEQUALITY_FAMILIES["infeasible_inequality"](np.random.default_rng(seed), 6, 3)
     sol = prioik.solve(stack, NAME)
     assert_exact(stack, sol)
-    assert sol.info["infeasible_levels"][:1] == [0]
+    assert sol.diagnostics.infeasible_levels[:1] == [0]
     # c x = 0 violates each of c x ≥ 1 and c x ≤ −1 by 1
-    assert sol.info["level_violation"][0] == pytest.approx(2.0, rel=1e-12)
+    assert sol.detail.level_violation[0] == pytest.approx(2.0, rel=1e-12)
 
 
 def test_redundant_and_degenerate_constraints():
@@ -367,11 +367,11 @@ def test_rank_deficient_inequality_level():
 def test_iteration_cap_is_reported_as_approximate():
     stack = random_inequality_stack(np.random.default_rng(11), 12, 4)
     full = prioik.solve(stack, NAME)
-    assert full.status == "optimal" and full.info["iterations"].max() > 1
+    assert full.status == "optimal" and full.diagnostics.iterations.max() > 1
     sol = prioik.solve(stack, NAME, max_iter=1)
     assert sol.status == "approximate"
-    lv = sol.info["failed_level"]
-    assert "max_iter=1" in sol.info["message"] and f"level {lv}" in sol.info["message"]
+    lv = sol.diagnostics.fault.level
+    assert "max_iter=1" in sol.diagnostics.reason and f"level {lv}" in sol.diagnostics.reason
     assert np.isfinite(sol.x).all()
 
 
@@ -394,12 +394,12 @@ def test_a_cycle_of_rounding_stops_at_the_stall_limit_not_the_cap(warm_start):
     stack = draw("bounds", 1205, 1331).stack
     solver = prioik.prepare(stack.layout, NAME, warm_start=warm_start, max_iter=10_000)
     sol = solver.solve(stack)
-    assert "capped_levels" not in sol.info
+    assert not sol.diagnostics.capped_levels
     # the limit (2 rows + 10, core/src/active_set_solve.cpp) counts the rows up to the
     # level; all of the stack's bound it
-    assert sol.info["iterations"][2] <= 2 * stack.layout.m + 10 + 10
+    assert sol.diagnostics.iterations[2] <= 2 * stack.layout.m + 10 + 10
     # the decision's margin (~1.01) is deep inside the ambiguity band (AMBIGUITY = 1e3)
-    assert sol.status == "approximate" and sol.info["ambiguous_levels"] == [2]
+    assert sol.status == "approximate" and sol.diagnostics.ambiguous_levels == [2]
     w = lexicographic_residuals(stack, sol.x) ** 2
     compared = 0
     for backend in ("quadprog", "clarabel"):
@@ -427,7 +427,7 @@ def test_a_degenerate_point_takes_the_working_set_its_multipliers_need(warm_star
     solver = prioik.prepare(stack.layout, NAME, warm_start=warm_start)
     sol = solver.solve(stack)
     posture = stack.layout.k - 1
-    assert sol.info["iterations"][posture] <= 3, sol.info["iterations"]
+    assert sol.diagnostics.iterations[posture] <= 3, sol.diagnostics.iterations
     assert_exact(stack, sol)
     ref = prioik.solve(stack, "cascaded_qp", solver="proxqp", tolerance=1e-12)
     assert ref.status == "optimal"
@@ -446,7 +446,7 @@ def test_a_degenerate_point_of_the_tie_break_takes_the_working_set_its_multiplie
     from prioik.benchmarks.fuzz import draw
     stack = draw("bounds", 7, 1268).stack
     sol = prioik.solve(stack, NAME)
-    assert sol.info["iterations"][-1] <= 3, sol.info["iterations"]
+    assert sol.diagnostics.iterations[-1] <= 3, sol.diagnostics.iterations
     assert sol.status == "optimal"
     assert_exact(stack, sol)
 
@@ -469,7 +469,7 @@ def test_a_level_of_extreme_scale_is_solved_equilibrated(scale):
     solver = prioik.prepare(stack.layout, NAME)
     for _ in range(3):
         sol = solver.solve(stack)
-        assert sol.info["equilibrated_levels"] == [0, 1]
+        assert sol.diagnostics.equilibrated_levels == [0, 1]
         assert sol.x * scale == pytest.approx([1.0, 2.0], rel=1e-14)
         assert check_lexicographic(stack, sol.x).ok
         if scale > 1e-150:
@@ -477,11 +477,11 @@ def test_a_level_of_extreme_scale_is_solved_equilibrated(scale):
         elif sol.status == "failed":
             # the squares of the level's rounding (~1e184) overflow: its weighted
             # squared violation is not a float64
-            assert "non-finite" in sol.info["message"]
+            assert "non-finite" in sol.diagnostics.reason
         else:
             # the precision reading: ‖x‖'s rounding is coarser than the box rows' tolerance
             assert sol.status == "approximate"
-            assert "x's coordinates are known to about" in sol.info["reason"]
+            assert "x's coordinates are known to about" in sol.diagnostics.reason
 
 # -------------------------------------------------------------- warm start
 def _trajectory(rng, n, steps):
@@ -517,8 +517,8 @@ def test_warm_start_gives_the_cold_answer_in_fewer_iterations(seed):
         assert a.status == b.status == "optimal"
         assert np.linalg.norm(a.x - b.x) <= 1e-9 * max(1.0, np.linalg.norm(b.x))
         assert_exact(stack, a)
-        it_warm += int(a.info["iterations"].sum())
-        it_cold += int(b.info["iterations"].sum())
+        it_warm += int(a.diagnostics.iterations.sum())
+        it_cold += int(b.diagnostics.iterations.sum())
     assert it_warm < it_cold
 
 
@@ -561,7 +561,7 @@ def _limits_stack(n, target, *, box=1.0, level_of_box=1, equal_rows=False):
 def test_equality_first_answers_while_no_inequality_row_is_held(level_of_box, equal_rows):
     """A warm solve whose last answer held no inequality row first solves the equality
     rows alone (the extended Jacobian's nested QR); that answer satisfies every bound
-    here, so it is the answer: zero iterations, info['equality_first'], the cold answer
+    here, so it is the answer: zero iterations, detail.equality_first, the cold answer
     to 1e-12 and the independent KKT check. The first solve has no last answer."""
     n = 6
     warm = prioik.prepare(_limits_stack(n, [0.1, 0.2], level_of_box=level_of_box,
@@ -575,11 +575,11 @@ def test_equality_first_answers_while_no_inequality_row_is_held(level_of_box, eq
         assert_exact(stack, a)
         assert np.linalg.norm(a.x - b.x) <= 1e-12 * max(1.0, np.linalg.norm(b.x))
         assert np.allclose(a.residuals, b.residuals, rtol=1e-12, atol=1e-14)
-        assert list(a.info["rank_profile"]) == list(b.info["rank_profile"])
-        assert not b.info["equality_first"]
-        firsts.append(a.info["equality_first"])
-        if a.info["equality_first"]:
-            assert not a.info["iterations"].any()
+        assert list(a.diagnostics.ranks) == list(b.diagnostics.ranks)
+        assert not b.detail.equality_first
+        firsts.append(a.detail.equality_first)
+        if a.detail.equality_first:
+            assert not a.diagnostics.iterations.any()
     assert firsts == [False] + [True] * 7
 
 
@@ -601,10 +601,10 @@ def test_equality_first_gives_way_to_the_active_set_when_a_bound_is_crossed():
         a, b = warm.solve(stack), cold.solve(stack)
         assert_exact(stack, a)
         assert np.linalg.norm(a.x - b.x) <= 1e-12 * max(1.0, np.linalg.norm(b.x))
-        firsts.append(a.info["equality_first"])
+        firsts.append(a.detail.equality_first)
         held.append(bool(abs(a.x[0]) >= 1.0 - 1e-12))
-        if a.info["equality_first"]:
-            assert not a.info["iterations"].any()
+        if a.detail.equality_first:
+            assert not a.diagnostics.iterations.any()
     assert held == [False, False, False, True, True, True, False, False, False]
     assert firsts == [False, True, True, True, False, False, True, True, True]
 
@@ -619,7 +619,7 @@ def _reach_beyond_limits(n, target):
 
 def test_held_rows_are_tried_as_equalities_and_proved_by_their_multipliers():
     """Every warm answer after the first is an equality-first try's, proved: zero
-    iterations, info['equality_first'], the cold answer to 1e-12, the KKT check.
+    iterations, detail.equality_first, the cold answer to 1e-12, the KKT check.
 
     At 1.3 the equality rows' answer (x₀ = 1.3) violates x₀ ≤ 1, and the second guess
     holds that row. At 1.4 and 1.6 the first guess is the kept held row: the reach
@@ -641,10 +641,10 @@ def test_held_rows_are_tried_as_equalities_and_proved_by_their_multipliers():
         assert_exact(stack, a)
         assert np.linalg.norm(a.x - b.x) <= 1e-12 * max(1.0, np.linalg.norm(b.x))
         assert np.allclose(a.residuals, b.residuals, rtol=1e-12, atol=1e-14)
-        firsts.append(bool(a.info["equality_first"]))
+        firsts.append(bool(a.detail.equality_first))
         held.append(bool(a.x[0] == 1.0))
-        if a.info["equality_first"]:
-            assert not a.info["iterations"].any()
+        if a.detail.equality_first:
+            assert not a.diagnostics.iterations.any()
     assert held == [False, True, True, True, False, False]
     assert firsts == [False, True, True, True, True, True]
 
@@ -662,7 +662,7 @@ def _warm_answers_are_proved(make, targets, last=None):
         assert a.status == b.status == "optimal"
         assert_exact(stack, a)
         assert np.linalg.norm(a.x - b.x) <= 1e-12 * max(1.0, np.linalg.norm(b.x))
-        firsts.append(bool(a.info["equality_first"]))
+        firsts.append(bool(a.detail.equality_first))
     if last is not None:
         last.append(a)
     return firsts
@@ -708,7 +708,7 @@ def test_a_released_row_that_overshoots_holds_the_row_that_blocks_first():
     0), leaves both limits: x₀ beyond 2 by 8 and x₁ below −0.1 by 0.9. On the way there
     from the last feasible guess's answer, (0, 0, 0), x₁ leaves first (at 1/10 of the way,
     x₀ at 1/5): the guess after holds x₁ (the primal active-set ratio test), whose answer
-    (1, −0.1, 0) is proved: zero iterations, info['equality_first'], the cold answer.
+    (1, −0.1, 0) is proved: zero iterations, detail.equality_first, the cold answer.
     Holding the most violated row (x₀ at 2) instead, three guesses were refuted and the
     step ran the active set (1, 1 and 3 iterations on its levels)."""
     def stack(p):
@@ -719,7 +719,7 @@ def test_a_released_row_that_overshoots_holds_the_row_that_blocks_first():
     last: list = []
     assert _warm_answers_are_proved(stack, [-5.0, 10.0], last) == [False, True]
     np.testing.assert_allclose(last[0].x, [1.0, -0.1, 0.0], atol=1e-14)
-    assert not last[0].info["iterations"].any()
+    assert not last[0].diagnostics.iterations.any()
 
 
 def _limits_trajectory(seed: int, steps: int = 10) -> list[TaskStack]:
@@ -768,13 +768,13 @@ def test_warm_answers_with_held_limits_equal_cold_ones():
         cold = prioik.prepare(warm.layout, NAME, warm_start=False)
         for stack in stacks:
             a, b = warm.solve(stack), cold.solve(stack)
-            assert a.status == b.status == "optimal", (seed, a.info.get("message"))
+            assert a.status == b.status == "optimal", (seed, a.diagnostics.reason)
             assert np.linalg.norm(a.x - b.x) <= 1e-9 * max(1.0, np.linalg.norm(b.x)), seed
             assert prioik.check_lexicographic(stack, a.x, minimum_norm=True).ok, seed
             limits = stack.levels[1][0]
             on_bound = np.isclose(limits.A @ a.x, limits.lower, rtol=0, atol=1e-12) | \
                 np.isclose(limits.A @ a.x, limits.upper, rtol=0, atol=1e-12)
-            held_tries += bool(a.info["equality_first"] and on_bound.any())
+            held_tries += bool(a.detail.equality_first and on_bound.any())
     assert held_tries >= 100
 
 
@@ -805,7 +805,7 @@ def test_held_rows_pinned_above_a_level_that_takes_the_rest_are_proved():
         assert_exact(s, a)
         assert a.x[0] == 1.0
         assert np.linalg.norm(a.x - b.x) <= 1e-12 * max(1.0, np.linalg.norm(b.x))
-        firsts.append(bool(a.info["equality_first"]))
+        firsts.append(bool(a.detail.equality_first))
     assert firsts == [False, True, True, True]
 
 
@@ -826,7 +826,7 @@ def test_held_rows_that_take_every_coordinate_are_not_read_as_triangular():
     for t in (5.0, 5.1, 5.2):
         s = stack(t)
         a, b = warm.solve(s), cold.solve(s)
-        assert a.status == b.status == "optimal", a.info.get("message")
+        assert a.status == b.status == "optimal", a.diagnostics.reason
         assert_exact(s, a)
         np.testing.assert_allclose(a.x, [1.0, -1.0, 1.0], atol=1e-14)
         assert np.linalg.norm(a.x - b.x) <= 1e-12
@@ -836,12 +836,12 @@ def test_equality_first_is_off_without_warm_start_and_after_reset():
     n = 5
     stack = _limits_stack(n, [0.1, 0.1])
     off = prioik.prepare(stack, NAME, warm_start=False)
-    assert not any(off.solve(stack).info["equality_first"] for _ in range(3))
+    assert not any(off.solve(stack).detail.equality_first for _ in range(3))
     on = prioik.prepare(stack, NAME)
-    assert [on.solve(stack).info["equality_first"] for _ in range(2)] == [False, True]
+    assert [on.solve(stack).detail.equality_first for _ in range(2)] == [False, True]
     on.reset()
     after = on.solve(stack)
-    assert not after.info["equality_first"] and after.info["iterations"].any()
+    assert not after.detail.equality_first and after.diagnostics.iterations.any()
     assert np.array_equal(after.x, off.solve(stack).x)
     assert prioik.solve_batch([stack] * 3, NAME).statuses == ["optimal"] * 3
 
@@ -876,7 +876,7 @@ def test_equality_first_answers_a_level_of_equality_and_held_rows(conflict):
         assert check_lexicographic(stack, sol.x, minimum_norm=True).ok
         a = stack.levels[0][-1].A @ sol.x
         assert abs(a[0] - 0.2) <= 1e-12            # the region's row is held
-        assert sol.info["equality_first"] is (step > 0 and not conflict)
+        assert sol.detail.equality_first is (step > 0 and not conflict)
 
 
 @settings(max_examples=60, deadline=None)
@@ -959,7 +959,7 @@ def test_each_bad_value_is_named_on_both_paths(task, field, row, value, what, ar
     solver = prioik.prepare(stack.layout, NAME)
     if armed:
         solver.solve(stack)
-        assert solver.solve(stack).info["equality_first"]
+        assert solver.solve(stack).detail.equality_first
     data = stack.data.copy()
     tasks = [t for level in stack.levels for t in level]
     at = [t.name for t in tasks].index(task)
@@ -1051,8 +1051,9 @@ def test_an_ambiguous_rank_decision_is_approximate_and_named():
     sol = prioik.solve(stack, NAME)
     ej = prioik.solve(stack, "extended_jacobian")
     assert sol.status == ej.status == "approximate"
-    assert sol.info["ambiguous_levels"] == [0] and "ambiguous at level 0" in sol.info["reason"]
-    assert f"{AMBIGUITY:g}x" in sol.info["reason"]
+    assert sol.diagnostics.ambiguous_levels == [0]
+    assert "ambiguous at level 0" in sol.diagnostics.reason
+    assert f"{AMBIGUITY:g}x" in sol.diagnostics.reason
     # a clear decision either side stays optimal
     for tiny in (1e-14, 1e-4):
         A[1, 1] = tiny
@@ -1070,7 +1071,7 @@ def test_statuses_follow_the_extended_jacobians_rank_rule_on_equality_stacks():
         stack = equality_case(np.random.default_rng([23, i]), max_n=12, max_levels=5,
                               max_rows=8, truth=False).stack
         sol, ej = prioik.solve(stack, NAME), prioik.solve(stack, "extended_jacobian")
-        assert sol.status == ej.status, (i, sol.info, ej.info)
+        assert sol.status == ej.status, (i, sol.diagnostics, ej.diagnostics)
         approximate += sol.status == "approximate"
     assert approximate >= 10
 
@@ -1110,7 +1111,7 @@ def test_a_wrong_signed_multiplier_is_read_at_the_levels_gain():
     from prioik.hierarchy.fuzz import bounds_case
     stack = bounds_case(np.random.default_rng([2026, 434]), 434).stack
     sol = prioik.solve(stack, NAME)
-    assert sol.status == "optimal" and sol.info["path_certified"] is True
+    assert sol.status == "optimal" and sol.diagnostics.verification.ok is True
     report = check_lexicographic(stack, sol.x, minimum_norm=True)
     assert report.ok and report.worst_relative <= 1e-10, str(report)   # measured 1.2e-12
     assert max(kkt_report(stack, sol.x)) <= KKT_TOL
@@ -1180,8 +1181,8 @@ def test_a_level_float64_cannot_give_at_a_huge_x_is_approximate(seed, case, leve
     sol = prioik.solve(stack, NAME)
     assert not check_lexicographic(stack, sol.x, minimum_norm=True).ok
     assert sol.status == "approximate"
-    assert sol.info["precision_limited_levels"] == [level]
-    assert f"level {level} " in sol.info["reason"] and "‖x‖ = " in sol.info["reason"]
+    assert sol.diagnostics.precision_limited_levels == [level]
+    assert f"level {level} " in sol.diagnostics.reason and "‖x‖ = " in sol.diagnostics.reason
 
 
 @pytest.mark.parametrize("name", ["extended_jacobian", "reference", NAME])
@@ -1194,7 +1195,7 @@ def test_an_equality_stack_at_float64s_limit_is_approximate_for_every_exact_meth
     stack = inequality_case(np.random.default_rng([2, 827]), 827).stack
     sol = prioik.solve(stack, name)
     assert not check_lexicographic(stack, sol.x).ok
-    assert sol.status == "approximate" and sol.info["precision_limited_levels"] == [3]
+    assert sol.status == "approximate" and sol.diagnostics.precision_limited_levels == [3]
     assert prioik.solve_batch([stack, stack], name).statuses == ["approximate"] * 2
 
 
@@ -1214,18 +1215,18 @@ def test_independent_14_976_wrong_working_set_is_not_called_optimal():
     stack = load_stack(_ADVERSARIAL_DIR / "independent-14-976.json")
     sol = prioik.solve(stack, NAME)
     assert sol.status == "approximate"
-    assert sol.info["ambiguous_levels"] == [1]
+    assert sol.diagnostics.ambiguous_levels == [1]
     w1 = sol.residuals[1] ** 2
     if w1 <= 1e-12:
         # the exact optimum (level 1 met): the status for the ambiguous decision
         assert check_lexicographic(stack, sol.x).ok
-        assert "rank decision ambiguous at level 1" in sol.info["reason"]
+        assert "rank decision ambiguous at level 1" in sol.diagnostics.reason
         return
     assert w1 > 1.6e-4              # above the cascades' value: rejected, not vouched for
     assert not check_lexicographic(stack, sol.x).ok
-    assert sol.info["ambiguous_path_levels"] == [1] and sol.info["path_certified"] is False
-    assert "level 1 passed through an ambiguous rank decision" in sol.info["reason"]
-    assert "rejects level 1 (box2, np3)" in sol.info["reason"]
+    assert sol.detail.ambiguous_path_levels == [1] and sol.diagnostics.verification.ok is False
+    assert "level 1 passed through an ambiguous rank decision" in sol.diagnostics.reason
+    assert "rejects level 1 (box2, np3)" in sol.diagnostics.reason
 
 
 @pytest.mark.parametrize("case", [32, 42, 448])
@@ -1238,9 +1239,9 @@ def test_an_ambiguous_path_to_a_certified_answer_stays_optimal(case):
     from prioik.hierarchy.fuzz import inequality_case
     stack = inequality_case(np.random.default_rng([1, case]), case).stack
     sol = prioik.solve(stack, NAME)
-    assert sol.info["ambiguous_path_levels"] and check_lexicographic(stack, sol.x).ok
-    assert sol.info["path_certified"] is True
-    assert sol.status == "optimal" and "reason" not in sol.info
+    assert sol.detail.ambiguous_path_levels and check_lexicographic(stack, sol.x).ok
+    assert sol.diagnostics.verification.ok is True
+    assert sol.status == "optimal" and sol.diagnostics.reason == ""
 
 
 def test_independent_12_407_is_not_optimal_above_its_level_1_optimum():
@@ -1286,17 +1287,17 @@ def test_a_level_of_wide_row_scales_on_an_ambiguous_path_is_not_vouched_for(case
         assert sol.status in ("optimal", "approximate")
         return
     # above it: never vouched for, by whichever reading rounding makes reject it here
-    assert sol.status == "approximate" and sol.info["path_certified"] is False
-    assert level in sol.info["ambiguous_path_levels"]
+    assert sol.status == "approximate" and sol.diagnostics.verification.ok is False
+    assert level in sol.detail.ambiguous_path_levels
     report = check_lexicographic(stack, sol.x)
     if by == "certificate":
         assert not report.ok and report.fault_level == level, str(report)
-        assert f"the certificate rejects level {level} (" in sol.info["reason"]
+        assert f"the certificate rejects level {level} (" in sol.diagnostics.reason
     elif report.ok:
-        assert f"at level {level} (" in sol.info["reason"]
-        assert f"span more than {CERTIFIABLE_SPREAD:g}x" in sol.info["reason"]
+        assert f"at level {level} (" in sol.diagnostics.reason
+        assert f"span more than {CERTIFIABLE_SPREAD:g}x" in sol.diagnostics.reason
     else:
-        assert f"the certificate rejects level {report.fault_level} (" in sol.info["reason"]
+        assert f"the certificate rejects level {report.fault_level} (" in sol.diagnostics.reason
 
 
 @pytest.mark.parametrize("warm_start", [False, True])
@@ -1323,12 +1324,12 @@ def test_a_box_row_at_a_bound_finer_than_xs_precision_is_approximate(warm_start)
         assert sol.status == status
         assert sol.x[0] == far
         if status == "approximate":
-            assert "known to about 3.6e-07" in sol.info["reason"]
-            assert "1 box row(s) near a bound" in sol.info["reason"]
-            assert sol.info["equality_first"] is False
+            assert "known to about 3.6e-07" in sol.diagnostics.reason
+            assert "1 box row(s) near a bound" in sol.diagnostics.reason
+            assert sol.detail.equality_first is False
             assert abs(sol.x[1] - 1e-8) <= 3.6e-7
         else:
-            assert "reason" not in sol.info and sol.x[1] == pytest.approx(1e-8, rel=1e-12)
+            assert sol.diagnostics.reason == "" and sol.x[1] == pytest.approx(1e-8, rel=1e-12)
 
 
 def test_bounds_31_1103_held_row_within_its_release_tolerance_is_refined():
@@ -1348,9 +1349,9 @@ def test_bounds_31_1103_held_row_within_its_release_tolerance_is_refined():
     stack = draw("bounds", 31, 1103).stack
     sol = prioik.solve(stack, NAME)
     assert sol.status == "optimal" and check_lexicographic(stack, sol.x).ok
-    assert sol.info["near_release_levels"] == [0] and sol.info["path_certified"] is True
-    assert sol.info["refined_primal_tol"] == pytest.approx(1e-12)
-    assert "level 0 ended with a held row inside its bound" in sol.info["refined_from"]
+    assert sol.detail.near_release_levels == [0] and sol.diagnostics.verification.ok is True
+    assert sol.detail.refined_primal_tol == pytest.approx(1e-12)
+    assert "level 0 ended with a held row inside its bound" in sol.detail.refined_from
     ref = prioik.solve(stack, "cascaded_qp", solver="quadprog")
     assert ref.status == "optimal" and check_lexicographic(stack, ref.x).ok
     w, wq = sol.residuals ** 2, ref.residuals ** 2
@@ -1373,10 +1374,10 @@ def test_a_refined_answer_the_certificate_rejects_stays_approximate(monkeypatch)
     stack = draw("bounds", 31, 1103).stack
     sol = prioik.solve(stack, NAME)
     assert not check_lexicographic(stack, sol.x).ok
-    assert sol.status == "approximate" and sol.info["path_certified"] is False
-    assert sol.info["near_release_levels"] == [0] and sol.info["ambiguous_levels"] == [0]
-    assert "refined_primal_tol" not in sol.info
-    assert "level 0 ended with a held row inside its bound" in sol.info["reason"]
+    assert sol.status == "approximate" and sol.diagnostics.verification.ok is False
+    assert sol.detail.near_release_levels == [0] and sol.diagnostics.ambiguous_levels == [0]
+    assert sol.detail.refined_primal_tol is None
+    assert "level 0 ended with a held row inside its bound" in sol.diagnostics.reason
     ref = prioik.solve(stack, "cascaded_qp", solver="quadprog")
     assert sol.residuals[0] ** 2 > 2.5 * ref.residuals[0] ** 2
 
@@ -1395,7 +1396,7 @@ def test_independent_13_783_right_answer_is_certified():
     report = check_lexicographic(stack, sol.x)
     assert report.ok and report.band_rows_fixed == 0
     assert report.levels[1].relative <= 1e-9
-    assert sol.status == "optimal" and sol.info["path_certified"] is True
+    assert sol.status == "optimal" and sol.diagnostics.verification.ok is True
 
 
 def test_a_rank_decision_near_the_ambiguity_band_is_certified():
@@ -1409,13 +1410,13 @@ def test_a_rank_decision_near_the_ambiguity_band_is_certified():
     from prioik.hierarchy import AMBIGUITY, NEAR_AMBIGUITY, check_lexicographic, load_stack
     stack = load_stack(Path(__file__).parent / "data" / "fuzz" / "inequality-drift-1478.json")
     sol = prioik.solve(stack, NAME)
-    assert sol.status == "approximate" and sol.info["near_ambiguous_levels"] == [0, 1]
-    assert sol.info["path_certified"] is False
-    assert "the certificate rejects level 1" in sol.info["reason"]
+    assert sol.status == "approximate" and sol.detail.near_ambiguous_levels == [0, 1]
+    assert sol.diagnostics.verification.ok is False
+    assert "the certificate rejects level 1" in sol.diagnostics.reason
     assert not check_lexicographic(stack, sol.x).ok
     ref = prioik.solve(stack, "cascaded_qp", solver="clarabel")
     # passed by the certificate, whose own rank decision there is ambiguous
-    assert ref.status == "approximate" and ref.info["ambiguous_levels"]
+    assert ref.status == "approximate" and ref.diagnostics.ambiguous_levels
     assert check_lexicographic(stack, ref.x, minimum_norm=True).ok
     w1, r1 = sol.residuals[1] ** 2, ref.residuals[1] ** 2
     assert 1e-8 < (w1 - r1) / r1 < 2e-8
@@ -1471,18 +1472,18 @@ def test_a_row_held_off_its_bound_for_the_levels_below_is_refined_to_the_optimum
     stack = load_stack(Path(__file__).parent / "data" / "fuzz" / "inequality-7002-1384.json")
     sol = prioik.solve(stack, NAME)
     assert check_lexicographic(stack, sol.x).ok
-    assert sol.status == "optimal" and sol.info["held_off_bound_levels"] == [1]
-    assert sol.info["refined_primal_tol"] == pytest.approx(1e-14)
-    assert sol.info["refined_dual_tol"] == pytest.approx(1e-16)
-    assert "level 1 kept a row off its bound" in sol.info["refined_from"]
+    assert sol.status == "optimal" and sol.detail.held_off_bound_levels == [1]
+    assert sol.detail.refined_primal_tol == pytest.approx(1e-14)
+    assert sol.detail.refined_dual_tol == pytest.approx(1e-16)
+    assert "level 1 kept a row off its bound" in sol.detail.refined_from
     w = lexicographic_residuals(stack, sol.x) ** 2
     assert w[3] == pytest.approx(0.0759022606, rel=1e-6)
     # with one refinement round the rows stay held: the first answer, 'approximate'
     monkeypatch.setattr(H, "REFINE_ROUNDS", 1)
     once = prioik.solve(stack, NAME)
-    assert once.status == "approximate" and once.info["held_off_bound_levels"] == [1]
-    assert "level 1 kept a row off its bound" in once.info["reason"]
-    assert "refined_primal_tol" not in once.info
+    assert once.status == "approximate" and once.detail.held_off_bound_levels == [1]
+    assert "level 1 kept a row off its bound" in once.diagnostics.reason
+    assert once.detail.refined_primal_tol is None
     assert not check_lexicographic(stack, once.x).ok
     wo = lexicographic_residuals(stack, once.x) ** 2
     assert wo[3] == pytest.approx(12.9, rel=1e-2)
@@ -1500,7 +1501,8 @@ def test_a_flagged_solve_stays_in_the_compiled_core():
             "from prioik.hierarchy import load_stack\n"
             f"s = load_stack({str(path)!r})\n"
             "sol = prioik.prepare(s.layout, 'hierarchical_active_set').solve(s.data)\n"
-            "print(sol.status, sol.info['path_certified'], 'refined_primal_tol' in sol.info,\n"
+            "print(sol.status, sol.diagnostics.verification.ok,\n"
+            "      sol.detail.refined_primal_tol is not None,\n"
             "      'scipy' in sys.modules)\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=300, env={**os.environ, "OPENBLAS_NUM_THREADS": "1"})

@@ -58,16 +58,16 @@ def test_lexls_reaches_the_active_sets_level_values(family, seed):
     stack = build(rng, 12, 4)
     ours = prioik.solve(stack, "hierarchical_active_set")
     sol = prioik.solve(stack, NAME, max_factorizations=10_000)
-    assert sol.info["termination"].startswith("solved"), sol.info
-    assert ours.status == "optimal", ours.info
+    assert sol.detail.termination.startswith("solved"), sol.diagnostics
+    assert ours.status == "optimal", ours.diagnostics
     w_ours, w_lexls = _values(stack, ours.x), _values(stack, sol.x)
     if sol.status == "optimal":
         assert check_lexicographic(stack, sol.x).ok
         assert np.all(np.abs(w_lexls - w_ours) <= LEVEL_TOL * np.maximum(1.0, w_ours)), \
             (w_ours, w_lexls)
         return
-    assert sol.status == "approximate" and "fault_level" in sol.info, sol.info
-    bad = sol.info["fault_level"]
+    assert sol.status == "approximate" and sol.diagnostics.fault is not None, sol.diagnostics
+    bad = sol.diagnostics.fault.level
     above = slice(0, bad)
     assert np.all(np.abs(w_lexls[above] - w_ours[above])
                   <= LEVEL_TOL * np.maximum(1.0, w_ours[above]))
@@ -79,7 +79,7 @@ def test_lexls_solves_its_own_test_hierarchy():
     """lexls's own test file (its #Solution: the last level's value 1.58890)."""
     problem = load_peer(PEER_DIR / "lexls_test_01.dat")[0]
     sol = prioik.solve(problem.stack, NAME)
-    assert sol.status == "optimal", sol.info
+    assert sol.status == "optimal", sol.diagnostics
     assert abs(_values(problem.stack, sol.x)[-1] - 1.58890) <= 1e-5
 
 
@@ -90,31 +90,31 @@ def test_a_hot_start_from_the_same_data_reuses_the_working_set():
     solver = prioik.prepare(stack.layout, NAME)
     cold = solver.solve(stack)
     hot = solver.solve(stack)
-    assert not cold.info["hot_started"] and hot.info["hot_started"]
-    assert hot.info["factorizations"] <= cold.info["factorizations"]
+    assert not cold.detail.hot_started and hot.detail.hot_started
+    assert hot.detail.factorizations <= cold.detail.factorizations
     np.testing.assert_allclose(_values(stack, hot.x), _values(stack, cold.x),
                                rtol=1e-9, atol=1e-12)
     solver.reset()
-    assert not solver.solve(stack).info["hot_started"]
+    assert not solver.solve(stack).detail.hot_started
     again = prioik.prepare(stack.layout, NAME, hot_start=False)
     again.solve(stack)
-    assert not again.solve(stack).info["hot_started"]
+    assert not again.solve(stack).detail.hot_started
 
 
 @needs_lexls
 def test_a_capped_solve_is_not_optimal():
     """At lexls's factorization cap the answer is where it stopped: 'approximate' with
-    info['capped'], never 'optimal'."""
+    detail.capped, never 'optimal'."""
     n = 10
     rng = np.random.default_rng(2)
     box = Task("box", np.eye(n), lower=-0.1 * np.ones(n), upper=0.1 * np.ones(n))
     pull = Task("pull", rng.standard_normal((n, n)), 10 * rng.standard_normal(n))
     stack = TaskStack([[box], [pull]])
     full = prioik.solve(stack, NAME)
-    assert full.status == "optimal" and full.info["factorizations"] > 2, full.info
+    assert full.status == "optimal" and full.detail.factorizations > 2, full.diagnostics
     capped = prioik.solve(stack, NAME, max_factorizations=1)
-    assert capped.status == "approximate" and capped.info["capped"], capped.info
-    assert "factorization" in capped.info["message"]
+    assert capped.status == "approximate" and capped.detail.capped, capped.diagnostics
+    assert "factorization" in capped.diagnostics.reason
 
 
 @needs_lexls
@@ -140,7 +140,7 @@ def test_the_certificate_demotes_a_wrong_answer(monkeypatch):
 
     solver._impl._solver = Shifted(solver._impl._solver)
     sol = solver.solve(stack)
-    assert sol.status == "approximate" and sol.info["fault_level"] == 0, sol.info
+    assert sol.status == "approximate" and sol.diagnostics.fault.level == 0, sol.diagnostics
     raw = prioik.prepare(stack.layout, NAME, check=False)
     raw._impl._solver = Shifted(raw._impl._solver)
     assert raw.solve(stack).status == "optimal"

@@ -120,9 +120,9 @@ def test_a_limb_reach_with_joint_limits_is_exact_on_every_robot(name, mode):
         w.posture(state, "posture", robot.q0)
         stack = w.targets(state)
         answer = warm.solve(stack)
-        assert answer.status == "optimal", (step, answer.info)
+        assert answer.status == "optimal", (step, answer.diagnostics)
         reference = cold.solve(stack)
-        assert reference.status == "optimal", (step, reference.info)
+        assert reference.status == "optimal", (step, reference.diagnostics)
         gap = np.linalg.norm(answer.x - reference.x)
         assert gap <= WARM_TOL * max(1.0, np.linalg.norm(reference.x)), (step, gap)
         if step % 10 == 9:
@@ -286,7 +286,7 @@ def test_regions_at_two_levels_every_optimal_answer_is_certified(name, mode, see
         for sol in (answer, cold.solve(stack)):
             if sol.status == "optimal":
                 check = check_lexicographic(stack, sol.x)
-                assert check.ok, (step, sol.info, str(check))
+                assert check.ok, (step, sol.diagnostics, str(check))
         A, lower, _ = stack.bounds("wall")
         held += int(abs(A[0] @ answer.x - lower[0]) <= AT_BOUND * (1 + abs(lower[0])))
         v = v + answer.x * dt if accel else answer.x

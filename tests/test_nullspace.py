@@ -42,8 +42,8 @@ def test_grows_like_one_over_sigma_near_an_algorithmic_singularity():
     slope = np.polyfit(np.log(SIGMAS), np.log(norms), 1)[0]
     assert -1.02 <= slope <= -0.98, slope
     # and the smallest kept σ of the projected Jacobian is reported as sin σ
-    info = formulations.solve(near_singular(1e-4), "nullspace").info
-    assert info["min_singular_values"][1] == pytest.approx(np.sin(1e-4), rel=1e-6)
+    detail = formulations.solve(near_singular(1e-4), "nullspace").detail
+    assert detail.min_singular_values[1] == pytest.approx(np.sin(1e-4), rel=1e-6)
 
 
 @pytest.mark.parametrize("lam", [1e-2, 1e-4])
@@ -75,7 +75,7 @@ def test_exactly_conflicting_limit_is_finite_and_equals_reference():
     sol = formulations.solve(stack, "nullspace")
     assert np.isfinite(sol.x).all() and np.linalg.norm(sol.x) < 1.0
     np.testing.assert_allclose(sol.x, ref, atol=1e-14)
-    assert sol.info["rank_profile"] == [2, 1]
+    assert sol.diagnostics.ranks.tolist() == [2, 1]
 
 
 def rotated_near_singular(sigma):

@@ -56,8 +56,8 @@ def test_torque_forms_agree_and_projectors_are_dynamically_consistent(family, se
     # the per-level quantities are the readable kernel's
     sol = formulations.solve(stack, "operational_space", mass_matrix=M, bias=bias,
                              kernel="numpy")
-    tau = sol.info["tau"]
-    levels, N = sol.info["levels"], sol.info["null_projector"]
+    tau = sol.detail.tau
+    levels, N = sol.detail.levels, sol.detail.null_projector
     scale = max(1.0, np.linalg.norm(tau))
     # τ = Σ J_{i|prev}ᵀ F_i + C + G  (task forces F_i = Λ_{i|prev}(h_i − J_i θ̈_{i-1}))
     forces = sum(lv.J_projected.T @ lv.force for lv in levels) + bias
@@ -136,6 +136,6 @@ def test_property_shape_finite_and_lexicographic_on_any_family(seed, n, k, famil
     sol = formulations.solve(stack, "operational_space", mass_matrix=M,
                              bias=rng.standard_normal(n))
     assert sol.ok and sol.x.shape == (stack.n,) and np.isfinite(sol.x).all()
-    assert sol.info["tau"].shape == (stack.n,)
+    assert sol.detail.tau.shape == (stack.n,)
     report = check_lexicographic(stack, sol.x, tol=1e-8)
     assert report.ok, str(report)

@@ -33,7 +33,7 @@ def test_deeper_stacks_are_approximate_with_documented_weights():
     sol = formulations.solve(stack, "placo")
     assert sol.status == "approximate"
     rho = placo_.SOFT_SPAN ** 0.5
-    assert sol.info["soft_weights"] == pytest.approx([1.0, rho, rho ** 2])
+    assert sol.detail.soft_weights == pytest.approx([1.0, rho, rho ** 2])
     # first level still hard
     ref = formulations.solve(stack, "reference")
     assert sol.residuals[0] <= ref.residuals[0] + 1e-7
@@ -52,9 +52,9 @@ def test_infeasible_hard_inequalities_fail_naming_level_and_tasks():
     stack = infeasible_inequality(np.random.default_rng(3), 6, 3)
     sol = formulations.solve(stack, "placo")
     assert sol.status == "failed"
-    assert sol.info["failed_level"] == 0
-    assert set(sol.info["failed_tasks"]) == {"box", "keepout"}
-    assert "keepout" in sol.info["message"]
+    assert sol.diagnostics.fault.level == 0
+    assert set(sol.diagnostics.fault.tasks) == {"box", "keepout"}
+    assert "keepout" in sol.diagnostics.reason
 
 
 def test_rank_deficient_first_level_is_reduced_to_full_row_rank():
@@ -62,7 +62,7 @@ def test_rank_deficient_first_level_is_reduced_to_full_row_rank():
     stack = TaskStack([Task("t0", A, [1.0, 0.0]), Task("t1", np.eye(3), [5.0, 1.0, 2.0])])
     sol = formulations.solve(stack, "placo")
     ref = formulations.solve(stack, "reference").x
-    assert sol.info["first_level_rank"] == 1
+    assert sol.detail.first_level_rank == 1
     assert relative_distance(sol.x, ref) <= 1e-6
 
 

@@ -1,5 +1,8 @@
 """The registry: names, availability, option checks, failures as statuses."""
 
+import dataclasses
+import importlib
+
 import numpy as np
 import pytest
 from conftest import stack_formulation
@@ -69,14 +72,14 @@ def test_linalg_failure_becomes_failed_status(monkeypatch, stack):
     _fake(monkeypatch, "boom", boom)
     sol = formulations.solve(stack, "boom")
     assert sol.status == "failed" and not sol.ok
-    assert "LinAlgError: Singular matrix" in sol.info["message"]
+    assert "LinAlgError: Singular matrix" in sol.diagnostics.reason
     assert np.isnan(sol.x).all() and np.isnan(sol.residuals).all()
 
 
 def test_non_finite_answer_is_reported_failed(monkeypatch, stack):
     _fake(monkeypatch, "nanny", lambda stack, **_: Outcome(np.full(stack.n, np.nan)))
     sol = formulations.solve(stack, "nanny")
-    assert sol.status == "failed" and "non-finite" in sol.info["message"]
+    assert sol.status == "failed" and "non-finite" in sol.diagnostics.reason
 
 
 def test_mass_matrix_is_required_validated_and_never_mutated(monkeypatch, stack):
@@ -221,14 +224,16 @@ def test_a_contradictory_hard_top_level_fails_naming_it_on_every_formulation(inf
     opts = _options(info, stack.n)
     soft = formulations.solve(_contradictory_hard_top(hard_top=False), info.name, **opts)
     sol = formulations.solve(stack, info.name, **opts)
-    assert soft.status != "failed", soft.info.get("message")
+    assert soft.status != "failed", soft.diagnostics.reason
     np.testing.assert_allclose(sol.x, soft.x, rtol=0, atol=1e-12)  # the same answer
     assert sol.residuals[0] == pytest.approx(np.sqrt(2.0), rel=1e-6)
     assert sol.status == "failed"
-    assert sol.info["fault_level"] == 0 and sol.info["fault_tasks"] == ["up", "down"]
-    assert sol.info["hard_violations"] == [0]
-    assert sol.info["message"].startswith("hard level 0 (up, down) is left violated: "
-                                          "residual 1.41")
+    fault = sol.diagnostics.fault
+    assert fault.level == 0 and fault.tasks == ("up", "down") and fault.code == "hard_level"
+    assert sol.diagnostics.hard_violated_levels == [0]
+    assert fault.message.startswith("hard level 0 (up, down) is left violated: "
+                                    "residual 1.41")
+    assert sol.diagnostics.reason == fault.message
     solver = formulations.prepare(stack.layout, info.name, **opts)
     batch = solver.solve_batch([stack, stack])
     assert list(batch.statuses) == ["failed", "failed"]
@@ -253,17 +258,146 @@ def test_a_hard_level_that_holds_leaves_the_status_as_it_was(info):
     violated = hard_violations(stack.data, plain.x)
     if info.capabilities.exact:
         assert violated == [] and sol.status == plain.status == "optimal"
-        assert "hard_violations" not in sol.info
+        assert not sol.diagnostics.hard_violated_levels
     else:
         assert sol.status == ("failed" if violated else plain.status)
-        assert sol.info.get("hard_violations", []) == [v[0] for v in violated]
+        assert list(sol.diagnostics.hard_violated_levels) == [v[0] for v in violated]
 
 
 def test_a_new_formulation_gets_the_hard_check_with_no_edit(toy_plugin):
     from conftest import TOY
     sol = formulations.solve(_contradictory_hard_top(), TOY)
-    assert sol.status == "failed" and sol.info["fault_level"] == 0
+    assert sol.status == "failed" and sol.diagnostics.fault.level == 0
     assert formulations.solve(_contradictory_hard_top(hard_top=False), TOY).status != "failed"
+
+
+# ------------------------------------------------------------------ typed results
+@pytest.mark.parametrize("info", RUNNABLE, ids=lambda f: f.name)
+def test_every_formulation_returns_a_status_and_its_own_detail_record(info):
+    """Every plugin: the status is a Status equal to its string, the diagnostics a
+    Diagnostics, and the detail the plugin module's own dataclass ``Detail``."""
+    from prioik.formulations import Diagnostics, Status
+    stack = compatible(np.random.default_rng(3), 6, 2)
+    sol = formulations.solve(stack, info.name, **_options(info, stack.n))
+    assert isinstance(sol.status, Status) and sol.status == sol.status.value
+    assert str(sol.status) == f"{sol.status}" == sol.status.value
+    assert isinstance(sol.diagnostics, Diagnostics)
+    module = importlib.import_module(registry.PLUGINS[info.name][0])
+    assert type(sol.detail) is module.Detail
+    assert dataclasses.is_dataclass(sol.detail)
+    assert (sol.status == "optimal") == (sol.diagnostics.reason == "")
+    assert sol.time_s > 0 and sol.verify_time_s >= 0
+
+
+@pytest.mark.parametrize("info", RUNNABLE, ids=lambda f: f.name)
+def test_verify_none_checks_nothing_and_takes_no_time(info):
+    """``verify="none"``: no verification stage (no verdict recorded, verify_time_s 0)
+    and the formulation's own status, never a demotion: what "auto" says is never more
+    than what "none" says."""
+    stack = compatible(np.random.default_rng(4), 6, 3)
+    opts = _options(info, stack.n)
+    none = formulations.solve(stack, info.name, verify="none", **opts)
+    auto = formulations.solve(stack, info.name, **opts)
+    assert none.verify_time_s == 0.0
+    own = none.diagnostics.verification
+    assert own is None or own.method == "solver"       # a solver's own certificate only
+    np.testing.assert_array_equal(none.x, auto.x)
+    rank = {"optimal": 0, "approximate": 1, "failed": 2}
+    assert rank[none.status] <= rank[auto.status]
+
+
+def _perturbed_plugin(monkeypatch, ask: bool):
+    """A registered formulation answering the exact optimum moved by 1e-3 along a
+    level's rows, and saying ``optimal`` (asking to be certified when ``ask``)."""
+    from prioik.formulations.base import CheckRequest, Diagnostics
+
+    @dataclasses.dataclass
+    class Detail:
+        moved: float
+
+    def solve(stack, **_):
+        x = formulations.solve(stack, "reference").x + 1e-3 * stack.levels[0].A[0]
+        return Outcome(x, "optimal", Diagnostics(detail=Detail(1e-3)),
+                       check=CheckRequest(auto=ask))
+
+    _fake(monkeypatch, "perturbed", solve)
+
+
+def test_the_certificate_demotes_a_perturbed_answer_and_none_does_not(monkeypatch, stack):
+    """An answer 1e-3 off the optimum said ``optimal`` by its plugin: ``"certificate"``
+    and ``"lower_point"`` demote it, naming the level at fault; ``"none"`` and ``"auto"``
+    (the plugin did not ask) leave it; asked, ``"auto"`` demotes it too."""
+    _perturbed_plugin(monkeypatch, ask=False)
+    for mode in ("certificate", "lower_point"):
+        sol = formulations.solve(stack, "perturbed", verify=mode)
+        assert sol.status == "approximate", mode
+        v = sol.diagnostics.verification
+        assert v.method == mode and v.ok is False
+        assert sol.diagnostics.fault.code == "certificate" and sol.diagnostics.fault.level == 0
+        assert sol.diagnostics.reason == sol.diagnostics.fault.message
+        assert sol.verify_time_s > 0
+    for mode in ("none", "auto"):
+        sol = formulations.solve(stack, "perturbed", verify=mode)
+        assert sol.status == "optimal" and sol.diagnostics.verification is None, mode
+    _perturbed_plugin(monkeypatch, ask=True)
+    assert formulations.solve(stack, "perturbed").status == "approximate"
+    assert formulations.solve(stack, "perturbed", verify="none").status == "optimal"
+
+
+def test_an_unknown_verify_mode_is_refused_naming_the_modes(stack):
+    with pytest.raises(FormulationError, match="verify must be one of auto, none, "
+                                               "certificate, lower_point; got 'all'"):
+        formulations.prepare(stack.layout, "reference", verify="all")
+
+
+@pytest.mark.skipif("daqp_hierarchical" not in {f.name for f in RUNNABLE},
+                    reason="daqp is not installed")
+def test_daqp_hierarchical_timed_solve_does_not_run_the_active_set(monkeypatch):
+    """``check=True`` (default): the active set runs in the verification stage (the
+    lower-point comparison), never inside DAQP's timed solve."""
+    from prioik.formulations import daqp_hierarchical as dh
+    from prioik.formulations import hierarchical_active_set as has
+    calls = {"active_set": 0, "inside": 0}
+    original_solve, original_active = dh.solve, has.Prepared.solve
+
+    def active(self, data, options=None):
+        calls["active_set"] += 1
+        return original_active(self, data, options)
+
+    def timed(stack, **options):
+        before = calls["active_set"]
+        out = original_solve(stack, **options)
+        calls["inside"] += calls["active_set"] - before
+        return out
+
+    monkeypatch.setattr(has.Prepared, "solve", active)
+    monkeypatch.setattr(dh, "solve", timed)
+    stack = compatible(np.random.default_rng(5), 6, 3)
+    sol = formulations.solve(stack, "daqp_hierarchical")
+    assert sol.status == "optimal" and sol.diagnostics.verification.method == "lower_point"
+    assert calls["inside"] == 0 and calls["active_set"] >= 1
+    assert sol.verify_time_s > 0
+
+
+def test_the_verification_solver_is_prepared_once_per_prepared_solver(monkeypatch):
+    """The exact active set of the lower-point comparison is prepared at the first
+    verification and kept for every later one."""
+    from prioik.formulations import prepared as prepared_module
+    built = []
+    original = prepared_module.lower_point_solver
+
+    def counting(layout):
+        built.append(layout)
+        return original(layout)
+
+    monkeypatch.setattr(prepared_module, "lower_point_solver", counting)
+    base = compatible(np.random.default_rng(6), 6, 3)
+    stacks = same_shape_batch(base, np.random.default_rng(7), 5)
+    solver = formulations.prepare(base.layout, "reference", verify="lower_point")
+    sols = [solver.solve(s) for s in stacks]
+    assert [s.diagnostics.verification.method for s in sols] == ["lower_point"] * 5
+    assert all(s.status == "optimal" for s in sols)
+    assert len(built) == 1
 
 
 # ------------------------------------------------------------------ the contract

@@ -895,7 +895,7 @@ def test_a_writer_declares_hard_levels_and_a_violated_one_fails_the_solve(robot)
         answers[hard] = solver.solve(w.targets(state))
     sol, soft = answers[(0,)], answers[()]
     assert soft.status == "optimal" and sol.status == "failed"
-    assert sol.info["fault_level"] == 0 and sol.info["fault_tasks"] == ["reach", "away"]
+    assert sol.diagnostics.fault.level == 0 and sol.diagnostics.fault.tasks == ("reach", "away")
     np.testing.assert_array_equal(sol.x, soft.x)
     bad = TaskWriter(robot, "velocity", hard=(1,))
     bad.add_posture("posture", gain=1.0, level=0)

@@ -68,13 +68,14 @@ def test_torque_law_of_the_formulation_is_used(chain):
     def solve(stack, **kw):
         seen.update(kw)
         return SimpleNamespace(x=np.zeros(stack.n), status="optimal",
-                               info={"tau": np.full(stack.n, 7.0)})
+                               diagnostics=SimpleNamespace(
+                                   detail=SimpleNamespace(tau=np.full(stack.n, 7.0))))
 
     res = simulate(chain, _build(chain), solve, duration=0.01, dt=0.002,
                    needs_dynamics=True, torque_from_solution=True)
     assert set(seen) == {"mass_matrix", "bias"} and seen["mass_matrix"].shape == (6, 6)
     assert np.allclose(seen["mass_matrix"], seen["mass_matrix"].T)
-    assert np.all(res.tau == 7.0)
+    assert not res.failed and res.steps == 5 and np.all(res.tau == 7.0)
 
 
 def test_failed_or_nonfinite_solution_stops_cleanly(chain):
@@ -83,13 +84,14 @@ def test_failed_or_nonfinite_solution_stops_cleanly(chain):
     def solve(stack, **kw):
         calls.append(1)
         x = np.zeros(stack.n) if len(calls) < 4 else np.full(stack.n, np.nan)
-        return SimpleNamespace(x=x, status="optimal", info={})
+        return SimpleNamespace(x=x, status="optimal")
 
     res = simulate(chain, _build(chain), solve, duration=1.0, dt=0.01)
     assert res.failed and res.steps == 3 and "t = 0.030" in res.message
     res = simulate(chain, _build(chain),
-                   lambda s, **kw: SimpleNamespace(x=np.zeros(s.n), status="failed",
-                                                   info={"message": "boom"}),
+                   lambda s, **kw: SimpleNamespace(
+                       x=np.zeros(s.n), status="failed",
+                       diagnostics=SimpleNamespace(reason="boom")),
                    duration=1.0, dt=0.01)
     assert res.failed and res.steps == 0 and "boom" in res.message
 
@@ -149,7 +151,7 @@ def _answer_at_step(bad, at: int = 3):
     def solve(stack, **kw):
         calls.append(1)
         if len(calls) <= at:
-            return SimpleNamespace(x=np.zeros(stack.n), status="optimal", info={})
+            return SimpleNamespace(x=np.zeros(stack.n), status="optimal")
         return bad(stack)
     return solve
 
@@ -160,17 +162,18 @@ def _raise(stack):
 
 @pytest.mark.parametrize("bad, message", [
     (_raise, "solve raised RuntimeError: solver exploded"),
-    (lambda s: SimpleNamespace(x=np.full(s.n, np.nan), status="optimal", info={}),
+    (lambda s: SimpleNamespace(x=np.full(s.n, np.nan), status="optimal"),
      "non-finite values at [0, 1, 2, 3, 4] although its status is 'optimal'"),
-    (lambda s: SimpleNamespace(x=np.zeros(s.n + 1), status="optimal", info={}),
+    (lambda s: SimpleNamespace(x=np.zeros(s.n + 1), status="optimal"),
      "solution x has shape (7,), expected (6,)"),
-    (lambda s: SimpleNamespace(x=None, status="optimal", info={}),
+    (lambda s: SimpleNamespace(x=None, status="optimal"),
      "solution x has shape (), expected (6,)"),
     (lambda s: None, "status None"),
-    (lambda s: SimpleNamespace(x=np.zeros(s.n), status="great", info={}), "status 'great'"),
-    (lambda s: SimpleNamespace(x=np.zeros(s.n), status="failed", info={"message": "boom"}),
+    (lambda s: SimpleNamespace(x=np.zeros(s.n), status="great"), "status 'great'"),
+    (lambda s: SimpleNamespace(x=np.zeros(s.n), status="failed",
+                               diagnostics=SimpleNamespace(reason="boom")),
      "solution failed: boom"),
-    (lambda s: SimpleNamespace(x=["a"] * s.n, status="optimal", info={}),
+    (lambda s: SimpleNamespace(x=["a"] * s.n, status="optimal"),
      "solution x cannot be read as numbers"),
 ])
 def test_a_solver_error_or_bad_answer_ends_the_run_with_the_trajectory(chain, bad, message):
@@ -197,9 +200,9 @@ def test_a_build_error_ends_the_run_with_the_trajectory(chain):
 
 def test_torque_from_solution_without_tau_fails_the_run(chain):
     res = simulate(chain, _build(chain),
-                   lambda s, **kw: SimpleNamespace(x=np.zeros(s.n), status="optimal", info={}),
+                   lambda s, **kw: SimpleNamespace(x=np.zeros(s.n), status="optimal"),
                    duration=0.1, dt=0.01, torque_from_solution=True)
-    assert res.failed and res.failed_step == 0 and "no info['tau']" in res.message
+    assert res.failed and res.failed_step == 0 and "no diagnostics.detail.tau" in res.message
 
 
 @pytest.mark.parametrize("duration, dt, message", [

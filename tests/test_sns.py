@@ -40,7 +40,7 @@ def test_without_bounds_sns_is_the_exact_lexicographic_optimum(family):
         r = prioik.solve(stack, "reference")
         assert s.status == "optimal"
         assert np.linalg.norm(s.x - r.x) <= 1e-7 * max(1.0, np.linalg.norm(r.x))
-        assert s.info["task_scaling"] == [1.0] * len(stack)
+        assert s.detail.task_scaling == [1.0] * len(stack)
 
 
 @settings(max_examples=60, deadline=None)
@@ -52,7 +52,7 @@ def test_bounds_are_never_violated_and_scaling_is_in_unit_interval(seed, n, k, s
     lo, hi = _box(stack)
     assert sol.ok
     assert _within(sol.x, lo, hi) <= BOUND_TOL
-    s = np.array(sol.info["task_scaling"])
+    s = np.array(sol.detail.task_scaling)
     assert s.shape == (k,) and np.all((0.0 <= s) & (s <= 1.0))
 
 
@@ -67,7 +67,7 @@ def test_tasks_are_exact_whenever_the_bounds_allow():
                             float(rng.choice([0.5, 2.0, 5.0])))
         s = prioik.solve(stack, "sns")
         q = prioik.solve(stack, "cascaded_qp", solver="quadprog")
-        assert q.ok, q.info
+        assert q.ok, q.diagnostics
         lo, hi = _box(stack)
         bound_active += bool(np.any(np.isclose(s.x, lo) | np.isclose(s.x, hi)))
         for i in range(1, len(stack)):
@@ -86,13 +86,13 @@ def test_a_scaled_task_keeps_its_direction_and_the_status_says_so():
     for _ in range(100):
         stack = box_bounded(rng, 7, 2, 20.0)       # targets far outside the box
         sol = prioik.solve(stack, "sns")
-        s1 = sol.info["task_scaling"][0]
+        s1 = sol.detail.task_scaling[0]
         if s1 < 1.0:
             seen += 1
             J, b = stack.levels[1].A, stack.levels[1].b
             assert np.linalg.norm(J @ sol.x - s1 * b) <= 1e-7 * np.linalg.norm(b)
             assert sol.status == "approximate"
-            assert "task0" in sol.info["scaled_tasks"]
+            assert "task0" in sol.detail.scaled_tasks
     assert seen >= 50
 
 
@@ -109,7 +109,7 @@ def test_optimal_scaling_of_a_single_task_matches_the_largest_feasible_scale():
         sol = prioik.solve(stack, "sns")
         d = np.linalg.solve(J, b)
         best = min(1.0, float(np.min(u / np.abs(d))))
-        assert sol.info["task_scaling"][0] == pytest.approx(best, rel=1e-9)
+        assert sol.detail.task_scaling[0] == pytest.approx(best, rel=1e-9)
         np.testing.assert_allclose(sol.x, best * d, rtol=1e-9, atol=1e-12)
 
 
@@ -117,8 +117,8 @@ def test_bounds_inactive_gives_optimal_status():
     rng = np.random.default_rng(0)
     stack = box_bounded(rng, 10, 2, 0.01)
     sol = prioik.solve(stack, "sns")
-    assert sol.status == "optimal" and sol.info["scaled_tasks"] == []
-    assert all(not s for s in sol.info["saturated"])
+    assert sol.status == "optimal" and sol.detail.scaled_tasks == []
+    assert all(not s for s in sol.detail.saturated)
 
 
 def test_box_given_by_scaled_and_several_rows():
@@ -128,7 +128,7 @@ def test_box_given_by_scaled_and_several_rows():
     stack = TaskStack([box, Task("t", np.eye(n), [5.0, 5.0, 5.0])])
     sol = prioik.solve(stack, "sns")
     assert sol.x[0] <= 0.3 + 1e-12 and abs(sol.x[1]) <= 0.5 + 1e-12
-    assert sol.x[2] == pytest.approx(5.0 * sol.info["task_scaling"][0])
+    assert sol.x[2] == pytest.approx(5.0 * sol.detail.task_scaling[0])
 
 
 def test_unsupported_inequalities_are_named():
@@ -189,8 +189,8 @@ def test_many_levels_keep_the_projector_on_the_fuzz_stack():
     from prioik.hierarchy.fuzz import judged
     case = judged(load_stack(Path(__file__).parent / "data" / "fuzz" / "equality-2026-3.json"))
     sol = prioik.solve(case.stack, "sns")
-    assert sol.status == "approximate" and sol.info["ambiguous_levels"] == [4, 5]
-    assert "ambiguous at levels 4, 5" in sol.info["reason"]
+    assert sol.status == "approximate" and sol.diagnostics.ambiguous_levels == [4, 5]
+    assert "ambiguous at levels 4, 5" in sol.diagnostics.reason
     assert relative_distance(sol.x, case.truth) <= 1e-8
     assert check_lexicographic(case.stack, sol.x).ok
 

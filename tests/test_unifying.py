@@ -54,7 +54,7 @@ def test_eq40_matches_the_torque_recursion_eq37(family, seed):
     tau, taus = torque_recursion(stack, M, bias)
     assert len(taus) == len(stack)
     scale = max(1.0, np.linalg.norm(tau))
-    assert np.linalg.norm(sol.info["tau"] - tau) <= 1e-8 * scale
+    assert np.linalg.norm(sol.detail.tau - tau) <= 1e-8 * scale
     # eq. 36: the accelerations follow from the torques through the dynamics
     np.testing.assert_allclose(np.linalg.solve(M, tau - bias), sol.x,
                                atol=1e-8 * max(1.0, np.linalg.norm(sol.x)))
@@ -153,7 +153,7 @@ def test_property_shape_finite_and_eq37_on_any_family(seed, n, k, family, cond):
     # 1e-6-scaled level at condition 1e3 gives τ_i ~ 1e7 that cancel to ‖τ‖ ~ 1
     # (seed 1195, n = k = 2, degenerate: 1.9e-6 apart, 6e-14 of Σ‖τ_i‖)
     contributions = sum(np.linalg.norm(t) for t in taus)
-    assert np.linalg.norm(sol.info["tau"] - tau) <= 1e-7 * max(1.0, np.linalg.norm(tau)) \
+    assert np.linalg.norm(sol.detail.tau - tau) <= 1e-7 * max(1.0, np.linalg.norm(tau)) \
         + 1e-12 * contributions
     # the top level is met up to round-off on the scale of the levels' contributions
     # M⁻¹τ_i (a tiny lower level can contribute far more than the final θ̈)

@@ -35,14 +35,16 @@ def detail_table(rows: list[TimingRow]) -> str:
     body = []
     for r in sorted(rows, key=lambda r: (math.isnan(r.median_us), r.median_us)):
         if r.status in ("skipped", "unsupported", "error"):
-            body.append([r.label, "–", "–", "–", "–", "–", "–", 0, f"{r.status}: {r.note}"])
+            body.append([r.label, "–", "–", "–", "–", "–", "–", "–", 0,
+                         f"{r.status}: {r.note}"])
             continue
         status = r.status if r.status == "ok" else f"{r.status}: {r.note}"
-        body.append([r.label, us(r.median_us), us(r.p10_us), us(r.p90_us),
+        verify = us(r.verify_median_us) if math.isfinite(r.verify_median_us) else "–"
+        body.append([r.label, us(r.median_us), us(r.p10_us), us(r.p90_us), verify,
                      f"{r.success_rate:.0%}", _dist(r.dist_median), _dist(r.dist_max),
                      r.repeats, status])
-    return table(["formulation", "median µs", "p10 µs", "p90 µs", "success", "dist. median",
-                  "dist. max", "repeats", "status"], body, "lrrrrrrrl")
+    return table(["formulation", "median µs", "p10 µs", "p90 µs", "verify µs", "success",
+                  "dist. median", "dist. max", "repeats", "status"], body, "lrrrrrrrrl")
 
 
 def pivot_table(rows: list[TimingRow], k: int) -> str:

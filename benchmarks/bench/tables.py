@@ -109,6 +109,9 @@ def time_case(case: Case, variant: Variant, ref: References, settings: Settings
     row.median_us = float(np.median(times)) * 1e6
     row.p10_us = percentile(times, 10) * 1e6
     row.p90_us = percentile(times, 90) * 1e6
+    verify = np.array([sol.verify_time_s for _, sol in timed.results])
+    if verify.size and (verify > 0).any():
+        row.verify_median_us = float(np.median(verify)) * 1e6
     row.success_rate = float(np.mean(ok)) if ok else math.nan
     finite = np.array([d for d in dist if np.isfinite(d)])
     row.dist_median = float(np.median(finite)) if finite.size else math.nan

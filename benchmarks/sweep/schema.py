@@ -26,6 +26,7 @@ IDENTITY = ("run_id", "point", "scenario", "label", "formulation", "options", "l
 OUTCOME = ("steps", "failed", "status", "message", "wall_s", "worker")
 #: columns that depend on the machine and its load, not on the computation
 DETERMINISTIC_EXCLUDE = ("median_step_time_s", "p90_step_time_s", "median_solve_time_s",
+                         "median_verify_time_s",
                          "wall_s", "worker")
 
 

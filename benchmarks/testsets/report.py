@@ -54,8 +54,9 @@ def summarize(records: list[dict[str, Any]], profile: str = "mid",
     of times and its ratio to the best row's), ``flops_counted`` (the solves that report
     a flop count), ``sgm_flops`` and ``sgm_flops_norm`` (the shifted geometric mean of
     those counts, shift ``flop_shift``, and its ratio to the best of the rows that count
-    them; NaN for a row that counts none), ``worst_s``, ``within_2x`` (share of the
-    problems taken), ``failures`` ((problem, status, reason) at ``profile``).
+    them; NaN for a row that counts none), ``worst_s``, ``verify_s`` (the median
+    verification stage, NaN where none ran), ``within_2x`` (share of the problems
+    taken), ``failures`` ((problem, status, reason) at ``profile``).
 
     Raises:
         ValueError: unknown profile.
@@ -78,6 +79,8 @@ def summarize(records: list[dict[str, Any]], profile: str = "mid",
         for label, rr in rows.items():
             taken = [r for r in rr if _taken(r)]
             times = [r["time_s"] for r in taken if r["time_s"] != ""]
+            verify = [r.get("verify_time_s", "") for r in taken]
+            verify = [v for v in verify if v != "" and v > 0]
             flops = [r["flops"] for r in taken if r.get("flops", "") != ""]
             s = {"row": label, "formulation": rr[0]["formulation"], "taken": len(taken),
                  "problems": len(rr),
@@ -89,6 +92,7 @@ def summarize(records: list[dict[str, Any]], profile: str = "mid",
                  "sgm_flops": (shifted_geometric_mean(flops, flop_shift) if flops
                                else math.nan),
                  "worst_s": max(times) if times else math.nan,
+                 "verify_s": float(np.median(verify)) if verify else math.nan,
                  "within_2x": (float(np.mean([
                      r[f"success_{profile}"] == 1 and r["problem"] in best
                      and r["time_s"] <= WITHIN * best[r["problem"]] for r in taken]))
@@ -142,8 +146,9 @@ def _set_section(name: str, recs: list[dict[str, Any]], summaries: list[dict[str
         lines.append(f"Fewest flops (shifted geometric mean): `{least['row']}`, "
                      f"{least['sgm_flops']:.3g}.")
     lines += ["", "| row | taken | success low | mid | high | time (SGM, ×best) "
-              f"| flops (SGM, ×best) | worst (µs) | within {WITHIN:g}× best ({profile}) |",
-              "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+              f"| flops (SGM, ×best) | worst (µs) | verify (median µs) "
+              f"| within {WITHIN:g}× best ({profile}) |",
+              "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     uncounted = []
     for s in summaries:
         if s["taken"] == 0:
@@ -155,7 +160,8 @@ def _set_section(name: str, recs: list[dict[str, Any]], summaries: list[dict[str
                      f"{_pct(s['success']['low'])} | {_pct(s['success']['mid'])} | "
                      f"{_pct(s['success']['high'])} | {_num(s['sgm_norm'], '.2f')} | "
                      f"{_flop_cell(s)} | "
-                     f"{_num(1e6 * s['worst_s'], '.0f')} | {_pct(s['within_2x'])} |")
+                     f"{_num(1e6 * s['worst_s'], '.0f')} | "
+                     f"{_num(1e6 * s['verify_s'], '.0f')} | {_pct(s['within_2x'])} |")
     if uncounted:
         lines += ["", "Flops —: not counted by " + ", ".join(f"`{r}`" for r in uncounted)
                   + " (only the compiled closed forms count their floating-point "
@@ -227,7 +233,8 @@ def format_report(records: list[dict[str, Any]], profile: str = "mid", *,
         "level's residual ‖w_i‖ is within tol·max(1, ‖w_i*‖) of the exact answer's "
         "(`hierarchical_active_set`, cold, cross-checked against the stated answers "
         "where a problem has them). **Time**: the wall time of the prepared solver's "
-        "`solve` (`prioik.prepare`, untimed), per problem the fastest of the passes, "
+        "`solve` (`prioik.prepare`, untimed) less its verification stage (reported apart: "
+        "**verify**, `Solution.verify_time_s`), per problem the fastest of the passes, "
         "rows interleaved; on sequential test sets warm/hot rows follow each sequence "
         "and `[cold]` rows do not. **SGM** is the shifted geometric mean "
         f"exp(mean(log(t + s))) − s, s = {1e6 * shift:g} µs, over every solve the row "
@@ -236,7 +243,7 @@ def format_report(records: list[dict[str, Any]], profile: str = "mid", *,
         "take. **Worst**: the slowest solve. **Within 2× best**: the share of "
         "the problems taken where the row succeeded in at most twice the fastest "
         "successful solve of any row. **Flops**: the floating-point operations the "
-        "compiled closed forms count in their kernels (`info[\"flops\"]`), the same "
+        "compiled closed forms count in their kernels (`sol.flops`), the same "
         f"shifted geometric mean with s = {flop_shift:g} flops, divided by the "
         "fewest among the rows that count them; `—` for the "
         "rows whose formulation does not count them (QP back-ends, active sets, lexls, "

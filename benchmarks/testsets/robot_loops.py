@@ -59,7 +59,7 @@ def _loop(robot_name: str, contacts: tuple[str, ...], limb: str, steps: int
         sol = driver.solve(rows)
         if sol.status == "failed":
             raise RuntimeError(f"the {robot_name} loop's driver failed at step {step}: "
-                               f"{sol.info.get('message', '')}")
+                               f"{sol.diagnostics.reason}")
         v = np.array(sol.x)
         q = pin.integrate(robot.model, q, v * LOOP_DT)
 

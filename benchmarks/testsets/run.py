@@ -13,7 +13,7 @@ Timing: ``repeats`` passes over the problems in order, the rows interleaved with
 pass; per problem the fastest pass's wall time of ``solver.solve(data)``
 (``perf_counter``, the prepared solver of :func:`prioik.prepare`, prepared untimed: one
 per layout, anew at each sequence's start). The answer judged is the first pass's, and
-so is its flop count (``flops``: the compiled kernel's ``info["flops"]`` for the
+so is its flop count (``flops``: the compiled kernel's ``sol.flops`` for the
 formulations that count them, empty for the others).
 
 The exact answer of each problem is ``hierarchical_active_set``'s (cold); where the
@@ -71,7 +71,7 @@ class Row:
 #: the CSV's columns (lists are JSON; success columns ``1``/``0``, empty when not judged;
 #: ``flops`` empty where the formulation does not count them)
 CSV_FIELDS = ("test_set", "problem", "sequence", "row", "formulation", "n", "levels",
-              "rows", "status", "time_s", "flops", "judged_by",
+              "rows", "status", "time_s", "verify_time_s", "flops", "judged_by",
               *(f"success_{p}" for p in PROFILES), *(f"reason_{p}" for p in PROFILES),
               "values", "exact_values", "exact_status", "stated_values", "stated_by",
               "exact_vs_stated", "message")
@@ -146,8 +146,10 @@ UNSUPPORTED = "unsupported: "
 
 def _solve(solvers: _Solvers, problem: Problem, sequential: bool, mass: np.ndarray | None
            ) -> tuple[Any, float, str]:
-    """``(solution or None, wall time, message)``; the message starts with
-    :data:`UNSUPPORTED` when the formulation refused the stack's kind of task."""
+    """``(solution or None, wall time of the solve, message)``: the call's wall time less
+    the verification stage's (``Solution.verify_time_s``, reported apart); the message
+    starts with :data:`UNSUPPORTED` when the formulation refused the stack's kind of
+    task."""
     from prioik.formulations import FormulationError
     from prioik.hierarchy import TaskStackError, UnsupportedTaskError
     data = problem.stack.data
@@ -156,7 +158,7 @@ def _solve(solvers: _Solvers, problem: Problem, sequential: bool, mass: np.ndarr
         solver = solvers.get(problem, sequential)
         t0 = time.perf_counter()
         sol = solver.solve(data, **step)
-        elapsed = time.perf_counter() - t0
+        elapsed = time.perf_counter() - t0 - sol.verify_time_s
     except UnsupportedTaskError as exc:
         return None, math.nan, f"{UNSUPPORTED}{exc}"
     except (FormulationError, TaskStackError, ValueError, ArithmeticError) as exc:
@@ -192,7 +194,7 @@ def _judge(row: Row, problem: Problem, sol, exact: np.ndarray | None
     judged_by = (JUDGED_BY_VALUES if row.formulation in VALUE_JUDGED
                  else JUDGED_BY_CERTIFICATE)
     success, reason = {}, {}
-    message = str(sol.info.get("message", ""))[:160]
+    message = sol.diagnostics.reason[:160]
     for name, tol in PROFILES.items():
         if sol.status == "failed":
             success[name], reason[name] = False, message or "no message"
@@ -217,9 +219,9 @@ def _judge(row: Row, problem: Problem, sol, exact: np.ndarray | None
 
 
 def _flops(sol) -> float | str:
-    """The solve's floating-point operation count (``info["flops"]``), ``""`` when the
-    formulation does not count them."""
-    flops = sol.info.get("flops")
+    """The solve's floating-point operation count (:attr:`Solution.flops`), ``""`` when
+    the formulation does not count them."""
+    flops = sol.flops
     if flops is None:
         return ""
     flops = float(flops)
@@ -294,10 +296,11 @@ def run_test_set(test_set: TestSet, rows: list[Row] | None = None, repeats: int 
                     rec[f"reason_{name}"] = messages[r][j][:160]
             else:
                 judged_by, success, reason = _judge(row, p, sol, exact_values)
-                rec.update(status=sol.status, time_s=float(times[r, j]), flops=_flops(sol),
+                rec.update(status=sol.status, time_s=float(times[r, j]),
+                           verify_time_s=float(sol.verify_time_s), flops=_flops(sol),
                            judged_by=judged_by,
                            values=_values(p, sol.x),
-                           message=str(sol.info.get("message", ""))[:200])
+                           message=sol.diagnostics.reason[:200])
                 for name in PROFILES:
                     rec[f"success_{name}"] = int(success[name])
                     rec[f"reason_{name}"] = reason[name]
@@ -320,7 +323,7 @@ def write_csv(records: list[dict[str, Any]], path: str | Path) -> Path:
 
 
 _INT = ("n", "levels", "rows", *(f"success_{p}" for p in PROFILES))
-_FLOAT = ("time_s", "flops", "exact_vs_stated")
+_FLOAT = ("time_s", "verify_time_s", "flops", "exact_vs_stated")
 _LIST = ("values", "exact_values", "stated_values")
 #: columns added after the first files were written: empty when a file lacks them
 _ADDED = ("flops",)

@@ -71,7 +71,7 @@ def test_every_core_formulation_solves_a_compatible_stack(seed):
     for name in (n for n in CORE if n != "lexls" or LEXLS_BUILT):
         opts = {"mass_matrix": mass} if name in ("unifying", "operational_space") else {}
         sol = formulations.solve(stack, name, **opts)
-        assert sol.status != "failed" and np.isfinite(sol.x).all(), (name, sol.info)
+        assert sol.status != "failed" and np.isfinite(sol.x).all(), (name, sol.diagnostics)
         if formulations.get(name).capabilities.exact:
             assert np.max(sol.residuals) <= 1e-9, (name, sol.residuals)
             assert check_lexicographic(stack, sol.x, tol=1e-8).ok, name
@@ -101,7 +101,7 @@ def test_hierarchical_active_set_takes_inequality_stacks_in_the_core():
     for seed in range(3):
         stack = with_inequalities(np.random.default_rng(seed), 10, 3)
         sol = formulations.solve(stack, "hierarchical_active_set")
-        assert sol.status == "optimal", sol.info
+        assert sol.status == "optimal", sol.diagnostics
         assert sol.residuals[0] <= 1e-8   # the first level (a feasible box) is met
 
 
@@ -162,7 +162,7 @@ def test_prioik_solve_and_validate_run_on_the_core(tmp_path, capsys):
     assert main(["compile"]) == 0
     assert "built when prioik is installed" in capsys.readouterr().out
     assert formulations.solve(load_stack(EXAMPLES / "small_4x3.json"),
-                              "extended_jacobian").info["kernel"] == "cpp"
+                              "extended_jacobian").detail.kernel == "cpp"
 
 
 @pytest.mark.parametrize("argv, extra", [
