@@ -26,8 +26,12 @@ import numpy as np
 
 from prioik.hierarchy import StackData, StackLayout, TaskStack, UnsupportedTaskError
 
-from .base import Capabilities, Outcome, in_original_units
+from .base import Capabilities, CheckRequest, Outcome, in_original_units
 from .options import Option, settings_class
+
+#: what a batched kernel gives (:meth:`Prepared.solve_batch`): the answers ``X`` (one row
+#: per stack), their statuses, and the checks they ask the verification stage for
+BatchOutcome = tuple[np.ndarray, list[str], "list[CheckRequest | None] | None"]
 
 __all__ = ["Formulation", "Prepared", "StackPrepared", "check_layout_support",
            "check_support"]
@@ -96,9 +100,12 @@ class Prepared(abc.ABC):
         loop's path. The verification stage runs after it either way."""
         return self.solve(data)
 
-    def solve_batch(self, datas: list[StackData]) -> tuple[np.ndarray, list[str]] | None:
-        """``(X, statuses)`` of many stacks of the layout from a batched kernel, or
-        ``None`` when the formulation has none (the caller solves them one by one)."""
+    def solve_batch(self, datas: list[StackData]) -> BatchOutcome | None:
+        """``(X, statuses, checks)`` of many stacks of the layout from a batched kernel
+        (``checks``: per stack the :class:`~prioik.formulations.base.CheckRequest` its
+        answer asks the verification stage for, as :attr:`Outcome.check`, or ``None``
+        when no answer asks), or ``None`` when the formulation has none (the caller
+        solves them one by one)."""
         return None
 
     def reset(self) -> None:

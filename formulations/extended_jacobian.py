@@ -74,7 +74,6 @@ from .base import (
     solve_equilibrated,
 )
 from .options import Option, rcond_option, validate_options
-from .verification import certify
 
 
 @dataclass(slots=True)
@@ -326,8 +325,10 @@ class Prepared(contract.Prepared):
         return _solve_qr(stack, self.rcond, self.level_damping, self.singular_threshold,
                          self.step_bound)
 
-    def solve_batch(self, datas: list[StackData]) -> tuple[np.ndarray, list[str]]:
-        """Many stacks of the layout: ``(X, statuses)`` (compiled, in parallel)."""
+    def solve_batch(self, datas: list[StackData]) -> contract.BatchOutcome:
+        """Many stacks of the layout: ``(X, statuses, checks)`` (compiled, in parallel;
+        a near-ambiguous answer asks the verification stage to certify it, as in
+        :meth:`solve`)."""
         return _solve_batch(self, datas)
 
 
@@ -877,26 +878,21 @@ def _solve_damped(stack: TaskStack, damping: float, rcond: float, nullspace: str
                                detail=detail))
 
 
-def _solve_batch(prepared: Prepared, datas: list[StackData]) -> tuple[np.ndarray, list[str]]:
+def _solve_batch(prepared: Prepared, datas: list[StackData]) -> contract.BatchOutcome:
     """Many stacks of one layout at once: the compiled kernel over the batch, stacks in
     parallel (a loop of :meth:`Prepared.solve` off the compiled path)."""
     if not prepared.compiled:
-        outs = [prepared.solve(d) for d in datas]
-        return np.array([o.x for o in outs]), _outcome_statuses(datas, outs)
+        return _outcomes(prepared, datas)
     return _solve_batch_core(prepared, datas)
 
 
-def _outcome_statuses(datas: list[StackData], outs: list[Outcome]) -> list[str]:
-    """The statuses of a batch's outcomes, an ``optimal`` one that asks to be certified
-    (near-ambiguous) certified as :meth:`Prepared.solve`'s verification stage does (a
-    batch has no stage of its own)."""
-    return [Status.APPROXIMATE if o.status == Status.OPTIMAL and o.check is not None
-            and np.isfinite(o.x).all() and not certify(d, o.x, Diagnostics()) else o.status
-            for d, o in zip(datas, outs, strict=True)]
+def _outcomes(prepared: Prepared, datas: list[StackData]) -> contract.BatchOutcome:
+    """A loop of :meth:`Prepared.solve`: the answers, statuses and checks asked."""
+    outs = [prepared.solve(d) for d in datas]
+    return np.array([o.x for o in outs]), [o.status for o in outs], [o.check for o in outs]
 
 
-def _solve_batch_core(prepared: Prepared, datas: list[StackData]
-                      ) -> tuple[np.ndarray, list[str]]:
+def _solve_batch_core(prepared: Prepared, datas: list[StackData]) -> contract.BatchOutcome:
     """:func:`_solve_batch` on the C++ core: the stacks' rows copied into one array each,
     solved one after the other by the prepared core."""
     A = np.stack([d.A for d in datas])
@@ -910,23 +906,22 @@ def _solve_batch_core(prepared: Prepared, datas: list[StackData]
         raise
     if not res.solved.all():
         # finite rows of extreme scale: one by one, equilibrated as in solve
-        outs = [prepared.solve(one) for one in datas]
-        return np.array([o.x for o in outs]), _outcome_statuses(datas, outs)
+        return _outcomes(prepared, datas)
     X = res.x.copy()
-    return X, _batch_statuses(datas, X, res.level_mu2, res.margins)
+    return (X, *_batch_statuses(res.level_mu2, res.margins))
 
 
-def _batch_statuses(datas: list[StackData], X: np.ndarray, mu2: np.ndarray,
-                    margins: np.ndarray) -> list[str]:
-    """Each stack's status from its damping and rank decisions' margins (as
+def _batch_statuses(mu2: np.ndarray, margins: np.ndarray
+                    ) -> tuple[list[str], list[CheckRequest | None]]:
+    """Each stack's status from its damping and rank decisions' margins, and the check
+    a near-ambiguous ``optimal`` answer asks the verification stage for (as
     :meth:`Prepared.solve` reads them)."""
     approximate = np.asarray((mu2 > 0).any(axis=1) | (margins <= AMBIGUITY).any(axis=1))
     near = (margins <= NEAR_AMBIGUITY * AMBIGUITY).any(axis=1) & ~approximate
-    for i in np.flatnonzero(near & np.isfinite(X).all(axis=1)).tolist():
-        # as solve's verification stage: a near-ambiguous answer is optimal only when
-        # certified (the certificate the stage runs; a batch has no stage of its own)
-        approximate[i] = not certify(datas[i], X[i], Diagnostics())
-    return [Status.APPROXIMATE if a else Status.OPTIMAL for a in approximate.tolist()]
+    statuses: list[str] = [Status.APPROXIMATE if a else Status.OPTIMAL
+                           for a in approximate.tolist()]
+    checks = [_NEAR_AMBIGUOUS_CHECK if n else None for n in near.tolist()]
+    return statuses, checks
 
 
 #: the plugin (:mod:`prioik.formulations.registry`)

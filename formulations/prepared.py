@@ -375,8 +375,10 @@ class PreparedSolver:
         """Solve many stacks of the layout (the plugin's batched kernel when it has one,
         else a loop of :meth:`solve`), each on its own: a plugin's warm start is reset
         before each stack, so that row ``i`` equals ``prioik.solve(stacks[i])``. The
-        verification stage of a batched kernel's statuses is the precision check alone
-        (skipped with ``verify="none"``); a loop of :meth:`solve` runs the whole stage.
+        verification stage runs on every ``optimal`` answer as in :meth:`solve`: the
+        precision check; under ``verify="auto"`` the certificate of the answers whose
+        plugin asked for it; under ``"certificate"``/``"lower_point"`` that of every one
+        (``"none"``: nothing). A loop of :meth:`solve` runs the stage in each solve.
 
         Raises:
             TaskStackError: an empty batch.
@@ -398,21 +400,22 @@ class PreparedSolver:
             # a stack the batched kernel cannot take (e.g. an SVD that does not
             # converge): one by one, so that stack alone is "failed", as in solve
             out, batched = None, True
+        checks = None
         if out is None:
             X, statuses = self._one_by_one(datas)
         else:
-            X, statuses = out[0], list(out[1])
+            X, statuses, checks = out[0], list(out[1]), out[2]
         elapsed = time.perf_counter() - t0
         X = np.asarray(X, dtype=np.float64)
         bad = ~np.isfinite(X).all(axis=1)
         checked: list[Status] = [Status.FAILED if b else Status(st)
                                  for b, st in zip(bad, statuses, strict=False)]
-        # as solve's verification stage: float64 cannot give every level at a huge ‖x‖
-        # (a batched kernel's statuses do not know it)
-        if self.verify != "none":
-            for i in np.flatnonzero(np.linalg.norm(X, axis=1) > PRECISION_LIMIT_NORM).tolist():
-                if checked[i] == Status.OPTIMAL and \
-                        not precision_holds(Diagnostics(), datas[i], X[i]):
+        # solve's verification stage on the batched kernel's optimal answers (a loop of
+        # solve ran it already)
+        if self.verify != "none" and out is not None:
+            for i in [i for i, st in enumerate(checked) if st == Status.OPTIMAL]:
+                check = None if checks is None else checks[i]
+                if not self._verified(X[i], datas[i], Diagnostics(), check):
                     checked[i] = Status.APPROXIMATE
         if self._hard:          # as solve: a hard level left violated fails the answer
             checked = [Status.FAILED if st != Status.FAILED and hard_violations(d, x) else st

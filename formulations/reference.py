@@ -354,15 +354,16 @@ class Prepared(contract.Prepared):
         return _outcome(res.x, res.ranks.copy(), np.flatnonzero(res.ambiguous).tolist(),
                         bool(self.mu2.any()), detail, res.residuals)
 
-    def solve_batch(self, datas: list[StackData]) -> tuple[np.ndarray, list[str]]:
+    def solve_batch(self, datas: list[StackData]) -> contract.BatchOutcome:
         """Many stacks of the layout: ``(X, statuses)`` (:func:`solve_batch`, the stacked
         SVDs, on the numpy kernel; one compiled solve after the other on the cpp kernel)."""
         if not self._cpp:
             stacks = [d.as_stack().equilibrated()[0] for d in datas]
-            return solve_batch(stacks, rcond=self.rcond, metric=self.metric,
-                               level_damping=self.level_damping)
+            X, statuses = solve_batch(stacks, rcond=self.rcond, metric=self.metric,
+                                      level_damping=self.level_damping)
+            return X, statuses, None
         outs = [self.solve(d) for d in datas]
-        return np.array([o.x for o in outs]), [o.status for o in outs]
+        return np.array([o.x for o in outs]), [o.status for o in outs], [o.check for o in outs]
 
 
 #: the plugin (:mod:`prioik.formulations.registry`)

@@ -344,6 +344,52 @@ def test_the_certificate_demotes_a_perturbed_answer_and_none_does_not(monkeypatc
     assert formulations.solve(stack, "perturbed", verify="none").status == "optimal"
 
 
+def _perturbed_batched_plugin(monkeypatch, ask: bool):
+    """:func:`_perturbed_plugin` with a batched kernel: each stack's answer moved by 1e-3,
+    ``optimal``, a check asked (``ask``) or none."""
+    from prioik.formulations.base import CheckRequest
+
+    form = _fake(monkeypatch, "perturbed_batch", lambda stack, **_: None)
+
+    class Batched(form.prepared):
+        def solve_batch(self, datas):
+            X = np.array([formulations.solve(d.as_stack(), "reference").x
+                          + 1e-3 * d.A[0] for d in datas])
+            return X, ["optimal"] * len(datas), [CheckRequest() if ask else None] * len(datas)
+
+    monkeypatch.setitem(registry._loaded, "perturbed_batch",
+                        dataclasses.replace(form, prepared=Batched))
+
+
+def test_a_batched_kernels_answers_go_through_the_verification_stage(monkeypatch, stack):
+    """A batched kernel's ``optimal`` answers 1e-3 off the optimum: the stage demotes
+    them under ``"certificate"``, and under ``"auto"`` when the kernel asked; ``"none"``
+    never; nothing in the plugin certifies."""
+    stacks = [stack, stack]
+    _perturbed_batched_plugin(monkeypatch, ask=False)
+    assert formulations.solve_batch(stacks, "perturbed_batch").batched
+    for mode, status in (("none", "optimal"), ("auto", "optimal"),
+                         ("certificate", "approximate"), ("lower_point", "approximate")):
+        got = formulations.solve_batch(stacks, "perturbed_batch", verify=mode).statuses
+        assert got == [status, status], mode
+    _perturbed_batched_plugin(monkeypatch, ask=True)
+    assert formulations.solve_batch(stacks, "perturbed_batch").statuses == ["approximate"] * 2
+    assert formulations.solve_batch(stacks, "perturbed_batch",
+                                    verify="none").statuses == ["optimal"] * 2
+
+
+def test_the_extended_jacobian_batch_asks_the_stage_instead_of_certifying():
+    """The compiled batch leaves certification to the stage: its module imports no
+    certificate, and a near-ambiguous answer's check comes back with the batch."""
+    from prioik.formulations import extended_jacobian
+    assert not hasattr(extended_jacobian, "certify")
+    statuses, checks = extended_jacobian._batch_statuses(
+        np.zeros((2, 2)), np.array([[1e6, 1e6], [extended_jacobian.NEAR_AMBIGUITY
+                                                 * extended_jacobian.AMBIGUITY * 0.5, 1e6]]))
+    assert statuses == ["optimal", "optimal"]
+    assert checks[0] is None and checks[1] is not None
+
+
 def test_an_unknown_verify_mode_is_refused_naming_the_modes(stack):
     with pytest.raises(FormulationError, match="verify must be one of auto, none, "
                                                "certificate, lower_point; got 'all'"):
