@@ -131,11 +131,15 @@ def cmd_solve(args: argparse.Namespace) -> int:
     np.set_printoptions(precision=6, suppress=False, linewidth=100)
     code = 0
     for name, stack, peer in problems:
-        sol = formulations.solve(stack, args.formulation, **options)
+        sol = formulations.solve(stack, args.formulation, verify=args.verify, **options)
         if len(problems) > 1 or peer is not None:
             print(f"problem: {name}  ({stack.n} unknowns, {len(stack.levels)} levels)")
+        verified = (f"  verification ({args.verify}): {sol.verify_time_s * 1e6:.1f} µs"
+                    if sol.verify_time_s > 0 else "")
         print(f"formulation: {sol.formulation}  status: {sol.status}  "
-              f"time: {sol.time_s * 1e6:.1f} µs")
+              f"time: {sol.time_s * 1e6:.1f} µs{verified}")
+        if sol.status == "approximate" and sol.diagnostics.reason:
+            print(f"approximate: {sol.diagnostics.reason}")
         print(f"x = {sol.x}")
         finite = bool(np.isfinite(sol.x).all())
         w2 = lexicographic_residuals(stack, sol.x) ** 2 if finite else None
@@ -200,6 +204,12 @@ def add_parser(sub) -> None:
                    help="also run check_lexicographic (minimum-norm tie-break) on the answer")
     p.add_argument("--formulation", "-f", default="extended_jacobian",
                    help="formulation name (see `prioik list`)")
+    from prioik.formulations.base import VERIFY_MODES
+    p.add_argument("--verify", choices=VERIFY_MODES, default="auto",
+                   help="the verification stage after the solve (default auto: what the "
+                        "formulation asks for; none: nothing; certificate: "
+                        "check_lexicographic on every optimal answer; lower_point: that and "
+                        "the exact active set's comparison), timed apart")
     p.add_argument("--option", "-o", action="append", default=[], metavar="KEY=VALUE",
                    help="formulation option, repeatable (e.g. -o damping=0.01)")
     p.set_defaults(func=cmd_solve)

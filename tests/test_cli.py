@@ -27,6 +27,22 @@ def test_solve_prints_x_and_residuals(capsys):
     assert "level 2 (posture): residual" in out
 
 
+def test_solve_verify_runs_the_stage_apart_and_prints_its_time(capsys):
+    """``--verify certificate`` certifies the answer and prints the stage's time beside
+    the solve's; ``--verify none`` prints none; an unknown mode exits 2 naming them."""
+    path = str(examples_dir() / "small_4x3.json")
+    assert main(["solve", path, "--verify", "certificate"]) == 0
+    out = capsys.readouterr().out
+    assert re.search(r"status: optimal  time: [\d.]+ µs  verification \(certificate\): "
+                     r"[\d.]+ µs", out)
+    assert main(["solve", path, "--verify", "none"]) == 0
+    assert "verification" not in capsys.readouterr().out
+    with pytest.raises(SystemExit) as exc:
+        main(["solve", path, "--verify", "nosuch"])
+    assert exc.value.code == 2
+    assert "lower_point" in capsys.readouterr().err
+
+
 PEER = Path(__file__).parent / "data" / "peer"
 
 
