@@ -87,7 +87,7 @@ def ratios(rows: list[TimingRow], batch: dict[str, Any], ik: dict[str, Any]) -> 
         out.append(Ratio(r["name"], float(r["value"]), float(r["target"]),
                          "hierarchical_active_set (benchmarks/active_set_bench.py)"))
     panda = ik.get("panda", {}) if ik else {}
-    for key, what, target in (("prepared_step_us", "prepared path", 2.5),
+    for key, what, target in (("prepared_step_us", "prepared path", 1.0),
                               ("oneoff_step_us", "one-off prioik.solve", math.inf)):
         name = f"Panda reach step (kinematics + rows + solve), {what}: {ej} / PlaCo"
         a, b = panda.get(key, math.nan), panda.get("placo_step_us", math.nan)
