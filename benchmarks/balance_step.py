@@ -204,4 +204,4 @@ def balance_step_times(steps: int = 300, rounds: int = 5) -> dict[str, Any]:
             "prioik_hand_error_m": hand_error(own[-1]),
             "placo_hand_error_m": hand_error(placo_states[-1]),
             "equality_first_share": float(np.mean(first[:steps])) if first else 0.0,
-            "statuses": sorted(statuses)}
+            "statuses": sorted(str(s) for s in statuses)}
