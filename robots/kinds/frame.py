@@ -129,6 +129,30 @@ class FrameTask(RobotTask):
             raise (_refused(self, exc, names) if names else _refused(self, exc)) from None
         self.stamp = writer._stamp
 
+    #: its baselines' counterparts: PlaCo's ``KinematicsSolver`` method, TSID's task
+    #: name, and which of (position, orientation) pink's and mink's frame task weigh
+    placo_method: ClassVar[str] = ""
+    tsid_name: ClassVar[str] = ""
+    weighs: ClassVar[tuple[bool, bool]] = (False, False)
+
+    @classmethod
+    def baseline_task(cls, library, spec, target, context):
+        if not cls.placo_method:
+            return super().baseline_task(library, spec, target, context)
+        if library == "placo":
+            add = getattr(context["solver"], cls.placo_method)
+            task = add(spec.frame, np.asarray(target))
+            weights = (spec.weight, spec.weight) if all(cls.weighs) else (spec.weight,)
+            task.configure(spec.name, context["priority"], *weights)
+            return task
+        if library == "tsid":
+            return cls.tsid_name
+        if library == "pink":
+            return cls._pink_frame_task(spec, context, *cls.weighs)
+        if library == "mink":
+            return cls._mink_frame_task(spec, context, *cls.weighs)
+        return super().baseline_task(library, spec, target, context)
+
     @staticmethod
     def _pink_frame_task(spec, context, position: bool, orientation: bool):
         c = context["cost"]
@@ -156,6 +180,9 @@ class FramePositionTask(FrameTask):
     """
 
     kind = "frame_position"
+    placo_method = "add_position_task"
+    tsid_name = "position"
+    weighs = (True, False)
     capped = True
     frame_mode = _k.POSITION
     frame_rows = 3
@@ -190,20 +217,6 @@ class FramePositionTask(FrameTask):
             except CoreInputError as exc:
                 raise _refused(self, exc) from None
         self.stamp = writer._stamp
-
-    @classmethod
-    def baseline_task(cls, library, spec, target, context):
-        if library == "placo":
-            task = context["solver"].add_position_task(spec.frame, np.asarray(target))
-            task.configure(spec.name, context["priority"], spec.weight)
-            return task
-        if library == "tsid":
-            return "position"
-        if library == "pink":
-            return cls._pink_frame_task(spec, context, True, False)
-        if library == "mink":
-            return cls._mink_frame_task(spec, context, True, False)
-        return super().baseline_task(library, spec, target, context)
 
     @classmethod
     def baseline_reference(cls, library, targets, step, context):
@@ -260,6 +273,9 @@ class FrameOrientationTask(FrameTask):
     """
 
     kind = "frame_orientation"
+    placo_method = "add_orientation_task"
+    tsid_name = "orientation"
+    weighs = (False, True)
     capped = True
     frame_mode = _k.ORIENTATION
     frame_rows = 3
@@ -276,20 +292,6 @@ class FrameOrientationTask(FrameTask):
         self._frame(state, _ZERO3, _ZERO3, _ZERO3, _rotation(rotation, name),
                     _vec3(angular_velocity, name, "ω*"),
                     _vec3(angular_acceleration, name, "ω̇*"))
-
-    @classmethod
-    def baseline_task(cls, library, spec, target, context):
-        if library == "placo":
-            task = context["solver"].add_orientation_task(spec.frame, np.asarray(target))
-            task.configure(spec.name, context["priority"], spec.weight)
-            return task
-        if library == "tsid":
-            return "orientation"
-        if library == "pink":
-            return cls._pink_frame_task(spec, context, False, True)
-        if library == "mink":
-            return cls._mink_frame_task(spec, context, False, True)
-        return super().baseline_task(library, spec, target, context)
 
     @classmethod
     def baseline_reference(cls, library, targets, step, context):
@@ -321,6 +323,9 @@ class FramePoseTask(FrameTask):
     """
 
     kind = "frame_pose"
+    placo_method = "add_frame_task"
+    tsid_name = "frame"
+    weighs = (True, True)
     hard_is_constraint = True
 
     def __init__(self, name: str, frame: str, *, gain=None, level=None, weight=1.0,
@@ -349,20 +354,6 @@ class FramePoseTask(FrameTask):
                         _vec3(angular_velocity, name, "ω*"),
                         _vec3(angular_acceleration, name, "ω̇*"))
         self.stamp = writer._stamp
-
-    @classmethod
-    def baseline_task(cls, library, spec, target, context):
-        if library == "placo":
-            task = context["solver"].add_frame_task(spec.frame, np.asarray(target))
-            task.configure(spec.name, context["priority"], spec.weight, spec.weight)
-            return task
-        if library == "tsid":
-            return "frame"
-        if library == "pink":
-            return cls._pink_frame_task(spec, context, True, True)
-        if library == "mink":
-            return cls._mink_frame_task(spec, context, True, True)
-        return super().baseline_task(library, spec, target, context)
 
     @classmethod
     def baseline_reference(cls, library, targets, step, context):
