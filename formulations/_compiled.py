@@ -12,13 +12,21 @@ level and row; :func:`solve_rescaled` answers a stack the kernel refused for its
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
 from prioik.hierarchy import StackData
 
-from .base import CoreInputError, Diagnostics, FormulationError, Outcome, solve_equilibrated
+from . import contract
+from .base import (
+    CoreInputError,
+    Diagnostics,
+    FormulationError,
+    Outcome,
+    in_original_units,
+    solve_equilibrated,
+)
 
 try:  # the compiled C++ core (core/, built by pip install)
     from prioik import _core
@@ -74,6 +82,24 @@ def solve_rescaled(solve: Callable[[StackData], Outcome], data: StackData) -> Ou
     return solve_equilibrated(solve, data, OVERFLOW_MESSAGE)
 
 
+def solve_readable_equilibrated(solve_stack: Callable[[Any], Outcome], data: StackData
+                                ) -> Outcome:
+    """A readable (``kernel="numpy"``) path's answer for ``data``: ``solve_stack`` on its
+    stack with the levels of extreme scale equilibrated
+    (:meth:`~prioik.hierarchy.TaskStack.equilibrated`), read in the user's units."""
+    stack, levels = data.as_stack().equilibrated()
+    out = solve_stack(stack)
+    return in_original_units(out, data, levels) if levels else out
+
+
+def solve_each(solve: Callable[[StackData], Outcome], datas: list[StackData]
+               ) -> tuple[np.ndarray, list[str], list[Any]]:
+    """``(X, statuses, checks)`` (a batched kernel's answer,
+    :meth:`~.contract.Prepared.solve_batch`) of ``solve`` on each data in turn."""
+    outs = [solve(d) for d in datas]
+    return np.array([o.x for o in outs]), [o.status for o in outs], [o.check for o in outs]
+
+
 def mass_matrix_outcome(res: Any, M: np.ndarray, bias: Any, status: str,
                         detail: Callable[..., Any]) -> Outcome | None:
     """The answer of a compiled solve with the mass matrix ``M`` (``UnifyingResult``):
@@ -97,3 +123,45 @@ def mass_matrix_outcome(res: Any, M: np.ndarray, bias: Any, status: str,
     return Outcome(x, status, Diagnostics(ranks=res.ranks.copy(),
                                           detail=detail(kernel="cpp", flops=res.flops,
                                                         tau=tau)), res.residuals)
+
+
+class MassMatrixPrepared(contract.Prepared):
+    """A closed form solved in the metric of a mass matrix given with every solve
+    (``unifying``, ``operational_space``): the options ``mass_matrix`` (required) and
+    ``bias`` read per call, the compiled kernel ``self._core`` when ``self._cpp``, else
+    the subclass's :meth:`readable`; :meth:`outcome` reads a compiled result."""
+
+    accepts_step_options = True
+    #: the formulation's registry name (in messages)
+    name: ClassVar[str]
+    options: dict[str, Any]
+    _cpp: bool
+    _core: Any
+
+    def readable(self, data: StackData, mass: Any, bias: Any) -> Outcome:
+        """The readable path's answer (``kernel="numpy"``)."""
+        raise NotImplementedError
+
+    def outcome(self, res: Any, M: np.ndarray, bias: Any) -> Outcome | None:
+        """The answer of the compiled result ``res`` (``None``: rescale,
+        :func:`mass_matrix_outcome`)."""
+        raise NotImplementedError
+
+    def solve(self, data: StackData, options: dict[str, Any] | None = None) -> Outcome:
+        """Solve one stack of the layout (``options``: this call's, else the prepared ones).
+
+        Raises:
+            FormulationError: no ``mass_matrix``, or one that is not positive definite.
+            TaskStackError: a value is not finite (naming the task, level and row).
+        """
+        options = options or self.options
+        mass, bias = options["mass_matrix"], options["bias"]
+        if mass is None:
+            raise FormulationError(f"formulation {self.name!r} needs mass_matrix=M")
+        if not self._cpp:
+            return self.readable(data, mass, bias)
+        M = np.ascontiguousarray(mass, dtype=np.float64)
+        out = self.outcome(solve_compiled(self._core, data, M), M, bias)
+        if out is None:
+            return solve_rescaled(lambda d: self.solve(d, options), data)
+        return out

@@ -62,7 +62,7 @@ from prioik.hierarchy import (
 from prioik.hierarchy.linalg import numpy_svd
 
 from . import contract
-from ._compiled import _core, core_error
+from ._compiled import _core, core_error, solve_each
 from .base import (
     Capabilities,
     CheckRequest,
@@ -882,14 +882,8 @@ def _solve_batch(prepared: Prepared, datas: list[StackData]) -> contract.BatchOu
     """Many stacks of one layout at once: the compiled kernel over the batch, stacks in
     parallel (a loop of :meth:`Prepared.solve` off the compiled path)."""
     if not prepared.compiled:
-        return _outcomes(prepared, datas)
+        return solve_each(prepared.solve, datas)
     return _solve_batch_core(prepared, datas)
-
-
-def _outcomes(prepared: Prepared, datas: list[StackData]) -> contract.BatchOutcome:
-    """A loop of :meth:`Prepared.solve`: the answers, statuses and checks asked."""
-    outs = [prepared.solve(d) for d in datas]
-    return np.array([o.x for o in outs]), [o.status for o in outs], [o.check for o in outs]
 
 
 def _solve_batch_core(prepared: Prepared, datas: list[StackData]) -> contract.BatchOutcome:
@@ -906,7 +900,7 @@ def _solve_batch_core(prepared: Prepared, datas: list[StackData]) -> contract.Ba
         raise
     if not res.solved.all():
         # finite rows of extreme scale: one by one, equilibrated as in solve
-        return _outcomes(prepared, datas)
+        return solve_each(prepared.solve, datas)
     X = res.x.copy()
     return (X, *_batch_statuses(res.level_mu2, res.margins))
 

@@ -47,14 +47,20 @@ from prioik.hierarchy import (
 )
 
 from . import contract
-from ._compiled import _core, resolve_kernel, solve_compiled, solve_rescaled
+from ._compiled import (
+    _core,
+    resolve_kernel,
+    solve_compiled,
+    solve_each,
+    solve_readable_equilibrated,
+    solve_rescaled,
+)
 from ._numerics import check_nonnegative, project_level, project_levels
 from .base import (
     Capabilities,
     Diagnostics,
     Outcome,
     Status,
-    in_original_units,
 )
 from .options import Option, rcond_option, validate_options
 
@@ -199,10 +205,9 @@ class Prepared(contract.Prepared):
             TaskStackError: a value is not finite (naming the task, level and row).
         """
         if not self._cpp:
-            stack, levels = data.as_stack().equilibrated()
-            out = solve_readable(stack, damping=self.damping, rcond=self.rcond,
-                                 reproject=self.reproject)
-            return in_original_units(out, data, levels) if levels else out
+            return solve_readable_equilibrated(
+                lambda stack: solve_readable(stack, damping=self.damping, rcond=self.rcond,
+                                             reproject=self.reproject), data)
         res = solve_compiled(self._core, data)
         if not res.solved:
             return solve_rescaled(self.solve, data)
@@ -220,8 +225,7 @@ class Prepared(contract.Prepared):
             X, statuses = solve_batch(stacks, damping=self.damping, rcond=self.rcond,
                                       reproject=self.reproject)
             return X, statuses, None
-        outs = [self.solve(d) for d in datas]
-        return np.array([o.x for o in outs]), [o.status for o in outs], [o.check for o in outs]
+        return solve_each(self.solve, datas)
 
 
 #: the plugin (:mod:`prioik.formulations.registry`)

@@ -43,7 +43,6 @@ compiled kernel to.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from scipy.linalg import solve_triangular
@@ -51,7 +50,7 @@ from scipy.linalg import solve_triangular
 from prioik.hierarchy import StackData, StackLayout, TaskStack
 
 from . import contract
-from ._compiled import _core, mass_matrix_outcome, resolve_kernel, solve_compiled, solve_rescaled
+from ._compiled import MassMatrixPrepared, _core, mass_matrix_outcome, resolve_kernel
 from ._numerics import check_nonnegative, truncated_svd
 from .base import (
     Capabilities,
@@ -189,7 +188,7 @@ def solve_readable(stack: TaskStack, *, mass_matrix, bias, rcond: float, reproje
                                detail=Detail("numpy", None, tau, levels, N)))
 
 
-class Prepared(contract.Prepared):
+class Prepared(MassMatrixPrepared):
     """Prioritized operational-space control prepared for one layout: options checked, and
     on the compiled kernel (``kernel="cpp"``) the C++ solver with every workspace allocated
     once (``prioik._core.OperationalSpaceSolver``: ``M = L Lᵀ`` factored in the solve,
@@ -206,7 +205,7 @@ class Prepared(contract.Prepared):
         options: Every option of :data:`OPTIONS`, validated.
     """
 
-    accepts_step_options = True
+    name = NAME
 
     def __init__(self, layout: StackLayout, options: dict) -> None:
         self.layout = layout
@@ -221,26 +220,12 @@ class Prepared(contract.Prepared):
                 [int(s) for s in layout.starts], layout.n, rcond=self.rcond,
                 reproject=self.reproject)
 
-    def solve(self, data: StackData, options: dict[str, Any] | None = None) -> Outcome:
-        """Solve one stack of the layout (``options``: this call's, else the prepared ones).
+    def readable(self, data: StackData, mass, bias) -> Outcome:
+        return solve_readable(data.as_stack(), mass_matrix=mass, bias=bias,
+                              rcond=self.rcond, reproject=self.reproject)
 
-        Raises:
-            FormulationError: no ``mass_matrix``, or one that is not positive definite.
-            TaskStackError: a value is not finite (naming the task, level and row).
-        """
-        options = options or self.options
-        mass, bias = options["mass_matrix"], options["bias"]
-        if mass is None:
-            raise FormulationError("formulation 'operational_space' needs mass_matrix=M")
-        if not self._cpp:
-            return solve_readable(data.as_stack(), mass_matrix=mass, bias=bias,
-                                  rcond=self.rcond, reproject=self.reproject)
-        M = np.ascontiguousarray(mass, dtype=np.float64)
-        res = solve_compiled(self._core, data, M)
-        out = mass_matrix_outcome(res, M, bias, Status.OPTIMAL, Detail)
-        if out is None:
-            return solve_rescaled(lambda d: self.solve(d, options), data)
-        return out
+    def outcome(self, res, M: np.ndarray, bias) -> Outcome | None:
+        return mass_matrix_outcome(res, M, bias, Status.OPTIMAL, Detail)
 
 
 #: the plugin (:mod:`prioik.formulations.registry`)

@@ -54,7 +54,14 @@ from prioik.hierarchy import (
 )
 
 from . import contract
-from ._compiled import _core, resolve_kernel, solve_compiled, solve_rescaled
+from ._compiled import (
+    _core,
+    resolve_kernel,
+    solve_compiled,
+    solve_each,
+    solve_readable_equilibrated,
+    solve_rescaled,
+)
 from ._numerics import REFINEMENT_STEPS, refinement
 from .base import (
     Capabilities,
@@ -62,7 +69,6 @@ from .base import (
     FormulationError,
     Outcome,
     Status,
-    in_original_units,
 )
 from .options import (
     Option,
@@ -342,9 +348,7 @@ class Prepared(contract.Prepared):
                 null space (the prepared solver's status ``"failed"``).
         """
         if not self._cpp:
-            stack, levels = data.as_stack().equilibrated()
-            out = self._readable(stack)
-            return in_original_units(out, data, levels) if levels else out
+            return solve_readable_equilibrated(self._readable, data)
         res = solve_compiled(self._core, data)
         if not res.solved:
             return solve_rescaled(self.solve, data)
@@ -362,8 +366,7 @@ class Prepared(contract.Prepared):
             X, statuses = solve_batch(stacks, rcond=self.rcond, metric=self.metric,
                                       level_damping=self.level_damping)
             return X, statuses, None
-        outs = [self.solve(d) for d in datas]
-        return np.array([o.x for o in outs]), [o.status for o in outs], [o.check for o in outs]
+        return solve_each(self.solve, datas)
 
 
 #: the plugin (:mod:`prioik.formulations.registry`)

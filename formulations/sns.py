@@ -56,7 +56,13 @@ from prioik.hierarchy import (
 )
 
 from . import contract
-from ._compiled import _core, resolve_kernel, solve_compiled, solve_rescaled
+from ._compiled import (
+    _core,
+    resolve_kernel,
+    solve_compiled,
+    solve_readable_equilibrated,
+    solve_rescaled,
+)
 from ._numerics import check_nonnegative, project_level, truncated_svd
 from .base import (
     Capabilities,
@@ -64,7 +70,6 @@ from .base import (
     FormulationError,
     Outcome,
     Status,
-    in_original_units,
 )
 from .options import Option, rcond_option, validate_options
 
@@ -418,10 +423,10 @@ class Prepared(contract.Prepared):
             UnsupportedTaskError, FormulationError: see :func:`split_bounds`.
         """
         if not self._cpp:
-            stack, levels = data.as_stack().equilibrated()
-            out = solve_readable(stack, rcond=self.rcond, bound_tolerance=self.bound_tolerance,
-                                 max_saturations=self.max_saturations)
-            return in_original_units(out, data, levels) if levels else out
+            return solve_readable_equilibrated(
+                lambda stack: solve_readable(stack, rcond=self.rcond,
+                                             bound_tolerance=self.bound_tolerance,
+                                             max_saturations=self.max_saturations), data)
         res = solve_compiled(self._core, data, data.lower, data.upper)
         if res.bounds != 0:
             split_bounds(data.as_stack())         # raises, naming the task or column
