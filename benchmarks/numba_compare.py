@@ -19,10 +19,11 @@ bench`` (:func:`~prioik.benchmarks.stacks.g1_fencing_cases`,
 :func:`~prioik.benchmarks.stacks.random_case`, the ``conflicting`` family, the default
 sizes and levels), and the G1 bounds trajectories of
 :mod:`~prioik.benchmarks.active_set_bench` (:func:`.active_set_bench.bounds_stacks`,
-both variants, both levels). A worker process (this file run as a script by either
-environment's Python) loads them and times, per row, the same solve through the
+both variants, both levels). A worker process per side (this file run as a script by
+that environment's Python) loads them and times, per row, the same solve through the
 registry's prepared path (``prioik.prepare(layout, formulation, kernel=K, ...)``):
-``K = "numba"`` in the old environment, ``K = "cpp"`` in this one, every other option
+``K = "numba"`` in the old environment, ``K = "cpp"`` in this one (or in
+``--cpp-python``'s, e.g. one whose core is tuned for this machine), every other option
 at its default. The rows:
 
 * ``extended_jacobian`` and ``hierarchical_active_set`` on every case of the tables,
@@ -40,14 +41,16 @@ at its default. The rows:
   over the trajectory, per stack the fastest whole ``PreparedSolver.solve`` call, a
   row's time the median over the stacks.
 
-Rounds. The two workers run alternately, ``numba, C++, numba, C++, …``, ``--rounds``
-of each (BLAS limited to one thread in both); a row's figure per side is the median of
+Rounds. Both workers stay alive and take turns, one at a time (the other waits): each
+first times every row once and saves its answers (imports, numba's cache, first calls),
+then in each of ``--rounds`` rounds every row is timed by numba's worker and right after
+by C++'s (BLAS limited to one thread in both). A row's figure per side is the median of
 its per-round times, its ratio the quotient of the two medians (and, beside it, the
 smallest and largest ratio of one round's pair).
 
-Answers. Each side's first round also saves every answer: ``x``, the level residuals
-``‖w_i‖`` and the status of each stack's solve (the table rows: a fresh solver per
-layout, the case's stacks once in order; the trajectory rows: the last pass). Two
+Answers. Each side's saved answers: ``x``, the level residuals ``‖w_i‖`` and the status
+of each stack's solve (the table rows: a fresh solver per layout, the case's stacks once
+in order; the trajectory rows: the last pass). Two
 answers agree when their statuses are equal and ``‖x_cpp − x_numba‖ ≤``
 :data:`X_RTOL` ``· max(1, ‖x_numba‖)``; the table gives the count of agreeing answers,
 the largest such distance of a row, the largest change of a level residual (relative to
@@ -190,34 +193,48 @@ def _time_trajectory(stacks: list, before: dict[int, int], mode: str, options: d
     return float(np.median(best)), answers
 
 
-def worker(work: Path, side: str, out: Path, answers: Path | None) -> None:
-    """Time every row of ``work/rows.json`` with ``side``'s kernels; write
-    ``{row: {"solve": seconds, "wall": seconds}}`` (and, with ``answers``, every answer's
-    ``x``, level residuals and status)."""
+def _time_row(row: dict, stacks: list, kernels: dict, spec: dict, answers: bool
+              ) -> tuple[dict[str, float], list]:
+    """One row's times (``{"solve": s, "wall": s}``) and, with ``answers``, its answers."""
+    options = {"kernel": kernels[row["formulation"]]}
+    these = [stacks[i] for i in row["stacks"]]
+    if row["mode"] == "table":
+        times = _time_table(these, row["formulation"], options, spec["repeats"],
+                            spec["cap_s"])
+        return times, _table_answers(these, row["formulation"], options) if answers else []
+    before = {int(k): v for k, v in row["before"].items()}
+    wall, sols = _time_trajectory(these, before, row["mode"], options, spec["passes"],
+                                  stacks)
+    return {"solve": wall, "wall": wall}, sols
+
+
+def worker(work: Path, side: str) -> None:
+    """Serve timings of the rows of ``work/rows.json`` with ``side``'s kernels: per line
+    of stdin, ``{"row": NAME}`` is answered on stdout by ``{"solve": s, "wall": s}``;
+    ``{"answers": PATH}`` times every row once and writes every answer's ``x`` and level
+    residuals (npz ``PATH``) and statuses (``PATH`` with ``.json``), then ``{}``."""
+    reply, sys.stdout = sys.stdout, sys.stderr     # stray prints leave the protocol alone
     spec = json.loads((work / "rows.json").read_text())
     stacks = load_stacks(spec["manifest"], work / "stacks.npz")
+    rows = {row["name"]: row for row in spec["rows"]}
     kernels = KERNELS[side]
-    times, xs, statuses = {}, {}, {}
-    for row in spec["rows"]:
-        options = {"kernel": kernels[row["formulation"]]}
-        these = [stacks[i] for i in row["stacks"]]
-        if row["mode"] == "table":
-            times[row["name"]] = _time_table(these, row["formulation"], options,
-                                             spec["repeats"], spec["cap_s"])
-            sols = _table_answers(these, row["formulation"], options) if answers else []
-        else:
-            before = {int(k): v for k, v in row["before"].items()}
-            wall, sols = _time_trajectory(these, before, row["mode"], options,
-                                          spec["passes"], stacks)
-            times[row["name"]] = {"solve": wall, "wall": wall}
-        for j, sol in enumerate(sols):
-            xs[f"{row['name']}#{j}"] = np.asarray(sol.x, dtype=float)
-            xs[f"{row['name']}#{j}/residuals"] = np.asarray(sol.residuals, dtype=float)
-        statuses[row["name"]] = [str(sol.status) for sol in sols]
-    out.write_text(json.dumps(times))
-    if answers is not None:
-        np.savez(answers, **xs)
-        answers.with_suffix(".json").write_text(json.dumps(statuses))
+    for line in sys.stdin:
+        request = json.loads(line)
+        if "row" in request:
+            times, _ = _time_row(rows[request["row"]], stacks, kernels, spec, False)
+            print(json.dumps(times), file=reply, flush=True)
+            continue
+        xs, statuses = {}, {}
+        for name, row in rows.items():
+            _, sols = _time_row(row, stacks, kernels, spec, True)
+            for j, sol in enumerate(sols):
+                xs[f"{name}#{j}"] = np.asarray(sol.x, dtype=float)
+                xs[f"{name}#{j}/residuals"] = np.asarray(sol.residuals, dtype=float)
+            statuses[name] = [str(sol.status) for sol in sols]
+        path = Path(request["answers"])
+        np.savez(path, **xs)
+        path.with_suffix(".json").write_text(json.dumps(statuses))
+        print("{}", file=reply, flush=True)
 
 
 # ------------------------------------------------------------------ the rows
@@ -347,26 +364,46 @@ def markdown_table(results: list[RowResult]) -> str:
     return "\n".join(lines)
 
 
-def _worker_command(python: str, work: Path, side: str, out: Path,
-                    answers: Path | None) -> list[str]:
-    # -P: the script's directory (benchmarks/) is not put on sys.path, so that its
-    # modules cannot shadow the environment's packages
-    cmd = [python, "-P", str(Path(__file__).resolve()), "--worker", str(work),
-           "--side", side, "--out", str(out)]
-    return cmd + (["--answers", str(answers)] if answers else [])
+class _Worker:
+    """One side's worker process (:func:`worker`), asked row by row."""
+
+    def __init__(self, python: str, work: Path, side: str, env: dict[str, str]) -> None:
+        # -P: the script's directory (benchmarks/) is not put on sys.path, so that its
+        # modules cannot shadow the environment's packages
+        self.side = side
+        self.process = subprocess.Popen(
+            [python, "-P", str(Path(__file__).resolve()), "--worker", str(work),
+             "--side", side], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+            env=env)
+
+    def ask(self, request: dict) -> dict:
+        self.process.stdin.write(json.dumps(request) + "\n")
+        self.process.stdin.flush()
+        line = self.process.stdout.readline()
+        if not line:
+            raise SystemExit(f"numba_compare: the {self.side} worker ended "
+                             f"(exit {self.process.wait()}) on {request}")
+        return json.loads(line)
+
+    def close(self) -> None:
+        self.process.stdin.close()
+        self.process.wait()
 
 
-def _describe_builds(old_python: str) -> list[str]:
-    import prioik._core as core
-    info = core.build_info()
-    tuning = "-march=native" if info.native else "portable"
-    lines = [f"C++ core: {info.compiler}, {tuning} (vector clones: "
-             f"{info.vector_clones or 'none'}), fast math {info.fast_math}, "
-             f"FP contraction {info.fp_contract}, Eigen {info.eigen}"]
-    probe = ("import numba, llvmlite.binding as b; "
-             "print(f'numba {numba.__version__}, compiled for this CPU ({b.get_host_cpu_name()})')")
-    got = subprocess.run([old_python, "-c", probe], capture_output=True, text=True)
-    lines.append(got.stdout.strip() or f"numba: {got.stderr.strip()[-200:]}")
+def _describe_builds(pythons: dict[str, str]) -> list[str]:
+    """A line per side: the C++ core's build flags, numba's version and target CPU."""
+    probes = {
+        "cpp": "import prioik._core as c; b = c.build_info(); "
+               "print(f\"C++ core: {b.compiler}, {'-march=native' if b.native else 'portable'} "
+               "(vector clones: {b.vector_clones}), -O3, fast math {b.fast_math}, "
+               "FP contraction {b.fp_contract}, Eigen {b.eigen}\")",
+        "numba": "import numba, llvmlite.binding as b; print(f'numba {numba.__version__}, "
+                 "compiled for this CPU ({b.get_host_cpu_name()})')"}
+    lines = []
+    for side, probe in probes.items():
+        got = subprocess.run([pythons[side], "-P", "-c", probe], capture_output=True,
+                             text=True, cwd=tempfile.gettempdir())
+        lines.append(got.stdout.strip() or f"{side}: {got.stderr.strip()[-200:]}")
     return lines
 
 
@@ -375,9 +412,13 @@ def main(argv: list[str] | None = None) -> None:
         prog="python -m prioik.benchmarks.numba_compare",
         description="Time prioik bench's extended-Jacobian and active-set rows with the "
                     f"C++ core here and with the numba kernels of a checkout of commit "
-                    f"{NUMBA_COMMIT} (see the module docstring), in alternating processes.")
+                    f"{NUMBA_COMMIT} (see the module docstring), two processes taking turns.")
     p.add_argument("--old-python", help="the Python of the checkout with the numba kernels")
-    p.add_argument("--rounds", type=int, default=7, help="rounds of each side (>= 5)")
+    p.add_argument("--cpp-python", default=sys.executable, help="the Python whose prioik "
+                   "times the C++ core (default: this one; e.g. an environment with the "
+                   "core built with -C cmake.define.PRIOIK_NATIVE=ON)")
+    p.add_argument("--rounds", type=int, default=7, help="rounds, each row timed by numba's "
+                   "worker then C++'s (at least 5)")
     p.add_argument("--repeats", type=int, default=200, help="table rows: timed solves")
     p.add_argument("--cap", type=float, default=0.3, help="table rows: seconds per row "
                    "and round (fewer repeats above it, at least 10)")
@@ -389,15 +430,13 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--levels", type=lambda s: tuple(int(v) for v in s.split(",")),
                    help="random cases' k (default: prioik bench's)")
     p.add_argument("--no-g1", action="store_true", help="only the random cases")
-    p.add_argument("--work", type=Path, help="directory for the stacks, each round's times "
-                   "and the answers (default: a new temporary directory)")
+    p.add_argument("--work", type=Path, help="directory for the stacks and both sides' "
+                   "answers (default: a new temporary directory)")
     p.add_argument("--worker", type=Path, help=argparse.SUPPRESS)
     p.add_argument("--side", choices=SIDES, help=argparse.SUPPRESS)
-    p.add_argument("--out", type=Path, help=argparse.SUPPRESS)
-    p.add_argument("--answers", type=Path, help=argparse.SUPPRESS)
     a = p.parse_args(argv)
     if a.worker is not None:
-        worker(a.worker, a.side, a.out, a.answers)
+        worker(a.worker, a.side)
         return
     if not a.old_python:
         p.error("--old-python is required (the numba checkout's Python; see --help)")
@@ -409,23 +448,24 @@ def main(argv: list[str] | None = None) -> None:
     rows = build_rows(work, a.repeats, a.cap, a.passes, a.windows, a.steps, a.sizes,
                       a.levels, not a.no_g1)
     env = dict(os.environ, **{v: "1" for v in THREAD_VARIABLES})
-    pythons = {"numba": a.old_python, "cpp": sys.executable}
+    pythons = {"numba": a.old_python, "cpp": a.cpp_python}
+    workers = {side: _Worker(pythons[side], work, side, env) for side in SIDES}
     results = {r["name"]: RowResult(r["name"]) for r in rows}
     start = time.perf_counter()
-    for rnd in range(a.rounds):
-        for side in SIDES:
-            out = work / f"{side}-{rnd}.json"
-            answers = work / f"answers-{side}.npz" if rnd == 0 else None
-            done = subprocess.run(_worker_command(pythons[side], work, side, out, answers),
-                                  env=env)
-            if done.returncode != 0:
-                raise SystemExit(f"numba_compare: the {side} worker failed "
-                                 f"(exit {done.returncode}) in round {rnd + 1}")
-            for name, sec in json.loads(out.read_text()).items():
-                results[name].seconds[side].append(sec["solve"])
-                results[name].wall[side].append(sec["wall"])
-            print(f"numba_compare: round {rnd + 1}/{a.rounds} {side} done "
+    try:
+        for side in SIDES:      # every row once (compiles, caches), every answer saved
+            workers[side].ask({"answers": str(work / f"answers-{side}.npz")})
+        for rnd in range(a.rounds):
+            for row in rows:
+                for side in SIDES:
+                    got = workers[side].ask({"row": row["name"]})
+                    results[row["name"]].seconds[side].append(got["solve"])
+                    results[row["name"]].wall[side].append(got["wall"])
+            print(f"numba_compare: round {rnd + 1}/{a.rounds} done "
                   f"({time.perf_counter() - start:.0f} s)", file=sys.stderr, flush=True)
+    finally:
+        for w in workers.values():
+            w.close()
     x, statuses = {}, {}
     for side in SIDES:
         with np.load(work / f"answers-{side}.npz") as f:
@@ -433,8 +473,8 @@ def main(argv: list[str] | None = None) -> None:
         statuses[side] = json.loads((work / f"answers-{side}.json").read_text())
     for r in results.values():
         compare_answers(r, x, statuses)
-    print("\n".join(_describe_builds(a.old_python)))
-    print(f"{a.rounds} rounds of each side, alternating; BLAS on one thread; "
+    print("\n".join(_describe_builds(pythons)))
+    print(f"{a.rounds} rounds, each row numba then C++; BLAS on one thread; "
           f"answers agree: same status and ‖Δx‖ ≤ {X_RTOL:g}·max(1, ‖x‖)")
     print(markdown_table(list(results.values())))
 
