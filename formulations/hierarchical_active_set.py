@@ -42,7 +42,6 @@ The algorithm, its hard cases, tolerances and complexity: ``docs/active-set.md``
 from __future__ import annotations
 
 from dataclasses import dataclass
-from itertools import compress
 from types import SimpleNamespace
 from typing import Any
 
@@ -180,6 +179,21 @@ class Detail:
     refined_dual_tol: float | None = None
     refined_from: str | None = None
 
+def _clean_diagnostics(snapshot: tuple) -> Diagnostics:
+    """The :class:`~prioik.formulations.Diagnostics` of a clean solve from what it left
+    (:meth:`Prepared.solve_checked`): ``(values, k, infeasible, warm_start,
+    equality_first)``, ``values`` the kernel's per-level values copied by
+    ``ActiveSetSolver.snapshot`` — ``res``, ``w2``, ``ranks``, ``over`` (``k`` each),
+    ``iterations`` (``k + 1``), the integers as exact doubles — and ``infeasible``
+    whether a level has ``f_i* > 0`` (its ``over`` flag set)."""
+    values, k, infeasible, warm_start, first = snapshot
+    return Diagnostics(
+        ranks=values[2 * k:3 * k].astype(np.int64),
+        iterations=values[4 * k:].astype(np.int64),
+        infeasible_levels=np.flatnonzero(values[3 * k:4 * k]).tolist() if infeasible else (),
+        detail=Detail(values[k:2 * k], warm_start, first))
+
+
 def _core_module():
     """``prioik._core`` (the compiled C++ core), or a FormulationError saying why not."""
     if _CORE_CODES is None:  # pragma: no cover - built by pip install
@@ -236,7 +250,6 @@ class Prepared(contract.Prepared):
         # has none to try)
         self._try_first = self.warm_start and bool(layout.row_is_equality.any())
         self._n, self._k = layout.n, layout.k
-        self._levels = range(layout.k)
         self._prepare_cpp(layout)
         #: how many more times a rejected answer is re-solved (:meth:`_refined`)
         self._refine = REFINE_ROUNDS if refine_rounds is None else refine_rounds
@@ -258,6 +271,8 @@ class Prepared(contract.Prepared):
         self._x, self._w2, self._res = cpp.x, cpp.w2, cpp.res
         self._margins, self._iterations, self._flags = cpp.margins, cpp.iterations, cpp.flags
         self._ranks, self._over = cpp.ranks[:k], cpp.over[:k]
+        # a clean answer's per-level values, copied in one (_clean_diagnostics)
+        self._snapshot, self._snapshot_size = cpp.snapshot, cpp.snapshot_size
         # the certificate of flagged answers (_certify): its workspace allocated here
         self._certificate = core.Certificate(
             layout.n, np.ascontiguousarray(layout.starts, dtype=np.int64),
@@ -290,14 +305,17 @@ class Prepared(contract.Prepared):
         """
         out = self.solve_checked(data)
         if isinstance(out, tuple):
-            x, status, diagnostics, residuals = out
-            return Outcome(x, status, diagnostics, residuals=residuals, checked=True)
+            x, residuals, (diagnostics_of, values) = out
+            return Outcome(x, Status.OPTIMAL, diagnostics_of(values), residuals=residuals,
+                           checked=True)
         return out
 
     def solve_checked(self, data: StackData) -> tuple | Outcome:
         """:meth:`solve`, its common case (settled, finite, every rank decision clear,
-        every box row resolved) as the tuple ``(x, Status.OPTIMAL, diagnostics, residuals)`` of a
-        checked :class:`Outcome` without the object (see :mod:`formulations.prepared`).
+        every box row resolved) as the tuple ``(x, residuals, snapshot)`` of a checked
+        ``optimal`` :class:`Outcome` without the object, its diagnostics built from
+        ``snapshot`` when read (:func:`_clean_diagnostics`; see
+        :meth:`prioik.formulations.contract.Prepared.solve_checked`).
 
         Raises:
             TaskStackError: as :meth:`solve`.
@@ -325,12 +343,13 @@ class Prepared(contract.Prepared):
             data.check()
             raise
         if code == _SOLVED_CLEAN or code == _SOLVED_INFEASIBLE:
-            return (self._x.copy(), Status.OPTIMAL,
-                    Diagnostics(ranks=self._ranks.copy(), iterations=self._iterations.copy(),
-                                infeasible_levels=() if code == _SOLVED_CLEAN else
-                                list(compress(self._levels, self._over.tolist())),
-                                detail=Detail(self._w2.copy(), self.warm_start, first)),
-                    self._res.copy())
+            # the per-level values in one copy (the snapshot the Solution keeps): the
+            # residuals a view of it, the diagnostics built from it when read
+            values = np.empty(self._snapshot_size)
+            self._snapshot(values)
+            return (self._x.copy(), values[:self._k],
+                    (_clean_diagnostics, (values, self._k, code == _SOLVED_INFEASIBLE,
+                                          self.warm_start, first)))
         if code == _codes.NOT_SOLVED:
             self.reset()
             data.check()     # names the task, level and row at fault
