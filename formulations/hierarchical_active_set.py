@@ -181,17 +181,17 @@ class Detail:
 
 def _clean_diagnostics(snapshot: tuple) -> Diagnostics:
     """The :class:`~prioik.formulations.Diagnostics` of a clean solve from what it left
-    (:meth:`Prepared.solve_checked`): ``(values, k, infeasible, warm_start,
-    equality_first)``, ``values`` the kernel's per-level values copied by
-    ``ActiveSetSolver.snapshot`` — ``res``, ``w2``, ``ranks``, ``over`` (``k`` each),
-    ``iterations`` (``k + 1``), the integers as exact doubles — and ``infeasible``
-    whether a level has ``f_i* > 0`` (its ``over`` flag set)."""
-    values, k, infeasible, warm_start, first = snapshot
-    return Diagnostics(
-        ranks=values[2 * k:3 * k].astype(np.int64),
-        iterations=values[4 * k:].astype(np.int64),
-        infeasible_levels=np.flatnonzero(values[3 * k:4 * k]).tolist() if infeasible else (),
-        detail=Detail(values[k:2 * k], warm_start, first))
+    (:meth:`Prepared.solve_checked`): ``(values, (n, k), infeasible, warm_start,
+    equality_first)``, ``values`` the kernel's answer copied by
+    ``ActiveSetSolver.snapshot`` — ``x`` (``n``), ``res``, ``w2``, ``ranks``, ``over``
+    (``k`` each), ``iterations`` (``k + 1``), the integers as exact doubles — and
+    ``infeasible`` whether a level has ``f_i* > 0`` (its ``over`` flag set)."""
+    values, (n, k), infeasible, warm_start, first = snapshot
+    w2, ranks, over, iterations = (values[n + k:n + 2 * k], values[n + 2 * k:n + 3 * k],
+                                   values[n + 3 * k:n + 4 * k], values[n + 4 * k:])
+    return Diagnostics(ranks=ranks.astype(np.int64), iterations=iterations.astype(np.int64),
+                       infeasible_levels=np.flatnonzero(over).tolist() if infeasible else (),
+                       detail=Detail(w2, warm_start, first))
 
 
 def _core_module():
@@ -271,8 +271,9 @@ class Prepared(contract.Prepared):
         self._x, self._w2, self._res = cpp.x, cpp.w2, cpp.res
         self._margins, self._iterations, self._flags = cpp.margins, cpp.iterations, cpp.flags
         self._ranks, self._over = cpp.ranks[:k], cpp.over[:k]
-        # a clean answer's per-level values, copied in one (_clean_diagnostics)
+        # a clean answer, copied in one (_clean_diagnostics): x (n), res (k), ...
         self._snapshot, self._snapshot_size = cpp.snapshot, cpp.snapshot_size
+        self._x_res, self._n_k = layout.n + k, (layout.n, k)
         # the certificate of flagged answers (_certify): its workspace allocated here
         self._certificate = core.Certificate(
             layout.n, np.ascontiguousarray(layout.starts, dtype=np.int64),
@@ -343,12 +344,13 @@ class Prepared(contract.Prepared):
             data.check()
             raise
         if code == _SOLVED_CLEAN or code == _SOLVED_INFEASIBLE:
-            # the per-level values in one copy (the snapshot the Solution keeps): the
-            # residuals a view of it, the diagnostics built from it when read
+            # the answer in one copy (the snapshot the Solution keeps): x and the
+            # residuals views of it, the diagnostics built from it when read
             values = np.empty(self._snapshot_size)
             self._snapshot(values)
-            return (self._x.copy(), values[:self._k],
-                    (_clean_diagnostics, (values, self._k, code == _SOLVED_INFEASIBLE,
+            n = self._n
+            return (values[:n], values[n:self._x_res],
+                    (_clean_diagnostics, (values, self._n_k, code == _SOLVED_INFEASIBLE,
                                           self.warm_start, first)))
         if code == _codes.NOT_SOLVED:
             self.reset()

@@ -220,6 +220,18 @@ def test_solve_overhead_times_the_public_call_and_its_kernel_on_the_same_rows():
         solve_overhead.solve_overhead(lapack, datas, rounds=1, calls=5)
 
 
+def test_solve_overhead_times_the_active_set_beside_a_twin_kernel():
+    """The Panda reach with limits (hierarchical_active_set): the public call beside a twin
+    ActiveSetSolver solving the same sequence (the same answers, bit for bit, checked by
+    solve_overhead itself)."""
+    from prioik.benchmarks import solve_overhead
+    solver, datas = solve_overhead.panda_rows(states=3, limits=True)
+    assert solver.formulation == "hierarchical_active_set"
+    r = solve_overhead.solve_overhead(solver, datas, rounds=1, calls=5)
+    assert 0.0 < r["kernel_us"] and 0.0 < r["solve_us"]
+    assert math.isfinite(r["overhead_us"]) and r["overhead_us"] < r["solve_us"]
+
+
 def test_missing_measurements_give_nan_not_a_number():
     got = ratios([_row("g1 compatible", "extended_jacobian", 20.0)], {}, {})
     for r in got:
