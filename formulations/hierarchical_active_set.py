@@ -42,6 +42,7 @@ The algorithm, its hard cases, tolerances and complexity: ``docs/active-set.md``
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 from types import SimpleNamespace
 from typing import Any
 
@@ -179,14 +180,15 @@ class Detail:
     refined_dual_tol: float | None = None
     refined_from: str | None = None
 
-def _clean_diagnostics(snapshot: tuple) -> Diagnostics:
-    """The :class:`~prioik.formulations.Diagnostics` of a clean solve from what it left
-    (:meth:`Prepared.solve_checked`): ``(values, (n, k), infeasible, warm_start,
-    equality_first)``, ``values`` the kernel's answer copied by
-    ``ActiveSetSolver.snapshot`` — ``x`` (``n``), ``res``, ``w2``, ``ranks``, ``over``
-    (``k`` each), ``iterations`` (``k + 1``), the integers as exact doubles — and
-    ``infeasible`` whether a level has ``f_i* > 0`` (its ``over`` flag set)."""
-    values, (n, k), infeasible, warm_start, first = snapshot
+def _clean_diagnostics(n: int, k: int, warm_start: bool, snapshot: tuple) -> Diagnostics:
+    """The :class:`~prioik.formulations.Diagnostics` of a clean solve of a layout of
+    ``n`` unknowns and ``k`` levels from what it left (:meth:`Prepared.solve_checked`):
+    ``snapshot`` is ``(values, infeasible, equality_first)``, ``values`` the kernel's
+    answer copied by ``ActiveSetSolver.snapshot`` — ``x`` (``n``), ``res``, ``w2``,
+    ``ranks``, ``over`` (``k`` each), ``iterations`` (``k + 1``), the integers as exact
+    doubles — and ``infeasible`` whether a level has ``f_i* > 0`` (its ``over`` flag
+    set)."""
+    values, infeasible, first = snapshot
     w2, ranks, over, iterations = (values[n + k:n + 2 * k], values[n + 2 * k:n + 3 * k],
                                    values[n + 3 * k:n + 4 * k], values[n + 4 * k:])
     return Diagnostics(ranks=ranks.astype(np.int64), iterations=iterations.astype(np.int64),
@@ -273,7 +275,8 @@ class Prepared(contract.Prepared):
         self._ranks, self._over = cpp.ranks[:k], cpp.over[:k]
         # a clean answer, copied in one (_clean_diagnostics): x (n), res (k), ...
         self._snapshot, self._snapshot_size = cpp.snapshot, cpp.snapshot_size
-        self._x_res, self._n_k = layout.n + k, (layout.n, k)
+        self._x_res = layout.n + k
+        self._diagnostics_of = partial(_clean_diagnostics, layout.n, k, self.warm_start)
         # the certificate of flagged answers (_certify): its workspace allocated here
         self._certificate = core.Certificate(
             layout.n, np.ascontiguousarray(layout.starts, dtype=np.int64),
@@ -350,8 +353,7 @@ class Prepared(contract.Prepared):
             self._snapshot(values)
             n = self._n
             return (values[:n], values[n:self._x_res],
-                    (_clean_diagnostics, (values, self._n_k, code == _SOLVED_INFEASIBLE,
-                                          self.warm_start, first)))
+                    (self._diagnostics_of, (values, code == _SOLVED_INFEASIBLE, first)))
         if code == _codes.NOT_SOLVED:
             self.reset()
             data.check()     # names the task, level and row at fault

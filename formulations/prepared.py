@@ -143,6 +143,7 @@ class PreparedSolver:
                  options: dict[str, Any], given: dict[str, Any], verify: str = "auto"
                  ) -> None:
         check_layout_support(formulation.name, formulation.capabilities, layout)
+        self._hard = layout.hard
         self.verify = verify
         #: the exact active set of the lower-point comparison (prepared at first use)
         self._lower_solver: Any = None
@@ -154,7 +155,6 @@ class PreparedSolver:
         self._lock = threading.Lock()
         self._n = layout.n
         self._sqrt_n = float(np.sqrt(layout.n))
-        self._hard = layout.hard
         self._needs_mass_matrix = formulation.capabilities.needs_mass_matrix
         self._impl = formulation.prepare(layout, options)
         # a plugin's solve_checked may give its verified answers as a tuple (no Outcome)
@@ -177,6 +177,9 @@ class PreparedSolver:
         self._verify = mode
         #: every optimal answer is certified (not only those whose plugin asks)
         self._verify_every = mode in ("certificate", "lower_point")
+        #: a clean answer (solve_checked's tuple) is returned as it is: no hard level to
+        #: check, not every answer verified
+        self._clean_is_final = not self._hard and not self._verify_every
 
     def _data(self, stack_or_data) -> StackData:
         if type(stack_or_data) is StackData:
@@ -238,6 +241,8 @@ class PreparedSolver:
                 x, residuals, snapshot = out
                 sol = Solution(x, self.formulation, self._given, _OPTIMAL, residuals, elapsed)
                 sol._snapshot = snapshot
+                if self._clean_is_final:    # (the lock is released on the way out)
+                    return sol
                 if self._verify_every:
                     self._verify_timed(sol, data, None, None)
             else:

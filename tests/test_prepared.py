@@ -433,3 +433,23 @@ def test_a_solutions_diagnostics_can_be_set_and_default_to_empty():
     again = solver.solve(stack)
     again.diagnostics = mine
     assert again.diagnostics is mine and again.detail is None
+
+
+@pytest.mark.parametrize("name", LAZY)
+def test_a_verify_mode_set_after_prepare_applies_to_clean_answers(name):
+    """``solver.verify`` set after :func:`prioik.prepare` is validated and takes effect on
+    the next clean answer: ``"certificate"`` certifies it (a verification recorded),
+    ``"auto"`` leaves it unchecked again; an unknown mode is refused, naming the modes."""
+    stack = _steps(name, seed=5, count=1)[0]
+    solver = prioik.prepare(stack.layout, name)
+    assert solver.solve(stack).diagnostics.verification is None
+    solver.verify = "certificate"
+    certified = solver.solve(stack)
+    assert certified.status == "optimal"
+    assert certified.diagnostics.verification.method == "certificate"
+    assert certified.diagnostics.verification.ok
+    solver.verify = "auto"
+    assert solver.solve(stack).diagnostics.verification is None
+    with pytest.raises(FormulationError, match="lower_point"):
+        solver.verify = "everything"
+    assert solver.verify == "auto"
