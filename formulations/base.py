@@ -291,7 +291,12 @@ class Outcome:
         return self
 
 
-@dataclass(slots=True)
+#: A clean answer's diagnostics, not yet built (:attr:`Solution.diagnostics`): a function
+#: and the values of one solve it reads (copies, the solve's own), ``diagnostics_of(values)``
+#: giving the :class:`Diagnostics` on first read.
+DiagnosticsSnapshot = tuple[Callable[[Any], "Diagnostics"], Any]
+
+
 class Solution:
     """The answer of a formulation to a task stack.
 
@@ -306,19 +311,44 @@ class Solution:
         residuals: Per level, ``‖A_i x − b_i‖`` plus inequality violation (weighted).
         time_s: Wall time of the formulation's solve alone (``perf_counter``).
         diagnostics: What the solve and the verification found (:class:`Diagnostics`;
-            the formulation's own record in ``diagnostics.detail``).
+            the formulation's own record in ``diagnostics.detail``). A compiled
+            formulation's clean answer builds it at its first read, from the values of
+            its own solve (kept when the solver solves again).
         verify_time_s: Wall time of the verification stage (``0.0`` when nothing was
             verified, e.g. ``verify="none"``).
     """
 
-    x: np.ndarray
-    formulation: str
-    options: dict[str, Any]
-    status: Status
-    residuals: np.ndarray
-    time_s: float
-    diagnostics: Diagnostics = field(default_factory=Diagnostics)
-    verify_time_s: float = 0.0
+    __slots__ = ("x", "formulation", "options", "status", "residuals", "time_s",
+                 "verify_time_s", "_diagnostics", "_snapshot")
+
+    def __init__(self, x: np.ndarray, formulation: str, options: dict[str, Any],
+                 status: Status, residuals: np.ndarray, time_s: float,
+                 diagnostics: Diagnostics | None = None, verify_time_s: float = 0.0
+                 ) -> None:
+        self.x = x
+        self.formulation = formulation
+        self.options = options
+        self.status = status
+        self.residuals = residuals
+        self.time_s = time_s
+        self.verify_time_s = verify_time_s
+        self._diagnostics = diagnostics
+        #: the diagnostics not yet built (:data:`DiagnosticsSnapshot`), or ``None``
+        self._snapshot: DiagnosticsSnapshot | None = None
+
+    @property
+    def diagnostics(self) -> Diagnostics:
+        """What the solve and the verification found (:class:`Diagnostics`)."""
+        d = self._diagnostics
+        if d is None:
+            snapshot = self._snapshot
+            d = Diagnostics() if snapshot is None else snapshot[0](snapshot[1])
+            self._diagnostics, self._snapshot = d, None
+        return d
+
+    @diagnostics.setter
+    def diagnostics(self, value: Diagnostics) -> None:
+        self._diagnostics, self._snapshot = value, None
 
     @property
     def ok(self) -> bool:

@@ -96,8 +96,12 @@ class Prepared(abc.ABC):
         """:meth:`solve`, or, for an answer the plugin checked itself (what
         ``Outcome(..., checked=True)`` means: finite, of length ``n``, residuals given,
         ``‖x‖`` below the precision limit) with the status ``optimal``, the tuple ``(x,
-        status, diagnostics, residuals)`` — one object fewer per solve on a control
-        loop's path. The verification stage runs after it either way."""
+        residuals, snapshot)``: ``snapshot`` is a
+        :data:`~prioik.formulations.base.DiagnosticsSnapshot`, ``(diagnostics_of,
+        values)`` with ``values`` the solve's own (copies: the next solve does not change
+        them), and ``diagnostics_of(values)`` the :class:`~prioik.formulations.Diagnostics`
+        that :meth:`solve` would give, built only when the Solution's diagnostics are
+        read. The verification stage runs after it either way."""
         return self.solve(data)
 
     def solve_batch(self, datas: list[StackData]) -> BatchOutcome | None:

@@ -109,6 +109,16 @@ class Detail:
     level_damping: np.ndarray | None = None
     near_ambiguous_levels: list[int] | None = None
 
+_INT64 = np.dtype(np.int64)
+
+
+def _clean_diagnostics(values: tuple) -> Diagnostics:
+    """The :class:`~prioik.formulations.Diagnostics` of a solve on the C++ core from the
+    values it left (:meth:`Prepared.solve_checked`'s snapshot): ``(ranks, flops)``."""
+    ranks, flops = values
+    return Diagnostics(ranks=ranks, detail=Detail("qr", "cpp", flops))
+
+
 def step_bound_value(value):
     """The ``step_bound`` option's type check (its per-level values are checked against
     the layout by :func:`level_step_bounds`)."""
@@ -267,15 +277,18 @@ class Prepared(contract.Prepared):
         """
         out = self.solve_checked(data)
         if isinstance(out, tuple):
-            x, status, diagnostics, residuals = out
-            return Outcome(x, status, diagnostics, residuals=residuals, checked=True)
+            x, residuals, (diagnostics_of, values) = out
+            return Outcome(x, Status.OPTIMAL, diagnostics_of(values), residuals=residuals,
+                           checked=True)
         return out
 
     def solve_checked(self, data: StackData) -> tuple | Outcome:
         """:meth:`solve`, its common case (the compiled kernel's answer, finite, every
-        rank decision clear, no damping) as the tuple ``(x, Status.OPTIMAL,
-        diagnostics, residuals)`` of a checked :class:`Outcome` without the object (the registry's
-        :class:`~prioik.formulations.PreparedSolver` makes the Solution from it); an
+        rank decision clear, no damping) as the tuple ``(x, residuals, snapshot)`` of a
+        checked ``optimal`` :class:`Outcome` without the object, its diagnostics built
+        from ``snapshot`` when read (:func:`_clean_diagnostics`; the registry's
+        :class:`~prioik.formulations.PreparedSolver` makes the Solution from it, see
+        :meth:`prioik.formulations.contract.Prepared.solve_checked`); an
         :class:`Outcome` otherwise.
 
         Raises:
@@ -288,20 +301,21 @@ class Prepared(contract.Prepared):
     def _solve_core(self, data: StackData) -> tuple | Outcome:
         """:meth:`solve_checked` on the C++ core (``kernel="cpp"``), its answer read from
         the core's result by name."""
-        x, residuals = np.empty(self._n), np.empty(self._k)    # the answer's own
-        ranks = np.empty(self._k, dtype=np.int64)
+        k = self._k
+        x, residuals = np.empty(self._n), np.empty(k)    # the answer's own
+        ranks = np.empty(k, _INT64)
         try:
             res = self._core.solve(data.A, data.b, data.sqrt_weight, x, residuals, ranks)
         except CoreInputError:
             data.check()     # names the task, level and row of a NaN, inf or bad √w
             raise
+        if res.clear and not self._damped:     # the common case (clear: solved too)
+            return (x, residuals, (_clean_diagnostics, (ranks, res.flops)))
         if not res.solved:
             # finite rows of extreme scale: solve the equilibrated stack (same optimum)
             return solve_equilibrated(self.solve, data, "the rows' scale overflows float64 "
                                       "(‖A_i‖_F² is not finite): scale the tasks down")
-        diagnostics = Diagnostics(ranks=ranks, detail=Detail("qr", "cpp", res.flops))
-        if res.clear and not self._damped:
-            return (x, Status.OPTIMAL, diagnostics, residuals)     # the common case
+        diagnostics = _clean_diagnostics((ranks, res.flops))
         status = Status.OPTIMAL
         if self._damped:
             status = _damping_info(diagnostics, res.level_mu2, self._selective,

@@ -42,7 +42,7 @@ The algorithm, its hard cases, tolerances and complexity: ``docs/active-set.md``
 from __future__ import annotations
 
 from dataclasses import dataclass
-from itertools import compress
+from functools import partial
 from types import SimpleNamespace
 from typing import Any
 
@@ -180,6 +180,22 @@ class Detail:
     refined_dual_tol: float | None = None
     refined_from: str | None = None
 
+def _clean_diagnostics(n: int, k: int, warm_start: bool, snapshot: tuple) -> Diagnostics:
+    """The :class:`~prioik.formulations.Diagnostics` of a clean solve of a layout of
+    ``n`` unknowns and ``k`` levels from what it left (:meth:`Prepared.solve_checked`):
+    ``snapshot`` is ``(values, infeasible, equality_first)``, ``values`` the kernel's
+    answer copied by ``ActiveSetSolver.snapshot`` — ``x`` (``n``), ``res``, ``w2``,
+    ``ranks``, ``over`` (``k`` each), ``iterations`` (``k + 1``), the integers as exact
+    doubles — and ``infeasible`` whether a level has ``f_i* > 0`` (its ``over`` flag
+    set)."""
+    values, infeasible, first = snapshot
+    w2, ranks, over, iterations = (values[n + k:n + 2 * k], values[n + 2 * k:n + 3 * k],
+                                   values[n + 3 * k:n + 4 * k], values[n + 4 * k:])
+    return Diagnostics(ranks=ranks.astype(np.int64), iterations=iterations.astype(np.int64),
+                       infeasible_levels=np.flatnonzero(over).tolist() if infeasible else (),
+                       detail=Detail(w2, warm_start, first))
+
+
 def _core_module():
     """``prioik._core`` (the compiled C++ core), or a FormulationError saying why not."""
     if _CORE_CODES is None:  # pragma: no cover - built by pip install
@@ -236,7 +252,6 @@ class Prepared(contract.Prepared):
         # has none to try)
         self._try_first = self.warm_start and bool(layout.row_is_equality.any())
         self._n, self._k = layout.n, layout.k
-        self._levels = range(layout.k)
         self._prepare_cpp(layout)
         #: how many more times a rejected answer is re-solved (:meth:`_refined`)
         self._refine = REFINE_ROUNDS if refine_rounds is None else refine_rounds
@@ -258,6 +273,10 @@ class Prepared(contract.Prepared):
         self._x, self._w2, self._res = cpp.x, cpp.w2, cpp.res
         self._margins, self._iterations, self._flags = cpp.margins, cpp.iterations, cpp.flags
         self._ranks, self._over = cpp.ranks[:k], cpp.over[:k]
+        # a clean answer, copied in one (_clean_diagnostics): x (n), res (k), ...
+        self._snapshot, self._snapshot_size = cpp.snapshot, cpp.snapshot_size
+        self._x_res = layout.n + k
+        self._diagnostics_of = partial(_clean_diagnostics, layout.n, k, self.warm_start)
         # the certificate of flagged answers (_certify): its workspace allocated here
         self._certificate = core.Certificate(
             layout.n, np.ascontiguousarray(layout.starts, dtype=np.int64),
@@ -290,14 +309,17 @@ class Prepared(contract.Prepared):
         """
         out = self.solve_checked(data)
         if isinstance(out, tuple):
-            x, status, diagnostics, residuals = out
-            return Outcome(x, status, diagnostics, residuals=residuals, checked=True)
+            x, residuals, (diagnostics_of, values) = out
+            return Outcome(x, Status.OPTIMAL, diagnostics_of(values), residuals=residuals,
+                           checked=True)
         return out
 
     def solve_checked(self, data: StackData) -> tuple | Outcome:
         """:meth:`solve`, its common case (settled, finite, every rank decision clear,
-        every box row resolved) as the tuple ``(x, Status.OPTIMAL, diagnostics, residuals)`` of a
-        checked :class:`Outcome` without the object (see :mod:`formulations.prepared`).
+        every box row resolved) as the tuple ``(x, residuals, snapshot)`` of a checked
+        ``optimal`` :class:`Outcome` without the object, its diagnostics built from
+        ``snapshot`` when read (:func:`_clean_diagnostics`; see
+        :meth:`prioik.formulations.contract.Prepared.solve_checked`).
 
         Raises:
             TaskStackError: as :meth:`solve`.
@@ -325,12 +347,13 @@ class Prepared(contract.Prepared):
             data.check()
             raise
         if code == _SOLVED_CLEAN or code == _SOLVED_INFEASIBLE:
-            return (self._x.copy(), Status.OPTIMAL,
-                    Diagnostics(ranks=self._ranks.copy(), iterations=self._iterations.copy(),
-                                infeasible_levels=() if code == _SOLVED_CLEAN else
-                                list(compress(self._levels, self._over.tolist())),
-                                detail=Detail(self._w2.copy(), self.warm_start, first)),
-                    self._res.copy())
+            # the answer in one copy (the snapshot the Solution keeps): x and the
+            # residuals views of it, the diagnostics built from it when read
+            values = np.empty(self._snapshot_size)
+            self._snapshot(values)
+            n = self._n
+            return (values[:n], values[n:self._x_res],
+                    (self._diagnostics_of, (values, code == _SOLVED_INFEASIBLE, first)))
         if code == _codes.NOT_SOLVED:
             self.reset()
             data.check()     # names the task, level and row at fault

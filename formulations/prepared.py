@@ -10,8 +10,11 @@ Each formulation provides its own prepared solver, a subclass of
 :class:`~prioik.formulations.contract.Formulation`; its ``solve_checked(data)`` returns
 either an ``Outcome`` or, for a clean answer the plugin's kernel checked itself (what
 ``Outcome(..., checked=True)`` means: finite, of the right length, residuals given,
-``‖x‖`` below the precision limit) with the status ``optimal``, the tuple ``(x, status,
-diagnostics, residuals)`` — one object fewer per solve on a control loop's path.
+``‖x‖`` below the precision limit) with the status ``optimal``, the tuple ``(x,
+residuals, snapshot)``: the :class:`~prioik.formulations.Solution`'s diagnostics are
+built from ``snapshot`` (:data:`~prioik.formulations.base.DiagnosticsSnapshot`, the
+values of that solve) at their first read — a control loop that reads ``x`` alone pays
+for no record.
 
 After the timed solve, :meth:`PreparedSolver.solve` runs the **verification stage**
 (its ``verify`` mode, :data:`~prioik.formulations.base.VERIFY_MODES`), timed apart
@@ -60,6 +63,7 @@ from .verification import certify, lower_point_solver
 __all__ = ["BatchSolution", "PreparedSolver", "check_layout_support", "check_support"]
 
 _clock = time.perf_counter
+_OPTIMAL = Status.OPTIMAL
 
 
 def _step_options(formulation: Formulation, n: int, given: dict) -> dict:
@@ -139,9 +143,7 @@ class PreparedSolver:
                  options: dict[str, Any], given: dict[str, Any], verify: str = "auto"
                  ) -> None:
         check_layout_support(formulation.name, formulation.capabilities, layout)
-        if verify not in VERIFY_MODES:
-            raise FormulationError(f"verify must be one of {', '.join(VERIFY_MODES)}; "
-                                   f"got {verify!r}")
+        self._hard = layout.hard
         self.verify = verify
         #: the exact active set of the lower-point comparison (prepared at first use)
         self._lower_solver: Any = None
@@ -153,7 +155,6 @@ class PreparedSolver:
         self._lock = threading.Lock()
         self._n = layout.n
         self._sqrt_n = float(np.sqrt(layout.n))
-        self._hard = layout.hard
         self._needs_mass_matrix = formulation.capabilities.needs_mass_matrix
         self._impl = formulation.prepare(layout, options)
         # a plugin's solve_checked may give its verified answers as a tuple (no Outcome)
@@ -162,6 +163,23 @@ class PreparedSolver:
         #: kernel that checks its own answers (``solve_checked``)
         self.compiled = bool(self._impl.compiled)
         self._acquire, self._release = self._lock.acquire, self._lock.release
+
+    @property
+    def verify(self) -> str:
+        """The verification mode (:data:`~prioik.formulations.base.VERIFY_MODES`)."""
+        return self._verify
+
+    @verify.setter
+    def verify(self, mode: str) -> None:
+        if mode not in VERIFY_MODES:
+            raise FormulationError(f"verify must be one of {', '.join(VERIFY_MODES)}; "
+                                   f"got {mode!r}")
+        self._verify = mode
+        #: every optimal answer is certified (not only those whose plugin asks)
+        self._verify_every = mode in ("certificate", "lower_point")
+        #: a clean answer (solve_checked's tuple) is returned as it is: no hard level to
+        #: check, not every answer verified
+        self._clean_is_final = not self._hard and not self._verify_every
 
     def _data(self, stack_or_data) -> StackData:
         if type(stack_or_data) is StackData:
@@ -220,10 +238,12 @@ class PreparedSolver:
                 out = Outcome(np.full(self._n, np.nan)).fail(f"{type(exc).__name__}: {exc}")
             elapsed = _clock() - t0
             if isinstance(out, tuple):  # solve_checked's clean answer (see the module doc)
-                x, status, diagnostics, residuals = out
-                sol = Solution(x, self.formulation, self._given, status, residuals, elapsed,
-                               diagnostics)
-                if self.verify in ("certificate", "lower_point"):
+                x, residuals, snapshot = out
+                sol = Solution(x, self.formulation, self._given, _OPTIMAL, residuals, elapsed)
+                sol._snapshot = snapshot
+                if self._clean_is_final:    # (the lock is released on the way out)
+                    return sol
+                if self._verify_every:
                     self._verify_timed(sol, data, None, None)
             else:
                 sol = self._solution(out, data, elapsed)

@@ -292,6 +292,37 @@ def test_binding_refuses_wrong_dtype_shape_and_layout(name):
                 entry(args["A"], args["b"], args["lower"], args["upper"], args["sqrt_weight"])
 
 
+def test_snapshot_copies_the_last_solve_in_one_array():
+    """``snapshot(out)`` writes the last solve's x, res, w2, ranks, over (k each) and
+    iterations (k + 1) into one float64 array, the integers exactly; a later solve leaves
+    it. A writable float64 array of another length, another dtype, a read-only one or a
+    list is refused naming ``out``."""
+    solver, data = _solver_and_data()
+    n, k = solver.x.size, solver.w2.size
+    assert solver.snapshot_size == n + 5 * k + 1
+    solver.solve(data.A, data.b, data.lower, data.upper, data.sqrt_weight)
+    out = np.empty(solver.snapshot_size)
+    solver.snapshot(out)
+    parts = np.split(out, np.cumsum([n, k, k, k, k]))
+    want = [solver.x, solver.res, solver.w2, solver.ranks[:k], solver.over[:k],
+            solver.iterations]
+    for got, kernel in zip(parts, want, strict=True):
+        np.testing.assert_array_equal(got, kernel)
+    kept = out.copy()
+    rng = np.random.default_rng(6)
+    moved = [data.A + 0.1 * rng.standard_normal(data.A.shape)] + [
+        v + 0.1 for v in (data.b, data.lower, data.upper)] + [data.sqrt_weight]
+    solver.solve(*moved)
+    assert not np.array_equal(solver.x, parts[0])
+    np.testing.assert_array_equal(out, kept)
+    read_only = np.empty(solver.snapshot_size)
+    read_only.setflags(write=False)
+    for bad in (np.empty(solver.snapshot_size - 1), np.empty(solver.snapshot_size, np.float32),
+                read_only, [0.0] * solver.snapshot_size):
+        with pytest.raises(CoreInputError, match="^out "):
+            solver.snapshot(bad)
+
+
 @pytest.mark.parametrize("name, value, message", [
     ("A", np.nan, r"A\[0, 0\] is not finite"), ("A", np.inf, r"A\[0, 0\] is not finite"),
     ("sqrt_weight", 0.0, r"sqrt_weight\[0\] must be finite and > 0"),

@@ -185,7 +185,11 @@ def test_ratios_are_the_quotients_of_the_medians():
 
 def test_solve_overhead_and_row_writing_rows_are_the_measured_times():
     ik = {"solve_overhead": {"g1": {"solve_us": 12.0, "kernel_us": 10.5, "overhead_us": 1.5},
-                             "panda": {"solve_us": 4.0, "kernel_us": 1.5, "overhead_us": 2.5}},
+                             "panda": {"solve_us": 4.0, "kernel_us": 1.5, "overhead_us": 2.5},
+                             "g1_bounds": {"solve_us": 7.0, "kernel_us": 6.0,
+                                           "overhead_us": 1.0},
+                             "panda_limits": {"solve_us": 3.5, "kernel_us": 2.0,
+                                              "overhead_us": 1.5}},
           "rows": {"none": {"write_us": 8.0, "rows": 46},
                    "bounds": {"write_us": 11.0, "rows": 75}}}
     got = {r.name: r for r in ratios([], {}, ik)}
@@ -193,10 +197,12 @@ def test_solve_overhead_and_row_writing_rows_are_the_measured_times():
     def named(*parts):
         (hit,) = [r for name, r in got.items() if all(p in name for p in parts)]
         return hit
-    g1 = named("prepared.solve overhead", "G1")
+    g1 = named("prepared.solve overhead", "G1 fencing rows")
     assert g1.value == 1.5 and g1.target == 2.0 and g1.met == "yes"
-    panda = named("prepared.solve overhead", "Panda")
+    panda = named("prepared.solve overhead", "Panda reach rows")
     assert panda.value == 2.5 and panda.met == "no"
+    assert named("prepared.solve overhead", "active_set, G1").value == 1.0
+    assert named("prepared.solve overhead", "active_set, Panda").value == 1.5
     rows = named("G1 fencing rows", "five fencing tasks")
     assert rows.value == 8.0 and rows.target == 10.0 and rows.met == "yes"
     assert named("G1 fencing rows", "bounds").value == 11.0
@@ -218,6 +224,18 @@ def test_solve_overhead_times_the_public_call_and_its_kernel_on_the_same_rows():
     lapack = prioik.prepare(solver.layout, "extended_jacobian", kernel="lapack")
     with pytest.raises(RuntimeError, match="compiled"):
         solve_overhead.solve_overhead(lapack, datas, rounds=1, calls=5)
+
+
+def test_solve_overhead_times_the_active_set_beside_a_twin_kernel():
+    """The Panda reach with limits (hierarchical_active_set): the public call beside a twin
+    ActiveSetSolver solving the same sequence (the same answers, bit for bit, checked by
+    solve_overhead itself)."""
+    from prioik.benchmarks import solve_overhead
+    solver, datas = solve_overhead.panda_rows(states=3, limits=True)
+    assert solver.formulation == "hierarchical_active_set"
+    r = solve_overhead.solve_overhead(solver, datas, rounds=1, calls=5)
+    assert 0.0 < r["kernel_us"] and 0.0 < r["solve_us"]
+    assert math.isfinite(r["overhead_us"]) and r["overhead_us"] < r["solve_us"]
 
 
 def test_missing_measurements_give_nan_not_a_number():

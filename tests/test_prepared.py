@@ -284,3 +284,172 @@ def test_the_answer_is_typed_through_and_through(info):
     flat = sol.diagnostics.as_dict()
     assert set(flat) == {f.name for f in dataclasses.fields(sol.diagnostics)}
     assert set(flat["detail"]) == {f.name for f in dataclasses.fields(sol.detail)}
+
+
+# ------------------------------------------ a clean answer's diagnostics, built when read
+#: the formulations whose compiled clean answer builds its diagnostics at the first read
+LAZY = ("hierarchical_active_set", "extended_jacobian")
+
+
+def _steps(name: str, seed: int, count: int = 8) -> list[TaskStack]:
+    """``count`` stacks of one layout, each a small move of the last (a control loop's
+    steps): a seeded family stack, its rows, targets and bounds moved at every step. The
+    active set's: inequality levels above equality ones (some level infeasible) for an
+    even seed, compatible equality levels (none infeasible) for an odd one."""
+    rng = np.random.default_rng(seed)
+    if name != "hierarchical_active_set":
+        stack = FAMILIES["weighted"](rng, 8, 3)
+    elif seed % 2 == 0:
+        stack = with_inequalities(rng, 8, 4)
+    else:
+        stack = FAMILIES["compatible"](rng, 8, 3)
+    out = []
+    for _ in range(count):
+        levels = []
+        for level in stack.levels:
+            tasks = []
+            for t in level:
+                A = t.A + 0.05 * rng.standard_normal(t.A.shape)
+                if t.is_equality:
+                    tasks.append(Task(t.name, A, t.b + 0.2 * rng.standard_normal(t.m),
+                                      weight=t.weight))
+                else:
+                    lower, upper = t.bounds()
+                    shift = 0.05 * rng.standard_normal(t.m)
+                    tasks.append(Task(t.name, A, lower=lower + shift, upper=upper + shift,
+                                      weight=t.weight))
+            levels.append(tasks)
+        stack = TaskStack(levels)
+        out.append(stack)
+    return out
+
+
+def _kernel_values(solver) -> dict:
+    """What the solver's compiled kernel holds after its last solve, copied: the values a
+    clean answer's diagnostics must give."""
+    impl = solver._impl
+    if solver.formulation == "hierarchical_active_set":
+        cpp, k = impl._cpp, solver.layout.k
+        return {"ranks": cpp.ranks[:k].copy(), "iterations": cpp.iterations.copy(),
+                "level_violation": cpp.w2.copy(), "residuals": cpp.res.copy(),
+                "infeasible_levels": np.flatnonzero(cpp.over[:k]).tolist()}
+    return {}
+
+
+def _assert_same_diagnostics(got, want) -> None:
+    """Every field of two Diagnostics (and of their detail records) equal, arrays bit
+    for bit and of the same dtype."""
+    a, b = got.as_dict(), want.as_dict()
+    assert set(a) == set(b)
+    for key in a:
+        x, y = a[key], b[key]
+        if key == "detail":
+            assert type(got.detail) is type(want.detail)
+            assert set(x) == set(y)
+            for field in x:
+                _assert_same_value(x[field], y[field], f"detail.{field}")
+        else:
+            _assert_same_value(x, y, key)
+
+
+def _assert_same_value(x, y, what: str) -> None:
+    if isinstance(x, np.ndarray) or isinstance(y, np.ndarray):
+        assert isinstance(x, np.ndarray) and isinstance(y, np.ndarray), what
+        assert x.dtype == y.dtype and np.array_equal(x, y, equal_nan=True), what
+    else:
+        assert type(x) is type(y) and x == y, (what, x, y)
+
+
+@pytest.mark.parametrize("name", LAZY)
+@pytest.mark.parametrize("seed", range(4))
+def test_a_clean_answers_diagnostics_read_late_are_those_of_its_own_solve(name, seed):
+    """Solve after solve on one prepared solver, every answer's diagnostics read only
+    after the whole sequence: each equals the diagnostics the plugin builds at once for
+    the same solve (a twin solver, the same sequence, through its Outcome), field by
+    field, arrays bit for bit; the active set's ranks, iterations, level violations,
+    residuals and infeasible levels are the kernel's right after that solve. At least
+    one answer of each sequence took the clean path (diagnostics not yet built)."""
+    steps = _steps(name, seed)
+    solver = prioik.prepare(steps[0].layout, name)
+    twin = prioik.prepare(steps[0].layout, name)
+    answers, kernel, eager = [], [], []
+    for stack in steps:
+        data = stack.data
+        sol = solver.solve(data)
+        answers.append((sol, sol._snapshot is not None))
+        kernel.append(_kernel_values(solver))
+        out = twin._impl.solve(data)
+        eager.append(out)
+        assert np.array_equal(sol.x, out.x) and np.array_equal(sol.residuals, out.residuals)
+    assert any(pending for _, pending in answers)
+    for (sol, pending), want, out in zip(answers, kernel, eager, strict=True):
+        _assert_same_diagnostics(sol.diagnostics, out.diagnostics)
+        if pending and want:
+            d = sol.diagnostics
+            assert d.ranks.dtype == np.int64 and d.iterations.dtype == np.int64
+            np.testing.assert_array_equal(d.ranks, want["ranks"])
+            np.testing.assert_array_equal(d.iterations, want["iterations"])
+            np.testing.assert_array_equal(d.detail.level_violation, want["level_violation"])
+            np.testing.assert_array_equal(sol.residuals, want["residuals"])
+            assert list(d.infeasible_levels) == want["infeasible_levels"]
+
+
+@pytest.mark.parametrize("name", LAZY)
+def test_a_solution_keeps_its_values_when_the_solver_solves_again(name):
+    """Snapshot semantics: the first answer, its diagnostics not read yet, still gives
+    its own solve's values after the solver solved another stack (whose values differ),
+    and reading it twice gives the same object."""
+    first_stack, second_stack = _steps(name, seed=11, count=2)
+    solver = prioik.prepare(first_stack.layout, name)
+    first = solver.solve(first_stack)
+    assert first._snapshot is not None        # its diagnostics are not built yet
+    x, residuals = first.x.copy(), first.residuals.copy()
+    want = prioik.prepare(first_stack.layout, name)._impl.solve(first_stack.data).diagnostics
+    second = solver.solve(second_stack)
+    assert not np.array_equal(second.residuals, residuals)
+    np.testing.assert_array_equal(first.x, x)
+    np.testing.assert_array_equal(first.residuals, residuals)
+    _assert_same_diagnostics(first.diagnostics, want)
+    assert first.diagnostics is first.diagnostics
+    if name == "hierarchical_active_set":
+        assert not np.array_equal(second.detail.level_violation,
+                                  first.detail.level_violation)
+
+
+def test_a_solutions_diagnostics_can_be_set_and_default_to_empty():
+    """A Solution made directly holds an empty Diagnostics; one assigned replaces a
+    clean answer's pending one; a pending one survives a copy and a pickle."""
+    import copy
+    import pickle
+    sol = prioik.Solution(np.zeros(2), "x", {}, prioik.Status.OPTIMAL, np.zeros(1), 0.0)
+    assert sol.diagnostics == prioik.Diagnostics()
+    stack = _steps("hierarchical_active_set", seed=3, count=1)[0]
+    solver = prioik.prepare(stack.layout, "hierarchical_active_set")
+    lazy = solver.solve(stack)
+    assert lazy._snapshot is not None
+    for other in (copy.deepcopy(lazy), pickle.loads(pickle.dumps(lazy))):
+        _assert_same_diagnostics(other.diagnostics, lazy.diagnostics)
+    mine = prioik.Diagnostics(reason="mine")
+    again = solver.solve(stack)
+    again.diagnostics = mine
+    assert again.diagnostics is mine and again.detail is None
+
+
+@pytest.mark.parametrize("name", LAZY)
+def test_a_verify_mode_set_after_prepare_applies_to_clean_answers(name):
+    """``solver.verify`` set after :func:`prioik.prepare` is validated and takes effect on
+    the next clean answer: ``"certificate"`` certifies it (a verification recorded),
+    ``"auto"`` leaves it unchecked again; an unknown mode is refused, naming the modes."""
+    stack = _steps(name, seed=5, count=1)[0]
+    solver = prioik.prepare(stack.layout, name)
+    assert solver.solve(stack).diagnostics.verification is None
+    solver.verify = "certificate"
+    certified = solver.solve(stack)
+    assert certified.status == "optimal"
+    assert certified.diagnostics.verification.method == "certificate"
+    assert certified.diagnostics.verification.ok
+    solver.verify = "auto"
+    assert solver.solve(stack).diagnostics.verification is None
+    with pytest.raises(FormulationError, match="lower_point"):
+        solver.verify = "everything"
+    assert solver.verify == "auto"

@@ -49,7 +49,12 @@ def measure_ik_step(settings: Settings, progress: Progress | None = None
     try:
         out["solve_overhead"] = {
             "g1": solve_overhead.solve_overhead(*solve_overhead.fencing_rows(), **sizes),
-            "panda": solve_overhead.solve_overhead(*solve_overhead.panda_rows(), **sizes)}
+            "panda": solve_overhead.solve_overhead(*solve_overhead.panda_rows(), **sizes),
+            # hierarchical_active_set with the joint limits as bounds
+            "g1_bounds": solve_overhead.solve_overhead(
+                *solve_overhead.fencing_rows(limits=True), **sizes),
+            "panda_limits": solve_overhead.solve_overhead(
+                *solve_overhead.panda_rows(limits=True), **sizes)}
     except (ImportError, FileNotFoundError, RuntimeError) as exc:
         out["solve_overhead_error"] = f"{type(exc).__name__}: {exc}"
     try:

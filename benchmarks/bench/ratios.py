@@ -94,7 +94,9 @@ def ratios(rows: list[TimingRow], batch: dict[str, Any], ik: dict[str, Any]) -> 
         out.append(Ratio(name, a / b, target, f"{a:.1f} / {b:.1f} µs" if panda
                          else "not measured"))
     overhead = ik.get("solve_overhead", {}) if ik else {}
-    for key, what in (("g1", "G1 fencing rows"), ("panda", "Panda reach rows")):
+    for key, what in (("g1", "G1 fencing rows"), ("panda", "Panda reach rows"),
+                      ("g1_bounds", "hierarchical_active_set, G1 fencing bounds rows"),
+                      ("panda_limits", "hierarchical_active_set, Panda reach limits rows")):
         r = overhead.get(key)
         out.append(Ratio(f"prepared.solve overhead on top of the compiled kernel (µs), {what}",
                          r["overhead_us"] if r else math.nan, 2.0,

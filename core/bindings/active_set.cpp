@@ -7,6 +7,7 @@
 #include <nanobind/ndarray.h>
 #include <nanobind/stl/string.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <string>
@@ -15,6 +16,7 @@
 #include "prioik/active_set.hpp"
 #include "prioik/certificate.hpp"
 #include "prioik/extended_jacobian.hpp"
+#include "array_checks.hpp"
 
 namespace nb = nanobind;
 
@@ -212,6 +214,38 @@ nb::ndarray<nb::numpy, T> view(std::vector<T>& v, nb::handle owner) {
     return nb::ndarray<nb::numpy, T>(v.data(), 1, shape, owner);
 }
 
+/// The length of ActiveSetSolver.snapshot's array: x (n), then res, w2, ranks, over (k
+/// each) and iterations (k + 1).
+I64 snapshot_size(const ActiveSetSolver& s) { return s.layout().n + 5 * s.layout().k + 1; }
+
+/// The data of `out`, a writable float64 array of `size` (an exact numpy array read from
+/// its fields, as InputArray; anything else through array_checks.hpp's `output`).
+double* snapshot_target(nb::handle out, I64 size) {
+    const NumpyFloat64& numpy = NumpyFloat64::get();
+    if (Py_TYPE(out.ptr()) == numpy.ndarray) {
+        const auto* a = reinterpret_cast<const NumpyArrayHead*>(out.ptr());
+        constexpr int writeable = 0x0400;    // NPY_ARRAY_WRITEABLE (numpy/ndarraytypes.h)
+        if (a->descr == numpy.dtype && a->nd == 1 && a->dimensions[0] == size &&
+            a->strides[0] == static_cast<Py_ssize_t>(sizeof(double)) && (a->flags & writeable))
+            return reinterpret_cast<double*>(a->data);
+    }
+    return prioik::bindings::output<double>(out, "out", {size});
+}
+
+/// The last solve's values copied into `out` (float64, snapshot_size): one copy a Python
+/// Solution keeps, the integers as doubles (exact below 2^53).
+void copy_snapshot(const ActiveSetSolver& s, nb::handle out) {
+    const I64 k = s.layout().k;
+    double* to = snapshot_target(out, snapshot_size(s));
+    const prioik::ActiveSetResult& r = s.result();
+    to = std::copy(r.x.begin(), r.x.end(), to);
+    to = std::copy(r.res.begin(), r.res.begin() + k, to);
+    to = std::copy(r.w2.begin(), r.w2.begin() + k, to);
+    to = std::copy(r.ranks.begin(), r.ranks.begin() + k, to);
+    to = std::copy(r.over.begin(), r.over.begin() + k, to);
+    std::copy(r.iterations.begin(), r.iterations.begin() + k + 1, to);
+}
+
 /// A property reading one of the result's arrays as a numpy view (owned by the solver).
 template <class T>
 auto result_view(std::vector<T> prioik::ActiveSetResult::*part) {
@@ -380,6 +414,10 @@ void bind_active_set(nb::module_& m) {
             "The warm start's equality-first try; -1 when it is not the answer (a value it "
             "cannot read included: solve() names it).")
         .def("reset", &ActiveSetSolver::reset, "Forget the kept working sets.")
+        .def("snapshot", &copy_snapshot, nb::arg("out"),
+             "Copy the last solve's values into out (float64, snapshot_size): x (n), "
+             "res, w2, ranks, over (k each), iterations (k + 1); integers as doubles.")
+        .def_prop_ro("snapshot_size", &snapshot_size, "n + 5 k + 1")
         .def_prop_ro("x", result_view(&prioik::ActiveSetResult::x), "n")
         .def_prop_ro("w2", result_view(&prioik::ActiveSetResult::w2),
                      "k: each level's weighted squared violation")
