@@ -218,21 +218,29 @@ class PreparedSolver:
                     self._impl.solve(data, merged)
             except (np.linalg.LinAlgError, ArithmeticError) as exc:
                 out = Outcome(np.full(self._n, np.nan)).fail(f"{type(exc).__name__}: {exc}")
-            elapsed = _clock() - t0
-            if isinstance(out, tuple):  # solve_checked's clean answer (see the module doc)
-                x, status, diagnostics, residuals = out
-                sol = Solution(x, self.formulation, self._given, status, residuals, elapsed,
-                               diagnostics)
-                if self.verify in ("certificate", "lower_point"):
-                    self._verify_timed(sol, data, None, None)
-            else:
-                sol = self._solution(out, data, elapsed)
-                if sol.status == Status.OPTIMAL and self.verify != "none":
-                    self._verify_timed(sol, data, out.check, out.explain)
+            sol = self._finished(out, data, _clock() - t0)
         finally:
             self._release()
         if self._hard and sol.status != Status.FAILED:
             self._check_hard(sol, data)
+        return sol
+
+    def _finished(self, out, data: StackData, elapsed: float) -> Solution:
+        """The :class:`~prioik.formulations.Solution` of the plugin's answer ``out`` (an
+        ``Outcome``, or ``solve_checked``'s clean tuple, see the module doc) to ``data``,
+        ``elapsed`` its solve's time, after the verification stage — what :meth:`solve`
+        returns before its hard-level check (:meth:`_check_hard`). The one place an
+        answer is finished: :class:`prioik.robots.ControlStep` finishes its steps here."""
+        if isinstance(out, tuple):  # solve_checked's clean answer (see the module doc)
+            x, status, diagnostics, residuals = out
+            sol = Solution(x, self.formulation, self._given, status, residuals, elapsed,
+                           diagnostics)
+            if self.verify in ("certificate", "lower_point"):
+                self._verify_timed(sol, data, None, None)
+            return sol
+        sol = self._solution(out, data, elapsed)
+        if sol.status == Status.OPTIMAL and self.verify != "none":
+            self._verify_timed(sol, data, out.check, out.explain)
         return sol
 
     def _verify_timed(self, sol: Solution, data: StackData, check: CheckRequest | None,

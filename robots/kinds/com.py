@@ -85,6 +85,16 @@ class ComTask(RobotTask):
                 raise _refused(self, exc) from None
         self.stamp = writer._stamp
 
+    def compiled_op(self, step):
+        """Its CoM op; the reference ``(x, xd=None)`` on the task's axes."""
+        ref = step.com(self)
+        name, k = self.name, self.rows
+
+        def reference(x, xd=None) -> None:
+            step.copy(ref, 0, _vec(x, k, name, "x"), name, "x")
+            step.copy(ref, k, _vec(xd, k, name, "xd"), name, "xd")
+        return reference
+
     @classmethod
     def baseline_task(cls, library, spec, target, context):
         c = context.get("cost")

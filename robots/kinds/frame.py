@@ -218,6 +218,16 @@ class FramePositionTask(FrameTask):
                 raise _refused(self, exc) from None
         self.stamp = writer._stamp
 
+    def compiled_op(self, step):
+        """Its frame op; the reference ``(x, xd=None)`` as :meth:`write`'s."""
+        ref = step.frame(self)
+        name = self.name
+
+        def reference(x, xd=None) -> None:
+            step.copy(ref, 0, _vec3(x, name, "x"), name, "x")
+            step.copy(ref, 3, _vec3(xd, name, "xd"), name, "xd")
+        return reference
+
     @classmethod
     def baseline_reference(cls, library, targets, step, context):
         if library != "tsid":
@@ -293,6 +303,17 @@ class FrameOrientationTask(FrameTask):
                     _vec3(angular_velocity, name, "ω*"),
                     _vec3(angular_acceleration, name, "ω̇*"))
 
+    def compiled_op(self, step):
+        """Its frame op; the reference ``(rotation, angular_velocity=None)``."""
+        ref = step.frame(self)
+        name = self.name
+
+        def reference(rotation, angular_velocity=None) -> None:
+            step.copy(ref, 6, _rotation(rotation, name), name, "rotation")
+            step.copy(ref, 15, _vec3(angular_velocity, name, "angular_velocity"), name,
+                      "angular_velocity")
+        return reference
+
     @classmethod
     def baseline_reference(cls, library, targets, step, context):
         if library != "tsid":
@@ -355,6 +376,19 @@ class FramePoseTask(FrameTask):
                         _vec3(angular_acceleration, name, "ω̇*"))
         self.stamp = writer._stamp
 
+    def compiled_op(self, step):
+        """Its frame op; the reference ``(x, rotation, xd=None, angular_velocity=None)``."""
+        ref = step.frame(self)
+        name = self.name
+
+        def reference(x, rotation, xd=None, angular_velocity=None) -> None:
+            step.copy(ref, 0, _vec3(x, name, "x"), name, "x")
+            step.copy(ref, 6, _rotation(rotation, name), name, "rotation")
+            step.copy(ref, 3, _vec3(xd, name, "xd"), name, "xd")
+            step.copy(ref, 15, _vec3(angular_velocity, name, "angular_velocity"), name,
+                      "angular_velocity")
+        return reference
+
     @classmethod
     def baseline_reference(cls, library, targets, step, context):
         if library != "tsid":
@@ -405,3 +439,17 @@ class ContactTask(FramePoseTask):
                         _ZERO3, _ZERO3, _rotation(rotation, name), _ZERO3, _ZERO3,
                         _CONTACT_ARGUMENTS)
         self.stamp = writer._stamp
+
+    def compiled_op(self, step):
+        """Its frame op; the reference ``(placement=None, *, translation=None,
+        rotation=None)`` as :meth:`write`'s."""
+        ref = step.frame(self)
+        name = self.name
+
+        def reference(placement=None, *, translation=None, rotation=None) -> None:
+            if placement is not None:
+                translation, rotation = placement.translation, placement.rotation
+            step.copy(ref, 0, _vec(translation, 3, name, "translation"), name,
+                      "translation")
+            step.copy(ref, 6, _rotation(rotation, name), name, "rotation")
+        return reference
