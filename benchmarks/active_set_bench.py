@@ -313,13 +313,22 @@ def g1_limits_step(steps: int = 300, rounds: int = 5) -> dict[str, Any]:
 
 def panda_limits_step(steps: int = 300, rounds: int = 7) -> dict[str, Any]:
     """The 9-DoF Panda reach of :mod:`prioik.benchmarks.panda_step` with joint position
-    and velocity limits: prioik's prepared path (joint-limit bounds on ``q̇`` above the
-    hand position above the posture, ``hierarchical_active_set``, warm-started) against
-    PlaCo's ``KinematicsSolver`` (the same soft tasks, ``enable_joint_limits`` and
+    and velocity limits (joint-limit bounds on ``q̇`` above the hand position above the
+    posture, ``hierarchical_active_set``, warm-started) against PlaCo's
+    ``KinematicsSolver`` (the same soft tasks, ``enable_joint_limits`` and
     ``enable_velocity_limits``), at PlaCo's states, interleaved rounds (fastest round's
-    median per path)."""
+    median per path). prioik's step two ways: the README's loop,
+    :class:`~prioik.robots.ControlStep` (kinematics, rows, solve and ``q ⊕ q̇ dt`` in
+    one compiled call after pinocchio's Jacobians), and the writer loop it compiles
+    (``KinematicState`` + the writers + ``PreparedSolver.solve`` + ``pin.integrate``).
+
+    Raises:
+        RuntimeError: the two prioik paths give different steps.
+    """
+    import pinocchio as pin
+
     import prioik
-    from prioik.robots import KinematicState, TaskWriter, load
+    from prioik.robots import ControlStep, KinematicState, TaskWriter, load
 
     from .panda_step import DT, GAINS, HAND_TARGET, _rounds, placo_panda
 
@@ -328,28 +337,52 @@ def panda_limits_step(steps: int = 300, rounds: int = 7) -> dict[str, Any]:
     hand = robot.frames["hand"]
     placo_step, states, placo_reset = placo_panda(robot, steps, limits=True)
 
+    def declare() -> TaskWriter:
+        rows = TaskWriter(robot, "velocity")
+        rows.add_joint_limits("joint_limits", form="bounds", dt=DT, level=0)
+        rows.add_frame_position("hand", hand, gain=GAINS["hand"], level=1)
+        rows.add_posture("posture", gain=GAINS["posture"], level=2)
+        return rows
+
     data = model.createData()
     zero = np.zeros(nv)
-    rows = TaskWriter(robot, "velocity")
-    rows.add_joint_limits("joint_limits", form="bounds", dt=DT, level=0)
-    rows.add_frame_position("hand", hand, gain=GAINS["hand"], level=1)
-    rows.add_posture("posture", gain=GAINS["posture"], level=2)
+    rows = declare()
     solver = prioik.prepare(rows.layout, NAME)
+    step = ControlStep(declare(), NAME, dt=DT)
+    step.reference("hand", HAND_TARGET)
+    step.reference("posture", q0)
     statuses = set()
+    loop_q: list = [None] * steps
+    step_q: list = [None] * steps
 
-    def prepared_step(i: int) -> None:
+    def writer_loop(i: int) -> None:
         state = KinematicState(robot, states[i], zero, data, drift=False)
         rows.joint_limits(state, "joint_limits")
         rows.frame_position(state, "hand", HAND_TARGET)
         rows.posture(state, "posture", q0)
-        statuses.add(solver.solve(rows.targets(state)).status)
+        sol = solver.solve(rows.targets(state))
+        loop_q[i] = pin.integrate(model, states[i], sol.x * DT)
+        statuses.add(sol.status)
 
-    for path in (prepared_step, placo_step):
+    def control_step(i: int) -> None:
+        step_q[i] = step(states[i])
+
+    for path in (writer_loop, control_step, placo_step):
         for i in range(min(50, steps)):
             path(i)
     placo_reset()
-    best = _rounds({"prepared": prepared_step, "placo": placo_step}, steps, rounds)
-    return {"steps": steps, "prioik_step_us": float(np.median(best["prepared"])) * 1e6,
+    best = _rounds({"control_step": control_step, "writer_loop": writer_loop,
+                    "placo": placo_step}, steps, rounds)
+    solver.reset()                  # both from a cold start: the same steps
+    step.reset()
+    for i in range(steps):
+        writer_loop(i)
+        control_step(i)
+        if not np.allclose(step_q[i], loop_q[i], rtol=1e-12, atol=1e-12):
+            raise RuntimeError(f"ControlStep and the writer loop differ at step {i}")
+    return {"steps": steps,
+            "prioik_step_us": float(np.median(best["control_step"])) * 1e6,
+            "prioik_writer_loop_us": float(np.median(best["writer_loop"])) * 1e6,
             "placo_step_us": float(np.median(best["placo"])) * 1e6,
             "statuses": sorted(str(s) for s in statuses)}
 
@@ -402,6 +435,11 @@ def run(windows: int = 4, steps: int = 6, repeats: int = REPEATS, ik_steps: int 
             s = out[key]
             out["ratios"].append({"name": f"{what} / PlaCo", "target": target,
                                   "value": s["prioik_step_us"] / s["placo_step_us"]})
+    if "panda_step" in out:         # the writer loop ControlStep compiles: reported
+        s = out["panda_step"]
+        out["ratios"].append({"name": "Panda reach with limits, the writer loop / PlaCo",
+                              "target": math.inf,
+                              "value": s["prioik_writer_loop_us"] / s["placo_step_us"]})
     if "balance_step" in out:      # no target of issue 13's: reported
         s = out["balance_step"]
         out["ratios"] += [
@@ -464,6 +502,9 @@ def format_table(results: dict[str, Any]) -> str:
             extra = (f" (kinematics {s['prioik_kinematics_us']:.1f}, rows "
                      f"{s['prioik_rows_us']:.1f}, solve {s['prioik_solve_us']:.1f})"
                      if "prioik_solve_us" in s else "")
+            if "prioik_writer_loop_us" in s:
+                extra = (f" (ControlStep; the writer loop it compiles "
+                         f"{s['prioik_writer_loop_us']:.1f} µs)")
             lines.append(f"\n{what}: prioik prepared {s['prioik_step_us']:.1f} µs{extra}, "
                          f"PlaCo {s['placo_step_us']:.1f} µs, statuses {s['statuses']}")
     if "balance_step" in results:

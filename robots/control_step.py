@@ -120,15 +120,46 @@ class StepBuilder:
         return self.core.region_reference(index)
 
     @staticmethod
-    def copy(buffer: np.ndarray, offset: int, value: np.ndarray, task: str, what: str
-             ) -> None:
-        """``value`` (a validated float64 array) into ``buffer[offset:]``, refusing an
-        entry that is not finite (naming the task and the reference)."""
-        flat = value.reshape(-1)
-        if not np.isfinite(flat).all():
-            bad = int(np.flatnonzero(~np.isfinite(flat))[0])
+    def put(buffer: np.ndarray, offset: int, value, shape: tuple, task: str, what: str
+            ) -> None:
+        """``value`` (of ``shape``: ``(m,)``, or ``(3, 3)`` for a rotation, copied row by
+        row; ``None``: zeros) into ``buffer[offset:]``.
+
+        Raises:
+            TaskStackError: ``value`` of another shape, not numbers, or not finite
+                (naming the task and the reference).
+        """
+        rows, cols = shape[0], shape[1] if len(shape) == 2 else -1
+        if value is None:
+            value = _zeros(shape)
+        try:
+            bad = _put(buffer, offset, value, rows, cols)
+        except CoreInputError:
+            try:
+                given = np.asarray(value, dtype=np.float64)
+            except (TypeError, ValueError):
+                raise TaskStackError(f"{what} must be numbers of shape {shape}, got "
+                                     f"{value!r}", task=task) from None
+            if given.shape != shape:
+                raise TaskStackError(f"{what} must have shape {shape}, got {given.shape}",
+                                     task=task) from None
+            bad = _put(buffer, offset, given, rows, cols)
+        if bad >= 0:
+            flat = np.asarray(value, dtype=np.float64).reshape(-1)
             raise TaskStackError(f"{what}[{bad}] is not finite ({flat[bad]})", task=task)
-        buffer[offset:offset + flat.size] = flat
+
+
+_put = _core.put_reference
+_ZERO_REFERENCES: dict[tuple, np.ndarray] = {}
+
+
+def _zeros(shape: tuple) -> np.ndarray:
+    """Zeros of ``shape`` (kept, never written)."""
+    zeros = _ZERO_REFERENCES.get(shape)
+    if zeros is None:
+        zeros = _ZERO_REFERENCES[shape] = np.zeros(shape)
+        zeros.setflags(write=False)
+    return zeros
 
 
 def _joint_segments(model) -> tuple[np.ndarray, bool]:

@@ -10,6 +10,7 @@
 #include <nanobind/nanobind.h>
 #include <nanobind/ndarray.h>
 
+#include <cmath>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -220,6 +221,40 @@ void build(PyControlStep* self, nb::handle solver, nb::handle A, nb::handle b,
     new (self) PyControlStep(std::move(built));
 }
 
+// buffer[offset : offset + size] = value, a float64 numpy array of shape (rows,) (cols
+// < 0) or (rows, cols), any strides, read in C order: the index of value's first entry
+// that is not finite (nothing written), or -1. Anything else raises InputError.
+Index put_reference(nb::handle buffer, Index offset, nb::handle value, Index rows, Index cols) {
+    auto fields = [](nb::handle h) -> const NumpyHead* {
+        if (numpy_ndarray == nullptr || Py_TYPE(h.ptr()) != numpy_ndarray) return nullptr;
+        const auto* a = reinterpret_cast<const NumpyHead*>(h.ptr());
+        return a->descr == numpy_float64 ? a : nullptr;
+    };
+    const Index ncols = cols < 0 ? 1 : cols;
+    const NumpyHead* out = fields(buffer);
+    if (out == nullptr || out->nd != 1 || (out->dimensions[0] > 1 && out->strides[0] != 8) ||
+        !(out->flags & 0x0400) || rows < 0 || offset < 0 ||
+        offset + rows * ncols > out->dimensions[0])
+        throw InputError("buffer must be a writable float64 vector holding the reference");
+    const NumpyHead* in = fields(value);
+    if (in == nullptr) throw InputError("the reference must be a float64 numpy array");
+    const bool fits = cols < 0 ? in->nd == 1 && in->dimensions[0] == rows
+                               : in->nd == 2 && in->dimensions[0] == rows &&
+                                     in->dimensions[1] == cols;
+    if (!fits) throw InputError("the reference is not of its shape");
+    const Py_ssize_t rs = in->strides[0], cs = cols < 0 ? 0 : in->strides[1];
+    auto at = [&](Index i, Index j) {
+        return *reinterpret_cast<const double*>(in->data + i * rs + j * cs);
+    };
+    for (Index i = 0; i < rows; ++i)
+        for (Index j = 0; j < ncols; ++j)
+            if (!std::isfinite(at(i, j))) return i * ncols + j;
+    double* dst = reinterpret_cast<double*>(out->data) + offset;
+    for (Index i = 0; i < rows; ++i)
+        for (Index j = 0; j < ncols; ++j) dst[i * ncols + j] = at(i, j);
+    return -1;
+}
+
 }  // namespace
 
 void bind_control_step(nb::module_& m) {
@@ -233,6 +268,11 @@ void bind_control_step(nb::module_& m) {
         numpy_ndarray = nullptr;
     }
     auto a = [](const char* name) { return nb::arg(name).none(); };
+    m.def("put_reference", &put_reference, a("buffer"), nb::arg("offset"), a("value"),
+          nb::arg("rows"), nb::arg("cols"),
+          "buffer[offset:] = value (float64 of shape (rows,) when cols < 0, else (rows, "
+          "cols); read in C order): the index of its first entry that is not finite "
+          "(nothing written), or -1.");
     nb::class_<PyControlStep>(m, "ControlStep",
                               "A prepared velocity-level control step "
                               "(core/include/prioik/control_step.hpp): prioik.robots."

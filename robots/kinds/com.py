@@ -88,11 +88,11 @@ class ComTask(RobotTask):
     def compiled_op(self, step):
         """Its CoM op; the reference ``(x, xd=None)`` on the task's axes."""
         ref = step.com(self)
-        name, k = self.name, self.rows
+        name, k, shape = self.name, self.rows, (self.rows,)
 
         def reference(x, xd=None) -> None:
-            step.copy(ref, 0, _vec(x, k, name, "x"), name, "x")
-            step.copy(ref, k, _vec(xd, k, name, "xd"), name, "xd")
+            step.put(ref, 0, x, shape, name, "x")
+            step.put(ref, k, xd, shape, name, "xd")
         return reference
 
     @classmethod

@@ -31,6 +31,8 @@ from ..rows import (
 __all__ = ["ContactTask", "FrameOrientationTask", "FramePoseTask", "FramePositionTask",
            "PointTask"]
 
+_SHAPE3, _SHAPE33 = (3,), (3, 3)
+
 #: a contact's compiled-writer argument names
 _CONTACT_ARGUMENTS = {"x": "translation", "Rstar": "rotation"}
 
@@ -224,8 +226,8 @@ class FramePositionTask(FrameTask):
         name = self.name
 
         def reference(x, xd=None) -> None:
-            step.copy(ref, 0, _vec3(x, name, "x"), name, "x")
-            step.copy(ref, 3, _vec3(xd, name, "xd"), name, "xd")
+            step.put(ref, 0, x, _SHAPE3, name, "x")
+            step.put(ref, 3, xd, _SHAPE3, name, "xd")
         return reference
 
     @classmethod
@@ -309,9 +311,8 @@ class FrameOrientationTask(FrameTask):
         name = self.name
 
         def reference(rotation, angular_velocity=None) -> None:
-            step.copy(ref, 6, _rotation(rotation, name), name, "rotation")
-            step.copy(ref, 15, _vec3(angular_velocity, name, "angular_velocity"), name,
-                      "angular_velocity")
+            step.put(ref, 6, rotation, _SHAPE33, name, "rotation")
+            step.put(ref, 15, angular_velocity, _SHAPE3, name, "angular_velocity")
         return reference
 
     @classmethod
@@ -382,11 +383,10 @@ class FramePoseTask(FrameTask):
         name = self.name
 
         def reference(x, rotation, xd=None, angular_velocity=None) -> None:
-            step.copy(ref, 0, _vec3(x, name, "x"), name, "x")
-            step.copy(ref, 6, _rotation(rotation, name), name, "rotation")
-            step.copy(ref, 3, _vec3(xd, name, "xd"), name, "xd")
-            step.copy(ref, 15, _vec3(angular_velocity, name, "angular_velocity"), name,
-                      "angular_velocity")
+            step.put(ref, 0, x, _SHAPE3, name, "x")
+            step.put(ref, 6, rotation, _SHAPE33, name, "rotation")
+            step.put(ref, 3, xd, _SHAPE3, name, "xd")
+            step.put(ref, 15, angular_velocity, _SHAPE3, name, "angular_velocity")
         return reference
 
     @classmethod
@@ -449,7 +449,6 @@ class ContactTask(FramePoseTask):
         def reference(placement=None, *, translation=None, rotation=None) -> None:
             if placement is not None:
                 translation, rotation = placement.translation, placement.rotation
-            step.copy(ref, 0, _vec(translation, 3, name, "translation"), name,
-                      "translation")
-            step.copy(ref, 6, _rotation(rotation, name), name, "rotation")
+            step.put(ref, 0, translation, _SHAPE3, name, "translation")
+            step.put(ref, 6, rotation, _SHAPE33, name, "rotation")
         return reference

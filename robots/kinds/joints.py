@@ -82,10 +82,10 @@ class PostureTask(RobotTask):
         """Its posture op (a robot whose actuated joints have one coordinate each); the
         reference ``(q_ref)`` (``n_q``)."""
         ref = step.posture(self)
-        name, nq = self.name, self.writer.robot.nq
+        name, shape = self.name, (self.writer.robot.nq,)
 
         def reference(q_ref) -> None:
-            step.copy(ref, 0, _vec(q_ref, nq, name, "q_ref"), name, "q_ref")
+            step.put(ref, 0, q_ref, shape, name, "q_ref")
         return reference
 
     def _term_of(self, w, state):
