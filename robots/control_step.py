@@ -25,7 +25,9 @@ extreme scale) is finished by the prepared solver's own code
 :meth:`~prioik.formulations.PreparedSolver._finished`): its status, diagnostics,
 certificate, refinement, verification stage and hard-level check are those of
 ``PreparedSolver.solve`` on the same rows. So is every step of a solver prepared with
-``verify="certificate"`` or ``"lower_point"``, or of a layout with hard levels.
+``verify="certificate"`` or ``"lower_point"``, and a clean step of a layout with hard
+levels unless C++ finds each held with a factor 2 to spare (the check of
+:func:`~prioik.hierarchy.hard_violations`).
 """
 
 from __future__ import annotations
@@ -38,7 +40,7 @@ import pinocchio as pin
 
 import prioik._core as _core
 from prioik.formulations.base import ConcurrentUseError, CoreInputError, FormulationError, Status
-from prioik.hierarchy import TaskStackError
+from prioik.hierarchy import DEFAULT_CERTIFICATE_TOL, TaskStackError
 
 from .models import StateError, check_configuration
 from .rows import TaskWriter
@@ -47,7 +49,7 @@ __all__ = ["ControlStep", "StepBuilder"]
 
 _NDARRAY = np.ndarray
 _F64 = np.dtype(np.float64)
-_CLEAN, _INFEASIBLE, _INVALID_STATE = 1, 2, -3
+_CLEAN, _INFEASIBLE, _INVALID_STATE, _HARD_UNCLEAR = 1, 2, -3, 4
 _clock = time.perf_counter
 _OPTIMAL, _FAILED = Status.OPTIMAL, Status.FAILED
 
@@ -252,9 +254,10 @@ class ControlStep:
         for start, stop, cap in writer._capped:
             core.add_cap(start, stop, cap)
         self._missing = set(builder.needs_reference)
+        if layout.hard:        # a clean answer holding them clearly is the step's
+            core.set_hard(np.asarray(layout.hard, dtype=np.int64), DEFAULT_CERTIFICATE_TOL)
         # the fast path: a clean kernel answer is the step's answer as it is
-        self._fast = (self._integrable and not layout.hard
-                      and verify not in ("certificate", "lower_point"))
+        self._fast = self._integrable and verify not in ("certificate", "lower_point")
         self._q_shape = (self.robot.nq,)
         self._q_next = core.q_next
         self._velocity = core.velocity
@@ -322,6 +325,9 @@ class ControlStep:
             except CoreInputError:          # a strided view: its contiguous copy
                 q = np.ascontiguousarray(q)
                 code = self._step(q)
+            if code == _HARD_UNCLEAR:       # a clean answer, its hard levels checked here
+                code = self._code = self._core.code
+                return self._finish(code, q)
             self._code = code
             if (code == _CLEAN or code == _INFEASIBLE) and self._fast:
                 self.status = _OPTIMAL

@@ -53,7 +53,7 @@ def _placements(robot, q, frames):
     return {f: data.oMf[robot.frame_id(f)].copy() for f in frames}, np.array(com)
 
 
-def _run(robot, declare, references, steps, q0=None, follow=False, **options):
+def _run(robot, declare, references, steps, q0=None, follow=False, hard=(), **options):
     """Both loops from q0 (default robot.q0) for ``steps`` steps; ``references(i)``: task
     name → the writer's arguments (a task absent takes none). Returns per step
     (q_next, q̇, status) of the ControlStep and of the writer loop, and the step. With
@@ -61,7 +61,8 @@ def _run(robot, declare, references, steps, q0=None, follow=False, **options):
     through near-singular configurations amplifies the last bits of the free flyer's
     integration, which pinocchio rounds in its own order)."""
     q0 = robot.q0 if q0 is None else q0
-    rows, loop_rows = declare(TaskWriter(robot, "velocity")), declare(TaskWriter(robot, "velocity"))
+    rows = declare(TaskWriter(robot, "velocity", hard=hard))
+    loop_rows = declare(TaskWriter(robot, "velocity", hard=hard))
     step = ControlStep(rows, "hierarchical_active_set", dt=DT, **options)
     solver = prioik.prepare(loop_rows.layout, "hierarchical_active_set", **options)
     data, zero = robot.model.createData(), np.zeros(robot.nv)
@@ -131,7 +132,8 @@ def test_panda_with_limits_equals_the_writer_loop(panda):
     assert step.solution().status == ours[-1][2]
 
 
-def test_g1_free_flyer_contacts_com_hand_posture_limits(g1):
+@pytest.mark.parametrize("hard", [(), (0, 1)], ids=["soft", "hard-limits-and-feet"])
+def test_g1_free_flyer_contacts_com_hand_posture_limits(g1, hard):
     feet, com0 = _placements(g1, g1.q0, ("left_foot", "right_foot"))
     f = g1.frames
 
@@ -152,7 +154,7 @@ def test_g1_free_flyer_contacts_com_hand_posture_limits(g1):
         return {"left_foot": (feet["left_foot"],), "right_foot": (feet["right_foot"],),
                 "com": (com0[:2] + 0.02 * np.sin(i / 30.0),), "hand": (path[i],),
                 "posture": (g1.q0,)}
-    ours, theirs, _ = _run(g1, declare, references, 300)
+    ours, theirs, _ = _run(g1, declare, references, 300, hard=hard)
     _assert_same(ours, theirs)
 
 
@@ -392,3 +394,20 @@ def test_core_binding_refuses_bad_arrays(panda):
                        np.array([0, 0, 1, 99], np.int64), np.zeros((5, 3)), True)
     with pytest.raises(CoreInputError, match="lim"):
         core.add_limits(True, np.arange(3, dtype=np.int64), np.zeros((3, 2)), np.zeros(6))
+
+
+def test_held_hard_levels_stay_on_the_compiled_path(panda, monkeypatch):
+    # the limits hard (level 0, always held): no step runs the Python hard check
+    rows = _panda_rows(TaskWriter(panda, "velocity", hard=(0,)))
+    step = ControlStep(rows, dt=DT)
+    step.reference("hand", np.array([0.45, 0.2, 0.45]))
+    step.reference("posture", panda.q0)
+
+    def refuse(*_a, **_k):
+        raise AssertionError("the Python hard check ran")
+    monkeypatch.setattr(step.solver, "_check_hard", refuse)
+    q = panda.q0
+    for _ in range(50):
+        q = step(q)
+        assert step.status == Status.OPTIMAL
+    assert np.abs(q - panda.q0).max() > 1e-3

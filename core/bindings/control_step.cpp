@@ -13,6 +13,7 @@
 #include <cmath>
 #include <cstdint>
 #include <memory>
+#include <stdexcept>
 #include <string>
 #include <utility>
 #include <vector>
@@ -399,6 +400,20 @@ void bind_control_step(nb::module_& m) {
             },
             nb::arg("start"), nb::arg("stop"), nb::arg("cap"), "A task's max_rate.")
         .def(
+            "set_hard",
+            [](PyControlStep& s, nb::handle levels, double tol) {
+                auto& step = step_of(s);
+                try {
+                    step.set_hard(copied<std::int64_t>(take<AnyIndex>(levels, "levels", {-1})),
+                                  tol);
+                } catch (const std::invalid_argument& e) {
+                    throw InputError(e.what());
+                }
+            },
+            a("levels"), nb::arg("tol"),
+            "The hard levels and the certificate's tolerance (a clean answer is the step's "
+            "only when each holds clearly; else step() returns 4).")
+        .def(
             "step",
             [](PyControlStep& s, nb::handle q) {
                 auto& step = step_of(s);
@@ -408,7 +423,8 @@ void bind_control_step(nb::module_& m) {
             },
             a("q"),
             "One step at q: the code (1 clean, 2 infeasible levels: q_next and velocity "
-            "written; 3 read the solver's summary; 0 not solved; -3 q not valid).")
+            "written; 3 read the solver's summary; 0 not solved; 4 clean but a hard level "
+            "not clearly held: check it; -3 q not valid). `code` holds the kernel's.")
         .def(
             "integrate",
             [](PyControlStep& s, nb::handle q, nb::handle v, nb::handle out) {

@@ -190,6 +190,43 @@ void ControlStep::add_cap(Index start, Index stop, double cap) {
     caps_.push_back({static_cast<double>(start), static_cast<double>(stop), cap});
 }
 
+void ControlStep::set_hard(std::vector<std::int64_t> levels, double tol) {
+    for (std::int64_t i : levels)
+        if (i < 0 || i >= solver_.layout().k)
+            throw std::invalid_argument("a hard level is not a level of the layout");
+    hard_ = std::move(levels);
+    hard_tol_ = tol;
+}
+
+bool ControlStep::hard_levels_clear() const {
+    const ActiveSetLayout& layout = solver_.layout();
+    const ControlStepArrays& a = arrays_;
+    const std::vector<double>& x = solver_.result().x;
+    for (std::int64_t level : hard_) {
+        double terms = 0.0, rows_sq = 0.0;
+        for (Index j = layout.starts[level]; j < layout.starts[level + 1]; ++j) {
+            double ax = 0.0, abs_ax = 0.0, row_sq = 0.0;
+            for (Index c = 0; c < nv_; ++c) {
+                const double v = a.A(j, c);
+                ax += v * x[c];
+                abs_ax += std::abs(v) * std::abs(x[c]);
+                row_sq += v * v;
+            }
+            const double target = layout.row_eq[j] ? a.b[j]
+                                                   : std::min(std::max(ax, a.lower[j]), a.upper[j]);
+            const double w = a.sqrt_weight[j];
+            const double term = w * (abs_ax + std::abs(target));
+            terms += term * term;
+            rows_sq += w * w * row_sq;
+        }
+        const double scale = std::sqrt(terms) + std::sqrt(rows_sq);
+        // (squares beyond float64's safe range: not decided here)
+        if (!(scale > 1e-150 && scale < 1e150)) return false;
+        if (!(solver_.result().res[level] <= 0.5 * hard_tol_ * scale)) return false;
+    }
+    return true;
+}
+
 bool ControlStep::state_is_valid(const double* q) const {
     return rows::state_is_valid(cvec(q, nq_), cvec(zeros_.data(), 0), cidx(unit_), 1e-6);
 }
@@ -297,6 +334,7 @@ StepCode ControlStep::step(const double* q) {
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     result_.code = static_cast<int>(code);
     if (code == SolveCode::clean || code == SolveCode::infeasible) {
+        if (!hard_.empty() && !hard_levels_clear()) return StepCode::hard_unclear;
         const std::vector<double>& x = solver_.result().x;
         std::copy(x.begin(), x.end(), result_.velocity.begin());
         if (integrable_) integrate(q, result_.velocity.data(), result_.q_next.data());

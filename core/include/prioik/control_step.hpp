@@ -32,6 +32,9 @@ enum class StepCode : int {
     infeasible = 2,      ///< SolveCode::infeasible (q_next integrated)
     other = 3,           ///< SolveCode::other: the caller reads the solver's summary
     invalid_state = -3,  ///< q not finite or a unit-norm part not of norm 1: nothing done
+    /// a clean answer whose hard levels (set_hard) are not clearly held: the caller
+    /// checks them (result().code holds the kernel's code; q_next not written)
+    hard_unclear = 4,
 };
 
 /// The views of pinocchio's Data and of the stack's arrays a step reads and writes.
@@ -138,6 +141,14 @@ public:
     rows::Index add_region(RegionOp op);
     /// b[start:stop] scaled down to norm cap where it is larger (a task's max_rate).
     void add_cap(rows::Index start, rows::Index stop, double cap);
+    /// The hard levels (hierarchy.hard) and the certificate's tolerance: a clean answer
+    /// is the step's only when each holds with a margin (hard_levels_clear).
+    void set_hard(std::vector<std::int64_t> levels, double tol);
+    /// Every hard level's residual r_i <= tol scale_i / 2, scale_i the certificate's
+    /// ‖√w (|A_i| |x| + |t_i|)‖ + ‖√W_i A_i‖_F (hierarchy.hard_violations; t_i the
+    /// equality targets and A_i x clipped to the bounds): held beyond rounding. False
+    /// also when a scale cannot be formed in float64 (the caller then checks).
+    bool hard_levels_clear() const;
 
     /// One step at q (n_q): rows, targets, solve, and on a clean answer q_next. Throws
     /// ConcurrentUse when another thread is in a step of this object.
@@ -187,6 +198,8 @@ private:
     std::vector<LimitOp> limits_;
     std::vector<RegionOp> regions_;
     std::vector<std::array<double, 3>> caps_;   ///< (start, stop, cap)
+    std::vector<std::int64_t> hard_;
+    double hard_tol_ = 0.0;
     // scratch: zeros (n_v), the actuated positions (n_v), the scaled step v dt (n_v)
     std::vector<double> zeros_, qa_, vdt_;
     ControlStepResult result_;
