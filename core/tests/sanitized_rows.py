@@ -17,13 +17,16 @@ import sys
 
 
 def load_core(path: str):
-    """The extension at ``path`` as ``prioik._core`` (before anything imports it)."""
-    import prioik
+    """The extension at ``path`` as ``prioik._core``, loaded before ``prioik`` is imported
+    (importing it imports ``prioik._core``: the installed build's classes would then be
+    the ones registered, and the sanitized build's not)."""
     spec = importlib.util.spec_from_file_location("prioik._core", path)
     core = importlib.util.module_from_spec(spec)
     sys.modules["prioik._core"] = core
     spec.loader.exec_module(core)
+    import prioik
     prioik._core = core
+    assert hasattr(core, "ActiveSetSolver") and hasattr(core, "ControlStep")
     return core
 
 
