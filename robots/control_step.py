@@ -166,7 +166,7 @@ def _zeros(shape: tuple) -> np.ndarray:
 
 def _joint_segments(model) -> tuple[np.ndarray, bool]:
     """Per joint ``(idx_q, idx_v, n_q, n_v, free flyer)`` and whether C++ integrates
-    every one (``n_q == n_v``, or a free flyer)."""
+    every one (``n_q == n_v``, or a free flyer; none listed when it does not)."""
     rows, integrable = [], True
     for j in range(1, model.njoints):
         joint = model.joints[j]
@@ -174,7 +174,7 @@ def _joint_segments(model) -> tuple[np.ndarray, bool]:
         if not free and joint.nq != joint.nv:
             integrable = False
         rows.append((joint.idx_q, joint.idx_v, joint.nq, joint.nv, int(free)))
-    segments = np.array(rows, dtype=np.int64).reshape(-1, 5)
+    segments = np.array(rows if integrable else [], dtype=np.int64).reshape(-1, 5)
     return segments, integrable
 
 
@@ -257,7 +257,7 @@ class ControlStep:
         if layout.hard:        # a clean answer holding them clearly is the step's
             core.set_hard(np.asarray(layout.hard, dtype=np.int64), DEFAULT_CERTIFICATE_TOL)
         # the fast path: a clean kernel answer is the step's answer as it is
-        self._fast = self._integrable and verify not in ("certificate", "lower_point")
+        self._fast = verify not in ("certificate", "lower_point")
         self._q_shape = (self.robot.nq,)
         self._q_next = core.q_next
         self._velocity = core.velocity
@@ -332,6 +332,8 @@ class ControlStep:
             if (code == _CLEAN or code == _INFEASIBLE) and self._fast:
                 self.status = _OPTIMAL
                 self._solution = None
+                if not self._integrable:      # a joint C++ does not integrate
+                    self._q_next[:] = pin.integrate(self._model, q, self._velocity * self.dt)
                 return self._q_next
             return self._finish(code, q)
         finally:

@@ -411,3 +411,40 @@ def test_held_hard_levels_stay_on_the_compiled_path(panda, monkeypatch):
         q = step(q)
         assert step.status == Status.OPTIMAL
     assert np.abs(q - panda.q0).max() > 1e-3
+
+
+def _wheel_arm():
+    """A fixed-base arm whose first joint is continuous (n_q = 2, n_v = 1)."""
+    from prioik.robots import RobotModel
+    model = pin.Model()
+    inertia = pin.Inertia(1.0, np.zeros(3), np.eye(3) * 0.01)
+    parent = 0
+    for i, joint in enumerate((pin.JointModelRUBZ(), pin.JointModelRY(), pin.JointModelRY())):
+        parent = model.addJoint(parent, joint, pin.SE3(np.eye(3), np.array([0.3, 0, 0]) * (i > 0)),
+                                f"joint{i}")
+        model.appendBodyToJoint(parent, inertia, pin.SE3.Identity())
+    model.addFrame(pin.Frame("tip", parent, 0, pin.SE3(np.eye(3), np.array([0.3, 0, 0])),
+                             pin.FrameType.OP_FRAME))
+    q0 = pin.neutral(model)
+    q0[2:] = [0.4, -0.6]
+    return RobotModel("wheel_arm", model, q0, {"tip": "tip"})
+
+
+def test_a_continuous_joint_is_integrated_by_pinocchio():
+    robot = _wheel_arm()
+
+    def declare(rows):
+        rows.add_frame_position("tip", "tip", gain=10.0, level=0)
+        rows.add_damping("damping", weight=1e-3, level=1)
+        return rows
+
+    def references(i):
+        return {"tip": (np.array([0.2 * np.cos(i / 20), 0.4 + 0.1 * np.sin(i / 20), 0.1]),)}
+    ours, theirs, step = _run(robot, declare, references, 100)
+    _assert_same(ours, theirs)
+    assert not step._integrable
+    # a posture over its continuous joint has no compiled op: refused, naming it
+    rows = TaskWriter(robot, "velocity")
+    rows.add_posture("posture", gain=1.0, level=0)
+    with pytest.raises(TaskStackError, match="posture"):
+        ControlStep(rows, dt=DT)
