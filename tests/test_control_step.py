@@ -392,8 +392,25 @@ def test_core_binding_refuses_bad_arrays(panda):
     with pytest.raises(CoreInputError, match="spec"):
         core.add_frame(np.zeros(3), np.eye(3), np.zeros(3), np.eye(3),
                        np.array([0, 0, 1, 99], np.int64), np.zeros((5, 3)), True)
+    with pytest.raises(CoreInputError, match="spec"):
+        core.add_frame(np.zeros(3), np.eye(3), np.zeros(3), np.eye(3),
+                       np.array([0, 5, 1, 0], np.int64), np.zeros((5, 3)), False)
     with pytest.raises(CoreInputError, match="lim"):
         core.add_limits(True, np.arange(3, dtype=np.int64), np.zeros((3, 2)), np.zeros(6))
+    with pytest.raises(CoreInputError, match="rows"):
+        core.add_posture(d.A.shape[0] - 1, np.arange(panda.nq, dtype=np.int64))
+    buffer = np.zeros(3)
+    for bad in (np.zeros(3)[::-1].copy(), buffer.copy()):
+        bad.setflags(write=False)
+        with pytest.raises(CoreInputError, match="buffer"):
+            _core.put_reference(bad, 0, np.zeros(3), 3, -1)
+    for value in (np.zeros(4), np.zeros((3, 1)), [0.0, 0.0, 0.0], np.zeros(3, np.float32)):
+        with pytest.raises(CoreInputError, match="reference"):
+            _core.put_reference(buffer, 0, value, 3, -1)
+    with pytest.raises(CoreInputError, match="buffer"):
+        _core.put_reference(buffer, 1, np.zeros(3), 3, -1)
+    assert _core.put_reference(buffer, 0, np.array([1.0, np.inf, 2.0]), 3, -1) == 1
+    assert not buffer.any()                      # nothing written
 
 
 def test_held_hard_levels_stay_on_the_compiled_path(panda, monkeypatch):

@@ -141,6 +141,8 @@ prioik::FrameOp frame_op(PyControlStep& s, nb::handle joint_t, nb::handle joint_
     std::copy(g.begin(), g.end(), op.geo.begin());
     op.position_only = position_only;
     if (op.spec.size() < 3) throw InputError("spec must hold at least 3 entries");
+    if (op.spec[1] < 0 || op.spec[1] > 2 || (position_only && op.spec[1] != 0))
+        throw InputError("spec[1] is not a row set (0: position, 1: orientation, 2: pose)");
     for (size_t k = 3; k < op.spec.size(); ++k)
         if (op.spec[k] < 0 || op.spec[k] >= s.nv)
             throw InputError("spec[" + std::to_string(k) + "] is not a column");
@@ -288,7 +290,6 @@ void bind_control_step(nb::module_& m) {
                 const AnyFloatRO c = take<AnyFloatRO>(com, "com", {3});
                 s.hold(Jcom);
                 s.hold(com);
-                // (ControlStepArrays is the step's: set through a fresh frame of it)
                 auto& step = step_of(s);
                 step.set_com(cmatrix(jc), cvector(c));
             },
@@ -381,8 +382,11 @@ void bind_control_step(nb::module_& m) {
                 if (start < 0 || start + k > step.rows())
                     throw InputError("the region's rows are outside the stack");
                 op.on_frame = !joint_t.is_none();
-                if (op.on_frame)
+                if (op.on_frame) {
                     op.point = frame_op(s, joint_t, joint_R, local_t, local_R, spec, geo, true);
+                    if (op.point.spec[0] != 0)
+                        throw InputError("a region's point rows start at 0 (spec[0])");
+                }
                 else if (!step.has_com())
                     throw InputError("set_com first");
                 return step.add_region(std::move(op));

@@ -23,6 +23,9 @@ using rows::Matrix;
 using rows::Vector;
 
 constexpr double kEps = std::numeric_limits<double>::epsilon();
+// a unit-norm part of q (a quaternion, a unit complex) off norm 1 by more is refused
+// (robots.models.UNIT_NORM_TOL)
+constexpr double kUnitNormTol = 1e-6;
 
 ConstVector cvec(const double* p, Index n) { return ConstVector{p, n, 1}; }
 ConstMatrix cmat(const double* p, Index r, Index c) { return ConstMatrix{p, r, c, c, 1}; }
@@ -228,7 +231,7 @@ bool ControlStep::hard_levels_clear() const {
 }
 
 bool ControlStep::state_is_valid(const double* q) const {
-    return rows::state_is_valid(cvec(q, nq_), cvec(zeros_.data(), 0), cidx(unit_), 1e-6);
+    return rows::state_is_valid(cvec(q, nq_), cvec(zeros_.data(), 0), cidx(unit_), kUnitNormTol);
 }
 
 void ControlStep::write_rows(const double* q) {

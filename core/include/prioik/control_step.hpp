@@ -156,7 +156,8 @@ public:
     /// out = q ⊕ v dt (n_q; the joints' segments; integrable() must hold).
     void integrate(const double* q, const double* v, double* out) const;
     bool integrable() const { return integrable_; }
-    /// Every entry of q finite and its unit-norm parts of norm 1 within tol.
+    /// Every entry of q finite and its unit-norm parts of norm 1 within 1e-6
+    /// (robots.models.UNIT_NORM_TOL).
     bool state_is_valid(const double* q) const;
 
     const ControlStepResult& result() const { return result_; }
