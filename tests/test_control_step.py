@@ -12,6 +12,7 @@ from prioik.formulations import ConcurrentUseError, FormulationError, Status
 from prioik.formulations.base import CoreInputError
 from prioik.hierarchy import TaskStackError
 from prioik.robots import (
+    TASK_KINDS,
     ControlStep,
     KinematicState,
     PostureTask,
@@ -334,19 +335,21 @@ def test_bad_references_and_declarations(panda):
         ControlStep(_panda_rows(TaskWriter(panda, "velocity")), dt=float("nan"))
 
 
-@register_task_kind
-class _UncompiledPosture(PostureTask):
-    """A kind without a compiled op (the base's)."""
-
-    kind = "test_uncompiled_posture"
-    compiled_op = RobotTask.compiled_op
-
-
 def test_a_kind_without_compiled_op_is_refused(panda):
-    rows = TaskWriter(panda, "velocity")
-    rows.add(_UncompiledPosture("mine", gain=1.0, level=0))
-    with pytest.raises(TaskStackError, match="test_uncompiled_posture.*mine|mine.*test_unc"):
-        ControlStep(rows, dt=DT)
+    class UncompiledPosture(PostureTask):
+        """A kind without a compiled op (the base's)."""
+
+        kind = "test_uncompiled_posture"
+        compiled_op = RobotTask.compiled_op
+
+    register_task_kind(UncompiledPosture)
+    try:
+        rows = TaskWriter(panda, "velocity")
+        rows.add(UncompiledPosture("mine", gain=1.0, level=0))
+        with pytest.raises(TaskStackError, match="test_uncompiled_posture.*mine|mine.*test_unc"):
+            ControlStep(rows, dt=DT)
+    finally:
+        del TASK_KINDS[UncompiledPosture.kind]     # (the registry is the process's)
 
 
 def test_one_thread_at_a_time(panda):
