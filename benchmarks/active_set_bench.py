@@ -248,9 +248,14 @@ def g1_limits_step(steps: int = 300, rounds: int = 5) -> dict[str, Any]:
 
     prioik: six strict levels (support foot, joint-limit bounds on ``q̇`` — ``q + q̇ dt``
     within the position limits, ``|q̇| ≤ q̇_max`` —, CoM, left foot, sword tip, posture),
-    ``KinematicState(drift=False)`` + the scenario's writers
+    the scenario's writers
     (:meth:`~prioik.robots.fencing.FencingScenario.velocity_rows` ``limits="bounds"``)
-    + a ``hierarchical_active_set`` solver prepared once (warm-started). PlaCo:
+    and a ``hierarchical_active_set`` solver prepared once (warm-started), two ways:
+    :class:`~prioik.robots.ControlStep` (the references of
+    :meth:`~prioik.robots.fencing.FencingScenario.step_references`, then one step: the
+    ratio's path) and the writer loop it compiles (``KinematicState(drift=False)`` + the
+    writers + ``PreparedSolver.solve``, its parts timed; checked to give the same
+    answers). PlaCo:
     ``update_kinematics`` + target updates + ``KinematicsSolver.solve(True)`` with
     ``enable_joint_limits`` and ``enable_velocity_limits``
     (:func:`prioik.benchmarks.placo_baseline.run_placo`), at the same states (PlaCo's
@@ -258,6 +263,7 @@ def g1_limits_step(steps: int = 300, rounds: int = 5) -> dict[str, Any]:
     prioik's passes interleaved (PlaCo's run repeated from the start: it is
     deterministic), the fastest pass's median reported for each."""
     import prioik
+    from prioik.robots import ControlStep
     from prioik.robots.fencing import FencingScenario
     from prioik.robots.tasks import KinematicState
     from prioik.smoke import cap
@@ -277,8 +283,11 @@ def g1_limits_step(steps: int = 300, rounds: int = 5) -> dict[str, Any]:
     data = robot.model.createData()
     rows = scenario.velocity_rows(GAIN, limits="bounds", dt=DT)
     solver = prioik.prepare(rows.layout, NAME)
+    control = ControlStep(scenario.velocity_rows(GAIN, limits="bounds", dt=DT), NAME, dt=DT)
+    scenario.step_references(control, 0.0)
     statuses = set()
     best = None
+    best_control = None
     placo_kin, placo_solve = placo_run.kinematics_time_s, placo_run.solve_time_s
     for r in range(rounds):
         if r > 0:
@@ -299,9 +308,27 @@ def g1_limits_step(steps: int = 300, rounds: int = 5) -> dict[str, Any]:
             times[:, i] = (t1 - t0, t2 - t1, t3 - t2)
         if best is None or np.median(times.sum(0)) < np.median(best.sum(0)):
             best = times
+        control_times = np.empty(len(states))
+        for i, (q, _v, t) in enumerate(states):
+            t0 = time.perf_counter()
+            scenario.step_references(control, t, fixed=False)
+            control(q)
+            control_times[i] = time.perf_counter() - t0
+        if best_control is None or np.median(control_times) < np.median(best_control):
+            best_control = control_times
+    solver.reset()                    # both from a cold start: the same steps
+    control.reset()
+    for q, v, t in states:
+        sol = solver.solve(scenario.write_rows(rows, KinematicState(robot, q, v, data,
+                                                                    drift=False), t))
+        scenario.step_references(control, t, fixed=False)
+        control(q)
+        if not np.allclose(control.velocity, sol.x, rtol=1e-12, atol=1e-12):
+            raise RuntimeError(f"ControlStep and the writer loop differ at t = {t}")
     step = best.sum(0)
     return {"steps": len(states), "layout": rows.layout.describe(),
-            "prioik_step_us": float(np.median(step)) * 1e6,
+            "prioik_step_us": float(np.median(best_control)) * 1e6,
+            "prioik_writer_loop_us": float(np.median(step)) * 1e6,
             "prioik_kinematics_us": float(np.median(best[0])) * 1e6,
             "prioik_rows_us": float(np.median(best[1])) * 1e6,
             "prioik_solve_us": float(np.median(best[2])) * 1e6,
@@ -313,13 +340,22 @@ def g1_limits_step(steps: int = 300, rounds: int = 5) -> dict[str, Any]:
 
 def panda_limits_step(steps: int = 300, rounds: int = 7) -> dict[str, Any]:
     """The 9-DoF Panda reach of :mod:`prioik.benchmarks.panda_step` with joint position
-    and velocity limits: prioik's prepared path (joint-limit bounds on ``q̇`` above the
-    hand position above the posture, ``hierarchical_active_set``, warm-started) against
-    PlaCo's ``KinematicsSolver`` (the same soft tasks, ``enable_joint_limits`` and
+    and velocity limits (joint-limit bounds on ``q̇`` above the hand position above the
+    posture, ``hierarchical_active_set``, warm-started) against PlaCo's
+    ``KinematicsSolver`` (the same soft tasks, ``enable_joint_limits`` and
     ``enable_velocity_limits``), at PlaCo's states, interleaved rounds (fastest round's
-    median per path)."""
+    median per path). prioik's step two ways: the README's loop,
+    :class:`~prioik.robots.ControlStep` (kinematics, rows, solve and ``q ⊕ q̇ dt`` in
+    one compiled call after pinocchio's Jacobians), and the writer loop it compiles
+    (``KinematicState`` + the writers + ``PreparedSolver.solve`` + ``pin.integrate``).
+
+    Raises:
+        RuntimeError: the two prioik paths give different steps.
+    """
+    import pinocchio as pin
+
     import prioik
-    from prioik.robots import KinematicState, TaskWriter, load
+    from prioik.robots import ControlStep, KinematicState, TaskWriter, load
 
     from .panda_step import DT, GAINS, HAND_TARGET, _rounds, placo_panda
 
@@ -328,28 +364,52 @@ def panda_limits_step(steps: int = 300, rounds: int = 7) -> dict[str, Any]:
     hand = robot.frames["hand"]
     placo_step, states, placo_reset = placo_panda(robot, steps, limits=True)
 
+    def declare() -> TaskWriter:
+        rows = TaskWriter(robot, "velocity")
+        rows.add_joint_limits("joint_limits", form="bounds", dt=DT, level=0)
+        rows.add_frame_position("hand", hand, gain=GAINS["hand"], level=1)
+        rows.add_posture("posture", gain=GAINS["posture"], level=2)
+        return rows
+
     data = model.createData()
     zero = np.zeros(nv)
-    rows = TaskWriter(robot, "velocity")
-    rows.add_joint_limits("joint_limits", form="bounds", dt=DT, level=0)
-    rows.add_frame_position("hand", hand, gain=GAINS["hand"], level=1)
-    rows.add_posture("posture", gain=GAINS["posture"], level=2)
+    rows = declare()
     solver = prioik.prepare(rows.layout, NAME)
+    step = ControlStep(declare(), NAME, dt=DT)
+    step.reference("hand", HAND_TARGET)
+    step.reference("posture", q0)
     statuses = set()
+    loop_q: list = [None] * steps
+    step_q: list = [None] * steps
 
-    def prepared_step(i: int) -> None:
+    def writer_loop(i: int) -> None:
         state = KinematicState(robot, states[i], zero, data, drift=False)
         rows.joint_limits(state, "joint_limits")
         rows.frame_position(state, "hand", HAND_TARGET)
         rows.posture(state, "posture", q0)
-        statuses.add(solver.solve(rows.targets(state)).status)
+        sol = solver.solve(rows.targets(state))
+        loop_q[i] = pin.integrate(model, states[i], sol.x * DT)
+        statuses.add(sol.status)
 
-    for path in (prepared_step, placo_step):
+    def control_step(i: int) -> None:
+        step_q[i] = step(states[i])
+
+    for path in (writer_loop, control_step, placo_step):
         for i in range(min(50, steps)):
             path(i)
     placo_reset()
-    best = _rounds({"prepared": prepared_step, "placo": placo_step}, steps, rounds)
-    return {"steps": steps, "prioik_step_us": float(np.median(best["prepared"])) * 1e6,
+    best = _rounds({"control_step": control_step, "writer_loop": writer_loop,
+                    "placo": placo_step}, steps, rounds)
+    solver.reset()                  # both from a cold start: the same steps
+    step.reset()
+    for i in range(steps):
+        writer_loop(i)
+        control_step(i)
+        if not np.allclose(step_q[i], loop_q[i], rtol=1e-12, atol=1e-12):
+            raise RuntimeError(f"ControlStep and the writer loop differ at step {i}")
+    return {"steps": steps,
+            "prioik_step_us": float(np.median(best["control_step"])) * 1e6,
+            "prioik_writer_loop_us": float(np.median(best["writer_loop"])) * 1e6,
             "placo_step_us": float(np.median(best["placo"])) * 1e6,
             "statuses": sorted(str(s) for s in statuses)}
 
@@ -402,6 +462,13 @@ def run(windows: int = 4, steps: int = 6, repeats: int = REPEATS, ik_steps: int 
             s = out[key]
             out["ratios"].append({"name": f"{what} / PlaCo", "target": target,
                                   "value": s["prioik_step_us"] / s["placo_step_us"]})
+    for key, what in (("g1_step", "G1 velocity IK step with limits"),
+                      ("panda_step", "Panda reach with limits")):
+        if key in out:         # the writer loop ControlStep compiles: reported
+            s = out[key]
+            out["ratios"].append({"name": f"{what}, the writer loop / PlaCo",
+                                  "target": math.inf,
+                                  "value": s["prioik_writer_loop_us"] / s["placo_step_us"]})
     if "balance_step" in out:      # no target of issue 13's: reported
         s = out["balance_step"]
         out["ratios"] += [
@@ -461,9 +528,11 @@ def format_table(results: dict[str, Any]) -> str:
                       ("panda_step", "Panda reach, limits")):
         if key in results:
             s = results[key]
-            extra = (f" (kinematics {s['prioik_kinematics_us']:.1f}, rows "
-                     f"{s['prioik_rows_us']:.1f}, solve {s['prioik_solve_us']:.1f})"
+            extra = (f", of which kinematics {s['prioik_kinematics_us']:.1f}, rows "
+                     f"{s['prioik_rows_us']:.1f}, solve {s['prioik_solve_us']:.1f}"
                      if "prioik_solve_us" in s else "")
+            extra = (f" (ControlStep; the writer loop it compiles "
+                     f"{s['prioik_writer_loop_us']:.1f} µs{extra})")
             lines.append(f"\n{what}: prioik prepared {s['prioik_step_us']:.1f} µs{extra}, "
                          f"PlaCo {s['placo_step_us']:.1f} µs, statuses {s['statuses']}")
     if "balance_step" in results:

@@ -346,6 +346,20 @@ class Prepared(contract.Prepared):
             self.reset()
             data.check()
             raise
+        return self.answer(code, first, data)
+
+    def answer(self, code: int, first: bool, data: StackData) -> tuple | Outcome:
+        """The answer of the kernel's last solve of ``data``, which returned ``code``
+        (``first``: the equality-first try gave it), read from the kernel's result: the
+        clean tuple of :meth:`solve_checked`, an equilibrated re-solve of a level of
+        extreme scale, or :meth:`_outcome` (capped, non-finite, ambiguous, flagged —
+        certified, refined —, unresolved). :meth:`solve_checked` ends here, and so does a
+        :class:`prioik.robots.ControlStep` step that ran the kernel in C++.
+
+        Raises:
+            TaskStackError: a value of ``data`` is not valid (naming the task, level and
+                row).
+        """
         if code == _SOLVED_CLEAN or code == _SOLVED_INFEASIBLE:
             # the answer in one copy (the snapshot the Solution keeps): x and the
             # residuals views of it, the diagnostics built from it when read

@@ -237,22 +237,35 @@ class PreparedSolver:
             except (np.linalg.LinAlgError, ArithmeticError) as exc:
                 out = Outcome(np.full(self._n, np.nan)).fail(f"{type(exc).__name__}: {exc}")
             elapsed = _clock() - t0
-            if isinstance(out, tuple):  # solve_checked's clean answer (see the module doc)
+            if self._clean_is_final and isinstance(out, tuple):
+                # solve_checked's clean answer, final as it is (see the module doc)
                 x, residuals, snapshot = out
                 sol = Solution(x, self.formulation, self._given, _OPTIMAL, residuals, elapsed)
                 sol._snapshot = snapshot
-                if self._clean_is_final:    # (the lock is released on the way out)
-                    return sol
-                if self._verify_every:
-                    self._verify_timed(sol, data, None, None)
-            else:
-                sol = self._solution(out, data, elapsed)
-                if sol.status == Status.OPTIMAL and self.verify != "none":
-                    self._verify_timed(sol, data, out.check, out.explain)
+                return sol                  # (the lock is released on the way out)
+            sol = self._finished(out, data, elapsed)
         finally:
             self._release()
         if self._hard and sol.status != Status.FAILED:
             self._check_hard(sol, data)
+        return sol
+
+    def _finished(self, out, data: StackData, elapsed: float) -> Solution:
+        """The :class:`~prioik.formulations.Solution` of the plugin's answer ``out`` (an
+        ``Outcome``, or ``solve_checked``'s clean tuple, see the module doc) to ``data``,
+        ``elapsed`` its solve's time, after the verification stage — what :meth:`solve`
+        returns before its hard-level check (:meth:`_check_hard`). The one place an
+        answer is finished: :class:`prioik.robots.ControlStep` finishes its steps here."""
+        if isinstance(out, tuple):  # solve_checked's clean answer (see the module doc)
+            x, residuals, snapshot = out
+            sol = Solution(x, self.formulation, self._given, _OPTIMAL, residuals, elapsed)
+            sol._snapshot = snapshot
+            if self._verify_every:
+                self._verify_timed(sol, data, None, None)
+            return sol
+        sol = self._solution(out, data, elapsed)
+        if sol.status == Status.OPTIMAL and self.verify != "none":
+            self._verify_timed(sol, data, out.check, out.explain)
         return sol
 
     def _verify_timed(self, sol: Solution, data: StackData, check: CheckRequest | None,

@@ -14,6 +14,7 @@ from prioik.extras import MissingExtraError
 if importlib.util.find_spec("pinocchio") is None:
     raise MissingExtraError(("robots",), "prioik.robots", ("pinocchio",))
 
+from .control_step import ControlStep
 from .kinds import (
     ComRegionTask,
     ComTask,
@@ -85,7 +86,8 @@ __all__ = [
     "check_configuration", "check_velocity", "example_robot_data_dir",
     "from_urdf", "g1", "go2", "has_free_flyer", "load", "panda", "sample_humanoid", "solo12",
     "spatial_chain", "talos", "ur5", "Reference", "Waypoints", "minimum_jerk",
-    "MODES", "TaskWriter", "SimulationError", "SimulationResult", "StepTasks", "equality_view",
+    "MODES", "TaskWriter", "ControlStep", "SimulationError", "SimulationResult", "StepTasks",
+    "equality_view",
     "simulate", "simulation_steps", "run_to_end", "JointLimitActivation",
     "KinematicState", "TaskTerm", "com_position", "contact", "frame_orientation",
     "frame_pose", "frame_position", "joint_limit_bounds", "joint_limit_rows",

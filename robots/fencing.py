@@ -385,6 +385,22 @@ class FencingScenario(Scenario):
             rows.posture(state, "posture", self.robot.q0)
         return rows.targets(state)
 
+    def step_references(self, step, t: float, fixed: bool = True) -> None:
+        """:meth:`write_rows`' references at ``t`` into ``step`` (a
+        :class:`~robots.control_step.ControlStep` of :meth:`velocity_rows`); ``fixed``:
+        the support foot's and the posture's too (they do not move: once suffices)."""
+        if fixed:
+            step.reference("support_foot", translation=self._support_x,
+                           rotation=self._support_R)
+            if self.with_posture:
+                step.reference("posture", self.robot.q0)
+        com = self.com_ref(t)
+        step.reference("com", com.x, com.xd)
+        foot = self.left_foot_ref(t)
+        step.reference("left_foot", foot.x, self._left_foot_R, foot.xd)
+        tip = self.tip_ref(t)
+        step.reference("sword_tip", tip.x, tip.xd)
+
     #: the same as :meth:`write_rows` (the name the benchmarks use)
     write_velocity_rows = write_rows
 

@@ -300,6 +300,20 @@ class RobotTask:
         for its ``references``."""
         raise NotImplementedError
 
+    def compiled_op(self, step):
+        """Add the task to a :class:`~robots.control_step.ControlStep`'s compiled step
+        (``step``: its :class:`~robots.control_step.StepBuilder`) and return the setter of
+        its reference (what :meth:`ControlStep.reference` calls with the task's
+        reference), or ``None`` for a task that takes none. A kind without a compiled op
+        keeps this default.
+
+        Raises:
+            TaskStackError: the kind has no compiled op (naming it and the task).
+        """
+        raise TaskStackError(f"a {self.kind} task has no compiled op: ControlStep cannot "
+                             "run it (write its rows in the writer loop instead)",
+                             task=self.name)
+
     def _detach(self) -> None:
         """Give a copy of the task (:meth:`term`'s one-task writer holds one) its own
         copy of what its writes change (default: nothing; declared arrays are

@@ -77,3 +77,15 @@ def test_balance_step_runs_both_loops_and_holds_the_com():
     assert out["prioik_hand_error_m"] <= 1e-3 < out["placo_hand_error_m"]
     for key in ("prioik_step_us", "prioik_at_placo_states_us", "placo_step_us"):
         assert math.isfinite(out[key]) and out[key] > 0
+
+
+@pytest.mark.parametrize("which", ["panda_limits_step", "g1_limits_step"])
+def test_ik_steps_time_the_control_step_beside_the_writer_loop(which):
+    """The IK steps' ratio path is ControlStep, checked against the writer loop it
+    compiles (the function raises when they differ); the writer loop is reported."""
+    pytest.importorskip("placo")
+    from prioik.benchmarks import active_set_bench
+    out = getattr(active_set_bench, which)(steps=20, rounds=1)
+    assert out["statuses"] == ["optimal"]
+    for key in ("prioik_step_us", "prioik_writer_loop_us", "placo_step_us"):
+        assert math.isfinite(out[key]) and out[key] > 0

@@ -25,6 +25,7 @@ using prioik::Index;
 
 void bind_active_set(nb::module_& m);
 void bind_closed_form(nb::module_& m);
+void bind_control_step(nb::module_& m);
 
 namespace {
 
@@ -117,6 +118,7 @@ NB_MODULE(_core, m) {
   m.def("build_info", &prioik::build_info, "The flags the core was compiled with.");
   bind_active_set(m);
   bind_closed_form(m);
+  bind_control_step(m);
 
   m.attr("AMBIGUITY") = prioik::kAmbiguity;
   m.attr("NEAR_AMBIGUITY") = prioik::kNearAmbiguity;

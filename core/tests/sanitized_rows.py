@@ -6,8 +6,9 @@ Run by ``make asan-bindings``: ``python core/tests/sanitized_rows.py PATH`` with
 loads that build as ``prioik._core`` and runs, from ``tests/test_rows_cpp.py``, every
 writer against the plain-Python reference on the Panda, G1 and TALOS at both levels, log3, the
 bound and
-activation formulas, the bad inputs and 40 seeds of the boundary fuzz; a sanitizer
-report aborts the process.
+activation formulas, the bad inputs and 40 seeds of the boundary fuzz, and from
+``tests/test_control_step.py`` the control step's trajectories (Panda, G1), a capped
+step, its integration and its bad inputs; a sanitizer report aborts the process.
 """
 
 import importlib.util
@@ -16,13 +17,16 @@ import sys
 
 
 def load_core(path: str):
-    """The extension at ``path`` as ``prioik._core`` (before anything imports it)."""
-    import prioik
+    """The extension at ``path`` as ``prioik._core``, loaded before ``prioik`` is imported
+    (importing it imports ``prioik._core``: the installed build's classes would then be
+    the ones registered, and the sanitized build's not)."""
     spec = importlib.util.spec_from_file_location("prioik._core", path)
     core = importlib.util.module_from_spec(spec)
     sys.modules["prioik._core"] = core
     spec.loader.exec_module(core)
+    import prioik
     prioik._core = core
+    assert hasattr(core, "ActiveSetSolver") and hasattr(core, "ControlStep")
     return core
 
 
@@ -71,7 +75,20 @@ def main(path: str) -> None:
     t.test_other_buffers_give_the_same_rows(call)
     for seed in range(40):
         t.test_the_bindings_refuse_or_take_any_array_without_harm(call, seed)
-    print("sanitized prioik._core.rows: the reference, the bad inputs and 40 fuzz seeds passed")
+    # the control step (prioik._core.ControlStep) on the same build: its trajectories
+    # against the writer loop, a capped step, the integration and the bad inputs
+    import test_control_step as c
+    c.test_panda_with_limits_equals_the_writer_loop(robots["panda"])
+    c.test_g1_free_flyer_contacts_com_hand_posture_limits(robots["g1"], (0, 1))
+    c.test_a_capped_step_is_the_prepared_solvers_answer(robots["panda"])
+    for name in ("panda", "g1"):
+        c.test_integration_is_pinocchios(name, type("R", (), {
+            "getfixturevalue": staticmethod(lambda key: robots[key])})())
+    c.test_bad_q(robots["g1"], robots["panda"])
+    c.test_bad_references_and_declarations(robots["panda"])
+    c.test_core_binding_refuses_bad_arrays(robots["panda"])
+    print("sanitized prioik._core.rows: the reference, the bad inputs and 40 fuzz seeds passed;"
+          " prioik._core.ControlStep: its trajectories, integration and bad inputs passed")
 
 
 if __name__ == "__main__":

@@ -85,6 +85,16 @@ class ComTask(RobotTask):
                 raise _refused(self, exc) from None
         self.stamp = writer._stamp
 
+    def compiled_op(self, step):
+        """Its CoM op; the reference ``(x, xd=None)`` on the task's axes."""
+        ref = step.com(self)
+        name, k, shape = self.name, self.rows, (self.rows,)
+
+        def reference(x, xd=None) -> None:
+            step.put(ref, 0, x, shape, name, "x")
+            step.put(ref, k, xd, shape, name, "xd")
+        return reference
+
     @classmethod
     def baseline_task(cls, library, spec, target, context):
         c = context.get("cost")

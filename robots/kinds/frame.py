@@ -31,6 +31,8 @@ from ..rows import (
 __all__ = ["ContactTask", "FrameOrientationTask", "FramePoseTask", "FramePositionTask",
            "PointTask"]
 
+_SHAPE3, _SHAPE33 = (3,), (3, 3)
+
 #: a contact's compiled-writer argument names
 _CONTACT_ARGUMENTS = {"x": "translation", "Rstar": "rotation"}
 
@@ -218,6 +220,16 @@ class FramePositionTask(FrameTask):
                 raise _refused(self, exc) from None
         self.stamp = writer._stamp
 
+    def compiled_op(self, step):
+        """Its frame op; the reference ``(x, xd=None)`` as :meth:`write`'s."""
+        ref = step.frame(self)
+        name = self.name
+
+        def reference(x, xd=None) -> None:
+            step.put(ref, 0, x, _SHAPE3, name, "x")
+            step.put(ref, 3, xd, _SHAPE3, name, "xd")
+        return reference
+
     @classmethod
     def baseline_reference(cls, library, targets, step, context):
         if library != "tsid":
@@ -293,6 +305,16 @@ class FrameOrientationTask(FrameTask):
                     _vec3(angular_velocity, name, "ω*"),
                     _vec3(angular_acceleration, name, "ω̇*"))
 
+    def compiled_op(self, step):
+        """Its frame op; the reference ``(rotation, angular_velocity=None)``."""
+        ref = step.frame(self)
+        name = self.name
+
+        def reference(rotation, angular_velocity=None) -> None:
+            step.put(ref, 6, rotation, _SHAPE33, name, "rotation")
+            step.put(ref, 15, angular_velocity, _SHAPE3, name, "angular_velocity")
+        return reference
+
     @classmethod
     def baseline_reference(cls, library, targets, step, context):
         if library != "tsid":
@@ -355,6 +377,18 @@ class FramePoseTask(FrameTask):
                         _vec3(angular_acceleration, name, "ω̇*"))
         self.stamp = writer._stamp
 
+    def compiled_op(self, step):
+        """Its frame op; the reference ``(x, rotation, xd=None, angular_velocity=None)``."""
+        ref = step.frame(self)
+        name = self.name
+
+        def reference(x, rotation, xd=None, angular_velocity=None) -> None:
+            step.put(ref, 0, x, _SHAPE3, name, "x")
+            step.put(ref, 6, rotation, _SHAPE33, name, "rotation")
+            step.put(ref, 3, xd, _SHAPE3, name, "xd")
+            step.put(ref, 15, angular_velocity, _SHAPE3, name, "angular_velocity")
+        return reference
+
     @classmethod
     def baseline_reference(cls, library, targets, step, context):
         if library != "tsid":
@@ -405,3 +439,16 @@ class ContactTask(FramePoseTask):
                         _ZERO3, _ZERO3, _rotation(rotation, name), _ZERO3, _ZERO3,
                         _CONTACT_ARGUMENTS)
         self.stamp = writer._stamp
+
+    def compiled_op(self, step):
+        """Its frame op; the reference ``(placement=None, *, translation=None,
+        rotation=None)`` as :meth:`write`'s."""
+        ref = step.frame(self)
+        name = self.name
+
+        def reference(placement=None, *, translation=None, rotation=None) -> None:
+            if placement is not None:
+                translation, rotation = placement.translation, placement.rotation
+            step.put(ref, 0, translation, _SHAPE3, name, "translation")
+            step.put(ref, 6, rotation, _SHAPE33, name, "rotation")
+        return reference

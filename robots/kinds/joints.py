@@ -78,6 +78,16 @@ class PostureTask(RobotTask):
             w.drift[sl] = 0.0
         self.stamp = w._stamp
 
+    def compiled_op(self, step):
+        """Its posture op (a robot whose actuated joints have one coordinate each); the
+        reference ``(q_ref)`` (``n_q``)."""
+        ref = step.posture(self)
+        name, shape = self.name, (self.writer.robot.nq,)
+
+        def reference(q_ref) -> None:
+            step.put(ref, 0, q_ref, shape, name, "q_ref")
+        return reference
+
     def _term_of(self, w, state):
         term = super()._term_of(w, state)
         if term.drift is None:
@@ -189,6 +199,10 @@ class DampingTask(RobotTask):
     def write(self, state) -> None:
         """Nothing: the rows are constant."""
 
+    def compiled_op(self, step):
+        """Nothing per step (constant rows); no reference."""
+        return None
+
 
 @register_task_kind
 class JointLimitsTask(RobotTask):
@@ -294,6 +308,11 @@ class JointLimitsTask(RobotTask):
                                   self.bound_params, w._qa)
         self.stamp = w._stamp
         return active
+
+    def compiled_op(self, step):
+        """Its joint-limit op (bounds or activation rows); no reference."""
+        step.limits(self)
+        return None
 
     def _term_of(self, w, state):
         """Bounds: the bounds task; activation rows: the active rows as a task (``None``

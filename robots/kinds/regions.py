@@ -144,6 +144,21 @@ class _RegionTask(RobotTask):
                        reg.no_speed_limit, reg.horizon, reg.dt, accel)
         self.stamp = w._stamp
 
+    def compiled_op(self, step):
+        """Its region op (declared normals and bounds copied in); the reference
+        ``(normals=None, lower=None, upper=None)`` replaces them as :meth:`write`'s
+        arguments do (``None``: kept)."""
+        C, lo, hi = step.region(self)
+        reg = self.region
+
+        def reference(normals=None, lower=None, upper=None) -> None:
+            reg.update(self.name, normals, lower, upper)
+            C[:] = reg.C.reshape(-1)
+            lo[:] = reg.lower
+            hi[:] = reg.upper
+        reference()
+        return reference
+
     def term(self, state, normals=None, lower=None, upper=None, *, mode=None):
         """The region's bounds task at ``state`` (:meth:`RobotTask.term`), for its
         normals and bounds or the ones given."""
