@@ -14,6 +14,7 @@ STAMP  := $(VENV)/.installed
 CORE_VENV  := .venv-core
 CORE_PY    := $(CORE_VENV)/bin/python
 CORE_STAMP := $(CORE_VENV)/.installed
+CORE_VENV_BUILT := $(CORE_VENV)/.core-built
 OUT    ?= results
 
 CORE_STAMP_BUILT := $(VENV)/.core-built
@@ -56,7 +57,7 @@ $(CORE_STAMP): pyproject.toml
 	$(CORE_PY) -m pip install --quiet -C build-dir=build/venv-core-{wheel_tag} -e . "pytest>=7" && \
 	$(CORE_PY) $(EDITABLE_PATHS_OFF) && \
 	echo "$(CORE_VENV) (core + pytest) built in $$(( $$(date +%s) - start )) s; $$(du -sh $(CORE_VENV) | cut -f1)"
-	touch $(CORE_STAMP)
+	touch $(CORE_STAMP) $(CORE_VENV_BUILT)
 
 venv: $(STAMP) $(CORE_STAMP_BUILT)
 
@@ -80,16 +81,25 @@ tsid:
 	echo "$(TSID_VENV) (tsid, pin) built in $$(( $$(date +%s) - start )) s; $$(du -sh $(TSID_VENV) | cut -f1)"; \
 	fi
 
-venv-core: $(CORE_STAMP)
+# an edit to core/: the core environment's extension rebuilt in its build directory
+# (only what changed), so that tests/core never runs a stale core
+$(CORE_VENV_BUILT): $(CORE_STAMP) $(CORE_SOURCES)
+	@start=$$(date +%s); \
+	$(CORE_PY) -m pip install --quiet --no-deps -C build-dir=build/venv-core-{wheel_tag} -e . && \
+	$(CORE_PY) $(EDITABLE_PATHS_OFF) && \
+	echo "$(CORE_VENV)'s prioik._core rebuilt in $$(( $$(date +%s) - start )) s"
+	touch $(CORE_VENV_BUILT)
+
+venv-core: $(CORE_STAMP) $(CORE_VENV_BUILT)
 
 CORE_TEST := $(CORE_PY) -m pytest -q -p no:cacheprovider tests/core
 
-test-core: $(CORE_STAMP)
+test-core: $(CORE_STAMP) $(CORE_VENV_BUILT)
 	$(CORE_TEST)
 
 # The core's tests run beside the full suite (side by side on two cores the wall time is
 # the full suite's); the core's output follows the suite's.
-test: $(STAMP) $(CORE_STAMP_BUILT) $(CORE_STAMP) lint
+test: $(STAMP) $(CORE_STAMP_BUILT) $(CORE_STAMP) $(CORE_VENV_BUILT) lint
 	@$(CORE_TEST) > $(CORE_VENV)/test-core.log 2>&1 & core=$$!; \
 	$(PY) -m pytest -q -p no:cacheprovider; full=$$?; \
 	wait $$core; status=$$?; \
