@@ -166,7 +166,7 @@ double ReferenceSolver::level_step(Index lev, Index s0, Index m, Index r) {
   return flops + f(n);
 }
 
-double ReferenceSolver::solve_level(Index lev) {
+double ReferenceSolver::solve_level(Index lev, bool /*last*/) {
   ProjectionWorkspace& ws = work_;
   ReferenceResult& res = result_;
   const Index s0 = starts_[lev], m = starts_[lev + 1] - s0, n = n_, d = nested_.d;
@@ -280,33 +280,22 @@ double ReferenceSolver::metric_step() {
 
 const ReferenceResult& ReferenceSolver::solve(const StackArrays& data) {
   BusyGuard guard(busy_);
-  ProjectionWorkspace& ws = work_;
   ReferenceResult& res = result_;
-  const bool stack_ok = projection::weigh_stack(data, starts_, n_, ws);
-  res.flops = 0.0;
   res.sweeps = 0;
   res.rotations = 0;
-  std::fill(res.x.begin(), res.x.end(), 0.0);
   std::fill(res.ranks.begin(), res.ranks.end(), 0);
   std::fill(res.ambiguous.begin(), res.ambiguous.end(), 0);
   res.metric_positive_definite = true;
-  res.solved = stack_ok;
-  if (!res.solved) {
-    check_stack_entries(data, M_, n_);     // a NaN, inf or √w ≤ 0 is an input error
-    res.finite = false;
-    res.null_space_dim = 0;
-    return res;
-  }
+  res.null_space_dim = 0;
+  res.solved = open_solve(data, res);
+  if (!res.solved) return res;
   for (Index a = 0; a < n_; ++a)
     for (Index b = 0; b < n_; ++b) nested_.Z[a * n_ + b] = a == b ? 1.0 : 0.0;
   nested_.d = n_;
-  double flops = 0.0;
-  for (Index lev = 0; lev < k_; ++lev) flops += solve_level(lev);
+  double flops = run_levels(0);
   if (!options_.metric.empty() && nested_.d > 0) flops += metric_step();
   res.null_space_dim = nested_.d;
-  res.flops = flops;
-  res.finite =
-      projection::stack_residuals(data, starts_, n_, res.x.data(), res.residuals.data());
+  close_solve(data, flops, res);
   return res;
 }
 
