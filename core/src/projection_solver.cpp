@@ -3,32 +3,12 @@
 // mass-matrix weighted level step of unifying and operational_space (MassMatrixSolver).
 #include <algorithm>
 #include <cmath>
-#include <string>
 #include <utility>
 
 #include "prioik/closed_form.hpp"
 #include "projection_steps.hpp"
 
 namespace prioik {
-
-using projection::fmt;
-
-void check_stack_entries(const StackArrays& data, Index M, Index n) {
-  for (Index i = 0; i < M; ++i)
-    for (Index j = 0; j < n; ++j)
-      if (!std::isfinite(data.A[i * n + j]))
-        throw InputError("A[" + std::to_string(i) + ", " + std::to_string(j) +
-                         "] is not finite (" + fmt(data.A[i * n + j]) + ")");
-  for (Index i = 0; i < M; ++i)
-    if (!std::isfinite(data.b[i]))
-      throw InputError("b[" + std::to_string(i) + "] is not finite (" + fmt(data.b[i]) + ")");
-  for (Index i = 0; i < M; ++i) {
-    const double w = data.sqrt_weight[i];
-    if (!(w > 0.0 && w < kInf))
-      throw InputError("sqrt_weight[" + std::to_string(i) + "] must be finite and > 0, got " +
-                       fmt(w));
-  }
-}
 
 ProjectionWorkspace::ProjectionWorkspace(Index M, Index n, Index k, Index m_max)
     : B(M * n, 0.0),

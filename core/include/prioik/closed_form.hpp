@@ -428,8 +428,4 @@ class SnsSolver final : public ProjectionSolver {
   SnsWorkspace rounds_;         // beside work_ (the weighted rows, the projector, its LQ)
 };
 
-// Throws InputError naming the first entry of A or b that is not finite, or the first
-// √w not finite and > 0 (M rows of n columns).
-void check_stack_entries(const StackArrays& data, Index M, Index n);
-
 }  // namespace prioik
