@@ -229,18 +229,8 @@ void jacobi_svd(MatrixRef W, MatrixRef Vt) {
         const double t = (zeta >= 0.0 ? 1.0 : -1.0) / (std::fabs(zeta) + std::hypot(1.0, zeta));
         const double cs = 1.0 / std::sqrt(1.0 + t * t);
         const double sn = cs * t;
-        for (Index i = 0; i < m; ++i) {
-          const double a = wp[i], b = wq[i];
-          wp[i] = cs * a - sn * b;
-          wq[i] = sn * a + cs * b;
-        }
-        double* vp = Vt.row(p);
-        double* vq = Vt.row(q);
-        for (Index i = 0; i < r; ++i) {
-          const double a = vp[i], b = vq[i];
-          vp[i] = cs * a - sn * b;
-          vq[i] = sn * a + cs * b;
-        }
+        rotate_rows(wp, wq, m, cs, sn);
+        rotate_rows(Vt.row(p), Vt.row(q), r, cs, sn);
       }
     }
     if (!rotated) break;

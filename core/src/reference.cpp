@@ -51,18 +51,8 @@ double jacobi_rows(MatrixRef Gt, MatrixRef Wt, double* sigma, Index* sweeps, Ind
         const double t = az > 1e150 ? 0.5 / zeta : sign / (az + std::sqrt(1.0 + zeta * zeta));
         const double c = 1.0 / std::sqrt(1.0 + t * t), s = c * t;
         flops += 12.0;
-        for (Index e = 0; e < m; ++e) {
-          const double x = gi[e], y = gj[e];
-          gi[e] = c * x - s * y;
-          gj[e] = s * x + c * y;
-        }
-        double* wi = Wt.row(i);
-        double* wj = Wt.row(j);
-        for (Index e = 0; e < p; ++e) {
-          const double x = wi[e], y = wj[e];
-          wi[e] = c * x - s * y;
-          wj[e] = s * x + c * y;
-        }
+        rotate_rows(gi, gj, m, c, s);
+        rotate_rows(Wt.row(i), Wt.row(j), p, c, s);
         flops += 6.0 * f(m + p);
         rotated = true;
         ++*rotations;

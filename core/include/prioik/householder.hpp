@@ -80,6 +80,16 @@ inline void swap_rows(MatrixRef M, Index i, Index j) {
   }
 }
 
+// (x, y) ← (c x − s y, s x + c y) entry by entry over n entries: a plane rotation of two
+// rows (the one-sided Jacobi SVDs' step)
+inline void rotate_rows(double* x, double* y, Index n, double c, double s) {
+  for (Index e = 0; e < n; ++e) {
+    const double a = x[e], b = y[e];
+    x[e] = c * a - s * b;
+    y[e] = s * a + c * b;
+  }
+}
+
 // index of the largest of values[start:stop] (the first on ties)
 inline Index argmax_from(const double* values, Index start, Index stop) {
   Index p = start;
