@@ -16,9 +16,10 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from prioik.hierarchy import StackData
+from prioik.hierarchy import StackData, StackLayout
 
 from . import contract
+from ._numerics import check_nonnegative
 from .base import (
     CoreInputError,
     Diagnostics,
@@ -127,16 +128,38 @@ def mass_matrix_outcome(res: Any, M: np.ndarray, bias: Any, status: str,
 
 class MassMatrixPrepared(contract.Prepared):
     """A closed form solved in the metric of a mass matrix given with every solve
-    (``unifying``, ``operational_space``): the options ``mass_matrix`` (required) and
-    ``bias`` read per call, the compiled kernel ``self._core`` when ``self._cpp``, else
-    the subclass's :meth:`readable`; :meth:`outcome` reads a compiled result."""
+    (``unifying``, ``operational_space``) prepared for one layout: the options ``kernel``
+    and ``rcond`` read here, the compiled kernel ``self._core`` (the subclass's
+    :meth:`compiled_solver`) when ``self._cpp``; ``mass_matrix`` (required) and ``bias``
+    read per call, the subclass's :meth:`readable` on ``kernel="numpy"``;
+    :meth:`outcome` reads a compiled result.
+
+    Args:
+        layout: The stack layout (equality tasks only; the registry checked it).
+        options: Every option of the formulation's ``OPTIONS``, validated.
+
+    Raises:
+        FormulationError: ``rcond`` is negative or not finite, or ``kernel="cpp"`` where
+            the compiled core is not built.
+    """
 
     accepts_step_options = True
     #: the formulation's registry name (in messages)
     name: ClassVar[str]
-    options: dict[str, Any]
-    _cpp: bool
-    _core: Any
+
+    def __init__(self, layout: StackLayout, options: dict[str, Any]) -> None:
+        self.layout = layout
+        self.options = options
+        self.kernel = resolve_kernel(options["kernel"])
+        check_nonnegative(rcond=options["rcond"])
+        self.rcond = float(options["rcond"])
+        self._cpp = self.kernel == "cpp"
+        if self._cpp:
+            self._core = self.compiled_solver([int(s) for s in layout.starts], layout.n)
+
+    def compiled_solver(self, starts: list[int], n: int) -> Any:
+        """The compiled solver of the layout (``starts``, ``n``) with this one's options."""
+        raise NotImplementedError
 
     def readable(self, data: StackData, mass: Any, bias: Any) -> Outcome:
         """The readable path's answer (``kernel="numpy"``)."""

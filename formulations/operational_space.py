@@ -43,6 +43,7 @@ compiled kernel to.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.linalg import solve_triangular
@@ -50,7 +51,7 @@ from scipy.linalg import solve_triangular
 from prioik.hierarchy import StackData, StackLayout, TaskStack
 
 from . import contract
-from ._compiled import MassMatrixPrepared, _core, mass_matrix_outcome, resolve_kernel
+from ._compiled import MassMatrixPrepared, _core, mass_matrix_outcome
 from ._numerics import check_nonnegative, truncated_svd
 from .base import (
     Capabilities,
@@ -208,17 +209,12 @@ class Prepared(MassMatrixPrepared):
     name = NAME
 
     def __init__(self, layout: StackLayout, options: dict) -> None:
-        self.layout = layout
-        self.options = options
-        self.kernel = resolve_kernel(options["kernel"])
-        check_nonnegative(rcond=options["rcond"])
-        self.rcond = float(options["rcond"])
         self.reproject = bool(options["reproject"])
-        self._cpp = self.kernel == "cpp"
-        if self._cpp:
-            self._core = _core.OperationalSpaceSolver(
-                [int(s) for s in layout.starts], layout.n, rcond=self.rcond,
-                reproject=self.reproject)
+        super().__init__(layout, options)
+
+    def compiled_solver(self, starts: list[int], n: int) -> Any:
+        return _core.OperationalSpaceSolver(starts, n, rcond=self.rcond,
+                                            reproject=self.reproject)
 
     def readable(self, data: StackData, mass, bias) -> Outcome:
         return solve_readable(data.as_stack(), mass_matrix=mass, bias=bias,

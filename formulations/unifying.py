@@ -43,14 +43,15 @@ oracle the tests hold the compiled kernel to.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve
 
-from prioik.hierarchy import DEFAULT_RCOND, StackData, StackLayout, TaskStack
+from prioik.hierarchy import DEFAULT_RCOND, StackData, TaskStack
 
 from . import contract
-from ._compiled import MassMatrixPrepared, _core, mass_matrix_outcome, resolve_kernel
+from ._compiled import MassMatrixPrepared, _core, mass_matrix_outcome
 from ._numerics import check_nonnegative, generalized_inverse
 from .base import (
     Capabilities,
@@ -196,16 +197,8 @@ class Prepared(MassMatrixPrepared):
 
     name = NAME
 
-    def __init__(self, layout: StackLayout, options: dict) -> None:
-        self.layout = layout
-        self.options = options
-        self.kernel = resolve_kernel(options["kernel"])
-        check_nonnegative(rcond=options["rcond"])
-        self.rcond = float(options["rcond"])
-        self._cpp = self.kernel == "cpp"
-        if self._cpp:
-            self._core = _core.UnifyingSolver([int(s) for s in layout.starts], layout.n,
-                                              rcond=self.rcond)
+    def compiled_solver(self, starts: list[int], n: int) -> Any:
+        return _core.UnifyingSolver(starts, n, rcond=self.rcond)
 
     def readable(self, data: StackData, mass, bias) -> Outcome:
         return solve_readable(data.as_stack(), mass_matrix=mass, bias=bias, rcond=self.rcond)

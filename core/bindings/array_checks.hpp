@@ -1,7 +1,9 @@
-// The array checks of prioik._core's bindings (module.cpp, closed_form.cpp): each entry
-// point takes a float64 (or int64) numpy-compatible array on the CPU, C-contiguous, of
-// the layout's shape and not empty; anything else raises prioik::InputError naming the
-// array (CoreInputError in Python), never a copy, never a crash.
+// The array checks of prioik._core's bindings, one helper per kind of argument (input,
+// output, stack_input, optional_output; module.cpp, closed_form.cpp), and the numpy
+// fields active_set.cpp and rows.cpp read directly: each entry point takes a float64 (or
+// int64) numpy-compatible array on the CPU, C-contiguous, of the layout's shape and not
+// empty; anything else raises prioik::InputError naming the array (CoreInputError in
+// Python), never a copy, never a crash.
 #pragma once
 
 #include <nanobind/nanobind.h>
@@ -102,6 +104,49 @@ template <class T>
 T* output(nb::handle h, const char* name, std::initializer_list<Index> shape) {
   return checked<T, nb::ndarray<>>(h, name, shape);
 }
+
+// A stack's arrays of a layout of M rows and n columns: A (M × n), b and sqrt_weight (M)
+inline StackArrays stack_input(nb::handle A, nb::handle b, nb::handle w, Index M, Index n) {
+  return StackArrays{input(A, "A", {M, n}), input(b, "b", {M}), input(w, "sqrt_weight", {M})};
+}
+
+// An answer's optional output `name` of `size` entries: nullptr when h is None
+template <class T>
+T* optional_output(nb::handle h, const char* name, Index size) {
+  return h.is_none() ? nullptr : output<T>(h, name, {size});
+}
+
+// out = v, when out is given (optional_output)
+template <class T>
+void copy_out(const std::vector<T>& v, T* out) {
+  if (out != nullptr) std::copy(v.begin(), v.end(), out);
+}
+
+// NumPy's array and dtype structs, their leading fields (numpy/ndarraytypes.h:
+// PyArrayObject_fields, PyArray_Descr; public and the same from NumPy 1.7 through 2.x),
+// for the bindings that read a numpy.ndarray argument's fields directly (active_set.cpp,
+// rows.cpp)
+struct NumpyArrayFields {
+  PyObject_HEAD
+  char* data;
+  int nd;
+  Py_ssize_t* dimensions;
+  Py_ssize_t* strides;
+  PyObject* base;
+  PyObject* descr;
+  int flags;
+};
+
+struct NumpyDescrFields {
+  PyObject_HEAD
+  PyTypeObject* typeobj;
+  char kind;
+  char type;
+  char byteorder;
+};
+
+constexpr int kNumpyAligned = 0x0100;    // NPY_ARRAY_ALIGNED
+constexpr int kNumpyWriteable = 0x0400;  // NPY_ARRAY_WRITEABLE
 
 // a new numpy array holding a copy of v (the caller keeps it; the next solve leaves it)
 template <class T>

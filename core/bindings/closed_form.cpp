@@ -18,8 +18,10 @@
 namespace nb = nanobind;
 using prioik::Index;
 using prioik::bindings::copy1;
+using prioik::bindings::copy_out;
 using prioik::bindings::input;
-using prioik::bindings::output;
+using prioik::bindings::optional_output;
+using prioik::bindings::stack_input;
 
 namespace {
 
@@ -28,6 +30,7 @@ using prioik::ChiaveriniSolver;
 using prioik::NullspaceResult;
 using prioik::NullspaceSolver;
 using prioik::OperationalSpaceSolver;
+using prioik::ProjectionResult;
 using prioik::ReferenceResult;
 using prioik::ReferenceSolver;
 using prioik::SnsResult;
@@ -38,13 +41,12 @@ using prioik::UnifyingSolver;
 // The stack's arrays checked against the solver's layout (M × n, M, M).
 template <class Solver>
 prioik::StackArrays stack_arrays(const Solver& self, nb::handle A, nb::handle b, nb::handle w) {
-  const Index M = self.rows(), n = self.cols();
-  return prioik::StackArrays{input(A, "A", {M, n}), input(b, "b", {M}),
-                             input(w, "sqrt_weight", {M})};
+  return stack_input(A, b, w, self.rows(), self.cols());
 }
 
-const ChiaveriniResult& solve_chiaverini(ChiaveriniSolver& self, nb::handle A, nb::handle b,
-                                         nb::handle w) {
+// a solve of the stack alone (chiaverini, reference)
+template <class Solver>
+const auto& solve_stack(Solver& self, nb::handle A, nb::handle b, nb::handle w) {
   const prioik::StackArrays data = stack_arrays(self, A, b, w);
   nb::gil_scoped_release release;
   return self.solve(data);
@@ -52,16 +54,13 @@ const ChiaveriniResult& solve_chiaverini(ChiaveriniSolver& self, nb::handle A, n
 
 const NullspaceResult& solve_nullspace(NullspaceSolver& self, nb::handle A, nb::handle b,
                                        nb::handle w, nb::handle x, nb::handle residuals) {
-  const Index n = self.cols(), k = self.levels();
   const prioik::StackArrays data = stack_arrays(self, A, b, w);
-  double* x_out = x.is_none() ? nullptr : output<double>(x, "x", {n});
-  double* residuals_out = residuals.is_none() ? nullptr
-                                              : output<double>(residuals, "residuals", {k});
+  double* x_out = optional_output<double>(x, "x", self.cols());
+  double* residuals_out = optional_output<double>(residuals, "residuals", self.levels());
   nb::gil_scoped_release release;
   const NullspaceResult& res = self.solve(data);
-  if (x_out != nullptr) std::copy(res.x.begin(), res.x.end(), x_out);
-  if (residuals_out != nullptr)
-    std::copy(res.residuals.begin(), res.residuals.end(), residuals_out);
+  copy_out(res.x, x_out);
+  copy_out(res.residuals, residuals_out);
   return res;
 }
 
@@ -73,13 +72,6 @@ const UnifyingResult& solve_with_mass(Solver& self, nb::handle A, nb::handle b, 
   const double* mass = input(mass_matrix, "mass_matrix", {self.cols(), self.cols()});
   nb::gil_scoped_release release;
   return self.solve(data, mass);
-}
-
-const ReferenceResult& solve_reference(ReferenceSolver& self, nb::handle A, nb::handle b,
-                                       nb::handle w) {
-  const prioik::StackArrays data = stack_arrays(self, A, b, w);
-  nb::gil_scoped_release release;
-  return self.solve(data);
 }
 
 // ReferenceSolver(starts, n, rcond=, level_damping=, metric=): the metric (n × n) checked
@@ -107,29 +99,54 @@ const SnsResult& solve_sns(SnsSolver& self, nb::handle A, nb::handle b, nb::hand
   return self.solve(data, lo, up);
 }
 
+const char* const kScaleUnsolved =
+    "False: a level's scale is outside [SCALE_LOW, SCALE_HIGH], nothing solved";
+
+// The fields every answer holds (ProjectionResult): x, residuals, flops, solved, finite;
+// each read of an array field returns a new array
+template <class Result>
+nb::class_<Result> bind_result(nb::module_& m, const char* name, const char* doc,
+                               const char* solved_doc = kScaleUnsolved,
+                               const char* residuals_doc = nullptr) {
+  nb::class_<Result> cls(m, name, doc);
+  cls.def_prop_ro("x", [](const Result& r) { return copy1(r.x); }, nb::rv_policy::move);
+  auto residuals = [](const Result& r) { return copy1(r.residuals); };
+  if (residuals_doc != nullptr)
+    cls.def_prop_ro("residuals", residuals, nb::rv_policy::move, residuals_doc);
+  else
+    cls.def_prop_ro("residuals", residuals, nb::rv_policy::move);
+  cls.def_ro("flops", &ProjectionResult::flops, "floating-point operations of the solve")
+      .def_ro("solved", &ProjectionResult::solved, solved_doc)
+      .def_ro("finite", &ProjectionResult::finite);
+  return cls;
+}
+
+// A prepared solver's class: its layout's rows, cols and levels read-only
+template <class Solver>
+nb::class_<Solver> bind_solver(nb::module_& m, const char* name, const char* doc) {
+  nb::class_<Solver> cls(m, name, doc);
+  cls.def_prop_ro("rows", [](const Solver& s) { return s.rows(); })
+      .def_prop_ro("cols", [](const Solver& s) { return s.cols(); })
+      .def_prop_ro("levels", [](const Solver& s) { return s.levels(); });
+  return cls;
+}
+
 }  // namespace
 
 void bind_closed_form(nb::module_& m) {
-  nb::class_<NullspaceResult>(
+  bind_result<NullspaceResult>(
       m, "NullspaceResult",
       "One null-space projection solve's answer, the solver's own (the next solve "
       "overwrites it): each read of an array field returns a new array.")
-      .def_prop_ro("x", [](const NullspaceResult& r) { return copy1(r.x); }, nb::rv_policy::move)
-      .def_prop_ro("residuals", [](const NullspaceResult& r) { return copy1(r.residuals); },
-                   nb::rv_policy::move)
       .def_prop_ro("min_pivots", [](const NullspaceResult& r) { return copy1(r.min_pivots); },
                    nb::rv_policy::move, "the smallest kept pivot norm of each Ĵ_i (0: none)")
       .def_prop_ro("margins", [](const NullspaceResult& r) { return copy1(r.margins); },
                    nb::rv_policy::move)
       .def_prop_ro("ranks", [](const NullspaceResult& r) { return copy1(r.ranks); },
                    nb::rv_policy::move)
-      .def_ro("flops", &NullspaceResult::flops, "floating-point operations of the solve")
-      .def_ro("solved", &NullspaceResult::solved,
-              "False: a level's scale is outside [SCALE_LOW, SCALE_HIGH], nothing solved")
-      .def_ro("finite", &NullspaceResult::finite)
       .def_ro("ambiguous", &NullspaceResult::ambiguous);
 
-  nb::class_<NullspaceSolver>(
+  bind_solver<NullspaceSolver>(
       m, "NullspaceSolver",
       "Recursive null-space projection prepared for one layout (closed_form.hpp): "
       "workspaces allocated here, none per solve. One thread at a time.")
@@ -148,27 +165,17 @@ void bind_closed_form(nb::module_& m) {
            nb::arg("sqrt_weight").none(), nb::arg("x") = nb::none(),
            nb::arg("residuals") = nb::none(), nb::rv_policy::reference_internal,
            "Solve one stack (A: M × n, b and sqrt_weight: M; C-contiguous float64); x (n) "
-           "and residuals (k), when given, receive the answer's.")
-      .def_prop_ro("rows", [](const NullspaceSolver& s) { return s.rows(); })
-      .def_prop_ro("cols", [](const NullspaceSolver& s) { return s.cols(); })
-      .def_prop_ro("levels", [](const NullspaceSolver& s) { return s.levels(); });
+           "and residuals (k), when given, receive the answer's.");
 
-  nb::class_<ChiaveriniResult>(
+  bind_result<ChiaveriniResult>(
       m, "ChiaveriniResult",
       "One Chiaverini solve's answer, the solver's own (the next solve overwrites it): "
       "each read of an array field returns a new array.")
-      .def_prop_ro("x", [](const ChiaveriniResult& r) { return copy1(r.x); }, nb::rv_policy::move)
-      .def_prop_ro("residuals", [](const ChiaveriniResult& r) { return copy1(r.residuals); },
-                   nb::rv_policy::move)
       .def_prop_ro("task_solutions",
                    [](const ChiaveriniResult& r) { return copy1(r.task_solutions); },
-                   nb::rv_policy::move, "k × n, flattened: row i = A_i^# b_i")
-      .def_ro("flops", &ChiaveriniResult::flops, "floating-point operations of the solve")
-      .def_ro("solved", &ChiaveriniResult::solved,
-              "False: a level's scale is outside [SCALE_LOW, SCALE_HIGH], nothing solved")
-      .def_ro("finite", &ChiaveriniResult::finite);
+                   nb::rv_policy::move, "k × n, flattened: row i = A_i^# b_i");
 
-  nb::class_<ChiaveriniSolver>(
+  bind_solver<ChiaveriniSolver>(
       m, "ChiaveriniSolver",
       "Chiaverini's task priority prepared for one layout (closed_form.hpp): workspaces "
       "allocated here, none per solve. One thread at a time.")
@@ -182,30 +189,21 @@ void bind_closed_form(nb::module_& m) {
            },
            nb::arg("starts"), nb::arg("n"), nb::kw_only(), nb::arg("rcond"),
            nb::arg("damping") = 0.0)
-      .def("solve", &solve_chiaverini, nb::arg("A").none(), nb::arg("b").none(),
+      .def("solve", &solve_stack<ChiaveriniSolver>, nb::arg("A").none(), nb::arg("b").none(),
            nb::arg("sqrt_weight").none(), nb::rv_policy::reference_internal,
-           "Solve one stack (A: M × n, b and sqrt_weight: M; C-contiguous float64).")
-      .def_prop_ro("rows", [](const ChiaveriniSolver& s) { return s.rows(); })
-      .def_prop_ro("cols", [](const ChiaveriniSolver& s) { return s.cols(); })
-      .def_prop_ro("levels", [](const ChiaveriniSolver& s) { return s.levels(); });
+           "Solve one stack (A: M × n, b and sqrt_weight: M; C-contiguous float64).");
 
-  nb::class_<UnifyingResult>(
+  bind_result<UnifyingResult>(
       m, "UnifyingResult",
       "One unifying-framework solve's answer, the solver's own (the next solve overwrites "
-      "it): each read of an array field returns a new array.")
-      .def_prop_ro("x", [](const UnifyingResult& r) { return copy1(r.x); }, nb::rv_policy::move)
-      .def_prop_ro("residuals", [](const UnifyingResult& r) { return copy1(r.residuals); },
-                   nb::rv_policy::move)
+      "it): each read of an array field returns a new array.",
+      "False: M is not positive definite, or a level's scale is outside "
+      "[SCALE_LOW, SCALE_HIGH]; nothing solved")
       .def_prop_ro("ranks", [](const UnifyingResult& r) { return copy1(r.ranks); },
                    nb::rv_policy::move, "the kept rank of each A_i M⁻¹")
-      .def_ro("flops", &UnifyingResult::flops, "floating-point operations of the solve")
-      .def_ro("solved", &UnifyingResult::solved,
-              "False: M is not positive definite, or a level's scale is outside "
-              "[SCALE_LOW, SCALE_HIGH]; nothing solved")
-      .def_ro("mass_positive_definite", &UnifyingResult::mass_positive_definite)
-      .def_ro("finite", &UnifyingResult::finite);
+      .def_ro("mass_positive_definite", &UnifyingResult::mass_positive_definite);
 
-  nb::class_<UnifyingSolver>(
+  bind_solver<UnifyingSolver>(
       m, "UnifyingSolver",
       "The unifying framework (eq. 40) prepared for one layout (closed_form.hpp): "
       "workspaces allocated here, none per solve; M given with each solve. One thread at "
@@ -216,12 +214,9 @@ void bind_closed_form(nb::module_& m) {
            nb::arg("sqrt_weight").none(), nb::arg("mass_matrix").none(),
            nb::rv_policy::reference_internal,
            "Solve one stack (A: M × n, b and sqrt_weight: M, mass_matrix: n × n SPD; "
-           "C-contiguous float64).")
-      .def_prop_ro("rows", [](const UnifyingSolver& s) { return s.rows(); })
-      .def_prop_ro("cols", [](const UnifyingSolver& s) { return s.cols(); })
-      .def_prop_ro("levels", [](const UnifyingSolver& s) { return s.levels(); });
+           "C-contiguous float64).");
 
-  nb::class_<OperationalSpaceSolver>(
+  bind_solver<OperationalSpaceSolver>(
       m, "OperationalSpaceSolver",
       "Prioritized operational-space control prepared for one layout (closed_form.hpp): "
       "workspaces allocated here, none per solve; M given with each solve (its answer a "
@@ -240,18 +235,12 @@ void bind_closed_form(nb::module_& m) {
            nb::arg("b").none(), nb::arg("sqrt_weight").none(), nb::arg("mass_matrix").none(),
            nb::rv_policy::reference_internal,
            "Solve one stack (A: M × n, b and sqrt_weight: M, mass_matrix: n × n SPD; "
-           "C-contiguous float64).")
-      .def_prop_ro("rows", [](const OperationalSpaceSolver& s) { return s.rows(); })
-      .def_prop_ro("cols", [](const OperationalSpaceSolver& s) { return s.cols(); })
-      .def_prop_ro("levels", [](const OperationalSpaceSolver& s) { return s.levels(); });
+           "C-contiguous float64).");
 
-  nb::class_<ReferenceResult>(
+  bind_result<ReferenceResult>(
       m, "ReferenceResult",
       "One nested-SVD reference solve's answer, the solver's own (the next solve "
       "overwrites it): each read of an array field returns a new array.")
-      .def_prop_ro("x", [](const ReferenceResult& r) { return copy1(r.x); }, nb::rv_policy::move)
-      .def_prop_ro("residuals", [](const ReferenceResult& r) { return copy1(r.residuals); },
-                   nb::rv_policy::move)
       .def_prop_ro("ranks", [](const ReferenceResult& r) { return copy1(r.ranks); },
                    nb::rv_policy::move, "the kept rank of each M_i = A_i Z_i")
       .def_prop_ro("ambiguous", [](const ReferenceResult& r) { return copy1(r.ambiguous); },
@@ -260,35 +249,27 @@ void bind_closed_form(nb::module_& m) {
       .def_ro("null_space_dim", &ReferenceResult::null_space_dim)
       .def_ro("sweeps", &ReferenceResult::sweeps, "the Jacobi sweeps of the solve")
       .def_ro("rotations", &ReferenceResult::rotations, "the Jacobi rotations of the solve")
-      .def_ro("flops", &ReferenceResult::flops, "floating-point operations of the solve")
-      .def_ro("solved", &ReferenceResult::solved,
-              "False: a level's scale is outside [SCALE_LOW, SCALE_HIGH], nothing solved")
-      .def_ro("finite", &ReferenceResult::finite)
       .def_ro("metric_positive_definite", &ReferenceResult::metric_positive_definite,
               "False: ZᵀWZ is not positive definite (x without the metric's tie-break)");
 
-  nb::class_<ReferenceSolver>(
+  bind_solver<ReferenceSolver>(
       m, "ReferenceSolver",
       "The nested-SVD lexicographic least squares prepared for one layout "
       "(closed_form.hpp): workspaces allocated here, none per solve. One thread at a time.")
       .def("__init__", &init_reference, nb::arg("starts"), nb::arg("n"), nb::kw_only(),
            nb::arg("rcond"), nb::arg("level_damping") = std::vector<double>(),
            nb::arg("metric") = nb::none())
-      .def("solve", &solve_reference, nb::arg("A").none(), nb::arg("b").none(),
+      .def("solve", &solve_stack<ReferenceSolver>, nb::arg("A").none(), nb::arg("b").none(),
            nb::arg("sqrt_weight").none(), nb::rv_policy::reference_internal,
-           "Solve one stack (A: M × n, b and sqrt_weight: M; C-contiguous float64).")
-      .def_prop_ro("rows", [](const ReferenceSolver& s) { return s.rows(); })
-      .def_prop_ro("cols", [](const ReferenceSolver& s) { return s.cols(); })
-      .def_prop_ro("levels", [](const ReferenceSolver& s) { return s.levels(); });
+           "Solve one stack (A: M × n, b and sqrt_weight: M; C-contiguous float64).");
 
-  nb::class_<SnsResult>(
+  bind_result<SnsResult>(
       m, "SnsResult",
       "One SNS solve's answer, the solver's own (the next solve overwrites it): each read "
-      "of an array field returns a new array.")
-      .def_prop_ro("x", [](const SnsResult& r) { return copy1(r.x); }, nb::rv_policy::move)
-      .def_prop_ro("residuals", [](const SnsResult& r) { return copy1(r.residuals); },
-                   nb::rv_policy::move,
-                   "‖√w ∘ (A_i x − b_i)‖ per level (the bounds level: the bounds' violation)")
+      "of an array field returns a new array.",
+      "False: a level's scale is outside [SCALE_LOW, SCALE_HIGH] or the bounds are "
+      "malformed; nothing solved",
+      "‖√w ∘ (A_i x − b_i)‖ per level (the bounds level: the bounds' violation)")
       .def_prop_ro("task_scaling", [](const SnsResult& r) { return copy1(r.task_scaling); },
                    nb::rv_policy::move, "each level's scaling s (the bounds level: 1)")
       .def_prop_ro("margins", [](const SnsResult& r) { return copy1(r.margins); },
@@ -310,15 +291,10 @@ void bind_closed_form(nb::module_& m) {
                    "0: the bounds rows are a box; 1: row bad_entry is not a single-column "
                    "row; 2: column bad_entry's bounds do not intersect")
       .def_ro("bad_entry", &SnsResult::bad_entry)
-      .def_ro("flops", &SnsResult::flops, "floating-point operations of the solve")
-      .def_ro("solved", &SnsResult::solved,
-              "False: a level's scale is outside [SCALE_LOW, SCALE_HIGH] or the bounds are "
-              "malformed; nothing solved")
-      .def_ro("finite", &SnsResult::finite)
       .def_ro("exact", &SnsResult::exact,
               "every level reached its residual without bounds");
 
-  nb::class_<SnsSolver>(
+  bind_solver<SnsSolver>(
       m, "SnsSolver",
       "Saturation in the Null Space prepared for one layout (closed_form.hpp): workspaces "
       "allocated here, none per solve. One thread at a time.")
@@ -339,8 +315,5 @@ void bind_closed_form(nb::module_& m) {
            nb::arg("sqrt_weight").none(), nb::arg("lower").none(), nb::arg("upper").none(),
            nb::rv_policy::reference_internal,
            "Solve one stack (A: M × n, b, sqrt_weight, lower and upper: M; C-contiguous "
-           "float64; lower and upper are read on the first level's rows when bounds_level).")
-      .def_prop_ro("rows", [](const SnsSolver& s) { return s.rows(); })
-      .def_prop_ro("cols", [](const SnsSolver& s) { return s.cols(); })
-      .def_prop_ro("levels", [](const SnsSolver& s) { return s.levels(); });
+           "float64; lower and upper are read on the first level's rows when bounds_level).");
 }

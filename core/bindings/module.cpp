@@ -29,10 +29,11 @@ void bind_control_step(nb::module_& m);
 
 namespace {
 
-using prioik::bindings::checked;
 using prioik::bindings::copy1;
+using prioik::bindings::copy_out;
 using prioik::bindings::input;
-using prioik::bindings::output;
+using prioik::bindings::optional_output;
+using prioik::bindings::stack_input;
 
 template <class T>
 nb::ndarray<nb::numpy, const T, nb::ndim<1>> view1(const std::vector<T>& v, nb::handle owner) {
@@ -60,18 +61,17 @@ using prioik::ExtendedJacobianResult;
 const ExtendedJacobianResult& solve_one(ExtendedJacobian& self, nb::handle A, nb::handle b,
                                         nb::handle w, nb::handle x, nb::handle residuals,
                                         nb::handle ranks) {
-  const Index M = self.rows(), n = self.cols(), k = self.levels();
-  const prioik::StackArrays data{input(A, "A", {M, n}), input(b, "b", {M}),
-                                 input(w, "sqrt_weight", {M})};
+  const Index k = self.levels();
+  const prioik::StackArrays data = stack_input(A, b, w, self.rows(), self.cols());
   // the answer's outputs, when given: written after the solve
-  double* x_out = x.is_none() ? nullptr : output<double>(x, "x", {n});
-  double* residuals_out = residuals.is_none() ? nullptr : output<double>(residuals, "residuals", {k});
-  Index* ranks_out = ranks.is_none() ? nullptr : output<Index>(ranks, "ranks", {k});
+  double* x_out = optional_output<double>(x, "x", self.cols());
+  double* residuals_out = optional_output<double>(residuals, "residuals", k);
+  Index* ranks_out = optional_output<Index>(ranks, "ranks", k);
   nb::gil_scoped_release release;
   const ExtendedJacobianResult& res = self.solve(data);
-  if (x_out != nullptr) std::copy(res.x.begin(), res.x.end(), x_out);
-  if (residuals_out != nullptr) std::copy(res.residuals.begin(), res.residuals.end(), residuals_out);
-  if (ranks_out != nullptr) std::copy(res.ranks.begin(), res.ranks.end(), ranks_out);
+  copy_out(res.x, x_out);
+  copy_out(res.residuals, residuals_out);
+  copy_out(res.ranks, ranks_out);
   return res;
 }
 

@@ -118,16 +118,16 @@ ExtendedJacobian::ExtendedJacobian(std::vector<Index> starts, Index n,
   work_ = ExtendedJacobianWorkspace(M_, n_, k_);
 }
 
-void ExtendedJacobian::check_entries(const StackArrays& data) const {
-  for (Index i = 0; i < M_; ++i)
-    for (Index j = 0; j < n_; ++j)
-      if (!std::isfinite(data.A[i * n_ + j]))
+void check_stack_entries(const StackArrays& data, Index M, Index n) {
+  for (Index i = 0; i < M; ++i)
+    for (Index j = 0; j < n; ++j)
+      if (!std::isfinite(data.A[i * n + j]))
         throw InputError("A[" + std::to_string(i) + ", " + std::to_string(j) +
-                         "] is not finite (" + fmt(data.A[i * n_ + j]) + ")");
-  for (Index i = 0; i < M_; ++i)
+                         "] is not finite (" + fmt(data.A[i * n + j]) + ")");
+  for (Index i = 0; i < M; ++i)
     if (!std::isfinite(data.b[i]))
       throw InputError("b[" + std::to_string(i) + "] is not finite (" + fmt(data.b[i]) + ")");
-  for (Index i = 0; i < M_; ++i) {
+  for (Index i = 0; i < M; ++i) {
     const double w = data.sqrt_weight[i];
     if (!(w > 0.0 && w < kInf))
       throw InputError("sqrt_weight[" + std::to_string(i) + "] must be finite and > 0, got " +
@@ -163,7 +163,7 @@ void ExtendedJacobian::solve_on(const StackArrays& data, ExtendedJacobianWorkspa
   res.solved = weights_ok && scales_ok;
   if (!res.solved) {
     // a NaN, an inf or a √w ≤ 0 is an input error; finite rows of extreme scale are not
-    check_entries(data);
+    check_stack_entries(data, M_, n_);
     res.finite = res.ambiguous = res.near_ambiguous = res.precision_limited = false;
     return;
   }

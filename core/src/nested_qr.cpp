@@ -126,33 +126,14 @@ Index pivoted_lq_level(MatrixRef B, Index s0, Index m, double tol, NestedQRWorks
       if (rowperm != nullptr) swap_entries(rowperm, s0 + r, s0 + p);
     }
     const Index q = col + r;
-    double* pivot = B.row(s0 + r);
-    const double norm = std::sqrt(exact);
-    const double alpha = pivot[q] >= 0.0 ? -norm : norm;
-    // v = row[q:] - alpha e_1; H = I - beta v vᵀ
+    // H = I − β v vᵀ mapping the pivot row's entries q: onto α e_q
     double* v = V.row(at.nref);
-    v[q] = pivot[q] - alpha;
-    double vtv = v[q] * v[q];
-    for (Index j = q + 1; j < n; ++j) {
-      v[j] = pivot[j];
-      vtv += v[j] * v[j];
-    }
-    const double bt = vtv > 0.0 ? 2.0 / vtv : 0.0;
+    const double bt = make_row_reflector(B.row(s0 + r), q, n, std::sqrt(exact), v);
     ws.beta[at.nref] = bt;
     ws.pos[at.nref] = q;
-    pivot[q] = alpha;
-    for (Index j = q + 1; j < n; ++j) pivot[j] = 0.0;
     // applied to the level's other rows and to every lower level's rows
-    const double* vq = v + q;
-    const Index w = n - q;
-    for (Index i = s0 + r + 1; i < at.rot_end; ++i) {
-      double* row = B.row(i) + q;
-      const double dt = dot(row, vq, w);
-      if (dt != 0.0) {
-        const double f = bt * dt;
-        for (Index j = 0; j < w; ++j) row[j] -= f * vq[j];
-      }
-    }
+    for (Index i = s0 + r + 1; i < at.rot_end; ++i)
+      apply_row_reflector(B.row(i) + q, v + q, n - q, bt);
     for (Index i = r + 1; i < m; ++i) norms[i] -= B(s0 + i, q) * B(s0 + i, q);
     ++at.nref;
     ++r;
@@ -229,18 +210,8 @@ void jacobi_svd(MatrixRef W, MatrixRef Vt) {
         const double t = (zeta >= 0.0 ? 1.0 : -1.0) / (std::fabs(zeta) + std::hypot(1.0, zeta));
         const double cs = 1.0 / std::sqrt(1.0 + t * t);
         const double sn = cs * t;
-        for (Index i = 0; i < m; ++i) {
-          const double a = wp[i], b = wq[i];
-          wp[i] = cs * a - sn * b;
-          wq[i] = sn * a + cs * b;
-        }
-        double* vp = Vt.row(p);
-        double* vq = Vt.row(q);
-        for (Index i = 0; i < r; ++i) {
-          const double a = vp[i], b = vq[i];
-          vp[i] = cs * a - sn * b;
-          vq[i] = sn * a + cs * b;
-        }
+        rotate_rows(wp, wq, m, cs, sn);
+        rotate_rows(Vt.row(p), Vt.row(q), r, cs, sn);
       }
     }
     if (!rotated) break;

@@ -1,6 +1,6 @@
-// Prioritized operational-space control, compiled (closed_form.hpp).
+// Prioritized operational-space control, compiled (closed_form.hpp): its parts of
+// MassMatrixSolver's level step.
 #include <algorithm>
-#include <cmath>
 #include <utility>
 
 #include "prioik/closed_form.hpp"
@@ -49,60 +49,42 @@ double right_multiply(MatrixRef B, MatrixRef N, MatrixRef J) {
 
 OperationalSpaceSolver::OperationalSpaceSolver(std::vector<Index> starts, Index n,
                                                OperationalSpaceOptions options)
-    : MassMatrixSolver(std::move(starts), n, options.rcond), options_(options) {}
+    : MassMatrixSolver(std::move(starts), n, options.rcond, options.reproject) {}
 
-double OperationalSpaceSolver::solve_level(Index lev, bool last) {
+double OperationalSpaceSolver::level_rows(const Level& lv, double* scale2) {
   ProjectionWorkspace& ws = work_;
-  UnifyingResult& res = result_;
-  const Index s0 = starts_[lev], m = starts_[lev + 1] - s0, n = n_;
-  const MatrixRef chol{ws.chol.data(), n, n, n};
-  MatrixRef N{ws.N.data(), n, n, n};
-  MatrixRef J{ws.J.data(), m, n, n};
-  MatrixRef B{ws.B.data() + s0 * n, m, n, n};
-  // the scale ‖A_i L⁻ᵀ‖_F (row by row in ws.aux), B = A_i N L⁻ᵀ and e = b_i − A_i x
-  double flops = 0.0, scale2 = 0.0;
+  const Index m = lv.m, n = n_;
+  const MatrixRef chol = mass_factor();
+  // the scale ‖A_i L⁻ᵀ‖_F (row by row in ws.aux), J = A_i N L⁻ᵀ and e = b_i − A_i x
+  double flops = 0.0;
   for (Index i = 0; i < m; ++i) {
-    std::copy(B.row(i), B.row(i) + n, ws.aux.begin());
+    std::copy(lv.B.row(i), lv.B.row(i) + n, ws.aux.begin());
     flops += lower_solve(chol, ws.aux.data());
-    scale2 += dot(ws.aux.data(), ws.aux.data(), n);
+    *scale2 += dot(ws.aux.data(), ws.aux.data(), n);
   }
-  flops += 2.0 * static_cast<double>(m * n) + 1.0;
   if (ws.projected) {
-    flops += right_multiply(B, N, J);
+    flops += right_multiply(lv.B, projector(), lv.J);
   } else {
-    std::copy(B.data, B.data + m * n, J.data);
+    std::copy(lv.B.data, lv.B.data + m * n, lv.J.data);
   }
-  for (Index i = 0; i < m; ++i) flops += lower_solve(chol, J.row(i));
-  flops += projection::multiply_rows(B, res.x.data(), ws.e.data());
-  for (Index i = 0; i < m; ++i) ws.e[i] = ws.c[s0 + i] - ws.e[i];
-  flops += static_cast<double>(m);
-  const double tol = options_.rcond * std::sqrt(scale2);
-  if (!(tol > 0.0)) return flops;
-  Reflectors H{MatrixRef{ws.V.data(), n, n, n}, ws.beta.data(), ws.pos.data(), 0};
-  // the step J̄ e = L⁻ᵀ B⁺ e, reprojected by N_{i-1}
-  double* step = ws.step.data();
-  Index r = 0;
-  double min_pivot = 0.0, margin = kInf;
-  flops += projection::lq_step(J, ws.e.data(), tol, 0.0, H, &r, &min_pivot, &margin, step, ws);
-  res.ranks[lev] = r;
-  if (r == 0) return flops;
-  flops += lower_transpose_solve(chol, step);
-  flops += projection::add_step(ws, step, options_.reproject, res.x.data());
-  if (last) return flops;
-  // N_i = N_{i-1} − (L⁻ᵀ V)(L V)ᵀ, V = Q_rᵀ
-  MatrixRef left{ws.left.data(), r, n, n}, right{ws.right.data(), r, n, n};
-  for (Index l = 0; l < r; ++l) {
-    double* vl = ws.basis.data() + l * n;
-    flops += projection::reflector_column(H, l, vl, n);
-    double* rl = right.row(l);
-    for (Index a = 0; a < n; ++a) rl[a] = dot(chol.row(a), vl, a + 1);
-    flops += static_cast<double>(n * (n + 1));
-    std::copy(vl, vl + n, left.row(l));
-    flops += lower_transpose_solve(chol, left.row(l));
-  }
-  flops += projection::subtract_products(N, left, right, r);
-  ws.projected = true;
-  return flops;
+  for (Index i = 0; i < m; ++i) flops += lower_solve(chol, lv.J.row(i));
+  flops += projection::multiply_rows(lv.B, result_.x.data(), ws.e.data());
+  for (Index i = 0; i < m; ++i) ws.e[i] = ws.c[lv.s0 + i] - ws.e[i];
+  return flops + static_cast<double>(m);
+}
+
+// J̄ e = L⁻ᵀ B⁺ e (reprojected by N_{i-1} when options.reproject)
+double OperationalSpaceSolver::map_step(double* z) {
+  return lower_transpose_solve(mass_factor(), z);
+}
+
+// N_i = N_{i-1} − (L⁻ᵀ V)(L V)ᵀ, V = Q_rᵀ
+double OperationalSpaceSolver::projector_factors(const double* v, double* p, double* q) {
+  const Index n = n_;
+  const MatrixRef chol = mass_factor();
+  for (Index a = 0; a < n; ++a) q[a] = dot(chol.row(a), v, a + 1);
+  std::copy(v, v + n, p);
+  return static_cast<double>(n * (n + 1)) + lower_transpose_solve(chol, p);
 }
 
 }  // namespace prioik

@@ -119,32 +119,17 @@ double pivoted_lq(MatrixRef J, double* e, double tol, double* norms, Reflectors&
       swap_entries(e, r, p);
       swap_entries(norms, r, p);
     }
-    double* pivot = J.row(r);
-    const double alpha = pivot[r] >= 0.0 ? -norm : norm;
     double* v = H.V.row(r);
-    v[r] = pivot[r] - alpha;
-    double vtv = v[r] * v[r];
-    for (Index j = r + 1; j < n; ++j) {
-      v[j] = pivot[j];
-      vtv += v[j] * v[j];
-    }
-    const double bt = vtv > 0.0 ? 2.0 / vtv : 0.0;
+    const double bt = make_row_reflector(J.row(r), r, n, norm, v);
     flops += 2.0 * (n - r) + 2.0;
     H.beta[r] = bt;
     H.pos[r] = r;
-    pivot[r] = alpha;
-    for (Index j = r + 1; j < n; ++j) pivot[j] = 0.0;
     const double* vr = v + r;
     const Index w = n - r;
     for (Index i = r + 1; i < m; ++i) {
       double* row = J.row(i) + r;
-      const double dt = dot(row, vr, w);
       flops += 2.0 * w;
-      if (dt != 0.0) {
-        const double f = bt * dt;
-        for (Index j = 0; j < w; ++j) row[j] -= f * vr[j];
-        flops += 2.0 * w + 1.0;
-      }
+      if (apply_row_reflector(row, vr, w, bt)) flops += 2.0 * w + 1.0;
       norms[i] -= row[0] * row[0];
       flops += 2.0;
     }
@@ -268,17 +253,13 @@ bool weigh_stack(const StackArrays& data, const std::vector<Index>& starts, Inde
   return weights_ok && scales_ok;
 }
 
-bool factor_mass_matrix(const StackArrays& data, const double* mass, bool stack_ok, Index n,
-                        ProjectionWorkspace& ws) {
+bool factor_mass_matrix(const double* mass, Index n, ProjectionWorkspace& ws) {
   bool mass_finite = true;
   for (Index i = 0; i < n * n; ++i) {
     ws.chol[i] = mass[i];
     if (!std::isfinite(mass[i])) mass_finite = false;
   }
-  if (!(stack_ok && mass_finite)) {
-    check_stack_entries(data, static_cast<Index>(ws.c.size()), n);   // a NaN, inf or √w ≤ 0
-    check_mass_matrix(mass, n);
-  }
+  if (!mass_finite) check_mass_matrix(mass, n);
   return cholesky_lower(MatrixRef{ws.chol.data(), n, n, n}, n);
 }
 

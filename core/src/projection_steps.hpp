@@ -64,10 +64,9 @@ bool weigh_stack(const StackArrays& data, const std::vector<Index>& starts, Inde
                  ProjectionWorkspace& ws);
 
 // ws.chol = the lower Cholesky factor of the mass matrix (n × n, row-major). Throws
-// InputError naming a non-finite entry of the stack (when !stack_ok) or of the mass matrix;
-// returns whether the factorization succeeded (M positive definite).
-bool factor_mass_matrix(const StackArrays& data, const double* mass, bool stack_ok, Index n,
-                        ProjectionWorkspace& ws);
+// InputError naming a non-finite entry of the mass matrix; returns whether the
+// factorization succeeded (M positive definite).
+bool factor_mass_matrix(const double* mass, Index n, ProjectionWorkspace& ws);
 
 // residuals[i] = ‖√w ∘ (A_i x − b_i)‖ for the k = starts.size() − 1 levels; whether their
 // sum (and so x) is finite

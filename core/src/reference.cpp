@@ -51,18 +51,8 @@ double jacobi_rows(MatrixRef Gt, MatrixRef Wt, double* sigma, Index* sweeps, Ind
         const double t = az > 1e150 ? 0.5 / zeta : sign / (az + std::sqrt(1.0 + zeta * zeta));
         const double c = 1.0 / std::sqrt(1.0 + t * t), s = c * t;
         flops += 12.0;
-        for (Index e = 0; e < m; ++e) {
-          const double x = gi[e], y = gj[e];
-          gi[e] = c * x - s * y;
-          gj[e] = s * x + c * y;
-        }
-        double* wi = Wt.row(i);
-        double* wj = Wt.row(j);
-        for (Index e = 0; e < p; ++e) {
-          const double x = wi[e], y = wj[e];
-          wi[e] = c * x - s * y;
-          wj[e] = s * x + c * y;
-        }
+        rotate_rows(gi, gj, m, c, s);
+        rotate_rows(Wt.row(i), Wt.row(j), p, c, s);
         flops += 6.0 * f(m + p);
         rotated = true;
         ++*rotations;
@@ -166,7 +156,7 @@ double ReferenceSolver::level_step(Index lev, Index s0, Index m, Index r) {
   return flops + f(n);
 }
 
-double ReferenceSolver::solve_level(Index lev) {
+double ReferenceSolver::solve_level(Index lev, bool /*last*/) {
   ProjectionWorkspace& ws = work_;
   ReferenceResult& res = result_;
   const Index s0 = starts_[lev], m = starts_[lev + 1] - s0, n = n_, d = nested_.d;
@@ -280,33 +270,22 @@ double ReferenceSolver::metric_step() {
 
 const ReferenceResult& ReferenceSolver::solve(const StackArrays& data) {
   BusyGuard guard(busy_);
-  ProjectionWorkspace& ws = work_;
   ReferenceResult& res = result_;
-  const bool stack_ok = projection::weigh_stack(data, starts_, n_, ws);
-  res.flops = 0.0;
   res.sweeps = 0;
   res.rotations = 0;
-  std::fill(res.x.begin(), res.x.end(), 0.0);
   std::fill(res.ranks.begin(), res.ranks.end(), 0);
   std::fill(res.ambiguous.begin(), res.ambiguous.end(), 0);
   res.metric_positive_definite = true;
-  res.solved = stack_ok;
-  if (!res.solved) {
-    check_stack_entries(data, M_, n_);     // a NaN, inf or √w ≤ 0 is an input error
-    res.finite = false;
-    res.null_space_dim = 0;
-    return res;
-  }
+  res.null_space_dim = 0;
+  res.solved = open_solve(data, res);
+  if (!res.solved) return res;
   for (Index a = 0; a < n_; ++a)
     for (Index b = 0; b < n_; ++b) nested_.Z[a * n_ + b] = a == b ? 1.0 : 0.0;
   nested_.d = n_;
-  double flops = 0.0;
-  for (Index lev = 0; lev < k_; ++lev) flops += solve_level(lev);
+  double flops = run_levels(0);
   if (!options_.metric.empty() && nested_.d > 0) flops += metric_step();
   res.null_space_dim = nested_.d;
-  res.flops = flops;
-  res.finite =
-      projection::stack_residuals(data, starts_, n_, res.x.data(), res.residuals.data());
+  close_solve(data, flops, res);
   return res;
 }
 

@@ -320,25 +320,17 @@ double SnsSolver::solve_level(Index lev, bool last) {
   SnsWorkspace& rw = rounds_;
   ProjectionWorkspace& ws = work_;
   SnsResult& res = result_;
-  const Index s0 = starts_[lev], m = starts_[lev + 1] - s0, n = n_;
-  const double tol = options_.rcond * ws.scales[lev];
-  MatrixRef J{ws.J.data(), m, n, n};
-  MatrixRef B{ws.B.data() + s0 * n, m, n, n};
-  const double* c_level = ws.c.data() + s0;
+  const Index n = n_;
+  Level lv = level(lev);
+  const Index m = lv.m;
+  const MatrixRef B = lv.B;
+  const double* c_level = ws.c.data() + lv.s0;
   // nullspace's step: x_free = x + N_{i-1} Ĵ_i^# (b_i − A_i x)
   std::copy(res.x.begin(), res.x.end(), rw.x_free.begin());
-  double flops = projection::project_rows(B, ws, J);
-  flops += projection::multiply_rows(B, rw.x_free.data(), ws.e.data());
-  for (Index i = 0; i < m; ++i) ws.e[i] = c_level[i] - ws.e[i];
-  flops += static_cast<double>(m);
-  Reflectors H{MatrixRef{ws.V.data(), n, n, n}, ws.beta.data(), ws.pos.data(), 0};
   Index r = 0;
-  if (tol > 0.0) {
-    double min_pivot = 0.0;
-    flops += projection::lq_step(J, ws.e.data(), tol, 0.0, H, &r, &min_pivot, &res.margins[lev],
-                                 ws.step.data(), ws);
-    if (r > 0) flops += projection::add_step(ws, ws.step.data(), true, rw.x_free.data());
-  }
+  double min_pivot = 0.0;
+  double flops = projected_step(lv, options_.rcond * ws.scales[lev], 0.0, true,
+                                rw.x_free.data(), &r, &min_pivot, &res.margins[lev]);
   res.ranks[lev] = r;
   const double res_free = residual_norm(B, c_level, rw.x_free.data());
   // the level's answer within the box
@@ -363,18 +355,14 @@ double SnsSolver::solve_level(Index lev, bool last) {
   flops += 3.0 * (2.0 * f(m * n) + 2.0 * f(m) + 1.0);
   if (chosen != res.x.data()) std::copy(chosen, chosen + n, res.x.begin());
   res.task_scaling[lev] = s_level;
-  if (r > 0 && !last) flops += projection::update_projector(ws, H, r);
+  if (r > 0 && !last) flops += projection::update_projector(ws, lv.H, r);
   return flops;
 }
 
 const SnsResult& SnsSolver::solve(const StackArrays& data, const double* lower,
                                   const double* upper) {
   BusyGuard guard(busy_);
-  ProjectionWorkspace& ws = work_;
   SnsResult& res = result_;
-  const bool stack_ok = projection::weigh_stack(data, starts_, n_, ws);
-  res.flops = 0.0;
-  std::fill(res.x.begin(), res.x.end(), 0.0);
   std::fill(res.task_scaling.begin(), res.task_scaling.end(), 1.0);
   std::fill(res.margins.begin(), res.margins.end(), kInf);
   std::fill(res.ranks.begin(), res.ranks.end(), 0);
@@ -383,23 +371,13 @@ const SnsResult& SnsSolver::solve(const StackArrays& data, const double* lower,
   res.bounds = SnsBounds::ok;
   res.bad_entry = -1;
   res.exact = true;
-  res.finite = false;
-  res.solved = false;
-  if (!stack_ok) {
-    check_stack_entries(data, M_, n_);     // a NaN, inf or √w ≤ 0 is an input error
-    return res;
-  }
-  if (!read_bounds(data, lower, upper)) return res;
+  if (!open_solve(data, res) || !read_bounds(data, lower, upper)) return res;
   res.solved = true;
-  projection::reset(ws);
   const Index first = options_.bounds_level ? 1 : 0;
-  double flops = 0.0;
-  for (Index lev = first; lev < k_; ++lev) flops += solve_level(lev, lev == k_ - 1);
+  const double flops = run_levels(first);
   if (first == k_ && !feasible(res.x.data()))      // bounds alone: the box's minimum-norm point
     for (Index j = 0; j < n_; ++j) res.x[j] = clip(res.x[j], res.lower[j], res.upper[j]);
-  res.flops = flops;
-  res.finite =
-      projection::stack_residuals(data, starts_, n_, res.x.data(), res.residuals.data());
+  close_solve(data, flops, res);
   if (first == 1) {          // the bounds rows: the distance of A_0 x to [lower, upper]
     double acc = 0.0;
     for (Index i = 0; i < starts_[1]; ++i) {

@@ -34,17 +34,21 @@ struct NullspaceOptions {
   bool reproject = true;    // multiply each step by N_{i-1} once more (exact no-op)
 };
 
-// The answer of one solve, read by name.
-struct NullspaceResult {
+// What every compiled closed form's answer holds, read by name (each result adds its own).
+struct ProjectionResult {
   std::vector<double> x;            // n
   std::vector<double> residuals;    // k: ‖√w ∘ (A_i x − b_i)‖
+  double flops = 0.0;               // floating-point operations of the solve
+  bool solved = false;       // false: a level's scale is outside [1e-100, 1e100] (the
+                             // caller equilibrates), or as the result says; nothing solved
+  bool finite = false;       // the residuals (and so x) are finite
+};
+
+// The answer of one null-space projection solve.
+struct NullspaceResult : ProjectionResult {
   std::vector<double> min_pivots;   // k: the smallest kept pivot norm of Ĵ_i (0: none)
   std::vector<double> margins;      // k: the rank decisions' margins (inf: none decided)
   std::vector<Index> ranks;         // k: the kept rank of Ĵ_i
-  double flops = 0.0;               // floating-point operations of the solve
-  bool solved = false;       // false: a level's scale is outside [1e-100, 1e100] and
-                             // nothing was solved (the caller equilibrates)
-  bool finite = false;       // the residuals (and so x) are finite
   bool ambiguous = false;    // some level's margin ≤ kAmbiguity
 };
 
@@ -77,10 +81,13 @@ struct ProjectionWorkspace {
 
 // What every compiled closed form holds: the layout (the k + 1 row offsets `starts` of
 // the levels, n columns), its ProjectionWorkspace allocated at construction, and the
-// one-thread-at-a-time flag. The constructor throws InputError on a malformed layout,
-// rcond outside (0, 1) or a damping not finite and ≥ 0.
+// one-thread-at-a-time flag; and the frame of a solve, around the formulation's level
+// step. The constructor throws InputError on a malformed layout, rcond outside (0, 1) or
+// a damping not finite and ≥ 0.
 class ProjectionSolver {
  public:
+  virtual ~ProjectionSolver() = default;
+
   Index rows() const { return M_; }
   Index cols() const { return n_; }
   Index levels() const { return k_; }
@@ -88,13 +95,40 @@ class ProjectionSolver {
  protected:
   ProjectionSolver(std::vector<Index> starts, Index n, double rcond, double damping);
 
+  // The opening of a solve: x = 0, flops = 0, solved and finite false; the stack weighed
+  // into the workspace (ws.B = diag(√w) A, ws.c = √w ∘ b, the levels' scales) and N = I.
+  // Throws InputError naming a NaN, inf or √w ≤ 0 (check_stack_entries); returns whether
+  // every level's scale is in [1e-100, 1e100] (else there is nothing to solve).
+  bool open_solve(const StackArrays& data, ProjectionResult& res);
+  // The formulation's levels first, …, k − 1 in turn; returns their flops
+  double run_levels(Index first);
+  // Level lev's rows s0, …, s0 + m − 1 on the workspace: their weighted rows B (ws.B),
+  // the matrix the level factors J (ws.J, m × n) and the LQ's reflectors H (none yet)
+  struct Level {
+    Index s0, m;
+    MatrixRef B, J;
+    Reflectors H;
+  };
+  Level level(Index lev);
+  // Null-space projection's step of a level at x: J = A_i N, e = b_i − A_i x and, when
+  // tol > 0, x += N J^# e (x += J^# e when !reproject) by projection::lq_step, which
+  // writes the rank, the smallest kept pivot and the margin; returns the flops
+  double projected_step(Level& lv, double tol, double damping, bool reproject, double* x,
+                        Index* rank, double* min_pivot, double* margin);
+  // level lev's step (and, unless last, its projector update) on the workspace; returns
+  // the level's flops
+  virtual double solve_level(Index lev, bool last) = 0;
+  // The close of a solve: res.flops = flops, and the levels' residuals at x and whether
+  // they are finite
+  void close_solve(const StackArrays& data, double flops, ProjectionResult& res) const;
+
   std::vector<Index> starts_;
   Index M_, n_, k_;
   ProjectionWorkspace work_;
   std::atomic<bool> busy_{false};
 };
 
-class NullspaceSolver : public ProjectionSolver {
+class NullspaceSolver final : public ProjectionSolver {
  public:
   // starts: the k + 1 row offsets of the levels; n: the columns. Throws InputError on a
   // malformed layout or options.
@@ -108,8 +142,7 @@ class NullspaceSolver : public ProjectionSolver {
   const NullspaceOptions& options() const { return options_; }
 
  private:
-  // level lev's step and projector update on the workspace; returns the level's flops
-  double solve_level(Index lev, bool last);
+  double solve_level(Index lev, bool last) override;
 
   NullspaceOptions options_;
   NullspaceResult result_;
@@ -125,16 +158,11 @@ struct ChiaveriniOptions {
   double damping = 0.0;     // λ of the damped inverse (0: pseudo-inverse)
 };
 
-struct ChiaveriniResult {
-  std::vector<double> x;               // n
-  std::vector<double> residuals;       // k: ‖√w ∘ (A_i x − b_i)‖
+struct ChiaveriniResult : ProjectionResult {
   std::vector<double> task_solutions;  // k × n: row i = A_i^# b_i, the level's own solution
-  double flops = 0.0;                  // floating-point operations of the solve
-  bool solved = false;       // false: a level's scale is outside [1e-100, 1e100]
-  bool finite = false;       // the residuals (and so x) are finite
 };
 
-class ChiaveriniSolver : public ProjectionSolver {
+class ChiaveriniSolver final : public ProjectionSolver {
  public:
   ChiaveriniSolver(std::vector<Index> starts, Index n, ChiaveriniOptions options);
 
@@ -144,7 +172,7 @@ class ChiaveriniSolver : public ProjectionSolver {
   const ChiaveriniResult& result() const { return result_; }
 
  private:
-  double solve_level(Index lev, bool last);
+  double solve_level(Index lev, bool last) override;
 
   ChiaveriniOptions options_;
   ChiaveriniResult result_;
@@ -157,24 +185,21 @@ class ChiaveriniSolver : public ProjectionSolver {
 // (B = A M⁻¹ = Pᵀ [L_B 0] Q by a row-pivoted LQ, rank rule rcond ‖B‖_F; B⁺ y =
 // Q_rᵀ argmin ‖L_B z − P y‖ and J^{M²+} A = M⁻¹ B⁺ B M = M⁻¹ V Vᵀ M with V = Q_rᵀ).
 // The answer of a solve with a mass matrix (unifying, operational_space), read by name.
-struct UnifyingResult {
-  std::vector<double> x;            // n
-  std::vector<double> residuals;    // k: ‖√w ∘ (A_i x − b_i)‖
+// solved is also false when M is not positive definite (mass_positive_definite).
+struct UnifyingResult : ProjectionResult {
   std::vector<Index> ranks;         // k: the kept rank of each level's factored matrix
-  double flops = 0.0;               // floating-point operations of the solve
-  bool solved = false;       // false: a level's scale is outside [1e-100, 1e100], or M is
-                             // not positive definite (mass_positive_definite)
   bool mass_positive_definite = false;   // the Cholesky factorization of M succeeded
-  bool finite = false;       // the residuals (and so x) are finite
 };
 
 // A solver with the joint-space inertia M = L Lᵀ given per solve (unifying,
-// operational_space): one solve factors M, then runs the derived solver's level step
-// over the levels.
+// operational_space): one solve factors M, then runs over the levels the mass-matrix
+// weighted level step, for each level i (x_0 = 0, N_0 = I):
+//     J_i = the level's rows in M's weighting (level_rows), its rank rule rcond ‖·‖_F,
+//     J_i = Pᵀ [L_J 0] Q (row-pivoted LQ),   z = Q_rᵀ argmin ‖L_J z − P e‖,
+//     x_i = x_{i-1} + N_{i-1} (map_step z),   N_i = N_{i-1} − Σ_{l<r} p_l q_lᵀ
+// with (p_l, q_l) = projector_factors(Q e_l); the derived solver gives the three parts.
 class MassMatrixSolver : public ProjectionSolver {
  public:
-  virtual ~MassMatrixSolver() = default;
-
   // Solve one stack of the layout with the joint-space inertia M (n × n, row-major; its
   // lower triangle is read). Throws InputError naming a non-finite entry, a √w ≤ 0 or a
   // non-finite entry of M.
@@ -183,13 +208,28 @@ class MassMatrixSolver : public ProjectionSolver {
   const UnifyingResult& result() const { return result_; }
 
  protected:
-  MassMatrixSolver(std::vector<Index> starts, Index n, double rcond);
+  // reproject: x_i = x_{i-1} + N_{i-1} (map_step z) (else + map_step z, when J_i holds N_{i-1})
+  MassMatrixSolver(std::vector<Index> starts, Index n, double rcond, bool reproject);
 
-  // level lev's step and projector update on the workspace (ws.chol: M's factor);
-  // returns the level's flops
-  virtual double solve_level(Index lev, bool last) = 0;
+  // M's lower Cholesky factor L (ws.chol) and the projector N (ws.N)
+  MatrixRef mass_factor() { return MatrixRef{work_.chol.data(), n_, n_, n_}; }
+  MatrixRef projector() { return MatrixRef{work_.N.data(), n_, n_, n_}; }
+
+  // The level's matrix lv.J from its rows lv.B, and its right-hand side (ws.e); adds the
+  // squared scale of the rank rule to *scale2; returns the flops
+  virtual double level_rows(const Level& lv, double* scale2) = 0;
+  // the step in x from the step z of J's LQ, in place; returns the flops
+  virtual double map_step(double* z) = 0;
+  // the pair (p, q) of the projector update N ← N − p qᵀ for v = Q e_l; returns the flops
+  virtual double projector_factors(const double* v, double* p, double* q) = 0;
 
   UnifyingResult result_;     // x, residuals, ranks of the factored matrices, flops, flags
+
+ private:
+  double solve_level(Index lev, bool last) final;
+
+  double rcond_;
+  bool reproject_;
 };
 
 class UnifyingSolver final : public MassMatrixSolver {
@@ -197,9 +237,12 @@ class UnifyingSolver final : public MassMatrixSolver {
   UnifyingSolver(std::vector<Index> starts, Index n, double rcond);
 
  private:
-  double solve_level(Index lev, bool last) override;
-
-  double rcond_;
+  // J = A_i M⁻¹ (row j: M⁻¹ a_j, M symmetric), e = b_i
+  double level_rows(const Level& lv, double* scale2) override;
+  // z ← M⁻¹ z
+  double map_step(double* z) override;
+  // p = N_i M⁻¹ v, q = M v
+  double projector_factors(const double* v, double* p, double* q) override;
 };
 
 // Prioritized operational-space control (Khatib 1987; Sentis & Khatib 2005) with the
@@ -218,9 +261,12 @@ class OperationalSpaceSolver final : public MassMatrixSolver {
   OperationalSpaceSolver(std::vector<Index> starts, Index n, OperationalSpaceOptions options);
 
  private:
-  double solve_level(Index lev, bool last) override;
-
-  OperationalSpaceOptions options_;
+  // J = A_i N_{i-1} L⁻ᵀ (scale ‖A_i L⁻ᵀ‖_F), e = b_i − A_i x_{i-1}
+  double level_rows(const Level& lv, double* scale2) override;
+  // z ← L⁻ᵀ z
+  double map_step(double* z) override;
+  // p = L⁻ᵀ v, q = L v
+  double projector_factors(const double* v, double* p, double* q) override;
 };
 
 // The exact lexicographic minimum-norm least squares by nested SVD null spaces (the
@@ -241,18 +287,13 @@ struct ReferenceOptions {
   std::vector<double> metric;          // n × n, row-major (empty: minimum norm)
 };
 
-struct ReferenceResult {
-  std::vector<double> x;            // n
-  std::vector<double> residuals;    // k: ‖√w ∘ (A_i x − b_i)‖
+struct ReferenceResult : ProjectionResult {
   std::vector<Index> ranks;         // k: the kept rank of M_i
   std::vector<Index> ambiguous;     // k: 1 where a σ of M_i lies within kAmbiguity of the
                                     // threshold
   Index null_space_dim = 0;         // the columns of the last Z
   Index sweeps = 0;                 // the Jacobi sweeps of the solve, over every level
   Index rotations = 0;              // the Jacobi rotations of the solve, over every level
-  double flops = 0.0;               // floating-point operations of the solve
-  bool solved = false;       // false: a level's scale is outside [1e-100, 1e100]
-  bool finite = false;       // the residuals (and so x) are finite
   bool metric_positive_definite = true;   // ZᵀW_xZ factored (false: x without tie-break)
 };
 
@@ -274,7 +315,7 @@ struct ReferenceWorkspace {
   std::vector<double> WZ;       // n × n: W_x Z
 };
 
-class ReferenceSolver : public ProjectionSolver {
+class ReferenceSolver final : public ProjectionSolver {
  public:
   // Throws InputError on a malformed layout, rcond outside (0, 1), level_damping not k
   // finite values ≥ 0, or a metric not n × n finite values.
@@ -286,8 +327,8 @@ class ReferenceSolver : public ProjectionSolver {
   const ReferenceResult& result() const { return result_; }
 
  private:
-  // level lev on the workspace (Z: n × d, d the null space's dimension); returns its flops
-  double solve_level(Index lev);
+  // level lev on the workspace (Z: n × d, d the null space's dimension; N unused)
+  double solve_level(Index lev, bool last) override;
   // the level's step from the kept singular directions (Zq's columns), refined; its flops
   double level_step(Index lev, Index s0, Index m, Index r);
   // the metric's tie-break on the last null space; its flops
@@ -318,10 +359,9 @@ struct SnsOptions {
 // what a solve found wrong with the bounds rows (the caller names the task)
 enum class SnsBounds : int { ok = 0, not_single_column = 1, empty_box = 2 };
 
-struct SnsResult {
-  std::vector<double> x;              // n
-  std::vector<double> residuals;      // k: ‖√w ∘ (A_i x − b_i)‖; the bounds level:
-                                      // ‖√w ∘ the distance of A_0 x to [lower, upper]‖
+// residuals: the bounds level's is ‖√w ∘ the distance of A_0 x to [lower, upper]‖;
+// solved is also false when the bounds are malformed (`bounds`).
+struct SnsResult : ProjectionResult {
   std::vector<double> task_scaling;   // k: each equality level's s (the bounds level: 1)
   std::vector<double> margins;        // k: the unbounded step's rank decision margins
   std::vector<Index> ranks;           // k: the unbounded step's kept rank
@@ -331,10 +371,6 @@ struct SnsResult {
   std::vector<double> lower, upper;   // n: the box the bounds rows give
   SnsBounds bounds = SnsBounds::ok;   // not ok: nothing solved (`bad_entry` says where)
   Index bad_entry = -1;               // the row (not_single_column) or column (empty_box)
-  double flops = 0.0;                 // floating-point operations of the solve
-  bool solved = false;       // false: a level's scale is outside [1e-100, 1e100] or the
-                             // bounds are malformed (`bounds`); nothing solved
-  bool finite = false;       // the residuals (and so x) are finite
   bool exact = false;        // every level reached its unbounded residual
 };
 
@@ -358,7 +394,7 @@ struct SnsWorkspace {
   std::vector<double> v;        // n
 };
 
-class SnsSolver : public ProjectionSolver {
+class SnsSolver final : public ProjectionSolver {
  public:
   SnsSolver(std::vector<Index> starts, Index n, SnsOptions options);
 
@@ -377,8 +413,7 @@ class SnsSolver : public ProjectionSolver {
   // upper end (formulations.sns._scale_interval); returns the flops
   double scale_interval(double* s_min, double* s_max);
   bool feasible(const double* v) const;
-  // level lev; returns its flops
-  double solve_level(Index lev, bool last);
+  double solve_level(Index lev, bool last) override;
   // the saturation rounds of level lev from x (x_new: the answer, *scale its s; false:
   // none feasible); returns the flops
   double saturate(Index lev, Index rank, double* x_new, double* scale, bool* found);
@@ -392,9 +427,5 @@ class SnsSolver : public ProjectionSolver {
   SnsResult result_;
   SnsWorkspace rounds_;         // beside work_ (the weighted rows, the projector, its LQ)
 };
-
-// Throws InputError naming the first entry of A or b that is not finite, or the first
-// √w not finite and > 0 (M rows of n columns).
-void check_stack_entries(const StackArrays& data, Index M, Index n);
 
 }  // namespace prioik

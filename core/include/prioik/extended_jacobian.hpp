@@ -64,6 +64,10 @@ struct StackArrays {
   const double* sqrt_weight = nullptr;
 };
 
+// Throws InputError naming the first entry of A or b that is not finite, or the first
+// √w not finite and > 0 (M rows of n columns).
+void check_stack_entries(const StackArrays& data, Index M, Index n);
+
 // The answers of many stacks of one layout, stack s in row s of each part.
 struct ExtendedJacobianBatch {
   Index N = 0, n = 0, k = 0;
@@ -117,8 +121,6 @@ class ExtendedJacobian {
   // one solve on `work` (this solver's or a batch thread's)
   void solve_on(const StackArrays& data, ExtendedJacobianWorkspace& work) const;
   void summarize(const StackArrays& data, ExtendedJacobianResult& res) const;
-  // throws InputError naming the first non-finite entry or √w ≤ 0, if any
-  void check_entries(const StackArrays& data) const;
 
   std::vector<Index> starts_;
   Index M_, n_, k_;

@@ -80,6 +80,40 @@ inline void swap_rows(MatrixRef M, Index i, Index j) {
   }
 }
 
+// (x, y) ← (c x − s y, s x + c y) entry by entry over n entries: a plane rotation of two
+// rows (the one-sided Jacobi SVDs' step)
+inline void rotate_rows(double* x, double* y, Index n, double c, double s) {
+  for (Index e = 0; e < n; ++e) {
+    const double a = x[e], b = y[e];
+    x[e] = c * a - s * b;
+    y[e] = s * a + c * b;
+  }
+}
+
+// The Householder reflector H = I − β v vᵀ mapping row[q:n] (of norm `norm`) onto α e_q,
+// α = −sign(row[q]) norm: writes v[q:n], sets row[q:n] = (α, 0, …, 0) and returns β
+inline double make_row_reflector(double* row, Index q, Index n, double norm, double* v) {
+  const double alpha = row[q] >= 0.0 ? -norm : norm;
+  v[q] = row[q] - alpha;
+  double vtv = v[q] * v[q];
+  for (Index j = q + 1; j < n; ++j) {
+    v[j] = row[j];
+    vtv += v[j] * v[j];
+  }
+  row[q] = alpha;
+  for (Index j = q + 1; j < n; ++j) row[j] = 0.0;
+  return vtv > 0.0 ? 2.0 / vtv : 0.0;
+}
+
+// row ← row − β (row · v) v over w entries, skipped when row · v = 0; whether applied
+inline bool apply_row_reflector(double* row, const double* v, Index w, double beta) {
+  const double dt = dot(row, v, w);
+  if (dt == 0.0) return false;
+  const double f = beta * dt;
+  for (Index j = 0; j < w; ++j) row[j] -= f * v[j];
+  return true;
+}
+
 // index of the largest of values[start:stop] (the first on ties)
 inline Index argmax_from(const double* values, Index start, Index stop) {
   Index p = start;
