@@ -129,22 +129,25 @@ Index pivoted_lq_level(MatrixRef B, Index s0, Index m, double tol, NestedQRWorks
     double* pivot = B.row(s0 + r);
     const double norm = std::sqrt(exact);
     const double alpha = pivot[q] >= 0.0 ? -norm : norm;
-    // v = row[q:] - alpha e_1; H = I - beta v vᵀ
+    // v = row[q:] - alpha e_1; H = I - beta v vᵀ, vᵀv = 2 (‖row[q:]‖² - alpha row[q])
+    // (reflect_column's); v's trailing zeros (a row on few columns) are not applied
     double* v = V.row(at.nref);
     v[q] = pivot[q] - alpha;
-    double vtv = v[q] * v[q];
+    const double vtv = 2.0 * (exact - alpha * pivot[q]);
+    Index last = q + 1;
     for (Index j = q + 1; j < n; ++j) {
       v[j] = pivot[j];
-      vtv += v[j] * v[j];
+      last = pivot[j] != 0.0 ? j + 1 : last;
     }
     const double bt = vtv > 0.0 ? 2.0 / vtv : 0.0;
     ws.beta[at.nref] = bt;
     ws.pos[at.nref] = q;
+    ws.end[at.nref] = last;
     pivot[q] = alpha;
     for (Index j = q + 1; j < n; ++j) pivot[j] = 0.0;
     // applied to the level's other rows and to every lower level's rows
     const double* vq = v + q;
-    const Index w = n - q;
+    const Index w = last - q;
     for (Index i = s0 + r + 1; i < at.rot_end; ++i) {
       double* row = B.row(i) + q;
       const double dt = dot(row, vq, w);
@@ -255,6 +258,7 @@ NestedQRWorkspace::NestedQRWorkspace(Index rows, Index cols)
       V(cols * cols),
       beta(cols),
       pos(cols),
+      end(cols),
       y(cols),
       norms(std::max(rows, cols)),
       rhs(rows),

@@ -7,8 +7,8 @@
 // allocates nothing. Matrices are row-major views (MatrixRef); a matrix "held
 // transposed" keeps its column j in row j, so that the inner loops run over contiguous
 // memory. Each loop does its operations in the order it is written (the sums of dot() in
-// eight written-out partial sums); the arithmetic is IEEE double as written (no fast
-// math, no fused multiply-add: core/CMakeLists.txt).
+// eight written-out partial sums, then four); the arithmetic is IEEE double as written
+// (no fast math, no fused multiply-add: core/CMakeLists.txt).
 #pragma once
 
 #include <cmath>
@@ -38,25 +38,40 @@ struct MatrixRef {
 
 // The Householder reflectors H_t = I - beta_t v_t v_tᵀ of a nested QR, v_t held in
 // V(t, pos_t:) (its entries before pos_t are zero and never read); Q = H_0 H_1 … H_{count-1}.
+// end (optional, count entries): v_t's entries from end_t on are zero (stored as zeros),
+// so that applying H_t reads and writes entries pos_t:end_t only (a reflector of a row
+// that touches few columns, e.g. a foot's Jacobian, stays short); null: end_t = n.
 struct Reflectors {
   MatrixRef V;          // n × n
   double* beta = nullptr;
   Index* pos = nullptr;
   Index count = 0;
+  const Index* end = nullptr;
 };
+
+// one past the last entry of reflector t that may be non-zero (Reflectors::end), of n
+inline Index reflector_end(const Reflectors& H, Index t, Index n) {
+  return H.end != nullptr ? H.end[t] : n;
+}
 
 // --------------------------------------------------------------------------- vectors
 
 // a · b over n entries, summed in eight interleaved partial sums (s_r: the entries
-// j ≡ r mod 8) added pairwise, ((s0 + s1) + (s2 + s3)) + ((s4 + s5) + (s6 + s7)), then the
-// tail in order: an order written out, so that the compiler may vectorise it without
-// reassociating (the rounding rule), and eight chains of dependent additions hide each
-// other's latency.
+// j ≡ r mod 8 of the whole blocks of eight; then, when four or more entries are left, the
+// next four into s_0 … s_3) added pairwise, ((s0 + s1) + (s2 + s3)) + ((s4 + s5) + (s6 +
+// s7)), then the last (at most three) in order: an order written out, so that the
+// compiler may vectorise it without reassociating (the rounding rule), eight chains of
+// dependent additions hide each other's latency, and a row of ~30 entries leaves no long
+// scalar tail.
 inline double dot(const double* a, const double* b, Index n) {
   double s[8] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
   Index j = 0;
   for (; j + 8 <= n; j += 8) {
     for (int r = 0; r < 8; ++r) s[r] += a[j + r] * b[j + r];
+  }
+  if (j + 4 <= n) {
+    for (int r = 0; r < 4; ++r) s[r] += a[j + r] * b[j + r];
+    j += 4;
   }
   double acc = ((s[0] + s[1]) + (s[2] + s[3])) + ((s[4] + s[5]) + (s[6] + s[7]));
   for (; j < n; ++j) acc += a[j] * b[j];
@@ -158,9 +173,10 @@ inline void apply_reflectors(double* v, Index n, const Reflectors& H, bool trans
     const Index q = H.pos[t];
     const double* vt = H.V.row(t) + q;
     double* vq = v + q;
-    const double f = H.beta[t] * dot(vt, vq, n - q);
+    const Index w = reflector_end(H, t, n) - q;
+    const double f = H.beta[t] * dot(vt, vq, w);
     if (f != 0.0) {
-      for (Index c = 0; c < n - q; ++c) vq[c] -= f * vt[c];
+      for (Index c = 0; c < w; ++c) vq[c] -= f * vt[c];
     }
   }
 }
@@ -349,7 +365,7 @@ inline void free_directions(const Index* cols, Index m, MatrixRef Z, const Refle
     const Index q = H.pos[t];
     const double* vt = H.V.row(t) + q;
     const double bt = H.beta[t];
-    const Index w = n - q;
+    const Index w = reflector_end(H, t, n) - q;
     for (Index i = 0; i < m; ++i) {
       double* zq = Z.row(i) + q;
       const double f = bt * dot(vt, zq, w);

@@ -53,6 +53,7 @@ struct NestedQRWorkspace {
   std::vector<double> V;        // n × n: reflector t in V(t, pos_t:)
   std::vector<double> beta;     // n
   std::vector<Index> pos;       // n
+  std::vector<Index> end;       // n: one past each reflector's last non-zero entry
   std::vector<double> y;        // n: the rotated unknowns
   std::vector<double> norms;    // max(M, n): the level's row norms on the free columns
   std::vector<double> rhs;      // M: the level's right-hand side
@@ -64,7 +65,7 @@ struct NestedQRWorkspace {
   std::vector<Index> ucols;     // n: the columns no unit row covers
 
   Reflectors reflectors(Index count) {
-    return Reflectors{MatrixRef{V.data(), n, n, n}, beta.data(), pos.data(), count};
+    return Reflectors{MatrixRef{V.data(), n, n, n}, beta.data(), pos.data(), count, end.data()};
   }
 };
 
