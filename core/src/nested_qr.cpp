@@ -34,7 +34,7 @@ void defer_unit_level(MatrixRef B, const Index* starts, Index k, const NestedQRP
   at.unit_s = -1.0;
   const bool bounded = p.step_bound != nullptr && k > 0 && p.step_bound[k - 1] > 0.0;
   if (k > 0 && p.rcond > 0.0 && !bounded && !p.selective() && starts[k - 1] < M) {
-    at.unit_s = unit_rows_of(B, starts[k - 1], M, ws.cover.data());
+    at.unit_s = unit_rows_of(B, starts[k - 1], M, ws.cover.data(), p.row_columns);
     if (at.unit_s > 0.0) at.rot_end = starts[k - 1];
   }
 }

@@ -412,8 +412,11 @@ constexpr double kUnitRowsGap = 1e-3;
 
 // Whether the rows B[s0:s1] are unit rows (one non-zero each, of one magnitude, on
 // distinct columns): their magnitude s, else -1. cover[c] is then the row (offset from
-// s0) on column c, -1 where none is (cover: B.cols entries, written).
-inline double unit_rows_of(MatrixRef B, Index s0, Index s1, Index* cover) {
+// s0) on column c, -1 where none is (cover: B.cols entries, written). columns (optional,
+// indexed by B's rows): a row's entry c ≥ 0 says the caller knows every entry of that
+// row but column c to be zero (its row is then not scanned); -1: scan it.
+inline double unit_rows_of(MatrixRef B, Index s0, Index s1, Index* cover,
+                           const Index* columns = nullptr) {
   const Index n = B.cols;
   for (Index c = 0; c < n; ++c) cover[c] = -1;
   double s = -1.0;
@@ -421,10 +424,15 @@ inline double unit_rows_of(MatrixRef B, Index s0, Index s1, Index* cover) {
     const double* row = B.row(s0 + i);
     Index nz = 0;
     Index at = 0;
-    for (Index c = 0; c < n; ++c) {
-      const bool nonzero = row[c] != 0.0;
-      nz += nonzero ? 1 : 0;
-      at += nonzero ? c : 0;
+    if (columns != nullptr && columns[s0 + i] >= 0) {
+      at = columns[s0 + i];
+      nz = row[at] != 0.0 ? 1 : 0;
+    } else {
+      for (Index c = 0; c < n; ++c) {
+        const bool nonzero = row[c] != 0.0;
+        nz += nonzero ? 1 : 0;
+        at += nonzero ? c : 0;
+      }
     }
     if (nz != 1 || cover[at] >= 0) return -1.0;
     const double a = std::fabs(row[at]);

@@ -38,6 +38,9 @@ struct NestedQRParameters {
   double level_damping = 0.0;        // λ_max of the selective damping (0: off)
   double singular_threshold = 0.0;   // ε of the selective damping (0: off)
   const double* step_bound = nullptr;  // k bounds Δ_i (0: unbounded); null: none
+  // optional, M entries: row i's entries are zero but at column row_columns[i] when that
+  // is ≥ 0 (the caller checked it; -1: not known); spares the unit-rows test its scan
+  const Index* row_columns = nullptr;
 
   bool selective() const { return level_damping > 0.0 && singular_threshold > 0.0; }
 };
