@@ -101,9 +101,11 @@ Index pivoted_lq_level(MatrixRef B, Index s0, Index m, double tol, NestedQRWorks
   double kept_min = kInf;
   while (r < m && r < d) {
     // pivot: the remaining row of largest norm on the free columns, its norm recomputed
-    // exactly (downdating loses accuracy)
+    // exactly (downdating loses accuracy; the first pivot's is level_rhs_and_norms', the
+    // same sum)
     Index p = argmax_from(norms, r, m);
-    double exact = dot(B.row(s0 + p) + col + r, B.row(s0 + p) + col + r, d - r);
+    double exact = r == 0 ? norms[p]
+                          : dot(B.row(s0 + p) + col + r, B.row(s0 + p) + col + r, d - r);
     if (!(std::sqrt(exact) > tol) && tol > 0.0) {
       // the downdated norms may have lost the largest remaining row (their cancellation
       // error is ~ε‖row‖², above the rows a heavy first pivot leaves): recompute them
