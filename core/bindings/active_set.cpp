@@ -214,7 +214,7 @@ I64 snapshot_size(const ActiveSetSolver& s) { return s.layout().n + 5 * s.layout
 double* snapshot_target(nb::handle out, I64 size) {
     const NumpyFloat64& numpy = NumpyFloat64::get();
     if (Py_TYPE(out.ptr()) == numpy.ndarray) {
-        const auto* a = reinterpret_cast<const NumpyArrayHead*>(out.ptr());
+        const auto* a = reinterpret_cast<const NumpyArrayFields*>(out.ptr());
         constexpr int writeable = 0x0400;    // NPY_ARRAY_WRITEABLE (numpy/ndarraytypes.h)
         if (a->descr == numpy.dtype && a->nd == 1 && a->dimensions[0] == size &&
             a->strides[0] == static_cast<Py_ssize_t>(sizeof(double)) && (a->flags & writeable))

@@ -125,7 +125,7 @@ void copy_out(const std::vector<T>& v, T* out) {
 // NumPy's array and dtype structs, their leading fields (numpy/ndarraytypes.h:
 // PyArrayObject_fields, PyArray_Descr; public and the same from NumPy 1.7 through 2.x),
 // for the bindings that read a numpy.ndarray argument's fields directly (active_set.cpp,
-// rows.cpp)
+// rows.cpp, control_step.cpp)
 struct NumpyArrayFields {
   PyObject_HEAD
   char* data;

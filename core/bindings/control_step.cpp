@@ -18,6 +18,7 @@
 #include <utility>
 #include <vector>
 
+#include "array_checks.hpp"
 #include "prioik/active_set.hpp"
 #include "prioik/control_step.hpp"
 #include "prioik/extended_jacobian.hpp"
@@ -37,17 +38,7 @@ using AnyFloat = nb::ndarray<double, nb::device::cpu>;
 using AnyFloatRO = nb::ndarray<nb::ro, double, nb::device::cpu>;
 using AnyIndex = nb::ndarray<nb::ro, std::int64_t, nb::device::cpu>;
 
-// The leading fields of numpy's array object (numpy/ndarraytypes.h, as active_set.cpp).
-struct NumpyHead {
-    PyObject_HEAD
-    char* data;
-    int nd;
-    Py_ssize_t* dimensions;
-    Py_ssize_t* strides;
-    PyObject* base;
-    PyObject* descr;
-    int flags;
-};
+using prioik::bindings::NumpyArrayFields;
 
 // numpy.ndarray and its float64 dtype, looked up once (null: q takes nanobind's cast)
 PyTypeObject* numpy_ndarray = nullptr;
@@ -163,7 +154,7 @@ prioik::ControlStep& step_of(PyControlStep& s) {
 // q as the step reads it: a C-contiguous float64 numpy array of n_q entries
 const double* q_of(nb::handle q, Index nq) {
     if (numpy_ndarray != nullptr && Py_TYPE(q.ptr()) == numpy_ndarray) {
-        const auto* a = reinterpret_cast<const NumpyHead*>(q.ptr());
+        const auto* a = reinterpret_cast<const NumpyArrayFields*>(q.ptr());
         if (a->descr == numpy_float64 && a->nd == 1 && a->dimensions[0] == nq &&
             (nq <= 1 || a->strides[0] == 8))
             return reinterpret_cast<const double*>(a->data);
@@ -228,18 +219,18 @@ void build(PyControlStep* self, nb::handle solver, nb::handle A, nb::handle b,
 // < 0) or (rows, cols), any strides, read in C order: the index of value's first entry
 // that is not finite (nothing written), or -1. Anything else raises InputError.
 Index put_reference(nb::handle buffer, Index offset, nb::handle value, Index rows, Index cols) {
-    auto fields = [](nb::handle h) -> const NumpyHead* {
+    auto fields = [](nb::handle h) -> const NumpyArrayFields* {
         if (numpy_ndarray == nullptr || Py_TYPE(h.ptr()) != numpy_ndarray) return nullptr;
-        const auto* a = reinterpret_cast<const NumpyHead*>(h.ptr());
+        const auto* a = reinterpret_cast<const NumpyArrayFields*>(h.ptr());
         return a->descr == numpy_float64 ? a : nullptr;
     };
     const Index ncols = cols < 0 ? 1 : cols;
-    const NumpyHead* out = fields(buffer);
+    const NumpyArrayFields* out = fields(buffer);
     if (out == nullptr || out->nd != 1 || (out->dimensions[0] > 1 && out->strides[0] != 8) ||
         !(out->flags & 0x0400) || rows < 0 || offset < 0 ||
         offset + rows * ncols > out->dimensions[0])
         throw InputError("buffer must be a writable float64 vector holding the reference");
-    const NumpyHead* in = fields(value);
+    const NumpyArrayFields* in = fields(value);
     if (in == nullptr) throw InputError("the reference must be a float64 numpy array");
     const bool fits = cols < 0 ? in->nd == 1 && in->dimensions[0] == rows
                                : in->nd == 2 && in->dimensions[0] == rows &&

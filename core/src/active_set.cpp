@@ -55,7 +55,7 @@ void ActiveSetWorkspace::allocate(index M, index n, index k) {
     evec.assign(M + 4 * k, 0.0);
     efs.assign(4 * R, 0.0);
     equality_qr = NestedQRWorkspace(M, n);
-    eint.assign(2 * k + 1 + 4 * M + 4 * n, 0);
+    eint.assign(2 * k + 1 + 5 * M + 4 * n, 0);
     eispare.assign(n, 0);
     warm_state.assign((k + 1) * R, 0);
     warm_valid.assign(k + 1, 0);

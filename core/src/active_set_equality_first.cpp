@@ -40,6 +40,7 @@ EqFirst::EqFirst(Ctx& c, ActiveSetWorkspace& ws) {
     pinned = ei + o + 2 * n;
     hcol = ei + o + 3 * n;
     ecol = ei + o + 4 * n;
+    qcol = ecol + M;
     fs = ws.efs.data();
     work = Lflat;
     ispare = ws.eispare.data();
@@ -138,8 +139,10 @@ bool fixed_equality_row(Ctx& c, EqFirst& e, index lev, index j, double& nn) {
     if (ecl >= 0) {
         for (index q = 0; q < n2; ++q) row[q] = 0.0;
         row[e.pinned[ecl]] = s * Aj[ecl];
+        e.qcol[e.m] = e.pinned[ecl];
     } else {
         for (index q = 0; q < n2; ++q) row[q] = s * Aj[e.prow[q]];
+        e.qcol[e.m] = -1;
     }
     e.ec[e.m] = s * t;
     e.erow[e.m] = j;
@@ -166,6 +169,7 @@ double equality_row(Ctx& c, EqFirst& e, index j) {
         column = e.ucol[j] = one_column(Aj, n, e.ucol[j]);
     }
     double nn = norm2_of_row(row, n, column);
+    e.qcol[e.m] = column;
     e.erow[e.m] = j;
     e.rowperm[e.m] = e.m;
     ++e.m;
@@ -213,6 +217,7 @@ void solve_rows(Ctx& c, EqFirst& e) {
     ws.M = e.m;
     NestedQRParameters params;
     params.rcond = c.rcond;
+    params.row_columns = e.qcol;
     NestedQROutput out{c.x, e.eranks, e.mu2, e.emargins,
                        (e.fixed || e.nheld > 0) ? e.rowperm : nullptr};
     nested_qr(e.eB.ref(e.m, n2), e.ec, e.estarts, c.k, e.scales, params, false, ws, out);

@@ -14,6 +14,9 @@ struct EqFirst {
     double* eflat;
     double *ec, *scales, *mu2, *emargins, *step_bound;
     index *estarts, *eranks, *ucol, *erow, *rowperm, *prow, *pside, *pinned, *hcol, *ecol;
+    /// per QR row, the column of its one non-zero entry when the row was built on one
+    /// (NestedQRParameters::row_columns), else −1
+    index* qcol;
     double* fs;
     double* work;      // the fixed columns' test's scratch (≥ 2 n + M)
     NestedQRWorkspace* qr;

@@ -34,7 +34,7 @@ void defer_unit_level(MatrixRef B, const Index* starts, Index k, const NestedQRP
   at.unit_s = -1.0;
   const bool bounded = p.step_bound != nullptr && k > 0 && p.step_bound[k - 1] > 0.0;
   if (k > 0 && p.rcond > 0.0 && !bounded && !p.selective() && starts[k - 1] < M) {
-    at.unit_s = unit_rows_of(B, starts[k - 1], M, ws.cover.data());
+    at.unit_s = unit_rows_of(B, starts[k - 1], M, ws.cover.data(), p.row_columns);
     if (at.unit_s > 0.0) at.rot_end = starts[k - 1];
   }
 }
@@ -101,9 +101,11 @@ Index pivoted_lq_level(MatrixRef B, Index s0, Index m, double tol, NestedQRWorks
   double kept_min = kInf;
   while (r < m && r < d) {
     // pivot: the remaining row of largest norm on the free columns, its norm recomputed
-    // exactly (downdating loses accuracy)
+    // exactly (downdating loses accuracy; the first pivot's is level_rhs_and_norms', the
+    // same sum)
     Index p = argmax_from(norms, r, m);
-    double exact = dot(B.row(s0 + p) + col + r, B.row(s0 + p) + col + r, d - r);
+    double exact = r == 0 ? norms[p]
+                          : dot(B.row(s0 + p) + col + r, B.row(s0 + p) + col + r, d - r);
     if (!(std::sqrt(exact) > tol) && tol > 0.0) {
       // the downdated norms may have lost the largest remaining row (their cancellation
       // error is ~ε‖row‖², above the rows a heavy first pivot leaves): recompute them
@@ -126,14 +128,17 @@ Index pivoted_lq_level(MatrixRef B, Index s0, Index m, double tol, NestedQRWorks
       if (rowperm != nullptr) swap_entries(rowperm, s0 + r, s0 + p);
     }
     const Index q = col + r;
-    // H = I − β v vᵀ mapping the pivot row's entries q: onto α e_q
+    // H = I − β v vᵀ mapping the pivot row's entries q: onto α e_q, applied up to its
+    // support's end (ws.end)
     double* v = V.row(at.nref);
-    const double bt = make_row_reflector(B.row(s0 + r), q, n, std::sqrt(exact), v);
+    Index last = q + 1;
+    const double bt = make_row_reflector(B.row(s0 + r), q, n, exact, v, &last);
     ws.beta[at.nref] = bt;
     ws.pos[at.nref] = q;
+    ws.end[at.nref] = last;
     // applied to the level's other rows and to every lower level's rows
     for (Index i = s0 + r + 1; i < at.rot_end; ++i)
-      apply_row_reflector(B.row(i) + q, v + q, n - q, bt);
+      apply_row_reflector(B.row(i) + q, v + q, last - q, bt);
     for (Index i = r + 1; i < m; ++i) norms[i] -= B(s0 + i, q) * B(s0 + i, q);
     ++at.nref;
     ++r;
@@ -226,6 +231,7 @@ NestedQRWorkspace::NestedQRWorkspace(Index rows, Index cols)
       V(cols * cols),
       beta(cols),
       pos(cols),
+      end(cols),
       y(cols),
       norms(std::max(rows, cols)),
       rhs(rows),

@@ -120,7 +120,8 @@ double pivoted_lq(MatrixRef J, double* e, double tol, double* norms, Reflectors&
       swap_entries(norms, r, p);
     }
     double* v = H.V.row(r);
-    const double bt = make_row_reflector(J.row(r), r, n, norm, v);
+    Index support_end = n;       // (the level's step applies over all n - r columns)
+    const double bt = make_row_reflector(J.row(r), r, n, exact, v, &support_end);
     flops += 2.0 * (n - r) + 2.0;
     H.beta[r] = bt;
     H.pos[r] = r;

@@ -2,7 +2,8 @@
 // nested_qr.hpp) as their loops are written, by formula over the sizes a solve used: a
 // multiply, an add, a divide or a square root is one operation; comparisons, copies and
 // swaps are none. A dot product or a reflector update is counted in full (the kernels'
-// skip of a zero reflector product is not subtracted). The nested QR's count leaves out a
+// skip of a zero reflector product, and of a reflector's trailing zeros (Reflectors::end),
+// is not subtracted). The nested QR's count leaves out a
 // full-rank attempt that fails and the trust-region step's SVD (bounded_step).
 #pragma once
 

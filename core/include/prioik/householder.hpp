@@ -7,8 +7,8 @@
 // allocates nothing. Matrices are row-major views (MatrixRef); a matrix "held
 // transposed" keeps its column j in row j, so that the inner loops run over contiguous
 // memory. Each loop does its operations in the order it is written (the sums of dot() in
-// eight written-out partial sums); the arithmetic is IEEE double as written (no fast
-// math, no fused multiply-add: core/CMakeLists.txt).
+// eight written-out partial sums, then four); the arithmetic is IEEE double as written
+// (no fast math, no fused multiply-add: core/CMakeLists.txt).
 #pragma once
 
 #include <cmath>
@@ -38,25 +38,40 @@ struct MatrixRef {
 
 // The Householder reflectors H_t = I - beta_t v_t v_tᵀ of a nested QR, v_t held in
 // V(t, pos_t:) (its entries before pos_t are zero and never read); Q = H_0 H_1 … H_{count-1}.
+// end (optional, count entries): v_t's entries from end_t on are zero (stored as zeros),
+// so that applying H_t reads and writes entries pos_t:end_t only (a reflector of a row
+// that touches few columns, e.g. a foot's Jacobian, stays short); null: end_t = n.
 struct Reflectors {
   MatrixRef V;          // n × n
   double* beta = nullptr;
   Index* pos = nullptr;
   Index count = 0;
+  const Index* end = nullptr;
 };
+
+// one past the last entry of reflector t that may be non-zero (Reflectors::end), of n
+inline Index reflector_end(const Reflectors& H, Index t, Index n) {
+  return H.end != nullptr ? H.end[t] : n;
+}
 
 // --------------------------------------------------------------------------- vectors
 
 // a · b over n entries, summed in eight interleaved partial sums (s_r: the entries
-// j ≡ r mod 8) added pairwise, ((s0 + s1) + (s2 + s3)) + ((s4 + s5) + (s6 + s7)), then the
-// tail in order: an order written out, so that the compiler may vectorise it without
-// reassociating (the rounding rule), and eight chains of dependent additions hide each
-// other's latency.
+// j ≡ r mod 8 of the whole blocks of eight; then, when four or more entries are left, the
+// next four into s_0 … s_3) added pairwise, ((s0 + s1) + (s2 + s3)) + ((s4 + s5) + (s6 +
+// s7)), then the last (at most three) in order: an order written out, so that the
+// compiler may vectorise it without reassociating (the rounding rule), eight chains of
+// dependent additions hide each other's latency, and a row of ~30 entries leaves no long
+// scalar tail.
 inline double dot(const double* a, const double* b, Index n) {
   double s[8] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
   Index j = 0;
   for (; j + 8 <= n; j += 8) {
     for (int r = 0; r < 8; ++r) s[r] += a[j + r] * b[j + r];
+  }
+  if (j + 4 <= n) {
+    for (int r = 0; r < 4; ++r) s[r] += a[j + r] * b[j + r];
+    j += 4;
   }
   double acc = ((s[0] + s[1]) + (s[2] + s[3])) + ((s[4] + s[5]) + (s[6] + s[7]));
   for (; j < n; ++j) acc += a[j] * b[j];
@@ -90,16 +105,22 @@ inline void rotate_rows(double* x, double* y, Index n, double c, double s) {
   }
 }
 
-// The Householder reflector H = I − β v vᵀ mapping row[q:n] (of norm `norm`) onto α e_q,
-// α = −sign(row[q]) norm: writes v[q:n], sets row[q:n] = (α, 0, …, 0) and returns β
-inline double make_row_reflector(double* row, Index q, Index n, double norm, double* v) {
-  const double alpha = row[q] >= 0.0 ? -norm : norm;
+// The Householder reflector H = I − β v vᵀ mapping row[q:n] (of squared norm `exact`)
+// onto α e_q, α = −sign(row[q]) √exact: writes v[q:n], sets row[q:n] = (α, 0, …, 0),
+// stores in *last one past v's last non-zero entry (a row on few columns keeps its
+// trailing zeros, which a reflector need not be applied over) and returns β, with
+// vᵀv = 2 (exact − α row[q]) (reflect_column's formula)
+inline double make_row_reflector(double* row, Index q, Index n, double exact, double* v,
+                                 Index* last) {
+  const double alpha = row[q] >= 0.0 ? -std::sqrt(exact) : std::sqrt(exact);
   v[q] = row[q] - alpha;
-  double vtv = v[q] * v[q];
+  const double vtv = 2.0 * (exact - alpha * row[q]);
+  Index end = q + 1;
   for (Index j = q + 1; j < n; ++j) {
     v[j] = row[j];
-    vtv += v[j] * v[j];
+    end = row[j] != 0.0 ? j + 1 : end;
   }
+  *last = end;
   row[q] = alpha;
   for (Index j = q + 1; j < n; ++j) row[j] = 0.0;
   return vtv > 0.0 ? 2.0 / vtv : 0.0;
@@ -192,9 +213,10 @@ inline void apply_reflectors(double* v, Index n, const Reflectors& H, bool trans
     const Index q = H.pos[t];
     const double* vt = H.V.row(t) + q;
     double* vq = v + q;
-    const double f = H.beta[t] * dot(vt, vq, n - q);
+    const Index w = reflector_end(H, t, n) - q;
+    const double f = H.beta[t] * dot(vt, vq, w);
     if (f != 0.0) {
-      for (Index c = 0; c < n - q; ++c) vq[c] -= f * vt[c];
+      for (Index c = 0; c < w; ++c) vq[c] -= f * vt[c];
     }
   }
 }
@@ -383,7 +405,7 @@ inline void free_directions(const Index* cols, Index m, MatrixRef Z, const Refle
     const Index q = H.pos[t];
     const double* vt = H.V.row(t) + q;
     const double bt = H.beta[t];
-    const Index w = n - q;
+    const Index w = reflector_end(H, t, n) - q;
     for (Index i = 0; i < m; ++i) {
       double* zq = Z.row(i) + q;
       const double f = bt * dot(vt, zq, w);
@@ -430,8 +452,11 @@ constexpr double kUnitRowsGap = 1e-3;
 
 // Whether the rows B[s0:s1] are unit rows (one non-zero each, of one magnitude, on
 // distinct columns): their magnitude s, else -1. cover[c] is then the row (offset from
-// s0) on column c, -1 where none is (cover: B.cols entries, written).
-inline double unit_rows_of(MatrixRef B, Index s0, Index s1, Index* cover) {
+// s0) on column c, -1 where none is (cover: B.cols entries, written). columns (optional,
+// indexed by B's rows): a row's entry c ≥ 0 says the caller knows every entry of that
+// row but column c to be zero (its row is then not scanned); -1: scan it.
+inline double unit_rows_of(MatrixRef B, Index s0, Index s1, Index* cover,
+                           const Index* columns = nullptr) {
   const Index n = B.cols;
   for (Index c = 0; c < n; ++c) cover[c] = -1;
   double s = -1.0;
@@ -439,10 +464,15 @@ inline double unit_rows_of(MatrixRef B, Index s0, Index s1, Index* cover) {
     const double* row = B.row(s0 + i);
     Index nz = 0;
     Index at = 0;
-    for (Index c = 0; c < n; ++c) {
-      const bool nonzero = row[c] != 0.0;
-      nz += nonzero ? 1 : 0;
-      at += nonzero ? c : 0;
+    if (columns != nullptr && columns[s0 + i] >= 0) {
+      at = columns[s0 + i];
+      nz = row[at] != 0.0 ? 1 : 0;
+    } else {
+      for (Index c = 0; c < n; ++c) {
+        const bool nonzero = row[c] != 0.0;
+        nz += nonzero ? 1 : 0;
+        at += nonzero ? c : 0;
+      }
     }
     if (nz != 1 || cover[at] >= 0) return -1.0;
     const double a = std::fabs(row[at]);

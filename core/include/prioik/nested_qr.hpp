@@ -38,6 +38,9 @@ struct NestedQRParameters {
   double level_damping = 0.0;        // λ_max of the selective damping (0: off)
   double singular_threshold = 0.0;   // ε of the selective damping (0: off)
   const double* step_bound = nullptr;  // k bounds Δ_i (0: unbounded); null: none
+  // optional, M entries: row i's entries are zero but at column row_columns[i] when that
+  // is ≥ 0 (the caller checked it; -1: not known); spares the unit-rows test its scan
+  const Index* row_columns = nullptr;
 
   bool selective() const { return level_damping > 0.0 && singular_threshold > 0.0; }
 };
@@ -53,6 +56,7 @@ struct NestedQRWorkspace {
   std::vector<double> V;        // n × n: reflector t in V(t, pos_t:)
   std::vector<double> beta;     // n
   std::vector<Index> pos;       // n
+  std::vector<Index> end;       // n: one past each reflector's last non-zero entry
   std::vector<double> y;        // n: the rotated unknowns
   std::vector<double> norms;    // max(M, n): the level's row norms on the free columns
   std::vector<double> rhs;      // M: the level's right-hand side
@@ -64,7 +68,7 @@ struct NestedQRWorkspace {
   std::vector<Index> ucols;     // n: the columns no unit row covers
 
   Reflectors reflectors(Index count) {
-    return Reflectors{MatrixRef{V.data(), n, n, n}, beta.data(), pos.data(), count};
+    return Reflectors{MatrixRef{V.data(), n, n, n}, beta.data(), pos.data(), count, end.data()};
   }
 };
 
