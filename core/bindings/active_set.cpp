@@ -70,18 +70,8 @@ bool native_float64(const Py_buffer& v) {
     return f[0] == 'd' && f[1] == '\0';
 }
 
-/// The leading fields of numpy's array object (numpy/ndarraytypes.h, PyArrayObject_fields:
-/// public and the same in numpy 1.x and 2.x; pybind11's numpy support reads them alike).
-struct NumpyArrayHead {
-    PyObject_HEAD
-    char* data;
-    int nd;
-    Py_ssize_t* dimensions;
-    Py_ssize_t* strides;
-    PyObject* base;
-    PyObject* descr;
-    int flags;
-};
+/// The leading fields of numpy's array object (array_checks.hpp)
+using prioik::bindings::NumpyArrayFields;
 
 /// numpy.ndarray and the float64 dtype (native byte order), looked up once, when the
 /// module is loaded (bind_active_set; null when numpy cannot be imported: every array then
@@ -127,7 +117,7 @@ public:
         const std::string what(name);
         const NumpyFloat64& numpy = NumpyFloat64::get();
         if (Py_TYPE(h.ptr()) == numpy.ndarray) {
-            const auto* a = reinterpret_cast<const NumpyArrayHead*>(h.ptr());
+            const auto* a = reinterpret_cast<const NumpyArrayFields*>(h.ptr());
             if (a->descr == numpy.dtype) {
                 check_layout(
                     what, a->nd, [&](I64 d) { return static_cast<I64>(a->dimensions[d]); },
@@ -223,7 +213,7 @@ I64 snapshot_size(const ActiveSetSolver& s) { return s.layout().n + 5 * s.layout
 double* snapshot_target(nb::handle out, I64 size) {
     const NumpyFloat64& numpy = NumpyFloat64::get();
     if (Py_TYPE(out.ptr()) == numpy.ndarray) {
-        const auto* a = reinterpret_cast<const NumpyArrayHead*>(out.ptr());
+        const auto* a = reinterpret_cast<const NumpyArrayFields*>(out.ptr());
         constexpr int writeable = 0x0400;    // NPY_ARRAY_WRITEABLE (numpy/ndarraytypes.h)
         if (a->descr == numpy.dtype && a->nd == 1 && a->dimensions[0] == size &&
             a->strides[0] == static_cast<Py_ssize_t>(sizeof(double)) && (a->flags & writeable))

@@ -1,7 +1,10 @@
-// The array checks of prioik._core's bindings (module.cpp, closed_form.cpp): each entry
-// point takes a float64 (or int64) numpy-compatible array on the CPU, C-contiguous, of
-// the layout's shape and not empty; anything else raises prioik::InputError naming the
-// array (CoreInputError in Python), never a copy, never a crash.
+// The array checks of prioik._core's bindings (module.cpp, closed_form.cpp), and the numpy
+// fields active_set.cpp and rows.cpp read directly: each entry point takes a float64 (or
+// int64) numpy-compatible array on the CPU, C-contiguous, of the layout's shape and not
+// empty; anything else raises prioik::InputError naming the array (CoreInputError in
+// Python), never a copy, never a crash. An exact numpy.ndarray that passes is read from
+// its fields (a few loads); any other array, or one that does not pass, goes through
+// nanobind's ndarray (DLPack), which reads it or names what is wrong.
 #pragma once
 
 #include <nanobind/nanobind.h>
@@ -52,11 +55,99 @@ inline std::string expected_text(const std::vector<Index>& shape) {
   return s + (shape.size() == 1 ? ",)" : ")");
 }
 
+// NumPy's array and dtype structs, their leading fields (numpy/ndarraytypes.h:
+// PyArrayObject_fields, PyArray_Descr; public and the same from NumPy 1.7 through 2.x),
+// for the bindings that read a numpy.ndarray argument's fields directly (active_set.cpp,
+// rows.cpp)
+struct NumpyArrayFields {
+  PyObject_HEAD
+  char* data;
+  int nd;
+  Py_ssize_t* dimensions;
+  Py_ssize_t* strides;
+  PyObject* base;
+  PyObject* descr;
+  int flags;
+};
+
+struct NumpyDescrFields {
+  PyObject_HEAD
+  PyTypeObject* typeobj;
+  char kind;
+  char type;
+  char byteorder;
+};
+
+constexpr int kNumpyAligned = 0x0100;    // NPY_ARRAY_ALIGNED
+constexpr int kNumpyWriteable = 0x0400;  // NPY_ARRAY_WRITEABLE
+
+// numpy.ndarray and the dtypes numpy.dtype("float64") and numpy.dtype("int64") (native
+// byte order: the instances numpy's own float64 and int64 arrays share), looked up once;
+// null when numpy cannot be imported (every array then goes through nanobind's ndarray).
+// The module's initialisation calls get() first, under the import's GIL.
+struct NumpyTypes {
+  PyTypeObject* ndarray = nullptr;
+  PyObject* float64 = nullptr;
+  PyObject* int64 = nullptr;
+
+  static const NumpyTypes& get() {
+    static const NumpyTypes types = [] {
+      NumpyTypes t;
+      try {
+        nb::module_ numpy = nb::module_::import_("numpy");
+        nb::object ndarray = numpy.attr("ndarray");
+        nb::object float64 = numpy.attr("dtype")("float64");
+        nb::object int64 = numpy.attr("dtype")("int64");
+        t.ndarray = reinterpret_cast<PyTypeObject*>(ndarray.release().ptr());
+        t.float64 = float64.release().ptr();
+        t.int64 = int64.release().ptr();
+      } catch (const nb::python_error&) {
+        t = NumpyTypes{};
+      }
+      return t;
+    }();
+    return types;
+  }
+};
+
+// The data of `h` read from its fields when it is exactly a numpy.ndarray of T's dtype
+// (float64 or int64, NumpyTypes' instance), aligned, writable unless T is const,
+// C-contiguous and of `shape` (-1: any extent) with no extent 0 (`got` receives the
+// shape); else nullptr, and the caller reads it the general way. No Python call: the
+// common argument costs a few loads where nanobind's DLPack import calls __dlpack__.
+template <class T>
+T* numpy_fields_data(nb::handle h, std::initializer_list<Index> shape, Index* got) {
+  using Element = std::remove_const_t<T>;
+  static_assert(sizeof(Element) == 8, "float64 or int64 elements");
+  const NumpyTypes& numpy = NumpyTypes::get();
+  if (numpy.ndarray == nullptr || Py_TYPE(h.ptr()) != numpy.ndarray) return nullptr;
+  const auto* a = reinterpret_cast<const NumpyArrayFields*>(h.ptr());
+  const PyObject* dtype = std::is_same_v<Element, double> ? numpy.float64 : numpy.int64;
+  const int need = kNumpyAligned | (std::is_const_v<T> ? 0 : kNumpyWriteable);
+  if (a->descr != dtype || (a->flags & need) != need ||
+      a->nd != static_cast<int>(shape.size()))
+    return nullptr;
+  int d = 0;
+  for (Index want : shape) {
+    const Index extent = static_cast<Index>(a->dimensions[d++]);
+    if (extent == 0 || (want >= 0 && extent != want)) return nullptr;
+  }
+  Py_ssize_t expect = sizeof(Element);   // C order: each stride the product after it
+  for (d = a->nd - 1; d >= 0; --d) {
+    if (a->dimensions[d] > 1 && a->strides[d] != expect) return nullptr;
+    expect *= a->dimensions[d];
+  }
+  if (got != nullptr)
+    for (d = 0; d < a->nd; ++d) got[d] = static_cast<Index>(a->dimensions[d]);
+  return reinterpret_cast<T*>(a->data);
+}
+
 // The data of `h` as a C-contiguous array of T of `shape` (-1: any extent > 0; an
 // output is writable), or InputError naming `name`. `got` receives the shape.
 template <class T, class Array>
 T* checked(nb::handle h, const char* name, std::initializer_list<Index> shape,
            Index* got = nullptr) {
+  if (T* data = numpy_fields_data<T>(h, shape, got)) return data;
   Array a;
   if (!nb::try_cast(h, a, false))
     throw prioik::InputError(std::string(name) + " must be a " +

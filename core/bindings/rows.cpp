@@ -21,6 +21,7 @@
 #include <type_traits>
 #include <utility>
 
+#include "array_checks.hpp"
 #include "prioik/extended_jacobian.hpp"
 #include "prioik/rows.hpp"
 
@@ -42,33 +43,14 @@ struct ArrayInfo {
   const Py_ssize_t* strides = nullptr;
 };
 
-// NumPy's array and dtype structs, their leading fields (numpy/ndarraytypes.h:
-// PyArrayObject_fields, PyArray_Descr; the same from NumPy 1.7 through 2.x). Read
-// directly, a numpy.ndarray argument costs a few field reads where the buffer protocol
-// builds a format string per call (as much time as the writer's work); register_rows
-// checks the layout on arrays of its own and leaves the buffer protocol in place
-// where it does not hold.
-struct NumpyArrayFields {
-  PyObject_HEAD
-  char* data;
-  int nd;
-  Py_ssize_t* dimensions;
-  Py_ssize_t* strides;
-  PyObject* base;
-  PyObject* descr;
-  int flags;
-};
-
-struct NumpyDescrFields {
-  PyObject_HEAD
-  PyTypeObject* typeobj;
-  char kind;
-  char type;
-  char byteorder;
-};
-
-constexpr int kNumpyAligned = 0x0100;    // NPY_ARRAY_ALIGNED
-constexpr int kNumpyWriteable = 0x0400;  // NPY_ARRAY_WRITEABLE
+// NumPy's array and dtype fields (array_checks.hpp), read directly: a numpy.ndarray
+// argument costs a few field reads where the buffer protocol builds a format string per
+// call (as much time as the writer's work); register_rows checks the layout on arrays of
+// its own and leaves the buffer protocol in place where it does not hold.
+using prioik::bindings::kNumpyAligned;
+using prioik::bindings::kNumpyWriteable;
+using prioik::bindings::NumpyArrayFields;
+using prioik::bindings::NumpyDescrFields;
 
 // numpy.ndarray, when its fields are read directly (null: the buffer protocol)
 PyTypeObject* numpy_array_type = nullptr;
