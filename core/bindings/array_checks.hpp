@@ -81,58 +81,60 @@ struct NumpyDescrFields {
 constexpr int kNumpyAligned = 0x0100;    // NPY_ARRAY_ALIGNED
 constexpr int kNumpyWriteable = 0x0400;  // NPY_ARRAY_WRITEABLE
 
-// numpy.ndarray and the dtypes numpy.dtype("float64") and numpy.dtype("int64") (native
-// byte order: the instances numpy's own float64 and int64 arrays share), looked up once;
-// null when numpy cannot be imported (every array then goes through nanobind's ndarray).
-// The module's initialisation calls get() first, under the import's GIL.
-struct NumpyTypes {
-  PyTypeObject* ndarray = nullptr;
-  PyObject* float64 = nullptr;
-  PyObject* int64 = nullptr;
+// Whether a numpy dtype's fields name T's type, float64 ('d') or int64 ('l' where a long
+// is 64 bits, 'q'), in the machine's byte order.
+template <class T>
+bool numpy_dtype_is(const NumpyDescrFields& d) {
+  constexpr char own_order = PY_LITTLE_ENDIAN ? '<' : '>';
+  if (d.byteorder != '=' && d.byteorder != own_order) return false;
+  if (std::is_same_v<std::remove_const_t<T>, double>) return d.kind == 'f' && d.type == 'd';
+  return d.kind == 'i' && (d.type == 'q' || (d.type == 'l' && sizeof(long) == 8));
+}
 
-  static const NumpyTypes& get() {
-    static const NumpyTypes types = [] {
-      NumpyTypes t;
-      try {
-        nb::module_ numpy = nb::module_::import_("numpy");
-        nb::object ndarray = numpy.attr("ndarray");
-        nb::object float64 = numpy.attr("dtype")("float64");
-        nb::object int64 = numpy.attr("dtype")("int64");
-        t.ndarray = reinterpret_cast<PyTypeObject*>(ndarray.release().ptr());
-        t.float64 = float64.release().ptr();
-        t.int64 = int64.release().ptr();
-      } catch (const nb::python_error&) {
-        t = NumpyTypes{};
-      }
-      return t;
-    }();
-    return types;
-  }
-};
+// numpy.ndarray, looked up once, when NumpyArrayFields reads a (2, 3) float64 array of
+// numpy's as it is; else null (numpy cannot be imported, or its fields differ: every
+// array then goes through nanobind's ndarray). The module's initialisation calls it
+// first, under the import's GIL.
+inline PyTypeObject* numpy_ndarray_type() {
+  static PyTypeObject* const type = []() -> PyTypeObject* {
+    try {
+      nb::module_ numpy = nb::module_::import_("numpy");
+      nb::object probe = numpy.attr("zeros")(nb::make_tuple(2, 3));
+      const auto* a = reinterpret_cast<const NumpyArrayFields*>(probe.ptr());
+      if (a->nd != 2 || a->dimensions[0] != 2 || a->dimensions[1] != 3 ||
+          a->strides[0] != 24 || a->strides[1] != 8 || !(a->flags & kNumpyWriteable) ||
+          !numpy_dtype_is<double>(*reinterpret_cast<const NumpyDescrFields*>(a->descr)))
+        return nullptr;
+      nb::object ndarray = numpy.attr("ndarray");    // kept: a reference held for good
+      return reinterpret_cast<PyTypeObject*>(ndarray.release().ptr());
+    } catch (const nb::python_error&) {
+      return nullptr;
+    }
+  }();
+  return type;
+}
 
 // The data of `h` read from its fields when it is exactly a numpy.ndarray of T's dtype
-// (float64 or int64, NumpyTypes' instance), aligned, writable unless T is const,
+// (float64 or int64, native byte order), aligned, writable unless T is const,
 // C-contiguous and of `shape` (-1: any extent) with no extent 0 (`got` receives the
 // shape); else nullptr, and the caller reads it the general way. No Python call: the
 // common argument costs a few loads where nanobind's DLPack import calls __dlpack__.
 template <class T>
 T* numpy_fields_data(nb::handle h, std::initializer_list<Index> shape, Index* got) {
-  using Element = std::remove_const_t<T>;
-  static_assert(sizeof(Element) == 8, "float64 or int64 elements");
-  const NumpyTypes& numpy = NumpyTypes::get();
-  if (numpy.ndarray == nullptr || Py_TYPE(h.ptr()) != numpy.ndarray) return nullptr;
+  static_assert(sizeof(T) == 8, "float64 or int64 elements");
+  PyTypeObject* ndarray = numpy_ndarray_type();
+  if (ndarray == nullptr || Py_TYPE(h.ptr()) != ndarray) return nullptr;
   const auto* a = reinterpret_cast<const NumpyArrayFields*>(h.ptr());
-  const PyObject* dtype = std::is_same_v<Element, double> ? numpy.float64 : numpy.int64;
   const int need = kNumpyAligned | (std::is_const_v<T> ? 0 : kNumpyWriteable);
-  if (a->descr != dtype || (a->flags & need) != need ||
-      a->nd != static_cast<int>(shape.size()))
+  if ((a->flags & need) != need || a->nd != static_cast<int>(shape.size()) ||
+      !numpy_dtype_is<T>(*reinterpret_cast<const NumpyDescrFields*>(a->descr)))
     return nullptr;
   int d = 0;
   for (Index want : shape) {
     const Index extent = static_cast<Index>(a->dimensions[d++]);
     if (extent == 0 || (want >= 0 && extent != want)) return nullptr;
   }
-  Py_ssize_t expect = sizeof(Element);   // C order: each stride the product after it
+  Py_ssize_t expect = sizeof(T);   // C order: each stride the product of the items after it
   for (d = a->nd - 1; d >= 0; --d) {
     if (a->dimensions[d] > 1 && a->strides[d] != expect) return nullptr;
     expect *= a->dimensions[d];

@@ -89,7 +89,7 @@ ExtendedJacobianBatch solve_many(ExtendedJacobian& self, nb::handle A, nb::handl
 }  // namespace
 
 NB_MODULE(_core, m) {
-  prioik::bindings::NumpyTypes::get();   // under the import's GIL, before any call needs it
+  prioik::bindings::numpy_ndarray_type();   // under the import's GIL, before any call needs it
   m.doc() = "prioik's compiled core (C++17): the extended Jacobian's nested pivoted QR, the "
             "hierarchical active set and the closed-form formulations beside them.";
 
