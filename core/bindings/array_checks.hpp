@@ -158,8 +158,8 @@ T* numpy_fields_data(nb::handle h, std::initializer_list<Index> shape, Index* go
   return reinterpret_cast<T*>(a->data);
 }
 
-// The data of `h` as a C-contiguous array of T of `shape` (-1: any extent > 0; an
-// output is writable), or InputError naming `name`. `got` receives the shape.
+// The data of `h` as a C-contiguous, aligned array of T of `shape` (-1: any extent > 0;
+// an output is writable), or InputError naming `name`. `got` receives the shape.
 template <class T, class Array>
 T* checked(nb::handle h, const char* name, std::initializer_list<Index> shape,
            Index* got = nullptr) {
@@ -197,6 +197,8 @@ T* checked(nb::handle h, const char* name, std::initializer_list<Index> shape,
                                "is not taken: pass np.ascontiguousarray of it)");
     expect *= static_cast<int64_t>(a.shape(d));
   }
+  if (reinterpret_cast<std::uintptr_t>(a.data()) % alignof(T) != 0)
+    throw prioik::InputError(std::string(name) + " is not aligned (a view of packed bytes)");
   return static_cast<T*>(a.data());
 }
 
