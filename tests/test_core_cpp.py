@@ -403,20 +403,41 @@ def test_the_result_is_read_by_name_and_each_answer_is_its_own():
     ("x", np.empty(24)[::2], "x must be C-contiguous"),
     ("residuals", [0.0, 0.0, 0.0], "residuals must be a float64 numpy array"),
     ("ranks", np.empty(3), "ranks must be int64"),
-    ("x", "read-only", "x must be a float64 numpy array (writable)")])
+    ("x", "read-only", "x must be a float64 numpy array (writable)"),
+    ("x", "unaligned", "x is not aligned")])
 def test_a_bad_output_array_is_refused_by_name(which, bad, word):
     stack = FAMILIES["conflicting"](np.random.default_rng(2), 12, 3)
     d = stack.data
     solver = core.ExtendedJacobian(list(stack.layout.starts), stack.n, rcond=1e-10)
     outputs = {"x": np.empty(12), "residuals": np.empty(3), "ranks": np.empty(3, np.int64)}
-    if isinstance(bad, str):
+    if isinstance(bad, str) and bad == "read-only":
         bad = np.empty(12)
         bad.setflags(write=False)
+    elif isinstance(bad, str) and bad == "unaligned":
+        bad = _unaligned(np.zeros(12))
     outputs[which] = bad
     with pytest.raises(CoreInputError) as err:
         solver.solve(d.A, d.b, d.sqrt_weight, outputs["x"], outputs["residuals"],
                      outputs["ranks"])
     assert word in str(err.value)
+
+
+def _unaligned(values: np.ndarray) -> np.ndarray:
+    """A writable float64 copy of ``values`` one byte off 8-byte alignment."""
+    out = np.zeros(values.nbytes + 1, np.uint8)[1:].view(np.float64).reshape(values.shape)
+    out[...] = values
+    assert not out.flags.aligned and out.flags.writeable
+    return out
+
+
+def test_an_unaligned_input_array_is_refused_by_name():
+    stack = FAMILIES["conflicting"](np.random.default_rng(2), 12, 3)
+    d = stack.data
+    solver = core.ExtendedJacobian(list(stack.layout.starts), stack.n, rcond=1e-10)
+    with pytest.raises(CoreInputError, match="A is not aligned"):
+        solver.solve(_unaligned(d.A), d.b, d.sqrt_weight)
+    res = solver.solve(np.array(_unaligned(d.A)), d.b, d.sqrt_weight)   # an aligned copy
+    assert res.solved
 
 
 def test_a_solve_releases_the_gil_and_one_solver_serves_one_thread():

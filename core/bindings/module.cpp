@@ -31,6 +31,7 @@ namespace {
 
 using prioik::bindings::copy1;
 using prioik::bindings::copy_out;
+using prioik::bindings::numpy_copy1;
 using prioik::bindings::input;
 using prioik::bindings::optional_output;
 using prioik::bindings::stack_input;
@@ -90,6 +91,7 @@ ExtendedJacobianBatch solve_many(ExtendedJacobian& self, nb::handle A, nb::handl
 }  // namespace
 
 NB_MODULE(_core, m) {
+  prioik::bindings::NumpyHandles::get();   // under the import's GIL, before any call needs it
   m.doc() = "prioik's compiled core (C++17): the extended Jacobian's nested pivoted QR, the "
             "hierarchical active set and the closed-form formulations beside them.";
 
@@ -131,15 +133,15 @@ NB_MODULE(_core, m) {
       m, "ExtendedJacobianResult",
       "One solve's answer, the solver's own (the next solve overwrites it): each read "
       "of an array field returns a new array, which the caller keeps.")
-      .def_prop_ro("x", [](nb::handle s) { return copy1(nb::cast<ExtendedJacobianResult&>(s).x); }, nb::rv_policy::move)
+      .def_prop_ro("x", [](nb::handle s) { return numpy_copy1(nb::cast<ExtendedJacobianResult&>(s).x); }, nb::rv_policy::automatic)
       .def_prop_ro("residuals",
-                   [](nb::handle s) { return copy1(nb::cast<ExtendedJacobianResult&>(s).residuals); }, nb::rv_policy::move)
+                   [](nb::handle s) { return numpy_copy1(nb::cast<ExtendedJacobianResult&>(s).residuals); }, nb::rv_policy::automatic)
       .def_prop_ro("level_mu2",
-                   [](nb::handle s) { return copy1(nb::cast<ExtendedJacobianResult&>(s).level_mu2); }, nb::rv_policy::move)
+                   [](nb::handle s) { return numpy_copy1(nb::cast<ExtendedJacobianResult&>(s).level_mu2); }, nb::rv_policy::automatic)
       .def_prop_ro("margins",
-                   [](nb::handle s) { return copy1(nb::cast<ExtendedJacobianResult&>(s).margins); }, nb::rv_policy::move)
+                   [](nb::handle s) { return numpy_copy1(nb::cast<ExtendedJacobianResult&>(s).margins); }, nb::rv_policy::automatic)
       .def_prop_ro("ranks",
-                   [](nb::handle s) { return copy1(nb::cast<ExtendedJacobianResult&>(s).ranks); }, nb::rv_policy::move)
+                   [](nb::handle s) { return numpy_copy1(nb::cast<ExtendedJacobianResult&>(s).ranks); }, nb::rv_policy::automatic)
       .def_ro("flops", &ExtendedJacobianResult::flops,
               "floating-point operations of the nested QR, by formula over its sizes")
       .def_ro("solved", &ExtendedJacobianResult::solved,
