@@ -23,8 +23,10 @@
 // level above, a direction they pin (by the rank rule) is not traded for the others,
 // as the LP's equalities are not.
 //
-// The SVDs are one-sided Jacobi (Hestenes) rotations over the workspace's rows; a right
-// basis wider than the rows is completed by Householder reflectors. Levels of extreme
+// The SVDs are one-sided Jacobi (Hestenes) rotations over the workspace's rows; rows
+// fewer than their length are first reduced by a row-pivoted Householder LQ and the
+// rotations orthogonalise the rows of its triangular factor's transpose (Drmač &
+// Veselić 2008), the LQ's reflectors completing the right basis. Levels of extreme
 // scale (an entry beyond 1e100, or a level whose entries are all below 1e-100) are not
 // checked here (CertificateCode::extreme_scale: the caller equilibrates them).
 //
@@ -141,6 +143,8 @@ private:
     void check_level(const Stack& s, const double* x, double x_norm, index level,
                      bool fix_band, CertificateResult& out);
     void right_svd(index m, index d);
+    void right_svd_wide(index m, index d);
+    void right_svd_tall(index m, index d);
     void fix_null_space(index m, double tol_r, index level, CertificateResult& out,
                         bool factor);
 
@@ -159,6 +163,9 @@ private:
     /// rows of the last right_svd (keep_index[0..svd_rows_)) at null space dimension
     /// svd_d_ (−1: none): add_level reuses it when its fixed rows are the same
     index svd_rows_ = -1, svd_d_ = -1;
+    /// the LQ reflectors (ws_.house) of the last right_svd whose rows they complete, 0
+    /// when it read every row of Vt
+    index reflectors_ = 0;
 };
 
 }  // namespace prioik
