@@ -342,8 +342,8 @@ void Certificate::right_svd(index m, index d) {
 void Certificate::right_svd_wide(index m, index d) {
     // P's m rows (stride n, d long) reduced by the row-pivoted LQ Π P = [L 0] Q; Jacobi
     // rotations G orthogonalise the rows of Lᵀ (L = Yᵀ G, Y's rows orthogonal), so Vt's
-    // first m rows are [G 0] Q and its others (σ = 0) the rows m..d−1 of Q, whose
-    // reflectors fix_null_space applies to Z directly
+    // first m rows are [G 0] Q (held in Vt) and its others (σ = 0) the rows m..d−1 of Q,
+    // read through the reflectors (v_coords, v_combine, fix_null_space)
     const index n = layout_.n, M = std::max<index>(layout_.M, 1);
     auto& w = ws_;
     double* P = w.P.data();
@@ -354,12 +354,11 @@ void Certificate::right_svd_wide(index m, index d) {
     for (index i = 0; i < m; ++i)
         for (index c = 0; c < d; ++c) w.Vt[i * n + c] = c == i ? 1.0 : 0.0;
     cert::jacobi_rows(Lt, m, m, m, w.Vt.data(), m, n, w.jnorms.data());
-    for (index i = 0; i < m; ++i) w.sig[i] = std::sqrt(dot(Lt + i * m, Lt + i * m, m));
-    for (index j = m; j < d; ++j) {
-        for (index c = 0; c < d; ++c) w.Vt[j * n + c] = c == j ? 1.0 : 0.0;
-        w.sig[j] = 0.0;
+    for (index i = 0; i < m; ++i) {
+        w.sig[i] = std::sqrt(dot(Lt + i * m, Lt + i * m, m));
+        cert::reflect_row(w.house.data(), m, d, w.Vt.data() + i * n);
     }
-    for (index j = 0; j < d; ++j) cert::reflect_row(w.house.data(), m, d, w.Vt.data() + j * n);
+    for (index j = m; j < d; ++j) w.sig[j] = 0.0;
     reflectors_ = m;
 }
 

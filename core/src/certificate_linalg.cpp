@@ -111,6 +111,15 @@ void reflect_row(const double* house, Index count, Index len, double* u) {
     }
 }
 
+void reflect_vector(const double* house, Index count, Index len, double* u) {
+    const Index hs = len + 1;
+    for (Index k = 0; k < count; ++k) {
+        const double* v = house + k * hs;
+        const double f = v[len] * dot(u + k, v + k, len - k);
+        for (Index c = k; c < len; ++c) u[c] -= f * v[c];
+    }
+}
+
 void reflect_rows(const double* house, Index count, Index len, double* Z, Index width,
                   Index stride, double* proj) {
     const Index hs = len + 1;

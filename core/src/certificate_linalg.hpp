@@ -33,6 +33,9 @@ void lq_rows(double* R, Index count, Index len, Index stride, double* house, dou
 /// The row vector u (len) times H_{count−1} ⋯ H_0 (lq_rows's reflectors), in place.
 void reflect_row(const double* house, Index count, Index len, double* u);
 
+/// The column vector u (len) replaced by H_{count−1} ⋯ H_0 u (lq_rows's reflectors).
+void reflect_vector(const double* house, Index count, Index len, double* u);
+
 /// The `len` rows of Z (each `width` long, stride) replaced by H_{count−1} ⋯ H_0 Z
 /// (lq_rows's reflectors acting on the row index); proj: width scratch entries.
 void reflect_rows(const double* house, Index count, Index len, double* Z, Index width,

@@ -145,6 +145,10 @@ private:
     void right_svd(index m, index d);
     void right_svd_wide(index m, index d);
     void right_svd_tall(index m, index d);
+    /// out = Vᵀ in (the coordinates of in, d, on the last right_svd's right vectors)
+    void v_coords(const double* in, double* out) const;
+    /// out = V coef (d)
+    void v_combine(const double* coef, double* out) const;
     void fix_null_space(index m, double tol_r, index level, CertificateResult& out,
                         bool factor);
 
@@ -163,8 +167,8 @@ private:
     /// rows of the last right_svd (keep_index[0..svd_rows_)) at null space dimension
     /// svd_d_ (−1: none): add_level reuses it when its fixed rows are the same
     index svd_rows_ = -1, svd_d_ = -1;
-    /// the LQ reflectors (ws_.house) of the last right_svd whose rows they complete, 0
-    /// when it read every row of Vt
+    /// the LQ reflectors (ws_.house) of the last right_svd: Vt holds its first
+    /// reflectors_ rows, the others are the rows of Q they complete (0: Vt holds all)
     index reflectors_ = 0;
 };
 
