@@ -26,6 +26,10 @@ constexpr double kSigmaFloor = 1e-6;
 
 constexpr double kDefaultTol = 1e-8;
 
+/// B Z of fewer columns than this is rotated as it is (right_svd_tall): its sweeps cost
+/// less than the two reductions
+constexpr index kPreconditionFrom = 16;
+
 double precision(double tol) { return cert::kXPrecision * std::max(1.0, tol / kDefaultTol); }
 
 /// _rounding: how far rounding alone may leave a level's weighted rows from where they
@@ -370,6 +374,14 @@ void Certificate::right_svd_tall(index m, index d) {
     const index n = layout_.n, M = std::max<index>(layout_.M, 1);
     auto& w = ws_;
     double* P = w.P.data();
+    reflectors_ = 0;
+    for (index i = 0; i < d; ++i)
+        for (index c = 0; c < d; ++c) w.Vt[i * n + c] = c == i ? 1.0 : 0.0;
+    if (d < kPreconditionFrom) {    // a few columns: the rotations of P's rows alone
+        cert::jacobi_rows(P, d, m, M, w.Vt.data(), d, n, w.jnorms.data());
+        for (index j = 0; j < d; ++j) w.sig[j] = std::sqrt(dot(P + j * M, P + j * M, m));
+        return;
+    }
     index* perm = w.face_perm.data();
     cert::lq_rows(P, d, m, M, w.house.data(), w.jnorms.data(), perm);
     double* R = w.Znew.data();  // R = Lᵀ (d × d, stride n)
@@ -379,8 +391,6 @@ void Certificate::right_svd_tall(index m, index d) {
     double* Lt = P + M * n;     // L₂ᵀ (d × d)
     for (index i = 0; i < d; ++i)
         for (index j = 0; j < d; ++j) Lt[i * d + j] = j >= i ? R[j * n + i] : 0.0;
-    for (index i = 0; i < d; ++i)
-        for (index c = 0; c < d; ++c) w.Vt[i * n + c] = c == i ? 1.0 : 0.0;
     cert::jacobi_rows(Lt, d, d, d, w.Vt.data(), d, n, w.jnorms.data());
     for (index i = 0; i < d; ++i) {
         w.sig[i] = std::sqrt(dot(Lt + i * d, Lt + i * d, d));
@@ -389,7 +399,6 @@ void Certificate::right_svd_tall(index m, index d) {
         std::copy(v, v + d, w.tmp_n.begin());
         for (index k = 0; k < d; ++k) v[perm[k]] = w.tmp_n[k];
     }
-    reflectors_ = 0;
 }
 
 }  // namespace prioik
