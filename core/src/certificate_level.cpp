@@ -113,6 +113,7 @@ void Certificate::read_once(const Stack& s, const double* x, bool fix_band,
     for (index c = 0; c < n * n; ++c) w.Zt[c] = 0.0;
     for (index c = 0; c < n; ++c) w.Zt[c * n + c] = 1.0;
     d_ = n;
+    z_identity_ = true;
     n_signed_ = fixed_count_ = band_ = 0;
     for (index r = 0; r < layout_.M; ++r) w.fixed[r] = 0;
     for (index i = 0; i < k; ++i) check_level(s, x, xn, i, fix_band, out);
@@ -313,34 +314,44 @@ void Certificate::fix_null_space(index m, double tol_r, index level, Certificate
         ++kept;
     }
     if (reflectors_ > 0) {
-        cert::reflect_rows(w.house.data(), reflectors_, d, w.Zt.data(), n, n, w.tmp_n.data());
+        cert::reflect_rows(w.house.data(), reflectors_, d, w.Zt.data(), n, n, w.reflect_proj.data());
         std::copy(w.Zt.begin() + reflectors_ * n, w.Zt.begin() + d * n,
                   w.Znew.begin() + kept * n);
         kept += d - reflectors_;
     }
     std::copy(w.Znew.begin(), w.Znew.begin() + kept * n, w.Zt.begin());
     d_ = kept;
+    z_identity_ = false;
 }
 
 void Certificate::right_svd(index m, index d) {
     // the right singular vectors (Vt's rows) and values (sig, d) of B Z, B the WA rows
     // keep_index[0..m), by one-sided Jacobi rotations preconditioned by Householder
     // reductions (Drmač & Veselić 2008; right_svd_wide, right_svd_tall)
+    const index n = layout_.n, M = std::max<index>(layout_.M, 1);
+    if (m < d) {
+        project_rows(m, d, n, 1);     // P's rows: B Z's rows
+        right_svd_wide(m, d);
+    } else {
+        project_rows(m, d, 1, M);     // P's rows: B Z's columns
+        right_svd_tall(m, d);
+    }
+}
+
+void Certificate::project_rows(index m, index d, index row_stride, index col_stride) {
+    // P[i row_stride + j col_stride] = (B Z)_ij, B the WA rows keep_index[0..m)
     const index n = layout_.n;
     auto& w = ws_;
     double* P = w.P.data();
-    if (m < d) {
-        for (index i = 0; i < m; ++i)
-            for (index j = 0; j < d; ++j)
-                P[i * n + j] = dot(w.WA.data() + w.keep_index[i] * n, w.Zt.data() + j * n, n);
-        right_svd_wide(m, d);
-        return;
+    for (index i = 0; i < m; ++i) {
+        const double* row = w.WA.data() + w.keep_index[i] * n;
+        double* out = P + i * row_stride;
+        if (z_identity_) {        // Z = I (no row fixed yet): B's own entries
+            for (index j = 0; j < d; ++j) out[j * col_stride] = row[j];
+        } else {
+            for (index j = 0; j < d; ++j) out[j * col_stride] = dot(row, w.Zt.data() + j * n, n);
+        }
     }
-    const index M = std::max<index>(layout_.M, 1);
-    for (index j = 0; j < d; ++j)
-        for (index i = 0; i < m; ++i)
-            P[j * M + i] = dot(w.WA.data() + w.keep_index[i] * n, w.Zt.data() + j * n, n);
-    right_svd_tall(m, d);
 }
 
 void Certificate::right_svd_wide(index m, index d) {

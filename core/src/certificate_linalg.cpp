@@ -122,19 +122,42 @@ void reflect_vector(const double* house, Index count, Index len, double* u) {
 
 void reflect_rows(const double* house, Index count, Index len, double* Z, Index width,
                   Index stride, double* proj) {
+    // two reflectors a pass over Z: H₂ H₁ Z = Z − β₁ v₁ p₁ᵀ − β₂ v₂ (p₂ − β₁ (v₂ᵀv₁) p₁)ᵀ
+    // with p₁ = Zᵀ v₁, p₂ = Zᵀ v₂
     const Index hs = len + 1;
-    for (Index k = 0; k < count; ++k) {
+    double *p1 = proj, *p2 = proj + width;
+    Index k = 0;
+    for (; k + 1 < count; k += 2) {
+        const double *v1 = house + k * hs, *v2 = v1 + hs;
+        for (Index c = 0; c < width; ++c) p1[c] = p2[c] = 0.0;
+        for (Index t = k; t < len; ++t) {
+            const double f1 = v1[t], f2 = v2[t];
+            const double* z = Z + t * stride;
+            for (Index c = 0; c < width; ++c) {
+                p1[c] += f1 * z[c];
+                p2[c] += f2 * z[c];
+            }
+        }
+        const double g = v1[len] * dot(v1 + k, v2 + k, len - k);
+        for (Index c = 0; c < width; ++c) p2[c] -= g * p1[c];
+        for (Index t = k; t < len; ++t) {
+            const double f1 = v1[len] * v1[t], f2 = v2[len] * v2[t];
+            double* z = Z + t * stride;
+            for (Index c = 0; c < width; ++c) z[c] -= f1 * p1[c] + f2 * p2[c];
+        }
+    }
+    for (; k < count; ++k) {
         const double* v = house + k * hs;
-        for (Index c = 0; c < width; ++c) proj[c] = 0.0;
+        for (Index c = 0; c < width; ++c) p1[c] = 0.0;
         for (Index t = k; t < len; ++t) {
             const double f = v[t];
             const double* z = Z + t * stride;
-            for (Index c = 0; c < width; ++c) proj[c] += f * z[c];
+            for (Index c = 0; c < width; ++c) p1[c] += f * z[c];
         }
         for (Index t = k; t < len; ++t) {
             const double f = v[len] * v[t];
             double* z = Z + t * stride;
-            for (Index c = 0; c < width; ++c) z[c] -= f * proj[c];
+            for (Index c = 0; c < width; ++c) z[c] -= f * p1[c];
         }
     }
 }

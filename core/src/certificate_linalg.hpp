@@ -37,7 +37,7 @@ void reflect_row(const double* house, Index count, Index len, double* u);
 void reflect_vector(const double* house, Index count, Index len, double* u);
 
 /// The `len` rows of Z (each `width` long, stride) replaced by H_{count−1} ⋯ H_0 Z
-/// (lq_rows's reflectors acting on the row index); proj: width scratch entries.
+/// (lq_rows's reflectors acting on the row index); proj: 2 width scratch entries.
 void reflect_rows(const double* house, Index count, Index len, double* Z, Index width,
                   Index stride, double* proj);
 

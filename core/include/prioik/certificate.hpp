@@ -84,7 +84,7 @@ struct CertificateWorkspace {
     std::vector<std::int8_t> fixed;
     // nested null space (held transposed: row j is basis vector j), unit rows at one
     // bound (oriented), the SVD's rows and right vectors, and their scratch
-    std::vector<double> Zt, signed_rows, P, Vt, sig, Znew, house;
+    std::vector<double> Zt, signed_rows, P, Vt, sig, Znew, house, reflect_proj;
     // the KKT residual: gradients, weights, masks, the held columns, the NNLS
     std::vector<double> g, zg, y, D, held, unit, mu, rho, step, dir, tmp_d, tmp_n;
     std::vector<std::int8_t> null, keep, passive, small;
@@ -143,6 +143,7 @@ private:
     void check_level(const Stack& s, const double* x, double x_norm, index level,
                      bool fix_band, CertificateResult& out);
     void right_svd(index m, index d);
+    void project_rows(index m, index d, index row_stride, index col_stride);
     void right_svd_wide(index m, index d);
     void right_svd_tall(index m, index d);
     /// out = Vᵀ in (the coordinates of in, d, on the last right_svd's right vectors)
@@ -159,6 +160,7 @@ private:
     std::unique_ptr<ActiveSetSolver> feasibility_;
     // the current reading's state: the null space's dimension, the signed rows
     index d_ = 0, n_signed_ = 0, fixed_count_ = 0;
+    bool z_identity_ = true;      ///< Z = I (no row fixed yet in this reading)
     index band_ = 0;
     // the last kkt()'s parts the descents read
     double kkt_floor_ = 0.0;
