@@ -46,7 +46,8 @@ void CertificateWorkspace::allocate(index M, index n) {
     P.assign(R * N + N * N, 0.0);
     lsq.assign(R * N, 0.0);
     for (auto* v : {&Zt, &Vt, &Znew, &lsqV}) v->assign(N * N, 0.0);
-    house.assign(N * (N + 1), 0.0);
+    house.assign(N * (std::max(R, N) + 1), 0.0);   // ≤ n reflectors of ≤ max(M, n) + 1
+    reflect_proj.assign(2 * N, 0.0);
     qr_work.assign(N + 2 * R, 0.0);
     for (auto* v : {&sig, &g, &zg, &y, &D, &rho, &step, &dir, &tmp_d, &tmp_n, &xp, &near_x,
                     &face_res})

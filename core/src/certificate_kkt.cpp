@@ -67,6 +67,7 @@ double Certificate::kkt(const double* grad, bool with_b, index m, double floor_s
                 for (index c = 0; c < d; ++c) w.Vt[j * n + c] = c == j ? 1.0 : 0.0;
                 w.sig[j] = 0.0;
             }
+            reflectors_ = 0;
         }
         // the solvers' rank rule: rcond times the whole level's ‖√W A_i‖_F
         const double threshold = options_.rcond * std::max(bn, floor_scale);
@@ -80,7 +81,7 @@ double Certificate::kkt(const double* grad, bool with_b, index m, double floor_s
             if (bn > 0 && w.null[j]) w.D[j] = 1.0 / bn;
         }
         if (ambiguous && threshold > 0) out.ambiguous[level] = 1;
-        for (index j = 0; j < d; ++j) w.tmp_d[j] = dot(w.Vt.data() + j * n, w.zg.data(), d);
+        v_coords(w.zg.data(), w.tmp_d.data());
         for (index j = 0; j < d; ++j) w.y[j] = w.null[j] ? 0.0 : w.D[j] * w.tmp_d[j];
     }
     kkt_keep_ = 0;
@@ -98,7 +99,8 @@ double Certificate::kkt(const double* grad, bool with_b, index m, double floor_s
         bool keep = std::sqrt(dot(hs, hs, d)) > options_.rcond;
         double* u = w.unit.data() + p * n;
         if (with_b) {
-            for (index j = 0; j < d; ++j) u[j] = w.D[j] * dot(w.Vt.data() + j * n, hs, d);
+            v_coords(hs, u);
+            for (index j = 0; j < d; ++j) u[j] *= w.D[j];
         } else {
             for (index j = 0; j < d; ++j) u[j] = hs[j];
         }
@@ -150,16 +152,18 @@ void Certificate::descent(int which, double* direction) {
     } else {
         // the null coordinates weighted as the floored ones: the multipliers cancel the
         // gradient there alone
+        v_coords(w.zg.data(), w.tmp_d.data());
         for (index j = 0; j < d; ++j) {
             w.tmp_n[j] = w.null[j] ? 1.0 / kkt_floor_ : w.D[j];
-            w.tmp_d[j] = w.null[j] ? 0.0 : w.tmp_n[j] * dot(w.Vt.data() + j * n, w.zg.data(), d);
+            w.tmp_d[j] = w.null[j] ? 0.0 : w.tmp_n[j] * w.tmp_d[j];
         }
         index q = 0;
         for (index s = 0; s < n_signed_; ++s) {
             if (!w.keep[s]) continue;
             const double* hs = w.held.data() + s * n;
             double* c = w.ucols.data() + q * n;
-            for (index j = 0; j < d; ++j) c[j] = w.tmp_n[j] * dot(w.Vt.data() + j * n, hs, d);
+            v_coords(hs, c);
+            for (index j = 0; j < d; ++j) c[j] *= w.tmp_n[j];
             const double len = std::sqrt(dot(c, c, d));
             if (!(len > 0)) continue;
             for (index j = 0; j < d; ++j) c[j] /= len;
@@ -176,12 +180,29 @@ void Certificate::descent(int which, double* direction) {
         for (index j = 0; j < d; ++j) w.step[j] = w.tmp_n[j] * w.rho[j];
     }
     // −Z V step
-    for (index c = 0; c < d; ++c) w.tmp_d[c] = 0.0;
-    for (index j = 0; j < d; ++j) {
-        const double* vj = w.Vt.data() + j * n;
-        for (index c = 0; c < d; ++c) w.tmp_d[c] += w.step[j] * vj[c];
-    }
+    v_combine(w.step.data(), w.tmp_d.data());
     minus_z_times(w.Zt.data(), d, n, w.tmp_d.data(), direction);
+}
+
+void Certificate::v_coords(const double* in, double* out) const {
+    const index n = layout_.n, d = d_, r = reflectors_;
+    const auto& w = ws_;
+    if (r > 0) {    // rows r..d−1 of Vt are those of Q: (Q in)'s entries
+        std::copy(in, in + d, out);
+        cert::reflect_vector(w.house.data(), r, d, out);
+    }
+    for (index j = 0; j < (r > 0 ? r : d); ++j) out[j] = dot(w.Vt.data() + j * n, in, d);
+}
+
+void Certificate::v_combine(const double* coef, double* out) const {
+    const index n = layout_.n, d = d_, r = reflectors_;
+    const auto& w = ws_;
+    for (index c = 0; c < d; ++c) out[c] = c >= r ? coef[c] : 0.0;
+    if (r > 0) cert::reflect_row(w.house.data(), r, d, out);    // Qᵀ [0; coef_r..d−1]
+    for (index j = 0; j < (r > 0 ? r : d); ++j) {
+        const double* vj = w.Vt.data() + j * n;
+        for (index c = 0; c < d; ++c) out[c] += coef[j] * vj[c];
+    }
 }
 
 double Certificate::descent_drop(const Stack& s, index s0, index s1, const double* x,

@@ -26,6 +26,10 @@ constexpr double kSigmaFloor = 1e-6;
 
 constexpr double kDefaultTol = 1e-8;
 
+/// B Z of fewer columns than this is rotated as it is (right_svd_tall): its sweeps cost
+/// less than the two reductions
+constexpr index kPreconditionFrom = 16;
+
 double precision(double tol) { return cert::kXPrecision * std::max(1.0, tol / kDefaultTol); }
 
 /// _rounding: how far rounding alone may leave a level's weighted rows from where they
@@ -109,6 +113,7 @@ void Certificate::read_once(const Stack& s, const double* x, bool fix_band,
     for (index c = 0; c < n * n; ++c) w.Zt[c] = 0.0;
     for (index c = 0; c < n; ++c) w.Zt[c * n + c] = 1.0;
     d_ = n;
+    z_identity_ = true;
     n_signed_ = fixed_count_ = band_ = 0;
     for (index r = 0; r < layout_.M; ++r) w.fixed[r] = 0;
     for (index i = 0; i < k; ++i) check_level(s, x, xn, i, fix_band, out);
@@ -292,8 +297,11 @@ void Certificate::fix_null_space(index m, double tol_r, index level, Certificate
     auto& w = ws_;
     if (factor) right_svd(m, d);
     if (ambiguous_decision(w.sig.data(), d, tol_r)) out.ambiguous[level] = 1;
+    // the directions of σ ≤ tol_r: Vt's rows times Zt, the rows the LQ's reflectors
+    // complete (σ = 0) as those reflectors applied to Zt
+    const index explicit_rows = reflectors_ > 0 ? reflectors_ : d;
     index kept = 0;
-    for (index j = 0; j < d; ++j) {
+    for (index j = 0; j < explicit_rows; ++j) {
         if (w.sig[j] > tol_r) continue;
         double* dst = w.Znew.data() + kept * n;
         for (index c = 0; c < n; ++c) dst[c] = 0.0;
@@ -305,40 +313,103 @@ void Certificate::fix_null_space(index m, double tol_r, index level, Certificate
         }
         ++kept;
     }
+    if (reflectors_ > 0) {
+        cert::reflect_rows(w.house.data(), reflectors_, d, w.Zt.data(), n, n, w.reflect_proj.data());
+        std::copy(w.Zt.begin() + reflectors_ * n, w.Zt.begin() + d * n,
+                  w.Znew.begin() + kept * n);
+        kept += d - reflectors_;
+    }
     std::copy(w.Znew.begin(), w.Znew.begin() + kept * n, w.Zt.begin());
     d_ = kept;
+    z_identity_ = false;
 }
 
 void Certificate::right_svd(index m, index d) {
     // the right singular vectors (Vt's rows) and values (sig, d) of B Z, B the WA rows
-    // keep_index[0..m): by Jacobi rotations of its columns (m ≥ d) or of its rows, the
-    // row space then completed to d directions (of σ = 0)
+    // keep_index[0..m), by one-sided Jacobi rotations preconditioned by Householder
+    // reductions (Drmač & Veselić 2008; right_svd_wide, right_svd_tall)
+    const index n = layout_.n, M = std::max<index>(layout_.M, 1);
+    if (m < d) {
+        project_rows(m, d, n, 1);     // P's rows: B Z's rows
+        right_svd_wide(m, d);
+    } else {
+        project_rows(m, d, 1, M);     // P's rows: B Z's columns
+        right_svd_tall(m, d);
+    }
+}
+
+void Certificate::project_rows(index m, index d, index row_stride, index col_stride) {
+    // P[i row_stride + j col_stride] = (B Z)_ij, B the WA rows keep_index[0..m)
+    const index n = layout_.n;
+    auto& w = ws_;
+    double* P = w.P.data();
+    for (index i = 0; i < m; ++i) {
+        const double* row = w.WA.data() + w.keep_index[i] * n;
+        double* out = P + i * row_stride;
+        if (z_identity_) {        // Z = I (no row fixed yet): B's own entries
+            for (index j = 0; j < d; ++j) out[j * col_stride] = row[j];
+        } else {
+            for (index j = 0; j < d; ++j) out[j * col_stride] = dot(row, w.Zt.data() + j * n, n);
+        }
+    }
+}
+
+void Certificate::right_svd_wide(index m, index d) {
+    // P's m rows (stride n, d long) reduced by the row-pivoted LQ Π P = [L 0] Q; Jacobi
+    // rotations G orthogonalise the rows of Lᵀ (L = Yᵀ G, Y's rows orthogonal), so Vt's
+    // first m rows are [G 0] Q (held in Vt) and its others (σ = 0) the rows m..d−1 of Q,
+    // read through the reflectors (v_coords, v_combine, fix_null_space)
     const index n = layout_.n, M = std::max<index>(layout_.M, 1);
     auto& w = ws_;
     double* P = w.P.data();
-    if (m >= d) {
-        for (index j = 0; j < d; ++j)
-            for (index i = 0; i < m; ++i)
-                P[j * M + i] = dot(w.WA.data() + w.keep_index[i] * n, w.Zt.data() + j * n, n);
-        for (index j = 0; j < d; ++j)
-            for (index c = 0; c < d; ++c) w.Vt[j * n + c] = c == j ? 1.0 : 0.0;
+    cert::lq_rows(P, m, d, n, w.house.data(), w.jnorms.data(), nullptr);
+    double* Lt = P + M * n;     // Lᵀ (m × m)
+    for (index i = 0; i < m; ++i)
+        for (index j = 0; j < m; ++j) Lt[i * m + j] = j >= i ? P[j * n + i] : 0.0;
+    for (index i = 0; i < m; ++i)
+        for (index c = 0; c < d; ++c) w.Vt[i * n + c] = c == i ? 1.0 : 0.0;
+    cert::jacobi_rows(Lt, m, m, m, w.Vt.data(), m, n, w.jnorms.data());
+    for (index i = 0; i < m; ++i) {
+        w.sig[i] = std::sqrt(dot(Lt + i * m, Lt + i * m, m));
+        cert::reflect_row(w.house.data(), m, d, w.Vt.data() + i * n);
+    }
+    for (index j = m; j < d; ++j) w.sig[j] = 0.0;
+    reflectors_ = m;
+}
+
+void Certificate::right_svd_tall(index m, index d) {
+    // P's d rows (stride M, m long: B Z's columns) reduced by the row-pivoted LQ
+    // Π P = [L 0] Q, so B Z = Qᵀ [R; 0] Π with R = Lᵀ (a column-pivoted QR); R's own
+    // row LQ R = L₂ Q₂ and rotations G orthogonalising the rows of L₂ᵀ give R's right
+    // singular vectors G Q₂, and B Z's are G Q₂ Π
+    const index n = layout_.n, M = std::max<index>(layout_.M, 1);
+    auto& w = ws_;
+    double* P = w.P.data();
+    reflectors_ = 0;
+    for (index i = 0; i < d; ++i)
+        for (index c = 0; c < d; ++c) w.Vt[i * n + c] = c == i ? 1.0 : 0.0;
+    if (d < kPreconditionFrom) {    // a few columns: the rotations of P's rows alone
         cert::jacobi_rows(P, d, m, M, w.Vt.data(), d, n, w.jnorms.data());
         for (index j = 0; j < d; ++j) w.sig[j] = std::sqrt(dot(P + j * M, P + j * M, m));
         return;
     }
-    for (index i = 0; i < m; ++i)
-        for (index j = 0; j < d; ++j)
-            P[i * n + j] = dot(w.WA.data() + w.keep_index[i] * n, w.Zt.data() + j * n, n);
-    cert::jacobi_rows(P, m, d, n, nullptr, 0, 0, w.jnorms.data());
-    index r = 0;
-    for (index i = 0; i < m; ++i) {
-        const double sigma = std::sqrt(dot(P + i * n, P + i * n, d));
-        if (!(sigma > 0)) continue;
-        for (index c = 0; c < d; ++c) w.Vt[r * n + c] = P[i * n + c] / sigma;
-        w.sig[r++] = sigma;
+    index* perm = w.face_perm.data();
+    cert::lq_rows(P, d, m, M, w.house.data(), w.jnorms.data(), perm);
+    double* R = w.Znew.data();  // R = Lᵀ (d × d, stride n)
+    for (index i = 0; i < d; ++i)
+        for (index j = 0; j < d; ++j) R[i * n + j] = j >= i ? P[j * M + i] : 0.0;
+    cert::lq_rows(R, d, d, n, w.house.data(), w.jnorms.data(), nullptr);
+    double* Lt = P + M * n;     // L₂ᵀ (d × d)
+    for (index i = 0; i < d; ++i)
+        for (index j = 0; j < d; ++j) Lt[i * d + j] = j >= i ? R[j * n + i] : 0.0;
+    cert::jacobi_rows(Lt, d, d, d, w.Vt.data(), d, n, w.jnorms.data());
+    for (index i = 0; i < d; ++i) {
+        w.sig[i] = std::sqrt(dot(Lt + i * d, Lt + i * d, d));
+        double* v = w.Vt.data() + i * n;
+        cert::reflect_row(w.house.data(), d, d, v);
+        std::copy(v, v + d, w.tmp_n.begin());
+        for (index k = 0; k < d; ++k) v[perm[k]] = w.tmp_n[k];
     }
-    cert::complete_basis(w.Vt.data(), r, d, n, w.Vt.data(), w.house.data());
-    for (index j = r; j < d; ++j) w.sig[j] = 0.0;
 }
 
 }  // namespace prioik

@@ -66,41 +66,98 @@ void jacobi_rows(double* R, Index count, Index len, Index stride, double* acc, I
     }
 }
 
-void complete_basis(const double* U, Index r, Index d, Index stride, double* out,
-                    double* house) {
-    // house row t (d + 1 long): reflector t's vector (entries t..d−1), then its beta
-    const Index hs = d + 1;
-    for (Index t = 0; t < r; ++t)
-        for (Index c = 0; c < d; ++c) house[t * hs + c] = U[t * stride + c];
-    for (Index t = 0; t < r; ++t) {
-        double* v = house + t * hs;
-        for (Index s = 0; s < t; ++s) {      // reflectors 0..t−1 on column t (row t)
-            const double* w = house + s * hs;
-            double proj = 0.0;
-            for (Index c = s; c < d; ++c) proj += w[c] * v[c];
-            proj *= w[d];
-            for (Index c = s; c < d; ++c) v[c] -= proj * w[c];
+void lq_rows(double* R, Index count, Index len, Index stride, double* house, double* norms,
+             Index* perm) {
+    const Index hs = len + 1;
+    if (perm != nullptr)
+        for (Index i = 0; i < count; ++i) perm[i] = i;
+    for (Index k = 0; k < count; ++k) {
+        Index pivot = k;
+        double top = -1.0;
+        for (Index i = k; i < count; ++i) {
+            const double* row = R + i * stride + k;
+            norms[i] = dot(row, row, len - k);
+            if (norms[i] > top) { top = norms[i]; pivot = i; }
         }
-        for (Index c = 0; c < t; ++c) v[c] = 0.0;
-        double norm = 0.0;
-        for (Index c = t; c < d; ++c) norm += v[c] * v[c];
-        norm = std::sqrt(norm);
-        const double alpha = v[t] >= 0 ? -norm : norm;
-        v[t] -= alpha;
-        double vv = 0.0;
-        for (Index c = t; c < d; ++c) vv += v[c] * v[c];
-        v[d] = vv > 0 ? 2.0 / vv : 0.0;
+        if (pivot != k) {
+            for (Index c = 0; c < len; ++c) std::swap(R[k * stride + c], R[pivot * stride + c]);
+            if (perm != nullptr) std::swap(perm[k], perm[pivot]);
+        }
+        double* row = R + k * stride;
+        double* v = house + k * hs;
+        for (Index c = 0; c < k; ++c) v[c] = 0.0;
+        for (Index c = k; c < len; ++c) v[c] = row[c];
+        const double norm = std::sqrt(top);
+        const double alpha = v[k] >= 0 ? -norm : norm;
+        v[k] -= alpha;
+        const double vv = dot(v + k, v + k, len - k);
+        v[len] = vv > 0 ? 2.0 / vv : 0.0;
+        row[k] = alpha;
+        for (Index c = k + 1; c < count; ++c) row[c] = 0.0;
+        for (Index i = k + 1; i < count; ++i) {
+            double* ri = R + i * stride + k;
+            const double f = v[len] * dot(ri, v + k, len - k);
+            for (Index c = 0; c < len - k; ++c) ri[c] -= f * v[k + c];
+        }
     }
-    // Q e_j = H_0 H_1 … H_{r−1} e_j for j = r..d−1
-    for (Index j = r; j < d; ++j) {
-        double* q = out + j * stride;
-        for (Index c = 0; c < d; ++c) q[c] = c == j ? 1.0 : 0.0;
-        for (Index s = r - 1; s >= 0; --s) {
-            const double* w = house + s * hs;
-            double proj = 0.0;
-            for (Index c = s; c < d; ++c) proj += w[c] * q[c];
-            proj *= w[d];
-            for (Index c = s; c < d; ++c) q[c] -= proj * w[c];
+}
+
+void reflect_row(const double* house, Index count, Index len, double* u) {
+    const Index hs = len + 1;
+    for (Index k = count - 1; k >= 0; --k) {
+        const double* v = house + k * hs;
+        const double f = v[len] * dot(u + k, v + k, len - k);
+        for (Index c = k; c < len; ++c) u[c] -= f * v[c];
+    }
+}
+
+void reflect_vector(const double* house, Index count, Index len, double* u) {
+    const Index hs = len + 1;
+    for (Index k = 0; k < count; ++k) {
+        const double* v = house + k * hs;
+        const double f = v[len] * dot(u + k, v + k, len - k);
+        for (Index c = k; c < len; ++c) u[c] -= f * v[c];
+    }
+}
+
+void reflect_rows(const double* house, Index count, Index len, double* Z, Index width,
+                  Index stride, double* proj) {
+    // two reflectors a pass over Z: H₂ H₁ Z = Z − β₁ v₁ p₁ᵀ − β₂ v₂ (p₂ − β₁ (v₂ᵀv₁) p₁)ᵀ
+    // with p₁ = Zᵀ v₁, p₂ = Zᵀ v₂
+    const Index hs = len + 1;
+    double *p1 = proj, *p2 = proj + width;
+    Index k = 0;
+    for (; k + 1 < count; k += 2) {
+        const double *v1 = house + k * hs, *v2 = v1 + hs;
+        for (Index c = 0; c < width; ++c) p1[c] = p2[c] = 0.0;
+        for (Index t = k; t < len; ++t) {
+            const double f1 = v1[t], f2 = v2[t];
+            const double* z = Z + t * stride;
+            for (Index c = 0; c < width; ++c) {
+                p1[c] += f1 * z[c];
+                p2[c] += f2 * z[c];
+            }
+        }
+        const double g = v1[len] * dot(v1 + k, v2 + k, len - k);
+        for (Index c = 0; c < width; ++c) p2[c] -= g * p1[c];
+        for (Index t = k; t < len; ++t) {
+            const double f1 = v1[len] * v1[t], f2 = v2[len] * v2[t];
+            double* z = Z + t * stride;
+            for (Index c = 0; c < width; ++c) z[c] -= f1 * p1[c] + f2 * p2[c];
+        }
+    }
+    for (; k < count; ++k) {
+        const double* v = house + k * hs;
+        for (Index c = 0; c < width; ++c) p1[c] = 0.0;
+        for (Index t = k; t < len; ++t) {
+            const double f = v[t];
+            const double* z = Z + t * stride;
+            for (Index c = 0; c < width; ++c) p1[c] += f * z[c];
+        }
+        for (Index t = k; t < len; ++t) {
+            const double f = v[len] * v[t];
+            double* z = Z + t * stride;
+            for (Index c = 0; c < width; ++c) z[c] -= f * p1[c];
         }
     }
 }

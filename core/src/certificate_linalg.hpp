@@ -1,5 +1,5 @@
 // The certificate's dense steps (certificate*.cpp): robust norms, one-sided Jacobi
-// rotations, the completion of an orthonormal basis, a least squares on a face of
+// rotations, a row-pivoted LQ and its reflectors, a least squares on a face of
 // columns and the non-negative least squares. Every function works on its caller's
 // memory (the Certificate's workspace) and allocates nothing.
 #pragma once
@@ -22,10 +22,24 @@ double robust_norm(const double* a, Index n);
 void jacobi_rows(double* R, Index count, Index len, Index stride, double* acc, Index acc_len,
                  Index acc_stride, double* norms);
 
-/// Rows r..d−1 of out (stride) set to an orthonormal basis of the complement of the r
-/// orthonormal rows U (d long, stride) by r Householder reflectors (house: r × d scratch).
-void complete_basis(const double* U, Index r, Index d, Index stride, double* out,
-                    double* house);
+/// The row-pivoted Householder LQ of the `count` rows of R (each `len` long, count ≤ len,
+/// stride): Π R = [L 0] H_{count−1} ⋯ H_0, L lower triangular written into R's first
+/// count columns (the rows in pivot order, the entries right of the diagonal zeroed),
+/// reflector k's vector (entries k..len−1) and its 2 / vᵀv into house row k (len + 1
+/// long); row k of Π R is R's row perm[k] when perm is not null. norms: count scratch.
+void lq_rows(double* R, Index count, Index len, Index stride, double* house, double* norms,
+             Index* perm);
+
+/// The row vector u (len) times H_{count−1} ⋯ H_0 (lq_rows's reflectors), in place.
+void reflect_row(const double* house, Index count, Index len, double* u);
+
+/// The column vector u (len) replaced by H_{count−1} ⋯ H_0 u (lq_rows's reflectors).
+void reflect_vector(const double* house, Index count, Index len, double* u);
+
+/// The `len` rows of Z (each `width` long, stride) replaced by H_{count−1} ⋯ H_0 Z
+/// (lq_rows's reflectors acting on the row index); proj: 2 width scratch entries.
+void reflect_rows(const double* house, Index count, Index len, double* Z, Index width,
+                  Index stride, double* proj);
 
 /// Least squares on q columns of length d held as the rows of F (stride fs; overwritten
 /// by the factorization) by a column-pivoted Householder QR, stopped at the first pivot

@@ -23,8 +23,10 @@
 // level above, a direction they pin (by the rank rule) is not traded for the others,
 // as the LP's equalities are not.
 //
-// The SVDs are one-sided Jacobi (Hestenes) rotations over the workspace's rows; a right
-// basis wider than the rows is completed by Householder reflectors. Levels of extreme
+// The SVDs are one-sided Jacobi (Hestenes) rotations over the workspace's rows; rows
+// fewer than their length are first reduced by a row-pivoted Householder LQ and the
+// rotations orthogonalise the rows of its triangular factor's transpose (Drmač &
+// Veselić 2008), the LQ's reflectors completing the right basis. Levels of extreme
 // scale (an entry beyond 1e100, or a level whose entries are all below 1e-100) are not
 // checked here (CertificateCode::extreme_scale: the caller equilibrates them).
 //
@@ -82,7 +84,7 @@ struct CertificateWorkspace {
     std::vector<std::int8_t> fixed;
     // nested null space (held transposed: row j is basis vector j), unit rows at one
     // bound (oriented), the SVD's rows and right vectors, and their scratch
-    std::vector<double> Zt, signed_rows, P, Vt, sig, Znew, house;
+    std::vector<double> Zt, signed_rows, P, Vt, sig, Znew, house, reflect_proj;
     // the KKT residual: gradients, weights, masks, the held columns, the NNLS
     std::vector<double> g, zg, y, D, held, unit, mu, rho, step, dir, tmp_d, tmp_n;
     std::vector<std::int8_t> null, keep, passive, small;
@@ -141,6 +143,13 @@ private:
     void check_level(const Stack& s, const double* x, double x_norm, index level,
                      bool fix_band, CertificateResult& out);
     void right_svd(index m, index d);
+    void project_rows(index m, index d, index row_stride, index col_stride);
+    void right_svd_wide(index m, index d);
+    void right_svd_tall(index m, index d);
+    /// out = Vᵀ in (the coordinates of in, d, on the last right_svd's right vectors)
+    void v_coords(const double* in, double* out) const;
+    /// out = V coef (d)
+    void v_combine(const double* coef, double* out) const;
     void fix_null_space(index m, double tol_r, index level, CertificateResult& out,
                         bool factor);
 
@@ -151,6 +160,7 @@ private:
     std::unique_ptr<ActiveSetSolver> feasibility_;
     // the current reading's state: the null space's dimension, the signed rows
     index d_ = 0, n_signed_ = 0, fixed_count_ = 0;
+    bool z_identity_ = true;      ///< Z = I (no row fixed yet in this reading)
     index band_ = 0;
     // the last kkt()'s parts the descents read
     double kkt_floor_ = 0.0;
@@ -159,6 +169,9 @@ private:
     /// rows of the last right_svd (keep_index[0..svd_rows_)) at null space dimension
     /// svd_d_ (−1: none): add_level reuses it when its fixed rows are the same
     index svd_rows_ = -1, svd_d_ = -1;
+    /// the LQ reflectors (ws_.house) of the last right_svd: Vt holds its first
+    /// reflectors_ rows, the others are the rows of Q they complete (0: Vt holds all)
+    index reflectors_ = 0;
 };
 
 }  // namespace prioik
