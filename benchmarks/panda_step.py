@@ -1,4 +1,5 @@
-"""The 9-DoF Panda reach step: prioik's prepared path, its one-off path and PlaCo.
+"""The 9-DoF Panda reach step: prioik's ControlStep, its writer loop, its one-off path
+and PlaCo.
 
 A fixed-base arm (example-robot-data's Panda, 7 arm joints + 2 fingers) reaches a hand
 target at velocity level: two strict levels, the hand position (3 rows,
@@ -6,9 +7,13 @@ target at velocity level: two strict levels, the hand position (3 rows,
 ``K_p = 1``), no limits. Timed per control step, each path in its own loop over the
 same states (PlaCo's trajectory), median of several interleaved rounds:
 
+* prioik, ``ControlStep`` (:class:`prioik.robots.ControlStep`,
+  ``hierarchical_active_set``): pinocchio's Jacobians, then the rows, the solve and
+  the integration in one compiled call — the README's control loop;
 * prioik, prepared: ``KinematicState(drift=False)``, the rows written in place
-  (``TaskWriter.frame_position``, ``posture``, ``targets``) and a solver prepared
-  once (``solver.solve(rows.data)``) — the path a control loop runs;
+  (``TaskWriter.frame_position``, ``posture``, ``targets``) and ``extended_jacobian``
+  prepared once (``solver.solve(rows.data)``) — what ControlStep does, step by step
+  in Python;
 * prioik, one-off: the same kinematics, ``Task`` objects and ``prioik.solve``;
 * PlaCo: ``update_kinematics`` + ``KinematicsSolver.solve(True)`` with a soft position
   task (weight 1) and a soft joints task (weight 1e-4), base masked — PlaCo's
@@ -95,6 +100,16 @@ def placo_panda(robot, steps: int, limits: bool = False, target=None):
     return step, states, reset
 
 
+def _writer(robot, hand: str):
+    """The reach's two levels: the hand position above the posture."""
+    from prioik.robots import TaskWriter
+
+    rows = TaskWriter(robot, "velocity")
+    rows.add_frame_position("hand", hand, gain=GAINS["hand"], level=0)
+    rows.add_posture("posture", gain=GAINS["posture"], level=1)
+    return rows
+
+
 def panda_step_times(steps: int = 300, rounds: int = 7) -> dict[str, Any]:
     """Median, p10 and p90 (µs) of the three step paths; see the module docstring.
 
@@ -104,7 +119,7 @@ def panda_step_times(steps: int = 300, rounds: int = 7) -> dict[str, Any]:
     """
     import prioik
     from prioik.hierarchy import Task, TaskStack, relative_distance
-    from prioik.robots import KinematicState, TaskWriter, load
+    from prioik.robots import ControlStep, KinematicState, load
 
     robot = load("panda")
     model, q0, nv = robot.model, robot.q0, robot.nv
@@ -115,11 +130,13 @@ def panda_step_times(steps: int = 300, rounds: int = 7) -> dict[str, Any]:
 
     data = model.createData()
     zero = np.zeros(nv)
-    rows = TaskWriter(robot, "velocity")
-    rows.add_frame_position("hand", hand, gain=GAINS["hand"], level=0)
-    rows.add_posture("posture", gain=GAINS["posture"], level=1)
+    rows = _writer(robot, hand)
     prepared = prioik.prepare(rows.layout, "extended_jacobian")
-    xs: dict[str, list] = {"prepared": [None] * steps, "one-off": [None] * steps}
+    control = ControlStep(_writer(robot, hand), "hierarchical_active_set", dt=DT)
+    control.reference("hand", HAND_TARGET)
+    control.reference("posture", q0)
+    xs: dict[str, list] = {"prepared": [None] * steps, "one-off": [None] * steps,
+                           "control": [None] * steps}
 
     def prepared_step(i: int) -> None:
         state = KinematicState(robot, states[i], zero, data, drift=False)
@@ -135,21 +152,32 @@ def panda_step_times(steps: int = 300, rounds: int = 7) -> dict[str, Any]:
                            Task("posture", np.eye(nv), GAINS["posture"] * (q0 - states[i]))])
         xs["one-off"][i] = prioik.solve(stack, "extended_jacobian").x
 
-    for path in (prepared_step, oneoff_step, placo_step):     # warm-up: JIT, caches
+    def control_step(i: int) -> None:
+        control(states[i])
+        xs["control"][i] = control.velocity.copy()
+
+    paths = {"prepared": prepared_step, "one-off": oneoff_step, "control": control_step,
+             "placo": placo_step}
+    for path in paths.values():     # warm-up: caches, first calls
         for i in range(min(50, steps)):
             path(i)
     placo_reset()
-    best = _rounds({"prepared": prepared_step, "one-off": oneoff_step, "placo": placo_step},
-                   steps, rounds)
+    best = _rounds(paths, steps, rounds)
     distance = max(relative_distance(a, b)
                    for a, b in zip(xs["prepared"], xs["one-off"], strict=False))
     if not distance <= 1e-9:
         raise RuntimeError(f"the prepared and one-off Panda paths differ by {distance:.2e}")
+    control_distance = max(relative_distance(a, b)
+                           for a, b in zip(xs["prepared"], xs["control"], strict=False))
+    if not control_distance <= 1e-9:
+        raise RuntimeError(f"ControlStep and the prepared Panda path differ by "
+                           f"{control_distance:.2e}")
 
     def us(key, q):
         return float(np.percentile(best[key], q)) * 1e6
 
-    out = {"steps": steps, "rounds": rounds, "max_path_distance": distance}
+    out = {"steps": steps, "rounds": rounds, "max_path_distance": distance,
+           "control_distance": control_distance}
     for key in best:
         tag = key.replace("-", "")
         out.update({f"{tag}_step_us": us(key, 50), f"{tag}_p10_us": us(key, 10),
@@ -161,8 +189,10 @@ def panda_step_times(steps: int = 300, rounds: int = 7) -> dict[str, Any]:
         "limits, at PlaCo's own states. Each path in its own loop, "
         f"{rounds} interleaved rounds, the fastest round's median: prioik prepared "
         "(`KinematicState(drift=False)` + `TaskWriter` writers + `solver.solve(data)`), "
-        "prioik one-off (`Task`/`TaskStack` + `prioik.solve`), PlaCo "
+        "prioik one-off (`Task`/`TaskStack` + `prioik.solve`), prioik `ControlStep` "
+        "(`hierarchical_active_set`, the step integrated too: the README's loop), PlaCo "
         "(`update_kinematics` + `KinematicsSolver.solve`, soft position and joints "
-        "tasks). The two prioik paths agree to "
-        f"{distance:.1e} (relative).")
+        "tasks, integrated). The two writer paths agree to "
+        f"{distance:.1e} (relative), ControlStep's q̇ with the prepared path's to "
+        f"{control_distance:.1e}.")
     return out

@@ -149,7 +149,8 @@ def results_markdown(rows: list[TimingRow], rats: list[Ratio], batch: dict, ik: 
     if ik and ik.get("panda"):
         panda = ik["panda"]
         md.append(page.block("panda", description=panda.get("description", ""),
-                             table=_step_table(page, panda, (("prepared", "panda_prepared"),
+                             table=_step_table(page, panda, (("control", "panda_control"),
+                                                             ("prepared", "panda_prepared"),
                                                              ("oneoff", "panda_oneoff"),
                                                              ("placo", "panda_placo")))))
     if control:
