@@ -138,7 +138,7 @@ class StepBuilder:
             bad = _put(buffer, offset, value, rows, cols)
         except CoreInputError:
             try:
-                given = np.asarray(value, dtype=np.float64)
+                given = np.array(value, dtype=np.float64)     # aligned, any strides
             except (TypeError, ValueError):
                 raise TaskStackError(f"{what} must be numbers of shape {shape}, got "
                                      f"{value!r}", task=task) from None
@@ -322,8 +322,8 @@ class ControlStep:
                 self._com_jacobian(self._model, self.data, False)
             try:
                 code = self._step(q)
-            except CoreInputError:          # a strided view: its contiguous copy
-                q = np.ascontiguousarray(q)
+            except CoreInputError:          # a strided or unaligned view: a plain copy
+                q = np.array(q, dtype=np.float64, order="C")
                 code = self._step(q)
             if code == _HARD_UNCLEAR:       # a clean answer, its hard levels checked here
                 code = self._code = self._core.code

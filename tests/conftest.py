@@ -123,3 +123,14 @@ def pytest_report_header(config):
     blas = ", ".join(f"{i['internal_api']} {i.get('version')} {i.get('architecture')}"
                      for i in threadpool_info() if i["user_api"] == "blas")
     return f"arithmetic: {built}; BLAS {blas or 'unknown'}"
+
+
+def unaligned(values):
+    """A writable float64 copy of ``values`` one byte off 8-byte alignment (a view of
+    packed bytes: what a binding must refuse by name, never read)."""
+    import numpy as np
+
+    out = np.zeros(values.nbytes + 1, np.uint8)[1:].view(np.float64).reshape(values.shape)
+    out[...] = values
+    assert not out.flags.aligned and out.flags.writeable
+    return out

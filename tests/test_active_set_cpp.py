@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import unaligned
 
 import prioik._core as core
 from prioik import formulations
@@ -281,6 +282,7 @@ def test_binding_refuses_wrong_dtype_shape_and_layout(name):
            "must have shape": arrays[name][:-1],
            "is empty": arrays[name][:0],
            "must be a float64 numpy array": arrays[name].tolist()}
+    bad["is not aligned"] = unaligned(arrays[name])
     if arrays[name].ndim == 2:
         bad["must be C-contiguous"] = np.asfortranarray(arrays[name])
     else:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
+from conftest import unaligned
 
 import prioik
 from prioik.formulations import ConcurrentUseError, FormulationError, Status
@@ -308,6 +309,7 @@ def test_bad_q(g1, panda):
     strided = np.repeat(g1.q0, 2)[::2]                 # a view with strides
     assert np.array_equal(step(strided), step.integrate(g1.q0, step.velocity))
     assert np.array_equal(step(list(g1.q0)), step.integrate(g1.q0, step.velocity))
+    assert np.array_equal(step(unaligned(g1.q0)), step.integrate(g1.q0, step.velocity))
 
 
 def test_bad_references_and_declarations(panda):

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import unaligned
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -414,7 +415,7 @@ def test_a_bad_output_array_is_refused_by_name(which, bad, word):
         bad = np.empty(12)
         bad.setflags(write=False)
     elif isinstance(bad, str) and bad == "unaligned":
-        bad = _unaligned(np.zeros(12))
+        bad = unaligned(np.zeros(12))
     outputs[which] = bad
     with pytest.raises(CoreInputError) as err:
         solver.solve(d.A, d.b, d.sqrt_weight, outputs["x"], outputs["residuals"],
@@ -422,21 +423,13 @@ def test_a_bad_output_array_is_refused_by_name(which, bad, word):
     assert word in str(err.value)
 
 
-def _unaligned(values: np.ndarray) -> np.ndarray:
-    """A writable float64 copy of ``values`` one byte off 8-byte alignment."""
-    out = np.zeros(values.nbytes + 1, np.uint8)[1:].view(np.float64).reshape(values.shape)
-    out[...] = values
-    assert not out.flags.aligned and out.flags.writeable
-    return out
-
-
 def test_an_unaligned_input_array_is_refused_by_name():
     stack = FAMILIES["conflicting"](np.random.default_rng(2), 12, 3)
     d = stack.data
     solver = core.ExtendedJacobian(list(stack.layout.starts), stack.n, rcond=1e-10)
     with pytest.raises(CoreInputError, match="A is not aligned"):
-        solver.solve(_unaligned(d.A), d.b, d.sqrt_weight)
-    res = solver.solve(np.array(_unaligned(d.A)), d.b, d.sqrt_weight)   # an aligned copy
+        solver.solve(unaligned(d.A), d.b, d.sqrt_weight)
+    res = solver.solve(np.array(unaligned(d.A)), d.b, d.sqrt_weight)   # an aligned copy
     assert res.solved
 
 

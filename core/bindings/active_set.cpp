@@ -73,31 +73,7 @@ bool native_float64(const Py_buffer& v) {
 
 /// The leading fields of numpy's array object (array_checks.hpp)
 using prioik::bindings::NumpyArrayFields;
-
-/// numpy.ndarray and the float64 dtype (native byte order), looked up once, when the
-/// module is loaded (bind_active_set; null when numpy cannot be imported: every array then
-/// takes the buffer protocol).
-struct NumpyFloat64 {
-    PyTypeObject* ndarray = nullptr;
-    PyObject* dtype = nullptr;
-
-    static const NumpyFloat64& get() {
-        static const NumpyFloat64 types = [] {
-            NumpyFloat64 t;
-            try {
-                nb::module_ numpy = nb::module_::import_("numpy");
-                nb::object ndarray = numpy.attr("ndarray");
-                nb::object dtype = numpy.attr("dtype")("float64");
-                t.ndarray = reinterpret_cast<PyTypeObject*>(ndarray.release().ptr());
-                t.dtype = dtype.release().ptr();
-            } catch (const nb::python_error&) {
-                t = NumpyFloat64{};
-            }
-            return t;
-        }();
-        return types;
-    }
-};
+using prioik::bindings::NumpyHandles;
 
 /// One input array: an exact numpy.ndarray of float64 read from its fields (a solve's
 /// five arrays then cost no Python call), another buffer exporter through the buffer
@@ -116,16 +92,17 @@ public:
     /// cols ≥ 0, not empty; else InputError naming it (the extended Jacobian's wording).
     const double* read(nb::handle h, const char* name, I64 rows, I64 cols) {
         const std::string what(name);
-        const NumpyFloat64& numpy = NumpyFloat64::get();
+        const NumpyHandles& numpy = NumpyHandles::get();
         if (Py_TYPE(h.ptr()) == numpy.ndarray) {
             const auto* a = reinterpret_cast<const NumpyArrayFields*>(h.ptr());
-            if (a->descr == numpy.dtype) {
+            if (a->descr == numpy.float64) {
                 check_layout(
                     what, a->nd, [&](I64 d) { return static_cast<I64>(a->dimensions[d]); },
                     [&](I64 d, I64 e) {
                         return a->strides[d] == e * static_cast<I64>(sizeof(double));
                     },
                     rows, cols);
+                prioik::bindings::require_aligned<double>(a->data, name);
                 return reinterpret_cast<const double*>(a->data);
             }
         }
@@ -137,6 +114,7 @@ public:
                     what, view_.ndim, [&](I64 d) { return static_cast<I64>(view_.shape[d]); },
                     [&](I64 d, I64 e) { return view_.strides[d] == e * view_.itemsize; },
                     rows, cols);
+                prioik::bindings::require_aligned<double>(view_.buf, name);
                 return static_cast<const double*>(view_.buf);
             }
             PyErr_Clear();    // a buffer it cannot export as strided: read it below
@@ -150,6 +128,7 @@ public:
         check_layout(
             what, static_cast<I64>(a.ndim()), [&](I64 d) { return static_cast<I64>(a.shape(d)); },
             [&](I64 d, I64 e) { return a.stride(d) == e; }, rows, cols);
+        prioik::bindings::require_aligned<double>(a.data(), name);
         return static_cast<const double*>(a.data());
     }
 
@@ -212,11 +191,11 @@ I64 snapshot_size(const ActiveSetSolver& s) { return s.layout().n + 5 * s.layout
 /// The data of `out`, a writable float64 array of `size` (an exact numpy array read from
 /// its fields, as InputArray; anything else through array_checks.hpp's `output`).
 double* snapshot_target(nb::handle out, I64 size) {
-    const NumpyFloat64& numpy = NumpyFloat64::get();
+    const NumpyHandles& numpy = NumpyHandles::get();
     if (Py_TYPE(out.ptr()) == numpy.ndarray) {
         const auto* a = reinterpret_cast<const NumpyArrayFields*>(out.ptr());
         constexpr int writeable = 0x0400;    // NPY_ARRAY_WRITEABLE (numpy/ndarraytypes.h)
-        if (a->descr == numpy.dtype && a->nd == 1 && a->dimensions[0] == size &&
+        if (a->descr == numpy.float64 && a->nd == 1 && a->dimensions[0] == size &&
             a->strides[0] == static_cast<Py_ssize_t>(sizeof(double)) && (a->flags & writeable))
             return reinterpret_cast<double*>(a->data);
     }
@@ -347,7 +326,7 @@ void bind_active_set(nb::module_& m) {
     codes["FLAG_NEAR_AMBIGUOUS"] = static_cast<int>(prioik::FLAG_NEAR_AMBIGUOUS);
     codes["FLAG_STALLED"] = static_cast<int>(prioik::FLAG_STALLED);
     m.attr("ACTIVE_SET_CODES") = codes;
-    NumpyFloat64::get();    // under the import's GIL, before any call can race for it
+    NumpyHandles::get();    // under the import's GIL, before any call can race for it
     bind_certificate(m);
     nb::class_<ActiveSetSolver>(m, "ActiveSetSolver",
                                 "The hierarchical active set prepared for one layout "

@@ -129,6 +129,14 @@ struct NumpyHandles {
   }
 };
 
+// InputError naming `name` unless `data` is aligned for T (a numpy view of packed bytes
+// may not be: reading it is undefined behaviour)
+template <class T>
+void require_aligned(const void* data, const char* name) {
+  if (reinterpret_cast<std::uintptr_t>(data) % alignof(T) != 0)
+    throw prioik::InputError(std::string(name) + " is not aligned (a view of packed bytes)");
+}
+
 // The data of `h` read from its fields when it is exactly a numpy.ndarray of T's dtype
 // (float64 or int64, native byte order), aligned, writable unless T is const,
 // C-contiguous and of `shape` (-1: any extent) with no extent 0 (`got` receives the
@@ -198,8 +206,7 @@ T* checked(nb::handle h, const char* name, std::initializer_list<Index> shape,
                                "is not taken: pass np.ascontiguousarray of it)");
     expect *= static_cast<int64_t>(a.shape(d));
   }
-  if (reinterpret_cast<std::uintptr_t>(a.data()) % alignof(T) != 0)
-    throw prioik::InputError(std::string(name) + " is not aligned (a view of packed bytes)");
+  require_aligned<T>(a.data(), name);
   return static_cast<T*>(a.data());
 }
 

@@ -38,11 +38,19 @@ using AnyFloat = nb::ndarray<double, nb::device::cpu>;
 using AnyFloatRO = nb::ndarray<nb::ro, double, nb::device::cpu>;
 using AnyIndex = nb::ndarray<nb::ro, std::int64_t, nb::device::cpu>;
 
+using prioik::bindings::kNumpyAligned;
+using prioik::bindings::kNumpyWriteable;
 using prioik::bindings::NumpyArrayFields;
+using prioik::bindings::NumpyHandles;
 
-// numpy.ndarray and its float64 dtype, looked up once (null: q takes nanobind's cast)
-PyTypeObject* numpy_ndarray = nullptr;
-PyObject* numpy_float64 = nullptr;
+// an exact numpy.ndarray of float64 (native byte order), aligned, read from its fields;
+// else nullptr
+const NumpyArrayFields* float64_fields(nb::handle h) {
+    const NumpyHandles& numpy = NumpyHandles::get();
+    if (numpy.ndarray == nullptr || Py_TYPE(h.ptr()) != numpy.ndarray) return nullptr;
+    const auto* a = reinterpret_cast<const NumpyArrayFields*>(h.ptr());
+    return a->descr == numpy.float64 && (a->flags & kNumpyAligned) ? a : nullptr;
+}
 
 std::string shape_text(const std::vector<Index>& got) {
     std::string out = "(";
@@ -153,12 +161,9 @@ prioik::ControlStep& step_of(PyControlStep& s) {
 
 // q as the step reads it: a C-contiguous float64 numpy array of n_q entries
 const double* q_of(nb::handle q, Index nq) {
-    if (numpy_ndarray != nullptr && Py_TYPE(q.ptr()) == numpy_ndarray) {
-        const auto* a = reinterpret_cast<const NumpyArrayFields*>(q.ptr());
-        if (a->descr == numpy_float64 && a->nd == 1 && a->dimensions[0] == nq &&
-            (nq <= 1 || a->strides[0] == 8))
-            return reinterpret_cast<const double*>(a->data);
-    }
+    const NumpyArrayFields* a = float64_fields(q);
+    if (a != nullptr && a->nd == 1 && a->dimensions[0] == nq && (nq <= 1 || a->strides[0] == 8))
+        return reinterpret_cast<const double*>(a->data);
     throw InputError("q must be a C-contiguous float64 numpy array of " + std::to_string(nq) +
                      " entries");
 }
@@ -219,18 +224,13 @@ void build(PyControlStep* self, nb::handle solver, nb::handle A, nb::handle b,
 // < 0) or (rows, cols), any strides, read in C order: the index of value's first entry
 // that is not finite (nothing written), or -1. Anything else raises InputError.
 Index put_reference(nb::handle buffer, Index offset, nb::handle value, Index rows, Index cols) {
-    auto fields = [](nb::handle h) -> const NumpyArrayFields* {
-        if (numpy_ndarray == nullptr || Py_TYPE(h.ptr()) != numpy_ndarray) return nullptr;
-        const auto* a = reinterpret_cast<const NumpyArrayFields*>(h.ptr());
-        return a->descr == numpy_float64 ? a : nullptr;
-    };
     const Index ncols = cols < 0 ? 1 : cols;
-    const NumpyArrayFields* out = fields(buffer);
+    const NumpyArrayFields* out = float64_fields(buffer);
     if (out == nullptr || out->nd != 1 || (out->dimensions[0] > 1 && out->strides[0] != 8) ||
-        !(out->flags & 0x0400) || rows < 0 || offset < 0 ||
+        !(out->flags & kNumpyWriteable) || rows < 0 || offset < 0 ||
         offset + rows * ncols > out->dimensions[0])
         throw InputError("buffer must be a writable float64 vector holding the reference");
-    const NumpyArrayFields* in = fields(value);
+    const NumpyArrayFields* in = float64_fields(value);
     if (in == nullptr) throw InputError("the reference must be a float64 numpy array");
     const bool fits = cols < 0 ? in->nd == 1 && in->dimensions[0] == rows
                                : in->nd == 2 && in->dimensions[0] == rows &&
@@ -252,15 +252,7 @@ Index put_reference(nb::handle buffer, Index offset, nb::handle value, Index row
 }  // namespace
 
 void bind_control_step(nb::module_& m) {
-    try {
-        nb::module_ numpy = nb::module_::import_("numpy");
-        nb::object ndarray = numpy.attr("ndarray");
-        numpy_ndarray = reinterpret_cast<PyTypeObject*>(ndarray.release().ptr());
-        nb::object float64 = numpy.attr("dtype")("float64");
-        numpy_float64 = float64.release().ptr();
-    } catch (const nb::python_error&) {
-        numpy_ndarray = nullptr;
-    }
+    NumpyHandles::get();    // under the import's GIL, before any call can race for it
     auto a = [](const char* name) { return nb::arg(name).none(); };
     m.def("put_reference", &put_reference, a("buffer"), nb::arg("offset"), a("value"),
           nb::arg("rows"), nb::arg("cols"),
