@@ -57,7 +57,7 @@ def _active_set_kernel(solver) -> Callable[[Any], np.ndarray]:
     set); returns ``x`` (a view of its result)."""
     from prioik._core import ACTIVE_SET_CODES as codes
     impl = solver._impl
-    twin = type(impl)(solver.layout, solver.options)._cpp
+    twin = type(impl)(solver.layout, solver.settings)._cpp
     equality_first, active_set, x = twin.equality_first, twin.solve, twin.x
     try_first = impl._try_first
     not_tried = codes["NOT_TRIED"]

@@ -136,7 +136,8 @@ class MassMatrixPrepared(contract.Prepared):
 
     Args:
         layout: The stack layout (equality tasks only; the registry checked it).
-        options: Every option of the formulation's ``OPTIONS``, validated.
+        settings: The formulation's settings (every option of its ``OPTIONS``,
+            validated).
 
     Raises:
         FormulationError: ``rcond`` is negative or not finite, or ``kernel="cpp"`` where
@@ -147,12 +148,12 @@ class MassMatrixPrepared(contract.Prepared):
     #: the formulation's registry name (in messages)
     name: ClassVar[str]
 
-    def __init__(self, layout: StackLayout, options: dict[str, Any]) -> None:
+    def __init__(self, layout: StackLayout, settings: Any) -> None:
         self.layout = layout
-        self.options = options
-        self.kernel = resolve_kernel(options["kernel"])
-        check_nonnegative(rcond=options["rcond"])
-        self.rcond = float(options["rcond"])
+        self.settings = settings
+        self.kernel = resolve_kernel(settings.kernel)
+        check_nonnegative(rcond=settings.rcond)
+        self.rcond = float(settings.rcond)
         self._cpp = self.kernel == "cpp"
         if self._cpp:
             self._core = self.compiled_solver([int(s) for s in layout.starts], layout.n)
@@ -170,15 +171,17 @@ class MassMatrixPrepared(contract.Prepared):
         :func:`mass_matrix_outcome`)."""
         raise NotImplementedError
 
-    def solve(self, data: StackData, options: dict[str, Any] | None = None) -> Outcome:
-        """Solve one stack of the layout (``options``: this call's, else the prepared ones).
+    def solve(self, data: StackData, settings: Any = None) -> Outcome:
+        """Solve one stack of the layout (``settings``: this call's, else the prepared
+        ones).
 
         Raises:
             FormulationError: no ``mass_matrix``, or one that is not positive definite.
             TaskStackError: a value is not finite (naming the task, level and row).
         """
-        options = options or self.options
-        mass, bias = options["mass_matrix"], options["bias"]
+        if settings is None:
+            settings = self.settings
+        mass, bias = settings.mass_matrix, settings.bias
         if mass is None:
             raise FormulationError(f"formulation {self.name!r} needs mass_matrix=M")
         if not self._cpp:
@@ -186,5 +189,5 @@ class MassMatrixPrepared(contract.Prepared):
         M = np.ascontiguousarray(mass, dtype=np.float64)
         out = self.outcome(solve_compiled(self._core, data, M), M, bias)
         if out is None:
-            return solve_rescaled(lambda d: self.solve(d, options), data)
+            return solve_rescaled(lambda d: self.solve(d, settings), data)
         return out

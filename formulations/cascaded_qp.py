@@ -508,8 +508,14 @@ class Prepared(contract.StackPrepared):
     name = NAME
     capabilities = CAPABILITIES
 
-    def solve_stack(self, stack: TaskStack, options: dict[str, Any]) -> Outcome:
-        return solve(stack, **options)
+    def solve_stack(self, stack: TaskStack, settings: Any) -> Outcome:
+        s = settings
+        return solve(stack, solver=s.solver, tolerance=s.tolerance,
+                     backend_options=s.backend_options, fixing=s.fixing, metric=s.metric,
+                     rcond=s.rcond, regularization=s.regularization,
+                     on_infeasible=s.on_infeasible, infeasibility_tol=s.infeasibility_tol,
+                     margin=s.margin, fix_active=s.fix_active, level_damping=s.level_damping,
+                     certify=s.certify)
 
 
 #: the plugin (:mod:`prioik.formulations.registry`)

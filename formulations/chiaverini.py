@@ -84,7 +84,7 @@ def solve(stack: TaskStack, **options) -> Outcome:
     """Chiaverini's task priority: :class:`Prepared` for the stack's layout, then its
     :meth:`Prepared.solve` (``kernel`` picks the compiled or the readable path)."""
     opts = validate_options(NAME, OPTIONS, options, stack.n)
-    return Prepared(stack.layout, opts).solve(stack.data)
+    return Prepared(stack.layout, FORMULATION.settings_of(opts)).solve(stack.data)
 
 
 def solve_readable(stack: TaskStack, *, damping: float, rcond: float) -> Outcome:
@@ -128,21 +128,22 @@ class Prepared(contract.Prepared):
 
     Args:
         layout: The stack layout (equality tasks only; the registry checked it).
-        options: Every option of :data:`OPTIONS`, validated.
+        settings: :data:`FORMULATION`'s settings (every option of :data:`OPTIONS`,
+            validated).
     """
 
-    def __init__(self, layout: StackLayout, options: dict) -> None:
+    def __init__(self, layout: StackLayout, settings: Any) -> None:
         self.layout = layout
-        self.kernel = resolve_kernel(options["kernel"])
-        check_nonnegative(damping=options["damping"], rcond=options["rcond"])
-        self.damping = float(options["damping"])
-        self.rcond = float(options["rcond"])
+        self.kernel = resolve_kernel(settings.kernel)
+        check_nonnegative(damping=settings.damping, rcond=settings.rcond)
+        self.damping = float(settings.damping)
+        self.rcond = float(settings.rcond)
         self._cpp = self.kernel == "cpp"
         if self._cpp:
             self._core = _core.ChiaveriniSolver([int(s) for s in layout.starts], layout.n,
                                                 rcond=self.rcond, damping=self.damping)
 
-    def solve(self, data: StackData, options: dict[str, Any] | None = None) -> Outcome:
+    def solve(self, data: StackData, settings: Any = None) -> Outcome:
         """Solve one stack of the layout.
 
         Raises:

@@ -26,7 +26,7 @@ import numpy as np
 
 from prioik.hierarchy import StackData, StackLayout, TaskStack, UnsupportedTaskError
 
-from .base import Capabilities, CheckRequest, Outcome, in_original_units
+from .base import Capabilities, CheckRequest, FormulationError, Outcome, in_original_units
 from .options import Option, settings_class
 
 #: what a batched kernel gives (:meth:`Prepared.solve_batch`): the answers ``X`` (one row
@@ -68,8 +68,9 @@ def check_support(name: str, caps: Capabilities, stack: TaskStack) -> None:
 class Prepared(abc.ABC):
     """A formulation prepared for one stack layout: what
     :class:`~prioik.formulations.PreparedSolver` calls (one thread at a time; it enforces
-    it). A subclass is built as ``Prepared(layout, options)`` with every option of its
-    formulation validated.
+    it). A subclass is built as ``Prepared(layout, settings)``: ``settings`` is an instance
+    of its formulation's :attr:`Formulation.settings` (frozen, one typed field per option,
+    every value validated), read by name (``settings.rcond``).
 
     Attributes:
         compiled: :meth:`solve_checked` reads the data's arrays in a compiled kernel and
@@ -82,14 +83,15 @@ class Prepared(abc.ABC):
     accepts_step_options: ClassVar[bool] = False
 
     @abc.abstractmethod
-    def solve(self, data: StackData, options: dict[str, Any] | None = None) -> Outcome:
+    def solve(self, data: StackData, settings: Any = None) -> Outcome:
         """Solve one stack of the layout (its data; the layout is checked by the caller).
 
         Args:
             data: The rows.
-            options: Every option of this call (validated), when the formulation
-                :attr:`accepts_step_options` and a step gave some; ``None``: the
-                prepared ones.
+            settings: The settings of this call (the prepared ones with the step's
+                options over them, ``dataclasses.replace``, validated), when the
+                formulation :attr:`accepts_step_options` and a step gave some;
+                ``None``: the prepared ones.
         """
 
     def solve_checked(self, data: StackData) -> Outcome | tuple:
@@ -136,21 +138,23 @@ class StackPrepared(Prepared):
     #: what it can take
     capabilities: ClassVar[Capabilities]
 
-    def __init__(self, layout: StackLayout, options: dict[str, Any]) -> None:
+    def __init__(self, layout: StackLayout, settings: Any) -> None:
         self.layout = layout
-        self.options = options
+        #: the formulation's settings (:attr:`Formulation.settings`) fixed at prepare
+        self.settings = settings
 
     @abc.abstractmethod
-    def solve_stack(self, stack: TaskStack, options: dict[str, Any]) -> Outcome:
-        """The plugin's solve of one (checked, equilibrated) stack with ``options``."""
+    def solve_stack(self, stack: TaskStack, settings: Any) -> Outcome:
+        """The plugin's solve of one (checked, equilibrated) stack with ``settings`` (an
+        instance of its :attr:`Formulation.settings`)."""
 
-    def solve(self, data: StackData, options: dict[str, Any] | None = None) -> Outcome:
+    def solve(self, data: StackData, settings: Any = None) -> Outcome:
         stack = data.as_stack()
         check_support(self.name, self.capabilities, stack)
         levels: list[int] = []
         if self.capabilities.exact:     # levels of extreme scale rescaled
             stack, levels = stack.equilibrated()
-        out = self.solve_stack(stack, options or self.options)
+        out = self.solve_stack(stack, self.settings if settings is None else settings)
         if levels:
             out = in_original_units(out, data, levels)
         return out
@@ -192,10 +196,23 @@ class Formulation:
     prepared: type[Prepared]
     backends: Callable[[], list[str]] = _no_backends
 
-    def prepare(self, layout: StackLayout, options: dict[str, Any]) -> Prepared:
-        """Its prepared solver for ``layout`` with ``options`` (every option, validated:
-        :func:`~prioik.formulations.options.validate_options`)."""
-        return self.prepared(layout, options)  # type: ignore[call-arg]
+    def prepare(self, layout: StackLayout, settings: Any) -> Prepared:
+        """Its prepared solver for ``layout`` with ``settings``, an instance of
+        :attr:`settings` (:meth:`settings_of` the validated options).
+
+        Raises:
+            FormulationError: ``settings`` is not an instance of :attr:`settings`.
+        """
+        if not isinstance(settings, self.settings):
+            raise FormulationError(f"formulation {self.name!r} is prepared with its "
+                                   f"{self.settings.__name__}, got "
+                                   f"{type(settings).__name__}")
+        return self.prepared(layout, settings)  # type: ignore[call-arg]
+
+    def settings_of(self, options: Mapping[str, Any]) -> Any:
+        """The :attr:`settings` instance holding ``options``: every declared option,
+        validated (what :func:`~prioik.formulations.options.validate_options` gives)."""
+        return self.settings(**options)
 
     @property
     def batched(self) -> bool:

@@ -257,8 +257,12 @@ class Prepared(contract.StackPrepared):
     name = NAME
     capabilities = CAPABILITIES
 
-    def solve_stack(self, stack: TaskStack, options: dict[str, Any]) -> Outcome:
-        return solve(stack, **options)
+    def solve_stack(self, stack: TaskStack, settings: Any) -> Outcome:
+        s = settings
+        return solve(stack, solver=s.solver, backend_options=s.backend_options,
+                     fixing=s.fixing, metric=s.metric, rcond=s.rcond, margin=s.margin,
+                     on_infeasible=s.on_infeasible, infeasibility_tol=s.infeasibility_tol,
+                     certify=s.certify)
 
 
 #: the plugin (:mod:`prioik.formulations.registry`)

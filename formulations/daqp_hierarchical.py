@@ -265,8 +265,11 @@ class Prepared(contract.StackPrepared):
     name = NAME
     capabilities = CAPABILITIES
 
-    def solve_stack(self, stack: TaskStack, options: dict[str, Any]) -> Outcome:
-        return solve(stack, **options)
+    def solve_stack(self, stack: TaskStack, settings: Any) -> Outcome:
+        s = settings
+        return solve(stack, primal_tol=s.primal_tol, dual_tol=s.dual_tol,
+                     compress_levels=s.compress_levels, check=s.check, rcond=s.rcond,
+                     settings=s.settings)
 
 
 #: the plugin (:mod:`prioik.formulations.registry`)

@@ -208,7 +208,7 @@ def solve(stack: TaskStack, **options) -> Outcome:
     """Solve the extended system (eq. 17) for ``x``: :class:`Prepared` for the stack's
     layout, then its :meth:`Prepared.solve` (see the module docstring)."""
     opts = validate_options(NAME, OPTIONS, options, stack.n)
-    return Prepared(stack.layout, opts).solve(stack.data)
+    return Prepared(stack.layout, FORMULATION.settings_of(opts)).solve(stack.data)
 
 
 class Prepared(contract.Prepared):
@@ -226,7 +226,8 @@ class Prepared(contract.Prepared):
 
     Args:
         layout: The stack layout (equality tasks only).
-        options: Every option of :data:`OPTIONS`, validated.
+        settings: :data:`FORMULATION`'s settings (every option of :data:`OPTIONS`,
+            validated).
 
     Raises:
         UnsupportedTaskError: the layout holds an inequality task.
@@ -234,22 +235,22 @@ class Prepared(contract.Prepared):
             the layout does not have.
     """
 
-    def __init__(self, layout: StackLayout, options: dict) -> None:
+    def __init__(self, layout: StackLayout, settings: Any) -> None:
         for i, level in enumerate(layout.levels):
             for name, _, kind in level:
                 if kind != "equality":
                     raise UnsupportedTaskError("inequality tasks are not supported",
                                                formulation=NAME, task=name, level=i)
         self.layout = layout
-        self.kernel = _resolve_kernel(options["kernel"], layout.n)
-        self.nullspace = options["nullspace"]
-        self.damping = float(options["damping"])
-        self.z_basis = str(options["z_basis"])
-        self.rcond = float(options["rcond"])
-        self.singular_threshold = float(options["singular_threshold"])
-        selective = float(options["level_damping"]) > 0 and self.singular_threshold > 0
-        self.level_damping = float(options["level_damping"]) if selective else 0.0
-        self.step_bound = level_step_bounds(layout, options["step_bound"])
+        self.kernel = _resolve_kernel(settings.kernel, layout.n)
+        self.nullspace = settings.nullspace
+        self.damping = float(settings.damping)
+        self.z_basis = str(settings.z_basis)
+        self.rcond = float(settings.rcond)
+        self.singular_threshold = float(settings.singular_threshold)
+        selective = float(settings.level_damping) > 0 and self.singular_threshold > 0
+        self.level_damping = float(settings.level_damping) if selective else 0.0
+        self.step_bound = level_step_bounds(layout, settings.step_bound)
         self.step_bound.setflags(write=False)
         self._bounded = bool(self.step_bound.any())
         if (selective or self._bounded) and (self.damping > 0 or self.nullspace != "qr"):
@@ -268,7 +269,7 @@ class Prepared(contract.Prepared):
                 level_damping=self.level_damping, singular_threshold=self.singular_threshold,
                 step_bound=self.step_bound.tolist())
 
-    def solve(self, data: StackData, options: dict[str, Any] | None = None) -> Outcome:
+    def solve(self, data: StackData, settings: Any = None) -> Outcome:
         """Solve one stack of the layout (its data; the registry checked the layout).
 
         Raises:

@@ -41,6 +41,7 @@ The algorithm, its hard cases, tolerances and complexity: ``docs/active-set.md``
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from functools import partial
 from types import SimpleNamespace
@@ -209,7 +210,7 @@ def solve(stack: TaskStack, **options) -> Outcome:
     """The lexicographic optimum of ``stack`` (a cold solve): :class:`Prepared` for the
     stack's layout, then its :meth:`Prepared.solve` (see the module docstring)."""
     opts = validate_options(NAME, OPTIONS, options, stack.n)
-    return Prepared(stack.layout, opts).solve(stack.data)
+    return Prepared(stack.layout, FORMULATION.settings_of(opts)).solve(stack.data)
 
 
 class Prepared(contract.Prepared):
@@ -227,7 +228,8 @@ class Prepared(contract.Prepared):
 
     Args:
         layout: The stack layout (equality and inequality tasks).
-        options: Every option of :data:`OPTIONS`, validated.
+        settings: :data:`FORMULATION`'s settings (every option of :data:`OPTIONS`,
+            validated).
         refine_rounds: How many times a rejected flagged answer is re-solved at finer
             tolerances (:meth:`_refined`; :data:`REFINE_ROUNDS`).
 
@@ -238,14 +240,15 @@ class Prepared(contract.Prepared):
     #: its solve_checked is the compiled kernel's, reading the data's arrays
     compiled = True
 
-    def __init__(self, layout: StackLayout, options: dict, *,
+    def __init__(self, layout: StackLayout, settings: Any, *,
                  refine_rounds: int | None = None) -> None:
         self.layout = layout
-        self.rcond = float(options["rcond"])
-        self.primal_tol = float(options["primal_tol"])
-        self.dual_tol = float(options["dual_tol"])
-        self.max_iter = int(options["max_iter"])
-        self.warm_start = bool(options["warm_start"])
+        self.settings = settings
+        self.rcond = float(settings.rcond)
+        self.primal_tol = float(settings.primal_tol)
+        self.dual_tol = float(settings.dual_tol)
+        self.max_iter = int(settings.max_iter)
+        self.warm_start = bool(settings.warm_start)
         #: the compiled kernel: "cpp"
         self.kernel = "cpp"
         # the equality-first try needs the equality rows' solve (an inequality-only stack
@@ -301,7 +304,7 @@ class Prepared(contract.Prepared):
         """Forget the kept working sets (the next solve starts cold)."""
         self._cpp.reset()
 
-    def solve(self, data: StackData, options: dict[str, Any] | None = None) -> Outcome:
+    def solve(self, data: StackData, settings: Any = None) -> Outcome:
         """Solve one stack of the layout (its data; the registry checked the layout).
 
         Raises:
@@ -459,10 +462,10 @@ class Prepared(contract.Prepared):
         tolerances, refining once less itself; prepared at the first refinement (a
         one-shot solve that needs none does not pay it) and kept for the next."""
         if self._refining is None:
-            self._refining = Prepared(self.layout, {
-                "rcond": self.rcond, "primal_tol": self.primal_tol * REFINE,
-                "dual_tol": self.dual_tol * REFINE, "max_iter": self.max_iter,
-                "warm_start": False}, refine_rounds=self._refine - 1)
+            self._refining = Prepared(self.layout, dataclasses.replace(
+                self.settings, primal_tol=self.primal_tol * REFINE,
+                dual_tol=self.dual_tol * REFINE, warm_start=False),
+                refine_rounds=self._refine - 1)
         return self._refining
 
     def _refined(self, data: StackData, flagged: dict[str, list[int]], rejected: str

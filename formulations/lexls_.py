@@ -97,7 +97,7 @@ _TERMINATION = {_lexls.PROBLEM_SOLVED: "solved",
 def solve(stack: TaskStack, **options) -> Outcome:
     """lexls's answer to ``stack`` (a cold solve; see the module docstring)."""
     opts = validate_options(NAME, OPTIONS, options, stack.n)
-    return Prepared(stack.layout, opts).solve(stack.data)
+    return Prepared(stack.layout, FORMULATION.settings_of(opts)).solve(stack.data)
 
 
 class Prepared(contract.Prepared):
@@ -106,20 +106,21 @@ class Prepared(contract.Prepared):
 
     Args:
         layout: The stack layout.
-        options: Every option of :data:`OPTIONS`, validated.
+        settings: :data:`FORMULATION`'s settings (every option of :data:`OPTIONS`,
+            validated).
     """
 
-    def __init__(self, layout: StackLayout, options: dict) -> None:
+    def __init__(self, layout: StackLayout, settings: Any) -> None:
         self.layout = layout
-        self.hot_start = bool(options["hot_start"])
-        self.check = bool(options["check"])
+        self.hot_start = bool(settings.hot_start)
+        self.check = bool(settings.check)
         #: the verification stage checks the levels only (lexls has no tie-break)
         self._check = CheckRequest(auto=self.check, minimum_norm=False)
-        self.max_factorizations = int(options["max_factorizations"])
+        self.max_factorizations = int(settings.max_factorizations)
         starts = np.asarray(layout.starts)
         self._solver = _lexls.LexlsSolver(layout.n, np.diff(starts).astype(int).tolist(),
                                           self.max_factorizations,
-                                          float(options["tol_linear_dependence"]))
+                                          float(settings.tol_linear_dependence))
         m = int(starts[-1])
         self._eq = np.asarray(layout.row_is_equality, dtype=bool)
         self._A = np.empty((m, layout.n))
@@ -129,7 +130,7 @@ class Prepared(contract.Prepared):
         """Forget the previous solve (the next one is cold)."""
         self._solver.reset()
 
-    def solve(self, data: StackData, options: dict[str, Any] | None = None) -> Outcome:
+    def solve(self, data: StackData, settings: Any = None) -> Outcome:
         """lexls on the data's rows, weighted by ``√w`` (see the module docstring).
 
         Raises:

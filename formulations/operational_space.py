@@ -147,7 +147,7 @@ def solve(stack: TaskStack, **options) -> Outcome:
     """Prioritized operational-space control: :class:`Prepared` for the stack's layout,
     then its :meth:`Prepared.solve` (``kernel`` picks the compiled or the readable path)."""
     opts = validate_options(NAME, OPTIONS, options, stack.n)
-    return Prepared(stack.layout, opts).solve(stack.data)
+    return Prepared(stack.layout, FORMULATION.settings_of(opts)).solve(stack.data)
 
 
 def solve_readable(stack: TaskStack, *, mass_matrix, bias, rcond: float, reproject: bool
@@ -203,14 +203,15 @@ class Prepared(MassMatrixPrepared):
 
     Args:
         layout: The stack layout (equality tasks only; the registry checked it).
-        options: Every option of :data:`OPTIONS`, validated.
+        settings: :data:`FORMULATION`'s settings (every option of :data:`OPTIONS`,
+            validated).
     """
 
     name = NAME
 
-    def __init__(self, layout: StackLayout, options: dict) -> None:
-        self.reproject = bool(options["reproject"])
-        super().__init__(layout, options)
+    def __init__(self, layout: StackLayout, settings: Any) -> None:
+        self.reproject = bool(settings.reproject)
+        super().__init__(layout, settings)
 
     def compiled_solver(self, starts: list[int], n: int) -> Any:
         return _core.OperationalSpaceSolver(starts, n, rcond=self.rcond,

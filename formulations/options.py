@@ -2,8 +2,9 @@
 
 Each plugin's ``OPTIONS`` maps an option name to an :class:`Option` (default, type,
 range or choices, description). The registry validates every option once, at the
-boundary (:func:`prioik.solve`, :func:`prioik.prepare`), and the plugin receives clean
-values; ``prioik list`` and ``--help`` print the same declarations.
+boundary (:func:`prioik.solve`, :func:`prioik.prepare`), and the plugin receives them
+clean, as an instance of its typed settings dataclass (:func:`settings_class`);
+``prioik list`` and ``--help`` print the same declarations.
 """
 
 from __future__ import annotations

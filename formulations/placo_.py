@@ -194,8 +194,9 @@ class Prepared(contract.StackPrepared):
     name = NAME
     capabilities = CAPABILITIES
 
-    def solve_stack(self, stack: TaskStack, options: dict[str, Any]) -> Outcome:
-        return solve(stack, **options)
+    def solve_stack(self, stack: TaskStack, settings: Any) -> Outcome:
+        return solve(stack, weight_ratio=settings.weight_ratio,
+                     regularization=settings.regularization, rcond=settings.rcond)
 
 
 #: the plugin (:mod:`prioik.formulations.registry`)

@@ -24,6 +24,7 @@ answer is demoted to ``approximate``.
 
 from __future__ import annotations
 
+import dataclasses
 import threading
 import time
 from collections.abc import Sequence
@@ -135,6 +136,9 @@ class PreparedSolver:
         formulation: Registry name.
         layout: The layout it solves.
         options: Every option's value (validated; defaults filled in).
+        settings: The same values as the formulation's typed settings
+            (:attr:`~prioik.formulations.contract.Formulation.settings`), what its
+            prepared solver was built with.
         verify: The verification mode.
         compiled: The plugin solves the data's arrays in a compiled kernel.
     """
@@ -150,13 +154,14 @@ class PreparedSolver:
         self.formulation = formulation.name
         self.layout = layout
         self.options = options
+        self.settings = formulation.settings_of(options)
         self._given = dict(given)
         self._plugin = formulation
         self._lock = threading.Lock()
         self._n = layout.n
         self._sqrt_n = float(np.sqrt(layout.n))
         self._needs_mass_matrix = formulation.capabilities.needs_mass_matrix
-        self._impl = formulation.prepare(layout, options)
+        self._impl = formulation.prepare(layout, self.settings)
         # a plugin's solve_checked may give its verified answers as a tuple (no Outcome)
         self._impl_solve = self._impl.solve_checked
         #: whether the plugin's prepared solver reads the data's arrays in a compiled
@@ -346,19 +351,20 @@ class PreparedSolver:
         finally:
             self._release()
 
-    def _step_options(self, step_options: dict) -> dict | None:
-        """The options of one call: the prepared ones with ``step_options`` over them
-        (validated), or ``None`` when there are none; a formulation that needs
-        ``mass_matrix`` refuses a call without one."""
+    def _step_options(self, step_options: dict) -> Any:
+        """The settings of one call: the prepared ones with ``step_options`` over them
+        (validated; ``dataclasses.replace``), or ``None`` when there are none; a
+        formulation that needs ``mass_matrix`` refuses a call without one."""
         merged = None
         if step_options:
             if not self._impl.accepts_step_options:
                 raise FormulationError(f"formulation {self.formulation!r} fixes its options "
                                        f"when prepared; prepare another solver for "
                                        f"{', '.join(step_options)}")
-            merged = dict(self.options)
-            merged.update(_step_options(self._plugin, self._n, step_options))
-        if self._needs_mass_matrix and (merged or self.options).get("mass_matrix") is None:
+            merged = dataclasses.replace(self.settings, **_step_options(self._plugin, self._n,
+                                                                        step_options))
+        if self._needs_mass_matrix and \
+                (self.settings if merged is None else merged).mass_matrix is None:
             raise FormulationError(f"formulation {self.formulation!r} needs mass_matrix=M "
                                    f"(the {self._n}x{self._n} joint-space inertia matrix, "
                                    f"SPD)")

@@ -141,7 +141,7 @@ def solve(stack: TaskStack, **options) -> Outcome:
     """The nested-SVD reference: :class:`Prepared` for the stack's layout, then its
     :meth:`Prepared.solve` (``kernel`` picks the compiled or the readable path)."""
     opts = validate_options(NAME, OPTIONS, options, stack.n)
-    return Prepared(stack.layout, opts).solve(stack.data)
+    return Prepared(stack.layout, FORMULATION.settings_of(opts)).solve(stack.data)
 
 
 def solve_readable(stack: TaskStack, *, rcond: float, metric, level_damping) -> Outcome:
@@ -313,19 +313,20 @@ class Prepared(contract.Prepared):
 
     Args:
         layout: The stack layout (equality tasks only; the registry checked it).
-        options: Every option of :data:`OPTIONS`, validated.
+        settings: :data:`FORMULATION`'s settings (every option of :data:`OPTIONS`,
+            validated).
 
     Raises:
         FormulationError: ``level_damping`` does not hold one value ``≥ 0`` per level.
     """
 
-    def __init__(self, layout: StackLayout, options: dict) -> None:
+    def __init__(self, layout: StackLayout, settings: Any) -> None:
         self.layout = layout
-        self.kernel = resolve_kernel(options["kernel"])
-        self.rcond = float(options["rcond"])
-        self.metric = options["metric"]
-        self.level_damping = options["level_damping"]
-        self.mu2 = level_damping_values(layout.k, options["level_damping"])
+        self.kernel = resolve_kernel(settings.kernel)
+        self.rcond = float(settings.rcond)
+        self.metric = settings.metric
+        self.level_damping = settings.level_damping
+        self.mu2 = level_damping_values(layout.k, settings.level_damping)
         self._cpp = self.kernel == "cpp"
         if self._cpp:
             metric = (None if self.metric is None
@@ -339,7 +340,7 @@ class Prepared(contract.Prepared):
         return solve_readable(stack, rcond=self.rcond, metric=self.metric,
                               level_damping=self.level_damping)
 
-    def solve(self, data: StackData, options: dict[str, Any] | None = None) -> Outcome:
+    def solve(self, data: StackData, settings: Any = None) -> Outcome:
         """Solve one stack of the layout.
 
         Raises:

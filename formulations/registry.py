@@ -3,11 +3,13 @@
 A plugin is a module that defines ``FORMULATION``, a
 :class:`~prioik.formulations.contract.Formulation`: its name, one-line description,
 :class:`Capabilities`, typed ``{option: Option(...)}`` (:mod:`.options`, the only options
-it accepts, validated once by the registry: the plugin receives every option, clean),
-the back-ends it can use here, and its own
+it accepts, validated once by the registry), the back-ends it can use here, and its own
 :class:`~prioik.formulations.contract.Prepared` subclass (``solve(data)``, and when it
 has them ``solve_checked``, ``solve_batch``, ``reset``), built once per layout by
-:func:`prepare`. Adding a formulation is its module and one line of :data:`PLUGINS`.
+:func:`prepare` as ``Prepared(layout, settings)``: ``settings`` is an instance of the
+formulation's typed settings dataclass
+(:attr:`~prioik.formulations.contract.Formulation.settings`) holding every option,
+clean. Adding a formulation is its module and one line of :data:`PLUGINS`.
 
 The rows a formulation adds to prioik's reports are declared by the benchmarks
 (:mod:`prioik.benchmarks.report_rows`), not here: a new plugin appears in every report

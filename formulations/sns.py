@@ -229,7 +229,7 @@ def solve(stack: TaskStack, **options) -> Outcome:
     """SNS on ``stack``: :class:`Prepared` for the stack's layout, then its
     :meth:`Prepared.solve` (``kernel`` picks the compiled or the readable path)."""
     opts = validate_options(NAME, OPTIONS, options, stack.n)
-    return Prepared(stack.layout, opts).solve(stack.data)
+    return Prepared(stack.layout, FORMULATION.settings_of(opts)).solve(stack.data)
 
 
 def solve_readable(stack: TaskStack, *, rcond: float = DEFAULT_RCOND,
@@ -391,19 +391,20 @@ class Prepared(contract.Prepared):
 
     Args:
         layout: The stack layout.
-        options: Every option of :data:`OPTIONS`, validated.
+        settings: :data:`FORMULATION`'s settings (every option of :data:`OPTIONS`,
+            validated).
 
     Raises:
         UnsupportedTaskError: see :func:`check_bounds_layout`.
         FormulationError: an option out of its range.
     """
 
-    def __init__(self, layout: StackLayout, options: dict) -> None:
+    def __init__(self, layout: StackLayout, settings: Any) -> None:
         self.layout = layout
-        self.kernel = resolve_kernel(options["kernel"])
-        self.rcond = options["rcond"]
-        self.bound_tolerance = options["bound_tolerance"]
-        self.max_saturations = options["max_saturations"]
+        self.kernel = resolve_kernel(settings.kernel)
+        self.rcond = settings.rcond
+        self.bound_tolerance = settings.bound_tolerance
+        self.max_saturations = settings.max_saturations
         check_saturation_options(self.rcond, self.bound_tolerance, self.max_saturations)
         self.bounds_level = check_bounds_layout(layout)
         self.first = 1 if self.bounds_level == 0 else 0
@@ -415,7 +416,7 @@ class Prepared(contract.Prepared):
                 max_saturations=-1 if self.max_saturations is None else
                 int(self.max_saturations), bounds_level=self.bounds_level == 0)
 
-    def solve(self, data: StackData, options: dict[str, Any] | None = None) -> Outcome:
+    def solve(self, data: StackData, settings: Any = None) -> Outcome:
         """Solve one stack of the layout.
 
         Raises:

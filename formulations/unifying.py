@@ -151,7 +151,7 @@ def solve(stack: TaskStack, **options) -> Outcome:
     """Eq. 40: :class:`Prepared` for the stack's layout, then its :meth:`Prepared.solve`
     (``kernel`` picks the compiled or the readable path)."""
     opts = validate_options(NAME, OPTIONS, options, stack.n)
-    return Prepared(stack.layout, opts).solve(stack.data)
+    return Prepared(stack.layout, FORMULATION.settings_of(opts)).solve(stack.data)
 
 
 def solve_readable(stack: TaskStack, *, mass_matrix, bias, rcond: float) -> Outcome:
@@ -192,7 +192,8 @@ class Prepared(MassMatrixPrepared):
 
     Args:
         layout: The stack layout (equality tasks only; the registry checked it).
-        options: Every option of :data:`OPTIONS`, validated.
+        settings: :data:`FORMULATION`'s settings (every option of :data:`OPTIONS`,
+            validated).
     """
 
     name = NAME

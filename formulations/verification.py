@@ -104,7 +104,7 @@ def lower_point_solver(layout):
     ``layout`` with its default options (:func:`lower_point` resets it before each
     answer: every comparison starts cold, as a freshly prepared one)."""
     opts = validate_options(active_set.NAME, active_set.OPTIONS, {}, layout.n)
-    return active_set.Prepared(layout, opts)
+    return active_set.Prepared(layout, active_set.FORMULATION.settings_of(opts))
 
 
 def lower_point(stack: TaskStack | StackData, x: np.ndarray,

@@ -51,13 +51,16 @@ TOY = "toy_flat_lstsq"
 def stack_formulation(name, solve, capabilities=None, options=None, description=""):
     """A test double of a formulation: a :class:`~prioik.formulations.contract.Formulation`
     whose prepared solver is a :class:`~prioik.formulations.contract.StackPrepared` over
-    ``solve(stack, **options)``."""
+    ``solve(stack, **options)`` (the fields of its settings, by name)."""
+    import dataclasses
+
     from prioik.formulations import Capabilities
     from prioik.formulations.contract import Formulation, StackPrepared
 
     class Prepared(StackPrepared):
-        def solve_stack(self, stack, options):
-            return solve(stack, **options)
+        def solve_stack(self, stack, settings):
+            return solve(stack, **{f.name: getattr(settings, f.name)
+                                   for f in dataclasses.fields(settings)})
 
     Prepared.name = name
     Prepared.capabilities = Capabilities() if capabilities is None else capabilities
@@ -87,10 +90,10 @@ def toy_plugin(monkeypatch):
 
         name = TOY
 
-        def solve_stack(self, stack, options):
+        def solve_stack(self, stack, settings):
             A = np.vstack([t.A for t in stack.tasks])
             b = np.concatenate([t.b for t in stack.tasks])
-            return Outcome(options["scale"] * np.linalg.lstsq(A, b, rcond=None)[0],
+            return Outcome(settings.scale * np.linalg.lstsq(A, b, rcond=None)[0],
                            "approximate")
 
     ToyPrepared.capabilities = capabilities

@@ -153,7 +153,8 @@ def check_cold(stack: TaskStack, what: str) -> bool:
 # ------------------------------------------------------------------ the path exists
 def test_the_solver_is_the_compiled_core():
     stack = random_inequality_hierarchy(np.random.default_rng(3), 8, 3)
-    solver = has.Prepared(stack.layout, dict(_OPTIONS, warm_start=False))
+    solver = has.Prepared(stack.layout,
+                          has.FORMULATION.settings(**_OPTIONS, warm_start=False))
     assert isinstance(solver._cpp, core.ActiveSetSolver)
     out = solver.solve(stack.data)
     np.testing.assert_array_equal(out.x, solver._cpp.x)
@@ -270,7 +271,8 @@ def test_warm_sequences_equal_the_cold_answers(family):
 # ------------------------------------------------------------------ the boundary
 def _solver_and_data():
     stack = random_inequality_hierarchy(np.random.default_rng(5), 6, 3)
-    return has.Prepared(stack.layout, dict(_OPTIONS, warm_start=False))._cpp, stack.data
+    settings = has.FORMULATION.settings(**_OPTIONS, warm_start=False)
+    return has.Prepared(stack.layout, settings)._cpp, stack.data
 
 
 @pytest.mark.parametrize("name", ["A", "b", "lower", "upper", "sqrt_weight"])

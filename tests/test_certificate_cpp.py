@@ -142,7 +142,7 @@ def test_flagged_answers_get_the_oracle_s_verdict_in_the_solver():
         if not _flagged(sol):
             continue
         flagged += 1
-        opts = H.validate_options(H.NAME, H.OPTIONS, {}, stack.n)
+        opts = H.FORMULATION.settings()                  # every option's default
         own = H.Prepared(stack.layout, opts).solve(stack.data)   # the plugin's outcome
         solver = H.Prepared(stack.layout, opts)
 
@@ -279,7 +279,7 @@ def test_the_refining_solver_is_prepared_once():
     """A prepared solver refines with one refining solver (and it with one of its own),
     prepared at the first refinement and kept: not one per rejected answer."""
     stack = load_stack(DATA / "fuzz" / "inequality-7002-1384.json")
-    solver = H.Prepared(stack.layout, H.validate_options(H.NAME, H.OPTIONS, {}, stack.n))
+    solver = H.Prepared(stack.layout, H.FORMULATION.settings())
     assert solver._refining is None
     first = solver.solve(stack.data)
     refiner = solver._refining

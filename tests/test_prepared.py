@@ -96,6 +96,77 @@ def test_prepared_solver_equals_one_off_solves_over_many_stacks(info):
                                rtol=1e-9, atol=1e-12)
 
 
+def _same_value(a, b) -> bool:
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return isinstance(a, np.ndarray) and isinstance(b, np.ndarray) and \
+            np.array_equal(a, b)
+    return bool(a == b)
+
+
+@pytest.mark.parametrize("info", AVAILABLE, ids=lambda f: f.name)
+def test_the_plugin_is_built_with_its_typed_settings(info, monkeypatch):
+    """``Prepared(layout, settings)``: the plugin's prepared solver receives an instance
+    of its own ``Formulation.settings`` (frozen), holding every validated option (the
+    given ones and the defaults), the same object as ``PreparedSolver.settings``; the
+    options mapping stays the same values by name."""
+    import dataclasses
+
+    form = formulations.registry.get(info.name)
+    received = []
+    init = form.prepared.__init__
+
+    def spy(self, layout, settings, *args, **kwargs):
+        received.append(settings)
+        init(self, layout, settings, *args, **kwargs)
+
+    monkeypatch.setattr(form.prepared, "__init__", spy)
+    stack = _stacks_for(info, 1)[0]
+    opts = _options_for(info, stack.n)
+    rcond = {"rcond": 1e-7} if "rcond" in form.options else {}
+    solver = prioik.prepare(stack.layout, info.name, **opts, **rcond)
+    assert len(received) == 1
+    settings = received[0]
+    assert type(settings) is form.settings, type(settings).__name__
+    assert solver.settings is settings
+    assert [f.name for f in dataclasses.fields(settings)] == list(form.options)
+    for name in form.options:
+        assert _same_value(getattr(settings, name), solver.options[name]), name
+    if rcond:
+        assert settings.rcond == 1e-7
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        settings.rcond = 0.5
+    assert solver.solve(stack).status != "failed"
+    with pytest.raises(FormulationError, match=f"{form.settings.__name__}, got dict"):
+        form.prepare(stack.layout, dict(solver.options))
+
+
+@pytest.mark.parametrize("info", [f for f in AVAILABLE if f.capabilities.needs_mass_matrix],
+                         ids=lambda f: f.name)
+def test_step_options_reach_the_plugin_as_its_settings_replaced(info, monkeypatch):
+    """A step's options (``mass_matrix``) reach the plugin's solve as its settings with
+    them replaced (``dataclasses.replace``); the prepared settings are unchanged."""
+    form = formulations.registry.get(info.name)
+    stack = _stacks_for(info, 1)[0]
+    prepared_mass = random_spd(np.random.default_rng(1), stack.n)
+    step_mass = random_spd(np.random.default_rng(2), stack.n)
+    solver = prioik.prepare(stack.layout, info.name, mass_matrix=prepared_mass)
+    seen = []
+    solve = solver._impl.solve
+
+    def spy(data, settings=None):
+        seen.append(settings)
+        return solve(data, settings)
+
+    monkeypatch.setattr(solver._impl, "solve", spy)
+    got = solver.solve(stack, mass_matrix=step_mass)
+    assert type(seen[0]) is form.settings
+    np.testing.assert_array_equal(seen[0].mass_matrix, step_mass)
+    np.testing.assert_array_equal(solver.settings.mass_matrix, prepared_mass)
+    assert seen[0].rcond == solver.settings.rcond
+    want = prioik.solve(stack, info.name, mass_matrix=step_mass)
+    np.testing.assert_array_equal(got.x, want.x)
+
+
 @pytest.mark.parametrize("info", AVAILABLE, ids=lambda f: f.name)
 def test_another_layout_is_refused_naming_both(info):
     stacks = _stacks_for(info, 1)
