@@ -23,8 +23,10 @@ the fastest round's median per path):
   1), ``PostureTask`` (1e-2), ``ConfigurationLimit``, ``VelocityLimit``.
 
 mink's step is ``Configuration.update`` at the state (its MuJoCo kinematics), the map
-of the state to MuJoCo's ``qpos`` and ``solve_ik``; each step of the three computes its
-own kinematics. mink's QP back-end is ``solver`` (default
+of the state to MuJoCo's ``qpos`` and ``solve_ik``; prioik's is timed twice: the writer
+loop (``KinematicState``, the writers, ``solver.solve``) and
+:class:`prioik.robots.ControlStep` over the same tasks (its step integrated too, as
+PlaCo's); each step computes its own kinematics. mink's QP back-end is ``solver`` (default
 :data:`prioik.benchmarks.mink_baseline.DEFAULT_SOLVER`, DAQP).
 """
 
@@ -73,6 +75,33 @@ def _mink(robot, urdf_text: str | None, hand: str, target, feet: dict, solver: s
     return solve, advance
 
 
+def _panda_rows(robot, hand: str):
+    """The Panda reach's levels: joint-limit bounds, the hand, the posture."""
+    from prioik.robots import TaskWriter
+
+    from .panda_step import DT, GAINS
+    rows = TaskWriter(robot, "velocity")
+    rows.add_joint_limits("joint_limits", form="bounds", dt=DT, level=0)
+    rows.add_frame_position("hand", hand, gain=GAINS["hand"], level=1)
+    rows.add_posture("posture", gain=GAINS["posture"], level=2)
+    return rows
+
+
+def _g1_rows(robot, dt: float):
+    """The G1's levels: both feet held and the joint-limit bounds, the left hand, the
+    posture."""
+    from prioik.robots import TaskWriter
+
+    from .balance_step import FEET
+    w = TaskWriter(robot, "velocity")
+    for f in FEET:
+        w.add_contact(f, f, gain=10.0, level=0)
+    w.add_joint_limits("limits", form="bounds", dt=dt, level=0)
+    w.add_frame_position("reach", "left_hand", gain=10.0, level=1)
+    w.add_posture("posture", gain=1.0, level=2)
+    return w
+
+
 def panda_mink_step(steps: int = 300, rounds: int = 7, solver: str | None = None
                     ) -> dict[str, Any]:
     """Median step times (µs) of mink, prioik and PlaCo on the Panda reach with limits
@@ -81,10 +110,10 @@ def panda_mink_step(steps: int = 300, rounds: int = 7, solver: str | None = None
     import pinocchio as pin
 
     import prioik
-    from prioik.robots import KinematicState, TaskWriter, load
+    from prioik.robots import ControlStep, KinematicState, load
 
     from .mink_baseline import DEFAULT_SOLVER
-    from .panda_step import DT, GAINS, HAND_TARGET, _rounds, placo_panda
+    from .panda_step import DT, HAND_TARGET, _rounds, placo_panda
 
     solver = solver or DEFAULT_SOLVER
     robot = load("panda")
@@ -95,11 +124,11 @@ def panda_mink_step(steps: int = 300, rounds: int = 7, solver: str | None = None
 
     data = model.createData()
     zero = np.zeros(nv)
-    rows = TaskWriter(robot, "velocity")
-    rows.add_joint_limits("joint_limits", form="bounds", dt=DT, level=0)
-    rows.add_frame_position("hand", hand, gain=GAINS["hand"], level=1)
-    rows.add_posture("posture", gain=GAINS["posture"], level=2)
+    rows = _panda_rows(robot, hand)
     solver_ = prioik.prepare(rows.layout, "hierarchical_active_set")
+    control = ControlStep(_panda_rows(robot, hand), "hierarchical_active_set", dt=DT)
+    control.reference("hand", HAND_TARGET)
+    control.reference("posture", q0)
 
     def prioik_solve(q):
         state = KinematicState(robot, q, zero, data, drift=False)
@@ -109,6 +138,7 @@ def panda_mink_step(steps: int = 300, rounds: int = 7, solver: str | None = None
         return solver_.solve(rows.targets(state)).x
 
     paths = {"prioik": lambda i: prioik_solve(states[i]),
+             "control": lambda i: control(states[i]),
              "mink": lambda i: mink_solve(states[i], DT),
              "placo": placo_step}
     for path in paths.values():               # warm-up: caches
@@ -138,7 +168,7 @@ def g1_feet_mink_step(steps: int = 300, rounds: int = 5, solver: str | None = No
     import pinocchio as pin
 
     import prioik
-    from prioik.robots import KinematicState, TaskWriter, load
+    from prioik.robots import ControlStep, KinematicState, load
 
     from .balance_step import DT, FEET, balance_setup, placo_feet
     from .mink_baseline import DEFAULT_SOLVER
@@ -152,13 +182,13 @@ def g1_feet_mink_step(steps: int = 300, rounds: int = 5, solver: str | None = No
     mink_solve, mink_advance = _mink(robot, None, robot.frames["left_hand"], target,
                           {robot.frames[f]: places[f] for f in FEET}, solver)
 
-    w = TaskWriter(robot, "velocity")
-    for f in FEET:
-        w.add_contact(f, f, gain=10.0, level=0)
-    w.add_joint_limits("limits", form="bounds", dt=DT, level=0)
-    w.add_frame_position("reach", "left_hand", gain=10.0, level=1)
-    w.add_posture("posture", gain=1.0, level=2)
+    w = _g1_rows(robot, DT)
     solver_ = prioik.prepare(w.layout, "hierarchical_active_set")
+    control = ControlStep(_g1_rows(robot, DT), "hierarchical_active_set", dt=DT)
+    for f in FEET:
+        control.reference(f, places[f])
+    control.reference("reach", target)
+    control.reference("posture", q0)
     data = robot.model.createData()
     zero = np.zeros(robot.nv)
     statuses: set[str] = set()
@@ -175,6 +205,7 @@ def g1_feet_mink_step(steps: int = 300, rounds: int = 5, solver: str | None = No
         return sol.x
 
     paths = {"prioik": lambda i: prioik_solve(states[i]),
+             "control": lambda i: control(states[i]),
              "mink": lambda i: mink_solve(states[i], DT),
              "placo": placo_step}
     for path in paths.values():
@@ -209,6 +240,7 @@ def _times(best: dict[str, np.ndarray]) -> dict[str, Any]:
         out[f"{key}_step_us"] = float(np.median(t)) * 1e6
         out[f"{key}_p90_us"] = float(np.percentile(t, 90)) * 1e6
     out["mink/prioik"] = out["mink_step_us"] / out["prioik_step_us"]
+    out["control/placo"] = out["control_step_us"] / out["placo_step_us"]
     out["mink/placo"] = out["mink_step_us"] / out["placo_step_us"]
     return out
 
@@ -232,12 +264,14 @@ def run(steps: int = 300, solvers: tuple[str, ...] | None = None,
 
 def format_table(results: dict[str, Any]) -> str:
     """A markdown table of :func:`run`'s result."""
-    lines = ["| problem [mink back-end] | mink µs | prioik µs | PlaCo µs | mink/prioik | "
-             "mink/PlaCo |", "|---|---|---|---|---|---|"]
+    lines = ["| problem [mink back-end] | mink µs | prioik µs (writer loop) | prioik µs "
+             "(ControlStep) | PlaCo µs | mink/prioik | mink/PlaCo | ControlStep/PlaCo |",
+             "|---|---|---|---|---|---|---|---|"]
     for key, r in results.items():
         lines.append(f"| {key} | {r['mink_step_us']:.1f} | {r['prioik_step_us']:.1f} | "
-                     f"{r['placo_step_us']:.1f} | {r['mink/prioik']:.2f} | "
-                     f"{r['mink/placo']:.2f} |")
+                     f"{r['control_step_us']:.1f} | {r['placo_step_us']:.1f} | "
+                     f"{r['mink/prioik']:.2f} | {r['mink/placo']:.2f} | "
+                     f"{r['control/placo']:.2f} |")
     return "\n".join(lines)
 
 

@@ -8,9 +8,11 @@ from prioik.benchmarks import mink_step
 @pytest.mark.parametrize("measure", [mink_step.panda_mink_step, mink_step.g1_feet_mink_step])
 def test_every_path_is_timed_and_keeps_its_limits(measure):
     out = measure(steps=8, rounds=1)
-    for path in ("mink", "prioik", "placo"):
+    for path in ("mink", "prioik", "control", "placo"):
         assert 0 < out[f"{path}_step_us"] <= out[f"{path}_p90_us"]
     assert out["mink/prioik"] == pytest.approx(out["mink_step_us"] / out["prioik_step_us"])
+    assert out["control/placo"] == pytest.approx(out["control_step_us"]
+                                                 / out["placo_step_us"])
     assert out["solver"] == "daqp"
     if "joint_limit_violation_rad" in out:
         assert max(out["joint_limit_violation_rad"].values()) == 0.0
