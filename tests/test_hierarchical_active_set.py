@@ -1293,11 +1293,15 @@ def test_a_level_of_wide_row_scales_on_an_ambiguous_path_is_not_vouched_for(case
     if by == "certificate":
         assert not report.ok and report.fault_level == level, str(report)
         assert f"the certificate rejects level {level} (" in sol.diagnostics.reason
-    elif report.ok:
+    elif report.ok and f"the certificate rejects level {level} (" not in sol.diagnostics.reason:
+        # the Python oracle passes it: the spread rule names the level (on some BLAS
+        # kernels the oracle passes an answer the core's certificate, which reads no
+        # BLAS, rejects first: the branch below)
         assert f"at level {level} (" in sol.diagnostics.reason
         assert f"span more than {CERTIFIABLE_SPREAD:g}x" in sol.diagnostics.reason
     else:
-        assert f"the certificate rejects level {report.fault_level} (" in sol.diagnostics.reason
+        fault = level if report.ok else report.fault_level
+        assert f"the certificate rejects level {fault} (" in sol.diagnostics.reason
 
 
 @pytest.mark.parametrize("warm_start", [False, True])
