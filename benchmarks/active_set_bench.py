@@ -355,27 +355,19 @@ def panda_limits_step(steps: int = 300, rounds: int = 7) -> dict[str, Any]:
     import pinocchio as pin
 
     import prioik
-    from prioik.robots import ControlStep, KinematicState, TaskWriter, load
+    from prioik.robots import ControlStep, KinematicState, load
 
-    from .panda_step import DT, GAINS, HAND_TARGET, _rounds, placo_panda
+    from .panda_step import DT, HAND_TARGET, _rounds, placo_panda, reach_rows
 
     robot = load("panda")
     model, q0, nv = robot.model, robot.q0, robot.nv
-    hand = robot.frames["hand"]
     placo_step, states, placo_reset = placo_panda(robot, steps, limits=True)
-
-    def declare() -> TaskWriter:
-        rows = TaskWriter(robot, "velocity")
-        rows.add_joint_limits("joint_limits", form="bounds", dt=DT, level=0)
-        rows.add_frame_position("hand", hand, gain=GAINS["hand"], level=1)
-        rows.add_posture("posture", gain=GAINS["posture"], level=2)
-        return rows
 
     data = model.createData()
     zero = np.zeros(nv)
-    rows = declare()
+    rows = reach_rows(robot, limits=True)
     solver = prioik.prepare(rows.layout, NAME)
-    step = ControlStep(declare(), NAME, dt=DT)
+    step = ControlStep(reach_rows(robot, limits=True), NAME, dt=DT)
     step.reference("hand", HAND_TARGET)
     step.reference("posture", q0)
     statuses = set()

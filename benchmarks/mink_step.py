@@ -75,18 +75,6 @@ def _mink(robot, urdf_text: str | None, hand: str, target, feet: dict, solver: s
     return solve, advance
 
 
-def _panda_rows(robot, hand: str):
-    """The Panda reach's levels: joint-limit bounds, the hand, the posture."""
-    from prioik.robots import TaskWriter
-
-    from .panda_step import DT, GAINS
-    rows = TaskWriter(robot, "velocity")
-    rows.add_joint_limits("joint_limits", form="bounds", dt=DT, level=0)
-    rows.add_frame_position("hand", hand, gain=GAINS["hand"], level=1)
-    rows.add_posture("posture", gain=GAINS["posture"], level=2)
-    return rows
-
-
 def _g1_rows(robot, dt: float):
     """The G1's levels: both feet held and the joint-limit bounds, the left hand, the
     posture."""
@@ -113,7 +101,7 @@ def panda_mink_step(steps: int = 300, rounds: int = 7, solver: str | None = None
     from prioik.robots import ControlStep, KinematicState, load
 
     from .mink_baseline import DEFAULT_SOLVER
-    from .panda_step import DT, HAND_TARGET, _rounds, placo_panda
+    from .panda_step import DT, HAND_TARGET, _rounds, placo_panda, reach_rows
 
     solver = solver or DEFAULT_SOLVER
     robot = load("panda")
@@ -124,9 +112,9 @@ def panda_mink_step(steps: int = 300, rounds: int = 7, solver: str | None = None
 
     data = model.createData()
     zero = np.zeros(nv)
-    rows = _panda_rows(robot, hand)
+    rows = reach_rows(robot, limits=True)
     solver_ = prioik.prepare(rows.layout, "hierarchical_active_set")
-    control = ControlStep(_panda_rows(robot, hand), "hierarchical_active_set", dt=DT)
+    control = ControlStep(reach_rows(robot, limits=True), "hierarchical_active_set", dt=DT)
     control.reference("hand", HAND_TARGET)
     control.reference("posture", q0)
 

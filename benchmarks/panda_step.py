@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["panda_step_times", "HAND_TARGET"]
+__all__ = ["panda_step_times", "reach_rows", "HAND_TARGET"]
 
 #: The hand target (world, m): in front of and above the base, reachable.
 HAND_TARGET = np.array([0.45, 0.2, 0.45])
@@ -100,13 +100,19 @@ def placo_panda(robot, steps: int, limits: bool = False, target=None):
     return step, states, reset
 
 
-def _writer(robot, hand: str):
-    """The reach's two levels: the hand position above the posture."""
+def reach_rows(robot, limits: bool = False):
+    """The Panda reach's levels, declared on a velocity-level writer: the hand position
+    (``K = 10``) above the posture (``K_p = 1``), below joint-limit bounds (``dt`` =
+    :data:`DT`) at level 0 when ``limits``."""
     from prioik.robots import TaskWriter
 
     rows = TaskWriter(robot, "velocity")
-    rows.add_frame_position("hand", hand, gain=GAINS["hand"], level=0)
-    rows.add_posture("posture", gain=GAINS["posture"], level=1)
+    level = 0
+    if limits:
+        rows.add_joint_limits("joint_limits", form="bounds", dt=DT, level=0)
+        level = 1
+    rows.add_frame_position("hand", robot.frames["hand"], gain=GAINS["hand"], level=level)
+    rows.add_posture("posture", gain=GAINS["posture"], level=level + 1)
     return rows
 
 
@@ -130,9 +136,9 @@ def panda_step_times(steps: int = 300, rounds: int = 7) -> dict[str, Any]:
 
     data = model.createData()
     zero = np.zeros(nv)
-    rows = _writer(robot, hand)
+    rows = reach_rows(robot)
     prepared = prioik.prepare(rows.layout, "extended_jacobian")
-    control = ControlStep(_writer(robot, hand), "hierarchical_active_set", dt=DT)
+    control = ControlStep(reach_rows(robot), "hierarchical_active_set", dt=DT)
     control.reference("hand", HAND_TARGET)
     control.reference("posture", q0)
     xs: dict[str, list] = {"prepared": [None] * steps, "one-off": [None] * steps,
